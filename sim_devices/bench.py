@@ -1,0 +1,204 @@
+"""The simulated calibration bench: a rate table with an IMU on it.
+
+Composes :mod:`sim_devices.world` (table state -> true specific force and
+inertial rate in case axes) and :class:`sim_devices.truth.Truth` (those ->
+raw sensor outputs).  See docs/simulation.md for the conventions.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import world
+from .truth import Truth
+from .world import ARCSEC, Site
+
+
+@dataclass
+class SimSegment:
+    """One recorded segment.
+
+    kind   "static" | "rotation"
+    t      (N,) device time, s, continuing across segments (gaps for moves)
+    accel  (N,3) raw accelerometer output (m/s^2 nominal)
+    gyro   (N,3) raw gyro output (deg/s nominal)
+    temp   (N,) IMU temperature, deg C
+    meta   what the bench reports: static {"up_body"}; rotation
+           {"axis_body", "rate_dps", "angle_deg" (encoder, over the window
+           [t0 - dt/2, t_{N-1} + dt/2])}
+    truth  hidden true values, for tests and diagnostics only -- an
+           estimator must not use them.
+    """
+
+    kind: str
+    t: np.ndarray
+    accel: np.ndarray
+    gyro: np.ndarray
+    temp: np.ndarray
+    meta: dict
+    truth: dict = field(default_factory=dict, repr=False)
+
+
+class SimulatedBench:
+    """A rate table at a site, with the IMU described by ``truth`` mounted on it.
+
+    All randomness derives from ``seed``: three independent streams (from
+    ``numpy.random.SeedSequence(seed).spawn(3)``) for the geometry (headings,
+    roll, mounting/table angle errors, ripple phase), the encoder errors and
+    the sensor/disturbance noise, so that changing noise settings does not
+    change the attitudes.
+    """
+
+    def __init__(self, truth: Truth, seed: int):
+        self.truth = truth
+        self.seed = seed
+        ss = np.random.SeedSequence(seed)
+        self._geom_rng, self._enc_rng, self._noise_rng = (
+            np.random.default_rng(s) for s in ss.spawn(3))
+        self.site = Site(truth.bench.latitude_deg, truth.bench.height_m)
+        self._g = self.site.g
+        self._time_end = 0.0          # end of the last segment's window
+        self._rotation_starts: dict = {}
+
+    # ------------------------------------------------------------ properties
+    @property
+    def sample_rate_hz(self) -> float:
+        return float(self.truth.sample_rate_hz)
+
+    @property
+    def gravity_mps2(self) -> float:
+        """Local gravity magnitude at the site (what the site knows), m/s^2."""
+        return self._g
+
+    @property
+    def latitude_deg(self) -> float:
+        return float(self.truth.bench.latitude_deg)
+
+    @property
+    def height_m(self) -> float:
+        return float(self.truth.bench.height_m)
+
+    @property
+    def time_s(self) -> float:
+        """Device time at the end of the last segment."""
+        return self._time_end
+
+    # -------------------------------------------------------------- helpers
+    def _n_samples(self, duration_s: float) -> int:
+        d = float(duration_s)
+        if not math.isfinite(d) or d <= 0.0:
+            raise ValueError(f"duration_s must be positive, got {duration_s!r}")
+        n = int(round(d * self.sample_rate_hz))
+        if n < 1:
+            raise ValueError(f"duration_s={duration_s} gives no sample at {self.sample_rate_hz} Hz")
+        return n
+
+    def _times(self, n: int) -> np.ndarray:
+        """Sample times of the next segment, after the move and settling gap."""
+        dt = 1.0 / self.sample_rate_hz
+        t0 = self._time_end + self.truth.bench.move_s + self.truth.bench.settle_s + 0.5 * dt
+        t = t0 + dt * np.arange(n)
+        self._time_end = float(t[-1] + 0.5 * dt)
+        return t
+
+    def _mount_error(self) -> np.ndarray:
+        """Random small rotation vector, rad, sigma per axis = table angle error."""
+        return self._geom_rng.normal(0.0, self.truth.bench.table_angle_error_arcsec, 3) * ARCSEC
+
+    def _measure(self, t, f_b, w_ib_rad):
+        f_b = world.perturb_specific_force(
+            f_b, self.truth.bench.accel_disturbance_ug * world.MICRO_G, self._noise_rng)
+        temp = self.truth.temperature.at(t)
+        accel, gyro = self.truth.measure(f_b, np.degrees(w_ib_rad), temp, self._noise_rng)
+        return accel, gyro, temp
+
+    # -------------------------------------------------------------- segments
+    def static(self, up_body, duration_s) -> SimSegment:
+        """Hold the IMU with case direction ``up_body`` up for ``duration_s``."""
+        up = world._unit(up_body, "up_body")
+        n = self._n_samples(duration_s)
+        heading = self._geom_rng.uniform(0.0, 2.0 * np.pi)
+        delta = self._mount_error()
+        C_bn = world.small_rotation(delta) * world.attitude_up(up, heading)
+        t = self._times(n)
+        f_b, w_ib = world.static_kinematics(C_bn, n, self.site)
+        f_true, w_true = f_b[0].copy(), w_ib[0].copy()
+        accel, gyro, temp = self._measure(t, f_b, w_ib)
+        return SimSegment(
+            kind="static", t=t, accel=accel, gyro=gyro, temp=temp,
+            meta={"up_body": [float(x) for x in up]},
+            truth={
+                "C_bn": C_bn.as_matrix(),
+                "heading_deg": math.degrees(heading),
+                "attitude_error_rad": delta,
+                "up_body_true": C_bn.apply([0.0, 0.0, 1.0]),
+                "f_b": f_true,
+                "w_ib_dps": np.degrees(w_true),
+            },
+        )
+
+    def rotation(self, axis_body, rate_dps, duration_s, *, start_up_body=None) -> SimSegment:
+        """Spin the IMU about case direction ``axis_body`` at ``rate_dps``.
+
+        The table axis is horizontal and Earth-fixed.  The start attitude (at
+        the first sample) is remembered per (axis_body, start_up_body), so the
+        second call of a +/- pair starts from the same attitude.
+        """
+        a_cmd = world._unit(axis_body, "axis_body")
+        r = float(rate_dps)
+        if not math.isfinite(r) or r == 0.0:
+            raise ValueError(f"rate_dps must be non-zero and finite, got {rate_dps!r}")
+        up_hint = None if start_up_body is None else world._unit(start_up_body, "start_up_body")
+        key = (tuple(np.round(a_cmd, 12)),
+               None if up_hint is None else tuple(np.round(up_hint, 12)))
+        start = self._rotation_starts.get(key)
+        if start is None:
+            heading = self._geom_rng.uniform(0.0, 2.0 * np.pi)
+            roll = self._geom_rng.uniform(0.0, 2.0 * np.pi)
+            delta = self._mount_error()
+            a_n = world.horizontal_axis_enu(heading)
+            C_bn0 = world.small_rotation(delta) * world.attitude_axis(
+                a_cmd, a_n, up_body=up_hint, roll_rad=roll)
+            start = (C_bn0, a_n, heading, delta)
+            self._rotation_starts[key] = start
+        C_bn0, a_n, heading, delta = start
+
+        n = self._n_samples(duration_s)
+        fs = self.sample_rate_hz
+        dt = 1.0 / fs
+        bench = self.truth.bench
+        phase = self._geom_rng.uniform(0.0, 2.0 * np.pi)
+        t = self._times(n)
+        w_rad = math.radians(r)
+        prof = dict(t0=t[0], rate_rad_s=w_rad, ripple_fraction=bench.rate_ripple_fraction,
+                    ripple_hz=bench.rate_ripple_hz, ripple_phase_rad=phase)
+        theta, theta_dot, theta_ddot = world.rate_profile(t, **prof)
+        C_bn = world.table_attitude(C_bn0, a_n, theta)
+        w_b, wdot_b = world.table_rates_body(C_bn0, a_n, theta_dot, theta_ddot)
+        f_b, w_ib = world.body_kinematics(C_bn, w_b, wdot_b, bench.lever_arm_m, self.site)
+
+        # encoder: true swept angle over [t0 - dt/2, t_{N-1} + dt/2] plus error
+        edges, _, _ = world.rate_profile(np.array([t[0] - 0.5 * dt, t[-1] + 0.5 * dt]), **prof)
+        swept_deg = math.degrees(edges[1] - edges[0])
+        enc_err_arcsec = float(self._enc_rng.normal(0.0, bench.table_angle_error_arcsec))
+        angle_deg = swept_deg + enc_err_arcsec / 3600.0
+
+        accel, gyro, temp = self._measure(t, f_b, w_ib)
+        meta = {"axis_body": [float(x) for x in a_cmd], "rate_dps": r, "angle_deg": angle_deg}
+        return SimSegment(
+            kind="rotation", t=t, accel=accel, gyro=gyro, temp=temp, meta=meta,
+            truth={
+                "C_bn0": C_bn0.as_matrix(),
+                "axis_enu": a_n,
+                "heading_deg": math.degrees(heading),
+                "attitude_error_rad": delta,
+                "axis_body_true": C_bn0.apply(a_n),
+                "swept_angle_deg": swept_deg,
+                "encoder_error_arcsec": enc_err_arcsec,
+                "ripple_phase_rad": phase,
+                "window_s": (float(t[0] - 0.5 * dt), float(t[-1] + 0.5 * dt)),
+            },
+        )

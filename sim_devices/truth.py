@@ -1,0 +1,489 @@
+"""The true (hidden) sensor error model of the simulated IMU, and its YAML file.
+
+Physical model (case frame b; see docs/simulation.md):
+
+    accel_raw = K_a S_a f_b             + b_a(T) + n_a      (raw units: m/s^2)
+    gyro_raw  = K_g S_g w_ib_b [deg/s]  + b_g(T) + n_g      (raw units: deg/s)
+
+S_a rows are the unit sensing directions u_ai of the three accelerometers in
+case axes, each given by two small tilt angles from case axis i towards the
+other two case axes; K_a = diag(scale).  Likewise for the gyros.  Then
+quantisation to an LSB (0 = none).
+
+:meth:`Truth.paper_parameters` re-expresses this physical truth in the
+parameterisation of Zhang et al. (2010), eqs. (1)-(6).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from scipy.spatial.transform import Rotation
+
+from station.errors import UserError
+
+from .world import ARCSEC, DEG_PER_HOUR, MICRO_G
+
+SCHEMA_VERSION = 1
+
+#: default white-noise densities (Zhang 2010, table 4 settings)
+DEFAULT_ACCEL_NOISE_UG_RTHZ = 100.0
+DEFAULT_GYRO_NOISE_DPH_RTHZ = 0.03
+DEFAULT_SAMPLE_RATE_HZ = 100.0
+
+MAX_TILT_ARCSEC = 36000.0   # 10 degrees: beyond that it is not a "misalignment"
+
+# The two "other" axes of each case axis, in x<y<z order: the columns of
+# axis_tilt_arcsec.
+OTHER_AXES = ((1, 2), (0, 2), (0, 1))
+AXIS_NAMES = "xyz"
+
+
+# --------------------------------------------------------------------------
+# Validation helpers
+# --------------------------------------------------------------------------
+
+class _Checker:
+    """Validates fields of a loaded YAML mapping and names file + field on error."""
+
+    def __init__(self, source: str):
+        self.source = source
+
+    def fail(self, field_name: str, msg: str):
+        raise UserError(f"{self.source}: field '{field_name}': {msg}")
+
+    def mapping(self, value, field_name: str, allowed: set[str]) -> dict:
+        if value is None:
+            return {}
+        if not isinstance(value, dict):
+            self.fail(field_name, f"expected a mapping, got {type(value).__name__}")
+        for k in value:
+            if not isinstance(k, str) or k not in allowed:
+                full = f"{field_name}.{k}" if field_name else str(k)
+                self.fail(full, f"unknown field (allowed: {', '.join(sorted(allowed))})")
+        return value
+
+    def number(self, value, field_name: str, *, lo=None, hi=None, lo_open=False,
+               hi_open=False) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            self.fail(field_name, f"expected a number, got {value!r}")
+        x = float(value)
+        if not math.isfinite(x):
+            self.fail(field_name, f"must be finite, got {value!r}")
+        if lo is not None and (x < lo or (lo_open and x == lo)):
+            self.fail(field_name, f"must be {'>' if lo_open else '>='} {lo}, got {x!r}")
+        if hi is not None and (x > hi or (hi_open and x == hi)):
+            self.fail(field_name, f"must be {'<' if hi_open else '<='} {hi}, got {x!r}")
+        return x
+
+    def vector(self, value, field_name: str, n: int = 3, **bounds) -> np.ndarray:
+        if not isinstance(value, (list, tuple)) or len(value) != n:
+            self.fail(field_name, f"expected a list of {n} numbers, got {value!r}")
+        return np.array([self.number(v, f"{field_name}[{i}]", **bounds)
+                         for i, v in enumerate(value)])
+
+    def matrix(self, value, field_name: str, rows: int, cols: int, **bounds) -> np.ndarray:
+        if not isinstance(value, (list, tuple)) or len(value) != rows:
+            self.fail(field_name, f"expected {rows} rows of {cols} numbers, got {value!r}")
+        return np.array([self.vector(r, f"{field_name}[{i}]", cols, **bounds)
+                         for i, r in enumerate(value)])
+
+
+# --------------------------------------------------------------------------
+# Model pieces
+# --------------------------------------------------------------------------
+
+def sensing_axes(tilt_arcsec) -> np.ndarray:
+    """Unit sensing directions (rows) in case axes from the 3x2 tilt angles.
+
+    Row i: u_i = unit(e_i + tan(t_i0) e_j + tan(t_i1) e_k), where (j, k) are
+    the other two case axes in x<y<z order.  For small angles u_i . e_j ~ t_i0.
+    """
+    tilt = np.asarray(tilt_arcsec, dtype=float).reshape(3, 2) * ARCSEC
+    S = np.eye(3)
+    for i, (j, k) in enumerate(OTHER_AXES):
+        S[i, j] = math.tan(tilt[i, 0])
+        S[i, k] = math.tan(tilt[i, 1])
+    return S / np.linalg.norm(S, axis=1, keepdims=True)
+
+
+def triad_frame(S: np.ndarray) -> np.ndarray:
+    """Orthonormal frame defined by sensing axes (rows of S), Zhang 2010 sec. 2.
+
+    x' = u_x; y' in the (u_x, u_y) plane (Gram-Schmidt); z' = x' x y'.
+    Returns C (3x3), rows x', y', z' in case coordinates: C maps case
+    coordinates to the triad frame (v' = C v_b).
+    """
+    x = S[0] / np.linalg.norm(S[0])
+    y = S[1] - np.dot(S[1], x) * x
+    y /= np.linalg.norm(y)
+    z = np.cross(x, y)
+    return np.vstack([x, y, z])
+
+
+def misalignment_angles(T: np.ndarray) -> np.ndarray:
+    """(a_yz, a_zy, a_zx) = (asin T10, -asin T20, asin T21), Zhang 2010 eq. (3)."""
+    return np.array([math.asin(T[1, 0]), -math.asin(T[2, 0]), math.asin(T[2, 1])])
+
+
+@dataclass
+class TriadTruth:
+    """One sensor triad.
+
+    ``bias`` and ``bias_tempco`` are in the triad's physical units
+    (accelerometer: ug and ug/degC; gyro: deg/h and deg/h/degC),
+    ``noise_density`` in ug/sqrt(Hz) or deg/h/sqrt(Hz), ``lsb`` in raw units.
+    """
+
+    scale: np.ndarray = field(default_factory=lambda: np.ones(3))
+    axis_tilt_arcsec: np.ndarray = field(default_factory=lambda: np.zeros((3, 2)))
+    bias: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    bias_tempco: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    noise_density: float = 0.0
+    lsb: float = 0.0
+
+    def __post_init__(self):
+        self.scale = np.asarray(self.scale, dtype=float).reshape(3)
+        self.axis_tilt_arcsec = np.asarray(self.axis_tilt_arcsec, dtype=float).reshape(3, 2)
+        self.bias = np.asarray(self.bias, dtype=float).reshape(3)
+        self.bias_tempco = np.asarray(self.bias_tempco, dtype=float).reshape(3)
+        self.noise_density = float(self.noise_density)
+        self.lsb = float(self.lsb)
+
+    @property
+    def axes(self) -> np.ndarray:
+        """S: rows are the unit sensing directions in case axes."""
+        return sensing_axes(self.axis_tilt_arcsec)
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """K S: the case-axes input -> raw output matrix."""
+        return self.scale[:, None] * self.axes
+
+
+@dataclass
+class TemperatureTruth:
+    """T(t) = start + drift_c_per_h t/3600 + warmup_delta (1 - exp(-t/tau)), t = bench time.
+
+    Biases in the truth file are those at ``reference_c``.
+    """
+
+    start_c: float = 25.0
+    reference_c: float = 25.0
+    drift_c_per_h: float = 0.0
+    warmup_delta_c: float = 2.0
+    warmup_time_constant_s: float = 900.0
+
+    def at(self, t) -> np.ndarray:
+        t = np.asarray(t, dtype=float)
+        return (self.start_c + self.drift_c_per_h * t / 3600.0
+                + self.warmup_delta_c * -np.expm1(-t / self.warmup_time_constant_s))
+
+
+@dataclass
+class BenchSettings:
+    """The physical bench the IMU sits on."""
+
+    latitude_deg: float = 45.0
+    height_m: float = 0.0
+    lever_arm_m: np.ndarray = field(default_factory=lambda: np.array([0.03, 0.0, 0.04]))
+    table_angle_error_arcsec: float = 2.0
+    rate_ripple_fraction: float = 0.0
+    rate_ripple_hz: float = 1.0
+    accel_disturbance_ug: float = 0.0
+    move_s: float = 10.0
+    settle_s: float = 5.0
+
+    def __post_init__(self):
+        self.lever_arm_m = np.asarray(self.lever_arm_m, dtype=float).reshape(3)
+
+
+def _quantise(x: np.ndarray, lsb: float) -> np.ndarray:
+    if lsb <= 0.0:
+        return x
+    return np.round(x / lsb) * lsb
+
+
+# --------------------------------------------------------------------------
+# Truth
+# --------------------------------------------------------------------------
+
+_TOP_KEYS = {"version", "sample_rate_hz", "accelerometer", "gyroscope", "temperature", "bench"}
+_ACC_KEYS = {"scale", "axis_tilt_arcsec", "bias_ug", "bias_tempco_ug_per_c",
+             "noise_density_ug_rthz", "lsb_mps2"}
+_GYR_KEYS = {"scale", "axis_tilt_arcsec", "bias_dph", "bias_tempco_dph_per_c",
+             "noise_density_dph_rthz", "lsb_dps"}
+_TEMP_KEYS = {"start_c", "reference_c", "drift_c_per_h", "warmup_delta_c",
+              "warmup_time_constant_s"}
+_BENCH_KEYS = {"latitude_deg", "height_m", "lever_arm_m", "table_angle_error_arcsec",
+               "rate_ripple_fraction", "rate_ripple_hz", "accel_disturbance_ug",
+               "move_s", "settle_s"}
+
+
+@dataclass
+class Truth:
+    accel: TriadTruth = field(default_factory=lambda: TriadTruth(
+        noise_density=DEFAULT_ACCEL_NOISE_UG_RTHZ))
+    gyro: TriadTruth = field(default_factory=lambda: TriadTruth(
+        noise_density=DEFAULT_GYRO_NOISE_DPH_RTHZ))
+    sample_rate_hz: float = DEFAULT_SAMPLE_RATE_HZ
+    temperature: TemperatureTruth = field(default_factory=TemperatureTruth)
+    bench: BenchSettings = field(default_factory=BenchSettings)
+
+    # ---------------------------------------------------------- noise levels
+    @property
+    def accel_noise_sigma(self) -> float:
+        """Per-sample accelerometer white-noise sigma, raw units (m/s^2)."""
+        return self.accel.noise_density * MICRO_G * math.sqrt(self.sample_rate_hz)
+
+    @property
+    def gyro_noise_sigma(self) -> float:
+        """Per-sample gyro white-noise sigma, raw units (deg/s)."""
+        return self.gyro.noise_density * DEG_PER_HOUR * math.sqrt(self.sample_rate_hz)
+
+    # ------------------------------------------------------------- measuring
+    def measure(self, f_b, w_b_dps, temp, rng):
+        """Body quantities -> raw outputs.
+
+        f_b (N,3) m/s^2 and w_b_dps (N,3) deg/s in case axes, temp (N,) or
+        scalar deg C, rng a numpy Generator (None: no noise).
+        Returns (accel_raw, gyro_raw), each (N,3).
+        """
+        f_b = np.atleast_2d(np.asarray(f_b, dtype=float))
+        w_b = np.atleast_2d(np.asarray(w_b_dps, dtype=float))
+        dT = (np.asarray(temp, dtype=float) - self.temperature.reference_c).reshape(-1, 1)
+        ba = (self.accel.bias + self.accel.bias_tempco * dT) * MICRO_G
+        bg = (self.gyro.bias + self.gyro.bias_tempco * dT) * DEG_PER_HOUR
+        accel = f_b @ self.accel.matrix.T + ba
+        gyro = w_b @ self.gyro.matrix.T + bg
+        if rng is not None:
+            if self.accel.noise_density > 0.0:
+                accel += self.accel_noise_sigma * rng.standard_normal(accel.shape)
+            if self.gyro.noise_density > 0.0:
+                gyro += self.gyro_noise_sigma * rng.standard_normal(gyro.shape)
+        return _quantise(accel, self.accel.lsb), _quantise(gyro, self.gyro.lsb)
+
+    # ------------------------------------------------------ paper parameters
+    def paper_parameters(self) -> dict[str, Any]:
+        """The truth in Zhang et al. (2010)'s parameterisation.
+
+        accel_raw = diag(accel_scale) accel_T f_p + accel_bias
+        gyro_raw  = diag(gyro_scale) gyro_T R_po w_p + gyro_bias
+        with f_p = C_pb f_b, w_p = C_pb w_b (deg/s); biases at reference_c,
+        in raw units (m/s^2, deg/s).
+        """
+        Sa, Sg = self.accel.axes, self.gyro.axes
+        C_pb = triad_frame(Sa)
+        C_ob = triad_frame(Sg)
+        T_a = Sa @ C_pb.T
+        T_g = Sg @ C_ob.T
+        # exact zeros above the diagonal (they are ~1e-17 by construction)
+        T_a[0, 1:] = 0.0
+        T_a[1, 2] = 0.0
+        T_g[0, 1:] = 0.0
+        T_g[1, 2] = 0.0
+        R_po = C_ob @ C_pb.T
+        alpha = misalignment_angles(T_a)
+        gamma = misalignment_angles(T_g)
+        theta = Rotation.from_matrix(R_po).as_rotvec()
+        return {
+            "accel_scale": self.accel.scale.copy(),
+            "accel_T": T_a,
+            "accel_misalignment_rad": alpha,
+            "accel_bias": self.accel.bias * MICRO_G,
+            "gyro_scale": self.gyro.scale.copy(),
+            "gyro_T": T_g,
+            "gyro_misalignment_rad": gamma,
+            "gyro_bias": self.gyro.bias * DEG_PER_HOUR,
+            "R_po": R_po,
+            "inter_triad_rad": theta,
+            # conveniences
+            "C_pb": C_pb,
+            "C_ob": C_ob,
+            "accel_bias_ug": self.accel.bias.copy(),
+            "gyro_bias_dph": self.gyro.bias.copy(),
+            "accel_misalignment_arcsec": alpha / ARCSEC,
+            "gyro_misalignment_arcsec": gamma / ARCSEC,
+            "inter_triad_arcsec": theta / ARCSEC,
+        }
+
+    # ------------------------------------------------------------------ YAML
+    def to_yaml_dict(self) -> dict[str, Any]:
+        def fl(a):
+            return [float(x) for x in np.asarray(a).reshape(-1)]
+
+        return {
+            "version": SCHEMA_VERSION,
+            "sample_rate_hz": float(self.sample_rate_hz),
+            "accelerometer": {
+                "scale": fl(self.accel.scale),
+                "axis_tilt_arcsec": [fl(r) for r in self.accel.axis_tilt_arcsec],
+                "bias_ug": fl(self.accel.bias),
+                "bias_tempco_ug_per_c": fl(self.accel.bias_tempco),
+                "noise_density_ug_rthz": float(self.accel.noise_density),
+                "lsb_mps2": float(self.accel.lsb),
+            },
+            "gyroscope": {
+                "scale": fl(self.gyro.scale),
+                "axis_tilt_arcsec": [fl(r) for r in self.gyro.axis_tilt_arcsec],
+                "bias_dph": fl(self.gyro.bias),
+                "bias_tempco_dph_per_c": fl(self.gyro.bias_tempco),
+                "noise_density_dph_rthz": float(self.gyro.noise_density),
+                "lsb_dps": float(self.gyro.lsb),
+            },
+            "temperature": {
+                "start_c": float(self.temperature.start_c),
+                "reference_c": float(self.temperature.reference_c),
+                "drift_c_per_h": float(self.temperature.drift_c_per_h),
+                "warmup_delta_c": float(self.temperature.warmup_delta_c),
+                "warmup_time_constant_s": float(self.temperature.warmup_time_constant_s),
+            },
+            "bench": {
+                "latitude_deg": float(self.bench.latitude_deg),
+                "height_m": float(self.bench.height_m),
+                "lever_arm_m": fl(self.bench.lever_arm_m),
+                "table_angle_error_arcsec": float(self.bench.table_angle_error_arcsec),
+                "rate_ripple_fraction": float(self.bench.rate_ripple_fraction),
+                "rate_ripple_hz": float(self.bench.rate_ripple_hz),
+                "accel_disturbance_ug": float(self.bench.accel_disturbance_ug),
+                "move_s": float(self.bench.move_s),
+                "settle_s": float(self.bench.settle_s),
+            },
+        }
+
+    def to_yaml(self, path) -> None:
+        Path(path).write_text(yaml.safe_dump(self.to_yaml_dict(), sort_keys=False))
+
+    @classmethod
+    def from_yaml(cls, path) -> "Truth":
+        path = Path(path)
+        try:
+            text = path.read_text()
+        except OSError as exc:
+            raise UserError(f"{path}: cannot read truth file: {exc}") from exc
+        try:
+            data = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            raise UserError(f"{path}: not valid YAML: {exc}") from exc
+        return cls.from_dict(data, source=str(path))
+
+    @classmethod
+    def from_dict(cls, data, source: str = "<truth>") -> "Truth":
+        c = _Checker(source)
+        if data is None:
+            data = {}
+        if not isinstance(data, dict):
+            c.fail("(top level)", f"expected a mapping, got {type(data).__name__}")
+        top = c.mapping(data, "", _TOP_KEYS)
+        if "version" in top and top["version"] != SCHEMA_VERSION:
+            c.fail("version", f"unsupported version {top['version']!r} (expected {SCHEMA_VERSION})")
+        rate = c.number(top.get("sample_rate_hz", DEFAULT_SAMPLE_RATE_HZ), "sample_rate_hz",
+                        lo=0.0, lo_open=True, hi=1e6)
+
+        def triad(sec: str, keys: set[str], bias_key, tc_key, noise_key, lsb_key,
+                  noise_default) -> TriadTruth:
+            d = c.mapping(top.get(sec), sec, keys)
+            t = TriadTruth(noise_density=noise_default)
+            if "scale" in d:
+                t.scale = c.vector(d["scale"], f"{sec}.scale", lo=0.0, lo_open=True)
+            if "axis_tilt_arcsec" in d:
+                t.axis_tilt_arcsec = c.matrix(d["axis_tilt_arcsec"], f"{sec}.axis_tilt_arcsec",
+                                              3, 2, lo=-MAX_TILT_ARCSEC, hi=MAX_TILT_ARCSEC)
+            if bias_key in d:
+                t.bias = c.vector(d[bias_key], f"{sec}.{bias_key}")
+            if tc_key in d:
+                t.bias_tempco = c.vector(d[tc_key], f"{sec}.{tc_key}")
+            if noise_key in d:
+                t.noise_density = c.number(d[noise_key], f"{sec}.{noise_key}", lo=0.0)
+            if lsb_key in d:
+                t.lsb = c.number(d[lsb_key], f"{sec}.{lsb_key}", lo=0.0)
+            return t
+
+        accel = triad("accelerometer", _ACC_KEYS, "bias_ug", "bias_tempco_ug_per_c",
+                      "noise_density_ug_rthz", "lsb_mps2", DEFAULT_ACCEL_NOISE_UG_RTHZ)
+        gyro = triad("gyroscope", _GYR_KEYS, "bias_dph", "bias_tempco_dph_per_c",
+                     "noise_density_dph_rthz", "lsb_dps", DEFAULT_GYRO_NOISE_DPH_RTHZ)
+
+        d = c.mapping(top.get("temperature"), "temperature", _TEMP_KEYS)
+        temp = TemperatureTruth()
+        for k in ("start_c", "reference_c", "warmup_delta_c"):
+            if k in d:
+                setattr(temp, k, c.number(d[k], f"temperature.{k}", lo=-100.0, hi=200.0))
+        if "drift_c_per_h" in d:
+            temp.drift_c_per_h = c.number(d["drift_c_per_h"], "temperature.drift_c_per_h",
+                                          lo=-100.0, hi=100.0)
+        if "warmup_time_constant_s" in d:
+            temp.warmup_time_constant_s = c.number(
+                d["warmup_time_constant_s"], "temperature.warmup_time_constant_s",
+                lo=0.0, lo_open=True)
+
+        d = c.mapping(top.get("bench"), "bench", _BENCH_KEYS)
+        bench = BenchSettings()
+        if "latitude_deg" in d:
+            bench.latitude_deg = c.number(d["latitude_deg"], "bench.latitude_deg", lo=-90.0, hi=90.0)
+        if "height_m" in d:
+            bench.height_m = c.number(d["height_m"], "bench.height_m", lo=-1000.0, hi=20000.0)
+        if "lever_arm_m" in d:
+            bench.lever_arm_m = c.vector(d["lever_arm_m"], "bench.lever_arm_m", lo=-2.0, hi=2.0)
+        if "table_angle_error_arcsec" in d:
+            bench.table_angle_error_arcsec = c.number(
+                d["table_angle_error_arcsec"], "bench.table_angle_error_arcsec", lo=0.0, hi=36000.0)
+        if "rate_ripple_fraction" in d:
+            bench.rate_ripple_fraction = c.number(
+                d["rate_ripple_fraction"], "bench.rate_ripple_fraction", lo=0.0, hi=1.0, hi_open=True)
+        if "rate_ripple_hz" in d:
+            bench.rate_ripple_hz = c.number(d["rate_ripple_hz"], "bench.rate_ripple_hz",
+                                            lo=0.0, lo_open=True)
+        if "accel_disturbance_ug" in d:
+            bench.accel_disturbance_ug = c.number(
+                d["accel_disturbance_ug"], "bench.accel_disturbance_ug", lo=0.0)
+        for k in ("move_s", "settle_s"):
+            if k in d:
+                setattr(bench, k, c.number(d[k], f"bench.{k}", lo=0.0))
+        return cls(accel=accel, gyro=gyro, sample_rate_hz=rate, temperature=temp, bench=bench)
+
+
+# --------------------------------------------------------------------------
+# A random tactical-grade IMU
+# --------------------------------------------------------------------------
+
+def _signed_uniform(rng, lo: float, hi: float, shape) -> np.ndarray:
+    mag = rng.uniform(lo, hi, size=shape)
+    sign = np.where(rng.random(size=shape) < 0.5, -1.0, 1.0)
+    return sign * mag
+
+
+def default_truth(seed: int) -> Truth:
+    """Random (seeded) errors of a tactical-grade IMU; see docs/simulation.md.
+
+    scale errors   +-[100, 1000] ppm (accel and gyro, each axis)
+    axis tilts     +-[10, 300] arcsec (each of the 6 accel and 6 gyro angles)
+    accel biases   +-[100, 2000] ug
+    gyro biases    +-[0.05, 1] deg/h
+    lever arm      5 cm in a random direction
+    noise          100 ug/sqrt(Hz), 0.03 deg/h/sqrt(Hz) at 100 Hz; no LSB;
+    bench          latitude 45 deg, height 0, table angle error 2 arcsec,
+                   no ripple, no disturbance, no temperature coefficients.
+    """
+    rng = np.random.default_rng(seed)
+    accel = TriadTruth(
+        scale=1.0 + 1e-6 * _signed_uniform(rng, 100.0, 1000.0, 3),
+        axis_tilt_arcsec=_signed_uniform(rng, 10.0, 300.0, (3, 2)),
+        bias=_signed_uniform(rng, 100.0, 2000.0, 3),
+        noise_density=DEFAULT_ACCEL_NOISE_UG_RTHZ,
+    )
+    gyro = TriadTruth(
+        scale=1.0 + 1e-6 * _signed_uniform(rng, 100.0, 1000.0, 3),
+        axis_tilt_arcsec=_signed_uniform(rng, 10.0, 300.0, (3, 2)),
+        bias=_signed_uniform(rng, 0.05, 1.0, 3),
+        noise_density=DEFAULT_GYRO_NOISE_DPH_RTHZ,
+    )
+    d = rng.standard_normal(3)
+    bench = BenchSettings(lever_arm_m=0.05 * d / np.linalg.norm(d))
+    return Truth(accel=accel, gyro=gyro, sample_rate_hz=DEFAULT_SAMPLE_RATE_HZ,
+                 temperature=TemperatureTruth(), bench=bench)

@@ -1,0 +1,295 @@
+"""The physical world of the simulated bench.
+
+Frames and conventions (see docs/simulation.md):
+
+* n  -- local level frame, ENU: x east, y north, z up.  Fixed to the Earth.
+* b  -- the IMU case frame (the axes printed on the case).
+* ``C_bn`` -- attitude, the rotation taking ENU coordinates to body
+  coordinates: ``v_b = C_bn.apply(v_n)``.  Held as a
+  :class:`scipy.spatial.transform.Rotation` (single or stacked over samples).
+* Specific force  f = a - g_vec, with g_vec = [0, 0, -g] in ENU.  A body at
+  rest therefore senses f_n = [0, 0, +g] (pointing up).
+* Angular rates are in rad/s inside this module.
+
+Everything here is independent of any sensor error: it turns a table state
+(attitude, table rate relative to the Earth and its derivative, lever arm)
+into the true specific force and inertial angular rate in body axes.  The
+sensor model lives in :mod:`sim_devices.truth`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+# --------------------------------------------------------------------------
+# Constants
+# --------------------------------------------------------------------------
+
+#: Earth rotation rate, rad/s (WGS-84).
+OMEGA_EARTH = 7.292115e-5
+#: Standard gravity, m/s^2 (definition of 1 g).
+G_STANDARD = 9.80665
+#: One micro-g in m/s^2.
+MICRO_G = 9.80665e-6
+#: Arc-second in rad.
+ARCSEC = np.pi / (180.0 * 3600.0)
+#: Degree per hour in deg/s.
+DEG_PER_HOUR = 1.0 / 3600.0
+
+# WGS-84 ellipsoid and normal gravity (NIMA TR8350.2, 3rd ed., ch. 3 and 4).
+WGS84_A = 6378137.0                     # semi-major axis, m
+WGS84_F = 1.0 / 298.257223563           # flattening
+WGS84_B = 6356752.3142                  # semi-minor axis, m
+WGS84_GM = 3.986004418e14               # m^3/s^2
+WGS84_GAMMA_E = 9.7803253359            # normal gravity at the equator, m/s^2
+WGS84_GAMMA_P = 9.8321849378            # normal gravity at the poles, m/s^2
+WGS84_K = 0.00193185265241              # Somigliana constant (b*gp)/(a*ge) - 1
+WGS84_E2 = 0.00669437999013             # first eccentricity squared
+WGS84_M = OMEGA_EARTH**2 * WGS84_A**2 * WGS84_B / WGS84_GM  # ~0.00344978650684
+
+UP_ENU = np.array([0.0, 0.0, 1.0])
+
+
+# --------------------------------------------------------------------------
+# Site: gravity and Earth rate
+# --------------------------------------------------------------------------
+
+def somigliana_gravity(latitude_deg: float) -> float:
+    """Normal gravity on the WGS-84 ellipsoid surface (Somigliana), m/s^2.
+
+    gamma(phi) = gamma_e (1 + k sin^2 phi) / sqrt(1 - e^2 sin^2 phi),
+    phi = geodetic latitude.
+    """
+    s2 = np.sin(np.radians(latitude_deg)) ** 2
+    return float(WGS84_GAMMA_E * (1.0 + WGS84_K * s2) / np.sqrt(1.0 - WGS84_E2 * s2))
+
+
+def local_gravity(latitude_deg: float, height_m: float = 0.0) -> float:
+    """Magnitude of normal gravity at geodetic latitude and ellipsoidal height.
+
+    Somigliana on the ellipsoid plus the WGS-84 second-order free-air
+    correction (TR8350.2 eq. 4-3):
+        g(h) = gamma [1 - 2/a (1 + f + m - 2 f sin^2 phi) h + 3 h^2 / a^2]
+    (about -3.086e-6 m/s^2 per metre near the surface).
+    """
+    s2 = np.sin(np.radians(latitude_deg)) ** 2
+    gamma = somigliana_gravity(latitude_deg)
+    h = float(height_m)
+    corr = (1.0
+            - 2.0 / WGS84_A * (1.0 + WGS84_F + WGS84_M - 2.0 * WGS84_F * s2) * h
+            + 3.0 * h * h / WGS84_A**2)
+    return float(gamma * corr)
+
+
+def earth_rate_enu(latitude_deg: float) -> np.ndarray:
+    """Earth rotation vector in ENU, rad/s: Omega [0, cos phi, sin phi]."""
+    phi = np.radians(latitude_deg)
+    return OMEGA_EARTH * np.array([0.0, np.cos(phi), np.sin(phi)])
+
+
+def gravity_enu(latitude_deg: float, height_m: float = 0.0) -> np.ndarray:
+    """Gravity vector in ENU, m/s^2: [0, 0, -g]."""
+    return np.array([0.0, 0.0, -local_gravity(latitude_deg, height_m)])
+
+
+@dataclass(frozen=True)
+class Site:
+    """Where the bench stands."""
+
+    latitude_deg: float = 45.0
+    height_m: float = 0.0
+
+    @property
+    def g(self) -> float:
+        return local_gravity(self.latitude_deg, self.height_m)
+
+    @property
+    def earth_rate_enu(self) -> np.ndarray:
+        return earth_rate_enu(self.latitude_deg)
+
+    @property
+    def gravity_enu(self) -> np.ndarray:
+        return gravity_enu(self.latitude_deg, self.height_m)
+
+
+# --------------------------------------------------------------------------
+# Attitudes
+# --------------------------------------------------------------------------
+
+def _unit(v, name: str = "vector") -> np.ndarray:
+    v = np.asarray(v, dtype=float).reshape(-1)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise ValueError(f"{name} must be 3 finite numbers, got {v!r}")
+    n = np.linalg.norm(v)
+    if n < 1e-12:
+        raise ValueError(f"{name} must not be zero")
+    return v / n
+
+
+def _any_perpendicular(u: np.ndarray) -> np.ndarray:
+    """A deterministic unit vector perpendicular to unit vector u."""
+    e = np.zeros(3)
+    e[int(np.argmin(np.abs(u)))] = 1.0
+    p = np.cross(u, e)
+    return p / np.linalg.norm(p)
+
+
+def _frame_map(src: tuple[np.ndarray, np.ndarray], dst: tuple[np.ndarray, np.ndarray]) -> Rotation:
+    """Rotation R with R(src[0]) = dst[0] and R(src[1]) = dst[1].
+
+    Both pairs must be orthonormal.
+    """
+    s1, s2 = src
+    d1, d2 = dst
+    S = np.column_stack([s1, s2, np.cross(s1, s2)])
+    D = np.column_stack([d1, d2, np.cross(d1, d2)])
+    return Rotation.from_matrix(D @ S.T)
+
+
+def attitude_up(up_body, heading_rad: float = 0.0) -> Rotation:
+    """Attitude C_bn (ENU -> body) that puts body direction ``up_body`` up.
+
+    ``heading_rad`` turns the IMU about the local vertical (an arbitrary
+    azimuth of the table).  C_bn.apply([0,0,1]) == unit(up_body).
+    """
+    u = _unit(up_body, "up_body")
+    p = _any_perpendicular(u)
+    c0 = _frame_map((UP_ENU, np.array([1.0, 0.0, 0.0])), (u, p))
+    return c0 * Rotation.from_rotvec(heading_rad * UP_ENU)
+
+
+def horizontal_axis_enu(heading_rad: float) -> np.ndarray:
+    """Unit horizontal vector in ENU at ``heading_rad`` from north towards east."""
+    return np.array([np.sin(heading_rad), np.cos(heading_rad), 0.0])
+
+
+def attitude_axis(axis_body, axis_enu, *, up_body=None, roll_rad: float = 0.0) -> Rotation:
+    """Attitude C_bn with C_bn.apply(axis_enu) == unit(axis_body).
+
+    ``axis_enu`` must be horizontal.  If ``up_body`` is given, its component
+    perpendicular to ``axis_body`` is put up; otherwise a deterministic
+    perpendicular direction turned by ``roll_rad`` about ``axis_body`` is.
+    """
+    a_b = _unit(axis_body, "axis_body")
+    a_n = _unit(axis_enu, "axis_enu")
+    if abs(a_n[2]) > 1e-9:
+        raise ValueError("table axis must be horizontal")
+    if up_body is not None:
+        h = _unit(up_body, "start_up_body")
+        h = h - np.dot(h, a_b) * a_b
+        if np.linalg.norm(h) < 1e-6:
+            raise ValueError("start_up_body must not be parallel to axis_body")
+        h /= np.linalg.norm(h)
+    else:
+        h = Rotation.from_rotvec(roll_rad * a_b).apply(_any_perpendicular(a_b))
+    return _frame_map((a_n, UP_ENU), (a_b, h))
+
+
+def small_rotation(rotvec_rad) -> Rotation:
+    """A small perturbation rotation (applied in body axes: C_bn' = dR * C_bn)."""
+    return Rotation.from_rotvec(np.asarray(rotvec_rad, dtype=float))
+
+
+# --------------------------------------------------------------------------
+# Table motion
+# --------------------------------------------------------------------------
+
+def rate_profile(t, t0: float, rate_rad_s: float, ripple_fraction: float = 0.0,
+                 ripple_hz: float = 1.0, ripple_phase_rad: float = 0.0):
+    """Table angle, rate and angular acceleration about its axis.
+
+    theta_dot(t) = w (1 + rho sin(2 pi f (t - t0) + phase)),  theta(t0) = 0.
+
+    Returns (theta, theta_dot, theta_ddot), arrays shaped like ``t``
+    (rad, rad/s, rad/s^2).
+    """
+    t = np.asarray(t, dtype=float)
+    tau = t - t0
+    w = float(rate_rad_s)
+    if ripple_fraction == 0.0:
+        theta = w * tau
+        return theta, np.full_like(tau, w), np.zeros_like(tau)
+    om = 2.0 * np.pi * ripple_hz
+    arg = om * tau + ripple_phase_rad
+    rho = float(ripple_fraction)
+    theta = w * tau + w * rho / om * (np.cos(ripple_phase_rad) - np.cos(arg))
+    theta_dot = w * (1.0 + rho * np.sin(arg))
+    theta_ddot = w * rho * om * np.cos(arg)
+    return theta, theta_dot, theta_ddot
+
+
+def table_attitude(C_bn0: Rotation, axis_enu, theta) -> Rotation:
+    """Attitude of a body turned by ``theta`` (rad, array) about the Earth-fixed
+    ``axis_enu`` from the start attitude ``C_bn0``.
+
+    C_nb(t) = Rot(axis_enu, theta) C_nb0   <=>   C_bn(t) = C_bn0 Rot(axis_enu, -theta).
+    """
+    a_n = _unit(axis_enu, "axis_enu")
+    theta = np.asarray(theta, dtype=float).reshape(-1)
+    return C_bn0 * Rotation.from_rotvec(-theta[:, None] * a_n[None, :])
+
+
+def table_rates_body(C_bn0: Rotation, axis_enu, theta_dot, theta_ddot):
+    """Table angular velocity relative to the Earth, and its derivative, in body.
+
+    The body sees the Earth-fixed axis at the constant body direction
+    a_b = C_bn0 a_n, so  w = theta_dot a_b,  w_dot = theta_ddot a_b.
+    """
+    a_b = C_bn0.apply(_unit(axis_enu, "axis_enu"))
+    theta_dot = np.asarray(theta_dot, dtype=float).reshape(-1, 1)
+    theta_ddot = np.asarray(theta_ddot, dtype=float).reshape(-1, 1)
+    return theta_dot * a_b[None, :], theta_ddot * a_b[None, :]
+
+
+# --------------------------------------------------------------------------
+# Kinematics: table state -> specific force and inertial rate in body
+# --------------------------------------------------------------------------
+
+def body_kinematics(C_bn: Rotation, w_eb_b, wdot_eb_b, lever_arm_b, site: Site):
+    """True specific force and inertial angular rate in body axes.
+
+    Parameters
+    ----------
+    C_bn : Rotation, single or stacked (N)
+        ENU -> body attitude at each sample.
+    w_eb_b, wdot_eb_b : (N,3) or (3,)
+        Body angular velocity relative to the Earth (the table rate), rad/s,
+        in body axes, and its time derivative (rad/s^2).
+    lever_arm_b : (3,)
+        Position of the sensing point (accelerometer centre) relative to a
+        point on the rotation axis, body axes, m.
+    site : Site
+
+    Returns
+    -------
+    f_b : (N,3)  m/s^2,  C_bn [0,0,g] + wdot x r + w x (w x r)
+    w_ib_b : (N,3) rad/s,  w + C_bn Omega_E
+    """
+    w = np.atleast_2d(np.asarray(w_eb_b, dtype=float))
+    wd = np.atleast_2d(np.asarray(wdot_eb_b, dtype=float))
+    r = np.asarray(lever_arm_b, dtype=float).reshape(3)
+    g_up = np.array([0.0, 0.0, site.g])
+    grav_b = np.atleast_2d(C_bn.apply(g_up))
+    earth_b = np.atleast_2d(C_bn.apply(site.earth_rate_enu))
+    n = max(len(w), len(wd), len(grav_b))
+    r_row = r[None, :]
+    f_b = grav_b + np.cross(wd, r_row) + np.cross(w, np.cross(w, r_row))
+    w_ib = w + earth_b
+    return np.broadcast_to(f_b, (n, 3)).copy(), np.broadcast_to(w_ib, (n, 3)).copy()
+
+
+def static_kinematics(C_bn: Rotation, n_samples: int, site: Site):
+    """Specific force and inertial rate of a body at rest (N copies)."""
+    zero = np.zeros((1, 3))
+    f_b, w_ib = body_kinematics(C_bn, zero, zero, np.zeros(3), site)
+    return np.repeat(f_b, n_samples, axis=0), np.repeat(w_ib, n_samples, axis=0)
+
+
+def perturb_specific_force(f_b: np.ndarray, sigma_mps2: float, rng) -> np.ndarray:
+    """Add a white acceleration disturbance (per axis sigma, m/s^2) to f_b."""
+    if sigma_mps2 <= 0.0 or rng is None:
+        return f_b
+    return f_b + sigma_mps2 * rng.standard_normal(f_b.shape)
