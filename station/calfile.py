@@ -1,0 +1,122 @@
+"""Calibration files (``format: station-calibration/1``): write, read, validate.
+
+The file is YAML, for people and programs alike.  ``parameters`` lists every estimated
+parameter with its unit; ``compensation`` is all a program needs to correct raw samples.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+import station
+from station.calibration import Calibration
+from station.errors import UserError
+
+FORMAT = "station-calibration/1"
+
+CONVENTION = {
+    "frame": ("p, the platform frame defined by the accelerometers: x along the x accelerometer's "
+              "sensing axis, y in the plane of the x and y sensing axes, z completing a "
+              "right-handed frame"),
+    "forward_model": ("accel_raw = K_a T_a f_p + b_a ; gyro_raw = K_g T_g R_po w_p + b_g "
+                      "(Zhang et al. 2010, eqs. 1-6); K diagonal scale factors, T lower-triangular "
+                      "unit-row sensing directions, R_po the inter-triad rotation ~ I + [theta x]; "
+                      "f_p, w_p in the IMU's declared unit (m/s^2 and deg/s when the unit is raw)"),
+    "misalignment": ("accel (yz, zy, zx) = (asin T[1,0], -asin T[2,0], asin T[2,1]); gyro the same; "
+                     "inter_triad = rotation vector of R_po"),
+    "compensation": ("f_p = accel_matrix (accel_raw - accel_bias) in m/s^2 ; "
+                     "w_p = gyro_matrix (gyro_raw - gyro_bias) in deg/s ; raw in the capture's units"),
+}
+
+
+def _floats(a) -> list:
+    return np.asarray(a, dtype=float).round(15).tolist()
+
+
+def to_document(cal: Calibration, provenance: dict) -> dict:
+    return {
+        "format": FORMAT,
+        "convention": CONVENTION,
+        "imu": {"accel_unit": cal.accel_unit, "gyro_unit": cal.gyro_unit},
+        "effects": list(cal.effects),
+        "parameters": {name: {"value": value, "unit": unit} for name, value, unit in cal.parameters()},
+        "compensation": {
+            "accel_matrix": _floats(cal.accel_matrix),
+            "accel_bias": _floats(cal.accel_bias),
+            "gyro_matrix": _floats(cal.gyro_matrix),
+            "gyro_bias": _floats(cal.gyro_bias),
+            "raw_units": {"accel": cal.accel_unit, "gyro": cal.gyro_unit},
+            "output_units": {"accel": "m/s^2", "gyro": "deg/s"},
+        },
+        "fit": cal.fit,
+        "provenance": {
+            "software": f"station {station.__version__}",
+            "date_utc": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+            **provenance,
+        },
+    }
+
+
+def write_calfile(path, cal: Calibration, provenance: dict) -> Path:
+    path = Path(path)
+    text = yaml.safe_dump(to_document(cal, provenance), sort_keys=False, width=100)
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        with open(tmp, "w") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except OSError as e:
+        raise UserError(f"{path}: cannot write calibration file: {e.strerror}") from None
+    return path
+
+
+def _matrix(doc: dict, key: str, shape, path) -> np.ndarray:
+    where = f"{path}: field 'compensation.{key}'"
+    try:
+        a = np.array(doc[key], dtype=float)
+    except KeyError:
+        raise UserError(f"{where}: missing") from None
+    except (TypeError, ValueError):
+        raise UserError(f"{where}: must be numbers") from None
+    if a.shape != shape or not np.all(np.isfinite(a)):
+        raise UserError(f"{where}: must be {'x'.join(map(str, shape))} finite numbers")
+    return a
+
+
+def read_calfile(path) -> dict:
+    """Load and validate a calibration file; compensation arrays come back as numpy arrays."""
+    path = Path(path)
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except OSError as e:
+        raise UserError(f"{path}: cannot read calibration file: {e.strerror}") from None
+    except yaml.YAMLError as e:
+        raise UserError(f"{path}: not valid YAML: {str(e).splitlines()[0]}") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise UserError(f"{path}: field 'format': not a station calibration file (expected {FORMAT})")
+    comp = doc.get("compensation")
+    if not isinstance(comp, dict):
+        raise UserError(f"{path}: field 'compensation': missing or not a mapping")
+    doc["compensation"] = {
+        **comp,
+        "accel_matrix": _matrix(comp, "accel_matrix", (3, 3), path),
+        "accel_bias": _matrix(comp, "accel_bias", (3,), path),
+        "gyro_matrix": _matrix(comp, "gyro_matrix", (3, 3), path),
+        "gyro_bias": _matrix(comp, "gyro_bias", (3,), path),
+    }
+    params = doc.get("parameters")
+    if not isinstance(params, dict):
+        raise UserError(f"{path}: field 'parameters': missing or not a mapping")
+    for name, p in params.items():
+        if not (isinstance(p, dict) and isinstance(p.get("value"), (int, float))
+                and not isinstance(p.get("value"), bool) and math.isfinite(p["value"])
+                and isinstance(p.get("unit"), str)):
+            raise UserError(f"{path}: field 'parameters.{name}': needs a finite 'value' and a 'unit'")
+    return doc

@@ -1,0 +1,181 @@
+"""The ``station`` command line: argument parsing and output only."""
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import sys
+from pathlib import Path
+
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+import station
+from station.errors import UserError
+
+out = Console(highlight=False)
+err = Console(stderr=True, highlight=False)
+
+
+# --- commands -----------------------------------------------------------------------------------
+
+def cmd_run(args) -> int:
+    from station.scheme import load_scheme
+
+    overrides = {k: v for k, v in (("dwell_s", args.dwell_s), ("rate_dps", args.rate_dps),
+                                   ("rotation_s", args.rotation_s)) if v is not None}
+    scheme = load_scheme(args.scheme, overrides)
+    if not args.sim:
+        raise UserError("runs on hardware need the serial drivers, which this version does not have "
+                        "yet; add --sim for a dry run against the simulated bench")
+    from station import simrun
+    from station.calfile import write_calfile
+    from station.estimate import estimate_capture
+
+    truth = simrun.load_truth(args.sim_truth, args.seed)
+    stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    out_dir = Path(args.out) if args.out else Path("captures") / f"{scheme.name}-sim-{stamp}"
+    out.print(f"dry run: scheme [bold]{scheme.name}[/] ({len(scheme.segments)} segments, "
+              f"{scheme.duration_s:.0f} s of data) on the simulated bench, seed {args.seed}")
+    with out.status("recording") as status:
+        capture = simrun.record_scheme(
+            scheme, truth, args.seed, out_dir,
+            progress=lambda name, i, n: status.update(f"recording {name} ({i + 1}/{n})"))
+    cal, _, provenance = estimate_capture(capture)
+    cal_path = write_calfile(capture / "calibration.yaml", cal, provenance)
+    _print_errors(cal, simrun.truth_calibration(truth))
+    _print_notes(cal)
+    out.print(f"capture:          {capture}")
+    out.print(f"simulated truth:  {capture / simrun.TRUTH_FILE}")
+    out.print(f"calibration file: {cal_path}")
+    return 0
+
+
+def cmd_estimate(args) -> int:
+    from station.calfile import write_calfile
+    from station.estimate import estimate_capture
+
+    cal, capture, provenance = estimate_capture(args.capture, args.method)
+    for w in capture.warnings:
+        err.print(f"warning: {w}")
+    target = Path(args.output) if args.output else capture.path / "calibration.yaml"
+    write_calfile(target, cal, provenance)
+    _print_parameters([(n, v, u) for n, v, u in cal.parameters()], f"calibration of {capture.path}")
+    _print_notes(cal)
+    out.print(f"calibration file: {target}")
+    return 0
+
+
+def cmd_apply(args) -> int:
+    from station.calfile import read_calfile
+    from station.capture import read_segment_csv
+
+    doc = read_calfile(args.calibration)
+    comp = doc["compensation"]
+    data = read_segment_csv(Path(args.input))
+    f = (data.accel - comp["accel_bias"]) @ comp["accel_matrix"].T
+    w = (data.gyro - comp["gyro_bias"]) @ comp["gyro_matrix"].T
+    table = np.column_stack([data.t, f, w])
+    try:
+        with open(args.output, "w") as fh:
+            fh.write("t,ax,ay,az,gx,gy,gz\n")
+            np.savetxt(fh, table, delimiter=",", fmt=["%.9f"] + ["%.12g"] * 6)
+    except OSError as e:
+        raise UserError(f"{args.output}: cannot write: {e.strerror}") from None
+    out.print(f"{len(table)} samples compensated into {args.output} (m/s^2, deg/s, frame p)")
+    return 0
+
+
+def cmd_show(args) -> int:
+    from station.calfile import read_calfile
+
+    doc = read_calfile(args.calibration)
+    rows = [(n, p["value"], p["unit"]) for n, p in doc["parameters"].items()]
+    _print_parameters(rows, f"{args.calibration}")
+    prov = doc.get("provenance", {})
+    out.print(f"effects: {', '.join(doc.get('effects', []))}")
+    for key in ("method", "capture", "capture_sha256", "imu_serial", "software", "date_utc"):
+        if key in prov:
+            out.print(f"{key}: {prov[key]}")
+    return 0
+
+
+# --- output helpers -----------------------------------------------------------------------------
+
+def _print_parameters(rows, title: str) -> None:
+    table = Table(title=title)
+    table.add_column("parameter")
+    table.add_column("value", justify="right")
+    table.add_column("unit")
+    for name, value, unit in rows:
+        table.add_row(name, f"{value:.9g}" if unit in ("1", "raw/(m/s^2)", "raw/(deg/s)") else f"{value:.4f}", unit)
+    out.print(table)
+
+
+def _print_errors(cal, truth) -> None:
+    from station.calibration import parameter_errors
+
+    table = Table(title="estimate against the simulated truth")
+    for col in ("parameter", "estimate", "truth", "error", "unit"):
+        table.add_column(col, justify="left" if col in ("parameter", "unit") else "right")
+    for name, value, true, error, unit in parameter_errors(cal, truth):
+        fmt = "{:.9f}" if "_scale_" in name else "{:.4f}"
+        table.add_row(name, fmt.format(value), fmt.format(true), f"{error:+.4f}", unit)
+    out.print(table)
+
+
+def _print_notes(cal) -> None:
+    for note in cal.fit.get("notes", []):
+        err.print(f"note: {note}")
+
+
+# --- parser -------------------------------------------------------------------------------------
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="station", description="IMU calibration with a rate table.")
+    p.add_argument("--version", action="version", version=f"station {station.__version__}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    run = sub.add_parser("run", help="run a calibration scheme and estimate")
+    run.add_argument("--scheme", default="optimal9", help="built-in scheme name or a scheme YAML file")
+    run.add_argument("--sim", action="store_true", help="dry run against the simulated bench")
+    run.add_argument("--sim-truth", metavar="FILE", help="true sensor errors for --sim (YAML)")
+    run.add_argument("--seed", type=int, default=1, help="seed of the simulated truth and noise")
+    run.add_argument("--out", metavar="DIR", help="capture directory (default captures/<scheme>-sim-<time>)")
+    run.add_argument("--dwell-s", type=float, help="override the scheme's dwell per attitude, s")
+    run.add_argument("--rate-dps", type=float, help="override the scheme's rotation rate, deg/s")
+    run.add_argument("--rotation-s", type=float, help="override the scheme's rotation time per direction, s")
+    run.set_defaults(func=cmd_run)
+
+    est = sub.add_parser("estimate", help="estimate a calibration from a capture (no hardware)")
+    est.add_argument("capture", help="capture directory (with manifest.yaml)")
+    est.add_argument("-o", "--output", metavar="CAL.yaml", help="default: CAPTURE/calibration.yaml")
+    est.add_argument("--method", choices=("zhang2010",), default="zhang2010")
+    est.set_defaults(func=cmd_estimate)
+
+    app = sub.add_parser("apply", help="compensate raw samples with a calibration file")
+    app.add_argument("calibration", metavar="CAL.yaml")
+    app.add_argument("input", metavar="IN.csv", help="columns t,ax,ay,az,gx,gy,gz[,temp] in the raw units")
+    app.add_argument("-o", "--output", metavar="OUT.csv", required=True)
+    app.set_defaults(func=cmd_apply)
+
+    show = sub.add_parser("show", help="print a calibration file")
+    show.add_argument("calibration", metavar="CAL.yaml")
+    show.set_defaults(func=cmd_show)
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except UserError as e:
+        err.print(f"station {args.command}: {e}", markup=False, soft_wrap=True)
+        return 2
+    except KeyboardInterrupt:
+        err.print("interrupted")
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

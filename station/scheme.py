@@ -1,0 +1,161 @@
+"""Calibration schemes: what a run must measure, written in IMU body axes.
+
+A scheme file (YAML, see ``schemes/optimal9.yaml``) lists static attitudes (the direction of
+local "up" in IMU axes and a dwell) and rotations (an axis in IMU axes, run as a +/- pair at a
+rate for a duration).  This module loads and validates such a file and expands it into the
+ordered list of segments a run records.  It knows nothing about tables or hardware.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from station.errors import UserError
+
+DEFAULT_KEYS = ("dwell_s", "rate_dps", "rotation_s")
+
+
+@dataclass(frozen=True)
+class StaticSpec:
+    """Hold the IMU still with ``up_body`` (unit vector, IMU axes) pointing up for ``dwell_s``."""
+
+    name: str
+    up_body: tuple[float, float, float]
+    dwell_s: float
+    kind: str = "static"
+
+    @property
+    def duration_s(self) -> float:
+        return self.dwell_s
+
+
+@dataclass(frozen=True)
+class RotationSpec:
+    """Rotate right-handed about ``axis_body`` at ``rate_dps`` (signed) for ``duration_s``."""
+
+    name: str
+    axis_body: tuple[float, float, float]
+    rate_dps: float
+    duration_s: float
+    kind: str = "rotation"
+
+    @property
+    def revolutions(self) -> float:
+        return abs(self.rate_dps) * self.duration_s / 360.0
+
+
+@dataclass(frozen=True)
+class Scheme:
+    name: str
+    title: str
+    reference: str
+    defaults: dict
+    segments: tuple  # of StaticSpec | RotationSpec
+
+    @property
+    def duration_s(self) -> float:
+        """Time spent recording (moves and settling excluded)."""
+        return sum(s.duration_s for s in self.segments)
+
+
+def builtin_names() -> list[str]:
+    return sorted(p.name[:-5] for p in resources.files("schemes").iterdir() if p.name.endswith(".yaml"))
+
+
+def load_scheme(name_or_path: str, overrides: dict | None = None) -> Scheme:
+    """Load a built-in scheme by name, or a scheme file by path; apply default overrides."""
+    path = Path(name_or_path)
+    if name_or_path in builtin_names():
+        text = resources.files("schemes").joinpath(f"{name_or_path}.yaml").read_text()
+        source = f"scheme '{name_or_path}'"
+    elif path.suffix in (".yaml", ".yml") or path.exists():
+        try:
+            text = path.read_text()
+        except OSError as e:
+            raise UserError(f"{path}: cannot read scheme file: {e.strerror}") from None
+        source = str(path)
+    else:
+        raise UserError(f"unknown scheme '{name_or_path}': built-in schemes are "
+                        f"{', '.join(builtin_names())}, or give a path to a .yaml file")
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        raise UserError(f"{source}: not valid YAML: {e}".splitlines()[0]) from None
+    return parse_scheme(doc, source, overrides or {})
+
+
+def _number(value, where: str, *, positive: bool = False, nonzero: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise UserError(f"{where}: must be a finite number, got {value!r}")
+    if positive and value <= 0:
+        raise UserError(f"{where}: must be > 0, got {value!r}")
+    if nonzero and value == 0:
+        raise UserError(f"{where}: must not be zero")
+    return float(value)
+
+
+def _unit_vector(value, where: str) -> tuple[float, float, float]:
+    if not isinstance(value, list) or len(value) != 3:
+        raise UserError(f"{where}: must be a list of 3 numbers, got {value!r}")
+    v = np.array([_number(x, where) for x in value])
+    n = np.linalg.norm(v)
+    if n == 0:
+        raise UserError(f"{where}: must not be the zero vector")
+    return tuple(float(x) for x in v / n)
+
+
+def parse_scheme(doc, source: str, overrides: dict) -> Scheme:
+    if not isinstance(doc, dict):
+        raise UserError(f"{source}: a scheme must be a YAML mapping")
+    for key in ("name", "segments"):
+        if key not in doc:
+            raise UserError(f"{source}: missing field '{key}'")
+    defaults = dict(doc.get("defaults") or {})
+    for key, value in overrides.items():
+        if key not in DEFAULT_KEYS:
+            raise UserError(f"{source}: unknown default '{key}' (known: {', '.join(DEFAULT_KEYS)})")
+        defaults[key] = value
+    for key, value in defaults.items():
+        _number(value, f"{source}: defaults.{key}", positive=True)
+
+    entries = doc["segments"]
+    if not isinstance(entries, list) or not entries:
+        raise UserError(f"{source}: 'segments' must be a non-empty list")
+    segments: list = []
+    for i, entry in enumerate(entries):
+        where = f"{source}: segments[{i}]"
+        if not isinstance(entry, dict):
+            raise UserError(f"{where}: must be a mapping")
+        if "static" in entry:
+            dwell = entry.get("dwell_s", defaults.get("dwell_s"))
+            if dwell is None:
+                raise UserError(f"{where}: no dwell_s here nor in defaults")
+            segments.append(StaticSpec(
+                name=str(entry["static"]),
+                up_body=_unit_vector(entry.get("up_body"), f"{where}.up_body"),
+                dwell_s=_number(dwell, f"{where}.dwell_s", positive=True)))
+        elif "rotation" in entry:
+            rate = entry.get("rate_dps", defaults.get("rate_dps"))
+            duration = entry.get("rotation_s", defaults.get("rotation_s"))
+            if rate is None or duration is None:
+                raise UserError(f"{where}: rate_dps and rotation_s needed here or in defaults")
+            rate = abs(_number(rate, f"{where}.rate_dps", nonzero=True))
+            duration = _number(duration, f"{where}.rotation_s", positive=True)
+            axis = _unit_vector(entry.get("axis_body"), f"{where}.axis_body")
+            base = str(entry["rotation"])
+            segments.append(RotationSpec(f"{base}_p", axis, +rate, duration))
+            segments.append(RotationSpec(f"{base}_m", axis, -rate, duration))
+        else:
+            raise UserError(f"{where}: must have a 'static' or a 'rotation' key")
+    names = [s.name for s in segments]
+    duplicates = sorted({n for n in names if names.count(n) > 1})
+    if duplicates:
+        raise UserError(f"{source}: duplicate segment names: {', '.join(duplicates)}")
+    return Scheme(name=str(doc["name"]), title=str(doc.get("title", "")),
+                  reference=str(doc.get("reference", "")), defaults=defaults,
+                  segments=tuple(segments))
