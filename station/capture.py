@@ -1,0 +1,821 @@
+"""Capture bundles (station-capture/1): read them, and write them while a run records.
+
+The format is the public interface in shared/spec/capture-format.md; docs/capture.md says what
+this reader refuses and tolerates and how the writer lays files out.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import re
+import tempfile
+from collections import Counter
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path, PurePosixPath, PureWindowsPath
+
+import numpy as np
+import yaml
+
+from station.errors import CaptureError, UserError
+from station.units import ACCEL_UNITS, GYRO_UNITS
+
+FORMAT = "station-capture/1"
+MANIFEST = "manifest.yaml"
+REQUIRED_COLUMNS = ("t", "ax", "ay", "az", "gx", "gy", "gz")
+STATUSES = ("complete", "incomplete")
+GAP_FACTOR = 1.5  # a time step longer than GAP_FACTOR / sample_rate_hz is a gap (lost samples)
+
+# Manifest keys in the order the spec lists them; the writer emits them in this order.
+_SEGMENT_KEYS = ("name", "kind", "file", "status", "up_body", "axis_body", "rate_dps", "angle_deg",
+                 "samples", "sha256", "started_utc", "table_file", "temperature_c", "note")
+_SEGMENT_FIELDS = ("name", "kind", "file", "status", "up_body", "axis_body", "rate_dps", "angle_deg",
+                   "note")  # the keys that become Segment attributes; the others go to Segment.extra
+_WRITER_OWNED = ("status", "samples", "sha256")  # set by SegmentWriter, never by the caller's meta
+
+_NUMBER_TEXT = re.compile(r"[-+]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][-+]?[0-9]+)?")
+_SHA256_TEXT = re.compile(r"[0-9a-fA-F]{64}")
+_T_FORMAT = "%.15g"  # time: 1e-8 s resolution at 1e6 s
+_VALUE_FORMAT = "%.12g"  # IMU outputs: far beyond any IMU's resolution
+
+
+@dataclass
+class ImuInfo:
+    sample_rate_hz: float
+    accel_unit: str
+    gyro_unit: str
+    model: str | None = None
+    serial: str | None = None
+    extra: dict = field(default_factory=dict)
+
+
+@dataclass
+class Site:
+    gravity_mps2: float
+    latitude_deg: float | None = None
+    extra: dict = field(default_factory=dict)
+
+
+@dataclass(eq=False)
+class SegmentData:
+    t: np.ndarray  # (N,) seconds
+    accel: np.ndarray  # (N, 3) in imu.accel_unit
+    gyro: np.ndarray  # (N, 3) in imu.gyro_unit
+    temp: np.ndarray | None  # (N,) deg C, None when the file has no temp column
+    gaps: int  # time steps longer than GAP_FACTOR / sample_rate_hz
+
+
+@dataclass(eq=False)
+class Segment:
+    name: str
+    kind: str
+    file: str
+    status: str
+    up_body: np.ndarray | None = None  # unit vector
+    axis_body: np.ndarray | None = None  # unit vector
+    rate_dps: float | None = None
+    angle_deg: float | None = None
+    note: str | None = None
+    extra: dict = field(default_factory=dict)  # every other manifest key, verbatim
+    data: SegmentData | None = None
+    problem: str | None = None  # why (part of) an incomplete segment's data could not be read
+
+
+@dataclass(eq=False)
+class Capture:
+    path: Path
+    imu: ImuInfo
+    site: Site
+    scheme: str | None
+    segments: list[Segment]
+    extra: dict
+    warnings: list[str]
+
+    def complete(self, kind=None):
+        """Complete segments (of `kind` if given), in manifest order."""
+        return [s for s in self.segments
+                if s.status == "complete" and (kind is None or s.kind == kind)]
+
+    def rotation_pairs(self):
+        """(plus, minus) pairs of complete rotation segments about the same axis_body.
+
+        plus has rate_dps > 0 and minus rate_dps < 0. Pairs of equal |rate_dps| are formed
+        first, then the remaining ones, each time in manifest order; a segment is used once.
+        Segments without rate_dps are never paired.
+        """
+        rotations = [s for s in self.complete("rotation") if s.rate_dps is not None]
+        plus = [s for s in rotations if s.rate_dps > 0]
+        unpaired_minus = [s for s in rotations if s.rate_dps < 0]
+        partner = {}
+        for same_rate_only in (True, False):
+            for p in plus:
+                if p.name in partner:
+                    continue
+                m = next((m for m in unpaired_minus
+                          if np.allclose(p.axis_body, m.axis_body, rtol=0, atol=1e-6)
+                          and (not same_rate_only
+                               or math.isclose(p.rate_dps, -m.rate_dps, rel_tol=1e-9))), None)
+                if m is not None:
+                    partner[p.name] = m
+                    unpaired_minus = [x for x in unpaired_minus if x is not m]
+        return [(p, partner[p.name]) for p in plus if p.name in partner]
+
+    def segment(self, name):
+        """The segment called `name`; UserError if there is none."""
+        for s in self.segments:
+            if s.name == name:
+                return s
+        names = ", ".join(s.name for s in self.segments) or "none"
+        raise UserError(f"{self.path / MANIFEST}: no segment named {name!r} (segments: {names})")
+
+
+# ---------------------------------------------------------------------------------------------
+# Reading
+
+
+def read_capture(path, *, load_data=True):
+    """Read and check a capture bundle (a directory, or its manifest.yaml).
+
+    Raises CaptureError for anything that does not follow the format. Incomplete segments never
+    raise: what is readable of them is loaded, the rest is described in Segment.problem and in
+    Capture.warnings. With load_data=False, CSV files are not read (Segment.data is None) and
+    sha256 is not checked.
+    """
+    path = Path(path)
+    directory, manifest_file = (path.parent, path) if path.is_file() else (path, path / MANIFEST)
+    try:
+        raw = yaml.safe_load(manifest_file.read_bytes())
+    except FileNotFoundError:
+        raise CaptureError(manifest_file, "no manifest: not a capture bundle") from None
+    except OSError as e:
+        raise CaptureError(manifest_file, f"cannot read: {e.strerror}") from None
+    except yaml.MarkedYAMLError as e:
+        line = e.problem_mark.line + 1 if e.problem_mark is not None else None
+        raise CaptureError(manifest_file, f"not valid YAML: {e.problem}", line=line) from None
+    except (yaml.YAMLError, ValueError) as e:  # ValueError: e.g. a timestamp in month 13
+        raise CaptureError(manifest_file, f"not valid YAML: {e}") from None
+    except RecursionError:
+        raise CaptureError(manifest_file, "not valid YAML: nested too deeply") from None
+
+    imu, site, scheme, segments, extra = _parse_manifest(raw, directory, manifest_file)
+    capture = Capture(path=directory, imu=imu, site=site, scheme=scheme, segments=segments,
+                      extra=extra, warnings=[])
+    if load_data:
+        for index, segment in enumerate(segments):
+            _load_segment(capture, segment, _segment_label(index, segment.name))
+    return capture
+
+
+def read_segment_csv(path, *, sample_rate_hz=None):
+    """Read one segment CSV on its own (e.g. a file to compensate) with the same checks as in a
+    bundle; CaptureError names the file and line. Gaps are counted against sample_rate_hz or,
+    when it is not given, against the median time step."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as e:
+        raise CaptureError(path, f"cannot read: {e.strerror}") from None
+    return _parse_csv(_csv_lines(raw, partial_last_line=False), sample_rate_hz, path, None,
+                      require_rows=True)
+
+
+def _segment_label(index, name):
+    return f"segments[{index}] ({name})" if name is not None else f"segments[{index}]"
+
+
+class _Fields:
+    """Typed values from one mapping of the manifest; failures name the file, segment and field."""
+
+    def __init__(self, file, mapping, *, prefix="", segment=None):
+        self.file = file
+        self.mapping = mapping
+        self.prefix = prefix
+        self.segment = segment
+
+    def fail(self, key, message):
+        return CaptureError(self.file, message, field=self.prefix + key, segment=self.segment)
+
+    def get(self, key, required):
+        value = self.mapping.get(key)
+        if value is None and required:
+            raise self.fail(key, "required, missing")
+        return value
+
+    def number(self, key, *, required=False):
+        value = self.get(key, required)
+        if value is None:
+            return None
+        number = _finite_number(value)
+        if number is None:
+            raise self.fail(key, f"must be a finite number, got {_show(value)}")
+        return number
+
+    def text(self, key, *, required=False):
+        value = self.get(key, required)
+        if value is None or isinstance(value, str):
+            return value
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return str(value)  # e.g. serial: 1234 or name: 7
+        raise self.fail(key, f"must be text, got {_show(value)}")
+
+    def choice(self, key, options):
+        value = self.get(key, True)
+        if value not in options:
+            raise self.fail(key, f"must be one of {', '.join(options)}; got {_show(value)}")
+        return value
+
+    def vector(self, key, *, required=False):
+        value = self.get(key, required)
+        if value is None:
+            return None
+        numbers = [_finite_number(v) for v in value] if isinstance(value, list) else []
+        if len(numbers) != 3 or None in numbers:
+            raise self.fail(key, f"must be a list of 3 finite numbers, got {_show(value)}")
+        vector = np.array(numbers)
+        norm = np.linalg.norm(vector)
+        if not norm > 0:
+            raise self.fail(key, "must not be the zero vector")
+        return vector / norm
+
+    def relpath(self, key, directory, *, required=False):
+        value = self.text(key, required=required)
+        if value is None:
+            return None
+        problem = _path_problem(value, directory)
+        if problem:
+            raise self.fail(key, f"{problem}: {_show(value)}")
+        return value
+
+
+def _finite_number(value):
+    """`value` as a float if it is a finite number (int, float or numeric text), else None."""
+    if isinstance(value, str) and _NUMBER_TEXT.fullmatch(value.strip()):
+        value = float(value)  # e.g. 1e3 or 1e+06: numbers in YAML 1.2, text to PyYAML's YAML 1.1
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    return float(value) if math.isfinite(value) else None
+
+
+def _show(value, limit=60):
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def _path_problem(relname, directory):
+    """Why `relname` may not be used as a path inside the capture `directory` (None if it may)."""
+    if relname == "" or "\0" in relname:
+        return "not a file name"
+    if PurePosixPath(relname).is_absolute() or PureWindowsPath(relname).anchor:
+        return "must be relative to the capture directory"
+    if ".." in re.split(r"[\\/]", relname):
+        return "must not contain '..'"
+    try:
+        base = Path(directory).resolve()
+        inside = (base / relname).resolve().is_relative_to(base)
+    except (OSError, RuntimeError):  # e.g. a symbolic link loop
+        return "cannot be resolved"
+    if not inside:
+        return "resolves (through a symbolic link) outside the capture directory"
+    return None
+
+
+def _is_file(path):
+    try:
+        return path.is_file()
+    except OSError:  # e.g. a name too long for the file system
+        return False
+
+
+def _parse_manifest(raw, directory, manifest_file):
+    """Check a loaded manifest; return (imu, site, scheme, segments, extra)."""
+    if not isinstance(raw, dict):
+        raise CaptureError(manifest_file, f"must be a YAML mapping, got {type(raw).__name__}")
+    top = _Fields(manifest_file, raw)
+    fmt = top.get("format", True)
+    if fmt != FORMAT:
+        raise top.fail("format", f"must be {FORMAT}, got {_show(fmt)}")
+
+    imu = _Fields(manifest_file, _mapping(top, "imu"), prefix="imu.")
+    sample_rate_hz = imu.number("sample_rate_hz", required=True)
+    if not sample_rate_hz > 0:
+        raise imu.fail("sample_rate_hz", f"must be > 0, got {sample_rate_hz}")
+    imu_info = ImuInfo(
+        sample_rate_hz=sample_rate_hz,
+        accel_unit=imu.choice("accel_unit", ACCEL_UNITS),
+        gyro_unit=imu.choice("gyro_unit", GYRO_UNITS),
+        model=imu.text("model"),
+        serial=imu.text("serial"),
+        extra=_rest(imu.mapping, ("sample_rate_hz", "accel_unit", "gyro_unit", "model", "serial")))
+
+    site = _Fields(manifest_file, _mapping(top, "site"), prefix="site.")
+    gravity = site.number("gravity_mps2", required=True)
+    if not gravity > 0:
+        raise site.fail("gravity_mps2", f"must be > 0, got {gravity}")
+    latitude = site.number("latitude_deg")
+    if latitude is not None and not -90 <= latitude <= 90:
+        raise site.fail("latitude_deg", f"must be within [-90, 90], got {latitude}")
+    site_info = Site(gravity_mps2=gravity, latitude_deg=latitude,
+                     extra=_rest(site.mapping, ("gravity_mps2", "latitude_deg")))
+
+    entries = top.get("segments", True)
+    if not isinstance(entries, list):
+        raise top.fail("segments", f"must be a list, got {type(entries).__name__}")
+    segments = []
+    first_index = {}
+    for index, entry in enumerate(entries):
+        segment = _parse_segment(entry, index, directory, manifest_file)
+        if segment.name in first_index:
+            raise CaptureError(manifest_file, "duplicate segment name (also "
+                               f"segments[{first_index[segment.name]}])",
+                               segment=_segment_label(index, segment.name), field="name")
+        first_index[segment.name] = index
+        segments.append(segment)
+
+    scheme = top.text("scheme")
+    extra = _rest(raw, ("format", "imu", "site", "scheme", "segments"))
+    return imu_info, site_info, scheme, segments, extra
+
+
+def _mapping(fields, key):
+    value = fields.get(key, True)
+    if not isinstance(value, dict):
+        raise fields.fail(key, f"must be a mapping, got {type(value).__name__}")
+    return value
+
+
+def _rest(mapping, known):
+    return {k: v for k, v in mapping.items() if k not in known}
+
+
+def _parse_segment(entry, index, directory, manifest_file):
+    if not isinstance(entry, dict):
+        raise CaptureError(manifest_file, f"must be a mapping, got {type(entry).__name__}",
+                           segment=_segment_label(index, None))
+    name = entry.get("name")
+    label = _segment_label(index, name if isinstance(name, (str, int)) else None)
+    fields = _Fields(manifest_file, entry, segment=label)
+    name = fields.text("name", required=True)
+    if name == "":
+        raise fields.fail("name", "must not be empty")
+    kind = fields.text("kind", required=True)
+    if kind == "":
+        raise fields.fail("kind", "must not be empty")
+    status = fields.choice("status", STATUSES)
+    file = fields.relpath("file", directory, required=True)
+    fields.relpath("table_file", directory)
+    if status == "complete" and not _is_file(Path(directory) / file):
+        raise fields.fail("file", f"no such file (or not a regular file): {_show(file)}")
+    samples = entry.get("samples")
+    if samples is not None and (isinstance(samples, bool) or not isinstance(samples, int)
+                                or samples < 0):
+        raise fields.fail("samples", f"must be a whole number >= 0, got {_show(samples)}")
+    sha256 = entry.get("sha256")
+    if sha256 is not None and not (isinstance(sha256, str) and _SHA256_TEXT.fullmatch(sha256)):
+        raise fields.fail("sha256", f"must be 64 hexadecimal digits, got {_show(sha256)}")
+    segment = Segment(
+        name=name, kind=kind, file=file, status=status,
+        up_body=fields.vector("up_body"),
+        axis_body=fields.vector("axis_body", required=kind == "rotation"),
+        rate_dps=fields.number("rate_dps"),
+        angle_deg=fields.number("angle_deg"),
+        note=fields.text("note"),
+        extra=_rest(entry, _SEGMENT_FIELDS))
+    return segment
+
+
+def _load_segment(capture, segment, label):
+    """Read a segment's CSV into segment.data, refusing (complete) or describing (incomplete)."""
+    csv_file = capture.path / segment.file
+    complete = segment.status == "complete"
+    try:
+        raw = csv_file.read_bytes()
+    except OSError as e:
+        if complete:
+            raise CaptureError(csv_file, f"cannot read: {e.strerror}", segment=label) from None
+        segment.problem = f"cannot read {segment.file}: {e.strerror}"
+        capture.warnings.append(f"{label}: incomplete, no data: {segment.problem}")
+        return
+
+    expected_sha = segment.extra.get("sha256")
+    sha_problem = None
+    if expected_sha is not None and hashlib.sha256(raw).hexdigest() != expected_sha.lower():
+        sha_problem = "file content does not match the manifest's sha256 (changed or corrupted)"
+        if complete:
+            raise CaptureError(csv_file, sha_problem, segment=label, field="sha256")
+
+    rate = capture.imu.sample_rate_hz
+    if complete:
+        segment.data = _parse_csv(_csv_lines(raw, partial_last_line=False), rate, csv_file, label,
+                                  require_rows=True)
+        samples = segment.extra.get("samples")
+        if samples is not None and samples != len(segment.data.t):
+            raise CaptureError(csv_file, f"has {len(segment.data.t)} data rows, the manifest says "
+                               f"samples: {samples}", segment=label, field="samples")
+    else:
+        segment.data, segment.problem = _parse_incomplete_csv(raw, rate, csv_file, label)
+        segment.problem = segment.problem or sha_problem
+        rows = 0 if segment.data is None else len(segment.data.t)
+        problem = f": {segment.problem}" if segment.problem else ""
+        capture.warnings.append(f"{label}: incomplete, {rows} readable rows{problem}")
+
+    if segment.data is not None and segment.data.gaps:
+        capture.warnings.append(f"{label}: {segment.data.gaps} gaps in time in {segment.file} "
+                                f"(steps longer than {GAP_FACTOR}/sample_rate_hz: lost samples)")
+
+
+def _parse_incomplete_csv(raw, rate, csv_file, label):
+    """(data or None, problem or None): the rows before the first unreadable line, and what is
+    wrong with that line."""
+    lines = _csv_lines(raw, partial_last_line=True)
+    problem = None
+    while True:
+        try:
+            return _parse_csv(lines, rate, csv_file, label, require_rows=False), problem
+        except CaptureError as e:
+            problem = str(e)
+            if e.line is None or e.line < 2:
+                return None, problem
+            lines = lines[:e.line - 1]  # header and the rows before the bad line
+
+
+def _csv_lines(raw, *, partial_last_line):
+    """The file's lines without line ends or trailing blank lines.
+
+    partial_last_line: the writer may have been stopped mid-line, so whatever follows the last
+    line end is dropped.
+    """
+    text = raw.decode("utf-8", errors="replace")  # a bad byte then fails as "not a number"
+    if text.startswith("\ufeff"):
+        text = text[1:]
+    if "\r" in text:
+        text = text.replace("\r\n", "\n")
+    lines = text.split("\n")
+    if partial_last_line:
+        lines.pop()
+    while lines and not lines[-1].strip():
+        lines.pop()
+    return lines
+
+
+def _parse_csv(lines, sample_rate_hz, csv_file, label, *, require_rows):
+    """SegmentData from the lines of a segment CSV (header first); CaptureError for any violation.
+
+    sample_rate_hz: nominal rate for counting gaps; None: the median time step is the nominal one.
+
+    The fast path parses all rows at once with np.loadtxt; only when it fails are the rows
+    searched for the first bad one, to name its line and column.
+    """
+    def fail(message, line):
+        return CaptureError(csv_file, message, line=line, segment=label)
+
+    if not lines:
+        raise fail(f"empty file: line 1 must be the header {','.join(REQUIRED_COLUMNS)}", 1)
+    if '"' in lines[0]:
+        raise fail("quoting is not allowed", 1)
+    names = [name.strip() for name in lines[0].split(",")]
+    if _NUMBER_TEXT.fullmatch(names[0]):
+        raise fail(f"no header: line 1 must name the columns {','.join(REQUIRED_COLUMNS)}", 1)
+    duplicates = sorted(n for n, count in Counter(names).items() if count > 1)
+    if duplicates:
+        raise fail(f"duplicate column name(s) {', '.join(map(repr, duplicates))}", 1)
+    missing = [n for n in REQUIRED_COLUMNS if n not in names]
+    if missing:
+        raise fail(f"missing required column(s) {', '.join(map(repr, missing))} in the header", 1)
+
+    wanted = list(REQUIRED_COLUMNS) + (["temp"] if "temp" in names else [])
+    usecols = [names.index(n) for n in wanted]
+    commas = len(names) - 1
+    bad = next((i for i, line in enumerate(lines)
+                if line.count(",") != commas or '"' in line), None)
+    if bad is not None:
+        if '"' in lines[bad]:
+            raise fail("quoting is not allowed", bad + 1)
+        if not lines[bad].strip():
+            raise fail("blank line (only allowed at the end of the file)", bad + 1)
+        raise fail(f"{lines[bad].count(',') + 1} fields, the header has {len(names)}", bad + 1)
+
+    rows = lines[1:]
+    if not rows:
+        if require_rows:
+            raise fail("no data rows after the header", 2)
+        values = np.empty((0, len(wanted)))
+    else:
+        values = _loadtxt(rows, usecols)
+        if values is None:
+            index = _first_unparsable(rows, usecols)
+            fields = rows[index].split(",")
+            column = next((c for c in usecols if _loadtxt([f"0,{fields[c]}"], [1]) is None), None)
+            if column is None:
+                raise fail("cannot parse the numbers", index + 2)
+            raise fail(f"column '{names[column]}': not a number: {_show(fields[column].strip())}",
+                       index + 2)
+
+    finite = np.isfinite(values)
+    if not finite.all():
+        row, col = np.argwhere(~finite)[0]
+        text = rows[row].split(",")[usecols[col]].strip()
+        raise fail(f"column '{wanted[col]}': not a finite number: {_show(text)}", row + 2)
+    t = np.ascontiguousarray(values[:, 0])
+    steps = np.diff(t)
+    backwards = np.flatnonzero(steps <= 0)
+    if len(backwards):
+        i = backwards[0] + 1
+        raise fail(f"time does not increase: t={t[i]:.15g} after t={t[i - 1]:.15g}", i + 2)
+    if sample_rate_hz is not None:
+        step = 1.0 / sample_rate_hz
+    else:
+        step = float(np.median(steps)) if len(steps) else math.inf
+    return SegmentData(
+        t=t,
+        accel=np.ascontiguousarray(values[:, 1:4]),
+        gyro=np.ascontiguousarray(values[:, 4:7]),
+        temp=np.ascontiguousarray(values[:, 7]) if len(wanted) == 8 else None,
+        gaps=int(np.count_nonzero(steps > GAP_FACTOR * step)))
+
+
+def _loadtxt(rows, usecols):
+    """The selected columns of `rows` (non-empty list of lines) as an (N, k) array, or None."""
+    try:
+        return np.loadtxt(rows, delimiter=",", comments=None, usecols=usecols, ndmin=2,
+                          dtype=np.float64)
+    except ValueError:
+        return None
+
+
+def _first_unparsable(rows, usecols):
+    """Index of the first row np.loadtxt refuses, knowing that it refuses `rows`."""
+    lo, hi = 0, len(rows)  # the first bad row is in rows[lo:hi]
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if _loadtxt(rows[lo:mid], usecols) is None:
+            hi = mid
+        else:
+            lo = mid
+    return lo
+
+
+# ---------------------------------------------------------------------------------------------
+# Writing
+
+
+class CaptureWriter:
+    """Writes a capture bundle as a run records it.
+
+    The manifest is rewritten atomically whenever a segment begins or ends, so a bundle whose
+    writer was killed at any moment is readable: finished segments are complete, the one being
+    recorded is incomplete with every row flushed before the kill.
+    """
+
+    def __init__(self, directory, imu: ImuInfo, site: Site, scheme: str | None = None,
+                 extra: dict | None = None):
+        directory = Path(directory)
+        if (directory / MANIFEST).exists():
+            raise UserError(f"{directory}: already holds a capture ({MANIFEST}); "
+                            "reopen it to append segments, or choose a new directory")
+        manifest = {
+            "format": FORMAT,
+            "imu": _without_none({"sample_rate_hz": imu.sample_rate_hz,
+                                  "accel_unit": imu.accel_unit, "gyro_unit": imu.gyro_unit,
+                                  "model": imu.model, "serial": imu.serial, **imu.extra}),
+            "site": _without_none({"gravity_mps2": site.gravity_mps2,
+                                   "latitude_deg": site.latitude_deg, **site.extra}),
+            "scheme": scheme,
+            "segments": [],
+        }
+        for key, value in (extra or {}).items():
+            if key in manifest:
+                raise ValueError(f"extra key {key!r} is a manifest key of its own")
+            manifest[key] = value
+        manifest = _without_none(_plain(manifest))
+        _check(manifest, directory)
+        directory.mkdir(parents=True, exist_ok=True)
+        self._dir = directory
+        self._save(manifest)
+
+    @classmethod
+    def reopen(cls, directory):
+        """A writer that appends to an existing bundle.
+
+        Complete segments are kept untouched; incomplete ones are dropped from the manifest and
+        their files renamed aside (rot1p.csv -> rot1p.csv.incomplete), so they can be recorded
+        again under the same name.
+        """
+        directory = Path(directory)
+        capture = read_capture(directory, load_data=False)
+        manifest = yaml.safe_load((directory / MANIFEST).read_bytes())
+        kept = []
+        for entry, segment in zip(manifest["segments"], capture.segments):
+            if segment.status == "complete":
+                kept.append(entry)
+            elif (directory / segment.file).is_file():
+                os.replace(directory / segment.file, _aside_name(directory / segment.file))
+        manifest["segments"] = kept
+        writer = cls.__new__(cls)
+        writer._dir = directory
+        writer._save(manifest)
+        return writer
+
+    @property
+    def path(self):
+        return self._dir
+
+    def begin_segment(self, name, kind, *, file=None, **meta):
+        """Start recording a segment: creates its CSV and lists it as incomplete.
+
+        meta: up_body, axis_body, rate_dps, angle_deg, note, started_utc (default: now), ...;
+        numpy values become plain numbers and lists.
+        """
+        _refuse_owned_keys(meta)
+        entry = {"name": name, "kind": kind, "file": file or f"{name}.csv",
+                 "status": "incomplete",
+                 "started_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+                 **_plain(meta)}
+        entry = _ordered_entry(entry)
+        manifest = {**self._manifest, "segments": self._manifest["segments"] + [entry]}
+        _check(manifest, self._dir)
+        csv_path = self._dir / entry["file"]
+        csv_path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            handle = open(csv_path, "xb")
+        except FileExistsError:
+            raise UserError(f"{csv_path}: already exists; will not overwrite it") from None
+        self._save(manifest)
+        return SegmentWriter(self, entry, handle)
+
+    def write_file(self, relname, text):
+        """Write an extra file into the bundle (text or bytes), atomically."""
+        problem = _path_problem(relname, self._dir)
+        if not problem and (self._dir / relname).resolve() == (self._dir / MANIFEST).resolve():
+            problem = "the manifest is written by the writer itself"
+        if problem:
+            raise ValueError(f"{relname!r}: {problem}")
+        path = self._dir / relname
+        path.parent.mkdir(parents=True, exist_ok=True)
+        _atomic_write(path, text.encode("utf-8") if isinstance(text, str) else text)
+
+    def _update_segment(self, entry, changes):
+        """Apply `changes` to a segment entry and save the manifest, refusing invalid values."""
+        index = next(i for i, e in enumerate(self._manifest["segments"]) if e is entry)
+        updated = _ordered_entry({**entry, **_plain(changes)})
+        segments = list(self._manifest["segments"])
+        segments[index] = updated
+        manifest = {**self._manifest, "segments": segments}
+        _check(manifest, self._dir)
+        self._save(manifest)
+        return updated
+
+    def _save(self, manifest):
+        """Make `manifest` (already checked) the bundle's manifest, atomically."""
+        _atomic_write(self._dir / MANIFEST,
+                      yaml.safe_dump(manifest, sort_keys=False, default_flow_style=None,
+                                     allow_unicode=True).encode("utf-8"))
+        self._manifest = manifest
+
+
+class SegmentWriter:
+    """Appends IMU samples to one segment's CSV; every write is on disk when it returns."""
+
+    def __init__(self, capture_writer, entry, handle):
+        self._writer = capture_writer
+        self._entry = entry
+        self._file = handle
+        self._sha = hashlib.sha256()
+        self._samples = 0
+        self._last_t = -math.inf
+        self._with_temp = None  # decided by the first write
+        self.closed = False
+
+    @property
+    def name(self):
+        return self._entry["name"]
+
+    @property
+    def samples(self):
+        return self._samples
+
+    def write(self, t, accel, gyro, temp=None):
+        """Append N rows: t (N,), accel (N, 3), gyro (N, 3), temp (N,) or None.
+
+        Whether the file has a temp column is decided by the first write. ValueError for
+        arrays of the wrong shape, non-finite values or time that does not increase.
+        """
+        if self.closed:
+            raise ValueError(f"segment {self.name!r} is closed")
+        columns = [np.asarray(a, dtype=np.float64)
+                   for a in ((t, accel, gyro) if temp is None else (t, accel, gyro, temp))]
+        n = len(columns[0]) if columns[0].ndim == 1 else -1
+        expected = [(n,), (n, 3), (n, 3), (n,)][:len(columns)]
+        if n < 0 or [c.shape for c in columns] != expected:
+            raise ValueError("write() needs t (N,), accel (N, 3), gyro (N, 3) and temp (N,) or None")
+        if self._with_temp is not None and (temp is not None) != self._with_temp:
+            raise ValueError(f"segment {self.name!r}: temp must be given in every write or in none")
+        if n == 0:
+            return
+        block = np.column_stack(columns)
+        t = columns[0]
+        if not np.isfinite(block).all():
+            raise ValueError(f"segment {self.name!r}: non-finite values cannot be recorded")
+        if t[0] <= self._last_t or (n > 1 and not (np.diff(t) > 0).all()):
+            raise ValueError(f"segment {self.name!r}: time must strictly increase")
+
+        header = ""
+        if self._with_temp is None:
+            self._with_temp = temp is not None
+            header = ",".join(REQUIRED_COLUMNS) + (",temp" if self._with_temp else "") + "\n"
+        row_format = ",".join([_T_FORMAT] + [_VALUE_FORMAT] * (block.shape[1] - 1)) + "\n"
+        data = (header + (row_format * n) % tuple(block.ravel().tolist())).encode("ascii")
+        self._file.write(data)
+        self._file.flush()
+        os.fsync(self._file.fileno())
+        self._sha.update(data)
+        self._samples += n
+        self._last_t = t[-1]
+
+    def close(self, status="complete", **meta):
+        """Finish the segment: record status, samples, sha256 and `meta` (e.g. the encoder's
+        angle_deg) in the manifest. A complete segment needs at least one sample (ValueError;
+        the segment is then recorded as incomplete)."""
+        if self.closed:
+            raise ValueError(f"segment {self.name!r} is already closed")
+        _refuse_owned_keys(meta)
+        self._file.close()
+        self.closed = True
+        if status == "complete" and self._samples == 0:
+            self._entry = self._writer._update_segment(self._entry, {"status": "incomplete", **meta})
+            raise ValueError(f"segment {self.name!r}: no samples; recorded as incomplete")
+        self._entry = self._writer._update_segment(
+            self._entry, {"status": status, "samples": self._samples,
+                          "sha256": self._sha.hexdigest(), **meta})
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if not self.closed:
+            self.close(status="complete" if exc_type is None else "incomplete")
+        return False
+
+
+def _check(manifest, directory):
+    """Refuse (CaptureError) a manifest that a reader would refuse."""
+    _parse_manifest(manifest, directory, Path(directory) / MANIFEST)
+
+
+def _refuse_owned_keys(meta):
+    owned = sorted(set(meta) & set(_WRITER_OWNED))
+    if owned:
+        raise TypeError(f"{', '.join(owned)} are recorded by the writer, not passed in")
+
+
+def _ordered_entry(entry):
+    known = [k for k in _SEGMENT_KEYS if k in entry]
+    return {k: entry[k] for k in known + [k for k in entry if k not in _SEGMENT_KEYS]}
+
+
+def _without_none(mapping):
+    return {k: v for k, v in mapping.items() if v is not None}
+
+
+def _plain(value):
+    """`value` with numpy arrays and scalars (also nested in dicts, lists and tuples) turned into
+    plain Python lists and numbers that yaml.safe_dump can write."""
+    if isinstance(value, np.ndarray):
+        return value.astype(np.float64).tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
+def _aside_name(path):
+    candidate = path.with_name(path.name + ".incomplete")
+    number = 2
+    while candidate.exists():
+        candidate = path.with_name(f"{path.name}.incomplete{number}")
+        number += 1
+    return candidate
+
+
+def _atomic_write(path, data):
+    """Replace `path` with `data` so that a reader sees either the old or the new file, even
+    after a crash: write a temporary file, flush and fsync it, rename it over, fsync the folder."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    dir_fd = os.open(path.parent, os.O_RDONLY)
+    try:
+        os.fsync(dir_fd)
+    finally:
+        os.close(dir_fd)
