@@ -131,10 +131,17 @@ def _print_notes(cal) -> None:
 
 # --- parser -------------------------------------------------------------------------------------
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with usage errors on one line (exit status 2, as for every user error)."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="station", description="IMU calibration with a rate table.")
+    p = _Parser(prog="station", description="IMU calibration with a rate table.")
     p.add_argument("--version", action="version", version=f"station {station.__version__}")
-    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
 
     run = sub.add_parser("run", help="run a calibration scheme and estimate")
     run.add_argument("--scheme", default="optimal9", help="built-in scheme name or a scheme YAML file")
