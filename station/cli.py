@@ -169,6 +169,8 @@ def build_parser() -> argparse.ArgumentParser:
     show = sub.add_parser("show", help="print a calibration file")
     show.add_argument("calibration", metavar="CAL.yaml")
     show.set_defaults(func=cmd_show)
+
+    # Commands defined in other modules register here (one line each).
     return p
 
 

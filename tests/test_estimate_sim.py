@@ -105,3 +105,27 @@ def test_error_spread_matches_noise_over_seeded_runs():
             assert lo < ratio < hi, f"{name}: spread {ratio:.2f} x predicted, outside [{lo:.2f}, {hi:.2f}]"
         # and no bias: the mean error is within 4 standard errors of zero
         assert abs(col.mean()) < 4 * col.std(ddof=1) / math.sqrt(runs), f"{name}: biased"
+
+
+@pytest.mark.parametrize("accel_unit, a_per_si, gyro_unit, g_per_si", [
+    ("g", 1 / G0, "rad/s", math.pi / 180),
+    ("raw", 1000.0, "raw", 50.0),
+])
+def test_manifest_units_are_honoured(accel_unit, a_per_si, gyro_unit, g_per_si):
+    """The same data declared in other units give the same compensation into m/s^2 and deg/s."""
+    scheme, truth = load_scheme("optimal9"), quiet_truth(accel_ug=100.0, gyro_dph=0.03, angle_arcsec=2.0)
+    capture = simrun.simulate_capture(scheme, truth, seed=21)
+    reference = zhang2010.estimate(capture)
+    for seg in capture.segments:
+        seg.data.accel = seg.data.accel * a_per_si
+        seg.data.gyro = seg.data.gyro * g_per_si
+    capture.imu.accel_unit, capture.imu.gyro_unit = accel_unit, gyro_unit
+    cal = zhang2010.estimate(capture)
+    np.testing.assert_allclose(cal.accel_matrix * a_per_si, reference.accel_matrix, rtol=1e-9)
+    np.testing.assert_allclose(cal.gyro_matrix * g_per_si, reference.gyro_matrix, rtol=1e-9)
+    np.testing.assert_allclose(cal.accel_bias / a_per_si, reference.accel_bias, rtol=1e-7, atol=1e-12)
+    np.testing.assert_allclose(cal.gyro_bias / g_per_si, reference.gyro_bias, rtol=1e-7, atol=1e-12)
+    if accel_unit == "raw":   # the scale factor carries the unit
+        np.testing.assert_allclose(cal.accel_scale, reference.accel_scale * a_per_si, rtol=1e-9)
+    else:                     # dimensionless, the same number
+        np.testing.assert_allclose(cal.accel_scale, reference.accel_scale, rtol=1e-9)
