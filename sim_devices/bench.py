@@ -140,12 +140,17 @@ class SimulatedBench:
             },
         )
 
-    def rotation(self, axis_body, rate_dps, duration_s, *, start_up_body=None) -> SimSegment:
+    def rotation(self, axis_body, rate_dps, duration_s, *, start_up_body=None,
+                 axis_elevation_deg: float = 0.0, drift_fraction: float = 0.0,
+                 encoder: bool = True) -> SimSegment:
         """Spin the IMU about case direction ``axis_body`` at ``rate_dps``.
 
-        The table axis is horizontal and Earth-fixed.  The start attitude (at
-        the first sample) is remembered per (axis_body, start_up_body), so the
-        second call of a +/- pair starts from the same attitude.
+        The table axis is Earth-fixed, ``axis_elevation_deg`` above the horizontal (0: a
+        horizontal axis, the default; 90: a vertical axis pointing up).  The start attitude (at
+        the first sample) is remembered per (axis_body, start_up_body, elevation), so the
+        second call of a +/- pair starts from the same attitude.  ``drift_fraction`` changes
+        the rate linearly by that fraction over the segment (-0.2: 20 % slower at the end, as a
+        screwdriver); ``encoder=False`` reports no angle (a hand or screwdriver rotation).
         """
         a_cmd = world._unit(axis_body, "axis_body")
         r = float(rate_dps)
@@ -153,13 +158,13 @@ class SimulatedBench:
             raise ValueError(f"rate_dps must be non-zero and finite, got {rate_dps!r}")
         up_hint = None if start_up_body is None else world._unit(start_up_body, "start_up_body")
         key = (tuple(np.round(a_cmd, 12)),
-               None if up_hint is None else tuple(np.round(up_hint, 12)))
+               None if up_hint is None else tuple(np.round(up_hint, 12)), float(axis_elevation_deg))
         start = self._rotation_starts.get(key)
         if start is None:
             heading = self._geom_rng.uniform(0.0, 2.0 * np.pi)
             roll = self._geom_rng.uniform(0.0, 2.0 * np.pi)
             delta = self._mount_error()
-            a_n = world.horizontal_axis_enu(heading)
+            a_n = world.table_axis_enu(heading, math.radians(axis_elevation_deg))
             C_bn0 = world.small_rotation(delta) * world.attitude_axis(
                 a_cmd, a_n, up_body=up_hint, roll_rad=roll)
             start = (C_bn0, a_n, heading, delta)
@@ -173,8 +178,10 @@ class SimulatedBench:
         phase = self._geom_rng.uniform(0.0, 2.0 * np.pi)
         t = self._times(n)
         w_rad = math.radians(r)
+        duration = n * dt
         prof = dict(t0=t[0], rate_rad_s=w_rad, ripple_fraction=bench.rate_ripple_fraction,
-                    ripple_hz=bench.rate_ripple_hz, ripple_phase_rad=phase)
+                    ripple_hz=bench.rate_ripple_hz, ripple_phase_rad=phase,
+                    drift_per_s=float(drift_fraction) / duration)
         theta, theta_dot, theta_ddot = world.rate_profile(t, **prof)
         C_bn = world.table_attitude(C_bn0, a_n, theta)
         w_b, wdot_b = world.table_rates_body(C_bn0, a_n, theta_dot, theta_ddot)
@@ -187,7 +194,9 @@ class SimulatedBench:
         angle_deg = swept_deg + enc_err_arcsec / 3600.0
 
         accel, gyro, temp = self._measure(t, f_b, w_ib)
-        meta = {"axis_body": [float(x) for x in a_cmd], "rate_dps": r, "angle_deg": angle_deg}
+        meta = {"axis_body": [float(x) for x in a_cmd], "rate_dps": r}
+        if encoder:
+            meta["angle_deg"] = angle_deg
         return SimSegment(
             kind="rotation", t=t, accel=accel, gyro=gyro, temp=temp, meta=meta,
             truth={

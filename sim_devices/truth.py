@@ -194,6 +194,7 @@ class BenchSettings:
     lever_arm_m: np.ndarray = field(default_factory=lambda: np.array([0.03, 0.0, 0.04]))
     table_angle_error_arcsec: float = 2.0
     rate_ripple_fraction: float = 0.0
+    rate_drift_fraction: float = 0.0      # rate change over a rotation without encoder (screwdriver)
     rate_ripple_hz: float = 1.0
     accel_disturbance_ug: float = 0.0
     move_s: float = 10.0
@@ -221,7 +222,7 @@ _GYR_KEYS = {"scale", "axis_tilt_arcsec", "bias_dph", "bias_tempco_dph_per_c",
 _TEMP_KEYS = {"start_c", "reference_c", "drift_c_per_h", "warmup_delta_c",
               "warmup_time_constant_s"}
 _BENCH_KEYS = {"latitude_deg", "height_m", "lever_arm_m", "table_angle_error_arcsec",
-               "rate_ripple_fraction", "rate_ripple_hz", "accel_disturbance_ug",
+               "rate_ripple_fraction", "rate_ripple_hz", "rate_drift_fraction", "accel_disturbance_ug",
                "move_s", "settle_s"}
 
 
@@ -349,6 +350,7 @@ class Truth:
                 "lever_arm_m": fl(self.bench.lever_arm_m),
                 "table_angle_error_arcsec": float(self.bench.table_angle_error_arcsec),
                 "rate_ripple_fraction": float(self.bench.rate_ripple_fraction),
+                "rate_drift_fraction": float(self.bench.rate_drift_fraction),
                 "rate_ripple_hz": float(self.bench.rate_ripple_hz),
                 "accel_disturbance_ug": float(self.bench.accel_disturbance_ug),
                 "move_s": float(self.bench.move_s),
@@ -436,6 +438,9 @@ class Truth:
         if "rate_ripple_fraction" in d:
             bench.rate_ripple_fraction = c.number(
                 d["rate_ripple_fraction"], "bench.rate_ripple_fraction", lo=0.0, hi=1.0, hi_open=True)
+        if "rate_drift_fraction" in d:
+            bench.rate_drift_fraction = c.number(
+                d["rate_drift_fraction"], "bench.rate_drift_fraction", lo=-0.9, hi=0.9)
         if "rate_ripple_hz" in d:
             bench.rate_ripple_hz = c.number(d["rate_ripple_hz"], "bench.rate_ripple_hz",
                                             lo=0.0, lo_open=True)

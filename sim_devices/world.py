@@ -166,17 +166,28 @@ def horizontal_axis_enu(heading_rad: float) -> np.ndarray:
     return np.array([np.sin(heading_rad), np.cos(heading_rad), 0.0])
 
 
+def table_axis_enu(heading_rad: float, elevation_rad: float = 0.0) -> np.ndarray:
+    """Unit table axis in ENU: ``heading_rad`` from north towards east, raised by
+    ``elevation_rad`` above the horizontal (pi/2: pointing up)."""
+    c = np.cos(elevation_rad)
+    return np.array([c * np.sin(heading_rad), c * np.cos(heading_rad), np.sin(elevation_rad)])
+
+
 def attitude_axis(axis_body, axis_enu, *, up_body=None, roll_rad: float = 0.0) -> Rotation:
     """Attitude C_bn with C_bn.apply(axis_enu) == unit(axis_body).
 
-    ``axis_enu`` must be horizontal.  If ``up_body`` is given, its component
-    perpendicular to ``axis_body`` is put up; otherwise a deterministic
-    perpendicular direction turned by ``roll_rad`` about ``axis_body`` is.
+    The remaining freedom (a turn about the axis) is fixed by a reference direction: the part
+    of local up perpendicular to ``axis_enu`` (north when the axis is vertical).  If
+    ``up_body`` is given, its component perpendicular to ``axis_body`` is put along that
+    reference; otherwise a deterministic perpendicular direction turned by ``roll_rad``
+    about ``axis_body`` is.
     """
     a_b = _unit(axis_body, "axis_body")
     a_n = _unit(axis_enu, "axis_enu")
-    if abs(a_n[2]) > 1e-9:
-        raise ValueError("table axis must be horizontal")
+    ref = UP_ENU - np.dot(UP_ENU, a_n) * a_n
+    if np.linalg.norm(ref) < 1e-9:
+        ref = np.array([0.0, 1.0, 0.0]) - a_n[1] * a_n
+    ref /= np.linalg.norm(ref)
     if up_body is not None:
         h = _unit(up_body, "start_up_body")
         h = h - np.dot(h, a_b) * a_b
@@ -185,7 +196,7 @@ def attitude_axis(axis_body, axis_enu, *, up_body=None, roll_rad: float = 0.0) -
         h /= np.linalg.norm(h)
     else:
         h = Rotation.from_rotvec(roll_rad * a_b).apply(_any_perpendicular(a_b))
-    return _frame_map((a_n, UP_ENU), (a_b, h))
+    return _frame_map((a_n, ref), (a_b, h))
 
 
 def small_rotation(rotvec_rad) -> Rotation:
@@ -198,10 +209,12 @@ def small_rotation(rotvec_rad) -> Rotation:
 # --------------------------------------------------------------------------
 
 def rate_profile(t, t0: float, rate_rad_s: float, ripple_fraction: float = 0.0,
-                 ripple_hz: float = 1.0, ripple_phase_rad: float = 0.0):
+                 ripple_hz: float = 1.0, ripple_phase_rad: float = 0.0,
+                 drift_per_s: float = 0.0):
     """Table angle, rate and angular acceleration about its axis.
 
-    theta_dot(t) = w (1 + rho sin(2 pi f (t - t0) + phase)),  theta(t0) = 0.
+    theta_dot(t) = w (1 + d (t - t0) + rho sin(2 pi f (t - t0) + phase)),  theta(t0) = 0,
+    with d the fractional rate drift per second (a screwdriver slowing down: d < 0).
 
     Returns (theta, theta_dot, theta_ddot), arrays shaped like ``t``
     (rad, rad/s, rad/s^2).
@@ -209,15 +222,17 @@ def rate_profile(t, t0: float, rate_rad_s: float, ripple_fraction: float = 0.0,
     t = np.asarray(t, dtype=float)
     tau = t - t0
     w = float(rate_rad_s)
-    if ripple_fraction == 0.0:
-        theta = w * tau
-        return theta, np.full_like(tau, w), np.zeros_like(tau)
-    om = 2.0 * np.pi * ripple_hz
-    arg = om * tau + ripple_phase_rad
-    rho = float(ripple_fraction)
-    theta = w * tau + w * rho / om * (np.cos(ripple_phase_rad) - np.cos(arg))
-    theta_dot = w * (1.0 + rho * np.sin(arg))
-    theta_ddot = w * rho * om * np.cos(arg)
+    d = float(drift_per_s)
+    theta = w * (tau + 0.5 * d * tau * tau)
+    theta_dot = w * (1.0 + d * tau)
+    theta_ddot = np.full_like(tau, w * d)
+    if ripple_fraction != 0.0:
+        om = 2.0 * np.pi * ripple_hz
+        arg = om * tau + ripple_phase_rad
+        rho = float(ripple_fraction)
+        theta = theta + w * rho / om * (np.cos(ripple_phase_rad) - np.cos(arg))
+        theta_dot = theta_dot + w * rho * np.sin(arg)
+        theta_ddot = theta_ddot + w * rho * om * np.cos(arg)
     return theta, theta_dot, theta_ddot
 
 

@@ -2,7 +2,8 @@
 
 A scheme file (YAML, see ``schemes/optimal9.yaml``) lists static attitudes (the direction of
 local "up" in IMU axes and a dwell) and rotations (an axis in IMU axes, run as a +/- pair at a
-rate for a duration).  This module loads and validates such a file and expands it into the
+rate for a duration, unless ``pair: false``; the table axis horizontal unless
+``axis_elevation_deg`` says otherwise; measured by an encoder unless ``encoder: false``).  This module loads and validates such a file and expands it into the
 ordered list of segments a run records.  It knows nothing about tables or hardware.
 """
 from __future__ import annotations
@@ -42,6 +43,8 @@ class RotationSpec:
     axis_body: tuple[float, float, float]
     rate_dps: float
     duration_s: float
+    axis_elevation_deg: float = 0.0   # the table axis above the horizontal (90: vertical, up)
+    encoder: bool = True              # False: hand or screwdriver, no angle measured
     kind: str = "rotation"
 
     @property
@@ -147,9 +150,21 @@ def parse_scheme(doc, source: str, overrides: dict) -> Scheme:
             rate = abs(_number(rate, f"{where}.rate_dps", nonzero=True))
             duration = _number(duration, f"{where}.rotation_s", positive=True)
             axis = _unit_vector(entry.get("axis_body"), f"{where}.axis_body")
+            elevation = _number(entry.get("axis_elevation_deg", 0.0), f"{where}.axis_elevation_deg")
+            if not -90.0 <= elevation <= 90.0:
+                raise UserError(f"{where}.axis_elevation_deg: must be within [-90, 90], got {elevation}")
+            flags = {}
+            for key in ("pair", "encoder"):
+                flags[key] = entry.get(key, True)
+                if not isinstance(flags[key], bool):
+                    raise UserError(f"{where}.{key}: must be true or false, got {flags[key]!r}")
             base = str(entry["rotation"])
-            segments.append(RotationSpec(f"{base}_p", axis, +rate, duration))
-            segments.append(RotationSpec(f"{base}_m", axis, -rate, duration))
+            common = dict(axis_elevation_deg=elevation, encoder=flags["encoder"])
+            if flags["pair"]:
+                segments.append(RotationSpec(f"{base}_p", axis, +rate, duration, **common))
+                segments.append(RotationSpec(f"{base}_m", axis, -rate, duration, **common))
+            else:
+                segments.append(RotationSpec(base, axis, rate, duration, **common))
         else:
             raise UserError(f"{where}: must have a 'static' or a 'rotation' key")
     names = [s.name for s in segments]

@@ -27,8 +27,14 @@ def _simulate(scheme: Scheme, bench) -> Iterator[tuple[object, object, dict]]:
     """(spec, simulated segment, commanded manifest keys) for every segment, in order."""
     for spec in scheme.segments:
         if isinstance(spec, RotationSpec):
-            yield (spec, bench.rotation(spec.axis_body, spec.rate_dps, spec.duration_s),
-                   {"axis_body": list(spec.axis_body), "rate_dps": spec.rate_dps})
+            drift = 0.0 if spec.encoder else bench.truth.bench.rate_drift_fraction
+            seg = bench.rotation(spec.axis_body, spec.rate_dps, spec.duration_s,
+                                 axis_elevation_deg=spec.axis_elevation_deg,
+                                 drift_fraction=drift, encoder=spec.encoder)
+            meta = {"axis_body": list(spec.axis_body), "rate_dps": spec.rate_dps}
+            if not spec.encoder:
+                meta["note"] = "no encoder: rate_dps is the nominal rate and gives the direction only"
+            yield spec, seg, meta
         else:
             yield spec, bench.static(spec.up_body, spec.dwell_s), {"up_body": list(spec.up_body)}
 
@@ -73,7 +79,7 @@ def simulate_capture(scheme: Scheme, truth, seed: int) -> Capture:
             name=spec.name, kind=spec.kind, file=f"{spec.name}.csv", status="complete",
             up_body=np.array(meta["up_body"]) if "up_body" in meta else None,
             axis_body=np.array(meta["axis_body"]) if "axis_body" in meta else None,
-            rate_dps=meta.get("rate_dps"), angle_deg=seg.meta.get("angle_deg"),
+            rate_dps=meta.get("rate_dps"), angle_deg=seg.meta.get("angle_deg"), note=meta.get("note"),
             data=SegmentData(t=seg.t, accel=seg.accel, gyro=seg.gyro, temp=seg.temp, gaps=0)))
     return Capture(path=Path(f"<simulated seed {seed}>"), imu=imu, site=site, scheme=scheme.name,
                    segments=segments, extra={}, warnings=[])
