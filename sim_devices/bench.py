@@ -108,11 +108,12 @@ class SimulatedBench:
         """Random small rotation vector, rad, sigma per axis = table angle error."""
         return self._geom_rng.normal(0.0, self.truth.bench.table_angle_error_arcsec, 3) * ARCSEC
 
-    def _measure(self, t, f_b, w_ib_rad):
+    def _measure(self, t, f_b, w_ib_rad, w_eb_b=None, wdot_eb_b=None):
         f_b = world.perturb_specific_force(
             f_b, self.truth.bench.accel_disturbance_ug * world.MICRO_G, self._noise_rng)
         temp = self.truth.temperature.at(t)
-        accel, gyro = self.truth.measure(f_b, np.degrees(w_ib_rad), temp, self._noise_rng)
+        accel, gyro = self.truth.measure(f_b, np.degrees(w_ib_rad), temp, self._noise_rng,
+                                         w_eb_b=w_eb_b, wdot_eb_b=wdot_eb_b)
         return accel, gyro, temp
 
     # -------------------------------------------------------------- segments
@@ -193,7 +194,7 @@ class SimulatedBench:
         enc_err_arcsec = float(self._enc_rng.normal(0.0, bench.table_angle_error_arcsec))
         angle_deg = swept_deg + enc_err_arcsec / 3600.0
 
-        accel, gyro, temp = self._measure(t, f_b, w_ib)
+        accel, gyro, temp = self._measure(t, f_b, w_ib, w_b, wdot_b)
         meta = {"axis_body": [float(x) for x in a_cmd], "rate_dps": r}
         if encoder:
             meta["angle_deg"] = angle_deg

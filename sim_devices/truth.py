@@ -146,6 +146,9 @@ class TriadTruth:
     bias_tempco: np.ndarray = field(default_factory=lambda: np.zeros(3))
     noise_density: float = 0.0
     lsb: float = 0.0
+    # accelerometers only: where each sensing element sits (row i: element i), m, case axes,
+    # relative to the IMU reference point (the 2017 paper's size effect)
+    position_m: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
 
     def __post_init__(self):
         self.scale = np.asarray(self.scale, dtype=float).reshape(3)
@@ -154,6 +157,7 @@ class TriadTruth:
         self.bias_tempco = np.asarray(self.bias_tempco, dtype=float).reshape(3)
         self.noise_density = float(self.noise_density)
         self.lsb = float(self.lsb)
+        self.position_m = np.asarray(self.position_m, dtype=float).reshape(3, 3)
 
     @property
     def axes(self) -> np.ndarray:
@@ -216,7 +220,7 @@ def _quantise(x: np.ndarray, lsb: float) -> np.ndarray:
 
 _TOP_KEYS = {"version", "sample_rate_hz", "accelerometer", "gyroscope", "temperature", "bench"}
 _ACC_KEYS = {"scale", "axis_tilt_arcsec", "bias_ug", "bias_tempco_ug_per_c",
-             "noise_density_ug_rthz", "lsb_mps2"}
+             "noise_density_ug_rthz", "lsb_mps2", "position_m"}
 _GYR_KEYS = {"scale", "axis_tilt_arcsec", "bias_dph", "bias_tempco_dph_per_c",
              "noise_density_dph_rthz", "lsb_dps"}
 _TEMP_KEYS = {"start_c", "reference_c", "drift_c_per_h", "warmup_delta_c",
@@ -248,11 +252,14 @@ class Truth:
         return self.gyro.noise_density * DEG_PER_HOUR * math.sqrt(self.sample_rate_hz)
 
     # ------------------------------------------------------------- measuring
-    def measure(self, f_b, w_b_dps, temp, rng):
+    def measure(self, f_b, w_b_dps, temp, rng, w_eb_b=None, wdot_eb_b=None):
         """Body quantities -> raw outputs.
 
-        f_b (N,3) m/s^2 and w_b_dps (N,3) deg/s in case axes, temp (N,) or
-        scalar deg C, rng a numpy Generator (None: no noise).
+        f_b (N,3) m/s^2 (at the IMU reference point) and w_b_dps (N,3) deg/s in case axes,
+        temp (N,) or scalar deg C, rng a numpy Generator (None: no noise).  ``w_eb_b`` and
+        ``wdot_eb_b`` (rad/s, rad/s^2, body axes) are the rate of the body relative to the
+        Earth and its derivative: each accelerometer then senses the specific force at its own
+        position p_i, f_i = f_b + wdot x p_i + w x (w x p_i) (rigid body).
         Returns (accel_raw, gyro_raw), each (N,3).
         """
         f_b = np.atleast_2d(np.asarray(f_b, dtype=float))
@@ -261,6 +268,12 @@ class Truth:
         ba = (self.accel.bias + self.accel.bias_tempco * dT) * MICRO_G
         bg = (self.gyro.bias + self.gyro.bias_tempco * dT) * DEG_PER_HOUR
         accel = f_b @ self.accel.matrix.T + ba
+        if w_eb_b is not None and np.any(self.accel.position_m):
+            w = np.atleast_2d(np.asarray(w_eb_b, dtype=float))
+            wd = np.atleast_2d(np.asarray(wdot_eb_b if wdot_eb_b is not None else 0.0, dtype=float))
+            for i, p in enumerate(self.accel.position_m):
+                extra = np.cross(wd, p) + np.cross(w, np.cross(w, p))
+                accel[:, i] += extra @ self.accel.matrix[i]
         gyro = w_b @ self.gyro.matrix.T + bg
         if rng is not None:
             if self.accel.noise_density > 0.0:
@@ -328,6 +341,7 @@ class Truth:
                 "bias_tempco_ug_per_c": fl(self.accel.bias_tempco),
                 "noise_density_ug_rthz": float(self.accel.noise_density),
                 "lsb_mps2": float(self.accel.lsb),
+                "position_m": [fl(r) for r in self.accel.position_m],
             },
             "gyroscope": {
                 "scale": fl(self.gyro.scale),
@@ -404,6 +418,8 @@ class Truth:
                 t.noise_density = c.number(d[noise_key], f"{sec}.{noise_key}", lo=0.0)
             if lsb_key in d:
                 t.lsb = c.number(d[lsb_key], f"{sec}.{lsb_key}", lo=0.0)
+            if "position_m" in d:
+                t.position_m = c.matrix(d["position_m"], f"{sec}.position_m", 3, 3, lo=-1.0, hi=1.0)
             return t
 
         accel = triad("accelerometer", _ACC_KEYS, "bias_ug", "bias_tempco_ug_per_c",
