@@ -139,6 +139,8 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from station import cli_devices
+
     p = _Parser(prog="station", description="IMU calibration with a rate table.")
     p.add_argument("--version", action="version", version=f"station {station.__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
@@ -171,6 +173,7 @@ def build_parser() -> argparse.ArgumentParser:
     show.set_defaults(func=cmd_show)
 
     # Commands defined in other modules register here (one line each).
+    cli_devices.add_parsers(sub)
     return p
 
 

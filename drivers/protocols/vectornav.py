@@ -1,0 +1,223 @@
+"""VectorNav: the ASCII command protocol and the binary output layout, as data.
+
+ASCII: ``$`` body ``*`` XX ``\\r\\n``, XX the XOR of the body's bytes in two upper-case hex
+digits (``XX`` literally: "no checksum", accepted by the sensor).  Replies echo the command's
+body (``$VNWRG,75,...``), errors are ``$VNERR,NN``.
+
+Binary output (VectorNav binary protocol, as documented for the VN-100/VN-200): sync byte
+0xFA, the group byte (bit g-1 set: group g present), one little-endian uint16 field mask per
+present group in group order, the payload (fields in group order then bit order,
+little-endian), then the CRC-16/XMODEM of everything after the sync byte, big-endian (so the
+CRC of group byte..CRC is 0).
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+SYNC = 0xFA
+
+#: IMU sampling rate of the VN-100; binary output rate = IMU_RATE_HZ / rate divisor.
+IMU_RATE_HZ = 800.0
+
+# --- binary groups and fields (group number, bit, name, size in bytes, numpy type or None) ----
+GROUP_FIELDS: dict[int, tuple[tuple[int, str, int, str | None], ...]] = {
+    1: (  # Common group
+        (0, "TimeStartup", 8, "<u8"),      # ns since startup
+        (1, "TimeGps", 8, None),
+        (2, "TimeSyncIn", 8, None),
+        (3, "YawPitchRoll", 12, None),
+        (4, "Quaternion", 16, None),
+        (5, "AngularRate", 12, None),
+        (6, "Position", 24, None),
+        (7, "Velocity", 12, None),
+        (8, "Accel", 12, None),
+        (9, "Imu", 24, None),
+        (10, "MagPres", 20, None),
+        (11, "DeltaTheta", 28, None),
+        (12, "InsStatus", 2, None),
+        (13, "SyncInCnt", 4, None),
+        (14, "TimeGpsPps", 8, None),
+    ),
+    3: (  # IMU group
+        (0, "ImuStatus", 2, None),
+        (1, "UncompMag", 12, None),
+        (2, "UncompAccel", 12, "<f4"),     # m/s^2, 3 x float32
+        (3, "UncompGyro", 12, "<f4"),      # rad/s, 3 x float32
+        (4, "Temp", 4, "<f4"),             # deg C
+        (5, "Pres", 4, None),
+        (6, "DeltaTheta", 16, None),
+        (7, "DeltaVel", 12, None),
+        (8, "Mag", 12, None),
+        (9, "Accel", 12, None),
+        (10, "AngularRate", 12, None),
+        (11, "SensSat", 2, None),
+    ),
+}
+#: the fields station asks for: time since startup, uncompensated acceleration and rate, temperature
+STATION_FIELDS = ("TimeStartup", "UncompAccel", "UncompGyro", "Temp")
+
+# --- ASCII registers and error codes -------------------------------------------------------------
+REG_MODEL = 1
+REG_SERIAL = 3
+REG_FIRMWARE = 4
+REG_BINARY_OUTPUT_1 = 75
+ASYNC_MODE_NONE, ASYNC_MODE_PORT1, ASYNC_MODE_PORT2, ASYNC_MODE_BOTH = 0, 1, 2, 3
+
+ERRORS = {
+    1: "hard fault", 2: "serial buffer overflow", 3: "invalid checksum", 4: "invalid command",
+    5: "not enough parameters", 6: "too many parameters", 7: "invalid parameter",
+    8: "invalid register", 9: "unauthorized access", 10: "watchdog reset",
+    11: "output buffer overflow", 12: "insufficient baud rate", 255: "error buffer overflow",
+}
+
+#: the ASCII commands used: (syntax, meaning, example body sent, example body answered)
+ASCII_COMMANDS = (
+    ("VNRRG,<reg>", "read register: 01 model, 03 serial number, 04 firmware, 75 binary output 1",
+     "VNRRG,01", "VNRRG,01,VN-100T-SIM"),
+    ("VNWRG,75,<async>,<divisor>,<groups>,<fields>...",
+     "write binary output 1: async mode (1 = port 1), rate divisor (800 Hz / divisor), "
+     "group byte and one field mask per group, in hex",
+     "VNWRG,75,1,8,05,0001,001C", "VNWRG,75,1,8,05,0001,001C"),
+    ("VNASY,<0|1>", "pause (0) or resume (1) asynchronous output", "VNASY,0", "VNASY,0"),
+    ("(error)", "any command the sensor cannot execute", "VNWRG,75,1,8,40,0001", "VNERR,07"),
+)
+
+
+def checksum(body: bytes) -> bytes:
+    """The two upper-case hex digits of the XOR of ``body``'s bytes."""
+    c = 0
+    for b in body:
+        c ^= b
+    return b"%02X" % c
+
+
+def format_message(body: str) -> bytes:
+    """``$body*XX\\r\\n`` with its checksum."""
+    raw = body.encode("ascii")
+    return b"$" + raw + b"*" + checksum(raw) + b"\r\n"
+
+
+_MESSAGE = re.compile(rb"\$([\x20-\x29\x2b-\x7e]{1,200})\*([0-9A-Fa-f]{2}|XX)\r?\n")
+
+
+def find_message(buf: bytes | bytearray, start: int = 0, *, allow_no_checksum: bool = False):
+    """The first well-formed ASCII message at or after ``start``: (body, end index) or None.
+
+    Messages whose checksum does not match are skipped (and so are ``*XX`` unless allowed).
+    """
+    for m in _MESSAGE.finditer(buf, start):
+        body, cs = m.group(1), m.group(2).upper()
+        if cs == b"XX":
+            if allow_no_checksum:
+                return body.decode("ascii"), m.end()
+            continue
+        if checksum(body) == cs:
+            return body.decode("ascii"), m.end()
+    return None
+
+
+@dataclass(frozen=True)
+class BinaryLayout:
+    """Which fields a binary output message carries, and where they sit in a frame."""
+
+    groups: int                      # the group byte
+    masks: tuple[int, ...]           # one field mask per present group, in group order
+    fields: tuple[tuple[str, int, int, str | None], ...]   # (name, offset, size, numpy type)
+
+    @classmethod
+    def from_masks(cls, groups: int, masks) -> "BinaryLayout":
+        """The layout of a group byte and its field masks; ValueError if not decodable here."""
+        masks = tuple(int(m) for m in masks)
+        present = [g for g in range(1, 9) if groups >> (g - 1) & 1]
+        if not present or not 0 < groups < 256:
+            raise ValueError("no output group selected")
+        if len(masks) != len(present):
+            raise ValueError(f"{len(present)} groups need {len(present)} field masks, got {len(masks)}")
+        offset = 2 + 2 * len(present)       # after sync, group byte and masks
+        fields = []
+        for g, mask in zip(present, masks):
+            table = GROUP_FIELDS.get(g)
+            if table is None:
+                raise ValueError(f"binary group {g} is not decoded by station")
+            if not 0 < mask < 1 << 16:
+                raise ValueError(f"group {g}: field mask {mask:#06x} selects nothing")
+            known = 0
+            for bit, name, size, np_type in table:
+                known |= 1 << bit
+                if mask >> bit & 1:
+                    fields.append((name, offset, size, np_type))
+                    offset += size
+            if mask & ~known:
+                raise ValueError(f"group {g}: unknown fields in mask {mask:#06x}")
+        return cls(groups, masks, tuple(fields))
+
+    @classmethod
+    def from_fields(cls, names) -> "BinaryLayout":
+        groups, masks = 0, {}
+        for name in names:
+            for g, table in GROUP_FIELDS.items():
+                hit = [bit for bit, n, _, _ in table if n == name]
+                if hit:
+                    groups |= 1 << (g - 1)
+                    masks[g] = masks.get(g, 0) | 1 << hit[0]
+                    break
+            else:
+                raise ValueError(f"unknown binary output field {name!r}")
+        return cls.from_masks(groups, [masks[g] for g in sorted(masks)])
+
+    # --------------------------------------------------------------------- geometry
+    @property
+    def header(self) -> bytes:
+        return bytes([SYNC, self.groups]) + b"".join(m.to_bytes(2, "little") for m in self.masks)
+
+    @property
+    def payload_end(self) -> int:
+        return self.fields[-1][1] + self.fields[-1][2]
+
+    @property
+    def frame_length(self) -> int:
+        return self.payload_end + 2
+
+    def has(self, name: str) -> bool:
+        return any(f[0] == name for f in self.fields)
+
+    @property
+    def dtype(self) -> np.dtype:
+        """Structured numpy type of one whole frame (decodable fields, and the CRC)."""
+        names, formats, offsets = [], [], []
+        for name, offset, size, np_type in self.fields:
+            if np_type is None:
+                continue
+            count = size // np.dtype(np_type).itemsize
+            names.append(name)
+            formats.append(np_type if count == 1 else (np_type, (count,)))
+            offsets.append(offset)
+        names.append("crc")
+        formats.append(">u2")
+        offsets.append(self.payload_end)
+        return np.dtype({"names": names, "formats": formats, "offsets": offsets,
+                         "itemsize": self.frame_length})
+
+    def register_values(self, async_mode: int, rate_divisor: int) -> str:
+        """The values of register 75 for this layout: ``1,8,05,0001,001C``."""
+        return ",".join([str(async_mode), str(rate_divisor), f"{self.groups:02X}"]
+                        + [f"{m:04X}" for m in self.masks])
+
+
+def parse_register_75(values: list[str]) -> tuple[int, int, BinaryLayout]:
+    """(async mode, rate divisor, layout) of register 75's values; ValueError if invalid."""
+    if len(values) < 4:
+        raise ValueError("not enough parameters")
+    async_mode, divisor = int(values[0]), int(values[1])
+    groups = int(values[2], 16)
+    masks = [int(v, 16) for v in values[3:]]
+    if async_mode not in (0, 1, 2, 3) or not 1 <= divisor <= 65535:
+        raise ValueError("invalid parameter")
+    return async_mode, divisor, BinaryLayout.from_masks(groups, masks)
+
+
+STATION_LAYOUT = BinaryLayout.from_fields(STATION_FIELDS)
+STATION_LAYOUT_NO_TEMP = BinaryLayout.from_fields(STATION_FIELDS[:3])

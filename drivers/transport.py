@@ -1,0 +1,144 @@
+"""Byte transport: any pyserial URL, serial settings from a :class:`SerialSettings`.
+
+``/dev/ttyUSB0``, ``/dev/pts/7``, ``socket://host:port``, ``spy:///dev/ttyUSB0`` ... are all
+opened with :func:`serial.serial_for_url`.  :class:`Port` adds what every driver needs on top
+of pyserial: reads bounded by a deadline, pyserial and OS errors turned into
+:class:`~drivers.errors.DeviceDisconnected` naming the device, and debug logging.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import serial
+
+from .errors import DeviceDisconnected, DeviceError, DeviceTimeout
+
+PARITIES = {"N": serial.PARITY_NONE, "E": serial.PARITY_EVEN, "O": serial.PARITY_ODD,
+            "M": serial.PARITY_MARK, "S": serial.PARITY_SPACE}
+
+#: longest a single pyserial read blocks, s (deadlines are checked between reads)
+READ_SLICE_S = 0.05
+
+
+@dataclass(frozen=True)
+class SerialSettings:
+    """Serial line settings (ignored by pyserial for socket:// URLs).
+
+    ``timeout_s`` is the default wait for a reply or a frame before
+    :class:`~drivers.errors.DeviceTimeout`; ``write_timeout_s`` bounds a blocked write.
+    """
+
+    baudrate: int = 115200
+    bytesize: int = 8
+    parity: str = "N"
+    stopbits: float = 1
+    rtscts: bool = False
+    xonxoff: bool = False
+    timeout_s: float = 1.0
+    write_timeout_s: float = 1.0
+
+    def __post_init__(self):
+        if self.parity not in PARITIES:
+            raise ValueError(f"parity must be one of {', '.join(PARITIES)}, got {self.parity!r}")
+        if self.bytesize not in (5, 6, 7, 8):
+            raise ValueError(f"bytesize must be 5..8, got {self.bytesize!r}")
+        if self.stopbits not in (1, 1.5, 2):
+            raise ValueError(f"stopbits must be 1, 1.5 or 2, got {self.stopbits!r}")
+        if not (self.baudrate > 0 and self.timeout_s > 0 and self.write_timeout_s > 0):
+            raise ValueError("baudrate and timeouts must be > 0")
+
+
+class Port:
+    """An open pyserial port with deadlines, error translation and logging.
+
+    ``name`` (e.g. ``"imu /dev/pts/3 (vectornav)"``) starts every error message.
+    """
+
+    def __init__(self, url: str, settings: SerialSettings, name: str, log: logging.Logger):
+        self.url = url
+        self.settings = settings
+        self.name = name
+        self.log = log
+        try:
+            ser = serial.serial_for_url(url, do_not_open=True)
+            ser.baudrate = settings.baudrate
+            ser.bytesize = settings.bytesize
+            ser.parity = PARITIES[settings.parity]
+            ser.stopbits = settings.stopbits
+            ser.rtscts = settings.rtscts
+            ser.xonxoff = settings.xonxoff
+            ser.timeout = READ_SLICE_S
+            ser.write_timeout = settings.write_timeout_s
+            ser.open()
+        except (serial.SerialException, OSError, ValueError) as e:
+            raise DeviceError(name, f"cannot open {url}: {e}") from None
+        self._ser = ser
+
+    # ------------------------------------------------------------------ basics
+    def close(self) -> None:
+        try:
+            self._ser.close()
+        except (serial.SerialException, OSError):
+            pass
+
+    @property
+    def is_open(self) -> bool:
+        return bool(self._ser.is_open)
+
+    def write(self, data: bytes) -> None:
+        self.log.debug("%s <- %r", self.name, data)
+        try:
+            self._ser.write(data)
+            self._ser.flush()
+        except serial.SerialTimeoutException:
+            raise DeviceTimeout(self.name, f"write blocked for {self.settings.write_timeout_s} s") from None
+        except (serial.SerialException, OSError) as e:
+            raise DeviceDisconnected(self.name, f"disconnected while writing ({e})") from None
+
+    def read_some(self, max_bytes: int = 65536) -> bytes:
+        """What is waiting (at least 1 byte), or b'' after one read slice (<= 50 ms)."""
+        try:
+            n = self._ser.in_waiting
+            data = self._ser.read(min(max(n, 1), max_bytes))
+        except (serial.SerialException, OSError) as e:
+            raise DeviceDisconnected(self.name, f"disconnected ({e})") from None
+        if data:
+            self.log.debug("%s -> %d bytes", self.name, len(data))
+        return data
+
+    def discard_input(self) -> None:
+        """Drop everything received so far (stale replies, old frames)."""
+        try:
+            self._ser.reset_input_buffer()
+        except (serial.SerialException, OSError) as e:
+            raise DeviceDisconnected(self.name, f"disconnected ({e})") from None
+
+    # ----------------------------------------------------------- terminated reads
+    def read_until(self, terminator: bytes, timeout_s: float | None, what: str,
+                   buffer: bytearray | None = None, max_bytes: int = 4096) -> bytes:
+        """Bytes up to and including ``terminator``; extra bytes stay in ``buffer``.
+
+        Raises DeviceTimeout naming ``what`` when nothing complete arrives in time, and
+        ProtocolError-like DeviceError when more than ``max_bytes`` arrive without it.
+        """
+        buf = buffer if buffer is not None else bytearray()
+        timeout = self.settings.timeout_s if timeout_s is None else timeout_s
+        deadline = time.monotonic() + timeout
+        while True:
+            i = buf.find(terminator)
+            if i >= 0:
+                end = i + len(terminator)
+                out = bytes(buf[:end])
+                del buf[:end]
+                self.log.debug("%s -> %r", self.name, out)
+                return out
+            if len(buf) > max_bytes:
+                junk = bytes(buf[:64])
+                buf.clear()
+                raise DeviceError(self.name, f"no {terminator!r} in {max_bytes} bytes while waiting "
+                                             f"for {what} (starts {junk!r})")
+            if time.monotonic() >= deadline:
+                raise DeviceTimeout(self.name, f"no reply to {what} within {timeout:g} s")
+            buf += self.read_some()

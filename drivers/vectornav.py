@@ -1,0 +1,97 @@
+"""Driver for VectorNav IMUs in binary output mode (protocol ``vectornav``).
+
+Configuration over the ASCII protocol: pause asynchronous output (``$VNASY,0``), read the
+model, serial number and firmware registers, write binary output register 1 (75) with
+time since startup, uncompensated acceleration and rate and temperature at 800 Hz / divisor,
+resume (``$VNASY,1``).  Frames are then decoded by
+:class:`drivers.protocols.vectornav_binary.VectorNavDecoder`.
+"""
+from __future__ import annotations
+
+import time
+
+from .base import Imu
+from .errors import DeviceTimeout, LimitError, ProtocolError
+from .protocols import vectornav as V
+from .protocols.vectornav_binary import VectorNavDecoder
+
+MAX_REPLY_SCAN = 1 << 20
+
+
+class VectorNavImu(Imu):
+    protocol = "vectornav"
+
+    def __init__(self, url, settings=None):
+        super().__init__(url, settings)
+        self.layout = V.STATION_LAYOUT
+
+    def _ask(self, body: str) -> list[str]:
+        """Send ``$body*XX``; return the reply's fields after the command name.
+
+        Waits for the reply echoing the command (``VNWRG,75``, ``VNASY``, ...) or ``VNERR``;
+        anything else (binary frames, other messages) is skipped; bytes after the reply are
+        kept for the decoder.
+        """
+        head = body.split(",")[0]
+        key = ",".join(body.split(",")[:2]) if head in ("VNRRG", "VNWRG") else head
+        self.port.write(V.format_message(body))
+        deadline = time.monotonic() + self.settings.serial.timeout_s
+        buf, pos = bytearray(), 0
+        while True:
+            found = V.find_message(buf, pos)
+            while found is not None:
+                reply, end = found
+                if reply == key or reply.startswith(key + ","):
+                    self._carry = bytes(buf[end:])
+                    return reply.split(",")[len(key.split(",")):]
+                if reply.startswith("VNERR"):
+                    code = reply.split(",")[1] if "," in reply else "?"
+                    try:
+                        meaning = V.ERRORS.get(int(code), "unknown error")
+                    except ValueError:
+                        meaning = "unknown error"
+                    raise ProtocolError(self.name, f"${body} refused: VNERR {code} ({meaning})")
+                pos = end
+                found = V.find_message(buf, pos)
+            if len(buf) > MAX_REPLY_SCAN:
+                del buf[:len(buf) - 256]
+                pos = 0
+            if time.monotonic() > deadline:
+                raise DeviceTimeout(self.name, f"no reply to ${body} within "
+                                               f"{self.settings.serial.timeout_s:g} s")
+            buf += self.port.read_some()
+
+    # ---------------------------------------------------------------- protocol part
+    def _identify(self) -> str:
+        self._ask("VNASY,0")
+        self.port.discard_input()
+        model = ",".join(self._ask(f"VNRRG,{V.REG_MODEL:02d}"))
+        serial_no = ",".join(self._ask(f"VNRRG,{V.REG_SERIAL:02d}"))
+        firmware = ",".join(self._ask(f"VNRRG,{V.REG_FIRMWARE:02d}"))
+        return f"{model} serial {serial_no} firmware {firmware}"
+
+    def _configure(self, rate_hz, temperature):
+        divisor = round(V.IMU_RATE_HZ / rate_hz)
+        if divisor < 1 or abs(V.IMU_RATE_HZ / divisor - rate_hz) > 1e-9 * rate_hz:
+            raise LimitError(self.name, f"output rate {rate_hz:g} Hz is not {V.IMU_RATE_HZ:g} Hz / N "
+                                        f"(e.g. 800, 400, 200, 100, 50 Hz)")
+        self.layout = V.STATION_LAYOUT if temperature else V.STATION_LAYOUT_NO_TEMP
+        body = f"VNWRG,{V.REG_BINARY_OUTPUT_1},{self.layout.register_values(V.ASYNC_MODE_PORT1, divisor)}"
+        if self.streaming:
+            self._ask("VNASY,0")
+        echo = self._ask(body)
+        if ",".join(echo) != self.layout.register_values(V.ASYNC_MODE_PORT1, divisor):
+            raise ProtocolError(self.name, f"${body} answered with {','.join(echo)!r}")
+        self._carry = b""
+        return V.IMU_RATE_HZ / divisor
+
+    def _new_decoder(self):
+        return VectorNavDecoder(self.layout)
+
+    def _start_stream(self):
+        self.port.discard_input()
+        self._ask("VNASY,1")
+
+    def _stop_stream(self):
+        self._ask("VNASY,0")
+        self._carry = b""

@@ -1,0 +1,31 @@
+"""csv front-end of the IMU twin: one ``t,ax,ay,az,gx,gy,gz,temp`` line per sample, from
+power-up, in the units of a :class:`drivers.protocols.csvlines.CsvFormat`.  Input is ignored
+(hobby firmware takes no commands)."""
+from __future__ import annotations
+
+from drivers.protocols.csvlines import CsvFormat, encode_lines
+
+from .faults import StreamFaulter
+from .imu import ImuTwin
+
+
+class CsvFrontEnd:
+    def __init__(self, imu: ImuTwin, faulter: StreamFaulter, fmt: CsvFormat = CsvFormat()):
+        self.imu = imu
+        self.faulter = faulter
+        self.fmt = fmt
+        self.streaming = True
+
+    def receive(self, data: bytes, now: float) -> bytes:
+        return b""
+
+    def produce(self, now: float) -> bytes:
+        t = self.imu.sample_times_until(now)
+        if not t.size:
+            return b""
+        accel, gyro, temp = self.imu.measure(t)
+        blob = encode_lines(self.fmt, t, accel, gyro, temp)
+        if not self.faulter.faults.active and not self.faulter.record:
+            self.faulter.frames_sent += t.size
+            return blob
+        return self.faulter.apply(t, blob.splitlines(keepends=True))[0]

@@ -1,0 +1,217 @@
+"""The rate-table twin: axes with modes, limits, interlocks, faults and encoder readback.
+
+Protocol-independent: the front-ends (``table_acutrol``, ``table_aerosmith``) turn bytes into
+calls of these methods.  A call that the controller would refuse raises
+:class:`CommandRefused`.  Power-up state: every axis at 0 deg, at rest, interlock open, servo
+off, no fault (``interlocks_closed=True`` for controllers without interlock commands).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .geometry import TableGeometry
+from .motion import AxisMotion
+
+
+class CommandRefused(Exception):
+    """The controller cannot execute the command (unknown, bad argument, wrong state)."""
+
+
+@dataclass(frozen=True)
+class TableConfig:
+    """Hardware of the twin: per-axis limits (every axis alike), encoder and rate readback
+    resolution, settling time after a move, the limits in force at power-up."""
+
+    max_rate_dps: float = 1000.0
+    max_accel_dps2: float = 1000.0
+    move_rate_dps: float = 60.0          # position-mode limits at power-up
+    move_accel_dps2: float = 60.0
+    rate_accel_dps2: float = 100.0       # rate-mode acceleration limit at power-up
+    encoder_resolution_deg: float = 1e-5
+    rate_resolution_dps: float = 1e-5
+    settle_s: float = 1.0
+    identity: str = "Acutronic,ACUTROL3000-SIM,{axes}AX-0001,3.1.0"
+
+
+@dataclass
+class TableFaults:
+    """Faults of the table (docs/twins.md): an interlock trip of ``trip_axis`` at device time
+    ``trip_at_s``; ``stuck_axis`` stopping ``shortfall_deg`` short of every position demand;
+    no replies from ``stall_at_s`` (for ``stall_duration_s``, None = for ever); the port
+    hung up at ``disconnect_at_s``."""
+
+    trip_axis: int | None = None
+    trip_at_s: float | None = None
+    stuck_axis: int | None = None
+    shortfall_deg: float = 0.0
+    stall_at_s: float | None = None
+    stall_duration_s: float | None = None
+    disconnect_at_s: float | None = None
+
+
+@dataclass
+class AxisState:
+    motion: AxisMotion
+    limits: dict = field(default_factory=dict)       # "P"/"R" -> [rate_dps, accel_dps2]
+    interlock_closed: bool = False
+    fault: bool = False
+    mode: str = "off"
+
+
+class TableTwin:
+    def __init__(self, geometry: TableGeometry, clock, *, config: TableConfig = TableConfig(),
+                 ripple_fraction: float = 0.0, ripple_hz: float = 1.0, rng=None,
+                 faults: TableFaults | None = None, interlocks_closed: bool = False):
+        self.geometry = geometry
+        self.clock = clock
+        self.config = config
+        self.faults = faults or TableFaults()
+        rng = rng if rng is not None else np.random.default_rng(0)
+        self.axes = [AxisState(AxisMotion(ripple_fraction=ripple_fraction, ripple_hz=ripple_hz,
+                                          settle_s=config.settle_s, rng=rng),
+                               {"P": [config.move_rate_dps, config.move_accel_dps2],
+                                "R": [config.max_rate_dps, config.rate_accel_dps2]},
+                               interlock_closed=interlocks_closed)
+                     for _ in range(geometry.n_axes)]
+        self._tripped = False
+
+    @property
+    def n_axes(self) -> int:
+        return len(self.axes)
+
+    # ------------------------------------------------------------------ time and faults
+    def update(self, now: float) -> None:
+        """Fire the faults due by ``now``; forget motion older than 60 s."""
+        f = self.faults
+        if not self._tripped and f.trip_at_s is not None and now >= f.trip_at_s:
+            self._tripped = True
+            ax = self._axis(f.trip_axis)
+            ax.fault = True
+            ax.interlock_closed = False
+            ax.mode = "off"
+            ax.motion.plan_stop(f.trip_at_s, self.config.max_accel_dps2)
+        for ax in self.axes:
+            ax.motion.prune(now - 60.0)
+
+    def stalled(self, now: float) -> bool:
+        f = self.faults
+        if f.stall_at_s is None or now < f.stall_at_s:
+            return False
+        return f.stall_duration_s is None or now < f.stall_at_s + f.stall_duration_s
+
+    # ------------------------------------------------------------------ commands
+    def identity(self) -> str:
+        return self.config.identity.format(axes=self.n_axes)
+
+    def interlock_reset(self) -> None:
+        for ax in self.axes:
+            ax.fault = False
+
+    def interlock_close(self, axis: int) -> None:
+        ax = self._axis(axis)
+        if ax.fault:
+            raise CommandRefused(f"axis {axis}: fault latched (reset first)")
+        ax.interlock_closed = True
+
+    def interlock_open(self, axis: int) -> None:
+        ax = self._axis(axis)
+        ax.interlock_closed = False
+        self._brake(ax, "off")
+
+    def set_mode(self, axis: int, mode: str) -> None:
+        ax = self._axis(axis)
+        now = self.clock.now()
+        if mode == "off":
+            self._brake(ax, "off")
+            return
+        if not ax.interlock_closed:
+            raise CommandRefused(f"axis {axis}: interlock open")
+        if mode == "position":
+            p, _, _ = ax.motion.state(now)
+            rate, acc = ax.limits["P"]
+            ax.motion.plan_position(now, p, rate, acc)
+        elif mode == "rate":
+            ax.motion.plan_rate(now, 0.0, ax.limits["R"][1])
+        else:
+            raise CommandRefused(f"unknown mode {mode!r}")
+        ax.mode = mode
+
+    def demand_position(self, axis: int, position_deg: float) -> None:
+        ax = self._axis(axis)
+        if ax.mode != "position" or not ax.interlock_closed:
+            raise CommandRefused(f"axis {axis}: not in position mode")
+        now = self.clock.now()
+        p, _, _ = ax.motion.state(now)
+        delta = (position_deg - p + 180.0) % 360.0 - 180.0      # the shortest way round
+        if self.faults.stuck_axis == axis:
+            delta = math.copysign(max(0.0, abs(delta) - self.faults.shortfall_deg), delta)
+        rate, acc = ax.limits["P"]
+        ax.motion.plan_position(now, p + delta, rate, acc)
+
+    def demand_rate(self, axis: int, rate_dps: float) -> None:
+        ax = self._axis(axis)
+        if ax.mode != "rate" or not ax.interlock_closed:
+            raise CommandRefused(f"axis {axis}: not in rate mode")
+        rate, acc = ax.limits["R"]
+        if abs(rate_dps) > rate:
+            raise CommandRefused(f"axis {axis}: {rate_dps} deg/s beyond the rate limit {rate}")
+        ax.motion.plan_rate(self.clock.now(), rate_dps, acc)
+
+    def set_limit(self, mode: str, axis: int, *, rate_dps=None, accel_dps2=None) -> None:
+        ax = self._axis(axis)
+        if rate_dps is not None:
+            if not 0.0 < rate_dps <= self.config.max_rate_dps:
+                raise CommandRefused(f"axis {axis}: rate limit {rate_dps} outside (0, {self.config.max_rate_dps}]")
+            ax.limits[mode][0] = float(rate_dps)
+        if accel_dps2 is not None:
+            if not 0.0 < accel_dps2 <= self.config.max_accel_dps2:
+                raise CommandRefused(f"axis {axis}: acceleration limit {accel_dps2} outside "
+                                     f"(0, {self.config.max_accel_dps2}]")
+            ax.limits[mode][1] = float(accel_dps2)
+
+    def stop(self, axis: int) -> None:
+        """Brake to rest and hold there (position mode)."""
+        ax = self._axis(axis)
+        if not ax.interlock_closed:
+            raise CommandRefused(f"axis {axis}: interlock open")
+        self._brake(ax, "position")
+
+    def read_position(self, axis: int) -> float:
+        p, _, _ = self._axis(axis).motion.state(self.clock.now())
+        res = self.config.encoder_resolution_deg
+        return float(np.round(p / res) * res % 360.0)
+
+    def read_rate(self, axis: int) -> float:
+        _, v, _ = self._axis(axis).motion.state(self.clock.now())
+        res = self.config.rate_resolution_dps
+        return float(np.round(v / res) * res) + 0.0
+
+    def in_motion(self, axis: int) -> bool:
+        _, v, _ = self._axis(axis).motion.state(self.clock.now())
+        return abs(v) > self.config.rate_resolution_dps
+
+    # ------------------------------------------------------------------ for the IMU twin
+    def axis_states(self, t):
+        """(theta, theta_dot, theta_ddot), each (N, k) in deg, deg/s, deg/s²."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        cols = [ax.motion.eval(t) for ax in self.axes]
+        return tuple(np.column_stack([c[i] for c in cols]) for i in range(3))
+
+    def kinematics_at(self, t):
+        """(C_bn, w_eb_b rad/s, wdot_eb_b rad/s²) of the platform at device times ``t``."""
+        th, thd, thdd = self.axis_states(t)
+        return self.geometry.kinematics(np.radians(th), np.radians(thd), np.radians(thdd))
+
+    # ------------------------------------------------------------------ helpers
+    def _axis(self, axis) -> AxisState:
+        if not isinstance(axis, int) or not 1 <= axis <= len(self.axes):
+            raise CommandRefused(f"no axis {axis!r}")
+        return self.axes[axis - 1]
+
+    def _brake(self, ax: AxisState, mode: str) -> None:
+        acc = self.config.max_accel_dps2 if mode == "off" else ax.limits["P"][1]
+        ax.motion.plan_stop(self.clock.now(), acc)
+        ax.mode = mode

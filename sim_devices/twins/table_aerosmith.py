@@ -1,0 +1,80 @@
+"""Three-letter (aerosmith) front-end of a single-axis table twin, driven by the command
+table ``drivers.protocols.aerosmith.COMMANDS``."""
+from __future__ import annotations
+
+from drivers.protocols import aerosmith as P
+
+from .table import CommandRefused, TableTwin
+
+C = P.COMMANDS
+MAX_LINE = 256
+
+
+class AerosmithFrontEnd:
+    def __init__(self, table: TableTwin):
+        if table.n_axes != 1:
+            raise ValueError("the three-letter dialect drives single-axis tables")
+        self.table = table
+        self._rx = bytearray()
+        self.handlers = {
+            "home": lambda: self._move(0.0),
+            "move": self._move,
+            "jog": self._jog,
+            "stop": lambda: table.stop(1),
+            "position": lambda: table.read_position(1),
+            "velocity": lambda: table.read_rate(1),
+            "status": self._status,
+        }
+        missing = {c.name for c in C.commands} - set(self.handlers)
+        assert not missing, f"no twin handler for {missing}"
+
+    def receive(self, data: bytes) -> bytes:
+        self._rx += data
+        out = []
+        while True:
+            ends = [i for i in (self._rx.find(b"\r"), self._rx.find(b"\n")) if i >= 0]
+            if not ends:
+                break
+            i = min(ends)
+            line = bytes(self._rx[:i])
+            del self._rx[:i + 1]
+            if line.strip():
+                out.append(self.execute(line))
+        if len(self._rx) > MAX_LINE:
+            self._rx.clear()
+            out.append((P.ERROR_REPLY + P.REPLY_END).encode() + P.PROMPT)
+        return b"".join(out)
+
+    def execute(self, line: bytes) -> bytes:
+        try:
+            cmd, args = C.parse(line.decode("ascii", "replace"))
+            value = self.handlers[cmd.name](*args)
+        except (ValueError, CommandRefused):
+            return (P.ERROR_REPLY + P.REPLY_END).encode("ascii") + P.PROMPT
+        text = cmd.reply.format(value) + P.REPLY_END if cmd.is_query else ""
+        return text.encode("ascii") + P.PROMPT
+
+    def _move(self, position_deg: float) -> None:
+        t = self.table
+        if t.axes[0].mode != "position":
+            t.set_mode(1, "position")
+        t.demand_position(1, position_deg)
+
+    def _jog(self, rate_dps: float) -> None:
+        t = self.table
+        if t.axes[0].mode != "rate":
+            t.set_mode(1, "rate")
+        t.demand_rate(1, rate_dps)
+
+    def _status(self) -> int:
+        ax = self.table.axes[0]
+        sta = 0
+        if ax.interlock_closed:
+            sta |= P.STA_DRIVE_ENABLED
+        if ax.fault:
+            sta |= P.STA_FAULT
+        if self.table.in_motion(1):
+            sta |= P.STA_IN_MOTION
+        if ax.mode == "rate":
+            sta |= P.STA_RATE_MODE
+        return sta

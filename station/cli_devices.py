@@ -1,0 +1,144 @@
+"""``station sim serve`` and ``station probe``: the device commands of the command line.
+
+Only ``sim serve`` imports ``sim_devices`` (the user asked for simulation).
+"""
+from __future__ import annotations
+
+import json
+import math
+import signal
+import sys
+import threading
+
+from station.errors import UserError
+
+
+def add_parsers(sub) -> None:
+    """Add ``sim`` (with ``serve``) and ``probe`` to the station sub-command parsers."""
+    sim = sub.add_parser("sim", help="simulated devices")
+    sim_sub = sim.add_subparsers(dest="sim_command", required=True, metavar="SIM_COMMAND",
+                                 parser_class=type(sim))
+    serve = sim_sub.add_parser("serve", help="serve a table twin and an IMU twin on pseudo-terminals")
+    serve.add_argument("--speed", type=float, default=1.0,
+                       help="device time per wall time (default 1; 50 = fifty times faster)")
+    serve.add_argument("--sim-truth", metavar="FILE", help="true sensor errors and bench (YAML)")
+    serve.add_argument("--seed", type=int, default=1, help="seed of the default truth and the noise")
+    serve.add_argument("--faults", metavar="FILE", help="faults to inject (YAML, docs/twins.md)")
+    serve.add_argument("--axes", type=int, choices=(1, 2, 3),
+                       help="table axes (default 3 for acutrol, 1 for aerosmith)")
+    serve.add_argument("--table-protocol", choices=("acutrol", "aerosmith"), default="acutrol")
+    serve.add_argument("--imu-protocol", choices=("vectornav", "csv"), default="vectornav")
+    serve.add_argument("--csv-units", metavar="SPEC", default="",
+                       help="units of the csv twin, e.g. t=ms,accel=g,gyro=rad/s "
+                            "(default t=s,accel=m/s^2,gyro=deg/s)")
+    serve.set_defaults(func=cmd_sim_serve)
+
+    probe = sub.add_parser("probe", help="read an IMU and/or a rate table and report")
+    probe.add_argument("--port", metavar="URL", help="IMU port (device path or pyserial URL)")
+    probe.add_argument("--imu-protocol", default="vectornav", help="vectornav (default) or csv")
+    probe.add_argument("--seconds", type=float, default=10.0,
+                       help="IMU device time to read, s (default 10)")
+    probe.add_argument("--rate-hz", type=float, default=100.0, help="IMU output rate, Hz (default 100)")
+    probe.add_argument("--csv-units", metavar="SPEC", default="", help="units of a csv IMU (see sim serve)")
+    probe.add_argument("--table-port", metavar="URL", help="rate-table port (device path or pyserial URL)")
+    probe.add_argument("--table-protocol", default="acutrol", help="acutrol (default) or aerosmith")
+    probe.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
+    probe.add_argument("--timeout-s", type=float, default=2.0,
+                       help="longest wait for a reply or a frame, s (default 2)")
+    probe.add_argument("--json", action="store_true", help="print JSON instead of text")
+    probe.set_defaults(func=cmd_probe)
+
+
+# ---------------------------------------------------------------------------------- sim serve
+
+def cmd_sim_serve(args) -> int:
+    if not (math.isfinite(args.speed) and args.speed > 0):
+        raise UserError(f"--speed must be > 0, got {args.speed}")
+    axes = args.axes or (1 if args.table_protocol == "aerosmith" else 3)
+    if args.table_protocol == "aerosmith" and axes != 1:
+        raise UserError("the aerosmith (three-letter) protocol drives single-axis tables: use --axes 1")
+    csv_format = _csv_format(args.csv_units)
+    from sim_devices.truth import Truth, default_truth
+    from sim_devices.twins.faults import Faults, load_faults
+    from sim_devices.twins.serve import BenchOptions, BenchServer
+
+    truth = Truth.from_yaml(args.sim_truth) if args.sim_truth else default_truth(args.seed)
+    faults = load_faults(args.faults, axes) if args.faults else Faults()
+    server = BenchServer(truth, BenchOptions(speed=args.speed, seed=args.seed, axes=axes,
+                                             table_protocol=args.table_protocol,
+                                             imu_protocol=args.imu_protocol, faults=faults,
+                                             csv_format=csv_format))
+    stop = threading.Event()
+    previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        print(f"table: {server.table_path}", flush=True)
+        print(f"imu: {server.imu_path}", flush=True)
+        print(f"station sim serve: {axes}-axis {args.table_protocol} table, {args.imu_protocol} IMU "
+              f"at {truth.sample_rate_hz:g} Hz, speed {args.speed:g}; stop with Ctrl-C",
+              file=sys.stderr, flush=True)
+        server.serve_forever(stop)
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+    return 0
+
+
+# ---------------------------------------------------------------------------------- probe
+
+def cmd_probe(args) -> int:
+    if not args.port and not args.table_port:
+        raise UserError("give --port (an IMU) and/or --table-port (a rate table)")
+    if not (math.isfinite(args.seconds) and args.seconds > 0):
+        raise UserError(f"--seconds must be > 0, got {args.seconds}")
+    if not (math.isfinite(args.timeout_s) and args.timeout_s > 0):
+        raise UserError(f"--timeout-s must be > 0, got {args.timeout_s}")
+    from drivers.base import ImuSettings, TableSettings
+    from drivers.probe import probe_imu, probe_table
+    from drivers.registry import imu_driver, table_driver
+    from drivers.transport import SerialSettings
+
+    try:
+        serial = SerialSettings(baudrate=args.baud, timeout_s=args.timeout_s)
+    except ValueError as e:
+        raise UserError(str(e)) from None
+    report = {}
+    if args.table_port:
+        table_driver(args.table_protocol)            # an unknown name fails before any I/O
+        report["table"] = probe_table(args.table_port, args.table_protocol, TableSettings(serial=serial))
+    if args.port:
+        imu_driver(args.imu_protocol)
+        settings = ImuSettings(serial=serial, rate_hz=args.rate_hz, frame_timeout_s=args.timeout_s,
+                               csv_format=_csv_format(args.csv_units))
+        report["imu"] = probe_imu(args.port, args.imu_protocol, args.seconds, settings)
+    if args.json:
+        print(json.dumps(report if len(report) == 2 else next(iter(report.values())), indent=2))
+        return 0
+    if "table" in report:
+        t = report["table"]
+        print(f"table {t['port']} ({t['protocol']}): {t['identity']}")
+        for i in range(t["axes"]):
+            print(f"  axis {i + 1}: {t['positions_deg'][i]:.6f} deg, {t['rates_dps'][i]:.6f} deg/s, "
+                  f"interlock {'closed' if t['interlock_closed'][i] else 'open'}"
+                  f"{', FAULT' if t['fault'][i] else ''}")
+    if "imu" in report:
+        r = report["imu"]
+        print(f"imu {r['port']} ({r['protocol']}): {r['identity']}")
+        rate = f"{r['rate_hz']:.4f} Hz" if r["rate_hz"] else "n/a"
+        print(f"  {r['frames']} frames over {r['device_seconds']:.3f} s of device time "
+              f"({r['wall_seconds']:.2f} s wall), measured rate {rate}")
+        if r["frames"]:
+            temp = f", mean temperature {r['mean_temp_c']:.2f} C" if r["mean_temp_c"] is not None else ""
+            print(f"  mean |f| {r['mean_accel_norm_mps2']:.6f} m/s^2, mean |w| "
+                  f"{r['mean_gyro_norm_dps']:.6f} deg/s{temp}")
+        print(f"  checksum errors {r['checksum_errors']}, resyncs {r['resyncs']}, gaps {r['gaps']} "
+              f"({r['missing_frames']} frames missing), {r['bytes_discarded']} bytes discarded")
+    return 0
+
+
+def _csv_format(spec: str):
+    from drivers.protocols.csvlines import CsvFormat
+
+    try:
+        return CsvFormat.parse(spec)
+    except ValueError as e:
+        raise UserError(f"--csv-units: {e}") from None

@@ -1,0 +1,158 @@
+"""Contract of the RateTable interface, for every protocol, against the table twin over
+real pseudo-terminals (pyserial on the slave side, the twin on the master side)."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from drivers.base import AxisLimits, TableSettings, angle_diff_deg
+from drivers.errors import DeviceError, LimitError, NotSupported, ProtocolError
+from drivers.registry import open_table, table_driver
+from sim_devices.truth import default_truth
+from sim_devices.twins.serve import BenchOptions, BenchServer
+from station.errors import UserError
+
+# (protocol, axes)
+TABLES = [("acutrol", 1), ("acutrol", 2), ("acutrol", 3), ("aerosmith", 1)]
+SPEED = 50.0
+
+
+@pytest.fixture(params=TABLES, ids=[f"{p}-{n}ax" for p, n in TABLES])
+def bench(request):
+    protocol, axes = request.param
+    server = BenchServer(default_truth(3), BenchOptions(speed=SPEED, axes=axes, table_protocol=protocol))
+    with server:
+        yield server, protocol, axes
+
+
+def _open(server, protocol, **kw):
+    return open_table(server.table_path, protocol, TableSettings(**kw))
+
+
+def test_connect_identifies_and_counts_axes(bench):
+    server, protocol, axes = bench
+    with _open(server, protocol) as table:
+        assert table.identity
+        assert table.n_axes == axes
+        assert table.axes == tuple(range(1, axes + 1))
+        assert len(table.limits) == axes
+        np.testing.assert_array_equal(table.read_positions_deg(), np.zeros(axes))
+        np.testing.assert_array_equal(table.read_rates_dps(), np.zeros(axes))
+        st = table.status()
+        assert len(st.interlock_closed) == len(st.fault) == axes
+        assert not any(st.fault)
+
+
+def test_interlocks_close_and_status_reports_them(bench):
+    server, protocol, axes = bench
+    with _open(server, protocol) as table:
+        st = table.close_interlocks()
+        assert st.interlock_closed == (True,) * axes and st.ok
+        assert table.check_ok().ok
+        assert [ax.interlock_closed for ax in server.table.axes] == [True] * axes
+
+
+def test_move_to_reaches_every_axis_and_the_twin_agrees(bench):
+    server, protocol, axes = bench
+    targets = [123.25, -40.0, 359.5][:axes]
+    with _open(server, protocol) as table:
+        table.close_interlocks()
+        final = table.move_to(targets)
+        tol = table.settings.position_tolerance_deg
+        assert np.all(np.abs(angle_diff_deg(final, targets)) <= tol)
+        assert np.all(final >= 0) and np.all(final < 360)
+        # the twin's true angles (unwrapped) are there too, and at rest
+        th, thd, _ = server.table.axis_states(server.clock.now())
+        assert np.all(np.abs(angle_diff_deg(th[0], targets)) <= tol)
+        assert np.all(np.abs(thd[0]) < table.settings.rate_tolerance_dps)
+        assert table.status().mode == ("position",) * axes
+
+
+def test_move_to_leaves_axes_given_none_alone(bench):
+    server, protocol, axes = bench
+    if axes == 1:
+        pytest.skip("needs two axes")
+    with _open(server, protocol) as table:
+        table.close_interlocks()
+        table.move_to([10.0] + [None] * (axes - 1))
+        np.testing.assert_allclose(table.read_positions_deg(), [10.0] + [0.0] * (axes - 1), atol=0.002)
+
+
+def test_set_rate_turns_the_axis_and_stop_brings_it_to_rest(bench):
+    server, protocol, axes = bench
+    with _open(server, protocol) as table:
+        table.close_interlocks()
+        rate = table.set_rate(axes, -25.0)
+        assert abs(rate + 25.0) <= table.settings.rate_tolerance_dps
+        p0, t0 = table.read_positions_deg()[axes - 1], server.clock.now()
+        time.sleep(0.05)
+        p1, t1 = table.read_positions_deg()[axes - 1], server.clock.now()
+        swept = -angle_diff_deg(p1, p0)
+        # at speed 50, 50 ms wall = 2.5 s device: 62.5 deg, give or take the read latency
+        assert 25.0 * (t1 - t0) * 0.8 < swept < 25.0 * (t1 - t0) * 1.2
+        assert table.status().mode[axes - 1] == "rate"
+        rest = table.stop()
+        assert np.all(np.abs(table.read_rates_dps()) <= table.settings.rate_tolerance_dps)
+        time.sleep(0.05)
+        np.testing.assert_allclose(table.read_positions_deg(), rest, atol=1e-4)
+        assert table.status().mode == ("position",) * axes
+
+
+def test_limits_are_checked_before_anything_is_sent(bench):
+    server, protocol, axes = bench
+    limits = AxisLimits(max_rate_dps=100.0)
+    with _open(server, protocol, limits=(limits,)) as table:
+        table.close_interlocks()
+        with pytest.raises(LimitError, match=r"axis 1: rate 150.0 deg/s beyond the limit 100"):
+            table.set_rate(1, 150.0)
+        with pytest.raises(LimitError, match="no axis 4"):
+            table.set_rate(4, 1.0)
+        with pytest.raises(LimitError, match="positions given"):
+            table.move_to([1.0] * (axes + 1))
+        with pytest.raises(LimitError, match="not finite"):
+            table.move_to([float("nan")] * axes)
+        assert server.table.axes[0].mode == "off"          # nothing reached the twin
+        assert str(table.name) in str(LimitError(table.name, "x"))
+
+
+def test_a_refusal_by_the_controller_is_a_protocol_error_naming_the_command(bench):
+    server, protocol, axes = bench
+    # the driver allows 5000 deg/s, the controller (twin) 1000 deg/s
+    with _open(server, protocol, limits=(AxisLimits(max_rate_dps=5000.0),)) as table:
+        table.close_interlocks()
+        with pytest.raises(ProtocolError) as e:
+            table.set_rate(1, 1500.0)
+        assert table.name in str(e.value) and "1500" in str(e.value)
+        # and the line is usable afterwards
+        assert table.read_rates_dps().shape == (axes,)
+
+
+def test_rate_limits_of_a_mode(bench):
+    server, protocol, axes = bench
+    with _open(server, protocol) as table:
+        if protocol == "aerosmith":
+            with pytest.raises(NotSupported):
+                table.set_rate_limits(1, "position", 10.0, 10.0)
+            return
+        table.set_rate_limits(1, "rate", 20.0, 40.0)
+        assert server.table.axes[0].limits["R"] == [20.0, 40.0]
+        with pytest.raises(LimitError):
+            table.set_rate_limits(1, "rate", 0.0, 40.0)
+
+
+def test_connect_sets_the_position_mode_limits(bench):
+    server, protocol, axes = bench
+    if protocol == "aerosmith":
+        pytest.skip("the three-letter dialect has no limit commands")
+    lim = AxisLimits(move_rate_dps=12.5, move_accel_dps2=25.0)
+    with _open(server, protocol, limits=(lim,)):
+        assert [ax.limits["P"] for ax in server.table.axes] == [[12.5, 25.0]] * axes
+
+
+def test_closed_port_and_unknown_protocol():
+    with pytest.raises(DeviceError, match="cannot open /dev/does-not-exist"):
+        open_table("/dev/does-not-exist", "acutrol")
+    with pytest.raises(UserError, match="unknown rate-table protocol 'nope'"):
+        table_driver("nope")

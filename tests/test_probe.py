@@ -1,0 +1,133 @@
+"""station probe and station sim serve, end to end over pseudo-terminals.
+
+The twin streams at 100 Hz at --speed 50: 60 s of device time take about 1.2 s.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from drivers.base import ImuSettings
+from drivers.registry import open_imu, open_table
+from drivers.samples import ImuSamples
+from sim_devices.truth import default_truth
+from sim_devices.twins.faults import Faults, ImuFaults
+from sim_devices.twins.serve import BenchOptions, BenchServer
+from station.cli import main
+
+
+@pytest.mark.parametrize("protocol", ["vectornav", "csv"])
+def test_probe_loses_no_frame_over_60_s_of_device_time_at_speed_50(protocol, capsys):
+    with BenchServer(default_truth(2), BenchOptions(speed=50, imu_protocol=protocol)) as server:
+        t0 = time.monotonic()
+        assert main(["probe", "--port", server.imu_path, "--imu-protocol", protocol,
+                     "--seconds", "60", "--json"]) == 0
+        wall = time.monotonic() - t0
+    r = json.loads(capsys.readouterr().out)
+    assert r["frames"] == 6000
+    assert r["gaps"] == 0 and r["missing_frames"] == 0
+    assert r["checksum_errors"] == 0
+    assert abs(r["rate_hz"] - 100.0) < 1e-6
+    assert abs(r["device_seconds"] - 60.0) < 1e-6
+    assert abs(r["mean_accel_norm_mps2"] - 9.806) < 0.05
+    assert wall < 10.0                         # device time, not wall time (about 1.3 s)
+
+
+@pytest.mark.parametrize("protocol", ["vectornav", "csv"])
+def test_with_garbage_and_corruption_every_intact_frame_is_decoded(protocol):
+    faults = Faults(imu=ImuFaults(garbage_every_s=0.25, garbage_bytes=48, corrupt_probability=0.02))
+    opts = BenchOptions(speed=50, imu_protocol=protocol, faults=faults, record=True)
+    with BenchServer(default_truth(2), opts) as server:
+        with open_imu(server.imu_path, protocol) as imu:
+            s = imu.read(3000)
+            counters = imu.counters
+            s = ImuSamples.concat([s, imu.read(counters.frames - 3000)])   # all decoded: no I/O
+            assert counters.frames == len(s)
+        sent = np.concatenate(server.faulter.intact_times)
+        corrupted, garbage = server.faulter.frames_corrupted, server.faulter.garbage_blocks
+    window = sent[(sent >= s.t_s[0] - 1e-9) & (sent <= s.t_s[-1] + 1e-9)]
+    np.testing.assert_allclose(s.t_s, window, rtol=0, atol=1e-9)    # all of them, nothing else
+    assert len(window) == len(s) >= 3000
+    # the frames that were not intact are the gaps
+    assert counters.missing_frames == round((s.t_s[-1] - s.t_s[0]) * 100) + 1 - len(s)
+    assert counters.checksum_errors > 0 and counters.resyncs > 0
+    assert counters.checksum_errors <= corrupted + garbage
+    assert garbage >= 0.9 * 4 * 30              # 30 s of device time read, 4 blocks a second
+
+
+def test_probe_table_json(capsys):
+    with BenchServer(default_truth(2), BenchOptions(speed=50, axes=2)) as server:
+        with open_table(server.table_path) as table:
+            table.close_interlocks()
+            table.move_to([30.0, 200.0])
+        assert main(["probe", "--table-port", server.table_path, "--json"]) == 0
+    r = json.loads(capsys.readouterr().out)
+    assert r["identity"].startswith("Acutronic,")
+    assert r["axes"] == 2
+    np.testing.assert_allclose(r["positions_deg"], [30.0, 200.0], atol=0.002)
+    assert r["interlock_closed"] == [True, True] and r["fault"] == [False, False]
+
+
+def test_probe_both_as_text(capsys):
+    with BenchServer(default_truth(2), BenchOptions(speed=50, axes=1, table_protocol="aerosmith")) as server:
+        assert main(["probe", "--table-port", server.table_path, "--table-protocol", "aerosmith",
+                     "--port", server.imu_path, "--seconds", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "axis 1: 0.000000 deg" in out and "interlock closed" in out
+    assert "200 frames over 2.000 s of device time" in out and "gaps 0" in out
+
+
+def test_probe_user_errors(capsys):
+    assert main(["probe"]) == 2
+    assert main(["probe", "--port", "/dev/nope-no-such-port", "--seconds", "1"]) == 2
+    assert main(["probe", "--port", "x", "--imu-protocol", "nope"]) == 2
+    assert main(["probe", "--port", "x", "--seconds", "-1"]) == 2
+    err = capsys.readouterr().err
+    assert "give --port" in err and "cannot open /dev/nope-no-such-port" in err
+    assert "unknown IMU protocol 'nope'" in err and "--seconds must be > 0" in err
+
+
+def _serve(*args):
+    proc = subprocess.Popen([sys.executable, "-m", "station.cli", "sim", "serve", *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines = [proc.stdout.readline(), proc.stdout.readline()]
+    return proc, lines
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_sim_serve_prints_two_paths_serves_and_stops_cleanly(sig):
+    proc, lines = _serve("--speed", "50", "--axes", "2", "--seed", "4")
+    try:
+        assert lines[0].startswith("table: /dev/") and lines[1].startswith("imu: /dev/")
+        table_path, imu_path = lines[0].split(": ", 1)[1].strip(), lines[1].split(": ", 1)[1].strip()
+        with open_table(table_path) as table:
+            assert table.n_axes == 2
+        with open_imu(imu_path, "vectornav", ImuSettings()) as imu:
+            assert imu.identity.endswith("firmware 2.1.0.0") and "serial 0100000004" in imu.identity
+            assert len(imu.read(100)) == 100
+        proc.send_signal(sig)
+        assert proc.wait(10) == 0
+        assert proc.stdout.read() == ""            # exactly the two lines on stdout
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def test_sim_serve_user_errors(tmp_path):
+    bad = tmp_path / "faults.yaml"
+    bad.write_text("imu:\n  drop: {probability: 2}\n")
+    for args, message in ((["--faults", str(bad)], "field 'imu.drop.probability': must be <= 1.0"),
+                          (["--table-protocol", "aerosmith", "--axes", "3"], "single-axis"),
+                          (["--speed", "0"], "--speed must be > 0")):
+        r = subprocess.run([sys.executable, "-m", "station.cli", "sim", "serve", *args],
+                           capture_output=True, text=True, timeout=30)
+        assert r.returncode == 2 and message in r.stderr and r.stdout == ""
+        assert len(r.stderr.strip().splitlines()) == 1
