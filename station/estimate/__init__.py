@@ -7,7 +7,10 @@ from pathlib import Path
 from station.calibration import Calibration
 from station.capture import Capture, read_capture
 
-METHODS = ("zhang2010",)
+METHODS = ("auto", "zhang2010", "fourier", "fourier-high")
+# "auto": fourier when any complete rotation segment has no angle_deg (no encoder), zhang2010
+# otherwise.  "fourier" is the Fourier method's low-grade variant (Earth rate neglected),
+# "fourier-high" its high-grade variant (Earth rate along each shaft estimated; only |Omega_E|).
 
 
 def capture_digest(capture: Capture) -> str:
@@ -19,12 +22,34 @@ def capture_digest(capture: Capture) -> str:
     return h.hexdigest()
 
 
-def estimate_capture(path, method: str = "zhang2010") -> tuple[Calibration, Capture, dict]:
-    """Read a capture, estimate, and return the calibration, the capture and its provenance."""
-    from station.estimate import zhang2010
+def choose_method(capture: Capture) -> str:
+    """The method "auto" stands for: fourier if any complete rotation lacks angle_deg."""
+    if any(seg.angle_deg is None for seg in capture.complete("rotation")):
+        return "fourier"
+    return "zhang2010"
 
+
+def estimate_with(capture: Capture, method: str = "auto") -> tuple[Calibration, str]:
+    """Estimate from a capture already read; returns the calibration and the method used."""
+    from station.errors import UserError
+
+    if method not in METHODS:
+        raise UserError(f"unknown estimation method {method!r}: use one of {', '.join(METHODS)}")
+    if method == "auto":
+        method = choose_method(capture)
+    if method == "zhang2010":
+        from station.estimate import zhang2010
+
+        return zhang2010.estimate(capture), method
+    from station.estimate import fourier
+
+    return fourier.estimate(capture, "high" if method == "fourier-high" else "low"), method
+
+
+def estimate_capture(path, method: str = "auto") -> tuple[Calibration, Capture, dict]:
+    """Read a capture, estimate, and return the calibration, the capture and its provenance."""
     capture = read_capture(path)
-    cal = zhang2010.estimate(capture)
+    cal, method = estimate_with(capture, method)
     provenance = {
         "capture": str(Path(capture.path).resolve()),
         "capture_sha256": capture_digest(capture),
