@@ -38,14 +38,23 @@ def _floats(a) -> list:
     return np.asarray(a, dtype=float).round(15).tolist()
 
 
+def _parameter(value: float, unit: str, sigma: float | None) -> dict:
+    out = {"value": value, "unit": unit}
+    if sigma is not None and math.isfinite(sigma):
+        out["sigma"] = sigma
+    return out
+
+
 def to_document(cal: Calibration, provenance: dict) -> dict:
     return {
         "format": FORMAT,
         "convention": CONVENTION,
         "imu": {"accel_unit": cal.accel_unit, "gyro_unit": cal.gyro_unit},
         "effects": list(cal.effects),
-        "parameters": {name: {"value": value, "unit": unit} for name, value, unit in cal.parameters()},
+        "parameters": {name: _parameter(value, unit, cal.sigma.get(name))
+                       for name, value, unit in cal.parameters()},
         "compensation": {
+            **{key: _floats(value) for key, value in cal.compensation_extra.items()},
             "accel_matrix": _floats(cal.accel_matrix),
             "accel_bias": _floats(cal.accel_bias),
             "gyro_matrix": _floats(cal.gyro_matrix),
@@ -54,6 +63,9 @@ def to_document(cal: Calibration, provenance: dict) -> dict:
             "output_units": {"accel": "m/s^2", "gyro": "deg/s"},
         },
         "fit": cal.fit,
+        **({"correlation": {"names": list(cal.correlation[0]),
+                            "matrix": np.nan_to_num(np.asarray(cal.correlation[1])).round(4).tolist()}}
+           if cal.correlation is not None else {}),
         "provenance": {
             "software": f"station {station.__version__}",
             "date_utc": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
@@ -104,8 +116,12 @@ def read_calfile(path) -> dict:
     comp = doc.get("compensation")
     if not isinstance(comp, dict):
         raise UserError(f"{path}: field 'compensation': missing or not a mapping")
+    extra = {}
+    if "accel_lever_arm_m" in comp:
+        extra["accel_lever_arm_m"] = _matrix(comp, "accel_lever_arm_m", (3, 3), path)
     doc["compensation"] = {
         **comp,
+        **extra,
         "accel_matrix": _matrix(comp, "accel_matrix", (3, 3), path),
         "accel_bias": _matrix(comp, "accel_bias", (3,), path),
         "gyro_matrix": _matrix(comp, "gyro_matrix", (3, 3), path),
@@ -117,6 +133,9 @@ def read_calfile(path) -> dict:
     for name, p in params.items():
         if not (isinstance(p, dict) and isinstance(p.get("value"), (int, float))
                 and not isinstance(p.get("value"), bool) and math.isfinite(p["value"])
-                and isinstance(p.get("unit"), str)):
-            raise UserError(f"{path}: field 'parameters.{name}': needs a finite 'value' and a 'unit'")
+                and isinstance(p.get("unit"), str)
+                and (p.get("sigma") is None or (isinstance(p["sigma"], (int, float))
+                                                and not isinstance(p["sigma"], bool)))):
+            raise UserError(f"{path}: field 'parameters.{name}': needs a finite 'value', a 'unit' "
+                            "and, if given, a numeric 'sigma'")
     return doc

@@ -48,6 +48,10 @@ class Calibration:
     effects: list = field(default_factory=lambda: ["base_triads", "inter_triad"])
     fit: dict = field(default_factory=dict)
     provenance: dict = field(default_factory=dict)
+    sigma: dict = field(default_factory=dict)          # name -> 1-sigma, in the reported unit
+    correlation: tuple | None = None                   # (names, matrix)
+    extra_parameters: list = field(default_factory=list)   # (name, value, unit) of added effects
+    compensation_extra: dict = field(default_factory=dict)  # e.g. accel_lever_arm_m (3x3, m)
 
     # --- unit factors: SI (m/s^2, deg/s) per raw unit; 1 for "raw" -------------------------
     @property
@@ -107,13 +111,13 @@ class Calibration:
             out += [(f"gyro_bias_{a}", float(dph[i]), "deg/h") for i, a in enumerate(AXES)]
         theta = self.inter_triad_rad / units.ARCSEC_RAD
         out += [(f"inter_triad_{a}", float(theta[i]), "arcsec") for i, a in enumerate(AXES)]
-        return out
+        return out + list(self.extra_parameters)
 
 
 def parameter_errors(estimate: Calibration, truth: Calibration) -> list[tuple[str, float, float, float, str]]:
     """(name, estimate, truth, error, error unit) per parameter; scale errors are relative, in ppm."""
     out = []
-    for (name, value, unit), (_, true, _) in zip(estimate.parameters(), truth.parameters()):
+    for (name, value, unit), (_, true, _) in zip(estimate.parameters()[:21], truth.parameters()):
         if "_scale_" in name:
             out.append((name, value, true, (value / true - 1.0) * 1e6, "ppm"))
         else:

@@ -1,7 +1,8 @@
-"""Monte Carlo: repeat simulate -> estimate with seeds and collect the errors per parameter."""
+"""Monte Carlo: repeat simulate -> estimate with seeds; compare the spread of the errors with
+the Cramér-Rao bound of the scheme and with the uncertainties the estimator reports."""
 from __future__ import annotations
 
-import dataclasses
+import copy
 import os
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -10,17 +11,20 @@ import numpy as np
 
 from station.scheme import Scheme
 
+BASE_PARAMETERS = 21
+
 
 @dataclass
 class Settings:
     accel_noise_ug: float = 100.0         # µg/√Hz
     gyro_noise_dph: float = 0.03          # °/h/√Hz
-    table_angle_arcsec: float = 2.0       # 1σ
-    accel_disturbance_ug: float = 50.0    # the paper's "perturbed acceleration", 1σ
+    table_angle_arcsec: float = 2.0       # 1σ, every encoder angle and table attitude
+    accel_disturbance_ug: float = 50.0    # the 2010 paper's "perturbed acceleration", 1σ
     truth_seed: int = 0                   # the true sensor errors, the same in every run
+    method: str = "lsq"                   # lsq | zhang2010
 
 
-def _truth(settings: Settings):
+def make_truth(settings: Settings):
     from sim_devices.truth import default_truth
 
     truth = default_truth(settings.truth_seed)
@@ -31,24 +35,62 @@ def _truth(settings: Settings):
     return truth
 
 
-def one_run(args) -> list[float]:
+def _estimate(capture, method: str):
+    from station.estimate import lsq, zhang2010
+
+    return lsq.estimate(capture) if method == "lsq" else zhang2010.estimate(capture)
+
+
+def _error_sigmas(cal) -> np.ndarray:
+    """Reported 1σ in the units of parameter_errors (scale factors relative, in ppm)."""
+    out = []
+    for name, value, _ in cal.parameters()[:BASE_PARAMETERS]:
+        sigma = cal.sigma.get(name, np.nan)
+        out.append(sigma / value * 1e6 if "_scale_" in name else sigma)
+    return np.array(out)
+
+
+def one_run(args) -> tuple[list[float], np.ndarray]:
     scheme, settings, seed = args
     from station import simrun
     from station.calibration import parameter_errors
-    from station.estimate import zhang2010
 
-    truth = _truth(settings)
-    cal = zhang2010.estimate(simrun.simulate_capture(scheme, truth, seed))
-    return [e[3] for e in parameter_errors(cal, simrun.truth_calibration(truth))]
+    truth = make_truth(settings)
+    cal = _estimate(simrun.simulate_capture(scheme, truth, seed), settings.method)
+    errors = [e[3] for e in parameter_errors(cal, simrun.truth_calibration(truth))]
+    return errors, _error_sigmas(cal)
+
+
+def cramer_rao(scheme: Scheme, settings: Settings, seed: int = 0) -> np.ndarray:
+    """Cramér-Rao lower bound (1σ, units of parameter_errors) of every base parameter for this
+    scheme and noise, with the static attitudes and the bench nuisances unknown: the inverse
+    Fisher information of the summaries' model at the truth, noise from the densities."""
+    from station import simrun
+    from station.estimate import lsq
+    from station.estimate.summaries import summarise
+
+    truth = make_truth(settings)
+    quiet = copy.deepcopy(truth)
+    quiet.accel.noise_density = quiet.gyro.noise_density = 0.0
+    quiet.bench.accel_disturbance_ug = quiet.bench.table_angle_error_arcsec = 0.0
+    capture = simrun.simulate_capture(scheme, quiet, seed)
+    s = summarise(capture, table_angle_arcsec=settings.table_angle_arcsec)
+    fs = s.sample_rate_hz
+    accel_sigma = np.hypot(settings.accel_noise_ug * np.sqrt(fs), settings.accel_disturbance_ug)
+    s.accel_sigma = np.full(3, accel_sigma * 9.80665e-6)
+    s.gyro_sigma = np.full(3, settings.gyro_noise_dph * np.sqrt(fs) / 3600.0)
+    result = lsq.fit(s, [], attitudes="unknown")
+    cal = lsq.to_calibration(result, capture.imu.accel_unit, capture.imu.gyro_unit)
+    return _error_sigmas(cal)
 
 
 def run(scheme: Scheme, settings: Settings, runs: int, first_seed: int = 1000,
-        workers: int | None = None) -> tuple[list[tuple[str, str]], np.ndarray]:
-    """Errors of ``runs`` dry runs: ((name, unit) per parameter, array runs x parameters)."""
+        workers: int | None = None):
+    """((name, unit) per parameter, errors runs x parameters, reported 1σ runs x parameters)."""
     from station import simrun
     from station.calibration import parameter_errors
 
-    truth_cal = simrun.truth_calibration(_truth(settings))
+    truth_cal = simrun.truth_calibration(make_truth(settings))
     names = [(e[0], e[4]) for e in parameter_errors(truth_cal, truth_cal)]
     jobs = [(scheme, settings, first_seed + i) for i in range(runs)]
     workers = workers or min(os.cpu_count() or 1, runs)
@@ -57,4 +99,4 @@ def run(scheme: Scheme, settings: Settings, runs: int, first_seed: int = 1000,
     else:
         with ProcessPoolExecutor(workers) as pool:
             rows = list(pool.map(one_run, jobs, chunksize=max(1, runs // (4 * workers))))
-    return names, np.array(rows)
+    return names, np.array([r[0] for r in rows]), np.array([r[1] for r in rows])

@@ -59,6 +59,7 @@ class Scheme:
     reference: str
     defaults: dict
     segments: tuple  # of StaticSpec | RotationSpec
+    centred: bool = False   # the IMU's reference point sits on the table's rotation axes
 
     @property
     def duration_s(self) -> float:
@@ -171,6 +172,9 @@ def parse_scheme(doc, source: str, overrides: dict) -> Scheme:
     duplicates = sorted({n for n in names if names.count(n) > 1})
     if duplicates:
         raise UserError(f"{source}: duplicate segment names: {', '.join(duplicates)}")
+    centred = doc.get("centred", False)
+    if not isinstance(centred, bool):
+        raise UserError(f"{source}: centred: must be true or false, got {centred!r}")
     return Scheme(name=str(doc["name"]), title=str(doc.get("title", "")),
                   reference=str(doc.get("reference", "")), defaults=defaults,
-                  segments=tuple(segments))
+                  segments=tuple(segments), centred=centred)

@@ -4,6 +4,7 @@ Only this module (and only when the user asks for simulation) imports ``sim_devi
 """
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 from typing import Callable, Iterator
 
@@ -39,6 +40,23 @@ def _simulate(scheme: Scheme, bench) -> Iterator[tuple[object, object, dict]]:
             yield spec, bench.static(spec.up_body, spec.dwell_s), {"up_body": list(spec.up_body)}
 
 
+def _bench_keys(truth, scheme: Scheme) -> dict:
+    """What the bench's datasheet says (manifest keys beyond the spec, kept by every reader)."""
+    keys = {"table": {"angle_error_arcsec": float(truth.bench.table_angle_error_arcsec)}}
+    if scheme.centred:
+        keys["mounting"] = {"offset_m": [0.0, 0.0, 0.0]}
+    return keys
+
+
+def _mounted(truth, scheme: Scheme):
+    """The truth as mounted for this scheme: centred schemes put the IMU on the table's axes."""
+    if not scheme.centred:
+        return truth
+    placed = copy.deepcopy(truth)
+    placed.bench.lever_arm_m = np.zeros(3)
+    return placed
+
+
 def _headers(bench, seed: int) -> tuple[ImuInfo, Site]:
     imu = ImuInfo(sample_rate_hz=bench.sample_rate_hz, accel_unit="m/s^2", gyro_unit="deg/s",
                   model="station simulated IMU", serial=f"SIM-{seed}")
@@ -50,10 +68,11 @@ def record_scheme(scheme: Scheme, truth, seed: int, out_dir: Path,
     """Simulate every segment of ``scheme`` and write the capture bundle to ``out_dir``."""
     from sim_devices.bench import SimulatedBench
 
-    bench = SimulatedBench(truth, seed)
+    bench = SimulatedBench(_mounted(truth, scheme), seed)
     imu, site = _headers(bench, seed)
     writer = CaptureWriter(out_dir, imu, site, scheme.name,
-                           extra={"simulation": {"seed": seed, "truth_file": TRUTH_FILE}})
+                           extra={**_bench_keys(truth, scheme),
+                                  "simulation": {"seed": seed, "truth_file": TRUTH_FILE}})
     writer.write_file(TRUTH_FILE, yaml.safe_dump(truth.to_yaml_dict(), sort_keys=False))
     block = max(1, int(round(BLOCK_SECONDS * bench.sample_rate_hz)))
     for i, (spec, seg, meta) in enumerate(_simulate(scheme, bench)):
@@ -71,7 +90,7 @@ def simulate_capture(scheme: Scheme, truth, seed: int) -> Capture:
     """The capture a dry run would write, kept in memory (for Monte Carlo runs)."""
     from sim_devices.bench import SimulatedBench
 
-    bench = SimulatedBench(truth, seed)
+    bench = SimulatedBench(_mounted(truth, scheme), seed)
     imu, site = _headers(bench, seed)
     segments = []
     for spec, seg, meta in _simulate(scheme, bench):
@@ -82,7 +101,7 @@ def simulate_capture(scheme: Scheme, truth, seed: int) -> Capture:
             rate_dps=meta.get("rate_dps"), angle_deg=seg.meta.get("angle_deg"), note=meta.get("note"),
             data=SegmentData(t=seg.t, accel=seg.accel, gyro=seg.gyro, temp=seg.temp, gaps=0)))
     return Capture(path=Path(f"<simulated seed {seed}>"), imu=imu, site=site, scheme=scheme.name,
-                   segments=segments, extra={}, warnings=[])
+                   segments=segments, extra=_bench_keys(truth, scheme), warnings=[])
 
 
 def truth_calibration(truth):

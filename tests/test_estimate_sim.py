@@ -93,8 +93,9 @@ def test_error_spread_matches_noise_over_seeded_runs():
     scheme = load_scheme("optimal9")
     settings = montecarlo.Settings(accel_noise_ug=100.0, gyro_noise_dph=0.03,
                                    table_angle_arcsec=2.0, accel_disturbance_ug=0.0)
-    names, errors = montecarlo.run(scheme, settings, runs, first_seed=500)
-    truth = montecarlo._truth(settings)
+    settings.method = "zhang2010"
+    names, errors, _ = montecarlo.run(scheme, settings, runs, first_seed=500)
+    truth = montecarlo.make_truth(settings)
     sigma = predicted_sigma(scheme, truth, simrun.simulate_capture(scheme, truth, 500))
     lo, hi = (math.sqrt(stats.chi2.ppf(q, runs - 1) / (runs - 1)) for q in (0.0005, 0.9995))
     for (name, _), col in zip(names, errors.T):

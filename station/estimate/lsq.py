@@ -1,0 +1,543 @@
+"""One measurement model for every segment kind, fitted by weighted nonlinear least squares.
+
+Model (frame p of the accelerometers, see station/calibration.py):
+  accel_raw = K_a T_a f_p + b_a (+ effects)      gyro_raw = K_g T_g R_po w_p + b_g (+ effects)
+Static segment j (attitude C_pn,j unknown: a nuisance):
+  f_p = C_pn [0, 0, g],   w_p = C_pn Omega_E,n          (Omega_E,n from the site latitude)
+Rotation segment s about table axis l (unit, in p; one per physical axis, a nuisance), encoder
+angle A over the window T, phase phi from 0 to A:
+  f_p(phi) = kappa l + cos(phi) v - sin(phi) (l x v) + w x (w x d)     v = |g_perp| (cos psi e1 + sin psi e2)
+  w_p      = (A/T + e) l                                               (e: Earth rate along the axis)
+kappa (gravity along the axis), e and the mounting offset d from the rotation centre are
+nuisances of the bench; psi (where gravity is at the start) is one per segment.
+The data are the segment summaries (station/estimate/summaries.py), each divided by its noise;
+the encoder's angle error enters the gyro integrals' covariance.  The solution starts from the
+2010 algebraic one; the covariance is (J^T J)^-1 at the solution.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
+
+from station import units
+from station.calibration import Calibration
+from station.errors import UserError
+from station.estimate import zhang2010
+from station.estimate.summaries import Summaries, summarise
+from station.geometry import cross, tangent_basis
+from station.model.effect import Effect, SampleContext
+
+EARTH_RATE_RAD = 7.292115e-5
+WEAK_PRIOR_RAD = 3.0             # a prior on nuisance angles that only matters when nothing else does
+PHASES = 12                      # phase grid for the harmonics of a rotation (exact to 5th order)
+UP = np.array([0.0, 0.0, 1.0])
+
+# Parameters of the base model: name, internal -> reported scale, reported unit
+GLOBAL = [("accel_scale", 1.0, "1"), ("accel_misalignment", 1 / units.ARCSEC_RAD, "arcsec"),
+          ("accel_bias", 1 / units.UG_MPS2, "ug"), ("gyro_scale", 1.0, "1"),
+          ("gyro_misalignment", 1 / units.ARCSEC_RAD, "arcsec"), ("gyro_bias", 3600.0, "deg/h"),
+          ("inter_triad", 1 / units.ARCSEC_RAD, "arcsec")]
+SUFFIX = {"accel_misalignment": ("yz", "zy", "zx"), "gyro_misalignment": ("yz", "zy", "zx")}
+
+
+def lower_unit_rows(angles: np.ndarray) -> np.ndarray:
+    """Sensing directions from the misalignment angles (yz, zy, zx), exact (paper eq. 3)."""
+    s_yz, s_zy, s_zx = np.sin(angles[0]), -np.sin(angles[1]), np.sin(angles[2])
+    return np.array([[1.0, 0.0, 0.0],
+                     [s_yz, np.sqrt(1.0 - s_yz**2), 0.0],
+                     [s_zy, s_zx, np.sqrt(max(1.0 - s_zy**2 - s_zx**2, 0.0))]])
+
+
+class Layout:
+    """Named slices of the parameter vector."""
+
+    def __init__(self):
+        self.blocks: dict[str, slice] = {}
+        self.size = 0
+
+    def add(self, name: str, n: int) -> slice:
+        self.blocks[name] = slice(self.size, self.size + n)
+        self.size += n
+        return self.blocks[name]
+
+    def __getitem__(self, name: str) -> slice:
+        return self.blocks[name]
+
+
+@dataclass
+class Start:
+    """Initial values: the algebraic solution and the bench nuisances derived from it."""
+    ka: np.ndarray
+    alpha: np.ndarray
+    ba: np.ndarray
+    kg: np.ndarray
+    gamma: np.ndarray
+    bg: np.ndarray
+    theta: np.ndarray
+    notes: list = field(default_factory=list)
+
+
+def _start(s: Summaries) -> Start:
+    means_a = np.array([st.accel for st in s.statics])
+    means_w = np.array([st.gyro for st in s.statics])
+    try:
+        L_a, b_a = zhang2010.fit_accelerometers(means_a, s.gravity_mps2)
+    except UserError:       # too few attitudes for the ellipsoid: nominal accelerometers
+        L_a, b_a = np.eye(3), np.zeros(3)
+    pairs = _pairs(s)
+    notes = []
+    try:
+        for p in pairs:
+            p.phi = p.integral_plus - p.integral_minus
+        L_g = zhang2010.fit_gyro_matrix(pairs)
+        b_g = zhang2010.fit_gyro_bias(L_g, means_w)
+    except UserError:
+        L_g, b_g = np.eye(3), means_w.mean(axis=0)
+    # inter-triad start: each rotation axis seen by the gyros and, through the plane in which
+    # gravity turns (the first harmonic), by the accelerometers (eqs. 41 and 44-47)
+    axes_o, axes_p = [], []
+    for r in s.rotations:
+        l_o = L_g @ (r.gyro_integral - b_g * r.duration_s) * np.sign(r.angle_deg)
+        l_p = -np.cross(L_a @ r.accel_cos, L_a @ r.accel_sin)
+        if np.linalg.norm(l_p) > 0.1 * s.gravity_mps2**2 and np.linalg.norm(l_o) > 0:
+            axes_o.append(l_o / np.linalg.norm(l_o))
+            axes_p.append(l_p / np.linalg.norm(l_p))
+    if len(axes_o) >= 2:
+        R_po = Rotation.align_vectors(np.array(axes_o), np.array(axes_p))[0].as_matrix()
+    else:
+        R_po = np.eye(3)
+        notes.append("no algebraic start for the inter-triad rotation: started from zero")
+    ka, Ta = zhang2010.scale_and_T(L_a)
+    kg, Tg = zhang2010.scale_and_T(L_g)
+    from station.calibration import misalignment_angles
+    return Start(ka, misalignment_angles(Ta), b_a, kg, misalignment_angles(Tg), b_g,
+                 Rotation.from_matrix(R_po).as_rotvec(), notes)
+
+
+def _pairs(s: Summaries) -> list:
+    """Rotation summaries of the same axis with opposite angles, as the algebraic solver wants."""
+    out = []
+    for g in range(s.groups):
+        segs = [r for r in s.rotations if r.group == g]
+        plus = [r for r in segs if r.angle_deg > 0]
+        minus = [r for r in segs if r.angle_deg < 0]
+        for p, m in zip(plus, minus):
+            out.append(zhang2010.RotationPair(
+                name=f"{p.name}/{m.name}", axis_body=p.axis_body, phi=None,
+                swept_deg=p.angle_deg - m.angle_deg, duration_diff_s=p.duration_s - m.duration_s,
+                integral_plus=p.gyro_integral, integral_minus=m.gyro_integral,
+                duration_plus_s=p.duration_s, duration_minus_s=m.duration_s, accel=None))
+    return out
+
+
+def _earth_rate_visible(r, s: Summaries) -> bool:
+    """Whether the Earth rate across the axis leaves a trace in this rotation's gyro integral:
+    it integrates to zero over whole turns, and to at most 2 Omega T / A over the rest of one;
+    below three times the integral's noise it is not modelled (its start angle would be an
+    unobservable nuisance)."""
+    turns = abs(r.angle_deg) / 360.0
+    if abs(turns - round(turns)) < 1e-3:
+        return False
+    largest = 2.0 * np.degrees(EARTH_RATE_RAD) * r.duration_s / np.radians(abs(r.angle_deg))
+    noise = np.max(s.gyro_sigma) * np.sqrt(r.duration_s / s.sample_rate_hz)
+    return largest > 3.0 * noise
+
+
+
+class Model:
+    """The whitened residual function of the base model plus effects."""
+
+    def __init__(self, s: Summaries, effects: list[Effect], attitudes: str = "auto"):
+        self.s, self.effects = s, effects
+        for e in effects:
+            e.setup(s)
+        if attitudes == "auto":
+            attitudes = "unknown" if len(s.statics) >= 9 else "table"
+        if attitudes not in ("unknown", "table"):
+            raise UserError(f"attitudes must be 'unknown' or 'table', not {attitudes!r}")
+        self.attitudes = attitudes
+        self.with_latitude = s.latitude_deg is not None
+        g, lat = s.gravity_mps2, np.radians(s.latitude_deg or 0.0)
+        self.f_n = np.array([0.0, 0.0, g])
+        self.omega_n = np.degrees(EARTH_RATE_RAD) * np.array([0.0, np.cos(lat), np.sin(lat)])
+        self.omega_dps = np.degrees(EARTH_RATE_RAD)
+        self.prior_sigma = np.radians(max(s.table_angle_sigma_deg, 1.0 / 3600.0))
+
+        L = self.layout = Layout()
+        for name, _, _ in GLOBAL:
+            L.add(name, 3)
+        if attitudes == "table":
+            L.add("mounting_rotation", 3)
+        for j in range(len(s.statics)):
+            L.add(f"static{j}", 3 if self.with_latitude else 2)
+        for k in range(s.groups):
+            L.add(f"axis{k}", 4)           # axis tangent (2), kappa, e
+        for i in range(len(s.rotations)):
+            # where gravity is at the start; and the Earth rate, unless the turns are whole
+            L.add(f"phase{i}", 2 if _earth_rate_visible(self.s.rotations[i], s) else 1)
+        if s.rotations and s.mounting_offset_m is None:
+            L.add("mounting_offset", 3)
+        for e in effects:
+            L.add(f"effect:{e.id}", len(e.params))
+        self._initialise()
+
+    # --- initial values ---------------------------------------------------------------------
+    def _initialise(self):
+        s, L = self.s, self.layout
+        st = self.start = _start(s)
+        x = np.zeros(L.size)
+        for name, value in (("accel_scale", st.ka), ("accel_misalignment", st.alpha), ("accel_bias", st.ba),
+                            ("gyro_scale", st.kg), ("gyro_misalignment", st.gamma), ("gyro_bias", st.bg),
+                            ("inter_triad", st.theta)):
+            x[L[name]] = value
+        Ma, Mg = self._matrices(x)
+        La, Lg = np.linalg.inv(Ma), np.linalg.inv(Mg)
+        # static attitudes: up from the accelerometers, heading from the Earth rate
+        self.static_ref = []
+        for j, stat in enumerate(s.statics):
+            up_p = La @ (stat.accel - st.ba)
+            up_p /= np.linalg.norm(up_p)
+            if self.with_latitude:
+                earth_p = Lg @ (stat.gyro - st.bg)
+                C0, _ = Rotation.align_vectors([up_p, earth_p], [UP, self.omega_n], weights=[1e6, 1.0])
+                self.static_ref.append(C0)
+            else:
+                self.static_ref.append(up_p)
+        # rotation axes in p from the gyro integrals; gravity along them and its start phase
+        self.axis_ref = []
+        for k in range(s.groups):
+            segs = [r for r in s.rotations if r.group == k]
+            v = sum(np.sign(r.angle_deg) * (Lg @ (r.gyro_integral - st.bg * r.duration_s)) for r in segs)
+            l0 = v / np.linalg.norm(v)
+            self.axis_ref.append(l0)
+            x[L[f"axis{k}"]][2] = np.mean([l0 @ (La @ (r.accel_dc - st.ba)) for r in segs])
+        self.axis_basis = [tangent_basis(l0) for l0 in self.axis_ref]
+        for i, r in enumerate(s.rotations):
+            l0 = self.axis_ref[r.group]
+            e1, e2 = self.axis_basis[r.group]
+            v = La @ r.accel_cos
+            x[L[f"phase{i}"].start] = np.arctan2(v @ e2, v @ e1)
+        # gyro integral whitening: white noise plus the encoder error along the axis
+        self.gyro_whiten = []
+        for r in s.rotations:
+            axis_raw = Mg @ self.axis_ref[r.group]
+            cov = np.diag(s.gyro_sigma**2 * r.duration_s / s.sample_rate_hz)
+            cov += s.table_angle_sigma_deg**2 * np.outer(axis_raw, axis_raw)
+            self.gyro_whiten.append(np.linalg.inv(np.linalg.cholesky(cov)))
+        self.x0 = x
+
+    # --- pieces -----------------------------------------------------------------------------
+    def _matrices(self, x):
+        L = self.layout
+        Ma = np.diag(x[L["accel_scale"]]) @ lower_unit_rows(x[L["accel_misalignment"]])
+        Mg = (np.diag(x[L["gyro_scale"]]) @ lower_unit_rows(x[L["gyro_misalignment"]])
+              @ Rotation.from_rotvec(x[L["inter_triad"]]).as_matrix())
+        return Ma, Mg
+
+    def _axis(self, x, k):
+        p = x[self.layout[f"axis{k}"]]
+        l0 = self.axis_ref[k]
+        t1, t2 = self.axis_basis[k]
+        l = l0 + p[0] * t1 + p[1] * t2
+        return l / np.linalg.norm(l), p[2], p[3]
+
+    def _static_attitude(self, x, j):
+        p = x[self.layout[f"static{j}"]]
+        ref = self.static_ref[j]
+        if self.with_latitude:
+            return Rotation.from_rotvec(p) * ref
+        t1, t2 = tangent_basis(ref)
+        up = ref + p[0] * t1 + p[1] * t2
+        return up / np.linalg.norm(up)
+
+    def _predict(self, x, ctx: SampleContext, Ma, Mg):
+        a = ctx.f_p @ Ma.T + x[self.layout["accel_bias"]]
+        w = ctx.w_p @ Mg.T + x[self.layout["gyro_bias"]]
+        for e in self.effects:
+            px = x[self.layout[f"effect:{e.id}"]]
+            da, dw = e.accel(px, ctx), e.gyro(px, ctx)
+            if da is not None:
+                a = a + da
+            if dw is not None:
+                w = w + dw
+        return a, w
+
+    def _context(self, f_p, w_p, w_table, temp, Ma, Mg):
+        n = len(f_p)
+        return SampleContext(f_p=f_p, w_p=w_p, w_table=w_table, wdot_table=np.zeros((n, 3)),
+                             temp_c=np.full(n, np.nan if temp is None else temp),
+                             accel_matrix=Ma, gyro_matrix=Mg)
+
+    def _column_groups(self):
+        """Columns that can be perturbed together: the same local parameter of every static,
+        axis or rotation segment moves disjoint residual rows."""
+        L = self.layout
+        _, tags = self._pieces(self.x0)
+        rows, at = {}, 0
+        for tag, n in tags:
+            rows.setdefault(tag, []).extend(range(at, at + n))
+            at += n
+        local = {}
+        for name, sl in L.blocks.items():
+            for prefix, kind in (("static", "static"), ("axis", "axis"), ("phase", "rot")):
+                if name.startswith(prefix) and name[len(prefix):].isdigit():
+                    j = int(name[len(prefix):])
+                    owned = list(rows.get((kind, j), [])) + list(rows.get(("weak", j), []) if kind == "static" else [])
+                    if kind == "axis":
+                        owned += [r for i, rot in enumerate(self.s.rotations) if rot.group == j
+                                  for r in rows.get(("rot", i), [])]
+                    for k in range(sl.stop - sl.start):
+                        local.setdefault((prefix, k), []).append((sl.start + k, np.array(owned, dtype=int)))
+                    break
+        local_cols = {c for members in local.values() for c, _ in members}
+        dense = [[(c, None)] for c in range(L.size) if c not in local_cols]
+        self.data_rows = np.ones(at, dtype=bool)
+        for tag, idx in rows.items():
+            if tag[0] == "weak":
+                self.data_rows[idx] = False
+        return dense + list(local.values()), at
+
+    def jacobian(self, x) -> np.ndarray:
+        if not hasattr(self, "_groups"):
+            self._groups, self._rows = self._column_groups()
+        r0 = self.residuals(x)
+        J = np.zeros((self._rows, len(x)))
+        for members in self._groups:
+            xp = x.copy()
+            steps = []
+            for c, _ in members:
+                h = 1e-7 * max(abs(x[c]), 1e-2)
+                xp[c] += h
+                steps.append(h)
+            d = self.residuals(xp) - r0
+            for (c, owned), h in zip(members, steps):
+                if owned is None:
+                    J[:, c] = d / h
+                else:
+                    J[owned, c] = d[owned] / h
+        return J
+
+    # --- the residuals ----------------------------------------------------------------------
+    def residuals(self, x) -> np.ndarray:
+        return np.concatenate(self._pieces(x)[0])
+
+    def _pieces(self, x):
+        """The whitened residuals in pieces, and a (tag, length) per piece naming what owns it."""
+        s, L = self.s, self.layout
+        Ma, Mg = self._matrices(x)
+        out, tags = [], []
+
+        def put(tag, values):
+            out.append(values)
+            tags.append((tag, len(values)))
+
+        static_sigma_a = s.accel_sigma
+        static_sigma_w = s.gyro_sigma
+        C_mount = Rotation.from_rotvec(x[L["mounting_rotation"]]) if self.attitudes == "table" else None
+        for j, st in enumerate(s.statics):
+            att = self._static_attitude(x, j)
+            if self.with_latitude:
+                f_p, w_p = att.apply(self.f_n)[None, :], att.apply(self.omega_n)[None, :]
+                up_p = att.apply(UP)
+            else:
+                up_p = att
+                f_p, w_p = (self.f_n[2] * att)[None, :], np.zeros((1, 3))
+            a, w = self._predict(x, self._context(f_p, w_p, np.zeros((1, 3)), st.temp_c, Ma, Mg), Ma, Mg)
+            root_n = np.sqrt(st.samples)
+            put(("static", j), (st.accel - a[0]) * root_n / static_sigma_a)
+            if self.with_latitude:
+                put(("static", j), (st.gyro - w[0]) * root_n / static_sigma_w)
+            else:   # only |Omega_E| known: the norm of the compensated rate
+                rate = np.linalg.norm(np.linalg.solve(Mg, st.gyro - x[L["gyro_bias"]]))
+                put(("static", j), np.atleast_1d((rate - self.omega_dps) * root_n / np.mean(static_sigma_w)))
+            if C_mount is not None and st.up_body is not None:
+                put(("static", j), cross(up_p, C_mount.apply(st.up_body)) / self.prior_sigma)
+            if self.with_latitude:   # keeps the heading finite when the gyros cannot see the Earth turn
+                put(("weak", j), x[L[f"static{j}"]] / WEAK_PRIOR_RAD)
+        offset = (x[L["mounting_offset"]] if "mounting_offset" in L.blocks
+                  else (s.mounting_offset_m if s.mounting_offset_m is not None else np.zeros(3)))
+        phases = 2 * np.pi * np.arange(PHASES) / PHASES
+        cos_p, sin_p = np.cos(phases), np.sin(phases)
+        axes = [self._axis(x, k) for k in range(s.groups)]
+        if C_mount is not None:
+            for k, (l, _, _) in enumerate(axes):
+                axis_body = next(r.axis_body for r in s.rotations if r.group == k)
+                put(("axis", k), cross(l, C_mount.apply(axis_body)) / self.prior_sigma)
+        g = s.gravity_mps2
+        for i, r in enumerate(s.rotations):
+            l, kappa, e = axes[r.group]
+            e1 = self.axis_basis[r.group][0]
+            e1 = e1 - (e1 @ l) * l
+            e1 /= np.linalg.norm(e1)
+            e2 = cross(l, e1)
+            psi, chi = (list(x[L[f"phase{i}"]]) + [0.0])[:2]
+            v = np.sqrt(max(g * g - kappa * kappa, 0.0)) * (np.cos(psi) * e1 + np.sin(psi) * e2)
+            # Earth rate across the axis turns with the body: over a whole number of turns it
+            # integrates to zero, over the rest of a turn it does not
+            earth_perp = (np.sqrt(max(self.omega_dps**2 - e * e, 0.0))
+                          * (np.cos(chi) * e1 + np.sin(chi) * e2))
+            A = np.radians(r.angle_deg)
+            earth_integral = np.zeros(3) if not _earth_rate_visible(r, s) else (r.duration_s / A) * (
+                np.sin(A) * earth_perp - (1.0 - np.cos(A)) * cross(l, earth_perp))
+            w_rad = np.radians(r.rate_dps) * l
+            centripetal = cross(w_rad, cross(w_rad, offset))
+            f_p = kappa * l + np.outer(cos_p, v) - np.outer(sin_p, cross(l, v)) + centripetal
+            w_p = np.tile((r.rate_dps + e) * l, (PHASES, 1))
+            ctx = self._context(f_p, w_p, np.tile(w_rad, (PHASES, 1)), r.temp_c, Ma, Mg)
+            a, w = self._predict(x, ctx, Ma, Mg)
+            dc, c, sn = a.mean(axis=0), 2 * cos_p @ a / PHASES, 2 * sin_p @ a / PHASES
+            root_n = np.sqrt(r.samples)
+            put(("rot", i), np.concatenate([
+                (r.accel_dc - dc) * root_n / s.accel_sigma,
+                (r.accel_cos - c) * root_n / (np.sqrt(2) * s.accel_sigma),
+                (r.accel_sin - sn) * root_n / (np.sqrt(2) * s.accel_sigma),
+                self.gyro_whiten[i] @ (r.gyro_integral - w.mean(axis=0) * r.duration_s
+                                       - Mg @ earth_integral)]))
+        return out, tags
+
+
+@dataclass
+class FitResult:
+    x: np.ndarray
+    covariance: np.ndarray          # of the full parameter vector (internal units)
+    model: Model
+    chi2: float
+    dof: int
+    residuals: np.ndarray
+
+
+def _solve(model: Model, x0: np.ndarray, free: np.ndarray):
+    def residuals(z):
+        x = x0.copy()
+        x[free] = z
+        return model.residuals(x)
+
+    def jacobian(z):
+        x = x0.copy()
+        x[free] = z
+        return model.jacobian(x)[:, free]
+
+    res = least_squares(residuals, x0[free], jac=jacobian, method="lm", x_scale="jac",
+                        xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=100)
+    x = x0.copy()
+    x[free] = res.x
+    J = jacobian(res.x)
+    # pinv: a nuisance the data cannot see has a zero column; it gets zero variance and
+    # leaves the others untouched
+    cov = np.zeros((len(x), len(x)))
+    cov[np.ix_(free, free)] = np.linalg.pinv(J.T @ J, rcond=1e-14, hermitian=True)
+    return x, cov, res.fun
+
+
+def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "auto") -> FitResult:
+    """Fit the model; effect parameters this capture cannot reveal (1-sigma above their
+    typical size) are fixed at zero, named in ``model.unobservable``, and the fit repeated
+    without them."""
+    model = Model(s, list(effects or []), attitudes)
+    free = np.ones(model.layout.size, dtype=bool)
+    x0 = model.x0
+    model.unobservable = []
+    while True:
+        x, cov, r = _solve(model, x0, free)
+        blind = []
+        for e in model.effects:
+            sl = model.layout[f"effect:{e.id}"]
+            for k, p in enumerate(e.params):
+                c = sl.start + k
+                if free[c] and np.sqrt(cov[c, c]) * p.scale > p.typical:
+                    blind.append((c, p.name))
+        if not blind:
+            break
+        for c, name in blind:
+            free[c] = False
+            model.unobservable.append(name)
+        x0 = x.copy()
+        x0[~free] = 0.0
+    r = r[model.data_rows]      # the weak priors on nuisance angles are not data
+    dof = len(r) - int(free.sum())
+    return FitResult(x=x, covariance=cov, model=model, chi2=float(r @ r), dof=dof, residuals=r)
+
+
+def reported(result: FitResult, accel_unit: str, gyro_unit: str):
+    """Names, reported values, units, and the covariance in reported units, in the order of
+    Calibration.parameters() followed by the effects' parameters."""
+    L, x = result.model.layout, result.x
+    scale = {name: (sc, unit) for name, sc, unit in GLOBAL}
+    if accel_unit == "raw":
+        scale["accel_bias"] = (1.0, "raw")
+        scale["accel_scale"] = (1.0, "raw/(m/s^2)")
+    if gyro_unit == "raw":
+        scale["gyro_bias"] = (1.0, "raw")
+        scale["gyro_scale"] = (1.0, "raw/(deg/s)")
+    order = ["accel_scale", "accel_misalignment", "gyro_scale", "gyro_misalignment",
+             "accel_bias", "gyro_bias", "inter_triad"]
+    names, index, factors, units_ = [], [], [], []
+    for block in order:
+        sc, unit = scale[block]
+        for k, suffix in enumerate(SUFFIX.get(block, "xyz")):
+            names.append(f"{block}_{suffix}")
+            index.append(L[block].start + k)
+            factors.append(sc)
+            units_.append(unit)
+    for e in result.model.effects:
+        sl = L[f"effect:{e.id}"]
+        for k, p in enumerate(e.params):
+            names.append(p.name)
+            index.append(sl.start + k)
+            factors.append(p.scale)
+            units_.append(p.unit)
+    index, factors = np.array(index, dtype=int), np.array(factors)
+    values = x[index] * factors
+    cov = result.covariance[np.ix_(index, index)] * np.outer(factors, factors)
+    return names, values, units_, cov
+
+
+def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=()) -> Calibration:
+    model, x = result.model, result.x
+    L, s = model.layout, model.s
+    names, values, units_, cov = reported(result, accel_unit, gyro_unit)
+    sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(sigma, sigma)
+    extra = {}
+    for e in model.effects:
+        extra.update(e.report(x[L[f"effect:{e.id}"]], None))
+    fit_stats = {
+        "method": "lsq",
+        "chi2": result.chi2,
+        "dof": result.dof,
+        "reduced_chi2": result.chi2 / result.dof if result.dof > 0 else float("nan"),
+        "static_segments": len(s.statics),
+        "rotation_segments": len(s.rotations),
+        "static_attitudes": model.attitudes,
+        "noise_per_sample": {"accel_ug": (s.accel_sigma / units.UG_MPS2).tolist(),
+                             "gyro_dph": (s.gyro_sigma * 3600).tolist()},
+        "notes": list(model.start.notes) + list(s.skipped) + list(notes),
+    }
+    if model.unobservable:
+        fit_stats["notes"].append(
+            f"not observable with this capture (1-sigma above the typical size), fixed at 0: "
+            f"{', '.join(model.unobservable)}")
+    if "mounting_offset" in L.blocks:
+        fit_stats["mounting_offset_mm"] = (x[L["mounting_offset"]] * 1e3).tolist()
+    return Calibration(
+        accel_unit=accel_unit, gyro_unit=gyro_unit,
+        accel_scale=x[L["accel_scale"]].copy(), accel_T=lower_unit_rows(x[L["accel_misalignment"]]),
+        accel_bias=x[L["accel_bias"]] / s.accel_factor,
+        gyro_scale=x[L["gyro_scale"]].copy(), gyro_T=lower_unit_rows(x[L["gyro_misalignment"]]),
+        gyro_bias=x[L["gyro_bias"]] / s.gyro_factor,
+        R_po=Rotation.from_rotvec(x[L["inter_triad"]]).as_matrix(),
+        effects=["base_triads", "inter_triad"] + [e.id for e in model.effects],
+        fit=fit_stats, sigma=dict(zip(names, sigma.tolist())), correlation=(names, corr),
+        extra_parameters=[(n, float(v), u) for n, v, u in zip(names[21:], values[21:], units_[21:])],
+        compensation_extra=extra)
+
+
+def estimate(capture, effects: list[Effect] | None = None, attitudes: str = "auto",
+             table_angle_arcsec: float | None = None) -> Calibration:
+    s = summarise(capture, table_angle_arcsec=table_angle_arcsec)
+    result = fit(s, effects, attitudes)
+    return to_calibration(result, capture.imu.accel_unit, capture.imu.gyro_unit)

@@ -1,0 +1,20 @@
+"""Small vector helpers for the measurement model (fast on 3-vectors and short stacks)."""
+from __future__ import annotations
+
+import numpy as np
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis (np.cross is slow on the model's small arrays)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def tangent_basis(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors completing the unit vector u to a right-handed frame (u, t1, t2)."""
+    e = np.zeros(3)
+    e[int(np.argmin(np.abs(u)))] = 1.0
+    t1 = cross(u, e)
+    t1 /= np.linalg.norm(t1)
+    return t1, cross(u, t1)

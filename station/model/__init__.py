@@ -1,0 +1,12 @@
+"""The measurement model's optional physical effects, one module each.
+
+The base model (scale factors, misalignments and biases of both triads, the inter-triad
+rotation, and the nuisances of the bench) lives in ``station.estimate.lsq``; every effect here
+adds parameters and a term to the predicted raw outputs.  ``EFFECTS`` maps ids to classes.
+"""
+from station.model.effect import Effect, Param, SampleContext
+from station.model.lever_arm import AccelLeverArm
+
+EFFECTS = {cls.id: cls for cls in (AccelLeverArm,)}
+
+__all__ = ["EFFECTS", "Effect", "Param", "SampleContext"]

@@ -1,0 +1,64 @@
+"""What an effect of the measurement model provides."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Param:
+    name: str
+    unit: str                 # the unit the value is reported in
+    scale: float              # reported value = internal value * scale
+    typical: float            # a typical magnitude (reported unit): below it, a capture that
+                              #   cannot resolve it (1-sigma above) does not reveal it
+    plausible: float          # the largest magnitude (reported unit) plausible for any IMU
+
+
+@dataclass
+class SampleContext:
+    """Quantities at the sample points where the model predicts raw outputs.
+
+    All arrays have N rows; frame p; specific force in m/s^2, rates in deg/s (w_p, the
+    inertial rate the gyros sense) and rad/s (w_table, the table rate relative to the Earth,
+    and its derivative wdot_table in rad/s^2).
+    """
+    f_p: np.ndarray           # specific force at the IMU reference point
+    w_p: np.ndarray           # inertial angular rate, deg/s
+    w_table: np.ndarray       # table rate relative to the Earth, rad/s
+    wdot_table: np.ndarray    # its time derivative, rad/s^2
+    temp_c: np.ndarray        # temperature, deg C (NaN when not recorded)
+    accel_matrix: np.ndarray  # current K_a T_a (rows: scale times sensing direction), 3x3
+    gyro_matrix: np.ndarray   # current K_g T_g R_po, 3x3
+
+
+class Effect:
+    """Base class: an effect adds parameters and additive terms to the raw outputs."""
+
+    id = ""
+    title = ""
+    physics = ""              # two sentences
+    term = ""                 # its term in the measurement equation
+    excited_by = ""           # which segments reveal it
+    magnitudes = ""           # typical sizes, consumer MEMS to navigation grade
+    signature = ""            # what its residuals look like when it is missing
+
+    def setup(self, summaries) -> None:
+        """Decide the parameters this capture can carry (e.g. a gauge choice)."""
+
+    @property
+    def params(self) -> tuple[Param, ...]:
+        return ()
+
+    def accel(self, x: np.ndarray, ctx: SampleContext) -> np.ndarray | None:
+        """Additive term of the raw accelerometer output (m/s^2 before unit conversion)."""
+        return None
+
+    def gyro(self, x: np.ndarray, ctx: SampleContext) -> np.ndarray | None:
+        """Additive term of the raw gyro output (deg/s before unit conversion)."""
+        return None
+
+    def report(self, x: np.ndarray, cov: np.ndarray | None) -> dict:
+        """Extra content for the calibration file (e.g. compensation data)."""
+        return {}
