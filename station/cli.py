@@ -12,6 +12,7 @@ from rich.table import Table
 
 import station
 from station.errors import UserError
+from station.estimate import METHODS
 
 out = Console(highlight=False)
 err = Console(stderr=True, highlight=False)
@@ -55,12 +56,16 @@ def cmd_estimate(args) -> int:
     from station.calfile import write_calfile
     from station.estimate import estimate_capture
 
-    cal, capture, provenance = estimate_capture(args.capture, args.method)
+    cal, capture, provenance = estimate_capture(args.capture, args.method, args.add)
     for w in capture.warnings:
         err.print(f"warning: {w}")
     target = Path(args.output) if args.output else capture.path / "calibration.yaml"
     write_calfile(target, cal, provenance)
-    _print_parameters([(n, v, u) for n, v, u in cal.parameters()], f"calibration of {capture.path}")
+    _print_parameters([(n, v, u, cal.sigma.get(n)) for n, v, u in cal.parameters()],
+                      f"calibration of {capture.path} ({provenance['method']})")
+    if "reduced_chi2" in cal.fit:
+        out.print(f"fit: chi2 {cal.fit['chi2']:.1f} for {cal.fit['dof']} degrees of freedom "
+                  f"(reduced {cal.fit['reduced_chi2']:.3f})")
     _print_notes(cal)
     out.print(f"calibration file: {target}")
     return 0
@@ -70,11 +75,11 @@ def cmd_apply(args) -> int:
     from station.calfile import read_calfile
     from station.capture import read_segment_csv
 
+    from station.compensate import compensate
+
     doc = read_calfile(args.calibration)
-    comp = doc["compensation"]
     data = read_segment_csv(Path(args.input))
-    f = (data.accel - comp["accel_bias"]) @ comp["accel_matrix"].T
-    w = (data.gyro - comp["gyro_bias"]) @ comp["gyro_matrix"].T
+    f, w = compensate(doc["compensation"], data.t, data.accel, data.gyro)
     table = np.column_stack([data.t, f, w])
     try:
         with open(args.output, "w") as fh:
@@ -90,7 +95,7 @@ def cmd_show(args) -> int:
     from station.calfile import read_calfile
 
     doc = read_calfile(args.calibration)
-    rows = [(n, p["value"], p["unit"]) for n, p in doc["parameters"].items()]
+    rows = [(n, p["value"], p["unit"], p.get("sigma")) for n, p in doc["parameters"].items()]
     _print_parameters(rows, f"{args.calibration}")
     prov = doc.get("provenance", {})
     out.print(f"effects: {', '.join(doc.get('effects', []))}")
@@ -100,15 +105,89 @@ def cmd_show(args) -> int:
     return 0
 
 
+def cmd_montecarlo(args) -> int:
+    import json
+
+    from station import montecarlo
+    from station.scheme import load_scheme
+
+    if args.runs < 2:
+        raise UserError("--runs must be at least 2")
+    scheme = load_scheme(args.scheme)
+    settings = montecarlo.Settings(accel_noise_ug=args.accel_noise_ug, gyro_noise_dph=args.gyro_noise_dph,
+                                   table_angle_arcsec=args.table_angle_arcsec,
+                                   accel_disturbance_ug=args.accel_disturbance_ug, method=args.method)
+    names, errors, sigmas = montecarlo.run(scheme, settings, args.runs, first_seed=args.seed)
+    crlb = montecarlo.cramer_rao(scheme, settings)
+    std = errors.std(axis=0, ddof=1)
+    with np.errstate(all="ignore"):
+        mean_sigma = np.nanmean(sigmas, axis=0) if np.isfinite(sigmas).any() else np.full(len(std), np.nan)
+    rows = [{"name": n, "unit": u, "std": float(sd), "crlb": float(c),
+             "mean_sigma": None if not np.isfinite(ms) else float(ms), "mean_error": float(me)}
+            for (n, u), sd, c, ms, me in zip(names, std, crlb, mean_sigma, errors.mean(axis=0))]
+    if args.json:
+        print(json.dumps({"scheme": scheme.name, "runs": args.runs, "method": args.method,
+                          "settings": {"accel_noise_ug_rthz": args.accel_noise_ug,
+                                       "gyro_noise_dph_rthz": args.gyro_noise_dph,
+                                       "table_angle_arcsec": args.table_angle_arcsec,
+                                       "accel_disturbance_ug": args.accel_disturbance_ug},
+                          "parameters": rows}, indent=1))
+        return 0
+    table = Table(title=f"{scheme.name}: {args.runs} dry runs, {args.method}; errors against the "
+                        "simulated truth (scale factors relative)")
+    for col in ("parameter", "std", "CRLB", "std/CRLB", "mean 1σ", "1σ/std", "mean error", "unit"):
+        table.add_column(col, justify="left" if col in ("parameter", "unit") else "right")
+    for r in rows:
+        ms = r["mean_sigma"]
+        table.add_row(r["name"], f"{r['std']:.4g}", f"{r['crlb']:.4g}", f"{r['std'] / r['crlb']:.2f}",
+                      "" if ms is None else f"{ms:.4g}", "" if ms is None else f"{ms / r['std']:.2f}",
+                      f"{r['mean_error']:+.3g}", r["unit"])
+    out.print(table)
+    return 0
+
+
+def cmd_effects(args) -> int:
+    from station.model import EFFECTS
+
+    if args.name is None:
+        table = Table(title="effects the model can add (station estimate --add ID)")
+        table.add_column("id")
+        table.add_column("what")
+        for eid, cls in sorted(EFFECTS.items()):
+            table.add_row(eid, cls.title)
+        out.print(table)
+        return 0
+    if args.name not in EFFECTS:
+        raise UserError(f"unknown effect {args.name!r}: the library has {', '.join(sorted(EFFECTS))}")
+    e = EFFECTS[args.name]()
+    out.print(f"[bold]{e.id}[/]: {e.title}\n")
+    for label, text in (("physics", e.physics), ("term", e.term), ("excited by", e.excited_by),
+                        ("typical size", e.magnitudes), ("when missing", e.signature)):
+        out.print(f"[bold]{label}:[/] {text}")
+    params = getattr(e, "all_params", None) or e.params
+    if params:
+        out.print("[bold]parameters:[/] " + ", ".join(f"{p.name} ({p.unit})" for p in params))
+    return 0
+
+
 # --- output helpers -----------------------------------------------------------------------------
 
 def _print_parameters(rows, title: str) -> None:
+    """rows: (name, value, unit, 1-sigma or None); scale factors get their 1σ in ppm."""
     table = Table(title=title)
     table.add_column("parameter")
     table.add_column("value", justify="right")
+    table.add_column("± 1σ", justify="right")
     table.add_column("unit")
-    for name, value, unit in rows:
-        table.add_row(name, f"{value:.9g}" if unit in ("1", "raw/(m/s^2)", "raw/(deg/s)") else f"{value:.4f}", unit)
+    for name, value, unit, sigma in rows:
+        is_scale = unit in ("1", "raw/(m/s^2)", "raw/(deg/s)")
+        if sigma is None or not np.isfinite(sigma):
+            spread = ""
+        elif is_scale:
+            spread = f"{sigma / value * 1e6:.3g} ppm"
+        else:
+            spread = f"{sigma:.3g}"
+        table.add_row(name, f"{value:.9g}" if is_scale else f"{value:.4f}", spread, unit)
     out.print(table)
 
 
@@ -116,11 +195,15 @@ def _print_errors(cal, truth) -> None:
     from station.calibration import parameter_errors
 
     table = Table(title="estimate against the simulated truth")
-    for col in ("parameter", "estimate", "truth", "error", "unit"):
+    for col in ("parameter", "estimate", "truth", "error", "± 1σ", "unit"):
         table.add_column(col, justify="left" if col in ("parameter", "unit") else "right")
     for name, value, true, error, unit in parameter_errors(cal, truth):
         fmt = "{:.9f}" if "_scale_" in name else "{:.4f}"
-        table.add_row(name, fmt.format(value), fmt.format(true), f"{error:+.4f}", unit)
+        sigma = cal.sigma.get(name)
+        if sigma is not None and "_scale_" in name:
+            sigma = sigma / value * 1e6
+        table.add_row(name, fmt.format(value), fmt.format(true), f"{error:+.4f}",
+                      "" if sigma is None else f"{sigma:.4f}", unit)
     out.print(table)
 
 
@@ -159,7 +242,10 @@ def build_parser() -> argparse.ArgumentParser:
     est = sub.add_parser("estimate", help="estimate a calibration from a capture (no hardware)")
     est.add_argument("capture", help="capture directory (with manifest.yaml)")
     est.add_argument("-o", "--output", metavar="CAL.yaml", help="default: CAPTURE/calibration.yaml")
-    est.add_argument("--method", choices=("zhang2010",), default="zhang2010")
+    est.add_argument("--method", choices=METHODS, default="auto",
+                     help="auto (default): lsq when rotations have encoder angles, fourier otherwise")
+    est.add_argument("--add", action="append", default=[], metavar="EFFECT",
+                     help="add an effect of the library to the model (repeatable; station effects lists them)")
     est.set_defaults(func=cmd_estimate)
 
     app = sub.add_parser("apply", help="compensate raw samples with a calibration file")
@@ -171,6 +257,23 @@ def build_parser() -> argparse.ArgumentParser:
     show = sub.add_parser("show", help="print a calibration file")
     show.add_argument("calibration", metavar="CAL.yaml")
     show.set_defaults(func=cmd_show)
+
+    mc = sub.add_parser("montecarlo", help="repeat simulate -> estimate; compare with the Cramér-Rao bound")
+    mc.add_argument("--scheme", default="optimal9")
+    mc.add_argument("--runs", type=int, default=100)
+    mc.add_argument("--accel-noise-ug", type=float, default=100.0, help="µg/√Hz (default 100)")
+    mc.add_argument("--gyro-noise-dph", type=float, default=0.03, help="°/h/√Hz (default 0.03)")
+    mc.add_argument("--table-angle-arcsec", type=float, default=2.0, help="1σ table angle error (default 2)")
+    mc.add_argument("--accel-disturbance-ug", type=float, default=50.0,
+                    help="1σ white acceleration disturbance (default 50, the 2010 paper's)")
+    mc.add_argument("--method", choices=("lsq", "zhang2010"), default="lsq")
+    mc.add_argument("--seed", type=int, default=1000, help="first seed (runs use seed, seed+1, ...)")
+    mc.add_argument("--json", action="store_true")
+    mc.set_defaults(func=cmd_montecarlo)
+
+    eff = sub.add_parser("effects", help="list the effects the model can add, or explain one")
+    eff.add_argument("name", nargs="?")
+    eff.set_defaults(func=cmd_effects)
 
     # Commands defined in other modules register here (one line each).
     cli_devices.add_parsers(sub)
