@@ -1,9 +1,9 @@
 """Driver for Acutronic Acutrol controllers (SCPI-style, protocol ``acutrol``), 1-3 axes."""
 from __future__ import annotations
 
-from .base import RateTable
 from .errors import ProtocolError
 from .protocols import acutrol as P
+from .table import RateTable
 
 C = P.COMMANDS
 _MODE_CMD = {"position": "mode_position", "rate": "mode_rate", "off": "mode_off"}

@@ -7,9 +7,9 @@ limits are set on the controller.
 """
 from __future__ import annotations
 
-from .base import RateTable
 from .errors import NotSupported, ProtocolError
 from .protocols import aerosmith as P
+from .table import RateTable
 
 C = P.COMMANDS
 

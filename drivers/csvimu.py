@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import time
 
-from .base import Imu
 from .errors import DeviceTimeout
+from .imu import Imu
 from .protocols.csvlines import COLUMNS, MAX_LINE_BYTES, CsvDecoder, CsvFormat
 
 

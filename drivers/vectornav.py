@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import time
 
-from .base import Imu
 from .errors import DeviceTimeout, LimitError, ProtocolError
+from .imu import Imu
 from .protocols import vectornav as V
 from .protocols.vectornav_binary import VectorNavDecoder
 

@@ -1,0 +1,409 @@
+"""The abstract rate-table interface :class:`RateTable`, its settings and status.
+
+As in python-can, each public method does the common work (argument and limit checks,
+waiting for arrival, timeouts, logging) and calls one small protocol-specific method
+(``_name``) that a driver implements.
+"""
+from __future__ import annotations
+
+import abc
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import DeviceTimeout, LimitError, TableFault
+from .transport import Port, SerialSettings
+
+
+@dataclass(frozen=True)
+class AxisLimits:
+    """What the driver allows on one axis (the controller may allow less).
+
+    ``max_rate_dps``/``max_accel_dps2``: refused beyond (rate demands, limits);
+    ``move_rate_dps``/``move_accel_dps2``: the position-mode limits set at connect.
+    """
+
+    max_rate_dps: float = 300.0
+    max_accel_dps2: float = 300.0
+    move_rate_dps: float = 60.0
+    move_accel_dps2: float = 60.0
+
+
+@dataclass(frozen=True)
+class TableSettings:
+    """Settings of a rate-table driver.
+
+    ``axes``: number of axes (None: ask the controller).  ``limits``: one :class:`AxisLimits`
+    for every axis, or one per axis (outer first).  A move has arrived when the position is
+    within ``position_tolerance_deg`` and the rate within ``rate_tolerance_dps`` for
+    ``settle_polls`` polls in a row, polled every ``poll_interval_s``.  A wait gives up
+    after its expected duration (from the limits) plus ``wait_margin_s``, and earlier when
+    the axis has stayed at rest away from its demand for ``stall_polls`` polls.
+    """
+
+    serial: SerialSettings = field(default_factory=SerialSettings)
+    axes: int | None = None
+    limits: tuple[AxisLimits, ...] = (AxisLimits(),)
+    position_tolerance_deg: float = 0.002
+    rate_tolerance_dps: float = 0.01
+    settle_polls: int = 5
+    poll_interval_s: float = 0.01
+    wait_margin_s: float = 10.0
+    stall_polls: int = 50
+
+    def axis_limits(self, n_axes: int) -> tuple[AxisLimits, ...]:
+        if len(self.limits) == 1:
+            return self.limits * n_axes
+        if len(self.limits) != n_axes:
+            raise ValueError(f"limits for {len(self.limits)} axes given, the table has {n_axes}")
+        return tuple(self.limits)
+
+
+@dataclass(frozen=True)
+class TableStatus:
+    """Per axis (outer first): interlock closed, fault latched, mode as last commanded
+    (``off``, ``position``, ``rate``, or ``unknown`` before any command); ``raw`` the
+    controller's status word."""
+
+    interlock_closed: tuple[bool, ...]
+    fault: tuple[bool, ...]
+    mode: tuple[str, ...]
+    raw: int
+
+    @property
+    def ok(self) -> bool:
+        return all(self.interlock_closed) and not any(self.fault)
+
+    def describe(self) -> str:
+        parts = []
+        for i, (closed, fault) in enumerate(zip(self.interlock_closed, self.fault)):
+            s = f"axis {i + 1}: interlock {'closed' if closed else 'OPEN'}"
+            parts.append(s + (", FAULT" if fault else ""))
+        return "; ".join(parts) + f" (status {self.raw:#04x})"
+
+
+def wrap_deg(x):
+    """Angle in [0, 360)."""
+    return np.mod(x, 360.0)
+
+
+def angle_diff_deg(a, b):
+    """a - b wrapped to [-180, 180)."""
+    return (np.asarray(a, dtype=float) - b + 180.0) % 360.0 - 180.0
+
+
+class RateTable(abc.ABC):
+    """A rate table of 1-3 axes (axis 1 = outermost).  Angles in deg, rates in deg/s.
+
+    Continuous axes: positions read back in [0, 360); a position demand is reached the
+    shortest way round.
+    """
+
+    protocol: str = ""
+
+    def __init__(self, url: str, settings: TableSettings | None = None):
+        self.url = url
+        self.settings = settings or TableSettings()
+        self.name = f"table {url} ({self.protocol})"
+        self.log = logging.getLogger(f"drivers.{self.protocol}")
+        self.port: Port | None = None
+        self.identity = ""
+        self.n_axes = 0
+        self.limits: tuple[AxisLimits, ...] = ()
+        self._modes: list[str] = []
+
+    # ------------------------------------------------------------------ connection
+    def connect(self) -> str:
+        """Open the port, identify the controller, find its axes, set the move limits."""
+        self.port = Port(self.url, self.settings.serial, self.name, self.log)
+        try:
+            self.port.discard_input()
+            self.identity = self._identify()
+            n = self.settings.axes or self._count_axes()
+            if not 1 <= n <= 3:
+                raise LimitError(self.name, f"{n} axes: tables of 1 to 3 axes are supported")
+            self.n_axes = n
+            try:
+                self.limits = self.settings.axis_limits(n)
+            except ValueError as e:
+                raise LimitError(self.name, str(e)) from None
+            self._modes = ["unknown"] * n
+            for axis, lim in enumerate(self.limits, 1):
+                self._set_move_limits(axis, lim.move_rate_dps, lim.move_accel_dps2)
+        except BaseException:
+            self.close()
+            raise
+        self.log.info("%s: %s, %d axes", self.name, self.identity, self.n_axes)
+        return self.identity
+
+    def close(self) -> None:
+        if self.port is not None:
+            self.port.close()
+            self.port = None
+
+    def __enter__(self):
+        if self.port is None:
+            self.connect()
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    @property
+    def axes(self) -> tuple[int, ...]:
+        return tuple(range(1, self.n_axes + 1))
+
+    # ------------------------------------------------------------------ reading
+    def read_positions_deg(self) -> np.ndarray:
+        """Encoder positions of all axes, deg in [0, 360)."""
+        return np.asarray(self._read_positions(), dtype=float)
+
+    def read_rates_dps(self) -> np.ndarray:
+        return np.asarray(self._read_rates(), dtype=float)
+
+    def status(self) -> TableStatus:
+        closed, fault, raw = self._status()
+        self._note_open(closed)
+        return TableStatus(tuple(closed), tuple(fault), tuple(self._modes), raw)
+
+    def _note_open(self, closed) -> None:
+        """An axis whose interlock is open is unpowered: its mode is off."""
+        for i, c in enumerate(closed):
+            if not c:
+                self._modes[i] = "off"
+
+    def check_ok(self) -> TableStatus:
+        """The status; TableFault naming the axes when an interlock is open or a fault latched."""
+        st = self.status()
+        if not st.ok:
+            raise TableFault(self.name, st.describe())
+        return st
+
+    # ------------------------------------------------------------------ interlocks
+    def reset_interlocks(self) -> None:
+        """Clear latched faults (tripped interlocks stay open until closed)."""
+        self._reset()
+
+    def close_interlocks(self, axes=None) -> TableStatus:
+        for axis in self._axes_arg(axes):
+            self._interlock(axis, True)
+        return self.status()
+
+    def open_interlocks(self, axes=None) -> None:
+        for axis in self._axes_arg(axes):
+            self._interlock(axis, False)
+            self._modes[axis - 1] = "off"
+
+    # ------------------------------------------------------------------ motion
+    def position_mode(self, axis: int) -> None:
+        self._check_axis(axis)
+        self._set_mode(axis, "position")
+        self._modes[axis - 1] = "position"
+
+    def rate_mode(self, axis: int) -> None:
+        self._check_axis(axis)
+        self._set_mode(axis, "rate")
+        self._modes[axis - 1] = "rate"
+
+    def move_to(self, positions_deg, *, wait: bool = True) -> np.ndarray:
+        """Move the axes to ``positions_deg`` (one per axis; None leaves an axis alone).
+
+        Switches those axes to position mode; with ``wait`` returns the settled positions,
+        or raises TableFault (fault, open interlock, axis at rest short of its demand) or
+        DeviceTimeout.
+        """
+        targets = list(positions_deg)
+        if len(targets) != self.n_axes:
+            raise LimitError(self.name, f"{len(targets)} positions given for {self.n_axes} axes")
+        start = self.read_positions_deg()
+        expected = 0.0
+        for axis, target in enumerate(targets, 1):
+            if target is None:
+                continue
+            if not math.isfinite(float(target)):
+                raise LimitError(self.name, f"axis {axis}: position {target!r} is not finite")
+            lim = self.limits[axis - 1]
+            dist = abs(float(angle_diff_deg(target, start[axis - 1])))
+            expected = max(expected, dist / lim.move_rate_dps + lim.move_rate_dps / lim.move_accel_dps2)
+        for axis, target in enumerate(targets, 1):
+            if target is None:
+                continue
+            if self._modes[axis - 1] != "position":
+                self.position_mode(axis)
+            self.log.info("%s: axis %d -> %.6f deg", self.name, axis, float(target))
+            self._demand_position(axis, float(wrap_deg(float(target))))
+        if not wait:
+            return start
+        return self._wait_positions(targets, expected)
+
+    def set_rate(self, axis: int, rate_dps: float, *, wait: bool = True) -> float:
+        """Turn ``axis`` at ``rate_dps`` (rate mode); with ``wait`` returns once the measured
+        rate has settled on the demand."""
+        self._check_axis(axis)
+        lim = self.limits[axis - 1]
+        rate = float(rate_dps)
+        if not math.isfinite(rate) or abs(rate) > lim.max_rate_dps:
+            raise LimitError(self.name, f"axis {axis}: rate {rate_dps!r} deg/s beyond the limit "
+                                        f"{lim.max_rate_dps:g} deg/s")
+        if self._modes[axis - 1] != "rate":
+            self.rate_mode(axis)
+        before = float(self.read_rates_dps()[axis - 1])
+        self.log.info("%s: axis %d at %.6f deg/s", self.name, axis, rate)
+        self._demand_rate(axis, rate)
+        if not wait:
+            return before
+        expected = abs(rate - before) / lim.max_accel_dps2
+        return self._wait_rate(axis, rate, expected)
+
+    def set_rate_limits(self, axis: int, mode: str, rate_dps: float, accel_dps2: float) -> None:
+        """Rate and acceleration limits of ``mode`` (``position`` or ``rate``) on ``axis``."""
+        self._check_axis(axis)
+        lim = self.limits[axis - 1]
+        if not (0 < rate_dps <= lim.max_rate_dps and 0 < accel_dps2 <= lim.max_accel_dps2):
+            raise LimitError(self.name, f"axis {axis}: limits {rate_dps:g} deg/s, {accel_dps2:g} "
+                                        f"deg/s^2 outside (0, {lim.max_rate_dps:g}], "
+                                        f"(0, {lim.max_accel_dps2:g}]")
+        self._set_limits(axis, mode, rate_dps, accel_dps2)
+
+    def stop(self) -> np.ndarray:
+        """Controlled stop: every axis brakes to rest and holds there.  Returns the positions."""
+        closed, _, _ = self._status()
+        active = [axis for axis in self.axes if closed[axis - 1]]   # open interlock: brakes itself
+        for axis in active:
+            self._halt(axis, self._modes[axis - 1])
+        expected = max((360.0 / lim.max_accel_dps2 for lim in self.limits), default=0.0)
+        deadline = time.monotonic() + expected + self.settings.wait_margin_s
+        still = 0
+        while still < self.settings.settle_polls:
+            rates = self.read_rates_dps()
+            still = still + 1 if np.all(np.abs(rates) <= self.settings.rate_tolerance_dps) else 0
+            if time.monotonic() > deadline:
+                raise DeviceTimeout(self.name, f"did not come to rest (rates {np.round(rates, 4).tolist()} "
+                                               f"deg/s)")
+            time.sleep(self.settings.poll_interval_s)
+        for axis in self.axes:
+            if axis in active:
+                self._after_halt(axis)
+                self._modes[axis - 1] = "position"
+            else:
+                self._modes[axis - 1] = "off"
+        return self.read_positions_deg()
+
+    # ------------------------------------------------------------------ waits
+    def _wait_positions(self, targets, expected_s: float) -> np.ndarray:
+        s = self.settings
+        idx = [i for i, t in enumerate(targets) if t is not None]
+        goal = np.array([float(targets[i]) for i in idx])
+        deadline = time.monotonic() + 2.0 * expected_s + s.wait_margin_s
+        settled = at_rest = 0
+        last = None
+        while True:
+            pos = self.read_positions_deg()
+            rates = self.read_rates_dps()
+            err = angle_diff_deg(pos[idx], goal)
+            still = np.all(np.abs(rates[idx]) <= s.rate_tolerance_dps)
+            if np.all(np.abs(err) <= s.position_tolerance_deg) and still:
+                settled += 1
+                if settled >= s.settle_polls:
+                    return pos
+            else:
+                settled = 0
+                self._check_faults()
+            moved = last is not None and np.any(np.abs(angle_diff_deg(pos[idx], last)) > s.position_tolerance_deg / 10)
+            at_rest = at_rest + 1 if (still and not moved and last is not None) else 0
+            last = pos[idx]
+            if at_rest >= s.stall_polls:
+                worst = int(np.argmax(np.abs(err)))
+                axis = idx[worst] + 1
+                raise TableFault(self.name, f"axis {axis} came to rest at {pos[axis - 1]:.6f} deg, "
+                                            f"{abs(err[worst]):.6f} deg from its demand "
+                                            f"{wrap_deg(goal[worst]):.6f} deg")
+            if time.monotonic() > deadline:
+                worst = int(np.argmax(np.abs(err)))
+                raise DeviceTimeout(self.name, f"axis {idx[worst] + 1} did not reach "
+                                               f"{wrap_deg(goal[worst]):.6f} deg in time (at "
+                                               f"{pos[idx[worst]]:.6f} deg)")
+            time.sleep(s.poll_interval_s)
+
+    def _wait_rate(self, axis: int, rate: float, expected_s: float) -> float:
+        s = self.settings
+        deadline = time.monotonic() + 2.0 * expected_s + s.wait_margin_s
+        settled = 0
+        while True:
+            r = float(self.read_rates_dps()[axis - 1])
+            if abs(r - rate) <= s.rate_tolerance_dps:
+                settled += 1
+                if settled >= s.settle_polls:
+                    return r
+            else:
+                settled = 0
+                self._check_faults()
+            if time.monotonic() > deadline:
+                raise DeviceTimeout(self.name, f"axis {axis} did not reach {rate:g} deg/s in time "
+                                               f"(at {r:.6f} deg/s)")
+            time.sleep(s.poll_interval_s)
+
+    def _check_faults(self) -> None:
+        closed, fault, raw = self._status()
+        self._note_open(closed)
+        if any(fault) or not all(closed):
+            st = TableStatus(tuple(closed), tuple(fault), tuple(self._modes), raw)
+            raise TableFault(self.name, st.describe())
+
+    # ------------------------------------------------------------------ helpers
+    def _check_axis(self, axis: int) -> None:
+        if axis not in self.axes:
+            raise LimitError(self.name, f"no axis {axis!r} (the table has axes 1..{self.n_axes})")
+
+    def _axes_arg(self, axes):
+        axes = self.axes if axes is None else tuple(axes)
+        for a in axes:
+            self._check_axis(a)
+        return axes
+
+    # ------------------------------------------------------------------ protocol part
+    @abc.abstractmethod
+    def _identify(self) -> str: ...
+
+    @abc.abstractmethod
+    def _count_axes(self) -> int: ...
+
+    @abc.abstractmethod
+    def _set_move_limits(self, axis: int, rate_dps: float, accel_dps2: float) -> None: ...
+
+    @abc.abstractmethod
+    def _set_limits(self, axis: int, mode: str, rate_dps: float, accel_dps2: float) -> None: ...
+
+    @abc.abstractmethod
+    def _read_positions(self) -> list[float]: ...
+
+    @abc.abstractmethod
+    def _read_rates(self) -> list[float]: ...
+
+    @abc.abstractmethod
+    def _status(self) -> tuple[list[bool], list[bool], int]: ...
+
+    @abc.abstractmethod
+    def _reset(self) -> None: ...
+
+    @abc.abstractmethod
+    def _interlock(self, axis: int, close: bool) -> None: ...
+
+    @abc.abstractmethod
+    def _set_mode(self, axis: int, mode: str) -> None: ...
+
+    @abc.abstractmethod
+    def _demand_position(self, axis: int, position_deg: float) -> None: ...
+
+    @abc.abstractmethod
+    def _demand_rate(self, axis: int, rate_dps: float) -> None: ...
+
+    @abc.abstractmethod
+    def _halt(self, axis: int, mode: str) -> None:
+        """Start braking ``axis`` (in ``mode``) to rest."""
+
+    def _after_halt(self, axis: int) -> None:
+        """Once every axis is at rest: hold ``axis`` where it is (position mode)."""
