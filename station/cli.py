@@ -223,6 +223,7 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     from station import cli_devices
+    from station import cli_import
 
     p = _Parser(prog="station", description="IMU calibration with a rate table.")
     p.add_argument("--version", action="version", version=f"station {station.__version__}")
@@ -276,6 +277,7 @@ def build_parser() -> argparse.ArgumentParser:
     eff.set_defaults(func=cmd_effects)
 
     # Commands defined in other modules register here (one line each).
+    cli_import.add_parsers(sub)
     cli_devices.add_parsers(sub)
     return p
 

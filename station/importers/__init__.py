@@ -1,0 +1,1 @@
+"""Importers: recordings made by other tools, turned into station capture bundles."""
