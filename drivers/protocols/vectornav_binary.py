@@ -2,12 +2,15 @@
 
 The decoder looks for the expected frame header (sync byte, group byte, field masks: known
 once the driver has configured the output), then checks whole runs of back-to-back frames at
-once with numpy (header bytes and CRC of every frame), and unpacks the valid ones with one
-``np.frombuffer`` of a structured type.  After a bad frame it searches for the next header
+once with numpy (header bytes and CRC of every frame; short runs frame by frame with
+``binascii.crc_hqx``), and unpacks the valid ones with one ``np.frombuffer`` of a structured
+type.  After a bad frame it searches for the next header
 from the byte after that frame's sync byte, so a frame that was cut short does not take the
 next, intact frame with it.
 """
 from __future__ import annotations
+
+from binascii import crc_hqx
 
 import numpy as np
 
@@ -16,6 +19,7 @@ from .crc import crc16_rows
 from .vectornav import BinaryLayout
 
 MAX_WINDOW_FRAMES = 4096
+VECTORISE_FROM = 512         # frames: fewer are checked one by one (binascii.crc_hqx)
 
 
 def encode_frames(layout: BinaryLayout, t_ns, accel_mps2, gyro_rad_s, temp_c=None) -> bytes:
@@ -76,20 +80,17 @@ class VectorNavDecoder:
             if k == 0:
                 pos = i
                 break
-            rows = np.frombuffer(buf, dtype=np.uint8, count=k * L, offset=i).reshape(k, L)
-            ok = (rows[:, :h] == self.header).all(axis=1)
-            ok &= crc16_rows(rows[:, 1:]) == 0
-            n = k if ok.all() else int(np.argmin(ok))
+            n = self._valid_run(buf, i, k)
             if n:
-                good.append(bytes(buf[i:i + n * L]))
+                good.append(buf[i:i + n * L])
                 self._window = min(MAX_WINDOW_FRAMES, self._window * 4)
             if n == k:
                 pos = i + k * L
                 continue
-            # frame n has the header (at least its sync byte, if n == 0) but is bad
+            # frame n is bad: a checksum error if it has the header, else not a frame start
             bad = i + n * L
             self._window = 8
-            if rows[n, :h].tobytes() == H:
+            if buf[bad:bad + h] == H:
                 self.checksum_errors += 1
                 after_bad = True
                 self.bytes_discarded += 1
@@ -107,6 +108,22 @@ class VectorNavDecoder:
                           accel_mps2=rec["UncompAccel"].astype(np.float64),
                           gyro_dps=np.degrees(rec["UncompGyro"].astype(np.float64)),
                           temp_c=temp)
+
+    def _valid_run(self, buf: bytes, i: int, k: int) -> int:
+        """How many of the k back-to-back frames from ``i`` are valid before the first bad
+        one: one numpy pass over long runs, frame by frame over short ones."""
+        L, H, h = self.length, self._header_bytes, len(self._header_bytes)
+        if k < VECTORISE_FROM:
+            view = memoryview(buf)
+            for j in range(k):
+                s = i + j * L
+                if buf[s:s + h] != H or crc_hqx(view[s + 1:s + L], 0):
+                    return j
+            return k
+        rows = np.frombuffer(buf, dtype=np.uint8, count=k * L, offset=i).reshape(k, L)
+        ok = (rows[:, :h] == self.header).all(axis=1)
+        ok &= crc16_rows(rows[:, 1:]) == 0
+        return k if ok.all() else int(np.argmin(ok))
 
     def _skip(self, n: int, after_bad: bool) -> None:
         if n > 0:
