@@ -237,3 +237,18 @@ def test_command_parsers_raise_only_value_error(text):
                 cs.parse(part)
             except ValueError:
                 pass
+
+
+def test_docs_list_every_command_with_its_example():
+    from pathlib import Path
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "protocols.md").read_text()
+    for cs in (acutrol.COMMANDS, aerosmith.COMMANDS):
+        for cmd in cs.commands:
+            assert f"`{cmd.header}" in doc, cmd.header
+            assert f"`{cmd.example[0]}`" in doc, cmd.example
+    for syntax, _, sent, answered in V.ASCII_COMMANDS:
+        assert V.format_message(sent).decode().strip() in doc
+        assert V.format_message(answered).decode().strip() in doc
+    frame = encode_frames(V.STATION_LAYOUT, [1_000_000_000], [[0.01, -0.02, 9.81]],
+                          [[0.001, 0.0, -0.0005]], [25.0]).hex(" ")
+    assert frame[:77] in doc and frame[78:] in doc
