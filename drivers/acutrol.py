@@ -1,9 +1,9 @@
 """Driver for Acutronic Acutrol controllers (SCPI-style, protocol ``acutrol``), 1-3 axes."""
 from __future__ import annotations
 
-from .errors import ProtocolError
+from .errors import ProtocolError, TableFault
 from .protocols import acutrol as P
-from .table import RateTable
+from .table import RateTable, TableStatus
 
 C = P.COMMANDS
 _MODE_CMD = {"position": "mode_position", "rate": "mode_rate", "off": "mode_off"}
@@ -36,6 +36,10 @@ class AcutrolTable(RateTable):
                                            f"{line!r}, got {reply[:80]!r}") from None
         self.last_status = stb
         if stb & P.STB_COMMAND_ERROR:
+            closed, fault, _ = self._decode_status(stb) if self.n_axes else ([True], [False], stb)
+            if any(fault) or not all(closed):       # refused because of the table's state
+                st = TableStatus(tuple(closed), tuple(fault), tuple(self._modes), stb)
+                raise TableFault(self.name, f"{line!r} refused: {st.describe()}")
             raise ProtocolError(self.name, f"{line!r} refused (command error, status {stb:#04x})")
         n_queries = sum(C.command(name).is_query for name, *_ in commands)
         if len(fields) - 1 != n_queries:
@@ -81,10 +85,22 @@ class AcutrolTable(RateTable):
 
     def _status(self):
         self._exchange()
-        stb = self.last_status
+        return self._decode_status(self.last_status)
+
+    def _decode_status(self, stb: int):
         closed = [bool(stb & P.STB_INTERLOCK_CLOSED[i]) for i in range(self.n_axes)]
         fault = [bool(stb & P.STB_FAULT[i]) for i in range(self.n_axes)]
         return closed, fault, stb
+
+    def _read_state(self):
+        answers = self._exchange(*[("read_position", a) for a in self.axes],
+                                 *[("read_rate", a) for a in self.axes])
+        try:
+            pos = [C.command("read_position").reply.parse(x) for x in answers[:self.n_axes]]
+            rates = [C.command("read_rate").reply.parse(x) for x in answers[self.n_axes:]]
+        except ValueError as e:
+            raise ProtocolError(self.name, f"bad answer to the position and rate queries: {e}") from None
+        return (pos, rates, *self._decode_status(self.last_status))
 
     def _reset(self):
         self._exchange(("interlock_reset",))

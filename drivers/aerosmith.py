@@ -7,9 +7,9 @@ limits are set on the controller.
 """
 from __future__ import annotations
 
-from .errors import NotSupported, ProtocolError
+from .errors import NotSupported, ProtocolError, TableFault
 from .protocols import aerosmith as P
-from .table import RateTable
+from .table import RateTable, TableStatus
 
 C = P.COMMANDS
 
@@ -30,6 +30,11 @@ class AerosmithTable(RateTable):
         raw = self.port.read_until(P.PROMPT, None, repr(text), self._rx)
         reply = raw[:-len(P.PROMPT)].decode("ascii", "replace").strip()
         if reply == P.ERROR_REPLY:
+            if name != "status":
+                closed, fault, sta = self._status()
+                if fault[0] or not closed[0]:       # refused because of the table's state
+                    st = TableStatus((closed[0],), (fault[0],), tuple(self._modes), sta)
+                    raise TableFault(self.name, f"{text!r} refused: {st.describe()}")
             raise ProtocolError(self.name, f"{text!r} refused ('?')")
         cmd = C.command(name)
         if cmd.is_query:

@@ -293,6 +293,16 @@ class RateTable(abc.ABC):
         return self.read_positions_deg()
 
     # ------------------------------------------------------------------ waits
+    def _poll(self):
+        """(positions, rates) of all axes; TableFault when an interlock is open or a fault
+        latched (one exchange where the protocol allows)."""
+        pos, rates, closed, fault, raw = self._read_state()
+        self._note_open(closed)
+        if any(fault) or not all(closed):
+            st = TableStatus(tuple(closed), tuple(fault), tuple(self._modes), raw)
+            raise TableFault(self.name, st.describe())
+        return np.asarray(pos, dtype=float), np.asarray(rates, dtype=float)
+
     def _wait_positions(self, targets, expected_s: float) -> np.ndarray:
         s = self.settings
         idx = [i for i, t in enumerate(targets) if t is not None]
@@ -301,8 +311,7 @@ class RateTable(abc.ABC):
         settled = at_rest = 0
         last = None
         while True:
-            pos = self.read_positions_deg()
-            rates = self.read_rates_dps()
+            pos, rates = self._poll()
             err = angle_diff_deg(pos[idx], goal)
             still = np.all(np.abs(rates[idx]) <= s.rate_tolerance_dps)
             if np.all(np.abs(err) <= s.position_tolerance_deg) and still:
@@ -311,21 +320,19 @@ class RateTable(abc.ABC):
                     return pos
             else:
                 settled = 0
-                self._check_faults()
-            moved = last is not None and np.any(np.abs(angle_diff_deg(pos[idx], last)) > s.position_tolerance_deg / 10)
-            at_rest = at_rest + 1 if (still and not moved and last is not None) else 0
+            moved = last is not None and np.any(
+                np.abs(angle_diff_deg(pos[idx], last)) > s.position_tolerance_deg / 10)
+            at_rest = at_rest + 1 if (still and not moved and last is not None and not settled) else 0
             last = pos[idx]
+            worst = int(np.argmax(np.abs(err)))
+            axis = idx[worst] + 1
             if at_rest >= s.stall_polls:
-                worst = int(np.argmax(np.abs(err)))
-                axis = idx[worst] + 1
                 raise TableFault(self.name, f"axis {axis} came to rest at {pos[axis - 1]:.6f} deg, "
                                             f"{abs(err[worst]):.6f} deg from its demand "
                                             f"{wrap_deg(goal[worst]):.6f} deg")
             if time.monotonic() > deadline:
-                worst = int(np.argmax(np.abs(err)))
-                raise DeviceTimeout(self.name, f"axis {idx[worst] + 1} did not reach "
-                                               f"{wrap_deg(goal[worst]):.6f} deg in time (at "
-                                               f"{pos[idx[worst]]:.6f} deg)")
+                raise DeviceTimeout(self.name, f"axis {axis} did not reach {wrap_deg(goal[worst]):.6f} "
+                                               f"deg in time (at {pos[axis - 1]:.6f} deg)")
             time.sleep(s.poll_interval_s)
 
     def _wait_rate(self, axis: int, rate: float, expected_s: float) -> float:
@@ -333,25 +340,17 @@ class RateTable(abc.ABC):
         deadline = time.monotonic() + 2.0 * expected_s + s.wait_margin_s
         settled = 0
         while True:
-            r = float(self.read_rates_dps()[axis - 1])
+            r = float(self._poll()[1][axis - 1])
             if abs(r - rate) <= s.rate_tolerance_dps:
                 settled += 1
                 if settled >= s.settle_polls:
                     return r
             else:
                 settled = 0
-                self._check_faults()
             if time.monotonic() > deadline:
                 raise DeviceTimeout(self.name, f"axis {axis} did not reach {rate:g} deg/s in time "
                                                f"(at {r:.6f} deg/s)")
             time.sleep(s.poll_interval_s)
-
-    def _check_faults(self) -> None:
-        closed, fault, raw = self._status()
-        self._note_open(closed)
-        if any(fault) or not all(closed):
-            st = TableStatus(tuple(closed), tuple(fault), tuple(self._modes), raw)
-            raise TableFault(self.name, st.describe())
 
     # ------------------------------------------------------------------ helpers
     def _check_axis(self, axis: int) -> None:
@@ -385,6 +384,12 @@ class RateTable(abc.ABC):
 
     @abc.abstractmethod
     def _status(self) -> tuple[list[bool], list[bool], int]: ...
+
+    def _read_state(self):
+        """(positions, rates, interlock closed, fault, raw status) of all axes.  Override to
+        do it in one exchange."""
+        closed, fault, raw = self._status()
+        return self._read_positions(), self._read_rates(), closed, fault, raw
 
     @abc.abstractmethod
     def _reset(self) -> None: ...

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import serial
 
-from .errors import DeviceDisconnected, DeviceError, DeviceTimeout
+from .errors import DeviceDisconnected, DeviceError, DeviceTimeout, ProtocolError
 
 PARITIES = {"N": serial.PARITY_NONE, "E": serial.PARITY_EVEN, "O": serial.PARITY_ODD,
             "M": serial.PARITY_MARK, "S": serial.PARITY_SPACE}
@@ -121,7 +121,7 @@ class Port:
         """Bytes up to and including ``terminator``; extra bytes stay in ``buffer``.
 
         Raises DeviceTimeout naming ``what`` when nothing complete arrives in time, and
-        ProtocolError-like DeviceError when more than ``max_bytes`` arrive without it.
+        ProtocolError when more than ``max_bytes`` arrive without it.
         """
         buf = buffer if buffer is not None else bytearray()
         timeout = self.settings.timeout_s if timeout_s is None else timeout_s
@@ -137,8 +137,8 @@ class Port:
             if len(buf) > max_bytes:
                 junk = bytes(buf[:64])
                 buf.clear()
-                raise DeviceError(self.name, f"no {terminator!r} in {max_bytes} bytes while waiting "
-                                             f"for {what} (starts {junk!r})")
+                raise ProtocolError(self.name, f"no {terminator!r} in {max_bytes} bytes while waiting "
+                                               f"for {what} (starts {junk!r})")
             if time.monotonic() >= deadline:
                 raise DeviceTimeout(self.name, f"no reply to {what} within {timeout:g} s")
             buf += self.read_some()

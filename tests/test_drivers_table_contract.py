@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from drivers.base import AxisLimits, TableSettings, angle_diff_deg
-from drivers.errors import DeviceError, LimitError, NotSupported, ProtocolError
+from drivers.errors import DeviceError, LimitError, NotSupported, ProtocolError, TableFault
 from drivers.registry import open_table, table_driver
 from sim_devices.truth import default_truth
 from sim_devices.twins.serve import BenchOptions, BenchServer
@@ -156,3 +156,20 @@ def test_closed_port_and_unknown_protocol():
         open_table("/dev/does-not-exist", "acutrol")
     with pytest.raises(UserError, match="unknown rate-table protocol 'nope'"):
         table_driver("nope")
+
+
+def test_a_demand_refused_for_an_open_interlock_is_a_table_fault(bench):
+    server, protocol, axes = bench
+    with _open(server, protocol) as table:
+        if protocol == "aerosmith":             # enabled from power-up, no interlock commands
+            with pytest.raises(NotSupported, match="front panel"):
+                table.open_interlocks()
+            return
+        with pytest.raises(TableFault, match=r"':Mode:Rate 1;\*STB\?' refused: axis 1: interlock OPEN"):
+            table.set_rate(1, 10.0)
+        table.close_interlocks([1])
+        table.set_rate(1, 10.0)
+        table.open_interlocks([1])
+        assert table.status().mode[0] == "off"
+        time.sleep(0.05)
+        assert table.read_rates_dps()[0] == 0.0        # braked to rest

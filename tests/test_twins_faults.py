@@ -20,9 +20,10 @@ from station.errors import UserError
 SPEED = 50.0
 
 
-def _bench(imu_protocol="vectornav", table_protocol="acutrol", axes=2, config=TableConfig(), **faults):
+def _bench(imu_protocol="vectornav", table_protocol="acutrol", axes=2, config=TableConfig(),
+           speed=SPEED, **faults):
     f = Faults(imu=faults.pop("imu", ImuFaults()), table=faults.pop("table", TableFaults()))
-    return BenchServer(default_truth(8), BenchOptions(speed=SPEED, axes=axes, faults=f, record=True,
+    return BenchServer(default_truth(8), BenchOptions(speed=speed, axes=axes, faults=f, record=True,
                                                       imu_protocol=imu_protocol, table_config=config,
                                                       table_protocol=table_protocol))
 
@@ -121,11 +122,13 @@ def test_an_interlock_trip_during_a_move_is_a_table_fault(protocol, axes):
 
 
 def test_an_interlock_trip_while_turning_is_a_table_fault_on_the_next_wait():
-    with _bench(table=TableFaults(trip_axis=2, trip_at_s=2.0)) as server:
+    # at speed 10 the trip comes 0.6 s after the start, in the 20 s (2 s wall) ramp to 200 deg/s
+    with _bench(table=TableFaults(trip_axis=2, trip_at_s=6.0), speed=10.0) as server:
         with open_table(server.table_path) as table:
             table.close_interlocks()
+            table.set_rate_limits(2, "rate", 300.0, 10.0)
             with pytest.raises(TableFault, match="axis 2: interlock OPEN, FAULT"):
-                table.set_rate(2, 200.0)                           # 2 s at 100 deg/s^2
+                table.set_rate(2, 200.0)
             with pytest.raises(TableFault, match="axis 2: interlock OPEN, FAULT"):
                 table.check_ok()
             table.stop()                                           # the other axis still stops

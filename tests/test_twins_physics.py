@@ -22,7 +22,7 @@ from sim_devices.twins.imu import ImuTwin
 from sim_devices.twins.imu_vectornav import VectorNavFrontEnd
 from sim_devices.twins.motion import AxisMotion
 from sim_devices.twins.serve import BenchOptions, BenchServer
-from sim_devices.twins.table import TableTwin
+from sim_devices.twins.table import CommandRefused, TableConfig, TableTwin
 from sim_devices.twins.table_acutrol import AcutrolFrontEnd
 from sim_devices.twins.table_aerosmith import AerosmithFrontEnd
 
@@ -214,3 +214,18 @@ def test_vectornav_front_end_never_raises(data):
     fe = VectorNavFrontEnd(ImuTwin(table, truth), StreamFaulter(ImuFaults(), None))
     out = fe.receive(data + b"\n", clock.now())
     assert isinstance(out, bytes)
+
+
+def test_per_axis_hardware_limits():
+    clock = ManualClock()
+    cfg = TableConfig(max_rate_dps=(100.0, 400.0), max_accel_dps2=(50.0, 500.0))
+    table = TableTwin(TableGeometry.default(2), clock, config=cfg, interlocks_closed=True)
+    table.set_limit("R", 2, rate_dps=400.0)
+    with pytest.raises(CommandRefused):
+        table.set_limit("R", 1, rate_dps=400.0)
+    table.set_mode(1, "rate")
+    with pytest.raises(CommandRefused):
+        table.demand_rate(1, 150.0)
+    table.demand_rate(1, 100.0)                        # at 50 deg/s^2: 2 s
+    clock.advance(1.0)
+    assert table.read_rate(1) == pytest.approx(50.0)

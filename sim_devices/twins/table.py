@@ -22,11 +22,12 @@ class CommandRefused(Exception):
 
 @dataclass(frozen=True)
 class TableConfig:
-    """Hardware of the twin: per-axis limits (every axis alike), encoder and rate readback
-    resolution, settling time after a move, the limits in force at power-up."""
+    """Hardware of the twin: the axes' limits (one number for every axis, or one per axis,
+    outer first), encoder and rate readback resolution, settling time after a move, the
+    limits in force at power-up."""
 
-    max_rate_dps: float = 1000.0
-    max_accel_dps2: float = 1000.0
+    max_rate_dps: float | tuple[float, ...] = 1000.0
+    max_accel_dps2: float | tuple[float, ...] = 1000.0
     move_rate_dps: float = 60.0          # position-mode limits at power-up
     move_accel_dps2: float = 60.0
     rate_accel_dps2: float = 100.0       # rate-mode acceleration limit at power-up
@@ -34,6 +35,12 @@ class TableConfig:
     rate_resolution_dps: float = 1e-5
     settle_s: float = 1.0
     identity: str = "Acutronic,ACUTROL3000-SIM,{axes}AX-0001,3.1.0"
+
+    def hardware(self, axis: int) -> tuple[float, float]:
+        """(max rate deg/s, max acceleration deg/s²) of ``axis`` (1 = outer)."""
+        def pick(v):
+            return float(v if isinstance(v, (int, float)) else v[axis - 1])
+        return pick(self.max_rate_dps), pick(self.max_accel_dps2)
 
 
 @dataclass
@@ -59,6 +66,7 @@ class AxisState:
     interlock_closed: bool = False
     fault: bool = False
     mode: str = "off"
+    hardware: tuple[float, float] = (1000.0, 1000.0)     # max rate deg/s, max accel deg/s²
 
 
 class TableTwin:
@@ -70,12 +78,15 @@ class TableTwin:
         self.config = config
         self.faults = faults or TableFaults()
         rng = rng if rng is not None else np.random.default_rng(0)
-        self.axes = [AxisState(AxisMotion(ripple_fraction=ripple_fraction, ripple_hz=ripple_hz,
-                                          settle_s=config.settle_s, rng=rng),
-                               {"P": [config.move_rate_dps, config.move_accel_dps2],
-                                "R": [config.max_rate_dps, config.rate_accel_dps2]},
-                               interlock_closed=interlocks_closed)
-                     for _ in range(geometry.n_axes)]
+        self.axes = []
+        for axis in range(1, geometry.n_axes + 1):
+            rate, acc = config.hardware(axis)
+            self.axes.append(AxisState(
+                AxisMotion(ripple_fraction=ripple_fraction, ripple_hz=ripple_hz,
+                           settle_s=config.settle_s, rng=rng),
+                {"P": [min(config.move_rate_dps, rate), min(config.move_accel_dps2, acc)],
+                 "R": [rate, min(config.rate_accel_dps2, acc)]},
+                interlock_closed=interlocks_closed, hardware=(rate, acc)))
         self._tripped = False
 
     @property
@@ -92,7 +103,7 @@ class TableTwin:
             ax.fault = True
             ax.interlock_closed = False
             ax.mode = "off"
-            ax.motion.plan_stop(f.trip_at_s, self.config.max_accel_dps2)
+            ax.motion.plan_stop(f.trip_at_s, ax.hardware[1])
         for ax in self.axes:
             ax.motion.prune(now - 60.0)
 
@@ -162,14 +173,14 @@ class TableTwin:
 
     def set_limit(self, mode: str, axis: int, *, rate_dps=None, accel_dps2=None) -> None:
         ax = self._axis(axis)
+        max_rate, max_acc = ax.hardware
         if rate_dps is not None:
-            if not 0.0 < rate_dps <= self.config.max_rate_dps:
-                raise CommandRefused(f"axis {axis}: rate limit {rate_dps} outside (0, {self.config.max_rate_dps}]")
+            if not 0.0 < rate_dps <= max_rate:
+                raise CommandRefused(f"axis {axis}: rate limit {rate_dps} outside (0, {max_rate}]")
             ax.limits[mode][0] = float(rate_dps)
         if accel_dps2 is not None:
-            if not 0.0 < accel_dps2 <= self.config.max_accel_dps2:
-                raise CommandRefused(f"axis {axis}: acceleration limit {accel_dps2} outside "
-                                     f"(0, {self.config.max_accel_dps2}]")
+            if not 0.0 < accel_dps2 <= max_acc:
+                raise CommandRefused(f"axis {axis}: acceleration limit {accel_dps2} outside (0, {max_acc}]")
             ax.limits[mode][1] = float(accel_dps2)
 
     def stop(self, axis: int) -> None:
@@ -212,6 +223,6 @@ class TableTwin:
         return self.axes[axis - 1]
 
     def _brake(self, ax: AxisState, mode: str) -> None:
-        acc = self.config.max_accel_dps2 if mode == "off" else ax.limits["P"][1]
+        acc = ax.hardware[1] if mode == "off" else ax.limits["P"][1]
         ax.motion.plan_stop(self.clock.now(), acc)
         ax.mode = mode
