@@ -293,12 +293,12 @@ class RateTable(abc.ABC):
         return self.read_positions_deg()
 
     # ------------------------------------------------------------------ waits
-    def _poll(self):
-        """(positions, rates) of all axes; TableFault when an interlock is open or a fault
-        latched (one exchange where the protocol allows)."""
+    def _poll(self, axes):
+        """(positions, rates) of all axes; TableFault when a fault is latched on any axis or
+        an interlock of ``axes`` is open (one exchange where the protocol allows)."""
         pos, rates, closed, fault, raw = self._read_state()
         self._note_open(closed)
-        if any(fault) or not all(closed):
+        if any(fault) or not all(closed[a - 1] for a in axes):
             st = TableStatus(tuple(closed), tuple(fault), tuple(self._modes), raw)
             raise TableFault(self.name, st.describe())
         return np.asarray(pos, dtype=float), np.asarray(rates, dtype=float)
@@ -311,7 +311,7 @@ class RateTable(abc.ABC):
         settled = at_rest = 0
         last = None
         while True:
-            pos, rates = self._poll()
+            pos, rates = self._poll([i + 1 for i in idx])
             err = angle_diff_deg(pos[idx], goal)
             still = np.all(np.abs(rates[idx]) <= s.rate_tolerance_dps)
             if np.all(np.abs(err) <= s.position_tolerance_deg) and still:
@@ -340,7 +340,7 @@ class RateTable(abc.ABC):
         deadline = time.monotonic() + 2.0 * expected_s + s.wait_margin_s
         settled = 0
         while True:
-            r = float(self._poll()[1][axis - 1])
+            r = float(self._poll([axis])[1][axis - 1])
             if abs(r - rate) <= s.rate_tolerance_dps:
                 settled += 1
                 if settled >= s.settle_polls:
