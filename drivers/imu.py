@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import DeviceTimeout, LimitError
+from .errors import DeviceError, DeviceTimeout, LimitError
 from .samples import ImuCounters, ImuSamples
 from .transport import Port, SerialSettings
 
@@ -47,7 +47,7 @@ class Imu(abc.ABC):
         self.settings = settings or ImuSettings()
         self.name = f"imu {url} ({self.protocol})"
         self.log = logging.getLogger(f"drivers.{self.protocol}")
-        self.port: Port | None = None
+        self._port: Port | None = None
         self.identity = ""
         self.rate_hz = float(self.settings.rate_hz)
         self.counters = ImuCounters()
@@ -59,9 +59,16 @@ class Imu(abc.ABC):
         self._last_t: float | None = None
 
     # ------------------------------------------------------------------ connection
+    @property
+    def port(self) -> Port:
+        """The open port; DeviceError before ``connect()`` or after ``close()``."""
+        if self._port is None:
+            raise DeviceError(self.name, "not connected (call connect(), or use it in a with block)")
+        return self._port
+
     def connect(self) -> str:
         """Open the port and identify the device."""
-        self.port = Port(self.url, self.settings.serial, self.name, self.log)
+        self._port = Port(self.url, self.settings.serial, self.name, self.log)
         try:
             self.identity = self._identify()
         except BaseException:
@@ -71,17 +78,17 @@ class Imu(abc.ABC):
         return self.identity
 
     def close(self) -> None:
-        if self.port is not None:
+        if self._port is not None:
             if self.streaming:
                 try:
                     self.stop()
                 except Exception:        # closing anyway
                     pass
-            self.port.close()
-            self.port = None
+            self._port.close()
+            self._port = None
 
     def __enter__(self):
-        if self.port is None:
+        if self._port is None:
             self.connect()
         return self
 

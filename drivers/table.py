@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import DeviceTimeout, LimitError, TableFault
+from .errors import DeviceError, DeviceTimeout, LimitError, TableFault
 from .transport import Port, SerialSettings
 
 
@@ -109,16 +109,23 @@ class RateTable(abc.ABC):
         self.settings = settings or TableSettings()
         self.name = f"table {url} ({self.protocol})"
         self.log = logging.getLogger(f"drivers.{self.protocol}")
-        self.port: Port | None = None
+        self._port: Port | None = None
         self.identity = ""
         self.n_axes = 0
         self.limits: tuple[AxisLimits, ...] = ()
         self._modes: list[str] = []
 
     # ------------------------------------------------------------------ connection
+    @property
+    def port(self) -> Port:
+        """The open port; DeviceError before ``connect()`` or after ``close()``."""
+        if self._port is None:
+            raise DeviceError(self.name, "not connected (call connect(), or use it in a with block)")
+        return self._port
+
     def connect(self) -> str:
         """Open the port, identify the controller, find its axes, set the move limits."""
-        self.port = Port(self.url, self.settings.serial, self.name, self.log)
+        self._port = Port(self.url, self.settings.serial, self.name, self.log)
         try:
             self.port.discard_input()
             self.identity = self._identify()
@@ -140,12 +147,12 @@ class RateTable(abc.ABC):
         return self.identity
 
     def close(self) -> None:
-        if self.port is not None:
-            self.port.close()
-            self.port = None
+        if self._port is not None:
+            self._port.close()
+            self._port = None
 
     def __enter__(self):
-        if self.port is None:
+        if self._port is None:
             self.connect()
         return self
 

@@ -123,3 +123,15 @@ def test_csv_units_are_converted():
     np.testing.assert_allclose(np.diff(s.t_s), 0.01, atol=1e-9)
     assert abs(np.linalg.norm(s.accel_mps2.mean(axis=0)) - 9.806) < 0.05
     assert np.linalg.norm(s.gyro_dps.mean(axis=0)) < 0.01          # Earth rate + bias, deg/s
+
+
+def test_use_before_connect_and_after_close_is_a_device_error():
+    from drivers.errors import DeviceError
+    from drivers.registry import imu_driver, table_driver
+    imu = imu_driver("vectornav")("/dev/null-imu")
+    with pytest.raises(DeviceError, match=r"imu /dev/null-imu \(vectornav\): not connected"):
+        imu.read(1)
+    table = table_driver("acutrol")("/dev/null-table")
+    with pytest.raises(DeviceError, match="not connected"):
+        table.status()
+    table.close()                                   # closing twice is harmless
