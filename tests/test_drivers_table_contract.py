@@ -173,3 +173,11 @@ def test_a_demand_refused_for_an_open_interlock_is_a_table_fault(bench):
         assert table.status().mode[0] == "off"
         time.sleep(0.05)
         assert table.read_rates_dps()[0] == 0.0        # braked to rest
+
+
+def test_any_pyserial_url_spy_logs_the_exchange(tmp_path):
+    log = tmp_path / "spy.txt"
+    with BenchServer(default_truth(3), BenchOptions(speed=SPEED, axes=2)) as server:
+        with open_table(f"spy://{server.table_path}?file={log}") as table:
+            assert table.n_axes == 2
+    assert "*IDN?;*STB?" in log.read_text()
