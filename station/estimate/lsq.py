@@ -182,7 +182,12 @@ class Model:
             L.add("mounting_offset", 3)
         for e in effects:
             L.add(f"effect:{e.id}", len(e.params))
+        self.priors: dict[int, float] = {}     # column -> 1-sigma of a zero-mean prior
         self._initialise()
+
+    def refresh(self):
+        """Forget the cached Jacobian structure (after priors were added)."""
+        self.__dict__.pop("_groups", None)
 
     # --- initial values ---------------------------------------------------------------------
     def _initialise(self):
@@ -396,6 +401,8 @@ class Model:
                 (r.accel_sin - sn) * root_n / (np.sqrt(2) * s.accel_sigma),
                 self.gyro_whiten[i] @ (r.gyro_integral - w.mean(axis=0) * r.duration_s
                                        - Mg @ earth_integral)]))
+        for c, sigma in self.priors.items():
+            put(("prior", c), np.atleast_1d(x[c] / sigma))
         return out, tags
 
 
@@ -424,40 +431,66 @@ def _solve(model: Model, x0: np.ndarray, free: np.ndarray):
                         xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=100)
     x = x0.copy()
     x[free] = res.x
-    J = jacobian(res.x)
-    # pinv: a nuisance the data cannot see has a zero column; it gets zero variance and
-    # leaves the others untouched
     cov = np.zeros((len(x), len(x)))
-    cov[np.ix_(free, free)] = np.linalg.pinv(J.T @ J, rcond=1e-14, hermitian=True)
+    cov[np.ix_(free, free)] = covariance(jacobian(res.x))
     return x, cov, res.fun
 
 
+def covariance(J: np.ndarray) -> np.ndarray:
+    """(J^T J)^-1 through the SVD of the column-scaled J (J^T J would square its condition).
+    A direction the data cannot see at all (a zero singular value, e.g. a nuisance with a zero
+    column) gets zero variance and leaves the others untouched."""
+    norms = np.linalg.norm(J, axis=0)
+    norms[norms == 0] = 1.0
+    _, sv, vt = np.linalg.svd(J / norms, full_matrices=False)
+    keep = sv > 1e-13 * sv[0]
+    v = vt[keep].T / sv[keep]
+    return (v @ v.T) / np.outer(norms, norms)
+
+
+def _blind_effect_parameters(model: Model, J: np.ndarray) -> list:
+    """Effect parameters the data cannot reveal: in the null space of the Jacobian (exactly
+    aliased with other parameters), or with a 1-sigma above their typical size."""
+    norms = np.linalg.norm(J, axis=0)
+    norms[norms == 0] = 1.0
+    _, sv, vt = np.linalg.svd(J / norms, full_matrices=False)
+    null = vt[sv < 1e-9 * sv[0]]
+    cov = covariance(J)
+    blind = []
+    for e in model.effects:
+        sl = model.layout[f"effect:{e.id}"]
+        for k, p in enumerate(e.params):
+            c = sl.start + k
+            if c in model.priors:
+                continue
+            aliased = null.size and np.max(np.abs(null[:, c])) > 1e-6
+            if aliased or np.sqrt(cov[c, c]) * p.scale > p.typical:
+                blind.append((c, p))
+    return blind
+
+
 def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "auto") -> FitResult:
-    """Fit the model; effect parameters this capture cannot reveal (1-sigma above their
-    typical size) are fixed at zero, named in ``model.unobservable``, and the fit repeated
-    without them."""
+    """Fit the model.  An effect parameter this capture cannot reveal (aliased with others, or
+    1-sigma above its typical size) gets a prior of zero +/- its typical size, is named in
+    ``model.unobservable``, and the fit is repeated: the parameters the capture does reveal then
+    carry the uncertainty of the ones it does not, instead of a bias from fixing them.  Which
+    ones are blind barely depends on where the fit ends, so the start is examined first."""
     model = Model(s, list(effects or []), attitudes)
-    free = np.ones(model.layout.size, dtype=bool)
-    x0 = model.x0
     model.unobservable = []
+    J = model.jacobian(model.x0)
+    x = None
     while True:
-        x, cov, r = _solve(model, x0, free)
-        blind = []
-        for e in model.effects:
-            sl = model.layout[f"effect:{e.id}"]
-            for k, p in enumerate(e.params):
-                c = sl.start + k
-                if free[c] and np.sqrt(cov[c, c]) * p.scale > p.typical:
-                    blind.append((c, p.name))
-        if not blind:
+        blind = _blind_effect_parameters(model, J)
+        if not blind and x is not None:
             break
-        for c, name in blind:
-            free[c] = False
-            model.unobservable.append(name)
-        x0 = x.copy()
-        x0[~free] = 0.0
+        for c, p in blind:
+            model.priors[c] = p.typical / p.scale
+            model.unobservable.append(p.name)
+        model.refresh()
+        x, cov, r = _solve(model, model.x0, np.ones(model.layout.size, dtype=bool))
+        J = model.jacobian(x)
     r = r[model.data_rows]      # the weak priors on nuisance angles are not data
-    dof = len(r) - int(free.sum())
+    dof = len(r) - model.layout.size
     return FitResult(x=x, covariance=cov, model=model, chi2=float(r @ r), dof=dof, residuals=r)
 
 
@@ -519,7 +552,8 @@ def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=())
     }
     if model.unobservable:
         fit_stats["notes"].append(
-            f"not observable with this capture (1-sigma above the typical size), fixed at 0: "
+            f"not revealed by this capture (1-sigma above the typical size), held at 0 +/- the "
+            f"typical size by a prior: "
             f"{', '.join(model.unobservable)}")
     if "mounting_offset" in L.blocks:
         fit_stats["mounting_offset_mm"] = (x[L["mounting_offset"]] * 1e3).tolist()

@@ -1,0 +1,109 @@
+"""The least-squares model against the simulated bench.
+
+Bounds come from the model's own Fisher information evaluated with the true noise densities
+(the Cramér-Rao bound, station.montecarlo.cramer_rao), never from a run of the estimator."""
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from sim_devices.bench import SimulatedBench
+from station import montecarlo, simrun
+from station.calibration import parameter_errors
+from station.compensate import compensate
+from station.estimate import lsq
+from station.model import EFFECTS
+from station.scheme import load_scheme
+
+POSITIONS_M = np.array([[0.012, 0.004, -0.006], [-0.005, 0.009, 0.007], [0.006, -0.008, -0.014]])
+
+
+def quiet(truth):
+    truth.accel.noise_density = truth.gyro.noise_density = 0.0
+    truth.bench.table_angle_error_arcsec = truth.bench.accel_disturbance_ug = 0.0
+    return truth
+
+
+def test_noise_free_fit_is_exact_and_chi2_zero():
+    scheme, truth = load_scheme("optimal9"), quiet(simrun.load_truth(None, 0))
+    capture = simrun.simulate_capture(scheme, truth, 4)
+    capture_noise = simrun.simulate_capture(scheme, montecarlo.make_truth(montecarlo.Settings()), 4)
+    # the noise level is taken from the data; borrow a noisy one so the weights are finite
+    s = lsq.summarise(capture)
+    s_noise = lsq.summarise(capture_noise)
+    s.accel_sigma, s.gyro_sigma, s.table_angle_sigma_deg = (s_noise.accel_sigma, s_noise.gyro_sigma,
+                                                            2.0 / 3600)
+    result = lsq.fit(s)
+    cal = lsq.to_calibration(result, "m/s^2", "deg/s")
+    for name, _, _, err, unit in parameter_errors(cal, simrun.truth_calibration(truth)):
+        assert abs(err) < 1e-3 * max(cal.sigma[name], 1e-3), (name, err, unit)
+    assert result.chi2 < 1e-6
+    lever_p = truth.paper_parameters()["C_pb"] @ truth.bench.lever_arm_m     # case axes -> frame p
+    np.testing.assert_allclose(result.x[result.model.layout["mounting_offset"]], lever_p, atol=1e-9)
+
+
+def test_spread_and_reported_sigma_match_the_cramer_rao_bound():
+    runs = 24
+    scheme = load_scheme("optimal9")
+    settings = montecarlo.Settings(accel_noise_ug=100.0, gyro_noise_dph=0.03, table_angle_arcsec=2.0)
+    names, errors, sigmas = montecarlo.run(scheme, settings, runs, first_seed=700)
+    crlb = montecarlo.cramer_rao(scheme, settings)
+    lo, hi = (math.sqrt(stats.chi2.ppf(q, runs) / runs) for q in (0.0005, 0.9995))
+    for (name, _), col, bound, reported in zip(names, errors.T, crlb, sigmas.T):
+        ratio = math.sqrt(np.mean(col**2)) / bound   # rms error over runs: unbiased and efficient
+        assert lo < ratio < hi, f"{name}: rms error {ratio:.2f} x the bound, outside [{lo:.2f}, {hi:.2f}]"
+        # the reported 1-sigma is the bound evaluated at the estimate; the bound itself moves a
+        # little with each run's random table headings (the Earth rate seen at rest)
+        assert abs(np.mean(reported) / bound - 1) < 0.05, name
+
+
+def test_reduced_chi2_follows_its_distribution():
+    scheme, truth = load_scheme("optimal9"), simrun.load_truth(None, 0)
+    chi2, dof = 0.0, 0
+    for seed in range(30, 36):
+        result = lsq.fit(lsq.summarise(simrun.simulate_capture(scheme, truth, seed)))
+        chi2 += result.chi2
+        dof += result.dof
+    assert stats.chi2.ppf(0.0005, dof) < chi2 < stats.chi2.ppf(0.9995, dof), (chi2, dof)
+
+
+def size_effect_truth():
+    truth = simrun.load_truth(None, 0)
+    truth.accel.noise_density, truth.gyro.noise_density = 150.0, 5.0      # MEMS
+    truth.accel.position_m = POSITIONS_M
+    return truth
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_size_effect_positions_recovered_and_compensated(seed):
+    scheme, truth = load_scheme("sizeeffect"), size_effect_truth()
+    capture = simrun.simulate_capture(scheme, truth, seed)
+    without = lsq.estimate(capture)
+    cal = lsq.estimate(capture, [EFFECTS["accel_lever_arm"]()])
+    # the missing effect shows: the base model cannot explain the rotations
+    assert without.fit["reduced_chi2"] > 100 and cal.fit["reduced_chi2"] < 1.5
+    # rotations about body axes reveal each element's own-axis coordinate, only those
+    for i, a in enumerate("xyz"):
+        name = f"accel_position_{a}_{a}"
+        value = dict((n, v) for n, v, _ in cal.extra_parameters)[name]
+        assert abs(value - POSITIONS_M[i, i] * 1e3) < 3 * cal.sigma[name], (name, value, cal.sigma[name])
+    assert any("not revealed by this capture" in note for note in cal.fit["notes"])
+
+    # 200 deg/s about the vertical z axis, compensated: the reference point is on the axis
+    bench = SimulatedBench(simrun._mounted(truth, scheme), seed + 100)
+    seg = bench.rotation([0, 0, 1], 200.0, 20.0, axis_elevation_deg=90.0)
+    # at the reference point, on the axis: gravity alone, constant in body, expressed in frame p
+    truth_f = truth.paper_parameters()["C_pb"] @ seg.truth["C_bn0"] @ [0.0, 0.0, bench.gravity_mps2]
+    comp = {"accel_matrix": cal.accel_matrix, "accel_bias": cal.accel_bias,
+            "gyro_matrix": cal.gyro_matrix, "gyro_bias": cal.gyro_bias}
+    f_plain, _ = compensate(comp, seg.t, seg.accel, seg.gyro)
+    f_comp, _ = compensate({**comp, **cal.compensation_extra}, seg.t, seg.accel, seg.gyro)
+    n = len(seg.t)
+    noise = truth.accel_noise_sigma / math.sqrt(n)                  # of the mean, per axis
+    # allowed: the mean's noise plus the calibration's own error (scale 1e-4 g, bias 1e-4 g)
+    allowed = 5 * noise + 3 * 1e-4 * bench.gravity_mps2
+    error_plain = np.abs(f_plain.mean(axis=0) - truth_f)[:2]
+    error_comp = np.abs(f_comp.mean(axis=0) - truth_f)[:2]
+    assert error_plain.max() > 50 * allowed / 5                      # several mg without the effect
+    assert error_comp.max() < allowed, (error_comp, allowed)
