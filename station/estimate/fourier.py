@@ -166,9 +166,9 @@ def rate_noise_factor(t, knots) -> float:
     The smoothed angle is the least-squares spline fit (it contains the straight line), so the
     mean rate is (th_s(t_end) - th_s(t_0)) / span = d^T coef, with var = sigma_phase^2 d^T (B^T B)^-1 d.
     """
-    B = BSpline.design_matrix(t, knots, 3).toarray()
-    d = (B[-1] - B[0]) / (t[-1] - t[0])
-    return float(d @ np.linalg.solve(B.T @ B, d))
+    B = BSpline.design_matrix(t, knots, 3).tocsr()
+    d = (B[[-1]].toarray()[0] - B[[0]].toarray()[0]) / (t[-1] - t[0])
+    return float(d @ np.linalg.solve((B.T @ B).toarray(), d))
 
 
 def _harmonic_fit(t, accel, th, dth, d2th):
