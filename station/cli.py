@@ -222,7 +222,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from station import cli_devices
+    from station import cli_devices, cli_diagnose
     from station import cli_import
 
     p = _Parser(prog="station", description="IMU calibration with a rate table.")
@@ -277,6 +277,7 @@ def build_parser() -> argparse.ArgumentParser:
     eff.set_defaults(func=cmd_effects)
 
     # Commands defined in other modules register here (one line each).
+    cli_diagnose.add_parsers(sub, out, err)
     cli_import.add_parsers(sub)
     cli_devices.add_parsers(sub)
     return p

@@ -282,7 +282,7 @@ class Model:
         L = self.layout
         _, tags = self._pieces(self.x0)
         rows, at = {}, 0
-        for tag, n in tags:
+        for tag, n, _ in tags:
             rows.setdefault(tag, []).extend(range(at, at + n))
             at += n
         local = {}
@@ -304,6 +304,35 @@ class Model:
             if tag[0] == "weak":
                 self.data_rows[idx] = False
         return dense + list(local.values()), at
+
+    def row_labels(self, x) -> list[tuple[str, str, str, str]]:
+        """(segment, kind, quantity, axis) of every residual row, in order."""
+        rot_parts = [(q, a) for q in ("accel_dc", "accel_cos", "accel_sin", "gyro_integral") for a in "xyz"]
+        labels = []
+        for tag, n, quantity in self._pieces(x)[1]:
+            kind, j = tag
+            if kind in ("static", "weak"):
+                name = self.s.statics[j].name
+                axes = "xyz" if n == 3 else ["|w|"]
+                labels += [(name, "static", quantity, a) for a in axes]
+            elif kind == "rot":
+                labels += [(self.s.rotations[j].name, "rotation", q, a) for q, a in rot_parts]
+            elif kind == "axis":
+                labels += [(f"axis{j}", "rotation", quantity, a) for a in "xyz"]
+            else:
+                labels += [("prior", "prior", quantity, str(j))]
+        return labels
+
+    def jacobian_columns(self, x, columns) -> np.ndarray:
+        """Forward-difference Jacobian of the given columns only."""
+        r0 = self.residuals(x)
+        J = np.empty((len(r0), len(columns)))
+        for k, c in enumerate(columns):
+            xp = x.copy()
+            h = 1e-7 * max(abs(x[c]), 1e-2)
+            xp[c] += h
+            J[:, k] = (self.residuals(xp) - r0) / h
+        return J
 
     def jacobian(self, x) -> np.ndarray:
         if not hasattr(self, "_groups"):
@@ -335,9 +364,9 @@ class Model:
         Ma, Mg = self._matrices(x)
         out, tags = [], []
 
-        def put(tag, values):
+        def put(tag, values, quantity):
             out.append(values)
-            tags.append((tag, len(values)))
+            tags.append((tag, len(values), quantity))
 
         static_sigma_a = s.accel_sigma
         static_sigma_w = s.gyro_sigma
@@ -352,16 +381,17 @@ class Model:
                 f_p, w_p = (self.f_n[2] * att)[None, :], np.zeros((1, 3))
             a, w = self._predict(x, self._context(f_p, w_p, np.zeros((1, 3)), st.temp_c, Ma, Mg), Ma, Mg)
             root_n = np.sqrt(st.samples)
-            put(("static", j), (st.accel - a[0]) * root_n / static_sigma_a)
+            put(("static", j), (st.accel - a[0]) * root_n / static_sigma_a, "accel")
             if self.with_latitude:
-                put(("static", j), (st.gyro - w[0]) * root_n / static_sigma_w)
+                put(("static", j), (st.gyro - w[0]) * root_n / static_sigma_w, "gyro")
             else:   # only |Omega_E| known: the norm of the compensated rate
                 rate = np.linalg.norm(np.linalg.solve(Mg, st.gyro - x[L["gyro_bias"]]))
-                put(("static", j), np.atleast_1d((rate - self.omega_dps) * root_n / np.mean(static_sigma_w)))
+                put(("static", j), np.atleast_1d((rate - self.omega_dps) * root_n / np.mean(static_sigma_w)),
+                    "gyro_norm")
             if C_mount is not None and st.up_body is not None:
-                put(("static", j), cross(up_p, C_mount.apply(st.up_body)) / self.prior_sigma)
+                put(("static", j), cross(up_p, C_mount.apply(st.up_body)) / self.prior_sigma, "attitude_prior")
             if self.with_latitude:   # keeps the heading finite when the gyros cannot see the Earth turn
-                put(("weak", j), x[L[f"static{j}"]] / WEAK_PRIOR_RAD)
+                put(("weak", j), x[L[f"static{j}"]] / WEAK_PRIOR_RAD, "weak_prior")
         offset = (x[L["mounting_offset"]] if "mounting_offset" in L.blocks
                   else (s.mounting_offset_m if s.mounting_offset_m is not None else np.zeros(3)))
         phases = 2 * np.pi * np.arange(PHASES) / PHASES
@@ -370,7 +400,7 @@ class Model:
         if C_mount is not None:
             for k, (l, _, _) in enumerate(axes):
                 axis_body = next(r.axis_body for r in s.rotations if r.group == k)
-                put(("axis", k), cross(l, C_mount.apply(axis_body)) / self.prior_sigma)
+                put(("axis", k), cross(l, C_mount.apply(axis_body)) / self.prior_sigma, "axis_prior")
         g = s.gravity_mps2
         for i, r in enumerate(s.rotations):
             l, kappa, e = axes[r.group]
@@ -395,14 +425,18 @@ class Model:
             a, w = self._predict(x, ctx, Ma, Mg)
             dc, c, sn = a.mean(axis=0), 2 * cos_p @ a / PHASES, 2 * sin_p @ a / PHASES
             root_n = np.sqrt(r.samples)
+            integral = w.mean(axis=0) * r.duration_s + Mg @ earth_integral
+            for eff in self.effects:
+                term = eff.integral(x[L[f"effect:{eff.id}"]], r)
+                if term is not None:
+                    integral = integral + term
             put(("rot", i), np.concatenate([
                 (r.accel_dc - dc) * root_n / s.accel_sigma,
                 (r.accel_cos - c) * root_n / (np.sqrt(2) * s.accel_sigma),
                 (r.accel_sin - sn) * root_n / (np.sqrt(2) * s.accel_sigma),
-                self.gyro_whiten[i] @ (r.gyro_integral - w.mean(axis=0) * r.duration_s
-                                       - Mg @ earth_integral)]))
+                self.gyro_whiten[i] @ (r.gyro_integral - integral)]), "rotation")
         for c, sigma in self.priors.items():
-            put(("prior", c), np.atleast_1d(x[c] / sigma))
+            put(("prior", c), np.atleast_1d(x[c] / sigma), "effect_prior")
         return out, tags
 
 

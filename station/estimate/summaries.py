@@ -18,6 +18,8 @@ import numpy as np
 from station import units
 from station.errors import UserError
 
+EDGE_SAMPLES = 3
+
 
 @dataclass
 class StaticSummary:
@@ -43,6 +45,8 @@ class RotationSummary:
     accel_sin: np.ndarray
     gyro_integral: np.ndarray       # (3,) integral over the window, deg (SI) or raw*s
     temp_c: float | None
+    gyro_start: np.ndarray          # (3,) rate at the window's start and end (mean of the
+    gyro_end: np.ndarray            #   first and last EDGE_SAMPLES samples)
 
     @property
     def rate_dps(self) -> float:
@@ -85,10 +89,12 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp) ->
     phase = np.radians(angle_deg) * (t - start) / duration      # uniform rate between encoder reads
     basis = np.column_stack([np.ones_like(t), np.cos(phase), np.sin(phase)])
     coef, *_ = np.linalg.lstsq(basis, accel, rcond=None)
+    edge = min(EDGE_SAMPLES, len(t) // 4)
     return RotationSummary(name=name, axis_body=axis_body, group=group, angle_deg=float(angle_deg),
                            duration_s=float(duration), samples=len(t), accel_dc=coef[0],
                            accel_cos=coef[1], accel_sin=coef[2], gyro_integral=gyro_integral,
-                           temp_c=None if temp is None else float(np.mean(temp)))
+                           temp_c=None if temp is None else float(np.mean(temp)),
+                           gyro_start=gyro[:edge].mean(axis=0), gyro_end=gyro[-edge:].mean(axis=0))
 
 
 def summarise(capture, *, table_angle_arcsec: float | None = None) -> Summaries:

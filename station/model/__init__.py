@@ -5,8 +5,14 @@ rotation, and the nuisances of the bench) lives in ``station.estimate.lsq``; eve
 adds parameters and a term to the predicted raw outputs.  ``EFFECTS`` maps ids to classes.
 """
 from station.model.effect import Effect, Param, SampleContext
+from station.model.g_sensitivity import GyroGSensitivity
 from station.model.lever_arm import AccelLeverArm
+from station.model.nonlinearity import AccelNonlinearity
+from station.model.scale_asymmetry import GyroScaleAsymmetry
+from station.model.temperature import TemperatureBias
+from station.model.time_offset import TimeOffset
 
-EFFECTS = {cls.id: cls for cls in (AccelLeverArm,)}
+EFFECTS = {cls.id: cls for cls in (AccelLeverArm, AccelNonlinearity, GyroGSensitivity,
+                                   GyroScaleAsymmetry, TemperatureBias, TimeOffset)}
 
 __all__ = ["EFFECTS", "Effect", "Param", "SampleContext"]

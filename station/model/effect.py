@@ -43,6 +43,8 @@ class Effect:
     excited_by = ""           # which segments reveal it
     magnitudes = ""           # typical sizes, consumer MEMS to navigation grade
     signature = ""            # what its residuals look like when it is missing
+    signature_variable = ""   # what to plot its residuals against: rate_squared, temperature,
+                              #   gravity_along_axis, signed_rate, rate_change
 
     def setup(self, summaries) -> None:
         """Decide the parameters this capture can carry (e.g. a gauge choice)."""
@@ -57,6 +59,10 @@ class Effect:
 
     def gyro(self, x: np.ndarray, ctx: SampleContext) -> np.ndarray | None:
         """Additive term of the raw gyro output (deg/s before unit conversion)."""
+        return None
+
+    def integral(self, x: np.ndarray, rotation) -> np.ndarray | None:
+        """Additive term of a rotation segment's gyro integral (deg before unit conversion)."""
         return None
 
     def report(self, x: np.ndarray, cov: np.ndarray | None) -> dict:

@@ -22,6 +22,7 @@ class AccelLeverArm(Effect):
                   "consumer MEMS boards; at 200 deg/s, 10 mm gives 12 mg")
     signature = ("accelerometer, rotation segments only: a constant offset growing with the square "
                  "of the rate, the same sign in both directions, different on each axis")
+    signature_variable = "rate_squared"
 
     def __init__(self):
         self.free = [(i, c) for i in range(3) for c in range(3)]   # (element, coordinate) estimated

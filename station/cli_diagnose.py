@@ -1,0 +1,146 @@
+"""``station diagnose``: compare the model with the measurements, find what is missing."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from rich.table import Table
+
+from station.errors import UserError
+
+
+def add_parsers(sub, out, err) -> None:
+    d = sub.add_parser("diagnose", help="residuals of the fitted model, where it fails, which effect is missing")
+    d.add_argument("capture", help="capture directory (rotations need encoder angles)")
+    d.add_argument("--calib", metavar="CAL.yaml", help="diagnose the model of this calibration file "
+                   "(its effects), refitted to the capture")
+    d.add_argument("--add", action="append", default=[], metavar="EFFECT", help="add an effect first")
+    d.add_argument("--auto", action="store_true",
+                   help="add the most significant candidate, refit, repeat until none is significant")
+    d.add_argument("--json", action="store_true", help="print the diagnosis as JSON (docs/diagnose.md)")
+    d.add_argument("--report", metavar="DIR", help="write PNG pictures and index.html into DIR")
+    d.set_defaults(func=lambda args: cmd_diagnose(args, out, err))
+
+
+def _effects(args) -> list[str]:
+    from station.calfile import read_calfile
+    from station.model import EFFECTS
+
+    effects = []
+    if args.calib:
+        effects += [e for e in read_calfile(args.calib).get("effects", [])
+                    if e not in ("base_triads", "inter_triad")]
+    effects += args.add
+    for e in effects:
+        if e not in EFFECTS:
+            raise UserError(f"unknown effect {e!r}: the library has {', '.join(sorted(EFFECTS))}")
+    return list(dict.fromkeys(effects))
+
+
+def cmd_diagnose(args, out, err) -> int:
+    from station.capture import read_capture
+    from station.diagnose import auto
+    from station.diagnose.core import diagnose
+    from station.estimate import lsq
+    from station.model import EFFECTS
+
+    capture = read_capture(args.capture)
+    if any(seg.angle_deg is None for seg in capture.complete("rotation")):
+        raise UserError(f"{capture.path}: diagnose fits the least-squares model, which needs the "
+                        "encoder angle (angle_deg) of every rotation segment")
+    s = lsq.summarise(capture)
+    effects = _effects(args)
+    if args.auto:
+        steps, final = auto.run(s, effects, progress=None)
+        first = steps[0].before if steps else final
+    else:
+        steps, first = [], diagnose(lsq.fit(s, [EFFECTS[e]() for e in effects]))
+        final = first
+    summary = _summary_lines(final)
+    if args.report:
+        from station.diagnose.report import write_report
+
+        index = write_report(args.report, first, steps, final, summary)
+        if not args.json:
+            out.print(f"report: {index}")
+    if args.json:
+        print(json.dumps(to_json(final, steps), indent=1))
+        return 0
+    _print(out, first, steps, final)
+    return 0
+
+
+def _summary_lines(d) -> list[str]:
+    lines = [d.verdict, f"effects in the model: {', '.join(d.effects)}",
+             f"chi2 {d.chi2:.1f} for {d.dof} degrees of freedom (reduced {d.reduced_chi2:.3f}, p = {d.p_value:.3g})"]
+    return lines + [f"where it fails: {f}" for f in d.failures]
+
+
+def _num(v):
+    return None if v is None or (isinstance(v, float) and not math.isfinite(v)) else v
+
+
+def to_json(d, steps) -> dict:
+    return {
+        "chi2": d.chi2, "dof": d.dof, "reduced_chi2": d.reduced_chi2, "p_value": _num(d.p_value),
+        "verdict": d.verdict,
+        "effects": d.effects,
+        "failures": d.failures,
+        "segments": [{"name": s.name, "kind": s.kind, "rms": s.rms, "rms_by_quantity": s.by_quantity}
+                     for s in d.segments],
+        "candidates": [{
+            "effect": c.effect, "significant": c.significant,
+            "predicted_chi2_drop": c.predicted_chi2_drop, "dof": c.dof,
+            "p_value": c.p_value, "p_value_corrected": c.p_value_corrected, "plausible": c.plausible,
+            "parameters": c.names, "units": c.units, "estimate": c.estimate, "sigma": c.sigma,
+            "smallest_detectable": [_num(v) for v in c.detectable], "aliased": c.aliased,
+            "advice": c.advice} for c in d.candidates],
+        "steps": [{"added": st.added, "predicted_chi2_drop": st.predicted_drop,
+                   "actual_chi2_drop": st.actual_drop, "chi2_before": st.before.chi2,
+                   "chi2_after": st.after.chi2, "reduced_chi2_after": st.after.reduced_chi2,
+                   "estimate": [{"name": n, "value": v, "sigma": sg, "unit": u}
+                                for n, v, sg, u in st.estimate]} for st in steps],
+    }
+
+
+def _candidates_table(d) -> Table:
+    t = Table(title="candidate effects (score test at the current fit)")
+    for col in ("effect", "significant", "predicted Δχ²", "p (Holm)", "one-step estimate ± 1σ", "note"):
+        t.add_column(col, justify="right" if col in ("predicted Δχ²", "p (Holm)") else "left")
+    for c in d.candidates:
+        est = "; ".join(f"{n} {v:.3g} ± {s:.2g} {u}" for n, v, s, u in
+                        list(zip(c.names, c.estimate, c.sigma, c.units))[:3])
+        if len(c.names) > 3:
+            est += f"; … ({len(c.names)} parameters)"
+        note = c.advice or ("" if c.plausible else "size implausible for any IMU")
+        if not note and c.detectable and all(math.isfinite(v) for v in c.detectable):
+            note = f"smallest detectable ≈ {min(c.detectable):.2g} {c.units[0]}"
+        t.add_row(c.effect, "yes" if c.significant else "no", f"{c.predicted_chi2_drop:.4g}",
+                  f"{c.p_value_corrected:.2g}", est, note)
+    return t
+
+
+def _print(out, first, steps, final) -> None:
+    from station.diagnose.auto import comparison_rows
+
+    for line in _summary_lines(first):
+        out.print(line)
+    worst = sorted(first.segments, key=lambda s: -s.rms)[:5]
+    out.print("worst segments: " + ", ".join(f"{s.name} ({s.kind}) {s.rms:.2g}σ" for s in worst))
+    out.print(_candidates_table(first))
+    for k, st in enumerate(steps, 1):
+        t = Table(title=f"step {k}: added {st.added}")
+        for col in ("", "before", "after"):
+            t.add_column(col, justify="left" if not col else "right")
+        for what, b, a in comparison_rows(st.before, st.after):
+            t.add_row(what, f"{b:.4g}", f"{a:.4g}")
+        t.add_row("predicted χ² drop", f"{st.predicted_drop:.4g}", "")
+        t.add_row("actual χ² drop", f"{st.actual_drop:.4g}", "")
+        out.print(t)
+        out.print("added: " + "; ".join(f"{n} = {v:.4g} ± {s:.2g} {u}" for n, v, s, u in st.estimate))
+    if steps:
+        for line in _summary_lines(final):
+            out.print(line)
+        if final.candidates:
+            out.print(_candidates_table(final))

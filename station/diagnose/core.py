@@ -1,0 +1,198 @@
+"""Compare the fitted model with the measurements; find which physical effect is missing.
+
+Everything here works on the whitened residuals of the least-squares fit (each residual divided
+by its noise, so a model that explains the data leaves residuals of unit spread):
+  * the fit as a whole: chi2, degrees of freedom, reduced chi2 and its p-value;
+  * per segment and quantity: the RMS of the whitened residuals (where the model fails);
+  * per candidate effect of the library not yet in the model: the score (Lagrange-multiplier)
+    test at the current fit, i.e. the chi2 drop a first Gauss-Newton step with the effect
+    added would give, its p-value corrected for testing several candidates (Holm), the
+    one-step estimate and its 1-sigma, whether that size is physically plausible, which of
+    its parameters the capture cannot tell apart from the model's, and the smallest size the
+    capture could detect.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from station.estimate import lsq
+from station.model import EFFECTS
+
+ALPHA = 0.01            # significance level of the whole family of candidate tests
+POWER_Z = 0.8416        # z of 80 % power, for the smallest detectable size
+
+
+@dataclass
+class SegmentResidual:
+    name: str
+    kind: str
+    rms: float                               # RMS of all its whitened data residuals
+    by_quantity: dict                        # quantity -> RMS
+    values: dict                             # (quantity, axis) -> whitened residual
+
+
+@dataclass
+class Candidate:
+    effect: str
+    title: str
+    predicted_chi2_drop: float
+    dof: int                                 # parameters the capture can reveal
+    p_value: float
+    p_value_corrected: float = 1.0
+    significant: bool = False
+    plausible: bool = True
+    names: list = field(default_factory=list)
+    units: list = field(default_factory=list)
+    estimate: list = field(default_factory=list)   # one-step estimate, reported units
+    sigma: list = field(default_factory=list)
+    detectable: list = field(default_factory=list)  # smallest detectable size, reported units
+    aliased: list = field(default_factory=list)     # parameters the capture cannot reveal
+    advice: str = ""
+    signature_rows: np.ndarray | None = None        # predicted whitened change, one step
+
+
+@dataclass
+class Diagnosis:
+    effects: list
+    chi2: float
+    dof: int
+    reduced_chi2: float
+    p_value: float
+    segments: list
+    candidates: list
+    failures: list                           # sentences: where and how the model fails
+    verdict: str
+    result: object                           # the lsq.FitResult diagnosed
+    labels: list
+
+
+def _data_mask(labels) -> np.ndarray:
+    return np.array([q not in ("weak_prior", "effect_prior", "attitude_prior", "axis_prior")
+                     for _, _, q, _ in labels])
+
+
+def segment_residuals(result, labels) -> list[SegmentResidual]:
+    r = result.model.residuals(result.x)
+    mask = _data_mask(labels)
+    out, order = {}, []
+    for (name, kind, quantity, axis), value, is_data in zip(labels, r, mask):
+        if not is_data:
+            continue
+        if name not in out:
+            out[name] = (kind, {})
+            order.append(name)
+        out[name][1][(quantity, axis)] = float(value)
+    segs = []
+    for name in order:
+        kind, values = out[name]
+        v = np.array(list(values.values()))
+        by_q = {}
+        for (q, _), value in values.items():
+            by_q.setdefault(q, []).append(value)
+        segs.append(SegmentResidual(name, kind, float(np.sqrt(np.mean(v**2))),
+                                    {q: float(np.sqrt(np.mean(np.square(vals)))) for q, vals in by_q.items()},
+                                    values))
+    return segs
+
+
+def score_test(result, effect_id: str) -> Candidate:
+    """The Lagrange-multiplier test of adding ``effect_id`` to the fitted model."""
+    model = result.model
+    effect = EFFECTS[effect_id]()
+    extended = lsq.Model(model.s, [*model.effects, effect], model.attitudes)
+    extended.priors = dict(model.priors)
+    n = model.layout.size
+    x = np.concatenate([result.x, np.zeros(extended.layout.size - n)])
+    r = extended.residuals(x)
+    cols = list(range(n, extended.layout.size))
+    Jc = extended.jacobian_columns(x, cols)
+    J = model.jacobian(result.x)
+    # the part of the candidate's columns the current model cannot already produce
+    u, sv, _ = np.linalg.svd(J, full_matrices=False)
+    basis = u[:, sv > 1e-10 * sv[0]]
+    Jp = Jc - basis @ (basis.T @ Jc)
+    A = Jp.T @ Jp
+    scale = np.sqrt(np.maximum(np.diag(Jc.T @ Jc), 1e-300))
+    w, V = np.linalg.eigh(A / np.outer(scale, scale))
+    keep = w > 1e-8 * max(w.max(), 1e-300)
+    Vk = V[:, keep] / scale[:, None]
+    A_pinv = (Vk / w[keep]) @ Vk.T
+    g = Jp.T @ r
+    step = -A_pinv @ g
+    lm = float(g @ A_pinv @ g)
+    k = int(keep.sum())
+    sigma = np.sqrt(np.clip(np.diag(A_pinv), 0.0, None))
+    # parameters with no component in the revealable subspace are aliased
+    revealable = np.abs(V[:, keep]).max(axis=1) if k else np.zeros(len(cols))
+    params = effect.params
+    aliased = [p.name for p, reach in zip(params, revealable) if reach < 1e-3]
+    cand = Candidate(effect=effect_id, title=effect.title, predicted_chi2_drop=lm, dof=k,
+                     p_value=float(stats.chi2.sf(lm, k)) if k else 1.0,
+                     names=[p.name for p in params], units=[p.unit for p in params],
+                     estimate=[float(v * p.scale) for v, p in zip(step, params)],
+                     sigma=[float(s * p.scale) for s, p in zip(sigma, params)],
+                     aliased=aliased, signature_rows=Jp @ step)
+    too_large = [abs(v) > p.plausible and abs(v) > 3 * s
+                 for v, s, p in zip(cand.estimate, cand.sigma, params)]
+    cand.plausible = not any(too_large)
+    if not k:
+        cand.advice = f"this capture cannot reveal {effect_id}: it needs {effect.excited_by}"
+    elif aliased:
+        cand.advice = (f"this capture cannot tell {', '.join(aliased)} apart from the model's "
+                       f"parameters; {effect.excited_by} would")
+    return cand
+
+
+def rank_candidates(result, exclude=()) -> list[Candidate]:
+    ids = [e for e in EFFECTS if e not in {m.id for m in result.model.effects} and e not in exclude]
+    cands = [score_test(result, e) for e in ids]
+    m = len(cands)
+    threshold = stats.norm.isf(ALPHA / (2 * max(m, 1))) + POWER_Z
+    # Holm's step-down correction over the family of candidates
+    for rank, c in enumerate(sorted(cands, key=lambda c: c.p_value)):
+        c.p_value_corrected = min(1.0, c.p_value * (m - rank))
+    running = 0.0
+    for c in sorted(cands, key=lambda c: c.p_value):
+        running = max(running, c.p_value_corrected)
+        c.p_value_corrected = running
+        c.significant = c.dof > 0 and c.p_value_corrected < ALPHA and c.plausible
+        c.detectable = [threshold * s if name not in c.aliased else float("inf")
+                        for name, s in zip(c.names, c.sigma)]
+    return sorted(cands, key=lambda c: (not c.significant, -c.predicted_chi2_drop))
+
+
+def diagnose(result, exclude=()) -> Diagnosis:
+    from station.diagnose.words import describe_failures
+
+    labels = result.model.row_labels(result.x)
+    segs = segment_residuals(result, labels)
+    cands = rank_candidates(result, exclude)
+    p = float(stats.chi2.sf(result.chi2, result.dof)) if result.dof > 0 else float("nan")
+    reduced = result.chi2 / result.dof if result.dof > 0 else float("nan")
+    failures = describe_failures(result, labels, segs)
+    good = p > ALPHA / 10
+    if good:
+        verdict = (f"the model explains the data: reduced chi2 {reduced:.3f} (p = {p:.3g})")
+    elif any(c.significant for c in cands):
+        verdict = (f"the model does not explain the data (reduced chi2 {reduced:.3g}); the most "
+                   f"likely missing effect is {next(c for c in cands if c.significant).effect}")
+    else:
+        verdict = (f"the model does not explain the data (reduced chi2 {reduced:.3g}, p = {p:.2g}) "
+                   "and no effect of the library accounts for it: see where it fails")
+    return Diagnosis(effects=["base_triads", "inter_triad"] + [e.id for e in result.model.effects],
+                     chi2=result.chi2, dof=result.dof, reduced_chi2=reduced, p_value=p,
+                     segments=segs, candidates=cands, failures=failures, verdict=verdict,
+                     result=result, labels=labels)
+
+
+def rms_by_kind(segs) -> dict:
+    """RMS of the whitened residuals per segment kind and quantity (accel/gyro, axis)."""
+    acc = {}
+    for seg in segs:
+        for (q, axis), v in seg.values.items():
+            sensor = "accel" if q.startswith("accel") else "gyro"
+            acc.setdefault((seg.kind, sensor, axis), []).append(v)
+    return {k: float(np.sqrt(np.mean(np.square(v)))) for k, v in sorted(acc.items())}

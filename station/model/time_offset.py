@@ -1,0 +1,28 @@
+"""time_offset: the IMU's clock against the table's."""
+from __future__ import annotations
+
+from station.model.effect import Effect, Param
+
+
+class TimeOffset(Effect):
+    id = "time_offset"
+    title = "Time offset between the IMU's time stamps and the table's encoder"
+    physics = ("The IMU stamps its samples with its own clock and the table reads its encoder with "
+               "another; a latency between them shifts the window over which the gyro is "
+               "integrated against the one over which the table measured the angle.  While the "
+               "rate is constant the shift changes nothing; where the rate changes it does.")
+    term = ("gyro_integral += dt (w_end - w_start): the samples cover the encoder window shifted "
+            "by dt (positive: the IMU's stamps are late)")
+    excited_by = ("rotation segments whose rate differs at their start and end (ramps, rate "
+                  "ripple, a rate that drifts); a constant-rate capture cannot reveal it")
+    magnitudes = "1-10 ms (USB and serial links, buffered MEMS), < 0.1 ms (hardware-synchronised)"
+    signature = ("gyro, rotation segments: an integral error proportional to the change of rate "
+                 "across the segment; zero for steady rotations")
+    signature_variable = "rate_change"
+
+    @property
+    def params(self):
+        return (Param("time_offset", "ms", 1e3, 3.0, 200.0),)
+
+    def integral(self, x, rotation):
+        return x[0] * (rotation.gyro_end - rotation.gyro_start)
