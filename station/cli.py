@@ -14,7 +14,7 @@ import station
 from station.errors import UserError
 from station.estimate import METHODS
 
-out = Console(highlight=False)
+out = Console(highlight=False, width=None if sys.stdout.isatty() else 160)
 err = Console(stderr=True, highlight=False)
 
 

@@ -106,16 +106,21 @@ def to_json(d, steps) -> dict:
 
 def _candidates_table(d) -> Table:
     t = Table(title="candidate effects (score test at the current fit)")
-    for col in ("effect", "significant", "predicted Δχ²", "p (Holm)", "one-step estimate ± 1σ", "note"):
-        t.add_column(col, justify="right" if col in ("predicted Δχ²", "p (Holm)") else "left")
+    for col in ("effect", "significant", "pred. Δχ²", "p (Holm)", "largest one-step estimate", "note"):
+        t.add_column(col, justify="right" if col in ("pred. Δχ²", "p (Holm)") else "left")
     for c in d.candidates:
-        est = "; ".join(f"{n} {v:.3g} ± {s:.2g} {u}" for n, v, s, u in
-                        list(zip(c.names, c.estimate, c.sigma, c.units))[:3])
-        if len(c.names) > 3:
-            est += f"; … ({len(c.names)} parameters)"
-        note = c.advice or ("" if c.plausible else "size implausible for any IMU")
-        if not note and c.detectable and all(math.isfinite(v) for v in c.detectable):
-            note = f"smallest detectable ≈ {min(c.detectable):.2g} {c.units[0]}"
+        if c.names:
+            k = max(range(len(c.names)), key=lambda i: abs(c.estimate[i]) / max(c.sigma[i], 1e-300))
+            est = f"{c.names[k]} {c.estimate[k]:.3g} ± {c.sigma[k]:.2g} {c.units[k]}"
+        else:
+            est = ""
+        note = c.advice or ("size implausible for any IMU" if not c.plausible else "")
+        if not note:
+            smallest = {}
+            for v, u in zip(c.detectable, c.units):
+                if math.isfinite(v):
+                    smallest[u] = min(v, smallest.get(u, math.inf))
+            note = "detects ≥ " + ", ".join(f"{v:.2g} {u}" for u, v in smallest.items())
         t.add_row(c.effect, "yes" if c.significant else "no", f"{c.predicted_chi2_drop:.4g}",
                   f"{c.p_value_corrected:.2g}", est, note)
     return t
