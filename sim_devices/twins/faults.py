@@ -223,11 +223,14 @@ class StreamFaulter:
             self.intact_times.append(t[intact])
         return b"".join(out), intact
 
-    def overflowed(self, n_frames: int) -> None:
-        """The last block did not fit in the port's transmit buffer: nothing of it was sent."""
+    def overflowed(self, n_frames: int, recorded: bool = True) -> None:
+        """The last block (``recorded``: it went through :meth:`apply`) did not fit in the
+        port's transmit buffer: nothing of it was sent."""
         self.frames_overflowed += n_frames
-        if self.record and self.intact_times:
-            self.intact_times.pop()
+        if recorded:
+            self.frames_sent -= n_frames
+            if self.record and self.intact_times:
+                self.intact_times.pop()
 
     def _garbage(self) -> bytes:
         self.garbage_blocks += 1
