@@ -14,7 +14,7 @@ def cmd_import_imucal(args) -> int:
     path = imucal.import_imucal(
         args.csv, args.output, rate_hz=args.rate_hz, sections_path=args.sections, fmt=args.format,
         gravity_mps2=args.gravity_mps2, accel_unit=args.accel_unit, gyro_unit=args.gyro_unit,
-        model=args.model, serial=args.serial)
+        model=args.model, serial=args.serial, turn_deg=args.turn_deg, placement_deg=args.placement_deg)
     from station.capture import read_capture
 
     capture = read_capture(path)
@@ -23,7 +23,8 @@ def cmd_import_imucal(args) -> int:
 
     for seg in capture.segments:
         what = (f"up_body {vec(seg.up_body)}" if seg.kind == "static"
-                else f"axis_body {vec(seg.axis_body)}, rate_dps {seg.rate_dps:+.1f} (direction only)")
+                else f"axis_body {vec(seg.axis_body)}, rate_dps {seg.rate_dps:+.1f} (direction only)"
+                + ("" if seg.angle_deg is None else f", angle_deg {seg.angle_deg:+g} (protocol)"))
         out.print(f"{seg.name:6s} {seg.kind:8s} {len(seg.data.t):6d} samples  {what}", markup=False)
     out.print(f"capture: {path} ({capture.imu.accel_unit}, {capture.imu.gyro_unit}, "
               f"{capture.imu.sample_rate_hz:g} Hz)", markup=False)
@@ -62,6 +63,11 @@ def add_parsers(sub) -> None:
     p.add_argument("--gyro-unit", choices=GYRO_UNITS, help="override the layout's gyro unit")
     p.add_argument("--model", help="IMU model, recorded in the manifest")
     p.add_argument("--serial", help="IMU serial number, recorded in the manifest")
+    p.add_argument("--turn-deg", type=_positive, metavar="DEG",
+                   help="record each rotation section as a turn of DEG (imucal's protocol: 360) so "
+                        "that the least-squares model can use it; no encoder measured it")
+    p.add_argument("--placement-deg", type=_positive, default=1.0, metavar="DEG",
+                   help="1-sigma accuracy of the hand placement and turns (default 1 deg)")
     p.set_defaults(func=cmd_import_imucal)
 
 

@@ -38,7 +38,7 @@ def test_noise_free_fit_is_exact_and_chi2_zero():
     cal = lsq.to_calibration(result, "m/s^2", "deg/s")
     for name, _, _, err, unit in parameter_errors(cal, simrun.truth_calibration(truth)):
         assert abs(err) < 1e-3 * max(cal.sigma[name], 1e-3), (name, err, unit)
-    assert result.chi2 < 1e-6
+    assert result.chi2 < 1e-4 * result.dof      # noise would give about dof
     lever_p = truth.paper_parameters()["C_pb"] @ truth.bench.lever_arm_m     # case axes -> frame p
     np.testing.assert_allclose(result.x[result.model.layout["mounting_offset"]], lever_p, atol=1e-9)
 

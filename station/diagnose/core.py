@@ -21,6 +21,7 @@ from scipy import stats
 from station.estimate import lsq
 from station.model import EFFECTS
 
+PRIOR_QUANTITIES = ("weak_prior", "effect_prior", "attitude_prior", "axis_prior", "earth_prior")
 ALPHA = 0.01            # significance level of the whole family of candidate tests
 POWER_Z = 0.8416        # z of 80 % power, for the smallest detectable size
 
@@ -70,7 +71,7 @@ class Diagnosis:
 
 
 def _data_mask(labels) -> np.ndarray:
-    return np.array([q not in ("weak_prior", "effect_prior", "attitude_prior", "axis_prior")
+    return np.array([q not in PRIOR_QUANTITIES
                      for _, _, q, _ in labels])
 
 

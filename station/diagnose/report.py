@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from station.diagnose.core import PRIOR_QUANTITIES
 from station.errors import UserError
 from station.model import EFFECTS
 
@@ -69,7 +70,7 @@ def _segments_figure(plt, path, panels):
 def _candidate_figure(plt, path, diagnosis, cand):
     labels = diagnosis.labels
     r = diagnosis.result.model.residuals(diagnosis.result.x)
-    data = np.array([q not in ("weak_prior", "effect_prior", "attitude_prior", "axis_prior")
+    data = np.array([q not in PRIOR_QUANTITIES
                      for _, _, q, _ in labels])
     pred = -cand.signature_rows
     var_name = EFFECTS[cand.effect].signature_variable

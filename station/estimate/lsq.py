@@ -177,7 +177,8 @@ class Model:
             L.add(f"axis{k}", 4)           # axis tangent (2), kappa, e
         for i in range(len(s.rotations)):
             # where gravity is at the start; and the Earth rate, unless the turns are whole
-            L.add(f"phase{i}", 2 if _earth_rate_visible(self.s.rotations[i], s) else 1)
+            r = self.s.rotations[i]
+            L.add(f"phase{i}", 0 if not r.steady else 2 if _earth_rate_visible(r, s) else 1)
         if s.rotations and s.mounting_offset_m is None:
             L.add("mounting_offset", 3)
         for e in effects:
@@ -221,6 +222,8 @@ class Model:
             x[L[f"axis{k}"]][2] = np.mean([l0 @ (La @ (r.accel_dc - st.ba)) for r in segs])
         self.axis_basis = [tangent_basis(l0) for l0 in self.axis_ref]
         for i, r in enumerate(s.rotations):
+            if not r.steady:
+                continue
             l0 = self.axis_ref[r.group]
             e1, e2 = self.axis_basis[r.group]
             v = La @ r.accel_cos
@@ -292,6 +295,7 @@ class Model:
                     j = int(name[len(prefix):])
                     owned = list(rows.get((kind, j), [])) + list(rows.get(("weak", j), []) if kind == "static" else [])
                     if kind == "axis":
+                        owned += list(rows.get(("weak_axis", j), []))
                         owned += [r for i, rot in enumerate(self.s.rotations) if rot.group == j
                                   for r in rows.get(("rot", i), [])]
                     for k in range(sl.stop - sl.start):
@@ -301,7 +305,7 @@ class Model:
         dense = [[(c, None)] for c in range(L.size) if c not in local_cols]
         self.data_rows = np.ones(at, dtype=bool)
         for tag, idx in rows.items():
-            if tag[0] == "weak":
+            if tag[0] in ("weak", "weak_axis"):
                 self.data_rows[idx] = False
         return dense + list(local.values()), at
 
@@ -316,7 +320,10 @@ class Model:
                 axes = "xyz" if n == 3 else ["|w|"]
                 labels += [(name, "static", quantity, a) for a in axes]
             elif kind == "rot":
-                labels += [(self.s.rotations[j].name, "rotation", q, a) for q, a in rot_parts]
+                parts = rot_parts if quantity == "rotation" else rot_parts[-3:]
+                labels += [(self.s.rotations[j].name, "rotation", q, a) for q, a in parts]
+            elif kind == "weak_axis":
+                labels += [(f"axis{j}", "rotation", quantity, "e" if quantity == "earth_prior" else "kappa")]
             elif kind == "axis":
                 labels += [(f"axis{j}", "rotation", quantity, a) for a in "xyz"]
             else:
@@ -402,13 +409,20 @@ class Model:
                 axis_body = next(r.axis_body for r in s.rotations if r.group == k)
                 put(("axis", k), cross(l, C_mount.apply(axis_body)) / self.prior_sigma, "axis_prior")
         g = s.gravity_mps2
+        for k, (_, kappa, e) in enumerate(axes):
+            # the Earth rate along an axis lies within +/- Omega_E (uniform: sigma Omega_E/sqrt(3));
+            # without this a single-direction turn could trade it against the scale factor
+            put(("weak_axis", k), np.atleast_1d(e * np.sqrt(3.0) / self.omega_dps), "earth_prior")
+            if not any(r.steady for r in s.rotations if r.group == k):
+                # only unsteady turns about this axis: nothing sees the gravity along it
+                put(("weak_axis", k), np.atleast_1d(kappa / g / WEAK_PRIOR_RAD), "weak_prior")
         for i, r in enumerate(s.rotations):
             l, kappa, e = axes[r.group]
             e1 = self.axis_basis[r.group][0]
             e1 = e1 - (e1 @ l) * l
             e1 /= np.linalg.norm(e1)
             e2 = cross(l, e1)
-            psi, chi = (list(x[L[f"phase{i}"]]) + [0.0])[:2]
+            psi, chi = (list(x[L[f"phase{i}"]]) + [0.0, 0.0])[:2]
             v = np.sqrt(max(g * g - kappa * kappa, 0.0)) * (np.cos(psi) * e1 + np.sin(psi) * e2)
             # Earth rate across the axis turns with the body: over a whole number of turns it
             # integrates to zero, over the rest of a turn it does not
@@ -430,11 +444,15 @@ class Model:
                 term = eff.integral(x[L[f"effect:{eff.id}"]], r)
                 if term is not None:
                     integral = integral + term
+            gyro_rows = self.gyro_whiten[i] @ (r.gyro_integral - integral)
+            if not r.steady:        # a hand turn: its angle and axis only, through the gyro
+                put(("rot", i), gyro_rows, "rotation_gyro")
+                continue
             put(("rot", i), np.concatenate([
                 (r.accel_dc - dc) * root_n / s.accel_sigma,
                 (r.accel_cos - c) * root_n / (np.sqrt(2) * s.accel_sigma),
                 (r.accel_sin - sn) * root_n / (np.sqrt(2) * s.accel_sigma),
-                self.gyro_whiten[i] @ (r.gyro_integral - integral)]), "rotation")
+                gyro_rows]), "rotation")
         for c, sigma in self.priors.items():
             put(("prior", c), np.atleast_1d(x[c] / sigma), "effect_prior")
         return out, tags

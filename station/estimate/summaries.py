@@ -19,6 +19,7 @@ from station import units
 from station.errors import UserError
 
 EDGE_SAMPLES = 3
+STEADY_SPREAD = 0.1     # a rotation whose rate magnitude varies more (std/mean) is a hand turn
 
 
 @dataclass
@@ -47,6 +48,7 @@ class RotationSummary:
     temp_c: float | None
     gyro_start: np.ndarray          # (3,) rate at the window's start and end (mean of the
     gyro_end: np.ndarray            #   first and last EDGE_SAMPLES samples)
+    steady: bool = True             # the rate held within STEADY_SPREAD (a table, not a hand)
 
     @property
     def rate_dps(self) -> float:
@@ -90,11 +92,14 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp) ->
     basis = np.column_stack([np.ones_like(t), np.cos(phase), np.sin(phase)])
     coef, *_ = np.linalg.lstsq(basis, accel, rcond=None)
     edge = min(EDGE_SAMPLES, len(t) // 4)
+    magnitude = np.linalg.norm(gyro, axis=1)
+    steady = bool(np.std(magnitude) < STEADY_SPREAD * np.mean(magnitude))
     return RotationSummary(name=name, axis_body=axis_body, group=group, angle_deg=float(angle_deg),
                            duration_s=float(duration), samples=len(t), accel_dc=coef[0],
                            accel_cos=coef[1], accel_sin=coef[2], gyro_integral=gyro_integral,
                            temp_c=None if temp is None else float(np.mean(temp)),
-                           gyro_start=gyro[:edge].mean(axis=0), gyro_end=gyro[-edge:].mean(axis=0))
+                           gyro_start=gyro[:edge].mean(axis=0), gyro_end=gyro[-edge:].mean(axis=0),
+                           steady=steady)
 
 
 def summarise(capture, *, table_angle_arcsec: float | None = None) -> Summaries:

@@ -312,8 +312,14 @@ def kinematic_consistency(t, accel, gyro, window_s: float = 0.1) -> float:
 
 def import_imucal(csv_path, out_dir, *, rate_hz: float, sections_path=None, fmt: str = "auto",
                   gravity_mps2: float = DEFAULT_GRAVITY_MPS2, accel_unit: str | None = None,
-                  gyro_unit: str | None = None, model: str | None = None, serial: str | None = None) -> Path:
-    """Write an imucal session as a station capture bundle in ``out_dir``; returns its path."""
+                  gyro_unit: str | None = None, model: str | None = None, serial: str | None = None,
+                  turn_deg: float | None = None, placement_deg: float = 1.0) -> Path:
+    """Write an imucal session as a station capture bundle in ``out_dir``; returns its path.
+
+    ``turn_deg``: the protocol's turn of every rotation section (imucal's Ferraris protocol: 360),
+    recorded as ``angle_deg`` with a note that no encoder measured it; then the least-squares
+    model can use the sections.  ``placement_deg``: how well a hand puts the IMU on a face and
+    turns it (1-sigma), recorded as the bench's angle error."""
     csv_path = Path(csv_path)
     if not (isinstance(rate_hz, (int, float)) and math.isfinite(rate_hz) and rate_hz > 0):
         raise UserError(f"--rate-hz must be a positive number, got {rate_hz!r}")
@@ -346,8 +352,13 @@ def import_imucal(csv_path, out_dir, *, rate_hz: float, sections_path=None, fmt:
               "gyro_kinematic_correlation": round(kinematic, 4)}
     if sections_path is not None:
         source["sections"] = Path(sections_path).name
+    if turn_deg is not None and not (math.isfinite(turn_deg) and turn_deg > 0):
+        raise UserError(f"--turn-deg must be a positive angle in degrees, got {turn_deg!r}")
+    if not (math.isfinite(placement_deg) and placement_deg > 0):
+        raise UserError(f"--placement-deg must be a positive angle in degrees, got {placement_deg!r}")
     writer = CaptureWriter(out_dir, ImuInfo(float(rate_hz), accel_unit, gyro_unit, model=model, serial=serial),
-                           Site(float(gravity_mps2)), scheme="imucal-ferraris", extra={"import": source})
+                           Site(float(gravity_mps2)), scheme="imucal-ferraris",
+                           extra={"import": source, "table": {"angle_error_arcsec": placement_deg * 3600.0}})
     for s in sections:
         if s.label in STATIC_UP:
             meta = {"up_body": list(STATIC_UP[s.label]),
@@ -358,6 +369,10 @@ def import_imucal(csv_path, out_dir, *, rate_hz: float, sections_path=None, fmt:
             duration = len(s.t) / rate_hz
             meta = {"axis_body": list(ROTATION_AXIS[s.label]), "rate_dps": sign * 360.0 / duration,
                     "note": note + f" (CSV line {s.first_line} on)"}
+            if turn_deg is not None:
+                meta["angle_deg"] = sign * float(turn_deg)
+                meta["note"] += (f"; angle_deg {sign * turn_deg:g} is the protocol's turn (--turn-deg), "
+                                 "not an encoder reading")
             kind = "rotation"
         with writer.begin_segment(s.label, kind, **meta) as seg:
             seg.write(s.t, s.accel, s.gyro)
