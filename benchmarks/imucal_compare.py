@@ -95,6 +95,25 @@ def main() -> int:
             except UserError as e:
                 print(f"  {method}: refused: {e}")
 
+        # with imucal's own assumption made explicit: each hand turn is exactly 360 deg, each pose
+        # within 1 deg of axis up or down (a prior, not a certainty)
+        path360 = importer.import_imucal(SESSION, Path(tmp) / "capture360", rate_hz=RATE_HZ,
+                                         sections_path=SECTIONS, turn_deg=360.0, placement_deg=1.0)
+        cal, _, _ = estimate_capture(path360, "auto")
+        p = {n: (v, cal.sigma.get(n)) for n, v, _ in cal.parameters()}
+        print("\nstation estimate --method lsq after `station import imucal --turn-deg 360`"
+              f" (reduced chi2 {cal.fit['reduced_chi2']:.2f}):")
+        for label, names, k in (("accel gain", [f"accel_scale_{a}" for a in "xyz"], 1.0),
+                                ("accel bias m/s^2", [f"accel_bias_{a}" for a in "xyz"], 9.80665e-6),
+                                ("gyro gain", [f"gyro_scale_{a}" for a in "xyz"], 1.0),
+                                ("gyro bias deg/s", [f"gyro_bias_{a}" for a in "xyz"], 1 / 3600)):
+            print(f"  {label:18s} " + ", ".join(f"{p[n][0] * k:+.4f} ± {p[n][1] * k:.4f}" for n in names))
+        station_result = {"K_a": [p[f"accel_scale_{a}"][0] for a in "xyz"],
+                          "b_a": [p[f"accel_bias_{a}"][0] * 9.80665e-6 for a in "xyz"],
+                          "K_g": [p[f"gyro_scale_{a}"][0] for a in "xyz"],
+                          "b_g": [p[f"gyro_bias_{a}"][0] / 3600 for a in "xyz"]}
+        print("  " + json.dumps({k: np.round(v, 4).tolist() for k, v in station_result.items()}))
+
         try:
             import imucal  # noqa: F401
         except ImportError:
