@@ -86,6 +86,25 @@ def test_cli_import_and_what_station_can_estimate(tmp_path, capsys):
     assert cli.main(["estimate", str(out)]) == 2
 
 
+def test_protocol_turn_lets_lsq_agree_with_imucal(tmp_path):
+    """With imucal's assumptions made explicit (--turn-deg 360, 1 deg placement), the
+    least-squares model reproduces imucal's published result within its printed digits."""
+    path = imucal.import_imucal(SESSION, tmp_path / "c", rate_hz=102.4, sections_path=SECTIONS,
+                                turn_deg=360.0)
+    assert read_capture(path).segment("x_rot").angle_deg == -360.0
+    cal, _, prov = estimate_capture(path)
+    assert prov["method"] == "lsq"
+    p = {n: v for n, v, _ in cal.parameters()}
+    published = {"accel_scale": ([0.997, 1.002, 1.023], 1.0, 0.0005),
+                 "accel_bias": ([0.54, -0.62, 0.40], 9.80665e-6, 0.005),
+                 "gyro_bias": ([-0.60, -0.37, 0.06], 1 / 3600, 0.005)}
+    for block, (values, unit, half_digit) in published.items():
+        for a, v in zip("xyz", values):
+            assert abs(p[f"{block}_{a}"] * unit - v) <= half_digit, (block, a, p[f"{block}_{a}"] * unit, v)
+    # six poses cannot reveal the misalignments: their 1-sigma is the placement prior's size
+    assert all(cal.sigma[f"accel_misalignment_{n}"] > 1000 for n in ("yz", "zy", "zx"))
+
+
 # --- bad input -------------------------------------------------------------------------------------
 
 def write(tmp_path, name, text):
