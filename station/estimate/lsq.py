@@ -468,24 +468,11 @@ class FitResult:
     residuals: np.ndarray
 
 
-def _solve(model: Model, x0: np.ndarray, free: np.ndarray):
-    def residuals(z):
-        x = x0.copy()
-        x[free] = z
-        return model.residuals(x)
-
-    def jacobian(z):
-        x = x0.copy()
-        x[free] = z
-        return model.jacobian(x)[:, free]
-
-    res = least_squares(residuals, x0[free], jac=jacobian, method="lm", x_scale="jac",
+def _solve(model: Model, x0: np.ndarray):
+    res = least_squares(model.residuals, x0, jac=model.jacobian, method="lm", x_scale="jac",
                         xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=100)
-    x = x0.copy()
-    x[free] = res.x
-    cov = np.zeros((len(x), len(x)))
-    cov[np.ix_(free, free)] = covariance(jacobian(res.x))
-    return x, cov, res.fun
+    J = model.jacobian(res.x)
+    return res.x, covariance(J), res.fun, J
 
 
 def covariance(J: np.ndarray) -> np.ndarray:
@@ -539,8 +526,7 @@ def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "aut
             model.priors[c] = p.typical / p.scale
             model.unobservable.append(p.name)
         model.refresh()
-        x, cov, r = _solve(model, model.x0, np.ones(model.layout.size, dtype=bool))
-        J = model.jacobian(x)
+        x, cov, r, J = _solve(model, model.x0)
     r = r[model.data_rows]      # the weak priors on nuisance angles are not data
     dof = len(r) - model.layout.size
     return FitResult(x=x, covariance=cov, model=model, chi2=float(r @ r), dof=dof, residuals=r)
