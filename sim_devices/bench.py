@@ -22,13 +22,14 @@ class SimSegment:
     """One recorded segment.
 
     kind   "static" | "rotation"
-    t      (N,) device time, s, continuing across segments (gaps for moves)
+    t      (N,) the IMU's time stamps, s, continuing across segments (gaps for moves); the
+           sample stamped t was taken at table time t + bench.time_offset_s
     accel  (N,3) raw accelerometer output (m/s^2 nominal)
     gyro   (N,3) raw gyro output (deg/s nominal)
     temp   (N,) IMU temperature, deg C
     meta   what the bench reports: static {"up_body"}; rotation
            {"axis_body", "rate_dps", "angle_deg" (encoder, over the window
-           [t0 - dt/2, t_{N-1} + dt/2])}
+           [t0 - dt/2, t_{N-1} + dt/2] of table time computed from the stamps)}
     truth  hidden true values, for tests and diagnostics only -- an
            estimator must not use them.
     """
@@ -97,7 +98,7 @@ class SimulatedBench:
         return n
 
     def _times(self, n: int) -> np.ndarray:
-        """Sample times of the next segment, after the move and settling gap."""
+        """IMU time stamps of the next segment, after the move and settling gap."""
         dt = 1.0 / self.sample_rate_hz
         t0 = self._time_end + self.truth.bench.move_s + self.truth.bench.settle_s + 0.5 * dt
         t = t0 + dt * np.arange(n)
@@ -109,6 +110,7 @@ class SimulatedBench:
         return self._geom_rng.normal(0.0, self.truth.bench.table_angle_error_arcsec, 3) * ARCSEC
 
     def _measure(self, t, f_b, w_ib_rad, w_eb_b=None, wdot_eb_b=None):
+        """Raw outputs of samples taken at table times ``t`` (temperature evaluated there)."""
         f_b = world.perturb_specific_force(
             f_b, self.truth.bench.accel_disturbance_ug * world.MICRO_G, self._noise_rng)
         temp = self.truth.temperature.at(t)
@@ -127,7 +129,7 @@ class SimulatedBench:
         t = self._times(n)
         f_b, w_ib = world.static_kinematics(C_bn, n, self.site)
         f_true, w_true = f_b[0].copy(), w_ib[0].copy()
-        accel, gyro, temp = self._measure(t, f_b, w_ib)
+        accel, gyro, temp = self._measure(t + self.truth.bench.time_offset_s, f_b, w_ib)
         return SimSegment(
             kind="static", t=t, accel=accel, gyro=gyro, temp=temp,
             meta={"up_body": [float(x) for x in up]},
@@ -177,24 +179,33 @@ class SimulatedBench:
         dt = 1.0 / fs
         bench = self.truth.bench
         phase = self._geom_rng.uniform(0.0, 2.0 * np.pi)
-        t = self._times(n)
+        t = self._times(n)                      # IMU stamps
+        tau = t + bench.time_offset_s           # table time at which each sample was taken
         w_rad = math.radians(r)
         duration = n * dt
+        # the profile is defined in table time, theta = 0 at table time t[0]
         prof = dict(t0=t[0], rate_rad_s=w_rad, ripple_fraction=bench.rate_ripple_fraction,
                     ripple_hz=bench.rate_ripple_hz, ripple_phase_rad=phase,
                     drift_per_s=float(drift_fraction) / duration)
-        theta, theta_dot, theta_ddot = world.rate_profile(t, **prof)
-        C_bn = world.table_attitude(C_bn0, a_n, theta)
-        w_b, wdot_b = world.table_rates_body(C_bn0, a_n, theta_dot, theta_ddot)
+        theta, theta_dot, theta_ddot = world.rate_profile(tau, **prof)
+        wobble_rad = bench.wobble_arcsec * ARCSEC
+        wobble_phase = math.radians(bench.wobble_phase_deg)
+        if wobble_rad > 0.0:
+            C_bn, w_b, wdot_b = world.wobbling_table(C_bn0, a_n, theta, theta_dot, theta_ddot,
+                                                     wobble_rad, wobble_phase, harmonic=1)
+        else:
+            C_bn = world.table_attitude(C_bn0, a_n, theta)
+            w_b, wdot_b = world.table_rates_body(C_bn0, a_n, theta_dot, theta_ddot)
         f_b, w_ib = world.body_kinematics(C_bn, w_b, wdot_b, bench.lever_arm_m, self.site)
 
-        # encoder: true swept angle over [t0 - dt/2, t_{N-1} + dt/2] plus error
+        # encoder: true swept angle over the table-time window [t0 - dt/2, t_{N-1} + dt/2] that
+        # the station computes from the IMU stamps, plus error
         edges, _, _ = world.rate_profile(np.array([t[0] - 0.5 * dt, t[-1] + 0.5 * dt]), **prof)
         swept_deg = math.degrees(edges[1] - edges[0])
         enc_err_arcsec = float(self._enc_rng.normal(0.0, bench.table_angle_error_arcsec))
         angle_deg = swept_deg + enc_err_arcsec / 3600.0
 
-        accel, gyro, temp = self._measure(t, f_b, w_ib, w_b, wdot_b)
+        accel, gyro, temp = self._measure(tau, f_b, w_ib, w_b, wdot_b)
         meta = {"axis_body": [float(x) for x in a_cmd], "rate_dps": r}
         if encoder:
             meta["angle_deg"] = angle_deg
@@ -210,5 +221,8 @@ class SimulatedBench:
                 "encoder_error_arcsec": enc_err_arcsec,
                 "ripple_phase_rad": phase,
                 "window_s": (float(t[0] - 0.5 * dt), float(t[-1] + 0.5 * dt)),
+                "time_offset_s": float(bench.time_offset_s),
+                "wobble_rad": wobble_rad,
+                "wobble_direction_enu": world.wobble_direction_enu(a_n, wobble_phase),
             },
         )

@@ -1,14 +1,18 @@
 """The true (hidden) sensor error model of the simulated IMU, and its YAML file.
 
-Physical model (case frame b; see docs/simulation.md):
+Physical model (case frame b; see docs/simulation.md for the exact equations):
 
     accel_raw = K_a S_a f_b             + b_a(T) + n_a      (raw units: m/s^2)
     gyro_raw  = K_g S_g w_ib_b [deg/s]  + b_g(T) + n_g      (raw units: deg/s)
 
 S_a rows are the unit sensing directions u_ai of the three accelerometers in
 case axes, each given by two small tilt angles from case axis i towards the
-other two case axes; K_a = diag(scale).  Likewise for the gyros.  Then
-quantisation to an LSB (0 = none).
+other two case axes; K_a = diag(scale).  Likewise for the gyros.  Optional
+higher-order effects (all zero by default): accelerometer second-order
+nonlinearity K2_i a_i^2 and cross-coupling sum_j C_ij a_i a_j (a in g, result
+in ug, added like the bias), gyro g-sensitivity G f (deg/h per g, f in case
+axes) and gyro scale-factor asymmetry (k_i (1 +- A_i) for +- input rate).
+Then quantisation to an LSB (0 = none).
 
 :meth:`Truth.paper_parameters` re-expresses this physical truth in the
 parameterisation of Zhang et al. (2010), eqs. (1)-(6).
@@ -27,7 +31,7 @@ from scipy.spatial.transform import Rotation
 
 from station.errors import UserError
 
-from .world import ARCSEC, DEG_PER_HOUR, MICRO_G
+from .world import ARCSEC, DEG_PER_HOUR, G_STANDARD, MICRO_G
 
 SCHEMA_VERSION = 1
 
@@ -37,6 +41,13 @@ DEFAULT_GYRO_NOISE_DPH_RTHZ = 0.03
 DEFAULT_SAMPLE_RATE_HZ = 100.0
 
 MAX_TILT_ARCSEC = 36000.0   # 10 degrees: beyond that it is not a "misalignment"
+# Plausibility bounds of the higher-order effects (far beyond any real IMU; they catch unit
+# mistakes, e.g. a ppm value entered as ug/g^2 * 1e6).
+MAX_SECOND_ORDER_UG_PER_G2 = 1e5      # 10 % of full scale per g^2
+MAX_G_SENSITIVITY_DPH_PER_G = 1e6     # ~280 deg/s per g
+MAX_SCALE_ASYMMETRY_PPM = 1e5         # 10 %
+MAX_TIME_OFFSET_S = 1.0
+MAX_WOBBLE_ARCSEC = 3600.0            # 1 degree
 
 # The two "other" axes of each case axis, in x<y<z order: the columns of
 # axis_tilt_arcsec.
@@ -149,6 +160,16 @@ class TriadTruth:
     # accelerometers only: where each sensing element sits (row i: element i), m, case axes,
     # relative to the IMU reference point (the 2017 paper's size effect)
     position_m: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
+    # accelerometers only: second-order nonlinearity K2_i (ug/g^2), accel i adds K2_i a_i^2
+    nonlinearity_ug_per_g2: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    # accelerometers only: cross-coupling C_ij (ug/g^2, zero diagonal), accel i adds
+    # sum_{j != i} C_ij a_i f_j  (a_i along its sensing axis, f_j along case axis j, in g)
+    cross_coupling_ug_per_g2: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
+    # gyros only: g-sensitivity G_ij (deg/h per g), gyro i adds sum_j G_ij f_j (f: case axes, g)
+    g_sensitivity_dph_per_g: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
+    # gyros only: scale-factor asymmetry A_i (ppm): scale k_i (1 + A_i 1e-6) for a positive
+    # input rate along the sensing axis, k_i (1 - A_i 1e-6) for a negative one
+    scale_asymmetry_ppm: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     def __post_init__(self):
         self.scale = np.asarray(self.scale, dtype=float).reshape(3)
@@ -158,6 +179,15 @@ class TriadTruth:
         self.noise_density = float(self.noise_density)
         self.lsb = float(self.lsb)
         self.position_m = np.asarray(self.position_m, dtype=float).reshape(3, 3)
+        self.nonlinearity_ug_per_g2 = np.asarray(self.nonlinearity_ug_per_g2, dtype=float).reshape(3)
+        self.cross_coupling_ug_per_g2 = np.asarray(self.cross_coupling_ug_per_g2,
+                                                   dtype=float).reshape(3, 3)
+        self.g_sensitivity_dph_per_g = np.asarray(self.g_sensitivity_dph_per_g,
+                                                  dtype=float).reshape(3, 3)
+        self.scale_asymmetry_ppm = np.asarray(self.scale_asymmetry_ppm, dtype=float).reshape(3)
+        if np.any(np.diag(self.cross_coupling_ug_per_g2) != 0.0):
+            raise ValueError("cross_coupling_ug_per_g2 must have a zero diagonal "
+                             "(the a_i^2 term is nonlinearity_ug_per_g2)")
 
     @property
     def axes(self) -> np.ndarray:
@@ -203,9 +233,37 @@ class BenchSettings:
     accel_disturbance_ug: float = 0.0
     move_s: float = 10.0
     settle_s: float = 5.0
+    # the IMU's time stamps lag the table's clock: the sample stamped t was taken at table
+    # time t + time_offset_s
+    time_offset_s: float = 0.0
+    # the platter's axis is tilted by wobble_arcsec from the nominal table axis, the tilt turning
+    # once per revolution relative to the platter (world.wobbling_table, harmonic 1)
+    wobble_arcsec: float = 0.0
+    wobble_phase_deg: float = 0.0
 
     def __post_init__(self):
         self.lever_arm_m = np.asarray(self.lever_arm_m, dtype=float).reshape(3)
+
+
+def _cross_coupling(c: "_Checker", value, field_name: str) -> np.ndarray:
+    """Cross-coupling coefficients as 3x3 (zero diagonal) or 3x2 (row i: the two other case
+    axes in x<y<z order, like axis_tilt_arcsec) -> 3x3 with a zero diagonal."""
+    bounds = dict(lo=-MAX_SECOND_ORDER_UG_PER_G2, hi=MAX_SECOND_ORDER_UG_PER_G2)
+    cols = 3
+    if isinstance(value, (list, tuple)) and value and isinstance(value[0], (list, tuple)) \
+            and len(value[0]) == 2:
+        cols = 2
+    m = c.matrix(value, field_name, 3, cols, **bounds)
+    if cols == 2:
+        full = np.zeros((3, 3))
+        for i, (j, k) in enumerate(OTHER_AXES):
+            full[i, j], full[i, k] = m[i]
+        return full
+    for i in range(3):
+        if m[i, i] != 0.0:
+            c.fail(f"{field_name}[{i}][{i}]",
+                   f"the diagonal must be 0 (a_i^2 is nonlinearity_ug_per_g2), got {m[i, i]!r}")
+    return m
 
 
 def _quantise(x: np.ndarray, lsb: float) -> np.ndarray:
@@ -220,14 +278,15 @@ def _quantise(x: np.ndarray, lsb: float) -> np.ndarray:
 
 _TOP_KEYS = {"version", "sample_rate_hz", "accelerometer", "gyroscope", "temperature", "bench"}
 _ACC_KEYS = {"scale", "axis_tilt_arcsec", "bias_ug", "bias_tempco_ug_per_c",
-             "noise_density_ug_rthz", "lsb_mps2", "position_m"}
+             "noise_density_ug_rthz", "lsb_mps2", "position_m", "nonlinearity_ug_per_g2",
+             "cross_coupling_ug_per_g2"}
 _GYR_KEYS = {"scale", "axis_tilt_arcsec", "bias_dph", "bias_tempco_dph_per_c",
-             "noise_density_dph_rthz", "lsb_dps"}
+             "noise_density_dph_rthz", "lsb_dps", "g_sensitivity_dph_per_g", "scale_asymmetry_ppm"}
 _TEMP_KEYS = {"start_c", "reference_c", "drift_c_per_h", "warmup_delta_c",
               "warmup_time_constant_s"}
 _BENCH_KEYS = {"latitude_deg", "height_m", "lever_arm_m", "table_angle_error_arcsec",
                "rate_ripple_fraction", "rate_ripple_hz", "rate_drift_fraction", "accel_disturbance_ug",
-               "move_s", "settle_s"}
+               "move_s", "settle_s", "time_offset_s", "wobble_arcsec", "wobble_phase_deg"}
 
 
 @dataclass
@@ -261,6 +320,12 @@ class Truth:
         Earth and its derivative: each accelerometer then senses the specific force at its own
         position p_i, f_i = f_b + wdot x p_i + w x (w x p_i) (rigid body).
         Returns (accel_raw, gyro_raw), each (N,3).
+
+        Per accelerometer i, with a_i = u_i . f_i / g0 and F = f_i / g0 (g0 = 9.80665 m/s^2):
+            accel_i = k_i u_i . f_i + [b_i + c_i dT + K2_i a_i^2 + sum_{j != i} C_ij a_i F_j] ug
+        per gyro i, with r_i = u_gi . w_b (deg/s) and F = f_b / g0 (case axes):
+            gyro_i = k_i r_i + k_i A_i 1e-6 |r_i| + [b_i + c_i dT + sum_j G_ij F_j] deg/h
+        then noise and quantisation.
         """
         f_b = np.atleast_2d(np.asarray(f_b, dtype=float))
         w_b = np.atleast_2d(np.asarray(w_b_dps, dtype=float))
@@ -268,13 +333,30 @@ class Truth:
         ba = (self.accel.bias + self.accel.bias_tempco * dT) * MICRO_G
         bg = (self.gyro.bias + self.gyro.bias_tempco * dT) * DEG_PER_HOUR
         accel = f_b @ self.accel.matrix.T + ba
+        extras = None
         if w_eb_b is not None and np.any(self.accel.position_m):
             w = np.atleast_2d(np.asarray(w_eb_b, dtype=float))
             wd = np.atleast_2d(np.asarray(wdot_eb_b if wdot_eb_b is not None else 0.0, dtype=float))
+            extras = []
             for i, p in enumerate(self.accel.position_m):
                 extra = np.cross(wd, p) + np.cross(w, np.cross(w, p))
+                extras.append(extra)
                 accel[:, i] += extra @ self.accel.matrix[i]
+        K2 = self.accel.nonlinearity_ug_per_g2
+        C = self.accel.cross_coupling_ug_per_g2
+        if np.any(K2) or np.any(C):
+            S = self.accel.axes
+            for i in range(3):
+                F = (f_b if extras is None else f_b + extras[i]) / G_STANDARD   # g, case axes
+                a = F @ S[i]                                                    # g, sensing axis
+                accel[:, i] += (K2[i] * a + F @ C[i]) * a * MICRO_G
         gyro = w_b @ self.gyro.matrix.T + bg
+        A = self.gyro.scale_asymmetry_ppm
+        if np.any(A):
+            gyro += np.abs(w_b @ self.gyro.axes.T) * (self.gyro.scale * A * 1e-6)
+        G = self.gyro.g_sensitivity_dph_per_g
+        if np.any(G):
+            gyro += (f_b / G_STANDARD) @ G.T * DEG_PER_HOUR
         if rng is not None:
             if self.accel.noise_density > 0.0:
                 accel += self.accel_noise_sigma * rng.standard_normal(accel.shape)
@@ -290,6 +372,12 @@ class Truth:
         gyro_raw  = diag(gyro_scale) gyro_T R_po w_p + gyro_bias
         with f_p = C_pb f_b, w_p = C_pb w_b (deg/s); biases at reference_c,
         in raw units (m/s^2, deg/s).
+
+        The higher-order effects in the same frames (exact): accelerometer i's own input is
+        a_i = (accel_T f_p)_i / g0, gyro i's input r_i = (gyro_T R_po w_p)_i, so
+        ``accel_nonlinearity_ug_per_g2`` (K2) and ``gyro_scale_asymmetry_ppm`` (A) carry over
+        unchanged; the g-sensitivity against f_p is ``gyro_g_sensitivity_dph_per_g``
+        = G C_pb^T.  (The cross-coupling uses case-axis components and has no such form.)
         """
         Sa, Sg = self.accel.axes, self.gyro.axes
         C_pb = triad_frame(Sa)
@@ -324,6 +412,10 @@ class Truth:
             "accel_misalignment_arcsec": alpha / ARCSEC,
             "gyro_misalignment_arcsec": gamma / ARCSEC,
             "inter_triad_arcsec": theta / ARCSEC,
+            # higher-order effects against f_p, w_p (see the docstring)
+            "accel_nonlinearity_ug_per_g2": self.accel.nonlinearity_ug_per_g2.copy(),
+            "gyro_scale_asymmetry_ppm": self.gyro.scale_asymmetry_ppm.copy(),
+            "gyro_g_sensitivity_dph_per_g": self.gyro.g_sensitivity_dph_per_g @ C_pb.T,
         }
 
     # ------------------------------------------------------------------ YAML
@@ -342,6 +434,8 @@ class Truth:
                 "noise_density_ug_rthz": float(self.accel.noise_density),
                 "lsb_mps2": float(self.accel.lsb),
                 "position_m": [fl(r) for r in self.accel.position_m],
+                "nonlinearity_ug_per_g2": fl(self.accel.nonlinearity_ug_per_g2),
+                "cross_coupling_ug_per_g2": [fl(r) for r in self.accel.cross_coupling_ug_per_g2],
             },
             "gyroscope": {
                 "scale": fl(self.gyro.scale),
@@ -350,6 +444,8 @@ class Truth:
                 "bias_tempco_dph_per_c": fl(self.gyro.bias_tempco),
                 "noise_density_dph_rthz": float(self.gyro.noise_density),
                 "lsb_dps": float(self.gyro.lsb),
+                "g_sensitivity_dph_per_g": [fl(r) for r in self.gyro.g_sensitivity_dph_per_g],
+                "scale_asymmetry_ppm": fl(self.gyro.scale_asymmetry_ppm),
             },
             "temperature": {
                 "start_c": float(self.temperature.start_c),
@@ -369,6 +465,9 @@ class Truth:
                 "accel_disturbance_ug": float(self.bench.accel_disturbance_ug),
                 "move_s": float(self.bench.move_s),
                 "settle_s": float(self.bench.settle_s),
+                "time_offset_s": float(self.bench.time_offset_s),
+                "wobble_arcsec": float(self.bench.wobble_arcsec),
+                "wobble_phase_deg": float(self.bench.wobble_phase_deg),
             },
         }
 
@@ -420,6 +519,21 @@ class Truth:
                 t.lsb = c.number(d[lsb_key], f"{sec}.{lsb_key}", lo=0.0)
             if "position_m" in d:
                 t.position_m = c.matrix(d["position_m"], f"{sec}.position_m", 3, 3, lo=-1.0, hi=1.0)
+            if "nonlinearity_ug_per_g2" in d:
+                t.nonlinearity_ug_per_g2 = c.vector(
+                    d["nonlinearity_ug_per_g2"], f"{sec}.nonlinearity_ug_per_g2",
+                    lo=-MAX_SECOND_ORDER_UG_PER_G2, hi=MAX_SECOND_ORDER_UG_PER_G2)
+            if "cross_coupling_ug_per_g2" in d:
+                t.cross_coupling_ug_per_g2 = _cross_coupling(c, d["cross_coupling_ug_per_g2"],
+                                                             f"{sec}.cross_coupling_ug_per_g2")
+            if "g_sensitivity_dph_per_g" in d:
+                t.g_sensitivity_dph_per_g = c.matrix(
+                    d["g_sensitivity_dph_per_g"], f"{sec}.g_sensitivity_dph_per_g", 3, 3,
+                    lo=-MAX_G_SENSITIVITY_DPH_PER_G, hi=MAX_G_SENSITIVITY_DPH_PER_G)
+            if "scale_asymmetry_ppm" in d:
+                t.scale_asymmetry_ppm = c.vector(
+                    d["scale_asymmetry_ppm"], f"{sec}.scale_asymmetry_ppm",
+                    lo=-MAX_SCALE_ASYMMETRY_PPM, hi=MAX_SCALE_ASYMMETRY_PPM)
             return t
 
         accel = triad("accelerometer", _ACC_KEYS, "bias_ug", "bias_tempco_ug_per_c",
@@ -466,6 +580,15 @@ class Truth:
         for k in ("move_s", "settle_s"):
             if k in d:
                 setattr(bench, k, c.number(d[k], f"bench.{k}", lo=0.0))
+        if "time_offset_s" in d:
+            bench.time_offset_s = c.number(d["time_offset_s"], "bench.time_offset_s",
+                                           lo=-MAX_TIME_OFFSET_S, hi=MAX_TIME_OFFSET_S)
+        if "wobble_arcsec" in d:
+            bench.wobble_arcsec = c.number(d["wobble_arcsec"], "bench.wobble_arcsec",
+                                           lo=0.0, hi=MAX_WOBBLE_ARCSEC)
+        if "wobble_phase_deg" in d:
+            bench.wobble_phase_deg = c.number(d["wobble_phase_deg"], "bench.wobble_phase_deg",
+                                              lo=-360.0, hi=360.0)
         return cls(accel=accel, gyro=gyro, sample_rate_hz=rate, temperature=temp, bench=bench)
 
 
@@ -503,6 +626,37 @@ def default_truth(seed: int) -> Truth:
         axis_tilt_arcsec=_signed_uniform(rng, 10.0, 300.0, (3, 2)),
         bias=_signed_uniform(rng, 0.05, 1.0, 3),
         noise_density=DEFAULT_GYRO_NOISE_DPH_RTHZ,
+    )
+    d = rng.standard_normal(3)
+    bench = BenchSettings(lever_arm_m=0.05 * d / np.linalg.norm(d))
+    return Truth(accel=accel, gyro=gyro, sample_rate_hz=DEFAULT_SAMPLE_RATE_HZ,
+                 temperature=TemperatureTruth(), bench=bench)
+
+
+def mems_truth(seed: int) -> Truth:
+    """Random (seeded) errors of a consumer/tactical MEMS IMU; see docs/simulation.md.
+
+    scale errors   +-[0.1, 1] %  (accel and gyro, each axis)
+    axis tilts     +-[0.1, 1] deg (each of the 6 accel and 6 gyro angles)
+    accel biases   +-[1, 20] mg
+    gyro biases    +-[0.1, 1] deg/s
+    noise          accel [100, 200] ug/sqrt(Hz), gyro [5, 20] deg/h/sqrt(Hz) (0.08-0.33 deg/sqrt(h))
+    lever arm      5 cm in a random direction
+    everything else as default_truth: 100 Hz, no LSB, no temperature coefficients and no
+    higher-order effect (set them in a truth file to hide them).
+    """
+    rng = np.random.default_rng(seed)
+    accel = TriadTruth(
+        scale=1.0 + 1e-6 * _signed_uniform(rng, 1000.0, 10000.0, 3),
+        axis_tilt_arcsec=_signed_uniform(rng, 360.0, 3600.0, (3, 2)),
+        bias=_signed_uniform(rng, 1000.0, 20000.0, 3),
+        noise_density=float(rng.uniform(100.0, 200.0)),
+    )
+    gyro = TriadTruth(
+        scale=1.0 + 1e-6 * _signed_uniform(rng, 1000.0, 10000.0, 3),
+        axis_tilt_arcsec=_signed_uniform(rng, 360.0, 3600.0, (3, 2)),
+        bias=_signed_uniform(rng, 360.0, 3600.0, 3),
+        noise_density=float(rng.uniform(5.0, 20.0)),
     )
     d = rng.standard_normal(3)
     bench = BenchSettings(lever_arm_m=0.05 * d / np.linalg.norm(d))

@@ -19,6 +19,7 @@ sensor model lives in :mod:`sim_devices.truth`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -173,6 +174,16 @@ def table_axis_enu(heading_rad: float, elevation_rad: float = 0.0) -> np.ndarray
     return np.array([c * np.sin(heading_rad), c * np.cos(heading_rad), np.sin(elevation_rad)])
 
 
+def axis_reference_enu(axis_enu) -> np.ndarray:
+    """Unit reference direction perpendicular to ``axis_enu`` (ENU): the part of local up
+    perpendicular to the axis, or the part of north when the axis is vertical."""
+    a_n = _unit(axis_enu, "axis_enu")
+    ref = UP_ENU - np.dot(UP_ENU, a_n) * a_n
+    if np.linalg.norm(ref) < 1e-9:
+        ref = np.array([0.0, 1.0, 0.0]) - a_n[1] * a_n
+    return ref / np.linalg.norm(ref)
+
+
 def attitude_axis(axis_body, axis_enu, *, up_body=None, roll_rad: float = 0.0) -> Rotation:
     """Attitude C_bn with C_bn.apply(axis_enu) == unit(axis_body).
 
@@ -184,10 +195,7 @@ def attitude_axis(axis_body, axis_enu, *, up_body=None, roll_rad: float = 0.0) -
     """
     a_b = _unit(axis_body, "axis_body")
     a_n = _unit(axis_enu, "axis_enu")
-    ref = UP_ENU - np.dot(UP_ENU, a_n) * a_n
-    if np.linalg.norm(ref) < 1e-9:
-        ref = np.array([0.0, 1.0, 0.0]) - a_n[1] * a_n
-    ref /= np.linalg.norm(ref)
+    ref = axis_reference_enu(a_n)
     if up_body is not None:
         h = _unit(up_body, "start_up_body")
         h = h - np.dot(h, a_b) * a_b
@@ -257,6 +265,71 @@ def table_rates_body(C_bn0: Rotation, axis_enu, theta_dot, theta_ddot):
     theta_dot = np.asarray(theta_dot, dtype=float).reshape(-1, 1)
     theta_ddot = np.asarray(theta_ddot, dtype=float).reshape(-1, 1)
     return theta_dot * a_b[None, :], theta_ddot * a_b[None, :]
+
+
+def wobble_direction_enu(axis_enu, phase_rad: float = 0.0) -> np.ndarray:
+    """d: the direction of the wobble tilt's rotation vector at table angle 0, ENU.
+
+    d = Rot(a_n, phase) ref, with ref = :func:`axis_reference_enu` (the part of local up
+    perpendicular to the axis).  d is perpendicular to a_n.
+    """
+    a_n = _unit(axis_enu, "axis_enu")
+    return Rotation.from_rotvec(float(phase_rad) * a_n).apply(axis_reference_enu(a_n))
+
+
+def wobbling_table(C_bn0: Rotation, axis_enu, theta, theta_dot, theta_ddot,
+                   wobble_rad: float, phase_rad: float = 0.0, harmonic: int = 1):
+    """Attitude, rate and angular acceleration of a table whose axis wobbles.
+
+    The platter is spun by theta about the Earth-fixed axis a_n and tilted by the constant
+    angle b = ``wobble_rad`` about a direction e(theta) perpendicular to a_n that turns
+    ``harmonic`` (m) times per revolution *relative to the platter*:
+
+        C_nb(t) = Rot(a_n, theta) Rot(b e(theta)) C_nb0,     e(theta) = Rot(a_n, m theta) d
+        <=>  C_bn(t) = C_bn0 Rot(-b e(theta)) Rot(a_n, -theta)
+
+    with d = :func:`wobble_direction_enu` (coordinates of the platter frame, which is ENU at
+    theta = 0).  The platter axis a_b = C_bn0 a_n (fixed in the body) then points, in ENU,
+    along Rot(a_n, theta) Rot(b e) a_n: exactly b away from a_n, turning m + 1 times per
+    revolution about it.  The exact angular velocity relative to the Earth, body axes
+    (derivation in docs/simulation.md):
+
+        w_b    = theta_dot C_bn0 [ (cos b - m (1 - cos b)) a_n + (1 + m) sin b (a_n x e) ]
+        wdot_b = theta_ddot w_b / theta_dot - m (1 + m) sin b theta_dot^2 C_bn0 e
+
+    m = 0 (a tilt fixed to the platter) is a constant mounting error and m = -1 (a tilt
+    fixed to the Earth) a constant tilt of the rotation axis: neither makes a wobble.  The
+    bench uses m = 1: the rate axis seen from the body cones once per revolution.
+
+    Returns (C_bn stacked (N), w_eb_b (N,3) rad/s, wdot_eb_b (N,3) rad/s^2).
+    """
+    a_n = _unit(axis_enu, "axis_enu")
+    theta = np.asarray(theta, dtype=float).reshape(-1)
+    thd = np.asarray(theta_dot, dtype=float).reshape(-1, 1)
+    thdd = np.asarray(theta_ddot, dtype=float).reshape(-1, 1)
+    b = float(wobble_rad)
+    m = int(harmonic)
+    d = wobble_direction_enu(a_n, phase_rad)
+    axd = np.cross(a_n, d)
+    phi = (m * theta)[:, None]
+    e = np.cos(phi) * d[None, :] + np.sin(phi) * axd[None, :]          # Rot(a_n, m theta) d
+    a_x_e = np.cos(phi) * axd[None, :] - np.sin(phi) * d[None, :]      # a_n x e
+    # C_bn = C_bn0 Rot(-b e) Rot(a_n, -theta); the stacked product as quaternions (scalar
+    # last), q_e (x) q_theta, which is much faster than composing two stacked Rotations
+    ve = -math.sin(0.5 * b) * e                                         # Rot(-b e), e unit
+    we = math.cos(0.5 * b)
+    vt = -np.sin(0.5 * theta)[:, None] * a_n[None, :]                   # Rot(a_n, -theta)
+    wt = np.cos(0.5 * theta)[:, None]
+    q = np.empty((len(theta), 4))
+    q[:, :3] = we * vt + wt * ve + np.cross(ve, vt)
+    q[:, 3] = we * wt[:, 0] - np.einsum("ij,ij->i", ve, vt)
+    C_bn = C_bn0 * Rotation.from_quat(q)
+    along = math.cos(b) - m * (1.0 - math.cos(b))
+    perp = (1.0 + m) * math.sin(b)
+    c_n = along * a_n[None, :] + perp * a_x_e                           # w / theta_dot, platter frame
+    w_b = C_bn0.apply(thd * c_n)
+    wd_b = C_bn0.apply(thdd * c_n - (m * perp) * thd * thd * e)
+    return C_bn, np.atleast_2d(w_b), np.atleast_2d(wd_b)
 
 
 # --------------------------------------------------------------------------
