@@ -72,11 +72,15 @@ def _pattern(sensor, kind, rows, s) -> str:
                     words.append("the same sign in both directions")
                 elif mean < -0.5:
                     words.append("opposite signs in the two directions")
+        second = [v for _, q, _, v in rows if q in ("accel_cos2", "accel_sin2")]
         harmonics = [v for _, q, _, v in rows if q in ("accel_cos", "accel_sin")]
         dc = [v for _, q, _, v in rows if q == "accel_dc"]
         if sensor == "accelerometer" and harmonics and dc:
             if np.sqrt(np.mean(np.square(harmonics))) > 2 * np.sqrt(np.mean(np.square(dc))):
                 words.append("mostly at the rotation frequency (the gravity turning in the body)")
+            if second and np.sqrt(np.mean(np.square(second))) > 2 * max(
+                    np.sqrt(np.mean(np.square(harmonics))), np.sqrt(np.mean(np.square(dc)))):
+                words.append("mostly at twice the rotation frequency")
     else:
         stat = {st.name: st for st in s.statics}
         temps = [stat[n].temp_c for n, _, _, _ in rows if n in stat and stat[n].temp_c is not None]

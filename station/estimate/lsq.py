@@ -7,6 +7,7 @@ Static segment j (attitude C_pn,j unknown: a nuisance):
 Rotation segment s about table axis l (unit, in p; one per physical axis, a nuisance), encoder
 angle A over the window T, phase phi from 0 to A:
   f_p(phi) = kappa l + cos(phi) v - sin(phi) (l x v) + w x (w x d)     v = |g_perp| (cos psi e1 + sin psi e2)
+(its mean, first and second harmonics are compared with the data's)
   w_p      = (A/T + e) l                                               (e: Earth rate along the axis)
 kappa (gravity along the axis), e and the mounting offset d from the rotation centre are
 nuisances of the bench; psi (where gravity is at the start) is one per segment.
@@ -311,7 +312,8 @@ class Model:
 
     def row_labels(self, x) -> list[tuple[str, str, str, str]]:
         """(segment, kind, quantity, axis) of every residual row, in order."""
-        rot_parts = [(q, a) for q in ("accel_dc", "accel_cos", "accel_sin", "gyro_integral") for a in "xyz"]
+        rot_parts = [(q, a) for q in ("accel_dc", "accel_cos", "accel_sin", "accel_cos2", "accel_sin2",
+                                      "gyro_integral") for a in "xyz"]
         labels = []
         for tag, n, quantity in self._pieces(x)[1]:
             kind, j = tag
@@ -403,6 +405,7 @@ class Model:
                   else (s.mounting_offset_m if s.mounting_offset_m is not None else np.zeros(3)))
         phases = 2 * np.pi * np.arange(PHASES) / PHASES
         cos_p, sin_p = np.cos(phases), np.sin(phases)
+        cos_2p, sin_2p = np.cos(2 * phases), np.sin(2 * phases)
         axes = [self._axis(x, k) for k in range(s.groups)]
         if C_mount is not None:
             for k, (l, _, _) in enumerate(axes):
@@ -438,6 +441,7 @@ class Model:
             ctx = self._context(f_p, w_p, np.tile(w_rad, (PHASES, 1)), r.temp_c, Ma, Mg)
             a, w = self._predict(x, ctx, Ma, Mg)
             dc, c, sn = a.mean(axis=0), 2 * cos_p @ a / PHASES, 2 * sin_p @ a / PHASES
+            c2, s2 = 2 * cos_2p @ a / PHASES, 2 * sin_2p @ a / PHASES
             root_n = np.sqrt(r.samples)
             integral = w.mean(axis=0) * r.duration_s + Mg @ earth_integral
             for eff in self.effects:
@@ -452,6 +456,8 @@ class Model:
                 (r.accel_dc - dc) * root_n / s.accel_sigma,
                 (r.accel_cos - c) * root_n / (np.sqrt(2) * s.accel_sigma),
                 (r.accel_sin - sn) * root_n / (np.sqrt(2) * s.accel_sigma),
+                (r.accel_cos2 - c2) * root_n / (np.sqrt(2) * s.accel_sigma),
+                (r.accel_sin2 - s2) * root_n / (np.sqrt(2) * s.accel_sigma),
                 gyro_rows]), "rotation")
         for c, sigma in self.priors.items():
             put(("prior", c), np.atleast_1d(x[c] / sigma), "effect_prior")

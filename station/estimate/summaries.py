@@ -2,7 +2,7 @@
 
 The fit works on a few numbers per segment, weighted by their noise, not on the raw samples:
   static    the mean accelerometer and gyro outputs over the dwell;
-  rotation  the accelerometer's mean and first harmonic (cos, sin) at the rotation frequency,
+  rotation  the accelerometer's mean and first and second harmonics at the rotation frequency,
             over the table angle measured by the encoder, and the gyro integral over the
             segment's window [t0 - dt/2, t_{N-1} + dt/2] (the window of ``angle_deg``).
 The noise of every summary comes from the white noise of the static segments (the per-sample
@@ -43,7 +43,9 @@ class RotationSummary:
     samples: int
     accel_dc: np.ndarray            # (3,) mean over the captured angle
     accel_cos: np.ndarray           # (3,) first harmonic: accel ~ dc + cos phi * c + sin phi * s
-    accel_sin: np.ndarray
+    accel_sin: np.ndarray           #   + cos 2phi * c2 + sin 2phi * s2
+    accel_cos2: np.ndarray          # (3,) second harmonic (nonlinearity, a wobbling axis)
+    accel_sin2: np.ndarray
     gyro_integral: np.ndarray       # (3,) integral over the window, deg (SI) or raw*s
     temp_c: float | None
     gyro_start: np.ndarray          # (3,) rate at the window's start and end (mean of the
@@ -89,14 +91,16 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp) ->
     gyro_integral = (np.trapezoid(gyro, t, axis=0)
                      + 0.5 * (gyro[0] * (t[1] - t[0]) + gyro[-1] * (t[-1] - t[-2])))
     phase = np.radians(angle_deg) * (t - start) / duration      # uniform rate between encoder reads
-    basis = np.column_stack([np.ones_like(t), np.cos(phase), np.sin(phase)])
+    basis = np.column_stack([np.ones_like(t), np.cos(phase), np.sin(phase),
+                             np.cos(2 * phase), np.sin(2 * phase)])
     coef, *_ = np.linalg.lstsq(basis, accel, rcond=None)
     edge = min(EDGE_SAMPLES, len(t) // 4)
     magnitude = np.linalg.norm(gyro, axis=1)
     steady = bool(np.std(magnitude) < STEADY_SPREAD * np.mean(magnitude))
     return RotationSummary(name=name, axis_body=axis_body, group=group, angle_deg=float(angle_deg),
                            duration_s=float(duration), samples=len(t), accel_dc=coef[0],
-                           accel_cos=coef[1], accel_sin=coef[2], gyro_integral=gyro_integral,
+                           accel_cos=coef[1], accel_sin=coef[2], accel_cos2=coef[3],
+                           accel_sin2=coef[4], gyro_integral=gyro_integral,
                            temp_c=None if temp is None else float(np.mean(temp)),
                            gyro_start=gyro[:edge].mean(axis=0), gyro_end=gyro[-edge:].mean(axis=0),
                            steady=steady)

@@ -16,14 +16,15 @@ class AccelNonlinearity(Effect):
     term = "accel_raw_i += K2_i (a_i / g0)^2 (µg), a_i the specific force along sensing axis i"
     excited_by = ("static attitudes with an axis at ±1 g and at 45° (0.5 g²), and rotations that "
                   "sweep gravity through every axis")
-    magnitudes = "10-100 µg/g² (MEMS), 5-20 µg/g² (quartz pendulum), < 5 µg/g² (navigation grade)"
+    magnitudes = ("100-2000 µg/g² (MEMS: 0.1-0.5 % of a ±2 to ±8 g range), 5-20 µg/g² (quartz "
+                  "pendulum), < 5 µg/g² (navigation grade)")
     signature = ("accelerometer, every segment: an error even in the square of the input, the same "
                  "sign at +1 g and -1 g, half as large at 45°, a second harmonic in rotations")
     signature_variable = "gravity_along_axis"
 
     @property
     def params(self):
-        return tuple(Param(f"accel_k2_{a}", "ug/g^2", 1.0, 30.0, 2000.0) for a in "xyz")
+        return tuple(Param(f"accel_k2_{a}", "ug/g^2", 1.0, 100.0, 5000.0) for a in "xyz")
 
     def accel(self, x, ctx):
         along = ctx.f_p @ (ctx.accel_matrix / np.linalg.norm(ctx.accel_matrix, axis=1)[:, None]).T
