@@ -82,6 +82,22 @@ def _window(t: np.ndarray) -> tuple[float, float]:
     return t[0] - 0.5 * dt_first, t[-1] + 0.5 * dt_last
 
 
+def _turned_fraction(t, gyro, start, duration) -> np.ndarray:
+    """Fraction of the segment's turn reached at each sample, from the gyro's own integral about
+    its mean rate direction (scale errors cancel in the ratio; a rate that ripples or drifts is
+    followed, where a uniform rate would smear the harmonics)."""
+    direction = gyro.mean(axis=0)
+    norm = np.linalg.norm(direction)
+    if norm == 0:
+        return (t - start) / duration
+    rate = gyro @ (direction / norm)
+    dt = np.diff(t)
+    turned = np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * dt)])
+    turned += 0.5 * rate[0] * (t[1] - t[0])                    # from the window's start
+    total = turned[-1] + 0.5 * rate[-1] * (t[-1] - t[-2])
+    return turned / total if total != 0 else (t - start) / duration
+
+
 def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp) -> RotationSummary:
     if len(t) < 8:
         raise UserError(f"segment '{name}': a rotation segment needs at least 8 samples")
@@ -90,7 +106,7 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp) ->
     # trapezoid over the samples plus half a sample at each end: the integral over the window
     gyro_integral = (np.trapezoid(gyro, t, axis=0)
                      + 0.5 * (gyro[0] * (t[1] - t[0]) + gyro[-1] * (t[-1] - t[-2])))
-    phase = np.radians(angle_deg) * (t - start) / duration      # uniform rate between encoder reads
+    phase = np.radians(angle_deg) * _turned_fraction(t, gyro, start, duration)
     basis = np.column_stack([np.ones_like(t), np.cos(phase), np.sin(phase),
                              np.cos(2 * phase), np.sin(2 * phase)])
     coef, *_ = np.linalg.lstsq(basis, accel, rcond=None)
