@@ -84,6 +84,7 @@ def effects(seed: int):
             truth.temperature.warmup_delta_c = 6.0
         if effect == "time_offset":
             truth.bench.rate_ripple_fraction, truth.bench.rate_ripple_hz = 0.2, 0.9   # a low-grade table
+            truth.bench.lever_arm_m = np.zeros(3)   # centred: no tangential force from the ripple
         t0 = time.perf_counter()
         capture = simrun.simulate_capture(load_scheme("optimal9", FAST), truth, seed)
         steps, final = auto.run(lsq.summarise(capture))

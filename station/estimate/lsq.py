@@ -434,7 +434,8 @@ class Model:
             A = np.radians(r.angle_deg)
             earth_integral = np.zeros(3) if not _earth_rate_visible(r, s) else (r.duration_s / A) * (
                 np.sin(A) * earth_perp - (1.0 - np.cos(A)) * cross(l, earth_perp))
-            w_rad = np.radians(r.rate_dps) * l
+            # the centripetal force follows the mean of the squared rate
+            w_rad = np.radians(r.rate_dps) * np.sqrt(r.rate_sq_factor) * l
             centripetal = cross(w_rad, cross(w_rad, offset))
             f_p = kappa * l + np.outer(cos_p, v) - np.outer(sin_p, cross(l, v)) + centripetal
             w_p = np.tile((r.rate_dps + e) * l, (PHASES, 1))
@@ -534,7 +535,9 @@ def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "aut
         model.refresh()
         x, cov, r, J = _solve(model, model.x0)
     r = r[model.data_rows]      # the weak priors on nuisance angles are not data
-    dof = len(r) - model.layout.size
+    # gravity along an axis turned only by hand is set by its weak prior, not by the data
+    blind_kappa = sum(1 for k in range(s.groups) if not any(rot.steady for rot in s.rotations if rot.group == k))
+    dof = len(r) - model.layout.size + blind_kappa
     return FitResult(x=x, covariance=cov, model=model, chi2=float(r @ r), dof=dof, residuals=r)
 
 

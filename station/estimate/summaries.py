@@ -19,7 +19,7 @@ from station import units
 from station.errors import UserError
 
 EDGE_SAMPLES = 3
-STEADY_SPREAD = 0.1     # a rotation whose rate magnitude varies more (std/mean) is a hand turn
+STEADY_SPREAD = 0.3     # a rotation whose rate magnitude varies more (std/mean) is a hand turn
 
 
 @dataclass
@@ -51,6 +51,8 @@ class RotationSummary:
     gyro_start: np.ndarray          # (3,) rate at the window's start and end (mean of the
     gyro_end: np.ndarray            #   first and last EDGE_SAMPLES samples)
     steady: bool = True             # the rate held within STEADY_SPREAD (a table, not a hand)
+    rate_sq_factor: float = 1.0     # mean of the squared rate over the square of the mean rate
+                                    #   (from the gyro's magnitude: > 1 when the rate ripples)
 
     @property
     def rate_dps(self) -> float:
@@ -113,13 +115,14 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp) ->
     edge = min(EDGE_SAMPLES, len(t) // 4)
     magnitude = np.linalg.norm(gyro, axis=1)
     steady = bool(np.std(magnitude) < STEADY_SPREAD * np.mean(magnitude))
+    rate_sq_factor = float(np.mean(magnitude**2) / np.mean(magnitude) ** 2)
     return RotationSummary(name=name, axis_body=axis_body, group=group, angle_deg=float(angle_deg),
                            duration_s=float(duration), samples=len(t), accel_dc=coef[0],
                            accel_cos=coef[1], accel_sin=coef[2], accel_cos2=coef[3],
                            accel_sin2=coef[4], gyro_integral=gyro_integral,
                            temp_c=None if temp is None else float(np.mean(temp)),
                            gyro_start=gyro[:edge].mean(axis=0), gyro_end=gyro[-edge:].mean(axis=0),
-                           steady=steady)
+                           steady=steady, rate_sq_factor=rate_sq_factor)
 
 
 def summarise(capture, *, table_angle_arcsec: float | None = None) -> Summaries:
