@@ -27,8 +27,8 @@ def cmd_run(args) -> int:
                                    ("rotation_s", args.rotation_s)) if v is not None}
     scheme = load_scheme(args.scheme, overrides)
     if not args.sim:
-        raise UserError("runs on hardware need the serial drivers, which this version does not have "
-                        "yet; add --sim for a dry run against the simulated bench")
+        from station import cli_run
+        return cli_run.cmd_run(args)
     from station import simrun
     from station.calfile import write_calfile
     from station.estimate import estimate_capture
@@ -224,6 +224,7 @@ class _Parser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     from station import cli_devices, cli_diagnose
     from station import cli_import
+    from station import cli_run
 
     p = _Parser(prog="station", description="IMU calibration with a rate table.")
     p.add_argument("--version", action="version", version=f"station {station.__version__}")
@@ -238,6 +239,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--dwell-s", type=float, help="override the scheme's dwell per attitude, s")
     run.add_argument("--rate-dps", type=float, help="override the scheme's rotation rate, deg/s")
     run.add_argument("--rotation-s", type=float, help="override the scheme's rotation time per direction, s")
+    cli_run.add_run_arguments(run)
     run.set_defaults(func=cmd_run)
 
     est = sub.add_parser("estimate", help="estimate a calibration from a capture (no hardware)")
@@ -277,6 +279,7 @@ def build_parser() -> argparse.ArgumentParser:
     eff.set_defaults(func=cmd_effects)
 
     # Commands defined in other modules register here (one line each).
+    cli_run.add_parsers(sub)
     cli_diagnose.add_parsers(sub, out, err)
     cli_import.add_parsers(sub)
     cli_devices.add_parsers(sub)

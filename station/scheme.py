@@ -1,10 +1,14 @@
 """Calibration schemes: what a run must measure, written in IMU body axes.
 
 A scheme file (YAML, see ``schemes/optimal9.yaml``) lists static attitudes (the direction of
-local "up" in IMU axes and a dwell) and rotations (an axis in IMU axes, run as a +/- pair at a
-rate for a duration, unless ``pair: false``; the table axis horizontal unless
-``axis_elevation_deg`` says otherwise; measured by an encoder unless ``encoder: false``).  This module loads and validates such a file and expands it into the
-ordered list of segments a run records.  It knows nothing about tables or hardware.
+local "up" in IMU axes and a dwell; optionally a heading: ``heading_body``, an IMU direction
+that points horizontally towards ``heading_deg``, clockwise from north) and rotations (an axis
+in IMU axes, run as a +/- pair at a rate for a duration, unless ``pair: false``; the table axis
+horizontal unless ``axis_elevation_deg`` says otherwise; measured by an encoder unless
+``encoder: false``; ``turn_deg``: the angle a hand turn makes by protocol, e.g. one whole turn).
+``table: none`` marks a scheme performed by hand, without a rate table (docs/schemes.md).  This
+module loads and validates such a file and expands it into the ordered list of segments a run
+records.  It knows nothing about tables or hardware.
 """
 from __future__ import annotations
 
@@ -29,6 +33,8 @@ class StaticSpec:
     up_body: tuple[float, float, float]
     dwell_s: float
     kind: str = "static"
+    heading_body: tuple[float, float, float] | None = None   # unit, perpendicular to up_body
+    heading_deg: float | None = None                          # where heading_body points, from north
 
     @property
     def duration_s(self) -> float:
@@ -46,6 +52,7 @@ class RotationSpec:
     axis_elevation_deg: float = 0.0   # the table axis above the horizontal (90: vertical, up)
     encoder: bool = True              # False: hand or screwdriver, no angle measured
     kind: str = "rotation"
+    turn_deg: float | None = None     # a hand turn's angle by protocol (e.g. 360: one whole turn)
 
     @property
     def revolutions(self) -> float:
@@ -60,6 +67,7 @@ class Scheme:
     defaults: dict
     segments: tuple  # of StaticSpec | RotationSpec
     centred: bool = False   # the IMU's reference point sits on the table's rotation axes
+    table: bool = True      # False (``table: none``): performed by hand, no rate table
 
     @property
     def duration_s(self) -> float:
@@ -71,21 +79,28 @@ def builtin_names() -> list[str]:
     return sorted(p.name[:-5] for p in resources.files("schemes").iterdir() if p.name.endswith(".yaml"))
 
 
-def load_scheme(name_or_path: str, overrides: dict | None = None) -> Scheme:
-    """Load a built-in scheme by name, or a scheme file by path; apply default overrides."""
+def scheme_text(name_or_path: str) -> tuple[str, str]:
+    """(YAML text, source name) of a built-in scheme or a scheme file."""
     path = Path(name_or_path)
     if name_or_path in builtin_names():
-        text = resources.files("schemes").joinpath(f"{name_or_path}.yaml").read_text()
-        source = f"scheme '{name_or_path}'"
-    elif path.suffix in (".yaml", ".yml") or path.exists():
+        return (resources.files("schemes").joinpath(f"{name_or_path}.yaml").read_text(),
+                f"scheme '{name_or_path}'")
+    if path.suffix in (".yaml", ".yml") or path.exists():
         try:
-            text = path.read_text()
+            return path.read_text(), str(path)
         except OSError as e:
             raise UserError(f"{path}: cannot read scheme file: {e.strerror}") from None
-        source = str(path)
-    else:
-        raise UserError(f"unknown scheme '{name_or_path}': built-in schemes are "
-                        f"{', '.join(builtin_names())}, or give a path to a .yaml file")
+    raise UserError(f"unknown scheme '{name_or_path}': built-in schemes are "
+                    f"{', '.join(builtin_names())}, or give a path to a .yaml file")
+
+
+def load_scheme(name_or_path: str, overrides: dict | None = None) -> Scheme:
+    """Load a built-in scheme by name, or a scheme file by path; apply default overrides."""
+    text, source = scheme_text(name_or_path)
+    return scheme_from_text(text, source, overrides)
+
+
+def scheme_from_text(text: str, source: str, overrides: dict | None = None) -> Scheme:
     try:
         doc = yaml.safe_load(text)
     except yaml.YAMLError as e:
@@ -127,6 +142,7 @@ def parse_scheme(doc, source: str, overrides: dict) -> Scheme:
     for key, value in defaults.items():
         _number(value, f"{source}: defaults.{key}", positive=True)
 
+    uses_table = _table_key(doc.get("table", True), source)
     entries = doc["segments"]
     if not isinstance(entries, list) or not entries:
         raise UserError(f"{source}: 'segments' must be a non-empty list")
@@ -139,10 +155,11 @@ def parse_scheme(doc, source: str, overrides: dict) -> Scheme:
             dwell = entry.get("dwell_s", defaults.get("dwell_s"))
             if dwell is None:
                 raise UserError(f"{where}: no dwell_s here nor in defaults")
+            up = _unit_vector(entry.get("up_body"), f"{where}.up_body")
             segments.append(StaticSpec(
-                name=str(entry["static"]),
-                up_body=_unit_vector(entry.get("up_body"), f"{where}.up_body"),
-                dwell_s=_number(dwell, f"{where}.dwell_s", positive=True)))
+                name=str(entry["static"]), up_body=up,
+                dwell_s=_number(dwell, f"{where}.dwell_s", positive=True),
+                **_heading(entry, up, where)))
         elif "rotation" in entry:
             rate = entry.get("rate_dps", defaults.get("rate_dps"))
             duration = entry.get("rotation_s", defaults.get("rotation_s"))
@@ -159,8 +176,17 @@ def parse_scheme(doc, source: str, overrides: dict) -> Scheme:
                 flags[key] = entry.get(key, True)
                 if not isinstance(flags[key], bool):
                     raise UserError(f"{where}.{key}: must be true or false, got {flags[key]!r}")
+            if not uses_table and flags["encoder"]:
+                raise UserError(f"{where}.encoder: a scheme without a table has no encoder: "
+                                "write encoder: false")
+            turn = entry.get("turn_deg")
+            if turn is not None:
+                turn = _number(turn, f"{where}.turn_deg", positive=True)
+                if flags["encoder"]:
+                    raise UserError(f"{where}.turn_deg: only for turns without an encoder "
+                                    "(encoder: false); the encoder measures a table's turns")
             base = str(entry["rotation"])
-            common = dict(axis_elevation_deg=elevation, encoder=flags["encoder"])
+            common = dict(axis_elevation_deg=elevation, encoder=flags["encoder"], turn_deg=turn)
             if flags["pair"]:
                 segments.append(RotationSpec(f"{base}_p", axis, +rate, duration, **common))
                 segments.append(RotationSpec(f"{base}_m", axis, -rate, duration, **common))
@@ -177,4 +203,30 @@ def parse_scheme(doc, source: str, overrides: dict) -> Scheme:
         raise UserError(f"{source}: centred: must be true or false, got {centred!r}")
     return Scheme(name=str(doc["name"]), title=str(doc.get("title", "")),
                   reference=str(doc.get("reference", "")), defaults=defaults,
-                  segments=tuple(segments), centred=centred)
+                  segments=tuple(segments), centred=centred, table=uses_table)
+
+
+def _table_key(value, source: str) -> bool:
+    """``table``: true (default, a rate table), or none/false (by hand)."""
+    if value is True or value is False:
+        return value
+    if isinstance(value, str) and value.strip().lower() == "none":
+        return False
+    raise UserError(f"{source}: table: must be none (a scheme done by hand) or true, got {value!r}")
+
+
+def _heading(entry: dict, up: tuple, where: str) -> dict:
+    """heading_body/heading_deg of a static entry (both or neither), checked."""
+    body, deg = entry.get("heading_body"), entry.get("heading_deg")
+    if body is None and deg is None:
+        return {}
+    if body is None or deg is None:
+        raise UserError(f"{where}: heading_body and heading_deg go together (give both or neither)")
+    body = _unit_vector(body, f"{where}.heading_body")
+    if abs(float(np.dot(body, up))) > 1e-6:
+        raise UserError(f"{where}.heading_body: must be perpendicular to up_body (a horizontal "
+                        f"direction), got {list(body)} with up_body {list(up)}")
+    deg = _number(deg, f"{where}.heading_deg")
+    if not 0.0 <= deg < 360.0:
+        raise UserError(f"{where}.heading_deg: must be within [0, 360), got {deg}")
+    return {"heading_body": body, "heading_deg": deg}

@@ -1,0 +1,392 @@
+"""``station run`` on a bench (hardware or the device twins), and ``station schemes``, ``station
+plan`` and ``station init``.  Parsing and output only: the plan comes from station/compile.py,
+the devices are driven by station/sequencer.py.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import select
+import sys
+from pathlib import Path
+
+import yaml
+from rich.console import Console
+from rich.table import Table
+
+from station.errors import UserError
+
+RUN_FILE = "run.yaml"
+SCHEME_FILE = "scheme.yaml"
+RUN_FORMAT = "station-run/1"
+CONNECTION = {"imu": ("port", "protocol", "serial", "csv_units", "frame_timeout_s"),
+              "table": ("port", "protocol", "serial")}
+
+out = Console(highlight=False, width=None if sys.stdout.isatty() else 160)
+err = Console(stderr=True, highlight=False)
+
+
+# ------------------------------------------------------------------------------------ parsers
+
+def add_run_arguments(run) -> None:
+    """The hardware flags of ``station run`` (the parser is defined in station/cli.py)."""
+    run.add_argument("--port", metavar="URL", help="IMU port (device path or pyserial URL)")
+    run.add_argument("--table-port", metavar="URL", help="rate-table port (device path or pyserial URL)")
+    run.add_argument("--imu-protocol", help="vectornav (default) or csv")
+    run.add_argument("--table-protocol", help="acutrol (default) or aerosmith")
+    run.add_argument("--config", metavar="FILE", help="station.yaml (default: $STATION_CONFIG, ./station.yaml)")
+    run.add_argument("--resume", metavar="CAPTURE", help="continue a stopped run from its first missing segment")
+    run.add_argument("--unattended", action="store_true",
+                     help="no operator: never ask for a remount (run.operator: false)")
+    run.add_argument("--reset-faults", action="store_true", help="clear a fault latched on the table first")
+
+
+def add_parsers(sub) -> None:
+    schemes = sub.add_parser("schemes", help="list the built-in schemes with their segments and durations")
+    schemes.add_argument("--config", metavar="FILE", help="estimate run times for this table configuration")
+    schemes.set_defaults(func=cmd_schemes)
+
+    plan = sub.add_parser("plan", help="print the compiled steps of a scheme for the configured table")
+    plan.add_argument("--scheme", default="optimal9", help="built-in scheme name or a scheme YAML file")
+    plan.add_argument("--config", metavar="FILE", help="station.yaml (default: $STATION_CONFIG, ./station.yaml)")
+    plan.add_argument("--dwell-s", type=float, help="override the scheme's dwell per attitude, s")
+    plan.add_argument("--rate-dps", type=float, help="override the scheme's rotation rate, deg/s")
+    plan.add_argument("--rotation-s", type=float, help="override the scheme's rotation time per direction, s")
+    plan.add_argument("--unattended", action="store_true", help="compile without remount steps")
+    plan.add_argument("--all", action="store_true", help="also list settle and checkpoint steps")
+    plan.set_defaults(func=cmd_plan)
+
+    init = sub.add_parser("init", help="write a commented example configuration (station.yaml)")
+    init.add_argument("path", nargs="?", default="station.yaml")
+    init.set_defaults(func=cmd_init)
+
+
+# ------------------------------------------------------------------------------------ commands
+
+def cmd_init(args) -> int:
+    from station.config import EXAMPLE
+
+    path = Path(args.path)
+    if path.exists():
+        raise UserError(f"{path}: already exists; will not overwrite it")
+    try:
+        path.write_text(EXAMPLE)
+    except OSError as e:
+        raise UserError(f"{path}: cannot write: {e.strerror}") from None
+    out.print(f"wrote {path}: edit the ports, the table geometry and limits, and the site")
+    return 0
+
+
+def cmd_schemes(args) -> int:
+    from station.compile import compile_scheme
+    from station.config import load_config
+    from station.scheme import builtin_names, load_scheme
+
+    config = load_config(args.config)
+    table = Table(title=f"built-in schemes (run times for the {config.table.axes}-axis table of "
+                        f"{config.source})")
+    for col in ("scheme", "statics", "rotations", "recording s", "run s", "operator steps", "title"):
+        table.add_column(col, justify="left" if col in ("scheme", "title") else "right")
+    for name in builtin_names():
+        scheme = load_scheme(name)
+        statics = sum(s.kind == "static" for s in scheme.segments)
+        try:
+            plan = compile_scheme(scheme, config)
+            run_s = f"{plan.duration_s:.0f}"
+            ops = str(sum(type(s).__name__ in ("Operator", "HandStatic", "HandRotation") for s in plan))
+        except UserError as e:
+            run_s, ops = "-", "-"
+            err.print(f"note: {name}: {e}", markup=False, soft_wrap=True)
+        table.add_row(name, str(statics), str(len(scheme.segments) - statics), f"{scheme.duration_s:.0f}",
+                      run_s, ops, scheme.title)
+    out.print(table)
+    return 0
+
+
+def cmd_plan(args) -> int:
+    from station.compile import compile_scheme
+    from station.plan import Checkpoint, Settle
+    from station.scheme import load_scheme
+
+    config = _config(args)
+    scheme = load_scheme(args.scheme, _overrides(args))
+    plan = compile_scheme(scheme, config)
+    t = config.table
+    where = "by hand (no table)" if plan.manual else (
+        f"{t.axes}-axis table, axes at zero (east-north-up) {t.axis_list()}, IMU mounted "
+        f"{list(t.mounting)}, {'with' if config.run.operator else 'without'} an operator")
+    out.print(f"scheme {scheme.name}: {len(scheme.segments)} segments, {scheme.duration_s:.0f} s of "
+              f"recording; {where} ({config.source})", markup=False)
+    elapsed = 0.0
+    for i, step in enumerate(plan.steps, 1):
+        elapsed += step.estimate_s
+        if args.all or not isinstance(step, (Settle, Checkpoint)):
+            out.print(f"{i:4d} {elapsed:8.0f} s  {step.describe()}", markup=False)
+    for note in plan.notes:
+        err.print(f"note: {note}", markup=False, soft_wrap=True)
+    out.print(f"total: {plan.duration_s:.0f} s ({plan.duration_s / 3600:.2f} h) of device time, "
+              f"{len(plan.steps)} steps, {sum(type(s).__name__ == 'Operator' for s in plan)} operator steps",
+              markup=False)
+    return 0
+
+
+def cmd_run(args) -> int:
+    """``station run`` without --sim: a run on the bench named by the flags and the configuration."""
+    from station.compile import compile_scheme
+    from station.scheme import load_scheme, scheme_from_text, scheme_text
+
+    config = _config(args)
+    done: set = set()
+    if args.resume:
+        directory = Path(args.resume)
+        scheme, config, done = _resumed(directory, config, args)
+    else:
+        text, source = scheme_text(args.scheme)
+        scheme = load_scheme(args.scheme, _overrides(args))
+        directory = None
+    if not config.imu.port:
+        raise UserError("no IMU port: give --port (and --table-port), set imu.port in station.yaml "
+                        "(station init writes an example), or add --sim for a dry run against the "
+                        "simulated bench")
+    if scheme.table and not config.table.port:
+        raise UserError(f"scheme {scheme.name} needs a rate table: give --table-port or set table.port")
+    plan = compile_scheme(scheme, config)
+    steps = _resume_steps(plan, scheme, done, config) if args.resume else plan.steps
+    for note in plan.notes:
+        err.print(f"note: {note}", markup=False, soft_wrap=True)
+
+    from station.sequencer import Interrupts, RunAborted, RunPaused, Sequencer
+
+    imu, table = _open_devices(config, scheme)
+    try:
+        rate_hz = imu.configure(config.imu.rate_hz)
+        if directory is None:
+            directory = _out_dir(args, config, scheme)
+            writer = _new_capture(directory, scheme, text, _overrides(args), config, imu, rate_hz)
+        else:
+            writer = _reopen(directory, rate_hz)
+        out.print(f"capture: {directory}", markup=False)
+        from station.live import make_display
+
+        display = make_display(out, sum(s.estimate_s for s in steps),
+                               f"{scheme.name} on {config.table.axes if scheme.table else 'no'}-axis table")
+        try:
+            with Interrupts() as interrupts, display:
+                Sequencer(table=table, imu=imu, writer=writer, config=config, display=display,
+                          operator=ConsoleOperator(display), interrupts=interrupts, rate_hz=rate_hz,
+                          reset_faults=args.reset_faults).run(steps)
+        except (RunPaused, RunAborted) as e:
+            what = "paused" if isinstance(e, RunPaused) else "aborted"
+            err.print(f"station run: {what}; the table is at rest and everything recorded is kept; "
+                      f"continue with: station run --resume {directory}", markup=False, soft_wrap=True)
+            return 130
+    finally:
+        for device in (table, imu):
+            if device is not None:
+                device.close()
+    return _estimate(directory)
+
+
+# ------------------------------------------------------------------------------------ operator
+
+class ConsoleOperator:
+    """Operator confirmations on the terminal: Enter confirms; Ctrl-C asks for a pause."""
+
+    def __init__(self, display):
+        self.display = display
+
+    def confirm(self, step, interrupts) -> None:
+        from station.sequencer import PauseRequested
+
+        if not sys.stdin.isatty():
+            raise UserError(f"an operator step needs a terminal ({step.instruction}); run from a "
+                            "terminal, or unattended (--unattended, run.operator: false)")
+        self.display.prompt("press Enter when done (Ctrl-C pauses)")
+        while True:
+            if interrupts.pause_requested:
+                raise PauseRequested()
+            ready, _, _ = select.select([sys.stdin], [], [], 0.2)
+            if ready:
+                sys.stdin.readline()
+                return
+
+    def act(self, step) -> None:
+        """Hand steps: the operator acts on the prompt; the data tell when it is done."""
+
+    def resume_after_pause(self, interrupts) -> bool:
+        if not sys.stdin.isatty():
+            return False
+        interrupts.clear()
+        self.display.prompt("paused: press Enter to continue, Ctrl-C to stop (resume later with --resume)")
+        while not interrupts.pause_requested:
+            ready, _, _ = select.select([sys.stdin], [], [], 0.2)
+            if ready:
+                sys.stdin.readline()
+                return True
+        return False
+
+
+# ------------------------------------------------------------------------------------ helpers
+
+def _overrides(args) -> dict:
+    return {k: v for k, v in (("dwell_s", args.dwell_s), ("rate_dps", args.rate_dps),
+                              ("rotation_s", args.rotation_s)) if v is not None}
+
+
+def _config(args):
+    from station.config import load_config
+
+    config = load_config(getattr(args, "config", None))
+    config = config.with_overrides("imu", port=getattr(args, "port", None),
+                                   protocol=getattr(args, "imu_protocol", None))
+    config = config.with_overrides("table", port=getattr(args, "table_port", None),
+                                   protocol=getattr(args, "table_protocol", None))
+    if getattr(args, "unattended", False):
+        config = config.with_overrides("run", operator=False)
+    return config
+
+
+def _open_devices(config, scheme):
+    from drivers.base import AxisLimits, ImuSettings, TableSettings
+    from drivers.protocols.csvlines import CsvFormat
+    from drivers.registry import imu_driver, open_imu, open_table, table_driver
+    from drivers.transport import SerialSettings
+
+    def serial(c):
+        return SerialSettings(baudrate=c.baudrate, bytesize=c.bytesize, parity=c.parity, stopbits=c.stopbits,
+                              rtscts=c.rtscts, xonxoff=c.xonxoff, timeout_s=c.timeout_s)
+
+    imu_driver(config.imu.protocol)
+    try:
+        csv_format = CsvFormat.parse(config.imu.csv_units)
+    except ValueError as e:
+        raise UserError(f"{config.source}: field 'imu.csv_units': {e}") from None
+    table = None
+    if scheme.table:
+        table_driver(config.table.protocol)
+        t = config.table
+        limits = tuple(AxisLimits(max_rate_dps=lim.max_rate_dps, max_accel_dps2=lim.max_accel_dps2,
+                                  move_rate_dps=lim.move_rate_dps, move_accel_dps2=lim.move_accel_dps2)
+                       for lim in t.axis_limits())
+        table = open_table(t.port, t.protocol, TableSettings(
+            serial=serial(t.serial), axes=t.axes, limits=limits,
+            position_tolerance_deg=t.position_tolerance_deg, rate_tolerance_dps=t.rate_tolerance_dps))
+    try:
+        imu = open_imu(config.imu.port, config.imu.protocol, ImuSettings(
+            serial=serial(config.imu.serial), rate_hz=config.imu.rate_hz,
+            frame_timeout_s=config.imu.frame_timeout_s, csv_format=csv_format))
+    except BaseException:
+        if table is not None:
+            table.close()
+        raise
+    return imu, table
+
+
+def _out_dir(args, config, scheme) -> Path:
+    if args.out:
+        return Path(args.out)
+    stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    return Path(config.run.output_dir) / f"{scheme.name}-{stamp}"
+
+
+def _new_capture(directory, scheme, scheme_text_, overrides, config, imu, rate_hz):
+    from station.capture import CaptureWriter, ImuInfo, Site
+
+    t = config.table
+    extra = {"run": {"file": RUN_FILE, "scheme_file": SCHEME_FILE}}
+    if scheme.table:
+        extra["table"] = {"protocol": t.protocol, "axes": t.axes, "axes_enu": t.axis_list(),
+                          "mounting": list(t.mounting), "angle_error_arcsec": t.angle_error_arcsec}
+    else:
+        extra["table"] = {"angle_error_arcsec": 3600.0,
+                          "note": "no table: the IMU was placed and turned by hand (1 deg)"}
+    if t.imu_offset_m is not None:
+        extra["mounting"] = {"offset_m": list(t.imu_offset_m)}
+    elif scheme.centred:
+        extra["mounting"] = {"offset_m": [0.0, 0.0, 0.0]}
+    writer = CaptureWriter(directory, ImuInfo(rate_hz, "m/s^2", "deg/s", model=imu.identity or None),
+                           Site(config.site.gravity, latitude_deg=config.site.latitude_deg),
+                           scheme.name, extra=extra)
+    writer.write_file(SCHEME_FILE, scheme_text_)
+    writer.write_file(RUN_FILE, yaml.safe_dump({
+        "format": RUN_FORMAT, "scheme": scheme.name, "overrides": overrides,
+        "started_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "config": config.to_dict()}, sort_keys=False))
+    return writer
+
+
+def _resumed(directory: Path, current, args):
+    """(scheme, config, complete segment names) of a run to continue: what is recorded comes
+    from the capture; the connection (ports, protocols, serial) from the flags and the file."""
+    from dataclasses import replace
+
+    from station.capture import read_capture
+    from station.config import from_dict
+    from station.scheme import scheme_from_text
+
+    run_file = directory / RUN_FILE
+    try:
+        doc = yaml.safe_load(run_file.read_text())
+        text = (directory / SCHEME_FILE).read_text()
+    except OSError as e:
+        raise UserError(f"{directory}: not a capture of station run (no {e.filename}): cannot resume") from None
+    if not isinstance(doc, dict) or doc.get("format") != RUN_FORMAT:
+        raise UserError(f"{run_file}: field 'format': must be {RUN_FORMAT}")
+    if _overrides(args):
+        raise UserError("--resume continues with the run's own timings: leave out --dwell-s, --rate-dps "
+                        "and --rotation-s")
+    scheme = scheme_from_text(text, str(directory / SCHEME_FILE), doc.get("overrides") or {})
+    config = from_dict(doc.get("config") or {}, str(run_file))
+    for section, keys in CONNECTION.items():
+        fresh = getattr(current, section)
+        config = replace(config, **{section: replace(getattr(config, section),
+                                                     **{k: getattr(fresh, k) for k in keys})})
+    config = replace(config, run=replace(config.run, operator=current.run.operator and config.run.operator))
+    capture = read_capture(directory, load_data=False)
+    done = {s.name for s in capture.complete()}
+    return scheme, config, done
+
+
+def _resume_steps(plan, scheme, done, config):
+    """The steps left; the operator's first check names the mounting the first segment left
+    was compiled for (a remount may have come before it)."""
+    from station.compile import mounting_step
+    from station.plan import Operator
+
+    steps = plan.remaining(done)
+    first = next((s.segment for s in steps if s.segment is not None), None)
+    if first is None:
+        return steps
+    needed = plan.mounting_of.get(first)
+    check = next((i for i, s in enumerate(steps) if isinstance(s, Operator) and s.segment is None), None)
+    if check is not None:
+        steps[check] = mounting_step(scheme, config, needed, check=True)
+    elif tuple(needed) != tuple(config.table.mounting):
+        raise UserError(f"the run resumes at {first}, recorded with the IMU mounted {list(needed)} on the "
+                        "platform: an operator must check the mounting (leave out --unattended)")
+    return steps
+
+
+def _reopen(directory, rate_hz):
+    from station.capture import CaptureWriter, read_capture
+
+    capture = read_capture(directory, load_data=False)
+    if abs(capture.imu.sample_rate_hz - rate_hz) > 1e-9:
+        raise UserError(f"{directory}: recorded at {capture.imu.sample_rate_hz:g} Hz, the IMU now gives "
+                        f"{rate_hz:g} Hz: set imu.rate_hz as in the run")
+    return CaptureWriter.reopen(directory)
+
+
+def _estimate(directory) -> int:
+    from station.calfile import write_calfile
+    from station.cli import _print_notes, _print_parameters
+    from station.estimate import estimate_capture
+
+    cal, capture, provenance = estimate_capture(directory)
+    for w in capture.warnings:
+        err.print(f"warning: {w}", markup=False)
+    path = write_calfile(Path(directory) / "calibration.yaml", cal, provenance)
+    _print_parameters([(n, v, u, cal.sigma.get(n)) for n, v, u in cal.parameters()],
+                      f"calibration of {directory} ({provenance['method']})")
+    _print_notes(cal)
+    out.print(f"calibration file: {path}", markup=False)
+    return 0

@@ -1,0 +1,448 @@
+"""The station configuration: ``station.yaml`` < environment < command-line flags.
+
+Loaded with ``yaml.safe_load``; every problem is ONE ``UserError`` naming the file and the field
+(``station.yaml: field 'table.limits[1].max_rate_dps': must be > 0, got -3``).  ``EXAMPLE`` is the
+commented file ``station init`` writes; docs/sequencer.md describes every key.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from station.errors import UserError
+
+DEFAULT_FILE = "station.yaml"
+ENV_FILE = "STATION_CONFIG"
+#: environment variables that override the file (flags override them)
+ENV_KEYS = {"STATION_IMU_PORT": ("imu", "port"), "STATION_TABLE_PORT": ("table", "port"),
+            "STATION_IMU_PROTOCOL": ("imu", "protocol"), "STATION_TABLE_PROTOCOL": ("table", "protocol")}
+#: conventional axis directions at zero (east-north-up), outer -> inner, by number of axes
+DEFAULT_AXES_ENU = {1: [[0, 0, 1]], 2: [[0, 0, 1], [1, 0, 0]], 3: [[0, 0, 1], [1, 0, 0], [0, 1, 0]]}
+AXIS_NAMES = {"+x": (1, 0, 0), "-x": (-1, 0, 0), "+y": (0, 1, 0), "-y": (0, -1, 0),
+              "+z": (0, 0, 1), "-z": (0, 0, -1)}
+
+
+@dataclass(frozen=True)
+class SerialConfig:
+    baudrate: int = 115200
+    bytesize: int = 8
+    parity: str = "N"
+    stopbits: float = 1
+    rtscts: bool = False
+    xonxoff: bool = False
+    timeout_s: float = 1.0
+
+
+@dataclass(frozen=True)
+class AxisConfig:
+    """Limits of one table axis.  The sequencer never commands beyond them."""
+
+    max_rate_dps: float = 300.0        # rate demands
+    max_accel_dps2: float = 300.0
+    move_rate_dps: float = 60.0        # position moves
+    move_accel_dps2: float = 60.0
+    rate_accel_dps2: float = 50.0      # ramps to and from a rotation rate
+    angle_min_deg: float | None = None  # both None: a continuous axis
+    angle_max_deg: float | None = None
+
+    @property
+    def angle_limits(self):
+        return None if self.angle_min_deg is None else (self.angle_min_deg, self.angle_max_deg)
+
+
+@dataclass(frozen=True)
+class TableConfig:
+    port: str | None = None
+    protocol: str = "acutrol"
+    serial: SerialConfig = field(default_factory=SerialConfig)
+    axes: int = 3
+    axes_enu: tuple = ()                  # per axis, ENU at zero; () -> DEFAULT_AXES_ENU[axes]
+    mounting: tuple = ("+x", "+y", "+z")  # platform directions of the IMU's case x, y, z
+    limits: tuple = (AxisConfig(),)       # one for every axis, or one per axis
+    load_position_deg: tuple = ()         # where the operator (re)mounts the IMU; () -> zeros
+    position_tolerance_deg: float = 0.002
+    rate_tolerance_dps: float = 0.01
+    angle_error_arcsec: float = 2.0       # 1-sigma of the table's angles (into the capture)
+    imu_offset_m: tuple | None = None     # IMU reference point from the axes' intersection
+
+    def axis_list(self) -> list:
+        return [list(a) for a in (self.axes_enu or DEFAULT_AXES_ENU[self.axes])]
+
+    def axis_limits(self) -> tuple:
+        return self.limits * self.axes if len(self.limits) == 1 else tuple(self.limits)
+
+    def mounting_matrix(self) -> np.ndarray:
+        """Case -> platform coordinates: column j is the platform direction of case axis j."""
+        return np.column_stack([AXIS_NAMES[m] for m in self.mounting]).astype(float)
+
+
+@dataclass(frozen=True)
+class ImuConfig:
+    port: str | None = None
+    protocol: str = "vectornav"
+    serial: SerialConfig = field(default_factory=SerialConfig)
+    rate_hz: float = 100.0
+    csv_units: str = ""
+    frame_timeout_s: float = 2.0
+
+
+@dataclass(frozen=True)
+class SiteConfig:
+    latitude_deg: float = 45.0
+    height_m: float = 0.0
+    gravity_mps2: float | None = None     # None: WGS-84 normal gravity at latitude and height
+
+    @property
+    def gravity(self) -> float:
+        return self.gravity_mps2 if self.gravity_mps2 is not None else normal_gravity(
+            self.latitude_deg, self.height_m)
+
+
+@dataclass(frozen=True)
+class WarmupConfig:
+    duration_s: float = 0.0               # at least this long (IMU time)
+    max_s: float | None = None            # at most (with a temperature criterion)
+    temp_slope_c_per_h: float | None = None   # until |dT/dt| over window_s is below this
+    window_s: float = 300.0
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    settle_s: float = 5.0                 # IMU samples discarded after every move and ramp
+    operator: bool = True                 # someone can remount the IMU (False: unattended)
+    operator_s: float = 120.0             # time allowed for an operator step, in estimates
+    output_dir: str = "captures"
+
+
+@dataclass(frozen=True)
+class Config:
+    imu: ImuConfig = field(default_factory=ImuConfig)
+    table: TableConfig = field(default_factory=TableConfig)
+    site: SiteConfig = field(default_factory=SiteConfig)
+    warmup: WarmupConfig = field(default_factory=WarmupConfig)
+    run: RunConfig = field(default_factory=RunConfig)
+    source: str = "defaults"
+
+    def with_overrides(self, section: str, **values) -> "Config":
+        """A copy with ``values`` (None ones skipped) set in ``section``."""
+        values = {k: v for k, v in values.items() if v is not None}
+        if not values:
+            return self
+        return replace(self, **{section: replace(getattr(self, section), **values)})
+
+    def to_dict(self) -> dict:
+        """Plain data (the snapshot kept in a capture for --resume), defaults resolved."""
+        doc = _plain(self)
+        doc["table"]["axes_enu"] = self.table.axis_list()
+        doc["table"]["load_position_deg"] = list(self.table.load_position_deg or [0.0] * self.table.axes)
+        return doc
+
+
+def normal_gravity(latitude_deg: float, height_m: float = 0.0) -> float:
+    """WGS-84 normal gravity (Somigliana) with the second-order free-air correction, m/s^2."""
+    a, f, gm, omega = 6378137.0, 1 / 298.257223563, 3.986004418e14, 7.292115e-5
+    ge, k, e2 = 9.7803253359, 0.00193185265241, 0.00669437999013
+    s2 = math.sin(math.radians(latitude_deg)) ** 2
+    gamma = ge * (1 + k * s2) / math.sqrt(1 - e2 * s2)
+    b = a * (1 - f)
+    m = omega**2 * a**2 * b / gm
+    return gamma * (1 - 2 / a * (1 + f + m - 2 * f * s2) * height_m + 3 * height_m**2 / a**2)
+
+
+# ------------------------------------------------------------------------------------ loading
+
+def find_config(path: str | None) -> Path | None:
+    """The file to read: ``path``, else $STATION_CONFIG, else ./station.yaml if it exists."""
+    if path:
+        return Path(path)
+    if os.environ.get(ENV_FILE):
+        return Path(os.environ[ENV_FILE])
+    return Path(DEFAULT_FILE) if Path(DEFAULT_FILE).is_file() else None
+
+
+def load_config(path: str | None = None, *, env: dict | None = None) -> Config:
+    """The configuration from the file (if any) and the environment; flags come on top."""
+    file = find_config(path)
+    config = Config()
+    if file is not None:
+        try:
+            doc = yaml.safe_load(file.read_text())
+        except OSError as e:
+            raise UserError(f"{file}: cannot read the configuration: {e.strerror}") from None
+        except yaml.YAMLError as e:
+            mark = getattr(e, "problem_mark", None)
+            where = f" (line {mark.line + 1})" if mark is not None else ""
+            raise UserError(f"{file}: not valid YAML{where}: {getattr(e, 'problem', e)}") from None
+        config = parse_config(doc, str(file))
+    env = os.environ if env is None else env
+    for var, (section, key) in ENV_KEYS.items():
+        if env.get(var):
+            config = config.with_overrides(section, **{key: env[var]})
+    return config
+
+
+def parse_config(doc, source: str) -> Config:
+    if doc is None:
+        doc = {}
+    if not isinstance(doc, dict):
+        raise UserError(f"{source}: a configuration must be a YAML mapping")
+    v = _Validator(source)
+    version = doc.get("version", 1)
+    if version != 1:
+        raise v.fail("version", f"must be 1, got {version!r}")
+    v.known(doc, "", ("version", "imu", "table", "site", "warmup", "run"))
+    imu = v.section(doc, "imu", ImuConfig, {
+        "port": v.text, "protocol": v.text, "serial": v.serial, "rate_hz": v.positive,
+        "csv_units": v.text_or_empty, "frame_timeout_s": v.positive})
+    table = v.section(doc, "table", TableConfig, {
+        "port": v.text, "protocol": v.text, "serial": v.serial, "axes": v.axes_count,
+        "axes_enu": v.vectors, "mounting": v.mounting, "limits": v.limits,
+        "load_position_deg": v.numbers, "position_tolerance_deg": v.positive,
+        "rate_tolerance_dps": v.positive, "angle_error_arcsec": v.non_negative,
+        "imu_offset_m": v.vector})
+    site = v.section(doc, "site", SiteConfig, {
+        "latitude_deg": v.latitude, "height_m": v.number, "gravity_mps2": v.gravity})
+    warmup = v.section(doc, "warmup", WarmupConfig, {
+        "duration_s": v.non_negative, "max_s": v.positive, "temp_slope_c_per_h": v.positive,
+        "window_s": v.positive})
+    run = v.section(doc, "run", RunConfig, {
+        "settle_s": v.non_negative, "operator": v.boolean, "operator_s": v.non_negative,
+        "output_dir": v.text})
+    table = _check_table(table, v)
+    if warmup.temp_slope_c_per_h is not None and warmup.max_s is None:
+        raise v.fail("warmup.max_s", "needed with temp_slope_c_per_h (the longest warm-up)")
+    return Config(imu=imu, table=table, site=site, warmup=warmup, run=run, source=source)
+
+
+def _check_table(table: TableConfig, v: "_Validator") -> TableConfig:
+    n = len(table.axes_enu) if table.axes_enu else table.axes
+    if table.axes_enu and not 1 <= n <= 3:
+        raise v.fail("table.axes_enu", f"a table has 1 to 3 axes, got {n}")
+    table = replace(table, axes=n)
+    if len(table.limits) not in (1, n):
+        raise v.fail("table.limits", f"one entry for every axis or one per axis ({n}), got {len(table.limits)}")
+    if table.load_position_deg and len(table.load_position_deg) != n:
+        raise v.fail("table.load_position_deg", f"one angle per axis ({n}), got {len(table.load_position_deg)}")
+    for i, lim in enumerate(table.axis_limits()):
+        where = f"table.limits[{i if len(table.limits) > 1 else 0}]"
+        if lim.move_rate_dps > lim.max_rate_dps or lim.move_accel_dps2 > lim.max_accel_dps2 \
+                or lim.rate_accel_dps2 > lim.max_accel_dps2:
+            raise v.fail(where, "move_rate_dps, move_accel_dps2 and rate_accel_dps2 must not exceed "
+                                "max_rate_dps and max_accel_dps2")
+        if (lim.angle_min_deg is None) != (lim.angle_max_deg is None):
+            raise v.fail(where, "angle_min_deg and angle_max_deg go together")
+        if lim.angle_min_deg is not None and not 0 < lim.angle_max_deg - lim.angle_min_deg < 360:
+            raise v.fail(where, "angle_max_deg - angle_min_deg must be within (0, 360) "
+                                "(leave both out for a continuous axis)")
+        if table.load_position_deg and lim.angle_limits is not None:
+            p = table.load_position_deg[i]
+            if not lim.angle_min_deg <= p <= lim.angle_max_deg:
+                raise v.fail(f"table.load_position_deg[{i}]", f"{p} is outside the axis's angle limits")
+    return table
+
+
+class _Validator:
+    """Typed values from the YAML document; failures name the file and the field."""
+
+    def __init__(self, source: str):
+        self.source = source
+
+    def fail(self, where: str, message: str) -> UserError:
+        return UserError(f"{self.source}: field '{where}': {message}")
+
+    def known(self, mapping: dict, prefix: str, keys) -> None:
+        for key in mapping:
+            if key not in keys:
+                raise self.fail(f"{prefix}{key}", f"unknown key (known: {', '.join(keys)})")
+
+    def section(self, doc: dict, name: str, cls, checks: dict, prefix: str = ""):
+        mapping = doc.get(name)
+        if mapping is None:
+            return cls()
+        where = f"{prefix}{name}"
+        if not isinstance(mapping, dict):
+            raise self.fail(where, f"must be a mapping, got {type(mapping).__name__}")
+        self.known(mapping, f"{where}.", tuple(checks))
+        values = {k: checks[k](val, f"{where}.{k}") for k, val in mapping.items() if val is not None}
+        return cls(**values)
+
+    # -------------------------------------------------------------- value checks
+    def number(self, value, where):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise self.fail(where, f"must be a finite number, got {value!r}")
+        return float(value)
+
+    def positive(self, value, where):
+        x = self.number(value, where)
+        if x <= 0:
+            raise self.fail(where, f"must be > 0, got {value!r}")
+        return x
+
+    def non_negative(self, value, where):
+        x = self.number(value, where)
+        if x < 0:
+            raise self.fail(where, f"must be >= 0, got {value!r}")
+        return x
+
+    def latitude(self, value, where):
+        x = self.number(value, where)
+        if not -90 <= x <= 90:
+            raise self.fail(where, f"must be within [-90, 90], got {value!r}")
+        return x
+
+    def gravity(self, value, where):
+        x = self.number(value, where)
+        if not 9.7 < x < 9.9:
+            raise self.fail(where, f"must be a local gravity on Earth (9.7-9.9 m/s^2), got {value!r}")
+        return x
+
+    def boolean(self, value, where):
+        if not isinstance(value, bool):
+            raise self.fail(where, f"must be true or false, got {value!r}")
+        return value
+
+    def text(self, value, where):
+        if isinstance(value, bool) or not isinstance(value, (str, int)) or str(value) == "":
+            raise self.fail(where, f"must be text, got {value!r}")
+        return str(value)
+
+    def text_or_empty(self, value, where):
+        if not isinstance(value, str):
+            raise self.fail(where, f"must be text, got {value!r}")
+        return value
+
+    def axes_count(self, value, where):
+        if isinstance(value, bool) or value not in (1, 2, 3):
+            raise self.fail(where, f"must be 1, 2 or 3, got {value!r}")
+        return int(value)
+
+    def numbers(self, value, where):
+        if not isinstance(value, list):
+            raise self.fail(where, f"must be a list of numbers, got {value!r}")
+        return tuple(self.number(x, f"{where}[{i}]") for i, x in enumerate(value))
+
+    def vector(self, value, where):
+        out = self.numbers(value, where)
+        if len(out) != 3:
+            raise self.fail(where, f"must be a list of 3 numbers, got {value!r}")
+        return out
+
+    def vectors(self, value, where):
+        if not isinstance(value, list) or not value:
+            raise self.fail(where, f"must be a list of axis directions [e, n, u], got {value!r}")
+        out = []
+        for i, item in enumerate(value):
+            vec = np.array(self.vector(item, f"{where}[{i}]"))
+            if np.linalg.norm(vec) == 0:
+                raise self.fail(f"{where}[{i}]", "must not be the zero vector")
+            out.append(tuple(float(x) for x in vec / np.linalg.norm(vec)))
+        return tuple(out)
+
+    def mounting(self, value, where):
+        if not isinstance(value, list) or len(value) != 3 or not all(
+                isinstance(x, str) and x.strip().lower() in AXIS_NAMES for x in value):
+            raise self.fail(where, "must be the platform directions of the IMU's x, y and z axes, "
+                                   f"each one of {', '.join(AXIS_NAMES)}, e.g. [+x, +y, +z]; got {value!r}")
+        names = tuple(x.strip().lower() for x in value)
+        m = np.column_stack([AXIS_NAMES[x] for x in names])
+        if round(float(np.linalg.det(m))) != 1:
+            raise self.fail(where, f"{list(value)} is not a right-handed mounting (x cross y must be z)")
+        return names
+
+    def serial(self, value, where):
+        s = self.section({"serial": value}, "serial", SerialConfig, {
+            "baudrate": self.positive, "bytesize": self.number, "parity": self.text,
+            "stopbits": self.number, "rtscts": self.boolean, "xonxoff": self.boolean,
+            "timeout_s": self.positive}, prefix=where[: -len("serial")])
+        if s.bytesize not in (5, 6, 7, 8) or s.parity not in ("N", "E", "O", "M", "S") \
+                or s.stopbits not in (1, 1.5, 2):
+            raise self.fail(where, "bytesize 5-8, parity N/E/O/M/S, stopbits 1, 1.5 or 2")
+        return replace(s, baudrate=int(s.baudrate), bytesize=int(s.bytesize))
+
+    def limits(self, value, where):
+        checks = {f.name: (self.positive if f.name.endswith(("dps", "dps2")) else self.number)
+                  for f in fields(AxisConfig)}
+        items = value if isinstance(value, list) else [value]
+        if not items:
+            raise self.fail(where, "must not be empty")
+        return tuple(self._axis(item, f"{where}[{i}]", checks) for i, item in enumerate(items))
+
+    def _axis(self, item, where, checks):
+        if not isinstance(item, dict):
+            raise self.fail(where, f"must be a mapping, got {type(item).__name__}")
+        self.known(item, f"{where}.", tuple(checks))
+        return AxisConfig(**{k: checks[k](v, f"{where}.{k}") for k, v in item.items() if v is not None})
+
+
+def _plain(value):
+    if hasattr(value, "__dataclass_fields__"):
+        return {f.name: _plain(getattr(value, f.name)) for f in fields(value)}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
+def from_dict(doc: dict, source: str) -> Config:
+    """A Config back from ``Config.to_dict()`` (a capture's snapshot)."""
+    doc = {k: v for k, v in doc.items() if k != "source"}
+    return parse_config({"version": 1, **doc}, source)
+
+
+EXAMPLE = """\
+# station configuration (station init wrote this file; docs/sequencer.md describes every key).
+# Flags override it: --port, --table-port, --imu-protocol, --table-protocol; so do the
+# environment variables STATION_IMU_PORT, STATION_TABLE_PORT, STATION_IMU_PROTOCOL,
+# STATION_TABLE_PROTOCOL.  Units are in the names.
+version: 1
+
+imu:
+  port: /dev/ttyUSB0          # device path or pyserial URL (socket://host:port, spy://...)
+  protocol: vectornav         # vectornav | csv
+  rate_hz: 100                # vectornav: 800 / N
+  # csv_units: t=ms,accel=g,gyro=rad/s   # csv only (default t=s,accel=m/s^2,gyro=deg/s)
+  frame_timeout_s: 2.0
+  serial: {baudrate: 115200, bytesize: 8, parity: N, stopbits: 1, rtscts: false, xonxoff: false, timeout_s: 1.0}
+
+table:
+  port: /dev/ttyUSB1
+  protocol: acutrol           # acutrol | aerosmith
+  serial: {baudrate: 115200, timeout_s: 1.0}
+  axes: 3
+  # Each axis's direction in east-north-up when every axis is at zero, outer -> inner.
+  # The platform's own axes are east, north, up at zero.  Default for 3 axes:
+  axes_enu: [[0, 0, 1], [1, 0, 0], [0, 1, 0]]
+  # How the IMU sits on the platform: the platform directions of the IMU's x, y and z axes.
+  mounting: [+x, +y, +z]
+  # Limits, one entry for every axis or one per axis (outer first).  Never exceeded.
+  limits:
+    - {max_rate_dps: 300, max_accel_dps2: 300, move_rate_dps: 60, move_accel_dps2: 60,
+       rate_accel_dps2: 50}
+    # an axis with cables: add angle_min_deg: -170, angle_max_deg: 170
+  load_position_deg: [0, 0, 0]   # where the table waits while the operator remounts the IMU
+  position_tolerance_deg: 0.002
+  rate_tolerance_dps: 0.01
+  angle_error_arcsec: 2.0        # 1-sigma of the table's angles (recorded in the capture)
+  # imu_offset_m: [0, 0, 0]      # IMU reference point from the axes' intersection, if known
+
+site:
+  latitude_deg: 45.0
+  height_m: 0.0
+  # gravity_mps2: 9.80620      # measured local gravity; default: WGS-84 normal gravity
+
+warmup:
+  duration_s: 0                # at least this long before the first segment
+  # temp_slope_c_per_h: 0.5    # ...and until the IMU temperature changes less than this
+  # max_s: 14400               # but never longer
+  window_s: 300                # the temperature slope is fitted over this window
+
+run:
+  settle_s: 5.0                # discarded after every move and every ramp
+  operator: true               # false: unattended, never ask for a remount
+  operator_s: 120              # time allowed for an operator step in duration estimates
+  output_dir: captures
+"""

@@ -1,0 +1,244 @@
+"""Gimbal kinematics of a 1-3 axis rate table: forward kinematics and inverse kinematics.
+
+Frames (as the device twins and docs/sequencer.md): ENU (x east, y north, z up); the platform
+frame, which is ENU when every axis is at zero; the IMU case frame b.  Axes are listed
+outer -> inner by their ENU direction at zero, a_i.  With R_i the rotation by theta_i about a_i
+and M the mounting (case -> platform coordinates, ``v_platform = M v_case``):
+
+    C_nb(theta) = R_1 R_2 ... R_k M           (case -> ENU)
+    b_i(theta)  = R_1 ... R_(i-1) a_i         (axis i now, ENU; independent of theta_i..theta_k)
+
+so d(C_nb v)/d theta_j = b_j x (C_nb v), and d b_i / d theta_j = b_j x b_i for j < i.
+
+Inverse kinematics solves a few direction constraints for the angles by batched Gauss-Newton
+from a grid of starting points plus the present angles, keeps the exact solutions inside the
+angle limits, and returns the one with the least travel from the present angles.
+"""
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+UP_ENU = np.array([0.0, 0.0, 1.0])
+SOLVE_TOL = 1e-10            # residual (unit vectors) of an exact solution: 2e-5 arcsec
+GRID_DEG = 90.0              # spacing of the starting points (and the present angles)
+ITERATIONS = 40
+
+
+def wrap180(x):
+    """Angle(s) in [-180, 180)."""
+    return (np.asarray(x, dtype=float) + 180.0) % 360.0 - 180.0
+
+
+def heading_enu(heading_deg: float) -> np.ndarray:
+    """Horizontal unit vector at azimuth ``heading_deg`` (clockwise from north)."""
+    h = np.radians(heading_deg)
+    return np.array([np.sin(h), np.cos(h), 0.0])
+
+
+def right_angle_mountings() -> list[np.ndarray]:
+    """The 24 mountings of a box on a face: proper rotation matrices with entries 0, +-1."""
+    out = []
+    for perm in itertools.permutations(range(3)):
+        for signs in itertools.product((1.0, -1.0), repeat=3):
+            m = np.zeros((3, 3))
+            for row, (col, s) in enumerate(zip(perm, signs)):
+                m[row, col] = s
+            if np.linalg.det(m) > 0:
+                out.append(m)
+    # identity first, then a fixed order
+    out.sort(key=lambda m: (not np.allclose(m, np.eye(3)), tuple(-m.ravel())))
+    return out
+
+
+def _rodrigues(axis: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
+    """(S, 3, 3) rotation matrices about the unit ``axis`` by ``angle_rad`` (S,)."""
+    x, y, z = axis
+    K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    s, c = np.sin(angle_rad)[:, None, None], np.cos(angle_rad)[:, None, None]
+    return np.eye(3) + s * K + (1.0 - c) * (K @ K)
+
+
+@dataclass(frozen=True)
+class Gimbal:
+    """A table's axes (ENU directions at zero, outer -> inner) and the IMU's mounting."""
+
+    axes_enu: tuple                   # k unit 3-vectors
+    mounting: np.ndarray              # (3, 3): case -> platform coordinates
+    angle_limits_deg: tuple = ()      # per axis: None (continuous) or (lo, hi)
+
+    def __post_init__(self):
+        axes = tuple(tuple(float(c) for c in np.asarray(a, float) / np.linalg.norm(a)) for a in self.axes_enu)
+        object.__setattr__(self, "axes_enu", axes)
+        object.__setattr__(self, "mounting", np.asarray(self.mounting, dtype=float).reshape(3, 3))
+        limits = tuple(self.angle_limits_deg) or (None,) * len(axes)
+        object.__setattr__(self, "angle_limits_deg", limits)
+
+    @property
+    def n_axes(self) -> int:
+        return len(self.axes_enu)
+
+    def remounted(self, mounting: np.ndarray) -> "Gimbal":
+        return Gimbal(self.axes_enu, mounting, self.angle_limits_deg)
+
+    # ------------------------------------------------------------------ forward kinematics
+    def frames(self, theta_deg):
+        """(C_nb (S,3,3), b (S,k,3)) for angles (S, k) or (k,)."""
+        th = np.radians(np.atleast_2d(np.asarray(theta_deg, dtype=float)))
+        S, k = th.shape
+        P = np.broadcast_to(np.eye(3), (S, 3, 3)).copy()
+        b = np.empty((S, k, 3))
+        for j in range(k):
+            a = np.asarray(self.axes_enu[j])
+            b[:, j] = P @ a
+            P = P @ _rodrigues(a, th[:, j])
+        return P @ self.mounting, b
+
+    def attitude(self, theta_deg) -> Rotation:
+        """C_nb (case -> ENU) as a scipy Rotation."""
+        C, _ = self.frames(theta_deg)
+        return Rotation.from_matrix(C[0] if np.ndim(theta_deg) == 1 else C)
+
+    def up_body(self, theta_deg) -> np.ndarray:
+        """Local up in case axes."""
+        return self.attitude(theta_deg).inv().apply(UP_ENU)
+
+    def axis_now(self, theta_deg, axis: int) -> tuple[np.ndarray, np.ndarray]:
+        """(ENU direction, case-axes direction) of table axis ``axis`` (1 = outer)."""
+        C, b = self.frames(theta_deg)
+        return b[0, axis - 1], C[0].T @ b[0, axis - 1]
+
+    # ------------------------------------------------------------------ inverse kinematics
+    def solve_static(self, up_body, theta0, heading_body=None, heading_deg=None):
+        """Angles putting ``up_body`` up (and ``heading_body`` towards ``heading_deg``), the
+        least travel from ``theta0``; None when no angles reach it."""
+        pairs = [(np.asarray(up_body, float), UP_ENU)]
+        if heading_body is not None:
+            pairs.append((np.asarray(heading_body, float), heading_enu(heading_deg)))
+
+        def residual(theta):
+            C, b = self.frames(theta)
+            res, jac = [], []
+            for v_body, v_enu in pairs:
+                w = C @ v_body                                  # (S, 3)
+                res.append(w - v_enu)
+                jac.append(np.cross(b, w[:, None, :]).transpose(0, 2, 1))   # (S, 3, k)
+            return np.concatenate(res, axis=1), np.concatenate(jac, axis=1)
+
+        return self._solve(residual, theta0, free=list(range(self.n_axes)))
+
+    def solve_rotation(self, axis_body, elevation_deg, theta0, axis: int, sign: float):
+        """Start angles for turning table ``axis`` so that the rotation is about ``axis_body``
+        (case axes) with that direction ``elevation_deg`` above the horizontal (None: any): the
+        table axis points along ``sign`` x ``axis_body``.  The turning axis keeps its present
+        angle."""
+        i = axis - 1
+        a = np.asarray(axis_body, float)
+        rows = 4 if elevation_deg is not None else 3            # None: any elevation
+        target = 0.0 if elevation_deg is None else np.sin(np.radians(elevation_deg))
+
+        def residual(theta):
+            C, b = self.frames(theta)
+            w = C @ a                                           # (S, 3)
+            bi = b[:, i]
+            res = np.concatenate([w - sign * bi, (sign * bi[:, 2] - target)[:, None]], axis=1)
+            jw = np.cross(b, w[:, None, :]).transpose(0, 2, 1)  # (S, 3, k)
+            jb = np.cross(b, bi[:, None, :]).transpose(0, 2, 1)
+            jb[:, :, i:] = 0.0                                  # b_i depends on outer axes only
+            jac = np.concatenate([jw - sign * jb, sign * jb[:, 2:3, :]], axis=1)
+            return res[:, :rows], jac[:, :rows]
+
+        return self._solve(residual, theta0, free=[j for j in range(self.n_axes) if j != i])
+
+    def _solve(self, residual, theta0, free):
+        k = self.n_axes
+        theta0 = self.unwrap(theta0)
+        if free:
+            grid = np.arange(0.0, 360.0, GRID_DEG)
+            starts = np.tile(theta0, (len(grid) ** len(free) + 1, 1))
+            combos = np.array(list(itertools.product(grid, repeat=len(free))))
+            starts[1:, free] = combos
+        else:
+            starts = theta0[None, :].copy()
+        theta = _newton(residual, starts, free)
+        r, _ = residual(theta)
+        theta = theta[np.linalg.norm(r, axis=1) < SOLVE_TOL]
+        if len(theta) and free:
+            theta = self._least_travel(residual, theta, theta0, free)
+            r, _ = residual(theta)
+            theta = theta[np.linalg.norm(r, axis=1) < SOLVE_TOL]
+        best, best_travel = None, np.inf
+        for th in theta:
+            th = self._in_limits(th)
+            if th is None:
+                continue
+            travel = self.travel(theta0, th)
+            if travel < best_travel - 1e-9:
+                best, best_travel = th, travel
+        return best
+
+    def _least_travel(self, residual, theta, theta0, free):
+        """Slide solutions along their solution set (when it is not a point) towards the least
+        travel from ``theta0``: steps against the travel gradient projected on the null space
+        of the constraints' Jacobian, each followed by a Newton correction."""
+        continuous = np.array([lim is None for lim in self.angle_limits_deg])
+        for _ in range(ITERATIONS):
+            _, J = residual(theta)
+            Jf = J[:, :, free]
+            null = np.eye(len(free)) - np.linalg.pinv(Jf, rcond=1e-9) @ Jf    # (S, f, f)
+            d = theta - theta0
+            d = np.where(continuous, wrap180(d), d)[:, free]
+            step = -0.5 * np.einsum("sij,sj->si", null, d)
+            if np.all(np.abs(step) < 1e-9):
+                break
+            theta = theta.copy()
+            theta[:, free] += np.clip(step, -30.0, 30.0)
+            theta = _newton(residual, theta, free)
+        return theta
+
+    # ------------------------------------------------------------------ limits and travel
+    def unwrap(self, theta) -> np.ndarray:
+        """Angles (e.g. read back in [0, 360)) written inside the limits of limited axes."""
+        theta = np.asarray(theta, dtype=float).reshape(self.n_axes).copy()
+        for j, lim in enumerate(self.angle_limits_deg):
+            if lim is not None:
+                theta[j] = lim[0] + (theta[j] - lim[0]) % 360.0
+        return theta
+
+    def _in_limits(self, theta):
+        """``theta`` written inside each axis's limits ([0, 360) for continuous axes), or None."""
+        out = np.empty_like(theta)
+        for j, (t, lim) in enumerate(zip(theta, self.angle_limits_deg)):
+            if lim is None:
+                out[j] = t % 360.0 if abs(t % 360.0 - 360.0) > 1e-9 else 0.0
+                continue
+            lo, hi = lim
+            cand = lo + (t - lo) % 360.0
+            if cand > hi + 1e-9:
+                return None
+            out[j] = cand
+        return out
+
+    def travel(self, theta_from, theta_to) -> float:
+        """Sum over axes of the angle turned (deg): the shortest way round on continuous axes,
+        through the allowed range on limited ones."""
+        total = 0.0
+        for a, b, lim in zip(theta_from, theta_to, self.angle_limits_deg):
+            total += abs(float(wrap180(b - a))) if lim is None else abs(float(b - a))
+        return total
+
+
+def _newton(residual, theta, free):
+    """Gauss-Newton (minimum-norm steps, at most 30 deg) on the ``free`` angles of every row."""
+    for _ in range(ITERATIONS):
+        r, J = residual(theta)
+        step = -np.einsum("sij,sj->si", np.linalg.pinv(J[:, :, free], rcond=1e-9), r)
+        step = np.clip(np.degrees(step), -30.0, 30.0)
+        theta = theta.copy()
+        theta[:, free] += step
+        if np.all(np.abs(step) < 1e-12):
+            break
+    return theta

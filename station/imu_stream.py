@@ -1,0 +1,113 @@
+"""The IMU stream of a run: one thread reads the IMU driver continuously into a queue.
+
+The sequencer takes samples from it by count (device time); while the table moves it drops
+them (``drain``).  Reading all the time keeps the device's and the operating system's buffers
+empty, so samples taken after a move are fresh and no frame is lost to an overflow.  Errors of
+the driver (timeouts, disconnection) are raised again in the thread that takes samples.
+"""
+from __future__ import annotations
+
+import collections
+import threading
+import time
+
+import numpy as np
+
+from drivers.samples import ImuSamples
+
+BLOCK_S = 0.1            # device seconds per driver read
+
+
+class ImuStream:
+    def __init__(self, imu, rate_hz: float):
+        self.imu = imu
+        self.rate_hz = float(rate_hz)
+        self._block = max(1, int(round(BLOCK_S * self.rate_hz)))
+        self._queue: collections.deque = collections.deque()
+        self._queued = 0
+        self._cond = threading.Condition()
+        self._stop = threading.Event()
+        self._error: BaseException | None = None
+        self._thread: threading.Thread | None = None
+        self.last: ImuSamples | None = None        # the newest block (live display)
+
+    # ------------------------------------------------------------------ thread
+    def start(self) -> None:
+        self.imu.start()
+        self._thread = threading.Thread(target=self._run, name="imu-stream", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        try:
+            while not self._stop.is_set():
+                block = self.imu.read(self._block)
+                with self._cond:
+                    self._queue.append(block)
+                    self._queued += len(block)
+                    self.last = block
+                    self._cond.notify_all()
+        except BaseException as e:          # handed to the consumer
+            with self._cond:
+                self._error = e
+                self._cond.notify_all()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(max(2.0, 3 * self.imu.settings.frame_timeout_s))
+            self._thread = None
+        try:
+            self.imu.stop()
+        except Exception:      # the port may be gone; closing anyway
+            pass
+
+    # ------------------------------------------------------------------ consumer
+    def take(self, n: int, *, wait_s: float = 0.25) -> ImuSamples:
+        """Up to ``n`` samples, as soon as any are there (waits at most ``wait_s`` wall
+        seconds for the first; an empty block when none came, so the caller can check for a
+        pause).  Raises the reader's error, if any."""
+        with self._cond:
+            deadline = time.monotonic() + wait_s
+            while not self._queue and self._error is None:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return ImuSamples.empty()
+                self._cond.wait(left)
+            if not self._queue:
+                raise self._error
+            blocks, have = [], 0
+            while self._queue and have < n:
+                block = self._queue.popleft()
+                if have + len(block) > n:
+                    head, tail = block.split(n - have)
+                    self._queue.appendleft(tail)
+                    block = head
+                blocks.append(block)
+                have += len(block)
+            self._queued -= have
+        return ImuSamples.concat(blocks)
+
+    def drain(self) -> int:
+        """Drop every sample received so far; returns how many."""
+        with self._cond:
+            n = self._queued
+            self._queue.clear()
+            self._queued = 0
+            if self._error is not None:
+                raise self._error
+        return n
+
+    @property
+    def counters(self):
+        return self.imu.counters
+
+    def live(self) -> dict:
+        """|f| (m/s^2), |w| (deg/s) and temperature of the newest block."""
+        b = self.last
+        if b is None or not len(b):
+            return {}
+        temp = b.temp_c[np.isfinite(b.temp_c)]
+        return {"f_mps2": float(np.linalg.norm(b.accel_mps2, axis=1).mean()),
+                "w_dps": float(np.linalg.norm(b.gyro_dps, axis=1).mean()),
+                "temp_c": float(temp.mean()) if temp.size else None,
+                "t_s": float(b.t_s[-1])}

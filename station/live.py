@@ -1,0 +1,148 @@
+"""What a run shows while it runs: the step and its purpose, progress with ETA for the step and
+the run, live |f| and |w|, table angles and rates, temperature, frame and error counters.
+
+``make_display(console)`` gives a rich live view on a terminal and plain lines otherwise (CI,
+pipes, files): one line per step, and a progress line at every quarter of a long step.  The
+sequencer calls ``step``, ``advance``, ``values``, ``note`` and ``prompt``; progress is in
+device seconds (a twin at --speed 100 fills the bars 100 times faster).
+"""
+from __future__ import annotations
+
+import time
+
+from rich.console import Group
+from rich.live import Live
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+from rich.table import Table
+
+QUARTERS = (0.25, 0.5, 0.75)
+
+
+def format_values(v: dict) -> str:
+    """One line of live values (missing ones left out)."""
+    parts = []
+    if v.get("f_mps2") is not None:
+        parts.append(f"|f| {v['f_mps2']:.5f} m/s^2")
+    if v.get("w_dps") is not None:
+        parts.append(f"|w| {v['w_dps']:.4f} deg/s")
+    if v.get("positions_deg") is not None:
+        parts.append("table " + ", ".join(f"{p % 360.0:.3f}".replace("360.000", "0.000")
+                                          for p in v["positions_deg"]) + " deg")
+    if v.get("rates_dps") is not None:
+        parts.append(", ".join(f"{r:+.3f}" for r in v["rates_dps"]) + " deg/s")
+    if v.get("temp_c") is not None:
+        parts.append(f"T {v['temp_c']:.2f} C")
+    c = v.get("counters")
+    if c is not None:
+        parts.append(f"frames {c.frames}, checksum errors {c.checksum_errors}, resyncs {c.resyncs}, "
+                     f"gaps {c.gaps}")
+    return "; ".join(parts)
+
+
+class PlainDisplay:
+    """Lines for logs: no cursor movement, no colour."""
+
+    def __init__(self, console, total_s: float, title: str):
+        self.console = console
+        self.total_s = total_s
+        self.title = title
+        self.done_before = 0.0      # estimates of the finished steps
+        self.values: dict = {}
+        self._step = None
+        self._marks: list = []
+        self._t0 = time.monotonic()
+
+    def __enter__(self):
+        self.console.print(f"{self.title}: estimated {self.total_s:.0f} s of device time",
+                           markup=False, highlight=False)
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def step(self, step, index: int, count: int) -> None:
+        if self._step is not None:
+            self.done_before += self._step.estimate_s
+        self._step = step
+        self._marks = list(QUARTERS)
+        self.console.print(f"[{index + 1}/{count}] {step.describe()}", markup=False, highlight=False)
+
+    def advance(self, done_s: float, total_s: float) -> None:
+        if total_s <= 0 or not self._marks or done_s < self._marks[0] * total_s:
+            return
+        while self._marks and done_s >= self._marks[0] * total_s:
+            self._marks.pop(0)
+        run = min(1.0, (self.done_before + done_s) / self.total_s) if self.total_s else 1.0
+        self.console.print(f"      {done_s:.0f}/{total_s:.0f} s (run {run:.0%}, "
+                           f"{time.monotonic() - self._t0:.0f} s wall); {format_values(self.values)}",
+                           markup=False, highlight=False)
+
+    def values_update(self, values: dict) -> None:
+        self.values.update(values)
+
+    def note(self, text: str) -> None:
+        self.console.print(f"      {text}", markup=False, highlight=False)
+
+    def prompt(self, text: str) -> None:
+        self.console.print(f">>> {text}", markup=False, highlight=False)
+
+
+class RichDisplay(PlainDisplay):
+    """A live view on a terminal."""
+
+    def __init__(self, console, total_s: float, title: str):
+        super().__init__(console, total_s, title)
+        columns = (TextColumn("{task.description}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
+                   TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn())
+        self.progress = Progress(*columns, console=console, auto_refresh=False)
+        self.run_task = self.progress.add_task(f"run {title}", total=max(total_s, 1e-9))
+        self.step_task = self.progress.add_task("step", total=1.0)
+        self.live = Live(self._render(), console=console, refresh_per_second=4, transient=False)
+
+    def _render(self):
+        table = Table.grid(padding=(0, 2))
+        table.add_column(style="bold")
+        table.add_column()
+        step = self._step
+        table.add_row("step", "" if step is None else step.describe())
+        table.add_row("purpose", "" if step is None else step.purpose)
+        table.add_row("live", format_values(self.values))
+        return Group(self.progress, table)
+
+    def __enter__(self):
+        self.live.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        self.live.update(self._render(), refresh=True)
+        return self.live.__exit__(*exc)
+
+    def step(self, step, index: int, count: int) -> None:
+        if self._step is not None:
+            self.done_before += self._step.estimate_s
+        self._step = step
+        self.progress.reset(self.step_task, total=max(step.estimate_s, 1e-9),
+                            description=f"[{index + 1}/{count}] {type(step).__name__}")
+        self.progress.update(self.run_task, completed=self.done_before)
+        self.live.console.print(f"[{index + 1}/{count}] {step.describe()}", markup=False, highlight=False)
+        self.live.update(self._render())
+
+    def advance(self, done_s: float, total_s: float) -> None:
+        self.progress.update(self.step_task, completed=done_s, total=max(total_s, 1e-9))
+        self.progress.update(self.run_task, completed=min(self.total_s, self.done_before + done_s))
+        self.live.update(self._render())
+
+    def values_update(self, values: dict) -> None:
+        self.values.update(values)
+
+    def note(self, text: str) -> None:
+        self.live.console.print(f"      {text}", markup=False, highlight=False)
+
+    def prompt(self, text: str) -> None:
+        self.live.console.print(f">>> {text}", style="bold yellow", markup=False, highlight=False)
+
+
+def make_display(console, total_s: float, title: str):
+    """A rich live display on a terminal, plain lines otherwise."""
+    cls = RichDisplay if console.is_terminal else PlainDisplay
+    return cls(console, total_s, title)

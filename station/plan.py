@@ -1,0 +1,170 @@
+"""A run's plan: small typed steps, compiled from a scheme (station/compile.py) and executed
+by the sequencer (station/sequencer.py), the only code that touches hardware.
+
+Every step says what it is for (``purpose``), which segment it serves (``segment``: the
+steps of a segment that is already complete are skipped on ``--resume``; ``None`` for steps
+that are run every time, e.g. the warm-up), and how long it should take in device time
+(``estimate_s``), so that dry runs and duration estimates walk the plan without hardware.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from station.scheme import RotationSpec, StaticSpec
+
+
+@dataclass(frozen=True)
+class Step:
+    purpose: str
+    segment: str | None
+    estimate_s: float
+
+    def describe(self) -> str:
+        return self.purpose
+
+
+@dataclass(frozen=True)
+class WarmUp(Step):
+    """Stream the IMU for at least ``min_s``; with ``slope_c_per_h``, until the temperature
+    changes more slowly than that over ``window_s`` (at most ``max_s``)."""
+
+    min_s: float = 0.0
+    max_s: float | None = None
+    slope_c_per_h: float | None = None
+    window_s: float = 300.0
+
+    def describe(self) -> str:
+        text = f"warm up: at least {self.min_s:g} s"
+        if self.slope_c_per_h is not None:
+            text += (f", until |dT/dt| < {self.slope_c_per_h:g} C/h over {self.window_s:g} s "
+                     f"(at most {self.max_s:g} s)")
+        return text
+
+
+@dataclass(frozen=True)
+class MoveTo(Step):
+    """Position moves of the axes to ``positions_deg`` (None: leave that axis alone)."""
+
+    positions_deg: tuple = ()
+
+    def describe(self) -> str:
+        angles = ", ".join("-" if p is None else f"{p:.4f}" for p in self.positions_deg)
+        return f"move table to ({angles}) deg: {self.purpose}"
+
+
+@dataclass(frozen=True)
+class Settle(Step):
+    """Discard ``duration_s`` of IMU samples (after a move, before recording)."""
+
+    duration_s: float = 0.0
+
+    def describe(self) -> str:
+        return f"settle {self.duration_s:g} s"
+
+
+@dataclass(frozen=True)
+class Dwell(Step):
+    """Record a static segment: ``spec.dwell_s`` of IMU samples, the table held."""
+
+    spec: StaticSpec = None
+    table_deg: tuple | None = None      # the commanded angles (recorded), None without a table
+
+    def describe(self) -> str:
+        return f"record {self.spec.name}: static {self.spec.dwell_s:g} s, {self.purpose}"
+
+
+@dataclass(frozen=True)
+class Rotate(Step):
+    """Record a rotation segment: ramp ``axis`` to ``table_rate_dps``, settle, record
+    ``revolutions`` whole turns, ramp down."""
+
+    spec: RotationSpec = None
+    axis: int = 1                       # table axis, 1 = outer
+    table_rate_dps: float = 0.0         # signed, of the table axis (= sign x spec.rate_dps)
+    revolutions: int = 1
+    accel_dps2: float = 50.0
+    settle_s: float = 0.0
+    elevation_deg: float = 0.0          # the rotation axis above the horizontal, as compiled
+    table_deg: tuple = ()               # start angles
+
+    @property
+    def capture_s(self) -> float:
+        return self.revolutions * 360.0 / abs(self.table_rate_dps)
+
+    def describe(self) -> str:
+        return (f"record {self.spec.name}: axis {self.axis} at {self.table_rate_dps:+g} deg/s, "
+                f"{self.revolutions} rev ({self.capture_s:g} s), {self.purpose}")
+
+
+@dataclass(frozen=True)
+class Operator(Step):
+    """Ask the operator to do something and wait for the confirmation.  ``remount``: the
+    table is brought to rest (interlocks opened where the protocol can) before asking."""
+
+    instruction: str = ""
+    remount: bool = False
+    mounting: tuple | None = None       # the mounting afterwards (case axes on the platform)
+
+    def describe(self) -> str:
+        return f"OPERATOR: {self.instruction}"
+
+
+@dataclass(frozen=True)
+class HandStatic(Step):
+    """Without a table: the operator puts the IMU on a face and keeps it still; the recording
+    continues until the data show ``spec.dwell_s`` of stillness."""
+
+    spec: StaticSpec = None
+    instruction: str = ""
+
+    def describe(self) -> str:
+        return f"OPERATOR (by hand): {self.instruction}"
+
+
+@dataclass(frozen=True)
+class HandRotation(Step):
+    """Without a table: the operator turns the IMU; the recording continues until the data
+    show a turn followed by stillness."""
+
+    spec: RotationSpec = None
+    instruction: str = ""
+
+    def describe(self) -> str:
+        return f"OPERATOR (by hand): {self.instruction}"
+
+
+@dataclass(frozen=True)
+class Checkpoint(Step):
+    """The segment is on disk and in the manifest: a run resumes after it."""
+
+    def describe(self) -> str:
+        return f"checkpoint: {self.segment} saved"
+
+
+@dataclass
+class Plan:
+    scheme: str
+    steps: list = field(default_factory=list)
+    notes: list = field(default_factory=list)     # e.g. what the compiler had to change
+    manual: bool = False                          # performed by hand, no table
+    mounting_of: dict = field(default_factory=dict)   # segment -> mounting while it records
+
+    def __iter__(self):
+        return iter(self.steps)
+
+    @property
+    def duration_s(self) -> float:
+        return sum(s.estimate_s for s in self.steps)
+
+    @property
+    def segments(self) -> list[str]:
+        return [s.segment for s in self.steps if isinstance(s, Checkpoint)]
+
+    def recording(self) -> list:
+        """The steps that record a segment (Dwell, Rotate, HandStatic, HandRotation)."""
+        return [s for s in self.steps if isinstance(s, (Dwell, Rotate, HandStatic, HandRotation))]
+
+    def remaining(self, done: set[str]) -> list:
+        """The steps still to run when the segments ``done`` are complete (``--resume``):
+        steps of no segment (warm-up) and those of the segments not done."""
+        return [s for s in self.steps if s.segment is None or s.segment not in done]

@@ -1,0 +1,441 @@
+"""The sequencer: executes a plan (station/plan.py) on the devices; the only code that touches
+hardware.
+
+Time comes from the devices: a dwell is a number of IMU samples, a rotation a whole number of
+table revolutions recorded as a number of IMU samples, settling is IMU samples discarded; so a
+run against the device twins at ``--speed 100`` runs the same code as one on a real bench.
+
+Safety: every rate, acceleration and angle is checked against the configured limits before it
+is commanded; whatever happens, the table is brought to rest in a ``finally``.  Ctrl-C asks for
+a pause: at the next safe point (between blocks of samples, between steps) the table is brought
+to rest and the segment being recorded is closed as ``incomplete`` (everything recorded is
+kept); on a terminal the operator can then continue, otherwise the run stops and
+``station run --resume CAPTURE`` continues later.  A second Ctrl-C (or SIGTERM) aborts at once,
+still stopping the table.  Hand-performed schemes (no table) are recorded as one continuous
+session and split into segments by station/segment_detect.py.
+"""
+from __future__ import annotations
+
+import math
+import signal
+import threading
+import time
+
+import numpy as np
+
+from station.capture import CaptureWriter
+from station.errors import UserError
+from station.imu_stream import ImuStream
+from station.plan import (Checkpoint, Dwell, HandRotation, HandStatic, MoveTo, Operator, Rotate, Settle,
+                          WarmUp)
+
+BLOCK_S = 1.0                 # device seconds written to a segment per write
+POLL_WALL_S = 0.1             # at most this often (wall) the table is read while recording
+RATE_HOLD_FRACTION = 0.01     # a rotation's rate must stay within 1 % (or 10 rate tolerances)
+POSITION_HOLD_FACTOR = 10     # a dwell's angles must stay within 10 position tolerances
+WAYPOINT_DEG = 170.0          # largest single move of an axis with angle limits
+
+
+class PauseRequested(Exception):
+    """Ctrl-C: stop at the next safe point."""
+
+
+class RunAborted(KeyboardInterrupt):
+    """A second Ctrl-C, or SIGTERM."""
+
+
+class RunPaused(Exception):
+    """The run stopped at a safe point and can be resumed (``station run --resume``)."""
+
+
+class SequencerError(UserError):
+    """The bench did not do what it was told (a rate not held, a table that moved)."""
+
+
+class Interrupts:
+    """SIGINT: the first asks for a pause, the second aborts; SIGTERM aborts."""
+
+    def __init__(self):
+        self.count = 0
+        self._previous = {}
+
+    @property
+    def pause_requested(self) -> bool:
+        return self.count > 0
+
+    def clear(self) -> None:
+        self.count = 0
+
+    def _sigint(self, signum, frame):
+        self.count += 1
+        if self.count >= 2:
+            raise RunAborted()
+
+    def _sigterm(self, signum, frame):
+        raise RunAborted()
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            self._previous = {signal.SIGINT: signal.signal(signal.SIGINT, self._sigint),
+                              signal.SIGTERM: signal.signal(signal.SIGTERM, self._sigterm)}
+        return self
+
+    def __exit__(self, *exc):
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        return False
+
+
+class Sequencer:
+    """Runs plan steps on ``table`` (a connected RateTable, or None for schemes done by hand)
+    and ``imu`` (a connected Imu), recording into ``writer`` (a CaptureWriter)."""
+
+    def __init__(self, *, table, imu, writer: CaptureWriter, config, display, operator,
+                 interrupts: Interrupts | None = None, rate_hz: float, reset_faults: bool = False):
+        self.table = table
+        self.writer = writer
+        self.config = config
+        self.display = display
+        self.operator = operator
+        self.interrupts = interrupts or Interrupts()
+        self.rate_hz = float(rate_hz)
+        self.stream = ImuStream(imu, self.rate_hz)
+        self.limits = config.table.axis_limits() if table is not None else ()
+        self.reset_faults = reset_faults
+        self.mounting = tuple(config.table.mounting)
+        self._last_poll = 0.0
+        self._elapsed_s = self._estimate_s = 0.0     # device time into the present step
+        self._session = None          # hand schemes: the continuous recording
+
+    # ------------------------------------------------------------------ the run
+    def run(self, steps: list) -> None:
+        """Execute ``steps``; the table is at rest and the IMU stream stopped afterwards."""
+        try:
+            self._prepare()
+            i = 0
+            while i < len(steps):
+                step = steps[i]
+                try:
+                    self._check_pause()
+                    self.display.step(step, i, len(steps))
+                    self._elapsed_s, self._estimate_s = 0.0, step.estimate_s
+                    self._execute(step)
+                    i += 1
+                except PauseRequested:
+                    i = self._pause(steps, i)
+            if self._session is not None:
+                self._finish_session(steps)
+        finally:
+            if self._session is not None and not self._session.segment.closed:
+                self._session.segment.close("incomplete")
+            self._shutdown()
+
+    def _execute(self, step) -> None:
+        handler = {WarmUp: self._warmup, MoveTo: self._move, Settle: self._settle, Dwell: self._dwell,
+                   Rotate: self._rotate, Operator: self._operator, Checkpoint: self._checkpoint,
+                   HandStatic: self._hand, HandRotation: self._hand}[type(step)]
+        handler(step)
+
+    def _pause(self, steps, i) -> int:
+        """At a safe point: table at rest, segment closed as incomplete (by its ``with``)."""
+        if self.table is not None:
+            self._stop_table()
+        self.display.note("paused: the table is at rest; what was recorded is kept "
+                          "(the segment being recorded is marked incomplete)")
+        if self._session is not None:                  # by hand: keep what was done, stop
+            self._finish_session(steps)
+            raise RunPaused(str(self.writer.path))
+        if not self.operator.resume_after_pause(self.interrupts):
+            raise RunPaused(str(self.writer.path))
+        self.interrupts.clear()
+        self.writer = CaptureWriter.reopen(self.writer.path)
+        self.stream.drain()
+        segment = steps[i].segment
+        while i > 0 and segment is not None and steps[i - 1].segment == segment:
+            i -= 1
+        return i
+
+    def _check_pause(self) -> None:
+        if self.interrupts.pause_requested:
+            raise PauseRequested()
+
+    # ------------------------------------------------------------------ start and end
+    def _prepare(self) -> None:
+        t = self.table
+        if t is not None:
+            st = t.status()
+            if any(st.fault):
+                if not self.reset_faults:
+                    raise UserError(f"{t.name}: a fault is latched ({st.describe()}): find its cause, "
+                                    "then reset it on the controller or run with --reset-faults")
+                t.reset_interlocks()
+            t.close_interlocks()
+            t.stop()                          # whatever it was doing (e.g. before a crash): at rest
+            for axis, lim in zip(t.axes, self.limits):
+                try:
+                    t.set_rate_limits(axis, "rate", lim.max_rate_dps, lim.rate_accel_dps2)
+                except UserError as e:        # NotSupported: the controller's own limits apply
+                    self.display.note(f"axis {axis}: rate-mode limits not set ({e}); the controller's apply")
+        self.stream.start()
+
+    def _shutdown(self) -> None:
+        try:
+            if self.table is not None:
+                self._stop_table()
+        finally:
+            self.stream.stop()
+
+    def _stop_table(self) -> None:
+        """Bring every axis to rest; one retry after clearing a half-read reply."""
+        try:
+            self.table.stop()
+        except UserError:
+            time.sleep(0.1)
+            self.table.port.discard_input()
+            self.table.stop()
+
+    def _progress(self, samples: int) -> None:
+        self._elapsed_s += samples / self.rate_hz
+        self.display.advance(self._elapsed_s, max(self._estimate_s, self._elapsed_s))
+
+    # ------------------------------------------------------------------ IMU samples
+    def _take(self, n: int):
+        """Up to ``n`` samples; checks for a pause while waiting."""
+        while True:
+            block = self.stream.take(n)
+            if len(block):
+                return block
+            self._check_pause()
+
+    def _discard(self, seconds: float) -> None:
+        self.stream.drain()
+        n = int(round(seconds * self.rate_hz))
+        done = 0
+        while done < n:
+            got = len(self._take(n - done))
+            done += got
+            self._progress(got)
+            self._check_pause()
+
+    def _record(self, seg, n: int, poll) -> dict:
+        """Write ``n`` samples into segment ``seg``, calling ``poll()`` now and then.  Returns
+        the window the samples stand for (``window_s``: t_last - t_first + one period, from the
+        device's sample times), the frames lost in it (``gaps``) and the mean temperature."""
+        block_n = max(1, int(round(BLOCK_S * self.rate_hz)))
+        done, temp_sum, temp_n = 0, 0.0, 0
+        with_temp = None
+        first_t = last_t = None
+        missing = self.stream.counters.missing_frames
+        while done < n:
+            b = self._take(min(block_n, n - done))
+            first_t = b.t_s[0] if first_t is None else first_t
+            last_t = b.t_s[-1]
+            finite = np.isfinite(b.temp_c)
+            if with_temp is None:
+                with_temp = bool(finite.all())
+            temp = None
+            if with_temp:
+                temp = np.where(finite, b.temp_c, np.nanmean(b.temp_c) if finite.any() else 0.0)
+                temp_sum += float(temp.sum())
+                temp_n += len(temp)
+            seg.write(b.t_s, b.accel_mps2, b.gyro_dps, temp)
+            done += len(b)
+            self.display.values_update({**self.stream.live(), "counters": self.stream.counters})
+            self._progress(len(b))
+            if time.monotonic() - self._last_poll >= POLL_WALL_S:
+                poll()
+            self._check_pause()
+        poll()
+        lost = self.stream.counters.missing_frames - missing
+        if lost:
+            self.display.note(f"{seg.name}: {lost} frames lost while recording (the window and the "
+                              "angle come from the sample times)")
+        return {"window_s": float(last_t - first_t) + 1.0 / self.rate_hz, "gaps": lost,
+                "temp": temp_sum / temp_n if temp_n else None}
+
+    # ------------------------------------------------------------------ steps
+    def _warmup(self, step: WarmUp) -> None:
+        self.stream.drain()
+        t_first = None
+        times, temps, rows = [], [], ["t_s,temp_c"]
+        while True:
+            b = self._take(max(1, int(round(self.rate_hz))))
+            t_first = b.t_s[0] if t_first is None else t_first
+            elapsed = float(b.t_s[-1] - t_first)
+            finite = np.isfinite(b.temp_c)
+            if finite.any():
+                times.append(float(b.t_s[-1]))
+                temps.append(float(b.temp_c[finite].mean()))
+                rows.append(f"{times[-1]:.3f},{temps[-1]:.4f}")
+            total = step.max_s if step.slope_c_per_h is not None else step.min_s
+            self.display.values_update({**self.stream.live(), "counters": self.stream.counters})
+            self.display.advance(min(elapsed, total), total)
+            if elapsed >= step.min_s:
+                if step.slope_c_per_h is None:
+                    break
+                slope = _slope_c_per_h(times, temps, step.window_s)
+                if slope is not None and abs(slope) < step.slope_c_per_h:
+                    self.display.note(f"warm-up done after {elapsed:.0f} s: {slope:+.3f} C/h")
+                    break
+                if step.max_s is not None and elapsed >= step.max_s:
+                    self.display.note(f"warm-up stopped at its maximum, {step.max_s:g} s "
+                                      f"(slope {slope if slope is not None else float('nan'):+.3f} C/h)")
+                    break
+            self._check_pause()
+        self.writer.write_file("warmup.csv", "\n".join(rows) + "\n")
+
+    def _move(self, step: MoveTo) -> None:
+        targets = list(step.positions_deg)
+        self._check_targets(targets)
+        for waypoint in self._waypoints(targets):
+            self.table.move_to(waypoint)
+        self._poll_table()
+
+    def _settle(self, step: Settle) -> None:
+        self._discard(step.duration_s)
+
+    def _dwell(self, step: Dwell) -> None:
+        spec = step.spec
+        n = int(round(spec.dwell_s * self.rate_hz))
+        meta = {"up_body": list(spec.up_body)}
+        if spec.heading_body is not None:
+            meta.update(heading_body=list(spec.heading_body), heading_deg=spec.heading_deg)
+        meta.update(table_deg=list(step.table_deg), mounting=list(self.mounting))
+        goal = np.array(step.table_deg)
+        tol = POSITION_HOLD_FACTOR * self.config.table.position_tolerance_deg
+
+        def poll():
+            pos, _ = self._poll_table()
+            off = np.abs((pos - goal + 180.0) % 360.0 - 180.0)
+            if np.any(off > tol):
+                raise SequencerError(f"{self.table.name}: the table moved while recording {spec.name}: "
+                                     f"axes at {np.round(pos, 4).tolist()} deg, commanded "
+                                     f"{np.round(goal, 4).tolist()} deg")
+
+        with self.writer.begin_segment(spec.name, "static", **meta) as seg:
+            rec = self._record(seg, n, poll)
+            seg.close("complete", **_optional(temperature_c=rec["temp"]))
+
+    def _rotate(self, step: Rotate) -> None:
+        spec, axis, rate = step.spec, step.axis, step.table_rate_dps
+        lim = self.limits[axis - 1]
+        if lim.angle_limits is not None or not math.isfinite(rate) or abs(rate) > lim.max_rate_dps:
+            raise SequencerError(f"{spec.name}: {rate:g} deg/s on axis {axis} is outside its limits "
+                                 f"(max_rate_dps {lim.max_rate_dps:g}, continuous axes only)")
+        self.table.set_rate(axis, rate)
+        self._discard(step.settle_s)
+        n = int(round(step.revolutions * 360.0 / abs(rate) * self.rate_hz))
+        readbacks = []
+        hold = max(RATE_HOLD_FRACTION * abs(rate), 10 * self.config.table.rate_tolerance_dps)
+
+        def poll():
+            _, rates = self._poll_table()
+            readbacks.append(float(rates[axis - 1]))
+            if abs(readbacks[-1] - rate) > hold:
+                raise SequencerError(f"{self.table.name}: axis {axis} did not hold {rate:g} deg/s while "
+                                     f"recording {spec.name} (read {readbacks[-1]:.6f} deg/s)")
+
+        body_sign = spec.rate_dps / rate                 # +1: table axis along axis_body
+        meta = {"axis_body": list(spec.axis_body), "rate_dps": spec.rate_dps, "table_axis": axis,
+                "table_rate_dps": rate, "revolutions": step.revolutions,
+                "axis_elevation_deg": round(step.elevation_deg, 9), "table_deg": list(step.table_deg),
+                "mounting": list(self.mounting)}
+        if not spec.encoder:
+            meta["note"] = "no encoder by the scheme: rate_dps is the nominal rate and gives the direction only"
+        with self.writer.begin_segment(spec.name, "rotation", **meta) as seg:
+            poll()
+            rec = self._record(seg, n, poll)
+            mean_rate = float(np.mean(readbacks))
+            angle = body_sign * mean_rate * rec["window_s"]
+            seg.close("complete", **_optional(angle_deg=angle if spec.encoder else None,
+                                              table_rate_readback_dps=mean_rate, temperature_c=rec["temp"]))
+        self.table.set_rate(axis, 0.0)
+
+    def _operator(self, step: Operator) -> None:
+        opened = False
+        if step.remount and self.table is not None:
+            self._stop_table()
+            try:
+                self.table.open_interlocks()
+                opened = True
+                self.display.note("interlocks open: the table is unpowered")
+            except UserError:
+                self.display.note("this controller cannot open its interlocks: switch the drive off "
+                                  "before touching the table")
+        self.display.prompt(step.instruction)
+        self.operator.confirm(step, self.interrupts)
+        if opened:
+            self.table.close_interlocks()
+        if step.mounting is not None:
+            self.mounting = tuple(step.mounting)
+
+    def _checkpoint(self, step: Checkpoint) -> None:
+        self.display.note(f"{step.segment}: saved")
+
+    # ------------------------------------------------------------------ hand schemes
+    def _hand(self, step) -> None:
+        from station.manual import hand_step
+
+        if self._session is None:
+            from station.manual import Session
+
+            self._session = Session(self.writer, self.rate_hz)
+        hand_step(self, step)
+
+    def _finish_session(self, steps) -> None:
+        from station.manual import finish_session
+
+        finish_session(self, steps)
+
+    # ------------------------------------------------------------------ table helpers
+    def _poll_table(self):
+        """(positions, rates) of the table, with a fault check; live display."""
+        if self.table is None:
+            return None, None
+        self._last_poll = time.monotonic()
+        self.table.check_ok()
+        pos, rates = self.table.read_positions_deg(), self.table.read_rates_dps()
+        self.display.values_update({"positions_deg": pos.tolist(), "rates_dps": rates.tolist()})
+        return pos, rates
+
+    def _check_targets(self, targets) -> None:
+        for axis, (target, lim) in enumerate(zip(targets, self.limits), 1):
+            if target is None:
+                continue
+            if not math.isfinite(target):
+                raise SequencerError(f"axis {axis}: position {target!r} is not a number")
+            if lim.angle_limits is not None and not lim.angle_min_deg - 1e-9 <= target <= lim.angle_max_deg + 1e-9:
+                raise SequencerError(f"axis {axis}: position {target:g} deg is outside its limits "
+                                     f"[{lim.angle_min_deg:g}, {lim.angle_max_deg:g}] deg")
+
+    def _waypoints(self, targets) -> list:
+        """The moves to reach ``targets``: axes with angle limits go there in steps of at most
+        WAYPOINT_DEG, so that the controller's shortest way round stays inside the limits."""
+        limited = [i for i, (t, lim) in enumerate(zip(targets, self.limits))
+                   if t is not None and lim.angle_limits is not None]
+        if not limited:
+            return [targets]
+        now = self.table.read_positions_deg()
+        start = {i: self.limits[i].angle_min_deg + (now[i] - self.limits[i].angle_min_deg) % 360.0
+                 for i in limited}
+        steps = max(math.ceil(abs(targets[i] - start[i]) / WAYPOINT_DEG) for i in limited)
+        out = []
+        for k in range(1, steps):
+            point = [None] * len(targets)
+            for i in limited:
+                point[i] = start[i] + (targets[i] - start[i]) * k / steps
+            out.append(point)
+        return out + [targets]
+
+
+def _optional(**values) -> dict:
+    return {k: v for k, v in values.items() if v is not None}
+
+
+def _slope_c_per_h(times, temps, window_s):
+    """Least-squares temperature slope over the last ``window_s`` (None before a full window)."""
+    if len(times) < 3 or times[-1] - times[0] < window_s:
+        return None
+    t = np.asarray(times)
+    sel = t >= t[-1] - window_s
+    return float(np.polyfit(t[sel], np.asarray(temps)[sel], 1)[0] * 3600.0)

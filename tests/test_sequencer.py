@@ -1,0 +1,192 @@
+"""station run end to end through the serial drivers against the device twins (real
+pseudo-terminals, --speed 100): the estimate against the twins' truth, compared with the
+in-process dry run; a run killed with SIGKILL and resumed; Ctrl-C pausing at a safe point.
+
+Errors are judged against the 1-sigma the least-squares estimator reports (z = error / sigma):
+with 21 parameters, max |z| < 4.5 fails by chance with probability ~1e-4, and the rms of z
+(about 1) exceeds 1.6 with probability < 1e-3.
+"""
+import hashlib
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from sim_devices.truth import default_truth
+from sim_devices.twins.serve import BenchOptions, BenchServer
+from station import simrun
+from station.calibration import parameter_errors
+from station.capture import read_capture
+from station.estimate import estimate_with
+from station.scheme import load_scheme
+
+SPEED = 100.0
+SEED = 11
+SHORT = ["--dwell-s", "20", "--rotation-s", "36"]     # 1 revolution at 10 deg/s
+CONFIG = """\
+version: 1
+table:
+  axes: 3
+  limits: [{max_rate_dps: 300, max_accel_dps2: 300, move_rate_dps: 60, move_accel_dps2: 60, rate_accel_dps2: 100}]
+run:
+  operator: false
+  settle_s: 3
+"""
+Z_MAX, Z_RMS = 4.5, 1.6
+
+
+@pytest.fixture(scope="module")
+def bench():
+    with BenchServer(default_truth(SEED), BenchOptions(speed=SPEED, seed=SEED, axes=3)) as b:
+        yield b
+
+
+@pytest.fixture(scope="module")
+def config(tmp_path_factory):
+    path = tmp_path_factory.mktemp("cfg") / "station.yaml"
+    path.write_text(CONFIG)
+    return path
+
+
+def station(bench, config, *args, **popen):
+    cmd = [sys.executable, "-m", "station.cli", "run", "--config", str(config),
+           "--port", bench.imu_path, "--table-port", bench.table_path, *args]
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            cwd=Path(__file__).parent, **popen)
+
+
+def run_to_end(bench, config, *args, timeout=120):
+    proc = station(bench, config, *args)
+    out, err = proc.communicate(timeout=timeout)
+    assert proc.returncode == 0, err[-3000:]
+    return out, err
+
+
+def z_scores(cal, truth):
+    return np.array([(value - true) / cal.sigma[name]
+                     for name, value, true, _, _ in parameter_errors(cal, simrun.truth_calibration(truth))])
+
+
+def sha(path):
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def complete_segments(capture_dir):
+    try:
+        doc = yaml.safe_load((Path(capture_dir) / "manifest.yaml").read_text())
+    except (OSError, yaml.YAMLError):
+        return []
+    return [s for s in (doc or {}).get("segments", []) if s.get("status") == "complete"]
+
+
+def wait_for_recording(out, after: int, timeout_s: float = 60.0) -> str:
+    """The name of the segment being recorded once ``after`` segments are complete and it has
+    rows on disk."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        try:
+            doc = yaml.safe_load((Path(out) / "manifest.yaml").read_text()) or {}
+        except (OSError, yaml.YAMLError):
+            doc = {}
+        segs = doc.get("segments", [])
+        done = sum(s.get("status") == "complete" for s in segs)
+        if done >= after and segs and segs[-1].get("status") == "incomplete":
+            csv = Path(out) / segs[-1]["file"]
+            if csv.exists() and csv.stat().st_size > 2000:
+                return segs[-1]["name"]
+        time.sleep(0.02)           # gently: the twins run in this process
+    raise AssertionError(f"no segment recording after {after} complete ones within {timeout_s} s")
+
+
+@pytest.fixture(scope="module")
+def full_run(bench, config, tmp_path_factory):
+    out = tmp_path_factory.mktemp("full") / "cap"
+    t0 = time.monotonic()
+    stdout, _ = run_to_end(bench, config, "--scheme", "optimal9", "--out", str(out), *SHORT)
+    return out, stdout, time.monotonic() - t0
+
+
+def test_optimal9_through_the_drivers_matches_the_truth_like_the_dry_run(full_run):
+    out, stdout, wall_s = full_run
+    capture = read_capture(out)
+    names = [s.name for s in load_scheme("optimal9").segments]
+    assert [s.name for s in capture.complete()] == names
+    assert (out / "calibration.yaml").exists() and "calibration file" in stdout
+    for seg in capture.complete("static"):
+        assert len(seg.data.t) == 20 * 100 and seg.data.gaps == 0
+    for seg in capture.complete("rotation"):
+        # one revolution at the table's measured rate; the twin holds exactly 10 deg/s
+        assert len(seg.data.t) == 3600
+        assert seg.angle_deg == pytest.approx(np.sign(seg.rate_dps) * 360.0, abs=1e-6)
+        assert seg.extra["revolutions"] == 1
+    truth = default_truth(SEED)
+    cal, method = estimate_with(capture, "lsq")
+    z_twin = z_scores(cal, truth)
+    scheme = load_scheme("optimal9", {"dwell_s": 20, "rotation_s": 36})
+    dry, _ = estimate_with(simrun.simulate_capture(scheme, truth, SEED), "lsq")
+    z_dry = z_scores(dry, truth)
+    print(f"\ntwins ({wall_s:.1f} s wall): max |z| {np.abs(z_twin).max():.2f}, rms z "
+          f"{np.sqrt(np.mean(z_twin**2)):.2f}; in-process dry run: max |z| {np.abs(z_dry).max():.2f}, "
+          f"rms z {np.sqrt(np.mean(z_dry**2)):.2f}")
+    for z in (z_twin, z_dry):
+        assert np.abs(z).max() < Z_MAX
+        assert np.sqrt(np.mean(z**2)) < Z_RMS
+
+
+def test_a_run_killed_mid_way_resumes_without_rewriting_what_was_complete(bench, config, full_run, tmp_path):
+    out = tmp_path / "cap"
+    proc = station(bench, config, "--scheme", "optimal9", "--out", str(out), *SHORT)
+    try:
+        recording = wait_for_recording(out, after=11)          # into the rotations
+        assert proc.poll() is None, proc.communicate()[1][-2000:]
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    before = {s["name"]: (s["sha256"], sha(out / s["file"])) for s in complete_segments(out)}
+    assert 11 <= len(before) < 21
+    assert all(recorded == actual for recorded, actual in before.values())
+
+    run_to_end(bench, config, "--resume", str(out))
+    capture = read_capture(out)
+    assert [s.name for s in capture.complete()] == [s.name for s in load_scheme("optimal9").segments]
+    after = {s.name: s.extra["sha256"] for s in capture.complete()}
+    for name, (recorded, _) in before.items():
+        assert after[name] == recorded == sha(out / f"{name}.csv"), name
+    assert (out / f"{recording}.csv.incomplete").stat().st_size > 0       # the one being recorded
+
+    resumed, _ = estimate_with(capture, "lsq")
+    whole, _ = estimate_with(read_capture(full_run[0]), "lsq")
+    for name, value, _ in resumed.parameters()[:21]:
+        spread = np.hypot(resumed.sigma[name], whole.sigma[name])
+        assert abs(value - dict((n, v) for n, v, _ in whole.parameters())[name]) < Z_MAX * spread, name
+
+
+def test_ctrl_c_pauses_at_a_safe_point_with_the_table_at_rest(bench, config, tmp_path):
+    scheme = tmp_path / "small.yaml"
+    scheme.write_text("name: small\ndefaults: {dwell_s: 20, rate_dps: 10, rotation_s: 36}\nsegments:\n"
+                      "  - {static: zup, up_body: [0, 0, 1]}\n  - {rotation: rotx, axis_body: [1, 0, 0]}\n")
+    out = tmp_path / "cap"
+    proc = station(bench, config, "--scheme", str(scheme), "--out", str(out))
+    try:
+        assert wait_for_recording(out, after=1) == "rotx_p"
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err[-2000:]
+    assert "paused" in err and f"--resume {out}" in err
+    capture = read_capture(out)
+    seg = capture.segment("rotx_p")
+    assert seg.status == "incomplete" and len(seg.data.t) > 0          # kept, marked incomplete
+    assert capture.segment("zup").status == "complete"
+    assert all(bench.table.read_rate(axis) == 0.0 for axis in (1, 2, 3))  # brought to rest
+    assert all(ax.mode == "position" for ax in bench.table.axes)
