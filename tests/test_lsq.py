@@ -36,8 +36,9 @@ def test_noise_free_fit_is_exact_and_chi2_zero():
                                                             2.0 / 3600)
     result = lsq.fit(s)
     cal = lsq.to_calibration(result, "m/s^2", "deg/s")
-    for name, _, _, err, unit in parameter_errors(cal, simrun.truth_calibration(truth)):
-        assert abs(err) < 1e-3 * max(cal.sigma[name], 1e-3), (name, err, unit)
+    for name, value, _, err, unit in parameter_errors(cal, simrun.truth_calibration(truth)):
+        sigma = cal.sigma[name] / value * 1e6 if unit == "ppm" else cal.sigma[name]
+        assert abs(err) < 1e-3 * sigma, (name, err, sigma, unit)
     # noise would give about dof; what remains is the Earth rate seen in the gyro-tracked phase
     # of each turn (about Omega_E / rate rad), far below the noise
     assert result.chi2 < 1e-2 * result.dof
