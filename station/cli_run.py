@@ -82,8 +82,8 @@ def cmd_schemes(args) -> int:
     from station.scheme import builtin_names, load_scheme
 
     config = load_config(args.config)
-    table = Table(title=f"built-in schemes (run times for the {config.table.axes}-axis table of "
-                        f"{config.source})")
+    table = Table(title=f"built-in schemes (run s: estimated for the {config.table.axes}-axis table of "
+                        f"the configuration: {config.source})")
     for col in ("scheme", "statics", "rotations", "recording s", "run s", "operator steps", "title"):
         table.add_column(col, justify="left" if col in ("scheme", "title") else "right")
     for name in builtin_names():

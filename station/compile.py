@@ -54,6 +54,8 @@ class Compiler:
         plan = Plan(self.scheme.name)
         gimbal, theta = self.gimbal0, self.load_deg.copy()
         specs = list(self.scheme.segments)
+        for spec in specs:
+            self._check_rate(spec)
         if self.operator:
             if self._solve(specs[0], gimbal, theta, free_elevation=not self._exact(specs[0])) is None:
                 gimbal = gimbal.remounted(self._best_mounting(specs, 0))
@@ -62,7 +64,6 @@ class Compiler:
                                                check=gimbal is self.gimbal0))
         plan.steps.extend(self._warmup())
         for i, spec in enumerate(specs):
-            self._check_rate(spec)
             solution = self._solve(spec, gimbal, theta)
             relaxed = False
             if solution is None and isinstance(spec, RotationSpec) and not self._exact(spec):
@@ -77,7 +78,7 @@ class Compiler:
                 solution = self._solve(spec, gimbal, theta, free_elevation=relaxed)
             if solution is None:
                 raise UserError(self._unreachable(spec, gimbal))
-            if relaxed:
+            if relaxed and abs(solution[3] - spec.axis_elevation_deg) > 1e-6:
                 why = ("with the IMU on any face" if self.operator
                        else "without a remount (unattended run)")
                 plan.notes.append(
@@ -160,9 +161,31 @@ class Compiler:
                 n += 1
             if n > reach:
                 best, reach = m, n
+        if best is None:                  # no face will do: a fixture holding the IMU askew
+            for m in self._fixtures(specs[i]):
+                n = 0
+                while i + n < len(specs) and self._reachable(specs[i + n], m):
+                    n += 1
+                if n > reach:
+                    best, reach = m, n
         if best is None:
             raise UserError(self._unreachable(specs[i], None))
         return best
+
+    def _fixtures(self, spec) -> list:
+        """Mountings that put what ``spec`` needs where the table reaches it at zero: a static's
+        up (and heading) on the platform's up (and that heading); a rotation's axis along the
+        innermost continuous axis that can turn at its rate, either way."""
+        if isinstance(spec, StaticSpec):
+            if spec.heading_body is None:
+                return [_align(spec.up_body, (0, 0, 1))]
+            return [_align(spec.up_body, (0, 0, 1), spec.heading_body, _heading(spec.heading_deg))]
+        out = []
+        for axis, lim in reversed(list(enumerate(self.limits))):
+            if lim.angle_limits is None and abs(spec.rate_dps) <= lim.max_rate_dps:
+                a = np.asarray(self.gimbal0.axes_enu[axis])
+                out += [_align(spec.axis_body, a), _align(spec.axis_body, -a)]
+        return out
 
     def _unreachable(self, spec, gimbal) -> str:
         t = self.config.table
@@ -224,21 +247,20 @@ class Compiler:
     def _mount_step(self, mounting, segment, *, check: bool = False) -> Operator:
         gimbal = self.gimbal0.remounted(mounting)
         C = gimbal.attitude(self.load_deg).as_matrix()          # case -> ENU at the load position
-        names = [(name, C @ np.array(v, float)) for name, v in CASE_AXES.items()]
-        up = max(names, key=lambda nv: nv[1][2])
-        level = [nv for nv in names if abs(nv[1][2]) < 1e-6 and nv[0][1] != up[0][1]]
-        placement = f"its {up[0]} axis pointing {_direction(up[1])}"
-        if level:
-            placement += f" and its {level[0][0]} axis pointing {_direction(level[0][1])}"
+        level = [d for d in ("east", "north", "west", "south") if _case_axis(C.T @ CARDINAL[d])] or ["east"]
+        placement = (f"with its {_imu_direction(C.T @ CARDINAL['up'])} pointing up and its "
+                     f"{_imu_direction(C.T @ CARDINAL[level[0]])} pointing {level[0]}")
+        if not _case_axis(C.T @ CARDINAL["up"]) or not _case_axis(C.T @ CARDINAL[level[0]]):
+            placement = "on a fixture, " + placement
         where = f"at the load position ({', '.join(f'{x:g}' for x in self.load_deg)}) deg"
         centred = (", its reference point on the table's axes (centred scheme)"
                    if self.scheme.centred else "")
         if check:
-            text = f"check the IMU is mounted with {placement}{centred} ({where})"
+            text = f"check the IMU is mounted {placement}{centred} ({where})"
         elif segment is None:
-            text = f"mount the IMU with {placement}{centred} ({where}; the first segment needs it)"
+            text = f"mount the IMU {placement}{centred} ({where}; the first segment needs it)"
         else:
-            text = f"remount the IMU with {placement}{centred} ({where})"
+            text = f"remount the IMU {placement}{centred} ({where})"
         return Operator(text, segment, self.config.run.operator_s, instruction=text, remount=True,
                         mounting=mounting_names(mounting))
 
@@ -276,22 +298,69 @@ def compile_scheme(scheme: Scheme, config: Config) -> Plan:
 
 
 def mounting_step(scheme: Scheme, config: Config, names, *, check: bool = True) -> Operator:
-    """The operator step asking to check (or make) the mounting ``names`` (('+x', '+y', '+z')-style
-    platform directions of the IMU's axes), at the load position."""
-    from station.config import AXIS_NAMES
-
-    mounting = np.column_stack([AXIS_NAMES[n] for n in names]).astype(float)
-    return Compiler(scheme, config)._mount_step(mounting, None, check=check)
+    """The operator step asking to check (or make) the mounting ``names`` (as ``mounting_names``
+    gives it), at the load position."""
+    return Compiler(scheme, config)._mount_step(mounting_matrix(names), None, check=check)
 
 
 def mounting_names(mounting: np.ndarray) -> tuple:
-    """('+x', '+y', '+z')-style platform directions of the case axes (columns of ``mounting``)."""
+    """The platform directions of the case axes x, y, z (the columns of ``mounting``): names
+    such as ('+x', '+y', '+z') for a box on a face, else the three unit vectors (a fixture)."""
+    m = np.asarray(mounting, float)
+    if not np.allclose(m, np.round(m), atol=1e-9):
+        return tuple(tuple(float(round(c, 12)) + 0.0 for c in m[:, j]) for j in range(3))
     out = []
     for j in range(3):
-        col = np.round(mounting[:, j]).astype(int)
+        col = np.round(m[:, j]).astype(int)
         i = int(np.flatnonzero(col)[0])
         out.append(("+" if col[i] > 0 else "-") + "xyz"[i])
     return tuple(out)
+
+
+def mounting_matrix(names) -> np.ndarray:
+    """The inverse of ``mounting_names``."""
+    from station.config import AXIS_NAMES
+
+    return np.column_stack([AXIS_NAMES[n] if isinstance(n, str) else n for n in names]).astype(float)
+
+
+def _align(body, platform, body2=None, platform2=None) -> np.ndarray:
+    """The mounting (case -> platform) taking the body vector onto the platform vector exactly,
+    and ``body2`` onto ``platform2`` as well as it can; without them, a case axis perpendicular
+    to ``body`` (if there is one) onto a platform axis, so the operator can line it up."""
+    from scipy.spatial.transform import Rotation
+
+    body, platform = np.asarray(body, float), np.asarray(platform, float)
+    if body2 is None:
+        square = [np.array(c, float) for c in CASE_AXES.values() if abs(np.dot(c, body)) < 1e-9]
+        level = [np.array(c, float) for c in CARDINAL.values() if abs(np.dot(c, platform)) < 1e-9]
+        if square and level:
+            body2, platform2 = square[0], level[0]
+    if body2 is None:
+        r, _ = Rotation.align_vectors(platform[None, :], body[None, :])
+    else:
+        r, _ = Rotation.align_vectors([platform, np.asarray(platform2, float)],
+                                      [body, np.asarray(body2, float)], weights=[1e6, 1.0])
+    return r.as_matrix()
+
+
+def _heading(deg: float) -> tuple:
+    h = math.radians(deg)
+    return (math.sin(h), math.cos(h), 0.0)
+
+
+def _case_axis(v) -> str | None:
+    for name, c in CASE_AXES.items():
+        if np.dot(v, c) > math.cos(math.radians(0.01)):
+            return name
+    return None
+
+
+def _imu_direction(v) -> str:
+    name = _case_axis(v)
+    if name:
+        return f"{name} axis"
+    return "direction (" + ", ".join(f"{x:.6f}" for x in np.round(np.asarray(v, float), 6) + 0.0) + ") (IMU axes)"
 
 
 def _with_estimate(step, estimate_s):

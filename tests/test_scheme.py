@@ -53,3 +53,66 @@ def test_bad_scheme_files_are_refused_naming_the_field(tmp_path, text, message):
     with pytest.raises(UserError, match=message) as e:
         load_scheme(str(path))
     assert str(path) in str(e.value)
+
+
+def test_traditional24_is_the_papers_laboratory_method():
+    s = load_scheme("traditional24")
+    statics = [x for x in s.segments if isinstance(x, StaticSpec)]
+    rotations = [x for x in s.segments if isinstance(x, RotationSpec)]
+    assert len(statics) == 24 and len(rotations) == 6 and s.table
+    # X, Y, Z up then down; the next axis (X->Y, Y->Z, Z->X) north, west, south, east in order
+    for k, spec in enumerate(statics):
+        axis, down = k // 8, (k // 4) % 2
+        up = [0.0, 0.0, 0.0]
+        up[axis] = -1.0 if down else 1.0
+        heading = [0.0, 0.0, 0.0]
+        heading[(axis + 1) % 3] = 1.0
+        assert spec.up_body == tuple(up) and spec.heading_body == tuple(heading), spec.name
+        assert spec.heading_deg == (0.0, 270.0, 180.0, 90.0)[k % 4] and spec.dwell_s == 100
+    assert [r.axis_body for r in rotations[::2]] == [(1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)]
+    assert [r.rate_dps for r in rotations] == [10.0, -10.0] * 3
+
+
+def test_manual6_is_done_by_hand():
+    s = load_scheme("manual6")
+    assert s.table is False
+    statics = [x for x in s.segments if isinstance(x, StaticSpec)]
+    turns = [x for x in s.segments if isinstance(x, RotationSpec)]
+    assert sorted(x.up_body for x in statics) == sorted(
+        tuple(float(sign) if i == axis else 0.0 for i in range(3)) for axis in range(3) for sign in (1, -1))
+    assert [t.axis_body for t in turns] == [(1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)]
+    assert all(t.turn_deg == 360 and not t.encoder and t.axis_elevation_deg == 90 for t in turns)
+    assert all(load_scheme(n).table for n in builtin_names() if n != "manual6")
+
+
+@pytest.mark.parametrize("text, message", [
+    ("name: x\ndefaults: {dwell_s: 1}\nsegments: [{static: a, up_body: [0, 0, 1], heading_body: [1, 0, 0]}]\n",
+     "heading_body and heading_deg go together"),
+    ("name: x\ndefaults: {dwell_s: 1}\nsegments: [{static: a, up_body: [0, 0, 1], heading_body: [1, 0, 1], "
+     "heading_deg: 0}]\n", r"segments\[0\].heading_body: must be perpendicular"),
+    ("name: x\ndefaults: {dwell_s: 1}\nsegments: [{static: a, up_body: [0, 0, 1], heading_body: [1, 0, 0], "
+     "heading_deg: 360}]\n", r"heading_deg: must be within \[0, 360\)"),
+    ("name: x\ntable: maybe\ndefaults: {dwell_s: 1}\nsegments: [{static: a, up_body: [0, 0, 1]}]\n", "table: must be none"),
+    ("name: x\ntable: none\nsegments: [{rotation: r, axis_body: [1, 0, 0], rate_dps: 9, rotation_s: 4}]\n",
+     "without a table has no encoder"),
+    ("name: x\nsegments: [{rotation: r, axis_body: [1, 0, 0], rate_dps: 9, rotation_s: 4, turn_deg: 360}]\n",
+     "turn_deg: only for turns without an encoder"),
+])
+def test_the_extensions_are_checked(tmp_path, text, message):
+    path = tmp_path / "s.yaml"
+    path.write_text(text)
+    with pytest.raises(UserError, match=message):
+        load_scheme(str(path))
+
+
+def test_station_schemes_lists_segments_and_durations(capsys):
+    from station.cli import main
+
+    assert main(["schemes"]) == 0
+    out = capsys.readouterr().out
+    for name in builtin_names():
+        assert name in out
+    row = next(line for line in out.splitlines() if "traditional24" in line)
+    cells = [c.strip() for c in row.split("│")[1:-1]]
+    assert cells[:4] == ["traditional24", "24", "6", "3480"]     # 24 x 100 s + 6 x 180 s of recording
+    assert float(cells[4]) > 3480 and cells[5] == "1"            # moves, settling; the mounting check

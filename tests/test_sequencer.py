@@ -21,6 +21,7 @@ import yaml
 from sim_devices.truth import default_truth
 from sim_devices.twins.serve import BenchOptions, BenchServer
 from station import simrun
+from station.calfile import read_calfile
 from station.calibration import parameter_errors
 from station.capture import read_capture
 from station.estimate import estimate_with
@@ -71,6 +72,18 @@ def run_to_end(bench, config, *args, timeout=120):
 def z_scores(cal, truth):
     return np.array([(value - true) / cal.sigma[name]
                      for name, value, true, _, _ in parameter_errors(cal, simrun.truth_calibration(truth))])
+
+
+def calibration(capture_dir):
+    """{name: (value, sigma)} from the calibration file station run wrote."""
+    doc = read_calfile(Path(capture_dir) / "calibration.yaml")
+    return {name: (p["value"], p["sigma"]) for name, p in doc["parameters"].items()}
+
+
+def file_z_scores(capture_dir, truth):
+    cal = calibration(capture_dir)
+    return np.array([(cal[name][0] - true) / cal[name][1]
+                     for name, true, _ in simrun.truth_calibration(truth).parameters()])
 
 
 def sha(path):
@@ -126,8 +139,9 @@ def test_optimal9_through_the_drivers_matches_the_truth_like_the_dry_run(full_ru
         assert seg.angle_deg == pytest.approx(np.sign(seg.rate_dps) * 360.0, abs=1e-6)
         assert seg.extra["revolutions"] == 1
     truth = default_truth(SEED)
-    cal, method = estimate_with(capture, "lsq")
-    z_twin = z_scores(cal, truth)
+    assert read_calfile(out / "calibration.yaml")["provenance"]["method"] == "lsq"
+    z_twin = file_z_scores(out, truth)
+    assert len(z_twin) == 21
     scheme = load_scheme("optimal9", {"dwell_s": 20, "rotation_s": 36})
     dry, _ = estimate_with(simrun.simulate_capture(scheme, truth, SEED), "lsq")
     z_dry = z_scores(dry, truth)
@@ -162,11 +176,10 @@ def test_a_run_killed_mid_way_resumes_without_rewriting_what_was_complete(bench,
         assert after[name] == recorded == sha(out / f"{name}.csv"), name
     assert (out / f"{recording}.csv.incomplete").stat().st_size > 0       # the one being recorded
 
-    resumed, _ = estimate_with(capture, "lsq")
-    whole, _ = estimate_with(read_capture(full_run[0]), "lsq")
-    for name, value, _ in resumed.parameters()[:21]:
-        spread = np.hypot(resumed.sigma[name], whole.sigma[name])
-        assert abs(value - dict((n, v) for n, v, _ in whole.parameters())[name]) < Z_MAX * spread, name
+    resumed, whole = calibration(out), calibration(full_run[0])      # as station run wrote them
+    assert len(resumed) == 21
+    for name, (value, sigma) in resumed.items():
+        assert abs(value - whole[name][0]) < Z_MAX * np.hypot(sigma, whole[name][1]), name
 
 
 def test_ctrl_c_pauses_at_a_safe_point_with_the_table_at_rest(bench, config, tmp_path):
