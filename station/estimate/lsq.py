@@ -24,7 +24,7 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from station import units
-from station.calibration import Calibration
+from station.calibration import Calibration, misalignment_angles
 from station.errors import UserError
 from station.estimate import zhang2010
 from station.estimate.summaries import Summaries, summarise
@@ -113,7 +113,6 @@ def _start(s: Summaries) -> Start:
         notes.append("no algebraic start for the inter-triad rotation: started from zero")
     ka, Ta = zhang2010.scale_and_T(L_a)
     kg, Tg = zhang2010.scale_and_T(L_g)
-    from station.calibration import misalignment_angles
     return Start(ka, misalignment_angles(Ta), b_a, kg, misalignment_angles(Tg), b_g,
                  Rotation.from_matrix(R_po).as_rotvec(), notes)
 
