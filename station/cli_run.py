@@ -132,7 +132,7 @@ def cmd_plan(args) -> int:
 def cmd_run(args) -> int:
     """``station run`` without --sim: a run on the bench named by the flags and the configuration."""
     from station.compile import compile_scheme
-    from station.scheme import load_scheme, scheme_from_text, scheme_text
+    from station.scheme import load_scheme, scheme_text
 
     config = _config(args)
     done: set = set()
@@ -140,7 +140,7 @@ def cmd_run(args) -> int:
         directory = Path(args.resume)
         scheme, config, done = _resumed(directory, config, args)
     else:
-        text, source = scheme_text(args.scheme)
+        text, _ = scheme_text(args.scheme)
         scheme = load_scheme(args.scheme, _overrides(args))
         directory = None
     if not config.imu.port:
@@ -151,6 +151,9 @@ def cmd_run(args) -> int:
         raise UserError(f"scheme {scheme.name} needs a rate table: give --table-port or set table.port")
     plan = compile_scheme(scheme, config)
     steps = _resume_steps(plan, scheme, done, config) if args.resume else plan.steps
+    if args.resume and not any(s.segment for s in steps):
+        out.print(f"{directory}: every segment is recorded; estimating", markup=False)
+        return _estimate(directory)
     for note in plan.notes:
         err.print(f"note: {note}", markup=False, soft_wrap=True)
 
@@ -354,9 +357,9 @@ def _resume_steps(plan, scheme, done, config):
 
     steps = plan.remaining(done)
     first = next((s.segment for s in steps if s.segment is not None), None)
-    if first is None:
+    if first is None or plan.manual:
         return steps
-    needed = plan.mounting_of.get(first)
+    needed = plan.mounting_of[first]
     check = next((i for i, s in enumerate(steps) if isinstance(s, Operator) and s.segment is None), None)
     if check is not None:
         steps[check] = mounting_step(scheme, config, needed, check=True)
