@@ -154,13 +154,12 @@ def cmd_run(args) -> int:
     if args.resume and not any(s.segment for s in steps):
         out.print(f"{directory}: every segment is recorded; estimating", markup=False)
         return _estimate(directory)
-    for note in plan.notes:
-        err.print(f"note: {note}", markup=False, soft_wrap=True)
-
     from station.sequencer import Interrupts, RunAborted, RunPaused, Sequencer
 
     imu, table = _open_devices(config, scheme)
     try:
+        for note in plan.notes:
+            err.print(f"note: {note}", markup=False, soft_wrap=True)
         rate_hz = imu.configure(config.imu.rate_hz)
         if directory is None:
             directory = _out_dir(args, config, scheme)
@@ -332,6 +331,8 @@ def _resumed(directory: Path, current, args):
         text = (directory / SCHEME_FILE).read_text()
     except OSError as e:
         raise UserError(f"{directory}: not a capture of station run (no {e.filename}): cannot resume") from None
+    except yaml.YAMLError as e:
+        raise UserError(f"{run_file}: not valid YAML: {e}".splitlines()[0]) from None
     if not isinstance(doc, dict) or doc.get("format") != RUN_FORMAT:
         raise UserError(f"{run_file}: field 'format': must be {RUN_FORMAT}")
     if _overrides(args):
@@ -343,7 +344,9 @@ def _resumed(directory: Path, current, args):
         fresh = getattr(current, section)
         config = replace(config, **{section: replace(getattr(config, section),
                                                      **{k: getattr(fresh, k) for k in keys})})
-    config = replace(config, run=replace(config.run, operator=current.run.operator and config.run.operator))
+    if getattr(args, "unattended", False) and config.run.operator:
+        raise UserError(f"{directory} was recorded with an operator (remounts may have happened): "
+                        "resume it with one (leave out --unattended)")
     capture = read_capture(directory, load_data=False)
     done = {s.name for s in capture.complete()}
     return scheme, config, done

@@ -207,3 +207,20 @@ def test_ctrl_c_pauses_at_a_safe_point_with_the_table_at_rest(bench, config, tmp
     assert capture.segment("zup").status == "complete"
     assert all(bench.table.read_rate(axis) == 0.0 for axis in (1, 2, 3))  # brought to rest
     assert all(ax.mode == "position" for ax in bench.table.axes)
+
+
+@pytest.mark.parametrize("argv, expected", [
+    (["run", "--scheme", "manual6"], "no IMU port"),
+    (["run", "--scheme", "optimal9", "--port", "/dev/nonexistent-imu"], "needs a rate table: give --table-port"),
+    (["run", "--scheme", "optimal9", "--unattended", "--port", "/dev/nonexistent-imu", "--table-port",
+      "/dev/nonexistent-table"], "cannot open /dev/nonexistent-table"),
+    (["run", "--resume", "{tmp}"], "not a capture of station run"),
+])
+def test_run_errors_are_one_line(argv, expected, tmp_path, capsys, monkeypatch):
+    from station.cli import main
+
+    monkeypatch.chdir(tmp_path)                      # no ./station.yaml
+    monkeypatch.delenv("STATION_CONFIG", raising=False)
+    assert main([a.replace("{tmp}", str(tmp_path)) for a in argv]) == 2
+    err = capsys.readouterr().err
+    assert expected in err and err.count("\n") == 1

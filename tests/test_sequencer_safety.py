@@ -195,3 +195,40 @@ def test_manual6_is_found_in_one_continuous_recording(tmp_path):
     # the estimator takes the hand turns (angle_deg by protocol); its accuracy on such captures is
     # the estimator's business (docs/sequencer.md)
     assert estimate_with(capture)[1] == "lsq"
+
+
+def test_after_a_pause_the_operator_can_continue_in_place(bench3, tmp_path):
+    """Ctrl-C during a dwell, then 'continue': the table was at rest, the segment starts again
+    (the interrupted attempt kept aside as .incomplete) and the run completes."""
+    import threading
+
+    from station.sequencer import Interrupts
+
+    scheme = scheme_from_text("name: two\ndefaults: {dwell_s: 30}\nsegments:\n  - {static: zup, up_body: [0, 0, 1]}\n"
+                              "  - {static: xup, up_body: [1, 0, 0]}\n", "two.yaml")
+    config = Config(table=TableConfig(axes=3), run=RunConfig(operator=False, settle_s=1))
+    interrupts = Interrupts()
+
+    class Continue(Hands):
+        def resume_after_pause(self, interrupts):
+            self.seen.append(("paused", [bench3.table.read_rate(a) for a in (1, 2, 3)]))
+            return True
+
+    operator = Continue(bench3)
+    seq, table, imu = sequencer(bench3, config, new_writer(tmp_path / "cap"), operator)
+    seq.interrupts = interrupts
+
+    def ctrl_c():                    # once xup is being recorded
+        while not (tmp_path / "cap" / "xup.csv").exists() or (tmp_path / "cap" / "xup.csv").stat().st_size < 3000:
+            time.sleep(0.005)
+        interrupts.count = 1
+
+    threading.Thread(target=ctrl_c, daemon=True).start()
+    seq.run(compile_scheme(scheme, config).steps)
+    table.close()
+    imu.close()
+    assert operator.seen == [("paused", [0.0, 0.0, 0.0])]
+    capture = read_capture(tmp_path / "cap")
+    assert [(s.name, s.status) for s in capture.segments] == [("zup", "complete"), ("xup", "complete")]
+    assert len(capture.segment("xup").data.t) == 3000
+    assert (tmp_path / "cap" / "xup.csv.incomplete").stat().st_size > 0
