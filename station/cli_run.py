@@ -269,8 +269,10 @@ def _open_devices(config, scheme):
         limits = tuple(AxisLimits(max_rate_dps=lim.max_rate_dps, max_accel_dps2=lim.max_accel_dps2,
                                   move_rate_dps=lim.move_rate_dps, move_accel_dps2=lim.move_accel_dps2)
                        for lim in t.axis_limits())
+        # the driver's waits assume ramps at max_accel_dps2; ours are at rate_accel_dps2: allow for them
+        ramp_s = max(lim.max_rate_dps / lim.rate_accel_dps2 for lim in t.axis_limits())
         table = open_table(t.port, t.protocol, TableSettings(
-            serial=serial(t.serial), axes=t.axes, limits=limits,
+            serial=serial(t.serial), axes=t.axes, limits=limits, wait_margin_s=10.0 + ramp_s,
             position_tolerance_deg=t.position_tolerance_deg, rate_tolerance_dps=t.rate_tolerance_dps))
     try:
         imu = open_imu(config.imu.port, config.imu.protocol, ImuSettings(

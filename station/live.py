@@ -132,9 +132,6 @@ class RichDisplay(PlainDisplay):
         self.progress.update(self.run_task, completed=min(self.total_s, self.done_before + done_s))
         self.live.update(self._render())
 
-    def values_update(self, values: dict) -> None:
-        self.values.update(values)
-
     def note(self, text: str) -> None:
         self.live.console.print(f"      {text}", markup=False, highlight=False)
 
