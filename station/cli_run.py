@@ -251,11 +251,6 @@ def _open_devices(config, scheme):
     from drivers.base import AxisLimits, ImuSettings, TableSettings
     from drivers.protocols.csvlines import CsvFormat
     from drivers.registry import imu_driver, open_imu, open_table, table_driver
-    from drivers.transport import SerialSettings
-
-    def serial(c):
-        return SerialSettings(baudrate=c.baudrate, bytesize=c.bytesize, parity=c.parity, stopbits=c.stopbits,
-                              rtscts=c.rtscts, xonxoff=c.xonxoff, timeout_s=c.timeout_s)
 
     imu_driver(config.imu.protocol)
     try:
@@ -272,11 +267,11 @@ def _open_devices(config, scheme):
         # the driver's waits assume ramps at max_accel_dps2; ours are at rate_accel_dps2: allow for them
         ramp_s = max(lim.max_rate_dps / lim.rate_accel_dps2 for lim in t.axis_limits())
         table = open_table(t.port, t.protocol, TableSettings(
-            serial=serial(t.serial), axes=t.axes, limits=limits, wait_margin_s=10.0 + ramp_s,
+            serial=t.serial, axes=t.axes, limits=limits, wait_margin_s=10.0 + ramp_s,
             position_tolerance_deg=t.position_tolerance_deg, rate_tolerance_dps=t.rate_tolerance_dps))
     try:
         imu = open_imu(config.imu.port, config.imu.protocol, ImuSettings(
-            serial=serial(config.imu.serial), rate_hz=config.imu.rate_hz,
+            serial=config.imu.serial, rate_hz=config.imu.rate_hz,
             frame_timeout_s=config.imu.frame_timeout_s, csv_format=csv_format))
     except BaseException:
         if table is not None:

@@ -14,6 +14,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from drivers.transport import SerialSettings
+
 from station.errors import UserError
 
 DEFAULT_FILE = "station.yaml"
@@ -25,17 +27,6 @@ ENV_KEYS = {"STATION_IMU_PORT": ("imu", "port"), "STATION_TABLE_PORT": ("table",
 DEFAULT_AXES_ENU = {1: [[0, 0, 1]], 2: [[0, 0, 1], [1, 0, 0]], 3: [[0, 0, 1], [1, 0, 0], [0, 1, 0]]}
 AXIS_NAMES = {"+x": (1, 0, 0), "-x": (-1, 0, 0), "+y": (0, 1, 0), "-y": (0, -1, 0),
               "+z": (0, 0, 1), "-z": (0, 0, -1)}
-
-
-@dataclass(frozen=True)
-class SerialConfig:
-    baudrate: int = 115200
-    bytesize: int = 8
-    parity: str = "N"
-    stopbits: float = 1
-    rtscts: bool = False
-    xonxoff: bool = False
-    timeout_s: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -59,7 +50,7 @@ class AxisConfig:
 class TableConfig:
     port: str | None = None
     protocol: str = "acutrol"
-    serial: SerialConfig = field(default_factory=SerialConfig)
+    serial: SerialSettings = field(default_factory=SerialSettings)
     axes: int = 3
     axes_enu: tuple = ()                  # per axis, ENU at zero; () -> DEFAULT_AXES_ENU[axes]
     mounting: tuple = ("+x", "+y", "+z")  # platform directions of the IMU's case x, y, z
@@ -85,7 +76,7 @@ class TableConfig:
 class ImuConfig:
     port: str | None = None
     protocol: str = "vectornav"
-    serial: SerialConfig = field(default_factory=SerialConfig)
+    serial: SerialSettings = field(default_factory=SerialSettings)
     rate_hz: float = 100.0
     csv_units: str = ""
     frame_timeout_s: float = 2.0
@@ -355,13 +346,14 @@ class _Validator:
         return names
 
     def serial(self, value, where):
-        s = self.section({"serial": value}, "serial", SerialConfig, {
-            "baudrate": self.positive, "bytesize": self.number, "parity": self.text,
-            "stopbits": self.number, "rtscts": self.boolean, "xonxoff": self.boolean,
-            "timeout_s": self.positive}, prefix=where[: -len("serial")])
-        if s.bytesize not in (5, 6, 7, 8) or s.parity not in ("N", "E", "O", "M", "S") \
-                or s.stopbits not in (1, 1.5, 2):
-            raise self.fail(where, "bytesize 5-8, parity N/E/O/M/S, stopbits 1, 1.5 or 2")
+        """The drivers' own SerialSettings, which check the values (parity, sizes, timeouts)."""
+        try:
+            s = self.section({"serial": value}, "serial", SerialSettings, {
+                "baudrate": self.positive, "bytesize": self.number, "parity": self.text,
+                "stopbits": self.number, "rtscts": self.boolean, "xonxoff": self.boolean,
+                "timeout_s": self.positive, "write_timeout_s": self.positive}, prefix=where[: -len("serial")])
+        except ValueError as e:
+            raise self.fail(where, str(e)) from None
         return replace(s, baudrate=int(s.baudrate), bytesize=int(s.bytesize))
 
     def limits(self, value, where):

@@ -154,8 +154,10 @@ def summarise(capture, *, table_angle_arcsec: float | None = None) -> Summaries:
             axes.append(axis)
             group = len(axes) - 1
         d = seg.data
-        rotations.append(rotation_summary(seg.name, axis, group, seg.angle_deg, d.t, d.accel * ca,
-                                          d.gyro * cg, d.temp))
+        summary = rotation_summary(seg.name, axis, group, seg.angle_deg, d.t, d.accel * ca, d.gyro * cg, d.temp)
+        if seg.extra.get("motion") == "hand":      # the writer says so (manual schemes)
+            summary.steady = False
+        rotations.append(summary)
 
     table = capture.extra.get("table") if isinstance(capture.extra.get("table"), dict) else {}
     if table_angle_arcsec is None:
