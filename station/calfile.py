@@ -98,7 +98,8 @@ def _matrix(doc: dict, key: str, shape, path) -> np.ndarray:
     except (TypeError, ValueError):
         raise UserError(f"{where}: must be numbers") from None
     if a.shape != shape or not np.all(np.isfinite(a)):
-        raise UserError(f"{where}: must be {'x'.join(map(str, shape))} finite numbers")
+        raise UserError(f"{where}: must be {'x'.join(map(str, shape)) or 'a'} finite number"
+                        f"{'s' if shape else ''}")
     return a
 
 
@@ -119,6 +120,10 @@ def read_calfile(path) -> dict:
     extra = {}
     if "accel_lever_arm_m" in comp:
         extra["accel_lever_arm_m"] = _matrix(comp, "accel_lever_arm_m", (3, 3), path)
+    if "temperature_reference_c" in comp:
+        extra["temperature_reference_c"] = float(_matrix(comp, "temperature_reference_c", (), path))
+        for key in ("accel_bias_tempco_raw_per_c", "gyro_bias_tempco_raw_per_c"):
+            extra[key] = _matrix(comp, key, (3,), path)
     doc["compensation"] = {
         **comp,
         **extra,

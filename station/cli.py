@@ -75,11 +75,14 @@ def cmd_apply(args) -> int:
     from station.calfile import read_calfile
     from station.capture import read_segment_csv
 
-    from station.compensate import compensate
+    from station.compensate import COMPENSATED_EFFECTS, compensate
 
     doc = read_calfile(args.calibration)
     data = read_segment_csv(Path(args.input))
-    f, w = compensate(doc["compensation"], data.t, data.accel, data.gyro)
+    f, w = compensate(doc["compensation"], data.t, data.accel, data.gyro, data.temp)
+    skipped = [e for e in doc.get("effects", []) if e not in COMPENSATED_EFFECTS]
+    if skipped:
+        err.print(f"note: estimated but not compensated by apply: {', '.join(skipped)}")
     table = np.column_stack([data.t, f, w])
     try:
         with open(args.output, "w") as fh:
