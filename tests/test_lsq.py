@@ -112,3 +112,28 @@ def test_size_effect_positions_recovered_and_compensated(seed):
     error_comp = np.abs(f_comp.mean(axis=0) - truth_f)[:2]
     assert error_plain.max() > 50 * allowed / 5                      # several mg without the effect
     assert error_comp.max() < allowed, (error_comp, allowed)
+
+
+def test_apply_follows_the_temperature_with_temperature_coefficients(tmp_path):
+    from station.calfile import read_calfile, write_calfile
+
+    truth = simrun.load_truth(None, 0)
+    truth.accel.bias_tempco = np.array([60.0, -40.0, 50.0])         # µg/°C
+    truth.temperature.warmup_delta_c = 6.0
+    capture = simrun.simulate_capture(load_scheme("optimal9"), truth, 3)
+    write_calfile(tmp_path / "c.yaml", lsq.estimate(capture, [EFFECTS["temperature_bias"]()]), {})
+    comp = read_calfile(tmp_path / "c.yaml")["compensation"]
+    first = capture.segments[0].data                                  # pos01, cold
+    warm = capture.segments[8].data                                   # pos09, warmed up
+    g = capture.site.gravity_mps2
+    noise = truth.accel_noise_sigma / math.sqrt(len(first.t))
+    for data in (first, warm):
+        f, _ = compensate(comp, data.t, data.accel, data.gyro, data.temp)
+        # with the temperature column: gravity to within the noise and the calibration's own error
+        assert abs(np.linalg.norm(f.mean(axis=0)) - g) < 5 * noise + 20e-6 * g
+    # without it the warm attitude is off by the coefficient times the temperature change
+    dT = warm.temp.mean() - comp["temperature_reference_c"]
+    f_plain, _ = compensate(comp, warm.t, warm.accel, warm.gyro)
+    f, _ = compensate(comp, warm.t, warm.accel, warm.gyro, warm.temp)
+    assert np.linalg.norm(f_plain.mean(axis=0) - f.mean(axis=0)) == pytest.approx(
+        np.linalg.norm(comp["accel_bias_tempco_raw_per_c"]) * abs(dT), rel=0.05)
