@@ -8,16 +8,16 @@ protocol's decoder (``drivers/protocols``).
 from __future__ import annotations
 
 import abc
-import logging
 import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import DeviceError, DeviceTimeout, LimitError
+from .device import Device
+from .errors import DeviceTimeout, LimitError
 from .samples import ImuCounters, ImuSamples
-from .transport import Port, SerialSettings
+from .transport import SerialSettings
 
 
 @dataclass(frozen=True)
@@ -37,18 +37,13 @@ class ImuSettings:
     csv_format: object = None
 
 
-class Imu(abc.ABC):
+class Imu(Device):
     """A streaming IMU.  Samples come in device time (:class:`ImuSamples`)."""
 
-    protocol: str = ""
+    kind = "imu"
 
     def __init__(self, url: str, settings: ImuSettings | None = None):
-        self.url = url
-        self.settings = settings or ImuSettings()
-        self.name = f"imu {url} ({self.protocol})"
-        self.log = logging.getLogger(f"drivers.{self.protocol}")
-        self._port: Port | None = None
-        self.identity = ""
+        super().__init__(url, settings or ImuSettings())
         self.rate_hz = float(self.settings.rate_hz)
         self.counters = ImuCounters()
         self.streaming = False
@@ -59,41 +54,17 @@ class Imu(abc.ABC):
         self._last_t: float | None = None
 
     # ------------------------------------------------------------------ connection
-    @property
-    def port(self) -> Port:
-        """The open port; DeviceError before ``connect()`` or after ``close()``."""
-        if self._port is None:
-            raise DeviceError(self.name, "not connected (call connect(), or use it in a with block)")
-        return self._port
-
-    def connect(self) -> str:
-        """Open the port and identify the device."""
-        self._port = Port(self.url, self.settings.serial, self.name, self.log)
-        try:
-            self.identity = self._identify()
-        except BaseException:
-            self.close()
-            raise
-        self.log.info("%s: %s", self.name, self.identity)
+    def _on_connect(self) -> str:
+        """Identify the device."""
+        self.identity = self._identify()
         return self.identity
 
-    def close(self) -> None:
-        if self._port is not None:
-            if self.streaming:
-                try:
-                    self.stop()
-                except Exception:        # closing anyway
-                    pass
-            self._port.close()
-            self._port = None
-
-    def __enter__(self):
-        if self._port is None:
-            self.connect()
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
+    def _before_close(self) -> None:
+        if self.streaming:
+            try:
+                self.stop()
+            except Exception:        # closing anyway
+                pass
 
     # ------------------------------------------------------------------ stream
     def configure(self, rate_hz: float | None = None, *, temperature: bool | None = None) -> float:

@@ -7,15 +7,15 @@ waiting for arrival, timeouts, logging) and calls one small protocol-specific me
 from __future__ import annotations
 
 import abc
-import logging
 import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import DeviceError, DeviceTimeout, LimitError, TableFault
-from .transport import Port, SerialSettings
+from .device import Device
+from .errors import DeviceTimeout, LimitError, TableFault
+from .transport import SerialSettings
 
 
 @dataclass(frozen=True)
@@ -95,69 +95,38 @@ def angle_diff_deg(a, b):
     return (np.asarray(a, dtype=float) - b + 180.0) % 360.0 - 180.0
 
 
-class RateTable(abc.ABC):
+class RateTable(Device):
     """A rate table of 1-3 axes (axis 1 = outermost).  Angles in deg, rates in deg/s.
 
     Continuous axes: positions read back in [0, 360); a position demand is reached the
     shortest way round.
     """
 
-    protocol: str = ""
+    kind = "table"
 
     def __init__(self, url: str, settings: TableSettings | None = None):
-        self.url = url
-        self.settings = settings or TableSettings()
-        self.name = f"table {url} ({self.protocol})"
-        self.log = logging.getLogger(f"drivers.{self.protocol}")
-        self._port: Port | None = None
-        self.identity = ""
+        super().__init__(url, settings or TableSettings())
         self.n_axes = 0
         self.limits: tuple[AxisLimits, ...] = ()
         self._modes: list[str] = []
 
     # ------------------------------------------------------------------ connection
-    @property
-    def port(self) -> Port:
-        """The open port; DeviceError before ``connect()`` or after ``close()``."""
-        if self._port is None:
-            raise DeviceError(self.name, "not connected (call connect(), or use it in a with block)")
-        return self._port
-
-    def connect(self) -> str:
-        """Open the port, identify the controller, find its axes, set the move limits."""
-        self._port = Port(self.url, self.settings.serial, self.name, self.log)
+    def _on_connect(self) -> str:
+        """Identify the controller, find its axes, set the move limits."""
+        self.port.discard_input()
+        self.identity = self._identify()
+        n = self.settings.axes or self._count_axes()
+        if not 1 <= n <= 3:
+            raise LimitError(self.name, f"{n} axes: tables of 1 to 3 axes are supported")
+        self.n_axes = n
         try:
-            self.port.discard_input()
-            self.identity = self._identify()
-            n = self.settings.axes or self._count_axes()
-            if not 1 <= n <= 3:
-                raise LimitError(self.name, f"{n} axes: tables of 1 to 3 axes are supported")
-            self.n_axes = n
-            try:
-                self.limits = self.settings.axis_limits(n)
-            except ValueError as e:
-                raise LimitError(self.name, str(e)) from None
-            self._modes = ["unknown"] * n
-            for axis, lim in enumerate(self.limits, 1):
-                self._set_move_limits(axis, lim.move_rate_dps, lim.move_accel_dps2)
-        except BaseException:
-            self.close()
-            raise
-        self.log.info("%s: %s, %d axes", self.name, self.identity, self.n_axes)
-        return self.identity
-
-    def close(self) -> None:
-        if self._port is not None:
-            self._port.close()
-            self._port = None
-
-    def __enter__(self):
-        if self._port is None:
-            self.connect()
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
+            self.limits = self.settings.axis_limits(n)
+        except ValueError as e:
+            raise LimitError(self.name, str(e)) from None
+        self._modes = ["unknown"] * n
+        for axis, lim in enumerate(self.limits, 1):
+            self._set_move_limits(axis, lim.move_rate_dps, lim.move_accel_dps2)
+        return f"{self.identity}, {self.n_axes} axes"
 
     @property
     def axes(self) -> tuple[int, ...]:
