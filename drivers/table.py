@@ -124,6 +124,7 @@ class RateTable(Device):
         except ValueError as e:
             raise LimitError(self.name, str(e)) from None
         self._modes = ["unknown"] * n
+        self._rate_accel = [lim.max_accel_dps2 for lim in self.limits]   # rate-mode ramps, deg/s^2
         for axis, lim in enumerate(self.limits, 1):
             self._set_move_limits(axis, lim.move_rate_dps, lim.move_accel_dps2)
         return f"{self.identity}, {self.n_axes} axes"
@@ -231,7 +232,7 @@ class RateTable(Device):
         self._demand_rate(axis, rate)
         if not wait:
             return before
-        expected = abs(rate - before) / lim.max_accel_dps2
+        expected = abs(rate - before) / self._rate_accel[axis - 1]
         return self._wait_rate(axis, rate, expected)
 
     def set_rate_limits(self, axis: int, mode: str, rate_dps: float, accel_dps2: float) -> None:
@@ -243,14 +244,20 @@ class RateTable(Device):
                                         f"deg/s^2 outside (0, {lim.max_rate_dps:g}], "
                                         f"(0, {lim.max_accel_dps2:g}]")
         self._set_limits(axis, mode, rate_dps, accel_dps2)
+        if mode == "rate":          # the waits expect ramps at this acceleration
+            self._rate_accel[axis - 1] = accel_dps2
 
     def stop(self) -> np.ndarray:
         """Controlled stop: every axis brakes to rest and holds there.  Returns the positions."""
         closed, _, _ = self._status()
         active = [axis for axis in self.axes if closed[axis - 1]]   # open interlock: brakes itself
+        rates = self.read_rates_dps()
         for axis in active:
             self._halt(axis, self._modes[axis - 1])
-        expected = max((360.0 / lim.max_accel_dps2 for lim in self.limits), default=0.0)
+        # each axis brakes at the acceleration of its mode
+        expected = max((abs(rates[axis - 1]) / (self._rate_accel[axis - 1] if self._modes[axis - 1] == "rate"
+                                                else self.limits[axis - 1].move_accel_dps2)
+                        for axis in self.axes), default=0.0)
         deadline = time.monotonic() + expected + self.settings.wait_margin_s
         still = 0
         while still < self.settings.settle_polls:
