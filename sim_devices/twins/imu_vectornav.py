@@ -15,6 +15,7 @@ from drivers.protocols.vectornav_binary import encode_frames
 
 from .faults import StreamFaulter
 from .imu import ImuTwin
+from .lines import take_lines
 
 MAX_LINE = 512
 TWIN_FIELDS = set(V.STATION_FIELDS)
@@ -37,15 +38,8 @@ class VectorNavFrontEnd:
     # ---------------------------------------------------------------- commands
     def receive(self, data: bytes, now: float) -> bytes:
         self._rx += data
-        out = []
-        while True:
-            i = self._rx.find(b"\n")
-            if i < 0:
-                break
-            line = bytes(self._rx[:i + 1])
-            del self._rx[:i + 1]
-            if line.strip():
-                out.append(self.execute(line, now))
+        # a message is recognised with its line end
+        out = [self.execute(line + b"\n", now) for line in take_lines(self._rx) if line.strip()]
         if len(self._rx) > MAX_LINE:
             self._rx.clear()
             out.append(V.format_message("VNERR,02"))

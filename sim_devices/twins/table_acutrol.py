@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from drivers.protocols import acutrol as P
 
+from .lines import take_lines
 from .table import CommandRefused, TableTwin
 
 C = P.COMMANDS
@@ -40,14 +41,7 @@ class AcutrolFrontEnd:
     def receive(self, data: bytes) -> bytes:
         """Execute the complete lines in ``data``; the replies."""
         self._rx += data
-        out = []
-        while True:
-            i = self._rx.find(b"\n")
-            if i < 0:
-                break
-            line = bytes(self._rx[:i])
-            del self._rx[:i + 1]
-            out.append(self.execute(line))
+        out = [self.execute(line) for line in take_lines(self._rx)]
         if len(self._rx) > MAX_LINE:
             self._rx.clear()
             self._error = True

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from drivers.protocols import aerosmith as P
 
+from .lines import take_lines
 from .table import CommandRefused, TableTwin
 
 C = P.COMMANDS
@@ -30,16 +31,7 @@ class AerosmithFrontEnd:
 
     def receive(self, data: bytes) -> bytes:
         self._rx += data
-        out = []
-        while True:
-            ends = [i for i in (self._rx.find(b"\r"), self._rx.find(b"\n")) if i >= 0]
-            if not ends:
-                break
-            i = min(ends)
-            line = bytes(self._rx[:i])
-            del self._rx[:i + 1]
-            if line.strip():
-                out.append(self.execute(line))
+        out = [self.execute(line) for line in take_lines(self._rx, b"\r\n") if line.strip()]
         if len(self._rx) > MAX_LINE:
             self._rx.clear()
             out.append((P.ERROR_REPLY + P.REPLY_END).encode() + P.PROMPT)
