@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from station.capture import CaptureWriter, ImuInfo, Site, read_capture
+from station.io.capture import CaptureWriter, ImuInfo, Site, read_capture
 
 
 def main():

@@ -20,22 +20,22 @@ FAST = {"rate_dps": 100.0, "rotation_s": 36.0}
 
 
 def truth_for(grade: str, seed: int = 0):
-    from station import simrun
+    from station.simulate import dryrun
 
     if grade == "mems":
         from sim_devices.truth import mems_truth
         return mems_truth(seed)
-    return simrun.load_truth(None, seed)
+    return dryrun.load_truth(None, seed)
 
 
 def one_clean(args):
     grade, seed = args
-    from station import simrun
+    from station.simulate import dryrun
     from station.diagnose.core import diagnose
     from station.estimate import lsq
-    from station.scheme import load_scheme
+    from station.io.scheme import load_scheme
 
-    capture = simrun.simulate_capture(load_scheme("optimal9", FAST), truth_for(grade), seed)
+    capture = dryrun.simulate_capture(load_scheme("optimal9", FAST), truth_for(grade), seed)
     d = diagnose(lsq.fit(lsq.summarise(capture)))
     flagged = [c.effect for c in d.candidates if c.significant]
     return seed, d.reduced_chi2, d.p_value, flagged
@@ -72,10 +72,10 @@ def _set(truth, path, value):
 
 
 def effects(seed: int):
-    from station import simrun
+    from station.simulate import dryrun
     from station.diagnose import auto
     from station.estimate import lsq
-    from station.scheme import load_scheme
+    from station.io.scheme import load_scheme
 
     for effect, (path, value) in HIDDEN.items():
         truth = truth_for("mems")
@@ -86,7 +86,7 @@ def effects(seed: int):
             truth.bench.rate_ripple_fraction, truth.bench.rate_ripple_hz = 0.2, 0.9   # a low-grade table
             truth.bench.lever_arm_m = np.zeros(3)   # centred: no tangential force from the ripple
         t0 = time.perf_counter()
-        capture = simrun.simulate_capture(load_scheme("optimal9", FAST), truth, seed)
+        capture = dryrun.simulate_capture(load_scheme("optimal9", FAST), truth, seed)
         steps, final = auto.run(lsq.summarise(capture))
         first = steps[0].before if steps else final
         top = next((c.effect for c in first.candidates if c.significant), "none")
@@ -98,17 +98,17 @@ def effects(seed: int):
 
 
 def outside(seed: int):
-    from station import simrun
+    from station.simulate import dryrun
     from station.diagnose import auto
     from station.estimate import lsq
-    from station.scheme import load_scheme
+    from station.io.scheme import load_scheme
 
     for label, setup in (("accelerometer cross-coupling", lambda t: _set(t, "accel.cross_coupling_ug_per_g2",
                                                                           [[0, 200, -150], [180, 0, 120], [-160, 140, 0]])),
                          ("table wobble", lambda t: _set(t, "bench.wobble_arcsec", 60.0))):
         truth = truth_for("mems")
         setup(truth)
-        capture = simrun.simulate_capture(load_scheme("optimal9", FAST), truth, seed)
+        capture = dryrun.simulate_capture(load_scheme("optimal9", FAST), truth, seed)
         steps, final = auto.run(lsq.summarise(capture))
         print(f"{label}: added {[s.added for s in steps]}; final reduced chi2 {final.reduced_chi2:.3g}")
         print(f"   verdict: {final.verdict}")

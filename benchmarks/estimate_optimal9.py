@@ -13,8 +13,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from station import simrun
-from station.scheme import load_scheme
+from station.simulate import dryrun
+from station.io.scheme import load_scheme
 
 
 def main():
@@ -26,9 +26,9 @@ def main():
     scheme = load_scheme("optimal9")
     for rate in a.rates:
         with tempfile.TemporaryDirectory() as tmp:
-            truth = simrun.load_truth(None, 1)
+            truth = dryrun.load_truth(None, 1)
             truth.sample_rate_hz = rate
-            cap = simrun.record_scheme(scheme, truth, 1, Path(tmp) / "cap")
+            cap = dryrun.record_scheme(scheme, truth, 1, Path(tmp) / "cap")
             samples = int(scheme.duration_s * rate)
             walls = []
             for _ in range(a.repeat):

@@ -27,10 +27,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from sim_devices.truth import Truth  # noqa: E402
-from station import simrun, units  # noqa: E402
-from station.calibration import parameter_errors  # noqa: E402
+from station import dryrun, units  # noqa: E402
+from station.model.calibration import parameter_errors  # noqa: E402
 from station.estimate import fourier  # noqa: E402
-from station.scheme import load_scheme  # noqa: E402
+from station.io.scheme import load_scheme  # noqa: E402
 
 
 def signed_uniform(rng, lo, hi, shape):
@@ -77,16 +77,16 @@ def main(argv=None) -> int:
     settings = dict(rate_hz=args.rate_hz, accel_ug=args.accel_ug, gyro_dph=args.gyro_dph, drift=args.drift)
     # prediction: propagate the noise through a noise-free run of the first truth
     quiet = mems_truth(0, **{**settings, "accel_ug": 0.0, "gyro_dph": 0.0})
-    summaries = fourier.summarise(simrun.simulate_capture(scheme, quiet, seed=0))
+    summaries = fourier.summarise(dryrun.simulate_capture(scheme, quiet, seed=0))
     predicted = fourier.propagate(summaries, args.variant, args.accel_ug * units.UG_MPS2,
                                   args.gyro_dph / 3600.0, args.rate_hz)
     errors, names, unit_of = [], None, {}
     start = time.perf_counter()
     for run in range(args.runs):
         truth = mems_truth(1000 + run, **settings)
-        capture = simrun.simulate_capture(scheme, truth, seed=run)
+        capture = dryrun.simulate_capture(scheme, truth, seed=run)
         cal = fourier.estimate(capture, args.variant)
-        rows = parameter_errors(cal, simrun.truth_calibration(truth))
+        rows = parameter_errors(cal, dryrun.truth_calibration(truth))
         names = [r[0] for r in rows]
         unit_of = {r[0]: r[4] for r in rows}
         errors.append([r[3] for r in rows])

@@ -31,10 +31,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from station.capture import read_capture  # noqa: E402
-from station.errors import UserError  # noqa: E402
+from station.io.capture import read_capture  # noqa: E402
+from station.core.errors import UserError  # noqa: E402
 from station.estimate import estimate_capture  # noqa: E402
-from station.importers import imucal as importer  # noqa: E402
+from station.io.importers import imucal as importer  # noqa: E402
 
 DATA = ROOT.parent / "shared" / "data" / "imucal"
 SESSION = DATA / "example_ferraris_session.csv"

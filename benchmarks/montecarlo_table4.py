@@ -9,8 +9,8 @@ import time
 
 import numpy as np
 
-from station import montecarlo
-from station.scheme import load_scheme
+from station.simulate import montecarlo
+from station.io.scheme import load_scheme
 
 # Zhang et al. 2010, tables 3 and 4 (standard deviations of the errors, 500 runs)
 PAPER = {

@@ -7,8 +7,8 @@ import argparse
 import os
 import time
 
-from station import montecarlo
-from station.scheme import load_scheme
+from station.simulate import montecarlo
+from station.io.scheme import load_scheme
 
 
 def main():

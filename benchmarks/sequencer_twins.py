@@ -5,7 +5,7 @@ run, over several seeds: errors against the truth in units of the reported 1 sig
 
 For each seed: the twins (BenchServer, 3-axis acutrol table, VectorNav IMU, default_truth(seed))
 on pseudo-terminals in this process; ``station run --scheme optimal9 --dwell-s 20 --rotation-s 36``
-unattended in a subprocess; the same scheme simulated in process (station.simrun) with the same
+unattended in a subprocess; the same scheme simulated in process (station.simulate.dryrun) with the same
 truth.  Prints max |z| and rms z (z = error / sigma over the 21 parameters) of both.
 """
 from __future__ import annotations
@@ -21,11 +21,11 @@ import numpy as np
 
 from sim_devices.truth import default_truth
 from sim_devices.twins.serve import BenchOptions, BenchServer
-from station import simrun
-from station.calfile import read_calfile
-from station.calibration import parameter_errors
+from station.simulate import dryrun
+from station.io.calfile import read_calfile
+from station.model.calibration import parameter_errors
 from station.estimate import estimate_with
-from station.scheme import load_scheme
+from station.io.scheme import load_scheme
 
 CONFIG = """\
 version: 1
@@ -55,10 +55,10 @@ def main() -> None:
             wall = time.monotonic() - t0
         params = read_calfile(out / "calibration.yaml")["parameters"]
         z_twin = np.array([(params[n]["value"] - true) / params[n]["sigma"]
-                           for n, true, _ in simrun.truth_calibration(truth).parameters()])
-        dry, _ = estimate_with(simrun.simulate_capture(scheme, truth, seed), "lsq")
+                           for n, true, _ in dryrun.truth_calibration(truth).parameters()])
+        dry, _ = estimate_with(dryrun.simulate_capture(scheme, truth, seed), "lsq")
         z_dry = np.array([(v - t) / dry.sigma[n]
-                          for n, v, t, _, _ in parameter_errors(dry, simrun.truth_calibration(truth))])
+                          for n, v, t, _, _ in parameter_errors(dry, dryrun.truth_calibration(truth))])
         print(f"{seed:>4} {wall:>7.1f} {np.abs(z_twin).max():>12.2f} {np.sqrt(np.mean(z_twin**2)):>6.2f} "
               f"{np.abs(z_dry).max():>10.2f} {np.sqrt(np.mean(z_dry**2)):>6.2f}", flush=True)
 

@@ -1,12 +1,12 @@
 """Errors raised by the device drivers.
 
-All derive from :class:`station.errors.UserError`, so the command line prints them as one
+All derive from :class:`station.core.errors.UserError`, so the command line prints them as one
 line (exit status 2).  Every message starts with the device it concerns, e.g.
 ``"imu /dev/ttyUSB0 (vectornav): no valid frame for 1.0 s"``.
 """
 from __future__ import annotations
 
-from station.errors import UserError
+from station.core.errors import UserError
 
 
 class DeviceError(UserError):

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import importlib
 
-from station.errors import UserError
+from station.core.errors import UserError
 
 #: protocol name -> "module:Class" (imported on first use)
 TABLE_DRIVERS = {

@@ -29,7 +29,7 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
-from station.errors import UserError
+from station.core.errors import UserError
 
 from .world import ARCSEC, DEG_PER_HOUR, G_STANDARD, MICRO_G
 

@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 
-from station.capture import CaptureWriter, ImuInfo, Site
+from station.io.capture import CaptureWriter, ImuInfo, Site
 
 RATE = 100.0
 BLOCK = 10

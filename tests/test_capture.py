@@ -9,9 +9,9 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from station.capture import CaptureWriter, ImuInfo, Site, read_capture, read_segment_csv
-from station.errors import CaptureError, UserError
-from station.units import (ACCEL_UNITS, GYRO_UNITS, STANDARD_GRAVITY, accel_to_mps2_factor,
+from station.io.capture import CaptureWriter, ImuInfo, Site, read_capture, read_segment_csv
+from station.core.errors import CaptureError, UserError
+from station.core.units import (ACCEL_UNITS, GYRO_UNITS, STANDARD_GRAVITY, accel_to_mps2_factor,
                            gyro_to_dps_factor)
 
 RATE = 100.0

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.capture import CaptureWriter, read_capture
+from station.io.capture import CaptureWriter, read_capture
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import yaml
 
-from station.calfile import read_calfile
-from station.capture import read_capture, read_segment_csv
+from station.io.calfile import read_calfile
+from station.io.capture import read_capture, read_segment_csv
 from station.cli import main
 
 SHORT = ["--dwell-s", "20", "--rotation-s", "36"]   # one revolution at 10 deg/s: a quick run

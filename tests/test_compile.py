@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from station.compile import compile_scheme
-from station.config import AXIS_NAMES, AxisConfig, Config, RunConfig, TableConfig
-from station.errors import UserError
-from station.gimbal import Gimbal
-from station.plan import Dwell, HandRotation, HandStatic, MoveTo, Operator, Rotate
-from station.scheme import builtin_names, load_scheme, scheme_from_text
+from station.bench.compile import compile_scheme
+from station.bench.config import AXIS_NAMES, AxisConfig, Config, RunConfig, TableConfig
+from station.core.errors import UserError
+from station.bench.gimbal import Gimbal
+from station.bench.plan import Dwell, HandRotation, HandStatic, MoveTo, Operator, Rotate
+from station.io.scheme import builtin_names, load_scheme, scheme_from_text
 
 TOL_DEG = 0.01
 FAST = AxisConfig(max_rate_dps=1000, max_accel_dps2=1000)       # the screwdriver turns at 720 deg/s

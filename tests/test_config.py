@@ -7,9 +7,9 @@ import yaml
 
 from sim_devices.world import local_gravity
 from station.cli import main
-from station.cli_run import _config
-from station.config import EXAMPLE, Config, from_dict, load_config, normal_gravity, parse_config
-from station.errors import UserError
+from station.cli.run import _config
+from station.bench.config import EXAMPLE, Config, from_dict, load_config, normal_gravity, parse_config
+from station.core.errors import UserError
 
 
 def test_the_example_parses_and_round_trips(tmp_path):

@@ -6,25 +6,25 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from station import simrun
+from station.simulate import dryrun
 from station.cli import main
 from station.diagnose import auto
 from station.diagnose.core import ALPHA, diagnose
 from station.estimate import lsq
-from station.scheme import load_scheme
+from station.io.scheme import load_scheme
 
 FAST = {"rate_dps": 100.0, "rotation_s": 36.0}     # optimal9 with rotations fast enough to excite
 
 
 def capture_with(seed=3, **hidden):
-    truth = simrun.load_truth(None, 0)
+    truth = dryrun.load_truth(None, 0)
     for path, value in hidden.items():
         obj = truth
         *parents, leaf = path.split("__")
         for p in parents:
             obj = getattr(obj, p)
         setattr(obj, leaf, value)
-    return truth, simrun.simulate_capture(load_scheme("optimal9", FAST), truth, seed)
+    return truth, dryrun.simulate_capture(load_scheme("optimal9", FAST), truth, seed)
 
 
 def chi2_band(dof):
@@ -101,7 +101,7 @@ def mems_capture(seed=3, **hidden):
         for p in parents:
             obj = getattr(obj, p)
         setattr(obj, leaf, np.asarray(value, float) if isinstance(value, list) else value)
-    return truth, simrun.simulate_capture(load_scheme("optimal9", FAST), truth, seed)
+    return truth, dryrun.simulate_capture(load_scheme("optimal9", FAST), truth, seed)
 
 
 MEMS_EFFECTS = {

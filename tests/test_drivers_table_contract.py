@@ -12,7 +12,7 @@ from drivers.errors import DeviceError, LimitError, NotSupported, ProtocolError,
 from drivers.registry import open_table, table_driver
 from sim_devices.truth import default_truth
 from sim_devices.twins.serve import BenchOptions, BenchServer
-from station.errors import UserError
+from station.core.errors import UserError
 
 # (protocol, axes)
 TABLES = [("acutrol", 1), ("acutrol", 2), ("acutrol", 3), ("aerosmith", 1)]

@@ -14,17 +14,19 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from station import montecarlo, simrun
-from station.calibration import parameter_errors
+from station.simulate import montecarlo
+
+from station.simulate import dryrun
+from station.model.calibration import parameter_errors
 from station.estimate import zhang2010
-from station.scheme import load_scheme
+from station.io.scheme import load_scheme
 
 G0 = 9.80665
 ARCSEC = math.radians(1 / 3600)
 
 
 def quiet_truth(seed=0, accel_ug=0.0, gyro_dph=0.0, angle_arcsec=0.0):
-    truth = simrun.load_truth(None, seed)
+    truth = dryrun.load_truth(None, seed)
     truth.accel.noise_density = accel_ug
     truth.gyro.noise_density = gyro_dph
     truth.bench.table_angle_error_arcsec = angle_arcsec
@@ -33,7 +35,7 @@ def quiet_truth(seed=0, accel_ug=0.0, gyro_dph=0.0, angle_arcsec=0.0):
 
 
 def errors_by_name(cal, truth):
-    return {name: err for name, _, _, err, _ in parameter_errors(cal, simrun.truth_calibration(truth))}
+    return {name: err for name, _, _, err, _ in parameter_errors(cal, dryrun.truth_calibration(truth))}
 
 
 def predicted_sigma(scheme, truth, capture) -> dict:
@@ -65,7 +67,7 @@ def predicted_sigma(scheme, truth, capture) -> dict:
 def test_noise_free_dry_run_recovers_truth_exactly():
     """No noise, no table error: only the numerical floor and the unmodelled terms remain."""
     scheme, truth = load_scheme("optimal9"), quiet_truth()
-    cal = zhang2010.estimate(simrun.simulate_capture(scheme, truth, seed=3))
+    cal = zhang2010.estimate(dryrun.simulate_capture(scheme, truth, seed=3))
     err = errors_by_name(cal, truth)
     floor = {"scale": 1e-5, "misalignment": 1e-5, "accel_bias": 1e-5, "gyro_bias": 1e-4, "inter_triad": 1e-5}
     for name, e in err.items():
@@ -77,7 +79,7 @@ def test_noise_free_dry_run_recovers_truth_exactly():
 def test_paper_noise_errors_within_predicted_bounds(seed):
     scheme = load_scheme("optimal9")
     truth = quiet_truth(accel_ug=100.0, gyro_dph=0.03, angle_arcsec=2.0)
-    capture = simrun.simulate_capture(scheme, truth, seed)
+    capture = dryrun.simulate_capture(scheme, truth, seed)
     err = errors_by_name(zhang2010.estimate(capture), truth)
     sigma = predicted_sigma(scheme, truth, capture)
     for name, s in sigma.items():
@@ -96,7 +98,7 @@ def test_error_spread_matches_noise_over_seeded_runs():
     settings.method = "zhang2010"
     names, errors, _ = montecarlo.run(scheme, settings, runs, first_seed=500)
     truth = montecarlo.make_truth(settings)
-    sigma = predicted_sigma(scheme, truth, simrun.simulate_capture(scheme, truth, 500))
+    sigma = predicted_sigma(scheme, truth, dryrun.simulate_capture(scheme, truth, 500))
     lo, hi = (math.sqrt(stats.chi2.ppf(q, runs - 1) / (runs - 1)) for q in (0.0005, 0.9995))
     for (name, _), col in zip(names, errors.T):
         ratio = col.std(ddof=1) / (sigma.get(name) or sigma["accel_misalignment_yz"])
@@ -115,7 +117,7 @@ def test_error_spread_matches_noise_over_seeded_runs():
 def test_manifest_units_are_honoured(accel_unit, a_per_si, gyro_unit, g_per_si):
     """The same data declared in other units give the same compensation into m/s^2 and deg/s."""
     scheme, truth = load_scheme("optimal9"), quiet_truth(accel_ug=100.0, gyro_dph=0.03, angle_arcsec=2.0)
-    capture = simrun.simulate_capture(scheme, truth, seed=21)
+    capture = dryrun.simulate_capture(scheme, truth, seed=21)
     reference = zhang2010.estimate(capture)
     for seg in capture.segments:
         seg.data.accel = seg.data.accel * a_per_si

@@ -17,12 +17,14 @@ import pytest
 import yaml
 from scipy import stats
 
-from station import simrun, units
-from station.calibration import parameter_errors
-from station.capture import read_capture
-from station.errors import UserError
+from station.simulate import dryrun
+
+from station.core import units
+from station.model.calibration import parameter_errors
+from station.io.capture import read_capture
+from station.core.errors import UserError
 from station.estimate import choose_method, estimate_capture, estimate_with, fourier, zhang2010
-from station.scheme import load_scheme, parse_scheme
+from station.io.scheme import load_scheme, parse_scheme
 
 EARTH_DPH = units.EARTH_RATE_DPS * 3600
 
@@ -81,7 +83,7 @@ def test_peak_interpolation_noise_matches_first_order_prediction(d):
 # --- the method on the simulated bench ---------------------------------------------------------------
 
 def truth_for(*, accel_ug, gyro_dph, drift=0.0, rate_hz=100.0, seed=0):
-    truth = simrun.load_truth(None, seed)
+    truth = dryrun.load_truth(None, seed)
     truth.sample_rate_hz = rate_hz
     truth.accel.noise_density = accel_ug
     truth.gyro.noise_density = gyro_dph
@@ -90,7 +92,7 @@ def truth_for(*, accel_ug, gyro_dph, drift=0.0, rate_hz=100.0, seed=0):
 
 
 def errors_of(cal, truth):
-    return {name: err for name, _, _, err, _ in parameter_errors(cal, simrun.truth_calibration(truth))}
+    return {name: err for name, _, _, err, _ in parameter_errors(cal, dryrun.truth_calibration(truth))}
 
 
 def predicted(scheme, truth, variant):
@@ -98,7 +100,7 @@ def predicted(scheme, truth, variant):
                       rate_hz=truth.sample_rate_hz)
     quiet.accel, quiet.gyro = truth.accel.__class__(**{**truth.accel.__dict__, "noise_density": 0.0}), \
         truth.gyro.__class__(**{**truth.gyro.__dict__, "noise_density": 0.0})
-    s = fourier.summarise(simrun.simulate_capture(scheme, quiet, seed=0))
+    s = fourier.summarise(dryrun.simulate_capture(scheme, quiet, seed=0))
     return fourier.propagate(s, variant, truth.accel.noise_density * units.UG_MPS2,
                              truth.gyro.noise_density / 3600, truth.sample_rate_hz)
 
@@ -117,7 +119,7 @@ def test_noise_free_with_rate_drift_recovers_truth():
     ug, deg/h) remains, except the low-grade gyro biases, which carry the Earth rate by design."""
     scheme = load_scheme("screwdriver", {"rotation_s": 20.0})
     truth = truth_for(accel_ug=0.0, gyro_dph=0.0, drift=-0.2)
-    capture = simrun.simulate_capture(scheme, truth, seed=3)
+    capture = dryrun.simulate_capture(scheme, truth, seed=3)
     for variant in ("low", "high"):
         cal = fourier.estimate(capture, variant)
         for name, e in errors_of(cal, truth).items():
@@ -140,7 +142,7 @@ def test_mems_noise_and_drift_within_predicted_bounds(seed):
     scheme = load_scheme("screwdriver")
     truth = truth_for(accel_ug=150.0, gyro_dph=10.0, drift=-0.2)
     sigma = predicted(scheme, truth, "low")
-    capture = simrun.simulate_capture(scheme, truth, seed)
+    capture = dryrun.simulate_capture(scheme, truth, seed)
     cal = fourier.estimate(capture, "low")
     bound = earth_bias_bound(capture, cal)
     for name, e in errors_of(cal, truth).items():
@@ -156,7 +158,7 @@ def test_high_variant_estimates_earth_rate_along_shafts():
     no larger than the Earth rate itself."""
     scheme = load_scheme("screwdriver", {"rotation_s": 30.0})
     truth = truth_for(accel_ug=100.0, gyro_dph=0.03)
-    capture = simrun.simulate_capture(scheme, truth, seed=5)
+    capture = dryrun.simulate_capture(scheme, truth, seed=5)
     sigma = predicted(scheme, truth, "high")
     high = fourier.estimate(capture, "high")
     for name, e in errors_of(high, truth).items():
@@ -181,7 +183,7 @@ def test_tilted_shaft_elevation_estimated():
     doc["defaults"]["rotation_s"] = 20.0
     scheme = parse_scheme(doc, "tilted", {})
     truth = truth_for(accel_ug=0.0, gyro_dph=0.0)
-    cal = fourier.estimate(simrun.simulate_capture(scheme, truth, seed=4))
+    cal = fourier.estimate(dryrun.simulate_capture(scheme, truth, seed=4))
     assert cal.fit["shaft_elevation_deg"] == pytest.approx(10.0, abs=0.01)
     for name, e in errors_of(cal, truth).items():
         if not name.startswith("gyro_bias"):
@@ -196,17 +198,17 @@ def test_three_mountings_assume_a_horizontal_shaft_and_two_are_refused():
                           .joinpath("screwdriver.yaml").read_text())
     base["defaults"]["rotation_s"] = 10.0
     three = parse_scheme({**base, "segments": base["segments"][:3]}, "three", {})
-    cal = fourier.estimate(simrun.simulate_capture(three, truth, seed=2))
+    cal = fourier.estimate(dryrun.simulate_capture(three, truth, seed=2))
     assert any("taken as horizontal" in n for n in cal.fit["notes"])
     assert abs(errors_of(cal, truth)["accel_scale_x"]) < 1e-3
     two = parse_scheme({**base, "segments": base["segments"][:2]}, "two", {})
     with pytest.raises(UserError, match="at least 3 mountings"):
-        fourier.estimate(simrun.simulate_capture(two, truth, seed=2))
+        fourier.estimate(dryrun.simulate_capture(two, truth, seed=2))
 
 
 def test_hand_turns_refused():
     scheme = load_scheme("screwdriver", {"rotation_s": 2.0})      # 4 revolutions
-    capture = simrun.simulate_capture(scheme, truth_for(accel_ug=150.0, gyro_dph=10.0), seed=1)
+    capture = dryrun.simulate_capture(scheme, truth_for(accel_ug=150.0, gyro_dph=10.0), seed=1)
     with pytest.raises(UserError, match=r"shaftx_p.*revolutions.*at least 10"):
         fourier.estimate(capture)
 
@@ -215,7 +217,7 @@ def test_vertical_shaft_refused():
     doc = {"name": "v", "defaults": {"rate_dps": 720.0, "rotation_s": 10.0},
            "segments": [{"rotation": f"r{i}", "axis_body": ax, "encoder": False, "axis_elevation_deg": 90}
                         for i, ax in enumerate([[1, 0, 0], [0, 1, 0], [0, 0, 1]])]}
-    capture = simrun.simulate_capture(parse_scheme(doc, "v", {}), truth_for(accel_ug=150.0, gyro_dph=10.0), 1)
+    capture = dryrun.simulate_capture(parse_scheme(doc, "v", {}), truth_for(accel_ug=150.0, gyro_dph=10.0), 1)
     with pytest.raises(UserError, match="vertical"):
         fourier.estimate(capture)
 
@@ -223,7 +225,7 @@ def test_vertical_shaft_refused():
 def test_wrong_direction_in_manifest_is_reported_and_the_data_used():
     scheme = load_scheme("screwdriver", {"rotation_s": 10.0})
     truth = truth_for(accel_ug=0.0, gyro_dph=0.0)
-    capture = simrun.simulate_capture(scheme, truth, seed=6)
+    capture = dryrun.simulate_capture(scheme, truth, seed=6)
     reference = fourier.estimate(capture)
     capture.segments[0].rate_dps = -capture.segments[0].rate_dps
     flipped = fourier.estimate(capture)
@@ -240,7 +242,7 @@ def test_unknown_variant_refused():
 
 def test_auto_selection_and_zhang2010_refusal(tmp_path):
     truth = truth_for(accel_ug=100.0, gyro_dph=0.03)
-    screw = simrun.record_scheme(load_scheme("screwdriver", {"rotation_s": 10.0}), truth, 1, tmp_path / "s")
+    screw = dryrun.record_scheme(load_scheme("screwdriver", {"rotation_s": 10.0}), truth, 1, tmp_path / "s")
     capture = read_capture(screw)
     assert choose_method(capture) == "fourier"
     with pytest.raises(UserError, match="no angle_deg; the 2010 method needs the encoder angle"):
@@ -250,7 +252,7 @@ def test_auto_selection_and_zhang2010_refusal(tmp_path):
     cal, method = estimate_with(capture, "fourier-high")
     assert method == "fourier-high" and cal.fit["variant"] == "high"
 
-    optimal = simrun.simulate_capture(load_scheme("optimal9", {"rotation_s": 36.0, "dwell_s": 10.0}), truth, 1)
+    optimal = dryrun.simulate_capture(load_scheme("optimal9", {"rotation_s": 36.0, "dwell_s": 10.0}), truth, 1)
     assert choose_method(optimal) != "fourier"          # every rotation has its encoder angle
     cal, method = estimate_with(optimal, "zhang2010")
     assert method == "zhang2010" and cal.fit["method"] == "zhang2010"

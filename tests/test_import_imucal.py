@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from station import cli
-from station.capture import read_capture
-from station.errors import UserError
+from station.io.capture import read_capture
+from station.core.errors import UserError
 from station.estimate import estimate_capture
-from station.importers import imucal
+from station.io.importers import imucal
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "imucal"
 SESSION = DATA / "example_ferraris_session.csv"

@@ -1,7 +1,7 @@
 """The least-squares model against the simulated bench.
 
 Bounds come from the model's own Fisher information evaluated with the true noise densities
-(the Cramér-Rao bound, station.montecarlo.cramer_rao), never from a run of the estimator."""
+(the Cramér-Rao bound, station.simulate.montecarlo.cramer_rao), never from a run of the estimator."""
 import math
 
 import numpy as np
@@ -9,12 +9,13 @@ import pytest
 from scipy import stats
 
 from sim_devices.bench import SimulatedBench
-from station import montecarlo, simrun
-from station.calibration import parameter_errors
-from station.compensate import compensate
+from station.simulate import montecarlo
+from station.simulate import dryrun
+from station.model.calibration import parameter_errors
+from station.model.compensate import compensate
 from station.estimate import lsq
 from station.model import EFFECTS
-from station.scheme import load_scheme
+from station.io.scheme import load_scheme
 
 POSITIONS_M = np.array([[0.012, 0.004, -0.006], [-0.005, 0.009, 0.007], [0.006, -0.008, -0.014]])
 
@@ -26,9 +27,9 @@ def quiet(truth):
 
 
 def test_noise_free_fit_is_exact_and_chi2_zero():
-    scheme, truth = load_scheme("optimal9"), quiet(simrun.load_truth(None, 0))
-    capture = simrun.simulate_capture(scheme, truth, 4)
-    capture_noise = simrun.simulate_capture(scheme, montecarlo.make_truth(montecarlo.Settings()), 4)
+    scheme, truth = load_scheme("optimal9"), quiet(dryrun.load_truth(None, 0))
+    capture = dryrun.simulate_capture(scheme, truth, 4)
+    capture_noise = dryrun.simulate_capture(scheme, montecarlo.make_truth(montecarlo.Settings()), 4)
     # the noise level is taken from the data; borrow a noisy one so the weights are finite
     s = lsq.summarise(capture)
     s_noise = lsq.summarise(capture_noise)
@@ -36,7 +37,7 @@ def test_noise_free_fit_is_exact_and_chi2_zero():
                                                             2.0 / 3600)
     result = lsq.fit(s)
     cal = lsq.to_calibration(result, "m/s^2", "deg/s")
-    for name, value, _, err, unit in parameter_errors(cal, simrun.truth_calibration(truth)):
+    for name, value, _, err, unit in parameter_errors(cal, dryrun.truth_calibration(truth)):
         sigma = cal.sigma[name] / value * 1e6 if unit == "ppm" else cal.sigma[name]
         assert abs(err) < 1e-3 * sigma, (name, err, sigma, unit)
     # noise would give about dof; what remains is the Earth rate seen in the gyro-tracked phase
@@ -64,17 +65,17 @@ def test_spread_and_reported_sigma_match_the_cramer_rao_bound():
 
 
 def test_reduced_chi2_follows_its_distribution():
-    scheme, truth = load_scheme("optimal9"), simrun.load_truth(None, 0)
+    scheme, truth = load_scheme("optimal9"), dryrun.load_truth(None, 0)
     chi2, dof = 0.0, 0
     for seed in range(30, 36):
-        result = lsq.fit(lsq.summarise(simrun.simulate_capture(scheme, truth, seed)))
+        result = lsq.fit(lsq.summarise(dryrun.simulate_capture(scheme, truth, seed)))
         chi2 += result.chi2
         dof += result.dof
     assert stats.chi2.ppf(0.0005, dof) < chi2 < stats.chi2.ppf(0.9995, dof), (chi2, dof)
 
 
 def size_effect_truth():
-    truth = simrun.load_truth(None, 0)
+    truth = dryrun.load_truth(None, 0)
     truth.accel.noise_density, truth.gyro.noise_density = 150.0, 5.0      # MEMS
     truth.accel.position_m = POSITIONS_M
     return truth
@@ -83,7 +84,7 @@ def size_effect_truth():
 @pytest.mark.parametrize("seed", [3, 4])
 def test_size_effect_positions_recovered_and_compensated(seed):
     scheme, truth = load_scheme("sizeeffect"), size_effect_truth()
-    capture = simrun.simulate_capture(scheme, truth, seed)
+    capture = dryrun.simulate_capture(scheme, truth, seed)
     without = lsq.estimate(capture)
     cal = lsq.estimate(capture, [EFFECTS["accel_lever_arm"]()])
     # the missing effect shows: the base model cannot explain the rotations
@@ -96,7 +97,7 @@ def test_size_effect_positions_recovered_and_compensated(seed):
     assert any("not revealed by this capture" in note for note in cal.fit["notes"])
 
     # 200 deg/s about the vertical z axis, compensated: the reference point is on the axis
-    bench = SimulatedBench(simrun._mounted(truth, scheme), seed + 100)
+    bench = SimulatedBench(dryrun._mounted(truth, scheme), seed + 100)
     seg = bench.rotation([0, 0, 1], 200.0, 20.0, axis_elevation_deg=90.0)
     # at the reference point, on the axis: gravity alone, constant in body, expressed in frame p
     truth_f = truth.paper_parameters()["C_pb"] @ seg.truth["C_bn0"] @ [0.0, 0.0, bench.gravity_mps2]
@@ -115,12 +116,12 @@ def test_size_effect_positions_recovered_and_compensated(seed):
 
 
 def test_apply_follows_the_temperature_with_temperature_coefficients(tmp_path):
-    from station.calfile import read_calfile, write_calfile
+    from station.io.calfile import read_calfile, write_calfile
 
-    truth = simrun.load_truth(None, 0)
+    truth = dryrun.load_truth(None, 0)
     truth.accel.bias_tempco = np.array([60.0, -40.0, 50.0])         # µg/°C
     truth.temperature.warmup_delta_c = 6.0
-    capture = simrun.simulate_capture(load_scheme("optimal9"), truth, 3)
+    capture = dryrun.simulate_capture(load_scheme("optimal9"), truth, 3)
     write_calfile(tmp_path / "c.yaml", lsq.estimate(capture, [EFFECTS["temperature_bias"]()]), {})
     comp = read_calfile(tmp_path / "c.yaml")["compensation"]
     first = capture.segments[0].data                                  # pos01, cold

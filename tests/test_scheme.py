@@ -2,8 +2,8 @@ import math
 
 import pytest
 
-from station.errors import UserError
-from station.scheme import RotationSpec, StaticSpec, builtin_names, load_scheme
+from station.core.errors import UserError
+from station.io.scheme import RotationSpec, StaticSpec, builtin_names, load_scheme
 
 
 def test_optimal9_is_the_papers_scheme():

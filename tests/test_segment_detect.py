@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
-from station.scheme import load_scheme
-from station.segment_detect import detect, match, still_mask
+from station.io.scheme import load_scheme
+from station.io.segment_detect import detect, match, still_mask
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "imucal"
 RATE = 102.4

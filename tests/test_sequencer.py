@@ -20,12 +20,12 @@ import yaml
 
 from sim_devices.truth import default_truth
 from sim_devices.twins.serve import BenchOptions, BenchServer
-from station import simrun
-from station.calfile import read_calfile
-from station.calibration import parameter_errors
-from station.capture import read_capture
+from station.simulate import dryrun
+from station.io.calfile import read_calfile
+from station.model.calibration import parameter_errors
+from station.io.capture import read_capture
 from station.estimate import estimate_with
-from station.scheme import load_scheme
+from station.io.scheme import load_scheme
 
 SPEED = 100.0
 SEED = 11
@@ -71,7 +71,7 @@ def run_to_end(bench, config, *args, timeout=120):
 
 def z_scores(cal, truth):
     return np.array([(value - true) / cal.sigma[name]
-                     for name, value, true, _, _ in parameter_errors(cal, simrun.truth_calibration(truth))])
+                     for name, value, true, _, _ in parameter_errors(cal, dryrun.truth_calibration(truth))])
 
 
 def calibration(capture_dir):
@@ -83,7 +83,7 @@ def calibration(capture_dir):
 def file_z_scores(capture_dir, truth):
     cal = calibration(capture_dir)
     return np.array([(cal[name][0] - true) / cal[name][1]
-                     for name, true, _ in simrun.truth_calibration(truth).parameters()])
+                     for name, true, _ in dryrun.truth_calibration(truth).parameters()])
 
 
 def sha(path):
@@ -143,7 +143,7 @@ def test_optimal9_through_the_drivers_matches_the_truth_like_the_dry_run(full_ru
     z_twin = file_z_scores(out, truth)
     assert len(z_twin) == 21
     scheme = load_scheme("optimal9", {"dwell_s": 20, "rotation_s": 36})
-    dry, _ = estimate_with(simrun.simulate_capture(scheme, truth, SEED), "lsq")
+    dry, _ = estimate_with(dryrun.simulate_capture(scheme, truth, SEED), "lsq")
     z_dry = z_scores(dry, truth)
     print(f"\ntwins ({wall_s:.1f} s wall): max |z| {np.abs(z_twin).max():.2f}, rms z "
           f"{np.sqrt(np.mean(z_twin**2)):.2f}; in-process dry run: max |z| {np.abs(z_dry).max():.2f}, "

@@ -15,15 +15,15 @@ from drivers.base import ImuSettings
 from drivers.registry import open_imu, open_table
 from sim_devices.truth import default_truth
 from sim_devices.twins.serve import BenchOptions, BenchServer
-from station.capture import CaptureWriter, ImuInfo, Site, read_capture
-from station.compile import compile_scheme
-from station.config import AxisConfig, Config, RunConfig, TableConfig, WarmupConfig, normal_gravity
+from station.io.capture import CaptureWriter, ImuInfo, Site, read_capture
+from station.bench.compile import compile_scheme
+from station.bench.config import AxisConfig, Config, RunConfig, TableConfig, WarmupConfig, normal_gravity
 from station.estimate import estimate_with
-from station.gimbal import Gimbal
-from station.live import PlainDisplay
-from station.plan import HandStatic, MoveTo, Operator, Rotate
-from station.scheme import RotationSpec, load_scheme, scheme_from_text
-from station.sequencer import Sequencer, SequencerError
+from station.bench.gimbal import Gimbal
+from station.bench.live import PlainDisplay
+from station.bench.plan import HandStatic, MoveTo, Operator, Rotate
+from station.io.scheme import RotationSpec, load_scheme, scheme_from_text
+from station.bench.sequencer import Sequencer, SequencerError
 
 SPEED = 100.0
 
@@ -202,7 +202,7 @@ def test_after_a_pause_the_operator_can_continue_in_place(bench3, tmp_path):
     (the interrupted attempt kept aside as .incomplete) and the run completes."""
     import threading
 
-    from station.sequencer import Interrupts
+    from station.bench.sequencer import Interrupts
 
     scheme = scheme_from_text("name: two\ndefaults: {dwell_s: 30}\nsegments:\n  - {static: zup, up_body: [0, 0, 1]}\n"
                               "  - {static: xup, up_body: [1, 0, 0]}\n", "two.yaml")

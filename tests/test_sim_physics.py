@@ -20,7 +20,7 @@ from sim_devices.bench import SimulatedBench
 from sim_devices.truth import (BenchSettings, TemperatureTruth, Truth, TriadTruth,
                                default_truth, mems_truth)
 from sim_devices.world import ARCSEC, G_STANDARD, MICRO_G, OMEGA_EARTH
-from station.errors import UserError
+from station.core.errors import UserError
 
 EPS = np.finfo(float).eps
 UPS = [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1],

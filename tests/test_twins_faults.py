@@ -15,7 +15,7 @@ from sim_devices.truth import default_truth
 from sim_devices.twins.faults import Faults, ImuFaults, faults_from_dict, load_faults
 from sim_devices.twins.serve import BenchOptions, BenchServer
 from sim_devices.twins.table import TableConfig, TableFaults
-from station.errors import UserError
+from station.core.errors import UserError
 
 SPEED = 50.0
 

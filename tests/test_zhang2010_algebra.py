@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from station.errors import UserError
+from station.core.errors import UserError
 from station.estimate import zhang2010 as z
 
 ARCSEC = np.radians(1 / 3600)

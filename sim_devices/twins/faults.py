@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from station.errors import UserError
+from station.core.errors import UserError
 
 from .table import TableFaults
 

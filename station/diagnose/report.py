@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from station.diagnose.core import PRIOR_QUANTITIES
-from station.errors import UserError
+from station.core.errors import UserError
 from station.model import EFFECTS
 
 VARIABLE_LABEL = {

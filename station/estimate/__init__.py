@@ -4,8 +4,8 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
-from station.calibration import Calibration
-from station.capture import Capture, read_capture
+from station.model.calibration import Calibration
+from station.io.capture import Capture, read_capture
 
 METHODS = ("auto", "lsq", "zhang2010", "fourier", "fourier-high")
 # "auto": fourier when any complete rotation segment has no angle_deg (no encoder), lsq
@@ -35,7 +35,7 @@ def estimate_with(capture: Capture, method: str = "auto", effects=()) -> tuple[C
     """Estimate from a capture already read; returns the calibration and the method used.
 
     ``effects``: ids of station.model.EFFECTS to add to the model (least squares only)."""
-    from station.errors import UserError
+    from station.core.errors import UserError
     from station.model import EFFECTS
 
     if method not in METHODS:

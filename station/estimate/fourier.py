@@ -57,9 +57,9 @@ import numpy as np
 from scipy.interpolate import BSpline, make_lsq_spline
 from scipy.optimize import least_squares
 
-from station import units
-from station.calibration import Calibration
-from station.errors import UserError
+from station.core import units
+from station.model.calibration import Calibration
+from station.core.errors import UserError
 from station.estimate.zhang2010 import lower_factor, scale_and_T
 
 EARTH_RATE_DPS = units.EARTH_RATE_DPS

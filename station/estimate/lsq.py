@@ -1,6 +1,6 @@
 """One measurement model for every segment kind, fitted by weighted nonlinear least squares.
 
-Model (frame p of the accelerometers, see station/calibration.py):
+Model (frame p of the accelerometers, see station/model/calibration.py):
   accel_raw = K_a T_a f_p + b_a (+ effects)      gyro_raw = K_g T_g R_po w_p + b_g (+ effects)
 Static segment j (attitude C_pn,j unknown: a nuisance):
   f_p = C_pn [0, 0, g],   w_p = C_pn Omega_E,n          (Omega_E,n from the site latitude)
@@ -23,12 +23,12 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from station import units
-from station.calibration import Calibration, misalignment_angles
-from station.errors import UserError
+from station.core import units
+from station.model.calibration import Calibration, misalignment_angles
+from station.core.errors import UserError
 from station.estimate import zhang2010
 from station.estimate.summaries import Summaries, summarise
-from station.geometry import cross, tangent_basis
+from station.model.geometry import cross, tangent_basis
 from station.model.effect import Effect, SampleContext
 
 EARTH_RATE_RAD = 7.292115e-5

@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from station import units
-from station.errors import UserError
+from station.core import units
+from station.core.errors import UserError
 
 EDGE_SAMPLES = 3
 STEADY_SPREAD = 0.3     # a rotation whose rate magnitude varies more (std/mean) is a hand turn

@@ -21,9 +21,9 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from station import units
-from station.calibration import Calibration
-from station.errors import UserError
+from station.core import units
+from station.model.calibration import Calibration
+from station.core.errors import UserError
 
 EARTH_RATE_DPS = units.EARTH_RATE_DPS
 

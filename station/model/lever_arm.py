@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from station.geometry import cross
+from station.model.geometry import cross
 from station.model.effect import Effect, Param
 
 AXES = "xyz"

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from station import units
+from station.core import units
 from station.model.effect import Effect, Param
 
 

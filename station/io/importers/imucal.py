@@ -46,9 +46,9 @@ from pathlib import Path
 
 import numpy as np
 
-from station.capture import CaptureWriter, ImuInfo, Site
-from station.errors import UserError
-from station.units import ACCEL_UNITS, GYRO_UNITS
+from station.io.capture import CaptureWriter, ImuInfo, Site
+from station.core.errors import UserError
+from station.core.units import ACCEL_UNITS, GYRO_UNITS
 
 FORMATS = ("auto", "session", "annotated")
 STATIC_UP = {"x_p": (1, 0, 0), "x_a": (-1, 0, 0), "y_p": (0, 1, 0), "y_a": (0, -1, 0),

@@ -10,7 +10,7 @@ import signal
 import sys
 import threading
 
-from station.errors import UserError
+from station.core.errors import UserError
 
 
 def add_parsers(sub) -> None:

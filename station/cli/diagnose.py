@@ -7,10 +7,11 @@ from pathlib import Path
 
 from rich.table import Table
 
-from station.errors import UserError
+from station.cli.output import err, out
+from station.core.errors import UserError
 
 
-def add_parsers(sub, out, err) -> None:
+def add_parsers(sub) -> None:
     d = sub.add_parser("diagnose", help="residuals of the fitted model, where it fails, which effect is missing")
     d.add_argument("capture", help="capture directory (rotations need encoder angles)")
     d.add_argument("--calib", metavar="CAL.yaml", help="diagnose the model of this calibration file "
@@ -20,11 +21,15 @@ def add_parsers(sub, out, err) -> None:
                    help="add the most significant candidate, refit, repeat until none is significant")
     d.add_argument("--json", action="store_true", help="print the diagnosis as JSON (docs/diagnose.md)")
     d.add_argument("--report", metavar="DIR", help="write PNG pictures and index.html into DIR")
-    d.set_defaults(func=lambda args: cmd_diagnose(args, out, err))
+    d.set_defaults(func=cmd_diagnose)
+
+    eff = sub.add_parser("effects", help="list the effects the model can add, or explain one")
+    eff.add_argument("name", nargs="?")
+    eff.set_defaults(func=cmd_effects)
 
 
 def _effects(args) -> list[str]:
-    from station.calfile import read_calfile
+    from station.io.calfile import read_calfile
     from station.model import EFFECTS
 
     effects = []
@@ -38,8 +43,8 @@ def _effects(args) -> list[str]:
     return list(dict.fromkeys(effects))
 
 
-def cmd_diagnose(args, out, err) -> int:
-    from station.capture import read_capture
+def cmd_diagnose(args) -> int:
+    from station.io.capture import read_capture
     from station.diagnose import auto
     from station.diagnose.core import diagnose
     from station.estimate import lsq
@@ -149,3 +154,27 @@ def _print(out, first, steps, final) -> None:
             out.print(line)
         if final.candidates:
             out.print(_candidates_table(final))
+
+
+def cmd_effects(args) -> int:
+    from station.model import EFFECTS
+
+    if args.name is None:
+        table = Table(title="effects the model can add (station estimate --add ID)")
+        table.add_column("id")
+        table.add_column("what")
+        for eid, cls in sorted(EFFECTS.items()):
+            table.add_row(eid, cls.title)
+        out.print(table)
+        return 0
+    if args.name not in EFFECTS:
+        raise UserError(f"unknown effect {args.name!r}: the library has {', '.join(sorted(EFFECTS))}")
+    e = EFFECTS[args.name]()
+    out.print(f"[bold]{e.id}[/]: {e.title}\n")
+    for label, text in (("physics", e.physics), ("term", e.term), ("excited by", e.excited_by),
+                        ("typical size", e.magnitudes), ("when missing", e.signature)):
+        out.print(f"[bold]{label}:[/] {text}")
+    params = getattr(e, "all_params", None) or e.params
+    if params:
+        out.print("[bold]parameters:[/] " + ", ".join(f"{p.name} ({p.unit})" for p in params))
+    return 0

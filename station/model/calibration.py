@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from station import units
+from station.core import units
 
 # Names, in order, of the parameters of the base model; the MC and the tests use them.
 AXES = "xyz"

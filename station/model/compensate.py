@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from station.geometry import cross
+from station.model.geometry import cross
 
 
 COMPENSATED_EFFECTS = ("base_triads", "inter_triad", "accel_lever_arm", "temperature_bias")

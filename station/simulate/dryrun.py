@@ -11,8 +11,8 @@ from typing import Callable, Iterator
 import numpy as np
 import yaml
 
-from station.capture import Capture, CaptureWriter, ImuInfo, Segment, SegmentData, Site
-from station.scheme import RotationSpec, Scheme
+from station.io.capture import Capture, CaptureWriter, ImuInfo, Segment, SegmentData, Site
+from station.io.scheme import RotationSpec, Scheme
 
 BLOCK_SECONDS = 10.0     # samples are written and flushed in blocks of this length
 TRUTH_FILE = "sim_truth.yaml"
@@ -106,7 +106,7 @@ def simulate_capture(scheme: Scheme, truth, seed: int) -> Capture:
 
 def truth_calibration(truth):
     """The simulated truth expressed as a Calibration, to compare estimates with."""
-    from station.calibration import Calibration
+    from station.model.calibration import Calibration
 
     p = truth.paper_parameters()
     return Calibration(accel_unit="m/s^2", gyro_unit="deg/s",

@@ -1,4 +1,4 @@
-"""The sequencer: executes a plan (station/plan.py) on the devices; the only code that touches
+"""The sequencer: executes a plan (station/bench/plan.py) on the devices; the only code that touches
 hardware.
 
 Time comes from the devices: a dwell is a number of IMU samples, a rotation a whole number of
@@ -12,7 +12,7 @@ to rest and the segment being recorded is closed as ``incomplete`` (everything r
 kept); on a terminal the operator can then continue, otherwise the run stops and
 ``station run --resume CAPTURE`` continues later.  A second Ctrl-C (or SIGTERM) aborts at once,
 still stopping the table.  Hand-performed schemes (no table) are recorded as one continuous
-session and split into segments by station/segment_detect.py.
+session and split into segments by station/io/segment_detect.py.
 """
 from __future__ import annotations
 
@@ -23,10 +23,10 @@ import time
 
 import numpy as np
 
-from station.capture import CaptureWriter
-from station.errors import UserError
-from station.imu_stream import ImuStream
-from station.plan import (Checkpoint, Dwell, HandRotation, HandStatic, MoveTo, Operator, Rotate, Settle,
+from station.io.capture import CaptureWriter
+from station.core.errors import UserError
+from station.bench.imu_stream import ImuStream
+from station.bench.plan import (Checkpoint, Dwell, HandRotation, HandStatic, MoveTo, Operator, Rotate, Settle,
                           WarmUp)
 
 BLOCK_S = 1.0                 # device seconds written to a segment per write
@@ -374,16 +374,16 @@ class Sequencer:
 
     # ------------------------------------------------------------------ hand schemes
     def _hand(self, step) -> None:
-        from station.manual import hand_step
+        from station.bench.manual import hand_step
 
         if self._session is None:
-            from station.manual import Session
+            from station.bench.manual import Session
 
             self._session = Session(self.writer, self.rate_hz)
         hand_step(self, step)
 
     def _finish_session(self, steps) -> None:
-        from station.manual import finish_session
+        from station.bench.manual import finish_session
 
         finish_session(self, steps)
 

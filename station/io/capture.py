@@ -19,8 +19,8 @@ from pathlib import Path, PurePosixPath, PureWindowsPath
 import numpy as np
 import yaml
 
-from station.errors import CaptureError, UserError
-from station.units import ACCEL_UNITS, GYRO_UNITS
+from station.core.errors import CaptureError, UserError
+from station.core.units import ACCEL_UNITS, GYRO_UNITS
 
 FORMAT = "station-capture/1"
 MANIFEST = "manifest.yaml"

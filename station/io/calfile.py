@@ -14,8 +14,8 @@ import numpy as np
 import yaml
 
 import station
-from station.calibration import Calibration
-from station.errors import UserError
+from station.model.calibration import Calibration
+from station.core.errors import UserError
 
 FORMAT = "station-calibration/1"
 

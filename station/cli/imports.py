@@ -1,21 +1,21 @@
 """``station import``: recordings made by other tools into capture bundles (argument parsing and
-output only; the work is in station.importers)."""
+output only; the work is in station.io.importers)."""
 from __future__ import annotations
 
 import argparse
 
-from station.errors import UserError
+from station.cli.output import out
+from station.core.errors import UserError
 
 
 def cmd_import_imucal(args) -> int:
-    from station.cli import out
-    from station.importers import imucal
+    from station.io.importers import imucal
 
     path = imucal.import_imucal(
         args.csv, args.output, rate_hz=args.rate_hz, sections_path=args.sections, fmt=args.format,
         gravity_mps2=args.gravity_mps2, accel_unit=args.accel_unit, gyro_unit=args.gyro_unit,
         model=args.model, serial=args.serial, turn_deg=args.turn_deg, placement_deg=args.placement_deg)
-    from station.capture import read_capture
+    from station.io.capture import read_capture
 
     capture = read_capture(path)
     def vec(v):
@@ -43,8 +43,8 @@ def _positive(text: str) -> float:
 
 def add_parsers(sub) -> None:
     """Add the ``import`` command (sub-command ``imucal``) to station's subparsers."""
-    from station.importers import imucal
-    from station.units import ACCEL_UNITS, GYRO_UNITS
+    from station.io.importers import imucal
+    from station.core.units import ACCEL_UNITS, GYRO_UNITS
 
     imp = sub.add_parser("import", help="turn another tool's recording into a capture bundle")
     kinds = imp.add_subparsers(dest="source", required=True, metavar="SOURCE", parser_class=type(imp))

@@ -1,6 +1,6 @@
 """Schemes done by hand (``table: none``), for the sequencer: one continuous recording (a
 segment of kind ``session``) while the operator follows the instructions; the data tell when
-each instruction is done; at the end station/segment_detect.py finds the still intervals and
+each instruction is done; at the end station/io/segment_detect.py finds the still intervals and
 the turns in the whole session and they are written as the scheme's segments.
 
 Each detected segment is a copy of part of the session (the session file stays as recorded).
@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from drivers.samples import ImuSamples
-from station.plan import HandRotation, HandStatic
-from station.segment_detect import detect, match, still_mask
+from station.bench.plan import HandRotation, HandStatic
+from station.io.segment_detect import detect, match, still_mask
 
 SESSION = "session"
 CHECK_EVERY_S = 0.5          # device time between looks at the data
@@ -162,6 +162,6 @@ def finish_session(seq, steps) -> list[str]:
 
 
 def _segment_names(writer) -> list[str]:
-    from station.capture import read_capture
+    from station.io.capture import read_capture
 
     return [s.name for s in read_capture(writer.path, load_data=False).segments]

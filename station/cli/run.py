@@ -1,6 +1,6 @@
 """``station run`` on a bench (hardware or the device twins), and ``station schemes``, ``station
-plan`` and ``station init``.  Parsing and output only: the plan comes from station/compile.py,
-the devices are driven by station/sequencer.py.
+plan`` and ``station init``.  Parsing and output only: the plan comes from station/bench/compile.py,
+the devices are driven by station/bench/sequencer.py.
 """
 from __future__ import annotations
 
@@ -10,10 +10,10 @@ import sys
 from pathlib import Path
 
 import yaml
-from rich.console import Console
 from rich.table import Table
 
-from station.errors import UserError
+from station.cli.output import err, out, print_errors, print_notes, print_parameters
+from station.core.errors import UserError
 
 RUN_FILE = "run.yaml"
 SCHEME_FILE = "scheme.yaml"
@@ -21,14 +21,17 @@ RUN_FORMAT = "station-run/1"
 CONNECTION = {"imu": ("port", "protocol", "serial", "csv_units", "frame_timeout_s"),
               "table": ("port", "protocol", "serial")}
 
-out = Console(highlight=False, width=None if sys.stdout.isatty() else 160)
-err = Console(stderr=True, highlight=False)
-
 
 # ------------------------------------------------------------------------------------ parsers
 
-def add_run_arguments(run) -> None:
-    """The hardware flags of ``station run`` (the parser is defined in station/cli.py)."""
+def add_parsers(sub) -> None:
+    run = sub.add_parser("run", help="run a calibration scheme and estimate")
+    run.add_argument("--scheme", default="optimal9", help="built-in scheme name or a scheme YAML file")
+    run.add_argument("--sim", action="store_true", help="dry run against the simulated bench")
+    run.add_argument("--sim-truth", metavar="FILE", help="true sensor errors for --sim (YAML)")
+    run.add_argument("--seed", type=int, default=1, help="seed of the simulated truth and noise")
+    run.add_argument("--out", metavar="DIR", help="capture directory (default captures/<scheme>-sim-<time>)")
+    _add_scheme_overrides(run)
     run.add_argument("--port", metavar="URL", help="IMU port (device path or pyserial URL)")
     run.add_argument("--table-port", metavar="URL", help="rate-table port (device path or pyserial URL)")
     run.add_argument("--imu-protocol", help="vectornav (default) or csv")
@@ -38,9 +41,8 @@ def add_run_arguments(run) -> None:
     run.add_argument("--unattended", action="store_true",
                      help="no operator: never ask for a remount (run.operator: false)")
     run.add_argument("--reset-faults", action="store_true", help="clear a fault latched on the table first")
+    run.set_defaults(func=cmd_run)
 
-
-def add_parsers(sub) -> None:
     schemes = sub.add_parser("schemes", help="list the built-in schemes with their segments and durations")
     schemes.add_argument("--config", metavar="FILE", help="estimate run times for this table configuration")
     schemes.set_defaults(func=cmd_schemes)
@@ -48,9 +50,7 @@ def add_parsers(sub) -> None:
     plan = sub.add_parser("plan", help="print the compiled steps of a scheme for the configured table")
     plan.add_argument("--scheme", default="optimal9", help="built-in scheme name or a scheme YAML file")
     plan.add_argument("--config", metavar="FILE", help="station.yaml (default: $STATION_CONFIG, ./station.yaml)")
-    plan.add_argument("--dwell-s", type=float, help="override the scheme's dwell per attitude, s")
-    plan.add_argument("--rate-dps", type=float, help="override the scheme's rotation rate, deg/s")
-    plan.add_argument("--rotation-s", type=float, help="override the scheme's rotation time per direction, s")
+    _add_scheme_overrides(plan)
     plan.add_argument("--unattended", action="store_true", help="compile without remount steps")
     plan.add_argument("--all", action="store_true", help="also list settle and checkpoint steps")
     plan.set_defaults(func=cmd_plan)
@@ -60,10 +60,16 @@ def add_parsers(sub) -> None:
     init.set_defaults(func=cmd_init)
 
 
+def _add_scheme_overrides(p) -> None:
+    p.add_argument("--dwell-s", type=float, help="override the scheme's dwell per attitude, s")
+    p.add_argument("--rate-dps", type=float, help="override the scheme's rotation rate, deg/s")
+    p.add_argument("--rotation-s", type=float, help="override the scheme's rotation time per direction, s")
+
+
 # ------------------------------------------------------------------------------------ commands
 
 def cmd_init(args) -> int:
-    from station.config import EXAMPLE
+    from station.bench.config import EXAMPLE
 
     path = Path(args.path)
     if path.exists():
@@ -77,9 +83,9 @@ def cmd_init(args) -> int:
 
 
 def cmd_schemes(args) -> int:
-    from station.compile import compile_scheme
-    from station.config import load_config
-    from station.scheme import builtin_names, load_scheme
+    from station.bench.compile import compile_scheme
+    from station.bench.config import load_config
+    from station.io.scheme import builtin_names, load_scheme
 
     config = load_config(args.config)
     table = Table(title=f"built-in schemes (run s: estimated for the {config.table.axes}-axis table of "
@@ -103,9 +109,9 @@ def cmd_schemes(args) -> int:
 
 
 def cmd_plan(args) -> int:
-    from station.compile import compile_scheme
-    from station.plan import Checkpoint, Settle
-    from station.scheme import load_scheme
+    from station.bench.compile import compile_scheme
+    from station.bench.plan import Checkpoint, Settle
+    from station.io.scheme import load_scheme
 
     config = _config(args)
     scheme = load_scheme(args.scheme, _overrides(args))
@@ -130,9 +136,40 @@ def cmd_plan(args) -> int:
 
 
 def cmd_run(args) -> int:
+    from station.io.scheme import load_scheme
+
+    overrides = {k: v for k, v in (("dwell_s", args.dwell_s), ("rate_dps", args.rate_dps),
+                                   ("rotation_s", args.rotation_s)) if v is not None}
+    scheme = load_scheme(args.scheme, overrides)
+    if not args.sim:
+        return _run_on_bench(args)
+    from station.simulate import dryrun
+    from station.io.calfile import write_calfile
+    from station.estimate import estimate_capture
+
+    truth = dryrun.load_truth(args.sim_truth, args.seed)
+    stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    out_dir = Path(args.out) if args.out else Path("captures") / f"{scheme.name}-sim-{stamp}"
+    out.print(f"dry run: scheme [bold]{scheme.name}[/] ({len(scheme.segments)} segments, "
+              f"{scheme.duration_s:.0f} s of data) on the simulated bench, seed {args.seed}")
+    with out.status("recording") as status:
+        capture = dryrun.record_scheme(
+            scheme, truth, args.seed, out_dir,
+            progress=lambda name, i, n: status.update(f"recording {name} ({i + 1}/{n})"))
+    cal, _, provenance = estimate_capture(capture)
+    cal_path = write_calfile(capture / "calibration.yaml", cal, provenance)
+    print_errors(cal, dryrun.truth_calibration(truth))
+    print_notes(cal)
+    out.print(f"capture:          {capture}")
+    out.print(f"simulated truth:  {capture / dryrun.TRUTH_FILE}")
+    out.print(f"calibration file: {cal_path}")
+    return 0
+
+
+def _run_on_bench(args) -> int:
     """``station run`` without --sim: a run on the bench named by the flags and the configuration."""
-    from station.compile import compile_scheme
-    from station.scheme import load_scheme, scheme_text
+    from station.bench.compile import compile_scheme
+    from station.io.scheme import load_scheme, scheme_text
 
     config = _config(args)
     done: set = set()
@@ -154,7 +191,7 @@ def cmd_run(args) -> int:
     if args.resume and not any(s.segment for s in steps):
         out.print(f"{directory}: every segment is recorded; estimating", markup=False)
         return _estimate(directory)
-    from station.sequencer import Interrupts, RunAborted, RunPaused, Sequencer
+    from station.bench.sequencer import Interrupts, RunAborted, RunPaused, Sequencer
 
     imu, table = _open_devices(config, scheme)
     try:
@@ -167,7 +204,7 @@ def cmd_run(args) -> int:
         else:
             writer = _reopen(directory, rate_hz)
         out.print(f"capture: {directory}", markup=False)
-        from station.live import make_display
+        from station.bench.live import make_display
 
         display = make_display(out, sum(s.estimate_s for s in steps),
                                f"{scheme.name} on {config.table.axes if scheme.table else 'no'}-axis table")
@@ -197,7 +234,7 @@ class ConsoleOperator:
         self.display = display
 
     def confirm(self, step, interrupts) -> None:
-        from station.sequencer import PauseRequested
+        from station.bench.sequencer import PauseRequested
 
         if not sys.stdin.isatty():
             raise UserError(f"an operator step needs a terminal ({step.instruction}); run from a "
@@ -235,7 +272,7 @@ def _overrides(args) -> dict:
 
 
 def _config(args):
-    from station.config import load_config
+    from station.bench.config import load_config
 
     config = load_config(getattr(args, "config", None))
     config = config.with_overrides("imu", port=getattr(args, "port", None),
@@ -288,7 +325,7 @@ def _out_dir(args, config, scheme) -> Path:
 
 
 def _new_capture(directory, scheme, scheme_text_, overrides, config, imu, rate_hz):
-    from station.capture import CaptureWriter, ImuInfo, Site
+    from station.io.capture import CaptureWriter, ImuInfo, Site
 
     t = config.table
     extra = {"run": {"file": RUN_FILE, "scheme_file": SCHEME_FILE}}
@@ -318,9 +355,9 @@ def _resumed(directory: Path, current, args):
     from the capture; the connection (ports, protocols, serial) from the flags and the file."""
     from dataclasses import replace
 
-    from station.capture import read_capture
-    from station.config import from_dict
-    from station.scheme import scheme_from_text
+    from station.io.capture import read_capture
+    from station.bench.config import from_dict
+    from station.io.scheme import scheme_from_text
 
     run_file = directory / RUN_FILE
     try:
@@ -352,8 +389,8 @@ def _resumed(directory: Path, current, args):
 def _resume_steps(plan, scheme, done, config):
     """The steps left; the operator's first check names the mounting the first segment left
     was compiled for (a remount may have come before it)."""
-    from station.compile import mounting_step
-    from station.plan import Operator
+    from station.bench.compile import mounting_step
+    from station.bench.plan import Operator
 
     steps = plan.remaining(done)
     first = next((s.segment for s in steps if s.segment is not None), None)
@@ -370,7 +407,7 @@ def _resume_steps(plan, scheme, done, config):
 
 
 def _reopen(directory, rate_hz):
-    from station.capture import CaptureWriter, read_capture
+    from station.io.capture import CaptureWriter, read_capture
 
     capture = read_capture(directory, load_data=False)
     if abs(capture.imu.sample_rate_hz - rate_hz) > 1e-9:
@@ -380,16 +417,15 @@ def _reopen(directory, rate_hz):
 
 
 def _estimate(directory) -> int:
-    from station.calfile import write_calfile
-    from station.cli import _print_notes, _print_parameters
+    from station.io.calfile import write_calfile
     from station.estimate import estimate_capture
 
     cal, capture, provenance = estimate_capture(directory)
     for w in capture.warnings:
         err.print(f"warning: {w}", markup=False)
     path = write_calfile(Path(directory) / "calibration.yaml", cal, provenance)
-    _print_parameters([(n, v, u, cal.sigma.get(n)) for n, v, u in cal.parameters()],
+    print_parameters([(n, v, u, cal.sigma.get(n)) for n, v, u in cal.parameters()],
                       f"calibration of {directory} ({provenance['method']})")
-    _print_notes(cal)
+    print_notes(cal)
     out.print(f"calibration file: {path}", markup=False)
     return 0

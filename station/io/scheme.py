@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from station.errors import UserError
+from station.core.errors import UserError
 
 DEFAULT_KEYS = ("dwell_s", "rate_dps", "rotation_s")
 

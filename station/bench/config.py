@@ -16,7 +16,7 @@ import yaml
 
 from drivers.transport import SerialSettings
 
-from station.errors import UserError
+from station.core.errors import UserError
 
 DEFAULT_FILE = "station.yaml"
 ENV_FILE = "STATION_CONFIG"

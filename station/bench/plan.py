@@ -1,5 +1,5 @@
-"""A run's plan: small typed steps, compiled from a scheme (station/compile.py) and executed
-by the sequencer (station/sequencer.py), the only code that touches hardware.
+"""A run's plan: small typed steps, compiled from a scheme (station/bench/compile.py) and executed
+by the sequencer (station/bench/sequencer.py), the only code that touches hardware.
 
 Every step says what it is for (``purpose``), which segment it serves (``segment``: the
 steps of a segment that is already complete are skipped on ``--resume``; ``None`` for steps
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from station.scheme import RotationSpec, StaticSpec
+from station.io.scheme import RotationSpec, StaticSpec
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,7 @@
 
 Each static attitude (``up_body``, and a heading if the scheme gives one) and each rotation
 (``axis_body`` at ``axis_elevation_deg``) is solved for the table's angles by gimbal inverse
-kinematics (station/gimbal.py) for the present mounting of the IMU, taking the solution with
+kinematics (station/bench/gimbal.py) for the present mounting of the IMU, taking the solution with
 the least travel from where the table is.  A rotation turns one continuous axis whose rate limit
 allows the rate; its direction in the IMU is ``axis_body`` or its opposite (the table then turns
 the other way).  When the table cannot reach a requirement with the IMU as mounted, the compiler
@@ -18,12 +18,12 @@ import math
 
 import numpy as np
 
-from station.config import Config
-from station.errors import UserError
-from station.gimbal import Gimbal, right_angle_mountings
-from station.plan import (Checkpoint, Dwell, HandRotation, HandStatic, MoveTo, Operator, Plan, Rotate,
+from station.bench.config import Config
+from station.core.errors import UserError
+from station.bench.gimbal import Gimbal, right_angle_mountings
+from station.bench.plan import (Checkpoint, Dwell, HandRotation, HandStatic, MoveTo, Operator, Plan, Rotate,
                           Settle, WarmUp)
-from station.scheme import RotationSpec, Scheme, StaticSpec
+from station.io.scheme import RotationSpec, Scheme, StaticSpec
 
 MOVE_SETTLE_S = 1.0      # estimate of a move's settling (driver polls), device s
 CARDINAL = {"up": (0, 0, 1), "down": (0, 0, -1), "east": (1, 0, 0), "west": (-1, 0, 0),
@@ -319,7 +319,7 @@ def mounting_names(mounting: np.ndarray) -> tuple:
 
 def mounting_matrix(names) -> np.ndarray:
     """The inverse of ``mounting_names``."""
-    from station.config import AXIS_NAMES
+    from station.bench.config import AXIS_NAMES
 
     return np.column_stack([AXIS_NAMES[n] if isinstance(n, str) else n for n in names]).astype(float)
 

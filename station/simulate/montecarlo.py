@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from station.scheme import Scheme
+from station.io.scheme import Scheme
 
 BASE_PARAMETERS = 21
 
@@ -52,12 +52,12 @@ def _error_sigmas(cal) -> np.ndarray:
 
 def one_run(args) -> tuple[list[float], np.ndarray]:
     scheme, settings, seed = args
-    from station import simrun
-    from station.calibration import parameter_errors
+    from station.simulate import dryrun
+    from station.model.calibration import parameter_errors
 
     truth = make_truth(settings)
-    cal = _estimate(simrun.simulate_capture(scheme, truth, seed), settings.method)
-    errors = [e[3] for e in parameter_errors(cal, simrun.truth_calibration(truth))]
+    cal = _estimate(dryrun.simulate_capture(scheme, truth, seed), settings.method)
+    errors = [e[3] for e in parameter_errors(cal, dryrun.truth_calibration(truth))]
     return errors, _error_sigmas(cal)
 
 
@@ -65,7 +65,7 @@ def cramer_rao(scheme: Scheme, settings: Settings, seed: int = 0) -> np.ndarray:
     """Cramér-Rao lower bound (1σ, units of parameter_errors) of every base parameter for this
     scheme and noise, with the static attitudes and the bench nuisances unknown: the inverse
     Fisher information of the summaries' model at the truth, noise from the densities."""
-    from station import simrun
+    from station.simulate import dryrun
     from station.estimate import lsq
     from station.estimate.summaries import summarise
 
@@ -73,7 +73,7 @@ def cramer_rao(scheme: Scheme, settings: Settings, seed: int = 0) -> np.ndarray:
     quiet = copy.deepcopy(truth)
     quiet.accel.noise_density = quiet.gyro.noise_density = 0.0
     quiet.bench.accel_disturbance_ug = quiet.bench.table_angle_error_arcsec = 0.0
-    capture = simrun.simulate_capture(scheme, quiet, seed)
+    capture = dryrun.simulate_capture(scheme, quiet, seed)
     s = summarise(capture, table_angle_arcsec=settings.table_angle_arcsec)
     fs = s.sample_rate_hz
     accel_sigma = np.hypot(settings.accel_noise_ug * np.sqrt(fs), settings.accel_disturbance_ug)
@@ -87,10 +87,10 @@ def cramer_rao(scheme: Scheme, settings: Settings, seed: int = 0) -> np.ndarray:
 def run(scheme: Scheme, settings: Settings, runs: int, first_seed: int = 1000,
         workers: int | None = None):
     """((name, unit) per parameter, errors runs x parameters, reported 1σ runs x parameters)."""
-    from station import simrun
-    from station.calibration import parameter_errors
+    from station.simulate import dryrun
+    from station.model.calibration import parameter_errors
 
-    truth_cal = simrun.truth_calibration(make_truth(settings))
+    truth_cal = dryrun.truth_calibration(make_truth(settings))
     names = [(e[0], e[4]) for e in parameter_errors(truth_cal, truth_cal)]
     jobs = [(scheme, settings, first_seed + i) for i in range(runs)]
     workers = workers or min(os.cpu_count() or 1, runs)

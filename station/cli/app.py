@@ -1,0 +1,44 @@
+"""The ``station`` command: the parser and the dispatch; each command group is a module of its own
+(run, calibration, diagnose, montecarlo, imports, devices) and prints through station.cli.output."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+import station
+from station.cli.output import err
+from station.core.errors import UserError
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with usage errors on one line (exit status 2, as for every user error)."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: {message} (see {self.prog} --help)\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from station.cli import calibration, devices, diagnose, imports, montecarlo, run
+
+    p = _Parser(prog="station", description="IMU calibration with a rate table.")
+    p.add_argument("--version", action="version", version=f"station {station.__version__}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
+    for group in (run, calibration, montecarlo, diagnose, imports, devices):
+        group.add_parsers(sub)
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except UserError as e:
+        err.print(f"station {args.command}: {e}", markup=False, soft_wrap=True)
+        return 2
+    except KeyboardInterrupt:
+        err.print("interrupted")
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

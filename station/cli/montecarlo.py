@@ -1,0 +1,64 @@
+"""``station montecarlo``: repeat simulate -> estimate, compare with the Cramér-Rao bound."""
+from __future__ import annotations
+
+import numpy as np
+from rich.table import Table
+
+from station.cli.output import out
+from station.core.errors import UserError
+
+
+def add_parsers(sub) -> None:
+    mc = sub.add_parser("montecarlo", help="repeat simulate -> estimate; compare with the Cramér-Rao bound")
+    mc.add_argument("--scheme", default="optimal9")
+    mc.add_argument("--runs", type=int, default=100)
+    mc.add_argument("--accel-noise-ug", type=float, default=100.0, help="µg/√Hz (default 100)")
+    mc.add_argument("--gyro-noise-dph", type=float, default=0.03, help="°/h/√Hz (default 0.03)")
+    mc.add_argument("--table-angle-arcsec", type=float, default=2.0, help="1σ table angle error (default 2)")
+    mc.add_argument("--accel-disturbance-ug", type=float, default=50.0,
+                    help="1σ white acceleration disturbance (default 50, the 2010 paper's)")
+    mc.add_argument("--method", choices=("lsq", "zhang2010"), default="lsq")
+    mc.add_argument("--seed", type=int, default=1000, help="first seed (runs use seed, seed+1, ...)")
+    mc.add_argument("--json", action="store_true")
+    mc.set_defaults(func=cmd_montecarlo)
+
+
+def cmd_montecarlo(args) -> int:
+    import json
+
+    from station.simulate import montecarlo
+    from station.io.scheme import load_scheme
+
+    if args.runs < 2:
+        raise UserError("--runs must be at least 2")
+    scheme = load_scheme(args.scheme)
+    settings = montecarlo.Settings(accel_noise_ug=args.accel_noise_ug, gyro_noise_dph=args.gyro_noise_dph,
+                                   table_angle_arcsec=args.table_angle_arcsec,
+                                   accel_disturbance_ug=args.accel_disturbance_ug, method=args.method)
+    names, errors, sigmas = montecarlo.run(scheme, settings, args.runs, first_seed=args.seed)
+    crlb = montecarlo.cramer_rao(scheme, settings)
+    std = errors.std(axis=0, ddof=1)
+    with np.errstate(all="ignore"):
+        mean_sigma = np.nanmean(sigmas, axis=0) if np.isfinite(sigmas).any() else np.full(len(std), np.nan)
+    rows = [{"name": n, "unit": u, "std": float(sd), "crlb": float(c),
+             "mean_sigma": None if not np.isfinite(ms) else float(ms), "mean_error": float(me)}
+            for (n, u), sd, c, ms, me in zip(names, std, crlb, mean_sigma, errors.mean(axis=0))]
+    if args.json:
+        print(json.dumps({"scheme": scheme.name, "runs": args.runs, "method": args.method,
+                          "settings": {"accel_noise_ug_rthz": args.accel_noise_ug,
+                                       "gyro_noise_dph_rthz": args.gyro_noise_dph,
+                                       "table_angle_arcsec": args.table_angle_arcsec,
+                                       "accel_disturbance_ug": args.accel_disturbance_ug},
+                          "parameters": rows}, indent=1))
+        return 0
+    table = Table(title=f"{scheme.name}: {args.runs} dry runs, {args.method}; errors against the "
+                        "simulated truth (scale factors relative)")
+    for col in ("parameter", "std", "CRLB", "std/CRLB", "mean 1σ", "1σ/std", "mean error", "unit"):
+        table.add_column(col, justify="left" if col in ("parameter", "unit") else "right")
+    for r in rows:
+        ms = r["mean_sigma"]
+        table.add_row(r["name"], f"{r['std']:.4g}", f"{r['crlb']:.4g}", f"{r['std'] / r['crlb']:.2f}",
+                      "" if ms is None else f"{ms:.4g}", "" if ms is None else f"{ms / r['std']:.2f}",
+                      f"{r['mean_error']:+.3g}", r["unit"])
+    out.print(table)
+    return 0

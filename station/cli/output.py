@@ -1,0 +1,51 @@
+"""What every command prints the same way: the consoles, parameter tables, notes."""
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+out = Console(highlight=False, width=None if sys.stdout.isatty() else 160)
+err = Console(stderr=True, highlight=False)
+
+
+def print_parameters(rows, title: str) -> None:
+    """rows: (name, value, unit, 1-sigma or None); scale factors get their 1σ in ppm."""
+    table = Table(title=title)
+    table.add_column("parameter")
+    table.add_column("value", justify="right")
+    table.add_column("± 1σ", justify="right")
+    table.add_column("unit")
+    for name, value, unit, sigma in rows:
+        is_scale = unit in ("1", "raw/(m/s^2)", "raw/(deg/s)")
+        if sigma is None or not np.isfinite(sigma):
+            spread = ""
+        elif is_scale:
+            spread = f"{sigma / value * 1e6:.3g} ppm"
+        else:
+            spread = f"{sigma:.3g}"
+        table.add_row(name, f"{value:.9g}" if is_scale else f"{value:.4f}", spread, unit)
+    out.print(table)
+
+
+def print_errors(cal, truth) -> None:
+    from station.model.calibration import parameter_errors
+
+    table = Table(title="estimate against the simulated truth")
+    for col in ("parameter", "estimate", "truth", "error", "± 1σ", "unit"):
+        table.add_column(col, justify="left" if col in ("parameter", "unit") else "right")
+    for name, value, true, error, unit in parameter_errors(cal, truth):
+        fmt = "{:.9f}" if "_scale_" in name else "{:.4f}"
+        sigma = cal.sigma.get(name)
+        if sigma is not None and "_scale_" in name:
+            sigma = sigma / value * 1e6
+        table.add_row(name, fmt.format(value), fmt.format(true), f"{error:+.4f}",
+                      "" if sigma is None else f"{sigma:.4f}", unit)
+    out.print(table)
+
+
+def print_notes(cal) -> None:
+    for note in cal.fit.get("notes", []):
+        err.print(f"note: {note}")
