@@ -111,12 +111,19 @@ class RunConfig:
 
 
 @dataclass(frozen=True)
+class EffectsConfig:
+    plugins: tuple = ()                   # effect plugins: path/file.py:ClassName (relative: to the file)
+    folders: tuple = ()                   # folders whose *.py files hold effect plugins
+
+
+@dataclass(frozen=True)
 class Config:
     imu: ImuConfig = field(default_factory=ImuConfig)
     table: TableConfig = field(default_factory=TableConfig)
     site: SiteConfig = field(default_factory=SiteConfig)
     warmup: WarmupConfig = field(default_factory=WarmupConfig)
     run: RunConfig = field(default_factory=RunConfig)
+    effects: EffectsConfig = field(default_factory=EffectsConfig)
     source: str = "defaults"
 
     def with_overrides(self, section: str, **values) -> "Config":
@@ -186,7 +193,7 @@ def parse_config(doc, source: str) -> Config:
     version = doc.get("version", 1)
     if version != 1:
         raise v.fail("version", f"must be 1, got {version!r}")
-    v.known(doc, "", ("version", "imu", "table", "site", "warmup", "run"))
+    v.known(doc, "", ("version", "imu", "table", "site", "warmup", "run", "effects"))
     imu = v.section(doc, "imu", ImuConfig, {
         "port": v.text, "protocol": v.text, "serial": v.serial, "rate_hz": v.positive,
         "csv_units": v.text_or_empty, "frame_timeout_s": v.positive})
@@ -204,10 +211,13 @@ def parse_config(doc, source: str) -> Config:
     run = v.section(doc, "run", RunConfig, {
         "settle_s": v.non_negative, "operator": v.boolean, "operator_s": v.non_negative,
         "output_dir": v.text})
+    effects = v.section(doc, "effects", EffectsConfig, {
+        "plugins": lambda value, where: v.paths(value, where, source),
+        "folders": lambda value, where: v.paths(value, where, source)})
     table = _check_table(table, v)
     if warmup.temp_slope_c_per_h is not None and warmup.max_s is None:
         raise v.fail("warmup.max_s", "needed with temp_slope_c_per_h (the longest warm-up)")
-    return Config(imu=imu, table=table, site=site, warmup=warmup, run=run, source=source)
+    return Config(imu=imu, table=table, site=site, warmup=warmup, run=run, effects=effects, source=source)
 
 
 def _check_table(table: TableConfig, v: "_Validator") -> TableConfig:
@@ -316,6 +326,13 @@ class _Validator:
         if not isinstance(value, list):
             raise self.fail(where, f"must be a list of numbers, got {value!r}")
         return tuple(self.number(x, f"{where}[{i}]") for i, x in enumerate(value))
+
+    def paths(self, value, where, source):
+        """A list of paths; relative ones are taken from the configuration file's folder."""
+        if not isinstance(value, list) or not all(isinstance(x, str) and x for x in value):
+            raise self.fail(where, "must be a list of paths")
+        base = Path(source).parent if source not in ("defaults", "") else Path(".")
+        return tuple(x if Path(x.split(":")[0]).is_absolute() else str(base / x) for x in value)
 
     def vector(self, value, where):
         out = self.numbers(value, where)

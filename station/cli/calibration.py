@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from station.cli import plugins
 from station.cli.output import err, out, print_notes, print_parameters
 from station.core.errors import UserError
 from station.estimate import METHODS
@@ -18,13 +19,18 @@ def add_parsers(sub) -> None:
     est.add_argument("--method", choices=METHODS, default="auto",
                      help="auto (default): lsq when rotations have encoder angles, fourier otherwise")
     est.add_argument("--add", action="append", default=[], metavar="EFFECT",
-                     help="add an effect of the library to the model (repeatable; station effects lists them)")
+                     help="add an effect to the model: an id (station effects lists them) or a plugin "
+                          "FILE.py:CLASS (repeatable)")
+    est.add_argument("--config", metavar="FILE", help="station.yaml (its effects section names plugins)")
+    plugins.add_arguments(est)
     est.set_defaults(func=cmd_estimate)
 
-    app = sub.add_parser("apply", help="compensate raw samples with a calibration file")
+    app = sub.add_parser("apply", help="compensate raw samples with a calibration file (every effect)")
     app.add_argument("calibration", metavar="CAL.yaml")
     app.add_argument("input", metavar="IN.csv", help="columns t,ax,ay,az,gx,gy,gz[,temp] in the raw units")
     app.add_argument("-o", "--output", metavar="OUT.csv", required=True)
+    app.add_argument("--config", metavar="FILE", help="station.yaml (its effects section names plugins)")
+    plugins.add_arguments(app)
     app.set_defaults(func=cmd_apply)
 
     show = sub.add_parser("show", help="print a calibration file")
@@ -36,7 +42,8 @@ def cmd_estimate(args) -> int:
     from station.io.calfile import write_calfile
     from station.estimate import estimate_capture
 
-    cal, capture, provenance = estimate_capture(args.capture, args.method, args.add)
+    reg = plugins.registry(args)
+    cal, capture, provenance = estimate_capture(args.capture, args.method, plugins.effect_ids(reg, args.add), reg)
     for w in capture.warnings:
         err.print(f"warning: {w}")
     target = Path(args.output) if args.output else capture.path / "calibration.yaml"
@@ -52,18 +59,35 @@ def cmd_estimate(args) -> int:
 
 
 def cmd_apply(args) -> int:
-    from station.io.calfile import read_calfile
+    from station.io.calfile import compensation_effects, read_calfile
     from station.io.capture import read_segment_csv
-
-    from station.model.compensate import COMPENSATED_EFFECTS, compensate
+    from station.model.compensate import LEGACY_EFFECTS, compensate, compensate_with_effects
 
     doc = read_calfile(args.calibration)
     data = read_segment_csv(Path(args.input))
-    f, w = compensate(doc["compensation"], data.t, data.accel, data.gyro, data.temp)
-    skipped = [e for e in doc.get("effects", []) if e not in COMPENSATED_EFFECTS]
-    if skipped:
-        err.print(f"note: estimated but not compensated by apply: {', '.join(skipped)}")
-    table = np.column_stack([data.t, f, w])
+    comp = doc["compensation"]
+    if "effects" in comp:
+        effects = compensation_effects(doc, plugins.registry(args), args.calibration)
+        needs = {need: [e.id for e, _ in effects if need in e.needs] for need in ("temperature", "time")}
+        if needs["temperature"] and data.temp is None:
+            raise UserError(f"{args.input}: no temp column, which the compensation of "
+                            f"{', '.join(needs['temperature'])} needs (deg C)")
+        if needs["time"] and len(data.t) < 3:
+            raise UserError(f"{args.input}: {len(data.t)} samples; the compensation of "
+                            f"{', '.join(needs['time'])} needs rates of change (at least 3 samples)")
+        t, f, w = compensate_with_effects(comp, effects, data.t, data.accel, data.gyro, data.temp)
+        for e, _ in effects:
+            inputs = ", ".join(e.needs)
+            err.print(f"compensated: {e.id} ({getattr(e, '_station_source', 'library')})"
+                      + (f", using {inputs}" if inputs else ""), markup=False)
+    else:                               # a file written before compensation.effects
+        t = data.t
+        f, w = compensate(comp, data.t, data.accel, data.gyro, data.temp)
+        skipped = [e for e in doc.get("effects", []) if e not in LEGACY_EFFECTS]
+        if skipped:
+            err.print(f"note: this calibration file predates compensation.effects: not compensated: "
+                      f"{', '.join(skipped)} (estimate again to compensate them)", markup=False)
+    table = np.column_stack([t, f, w])
     try:
         with open(args.output, "w") as fh:
             fh.write("t,ax,ay,az,gx,gy,gz\n")

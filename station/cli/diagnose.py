@@ -7,6 +7,7 @@ from pathlib import Path
 
 from rich.table import Table
 
+from station.cli import plugins
 from station.cli.output import err, out
 from station.core.errors import UserError
 
@@ -21,26 +22,25 @@ def add_parsers(sub) -> None:
                    help="add the most significant candidate, refit, repeat until none is significant")
     d.add_argument("--json", action="store_true", help="print the diagnosis as JSON (docs/diagnose.md)")
     d.add_argument("--report", metavar="DIR", help="write PNG pictures and index.html into DIR")
+    d.add_argument("--config", metavar="FILE", help="station.yaml (its effects section names plugins)")
+    plugins.add_arguments(d)
     d.set_defaults(func=cmd_diagnose)
 
     eff = sub.add_parser("effects", help="list the effects the model can add, or explain one")
     eff.add_argument("name", nargs="?")
+    eff.add_argument("--config", metavar="FILE", help="station.yaml (its effects section names plugins)")
+    plugins.add_arguments(eff)
     eff.set_defaults(func=cmd_effects)
 
 
-def _effects(args) -> list[str]:
+def _effects(args, reg) -> list[str]:
     from station.io.calfile import read_calfile
-    from station.model import EFFECTS
 
     effects = []
     if args.calib:
         effects += [e for e in read_calfile(args.calib).get("effects", [])
                     if e not in ("base_triads", "inter_triad")]
-    effects += args.add
-    for e in effects:
-        if e not in EFFECTS:
-            raise UserError(f"unknown effect {e!r}: the library has {', '.join(sorted(EFFECTS))}")
-    return list(dict.fromkeys(effects))
+    return plugins.effect_ids(reg, effects + args.add)
 
 
 def cmd_diagnose(args) -> int:
@@ -48,19 +48,18 @@ def cmd_diagnose(args) -> int:
     from station.diagnose import auto
     from station.diagnose.core import diagnose
     from station.estimate import lsq
-    from station.model import EFFECTS
-
     capture = read_capture(args.capture)
     if any(seg.angle_deg is None for seg in capture.complete("rotation")):
         raise UserError(f"{capture.path}: diagnose fits the least-squares model, which needs the "
                         "encoder angle (angle_deg) of every rotation segment")
     s = lsq.summarise(capture)
-    effects = _effects(args)
+    reg = plugins.registry(args)
+    effects = _effects(args, reg)
     if args.auto:
-        steps, final = auto.run(s, effects, progress=None)
+        steps, final = auto.run(s, effects, progress=None, registry=reg)
         first = steps[0].before if steps else final
     else:
-        steps, first = [], diagnose(lsq.fit(s, [EFFECTS[e]() for e in effects]))
+        steps, first = [], diagnose(lsq.fit(s, [reg.create(e) for e in effects]), registry=reg)
         final = first
     summary = _summary_lines(final)
     if args.report:
@@ -157,24 +156,24 @@ def _print(out, first, steps, final) -> None:
 
 
 def cmd_effects(args) -> int:
-    from station.model import EFFECTS
-
+    reg = plugins.registry(args)
     if args.name is None:
-        table = Table(title="effects the model can add (station estimate --add ID)")
+        table = Table(title="effects the model can add (station estimate --add ID; plugins: docs/effects.md)")
         table.add_column("id")
         table.add_column("what")
-        for eid, cls in sorted(EFFECTS.items()):
-            table.add_row(eid, cls.title)
+        table.add_column("source")
+        for eid in reg.ids():
+            table.add_row(eid, reg.classes[eid].title, reg.source(eid))
         out.print(table)
         return 0
-    if args.name not in EFFECTS:
-        raise UserError(f"unknown effect {args.name!r}: the library has {', '.join(sorted(EFFECTS))}")
-    e = EFFECTS[args.name]()
-    out.print(f"[bold]{e.id}[/]: {e.title}\n")
+    e = reg.create(args.name)
+    out.print(f"[bold]{e.id}[/]: {e.title}  ({reg.source(e.id)})\n")
     for label, text in (("physics", e.physics), ("term", e.term), ("excited by", e.excited_by),
                         ("typical size", e.magnitudes), ("when missing", e.signature)):
         out.print(f"[bold]{label}:[/] {text}")
     params = getattr(e, "all_params", None) or e.params
     if params:
         out.print("[bold]parameters:[/] " + ", ".join(f"{p.name} ({p.unit})" for p in params))
+    if e.needs:
+        out.print(f"[bold]compensation needs:[/] {', '.join(e.needs)}")
     return 0

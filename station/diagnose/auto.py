@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 from station.diagnose.core import Diagnosis, diagnose, rms_by_kind
 from station.estimate import lsq
-from station.model import EFFECTS
+from station.model.registry import EffectRegistry
 
 MAX_STEPS = 6
 
@@ -29,9 +29,11 @@ def added_parameters(after: Diagnosis, effect_id: str) -> list:
             for i, (n, v, u) in enumerate(zip(names, values, units_)) if n in own]
 
 
-def run(summaries, effects=(), attitudes="auto", progress=None) -> tuple[list[Step], Diagnosis]:
+def run(summaries, effects=(), attitudes="auto", progress=None,
+        registry: EffectRegistry | None = None) -> tuple[list[Step], Diagnosis]:
     """Diagnose; while a candidate is significant, add the best one, refit, diagnose again."""
-    current = diagnose(lsq.fit(summaries, [EFFECTS[e]() for e in effects], attitudes))
+    registry = registry or EffectRegistry()
+    current = diagnose(lsq.fit(summaries, [registry.create(e) for e in effects], attitudes), registry=registry)
     steps = []
     while len(steps) < MAX_STEPS:
         best = next((c for c in current.candidates if c.significant), None)
@@ -40,7 +42,7 @@ def run(summaries, effects=(), attitudes="auto", progress=None) -> tuple[list[St
         if progress:
             progress(best.effect)
         ids = [e.id for e in current.result.model.effects] + [best.effect]
-        after = diagnose(lsq.fit(summaries, [EFFECTS[e]() for e in ids], attitudes))
+        after = diagnose(lsq.fit(summaries, [registry.create(e) for e in ids], attitudes), registry=registry)
         steps.append(Step(best.effect, current, after, best.predicted_chi2_drop,
                           current.chi2 - after.chi2, added_parameters(after, best.effect)))
         current = after

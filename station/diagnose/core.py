@@ -19,7 +19,7 @@ import numpy as np
 from scipy import stats
 
 from station.estimate import lsq
-from station.model import EFFECTS
+from station.model.registry import EffectRegistry
 
 PRIOR_QUANTITIES = ("weak_prior", "effect_prior", "attitude_prior", "axis_prior", "earth_prior")
 ALPHA = 0.01            # significance level of the whole family of candidate tests
@@ -53,6 +53,8 @@ class Candidate:
     aliased: list = field(default_factory=list)     # parameters the capture cannot reveal
     advice: str = ""
     signature_rows: np.ndarray | None = None        # predicted whitened change, one step
+    signature_variable: str = ""
+    source: str = "library"
 
 
 @dataclass
@@ -99,10 +101,14 @@ def segment_residuals(result, labels) -> list[SegmentResidual]:
     return segs
 
 
-def score_test(result, effect_id: str) -> Candidate:
-    """The Lagrange-multiplier test of adding ``effect_id`` to the fitted model."""
+def score_test(result, effect_id, registry: EffectRegistry | None = None) -> Candidate:
+    """The Lagrange-multiplier test of adding ``effect_id`` (an id, or an Effect instance) to the
+    fitted model."""
     model = result.model
-    effect = EFFECTS[effect_id]()
+    if isinstance(effect_id, str):
+        effect = (registry or EffectRegistry()).create(effect_id)
+    else:
+        effect, effect_id = effect_id, effect_id.id
     extended = lsq.Model(model.s, [*model.effects, effect], model.attitudes)
     extended.priors = dict(model.priors)
     n = model.layout.size
@@ -135,7 +141,9 @@ def score_test(result, effect_id: str) -> Candidate:
                      names=[p.name for p in params], units=[p.unit for p in params],
                      estimate=[float(v * p.scale) for v, p in zip(step, params)],
                      sigma=[float(s * p.scale) for s, p in zip(sigma, params)],
-                     aliased=aliased, signature_rows=Jp @ step)
+                     aliased=aliased, signature_rows=Jp @ step,
+                     signature_variable=effect.signature_variable,
+                     source=getattr(effect, "_station_source", "library"))
     too_large = [abs(v) > p.plausible and abs(v) > 3 * s
                  for v, s, p in zip(cand.estimate, cand.sigma, params)]
     cand.plausible = not any(too_large)
@@ -147,9 +155,10 @@ def score_test(result, effect_id: str) -> Candidate:
     return cand
 
 
-def rank_candidates(result, exclude=()) -> list[Candidate]:
-    ids = [e for e in EFFECTS if e not in {m.id for m in result.model.effects} and e not in exclude]
-    cands = [score_test(result, e) for e in ids]
+def rank_candidates(result, exclude=(), registry: EffectRegistry | None = None) -> list[Candidate]:
+    registry = registry or EffectRegistry()
+    ids = [e for e in registry.ids() if e not in {m.id for m in result.model.effects} and e not in exclude]
+    cands = [score_test(result, e, registry) for e in ids]
     m = len(cands)
     threshold = stats.norm.isf(ALPHA / (2 * max(m, 1))) + POWER_Z
     # Holm's step-down correction over the family of candidates
@@ -165,12 +174,12 @@ def rank_candidates(result, exclude=()) -> list[Candidate]:
     return sorted(cands, key=lambda c: (not c.significant, -c.predicted_chi2_drop))
 
 
-def diagnose(result, exclude=()) -> Diagnosis:
+def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diagnosis:
     from station.diagnose.words import describe_failures
 
     labels = result.model.row_labels(result.x)
     segs = segment_residuals(result, labels)
-    cands = rank_candidates(result, exclude)
+    cands = rank_candidates(result, exclude, registry)
     p = float(stats.chi2.sf(result.chi2, result.dof)) if result.dof > 0 else float("nan")
     reduced = result.chi2 / result.dof if result.dof > 0 else float("nan")
     failures = describe_failures(result, labels, segs)

@@ -8,7 +8,6 @@ import numpy as np
 
 from station.diagnose.core import PRIOR_QUANTITIES
 from station.core.errors import UserError
-from station.model import EFFECTS
 
 VARIABLE_LABEL = {
     "rate_squared": "rotation rate squared (deg/s)^2",
@@ -73,7 +72,7 @@ def _candidate_figure(plt, path, diagnosis, cand):
     data = np.array([q not in PRIOR_QUANTITIES
                      for _, _, q, _ in labels])
     pred = -cand.signature_rows
-    var_name = EFFECTS[cand.effect].signature_variable
+    var_name = cand.signature_variable
     var = _variable(var_name, diagnosis, labels)
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
     a1.scatter(pred[data], r[data], s=6)

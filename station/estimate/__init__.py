@@ -31,27 +31,26 @@ def choose_method(capture: Capture) -> str:
     return "lsq"
 
 
-def estimate_with(capture: Capture, method: str = "auto", effects=()) -> tuple[Calibration, str]:
+def estimate_with(capture: Capture, method: str = "auto", effects=(), registry=None) -> tuple[Calibration, str]:
     """Estimate from a capture already read; returns the calibration and the method used.
 
-    ``effects``: ids of station.model.EFFECTS to add to the model (least squares only)."""
+    ``effects``: ids of effects to add to the model (least squares only), created by ``registry``
+    (station.model.registry.EffectRegistry: the library, entry points, loaded plugins)."""
     from station.core.errors import UserError
-    from station.model import EFFECTS
+    from station.model.registry import EffectRegistry
 
     if method not in METHODS:
         raise UserError(f"unknown estimation method {method!r}: use one of {', '.join(METHODS)}")
     if method == "auto":
         method = choose_method(capture)
-    unknown = [e for e in effects if e not in EFFECTS]
-    if unknown:
-        raise UserError(f"unknown effect {unknown[0]!r}: the library has {', '.join(sorted(EFFECTS))} "
-                        "(station effects lists them)")
+    registry = registry if registry is not None else EffectRegistry()
+    instances = [registry.create(e) for e in effects]
     if effects and method != "lsq":
         raise UserError(f"--add needs the least-squares method (lsq); this capture uses {method}")
     if method == "lsq":
         from station.estimate import lsq
 
-        return lsq.estimate(capture, [EFFECTS[e]() for e in effects]), method
+        return lsq.estimate(capture, instances), method
     if method == "zhang2010":
         from station.estimate import zhang2010
 
@@ -61,10 +60,10 @@ def estimate_with(capture: Capture, method: str = "auto", effects=()) -> tuple[C
     return fourier.estimate(capture, "high" if method == "fourier-high" else "low"), method
 
 
-def estimate_capture(path, method: str = "auto", effects=()) -> tuple[Calibration, Capture, dict]:
+def estimate_capture(path, method: str = "auto", effects=(), registry=None) -> tuple[Calibration, Capture, dict]:
     """Read a capture, estimate, and return the calibration, the capture and its provenance."""
     capture = read_capture(path)
-    cal, method = estimate_with(capture, method, effects)
+    cal, method = estimate_with(capture, method, effects, registry)
     provenance = {
         "capture": str(Path(capture.path).resolve()),
         "capture_sha256": capture_digest(capture),

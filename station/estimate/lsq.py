@@ -581,9 +581,13 @@ def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=())
     sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(sigma, sigma)
-    extra = {}
+    extra, effect_compensation = {}, []
     for e in model.effects:
-        extra.update(e.report(x[L[f"effect:{e.id}"]], None))
+        xe = x[L[f"effect:{e.id}"]]
+        extra.update(e.report(xe, None))
+        effect_compensation.append({
+            "id": e.id, "source": getattr(e, "_station_source", "library"), "state": e.state(),
+            "parameters": {p.name: float(v * p.scale) for p, v in zip(e.params, xe)}})
     fit_stats = {
         "method": "lsq",
         "chi2": result.chi2,
@@ -613,7 +617,7 @@ def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=())
         effects=["base_triads", "inter_triad"] + [e.id for e in model.effects],
         fit=fit_stats, sigma=dict(zip(names, sigma.tolist())), correlation=(names, corr),
         extra_parameters=[(n, float(v), u) for n, v, u in zip(names[21:], values[21:], units_[21:])],
-        compensation_extra=extra)
+        compensation_extra=extra, effect_compensation=effect_compensation)
 
 
 def estimate(capture, effects: list[Effect] | None = None, attitudes: str = "auto",

@@ -38,6 +38,21 @@ def _floats(a) -> list:
     return np.asarray(a, dtype=float).round(15).tolist()
 
 
+def _plain(value):
+    """numpy values -> plain YAML numbers and lists."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_plain(v) for v in value]
+    if isinstance(value, (np.floating, float)):
+        return float(value)
+    if isinstance(value, (np.integer,)):
+        return int(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    return value
+
+
 def _parameter(value: float, unit: str, sigma: float | None) -> dict:
     out = {"value": value, "unit": unit}
     if sigma is not None and math.isfinite(sigma):
@@ -61,6 +76,7 @@ def to_document(cal: Calibration, provenance: dict) -> dict:
             "gyro_bias": _floats(cal.gyro_bias),
             "raw_units": {"accel": cal.accel_unit, "gyro": cal.gyro_unit},
             "output_units": {"accel": "m/s^2", "gyro": "deg/s"},
+            "effects": [_plain(e) for e in cal.effect_compensation],
         },
         "fit": cal.fit,
         **({"correlation": {"names": list(cal.correlation[0]),
@@ -132,6 +148,8 @@ def read_calfile(path) -> dict:
         "gyro_matrix": _matrix(comp, "gyro_matrix", (3, 3), path),
         "gyro_bias": _matrix(comp, "gyro_bias", (3,), path),
     }
+    if "effects" in comp:
+        doc["compensation"]["effects"] = _effect_entries(comp["effects"], path)
     params = doc.get("parameters")
     if not isinstance(params, dict):
         raise UserError(f"{path}: field 'parameters': missing or not a mapping")
@@ -144,3 +162,56 @@ def read_calfile(path) -> dict:
             raise UserError(f"{path}: field 'parameters.{name}': needs a finite 'value', a 'unit' "
                             "and, if given, a numeric 'sigma'")
     return doc
+
+
+def _effect_entries(entries, path) -> list:
+    """Validate ``compensation.effects``: a list of {id, source, state, parameters}."""
+    if not isinstance(entries, list):
+        raise UserError(f"{path}: field 'compensation.effects': must be a list")
+    out = []
+    for k, e in enumerate(entries):
+        where = f"{path}: field 'compensation.effects[{k}]"
+        if not isinstance(e, dict) or not isinstance(e.get("id"), str):
+            raise UserError(f"{where}.id': needs an effect id")
+        params = e.get("parameters", {})
+        if not isinstance(params, dict) or not all(
+                isinstance(n, str) and isinstance(v, (int, float)) and not isinstance(v, bool)
+                and math.isfinite(v) for n, v in params.items()):
+            raise UserError(f"{where}.parameters': must map names to finite numbers")
+        state = e.get("state", {})
+        if not isinstance(state, dict):
+            raise UserError(f"{where}.state': must be a mapping")
+        source = e.get("source", "library")
+        if not isinstance(source, str):
+            raise UserError(f"{where}.source': must be text")
+        out.append({"id": e["id"], "source": source, "state": state, "parameters": dict(params)})
+    return out
+
+
+def compensation_effects(doc: dict, registry, path="calibration") -> list:
+    """(Effect, x internal) for every effect of a calibration read by read_calfile, created from
+    ``registry`` (station.model.registry): the library, installed plugins and those the user
+    loaded.  A plugin effect the registry lacks is refused with the way to load it; station never
+    runs code named in a calibration file."""
+    out = []
+    for k, entry in enumerate(doc["compensation"].get("effects", [])):
+        eid, source = entry["id"], entry["source"]
+        if eid not in registry:
+            how = (f"load it with --plugin {source}" if source != "library"
+                   else "it is not in this version's library")
+            raise UserError(f"{path}: effect {eid!r} ({source}) is not "
+                            f"available: {how}")
+        effect = registry.create(eid)
+        try:
+            effect.restore(entry["state"])
+            params = effect.params
+        except Exception as e:
+            raise UserError(f"{path}: field 'compensation.effects[{k}].state': "
+                            f"effect {eid!r} cannot use it: {type(e).__name__}: {e}") from None
+        missing = [p.name for p in params if p.name not in entry["parameters"]]
+        if missing:
+            raise UserError(f"{path}: field 'compensation.effects[{k}]"
+                            f".parameters': missing {', '.join(missing)}")
+        x = np.array([entry["parameters"][p.name] / p.scale for p in params], dtype=float)
+        out.append((effect, x))
+    return out

@@ -2,7 +2,8 @@
 
 The base model (scale factors, misalignments and biases of both triads, the inter-triad
 rotation, and the nuisances of the bench) lives in ``station.estimate.lsq``; every effect here
-adds parameters and a term to the predicted raw outputs.  ``EFFECTS`` maps ids to classes.
+adds parameters and a term to the predicted raw outputs.  ``LIBRARY`` (also ``EFFECTS``) maps
+the library's ids to classes; station.model.registry adds the user's own (plugins).
 """
 from station.model.effect import Effect, Param, SampleContext
 from station.model.g_sensitivity import GyroGSensitivity
@@ -12,7 +13,8 @@ from station.model.scale_asymmetry import GyroScaleAsymmetry
 from station.model.temperature import TemperatureBias
 from station.model.time_offset import TimeOffset
 
-EFFECTS = {cls.id: cls for cls in (AccelLeverArm, AccelNonlinearity, GyroGSensitivity,
+LIBRARY = {cls.id: cls for cls in (AccelLeverArm, AccelNonlinearity, GyroGSensitivity,
                                    GyroScaleAsymmetry, TemperatureBias, TimeOffset)}
+EFFECTS = LIBRARY
 
-__all__ = ["EFFECTS", "Effect", "Param", "SampleContext"]
+__all__ = ["EFFECTS", "LIBRARY", "Effect", "Param", "SampleContext"]

@@ -52,6 +52,8 @@ class Calibration:
     correlation: tuple | None = None                   # (names, matrix)
     extra_parameters: list = field(default_factory=list)   # (name, value, unit) of added effects
     compensation_extra: dict = field(default_factory=dict)  # e.g. accel_lever_arm_m (3x3, m)
+    effect_compensation: list = field(default_factory=list)  # per added effect: id, source, state,
+                                                             #   parameters (reported units)
 
     # --- unit factors: SI (m/s^2, deg/s) per raw unit; 1 for "raw" -------------------------
     @property

@@ -1,4 +1,12 @@
-"""What an effect of the measurement model provides."""
+"""What an effect of the measurement model provides: the ``Effect`` interface.
+
+An effect adds parameters and additive terms to the raw outputs the model predicts (the forward
+model).  The same terms, evaluated at the compensated quantities, give its compensation: ``station
+apply`` subtracts them by a fixed-point iteration (station/model/compensate.py), so an effect needs
+no separate inverse unless it wants an exact one.  Effects can come from the library
+(station/model/), from a Python file given to ``--add path/file.py:ClassName`` or from an installed
+package's entry point (group ``station.effects``); docs/effects.md walks through writing one.
+"""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -31,6 +39,17 @@ class SampleContext:
     temp_c: np.ndarray        # temperature, deg C (NaN when not recorded)
     accel_matrix: np.ndarray  # current K_a T_a (rows: scale times sensing direction), 3x3
     gyro_matrix: np.ndarray   # current K_g T_g R_po, 3x3
+    t_s: np.ndarray | None = None          # time since the start of the run, s (None: unknown)
+    segment_index: np.ndarray | None = None  # index of the segment in the capture (None: unknown)
+    temp_rate_c_per_s: np.ndarray | None = None  # rate of change of the temperature, deg C/s
+
+    def __len__(self) -> int:
+        return len(self.f_p)
+
+    def column(self, name: str) -> np.ndarray:
+        """An optional quantity as an (N,) array; NaN where it is not known."""
+        v = getattr(self, name)
+        return np.full(len(self), np.nan) if v is None else np.broadcast_to(np.asarray(v, float), (len(self),))
 
 
 class Effect:
@@ -45,6 +64,10 @@ class Effect:
     signature = ""            # what its residuals look like when it is missing
     signature_variable = ""   # what to plot its residuals against: rate_squared, temperature,
                               #   gravity_along_axis, signed_rate, rate_change
+    needs: tuple[str, ...] = ()   # inputs its compensation needs beyond the samples:
+                              #   "temperature" (a temp column), "time" (time stamps: rates of change)
+    state_fields: tuple[str, ...] = ()   # attributes set by setup() that the compensation needs;
+                              #   written to the calibration file and restored by restore()
 
     def setup(self, summaries) -> None:
         """Decide the parameters this capture can carry (e.g. a gauge choice)."""
@@ -66,5 +89,25 @@ class Effect:
         return None
 
     def report(self, x: np.ndarray, cov: np.ndarray | None) -> dict:
-        """Extra content for the calibration file (e.g. compensation data)."""
+        """Extra content for the calibration file's compensation block, for other programs
+        (e.g. the element positions of the size effect); station itself uses state()."""
         return {}
+
+    # --- compensation ---------------------------------------------------------------------
+    def state(self) -> dict:
+        """What setup() decided that the terms depend on, as plain numbers and lists."""
+        out = {}
+        for name in self.state_fields:
+            v = getattr(self, name)
+            out[name] = np.asarray(v).tolist() if isinstance(v, (np.ndarray, tuple, list)) else v
+        return out
+
+    def restore(self, state: dict) -> None:
+        """Undo state(): set the attributes the terms depend on (from a calibration file)."""
+        for name in self.state_fields:
+            if name in state:
+                setattr(self, name, state[name])
+
+    def compensate_time(self, x: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Time stamps corrected for this effect (e.g. a clock offset); most effects leave them."""
+        return t

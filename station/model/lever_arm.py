@@ -23,6 +23,8 @@ class AccelLeverArm(Effect):
     signature = ("accelerometer, rotation segments only: a constant offset growing with the square "
                  "of the rate, the same sign in both directions, different on each axis")
     signature_variable = "rate_squared"
+    needs = ("time",)
+    state_fields = ("free",)
 
     def __init__(self):
         self.free = [(i, c) for i in range(3) for c in range(3)]   # (element, coordinate) estimated

@@ -20,6 +20,8 @@ class TemperatureBias(Effect):
     signature = ("static segments: residuals that follow the temperature, the same on repeated "
                  "attitudes recorded at different temperatures; both sensors")
     signature_variable = "temperature"
+    needs = ("temperature",)
+    state_fields = ("reference_c", "available", "factors")
 
     def __init__(self):
         self.reference_c = 0.0

@@ -24,5 +24,9 @@ class TimeOffset(Effect):
     def params(self):
         return (Param("time_offset", "ms", 1e3, 3.0, 200.0),)
 
+    def compensate_time(self, x, t):
+        """The IMU's stamps are late by x[0]: the samples belong to t - x[0] on the table's clock."""
+        return t - x[0]
+
     def integral(self, x, rotation):
         return x[0] * (rotation.gyro_end - rotation.gyro_start)

@@ -1,0 +1,37 @@
+"""The effect-plugin options shared by estimate, diagnose, apply and effects."""
+from __future__ import annotations
+
+from station.model.registry import EffectRegistry, is_spec
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--plugin", action="append", default=[], metavar="FILE.py:CLASS",
+                   help="load an effect plugin (a file, FILE.py:CLASS, or module:CLASS); repeatable")
+    p.add_argument("--effects-dir", action="append", default=[], metavar="DIR",
+                   help="load every effect plugin in DIR/*.py; repeatable")
+
+
+def registry(args) -> EffectRegistry:
+    """Library + installed entry points + $STATION_EFFECTS_PATH + station.yaml's effects section
+    (when a configuration file is found) + --effects-dir + --plugin."""
+    from station.bench.config import find_config, load_config
+
+    reg = EffectRegistry()
+    config_path = getattr(args, "config", None)
+    if find_config(config_path) is not None:
+        config = load_config(config_path)
+        reg.add_all(config.effects.plugins, config.effects.folders)
+    reg.add_all(getattr(args, "plugin", []), getattr(args, "effects_dir", []))
+    return reg
+
+
+def effect_ids(reg: EffectRegistry, values) -> list[str]:
+    """--add values: effect ids, or plugin specs whose effects are loaded and added."""
+    ids = []
+    for value in values:
+        if is_spec(value):
+            ids += reg.add(value)
+        else:
+            reg.create(value)            # one line naming the unknown id
+            ids.append(value)
+    return list(dict.fromkeys(ids))
