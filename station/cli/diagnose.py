@@ -22,6 +22,8 @@ def add_parsers(sub) -> None:
                    help="add the most significant candidate, refit, repeat until none is significant")
     d.add_argument("--json", action="store_true", help="print the diagnosis as JSON (docs/diagnose.md)")
     d.add_argument("--report", metavar="DIR", help="write PNG pictures and index.html into DIR")
+    d.add_argument("--emit-effect", metavar="FILE.py",
+                   help="write the terms found outside the library as a ready-to-edit effect plugin")
     d.add_argument("--config", metavar="FILE", help="station.yaml (its effects section names plugins)")
     plugins.add_arguments(d)
     d.set_defaults(func=cmd_diagnose)
@@ -60,7 +62,10 @@ def cmd_diagnose(args) -> int:
         first = steps[0].before if steps else final
     else:
         steps, first = [], diagnose(lsq.fit(s, [reg.create(e) for e in effects]), registry=reg)
+        auto.conclude(first, s)
         final = first
+    if args.emit_effect:
+        _emit(args.emit_effect, final)
     summary = _summary_lines(final)
     if args.report:
         from station.diagnose.report import write_report
@@ -75,10 +80,25 @@ def cmd_diagnose(args) -> int:
     return 0
 
 
+def _emit(path, d) -> None:
+    from station.diagnose.terms import plugin_source
+
+    if d.proposal is None:
+        raise UserError(f"--emit-effect {path}: no term outside the library was found to write "
+                        "(the model explains the data, or a library effect is the better candidate)")
+    try:
+        Path(path).write_text(plugin_source(d.proposal.effect, d.proposal.values, d.proposal.sigmas))
+    except OSError as e:
+        raise UserError(f"{path}: cannot write: {e.strerror}") from None
+    err.print(f"effect plugin written: {path} (add it with --add {path}:DiscoveredTerms)", markup=False)
+
+
 def _summary_lines(d) -> list[str]:
     lines = [d.verdict, f"effects in the model: {', '.join(d.effects)}",
              f"chi2 {d.chi2:.1f} for {d.dof} degrees of freedom (reduced {d.reduced_chi2:.3f}, p = {d.p_value:.3g})"]
-    return lines + [f"where it fails: {f}" for f in d.failures]
+    lines += [f"where it fails: {f}" for f in d.failures]
+    lines += [f"not kept: {r.effect}: {r.reason}" for r in d.rejected]
+    return lines + [f"note: {n}" for n in d.notes]
 
 
 def _num(v):
@@ -91,6 +111,17 @@ def to_json(d, steps) -> dict:
         "verdict": d.verdict,
         "effects": d.effects,
         "failures": d.failures,
+        "notes": d.notes,
+        "terms_outside_library": None if d.proposal is None else {
+            "terms": [{"sensor": t.sensor, "axis": "xyz"[t.axis], "regressor": t.regressor.text,
+                       "parameter": t.name, "unit": t.unit, "value": v, "sigma": sg, "words": t.words(v, sg)}
+                      for t, v, sg in zip(d.proposal.effect.terms, d.proposal.values, d.proposal.sigmas)],
+            "chi2_after": d.proposal.chi2_after, "reduced_chi2_after": d.proposal.reduced_after,
+            "holdout_before": d.proposal.holdout_before, "holdout_after": d.proposal.holdout_after,
+            "kept": d.proposal.kept, "reason": d.proposal.reason},
+        "rejected": [{"effect": r.effect, "reason": r.reason, "actual_chi2_drop": r.actual_drop,
+                      "holdout_before": r.holdout_before, "holdout_after": r.holdout_after,
+                      "share_of_excess": _num(r.share)} for r in d.rejected],
         "segments": [{"name": s.name, "kind": s.kind, "rms": s.rms, "rms_by_quantity": s.by_quantity}
                      for s in d.segments],
         "candidates": [{
@@ -99,10 +130,13 @@ def to_json(d, steps) -> dict:
             "p_value": c.p_value, "p_value_corrected": c.p_value_corrected, "plausible": c.plausible,
             "parameters": c.names, "units": c.units, "estimate": c.estimate, "sigma": c.sigma,
             "smallest_detectable": [_num(v) for v in c.detectable], "aliased": c.aliased,
-            "advice": c.advice} for c in d.candidates],
+            "advice": c.advice, "source": c.source, "overdispersion": c.overdispersion}
+            for c in d.candidates],
         "steps": [{"added": st.added, "predicted_chi2_drop": st.predicted_drop,
                    "actual_chi2_drop": st.actual_drop, "chi2_before": st.before.chi2,
                    "chi2_after": st.after.chi2, "reduced_chi2_after": st.after.reduced_chi2,
+                   "holdout_before": st.holdout_before, "holdout_after": st.holdout_after,
+                   "share_of_excess": _num(st.share), "caveats": st.caveats,
                    "estimate": [{"name": n, "value": v, "sigma": sg, "unit": u}
                                 for n, v, sg, u in st.estimate]} for st in steps],
     }
@@ -146,8 +180,13 @@ def _print(out, first, steps, final) -> None:
             t.add_row(what, f"{b:.4g}", f"{a:.4g}")
         t.add_row("predicted χ² drop", f"{st.predicted_drop:.4g}", "")
         t.add_row("actual χ² drop", f"{st.actual_drop:.4g}", "")
+        t.add_row("leave-one-segment-out score", f"{st.holdout_before:.4g}", f"{st.holdout_after:.4g}")
+        if st.share is not None:
+            t.add_row("share of the excess χ² explained", f"{100 * st.share:.0f} %", "")
         out.print(t)
         out.print("added: " + "; ".join(f"{n} = {v:.4g} ± {s:.2g} {u}" for n, v, s, u in st.estimate))
+        for c in st.caveats:
+            out.print(f"caveat: {c}")
     if steps:
         for line in _summary_lines(final):
             out.print(line)

@@ -1,13 +1,29 @@
-"""Add the missing effect and watch the error fall: the diagnose -> add -> refit loop."""
+"""Add the missing effect and watch the error fall: the diagnose -> add -> refit loop.
+
+An effect is kept only if it passes three checks, so that adding it cannot make the calibration
+worse where it is used:
+  1. significant: its score test, over-dispersion-corrected and Holm-corrected over the family of
+     candidates, with a plausible size (station.diagnose.core);
+  2. out of sample: with it, the other segments predict each left-out segment better (the
+     leave-one-segment-out score of station.diagnose.holdout falls);
+  3. it explains the failure: when the fit failed, the chi2 drop is at least MIN_SHARE of the
+     excess misfit (chi2 - dof); a smaller drop "reduces chi2 but does not explain the failure".
+Candidates that fail are reported with the reason and the next one is tried (at most
+MAX_TRIES per step).
+"""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
-from station.diagnose.core import Diagnosis, diagnose, rms_by_kind
+from station.diagnose.core import Diagnosis, diagnose, fit_fails, rms_by_kind
+from station.diagnose.holdout import Holdout, leave_one_segment_out
+from station.diagnose.words import caveats
 from station.estimate import lsq
 from station.model.registry import EffectRegistry
 
 MAX_STEPS = 6
+MAX_TRIES = 3          # significant candidates tried per step
+MIN_SHARE = 0.2        # of the excess chi2 (chi2 - dof) an added effect must explain when the fit fails
 
 
 @dataclass
@@ -18,6 +34,21 @@ class Step:
     predicted_drop: float
     actual_drop: float
     estimate: list            # (name, value, sigma, unit) of the added effect, after the refit
+    holdout_before: float = float("nan")     # leave-one-segment-out score, same segments
+    holdout_after: float = float("nan")
+    share: float | None = None               # of the excess chi2 explained (None: the fit passed)
+    caveats: list = field(default_factory=list)  # what this capture cannot tell apart from it
+
+
+@dataclass
+class Rejection:
+    effect: str
+    reason: str
+    actual_drop: float
+    holdout_before: float
+    holdout_after: float
+    share: float | None
+    estimate: list = field(default_factory=list)
 
 
 def added_parameters(after: Diagnosis, effect_id: str) -> list:
@@ -29,24 +60,87 @@ def added_parameters(after: Diagnosis, effect_id: str) -> list:
             for i, (n, v, u) in enumerate(zip(names, values, units_)) if n in own]
 
 
+def judge(before: Diagnosis, after: Diagnosis, h_before: Holdout, h_after: Holdout):
+    """(kept, reason, share, holdout before, holdout after) for an effect added to ``before``."""
+    drop = before.chi2 - after.chi2
+    cv_b, cv_a = h_before.common_score(h_after)
+    share = None
+    if fit_fails(before.result):
+        excess = max(before.chi2 - before.dof, 1e-300)
+        share = drop / excess
+    if not cv_a < cv_b:
+        return (False, f"reduces chi2 by {drop:.1f} but predicts the left-out segments worse "
+                       f"(leave-one-segment-out {cv_b:.1f} -> {cv_a:.1f}): it fits noise or another "
+                       "effect's misfit", share, cv_b, cv_a)
+    if share is not None and share < MIN_SHARE:
+        return (False, f"reduces chi2 by {drop:.1f} but does not explain the failure (only "
+                       f"{100 * share:.0f} % of the excess chi2; at least {100 * MIN_SHARE:.0f} % "
+                       "needed)", share, cv_b, cv_a)
+    return True, "", share, cv_b, cv_a
+
+
 def run(summaries, effects=(), attitudes="auto", progress=None,
         registry: EffectRegistry | None = None) -> tuple[list[Step], Diagnosis]:
-    """Diagnose; while a candidate is significant, add the best one, refit, diagnose again."""
+    """Diagnose; while a significant candidate passes the checks, add it, refit, diagnose again."""
     registry = registry or EffectRegistry()
     current = diagnose(lsq.fit(summaries, [registry.create(e) for e in effects], attitudes), registry=registry)
-    steps = []
+    h_current = leave_one_segment_out(current.result)
+    steps, rejected = [], []
+    refused: set = set()
     while len(steps) < MAX_STEPS:
-        best = next((c for c in current.candidates if c.significant), None)
-        if best is None:
+        tries = [c for c in current.candidates if c.significant and c.effect not in refused][:MAX_TRIES]
+        kept = None
+        for cand in tries:
+            if progress:
+                progress(cand.effect)
+            ids = [e.id for e in current.result.model.effects] + [cand.effect]
+            after = diagnose(lsq.fit(summaries, [registry.create(e) for e in ids], attitudes), registry=registry)
+            h_after = leave_one_segment_out(after.result)
+            ok, reason, share, cv_b, cv_a = judge(current, after, h_current, h_after)
+            if ok:
+                kept = Step(cand.effect, current, after, cand.predicted_chi2_drop, current.chi2 - after.chi2,
+                            added_parameters(after, cand.effect), cv_b, cv_a, share,
+                            caveats(summaries, cand.effect))
+                break
+            refused.add(cand.effect)
+            rejected.append(Rejection(cand.effect, reason, current.chi2 - after.chi2, cv_b, cv_a, share,
+                                      added_parameters(after, cand.effect)))
+        if kept is None:
             break
-        if progress:
-            progress(best.effect)
-        ids = [e.id for e in current.result.model.effects] + [best.effect]
-        after = diagnose(lsq.fit(summaries, [registry.create(e) for e in ids], attitudes), registry=registry)
-        steps.append(Step(best.effect, current, after, best.predicted_chi2_drop,
-                          current.chi2 - after.chi2, added_parameters(after, best.effect)))
-        current = after
+        steps.append(kept)
+        current, h_current = kept.after, h_after
+    current.rejected = rejected
+    conclude(current, summaries, steps)
     return steps, current
+
+
+def conclude(d: Diagnosis, summaries, steps=(), search_terms: bool = True) -> Diagnosis:
+    """The final verdict: when the model still fails and no significant library effect is left
+    to add, search the dictionary of terms outside the library and say what it found."""
+    if not fit_fails(d.result):
+        return d
+    added = f" after adding {', '.join(st.added for st in steps)}" if steps else ""
+    pending = [c for c in d.candidates if c.significant and c.effect not in {r.effect for r in d.rejected}]
+    if pending and not steps and not d.rejected:
+        return d                # plain diagnose: the verdict already names the likely effect
+    if search_terms:
+        from station.diagnose import terms
+
+        d.proposal = terms.propose(d, summaries)
+    head = f"the model does not explain the data{added} (reduced chi2 {d.reduced_chi2:.3g})"
+    if d.rejected:
+        head += f"; tried and not kept: {', '.join(r.effect for r in d.rejected)}"
+    prop = d.proposal
+    if prop is not None:
+        check = ("and predicts left-out segments better" if prop.kept
+                 else f"but is not kept: {prop.reason}")
+        d.verdict = (f"{head}; outside the library the residuals follow {'; '.join(prop.lines())} "
+                     f"(with these terms reduced chi2 {prop.reduced_after:.3g}, {check}); write them "
+                     "as an effect plugin with --emit-effect FILE, check the physics, add it with --add")
+    else:
+        d.verdict = (f"{head}; no effect of the library and no term of the dictionary accounts for it: "
+                     "see where it fails")
+    return d
 
 
 def comparison_rows(before: Diagnosis, after: Diagnosis) -> list[tuple[str, float, float]]:

@@ -16,10 +16,20 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats
+from scipy import special
 
 from station.estimate import lsq
 from station.model.registry import EffectRegistry
+
+def chi2_sf(x: float, k: int) -> float:
+    """P(chi2_k > x)."""
+    return float(special.chdtrc(k, x))
+
+
+def norm_isf(p: float) -> float:
+    """z with P(N(0,1) > z) = p."""
+    return float(-special.ndtri(p))
+
 
 PRIOR_QUANTITIES = ("weak_prior", "effect_prior", "attitude_prior", "axis_prior", "earth_prior")
 ALPHA = 0.01            # significance level of the whole family of candidate tests
@@ -52,6 +62,8 @@ class Candidate:
     detectable: list = field(default_factory=list)  # smallest detectable size, reported units
     aliased: list = field(default_factory=list)     # parameters the capture cannot reveal
     advice: str = ""
+    overdispersion: float = 1.0                     # the statistics were divided by this (>1 when
+                                                    #   the fit fails: its reduced chi2)
     signature_rows: np.ndarray | None = None        # predicted whitened change, one step
     signature_variable: str = ""
     source: str = "library"
@@ -70,6 +82,9 @@ class Diagnosis:
     verdict: str
     result: object                           # the lsq.FitResult diagnosed
     labels: list
+    notes: list = field(default_factory=list)   # how the statistics were taken (over-dispersion)
+    rejected: list = field(default_factory=list)  # auto.Rejection: tried by --auto and not kept
+    proposal: object = None                  # terms.Proposal: terms found outside the library
 
 
 def _data_mask(labels) -> np.ndarray:
@@ -101,9 +116,11 @@ def segment_residuals(result, labels) -> list[SegmentResidual]:
     return segs
 
 
-def score_test(result, effect_id, registry: EffectRegistry | None = None) -> Candidate:
+def score_test(result, effect_id, registry: EffectRegistry | None = None, overdispersion: float = 1.0) -> Candidate:
     """The Lagrange-multiplier test of adding ``effect_id`` (an id, or an Effect instance) to the
-    fitted model."""
+    fitted model.  With ``overdispersion`` phi > 1 (a fit that fails: phi is its reduced chi2) the
+    statistic is divided by phi and the 1-sigma multiplied by sqrt(phi) (quasi-likelihood): a
+    drop that is large only against the nominal noise is not taken for a missing effect."""
     model = result.model
     if isinstance(effect_id, str):
         effect = (registry or EffectRegistry()).create(effect_id)
@@ -129,15 +146,15 @@ def score_test(result, effect_id, registry: EffectRegistry | None = None) -> Can
     A_pinv = (Vk / w[keep]) @ Vk.T
     g = Jp.T @ r
     step = -A_pinv @ g
-    lm = float(g @ A_pinv @ g)
+    lm = float(g @ A_pinv @ g)                   # the predicted chi2 drop, nominal noise
     k = int(keep.sum())
-    sigma = np.sqrt(np.clip(np.diag(A_pinv), 0.0, None))
+    sigma = np.sqrt(np.clip(np.diag(A_pinv), 0.0, None) * overdispersion)
     # parameters with no component in the revealable subspace are aliased
     revealable = np.abs(V[:, keep]).max(axis=1) if k else np.zeros(len(cols))
     params = effect.params
     aliased = [p.name for p, reach in zip(params, revealable) if reach < 1e-3]
     cand = Candidate(effect=effect_id, title=effect.title, predicted_chi2_drop=lm, dof=k,
-                     p_value=float(stats.chi2.sf(lm, k)) if k else 1.0,
+                     p_value=chi2_sf(lm / overdispersion, k) if k else 1.0, overdispersion=overdispersion,
                      names=[p.name for p in params], units=[p.unit for p in params],
                      estimate=[float(v * p.scale) for v, p in zip(step, params)],
                      sigma=[float(s * p.scale) for s, p in zip(sigma, params)],
@@ -155,12 +172,25 @@ def score_test(result, effect_id, registry: EffectRegistry | None = None) -> Can
     return cand
 
 
+def fit_fails(result) -> bool:
+    """The fit's chi2 is beyond what the noise explains (p below ALPHA / 10)."""
+    return result.dof > 0 and chi2_sf(result.chi2, result.dof) < ALPHA / 10
+
+
+def overdispersion(result) -> float:
+    """The reduced chi2 when the fit fails (and exceeds 1), else 1."""
+    if not fit_fails(result):
+        return 1.0
+    return max(result.chi2 / result.dof, 1.0)
+
+
 def rank_candidates(result, exclude=(), registry: EffectRegistry | None = None) -> list[Candidate]:
     registry = registry or EffectRegistry()
     ids = [e for e in registry.ids() if e not in {m.id for m in result.model.effects} and e not in exclude]
-    cands = [score_test(result, e, registry) for e in ids]
+    phi = overdispersion(result)
+    cands = [score_test(result, e, registry, phi) for e in ids]
     m = len(cands)
-    threshold = stats.norm.isf(ALPHA / (2 * max(m, 1))) + POWER_Z
+    threshold = norm_isf(ALPHA / (2 * max(m, 1))) + POWER_Z
     # Holm's step-down correction over the family of candidates
     for rank, c in enumerate(sorted(cands, key=lambda c: c.p_value)):
         c.p_value_corrected = min(1.0, c.p_value * (m - rank))
@@ -180,10 +210,10 @@ def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diag
     labels = result.model.row_labels(result.x)
     segs = segment_residuals(result, labels)
     cands = rank_candidates(result, exclude, registry)
-    p = float(stats.chi2.sf(result.chi2, result.dof)) if result.dof > 0 else float("nan")
+    p = chi2_sf(result.chi2, result.dof) if result.dof > 0 else float("nan")
     reduced = result.chi2 / result.dof if result.dof > 0 else float("nan")
-    failures = describe_failures(result, labels, segs)
     good = p > ALPHA / 10
+    failures = describe_failures(result, labels, segs, fails=not good)
     if good:
         verdict = (f"the model explains the data: reduced chi2 {reduced:.3f} (p = {p:.3g})")
     elif any(c.significant for c in cands):
@@ -192,10 +222,16 @@ def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diag
     else:
         verdict = (f"the model does not explain the data (reduced chi2 {reduced:.3g}, p = {p:.2g}) "
                    "and no effect of the library accounts for it: see where it fails")
+    notes = []
+    phi = overdispersion(result)
+    if phi > 1.0:
+        notes.append(f"the fit fails, so the candidates' chi2 drops are divided and their 1-sigma "
+                     f"multiplied by the over-dispersion (reduced chi2 {phi:.3g}, square root for "
+                     "the 1-sigma): only a drop large against the misfit counts")
     return Diagnosis(effects=["base_triads", "inter_triad"] + [e.id for e in result.model.effects],
                      chi2=result.chi2, dof=result.dof, reduced_chi2=reduced, p_value=p,
                      segments=segs, candidates=cands, failures=failures, verdict=verdict,
-                     result=result, labels=labels)
+                     result=result, labels=labels, notes=notes)
 
 
 def rms_by_kind(segs) -> dict:

@@ -152,6 +152,8 @@ class Model:
 
     def __init__(self, s: Summaries, effects: list[Effect], attitudes: str = "auto"):
         self.s, self.effects = s, effects
+        starts = [x.t_mid_s for x in (*s.statics, *s.rotations) if np.isfinite(x.t_mid_s)]
+        self.t0 = min(starts) if starts else 0.0        # the run's start, for time-dependent terms
         for e in effects:
             e.setup(s)
         if attitudes == "auto":
@@ -273,11 +275,15 @@ class Model:
                 w = w + dw
         return a, w
 
-    def _context(self, f_p, w_p, w_table, temp, Ma, Mg):
+    def _context(self, f_p, w_p, w_table, temp, Ma, Mg, seg=None):
         n = len(f_p)
+        extra = {}
+        if seg is not None:
+            extra = {"t_s": np.full(n, seg.t_mid_s - self.t0), "segment_index": np.full(n, float(seg.index)),
+                     "temp_rate_c_per_s": np.full(n, seg.temp_rate_c_per_s)}
         return SampleContext(f_p=f_p, w_p=w_p, w_table=w_table, wdot_table=np.zeros((n, 3)),
                              temp_c=np.full(n, np.nan if temp is None else temp),
-                             accel_matrix=Ma, gyro_matrix=Mg)
+                             accel_matrix=Ma, gyro_matrix=Mg, **extra)
 
     def _column_groups(self):
         """Columns that can be perturbed together: the same local parameter of every static,
@@ -387,7 +393,7 @@ class Model:
             else:
                 up_p = att
                 f_p, w_p = (self.f_n[2] * att)[None, :], np.zeros((1, 3))
-            a, w = self._predict(x, self._context(f_p, w_p, np.zeros((1, 3)), st.temp_c, Ma, Mg), Ma, Mg)
+            a, w = self._predict(x, self._context(f_p, w_p, np.zeros((1, 3)), st.temp_c, Ma, Mg, st), Ma, Mg)
             root_n = np.sqrt(st.samples)
             put(("static", j), (st.accel - a[0]) * root_n / static_sigma_a, "accel")
             if self.with_latitude:
@@ -438,7 +444,7 @@ class Model:
             centripetal = cross(w_rad, cross(w_rad, offset))
             f_p = kappa * l + np.outer(cos_p, v) - np.outer(sin_p, cross(l, v)) + centripetal
             w_p = np.tile((r.rate_dps + e) * l, (PHASES, 1))
-            ctx = self._context(f_p, w_p, np.tile(w_rad, (PHASES, 1)), r.temp_c, Ma, Mg)
+            ctx = self._context(f_p, w_p, np.tile(w_rad, (PHASES, 1)), r.temp_c, Ma, Mg, r)
             a, w = self._predict(x, ctx, Ma, Mg)
             dc, c, sn = a.mean(axis=0), 2 * cos_p @ a / PHASES, 2 * sin_p @ a / PHASES
             c2, s2 = 2 * cos_2p @ a / PHASES, 2 * sin_2p @ a / PHASES

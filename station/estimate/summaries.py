@@ -31,6 +31,9 @@ class StaticSummary:
     samples: int
     duration_s: float
     temp_c: float | None
+    t_mid_s: float = float("nan")   # mean sample time (the capture's clock), s
+    index: int = -1                 # position of the segment in the capture
+    temp_rate_c_per_s: float = 0.0  # temperature slope over the segment, deg C/s
 
 
 @dataclass
@@ -53,6 +56,9 @@ class RotationSummary:
     steady: bool = True             # the rate held within STEADY_SPREAD (a table, not a hand)
     rate_sq_factor: float = 1.0     # mean of the squared rate over the square of the mean rate
                                     #   (from the gyro's magnitude: > 1 when the rate ripples)
+    t_mid_s: float = float("nan")   # mean sample time (the capture's clock), s
+    index: int = -1                 # position of the segment in the capture
+    temp_rate_c_per_s: float = 0.0  # temperature slope over the segment, deg C/s
 
     @property
     def rate_dps(self) -> float:
@@ -77,6 +83,14 @@ class Summaries:
     @property
     def groups(self) -> int:
         return 1 + max((r.group for r in self.rotations), default=-1)
+
+
+def _slope(t, y) -> float:
+    """Least-squares slope of y over t (0 without y or with fewer than 2 samples)."""
+    if y is None or len(t) < 2 or np.ptp(t) == 0:
+        return 0.0
+    tc = t - t.mean()
+    return float(tc @ (y - y.mean()) / (tc @ tc))
 
 
 def _window(t: np.ndarray) -> tuple[float, float]:
@@ -129,11 +143,14 @@ def summarise(capture, *, table_angle_arcsec: float | None = None) -> Summaries:
     ca = units.accel_to_mps2_factor(capture.imu.accel_unit) or 1.0
     cg = units.gyro_to_dps_factor(capture.imu.gyro_unit) or 1.0
     statics, resid_a, resid_g = [], [], []
+    order = {seg.name: k for k, seg in enumerate(capture.segments)}
     for seg in capture.complete("static"):
         d = seg.data
         a, g = d.accel * ca, d.gyro * cg
         statics.append(StaticSummary(seg.name, seg.up_body, a.mean(axis=0), g.mean(axis=0), len(d.t),
-                                     float(d.t[-1] - d.t[0]), None if d.temp is None else float(d.temp.mean())))
+                                     float(d.t[-1] - d.t[0]), None if d.temp is None else float(d.temp.mean()),
+                                     t_mid_s=float(np.mean(d.t)), index=order[seg.name],
+                                     temp_rate_c_per_s=_slope(d.t, d.temp)))
         # white noise: first differences remove slow drifts (temperature) from the estimate
         resid_a.append(np.diff(a, axis=0) / np.sqrt(2))
         resid_g.append(np.diff(g, axis=0) / np.sqrt(2))
@@ -157,6 +174,8 @@ def summarise(capture, *, table_angle_arcsec: float | None = None) -> Summaries:
         summary = rotation_summary(seg.name, axis, group, seg.angle_deg, d.t, d.accel * ca, d.gyro * cg, d.temp)
         if seg.extra.get("motion") == "hand":      # the writer says so (manual schemes)
             summary.steady = False
+        summary.t_mid_s, summary.index = float(np.mean(d.t)), order[seg.name]
+        summary.temp_rate_c_per_s = _slope(d.t, d.temp)
         rotations.append(summary)
 
     table = capture.extra.get("table") if isinstance(capture.extra.get("table"), dict) else {}

@@ -1,0 +1,95 @@
+"""Out-of-sample check: how well a fitted model predicts each segment it was not fitted to.
+
+Leave-one-segment-out cross-validation of the linearised model at the fit.  For segment g, the
+model is fitted to every other segment, then g's own nuisances (its attitude, or its rotation's
+start phases) are fitted to g's data alone and what is left of g's residuals is its prediction
+error.  At the least-squares solution this needs no refits: with each segment's own nuisance
+columns projected out of its rows (P_g = I - J_gl (J_gl' J_gl)^+ J_gl'), the profiled problem is a
+linear regression on the shared parameters with design X and residuals e, and deleting a block
+of rows gives the classical deleted residuals
+    e_(g) = (I - H_gg)^-1 e_g,      H = X (X'X)^+ X'.
+The score is the sum of their squares (whitened, so chi2-like).  A segment whose data alone
+determine some shared parameter (H_gg has an eigenvalue 1) cannot be predicted from the others
+and is left out of the score, and named.
+
+An effect is worth adding when it makes the other segments predict each one better: a term
+that only absorbs the noise or the misfit of one segment raises this score.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+LEVERAGE_LIMIT = 1.0 - 1e-6      # a block whose largest leverage reaches this is unpredictable
+
+
+@dataclass
+class Holdout:
+    score: float                     # sum of squared deleted residuals over predictable segments
+    per_segment: dict                # segment name -> its deleted-residual sum of squares
+    unpredictable: list = field(default_factory=list)   # segments the others cannot predict
+
+    def common_score(self, other: "Holdout") -> tuple[float, float]:
+        """Both scores over the segments that both models can predict."""
+        names = set(self.per_segment) & set(other.per_segment)
+        return (sum(self.per_segment[n] for n in names), sum(other.per_segment[n] for n in names))
+
+
+def _blocks(model, x):
+    """Row indices and local (nuisance) columns of every segment; rows of nothing else."""
+    _, tags = model._pieces(x)
+    rows, at = {}, 0
+    for tag, n, quantity in tags:
+        rows.setdefault(tag, []).extend(range(at, at + n))
+        at += n
+    L = model.layout
+    names = {("static", j): st.name for j, st in enumerate(model.s.statics)}
+    names.update({("rot", i): r.name for i, r in enumerate(model.s.rotations)})
+    blocks = []
+    for (kind, j), name in names.items():
+        data = rows.get((kind, j), [])
+        if not data:
+            continue
+        weak = rows.get(("weak", j), []) if kind == "static" else []
+        col = L[f"static{j}"] if kind == "static" else L[f"phase{j}"]
+        blocks.append((name, np.array(data, int), np.array(weak, int), np.arange(col.start, col.stop)))
+    return blocks, at
+
+
+def leave_one_segment_out(result) -> Holdout:
+    model, x = result.model, result.x
+    r = model.residuals(x)
+    J = model.jacobian(x)
+    blocks, n_rows = _blocks(model, x)
+    local = np.zeros(J.shape[1], bool)
+    for _, _, _, cols in blocks:
+        local[cols] = True
+    shared = ~local
+    X = J[:, shared].copy()
+    e = r.copy()
+    for _, data, weak, cols in blocks:
+        rows = np.concatenate([data, weak])
+        if not len(cols):
+            continue
+        Jl = J[np.ix_(rows, cols)]
+        q, s, _ = np.linalg.svd(Jl, full_matrices=False)
+        q = q[:, s > 1e-10 * max(s.max(initial=0.0), 1e-300)]
+        X[rows] -= q @ (q.T @ X[rows])
+        e[rows] -= q @ (q.T @ e[rows])
+    norms = np.linalg.norm(X, axis=0)
+    norms[norms == 0] = 1.0
+    u, s, _ = np.linalg.svd(X / norms, full_matrices=False)
+    u = u[:, s > 1e-10 * s[0]] if len(s) else u[:, :0]
+    per, bad = {}, []
+    for name, data, weak, _ in blocks:
+        rows = np.concatenate([data, weak])
+        Ug = u[rows]
+        H = Ug @ Ug.T
+        w, V = np.linalg.eigh(H)
+        if w.max(initial=0.0) >= LEVERAGE_LIMIT:
+            bad.append(name)
+            continue
+        deleted = V @ ((V.T @ e[rows]) / (1.0 - w))
+        per[name] = float(np.sum(deleted[:len(data)] ** 2))
+    return Holdout(score=float(sum(per.values())), per_segment=per, unpredictable=bad)
