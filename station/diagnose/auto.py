@@ -16,14 +16,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from station.diagnose.core import Diagnosis, diagnose, fit_fails, rms_by_kind
-from station.diagnose.holdout import Holdout, leave_one_segment_out
+from station.diagnose.holdout import judge, leave_one_segment_out
 from station.diagnose.words import caveats
 from station.estimate import lsq
 from station.model.registry import EffectRegistry
 
 MAX_STEPS = 6
 MAX_TRIES = 3          # significant candidates tried per step
-MIN_SHARE = 0.2        # of the excess chi2 (chi2 - dof) an added effect must explain when the fit fails
 
 
 @dataclass
@@ -58,25 +57,6 @@ def added_parameters(after: Diagnosis, effect_id: str) -> list:
     own = {p.name for p in effect.params}
     return [(n, float(v), float(cov[i, i]) ** 0.5, u)
             for i, (n, v, u) in enumerate(zip(names, values, units_)) if n in own]
-
-
-def judge(before: Diagnosis, after: Diagnosis, h_before: Holdout, h_after: Holdout):
-    """(kept, reason, share, holdout before, holdout after) for an effect added to ``before``."""
-    drop = before.chi2 - after.chi2
-    cv_b, cv_a = h_before.common_score(h_after)
-    share = None
-    if fit_fails(before.result):
-        excess = max(before.chi2 - before.dof, 1e-300)
-        share = drop / excess
-    if not cv_a < cv_b:
-        return (False, f"reduces chi2 by {drop:.1f} but predicts the left-out segments worse "
-                       f"(leave-one-segment-out {cv_b:.1f} -> {cv_a:.1f}): it fits noise or another "
-                       "effect's misfit", share, cv_b, cv_a)
-    if share is not None and share < MIN_SHARE:
-        return (False, f"reduces chi2 by {drop:.1f} but does not explain the failure (only "
-                       f"{100 * share:.0f} % of the excess chi2; at least {100 * MIN_SHARE:.0f} % "
-                       "needed)", share, cv_b, cv_a)
-    return True, "", share, cv_b, cv_a
 
 
 def run(summaries, effects=(), attitudes="auto", progress=None,

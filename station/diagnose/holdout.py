@@ -21,7 +21,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from station.diagnose.core import fit_fails
+
 LEVERAGE_LIMIT = 1.0 - 1e-6      # a block whose largest leverage reaches this is unpredictable
+MIN_SHARE = 0.2                  # of the excess chi2 (chi2 - dof) an added effect must explain
+                                 #   when the fit fails
 
 
 @dataclass
@@ -93,3 +97,22 @@ def leave_one_segment_out(result) -> Holdout:
         deleted = V @ ((V.T @ e[rows]) / (1.0 - w))
         per[name] = float(np.sum(deleted[:len(data)] ** 2))
     return Holdout(score=float(sum(per.values())), per_segment=per, unpredictable=bad)
+
+
+def judge(before, after, h_before: Holdout, h_after: Holdout):
+    """(kept, reason, share, holdout before, holdout after) for an effect added to ``before``."""
+    drop = before.chi2 - after.chi2
+    cv_b, cv_a = h_before.common_score(h_after)
+    share = None
+    if fit_fails(before.result):
+        excess = max(before.chi2 - before.dof, 1e-300)
+        share = drop / excess
+    if not cv_a < cv_b:
+        return (False, f"reduces chi2 by {drop:.1f} but predicts the left-out segments worse "
+                       f"(leave-one-segment-out {cv_b:.1f} -> {cv_a:.1f}): it fits noise or another "
+                       "effect's misfit", share, cv_b, cv_a)
+    if share is not None and share < MIN_SHARE:
+        return (False, f"reduces chi2 by {drop:.1f} but does not explain the failure (only "
+                       f"{100 * share:.0f} % of the excess chi2; at least {100 * MIN_SHARE:.0f} % "
+                       "needed)", share, cv_b, cv_a)
+    return True, "", share, cv_b, cv_a

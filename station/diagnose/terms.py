@@ -302,9 +302,8 @@ class Proposal:
 
 def propose(diagnosis, summaries) -> Proposal | None:
     """Search, refit, judge; None when no term of the dictionary is significant."""
-    from station.diagnose.auto import judge
     from station.diagnose.core import diagnose
-    from station.diagnose.holdout import leave_one_segment_out
+    from station.diagnose.holdout import judge, leave_one_segment_out
 
     result = diagnosis.result
     found = search(result)
