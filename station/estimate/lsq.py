@@ -411,6 +411,7 @@ class Model:
         phases = 2 * np.pi * np.arange(PHASES) / PHASES
         cos_p, sin_p = np.cos(phases), np.sin(phases)
         cos_2p, sin_2p = np.cos(2 * phases), np.sin(2 * phases)
+        grid = np.column_stack([np.ones(PHASES), cos_p, sin_p, cos_2p, sin_2p])
         axes = [self._axis(x, k) for k in range(s.groups)]
         if C_mount is not None:
             for k, (l, _, _) in enumerate(axes):
@@ -439,12 +440,20 @@ class Model:
             A = np.radians(r.angle_deg)
             earth_integral = np.zeros(3) if not _earth_rate_visible(r, s) else (r.duration_s / A) * (
                 np.sin(A) * earth_perp - (1.0 - np.cos(A)) * cross(l, earth_perp))
-            # the centripetal force follows the mean of the squared rate
-            w_rad = np.radians(r.rate_dps) * np.sqrt(r.rate_sq_factor) * l
-            centripetal = cross(w_rad, cross(w_rad, offset))
-            f_p = kappa * l + np.outer(cos_p, v) - np.outer(sin_p, cross(l, v)) + centripetal
+            # at the mounting offset: centripetal w x (w x d) and tangential dw/dt x d, with the
+            # rate's shape over the turn (its harmonics, from the summary): a steady rate gives a
+            # constant centripetal force and no tangential one
+            if r.rate_coef is not None:
+                w_k, wsq_k, wdot_k = grid @ r.rate_coef, grid @ r.rate_sq_coef, grid @ r.rate_dot_coef
+            else:
+                w_k = np.full(PHASES, np.radians(r.rate_dps) * np.sqrt(r.rate_sq_factor))
+                wsq_k, wdot_k = w_k**2, np.zeros(PHASES)
+            l_x_d = cross(l, offset)
+            at_offset = np.outer(wsq_k, cross(l, l_x_d)) + np.outer(wdot_k, l_x_d)
+            f_p = kappa * l + np.outer(cos_p, v) - np.outer(sin_p, cross(l, v)) + at_offset
             w_p = np.tile((r.rate_dps + e) * l, (PHASES, 1))
-            ctx = self._context(f_p, w_p, np.tile(w_rad, (PHASES, 1)), r.temp_c, Ma, Mg, r)
+            ctx = self._context(f_p, w_p, np.outer(w_k, l), r.temp_c, Ma, Mg, r)
+            ctx.wdot_table = np.outer(wdot_k, l)
             a, w = self._predict(x, ctx, Ma, Mg)
             dc, c, sn = a.mean(axis=0), 2 * cos_p @ a / PHASES, 2 * sin_p @ a / PHASES
             c2, s2 = 2 * cos_2p @ a / PHASES, 2 * sin_2p @ a / PHASES

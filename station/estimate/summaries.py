@@ -59,6 +59,13 @@ class RotationSummary:
     t_mid_s: float = float("nan")   # mean sample time (the capture's clock), s
     index: int = -1                 # position of the segment in the capture
     temp_rate_c_per_s: float = 0.0  # temperature slope over the segment, deg C/s
+    # The table rate w(t) about the axis (rad/s, signed like the angle), its square and its time
+    # derivative, each projected on the same basis as the accelerometer (1, cos phi, sin phi,
+    # cos 2phi, sin 2phi): a rate that ripples moves the centripetal and adds a tangential
+    # acceleration at the mounting offset.  From the gyro, rescaled to the encoder's mean rate.
+    rate_coef: np.ndarray | None = None        # (5,) rad/s
+    rate_sq_coef: np.ndarray | None = None     # (5,) rad^2/s^2
+    rate_dot_coef: np.ndarray | None = None    # (5,) rad/s^2
 
     @property
     def rate_dps(self) -> float:
@@ -114,7 +121,45 @@ def _turned_fraction(t, gyro, start, duration) -> np.ndarray:
     return turned / total if total != 0 else (t - start) / duration
 
 
-def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp) -> RotationSummary:
+def _phase_fraction(t, gyro, start, duration, gyro_sigma_dps):
+    """Fraction of the turn at each sample: from the gyro when the rate really varies, else
+    uniform in time.  Integrating the gyro adds its noise as a random walk of the phase (pinned
+    at both ends: RMS sigma sqrt(dt T / 6)); over a few revolutions that wander projects onto the
+    harmonics.  So the gyro-tracked phase is used only where its departure from a uniform phase is
+    more than three times that noise, i.e. where the rate ripples or drifts."""
+    tracked = _turned_fraction(t, gyro, start, duration)
+    uniform = (t - start) / duration
+    if gyro_sigma_dps is None:
+        return tracked
+    rate = np.linalg.norm(gyro.mean(axis=0))
+    if rate == 0:
+        return tracked
+    dt = duration / len(t)
+    noise_deg = float(np.max(gyro_sigma_dps)) * np.sqrt(dt * duration / 6.0)
+    departure_deg = float(np.sqrt(np.mean(((tracked - uniform) * rate * duration) ** 2)))
+    return tracked if departure_deg > 3.0 * noise_deg else uniform
+
+
+def _rate_shape(t, gyro, gyro_bias, angle_deg, duration, basis):
+    """The table rate (rad/s, signed), its square and its derivative, projected on ``basis``."""
+    g = gyro - (0.0 if gyro_bias is None else gyro_bias)
+    direction = g.mean(axis=0)
+    norm = np.linalg.norm(direction)
+    mean_rate = np.radians(angle_deg) / duration
+    if norm == 0 or len(t) < 3:
+        w = np.full(len(t), mean_rate)
+    else:
+        along = g @ (direction / norm)
+        w = along * (mean_rate / along.mean())
+    projector = np.linalg.pinv(basis)
+    return projector @ w, projector @ w**2, projector @ np.gradient(w, t)
+
+
+def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
+                     gyro_sigma_dps=None, gyro_bias=None) -> RotationSummary:
+    """``gyro_sigma_dps``: per-sample white gyro noise (deg/s); with it the phase is tracked by
+    the gyro only where the rate varies beyond what that noise would make it seem to.
+    ``gyro_bias``: a rough gyro bias (the statics' mean), removed before the rate's shape is taken."""
     if len(t) < 8:
         raise UserError(f"segment '{name}': a rotation segment needs at least 8 samples")
     start, end = _window(t)
@@ -122,10 +167,11 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp) ->
     # trapezoid over the samples plus half a sample at each end: the integral over the window
     gyro_integral = (np.trapezoid(gyro, t, axis=0)
                      + 0.5 * (gyro[0] * (t[1] - t[0]) + gyro[-1] * (t[-1] - t[-2])))
-    phase = np.radians(angle_deg) * _turned_fraction(t, gyro, start, duration)
+    phase = np.radians(angle_deg) * _phase_fraction(t, gyro, start, duration, gyro_sigma_dps)
     basis = np.column_stack([np.ones_like(t), np.cos(phase), np.sin(phase),
                              np.cos(2 * phase), np.sin(2 * phase)])
     coef, *_ = np.linalg.lstsq(basis, accel, rcond=None)
+    rate_coefs = _rate_shape(t, gyro, gyro_bias, angle_deg, duration, basis)
     edge = min(EDGE_SAMPLES, len(t) // 4)
     magnitude = np.linalg.norm(gyro, axis=1)
     steady = bool(np.std(magnitude) < STEADY_SPREAD * np.mean(magnitude))
@@ -136,7 +182,8 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp) ->
                            accel_sin2=coef[4], gyro_integral=gyro_integral,
                            temp_c=None if temp is None else float(np.mean(temp)),
                            gyro_start=gyro[:edge].mean(axis=0), gyro_end=gyro[-edge:].mean(axis=0),
-                           steady=steady, rate_sq_factor=rate_sq_factor)
+                           steady=steady, rate_sq_factor=rate_sq_factor,
+                           rate_coef=rate_coefs[0], rate_sq_coef=rate_coefs[1], rate_dot_coef=rate_coefs[2])
 
 
 def summarise(capture, *, table_angle_arcsec: float | None = None) -> Summaries:
@@ -159,6 +206,7 @@ def summarise(capture, *, table_angle_arcsec: float | None = None) -> Summaries:
                         "static segments (biases and the noise level come from them)")
     accel_sigma = np.sqrt(np.mean(np.vstack(resid_a) ** 2, axis=0))
     gyro_sigma = np.sqrt(np.mean(np.vstack(resid_g) ** 2, axis=0))
+    static_gyro_mean = np.mean([st.gyro for st in statics], axis=0)   # ~ the bias (Earth rate averages out)
 
     rotations, skipped, axes = [], [], []
     for seg in capture.complete("rotation"):
@@ -171,7 +219,8 @@ def summarise(capture, *, table_angle_arcsec: float | None = None) -> Summaries:
             axes.append(axis)
             group = len(axes) - 1
         d = seg.data
-        summary = rotation_summary(seg.name, axis, group, seg.angle_deg, d.t, d.accel * ca, d.gyro * cg, d.temp)
+        summary = rotation_summary(seg.name, axis, group, seg.angle_deg, d.t, d.accel * ca, d.gyro * cg, d.temp,
+                                   gyro_sigma_dps=gyro_sigma, gyro_bias=static_gyro_mean)
         if seg.extra.get("motion") == "hand":      # the writer says so (manual schemes)
             summary.steady = False
         summary.t_mid_s, summary.index = float(np.mean(d.t)), order[seg.name]
