@@ -116,6 +116,18 @@ def segment_residuals(result, labels) -> list[SegmentResidual]:
     return segs
 
 
+def model_basis(result) -> np.ndarray:
+    """Orthonormal basis of what the fitted model's parameters can change in the residuals
+    (its Jacobian's column space), computed once per fit."""
+    cached = getattr(result, "_basis", None)
+    if cached is None:
+        J = result.model.jacobian(result.x)
+        u, sv, _ = np.linalg.svd(J, full_matrices=False)
+        cached = u[:, sv > 1e-10 * sv[0]]
+        result._basis = cached
+    return cached
+
+
 def score_test(result, effect_id, registry: EffectRegistry | None = None, overdispersion: float = 1.0) -> Candidate:
     """The Lagrange-multiplier test of adding ``effect_id`` (an id, or an Effect instance) to the
     fitted model.  With ``overdispersion`` phi > 1 (a fit that fails: phi is its reduced chi2) the
@@ -133,10 +145,8 @@ def score_test(result, effect_id, registry: EffectRegistry | None = None, overdi
     r = extended.residuals(x)
     cols = list(range(n, extended.layout.size))
     Jc = extended.jacobian_columns(x, cols)
-    J = model.jacobian(result.x)
     # the part of the candidate's columns the current model cannot already produce
-    u, sv, _ = np.linalg.svd(J, full_matrices=False)
-    basis = u[:, sv > 1e-10 * sv[0]]
+    basis = model_basis(result)
     Jp = Jc - basis @ (basis.T @ Jc)
     A = Jp.T @ Jp
     scale = np.sqrt(np.maximum(np.diag(Jc.T @ Jc), 1e-300))

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from station.diagnose.core import ALPHA, chi2_sf
+from station.diagnose.core import ALPHA, chi2_sf, model_basis
 from station.estimate import lsq
 from station.model.effect import Effect, Param
 
@@ -182,9 +182,7 @@ def search(result, max_terms: int = MAX_TERMS) -> list[Found]:
     r = extended.residuals(x)
     cols = list(range(n, n + len(candidates)))
     Jc = _linear_columns(extended, x, cols)             # d(residual)/d(coefficient)
-    J = model.jacobian(result.x)
-    u, sv, _ = np.linalg.svd(J, full_matrices=False)
-    basis = u[:, sv > 1e-10 * sv[0]]
+    basis = model_basis(result)
     Jp = Jc - basis @ (basis.T @ Jc)
     m = len(candidates)
     data = model.data_rows if hasattr(model, "data_rows") else np.ones(len(r), bool)
