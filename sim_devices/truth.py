@@ -719,9 +719,13 @@ class Truth:
                                                   "bench.remount_error_arcsec",
                                                   lo=0.0, hi=MAX_REMOUNT_ARCSEC)
         if "time_stamp_jitter_ms" in d:
-            bench.time_stamp_jitter_ms = c.number(
-                d["time_stamp_jitter_ms"], "bench.time_stamp_jitter_ms",
-                lo=0.0, hi=MAX_JITTER_FRACTION * 1000.0 / rate)
+            jitter = c.number(d["time_stamp_jitter_ms"], "bench.time_stamp_jitter_ms", lo=0.0)
+            bound = MAX_JITTER_FRACTION * 1000.0 / rate
+            if jitter > bound:
+                c.fail("bench.time_stamp_jitter_ms",
+                       f"must be <= {bound:g} ms (10 % of the sample period at {rate:g} Hz, so that "
+                       f"the stamps keep increasing), got {jitter!r}")
+            bench.time_stamp_jitter_ms = jitter
         return cls(accel=accel, gyro=gyro, sample_rate_hz=rate, temperature=temp, bench=bench)
 
 

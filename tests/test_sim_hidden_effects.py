@@ -282,3 +282,25 @@ def test_tangential_acceleration_of_a_rippling_table_off_axis():
     # Earth rate reaches the gyros, not the accelerometers (Coriolis neglected, < 0.2 ug)
     assert seg.gyro[:, 2].mean() == pytest.approx(10.0 + math.degrees(OMEGA_EARTH) * math.sin(
         math.radians(45.0)), abs=1e-3)
+
+
+def test_the_imu_twin_applies_the_bias_step_at_its_device_time():
+    """The IMU twin passes its device time to Truth.measure: a gyro step at 5 s shows in the
+    samples at t >= 5 s only (the table at rest at 0 deg, ideal sensors)."""
+    from sim_devices.twins.clock import ManualClock
+    from sim_devices.twins.geometry import TableGeometry
+    from sim_devices.twins.imu import ImuTwin
+    from sim_devices.twins.table import TableTwin
+
+    truth = perfect_truth()
+    truth.gyro.bias_step, truth.gyro.bias_step_time_s = np.array([0.0, 36.0, 0.0]), 5.0
+    clock = ManualClock()
+    table = TableTwin(TableGeometry.default(1, truth.bench.lever_arm_m), clock,
+                      interlocks_closed=True)
+    imu = ImuTwin(table, truth)
+    clock.advance(10.0)
+    t = np.array([4.0, 4.99, 5.0, 9.0])
+    _, gyro, _ = imu.measure(t)
+    earth = np.degrees(world.Site(45.0).earth_rate_enu)       # table at 0 deg: body = ENU
+    np.testing.assert_allclose(gyro - earth, [[0, 0, 0], [0, 0, 0], [0, 0.01, 0], [0, 0.01, 0]],
+                               rtol=0, atol=1e-15)
