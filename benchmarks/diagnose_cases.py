@@ -125,6 +125,9 @@ CASES = [
          library=False),
     Case("remount_1deg", "1 deg (1 sigma per axis) placement error at every static",
          {"bench.remount_error_arcsec": 3600.0}, library=False),
+    Case("remount_1deg_rotations", "1 deg (1 sigma per axis) placement error at every static and "
+         "every rotation segment (each half of a +/- pair)",
+         {"bench.remount_error_arcsec": 3600.0, "bench.remount_rotations": True}, library=False),
     Case("stamp_jitter_1ms", "1 ms (1 sigma) jitter of the time stamps",
          {"bench.time_stamp_jitter_ms": 1.0}, library=False),
     Case("wobble_30arcsec", "table axis wobbling by 30 arcsec once per revolution",

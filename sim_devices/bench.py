@@ -113,7 +113,7 @@ class SimulatedBench:
         return self._geom_rng.normal(0.0, self.truth.bench.table_angle_error_arcsec, 3) * ARCSEC
 
     def _remount_error(self) -> np.ndarray:
-        """Placement error of a static segment, rad (zero unless bench.remount_error_arcsec)."""
+        """Placement error of a segment, rad (zero unless bench.remount_error_arcsec)."""
         sigma = self.truth.bench.remount_error_arcsec
         if sigma <= 0.0:
             return np.zeros(3)
@@ -193,6 +193,12 @@ class SimulatedBench:
             start = (C_bn0, a_n, heading, delta)
             self._rotation_starts[key] = start
         C_bn0, a_n, heading, delta = start
+        remount = np.zeros(3)
+        if self.truth.bench.remount_rotations:
+            # taken off the table and put back before every rotation segment, each half of a
+            # +/- pair included: the remembered start attitude, turned by a fresh placement error
+            remount = self._remount_error()
+            C_bn0 = world.small_rotation(remount) * C_bn0
 
         n = self._n_samples(duration_s)
         fs = self.sample_rate_hz
@@ -243,6 +249,7 @@ class SimulatedBench:
                 "axis_enu": a_n,
                 "heading_deg": math.degrees(heading),
                 "attitude_error_rad": delta,
+                "remount_error_rad": remount,
                 "axis_body_true": C_bn0.apply(a_n),
                 "swept_angle_deg": swept_deg,
                 "encoder_error_arcsec": enc_err_arcsec,

@@ -276,6 +276,7 @@ class BenchSettings:
     # placement error: every static segment's attitude gets an extra random rotation, 1 sigma
     # per axis (arcsec), as when the IMU is taken off and put back for each attitude
     remount_error_arcsec: float = 0.0
+    remount_rotations: bool = False     # True: every rotation segment is remounted too
     # the IMU's time stamps jitter: stamp = nominal sample time + N(0, sigma) (ms); the samples
     # themselves are taken on the regular grid
     time_stamp_jitter_ms: float = 0.0
@@ -337,7 +338,7 @@ _TEMP_KEYS = {"start_c", "reference_c", "drift_c_per_h", "warmup_delta_c",
 _BENCH_KEYS = {"latitude_deg", "height_m", "lever_arm_m", "table_angle_error_arcsec",
                "rate_ripple_fraction", "rate_ripple_hz", "rate_drift_fraction", "accel_disturbance_ug",
                "move_s", "settle_s", "time_offset_s", "wobble_arcsec", "wobble_phase_deg",
-               "vibration_mg", "vibration_phase_deg", "remount_error_arcsec",
+               "vibration_mg", "vibration_phase_deg", "remount_error_arcsec", "remount_rotations",
                "time_stamp_jitter_ms"}
 
 
@@ -567,6 +568,7 @@ class Truth:
                 "vibration_mg": fl(self.bench.vibration_mg),
                 "vibration_phase_deg": float(self.bench.vibration_phase_deg),
                 "remount_error_arcsec": float(self.bench.remount_error_arcsec),
+                "remount_rotations": bool(self.bench.remount_rotations),
                 "time_stamp_jitter_ms": float(self.bench.time_stamp_jitter_ms),
             },
         }
@@ -718,6 +720,10 @@ class Truth:
             bench.remount_error_arcsec = c.number(d["remount_error_arcsec"],
                                                   "bench.remount_error_arcsec",
                                                   lo=0.0, hi=MAX_REMOUNT_ARCSEC)
+        if "remount_rotations" in d:
+            if not isinstance(d["remount_rotations"], bool):
+                c.fail("bench.remount_rotations", f"expected true or false, got {d['remount_rotations']!r}")
+            bench.remount_rotations = d["remount_rotations"]
         if "time_stamp_jitter_ms" in d:
             jitter = c.number(d["time_stamp_jitter_ms"], "bench.time_stamp_jitter_ms", lo=0.0)
             bound = MAX_JITTER_FRACTION * 1000.0 / rate

@@ -55,6 +55,7 @@ def test_new_hidden_effects_yaml_round_trip(tmp_path):
     truth.bench.vibration_mg = np.array([1.0, -0.5, 2.0])
     truth.bench.vibration_phase_deg = 30.0
     truth.bench.remount_error_arcsec = 3600.0
+    truth.bench.remount_rotations = True
     truth.bench.time_stamp_jitter_ms = 1.0
     path = tmp_path / "t.yaml"
     truth.to_yaml(path)
@@ -231,6 +232,29 @@ def test_remount_error_per_static_segment():
     assert stats.chi2.ppf(0.0005, n) < chi2 < stats.chi2.ppf(0.9995, n)
     rot, rot_ref = bench.rotation([1, 0, 0], 10.0, 1.0), ref.rotation([1, 0, 0], 10.0, 1.0)
     np.testing.assert_array_equal(rot.truth["attitude_error_rad"], rot_ref.truth["attitude_error_rad"])
+
+
+def test_remount_of_rotation_segments():
+    """With remount_rotations each rotation segment (each half of a +/- pair) starts from the
+    pair's attitude turned by its own placement error delta: a perfect gyro triad then reads
+    the table rate about Rot(delta) axis_body, i.e. 1 deg off the axis gives a cross-axis rate
+    of w sin(1 deg) = 1.7 % of the rate; without the flag rotations are not remounted."""
+    truth = perfect_truth(remount_error_arcsec=3600.0, remount_rotations=True)
+    bench = SimulatedBench(truth, 6)
+    w = 20.0
+    plus, minus = bench.rotation([1, 0, 0], w, 3.0), bench.rotation([1, 0, 0], -w, 3.0)
+    d_p, d_m = plus.truth["remount_error_rad"], minus.truth["remount_error_rad"]
+    assert np.all(d_p != d_m) and np.all(d_p != 0.0)
+    for seg, rate, d in ((plus, w, d_p), (minus, -w, d_m)):
+        axis = Rotation.from_rotvec(d).apply([1.0, 0.0, 0.0])
+        np.testing.assert_allclose(seg.truth["axis_body_true"], axis, rtol=0, atol=16 * EPS)
+        table = seg.gyro - np.degrees(np.array([Rotation.from_matrix(seg.truth["C_bn0"]).apply(
+            world.earth_rate_enu(45.0))]))           # the Earth rate turns with the body: bounded
+        np.testing.assert_allclose(table.mean(axis=0), rate * axis, rtol=0,
+                                   atol=2 * math.degrees(OMEGA_EARTH))
+    assert abs(w * math.sin(math.radians(1.0))) == pytest.approx(0.349, abs=1e-3)   # deg/s
+    off = SimulatedBench(perfect_truth(remount_error_arcsec=3600.0), 6)
+    np.testing.assert_array_equal(off.rotation([1, 0, 0], w, 3.0).truth["remount_error_rad"], 0.0)
 
 
 def test_time_stamp_jitter():

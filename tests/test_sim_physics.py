@@ -511,6 +511,7 @@ def test_truth_yaml_round_trip(tmp_path):
     ("bench", "vibration_mg", [0.0, 2e4, 0.0]),
     ("bench", "vibration_phase_deg", 400.0),
     ("bench", "remount_error_arcsec", -5.0),
+    ("bench", "remount_rotations", 1),
     ("bench", "time_stamp_jitter_ms", 1.5),                          # > 10 % of 10 ms
     ("bench", "time_stamp_jitter_ms", -0.1),
     ("bench", "time_offset_s", 2.0),
