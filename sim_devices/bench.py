@@ -14,7 +14,7 @@ import numpy as np
 
 from . import world
 from .truth import Truth
-from .world import ARCSEC, Site
+from .world import ARCSEC, G_STANDARD, Site
 
 
 @dataclass
@@ -59,6 +59,9 @@ class SimulatedBench:
         ss = np.random.SeedSequence(seed)
         self._geom_rng, self._enc_rng, self._noise_rng = (
             np.random.default_rng(s) for s in ss.spawn(3))
+        # further streams (spawned after the first three, which stay as they were): remount
+        # errors and time-stamp jitter, so switching them on changes no other draw
+        self._remount_rng, self._jitter_rng = (np.random.default_rng(s) for s in ss.spawn(2))
         self.site = Site(truth.bench.latitude_deg, truth.bench.height_m)
         self._g = self.site.g
         self._time_end = 0.0          # end of the last segment's window
@@ -109,13 +112,28 @@ class SimulatedBench:
         """Random small rotation vector, rad, sigma per axis = table angle error."""
         return self._geom_rng.normal(0.0, self.truth.bench.table_angle_error_arcsec, 3) * ARCSEC
 
+    def _remount_error(self) -> np.ndarray:
+        """Placement error of a segment, rad (zero unless bench.remount_error_arcsec)."""
+        sigma = self.truth.bench.remount_error_arcsec
+        if sigma <= 0.0:
+            return np.zeros(3)
+        return self._remount_rng.normal(0.0, sigma, 3) * ARCSEC
+
+    def _stamps(self, t: np.ndarray) -> np.ndarray:
+        """The IMU's time stamps of samples taken at the nominal times ``t``: t plus white
+        jitter of sigma bench.time_stamp_jitter_ms (the same array when there is none)."""
+        sigma = self.truth.bench.time_stamp_jitter_ms * 1e-3
+        if sigma <= 0.0:
+            return t
+        return t + self._jitter_rng.normal(0.0, sigma, len(t))
+
     def _measure(self, t, f_b, w_ib_rad, w_eb_b=None, wdot_eb_b=None):
         """Raw outputs of samples taken at table times ``t`` (temperature evaluated there)."""
         f_b = world.perturb_specific_force(
             f_b, self.truth.bench.accel_disturbance_ug * world.MICRO_G, self._noise_rng)
         temp = self.truth.temperature.at(t)
         accel, gyro = self.truth.measure(f_b, np.degrees(w_ib_rad), temp, self._noise_rng,
-                                         w_eb_b=w_eb_b, wdot_eb_b=wdot_eb_b)
+                                         w_eb_b=w_eb_b, wdot_eb_b=wdot_eb_b, t=t)
         return accel, gyro, temp
 
     # -------------------------------------------------------------- segments
@@ -125,18 +143,20 @@ class SimulatedBench:
         n = self._n_samples(duration_s)
         heading = self._geom_rng.uniform(0.0, 2.0 * np.pi)
         delta = self._mount_error()
-        C_bn = world.small_rotation(delta) * world.attitude_up(up, heading)
+        remount = self._remount_error()
+        C_bn = world.small_rotation(delta + remount) * world.attitude_up(up, heading)
         t = self._times(n)
         f_b, w_ib = world.static_kinematics(C_bn, n, self.site)
         f_true, w_true = f_b[0].copy(), w_ib[0].copy()
         accel, gyro, temp = self._measure(t + self.truth.bench.time_offset_s, f_b, w_ib)
         return SimSegment(
-            kind="static", t=t, accel=accel, gyro=gyro, temp=temp,
+            kind="static", t=self._stamps(t), accel=accel, gyro=gyro, temp=temp,
             meta={"up_body": [float(x) for x in up]},
             truth={
                 "C_bn": C_bn.as_matrix(),
                 "heading_deg": math.degrees(heading),
-                "attitude_error_rad": delta,
+                "attitude_error_rad": delta + remount,
+                "remount_error_rad": remount,
                 "up_body_true": C_bn.apply([0.0, 0.0, 1.0]),
                 "f_b": f_true,
                 "w_ib_dps": np.degrees(w_true),
@@ -173,13 +193,19 @@ class SimulatedBench:
             start = (C_bn0, a_n, heading, delta)
             self._rotation_starts[key] = start
         C_bn0, a_n, heading, delta = start
+        remount = np.zeros(3)
+        if self.truth.bench.remount_rotations:
+            # taken off the table and put back before every rotation segment, each half of a
+            # +/- pair included: the remembered start attitude, turned by a fresh placement error
+            remount = self._remount_error()
+            C_bn0 = world.small_rotation(remount) * C_bn0
 
         n = self._n_samples(duration_s)
         fs = self.sample_rate_hz
         dt = 1.0 / fs
         bench = self.truth.bench
         phase = self._geom_rng.uniform(0.0, 2.0 * np.pi)
-        t = self._times(n)                      # IMU stamps
+        t = self._times(n)                      # nominal sample times (the stamps without jitter)
         tau = t + bench.time_offset_s           # table time at which each sample was taken
         w_rad = math.radians(r)
         duration = n * dt
@@ -197,10 +223,17 @@ class SimulatedBench:
             C_bn = world.table_attitude(C_bn0, a_n, theta)
             w_b, wdot_b = world.table_rates_body(C_bn0, a_n, theta_dot, theta_ddot)
         f_b, w_ib = world.body_kinematics(C_bn, w_b, wdot_b, bench.lever_arm_m, self.site)
+        vibration_phase = math.radians(bench.vibration_phase_deg)
+        if np.any(bench.vibration_mg):
+            a_vib = world.table_vibration_enu(a_n, theta, bench.vibration_mg * 1e-3 * G_STANDARD,
+                                              vibration_phase)
+            f_b = f_b + np.atleast_2d(C_bn.apply(a_vib))
+        stamps = self._stamps(t)
 
         # encoder: true swept angle over the table-time window [t0 - dt/2, t_{N-1} + dt/2] that
         # the station computes from the IMU stamps, plus error
-        edges, _, _ = world.rate_profile(np.array([t[0] - 0.5 * dt, t[-1] + 0.5 * dt]), **prof)
+        edges, _, _ = world.rate_profile(np.array([stamps[0] - 0.5 * dt, stamps[-1] + 0.5 * dt]),
+                                         **prof)
         swept_deg = math.degrees(edges[1] - edges[0])
         enc_err_arcsec = float(self._enc_rng.normal(0.0, bench.table_angle_error_arcsec))
         angle_deg = swept_deg + enc_err_arcsec / 3600.0
@@ -210,19 +243,22 @@ class SimulatedBench:
         if encoder:
             meta["angle_deg"] = angle_deg
         return SimSegment(
-            kind="rotation", t=t, accel=accel, gyro=gyro, temp=temp, meta=meta,
+            kind="rotation", t=stamps, accel=accel, gyro=gyro, temp=temp, meta=meta,
             truth={
                 "C_bn0": C_bn0.as_matrix(),
                 "axis_enu": a_n,
                 "heading_deg": math.degrees(heading),
                 "attitude_error_rad": delta,
+                "remount_error_rad": remount,
                 "axis_body_true": C_bn0.apply(a_n),
                 "swept_angle_deg": swept_deg,
                 "encoder_error_arcsec": enc_err_arcsec,
                 "ripple_phase_rad": phase,
-                "window_s": (float(t[0] - 0.5 * dt), float(t[-1] + 0.5 * dt)),
+                "window_s": (float(stamps[0] - 0.5 * dt), float(stamps[-1] + 0.5 * dt)),
+                "nominal_t": t,
                 "time_offset_s": float(bench.time_offset_s),
                 "wobble_rad": wobble_rad,
                 "wobble_direction_enu": world.wobble_direction_enu(a_n, wobble_phase),
+                "vibration_phase_rad": vibration_phase,
             },
         )

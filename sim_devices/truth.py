@@ -11,8 +11,11 @@ other two case axes; K_a = diag(scale).  Likewise for the gyros.  Optional
 higher-order effects (all zero by default): accelerometer second-order
 nonlinearity K2_i a_i^2 and cross-coupling sum_j C_ij a_i a_j (a in g, result
 in ug, added like the bias), gyro g-sensitivity G f (deg/h per g, f in case
-axes) and gyro scale-factor asymmetry (k_i (1 +- A_i) for +- input rate).
-Then quantisation to an LSB (0 = none).
+axes), scale-factor asymmetry (k_i (1 +- A_i) for +- input, gyros and
+accelerometers), a temperature-dependent scale factor k_i (1 + s_i dT), a bias
+step at a given bench time, the gyro rate-squared term k_i q_i r_i^2 and the
+anisoelastic gyro term sum N_i,jk F_j F_k (deg/h per g^2).  Then quantisation
+to an LSB (0 = none).
 
 :meth:`Truth.paper_parameters` re-expresses this physical truth in the
 parameterisation of Zhang et al. (2010), eqs. (1)-(6).
@@ -48,11 +51,19 @@ MAX_G_SENSITIVITY_DPH_PER_G = 1e6     # ~280 deg/s per g
 MAX_SCALE_ASYMMETRY_PPM = 1e5         # 10 %
 MAX_TIME_OFFSET_S = 1.0
 MAX_WOBBLE_ARCSEC = 3600.0            # 1 degree
+MAX_SCALE_TEMPCO_PPM_PER_C = 1e4      # 1 % per degC
+MAX_RATE_SQUARED_PPM_PER_DPS = 1e4    # 1 % per deg/s
+MAX_ANISOELASTIC_DPH_PER_G2 = 1e6
+MAX_VIBRATION_MG = 1e4                # 10 g
+MAX_REMOUNT_ARCSEC = 36000.0          # 10 degrees
+MAX_JITTER_FRACTION = 0.1             # stamp jitter 1 sigma <= 10 % of the sample period
 
 # The two "other" axes of each case axis, in x<y<z order: the columns of
 # axis_tilt_arcsec.
 OTHER_AXES = ((1, 2), (0, 2), (0, 1))
 AXIS_NAMES = "xyz"
+# Columns of gyroscope.anisoelastic_dph_per_g2: the products F_j F_k of case-axis specific force.
+ANISOELASTIC_PRODUCTS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
 
 # --------------------------------------------------------------------------
@@ -167,9 +178,19 @@ class TriadTruth:
     cross_coupling_ug_per_g2: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
     # gyros only: g-sensitivity G_ij (deg/h per g), gyro i adds sum_j G_ij f_j (f: case axes, g)
     g_sensitivity_dph_per_g: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
-    # gyros only: scale-factor asymmetry A_i (ppm): scale k_i (1 + A_i 1e-6) for a positive
-    # input rate along the sensing axis, k_i (1 - A_i 1e-6) for a negative one
+    # scale-factor asymmetry A_i (ppm): scale k_i (1 + A_i 1e-6) for a positive input along the
+    # sensing axis, k_i (1 - A_i 1e-6) for a negative one (gyros and accelerometers)
     scale_asymmetry_ppm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    # temperature-dependent scale factor s_i (ppm/degC): scale k_i (1 + s_i 1e-6 (T - T_ref))
+    scale_tempco_ppm_per_c: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    # a bias step (the triad's bias units: ug or deg/h) added from bench time bias_step_time_s on
+    bias_step: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    bias_step_time_s: float = 0.0
+    # gyros only: rate-squared scale term q_i (ppm per deg/s): gyro i adds k_i q_i 1e-6 r_i^2
+    rate_squared_ppm_per_dps: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    # gyros only: anisoelastic term N (deg/h per g^2), row i: gyro i, columns the products
+    # F_x^2, F_y^2, F_z^2, F_x F_y, F_x F_z, F_y F_z (F: case axes, g; ANISOELASTIC_PRODUCTS)
+    anisoelastic_dph_per_g2: np.ndarray = field(default_factory=lambda: np.zeros((3, 6)))
 
     def __post_init__(self):
         self.scale = np.asarray(self.scale, dtype=float).reshape(3)
@@ -185,6 +206,13 @@ class TriadTruth:
         self.g_sensitivity_dph_per_g = np.asarray(self.g_sensitivity_dph_per_g,
                                                   dtype=float).reshape(3, 3)
         self.scale_asymmetry_ppm = np.asarray(self.scale_asymmetry_ppm, dtype=float).reshape(3)
+        self.scale_tempco_ppm_per_c = np.asarray(self.scale_tempco_ppm_per_c, dtype=float).reshape(3)
+        self.bias_step = np.asarray(self.bias_step, dtype=float).reshape(3)
+        self.bias_step_time_s = float(self.bias_step_time_s)
+        self.rate_squared_ppm_per_dps = np.asarray(self.rate_squared_ppm_per_dps,
+                                                   dtype=float).reshape(3)
+        self.anisoelastic_dph_per_g2 = np.asarray(self.anisoelastic_dph_per_g2,
+                                                  dtype=float).reshape(3, 6)
         if np.any(np.diag(self.cross_coupling_ug_per_g2) != 0.0):
             raise ValueError("cross_coupling_ug_per_g2 must have a zero diagonal "
                              "(the a_i^2 term is nonlinearity_ug_per_g2)")
@@ -240,9 +268,22 @@ class BenchSettings:
     # once per revolution relative to the platter (world.wobbling_table, harmonic 1)
     wobble_arcsec: float = 0.0
     wobble_phase_deg: float = 0.0
+    # a once-per-revolution vibration during rotations: the table base accelerates by
+    # cos(theta + phase) (A_axis a + A_ref r + A_perp a x r), amplitudes in mg along the table
+    # axis a, the reference direction r and a x r (world.table_vibration_enu)
+    vibration_mg: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    vibration_phase_deg: float = 0.0
+    # placement error: every static segment's attitude gets an extra random rotation, 1 sigma
+    # per axis (arcsec), as when the IMU is taken off and put back for each attitude
+    remount_error_arcsec: float = 0.0
+    remount_rotations: bool = False     # True: every rotation segment is remounted too
+    # the IMU's time stamps jitter: stamp = nominal sample time + N(0, sigma) (ms); the samples
+    # themselves are taken on the regular grid
+    time_stamp_jitter_ms: float = 0.0
 
     def __post_init__(self):
         self.lever_arm_m = np.asarray(self.lever_arm_m, dtype=float).reshape(3)
+        self.vibration_mg = np.asarray(self.vibration_mg, dtype=float).reshape(3)
 
 
 def _cross_coupling(c: "_Checker", value, field_name: str) -> np.ndarray:
@@ -266,6 +307,13 @@ def _cross_coupling(c: "_Checker", value, field_name: str) -> np.ndarray:
     return m
 
 
+def _step(t, step_time_s: float) -> np.ndarray:
+    """(N,1): 1.0 where the bench time t >= step_time_s, else 0.0."""
+    if t is None:
+        raise ValueError("a bias step needs the sample times: pass t= to Truth.measure")
+    return (np.asarray(t, dtype=float).reshape(-1, 1) >= step_time_s).astype(float)
+
+
 def _quantise(x: np.ndarray, lsb: float) -> np.ndarray:
     if lsb <= 0.0:
         return x
@@ -279,14 +327,19 @@ def _quantise(x: np.ndarray, lsb: float) -> np.ndarray:
 _TOP_KEYS = {"version", "sample_rate_hz", "accelerometer", "gyroscope", "temperature", "bench"}
 _ACC_KEYS = {"scale", "axis_tilt_arcsec", "bias_ug", "bias_tempco_ug_per_c",
              "noise_density_ug_rthz", "lsb_mps2", "position_m", "nonlinearity_ug_per_g2",
-             "cross_coupling_ug_per_g2"}
+             "cross_coupling_ug_per_g2", "scale_asymmetry_ppm", "scale_tempco_ppm_per_c",
+             "bias_step_ug", "bias_step_time_s"}
 _GYR_KEYS = {"scale", "axis_tilt_arcsec", "bias_dph", "bias_tempco_dph_per_c",
-             "noise_density_dph_rthz", "lsb_dps", "g_sensitivity_dph_per_g", "scale_asymmetry_ppm"}
+             "noise_density_dph_rthz", "lsb_dps", "g_sensitivity_dph_per_g", "scale_asymmetry_ppm",
+             "scale_tempco_ppm_per_c", "bias_step_dph", "bias_step_time_s",
+             "rate_squared_ppm_per_dps", "anisoelastic_dph_per_g2"}
 _TEMP_KEYS = {"start_c", "reference_c", "drift_c_per_h", "warmup_delta_c",
               "warmup_time_constant_s"}
 _BENCH_KEYS = {"latitude_deg", "height_m", "lever_arm_m", "table_angle_error_arcsec",
                "rate_ripple_fraction", "rate_ripple_hz", "rate_drift_fraction", "accel_disturbance_ug",
-               "move_s", "settle_s", "time_offset_s", "wobble_arcsec", "wobble_phase_deg"}
+               "move_s", "settle_s", "time_offset_s", "wobble_arcsec", "wobble_phase_deg",
+               "vibration_mg", "vibration_phase_deg", "remount_error_arcsec", "remount_rotations",
+               "time_stamp_jitter_ms"}
 
 
 @dataclass
@@ -311,20 +364,25 @@ class Truth:
         return self.gyro.noise_density * DEG_PER_HOUR * math.sqrt(self.sample_rate_hz)
 
     # ------------------------------------------------------------- measuring
-    def measure(self, f_b, w_b_dps, temp, rng, w_eb_b=None, wdot_eb_b=None):
+    def measure(self, f_b, w_b_dps, temp, rng, w_eb_b=None, wdot_eb_b=None, t=None):
         """Body quantities -> raw outputs.
 
         f_b (N,3) m/s^2 (at the IMU reference point) and w_b_dps (N,3) deg/s in case axes,
         temp (N,) or scalar deg C, rng a numpy Generator (None: no noise).  ``w_eb_b`` and
         ``wdot_eb_b`` (rad/s, rad/s^2, body axes) are the rate of the body relative to the
         Earth and its derivative: each accelerometer then senses the specific force at its own
-        position p_i, f_i = f_b + wdot x p_i + w x (w x p_i) (rigid body).
+        position p_i, f_i = f_b + wdot x p_i + w x (w x p_i) (rigid body).  ``t`` (N,) is the
+        bench time at which each sample was taken, s (needed only for a bias step: without it
+        a non-zero step raises ValueError).
         Returns (accel_raw, gyro_raw), each (N,3).
 
-        Per accelerometer i, with a_i = u_i . f_i / g0 and F = f_i / g0 (g0 = 9.80665 m/s^2):
-            accel_i = k_i u_i . f_i + [b_i + c_i dT + K2_i a_i^2 + sum_{j != i} C_ij a_i F_j] ug
+        Per accelerometer i, with a_i = u_i . f_i / g0 and F = f_i / g0 (g0 = 9.80665 m/s^2),
+        k_i(T) = k_i (1 + s_i 1e-6 dT), H = 1 if t >= the step time else 0:
+            accel_i = k_i(T) u_i . f_i + k_i A_i 1e-6 |u_i . f_i|
+                      + [b_i + c_i dT + H step_i + K2_i a_i^2 + sum_{j != i} C_ij a_i F_j] ug
         per gyro i, with r_i = u_gi . w_b (deg/s) and F = f_b / g0 (case axes):
-            gyro_i = k_i r_i + k_i A_i 1e-6 |r_i| + [b_i + c_i dT + sum_j G_ij F_j] deg/h
+            gyro_i = k_i(T) r_i + k_i A_i 1e-6 |r_i| + k_i q_i 1e-6 r_i^2
+                     + [b_i + c_i dT + H step_i + sum_j G_ij F_j + sum_jk N_i,jk F_j F_k] deg/h
         then noise and quantisation.
         """
         f_b = np.atleast_2d(np.asarray(f_b, dtype=float))
@@ -332,6 +390,10 @@ class Truth:
         dT = (np.asarray(temp, dtype=float) - self.temperature.reference_c).reshape(-1, 1)
         ba = (self.accel.bias + self.accel.bias_tempco * dT) * MICRO_G
         bg = (self.gyro.bias + self.gyro.bias_tempco * dT) * DEG_PER_HOUR
+        if np.any(self.accel.bias_step):
+            ba = ba + _step(t, self.accel.bias_step_time_s) * self.accel.bias_step * MICRO_G
+        if np.any(self.gyro.bias_step):
+            bg = bg + _step(t, self.gyro.bias_step_time_s) * self.gyro.bias_step * DEG_PER_HOUR
         accel = f_b @ self.accel.matrix.T + ba
         extras = None
         if w_eb_b is not None and np.any(self.accel.position_m):
@@ -350,13 +412,32 @@ class Truth:
                 F = (f_b if extras is None else f_b + extras[i]) / G_STANDARD   # g, case axes
                 a = F @ S[i]                                                    # g, sensing axis
                 accel[:, i] += (K2[i] * a + F @ C[i]) * a * MICRO_G
+        sa, Aa = self.accel.scale_tempco_ppm_per_c, self.accel.scale_asymmetry_ppm
+        if np.any(sa) or np.any(Aa):
+            S = self.accel.axes
+            a_in = f_b @ S.T                     # m/s^2 along each sensing axis (at its element)
+            if extras is not None:
+                for i in range(3):
+                    a_in[:, i] += extras[i] @ S[i]
+            accel += a_in * (self.accel.scale * sa * 1e-6) * dT
+            accel += np.abs(a_in) * (self.accel.scale * Aa * 1e-6)
         gyro = w_b @ self.gyro.matrix.T + bg
         A = self.gyro.scale_asymmetry_ppm
         if np.any(A):
             gyro += np.abs(w_b @ self.gyro.axes.T) * (self.gyro.scale * A * 1e-6)
+        sg, q = self.gyro.scale_tempco_ppm_per_c, self.gyro.rate_squared_ppm_per_dps
+        if np.any(sg) or np.any(q):
+            r = w_b @ self.gyro.axes.T           # deg/s along each sensing axis
+            gyro += r * (self.gyro.scale * sg * 1e-6) * dT
+            gyro += r * r * (self.gyro.scale * q * 1e-6)
         G = self.gyro.g_sensitivity_dph_per_g
         if np.any(G):
             gyro += (f_b / G_STANDARD) @ G.T * DEG_PER_HOUR
+        N = self.gyro.anisoelastic_dph_per_g2
+        if np.any(N):
+            F = f_b / G_STANDARD
+            products = np.column_stack([F[:, j] * F[:, k] for j, k in ANISOELASTIC_PRODUCTS])
+            gyro += products @ N.T * DEG_PER_HOUR
         if rng is not None:
             if self.accel.noise_density > 0.0:
                 accel += self.accel_noise_sigma * rng.standard_normal(accel.shape)
@@ -377,7 +458,10 @@ class Truth:
         a_i = (accel_T f_p)_i / g0, gyro i's input r_i = (gyro_T R_po w_p)_i, so
         ``accel_nonlinearity_ug_per_g2`` (K2) and ``gyro_scale_asymmetry_ppm`` (A) carry over
         unchanged; the g-sensitivity against f_p is ``gyro_g_sensitivity_dph_per_g``
-        = G C_pb^T.  (The cross-coupling uses case-axis components and has no such form.)
+        = G C_pb^T.  The scale asymmetries, scale temperature coefficients and the gyro
+        rate-squared term act on the same sensing-axis inputs and carry over unchanged too.
+        (The cross-coupling and the anisoelastic term use case-axis components and have no
+        such form here.)
         """
         Sa, Sg = self.accel.axes, self.gyro.axes
         C_pb = triad_frame(Sa)
@@ -416,6 +500,10 @@ class Truth:
             "accel_nonlinearity_ug_per_g2": self.accel.nonlinearity_ug_per_g2.copy(),
             "gyro_scale_asymmetry_ppm": self.gyro.scale_asymmetry_ppm.copy(),
             "gyro_g_sensitivity_dph_per_g": self.gyro.g_sensitivity_dph_per_g @ C_pb.T,
+            "accel_scale_asymmetry_ppm": self.accel.scale_asymmetry_ppm.copy(),
+            "accel_scale_tempco_ppm_per_c": self.accel.scale_tempco_ppm_per_c.copy(),
+            "gyro_scale_tempco_ppm_per_c": self.gyro.scale_tempco_ppm_per_c.copy(),
+            "gyro_rate_squared_ppm_per_dps": self.gyro.rate_squared_ppm_per_dps.copy(),
         }
 
     # ------------------------------------------------------------------ YAML
@@ -436,6 +524,10 @@ class Truth:
                 "position_m": [fl(r) for r in self.accel.position_m],
                 "nonlinearity_ug_per_g2": fl(self.accel.nonlinearity_ug_per_g2),
                 "cross_coupling_ug_per_g2": [fl(r) for r in self.accel.cross_coupling_ug_per_g2],
+                "scale_asymmetry_ppm": fl(self.accel.scale_asymmetry_ppm),
+                "scale_tempco_ppm_per_c": fl(self.accel.scale_tempco_ppm_per_c),
+                "bias_step_ug": fl(self.accel.bias_step),
+                "bias_step_time_s": float(self.accel.bias_step_time_s),
             },
             "gyroscope": {
                 "scale": fl(self.gyro.scale),
@@ -446,6 +538,11 @@ class Truth:
                 "lsb_dps": float(self.gyro.lsb),
                 "g_sensitivity_dph_per_g": [fl(r) for r in self.gyro.g_sensitivity_dph_per_g],
                 "scale_asymmetry_ppm": fl(self.gyro.scale_asymmetry_ppm),
+                "scale_tempco_ppm_per_c": fl(self.gyro.scale_tempco_ppm_per_c),
+                "bias_step_dph": fl(self.gyro.bias_step),
+                "bias_step_time_s": float(self.gyro.bias_step_time_s),
+                "rate_squared_ppm_per_dps": fl(self.gyro.rate_squared_ppm_per_dps),
+                "anisoelastic_dph_per_g2": [fl(r) for r in self.gyro.anisoelastic_dph_per_g2],
             },
             "temperature": {
                 "start_c": float(self.temperature.start_c),
@@ -468,6 +565,11 @@ class Truth:
                 "time_offset_s": float(self.bench.time_offset_s),
                 "wobble_arcsec": float(self.bench.wobble_arcsec),
                 "wobble_phase_deg": float(self.bench.wobble_phase_deg),
+                "vibration_mg": fl(self.bench.vibration_mg),
+                "vibration_phase_deg": float(self.bench.vibration_phase_deg),
+                "remount_error_arcsec": float(self.bench.remount_error_arcsec),
+                "remount_rotations": bool(self.bench.remount_rotations),
+                "time_stamp_jitter_ms": float(self.bench.time_stamp_jitter_ms),
             },
         }
 
@@ -501,7 +603,7 @@ class Truth:
                         lo=0.0, lo_open=True, hi=1e6)
 
         def triad(sec: str, keys: set[str], bias_key, tc_key, noise_key, lsb_key,
-                  noise_default) -> TriadTruth:
+                  noise_default, step_key) -> TriadTruth:
             d = c.mapping(top.get(sec), sec, keys)
             t = TriadTruth(noise_density=noise_default)
             if "scale" in d:
@@ -534,12 +636,31 @@ class Truth:
                 t.scale_asymmetry_ppm = c.vector(
                     d["scale_asymmetry_ppm"], f"{sec}.scale_asymmetry_ppm",
                     lo=-MAX_SCALE_ASYMMETRY_PPM, hi=MAX_SCALE_ASYMMETRY_PPM)
+            if "scale_tempco_ppm_per_c" in d:
+                t.scale_tempco_ppm_per_c = c.vector(
+                    d["scale_tempco_ppm_per_c"], f"{sec}.scale_tempco_ppm_per_c",
+                    lo=-MAX_SCALE_TEMPCO_PPM_PER_C, hi=MAX_SCALE_TEMPCO_PPM_PER_C)
+            if step_key in d:
+                t.bias_step = c.vector(d[step_key], f"{sec}.{step_key}")
+            if "bias_step_time_s" in d:
+                t.bias_step_time_s = c.number(d["bias_step_time_s"], f"{sec}.bias_step_time_s",
+                                              lo=0.0)
+            if "rate_squared_ppm_per_dps" in d:
+                t.rate_squared_ppm_per_dps = c.vector(
+                    d["rate_squared_ppm_per_dps"], f"{sec}.rate_squared_ppm_per_dps",
+                    lo=-MAX_RATE_SQUARED_PPM_PER_DPS, hi=MAX_RATE_SQUARED_PPM_PER_DPS)
+            if "anisoelastic_dph_per_g2" in d:
+                t.anisoelastic_dph_per_g2 = c.matrix(
+                    d["anisoelastic_dph_per_g2"], f"{sec}.anisoelastic_dph_per_g2", 3, 6,
+                    lo=-MAX_ANISOELASTIC_DPH_PER_G2, hi=MAX_ANISOELASTIC_DPH_PER_G2)
             return t
 
         accel = triad("accelerometer", _ACC_KEYS, "bias_ug", "bias_tempco_ug_per_c",
-                      "noise_density_ug_rthz", "lsb_mps2", DEFAULT_ACCEL_NOISE_UG_RTHZ)
+                      "noise_density_ug_rthz", "lsb_mps2", DEFAULT_ACCEL_NOISE_UG_RTHZ,
+                      "bias_step_ug")
         gyro = triad("gyroscope", _GYR_KEYS, "bias_dph", "bias_tempco_dph_per_c",
-                     "noise_density_dph_rthz", "lsb_dps", DEFAULT_GYRO_NOISE_DPH_RTHZ)
+                     "noise_density_dph_rthz", "lsb_dps", DEFAULT_GYRO_NOISE_DPH_RTHZ,
+                     "bias_step_dph")
 
         d = c.mapping(top.get("temperature"), "temperature", _TEMP_KEYS)
         temp = TemperatureTruth()
@@ -589,6 +710,28 @@ class Truth:
         if "wobble_phase_deg" in d:
             bench.wobble_phase_deg = c.number(d["wobble_phase_deg"], "bench.wobble_phase_deg",
                                               lo=-360.0, hi=360.0)
+        if "vibration_mg" in d:
+            bench.vibration_mg = c.vector(d["vibration_mg"], "bench.vibration_mg",
+                                          lo=-MAX_VIBRATION_MG, hi=MAX_VIBRATION_MG)
+        if "vibration_phase_deg" in d:
+            bench.vibration_phase_deg = c.number(d["vibration_phase_deg"],
+                                                 "bench.vibration_phase_deg", lo=-360.0, hi=360.0)
+        if "remount_error_arcsec" in d:
+            bench.remount_error_arcsec = c.number(d["remount_error_arcsec"],
+                                                  "bench.remount_error_arcsec",
+                                                  lo=0.0, hi=MAX_REMOUNT_ARCSEC)
+        if "remount_rotations" in d:
+            if not isinstance(d["remount_rotations"], bool):
+                c.fail("bench.remount_rotations", f"expected true or false, got {d['remount_rotations']!r}")
+            bench.remount_rotations = d["remount_rotations"]
+        if "time_stamp_jitter_ms" in d:
+            jitter = c.number(d["time_stamp_jitter_ms"], "bench.time_stamp_jitter_ms", lo=0.0)
+            bound = MAX_JITTER_FRACTION * 1000.0 / rate
+            if jitter > bound:
+                c.fail("bench.time_stamp_jitter_ms",
+                       f"must be <= {bound:g} ms (10 % of the sample period at {rate:g} Hz, so that "
+                       f"the stamps keep increasing), got {jitter!r}")
+            bench.time_stamp_jitter_ms = jitter
         return cls(accel=accel, gyro=gyro, sample_rate_hz=rate, temperature=temp, bench=bench)
 
 

@@ -332,6 +332,26 @@ def wobbling_table(C_bn0: Rotation, axis_enu, theta, theta_dot, theta_ddot,
     return C_bn, np.atleast_2d(w_b), np.atleast_2d(wd_b)
 
 
+def table_vibration_enu(axis_enu, theta, amplitude_mps2, phase_rad: float = 0.0) -> np.ndarray:
+    """Acceleration of a table base vibrating once per revolution, ENU, m/s^2 (N,3).
+
+    The base (and everything on it) accelerates along a direction fixed in the table's
+    (Earth-fixed) frame, with the phase of the table angle:
+
+        a_vib(t) = cos(theta(t) + phase) (A_axis a_n + A_ref r + A_perp (a_n x r))
+
+    a_n the table axis, r = :func:`axis_reference_enu` (the part of local up perpendicular to
+    the axis; north for a vertical axis), amplitudes A in m/s^2.  It adds to the specific force
+    (f = a - g), like any acceleration of the sensing point.
+    """
+    a_n = _unit(axis_enu, "axis_enu")
+    ref = axis_reference_enu(a_n)
+    A = np.asarray(amplitude_mps2, dtype=float).reshape(3)
+    direction = A[0] * a_n + A[1] * ref + A[2] * np.cross(a_n, ref)
+    theta = np.asarray(theta, dtype=float).reshape(-1, 1)
+    return np.cos(theta + float(phase_rad)) * direction[None, :]
+
+
 # --------------------------------------------------------------------------
 # Kinematics: table state -> specific force and inertial rate in body
 # --------------------------------------------------------------------------

@@ -496,7 +496,24 @@ def test_truth_yaml_round_trip(tmp_path):
     ("gyroscope", "g_sensitivity_dph_per_g", [[0, 0, 0], [0, float("inf"), 0], [0, 0, 0]]),
     ("gyroscope", "scale_asymmetry_ppm", [0.0, 0.0, 2e5]),
     ("gyroscope", "nonlinearity_ug_per_g2", [0.0, 0.0, 0.0]),      # accelerometer-only
-    ("accelerometer", "scale_asymmetry_ppm", [0.0, 0.0, 0.0]),     # gyro-only
+    ("accelerometer", "scale_asymmetry_ppm", [0.0, 0.0, 2e5]),
+    ("accelerometer", "rate_squared_ppm_per_dps", [0.0, 0.0, 0.0]),  # gyro-only
+    ("accelerometer", "anisoelastic_dph_per_g2", [[0] * 6] * 3),     # gyro-only
+    ("gyroscope", "bias_step_ug", [0.0, 0.0, 0.0]),                  # accelerometer's name
+    ("accelerometer", "scale_tempco_ppm_per_c", [1.0, 2.0]),
+    ("gyroscope", "scale_tempco_ppm_per_c", [0.0, 2e4, 0.0]),
+    ("accelerometer", "bias_step_ug", [0.0, "big", 0.0]),
+    ("gyroscope", "bias_step_time_s", -1.0),
+    ("gyroscope", "rate_squared_ppm_per_dps", [0.0, float("nan"), 0.0]),
+    ("gyroscope", "anisoelastic_dph_per_g2", [[0] * 6, [0] * 6, [0] * 5]),
+    ("gyroscope", "anisoelastic_dph_per_g2", [[0] * 3] * 3),
+    ("bench", "vibration_mg", 1.0),
+    ("bench", "vibration_mg", [0.0, 2e4, 0.0]),
+    ("bench", "vibration_phase_deg", 400.0),
+    ("bench", "remount_error_arcsec", -5.0),
+    ("bench", "remount_rotations", 1),
+    ("bench", "time_stamp_jitter_ms", 1.5),                          # > 10 % of 10 ms
+    ("bench", "time_stamp_jitter_ms", -0.1),
     ("bench", "time_offset_s", 2.0),
     ("bench", "time_offset_s", "5 ms"),
     ("bench", "wobble_arcsec", -1.0),

@@ -116,5 +116,5 @@ class ImuTwin:
                                            self.noise.batch(k, 0, self.epoch))
         temp = self.truth.temperature.at(t)
         self.noise.batch(k, 1, self.epoch)         # streams 1 (accel) and 2 (gyro)
-        accel, gyro = self.truth.measure(f_b, np.degrees(w_ib), temp, self.noise)
+        accel, gyro = self.truth.measure(f_b, np.degrees(w_ib), temp, self.noise, t=t)
         return accel, gyro, temp

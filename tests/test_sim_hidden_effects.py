@@ -1,0 +1,330 @@
+"""Physics checks of the hidden effects outside the estimator's library (issue 10):
+gyro rate-squared term, accelerometer scale asymmetry, anisoelastic gyro term,
+temperature-dependent scale factor, bias step, once-per-revolution vibration,
+remount error, time-stamp jitter, and the tangential acceleration of a rippling
+table with the IMU off the axis.
+
+Each sensor output is compared with a value computed by hand from the effect's
+definition (docs/simulation.md).  Exact identities are checked at a few ulps of
+the largest quantity involved; statistical ones at 99.9 % chi-square bounds.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+from scipy.spatial.transform import Rotation
+
+from sim_devices import world
+from sim_devices.bench import SimulatedBench
+from sim_devices.truth import (BenchSettings, TemperatureTruth, Truth, TriadTruth,
+                               mems_truth)
+from sim_devices.world import ARCSEC, G_STANDARD, MICRO_G, OMEGA_EARTH
+
+EPS = np.finfo(float).eps
+SIX_UPS = [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]]
+
+
+def perfect_truth(warmup_delta_c: float = 0.0, **bench) -> Truth:
+    """Ideal sensors, no noise, perfect table, IMU on the axis."""
+    settings = dict(table_angle_error_arcsec=0.0, lever_arm_m=[0.0, 0.0, 0.0])
+    settings.update(bench)
+    return Truth(accel=TriadTruth(noise_density=0.0), gyro=TriadTruth(noise_density=0.0),
+                 temperature=TemperatureTruth(warmup_delta_c=warmup_delta_c),
+                 bench=BenchSettings(**settings))
+
+
+def earth_along(seg, latitude_deg=45.0) -> float:
+    """Earth rate along the rotation's (Earth-fixed) table axis, deg/s."""
+    return math.degrees(float(np.dot(world.earth_rate_enu(latitude_deg), seg.truth["axis_enu"])))
+
+
+def test_new_hidden_effects_yaml_round_trip(tmp_path):
+    truth = mems_truth(5)
+    truth.accel.scale_asymmetry_ppm = np.array([300.0, -200.0, 500.0])
+    truth.accel.scale_tempco_ppm_per_c = np.array([20.0, -10.0, 5.0])
+    truth.accel.bias_step = np.array([500.0, 0.0, -300.0])
+    truth.accel.bias_step_time_s = 600.0
+    truth.gyro.scale_tempco_ppm_per_c = np.array([-30.0, 40.0, 0.0])
+    truth.gyro.bias_step = np.array([0.0, 20.0, 0.0])
+    truth.gyro.bias_step_time_s = 1200.0
+    truth.gyro.rate_squared_ppm_per_dps = np.array([4.0, -3.0, 5.0])
+    truth.gyro.anisoelastic_dph_per_g2 = np.arange(18.0).reshape(3, 6) - 9.0
+    truth.bench.vibration_mg = np.array([1.0, -0.5, 2.0])
+    truth.bench.vibration_phase_deg = 30.0
+    truth.bench.remount_error_arcsec = 3600.0
+    truth.bench.remount_rotations = True
+    truth.bench.time_stamp_jitter_ms = 1.0
+    path = tmp_path / "t.yaml"
+    truth.to_yaml(path)
+    back = Truth.from_yaml(path)
+    assert back.to_yaml_dict() == truth.to_yaml_dict()
+
+
+def test_gyro_rate_squared_term_plus_minus_rotations():
+    """gyro_x = k (w + E) + k q 1e-6 (w + E)^2 at every sample of a steady rotation about x (E:
+    Earth rate along the axis); the +- pair's sum is 2 k E + 2 k q 1e-6 (w^2 + E^2).  At
+    q = 4 ppm/(deg/s) and 100 deg/s the term is 0.04 deg/s = 144 deg/h."""
+    truth = perfect_truth()
+    k, q, w = 1.0007, 4.0, 100.0
+    truth.gyro.scale = np.array([k, 1.0, 1.0])
+    truth.gyro.rate_squared_ppm_per_dps = np.array([q, -3.0, 5.0])
+    bench = SimulatedBench(truth, seed=1)
+    plus = bench.rotation([1, 0, 0], w, 3.6)
+    minus = bench.rotation([1, 0, 0], -w, 3.6)
+    E = earth_along(plus)
+    tol = 64 * EPS * w
+    np.testing.assert_allclose(plus.gyro[:, 0], k * (w + E) + k * q * 1e-6 * (w + E) ** 2,
+                               rtol=0, atol=tol)
+    np.testing.assert_allclose(minus.gyro[:, 0], k * (-w + E) + k * q * 1e-6 * (w - E) ** 2,
+                               rtol=0, atol=tol)
+    s = plus.gyro[:, 0].mean() + minus.gyro[:, 0].mean()
+    assert s == pytest.approx(2 * k * E + 2 * k * q * 1e-6 * (w * w + E * E), abs=tol)
+    assert k * q * 1e-6 * w * w * 3600.0 == pytest.approx(144.1, abs=0.1)   # deg/h, by hand
+
+
+def test_accel_scale_asymmetry_plus_minus_one_g():
+    """+-1 g statics: accel_i = k (+-g) + k A 1e-6 g, so the sum is 2 k A 1e-6 g and the
+    difference 2 k g (an even term, like the gyro's asymmetry)."""
+    truth = perfect_truth()
+    A = np.array([300.0, -200.0, 500.0])
+    k = np.array([1.0008, 0.9993, 1.0004])
+    truth.accel.scale_asymmetry_ppm = A
+    truth.accel.scale = k
+    bench = SimulatedBench(truth, 0)
+    segs = [bench.static(u, 0.1) for u in SIX_UPS]
+    g = bench.gravity_mps2
+    tol = 16 * EPS * g
+    for i in range(3):
+        plus, minus = segs[2 * i].accel[:, i], segs[2 * i + 1].accel[:, i]
+        np.testing.assert_allclose(plus + minus, 2 * k[i] * A[i] * 1e-6 * g, rtol=0, atol=tol)
+        np.testing.assert_allclose(plus - minus, 2 * k[i] * g, rtol=0, atol=tol)
+    # 500 ppm of 1 g: 0.5 mg on +z and -z alike (1.0004 * 500e-6 * 9.80620 / 9.80665e-6)
+    assert k[2] * A[2] * 1e-6 * g / MICRO_G == pytest.approx(500.18, abs=0.01)
+
+
+def test_anisoelastic_gyro_term_at_45_degrees():
+    """Static, up = (x + y)/sqrt 2: F = (g/g0)(1, 1, 0)/sqrt 2, so the products (xx, yy, zz, xy,
+    xz, yz) are (g/g0)^2 (1/2, 1/2, 0, 1/2, 0, 0) and gyro i adds
+    (N_i,xx + N_i,yy + N_i,xy)/2 (g/g0)^2 deg/h over the Earth rate; up = z adds N_i,zz."""
+    truth = perfect_truth()
+    N = np.array([[10.0, 20.0, 30.0, 40.0, 50.0, 60.0],
+                  [-5.0, 15.0, 0.0, -25.0, 35.0, 0.0],
+                  [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]])
+    truth.gyro.anisoelastic_dph_per_g2 = N
+    bench = SimulatedBench(truth, 0)
+    diag, up_z = bench.static([1, 1, 0], 0.1), bench.static([0, 0, 1], 0.1)
+    g2 = (bench.gravity_mps2 / G_STANDARD) ** 2
+    tol = 64 * EPS * 3600.0
+    extra = (diag.gyro - diag.truth["w_ib_dps"]) * 3600.0
+    np.testing.assert_allclose(extra, np.tile(0.5 * (N[:, 0] + N[:, 1] + N[:, 3]) * g2,
+                                              (len(diag.t), 1)), rtol=0, atol=tol)
+    extra = (up_z.gyro - up_z.truth["w_ib_dps"]) * 3600.0
+    np.testing.assert_allclose(extra, np.tile(N[:, 2] * g2, (len(up_z.t), 1)), rtol=0, atol=tol)
+    # by hand for gyro x at 45 deg: (10 + 20 + 40)/2 = 35 deg/h (times (g/g0)^2 = 0.99991)
+    assert extra.shape[1] == 3 and 0.5 * (N[0, 0] + N[0, 1] + N[0, 3]) * g2 == pytest.approx(35.0, abs=0.01)
+
+
+def test_temperature_dependent_scale_factor():
+    """k_i(T) = k_i (1 + s_i 1e-6 (T - T_ref)): the +x static reads k g (1 + s dT) and the x gyro
+    of a rotation k (w + E)(1 + s dT), with T the temperature written in each sample."""
+    truth = perfect_truth(warmup_delta_c=6.0)
+    truth.temperature.warmup_time_constant_s = 60.0
+    sa, sg = np.array([50.0, -20.0, 10.0]), np.array([-100.0, 30.0, 0.0])
+    truth.accel.scale_tempco_ppm_per_c, truth.gyro.scale_tempco_ppm_per_c = sa, sg
+    k = 1.0003
+    truth.accel.scale = truth.gyro.scale = np.array([k, 1.0, 1.0])
+    bench = SimulatedBench(truth, 0)
+    stat = bench.static([1, 0, 0], 30.0)
+    rot = bench.rotation([1, 0, 0], 100.0, 3.6)
+    g = bench.gravity_mps2
+    dT = stat.temp - truth.temperature.reference_c
+    assert np.ptp(dT) > 1.0                            # the temperature really changes
+    np.testing.assert_allclose(stat.accel[:, 0], k * g * (1 + sa[0] * 1e-6 * dT), rtol=0,
+                               atol=16 * EPS * g)
+    dT = rot.temp - truth.temperature.reference_c
+    E = earth_along(rot)
+    np.testing.assert_allclose(rot.gyro[:, 0], k * (100.0 + E) * (1 + sg[0] * 1e-6 * dT),
+                               rtol=0, atol=64 * EPS * 100.0)
+    # by hand: -100 ppm/degC at 100 deg/s over 5 degC is -0.05 deg/s
+    assert -100e-6 * 100.0 * 5.0 == pytest.approx(-0.05)
+
+
+def test_bias_step_at_a_given_time():
+    """Statics 10 s long, 15 s apart (move + settle): table times [15, 25], [40, 50], [65, 75],
+    and one 20 s long over [90, 110].  A step at 50 s and one at 100 s: the first two statics
+    read the bias, the third bias + step, the fourth changes within the segment at 100 s."""
+    truth = perfect_truth()
+    truth.accel.bias_step, truth.accel.bias_step_time_s = np.array([500.0, -300.0, 0.0]), 50.0
+    truth.gyro.bias_step, truth.gyro.bias_step_time_s = np.array([0.0, 0.0, 20.0]), 100.0
+    bench = SimulatedBench(truth, 0)
+    segs = [bench.static([0, 0, 1], 10.0) for _ in range(3)] + [bench.static([0, 0, 1], 20.0)]
+    g = bench.gravity_mps2
+    tol = 16 * EPS * g
+    base_a = segs[0].accel[0]
+    base_g = 0.0           # the gyros read the Earth rate (heading-dependent) plus the steps
+    np.testing.assert_allclose(segs[1].accel - base_a, 0.0, atol=tol)
+    np.testing.assert_allclose(segs[2].accel - base_a, np.tile([500e-6 * G_STANDARD, -300 * MICRO_G, 0.0],
+                                                               (len(segs[2].t), 1)), rtol=0, atol=tol)
+    for seg in segs[:3]:
+        np.testing.assert_allclose(seg.gyro - seg.truth["w_ib_dps"], 0.0, atol=1e-15)
+    last = segs[3]
+    last.gyro = last.gyro - last.truth["w_ib_dps"]
+    after = last.t >= 100.0
+    assert 0 < after.sum() < len(last.t)
+    np.testing.assert_allclose(last.gyro[~after] - base_g, 0.0, atol=1e-15)
+    np.testing.assert_allclose(last.gyro[after, 2] - base_g, 20.0 / 3600.0, rtol=0, atol=1e-15)
+    with pytest.raises(ValueError, match="sample times"):
+        truth.measure(np.zeros((1, 3)), np.zeros((1, 3)), 25.0, None)
+
+
+def test_once_per_revolution_vibration():
+    """A perfect table with a horizontal axis and the IMU centred: along the axis gravity gives
+    nothing, so the axis accelerometer reads A_axis cos(theta + phase) exactly (2 mg -> 0.0196
+    m/s^2), and the specific force along local up is g + A_ref cos(theta + phase).  Statics do
+    not vibrate."""
+    truth = perfect_truth(vibration_mg=[2.0, 1.0, -0.5], vibration_phase_deg=40.0)
+    bench = SimulatedBench(truth, 3)
+    w = 30.0
+    seg = bench.rotation([0, 0, 1], w, 24.0)
+    tau = seg.t - seg.t[0]
+    arg = np.radians(w) * tau + math.radians(40.0)
+    g0 = G_STANDARD
+    tol = 64 * EPS * bench.gravity_mps2
+    np.testing.assert_allclose(seg.accel[:, 2], 2.0e-3 * g0 * np.cos(arg), rtol=0, atol=tol)
+    # specific force in ENU: back through the attitude
+    C_bn = world.table_attitude(Rotation.from_matrix(seg.truth["C_bn0"]), seg.truth["axis_enu"],
+                                np.radians(w) * tau)
+    f_n = C_bn.inv().apply(seg.accel)
+    np.testing.assert_allclose(f_n[:, 2], bench.gravity_mps2 + 1.0e-3 * g0 * np.cos(arg),
+                               rtol=0, atol=tol)
+    # its first harmonic at the rotation frequency has the amplitude 2 mg (2 whole turns)
+    spec = np.fft.rfft(seg.accel[:, 2]) * 2 / len(tau)
+    assert abs(spec[2]) == pytest.approx(2.0e-3 * g0, rel=1e-9)
+    stat = bench.static([0, 0, 1], 1.0)
+    np.testing.assert_allclose(stat.accel, np.tile([0, 0, bench.gravity_mps2], (len(stat.t), 1)),
+                               atol=tol)
+
+
+def test_remount_error_per_static_segment():
+    """Each static attitude gets an extra rotation delta (sigma per axis = remount_error_arcsec):
+    a perfect accelerometer reads g Rot(delta) up exactly; the deltas have the stated spread
+    (99.9 % chi-square bounds on 3 x 200 draws); rotations are not remounted."""
+    sigma = 3600.0
+    truth = perfect_truth(remount_error_arcsec=sigma)
+    bench = SimulatedBench(truth, 5)
+    ref = SimulatedBench(perfect_truth(), 5)
+    deltas = []
+    for k in range(200):
+        up = SIX_UPS[k % 6]
+        seg = bench.static(up, 0.01)
+        ref_seg = ref.static(up, 0.01)
+        d = seg.truth["remount_error_rad"]
+        deltas.append(d)
+        np.testing.assert_allclose(seg.accel[0] / bench.gravity_mps2,
+                                   Rotation.from_rotvec(d).apply(up), rtol=0, atol=16 * EPS)
+        np.testing.assert_array_equal(ref_seg.truth["heading_deg"], seg.truth["heading_deg"])
+    x = np.array(deltas).ravel() / ARCSEC
+    n = len(x)
+    chi2 = np.sum(x**2) / sigma**2
+    assert stats.chi2.ppf(0.0005, n) < chi2 < stats.chi2.ppf(0.9995, n)
+    rot, rot_ref = bench.rotation([1, 0, 0], 10.0, 1.0), ref.rotation([1, 0, 0], 10.0, 1.0)
+    np.testing.assert_array_equal(rot.truth["attitude_error_rad"], rot_ref.truth["attitude_error_rad"])
+
+
+def test_remount_of_rotation_segments():
+    """With remount_rotations each rotation segment (each half of a +/- pair) starts from the
+    pair's attitude turned by its own placement error delta: a perfect gyro triad then reads
+    the table rate about Rot(delta) axis_body, i.e. 1 deg off the axis gives a cross-axis rate
+    of w sin(1 deg) = 1.7 % of the rate; without the flag rotations are not remounted."""
+    truth = perfect_truth(remount_error_arcsec=3600.0, remount_rotations=True)
+    bench = SimulatedBench(truth, 6)
+    w = 20.0
+    plus, minus = bench.rotation([1, 0, 0], w, 3.0), bench.rotation([1, 0, 0], -w, 3.0)
+    d_p, d_m = plus.truth["remount_error_rad"], minus.truth["remount_error_rad"]
+    assert np.all(d_p != d_m) and np.all(d_p != 0.0)
+    for seg, rate, d in ((plus, w, d_p), (minus, -w, d_m)):
+        axis = Rotation.from_rotvec(d).apply([1.0, 0.0, 0.0])
+        np.testing.assert_allclose(seg.truth["axis_body_true"], axis, rtol=0, atol=16 * EPS)
+        table = seg.gyro - np.degrees(np.array([Rotation.from_matrix(seg.truth["C_bn0"]).apply(
+            world.earth_rate_enu(45.0))]))           # the Earth rate turns with the body: bounded
+        np.testing.assert_allclose(table.mean(axis=0), rate * axis, rtol=0,
+                                   atol=2 * math.degrees(OMEGA_EARTH))
+    assert abs(w * math.sin(math.radians(1.0))) == pytest.approx(0.349, abs=1e-3)   # deg/s
+    off = SimulatedBench(perfect_truth(remount_error_arcsec=3600.0), 6)
+    np.testing.assert_array_equal(off.rotation([1, 0, 0], w, 3.0).truth["remount_error_rad"], 0.0)
+
+
+def test_time_stamp_jitter():
+    """Stamps = nominal times + N(0, sigma): the samples are those of the jitter-free bench
+    (taken on the regular grid), the stamps scatter with the stated sigma (99.9 % chi-square
+    bounds), and the encoder angle, taken over the window the station computes from the first
+    and last stamp, changes by rate x (eps_last - eps_first)."""
+    sigma_ms = 1.0
+    bench = SimulatedBench(perfect_truth(time_stamp_jitter_ms=sigma_ms), 2)
+    ref = SimulatedBench(perfect_truth(), 2)
+    w = 50.0
+    seg, seg0 = bench.rotation([0, 1, 0], w, 60.0), ref.rotation([0, 1, 0], w, 60.0)
+    np.testing.assert_array_equal(seg.accel, seg0.accel)
+    np.testing.assert_array_equal(seg.gyro, seg0.gyro)
+    eps = seg.t - seg0.t
+    n = len(eps)
+    chi2 = np.sum(eps**2) / (sigma_ms * 1e-3) ** 2
+    assert stats.chi2.ppf(0.0005, n) < chi2 < stats.chi2.ppf(0.9995, n)
+    assert np.all(np.diff(seg.t) > 0)
+    assert seg.meta["angle_deg"] - seg0.meta["angle_deg"] == pytest.approx(
+        w * (eps[-1] - eps[0]), abs=1e-9)
+    st, st0 = bench.static([1, 0, 0], 5.0), ref.static([1, 0, 0], 5.0)
+    np.testing.assert_array_equal(st.accel, st0.accel)
+    assert np.std(st.t - st0.t) > 0.3e-3
+
+
+def test_tangential_acceleration_of_a_rippling_table_off_axis():
+    """Vertical table axis along body z, IMU 5 cm off the axis along body x, rate
+    w (1 + rho sin(2 pi f tau + psi)): a perfect accelerometer reads
+        x: -theta_dot^2 r  (centripetal),  y: theta_ddot r  (tangential, z x x = y),  z: g
+    with theta_ddot = w rho 2 pi f cos(2 pi f tau + psi).  By hand: 10 deg/s, rho = 0.2, 1 Hz,
+    5 cm -> peak tangential 0.1745 * 0.2 * 6.283 * 0.05 = 0.01097 m/s^2 = 1.12 mg."""
+    r = 0.05
+    truth = perfect_truth(lever_arm_m=[r, 0.0, 0.0], rate_ripple_fraction=0.2, rate_ripple_hz=1.0)
+    bench = SimulatedBench(truth, 4)
+    seg = bench.rotation([0, 0, 1], 10.0, 5.0, axis_elevation_deg=90.0)
+    tau = seg.t - seg.t[0]
+    psi = seg.truth["ripple_phase_rad"]
+    w = math.radians(10.0)
+    arg = 2 * np.pi * tau + psi
+    theta_dot = w * (1 + 0.2 * np.sin(arg))
+    theta_ddot = w * 0.2 * 2 * np.pi * np.cos(arg)
+    tol = 64 * EPS * bench.gravity_mps2
+    np.testing.assert_allclose(seg.accel[:, 1], theta_ddot * r, rtol=0, atol=tol)
+    np.testing.assert_allclose(seg.accel[:, 0], -theta_dot**2 * r, rtol=0, atol=tol)
+    np.testing.assert_allclose(seg.accel[:, 2], bench.gravity_mps2, rtol=0, atol=tol)
+    assert np.abs(seg.accel[:, 1]).max() == pytest.approx(0.01097, rel=2e-3)
+    assert np.abs(seg.accel[:, 1]).max() / MICRO_G == pytest.approx(1119.0, rel=2e-3)
+    # Earth rate reaches the gyros, not the accelerometers (Coriolis neglected, < 0.2 ug)
+    assert seg.gyro[:, 2].mean() == pytest.approx(10.0 + math.degrees(OMEGA_EARTH) * math.sin(
+        math.radians(45.0)), abs=1e-3)
+
+
+def test_the_imu_twin_applies_the_bias_step_at_its_device_time():
+    """The IMU twin passes its device time to Truth.measure: a gyro step at 5 s shows in the
+    samples at t >= 5 s only (the table at rest at 0 deg, ideal sensors)."""
+    from sim_devices.twins.clock import ManualClock
+    from sim_devices.twins.geometry import TableGeometry
+    from sim_devices.twins.imu import ImuTwin
+    from sim_devices.twins.table import TableTwin
+
+    truth = perfect_truth()
+    truth.gyro.bias_step, truth.gyro.bias_step_time_s = np.array([0.0, 36.0, 0.0]), 5.0
+    clock = ManualClock()
+    table = TableTwin(TableGeometry.default(1, truth.bench.lever_arm_m), clock,
+                      interlocks_closed=True)
+    imu = ImuTwin(table, truth)
+    clock.advance(10.0)
+    t = np.array([4.0, 4.99, 5.0, 9.0])
+    _, gyro, _ = imu.measure(t)
+    earth = np.degrees(world.Site(45.0).earth_rate_enu)       # table at 0 deg: body = ENU
+    np.testing.assert_allclose(gyro - earth, [[0, 0, 0], [0, 0, 0], [0, 0.01, 0], [0, 0.01, 0]],
+                               rtol=0, atol=1e-15)
