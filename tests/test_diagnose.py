@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
+import simhelpers
 from station.simulate import dryrun
 from station.cli import main
 from station.diagnose import auto
@@ -17,13 +18,7 @@ FAST = {"rate_dps": 100.0, "rotation_s": 36.0}     # optimal9 with rotations fas
 
 
 def capture_with(seed=3, **hidden):
-    truth = dryrun.load_truth(None, 0)
-    for path, value in hidden.items():
-        obj = truth
-        *parents, leaf = path.split("__")
-        for p in parents:
-            obj = getattr(obj, p)
-        setattr(obj, leaf, value)
+    truth = simhelpers.hide(dryrun.load_truth(None, 0), **hidden)
     return truth, dryrun.simulate_capture(load_scheme("optimal9", FAST), truth, seed)
 
 
@@ -92,16 +87,7 @@ def test_cli_json_and_report(tmp_path, capsys):
 
 
 def mems_capture(seed=3, **hidden):
-    from sim_devices.truth import mems_truth
-
-    truth = mems_truth(0)
-    for path, value in hidden.items():
-        obj = truth
-        *parents, leaf = path.split("__")
-        for p in parents:
-            obj = getattr(obj, p)
-        setattr(obj, leaf, np.asarray(value, float) if isinstance(value, list) else value)
-    return truth, dryrun.simulate_capture(load_scheme("optimal9", FAST), truth, seed)
+    return simhelpers.mems_capture(seed, overrides=FAST, **hidden)
 
 
 MEMS_EFFECTS = {

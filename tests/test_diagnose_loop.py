@@ -12,27 +12,15 @@ from station.diagnose import auto, terms
 from station.diagnose.core import ALPHA, diagnose
 from station.diagnose.holdout import leave_one_segment_out
 from station.estimate import lsq
-from station.io.scheme import load_scheme
 from station.model.registry import EffectRegistry
-from station.simulate import dryrun
+import simhelpers
 
 C_UG = [[0.0, 2000.0, -1500.0], [1800.0, 0.0, 1200.0], [-1600.0, 1400.0, 0.0]]
 
 
 def mems(seed=3, rate=100.0, out=None, **hidden):
-    from sim_devices.truth import mems_truth
-
-    truth = mems_truth(0)
-    for path, value in hidden.items():
-        obj = truth
-        *parents, leaf = path.split("__")
-        for p in parents:
-            obj = getattr(obj, p)
-        setattr(obj, leaf, np.asarray(value, float) if isinstance(value, list) else value)
-    scheme = load_scheme("optimal9", {"rate_dps": rate, "rotation_s": max(36.0, 360.0 / rate)})
-    if out is not None:
-        return truth, dryrun.record_scheme(scheme, truth, seed, out)
-    return truth, dryrun.simulate_capture(scheme, truth, seed)
+    overrides = {"rate_dps": rate, "rotation_s": max(36.0, 360.0 / rate)}
+    return simhelpers.mems_capture(seed, overrides=overrides, out=out, **hidden)
 
 
 def band(dof):

@@ -12,12 +12,11 @@ from station.diagnose import auto
 from station.estimate import lsq
 from station.io.calfile import compensation_effects, read_calfile, write_calfile
 from station.io.capture import read_capture
-from station.io.scheme import load_scheme
 from station.model import LIBRARY
 from station.model.compensate import compensate_with_effects
 from station.model.effect import SampleContext
 from station.model.registry import EffectRegistry
-from station.simulate import dryrun
+import simhelpers
 
 ROOT = Path(__file__).resolve().parents[1]
 CROSS = f"{ROOT / 'examples/effects/accel_cross_coupling.py'}:AccelCrossCoupling"
@@ -27,19 +26,7 @@ C_UG = [[0.0, 2000.0, -1500.0], [1800.0, 0.0, 1200.0], [-1600.0, 1400.0, 0.0]]
 
 
 def mems_capture(seed=3, scheme="optimal9", out=None, **hidden):
-    """A simulated MEMS capture: in memory, or recorded as a bundle into ``out``."""
-    from sim_devices.truth import mems_truth
-
-    truth = mems_truth(0)                    # a MEMS IMU (noise, sizes: docs/simulation.md)
-    for path, value in hidden.items():
-        obj = truth
-        *parents, leaf = path.split("__")
-        for p in parents:
-            obj = getattr(obj, p)
-        setattr(obj, leaf, np.asarray(value, float) if isinstance(value, list) else value)
-    if out is not None:
-        return truth, dryrun.record_scheme(load_scheme(scheme, FAST), truth, seed, out)
-    return truth, dryrun.simulate_capture(load_scheme(scheme, FAST), truth, seed)
+    return simhelpers.mems_capture(seed, scheme, FAST, out, **hidden)
 
 
 # --- loading ------------------------------------------------------------------------------------

@@ -181,7 +181,7 @@ def search(result, max_terms: int = MAX_TERMS) -> list[Found]:
     x = np.concatenate([result.x, np.zeros(len(candidates))])
     r = extended.residuals(x)
     cols = list(range(n, n + len(candidates)))
-    Jc = _linear_columns(extended, x, cols)             # d(residual)/d(coefficient)
+    Jc = extended.jacobian_columns(x, cols)             # d(residual)/d(coefficient)
     basis = model_basis(result)
     Jp = Jc - basis @ (basis.T @ Jc)
     m = len(candidates)
@@ -212,17 +212,6 @@ def search(result, max_terms: int = MAX_TERMS) -> list[Found]:
         r = r - q * (q @ r)
         Jp = Jp - np.outer(q, q @ Jp)
     return found
-
-
-def _linear_columns(model, x, cols) -> np.ndarray:
-    """Columns of a model linear in these parameters: unit steps are exact (no truncation error)."""
-    r0 = model.residuals(x)
-    J = np.empty((len(r0), len(cols)))
-    for k, c in enumerate(cols):
-        xp = x.copy()
-        xp[c] += 1.0
-        J[:, k] = model.residuals(xp) - r0
-    return J
 
 
 def refit(summaries, result, found: list[Found]):
