@@ -6,7 +6,7 @@ worse where it is used:
      candidates, with a plausible size (station.diagnose.core);
   2. out of sample: with it, the other segments predict each left-out segment better (the
      leave-one-segment-out score of station.diagnose.holdout falls);
-  3. it explains the failure: when the fit failed, the chi2 drop is at least MIN_SHARE of the
+  3. it explains the failure: when the fit failed, the chi2 drop is at least MIN_SHARE (half) of the
      excess misfit (chi2 - dof); a smaller drop "reduces chi2 but does not explain the failure".
 Candidates that fail are reported with the reason and the next one is tried (at most
 MAX_TRIES per step).
@@ -108,6 +108,10 @@ def conclude(d: Diagnosis, summaries, steps=(), search_terms: bool = True) -> Di
 
         d.proposal = terms.propose(d, summaries)
     head = f"the model does not explain the data{added} (reduced chi2 {d.reduced_chi2:.3g})"
+    specific = [f for f in d.failures if "a step in time" in f or "was moved or remounted" in f
+                or "drift steadily with time" in f]
+    if specific:
+        head += f"; first look at this: {specific[0]}"
     if d.rejected:
         head += f"; tried and not kept: {', '.join(r.effect for r in d.rejected)}"
     prop = d.proposal

@@ -34,8 +34,7 @@ def describe_failures(result, labels, segs, fails: bool = False) -> list[str]:
         pattern = _pattern(sensor, kind, rows, s)
         out.append(f"{sensor}, {kind} segments {only}: residuals {rms:.1f} times the noise"
                    f"{'; ' + pattern if pattern else ''}; worst: {where}")
-    out += _time_patterns(result, segs)
-    out += _moved_axes(result)
+    out = _moved_axes(result) + _time_patterns(result, segs) + out      # specific causes first
     if fails and not out:
         out.append(_spread_everywhere(groups))
     return out
