@@ -109,3 +109,29 @@ def test_over_dispersion_and_words_when_everything_is_a_little_off():
     assert any("no single segment kind stands out" in f for f in final.failures)
     assert not steps, [st.added for st in steps]
     assert final.notes and "over-dispersion" in final.notes[0]
+
+
+def test_a_once_per_revolution_vibration_is_not_taken_for_the_size_effect():
+    """At one rate a vibration fixed to the table's turn is fitted in part by the size effect,
+    whose rate² extrapolation is wrong elsewhere: it explains too little of the excess to be kept,
+    and the verdict says the model still fails."""
+    _, capture = mems(bench__vibration_mg=[1.0, 0.0, 1.0], bench__vibration_phase_deg=30.0)
+    steps, final = auto.run(lsq.summarise(capture))
+    assert "accel_lever_arm" not in [st.added for st in steps], [st.added for st in steps]
+    assert final.p_value < ALPHA / 10 and "does not explain" in final.verdict
+    assert final.failures and "accelerometer, rotation segments" in " ".join(final.failures)
+
+
+def test_a_bias_step_is_named_as_a_step_in_time_and_not_fitted_by_an_effect():
+    _, capture = mems(accel__bias_step=[1000.0, -500.0, 0.0], accel__bias_step_time_s=300.0,
+                      gyro__bias_step=[0.0, 0.0, 100.0], gyro__bias_step_time_s=300.0)
+    steps, final = auto.run(lsq.summarise(capture))
+    assert not steps, [st.added for st in steps]
+    assert any("a step in time" in f for f in final.failures)
+    assert "first look at this" in final.verdict and "a step in time" in final.verdict
+
+
+def test_a_remount_between_the_two_directions_is_named():
+    _, capture = mems(bench__remount_error_arcsec=3600.0, bench__remount_rotations=True)
+    d = diagnose(lsq.fit(lsq.summarise(capture)))
+    assert any("was moved or remounted between the two directions" in f for f in d.failures[:3]), d.failures[:3]
