@@ -122,12 +122,15 @@ def test_a_once_per_revolution_vibration_is_not_taken_for_the_size_effect():
     assert final.failures and "accelerometer, rotation segments" in " ".join(final.failures)
 
 
-def test_a_bias_step_is_named_as_a_step_in_time_and_not_fitted_by_an_effect():
+def test_a_bias_step_is_named_as_a_step_in_time():
+    """A bias step during a warm-up: a bias linear in the (monotonic) temperature may take part
+    of it, but the words name the step and the failing verdict points to it first."""
     _, capture = mems(accel__bias_step=[1000.0, -500.0, 0.0], accel__bias_step_time_s=300.0,
                       gyro__bias_step=[0.0, 0.0, 100.0], gyro__bias_step_time_s=300.0)
+    first = diagnose(lsq.fit(lsq.summarise(capture)))
+    assert "a step in time" in first.failures[0], first.failures[:2]
     steps, final = auto.run(lsq.summarise(capture))
-    assert not steps, [st.added for st in steps]
-    assert any("a step in time" in f for f in final.failures)
+    assert final.p_value < ALPHA / 10
     assert "first look at this" in final.verdict and "a step in time" in final.verdict
 
 

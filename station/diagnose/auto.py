@@ -108,10 +108,16 @@ def conclude(d: Diagnosis, summaries, steps=(), search_terms: bool = True) -> Di
 
         d.proposal = terms.propose(d, summaries)
     head = f"the model does not explain the data{added} (reduced chi2 {d.reduced_chi2:.3g})"
-    specific = [f for f in d.failures if "a step in time" in f or "was moved or remounted" in f
+    def specific(failures):
+        return [f for f in failures if "a step in time" in f or "was moved or remounted" in f
                 or "drift steadily with time" in f]
-    if specific:
-        head += f"; first look at this: {specific[0]}"
+
+    now = specific(d.failures)
+    first = specific(steps[0].before.failures) if steps else []
+    if now:
+        head += f"; first look at this: {now[0]}"
+    elif first:
+        head += f"; first look at this (seen before any effect was added): {first[0]}"
     if d.rejected:
         head += f"; tried and not kept: {', '.join(r.effect for r in d.rejected)}"
     prop = d.proposal
