@@ -142,3 +142,18 @@ class Port:
             if time.monotonic() >= deadline:
                 raise DeviceTimeout(self.name, f"no reply to {what} within {timeout:g} s")
             buf += self.read_some()
+
+    def read_exact(self, n: int, timeout_s: float | None, what: str,
+                   buffer: bytearray | None = None) -> bytes:
+        """Exactly ``n`` bytes (extra bytes stay in ``buffer``); DeviceTimeout naming ``what``."""
+        buf = buffer if buffer is not None else bytearray()
+        timeout = self.settings.timeout_s if timeout_s is None else timeout_s
+        deadline = time.monotonic() + timeout
+        while len(buf) < n:
+            if time.monotonic() >= deadline:
+                raise DeviceTimeout(self.name, f"no reply to {what} within {timeout:g} s "
+                                               f"({len(buf)} of {n} bytes)")
+            buf += self.read_some()
+        out = bytes(buf[:n])
+        del buf[:n]
+        return out

@@ -14,21 +14,27 @@ from sim_devices.truth import default_truth
 from sim_devices.twins.serve import BenchOptions, BenchServer
 from station.core.errors import UserError
 
-# (protocol, axes)
-TABLES = [("acutrol", 1), ("acutrol", 2), ("acutrol", 3), ("aerosmith", 1)]
+# (protocol, axes, transport): acutrol over a pseudo-terminal with the TCP reply framing (RS-232
+# through the DE-311, TM-9411), with the GPIB framing (replies to queries only), and over TCP
+# on 127.0.0.1 (TM-9384C)
+TABLES = [("acutrol", 1, "pty"), ("acutrol", 2, "gpib"), ("acutrol", 3, "tcp"), ("aerosmith", 1, "pty")]
 SPEED = 50.0
 
 
-@pytest.fixture(params=TABLES, ids=[f"{p}-{n}ax" for p, n in TABLES])
+@pytest.fixture(params=TABLES, ids=[f"{p}-{n}ax-{t}" for p, n, t in TABLES])
 def bench(request):
-    protocol, axes = request.param
-    server = BenchServer(default_truth(3), BenchOptions(speed=SPEED, axes=axes, table_protocol=protocol))
+    protocol, axes, transport = request.param
+    server = BenchServer(default_truth(3), BenchOptions(
+        speed=SPEED, axes=axes, table_protocol=protocol,
+        table_framing="gpib" if transport == "gpib" else "tcp",
+        table_tcp_port=0 if transport == "tcp" else None))
+    server.url = server.table_path + ("#gpib" if transport == "gpib" else "")
     with server:
         yield server, protocol, axes
 
 
 def _open(server, protocol, **kw):
-    return open_table(server.table_path, protocol, TableSettings(**kw))
+    return open_table(server.url, protocol, TableSettings(**kw))
 
 
 def test_connect_identifies_and_counts_axes(bench):
@@ -181,7 +187,7 @@ def test_a_demand_refused_for_an_open_interlock_is_a_table_fault(bench):
             with pytest.raises(NotSupported, match="front panel"):
                 table.open_interlocks()
             return
-        with pytest.raises(TableFault, match=r"':Mode:Rate 1;\*STB\?' refused: axis 1: interlock OPEN"):
+        with pytest.raises(TableFault, match=r"':Mode:Rate 1(;\*STB\?)?' refused \(error 4: .*\): axis 1: interlock OPEN"):
             table.set_rate(1, 10.0)
         table.close_interlocks([1])
         table.set_rate(1, 10.0)
@@ -196,4 +202,4 @@ def test_any_pyserial_url_spy_logs_the_exchange(tmp_path):
     with BenchServer(default_truth(3), BenchOptions(speed=SPEED, axes=2)) as server:
         with open_table(f"spy://{server.table_path}?file={log}") as table:
             assert table.n_axes == 2
-    assert "*IDN?;*STB?" in log.read_text()
+    assert "*IDN?" in log.read_text() and ":Query:System?" in log.read_text()

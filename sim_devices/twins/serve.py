@@ -22,6 +22,7 @@ from .imu import ImuTwin
 from .imu_csv import CsvFrontEnd
 from .imu_vectornav import VectorNavFrontEnd
 from .pty import PtyEndpoint
+from .tcp import TcpEndpoint
 from .table import TableConfig, TableTwin
 from .table_acutrol import AcutrolFrontEnd
 from .table_aerosmith import AerosmithFrontEnd
@@ -40,6 +41,8 @@ class BenchOptions:
     faults: Faults = field(default_factory=Faults)
     csv_format: CsvFormat = field(default_factory=CsvFormat)
     table_config: TableConfig = field(default_factory=TableConfig)
+    table_framing: str = "tcp"    # acutrol replies: "tcp" (error code, length first) or "gpib"
+    table_tcp_port: int | None = None   # serve the table on TCP 127.0.0.1:port (0: any free port)
     record: bool = False          # keep the times of the frames sent intact (tests)
 
 
@@ -66,7 +69,7 @@ class BenchServer:
         self.faulter = StreamFaulter(o.faults.imu, fault_rng,
                                      line_protocol=o.imu_protocol == "csv", record=o.record)
         if o.table_protocol == "acutrol":
-            self.table_frontend = AcutrolFrontEnd(self.table)
+            self.table_frontend = AcutrolFrontEnd(self.table, o.table_framing)
         else:
             self.table_frontend = AerosmithFrontEnd(self.table)
         if o.imu_protocol == "vectornav":
@@ -74,7 +77,7 @@ class BenchServer:
                                                   serial_number=f"01{o.seed:08d}"[-10:])
         else:
             self.imu_frontend = CsvFrontEnd(self.imu, self.faulter, o.csv_format)
-        self.table_port = PtyEndpoint()
+        self.table_port = PtyEndpoint() if o.table_tcp_port is None else TcpEndpoint(o.table_tcp_port)
         self.imu_port = PtyEndpoint()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
