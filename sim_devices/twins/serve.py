@@ -27,6 +27,13 @@ from .table import TableConfig, TableTwin
 from .table_acutrol import AcutrolFrontEnd
 from .table_aerosmith import AerosmithFrontEnd
 
+#: the IMU port's transmit buffer holds this much wall time of the stream (at least 8 KiB): a
+#: reader that keeps up on average never loses a frame to a scheduling pause, at any speed
+STREAM_BUFFER_WALL_S = 2.0
+MIN_STREAM_BUFFER = 8192
+#: frames per wall second above which frames go out every 20 ms (not every 5 ms)
+FAST_STREAM_HZ = 10000.0
+
 TABLE_PROTOCOLS = ("acutrol", "aerosmith")
 IMU_PROTOCOLS = ("vectornav", "csv")
 
@@ -118,16 +125,25 @@ class BenchServer:
             else:
                 before = self.faulter.frames_sent
                 frames = self.imu_frontend.produce(now)
+                if frames and self.faulter.frames_sent > before:
+                    self._size_stream_buffer(len(frames) / (self.faulter.frames_sent - before))
                 if frames and not self.imu_port.write(frames, droppable=True):
                     self.faulter.overflowed(self.faulter.frames_sent - before)
         for p in (self.table_port, self.imu_port):
             p.flush()
+
+    def _size_stream_buffer(self, bytes_per_frame: float) -> None:
+        """Transmit buffer for ``STREAM_BUFFER_WALL_S`` of the stream at the present speed."""
+        wanted = STREAM_BUFFER_WALL_S * self.clock.speed * self.imu.rate_hz * bytes_per_frame
+        self.imu_port.max_backlog = max(MIN_STREAM_BUFFER, int(wanted))
 
     def _timeout(self) -> float:
         """Until the next frame is due (wall s), within [5 ms, 20 ms]: frames go out in
         batches of at most 5 ms of wall time; commands are answered at once."""
         if not self.imu_frontend.streaming or self.imu.next_k is None:
             return 0.02
+        if self.imu.rate_hz * self.clock.speed >= FAST_STREAM_HZ:
+            return 0.02            # large batches: the cost of a batch is mostly per call
         wall = self.clock.wall_until(self.imu.next_k / self.imu.rate_hz)
         return min(0.02, max(0.005, wall))
 

@@ -15,7 +15,27 @@ import numpy as np
 
 from drivers.samples import ImuSamples
 
-BLOCK_S = 0.1            # device seconds per driver read
+BLOCK_S = 0.1            # device seconds per driver read (at least; more when they come fast)
+#: a read that comes back faster than this (wall s) doubles the block, one slower than
+#: SLOW_READ_S halves it: a twin at --speed 500 is read in large blocks (few Python calls per
+#: frame), hardware in blocks of BLOCK_S
+FAST_READ_S, SLOW_READ_S = 0.02, 0.1
+MAX_BLOCK = 2048         # frames per driver read, at most
+#: device time running this many times faster than wall time can only be a twin
+TWIN_SPEED_RATIO = 1.5
+
+
+def lost_frames_note(name: str, lost: int, device_s: float, wall_s: float) -> str:
+    """What to tell the operator about ``lost`` frames in ``device_s`` of device time read in
+    ``wall_s`` of wall time.  Device time far ahead of wall time is a twin at ``--speed``: one
+    that loses frames cannot keep up (too fast for this machine), which is said as such."""
+    ratio = device_s / wall_s if wall_s > 0 else float("inf")
+    if ratio > TWIN_SPEED_RATIO:
+        return (f"{name}: {lost} frames lost with device time running {ratio:.0f} x wall time: "
+                "the IMU twin and this reader cannot keep up at that speed; lower --speed of "
+                "station sim serve")
+    return (f"{name}: {lost} frames lost while recording (the window and the angle come from "
+            "the sample times)")
 
 
 class ImuStream:
@@ -38,9 +58,16 @@ class ImuStream:
         self._thread.start()
 
     def _run(self) -> None:
+        smallest = self._block
         try:
             while not self._stop.is_set():
+                t0 = time.monotonic()
                 block = self.imu.read(self._block)
+                took = time.monotonic() - t0
+                if took < FAST_READ_S:
+                    self._block = min(MAX_BLOCK, 2 * self._block)
+                elif took > SLOW_READ_S:
+                    self._block = max(smallest, self._block // 2)
                 with self._cond:
                     self._queue.append(block)
                     self._queued += len(block)

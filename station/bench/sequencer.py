@@ -25,7 +25,7 @@ import numpy as np
 
 from station.io.capture import CaptureWriter
 from station.core.errors import UserError
-from station.bench.imu_stream import ImuStream
+from station.bench.imu_stream import ImuStream, lost_frames_note
 from station.bench.plan import (Checkpoint, Dwell, HandRotation, HandStatic, MoveTo, Operator, Rotate, Settle,
                           WarmUp)
 
@@ -226,6 +226,7 @@ class Sequencer:
         with_temp = None
         first_t = last_t = None
         missing = self.stream.counters.missing_frames
+        wall0 = time.monotonic()
         while done < n:
             b = self._take(min(block_n, n - done))
             first_t = b.t_s[0] if first_t is None else first_t
@@ -248,8 +249,7 @@ class Sequencer:
         poll()
         lost = self.stream.counters.missing_frames - missing
         if lost:
-            self.display.note(f"{seg.name}: {lost} frames lost while recording (the window and the "
-                              "angle come from the sample times)")
+            self.display.note(lost_frames_note(seg.name, lost, float(last_t - first_t), time.monotonic() - wall0))
         return {"window_s": float(last_t - first_t) + 1.0 / self.rate_hz, "gaps": lost,
                 "temp": temp_sum / temp_n if temp_n else None}
 
