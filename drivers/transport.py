@@ -87,6 +87,13 @@ class Port:
     def is_open(self) -> bool:
         return bool(self._ser.is_open)
 
+    def set_baudrate(self, baudrate: int) -> None:
+        """Switch the line to ``baudrate`` (after the device was told to)."""
+        try:
+            self._ser.baudrate = int(baudrate)
+        except (serial.SerialException, OSError, ValueError) as e:
+            raise DeviceDisconnected(self.name, f"cannot switch to {baudrate} baud ({e})") from None
+
     def write(self, data: bytes) -> None:
         self.log.debug("%s <- %r", self.name, data)
         try:

@@ -46,6 +46,9 @@ def add_parsers(sub) -> None:
                        help="IMU device time to read, s (default 10)")
     probe.add_argument("--rate-hz", type=float, default=100.0, help="IMU output rate, Hz (default 100)")
     probe.add_argument("--csv-units", metavar="SPEC", default="", help="units of a csv IMU (see sim serve)")
+    probe.add_argument("--imu-baud", type=int, metavar="BAUD",
+                       help="vectornav: set the sensor's baud rate (register 05) after connecting, then "
+                            "talk at it (--baud is the rate it answers at first)")
     probe.add_argument("--table-port", metavar="URL",
                        help="rate-table port: device path, pyserial URL (socket://host:9878) or "
                             "visa://RESOURCE (GPIB0::1::INSTR); '#gpib'/'#tcp' chooses the acutrol framing")
@@ -117,7 +120,7 @@ def cmd_probe(args) -> int:
     if args.port:
         imu_driver(args.imu_protocol)
         settings = ImuSettings(serial=serial, rate_hz=args.rate_hz, frame_timeout_s=args.timeout_s,
-                               csv_format=_csv_format(args.csv_units))
+                               csv_format=_csv_format(args.csv_units), device_baud=args.imu_baud)
         report["imu"] = probe_imu(args.port, args.imu_protocol, args.seconds, settings)
     if args.json:
         print(json.dumps(report if len(report) == 2 else next(iter(report.values())), indent=2))
