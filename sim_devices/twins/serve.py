@@ -21,6 +21,7 @@ from .geometry import TableGeometry
 from .imu import ImuTwin
 from .imu_csv import CsvFrontEnd
 from .imu_vectornav import VectorNavFrontEnd
+from .imu_xsens import XsensFrontEnd
 from .pty import PtyEndpoint
 from .tcp import TcpEndpoint
 from .table import TableConfig, TableTwin
@@ -35,7 +36,7 @@ MIN_STREAM_BUFFER = 8192
 FAST_STREAM_HZ = 10000.0
 
 TABLE_PROTOCOLS = ("acutrol", "aerosmith")
-IMU_PROTOCOLS = ("vectornav", "csv")
+IMU_PROTOCOLS = ("vectornav", "csv", "xsens")
 
 
 @dataclass
@@ -82,6 +83,8 @@ class BenchServer:
         if o.imu_protocol == "vectornav":
             self.imu_frontend = VectorNavFrontEnd(self.imu, self.faulter,
                                                   serial_number=f"01{o.seed:08d}"[-10:])
+        elif o.imu_protocol == "xsens":
+            self.imu_frontend = XsensFrontEnd(self.imu, self.faulter)
         else:
             self.imu_frontend = CsvFrontEnd(self.imu, self.faulter, o.csv_format)
         self.table_port = PtyEndpoint() if o.table_tcp_port is None else TcpEndpoint(o.table_tcp_port)

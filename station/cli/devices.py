@@ -33,7 +33,7 @@ def add_parsers(sub) -> None:
     serve.add_argument("--table-tcp-port", type=int, metavar="PORT",
                        help="serve the table on TCP 127.0.0.1:PORT instead of a pseudo-terminal "
                             "(0: any free port; an Acutrol listens on 9878)")
-    serve.add_argument("--imu-protocol", choices=("vectornav", "csv"), default="vectornav")
+    serve.add_argument("--imu-protocol", choices=("vectornav", "csv", "xsens"), default="vectornav")
     serve.add_argument("--csv-units", metavar="SPEC", default="",
                        help="units of the csv twin, e.g. t=ms,accel=g,gyro=rad/s "
                             "(default t=s,accel=m/s^2,gyro=deg/s)")
@@ -41,7 +41,7 @@ def add_parsers(sub) -> None:
 
     probe = sub.add_parser("probe", help="read an IMU and/or a rate table and report")
     probe.add_argument("--port", metavar="URL", help="IMU port (device path or pyserial URL)")
-    probe.add_argument("--imu-protocol", default="vectornav", help="vectornav (default) or csv")
+    probe.add_argument("--imu-protocol", default="vectornav", help="vectornav (default), xsens or csv")
     probe.add_argument("--seconds", type=float, default=10.0,
                        help="IMU device time to read, s (default 10)")
     probe.add_argument("--rate-hz", type=float, default=100.0, help="IMU output rate, Hz (default 100)")
