@@ -183,18 +183,34 @@ def test_closed_port_and_unknown_protocol():
 def test_a_demand_refused_for_an_open_interlock_is_a_table_fault(bench):
     server, protocol, axes = bench
     with _open(server, protocol) as table:
-        if protocol == "aerosmith":             # enabled from power-up, no interlock commands
-            with pytest.raises(NotSupported, match="front panel"):
-                table.open_interlocks()
-            return
-        with pytest.raises(TableFault, match=r"':Mode:Rate 1(;\*STB\?)?' refused \(error 4: .*\): axis 1: interlock OPEN"):
-            table.set_rate(1, 10.0)
+        if protocol == "aerosmith":             # enabled from power-up; SRV0 opens it
+            table.open_interlocks([1])
+            with pytest.raises(TableFault, match=r"'JOG0.0000' refused: axis 1: interlock OPEN"):
+                table.set_rate(1, 10.0)
+        else:
+            with pytest.raises(TableFault, match=r"':Mode:Rate 1(;\*STB\?)?' refused \(error 4: .*\): "
+                                                 r"axis 1: interlock OPEN"):
+                table.set_rate(1, 10.0)
         table.close_interlocks([1])
         table.set_rate(1, 10.0)
         table.open_interlocks([1])
         assert table.status().mode[0] == "off"
         time.sleep(0.05)
         assert table.read_rates_dps()[0] == 0.0        # braked to rest
+
+
+def test_aerosmith_dialect_strings_are_data_and_9600_baud_is_the_default():
+    from drivers.aerosmith import AerosmithTable
+    from drivers.protocols import aerosmith as A
+    assert AerosmithTable("/dev/null").settings.serial.baudrate == 9600
+    cs = A.dialect((("move", "mpa"), ("position", "PPS")))
+    assert cs.format("move", 12.5) == "MPA12.5000" and cs.parse("pps")[0].name == "position"
+    with pytest.raises(ValueError, match="unknown aerosmith commands"):
+        A.dialect((("fly", "FLY"),))
+    with pytest.raises(ValueError, match="not three letters"):
+        A.dialect((("move", "MOVE"),))
+    with pytest.raises(LimitError, match="same string"):
+        AerosmithTable("/dev/null", TableSettings(dialect=(("move", "JOG"),)))
 
 
 def test_any_pyserial_url_spy_logs_the_exchange(tmp_path):

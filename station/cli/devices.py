@@ -53,7 +53,8 @@ def add_parsers(sub) -> None:
                        help="rate-table port: device path, pyserial URL (socket://host:9878) or "
                             "visa://RESOURCE (GPIB0::1::INSTR); '#gpib'/'#tcp' chooses the acutrol framing")
     probe.add_argument("--table-protocol", default="acutrol", help="acutrol (default) or aerosmith")
-    probe.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
+    probe.add_argument("--baud", type=int,
+                       help="baud rate (default 115200; 9600 for --table-protocol aerosmith)")
     probe.add_argument("--timeout-s", type=float, default=2.0,
                        help="longest wait for a reply or a frame, s (default 2)")
     probe.add_argument("--json", action="store_true", help="print JSON instead of text")
@@ -109,14 +110,17 @@ def cmd_probe(args) -> int:
     from drivers.registry import imu_driver, table_driver
     from drivers.transport import SerialSettings
 
-    try:
-        serial = SerialSettings(baudrate=args.baud, timeout_s=args.timeout_s)
-    except ValueError as e:
-        raise UserError(str(e)) from None
+    def line(default_baud):
+        try:
+            return SerialSettings(baudrate=args.baud or default_baud, timeout_s=args.timeout_s)
+        except ValueError as e:
+            raise UserError(str(e)) from None
+    serial = line(115200)
     report = {}
     if args.table_port:
         table_driver(args.table_protocol)            # an unknown name fails before any I/O
-        report["table"] = probe_table(args.table_port, args.table_protocol, TableSettings(serial=serial))
+        table_line = line(9600 if args.table_protocol == "aerosmith" else 115200)
+        report["table"] = probe_table(args.table_port, args.table_protocol, TableSettings(serial=table_line))
     if args.port:
         imu_driver(args.imu_protocol)
         settings = ImuSettings(serial=serial, rate_hz=args.rate_hz, frame_timeout_s=args.timeout_s,
