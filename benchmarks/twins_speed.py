@@ -73,7 +73,7 @@ def run(speed: float, seed: int, work: Path) -> str:
     params = read_calfile(out / "calibration.yaml")["parameters"]
     z = np.array([(params[n]["value"] - true) / params[n]["sigma"]
                   for n, true, _ in dryrun.truth_calibration(truth).parameters()])
-    keep_up = [line for line in proc.stderr.splitlines() if "cannot keep up" in line]
+    keep_up = [line for line in (proc.stdout + proc.stderr).splitlines() if "cannot keep up" in line]
     return (f"{wall:>7.1f} {device:>10.1f} {gaps:>5d} {overflowed:>10d} {np.abs(z).max():>7.2f}"
             + (f"  ({len(keep_up)} keep-up notes)" if keep_up else ""))
 

@@ -15,12 +15,8 @@ import numpy as np
 
 from drivers.samples import ImuSamples
 
-BLOCK_S = 0.1            # device seconds per driver read (at least; more when they come fast)
-#: a read that comes back faster than this (wall s) doubles the block, one slower than
-#: SLOW_READ_S halves it: a twin at --speed 500 is read in large blocks (few Python calls per
-#: frame), hardware in blocks of BLOCK_S
-FAST_READ_S, SLOW_READ_S = 0.02, 0.1
-MAX_BLOCK = 2048         # frames per driver read, at most
+BLOCK_S = 0.1            # device seconds per driver read: a block begun before a drain and
+                         # ended after it holds at most this much stale device time
 #: device time running this many times faster than wall time can only be a twin
 TWIN_SPEED_RATIO = 1.5
 
@@ -58,16 +54,9 @@ class ImuStream:
         self._thread.start()
 
     def _run(self) -> None:
-        smallest = self._block
         try:
             while not self._stop.is_set():
-                t0 = time.monotonic()
                 block = self.imu.read(self._block)
-                took = time.monotonic() - t0
-                if took < FAST_READ_S:
-                    self._block = min(MAX_BLOCK, 2 * self._block)
-                elif took > SLOW_READ_S:
-                    self._block = max(smallest, self._block // 2)
                 with self._cond:
                     self._queue.append(block)
                     self._queued += len(block)
