@@ -92,12 +92,17 @@ def test_set_rate_turns_the_axis_and_stop_brings_it_to_rest(bench):
         table.close_interlocks()
         rate = table.set_rate(axes, -25.0)
         assert abs(rate + 25.0) <= table.settings.rate_tolerance_dps
-        p0, t0 = table.read_positions_deg()[axes - 1], server.clock.now()
+        a0 = server.clock.now()
+        p0 = table.read_positions_deg()[axes - 1]
+        b0 = server.clock.now()
         time.sleep(0.05)
-        p1, t1 = table.read_positions_deg()[axes - 1], server.clock.now()
+        a1 = server.clock.now()
+        p1 = table.read_positions_deg()[axes - 1]
+        b1 = server.clock.now()
         swept = -angle_diff_deg(p1, p0)
-        # at speed 50, 50 ms wall = 2.5 s device: 62.5 deg, give or take the read latency
-        assert 25.0 * (t1 - t0) * 0.8 < swept < 25.0 * (t1 - t0) * 1.2
+        # each position was read at a device time between the clock readings around it
+        # (at speed 50, 50 ms wall = 2.5 s device: about 62.5 deg)
+        assert 25.0 * (a1 - b0) - 1e-3 < swept < 25.0 * (b1 - a0) + 1e-3
         assert table.status().mode[axes - 1] == "rate"
         rest = table.stop()
         assert np.all(np.abs(table.read_rates_dps()) <= table.settings.rate_tolerance_dps)
