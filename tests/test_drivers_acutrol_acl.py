@@ -259,3 +259,14 @@ def test_the_station_driver_through_pyvisa():
             assert table.read_accelerations_dps2()[0] == 0.0
             table.stop()
             assert server.table.axes[0].mode == "position"
+
+
+def test_the_station_driver_through_pyvisa_tcpip_socket():
+    pytest.importorskip("pyvisa")
+    with BenchServer(default_truth(3), BenchOptions(speed=SPEED, axes=1, table_tcp_port=0)) as server:
+        host, port = server.table_path[len("socket://"):].split(":")
+        url = f"visa://TCPIP0::{host}::{port}::SOCKET"
+        with open_table(url, "acutrol") as table:
+            assert table.framing == "tcp" and table.n_axes == 1
+            assert table.close_interlocks().ok
+            np.testing.assert_allclose(table.move_to([30.0]), [30.0], atol=0.002)
