@@ -10,6 +10,7 @@ import numpy as np
 from station.core import units
 
 COLOURS = {"x": "tab:red", "y": "tab:green", "z": "tab:blue"}
+SCALE_UNITS = ("1", "raw/(m/s^2)", "raw/(deg/s)")
 
 
 def pyplot():
@@ -85,12 +86,15 @@ def drift_figure(rows, path=None, title: str = "") -> bytes:
         when = [dt.datetime.strptime(d, "%Y-%m-%dT%H:%M:%SZ") for d, _, _, _ in pts]
         vals = np.array([v for _, v, _, _ in pts], float)
         sig = np.array([s if s is not None else np.nan for _, _, s, _ in pts], float)
+        unit = pts[0][3]
+        if unit in SCALE_UNITS and vals[0]:       # scale factors: ppm from the first calibration
+            vals, sig, unit = (vals / vals[0] - 1.0) * 1e6, sig / vals[0] * 1e6, f"ppm from {pts[0][1]:.6f}"
         ax.errorbar(when, vals, yerr=np.nan_to_num(sig), fmt="o-", ms=3, lw=0.8, capsize=2)
-        ax.set_title(f"{name} ({pts[0][3]})", fontsize=8)
+        ax.set_title(f"{name} ({unit})", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.yaxis.get_major_formatter().set_useOffset(False)
     fig.autofmt_xdate()
     if title:
         fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
     return save(fig, path)
