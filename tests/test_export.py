@@ -206,3 +206,48 @@ def test_export_refuses_a_file_that_is_not_a_calibration(tmp_path, capsys):
     bad.write_text("format: something-else\n")
     assert main(["export", str(bad), "--to", "json"]) == 2
     assert "bad.yaml" in capsys.readouterr().err
+
+
+from hypothesis import given, settings, strategies as st  # noqa: E402
+from hypothesis.extra.numpy import arrays  # noqa: E402
+
+from station.io.exporters.source import ExportSource  # noqa: E402
+
+near_identity = arrays(float, (3, 3), elements=st.floats(-0.05, 0.05)).map(lambda d: np.eye(3) * 1.01 + d)
+biases = arrays(float, (3,), elements=st.floats(-5.0, 5.0))
+
+
+@settings(max_examples=40, deadline=None)
+@given(M=near_identity, b=biases, G=near_identity, c=biases,
+       units=st.sampled_from([("m/s^2", "deg/s"), ("g", "rad/s"), ("raw", "raw")]))
+def test_any_calibration_round_trips_through_the_python_readable_formats(tmp_path_factory, M, b, G, c, units):
+    """Random compensations (every raw unit): imucal, imu_tk and ROS read back give the same
+    output as station's compensation within 1e-9 (relative to the output's size)."""
+    from imucal.management import load_calibration_info
+
+    tmp = tmp_path_factory.mktemp("h")
+    src = ExportSource(M, b, G, c, units[0], units[1], "random")
+    rng = np.random.default_rng(0)
+    acc, gyr = rng.normal(0, 10, (5, 3)), rng.normal(0, 100, (5, 3))
+    f, w = (acc - b) @ M.T, (gyr - c) @ G.T
+    info = load_calibration_info(FORMATS["imucal"].write(src, tmp / "c.json")[0])
+    a2, g2 = info.calibrate(acc, gyr, acc_unit=units[0], gyr_unit=units[1])
+    np.testing.assert_allclose(a2, f, rtol=0, atol=TOL * 100)
+    np.testing.assert_allclose(g2, w, rtol=0, atol=TOL * 1000)
+    acc_file, gyro_file = FORMATS["imu_tk"].write(src, tmp / "t")
+    T, K, B = read_imu_tk(acc_file)
+    np.testing.assert_allclose((acc - B) @ (T @ K).T, f, rtol=0, atol=TOL * 100)
+    doc = yaml.safe_load(FORMATS["ros"].write(src, tmp / "r.yaml")[0].read_text())
+    u = {"m/s^2": 1.0, "g": 9.80665, "raw": 1.0}[units[0]]
+    SM, bias = np.array(doc["SM"]).reshape(3, 3), np.array(doc["bias"])
+    np.testing.assert_allclose((acc * u) @ SM.T - bias, f, rtol=0, atol=TOL * 100)
+
+
+def test_a_singular_compensation_is_refused_in_one_line(cal, tmp_path, capsys):
+    doc = yaml.safe_load(cal.read_text())
+    doc["compensation"]["accel_matrix"] = [[1, 0, 0], [0, 0, 0], [0, 0, 1]]
+    bad = tmp_path / "singular.yaml"
+    bad.write_text(yaml.safe_dump(doc))
+    assert main(["export", str(bad), "--to", "imucal"]) == 2
+    err = capsys.readouterr().err
+    assert "singular.yaml" in err and "accel_matrix" in err and len(err.strip().splitlines()) == 1

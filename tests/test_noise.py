@@ -97,3 +97,15 @@ def test_noise_refuses_too_short_a_recording(tmp_path, capsys):
     csv.write_text("t,ax,ay,az,gx,gy,gz\n" + "".join(f"{i / 100},0,0,9.8,0,0,{i % 3}\n" for i in range(50)))
     assert main(["noise", str(csv)]) == 2
     assert "short.csv" in capsys.readouterr().err
+
+
+def test_kalibr_export_takes_the_noise_of_a_noise_run(noise_run, optimal9_run, tmp_path):
+    target = tmp_path / "imu.yaml"
+    assert main(["export", str(optimal9_run / "calibration.yaml"), "--to", "kalibr",
+                 "--noise", str(noise_run / "noise.yaml"), "-o", str(target)]) == 0
+    doc = yaml.safe_load(target.read_text())
+    kal = yaml.safe_load((noise_run / "noise.yaml").read_text())["noise"]["kalibr"]
+    assert all(isinstance(doc[k], float) and doc[k] == kal[k] for k in
+               ("accelerometer_noise_density", "accelerometer_random_walk", "gyroscope_noise_density",
+                "gyroscope_random_walk", "update_rate"))
+    assert "(upper bound)" in target.read_text()

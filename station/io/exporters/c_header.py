@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from station.core.errors import UserError
 from station.io.exporters.source import ExportSource, fmt, safe_comment, write_text
 
 TITLE = "C header (double, float and Q31 fixed point matrices and biases, inline functions)"
@@ -30,12 +31,18 @@ INT32_MAX = 2**31 - 1
 def matrix_frac_bits(matrix: np.ndarray) -> int:
     """Fraction bits so that every element times 2^bits fits an int32."""
     largest = float(np.max(np.abs(matrix)))
-    return int(30 - max(0, math.ceil(math.log2(largest + 1e-300))) if largest > 0 else 30)
+    bits = int(30 - max(0, math.ceil(math.log2(largest + 1e-300))) if largest > 0 else 30)
+    if bits < 0:
+        raise ValueError(f"a matrix element of {largest:.3g} leaves no fraction bits")
+    return bits
 
 
 def input_frac_bits(unit: str, bias: np.ndarray) -> int:
     scale = FULL_SCALE[unit] + float(np.max(np.abs(bias)))
-    return 30 - math.ceil(math.log2(scale))
+    bits = 30 - math.ceil(math.log2(scale))
+    if bits < 0:
+        raise ValueError(f"a bias of {float(np.max(np.abs(bias))):.3g} leaves no fraction bits")
+    return bits
 
 
 def quantise(a: np.ndarray, bits: int) -> np.ndarray:
@@ -110,4 +117,8 @@ def header_text(source: ExportSource, guard: str = "STATION_CALIBRATION_H") -> s
 
 
 def write(source: ExportSource, path) -> list[Path]:
-    return [write_text(path, header_text(source))]
+    try:
+        text = header_text(source)
+    except ValueError as e:
+        raise UserError(f"{source.origin}: cannot be written in fixed point: {e}") from None
+    return [write_text(path, text)]

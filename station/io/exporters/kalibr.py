@@ -15,7 +15,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from station.core.errors import UserError
-from station.io.exporters.source import ExportSource, fmt, safe_comment, write_text
+from station.io.exporters.source import ExportSource, safe_comment, write_text, yaml_float as fmt
 
 TITLE = "Kalibr imu.yaml (noise densities, random walks, rate)"
 SUFFIX = ".yaml"

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from station.io.exporters.source import ExportSource, fmt, safe_comment, write_text
+from station.io.exporters.source import ExportSource, safe_comment, write_text, yaml_float as fmt
 
 TITLE = "ROS imu_calib YAML (SM, bias; gyro_SM, gyro_bias)"
 SUFFIX = ".yaml"

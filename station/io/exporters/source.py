@@ -93,6 +93,10 @@ def source_from_document(doc: dict, origin) -> ExportSource:
     accel_bias = _array(comp, "accel_bias", (3,), origin)
     gyro_matrix = _array(comp, "gyro_matrix", (3, 3), origin, optional=True)
     gyro_bias = _array(comp, "gyro_bias", (3,), origin, optional=True)
+    for key, m in (("accel_matrix", accel_matrix), ("gyro_matrix", gyro_matrix)):
+        if m is not None and not (np.all(np.diag(m) != 0.0) and np.linalg.cond(m) < 1e12):
+            raise UserError(f"{origin}: field 'compensation.{key}': singular or with a zero diagonal "
+                            "element: not a calibration any format can carry")
     if (gyro_matrix is None) != (gyro_bias is None):
         raise UserError(f"{origin}: field 'compensation': gyro_matrix and gyro_bias go together")
     raw = comp.get("raw_units") or {}
@@ -139,3 +143,13 @@ def fmt(x: float) -> str:
     if not math.isfinite(x):
         raise ValueError(f"not finite: {x}")
     return repr(x)
+
+
+def yaml_float(x: float) -> str:
+    """A float that YAML 1.1 (PyYAML) and 1.2 (yaml-cpp) both read as the same double: repr's
+    shortest round-trip form, with a '.' in the mantissa (``1e-12`` is a string to YAML 1.1)."""
+    text = fmt(x)
+    mantissa, e, exponent = text.partition("e")
+    if "." not in mantissa:
+        mantissa += ".0"
+    return mantissa + (e + exponent if e else "")
