@@ -99,13 +99,27 @@ def test_noise_refuses_too_short_a_recording(tmp_path, capsys):
     assert "short.csv" in capsys.readouterr().err
 
 
-def test_kalibr_export_takes_the_noise_of_a_noise_run(noise_run, optimal9_run, tmp_path):
+def test_kalibr_export_takes_the_noise_of_a_noise_run(noise_run, optimal9_run, tmp_path, capsys):
+    """The noise run is of IMU SIM-5, the calibration of SIM-13: refused unless --force."""
     target = tmp_path / "imu.yaml"
-    assert main(["export", str(optimal9_run / "calibration.yaml"), "--to", "kalibr",
-                 "--noise", str(noise_run / "noise.yaml"), "-o", str(target)]) == 0
+    cmd = ["export", str(optimal9_run / "calibration.yaml"), "--to", "kalibr",
+           "--noise", str(noise_run / "noise.yaml"), "-o", str(target)]
+    assert main(cmd) == 2
+    assert "'SIM-5'" in capsys.readouterr().err and not target.exists()
+    assert main([*cmd, "--force"]) == 0
     doc = yaml.safe_load(target.read_text())
     kal = yaml.safe_load((noise_run / "noise.yaml").read_text())["noise"]["kalibr"]
     assert all(isinstance(doc[k], float) and doc[k] == kal[k] for k in
                ("accelerometer_noise_density", "accelerometer_random_walk", "gyroscope_noise_density",
                 "gyroscope_random_walk", "update_rate"))
     assert "(upper bound)" in target.read_text()
+
+
+def test_noise_is_not_written_into_another_imus_calibration(noise_run, optimal9_run, tmp_path, capsys):
+    import shutil
+
+    cal = tmp_path / "cal.yaml"
+    shutil.copy(optimal9_run / "calibration.yaml", cal)
+    before = cal.read_bytes()
+    assert main(["noise", str(noise_run), "--cal", str(cal)]) == 2
+    assert "SIM-13" in capsys.readouterr().err and cal.read_bytes() == before

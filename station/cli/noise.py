@@ -20,6 +20,8 @@ def add_parsers(sub) -> None:
     n.add_argument("--accel-unit", default="m/s^2", choices=("m/s^2", "g", "raw"), help="unit of a CSV")
     n.add_argument("--gyro-unit", default="deg/s", choices=("deg/s", "rad/s", "raw"), help="unit of a CSV")
     n.add_argument("--plot", metavar="PNG", help="default: allan.png next to the figures")
+    n.add_argument("--force", action="store_true",
+                   help="write into a calibration of another IMU serial than the recording's")
     n.set_defaults(func=cmd_noise)
 
 
@@ -68,6 +70,10 @@ def cmd_noise(args) -> int:
             args.cal, cal_doc = str(default_cal), read_calfile(default_cal)
         result = noise.from_capture(capture, args.segment, cal_doc)
         model, serial = capture.imu.model, capture.imu.serial
+        cal_serial = ((cal_doc or {}).get("provenance") or {}).get("imu_serial")
+        if serial and cal_serial and serial != cal_serial and not getattr(args, "force", False):
+            raise UserError(f"{args.cal}: calibration of IMU {cal_serial!r}, recording of IMU {serial!r}: "
+                            "the noise belongs to the IMU recorded (--force to write it anyway)")
         if capture.complete("static") and any(s.data.gaps for s in capture.complete("static")):
             err.print("warning: the recording has gaps; the Allan deviation assumes even sampling")
     else:
@@ -110,4 +116,4 @@ def characterise_run(directory) -> int:
     import argparse
 
     return cmd_noise(argparse.Namespace(source=str(directory), segment=None, cal=None, rate_hz=None,
-                                        accel_unit="m/s^2", gyro_unit="deg/s", plot=None))
+                                        accel_unit="m/s^2", gyro_unit="deg/s", plot=None, force=False))

@@ -256,10 +256,26 @@ def _diagnosis_section(inp: ReportInput, figures: dict) -> str:
     return "".join(parts) + "</section>"
 
 
+def _filed_noise(inp: ReportInput) -> str:
+    """The calibration file's own noise block (e.g. from a long noise recording), as a table."""
+    block = (inp.calibration or {}).get("noise")
+    if not isinstance(block, dict):
+        return ""
+    rows = []
+    for sensor, key, unit in (("accel", "white_noise_ug_rthz", "µg/√Hz"), ("gyro", "white_noise_dph_rthz", "°/h/√Hz")):
+        for axis, r in (block.get(sensor) or {}).items():
+            if isinstance(r, dict) and isinstance(r.get(key), (int, float)):
+                rows.append([_e(f"{sensor} {axis}"), _e(f"{r[key]:.4g} {unit}")])
+    kal = block.get("kalibr") or {}
+    kal_rows = [[_e(k), _e(f"{v:.4g}")] for k, v in kal.items() if isinstance(v, float)]
+    return (f"<h3>In the calibration file (from {_e(block.get('source', 'station noise'))})</h3>"
+            + _table(["axis", "white noise"], rows) + "<h3>Kalibr</h3>" + _table(["key", "value"], kal_rows))
+
+
 def _noise_section(inp: ReportInput, figures: dict) -> str:
     if inp.noise is None:
         return (f"<section><h2>Noise</h2><p class='note'>{_e(inp.noise_note or 'Not characterised.')}"
-                "</p></section>")
+                f"</p>{_filed_noise(inp)}</section>")
     res = inp.noise
     rows = []
     for a in res.axes:
@@ -278,7 +294,7 @@ def _noise_section(inp: ReportInput, figures: dict) -> str:
             "Bias instability and random walk are upper bounds (&lt;) when the record is too short "
             "to show them.</p>"
             + _table(["axis", "white noise ± 1σ", "bias instability", "bias random walk"], rows)
-            + _img(figures["allan.png"], "Allan deviation") + "</section>")
+            + _img(figures["allan.png"], "Allan deviation") + _filed_noise(inp) + "</section>")
 
 
 def render(inp: ReportInput, figures: dict) -> str:

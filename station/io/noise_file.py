@@ -62,6 +62,15 @@ def write_noise_file(path, block: dict, imu_model=None, imu_serial=None) -> Path
                               "noise": block})
 
 
+def noise_serial(path) -> str | None:
+    """The IMU serial a noise or calibration file names, if any."""
+    doc = _load(Path(path))
+    serial = (doc.get("imu") or {}).get("serial") if isinstance(doc.get("imu"), dict) else None
+    if serial is None and isinstance(doc.get("provenance"), dict):
+        serial = doc["provenance"].get("imu_serial")
+    return serial if isinstance(serial, str) else None
+
+
 def read_noise_block(path) -> dict:
     """The noise block of a station-noise/1 file or of a calibration file."""
     path = Path(path)
