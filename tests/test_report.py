@@ -22,10 +22,10 @@ def hidden_effect_capture(tmp_path_factory):
     before/after step."""
     import yaml
 
+    from sim_devices.truth import default_truth
+
     base = tmp_path_factory.mktemp("report")
-    assert main(["run", "--sim", "--seed", "5", "--out", str(base / "plain"), "--dwell-s", "20",
-                 "--rotation-s", "36"]) == 0
-    truth = yaml.safe_load((base / "plain" / "sim_truth.yaml").read_text())
+    truth = default_truth(5).to_yaml_dict()
     truth["accelerometer"]["nonlinearity_ug_per_g2"] = [300.0, -200.0, 400.0]
     (base / "truth.yaml").write_text(yaml.safe_dump(truth))
     cap = base / "nonlinear-cap"
