@@ -59,6 +59,9 @@ def test_diff_flags_exactly_the_parameter_moved_beyond_3_sigma(optimal9_run, sto
     png = tmp_path / "drift.png"
     assert main(["history", "SIM-13", "--drift", str(png)]) == 0
     assert png.stat().st_size > 20_000
+    png2 = tmp_path / "drift2.png"
+    assert main(["diff", str(cal), str(moved), "--drift", str(png2)]) == 0
+    assert png2.stat().st_size > 20_000
 
 
 def test_untrusted_serial_stays_inside_the_store(optimal9_run, store, tmp_path):

@@ -24,6 +24,8 @@ def add_parsers(sub) -> None:
     d.add_argument("b", metavar="B", help="a calibration file or an id of the history (#N)")
     d.add_argument("--all", action="store_true", help="list unchanged parameters too")
     d.add_argument("--store", metavar="DIR", help="the history store for ids")
+    d.add_argument("--drift", metavar="PNG", help="also plot the drift over time of A's IMU serial "
+                   "(every calibration of it in the history)")
     d.set_defaults(func=cmd_diff)
 
 
@@ -125,4 +127,12 @@ def cmd_diff(args) -> int:
     for label, names in (("only in A", only_a), ("only in B", only_b)):
         if names:
             out.print(f"{label}: {', '.join(names)}", markup=False)
+    if args.drift:
+        from station.core.errors import UserError
+
+        serial = (da.get("provenance") or {}).get("imu_serial")
+        entries = store.list(serial) if isinstance(serial, str) else []
+        if not entries:
+            raise UserError(f"{pa}: its IMU serial {serial!r} has no calibration in the history {store.root}")
+        _drift(entries, Path(args.drift), serial)
     return 0
