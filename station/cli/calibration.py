@@ -41,6 +41,9 @@ def cmd_estimate(args) -> int:
         err.print(f"warning: {w}")
     target = Path(args.output) if args.output else capture.path / "calibration.yaml"
     write_calfile(target, cal, provenance)
+    from station.cli.history import file_quietly
+
+    file_quietly(target)
     print_parameters([(n, v, u, cal.sigma.get(n)) for n, v, u in cal.parameters()],
                       f"calibration of {capture.path} ({provenance['method']})")
     if "reduced_chi2" in cal.fit:

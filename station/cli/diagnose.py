@@ -64,9 +64,18 @@ def cmd_diagnose(args) -> int:
         final = first
     summary = _summary_lines(final)
     if args.report:
-        from station.diagnose.report import write_report
+        from station.diagnose.report import ReportInput, capture_facts, noise_of, write_report
 
-        index = write_report(args.report, first, steps, final, summary)
+        cal_doc = None
+        if args.calib:
+            from station.io.calfile import read_calfile
+
+            cal_doc = read_calfile(args.calib)
+        page = ReportInput(title=f"Diagnosis: {Path(str(capture.path)).name}",
+                           facts=capture_facts(capture, cal_doc) + [("summary", line) for line in summary],
+                           calibration=cal_doc, calibration_path=args.calib)
+        page.noise, page.noise_note = noise_of(capture, cal_doc)
+        index = write_report(args.report, first, steps, final, summary, page)
         if not args.json:
             out.print(f"report: {index}")
     if args.json:

@@ -156,8 +156,14 @@ def cmd_run(args) -> int:
         capture = dryrun.record_scheme(
             scheme, truth, args.seed, out_dir,
             progress=lambda name, i, n: status.update(f"recording {name} ({i + 1}/{n})"))
+    from station.cli.history import file_quietly
+    from station.cli.noise import characterise_run, is_noise_recording
+
+    if is_noise_recording(scheme.segments):
+        return characterise_run(capture)
     cal, _, provenance = estimate_capture(capture)
     cal_path = write_calfile(capture / "calibration.yaml", cal, provenance)
+    file_quietly(cal_path)
     print_errors(cal, dryrun.truth_calibration(truth))
     print_notes(cal)
     out.print(f"capture:          {capture}")
@@ -419,11 +425,18 @@ def _reopen(directory, rate_hz):
 def _estimate(directory) -> int:
     from station.io.calfile import write_calfile
     from station.estimate import estimate_capture
+    from station.cli.noise import characterise_run, is_noise_recording
+    from station.io.capture import read_capture
 
+    if is_noise_recording(read_capture(directory, load_data=False).segments):
+        return characterise_run(directory)
     cal, capture, provenance = estimate_capture(directory)
     for w in capture.warnings:
         err.print(f"warning: {w}", markup=False)
     path = write_calfile(Path(directory) / "calibration.yaml", cal, provenance)
+    from station.cli.history import file_quietly
+
+    file_quietly(path)
     print_parameters([(n, v, u, cal.sigma.get(n)) for n, v, u in cal.parameters()],
                       f"calibration of {directory} ({provenance['method']})")
     print_notes(cal)
