@@ -101,14 +101,14 @@ class Integrator:
     def __init__(self, hands: list[HandRotation]):
         self.hands = hands
         self.gyro = np.vstack([h.gyro for h in hands])
-        self.dt = np.concatenate([np.full(h.samples, h.dt) for h in hands])
-        self.row = np.concatenate([np.full(h.samples, i) for i, h in enumerate(hands)])
-        self.col = np.concatenate([np.arange(h.samples) for h in hands])
+        self.step_rad = np.concatenate([np.full(h.samples, np.radians(h.dt)) for h in hands])[:, None]
         width = 1
         while width < max(h.samples for h in hands):
             width *= 2
-        self.identity = np.zeros((len(hands), width, 4))
-        self.identity[..., 3] = 1.0
+        self.flat = np.concatenate([i * width + np.arange(h.samples) for i, h in enumerate(hands)])
+        self.identity = np.zeros((len(hands) * width, 4))
+        self.identity[:, 3] = 1.0
+        self.shape = (len(hands), width, 4)
         self._key = None
 
     def turns(self, gyro_inverse: np.ndarray, bias: np.ndarray) -> Rotation:
@@ -117,11 +117,14 @@ class Integrator:
         key = np.concatenate([np.ravel(gyro_inverse), np.ravel(bias)]).tobytes()
         if key == self._key:
             return self._last
-        theta = np.radians((self.gyro - bias) @ gyro_inverse.T) * self.dt[:, None]    # rad, per sample
+        theta = ((self.gyro - bias) @ gyro_inverse.T) * self.step_rad       # rad, per sample
         angle = np.sqrt(np.einsum("ij,ij->i", theta, theta))
+        half = 0.5 * angle
+        with np.errstate(invalid="ignore", divide="ignore"):
+            k = np.where(angle > 1e-8, np.sin(half) / angle, 0.5 - angle * angle / 48.0)   # sin(a/2)/a
         Q = self.identity.copy()
-        Q[self.row, self.col, :3] = theta * (np.sinc(angle / (2.0 * np.pi)) * 0.5)[:, None]  # sin(a/2)/a
-        Q[self.row, self.col, 3] = np.cos(0.5 * angle)
+        Q[self.flat] = np.column_stack([theta * k[:, None], np.cos(half)])
+        Q = Q.reshape(self.shape)
         while Q.shape[1] > 1:
             Q = _product(Q[:, 0::2], Q[:, 1::2])
         self._key, self._last = key, Rotation.from_quat(Q[:, 0])
