@@ -225,6 +225,8 @@ def test_bad_recordings_say_what_is_wrong(tmp_path, capsys):
             "declare --accel-unit g")
     write_csv(tmp_path / "rad.csv", hs, rad=True)
     run_bad(base + [str(tmp_path / "rad.csv"), "-o", str(tmp_path / "o4")], capsys, "gyro unit", "rad/s?")
+    run_bad(base + [str(good), "--gyro-unit", "rad/s", "-o", str(tmp_path / "o12")], capsys,
+            "where the accelerometers are still the gyro reads", "are the rates in deg/s?")
     # NaN, a gap in time, time going back
     lines = good.read_text().splitlines()
     nan = lines[:]
@@ -254,4 +256,4 @@ def test_bad_recordings_say_what_is_wrong(tmp_path, capsys):
     (tmp_path / "nobag.bag").write_bytes(b"not a bag at all")
     run_bad(["import", "rosbag", str(tmp_path / "nobag.bag"), "-o", str(tmp_path / "o11")], capsys,
             "not a readable ROS bag")
-    assert not any((tmp_path / f"o{k}").exists() for k in range(1, 12))
+    assert not any((tmp_path / f"o{k}").exists() for k in range(1, 13))

@@ -37,7 +37,7 @@ PRESETS = {
     "t-a-g": {"columns": {"t": 0, "ax": 1, "ay": 2, "az": 3, "gx": 4, "gy": 5, "gz": 6},
               "units": ("m/s^2", "deg/s"), "time_unit": "s"},
     "imu_tk": {"columns": {"t": 0, "ax": 1, "ay": 2, "az": 3}, "gyro_columns": {"t": 0, "gx": 1, "gy": 2, "gz": 3},
-               "units": ("m/s^2", "rad/s"), "time_unit": "s", "delimiter": "space", "header": "no"},
+               "units": ("raw", "raw"), "time_unit": "s", "delimiter": "space", "header": "no"},
     "imucal": {"columns": {"index": "n_samples", "ax": "acc_x", "ay": "acc_y", "az": "acc_z",
                            "gx": "gyr_x", "gy": "gyr_y", "gz": "gyr_z"}, "units": ("m/s^2", "deg/s"),
                "delimiter": ","},

@@ -229,6 +229,7 @@ def detect_sections(rec: Recording, *, window_s: float, min_static_s: float, rat
         raise UserError(f"{rec.source}: {e}") from None
     statics = det.statics()
     if not statics:
+        _gyro_unit_at_rest(rec, det, min_static_s)
         th = det.thresholds
         gyro = (f"{th['gyro_std_threshold_dps']:.3g} deg/s" if "gyro_std_threshold_dps" in th
                 else f"{th['gyro_std_threshold_raw']:.3g} raw")
@@ -244,6 +245,34 @@ def detect_sections(rec: Recording, *, window_s: float, min_static_s: float, rat
             sections.append(Section(f"turn{k + 1:02d}", "rotation", iv.stop, nxt.start,
                                     note=f"hand turn from pose{k + 1:02d} to pose{k + 2:02d}, found by segment_detect"))
     return sections, det
+
+
+GYRO_AT_REST_DPS = 10.0      # no gyro reads more at rest: a wrong unit
+
+
+def _gyro_unit_at_rest(rec: Recording, det: Detection, min_static_s: float) -> None:
+    """When no pose was found: if the accelerometers alone are still long enough and the gyro
+    reads more than GYRO_AT_REST_DPS there in the declared unit, the gyro unit is wrong."""
+    from scipy.ndimage import uniform_filter1d
+
+    fg = rec.gyro_factor
+    if fg is None:
+        return
+    fa = rec.accel_factor or 1.0
+    window = max(3, int(round(det.thresholds["window_s"] * len(rec.t) / max(rec.t[-1] - rec.t[0], 1e-9))) | 1)
+    a = rec.accel * fa
+    m = uniform_filter1d(a, window, axis=0, mode="nearest")
+    m2 = uniform_filter1d(a * a, window, axis=0, mode="nearest")
+    still = (np.sqrt(np.maximum(m2 - m * m, 0.0)).max(axis=1) <= det.thresholds["accel_std_threshold_mps2"])
+    if still.sum() < min_static_s * len(rec.t) / max(rec.t[-1] - rec.t[0], 1e-9):
+        return
+    rate = float(np.median(np.linalg.norm(rec.gyro[still], axis=1))) * fg
+    if rate > GYRO_AT_REST_DPS:
+        unit = rec.gyro_unit if rec.gyro_unit != "raw" else f"raw x {rec.gyro_nominal:g} deg/s"
+        guess = " (are the rates in deg/s?)" if rec.gyro_unit == "rad/s" else ""
+        raise UserError(f"{rec.source}: where the accelerometers are still the gyro reads {rate:.3g} deg/s "
+                        f"(median) in the declared gyro unit ({unit}): no gyro reads that at rest, the unit is "
+                        f"wrong{guess}")
 
 
 def check_units(rec: Recording, sections: list[Section], gravity_mps2: float) -> list[str]:
@@ -295,9 +324,9 @@ def check_units(rec: Recording, sections: list[Section], gravity_mps2: float) ->
 
 def _guess_accel(f, g) -> str:
     ratio = f / g
-    if abs(ratio * units.STANDARD_GRAVITY / g - 1) < GRAVITY_TOLERANCE:
-        return " (the data look like m/s^2 declared as g)"
-    if abs(ratio * g / units.STANDARD_GRAVITY - 1) < 0.05 or abs(ratio * units.STANDARD_GRAVITY - 1) < GRAVITY_TOLERANCE:
+    if abs(ratio / units.STANDARD_GRAVITY - 1) < GRAVITY_TOLERANCE:
+        return " (the data look like m/s^2: declare --accel-unit m/s^2)"
+    if abs(ratio * units.STANDARD_GRAVITY - 1) < GRAVITY_TOLERANCE:
         return " (the data look like g: declare --accel-unit g)"
     return " (raw counts? declare --accel-unit raw, with --accel-nominal if the scale is known)"
 
