@@ -32,9 +32,9 @@ COUNTS = (8 * 9.80665 / 32768, 1000.0 / 32768)      # +-8 g and +-1000 deg/s in 
 SEED = 7
 
 
-def session(seed=SEED, poses=16, **kw):
+def session(seed=SEED, poses=16, dwell_s=(2.5, 3.5), **kw):
     truth = mems_truth(seed)
-    return truth, hand_session(truth, seed, poses=poses, dwell_s=(2.5, 3.5), turn_s=(1.0, 1.8), **kw)
+    return truth, hand_session(truth, seed, poses=poses, dwell_s=dwell_s, turn_s=(1.0, 1.8), **kw)
 
 
 def write_csv(path, hs, *, columns="t", rad=False, delimiter=","):
@@ -123,6 +123,20 @@ def test_raw_counts_without_timestamps_and_with_earth_rate(tmp_path, capsys):
     assert statics_inside_truth(capture, hs) == 16
     cal, _, _ = estimate_capture(out)
     check_against_truth(cal, counts_truth(truth, COUNTS))
+    # with the nominal scales declared: thresholds in physical units, the same fit
+    out2 = tmp_path / "cap2"
+    assert cli.main(["import", "csv", str(log), "--columns", "ax=0,ay=1,az=2,gx=3,gy=4,gz=5",
+                     "--accel-unit", "raw", "--gyro-unit", "raw", "--accel-nominal", str(COUNTS[0]),
+                     "--gyro-nominal", str(COUNTS[1]), "--rate-hz", "100", "-o", str(out2),
+                     "--gravity-mps2", str(hs.truth["gravity_mps2"]), "--latitude-deg", "45"]) == 0
+    text = capsys.readouterr().out
+    assert "|rate - bias| <= 1 deg/s" in text and "static |f| = " in text, text
+    assert read_capture(out2).imu.extra["gyro_nominal_dps_per_count"] == COUNTS[1]
+    cal2, _, _ = estimate_capture(out2)
+    if len(read_capture(out2).complete("static")) == 16:
+        for name, sigma in cal.sigma.items():
+            assert abs(dict((n, v) for n, v, _ in cal2.parameters())[name]
+                       - dict((n, v) for n, v, _ in cal.parameters())[name]) < 0.01 * sigma, name
 
 
 def test_ros_bags_ros1_db3_mcap(tmp_path, capsys):
@@ -205,11 +219,9 @@ def test_bad_recordings_say_what_is_wrong(tmp_path, capsys):
     truth, hs = session(seed=SEED + 4, poses=12)
     good = write_csv(tmp_path / "good.csv", hs)
     base = ["import", "csv"]
-    # no statics: a recording that never rests (a continuous tumble)
-    t = np.arange(3000) / 100.0
-    w = np.column_stack([40 * np.sin(t), 50 * np.cos(0.7 * t), 30 * np.ones_like(t)])
-    moving = np.column_stack([t, np.tile([0.0, 0.0, 9.8], (3000, 1)) + 2 * np.sin(3 * t)[:, None], w])
-    np.savetxt(tmp_path / "moving.csv", moving, delimiter=",", header="t,ax,ay,az,gx,gy,gz", comments="")
+    # no statics: a recording that never rests for long (turn after turn, 0.3-0.6 s pauses)
+    _, tumble = session(seed=SEED + 6, poses=30, dwell_s=(0.3, 0.6), init_rest_s=0.5)
+    write_csv(tmp_path / "moving.csv", tumble)
     run_bad(base + [str(tmp_path / "moving.csv"), "-o", str(tmp_path / "o1")], capsys, "no static pose found",
             "--segments")
     # too few poses
@@ -226,7 +238,7 @@ def test_bad_recordings_say_what_is_wrong(tmp_path, capsys):
     write_csv(tmp_path / "rad.csv", hs, rad=True)
     run_bad(base + [str(tmp_path / "rad.csv"), "-o", str(tmp_path / "o4")], capsys, "gyro unit", "rad/s?")
     run_bad(base + [str(good), "--gyro-unit", "rad/s", "-o", str(tmp_path / "o12")], capsys,
-            "where the accelerometers are still the gyro reads", "are the rates in deg/s?")
+            "the gyro reads", "no gyro reads that at rest", "are the rates in deg/s?")
     # NaN, a gap in time, time going back
     lines = good.read_text().splitlines()
     nan = lines[:]

@@ -248,6 +248,7 @@ def detect_sections(rec: Recording, *, window_s: float, min_static_s: float, rat
 
 
 GYRO_AT_REST_DPS = 10.0      # no gyro reads more at rest: a wrong unit
+ACCEL_AT_REST_STD_MPS2 = 0.05   # at rest for that check: every accelerometer's spread below this
 
 
 def _gyro_unit_at_rest(rec: Recording, det: Detection, min_static_s: float) -> None:
@@ -263,7 +264,8 @@ def _gyro_unit_at_rest(rec: Recording, det: Detection, min_static_s: float) -> N
     a = rec.accel * fa
     m = uniform_filter1d(a, window, axis=0, mode="nearest")
     m2 = uniform_filter1d(a * a, window, axis=0, mode="nearest")
-    still = (np.sqrt(np.maximum(m2 - m * m, 0.0)).max(axis=1) <= det.thresholds["accel_std_threshold_mps2"])
+    limit = min(det.thresholds["accel_std_threshold_mps2"], ACCEL_AT_REST_STD_MPS2)
+    still = np.sqrt(np.maximum(m2 - m * m, 0.0)).max(axis=1) <= limit
     if still.sum() < min_static_s * len(rec.t) / max(rec.t[-1] - rec.t[0], 1e-9):
         return
     rate = float(np.median(np.linalg.norm(rec.gyro[still], axis=1))) * fg
@@ -291,6 +293,13 @@ def check_units(rec: Recording, sections: list[Section], gravity_mps2: float) ->
                             f"is wrong{guess}")
         notes.append(f"static |f| = {f:.4g} m/s^2 (median over the poses), gravity {gravity_mps2:.4g}")
     fg = rec.gyro_factor
+    if fg is not None and len(statics):
+        rate = float(np.median([np.linalg.norm(rec.gyro[s.start:s.stop].mean(axis=0)) for s in statics])) * fg
+        if rate > GYRO_AT_REST_DPS:
+            unit = rec.gyro_unit if rec.gyro_unit != "raw" else f"raw x {rec.gyro_nominal:g} deg/s"
+            guess = " (are the rates in deg/s?)" if rec.gyro_unit == "rad/s" else ""
+            raise UserError(f"{rec.source}: in the static poses the gyro reads {rate:.3g} deg/s (median) in the "
+                            f"declared gyro unit ({unit}): no gyro reads that at rest, the unit is wrong{guess}")
     ratios = []
     for s in sections:
         if s.kind != "rotation":
@@ -358,6 +367,7 @@ def write_capture(rec: Recording, out_dir, *, gravity_mps2: float, latitude_deg:
         raise UserError(f"{sections_path}: no static section: a calibration needs static poses")
     if faces:
         _faces(rec, statics)
+    notes = check_units(rec, sections, gravity_mps2)
     known_up = all(s.up_body is not None for s in statics)
     need = 6 if known_up else min_poses
     if len(statics) < need:
@@ -365,7 +375,6 @@ def write_capture(rec: Recording, out_dir, *, gravity_mps2: float, latitude_deg:
                         f"needs at least {need} in different attitudes"
                         + ("" if known_up else f" (9 for the accelerometers' 9 unknowns when the attitudes are "
                            f"unknown; imu_tk recommends {RECOMMENDED_POSES}, with a turn between each two)"))
-    notes = check_units(rec, sections, gravity_mps2)
     imu_extra = {}
     if rec.accel_nominal is not None:
         imu_extra["accel_nominal_mps2_per_count"] = float(rec.accel_nominal)
