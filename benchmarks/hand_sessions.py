@@ -115,12 +115,14 @@ def simulated(tmp: Path, seed: int, kind: str, poses: int, dwell, verbose=True):
     counts = COUNTS if kind == "raw counts, no time" else None
     hs = hand_session(truth, seed, poses=poses, dwell_s=dwell, counts=counts)
     g = f"{hs.truth['gravity_mps2']:.6f}"
-    out = tmp / f"cap-{kind.split()[0]}-{seed}"
-    if kind == "csv t,ax..gz":
+    out = tmp / f"cap-{kind.split()[0]}-{len(kind)}-{seed}"
+    if kind.startswith("csv t,ax..gz"):
         src = tmp / f"log{seed}.csv"
         np.savetxt(src, np.column_stack([hs.t, hs.accel, hs.gyro]), delimiter=",", header="t,ax,ay,az,gx,gy,gz",
                    comments="", fmt="%.10g")
         argv = ["import", "csv", str(src), "--preset", "station"]
+        if "latitude" in kind:
+            argv += ["--latitude-deg", f"{hs.truth['latitude_deg']:g}"]
     elif kind == "raw counts, no time":
         src = tmp / f"raw{seed}.txt"
         np.savetxt(src, np.column_stack([hs.accel, hs.gyro]), delimiter=";", fmt="%d")
@@ -213,7 +215,7 @@ def honesty(tmp: Path, seeds: int):
         for label in z:
             z[label] += list(errs[label][4])
         chi.append(cal.fit["reduced_chi2"])
-        shutil.rmtree(tmp / f"cap-csv-{seed}")
+        shutil.rmtree(tmp / f"cap-csv-{len('csv t,ax..gz')}-{seed}")
     print(f"\n1-sigma honesty over {seeds} simulated 16-pose sessions: std of error / reported 1-sigma "
           f"(1 when honest; +- {1 / np.sqrt(2 * 3 * seeds):.2f} from the finite sample)")
     for label, values in z.items():
@@ -229,7 +231,8 @@ def main():
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         imucal_sessions(tmp)
-        for kind in ("csv t,ax..gz", "raw counts, no time", "ROS 2 bag (MCAP)"):
+        for kind in ("csv t,ax..gz", "csv t,ax..gz, latitude known (Earth rate modelled)", "raw counts, no time",
+                     "ROS 2 bag (MCAP)"):
             simulated(tmp, 11, kind, 38, (2.5, 4.0))
         speed(tmp, 1 if args.quick else 3)
         if not args.quick:

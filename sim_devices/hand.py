@@ -8,10 +8,10 @@ Physics (frames and conventions of :mod:`sim_devices.world`: ENU, C_bn takes ENU
   random dwell in ``dwell_s``; the first one (the initial rest) for ``init_rest_s``.
 * A hand turn from pose a to pose b over T seconds (random in ``turn_s``): with R = C_bn^T
   (body to ENU) and tau = (t - t0) / T,
-      R(tau) = R_a exp(s(tau) phi) exp(sin(pi tau) epsilon),   R_b = R_a exp(phi),
+      R(tau) = R_a exp(s(tau) phi) exp(sin^2(pi tau) epsilon),   R_b = R_a exp(phi),
   s the minimum-jerk profile 10 tau^3 - 15 tau^4 + 6 tau^5 and epsilon a random wobble
-  (``wobble_deg``, 1-sigma per axis) that vanishes at both ends: the axis wanders during the
-  turn as a hand's does.  The body rate relative to the Earth is R^T dR/dt, taken as the
+  (``wobble_deg``, 1-sigma per axis) that vanishes, with its rate, at both ends: the axis
+  wanders during the turn as a hand's does, and the rate starts and ends smoothly.  The body rate relative to the Earth is R^T dR/dt, taken as the
   central difference rotvec(R(t - h)^T R(t + h)) / 2h (h = 1 us: error ~ h^2 |w|^3, far below
   any gyro's noise).  The hand also lifts the IMU: position d sin^2(pi tau) (``lift_m``, a
   random direction), acceleration d 2 pi^2 / T^2 cos(2 pi tau).
@@ -101,7 +101,7 @@ def hand_session(truth: Truth, seed: int, *, poses: int = 38, dwell_s=(2.5, 4.0)
         def path(t):
             tau = np.clip(t / T, 0.0, 1.0)
             return (Ra * Rotation.from_rotvec(np.outer(_min_jerk(tau), phi))
-                    * Rotation.from_rotvec(np.outer(np.sin(np.pi * tau), eps)))
+                    * Rotation.from_rotvec(np.outer(np.sin(np.pi * tau) ** 2, eps)))
 
         Rk = path(tk)
         w = (path(tk - STEP_S).inv() * path(tk + STEP_S)).as_rotvec() / (2.0 * STEP_S)   # rad/s, body

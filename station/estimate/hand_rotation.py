@@ -12,6 +12,11 @@ Model, frame p (the accelerometers'), with M_g the gyro matrix and b_g the gyro 
 model (gyro_raw = M_g w_p + b_g):
   w_k   = M_g^-1 (gyro_k - b_g)                         each sample, deg/s
   dR    = exp(w_1 dt) exp(w_2 dt) ... exp(w_N dt)        the body's turn, sample k standing for dt
+                                                         (the midpoint rule: for 150-degree turns
+                                                         in 1.5 s at 100 Hz within 3 arcsec of the
+                                                         path; curvature and coning terms from the
+                                                         neighbouring samples did not do better
+                                                         where a turn starts from rest)
   u_after = dR^T exp(Omega_p T) u_before                 u: unit "up" of the static poses, the
                                                          model's attitude parameters
 where Omega_p is the Earth rate in p at the pose before (known when the site's latitude is:
@@ -170,6 +175,18 @@ def start_scale(integrator: Integrator, bias: np.ndarray, ups: np.ndarray, nomin
                           bounds=(np.log(nominal) - np.log(1.6), np.log(nominal) + np.log(1.6)),
                           method="bounded", options={"xatol": 1e-3})
     return float(np.exp(res.x))
+
+
+def heading_visible(s, counts_per_dps: float = 1.0) -> bool:
+    """Whether the gyros can see the Earth rate's horizontal component in a pose (and so the
+    pose's heading): its size above three times the noise of a pose's mean gyro output (the
+    median pose; ``counts_per_dps`` converts a raw gyro's noise to deg/s)."""
+    if not s.statics:
+        return False
+    horizontal = EARTH_RATE_DPS * np.cos(np.radians(s.latitude_deg or 0.0))
+    samples = float(np.median([st.samples for st in s.statics]))
+    noise_dps = float(np.max(s.gyro_sigma)) / abs(counts_per_dps) / np.sqrt(samples)
+    return bool(horizontal > 3.0 * noise_dps)
 
 
 def static_colours(n_statics: int, hands: list[HandRotation]) -> list[int]:

@@ -128,6 +128,12 @@ def _start(s: Summaries) -> Start:
                  Rotation.from_matrix(R_po).as_rotvec(), notes)
 
 
+def st_gyro_inverse(st: Start) -> np.ndarray:
+    """L_g = (K_g T_g R_po)^-1 of a start (R_po ~ I at the start of a hand capture)."""
+    Tg = lower_unit_rows(st.gamma)
+    return np.linalg.inv(np.diag(st.kg) @ Tg @ Rotation.from_rotvec(st.theta).as_matrix())
+
+
 def _pairs(s: Summaries) -> list:
     """Rotation summaries of the same axis with opposite angles, as the algebraic solver wants."""
     out = []
@@ -176,6 +182,12 @@ class Model:
             raise UserError(f"attitudes must be 'unknown' or 'table', not {attitudes!r}")
         self.attitudes = attitudes
         self.with_latitude = s.latitude_deg is not None
+        self.hand_earth_vertical = False
+        if self.hands and self.with_latitude and not hand_rotation.heading_visible(
+                s, 1.0 if not s.gyro_raw else s.gyro_nominal or float(np.mean(np.abs(_start(s).kg)))):
+            # hand poses whose gyro cannot see the Earth turn: up only, the Earth rate's vertical
+            # component modelled, its horizontal one (direction unknown) as noise
+            self.with_latitude, self.hand_earth_vertical = False, True
         g, lat = s.gravity_mps2, np.radians(s.latitude_deg or 0.0)
         self.f_n = np.array([0.0, 0.0, g])
         self.omega_n = np.degrees(EARTH_RATE_RAD) * np.array([0.0, np.cos(lat), np.sin(lat)])
@@ -266,12 +278,33 @@ class Model:
         per_sample_dps = s.gyro_sigma / np.abs(st.kg)
         omega = np.degrees(EARTH_RATE_RAD)
         var = np.array([np.mean(per_sample_dps**2) * h.dt**2 * h.samples for h in self.hands])
-        if not self.with_latitude:      # the Earth's turn during the hand turn: not modelled
-            var = var + np.array([(omega * h.duration_s) ** 2 / 3.0 for h in self.hands])
+        # the part of the Earth rate that is not modelled: all of it without the latitude, the
+        # horizontal part when only the vertical one is (its turn about up moves no up)
+        # a rate r of random direction: in 3-D r^2/3 per axis; across up (horizontal) r^2/2 per
+        # horizontal axis; its turn over T moves the up by its component across the up
+        if self.with_latitude:
+            unmodelled, share = 0.0, 0.0
+        elif self.hand_earth_vertical:
+            unmodelled, share = omega * np.cos(np.radians(s.latitude_deg)), 0.5
+        else:
+            unmodelled, share = omega, 1.0 / 3.0
+        var = var + np.array([share * (unmodelled * h.duration_s) ** 2 for h in self.hands])
         self.hand_sigma_rad = np.radians(np.sqrt(var))
         self.hand_duration = np.array([h.duration_s for h in self.hands])
-        # without the latitude the statics' gyro means give the bias, the Earth rate as noise
-        self.static_bias_var = (s.gyro_sigma**2, (omega * np.abs(st.kg)) ** 2 / 3.0)
+        # without the full attitudes the poses' gyro means give the bias, the unmodelled Earth
+        # rate as noise: covariance white/N + M_g C M_g^T, C = r^2/3 I, or r^2/2 (I - u u^T)
+        # across the pose's up u (fixed at the start's values)
+        M_g = np.linalg.inv(st_gyro_inverse(st))
+        self.static_gyro_whiten = []
+        for j, stat in enumerate(s.statics):
+            u = ups[j]
+            C = (share * unmodelled**2 * (np.eye(3) - np.outer(u, u)) if self.hand_earth_vertical
+                 else share * unmodelled**2 * np.eye(3))
+            cov = np.diag(s.gyro_sigma**2 / stat.samples) + M_g @ C @ M_g.T
+            self.static_gyro_whiten.append(np.linalg.inv(np.linalg.cholesky(cov)))
+        if self.hand_earth_vertical:
+            self.start.notes.append("Earth rate: its vertical component modelled (latitude known), its "
+                                    "horizontal one as noise: the gyros cannot see the poses' heading")
 
     def _hand_residuals(self, x, Mg, ups, attitudes) -> np.ndarray:
         """(H, 2) whitened residuals: the up after each turn against the up before carried through it."""
@@ -444,6 +477,8 @@ class Model:
             else:
                 up_p = att
                 f_p, w_p = (self.f_n[2] * att)[None, :], np.zeros((1, 3))
+                if self.hand_earth_vertical:
+                    w_p = (self.omega_n[2] * att)[None, :]
             a, w = self._predict(x, self._context(f_p, w_p, np.zeros((1, 3)), st.temp_c, Ma, Mg), Ma, Mg)
             root_n = np.sqrt(st.samples)
             ups.append(up_p)
@@ -451,9 +486,8 @@ class Model:
             put(("static", j), (st.accel - a[0]) * root_n / static_sigma_a, "accel")
             if self.with_latitude:
                 put(("static", j), (st.gyro - w[0]) * root_n / static_sigma_w, "gyro")
-            elif self.hands:    # the bias, the Earth rate within the noise
-                white, earth = self.static_bias_var
-                put(("static", j), (st.gyro - w[0]) / np.sqrt(white / st.samples + earth), "gyro")
+            elif self.hands:    # the bias, the unmodelled Earth rate within the noise
+                put(("static", j), self.static_gyro_whiten[j] @ (st.gyro - w[0]), "gyro")
             else:   # only |Omega_E| known: the norm of the compensated rate
                 rate = np.linalg.norm(np.linalg.solve(Mg, st.gyro - x[L["gyro_bias"]]))
                 put(("static", j), np.atleast_1d((rate - self.omega_dps) * root_n / np.mean(static_sigma_w)),
