@@ -128,10 +128,9 @@ def _start(s: Summaries) -> Start:
                  Rotation.from_matrix(R_po).as_rotvec(), notes)
 
 
-def st_gyro_inverse(st: Start) -> np.ndarray:
-    """L_g = (K_g T_g R_po)^-1 of a start (R_po ~ I at the start of a hand capture)."""
-    Tg = lower_unit_rows(st.gamma)
-    return np.linalg.inv(np.diag(st.kg) @ Tg @ Rotation.from_rotvec(st.theta).as_matrix())
+def _start_gyro_matrix(st: Start) -> np.ndarray:
+    """M_g = K_g T_g R_po of a start."""
+    return np.diag(st.kg) @ lower_unit_rows(st.gamma) @ Rotation.from_rotvec(st.theta).as_matrix()
 
 
 def _pairs(s: Summaries) -> list:
@@ -278,10 +277,9 @@ class Model:
         per_sample_dps = s.gyro_sigma / np.abs(st.kg)
         omega = np.degrees(EARTH_RATE_RAD)
         var = np.array([np.mean(per_sample_dps**2) * h.dt**2 * h.samples for h in self.hands])
-        # the part of the Earth rate that is not modelled: all of it without the latitude, the
-        # horizontal part when only the vertical one is (its turn about up moves no up)
-        # a rate r of random direction: in 3-D r^2/3 per axis; across up (horizontal) r^2/2 per
-        # horizontal axis; its turn over T moves the up by its component across the up
+        # the Earth rate not modelled, r: all of it without the latitude (a random direction:
+        # r^2/3 per axis), the horizontal part when only the vertical one is (r^2/2 per
+        # horizontal axis); its turn over T moves the up by its component across the up
         if self.with_latitude:
             unmodelled, share = 0.0, 0.0
         elif self.hand_earth_vertical:
@@ -294,7 +292,7 @@ class Model:
         # without the full attitudes the poses' gyro means give the bias, the unmodelled Earth
         # rate as noise: covariance white/N + M_g C M_g^T, C = r^2/3 I, or r^2/2 (I - u u^T)
         # across the pose's up u (fixed at the start's values)
-        M_g = np.linalg.inv(st_gyro_inverse(st))
+        M_g = _start_gyro_matrix(st)
         self.static_gyro_whiten = []
         for j, stat in enumerate(s.statics):
             u = ups[j]
