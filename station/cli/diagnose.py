@@ -50,10 +50,13 @@ def cmd_diagnose(args) -> int:
     from station.estimate import lsq
     from station.model import EFFECTS
 
+    from station.estimate.hand_rotation import is_hand
+
     capture = read_capture(args.capture)
-    if any(seg.angle_deg is None for seg in capture.complete("rotation")):
+    if any(seg.angle_deg is None and not is_hand(seg) for seg in capture.complete("rotation")):
         raise UserError(f"{capture.path}: diagnose fits the least-squares model, which needs the "
-                        "encoder angle (angle_deg) of every rotation segment")
+                        "encoder angle (angle_deg) of every rotation segment that is not a hand turn "
+                        "between statics")
     s = lsq.summarise(capture)
     effects = _effects(args)
     if args.auto:

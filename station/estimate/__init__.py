@@ -8,8 +8,8 @@ from station.model.calibration import Calibration
 from station.io.capture import Capture, read_capture
 
 METHODS = ("auto", "lsq", "zhang2010", "fourier", "fourier-high")
-# "auto": fourier when any complete rotation segment has no angle_deg (no encoder), lsq
-# otherwise.  "lsq" is the weighted least-squares fit of the full measurement model, started
+# "auto": fourier when any complete rotation segment has no angle_deg (no encoder) and is not a
+# hand turn between statics, lsq otherwise (hand turns of unknown angle are terms of its model).  "lsq" is the weighted least-squares fit of the full measurement model, started
 # from the 2010 algebraic solution ("zhang2010", which is also available alone).  "fourier" is
 # the Fourier method's low-grade variant (Earth rate neglected),
 # "fourier-high" its high-grade variant (Earth rate along each shaft estimated; only |Omega_E|).
@@ -25,8 +25,12 @@ def capture_digest(capture: Capture) -> str:
 
 
 def choose_method(capture: Capture) -> str:
-    """The method "auto" stands for: fourier if any complete rotation lacks angle_deg."""
-    if any(seg.angle_deg is None for seg in capture.complete("rotation")):
+    """The method "auto" stands for: fourier if any complete rotation lacks angle_deg and is
+    not a hand turn (a steady rotation about a shaft); lsq otherwise (hand turns between statics
+    enter its model: station/estimate/hand_rotation.py)."""
+    from station.estimate.hand_rotation import is_hand
+
+    if any(seg.angle_deg is None and not is_hand(seg) for seg in capture.complete("rotation")):
         return "fourier"
     return "lsq"
 

@@ -634,7 +634,7 @@ class CaptureWriter:
                  **_plain(meta)}
         entry = _ordered_entry(entry)
         manifest = {**self._manifest, "segments": self._manifest["segments"] + [entry]}
-        _check(manifest, self._dir)
+        self._validate(manifest)
         csv_path = self._dir / entry["file"]
         csv_path.parent.mkdir(parents=True, exist_ok=True)
         try:
@@ -662,9 +662,13 @@ class CaptureWriter:
         segments = list(self._manifest["segments"])
         segments[index] = updated
         manifest = {**self._manifest, "segments": segments}
-        _check(manifest, self._dir)
+        self._validate(manifest)
         self._save(manifest)
         return updated
+
+    def _validate(self, manifest):
+        """Refuse (CaptureError) a manifest that a reader would refuse (before it is saved)."""
+        _check(manifest, self._dir)
 
     def _save(self, manifest):
         """Make `manifest` (already checked) the bundle's manifest, atomically."""
