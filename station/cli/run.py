@@ -231,6 +231,9 @@ def _record_and_estimate(args, config, scheme, plan, steps, directory, text) -> 
                 Sequencer(table=table, imu=imu, writer=writer, config=config, display=display,
                           operator=ConsoleOperator(display), interrupts=interrupts, rate_hz=rate_hz,
                           reset_faults=args.reset_faults).run(steps)
+        except UserError as e:           # a device fault, a table that did not hold: the run stops
+            raise UserError(f"{e}; the table was brought to rest where it answered, what was recorded is "
+                            f"kept: continue with station run --resume {directory}") from None
         except (RunPaused, RunAborted) as e:
             what = "paused" if isinstance(e, RunPaused) else "aborted"
             err.print(f"station run: {what}; the table is at rest and everything recorded is kept; "
