@@ -206,3 +206,25 @@ def test_apply_and_diagnose_refuse_a_calibration_of_another_serial(with_rotation
     assert main(["apply", str(cal), str(with_rotations / "pos01.csv"), "-o", str(out)]) == 0
     assert main(["diagnose", str(other), "--calib", str(cal)]) == 2
     assert main(["diagnose", str(other), "--calib", str(cal), "--force"]) == 0
+
+
+# ------------------------------------------------------------------ data loss
+
+def test_a_segment_over_the_data_loss_limits_is_excluded_with_a_note(with_rotations, tmp_path, capsys):
+    cap = copy_capture(with_rotations, tmp_path / "cap")
+    # 1.5 s of frames missing in the middle of pos03 (an IMU stall): longest gap above 1 s
+    rewrite_csv(cap, "pos03", lambda table, header: None)
+    doc = yaml.safe_load((cap / "manifest.yaml").read_text())
+    entry = next(e for e in doc["segments"] if e["name"] == "pos03")
+    lines = (cap / entry["file"]).read_text().splitlines(keepends=True)
+    text = "".join(lines[:300] + lines[450:])
+    (cap / entry["file"]).write_text(text)
+    entry["sha256"], entry["samples"] = hashlib.sha256(text.encode()).hexdigest(), len(lines) - 1 - 150
+    (cap / "manifest.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    assert main(["estimate", str(cap)]) == 0
+    fit = read_calfile(cap / "calibration.yaml")["fit"]
+    assert fit["excluded_segments"] == ["pos03"] and fit["static_segments"] == 8
+    assert "segment pos03 excluded: 150 frames missing" in capsys.readouterr().err
+    # with a looser limit it is used
+    assert main(["estimate", str(cap), "--max-gap-s", "2", "--max-missing-fraction", "0.2"]) == 0
+    assert read_calfile(cap / "calibration.yaml")["fit"]["static_segments"] == 9

@@ -47,3 +47,24 @@ def test_a_device_that_disconnects_mid_run_is_one_line_and_resumable(tmp_path, c
     assert all(s.status in ("complete", "incomplete") for s in capture.segments)
     assert "--resume" in last[0] or not capture.segments
     assert yaml.safe_load((tmp_path / "cap" / "manifest.yaml").read_text())["imu"]["serial"]
+
+
+def test_frames_lost_beyond_the_limit_are_recorded_again_then_the_run_stops(tmp_path, capsys, monkeypatch):
+    """5 % of the frames dropped (limit 1 %, station.yaml run.max_missing_fraction): every
+    recording of the first segment is bad; each is kept aside and recorded again, and after
+    run.rerecord_attempts the run stops with one line that says why."""
+    (tmp_path / "s.yaml").write_text(SCHEME)
+    (tmp_path / "station.yaml").write_text(CONFIG + "  rerecord_attempts: 1\n")
+    monkeypatch.chdir(tmp_path)
+    faults = Faults(imu=ImuFaults(drop_probability=0.05))
+    with BenchServer(default_truth(4), BenchOptions(speed=20.0, seed=4, axes=3, faults=faults)) as bench:
+        status = main(["run", "--scheme", "s.yaml", "--config", "station.yaml", "--port", bench.imu_path,
+                       "--table-port", bench.table_path, "--out", str(tmp_path / "cap")])
+        rates = [bench.table.read_rate(axis) for axis in (1, 2, 3)]
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert "zup: every recording lost too much data" in err and "limit 1 %" in err and "--resume" in err
+    assert rates == [0.0, 0.0, 0.0]
+    cap = tmp_path / "cap"
+    assert (cap / "zup.csv.incomplete").stat().st_size > 0 and (cap / "zup.csv.incomplete2").stat().st_size > 0
+    assert read_capture(cap).complete() == []

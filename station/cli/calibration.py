@@ -19,6 +19,10 @@ def add_parsers(sub) -> None:
                      help="auto (default): lsq when rotations have encoder angles, fourier otherwise")
     est.add_argument("--add", action="append", default=[], metavar="EFFECT",
                      help="add an effect of the library to the model (repeatable; station effects lists them)")
+    est.add_argument("--max-missing-fraction", type=float, default=0.01, metavar="F",
+                     help="leave out a segment that lost more than this share of its frames (default 0.01)")
+    est.add_argument("--max-gap-s", type=float, default=1.0, metavar="S",
+                     help="leave out a segment with a longer stretch without a frame, s (default 1)")
     add_accept_poor_fit(est)
     est.set_defaults(func=cmd_estimate)
 
@@ -77,7 +81,11 @@ def cmd_estimate(args) -> int:
     from station.io.calfile import write_calfile
     from station.estimate import estimate_capture
 
-    cal, capture, provenance = estimate_capture(args.capture, args.method, args.add)
+    if not (0 <= args.max_missing_fraction < 1 and args.max_gap_s > 0):
+        raise UserError("--max-missing-fraction must be within [0, 1) and --max-gap-s > 0")
+    cal, capture, provenance = estimate_capture(args.capture, args.method, args.add,
+                                                max_missing_fraction=args.max_missing_fraction,
+                                                max_gap_s=args.max_gap_s)
     for w in capture.warnings:
         err.print(f"warning: {w}", markup=False, soft_wrap=True)
     target = Path(args.output) if args.output else capture.path / "calibration.yaml"

@@ -199,7 +199,7 @@ def _run_on_bench(args) -> int:
     steps = _resume_steps(plan, scheme, done, config) if args.resume else plan.steps
     if args.resume and not any(s.segment for s in steps):
         out.print(f"{directory}: every segment is recorded; estimating", markup=False)
-        return _estimate(directory, args.accept_poor_fit)
+        return _estimate(directory, args.accept_poor_fit, config)
     try:
         return _record_and_estimate(args, config, scheme, plan, steps, directory, text if not args.resume else None)
     except DEVICE_ERRORS as e:
@@ -243,7 +243,7 @@ def _record_and_estimate(args, config, scheme, plan, steps, directory, text) -> 
         for device in (table, imu):
             if device is not None:
                 device.close()
-    return _estimate(directory, args.accept_poor_fit)
+    return _estimate(directory, args.accept_poor_fit, config)
 
 
 # ------------------------------------------------------------------------------------ operator
@@ -444,11 +444,13 @@ def _reopen(directory, rate_hz, serial=None):
     return CaptureWriter.reopen(directory)
 
 
-def _estimate(directory, accept_poor_fit: bool = False) -> int:
+def _estimate(directory, accept_poor_fit: bool = False, config=None) -> int:
     from station.io.calfile import write_calfile
     from station.estimate import estimate_capture
 
-    cal, capture, provenance = estimate_capture(directory)
+    limits = {} if config is None else {"max_missing_fraction": config.run.max_missing_fraction,
+                                        "max_gap_s": config.run.max_gap_s}
+    cal, capture, provenance = estimate_capture(directory, **limits)
     for w in capture.warnings:
         err.print(f"warning: {w}", markup=False, soft_wrap=True)
     path = write_calfile(Path(directory) / "calibration.yaml", cal, provenance)

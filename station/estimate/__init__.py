@@ -35,6 +35,41 @@ def choose_method(capture: Capture) -> str:
 
 
 COLUMNS = ("ax", "ay", "az", "gx", "gy", "gz")
+# data-loss limits per segment (the defaults of station.yaml's run.max_missing_fraction, run.max_gap_s)
+MAX_MISSING_FRACTION = 0.01
+MAX_GAP_S = 1.0
+
+
+def data_loss(seg, sample_rate_hz: float) -> tuple[int, float, float]:
+    """(frames missing, their share of the frames, the longest stretch without a frame in s) of
+    a segment's samples, from its time stamps against the nominal rate."""
+    period = 1.0 / sample_rate_hz
+    steps = np.diff(seg.data.t)
+    big = steps > 1.5 * period
+    missing = int(np.round(steps[big] / period - 1.0).sum())
+    n = len(seg.data.t)
+    longest = float(steps.max()) - period if len(steps) else 0.0
+    return missing, missing / (n + missing), max(longest, 0.0)
+
+
+def exclude_lossy_segments(capture: Capture, max_missing_fraction: float = MAX_MISSING_FRACTION,
+                           max_gap_s: float = MAX_GAP_S) -> list[str]:
+    """Mark complete segments that lost more than the limits as ``excluded`` (so that
+    ``capture.complete()`` leaves them out); returns a note for each."""
+    notes = []
+    for seg in capture.complete():
+        if seg.data is None or len(seg.data.t) < 2:
+            continue
+        missing, share, gap = data_loss(seg, capture.imu.sample_rate_hz)
+        problems = []
+        if share > max_missing_fraction:
+            problems.append(f"{missing} frames missing ({100 * share:.2f} %, limit {100 * max_missing_fraction:g} %)")
+        if gap > max_gap_s:
+            problems.append(f"no frame for {gap:.2f} s (limit {max_gap_s:g} s)")
+        if problems:
+            seg.status = "excluded"
+            notes.append(f"segment {seg.name} excluded: {'; '.join(problems)}")
+    return notes
 
 
 def check_resolution(capture: Capture) -> None:
@@ -109,14 +144,19 @@ def _estimate_with(capture: Capture, method: str, effects) -> tuple[Calibration,
     return fourier.estimate(capture, "high" if method == "fourier-high" else "low"), method
 
 
-def estimate_capture(path, method: str = "auto", effects=()) -> tuple[Calibration, Capture, dict]:
+def estimate_capture(path, method: str = "auto", effects=(), *, max_missing_fraction: float = MAX_MISSING_FRACTION,
+                     max_gap_s: float = MAX_GAP_S) -> tuple[Calibration, Capture, dict]:
     """Read a capture, estimate, judge the fit (station.estimate.verdict: verdict, honest 1-sigma,
     parameters not determined) and return the calibration, the capture and its provenance."""
     from station.estimate.verdict import judge
 
     capture = read_capture(path)
     check_resolution(capture)
+    excluded = exclude_lossy_segments(capture, max_missing_fraction, max_gap_s)
     cal, method = estimate_with(capture, method, effects)
+    cal.fit.setdefault("notes", []).extend(excluded)
+    if excluded:
+        cal.fit["excluded_segments"] = [n.split()[1] for n in excluded]
     judge(cal)
     firmware = capture.imu.extra.get("firmware")
     provenance = {

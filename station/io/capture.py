@@ -647,6 +647,7 @@ class CaptureWriter:
         manifest = _without_none(_plain(manifest))
         _check(manifest, directory)
         directory.mkdir(parents=True, exist_ok=True)
+        remove_stray_temporaries(directory)     # a writer killed before its first manifest
         self._dir = directory
         self._save(manifest)
 
