@@ -50,7 +50,7 @@ Z_MAX, Z_RMS = 4.5, 1.6
 
 @pytest.fixture(scope="module")
 def bench():
-    with BenchServer(default_truth(SEED), BenchOptions(speed=SPEED, seed=SEED, axes=3)) as b:
+    with BenchServer(default_truth(SEED), BenchOptions(speed=SPEED, seed=SEED, axes=3, lossless=True)) as b:
         yield b
 
 

@@ -85,7 +85,7 @@ def new_writer(path, scheme="test", gravity=normal_gravity(45.0), extra=None):
 
 @pytest.fixture()
 def bench3():
-    with BenchServer(default_truth(3), BenchOptions(speed=SPEED, seed=3, axes=3)) as b:
+    with BenchServer(default_truth(3), BenchOptions(speed=SPEED, seed=3, axes=3, lossless=True)) as b:
         yield b
 
 
@@ -125,7 +125,7 @@ def test_the_table_is_unpowered_while_the_operator_remounts_the_imu(tmp_path):
     ops = [s for s in plan if isinstance(s, Operator)]
     assert len(ops) == 1 and ops[0].remount and ops[0].instruction.startswith("mount the IMU with its ")
     assert ops[0].mounting != config.table.mounting
-    with BenchServer(default_truth(2), BenchOptions(speed=SPEED, seed=2, axes=2)) as bench:
+    with BenchServer(default_truth(2), BenchOptions(speed=SPEED, seed=2, axes=2, lossless=True)) as bench:
         hands = Hands(bench)
         seq, table, imu = sequencer(bench, config, new_writer(tmp_path / "cap"), hands)
         seq.run(plan.steps)
@@ -146,7 +146,7 @@ def test_warm_up_lasts_until_the_temperature_slope_is_below_the_threshold(tmp_pa
                     run=RunConfig(**LOSS_AT_SPEED, operator=False, settle_s=1))
     scheme = scheme_from_text("name: z\ndefaults: {dwell_s: 2}\nsegments:\n  - {static: zup, up_body: [0, 0, 1]}\n",
                               "z.yaml")
-    with BenchServer(truth, BenchOptions(speed=SPEED, seed=4, axes=1)) as bench:
+    with BenchServer(truth, BenchOptions(speed=SPEED, seed=4, axes=1, lossless=True)) as bench:
         seq, table, imu = sequencer(bench, config, new_writer(tmp_path / "cap"), Hands(bench))
         seq.run(compile_scheme(scheme, config).steps)
         table.close()
@@ -170,7 +170,7 @@ def test_manual6_is_found_in_one_continuous_recording(tmp_path):
     config = Config(run=RunConfig(**LOSS_AT_SPEED, operator=True))
     plan = compile_scheme(scheme, config)
     speed = 50.0
-    with BenchServer(truth, BenchOptions(speed=speed, seed=5, axes=3)) as bench:
+    with BenchServer(truth, BenchOptions(speed=speed, seed=5, axes=3, lossless=True)) as bench:
         hands_table = open_table(bench.table_path)
         hands_table.close_interlocks()
         writer = new_writer(tmp_path / "cap", "manual6", extra={"table": {"angle_error_arcsec": 3600.0}})

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import select
 import threading
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -41,6 +42,12 @@ class BenchOptions:
     csv_format: CsvFormat = field(default_factory=CsvFormat)
     table_config: TableConfig = field(default_factory=TableConfig)
     record: bool = False          # keep the times of the frames sent intact (tests)
+    lossless: bool = False        # device time waits while a reader that is reading falls behind,
+                                  #   instead of frames being lost (tests on a loaded machine, where
+                                  #   --speed 100 outruns a descheduled reader; a real IMU drops them)
+
+
+READER_ACTIVE_S = 0.5             # lossless: a reader that took bytes within this (wall) is reading
 
 
 class BenchServer:
@@ -79,6 +86,7 @@ class BenchServer:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
+        self._last_wall = self._last_taken_wall = time.monotonic()
 
     @property
     def table_path(self) -> str:
@@ -93,6 +101,12 @@ class BenchServer:
         ports = [p for p in (self.table_port, self.imu_port) if not p.closed]
         writers = [p for p in ports if p.backlog]
         readable, _, _ = select.select(ports, writers, [], timeout_s) if ports else ([], [], [])
+        wall = time.monotonic()
+        held = (self.options.lossless and self._imu_behind()
+                and wall - self._last_taken_wall < READER_ACTIVE_S)
+        if held:
+            self.clock.hold(wall - self._last_wall)      # the simulated world waits for the reader
+        self._last_wall = wall
         now = self.clock.now()
         self.table.update(now)
         tf, imf = self.options.faults.table, self.options.faults.imu
@@ -109,16 +123,26 @@ class BenchServer:
             if data:
                 self.imu_port.write(self.imu_frontend.receive(data, now))
         if not self.imu_port.closed:
-            if self.imu_port.backlog > self.imu_port.max_backlog // 2 and self.imu_frontend.streaming:
+            if held:
+                pass                     # nothing came due: device time stood still
+            elif self._imu_behind():
                 # nobody reads: the frames due are lost anyway, do not compute them
                 self.faulter.overflowed(self.imu.sample_times_until(now).size, recorded=False)
             else:
                 before = self.faulter.frames_sent
                 frames = self.imu_frontend.produce(now)
-                if frames and not self.imu_port.write(frames, droppable=True):
+                # lossless: a batch larger than the backlog (this loop itself was descheduled) is kept
+                if frames and not self.imu_port.write(frames, droppable=not self.options.lossless):
                     self.faulter.overflowed(self.faulter.frames_sent - before)
+        backlog = self.imu_port.backlog
         for p in (self.table_port, self.imu_port):
             p.flush()
+        if self.imu_port.backlog < backlog or not self.imu_port.backlog:
+            self._last_taken_wall = time.monotonic()
+
+    def _imu_behind(self) -> bool:
+        return (not self.imu_port.closed and self.imu_frontend.streaming
+                and self.imu_port.backlog > self.imu_port.max_backlog // 2)
 
     def _timeout(self) -> float:
         """Until the next frame is due (wall s), within [5 ms, 20 ms]: frames go out in
