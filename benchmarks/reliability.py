@@ -77,7 +77,7 @@ def faults(speed: float) -> None:
             tmp = Path(tmp)
             (tmp / "s.yaml").write_text(SCHEME)
             (tmp / "station.yaml").write_text(CONFIG)
-            with BenchServer(default_truth(4), BenchOptions(speed=speed, seed=4, axes=3, faults=fault)) as bench:
+            with BenchServer(default_truth(4), BenchOptions(speed=speed, seed=4, axes=3, faults=fault, lossless=True)) as bench:
                 done = station("run", *RUN, "--config", "station.yaml", "--port", bench.imu_path,
                                "--table-port", bench.table_path, "--out", tmp / "cap", cwd=tmp)
                 try:
@@ -87,7 +87,7 @@ def faults(speed: float) -> None:
             tb = "Traceback" in done.stderr
             resumed = "-"
             if done.returncode != 0 and (tmp / "cap" / "manifest.yaml").exists():
-                with BenchServer(default_truth(4), BenchOptions(speed=speed, seed=4, axes=3)) as bench:
+                with BenchServer(default_truth(4), BenchOptions(speed=speed, seed=4, axes=3, lossless=True)) as bench:
                     again = station("run", "--resume", tmp / "cap", "--config", "station.yaml", "--port",
                                     bench.imu_path, "--table-port", bench.table_path, cwd=tmp)
                 resumed = f"exit {again.returncode}" + (" (traceback)" if "Traceback" in again.stderr else "")
@@ -147,7 +147,8 @@ def inputs() -> None:
         case("statics only, no latitude, diagnose --auto",
              lambda c: _edit(c, lambda d: (statics(d), d["site"].pop("latitude_deg"))), ["diagnose", "{c}", "--auto"])
         case("coarse quantisation (0.05 m/s^2 steps)", lambda c: _csv(c, "zup", quantise), ["estimate", "{c}"])
-        case("1e300 in a CSV", lambda c: _csv(c, "zup", lambda ls: [ls[0], "1," + "1e300," * 5 + "0"] + ls[2:]),
+        case("1e300 in a CSV", lambda c: _csv(c, "zup", lambda ls: [ls[0], ",".join(
+            ls[1].split(",")[:1] + ["1e300"] + ls[1].split(",")[2:])] + ls[2:]),
              ["estimate", "{c}"])
         for key, value in (("gravity_mps2", 1e300), ("latitude_deg", 1e300)):
             case(f"site.{key}: {value:g}", lambda c, k=key, v=value: _edit(c, lambda d: d["site"].update({k: v})),
@@ -160,7 +161,7 @@ def inputs() -> None:
             "l0: &l0 lol\n" + "".join(f"l{i}: &l{i} [{', '.join([f'*l{i - 1}'] * 9)}]\n" for i in range(1, 10))
             + (c / "manifest.yaml").read_text().replace("serial: SIM-5", "serial: *l9")), ["estimate", "{c}"])
         case("FIFO as an incomplete segment's file", lambda c: (
-            _edit(c, lambda d: d["segments"][-1].update(status="incomplete")),
+            _edit(c, lambda d: next(s for s in d["segments"] if s["name"] == "rotz_m").update(status="incomplete")),
             (c / "rotz_m.csv").unlink(), os.mkfifo(c / "rotz_m.csv")), ["estimate", "{c}"])
         case("FIFO as a complete segment's file", lambda c: ((c / "zup.csv").unlink(), os.mkfifo(c / "zup.csv")),
              ["estimate", "{c}"])
@@ -180,7 +181,9 @@ def inputs() -> None:
                     target.write_text("a: &a [x, x]\nb: &b [*a, *a]\n" + cal.read_text().replace(
                         "serial: SIM-5", "serial: *b"))
                 elif content is None:
-                    target.write_text(cal.read_text().replace("effects:\n- base_triads", "effects: 5\n#"))
+                    doc = yaml.safe_load(cal.read_text())
+                    doc["effects"] = 5
+                    target.write_text(yaml.safe_dump(doc, sort_keys=False))
                 else:
                     target.write_bytes(content)
             case(name + " (show)", prepare, ["show", "{c}/bad.yaml"])
