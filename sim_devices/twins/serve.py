@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import select
 import threading
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -52,6 +53,12 @@ class BenchOptions:
     table_framing: str = "tcp"    # acutrol replies: "tcp" (error code, length first) or "gpib"
     table_tcp_port: int | None = None   # serve the table on TCP 127.0.0.1:port (0: any free port)
     record: bool = False          # keep the times of the frames sent intact (tests)
+    lossless: bool = False        # device time waits while a reader that is reading falls behind,
+                                  #   instead of frames being lost (tests on a loaded machine, where
+                                  #   --speed 100 outruns a descheduled reader; a real IMU drops them)
+
+
+READER_ACTIVE_S = 0.5             # lossless: a reader that took bytes within this (wall) is reading
 
 
 class BenchServer:
@@ -92,6 +99,7 @@ class BenchServer:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
+        self._last_wall = self._last_taken_wall = time.monotonic()
 
     @property
     def table_path(self) -> str:
@@ -106,6 +114,12 @@ class BenchServer:
         ports = [p for p in (self.table_port, self.imu_port) if not p.closed]
         writers = [p for p in ports if p.backlog]
         readable, _, _ = select.select(ports, writers, [], timeout_s) if ports else ([], [], [])
+        wall = time.monotonic()
+        held = (self.options.lossless and self._imu_behind()
+                and wall - self._last_taken_wall < READER_ACTIVE_S)
+        if held:
+            self.clock.hold(wall - self._last_wall)      # the simulated world waits for the reader
+        self._last_wall = wall
         now = self.clock.now()
         self.table.update(now)
         tf, imf = self.options.faults.table, self.options.faults.imu
@@ -122,7 +136,9 @@ class BenchServer:
             if data:
                 self.imu_port.write(self.imu_frontend.receive(data, now))
         if not self.imu_port.closed:
-            if self.imu_port.backlog > self.imu_port.max_backlog // 2 and self.imu_frontend.streaming:
+            if held:
+                pass                     # nothing came due: device time stood still
+            elif self._imu_behind():
                 # nobody reads: the frames due are lost anyway, do not compute them
                 self.faulter.overflowed(self.imu.sample_times_until(now).size, recorded=False)
             else:
@@ -130,10 +146,18 @@ class BenchServer:
                 frames = self.imu_frontend.produce(now)
                 if frames and self.faulter.frames_sent > before:
                     self._size_stream_buffer(len(frames) / (self.faulter.frames_sent - before))
-                if frames and not self.imu_port.write(frames, droppable=True):
+                # lossless: a batch larger than the backlog (this loop itself was descheduled) is kept
+                if frames and not self.imu_port.write(frames, droppable=not self.options.lossless):
                     self.faulter.overflowed(self.faulter.frames_sent - before)
+        backlog = self.imu_port.backlog
         for p in (self.table_port, self.imu_port):
             p.flush()
+        if self.imu_port.backlog < backlog or not self.imu_port.backlog:
+            self._last_taken_wall = time.monotonic()
+
+    def _imu_behind(self) -> bool:
+        return (not self.imu_port.closed and self.imu_frontend.streaming
+                and self.imu_port.backlog > self.imu_port.max_backlog // 2)
 
     def _size_stream_buffer(self, bytes_per_frame: float) -> None:
         """Transmit buffer for ``STREAM_BUFFER_WALL_S`` of the stream at the present speed."""

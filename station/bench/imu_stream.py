@@ -31,7 +31,7 @@ def lost_frames_note(name: str, lost: int, device_s: float, wall_s: float) -> st
                 "the IMU twin and this reader cannot keep up at that speed; lower --speed of "
                 "station sim serve")
     return (f"{name}: {lost} frames lost while recording (the window and the angle come from "
-            "the sample times)")
+            "the frame count)")
 
 
 class ImuStream:

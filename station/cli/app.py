@@ -31,14 +31,19 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
+    """Exit status: 0 done; 2 bad input (one line naming the file, line or field); 3 the
+    calibration was written but its fit fails (``--accept-poor-fit`` makes it 0); 130
+    interrupted (Ctrl-C) at any moment, without a traceback."""
+    command = "?"
     try:
+        args = build_parser().parse_args(argv)
+        command = args.command
         return args.func(args)
     except UserError as e:
-        err.print(f"station {args.command}: {e}", markup=False, soft_wrap=True)
+        err.print(f"station {command}: {e}", markup=False, soft_wrap=True)
         return 2
     except KeyboardInterrupt:
-        err.print("interrupted")
+        err.print("interrupted", markup=False)
         return 130
 
 

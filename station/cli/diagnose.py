@@ -16,6 +16,8 @@ def add_parsers(sub) -> None:
     d.add_argument("capture", help="capture directory (rotations need encoder angles)")
     d.add_argument("--calib", metavar="CAL.yaml", help="diagnose the model of this calibration file "
                    "(its effects), refitted to the capture")
+    d.add_argument("--force", action="store_true",
+                   help="use a --calib made for another IMU serial than the capture's")
     d.add_argument("--add", action="append", default=[], metavar="EFFECT", help="add an effect first")
     d.add_argument("--auto", action="store_true",
                    help="add the most significant candidate, refit, repeat until none is significant")
@@ -28,14 +30,16 @@ def add_parsers(sub) -> None:
     eff.set_defaults(func=cmd_effects)
 
 
-def _effects(args) -> list[str]:
+def _effects(args, capture) -> list[str]:
+    from station.cli.calibration import check_serial
     from station.io.calfile import read_calfile
     from station.model import EFFECTS
 
     effects = []
     if args.calib:
-        effects += [e for e in read_calfile(args.calib).get("effects", [])
-                    if e not in ("base_triads", "inter_triad")]
+        doc = read_calfile(args.calib)
+        check_serial(doc, args.calib, capture.imu.serial, args.force, f"capture {capture.path}")
+        effects += [e for e in doc.get("effects", []) if e not in ("base_triads", "inter_triad")]
     effects += args.add
     for e in effects:
         if e not in EFFECTS:
@@ -58,7 +62,7 @@ def cmd_diagnose(args) -> int:
                         "encoder angle (angle_deg) of every rotation segment that is not a hand turn "
                         "between statics")
     s = lsq.summarise(capture)
-    effects = _effects(args)
+    effects = _effects(args, capture)
     if args.auto:
         steps, final = auto.run(s, effects, progress=None)
         first = steps[0].before if steps else final

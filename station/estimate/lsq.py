@@ -39,6 +39,8 @@ EARTH_RATE_RAD = 7.292115e-5
 WEAK_PRIOR_RAD = 3.0             # a prior on nuisance angles that only matters when nothing else does
 PHASES = 12                      # phase grid for the harmonics of a rotation (exact to 5th order)
 UP = np.array([0.0, 0.0, 1.0])
+# zero-mean priors (internal units) on the gyro block when no rotation has a known angle
+NO_ROTATION_PRIORS = {"gyro_scale": 1e3, "gyro_misalignment": 1e3, "gyro_bias": 1e6, "inter_triad": 1e3}
 
 # Parameters of the base model: name, internal -> reported scale, reported unit
 GLOBAL = [("accel_scale", 1.0, "1"), ("accel_misalignment", 1 / units.ARCSEC_RAD, "arcsec"),
@@ -569,6 +571,7 @@ class FitResult:
     chi2: float
     dof: int
     residuals: np.ndarray
+    rank_deficient: list = field(default_factory=list)   # columns in the Jacobian's null space
 
 
 def _solve(model: Model, x0: np.ndarray):
@@ -588,6 +591,18 @@ def covariance(J: np.ndarray) -> np.ndarray:
     keep = sv > 1e-13 * sv[0]
     v = vt[keep].T / sv[keep]
     return (v @ v.T) / np.outer(norms, norms)
+
+
+def _null_columns(J: np.ndarray) -> list:
+    """Columns that take part in a direction the data cannot see at all (a zero singular value
+    of the column-scaled Jacobian): their value is not determined, whatever covariance() says."""
+    norms = np.linalg.norm(J, axis=0)
+    norms[norms == 0] = 1.0
+    _, sv, vt = np.linalg.svd(J / norms, full_matrices=False)
+    null = vt[sv < 1e-9 * sv[0]]
+    zero = np.flatnonzero(np.linalg.norm(J, axis=0) == 0)
+    return sorted(set(zero.tolist()) | set(np.flatnonzero(np.max(np.abs(null), axis=0) > 1e-6).tolist()
+                                            if null.size else []))
 
 
 def _blind_effect_parameters(model: Model, J: np.ndarray) -> list:
@@ -622,6 +637,18 @@ def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "aut
                         "and misalignments need turns)" + (": " + "; ".join(s.skipped) if s.skipped else ""))
     model = Model(s, list(effects or []), attitudes)
     model.unobservable = []
+    if not s.rotations:
+        # nothing turned by a known angle: the gyro block is held only by wide priors (so the fit
+        # stays solvable); station.estimate.verdict then leaves it out of the calibration
+        L = model.layout
+        for block, width in NO_ROTATION_PRIORS.items():
+            for c in range(L[block].start, L[block].stop):
+                model.priors[c] = width
+        model.refresh()
+    rows, columns = len(model.residuals(model.x0)), model.layout.size
+    if rows < columns:
+        raise UserError(f"the capture cannot determine the model: {rows} measurements for {columns} "
+                        "unknowns (record more static attitudes or rotations, or add fewer effects)")
     J = model.jacobian(model.x0)
     x = None
     while True:
@@ -637,7 +664,10 @@ def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "aut
     # gravity along an axis turned only by hand is set by its weak prior, not by the data
     blind_kappa = sum(1 for k in range(s.groups) if not any(rot.steady for rot in s.rotations if rot.group == k))
     dof = len(r) - model.layout.size + blind_kappa
-    return FitResult(x=x, covariance=cov, model=model, chi2=float(r @ r), dof=dof, residuals=r)
+    if not s.rotations:     # the gyro block's wide priors are not data
+        dof -= sum(model.layout[b].stop - model.layout[b].start for b in NO_ROTATION_PRIORS)
+    return FitResult(x=x, covariance=cov, model=model, chi2=float(r @ r), dof=dof, residuals=r,
+                     rank_deficient=_null_columns(J))
 
 
 def reported(result: FitResult, accel_unit: str, gyro_unit: str):
@@ -674,11 +704,24 @@ def reported(result: FitResult, accel_unit: str, gyro_unit: str):
     return names, values, units_, cov
 
 
+def _reported_columns(result: FitResult) -> np.ndarray:
+    """The parameter-vector column of every reported parameter, in the order of reported()."""
+    L = result.model.layout
+    order = ["accel_scale", "accel_misalignment", "gyro_scale", "gyro_misalignment",
+             "accel_bias", "gyro_bias", "inter_triad"]
+    cols = [L[block].start + k for block in order for k in range(3)]
+    for e in result.model.effects:
+        cols += list(range(L[f"effect:{e.id}"].start, L[f"effect:{e.id}"].stop))
+    return np.array(cols, dtype=int)
+
+
 def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=()) -> Calibration:
     model, x = result.model, result.x
     L, s = model.layout, model.s
     names, values, units_, cov = reported(result, accel_unit, gyro_unit)
     sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    # a parameter in the null space has no finite 1-sigma (the pseudo-inverse would say zero)
+    sigma[np.isin(_reported_columns(result), result.rank_deficient)] = np.inf
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(sigma, sigma)
     extra = {}
