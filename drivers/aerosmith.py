@@ -1,28 +1,33 @@
 """Driver for single-axis tables speaking the three-letter dialect (protocol ``aerosmith``).
 
-The dialect has no interlock, fault-reset or limit commands: the driver reports the
-interlock and fault bits of ``STA``, refuses to change them (NotSupported: use the
-controller's front panel) and enforces its own rate limits; the controller's move profile
-limits are set on the controller.
+Interlock = the servo (``SRV1``/``SRV0``); the rate-mode acceleration is ``ACL``; the dialect
+has no fault-reset or rate-limit command: NotSupported (use the controller's front panel), and
+the driver enforces its own rate limits.  9600 baud unless the settings say otherwise; the
+command strings come from ``TableSettings.dialect`` over the defaults (docs/protocols.md says
+which are public and which unverified).
 """
 from __future__ import annotations
 
-from .errors import NotSupported, ProtocolError, TableFault
+from .errors import LimitError, NotSupported, ProtocolError, TableFault
 from .protocols import aerosmith as P
-from .table import RateTable, TableStatus
-
-C = P.COMMANDS
+from .table import RateTable, TableSettings, TableStatus
+from .transport import SerialSettings
 
 
 class AerosmithTable(RateTable):
     protocol = "aerosmith"
 
     def __init__(self, url, settings=None):
-        super().__init__(url, settings)
+        super().__init__(url, settings or TableSettings(serial=SerialSettings(baudrate=P.DEFAULT_BAUD)))
         self._rx = bytearray()
+        try:
+            self.commands = P.dialect(self.settings.dialect)
+        except ValueError as e:
+            raise LimitError(self.name, str(e)) from None
 
     def _exchange(self, name: str, *values) -> str:
         """Send one command, return its reply line ('' if none); ProtocolError on ``?``."""
+        C = self.commands
         text = C.format(name, *values)
         if self._rx:
             self._rx.clear()
@@ -58,8 +63,10 @@ class AerosmithTable(RateTable):
         pass        # set on the controller; the driver checks its own limits
 
     def _set_limits(self, axis, mode, rate_dps, accel_dps2):
-        raise NotSupported(self.name, "the three-letter dialect has no limit commands: set the "
-                                      "limits on the controller")
+        if mode != "rate":
+            raise NotSupported(self.name, "the three-letter dialect has no position-mode limit "
+                                          "commands: set them on the controller")
+        self._exchange("acceleration", accel_dps2)      # the rate limit is the driver's own
 
     def _read_positions(self):
         return [self._exchange("position")]
@@ -76,11 +83,7 @@ class AerosmithTable(RateTable):
                                       "on the controller's front panel")
 
     def _interlock(self, axis, close):
-        closed, fault, _ = self._status()
-        if close and closed[0] and not fault[0]:
-            return
-        raise NotSupported(self.name, f"the three-letter dialect cannot {'close' if close else 'open'} "
-                                      "the interlock: use the controller's front panel")
+        self._exchange("servo", 1 if close else 0)
 
     def _set_mode(self, axis, mode):
         if mode == "rate":

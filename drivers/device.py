@@ -32,7 +32,7 @@ class Device(abc.ABC):
 
     def connect(self) -> str:
         """Open the port and bring the device up; on any failure the port is closed again."""
-        self._port = Port(self.url, self.settings.serial, self.name, self.log)
+        self._port = self._open_port()
         try:
             line = self._on_connect()
         except BaseException:
@@ -40,6 +40,10 @@ class Device(abc.ABC):
             raise
         self.log.info("%s: %s", self.name, line)
         return self.identity
+
+    def _open_port(self):
+        """The transport: a pyserial :class:`Port` on ``url`` (drivers may choose others)."""
+        return Port(self.url, self.settings.serial, self.name, self.log)
 
     @abc.abstractmethod
     def _on_connect(self) -> str: ...

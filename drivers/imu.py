@@ -25,7 +25,8 @@ class ImuSettings:
     """Settings of an IMU driver.
 
     ``rate_hz``: output rate asked for (vectornav) or expected (csv, for gap counting);
-    ``temperature``: ask for the temperature where the protocol can; ``frame_timeout_s``:
+    ``temperature``: ask for the temperature where the protocol can; ``device_baud``: set the
+    device's serial baud rate at connect and switch the port to it; ``frame_timeout_s``:
     longest wait for the next valid frame before DeviceTimeout; ``csv_format``: units of the
     csv columns (see :mod:`drivers.protocols.csvlines`).
     """
@@ -35,6 +36,7 @@ class ImuSettings:
     temperature: bool = True
     frame_timeout_s: float = 1.0
     csv_format: object = None
+    device_baud: int | None = None     # vectornav: write it to the sensor (register 05), then use it
 
 
 class Imu(Device):

@@ -13,6 +13,7 @@ TABLE_DRIVERS = {
 IMU_DRIVERS = {
     "vectornav": "drivers.vectornav:VectorNavImu",
     "csv": "drivers.csvimu:CsvImu",
+    "xsens": "drivers.xsens:XsensImu",
 }
 DEFAULT_TABLE_PROTOCOL = "acutrol"
 DEFAULT_IMU_PROTOCOL = "vectornav"

@@ -53,6 +53,7 @@ class TableSettings:
     poll_interval_s: float = 0.01
     wait_margin_s: float = 10.0
     stall_polls: int = 50
+    dialect: tuple[tuple[str, str], ...] = ()     # aerosmith: (command name, string) overrides
 
     def axis_limits(self, n_axes: int) -> tuple[AxisLimits, ...]:
         if len(self.limits) == 1:

@@ -87,6 +87,13 @@ class Port:
     def is_open(self) -> bool:
         return bool(self._ser.is_open)
 
+    def set_baudrate(self, baudrate: int) -> None:
+        """Switch the line to ``baudrate`` (after the device was told to)."""
+        try:
+            self._ser.baudrate = int(baudrate)
+        except (serial.SerialException, OSError, ValueError) as e:
+            raise DeviceDisconnected(self.name, f"cannot switch to {baudrate} baud ({e})") from None
+
     def write(self, data: bytes) -> None:
         self.log.debug("%s <- %r", self.name, data)
         try:
@@ -142,3 +149,18 @@ class Port:
             if time.monotonic() >= deadline:
                 raise DeviceTimeout(self.name, f"no reply to {what} within {timeout:g} s")
             buf += self.read_some()
+
+    def read_exact(self, n: int, timeout_s: float | None, what: str,
+                   buffer: bytearray | None = None) -> bytes:
+        """Exactly ``n`` bytes (extra bytes stay in ``buffer``); DeviceTimeout naming ``what``."""
+        buf = buffer if buffer is not None else bytearray()
+        timeout = self.settings.timeout_s if timeout_s is None else timeout_s
+        deadline = time.monotonic() + timeout
+        while len(buf) < n:
+            if time.monotonic() >= deadline:
+                raise DeviceTimeout(self.name, f"no reply to {what} within {timeout:g} s "
+                                               f"({len(buf)} of {n} bytes)")
+            buf += self.read_some()
+        out = bytes(buf[:n])
+        del buf[:n]
+        return out

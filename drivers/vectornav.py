@@ -1,8 +1,11 @@
 """Driver for VectorNav IMUs in binary output mode (protocol ``vectornav``).
 
-Configuration over the ASCII protocol: pause asynchronous output (``$VNASY,0``), read the
-model, serial number and firmware registers, write binary output register 1 (75) with
-time since startup, uncompensated acceleration and rate and temperature at 800 Hz / divisor,
+Start-up over the ASCII protocol, as VectorNav's programming library does it: pause
+asynchronous output (``$VNASY,0``), turn the ASCII async output off (register 06 = 0, so that
+no ``$VNYMR``-like lines mix with the binary frames), read the model, hardware revision,
+serial number and firmware registers (01-04), set the baud rate (register 05) when asked,
+write binary output register 1 (75) with time since startup, uncompensated acceleration and
+rate and temperature at 800 Hz / divisor (checked against what the baud rate carries),
 resume (``$VNASY,1``).  Frames are then decoded by
 :class:`drivers.protocols.vectornav_binary.VectorNavDecoder`.
 """
@@ -65,17 +68,36 @@ class VectorNavImu(Imu):
     def _identify(self) -> str:
         self._ask("VNASY,0")
         self.port.discard_input()
+        self._ask(f"VNWRG,{V.REG_ADOR:02d},{V.ADOR_OFF}")
         model = ",".join(self._ask(f"VNRRG,{V.REG_MODEL:02d}"))
+        hardware = ",".join(self._ask(f"VNRRG,{V.REG_HARDWARE:02d}"))
         serial_no = ",".join(self._ask(f"VNRRG,{V.REG_SERIAL:02d}"))
         firmware = ",".join(self._ask(f"VNRRG,{V.REG_FIRMWARE:02d}"))
-        return f"{model} serial {serial_no} firmware {firmware}"
+        baud = self.settings.device_baud
+        if baud is not None:
+            if baud not in V.BAUD_RATES:
+                raise LimitError(self.name, f"baud rate {baud} is not one of "
+                                            f"{', '.join(map(str, V.BAUD_RATES))}")
+            self._ask(f"VNWRG,{V.REG_BAUD:02d},{baud}")      # answered at the old rate
+            self.port.set_baudrate(baud)
+        self.baudrate = baud or self.settings.serial.baudrate
+        return f"{model} hardware {hardware} serial {serial_no} firmware {firmware}"
 
     def _configure(self, rate_hz, temperature):
         divisor = round(V.IMU_RATE_HZ / rate_hz)
         if divisor < 1 or abs(V.IMU_RATE_HZ / divisor - rate_hz) > 1e-9 * rate_hz:
             raise LimitError(self.name, f"output rate {rate_hz:g} Hz is not {V.IMU_RATE_HZ:g} Hz / N "
                                         f"(e.g. 800, 400, 200, 100, 50 Hz)")
-        self.layout = V.STATION_LAYOUT if temperature else V.STATION_LAYOUT_NO_TEMP
+        layout = V.STATION_LAYOUT if temperature else V.STATION_LAYOUT_NO_TEMP
+        baud = getattr(self, "baudrate", self.settings.serial.baudrate)
+        top = V.max_rate_hz(layout.frame_length, baud)
+        if rate_hz > top:
+            need = rate_hz * layout.frame_length * V.BITS_PER_BYTE
+            raise LimitError(self.name, f"output rate {rate_hz:g} Hz of {layout.frame_length}-byte frames "
+                                        f"needs {need:.0f} baud (10 bits a byte); at {baud} baud at most "
+                                        f"{top:.1f} Hz: lower the rate or set a higher baud rate "
+                                        f"(register 05: ImuSettings.device_baud, station probe --imu-baud)")
+        self.layout = layout
         body = f"VNWRG,{V.REG_BINARY_OUTPUT_1},{self.layout.register_values(V.ASYNC_MODE_PORT1, divisor)}"
         if self.streaming:
             self._ask("VNASY,0")

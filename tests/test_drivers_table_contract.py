@@ -14,21 +14,27 @@ from sim_devices.truth import default_truth
 from sim_devices.twins.serve import BenchOptions, BenchServer
 from station.core.errors import UserError
 
-# (protocol, axes)
-TABLES = [("acutrol", 1), ("acutrol", 2), ("acutrol", 3), ("aerosmith", 1)]
+# (protocol, axes, transport): acutrol over a pseudo-terminal with the TCP reply framing (RS-232
+# through the DE-311, TM-9411), with the GPIB framing (replies to queries only), and over TCP
+# on 127.0.0.1 (TM-9384C)
+TABLES = [("acutrol", 1, "pty"), ("acutrol", 2, "gpib"), ("acutrol", 3, "tcp"), ("aerosmith", 1, "pty")]
 SPEED = 50.0
 
 
-@pytest.fixture(params=TABLES, ids=[f"{p}-{n}ax" for p, n in TABLES])
+@pytest.fixture(params=TABLES, ids=[f"{p}-{n}ax-{t}" for p, n, t in TABLES])
 def bench(request):
-    protocol, axes = request.param
-    server = BenchServer(default_truth(3), BenchOptions(speed=SPEED, axes=axes, table_protocol=protocol))
+    protocol, axes, transport = request.param
+    server = BenchServer(default_truth(3), BenchOptions(
+        speed=SPEED, axes=axes, table_protocol=protocol,
+        table_framing="gpib" if transport == "gpib" else "tcp",
+        table_tcp_port=0 if transport == "tcp" else None))
+    server.url = server.table_path + ("#gpib" if transport == "gpib" else "")
     with server:
         yield server, protocol, axes
 
 
 def _open(server, protocol, **kw):
-    return open_table(server.table_path, protocol, TableSettings(**kw))
+    return open_table(server.url, protocol, TableSettings(**kw))
 
 
 def test_connect_identifies_and_counts_axes(bench):
@@ -86,12 +92,17 @@ def test_set_rate_turns_the_axis_and_stop_brings_it_to_rest(bench):
         table.close_interlocks()
         rate = table.set_rate(axes, -25.0)
         assert abs(rate + 25.0) <= table.settings.rate_tolerance_dps
-        p0, t0 = table.read_positions_deg()[axes - 1], server.clock.now()
+        a0 = server.clock.now()
+        p0 = table.read_positions_deg()[axes - 1]
+        b0 = server.clock.now()
         time.sleep(0.05)
-        p1, t1 = table.read_positions_deg()[axes - 1], server.clock.now()
+        a1 = server.clock.now()
+        p1 = table.read_positions_deg()[axes - 1]
+        b1 = server.clock.now()
         swept = -angle_diff_deg(p1, p0)
-        # at speed 50, 50 ms wall = 2.5 s device: 62.5 deg, give or take the read latency
-        assert 25.0 * (t1 - t0) * 0.8 < swept < 25.0 * (t1 - t0) * 1.2
+        # each position was read at a device time between the clock readings around it
+        # (at speed 50, 50 ms wall = 2.5 s device: about 62.5 deg)
+        assert 25.0 * (a1 - b0) - 1e-3 < swept < 25.0 * (b1 - a0) + 1e-3
         assert table.status().mode[axes - 1] == "rate"
         rest = table.stop()
         assert np.all(np.abs(table.read_rates_dps()) <= table.settings.rate_tolerance_dps)
@@ -177,12 +188,14 @@ def test_closed_port_and_unknown_protocol():
 def test_a_demand_refused_for_an_open_interlock_is_a_table_fault(bench):
     server, protocol, axes = bench
     with _open(server, protocol) as table:
-        if protocol == "aerosmith":             # enabled from power-up, no interlock commands
-            with pytest.raises(NotSupported, match="front panel"):
-                table.open_interlocks()
-            return
-        with pytest.raises(TableFault, match=r"':Mode:Rate 1;\*STB\?' refused: axis 1: interlock OPEN"):
-            table.set_rate(1, 10.0)
+        if protocol == "aerosmith":             # enabled from power-up; SRV0 opens it
+            table.open_interlocks([1])
+            with pytest.raises(TableFault, match=r"'JOG0.0000' refused: axis 1: interlock OPEN"):
+                table.set_rate(1, 10.0)
+        else:
+            with pytest.raises(TableFault, match=r"':Mode:Rate 1(;\*STB\?)?' refused \(error 4: .*\): "
+                                                 r"axis 1: interlock OPEN"):
+                table.set_rate(1, 10.0)
         table.close_interlocks([1])
         table.set_rate(1, 10.0)
         table.open_interlocks([1])
@@ -191,9 +204,23 @@ def test_a_demand_refused_for_an_open_interlock_is_a_table_fault(bench):
         assert table.read_rates_dps()[0] == 0.0        # braked to rest
 
 
+def test_aerosmith_dialect_strings_are_data_and_9600_baud_is_the_default():
+    from drivers.aerosmith import AerosmithTable
+    from drivers.protocols import aerosmith as A
+    assert AerosmithTable("/dev/null").settings.serial.baudrate == 9600
+    cs = A.dialect((("move", "mpa"), ("position", "PPS")))
+    assert cs.format("move", 12.5) == "MPA12.5000" and cs.parse("pps")[0].name == "position"
+    with pytest.raises(ValueError, match="unknown aerosmith commands"):
+        A.dialect((("fly", "FLY"),))
+    with pytest.raises(ValueError, match="not three letters"):
+        A.dialect((("move", "MOVE"),))
+    with pytest.raises(LimitError, match="same string"):
+        AerosmithTable("/dev/null", TableSettings(dialect=(("move", "JOG"),)))
+
+
 def test_any_pyserial_url_spy_logs_the_exchange(tmp_path):
     log = tmp_path / "spy.txt"
     with BenchServer(default_truth(3), BenchOptions(speed=SPEED, axes=2)) as server:
         with open_table(f"spy://{server.table_path}?file={log}") as table:
             assert table.n_axes == 2
-    assert "*IDN?;*STB?" in log.read_text()
+    assert "*IDN?" in log.read_text() and ":Query:System?" in log.read_text()

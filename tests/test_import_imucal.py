@@ -77,9 +77,9 @@ def test_cli_import_and_what_station_can_estimate(tmp_path, capsys):
     assert cli.main(["import", "imucal", str(SESSION), "--sections", str(SECTIONS), "--rate-hz", "102.4",
                      "-o", str(out)]) == 0
     assert "x_rot" in capsys.readouterr().out
-    # hand turns about a vertical axis: the Fourier method cannot see them, the 2010 method
-    # needs nine attitudes and +/- pairs with encoder angles
-    with pytest.raises(UserError, match="x_rot.*barely turn"):
+    # hand turns annotated apart from the statics: the hand-rotation terms need a static just
+    # before and after each turn, the 2010 method nine attitudes and +/- pairs with encoder angles
+    with pytest.raises(UserError, match="x_rot: hand rotation without a static segment just before and after"):
         estimate_capture(out)
     with pytest.raises(UserError, match="at least 9 static attitudes; the capture has 6"):
         estimate_capture(out, "zhang2010")

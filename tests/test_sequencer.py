@@ -38,13 +38,19 @@ table:
 run:
   operator: false
   settle_s: 3
+  # at --speed 100 on a loaded machine the twins drop frames (10 ms of wall time = 1 s of device
+  # time); a recording that lost more than this is recorded again (up to 5 times), so the
+  # comparisons below see data within these limits whatever the load
+  max_missing_fraction: 0.02
+  max_gap_s: 2.0
+  rerecord_attempts: 5
 """
 Z_MAX, Z_RMS = 4.5, 1.6
 
 
 @pytest.fixture(scope="module")
 def bench():
-    with BenchServer(default_truth(SEED), BenchOptions(speed=SPEED, seed=SEED, axes=3)) as b:
+    with BenchServer(default_truth(SEED), BenchOptions(speed=SPEED, seed=SEED, axes=3, lossless=True)) as b:
         yield b
 
 

@@ -26,6 +26,11 @@ from station.io.scheme import RotationSpec, load_scheme, scheme_from_text
 from station.bench.sequencer import Sequencer, SequencerError
 
 SPEED = 100.0
+# At --speed 100 a reader descheduled for 10 ms of wall time misses 1 s of device time: on a
+# shared, loaded machine the twins drop frames that a real bench would never drop.  These
+# tests are about motion and safety, so they allow that loss; the data-loss limits themselves
+# are tested at a lower speed with injected drops (test_run_faults.py).
+LOSS_AT_SPEED = dict(max_missing_fraction=0.5, max_gap_s=100.0, rerecord_attempts=3)
 
 
 class Hands:
@@ -80,14 +85,14 @@ def new_writer(path, scheme="test", gravity=normal_gravity(45.0), extra=None):
 
 @pytest.fixture()
 def bench3():
-    with BenchServer(default_truth(3), BenchOptions(speed=SPEED, seed=3, axes=3)) as b:
+    with BenchServer(default_truth(3), BenchOptions(speed=SPEED, seed=3, axes=3, lossless=True)) as b:
         yield b
 
 
 def test_rates_and_angles_beyond_the_limits_are_never_commanded(bench3, tmp_path):
     limits = (AxisConfig(max_rate_dps=50, angle_min_deg=-170, angle_max_deg=170), AxisConfig(max_rate_dps=50),
               AxisConfig(max_rate_dps=50))
-    config = Config(table=TableConfig(axes=3, limits=limits), run=RunConfig(operator=False, settle_s=1))
+    config = Config(table=TableConfig(axes=3, limits=limits), run=RunConfig(**LOSS_AT_SPEED, operator=False, settle_s=1))
     seq, table, imu = sequencer(bench3, config, new_writer(tmp_path / "cap"), Hands(bench3))
     spec = RotationSpec("fast", (0.0, 1.0, 0.0), 60.0, 6.0)
     with pytest.raises(SequencerError, match="outside its limits"):
@@ -115,12 +120,12 @@ def test_rates_and_angles_beyond_the_limits_are_never_commanded(bench3, tmp_path
 def test_the_table_is_unpowered_while_the_operator_remounts_the_imu(tmp_path):
     scheme = scheme_from_text("name: up\ndefaults: {dwell_s: 2}\nsegments:\n  - {static: xup, up_body: [1, 0, 0]}\n",
                               "up.yaml")
-    config = Config(table=TableConfig(axes=2), run=RunConfig(operator=True, settle_s=1))
+    config = Config(table=TableConfig(axes=2), run=RunConfig(**LOSS_AT_SPEED, operator=True, settle_s=1))
     plan = compile_scheme(scheme, config)              # x up: the inner (east) axis is body x at zero
     ops = [s for s in plan if isinstance(s, Operator)]
     assert len(ops) == 1 and ops[0].remount and ops[0].instruction.startswith("mount the IMU with its ")
     assert ops[0].mounting != config.table.mounting
-    with BenchServer(default_truth(2), BenchOptions(speed=SPEED, seed=2, axes=2)) as bench:
+    with BenchServer(default_truth(2), BenchOptions(speed=SPEED, seed=2, axes=2, lossless=True)) as bench:
         hands = Hands(bench)
         seq, table, imu = sequencer(bench, config, new_writer(tmp_path / "cap"), hands)
         seq.run(plan.steps)
@@ -138,10 +143,10 @@ def test_warm_up_lasts_until_the_temperature_slope_is_below_the_threshold(tmp_pa
     truth.temperature.warmup_time_constant_s = 60.0      # dT/dt = 120 C/h exp(-t / 60 s)
     config = Config(table=TableConfig(axes=1),
                     warmup=WarmupConfig(duration_s=30.0, max_s=2000.0, temp_slope_c_per_h=6.0, window_s=20.0),
-                    run=RunConfig(operator=False, settle_s=1))
+                    run=RunConfig(**LOSS_AT_SPEED, operator=False, settle_s=1))
     scheme = scheme_from_text("name: z\ndefaults: {dwell_s: 2}\nsegments:\n  - {static: zup, up_body: [0, 0, 1]}\n",
                               "z.yaml")
-    with BenchServer(truth, BenchOptions(speed=SPEED, seed=4, axes=1)) as bench:
+    with BenchServer(truth, BenchOptions(speed=SPEED, seed=4, axes=1, lossless=True)) as bench:
         seq, table, imu = sequencer(bench, config, new_writer(tmp_path / "cap"), Hands(bench))
         seq.run(compile_scheme(scheme, config).steps)
         table.close()
@@ -162,10 +167,10 @@ def test_warm_up_lasts_until_the_temperature_slope_is_below_the_threshold(tmp_pa
 def test_manual6_is_found_in_one_continuous_recording(tmp_path):
     truth = default_truth(5)
     scheme = load_scheme("manual6")
-    config = Config(run=RunConfig(operator=True))
+    config = Config(run=RunConfig(**LOSS_AT_SPEED, operator=True))
     plan = compile_scheme(scheme, config)
     speed = 50.0
-    with BenchServer(truth, BenchOptions(speed=speed, seed=5, axes=3)) as bench:
+    with BenchServer(truth, BenchOptions(speed=speed, seed=5, axes=3, lossless=True)) as bench:
         hands_table = open_table(bench.table_path)
         hands_table.close_interlocks()
         writer = new_writer(tmp_path / "cap", "manual6", extra={"table": {"angle_error_arcsec": 3600.0}})
@@ -206,7 +211,7 @@ def test_after_a_pause_the_operator_can_continue_in_place(bench3, tmp_path):
 
     scheme = scheme_from_text("name: two\ndefaults: {dwell_s: 30}\nsegments:\n  - {static: zup, up_body: [0, 0, 1]}\n"
                               "  - {static: xup, up_body: [1, 0, 0]}\n", "two.yaml")
-    config = Config(table=TableConfig(axes=3), run=RunConfig(operator=False, settle_s=1))
+    config = Config(table=TableConfig(axes=3), run=RunConfig(**LOSS_AT_SPEED, operator=False, settle_s=1))
     interrupts = Interrupts()
 
     class Continue(Hands):

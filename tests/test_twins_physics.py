@@ -191,18 +191,21 @@ def test_table_front_ends_never_raise(data):
                                  ":Demand:Position 2,-10", ":Interlock:Open 3", "*STB?",
                                  ":Read:Position? 4", ":Limit:Rate P,1,0", ":Read:Rate? 1", "bogus"]),
                 max_size=8))
-def test_acutrol_chains_answer_one_line_per_query_line(parts):
+def test_acutrol_gpib_answers_the_queries_and_the_error_bit_follows_the_queue(parts):
     clock = ManualClock()
-    fe = AcutrolFrontEnd(TableTwin(TableGeometry.default(3), clock, interlocks_closed=True))
+    fe = AcutrolFrontEnd(TableTwin(TableGeometry.default(3), clock, interlocks_closed=True), "gpib")
     reply = fe.receive((";".join(parts + ["*STB?"]) + "\n").encode())
     fields = reply.decode().strip().split(";")
     stb = int(fields[-1])
-    # reading the status byte clears the error bit: errors after the last *STB? show
+    # *STB? clears the status byte: bit 7 (error queue) shows the errors after the last *STB?
     after = parts[len(parts) - parts[::-1].index("*STB?"):] if "*STB?" in parts else parts
     failing = any(p in ("bogus", ":Read:Position? 4", ":Limit:Rate P,1,0") for p in after)
     assert bool(stb & 0x80) >= failing
+    assert bool(stb & 0x40) == bool(stb & ~0x40)          # MSS summarises the others
     good_queries = [p for p in parts if "?" in p and p != ":Read:Position? 4"]
     assert len(fields) == len(good_queries) + 1
+    n_errors = sum(p in ("bogus", ":Read:Position? 4", ":Limit:Rate P,1,0") for p in parts)
+    assert len(fe.errors) >= min(n_errors, 32)
 
 
 @FUZZ

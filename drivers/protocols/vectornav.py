@@ -12,6 +12,7 @@ CRC of group byte..CRC is 0).
 """
 from __future__ import annotations
 
+import binascii
 import re
 from dataclasses import dataclass
 
@@ -60,11 +61,32 @@ GROUP_FIELDS: dict[int, tuple[tuple[int, str, int, str | None], ...]] = {
 STATION_FIELDS = ("TimeStartup", "UncompAccel", "UncompGyro", "Temp")
 
 # --- ASCII registers and error codes -------------------------------------------------------------
+# register numbers and values as VectorNav's programming library (vnproglib 1.2, packet.cpp and
+# types.h) reads and writes them
 REG_MODEL = 1
+REG_HARDWARE = 2          # hardware revision
 REG_SERIAL = 3
 REG_FIRMWARE = 4
+REG_BAUD = 5              # serial baud rate: VNWRG,05,<baud>[,<port>]
+REG_ADOR = 6              # async data output type (ASCII messages): 0 off
+REG_ADOF = 7              # async data output frequency, Hz
+REG_IMU = 54              # IMU measurements: mag (3), accel (3, m/s²), gyro (3, rad/s), temp (°C), pressure (kPa)
 REG_BINARY_OUTPUT_1 = 75
+REG_BINARY_OUTPUT_2 = 76
+REG_BINARY_OUTPUT_3 = 77
 ASYNC_MODE_NONE, ASYNC_MODE_PORT1, ASYNC_MODE_PORT2, ASYNC_MODE_BOTH = 0, 1, 2, 3
+ADOR_OFF = 0
+ADOR_VNIMU = 19           # $VNIMU: the register 54 values (types.h: VNIMU = 19)
+BAUD_RATES = (9600, 19200, 38400, 57600, 115200, 128000, 230400, 460800, 921600)
+ADOF_HZ = (1, 2, 4, 5, 10, 20, 25, 40, 50, 100, 200)
+#: bits on the line per byte (8 data bits, no parity, 1 start and 1 stop bit)
+BITS_PER_BYTE = 10
+
+
+def max_rate_hz(frame_length: int, baudrate: int) -> float:
+    """The highest output rate a serial line of ``baudrate`` carries for frames of
+    ``frame_length`` bytes (44-byte frames at 115200 baud: 261.8 Hz)."""
+    return baudrate / (BITS_PER_BYTE * frame_length)
 
 ERRORS = {
     1: "hard fault", 2: "serial buffer overflow", 3: "invalid checksum", 4: "invalid command",
@@ -82,6 +104,15 @@ ASCII_COMMANDS = (
      "group byte and one field mask per group, in hex",
      "VNWRG,75,1,8,05,0001,001C", "VNWRG,75,1,8,05,0001,001C"),
     ("VNASY,<0|1>", "pause (0) or resume (1) asynchronous output", "VNASY,0", "VNASY,0"),
+    ("VNRRG,02", "read the hardware revision", "VNRRG,02", "VNRRG,02,2"),
+    ("VNWRG,05,<baud>[,<port>]", "serial baud rate; the reply comes at the old rate",
+     "VNWRG,05,230400", "VNWRG,05,230400"),
+    ("VNWRG,06,<type>[,<port>]", "async ASCII output type: 0 off, 19 $VNIMU", "VNWRG,06,0", "VNWRG,06,0"),
+    ("VNWRG,07,<Hz>[,<port>]", "async ASCII output frequency", "VNWRG,07,40", "VNWRG,07,40"),
+    ("VNRRG,54", "IMU measurements: mag, accel m/s², gyro rad/s, temp °C, pressure kPa", "VNRRG,54",
+     "VNRRG,54,+0.0000,+0.0000,+0.0000,+0.0100,-0.0200,+9.8100,+0.001000,+0.000000,-0.000500,+25.0,+101.325"),
+    ("VNWNV", "write the settings to non-volatile memory", "VNWNV", "VNWNV"),
+    ("VNRST", "reset: the settings come back from non-volatile memory", "VNRST", "VNRST"),
     ("(error)", "any command the sensor cannot execute", "VNWRG,75,1,8,40,0001", "VNERR,07"),
 )
 
@@ -94,19 +125,26 @@ def checksum(body: bytes) -> bytes:
     return b"%02X" % c
 
 
-def format_message(body: str) -> bytes:
-    """``$body*XX\\r\\n`` with its checksum."""
+def crc16(body: bytes) -> bytes:
+    """The four upper-case hex digits of the CRC-16/XMODEM of ``body`` (the ASCII 16-bit CRC
+    mode; vnproglib error_detection.cpp Crc16::compute is this CRC)."""
+    return b"%04X" % binascii.crc_hqx(bytes(body), 0)
+
+
+def format_message(body: str, crc: bool = False) -> bytes:
+    """``$body*XX\\r\\n`` with its checksum (``crc``: ``*XXXX``, the 16-bit CRC)."""
     raw = body.encode("ascii")
-    return b"$" + raw + b"*" + checksum(raw) + b"\r\n"
+    return b"$" + raw + b"*" + (crc16(raw) if crc else checksum(raw)) + b"\r\n"
 
 
-_MESSAGE = re.compile(rb"\$([\x20-\x29\x2b-\x7e]{1,200})\*([0-9A-Fa-f]{2}|XX)\r?\n")
+_MESSAGE = re.compile(rb"\$([\x20-\x29\x2b-\x7e]{1,200})\*([0-9A-Fa-f]{4}|[0-9A-Fa-f]{2}|XX)\r?\n")
 
 
 def find_message(buf: bytes | bytearray, start: int = 0, *, allow_no_checksum: bool = False):
     """The first well-formed ASCII message at or after ``start``: (body, end index) or None.
 
-    Messages whose checksum does not match are skipped (and so are ``*XX`` unless allowed).
+    Checked by the 8-bit checksum (``*XX``, two hex digits) or the 16-bit CRC (four); messages
+    that do not match are skipped (and so are ``*XX`` unless allowed).
     """
     for m in _MESSAGE.finditer(buf, start):
         body, cs = m.group(1), m.group(2).upper()
@@ -114,9 +152,15 @@ def find_message(buf: bytes | bytearray, start: int = 0, *, allow_no_checksum: b
             if allow_no_checksum:
                 return body.decode("ascii"), m.end()
             continue
-        if checksum(body) == cs:
+        if (crc16(body) if len(cs) == 4 else checksum(body)) == cs:
             return body.decode("ascii"), m.end()
     return None
+
+
+def uses_crc(line: bytes) -> bool:
+    """Whether a message is protected by the 16-bit CRC (``*XXXX``)."""
+    m = _MESSAGE.search(line)
+    return bool(m) and len(m.group(2)) == 4
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,11 @@ class SimClock:
         """Wall seconds until device time ``device_t`` (<= 0 if past)."""
         return (device_t - self.now()) / self.speed
 
+    def hold(self, wall_s: float) -> None:
+        """Let ``wall_s`` wall seconds (already passed) add no device time: the world waits."""
+        if wall_s > 0:
+            self._wall0 += wall_s
+
 
 class ManualClock:
     """A clock that moves only when told (deterministic tests of the twins)."""

@@ -81,6 +81,7 @@ class ImuTwin:
         self.truth = truth
         self.rate_hz = float(truth.sample_rate_hz)
         self.next_k: int | None = None
+        self.frames_skipped = 0       # not made: the loop was held up longer than MAX_BATCH samples
 
     def set_rate(self, rate_hz: float, now: float) -> None:
         """Output rate (Hz); the noise per sample follows (densities are per √Hz)."""
@@ -101,6 +102,7 @@ class ImuTwin:
         if last < self.next_k:
             return np.zeros(0)
         if last - self.next_k + 1 > MAX_BATCH:
+            self.frames_skipped += last - MAX_BATCH + 1 - self.next_k
             self.next_k = last - MAX_BATCH + 1
         k = np.arange(self.next_k, last + 1)
         self.next_k = last + 1

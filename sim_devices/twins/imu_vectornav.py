@@ -1,10 +1,15 @@
 """VectorNav front-end of the IMU twin: the ASCII commands and the binary output frames.
 
-Implements ``$VNRRG`` (registers 1, 3, 4, 75), ``$VNWRG,75`` and ``$VNASY``; everything else
-is answered ``$VNERR``.  Binary output register 1 may select any of TimeStartup,
-UncompAccel, UncompGyro and Temp (the first three required): other fields are refused with
-``$VNERR,07`` (a limit of the twin, not of the protocol).  At power-up, binary output 1 is
-already on: station's layout at the truth's sample rate.
+Implements ``$VNRRG``/``$VNWRG`` of registers 1 (model), 2 (hardware revision), 3 (serial
+number), 4 (firmware), 5 (baud rate), 6 (async ASCII output type: 0 off or 19 ``$VNIMU``), 7
+(its frequency), 54 (IMU measurements), 75-77 (binary outputs; only 75 may stream),
+``$VNASY``, ``$VNWNV`` (save the settings) and ``$VNRST`` (back to the saved settings);
+everything else is answered ``$VNERR``.  Commands may carry the 8-bit checksum, the 16-bit CRC
+or ``*XX``; a reply is protected the same way as its command.  Binary output register 1 may
+select any of TimeStartup, UncompAccel, UncompGyro and Temp (the first three required): other
+fields are refused with ``$VNERR,07`` (a limit of the twin, not of the protocol).  At
+power-up, binary output 1 is already on (station's layout at the truth's sample rate) and the
+ASCII output is as ``ador``/``adof`` say (default off).
 """
 from __future__ import annotations
 
@@ -23,17 +28,25 @@ TWIN_FIELDS = set(V.STATION_FIELDS)
 
 class VectorNavFrontEnd:
     def __init__(self, imu: ImuTwin, faulter: StreamFaulter, *, serial_number: str = "0100000001",
-                 model: str = "VN-100T-SIM", firmware: str = "2.1.0.0"):
+                 model: str = "VN-100T-SIM", firmware: str = "2.1.0.0", hardware: str = "2",
+                 ador: int = V.ADOR_OFF, adof_hz: int = 40):
         self.imu = imu
         self.faulter = faulter
-        self.registers = {V.REG_MODEL: model, V.REG_SERIAL: serial_number, V.REG_FIRMWARE: firmware}
+        self.registers = {V.REG_MODEL: model, V.REG_HARDWARE: hardware, V.REG_SERIAL: serial_number,
+                          V.REG_FIRMWARE: firmware}
         self.layout = V.STATION_LAYOUT
         self.divisor = max(1, round(V.IMU_RATE_HZ / imu.rate_hz))
         self.async_mode = V.ASYNC_MODE_PORT1
         self.async_on = True
+        self.baudrate = 115200
+        self.ador, self.adof_hz = ador, adof_hz
+        self.other_outputs = {V.REG_BINARY_OUTPUT_2: "0,0,00", V.REG_BINARY_OUTPUT_3: "0,0,00"}
+        self._next_ascii_k: int | None = None
         self._rx = bytearray()
         self._restart_at: float | None = None
         self.frame_length = self.layout.frame_length
+        self.resets = 0
+        self._saved = self._settings()
 
     # ---------------------------------------------------------------- commands
     def receive(self, data: bytes, now: float) -> bytes:
@@ -49,38 +62,114 @@ class VectorNavFrontEnd:
         found = V.find_message(line, allow_no_checksum=True)
         if found is None:
             return V.format_message("VNERR,03")
+        crc = V.uses_crc(line)
+
+        def reply(body):
+            return V.format_message(body, crc=crc)
+
         fields = found[0].split(",")
         try:
             if fields[0] == "VNRRG":
-                return V.format_message(self._read_register(fields[1:]))
+                return reply(self._read_register(fields[1:], now))
             if fields[0] == "VNWRG":
-                return V.format_message(self._write_register(fields[1:], now))
+                return reply(self._write_register(fields[1:], now))
             if fields[0] == "VNASY":
                 if len(fields) != 2 or fields[1] not in ("0", "1"):
-                    return V.format_message("VNERR,07")
+                    return reply("VNERR,07")
                 on = fields[1] == "1"
                 if on and not self.async_on:
                     self.imu.restart(now)
+                    self._next_ascii_k = None
                 self.async_on = on
-                return V.format_message(found[0])
+                return reply(found[0])
+            if fields[0] in ("VNWNV", "VNRST"):
+                if len(fields) != 1:
+                    raise _VnError(6)
+                if fields[0] == "VNWNV":
+                    self._saved = self._settings()
+                else:
+                    self._restore(self._saved, now)
+                    self.resets += 1
+                return reply(fields[0])
         except _VnError as e:
-            return V.format_message(f"VNERR,{e.code:02d}")
-        return V.format_message("VNERR,04")
+            return reply(f"VNERR,{e.code:02d}")
+        return reply("VNERR,04")
 
-    def _read_register(self, args) -> str:
-        if len(args) != 1:
-            raise _VnError(5 if not args else 6)
+    # ---------------------------------------------------------------- settings
+    def _settings(self) -> dict:
+        return {"layout": self.layout, "divisor": self.divisor, "async_mode": self.async_mode,
+                "baudrate": self.baudrate, "ador": self.ador, "adof_hz": self.adof_hz,
+                "other_outputs": dict(self.other_outputs)}
+
+    def _restore(self, saved: dict, now: float) -> None:
+        for key, value in saved.items():
+            setattr(self, key, dict(value) if isinstance(value, dict) else value)
+        self.frame_length = self.layout.frame_length
+        self.async_on = True                   # after a reset the sensor streams again
+        self._next_ascii_k = None
+        self.imu.set_rate(V.IMU_RATE_HZ / self.divisor, now)
+
+    def _read_register(self, args, now) -> str:
+        if not args:
+            raise _VnError(5)
         reg = _int(args[0])
+        if len(args) > (2 if reg in (V.REG_BAUD, V.REG_ADOR, V.REG_ADOF) else 1):   # [,port]
+            raise _VnError(6)
         if reg == V.REG_BINARY_OUTPUT_1:
-            return f"VNRRG,{reg:02d},{self.layout.register_values(self.async_mode, self.divisor)}"
-        if reg not in self.registers:
+            value = self.layout.register_values(self.async_mode, self.divisor)
+        elif reg in self.other_outputs:
+            value = self.other_outputs[reg]
+        elif reg == V.REG_BAUD:
+            value = str(self.baudrate)
+        elif reg == V.REG_ADOR:
+            value = str(self.ador)
+        elif reg == V.REG_ADOF:
+            value = str(self.adof_hz)
+        elif reg == V.REG_IMU:
+            value = self._imu_values(now)
+        elif reg in self.registers:
+            value = self.registers[reg]
+        else:
             raise _VnError(8)
-        return f"VNRRG,{reg:02d},{self.registers[reg]}"
+        return f"VNRRG,{reg:02d},{value}"
+
+    def _imu_values(self, now: float) -> str:
+        """Register 54 / $VNIMU: the newest sample on the output grid (no magnetometer or
+        barometer in the twin: mag 0, pressure 101.325 kPa)."""
+        t = np.array([np.floor(now * self.imu.rate_hz) / self.imu.rate_hz])
+        accel, gyro, temp = self.imu.measure(t)
+        w = np.radians(gyro[0])
+        return ",".join(["+0.0000"] * 3 + [f"{v:+.4f}" for v in accel[0]] + [f"{v:+.6f}" for v in w]
+                        + [f"{float(temp[0]):+.1f}", "+101.325"])
 
     def _write_register(self, args, now) -> str:
         if not args:
             raise _VnError(5)
         reg = _int(args[0])
+        if reg in (V.REG_BAUD, V.REG_ADOR, V.REG_ADOF):
+            if not 2 <= len(args) <= 3:
+                raise _VnError(5 if len(args) < 2 else 6)
+            value = _int(args[1])
+            if reg == V.REG_BAUD and value not in V.BAUD_RATES:
+                raise _VnError(7)
+            if reg == V.REG_ADOR and value not in (V.ADOR_OFF, V.ADOR_VNIMU):
+                raise _VnError(7)              # other ASCII outputs: not made by the twin
+            if reg == V.REG_ADOF and value not in V.ADOF_HZ:
+                raise _VnError(7)
+            if reg == V.REG_BAUD:
+                self.baudrate = value
+            elif reg == V.REG_ADOR:
+                self.ador = value
+                self._next_ascii_k = None
+            else:
+                self.adof_hz = value
+                self._next_ascii_k = None
+            return "VNWRG," + ",".join(args)
+        if reg in self.other_outputs:
+            if len(args) < 2 or _int(args[1]) != V.ASYNC_MODE_NONE:
+                raise _VnError(7)              # the twin streams binary output 1 only
+            self.other_outputs[reg] = ",".join(args[1:])
+            return "VNWRG," + ",".join(args)
         if reg != V.REG_BINARY_OUTPUT_1:
             raise _VnError(8 if reg not in self.registers else 9)
         try:
@@ -101,7 +190,23 @@ class VectorNavFrontEnd:
         return self.async_on and self.async_mode != V.ASYNC_MODE_NONE
 
     def produce(self, now: float) -> bytes:
-        """The frames due by ``now`` (with the stream faults applied)."""
+        """The frames due by ``now`` (with the stream faults applied), then the ASCII async
+        messages due (``$VNIMU`` when register 06 is 19)."""
+        return self._produce_binary(now) + self._produce_ascii(now)
+
+    def _produce_ascii(self, now: float) -> bytes:
+        if not self.async_on or self.ador != V.ADOR_VNIMU:
+            return b""
+        last = int(np.floor(now * self.adof_hz))
+        if self._next_ascii_k is None:
+            self._next_ascii_k = last + 1
+        out = []
+        for k in range(max(self._next_ascii_k, last - 50), last + 1):
+            out.append(V.format_message("VNIMU," + self._imu_values(k / self.adof_hz)))
+        self._next_ascii_k = last + 1
+        return b"".join(out)
+
+    def _produce_binary(self, now: float) -> bytes:
         if not self.streaming:
             return b""
         t = self.imu.sample_times_until(now)

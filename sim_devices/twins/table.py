@@ -67,6 +67,8 @@ class AxisState:
     fault: bool = False
     mode: str = "off"
     hardware: tuple[float, float] = (1000.0, 1000.0)     # max rate deg/s, max accel deg/s²
+    demand_deg: float = 0.0            # last position demand, deg
+    rate_demand_dps: float = 0.0       # last rate demand, deg/s
 
 
 class TableTwin:
@@ -144,8 +146,10 @@ class TableTwin:
             p, _, _ = ax.motion.state(now)
             rate, acc = ax.limits["P"]
             ax.motion.plan_position(now, p, rate, acc)
+            ax.demand_deg = float(p % 360.0)
         elif mode == "rate":
             ax.motion.plan_rate(now, 0.0, ax.limits["R"][1])
+            ax.rate_demand_dps = 0.0
         else:
             raise CommandRefused(f"unknown mode {mode!r}")
         ax.mode = mode
@@ -161,6 +165,7 @@ class TableTwin:
             delta = math.copysign(max(0.0, abs(delta) - self.faults.shortfall_deg), delta)
         rate, acc = ax.limits["P"]
         ax.motion.plan_position(now, p + delta, rate, acc)
+        ax.demand_deg = float(position_deg)
 
     def demand_rate(self, axis: int, rate_dps: float) -> None:
         ax = self._axis(axis)
@@ -170,6 +175,7 @@ class TableTwin:
         if abs(rate_dps) > rate:
             raise CommandRefused(f"axis {axis}: {rate_dps} deg/s beyond the rate limit {rate}")
         ax.motion.plan_rate(self.clock.now(), rate_dps, acc)
+        ax.rate_demand_dps = float(rate_dps)
 
     def set_limit(self, mode: str, axis: int, *, rate_dps=None, accel_dps2=None) -> None:
         ax = self._axis(axis)
@@ -199,6 +205,11 @@ class TableTwin:
         _, v, _ = self._axis(axis).motion.state(self.clock.now())
         res = self.config.rate_resolution_dps
         return float(np.round(v / res) * res) + 0.0
+
+    def read_acceleration(self, axis: int) -> float:
+        """Angular acceleration, deg/s²."""
+        _, _, a = self._axis(axis).motion.state(self.clock.now())
+        return float(a) + 0.0
 
     def in_motion(self, axis: int) -> bool:
         _, v, _ = self._axis(axis).motion.state(self.clock.now())

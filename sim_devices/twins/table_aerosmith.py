@@ -22,6 +22,8 @@ class AerosmithFrontEnd:
             "move": self._move,
             "jog": self._jog,
             "stop": lambda: table.stop(1),
+            "servo": self._servo,
+            "acceleration": lambda v: table.set_limit("R", 1, accel_dps2=v),
             "position": lambda: table.read_position(1),
             "velocity": lambda: table.read_rate(1),
             "status": self._status,
@@ -45,6 +47,14 @@ class AerosmithFrontEnd:
             return (P.ERROR_REPLY + P.REPLY_END).encode("ascii") + P.PROMPT
         text = cmd.reply.format(value) + P.REPLY_END if cmd.is_query else ""
         return text.encode("ascii") + P.PROMPT
+
+    def _servo(self, on: int) -> None:
+        if on not in (0, 1):
+            raise CommandRefused("SRV takes 0 or 1")
+        if on:
+            self.table.interlock_close(1)
+        else:
+            self.table.interlock_open(1)
 
     def _move(self, position_deg: float) -> None:
         t = self.table

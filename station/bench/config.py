@@ -108,6 +108,10 @@ class RunConfig:
     operator: bool = True                 # someone can remount the IMU (False: unattended)
     operator_s: float = 120.0             # time allowed for an operator step, in estimates
     output_dir: str = "captures"
+    # data-loss limits per segment: above either, the segment is bad and recorded again
+    max_missing_fraction: float = 0.01    # share of the frames lost
+    max_gap_s: float = 1.0                # longest stretch without a frame, s (device time)
+    rerecord_attempts: int = 2            # bad recordings of one segment tolerated before the run stops
 
 
 @dataclass(frozen=True)
@@ -210,7 +214,8 @@ def parse_config(doc, source: str) -> Config:
         "window_s": v.positive})
     run = v.section(doc, "run", RunConfig, {
         "settle_s": v.non_negative, "operator": v.boolean, "operator_s": v.non_negative,
-        "output_dir": v.text})
+        "output_dir": v.text, "max_missing_fraction": v.fraction, "max_gap_s": v.positive,
+        "rerecord_attempts": v.count})
     effects = v.section(doc, "effects", EffectsConfig, {
         "plugins": lambda value, where: v.paths(value, where, source),
         "folders": lambda value, where: v.paths(value, where, source)})
@@ -289,6 +294,17 @@ class _Validator:
         if x < 0:
             raise self.fail(where, f"must be >= 0, got {value!r}")
         return x
+
+    def fraction(self, value, where):
+        x = self.number(value, where)
+        if not 0 <= x < 1:
+            raise self.fail(where, f"must be a fraction within [0, 1), got {value!r}")
+        return x
+
+    def count(self, value, where):
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 100:
+            raise self.fail(where, f"must be a whole number from 0 to 100, got {value!r}")
+        return value
 
     def latitude(self, value, where):
         x = self.number(value, where)
@@ -454,4 +470,7 @@ run:
   operator: true               # false: unattended, never ask for a remount
   operator_s: 120              # time allowed for an operator step in duration estimates
   output_dir: captures
+  max_missing_fraction: 0.01   # a segment that lost more of its frames is recorded again
+  max_gap_s: 1.0               # ...or that went longer without a frame (IMU stall), s
+  rerecord_attempts: 2         # then the run stops (resume later with --resume)
 """

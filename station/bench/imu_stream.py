@@ -15,7 +15,23 @@ import numpy as np
 
 from drivers.samples import ImuSamples
 
-BLOCK_S = 0.1            # device seconds per driver read
+BLOCK_S = 0.1            # device seconds per driver read: a block begun before a drain and
+                         # ended after it holds at most this much stale device time
+#: device time running this many times faster than wall time can only be a twin
+TWIN_SPEED_RATIO = 1.5
+
+
+def lost_frames_note(name: str, lost: int, device_s: float, wall_s: float) -> str:
+    """What to tell the operator about ``lost`` frames in ``device_s`` of device time read in
+    ``wall_s`` of wall time.  Device time far ahead of wall time is a twin at ``--speed``: one
+    that loses frames cannot keep up (too fast for this machine), which is said as such."""
+    ratio = device_s / wall_s if wall_s > 0 else float("inf")
+    if ratio > TWIN_SPEED_RATIO:
+        return (f"{name}: {lost} frames lost with device time running {ratio:.0f} x wall time: "
+                "the IMU twin and this reader cannot keep up at that speed; lower --speed of "
+                "station sim serve")
+    return (f"{name}: {lost} frames lost while recording (the window and the angle come from "
+            "the frame count)")
 
 
 class ImuStream:

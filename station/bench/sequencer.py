@@ -25,7 +25,7 @@ import numpy as np
 
 from station.io.capture import CaptureWriter
 from station.core.errors import UserError
-from station.bench.imu_stream import ImuStream
+from station.bench.imu_stream import ImuStream, lost_frames_note
 from station.bench.plan import (Checkpoint, Dwell, HandRotation, HandStatic, MoveTo, Operator, Rotate, Settle,
                           WarmUp)
 
@@ -219,16 +219,27 @@ class Sequencer:
 
     def _record(self, seg, n: int, poll) -> dict:
         """Write ``n`` samples into segment ``seg``, calling ``poll()`` now and then.  Returns
-        the window the samples stand for (``window_s``: t_last - t_first + one period, from the
-        device's sample times), the frames lost in it (``gaps``) and the mean temperature."""
+        the window the samples stand for, from the frame count (``window_s``: received plus
+        lost frames times one period; never from wall-clock time), the frames lost in it
+        (``gaps``, from the device's sample times), the longest step between two frames
+        (``longest_step_s``) and the mean temperature."""
         block_n = max(1, int(round(BLOCK_S * self.rate_hz)))
+        period = 1.0 / self.rate_hz
         done, temp_sum, temp_n = 0, 0.0, 0
         with_temp = None
         first_t = last_t = None
-        missing = self.stream.counters.missing_frames
+        wall0 = time.monotonic()
+        lost, longest = 0, period
         while done < n:
             b = self._take(min(block_n, n - done))
-            first_t = b.t_s[0] if first_t is None else first_t
+            if first_t is None and len(b):
+                first_t = b.t_s[0]
+            t = b.t_s if last_t is None else np.concatenate([[last_t], b.t_s])
+            steps = np.diff(t)
+            if len(steps):
+                longest = max(longest, float(steps.max()))
+                big = steps > 1.5 * period
+                lost += int(np.round(steps[big] / period - 1.0).sum())
             last_t = b.t_s[-1]
             finite = np.isfinite(b.temp_c)
             if with_temp is None:
@@ -246,12 +257,47 @@ class Sequencer:
                 poll()
             self._check_pause()
         poll()
-        lost = self.stream.counters.missing_frames - missing
         if lost:
-            self.display.note(f"{seg.name}: {lost} frames lost while recording (the window and the "
-                              "angle come from the sample times)")
-        return {"window_s": float(last_t - first_t) + 1.0 / self.rate_hz, "gaps": lost,
-                "temp": temp_sum / temp_n if temp_n else None}
+            self.display.note(lost_frames_note(seg.name, lost, float(last_t - first_t), time.monotonic() - wall0))
+        return {"window_s": (done + lost) * period, "gaps": lost, "samples": done,
+                "longest_step_s": longest, "temp": temp_sum / temp_n if temp_n else None}
+
+    def _data_loss(self, rec) -> str | None:
+        """Why a recording lost too much data (station.yaml run.max_missing_fraction and
+        run.max_gap_s), or None."""
+        run = self.config.run
+        share = rec["gaps"] / (rec["samples"] + rec["gaps"]) if rec["samples"] else 1.0
+        gap = rec["longest_step_s"] - 1.0 / self.rate_hz
+        problems = []
+        if share > run.max_missing_fraction:
+            problems.append(f"{rec['gaps']} frames lost ({100 * share:.2f} %, limit "
+                            f"{100 * run.max_missing_fraction:g} %)")
+        if gap > run.max_gap_s:
+            problems.append(f"no frame for {gap:.2f} s (limit {run.max_gap_s:g} s)")
+        return "; ".join(problems) or None
+
+    def _record_segment(self, name, kind, meta, n, poll, completed, start=None) -> None:
+        """Record segment ``name`` (``n`` samples); a recording over the data-loss limits is
+        closed as incomplete with a note, kept aside (``.incomplete``) and recorded again, at
+        most ``run.rerecord_attempts`` times.  ``completed(rec)`` gives the manifest keys of a
+        good recording."""
+        attempts = 1 + self.config.run.rerecord_attempts
+        for attempt in range(1, attempts + 1):
+            with self.writer.begin_segment(name, kind, **meta) as seg:
+                if start is not None:
+                    start()
+                rec = self._record(seg, n, poll)
+                problem = self._data_loss(rec)
+                if problem is None:
+                    seg.close("complete", **completed(rec))
+                    return
+                seg.close("incomplete", note=f"bad recording: {problem}")
+            self.writer = CaptureWriter.reopen(self.writer.path)
+            if attempt < attempts:
+                self.display.note(f"{name}: bad recording ({problem}): kept aside, recording it again "
+                                  f"({attempt}/{attempts - 1})")
+        raise SequencerError(f"{name}: every recording lost too much data ({problem}; {attempts} attempts): "
+                             "check the IMU's connection and the computer's load, then resume")
 
     # ------------------------------------------------------------------ steps
     def _warmup(self, step: WarmUp) -> None:
@@ -312,9 +358,8 @@ class Sequencer:
                                      f"axes at {np.round(pos, 4).tolist()} deg, commanded "
                                      f"{np.round(goal, 4).tolist()} deg")
 
-        with self.writer.begin_segment(spec.name, "static", **meta) as seg:
-            rec = self._record(seg, n, poll)
-            seg.close("complete", **_optional(temperature_c=rec["temp"]))
+        self._record_segment(spec.name, "static", meta, n, poll,
+                             lambda rec: _optional(temperature_c=rec["temp"]))
 
     def _rotate(self, step: Rotate) -> None:
         spec, axis, rate = step.spec, step.axis, step.table_rate_dps
@@ -342,13 +387,20 @@ class Sequencer:
                 "mounting": list(self.mounting)}
         if not spec.encoder:
             meta["note"] = "no encoder by the scheme: rate_dps is the nominal rate and gives the direction only"
-        with self.writer.begin_segment(spec.name, "rotation", **meta) as seg:
-            poll()
-            rec = self._record(seg, n, poll)
+
+        def completed(rec):
+            # the angle swept over the frames' window (frame count x period) at the rate the
+            # encoder read back: never from a wall-clock time
             mean_rate = float(np.mean(readbacks))
             angle = body_sign * mean_rate * rec["window_s"]
-            seg.close("complete", **_optional(angle_deg=angle if spec.encoder else None,
-                                              table_rate_readback_dps=mean_rate, temperature_c=rec["temp"]))
+            return _optional(angle_deg=angle if spec.encoder else None,
+                             table_rate_readback_dps=mean_rate, temperature_c=rec["temp"])
+
+        def start():               # every recording: its own readbacks, the first one now
+            readbacks.clear()
+            poll()
+
+        self._record_segment(spec.name, "rotation", meta, n, poll, completed, start=start)
         self.table.set_rate(axis, 0.0)
 
     def _operator(self, step: Operator) -> None:

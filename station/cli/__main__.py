@@ -1,5 +1,5 @@
 import sys
 
-from station.cli.app import main
+from station.cli import main
 
 sys.exit(main())

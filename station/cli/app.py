@@ -19,12 +19,14 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from station.cli import calibration, devices, diagnose, imports, montecarlo, run
+    from station.cli import (calibration, devices, diagnose, export, history, imports, montecarlo,
+                             noise, report, run)
 
     p = _Parser(prog="station", description="IMU calibration with a rate table.")
     p.add_argument("--version", action="version", version=f"station {station.__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
-    for group in (run, calibration, montecarlo, diagnose, imports, devices):
+    for group in (run, calibration, montecarlo, diagnose, imports, devices, export, noise, history,
+                  report):
         group.add_parsers(sub)
     return p
 
@@ -40,17 +42,22 @@ def _blas_threads() -> int:
 
 
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
-    from threadpoolctl import threadpool_limits
-
+    """Exit status: 0 done; 2 bad input (one line naming the file, line or field); 3 the
+    calibration was written but its fit fails (``--accept-poor-fit`` makes it 0); 130
+    interrupted (Ctrl-C) at any moment, without a traceback."""
+    command = "?"
     try:
+        args = build_parser().parse_args(argv)
+        command = args.command
+        from threadpoolctl import threadpool_limits
+
         with threadpool_limits(limits=_blas_threads(), user_api="blas"):
             return args.func(args)
     except UserError as e:
-        err.print(f"station {args.command}: {e}", markup=False, soft_wrap=True)
+        err.print(f"station {command}: {e}", markup=False, soft_wrap=True)
         return 2
     except KeyboardInterrupt:
-        err.print("interrupted")
+        err.print("interrupted", markup=False)
         return 130
 
 

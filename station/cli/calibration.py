@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from station.cli import plugins
-from station.cli.output import err, out, print_notes, print_parameters
+from station.cli.output import EXIT_POOR_FIT, err, out, print_notes, print_parameters, print_verdict
 from station.core.errors import UserError
 from station.estimate import METHODS
 
@@ -23,6 +23,11 @@ def add_parsers(sub) -> None:
                           "FILE.py:CLASS (repeatable)")
     est.add_argument("--config", metavar="FILE", help="station.yaml (its effects section names plugins)")
     plugins.add_arguments(est)
+    est.add_argument("--max-missing-fraction", type=float, default=0.01, metavar="F",
+                     help="leave out a segment that lost more than this share of its frames (default 0.01)")
+    est.add_argument("--max-gap-s", type=float, default=1.0, metavar="S",
+                     help="leave out a segment with a longer stretch without a frame, s (default 1)")
+    add_accept_poor_fit(est)
     est.set_defaults(func=cmd_estimate)
 
     app = sub.add_parser("apply", help="compensate raw samples with a calibration file (every effect)")
@@ -31,6 +36,12 @@ def add_parsers(sub) -> None:
     app.add_argument("-o", "--output", metavar="OUT.csv", required=True)
     app.add_argument("--config", metavar="FILE", help="station.yaml (its effects section names plugins)")
     plugins.add_arguments(app)
+    app.add_argument("--force", action="store_true",
+                     help="apply a calibration made for another IMU serial (the input's serial is "
+                          "given with --serial)")
+    app.add_argument("--serial", metavar="SERIAL",
+                     help="serial of the IMU that recorded IN.csv; refused when the calibration "
+                          "names another one (unless --force)")
     app.set_defaults(func=cmd_apply)
 
     show = sub.add_parser("show", help="print a calibration file")
@@ -38,24 +49,85 @@ def add_parsers(sub) -> None:
     show.set_defaults(func=cmd_show)
 
 
+def add_accept_poor_fit(parser) -> None:
+    parser.add_argument("--accept-poor-fit", action="store_true",
+                        help=f"exit 0 even when the fit fails (default: exit status {EXIT_POOR_FIT}; "
+                             "the file says so either way)")
+
+
+def report_calibration(cal, title: str, target, accept_poor_fit: bool, truth=None) -> int:
+    """Print a written calibration (parameters, chi-square, verdict, notes, file) and return the
+    exit status: 0, or EXIT_POOR_FIT when the fit fails and the user did not accept it."""
+    from station.cli.output import print_errors
+    from station.estimate.verdict import fit_fails
+
+    dropped = set(cal.fit.get("not_determined", []))
+    if truth is not None:
+        print_errors(cal, truth)
+    else:
+        print_parameters([(n, v, u, cal.sigma.get(n)) for n, v, u in cal.parameters() if n not in dropped],
+                         title)
+    if "reduced_chi2" in cal.fit:
+        out.print(f"fit: chi2 {cal.fit['chi2']:.1f} for {cal.fit['dof']} degrees of freedom "
+                  f"(reduced {cal.fit['reduced_chi2']:.3f})", markup=False)
+    print_notes(cal)
+    print_verdict(cal.fit.get("verdict", {}))
+    out.print(f"calibration file: {target}", markup=False)
+    if fit_fails(cal):
+        if accept_poor_fit:
+            err.print("note: the fit fails; accepted (--accept-poor-fit): exit status 0", markup=False)
+            return 0
+        err.print(f"station: the fit fails (exit status {EXIT_POOR_FIT}); the file says so; "
+                  "station diagnose shows where, --accept-poor-fit accepts it", markup=False, soft_wrap=True)
+        return EXIT_POOR_FIT
+    return 0
+
+
 def cmd_estimate(args) -> int:
     from station.io.calfile import write_calfile
     from station.estimate import estimate_capture
 
     reg = plugins.registry(args)
-    cal, capture, provenance = estimate_capture(args.capture, args.method, plugins.effect_ids(reg, args.add), reg)
+    if not (0 <= args.max_missing_fraction < 1 and args.max_gap_s > 0):
+        raise UserError("--max-missing-fraction must be within [0, 1) and --max-gap-s > 0")
+    cal, capture, provenance = estimate_capture(args.capture, args.method, plugins.effect_ids(reg, args.add), reg,
+                                                max_missing_fraction=args.max_missing_fraction,
+                                                max_gap_s=args.max_gap_s)
     for w in capture.warnings:
-        err.print(f"warning: {w}")
+        err.print(f"warning: {w}", markup=False, soft_wrap=True)
     target = Path(args.output) if args.output else capture.path / "calibration.yaml"
     write_calfile(target, cal, provenance)
-    print_parameters([(n, v, u, cal.sigma.get(n)) for n, v, u in cal.parameters()],
-                      f"calibration of {capture.path} ({provenance['method']})")
-    if "reduced_chi2" in cal.fit:
-        out.print(f"fit: chi2 {cal.fit['chi2']:.1f} for {cal.fit['dof']} degrees of freedom "
-                  f"(reduced {cal.fit['reduced_chi2']:.3f})")
-    print_notes(cal)
-    out.print(f"calibration file: {target}")
-    return 0
+    from station.cli.history import file_quietly
+
+    file_quietly(target)
+    return report_calibration(cal, f"calibration of {capture.path} ({provenance['method']})", target,
+                              args.accept_poor_fit)
+
+
+def check_serial(doc: dict, calibration, serial, force: bool, what: str) -> None:
+    """Refuse (UserError) a calibration made for another IMU than ``serial`` unless ``force``."""
+    made_for = (doc.get("provenance") or {}).get("imu_serial") or (doc.get("imu") or {}).get("serial")
+    if serial is None or made_for is None or str(made_for) == str(serial):
+        return
+    if force:
+        err.print(f"warning: {calibration} was made for IMU serial {made_for}, {what} comes from serial "
+                  f"{serial}: used anyway (--force)", markup=False, soft_wrap=True)
+        return
+    raise UserError(f"{calibration}: field 'provenance.imu_serial': made for IMU serial {made_for}, "
+                    f"but {what} comes from serial {serial}: refused (--force uses it anyway)")
+
+
+def _input_serial(args):
+    """The serial of the IMU that recorded the input: --serial, or the manifest of the capture
+    the input file lies in (if it lies in one)."""
+    from station.io.capture import MANIFEST, read_capture
+
+    if args.serial is not None:
+        return args.serial
+    folder = Path(args.input).parent
+    if (folder / MANIFEST).is_file():
+        return read_capture(folder, load_data=False).imu.serial
+    return None
 
 
 def cmd_apply(args) -> int:
@@ -64,6 +136,7 @@ def cmd_apply(args) -> int:
     from station.model.compensate import LEGACY_EFFECTS, compensate, compensate_with_effects
 
     doc = read_calfile(args.calibration)
+    check_serial(doc, args.calibration, _input_serial(args), args.force, args.input)
     data = read_segment_csv(Path(args.input))
     comp = doc["compensation"]
     if "effects" in comp:
@@ -87,6 +160,13 @@ def cmd_apply(args) -> int:
         if skipped:
             err.print(f"note: this calibration file predates compensation.effects: not compensated: "
                       f"{', '.join(skipped)} (estimate again to compensate them)", markup=False)
+    if doc.get("gyro_pass_through"):
+        err.print(f"note: {args.calibration} calibrates the accelerometers only: the gyro columns are "
+                  "passed through untouched (converted to deg/s only)", markup=False, soft_wrap=True)
+    verdict = doc.get("verdict") or {}
+    if verdict.get("result") == "fails":
+        err.print(f"warning: {args.calibration}: its fit fails ({verdict.get('reason', '')})",
+                  markup=False, soft_wrap=True)
     table = np.column_stack([t, f, w])
     try:
         with open(args.output, "w") as fh:
@@ -104,9 +184,14 @@ def cmd_show(args) -> int:
     doc = read_calfile(args.calibration)
     rows = [(n, p["value"], p["unit"], p.get("sigma")) for n, p in doc["parameters"].items()]
     print_parameters(rows, f"{args.calibration}")
-    prov = doc.get("provenance", {})
-    out.print(f"effects: {', '.join(doc.get('effects', []))}")
-    for key in ("method", "capture", "capture_sha256", "imu_serial", "software", "date_utc"):
-        if key in prov:
-            out.print(f"{key}: {prov[key]}")
+    prov = doc.get("provenance") or {}
+    out.print(f"effects: {', '.join(doc.get('effects', []))}", markup=False)
+    if doc.get("gyro_pass_through"):
+        out.print("gyro: not calibrated (accelerometer-only calibration; apply passes the gyro through)")
+    for key in ("method", "capture", "capture_sha256", "imu_model", "imu_serial", "imu_firmware",
+                "software", "date_utc"):
+        if prov.get(key) is not None:
+            out.print(f"{key}: {prov[key]}", markup=False)
+    if doc.get("verdict"):
+        print_verdict(doc["verdict"])
     return 0

@@ -27,7 +27,13 @@ def add_parsers(sub) -> None:
     serve.add_argument("--axes", type=int, choices=(1, 2, 3),
                        help="table axes (default 3 for acutrol, 1 for aerosmith)")
     serve.add_argument("--table-protocol", choices=("acutrol", "aerosmith"), default="acutrol")
-    serve.add_argument("--imu-protocol", choices=("vectornav", "csv"), default="vectornav")
+    serve.add_argument("--table-framing", choices=("tcp", "gpib"), default="tcp",
+                       help="acutrol replies: tcp (error code and length first, as on TCP port 9878 "
+                            "and RS-232; default) or gpib (queries only, one line)")
+    serve.add_argument("--table-tcp-port", type=int, metavar="PORT",
+                       help="serve the table on TCP 127.0.0.1:PORT instead of a pseudo-terminal "
+                            "(0: any free port; an Acutrol listens on 9878)")
+    serve.add_argument("--imu-protocol", choices=("vectornav", "csv", "xsens"), default="vectornav")
     serve.add_argument("--csv-units", metavar="SPEC", default="",
                        help="units of the csv twin, e.g. t=ms,accel=g,gyro=rad/s "
                             "(default t=s,accel=m/s^2,gyro=deg/s)")
@@ -35,14 +41,20 @@ def add_parsers(sub) -> None:
 
     probe = sub.add_parser("probe", help="read an IMU and/or a rate table and report")
     probe.add_argument("--port", metavar="URL", help="IMU port (device path or pyserial URL)")
-    probe.add_argument("--imu-protocol", default="vectornav", help="vectornav (default) or csv")
+    probe.add_argument("--imu-protocol", default="vectornav", help="vectornav (default), xsens or csv")
     probe.add_argument("--seconds", type=float, default=10.0,
                        help="IMU device time to read, s (default 10)")
     probe.add_argument("--rate-hz", type=float, default=100.0, help="IMU output rate, Hz (default 100)")
     probe.add_argument("--csv-units", metavar="SPEC", default="", help="units of a csv IMU (see sim serve)")
-    probe.add_argument("--table-port", metavar="URL", help="rate-table port (device path or pyserial URL)")
+    probe.add_argument("--imu-baud", type=int, metavar="BAUD",
+                       help="vectornav: set the sensor's baud rate (register 05) after connecting, then "
+                            "talk at it (--baud is the rate it answers at first)")
+    probe.add_argument("--table-port", metavar="URL",
+                       help="rate-table port: device path, pyserial URL (socket://host:9878) or "
+                            "visa://RESOURCE (GPIB0::1::INSTR); '#gpib'/'#tcp' chooses the acutrol framing")
     probe.add_argument("--table-protocol", default="acutrol", help="acutrol (default) or aerosmith")
-    probe.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
+    probe.add_argument("--baud", type=int,
+                       help="baud rate (default 115200; 9600 for --table-protocol aerosmith)")
     probe.add_argument("--timeout-s", type=float, default=2.0,
                        help="longest wait for a reply or a frame, s (default 2)")
     probe.add_argument("--json", action="store_true", help="print JSON instead of text")
@@ -58,16 +70,17 @@ def cmd_sim_serve(args) -> int:
     if args.table_protocol == "aerosmith" and axes != 1:
         raise UserError("the aerosmith (three-letter) protocol drives single-axis tables: use --axes 1")
     csv_format = _csv_format(args.csv_units)
+    if args.table_tcp_port is not None and not 0 <= args.table_tcp_port <= 65535:
+        raise UserError(f"--table-tcp-port must be 0..65535, got {args.table_tcp_port}")
     from sim_devices.truth import Truth, default_truth
     from sim_devices.twins.faults import Faults, load_faults
-    from sim_devices.twins.serve import BenchOptions, BenchServer
 
     truth = Truth.from_yaml(args.sim_truth) if args.sim_truth else default_truth(args.seed)
     faults = load_faults(args.faults, axes) if args.faults else Faults()
-    server = BenchServer(truth, BenchOptions(speed=args.speed, seed=args.seed, axes=axes,
-                                             table_protocol=args.table_protocol,
-                                             imu_protocol=args.imu_protocol, faults=faults,
-                                             csv_format=csv_format))
+    try:
+        server = _bench_server(truth, args, axes, faults, csv_format)
+    except OSError as e:
+        raise UserError(f"--table-tcp-port {args.table_tcp_port}: {e}") from None
     stop = threading.Event()
     previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
@@ -97,18 +110,21 @@ def cmd_probe(args) -> int:
     from drivers.registry import imu_driver, table_driver
     from drivers.transport import SerialSettings
 
-    try:
-        serial = SerialSettings(baudrate=args.baud, timeout_s=args.timeout_s)
-    except ValueError as e:
-        raise UserError(str(e)) from None
+    def line(default_baud):
+        try:
+            return SerialSettings(baudrate=args.baud or default_baud, timeout_s=args.timeout_s)
+        except ValueError as e:
+            raise UserError(str(e)) from None
+    serial = line(115200)
     report = {}
     if args.table_port:
         table_driver(args.table_protocol)            # an unknown name fails before any I/O
-        report["table"] = probe_table(args.table_port, args.table_protocol, TableSettings(serial=serial))
+        table_line = line(9600 if args.table_protocol == "aerosmith" else 115200)
+        report["table"] = probe_table(args.table_port, args.table_protocol, TableSettings(serial=table_line))
     if args.port:
         imu_driver(args.imu_protocol)
         settings = ImuSettings(serial=serial, rate_hz=args.rate_hz, frame_timeout_s=args.timeout_s,
-                               csv_format=_csv_format(args.csv_units))
+                               csv_format=_csv_format(args.csv_units), device_baud=args.imu_baud)
         report["imu"] = probe_imu(args.port, args.imu_protocol, args.seconds, settings)
     if args.json:
         print(json.dumps(report if len(report) == 2 else next(iter(report.values())), indent=2))
@@ -133,6 +149,16 @@ def cmd_probe(args) -> int:
         print(f"  checksum errors {r['checksum_errors']}, resyncs {r['resyncs']}, gaps {r['gaps']} "
               f"({r['missing_frames']} frames missing), {r['bytes_discarded']} bytes discarded")
     return 0
+
+
+def _bench_server(truth, args, axes, faults, csv_format):
+    from sim_devices.twins.serve import BenchOptions, BenchServer
+
+    return BenchServer(truth, BenchOptions(speed=args.speed, seed=args.seed, axes=axes,
+                                           table_protocol=args.table_protocol,
+                                           imu_protocol=args.imu_protocol, faults=faults,
+                                           csv_format=csv_format, table_framing=args.table_framing,
+                                           table_tcp_port=args.table_tcp_port))
 
 
 def _csv_format(spec: str):

@@ -17,6 +17,8 @@ def add_parsers(sub) -> None:
     d.add_argument("capture", help="capture directory (rotations need encoder angles)")
     d.add_argument("--calib", metavar="CAL.yaml", help="diagnose the model of this calibration file "
                    "(its effects), refitted to the capture")
+    d.add_argument("--force", action="store_true",
+                   help="use a --calib made for another IMU serial than the capture's")
     d.add_argument("--add", action="append", default=[], metavar="EFFECT", help="add an effect first")
     d.add_argument("--auto", action="store_true",
                    help="add the most significant candidate, refit, repeat until none is significant")
@@ -35,13 +37,15 @@ def add_parsers(sub) -> None:
     eff.set_defaults(func=cmd_effects)
 
 
-def _effects(args, reg) -> list[str]:
+def _effects(args, capture, reg) -> list[str]:
+    from station.cli.calibration import check_serial
     from station.io.calfile import read_calfile
 
     effects = []
     if args.calib:
-        effects += [e for e in read_calfile(args.calib).get("effects", [])
-                    if e not in ("base_triads", "inter_triad")]
+        doc = read_calfile(args.calib)
+        check_serial(doc, args.calib, capture.imu.serial, args.force, f"capture {capture.path}")
+        effects += [e for e in doc.get("effects", []) if e not in ("base_triads", "inter_triad")]
     return plugins.effect_ids(reg, effects + args.add)
 
 
@@ -50,13 +54,16 @@ def cmd_diagnose(args) -> int:
     from station.diagnose import auto
     from station.diagnose.core import diagnose
     from station.estimate import lsq
+    from station.estimate.hand_rotation import is_hand
+
     capture = read_capture(args.capture)
-    if any(seg.angle_deg is None for seg in capture.complete("rotation")):
+    if any(seg.angle_deg is None and not is_hand(seg) for seg in capture.complete("rotation")):
         raise UserError(f"{capture.path}: diagnose fits the least-squares model, which needs the "
-                        "encoder angle (angle_deg) of every rotation segment")
+                        "encoder angle (angle_deg) of every rotation segment that is not a hand turn "
+                        "between statics")
     s = lsq.summarise(capture)
     reg = plugins.registry(args)
-    effects = _effects(args, reg)
+    effects = _effects(args, capture, reg)
     if args.auto:
         steps, final = auto.run(s, effects, progress=None, registry=reg)
         first = steps[0].before if steps else final
@@ -68,9 +75,18 @@ def cmd_diagnose(args) -> int:
         _emit(args.emit_effect, final)
     summary = _summary_lines(final)
     if args.report:
-        from station.diagnose.report import write_report
+        from station.diagnose.report import ReportInput, capture_facts, noise_of, write_report
 
-        index = write_report(args.report, first, steps, final, summary)
+        cal_doc = None
+        if args.calib:
+            from station.io.calfile import read_calfile
+
+            cal_doc = read_calfile(args.calib)
+        page = ReportInput(title=f"Diagnosis: {Path(str(capture.path)).name}",
+                           facts=capture_facts(capture, cal_doc) + [("summary", line) for line in summary],
+                           calibration=cal_doc, calibration_path=args.calib)
+        page.noise, page.noise_note = noise_of(capture, cal_doc)
+        index = write_report(args.report, first, steps, final, summary, page)
         if not args.json:
             out.print(f"report: {index}")
     if args.json:

@@ -31,6 +31,90 @@ def cmd_import_imucal(args) -> int:
     return 0
 
 
+def _print_report(report) -> None:
+    for line in report.lines:
+        out.print(line, markup=False)
+    out.print(f"capture: {report.path}", markup=False)
+
+
+def _recording_options(args) -> dict:
+    return dict(gravity_mps2=args.gravity_mps2, latitude_deg=args.latitude_deg, sections_path=args.segments,
+                window_s=args.window_s, min_static_s=args.min_static_s, rate_threshold_dps=args.rate_threshold_dps,
+                init_rest_s=args.init_rest_s, min_poses=args.min_poses, model=args.model, serial=args.serial,
+                faces=args.faces, placement_deg=args.placement_deg)
+
+
+def cmd_import_csv(args) -> int:
+    from station.io.importers import delimited, recording
+
+    columns = delimited.parse_columns(args.columns) if args.columns else None
+    rec = delimited.read_delimited(
+        args.file, preset=args.preset, columns=columns, delimiter=args.delimiter, header=args.header,
+        accel_unit=args.accel_unit, gyro_unit=args.gyro_unit, accel_nominal=args.accel_nominal,
+        gyro_nominal=args.gyro_nominal, time_unit=args.time_unit, rate_hz=args.rate_hz, gyro_path=args.gyro_file)
+    _print_report(recording.write_capture(rec, args.output, **_recording_options(args)))
+    return 0
+
+
+def cmd_import_rosbag(args) -> int:
+    from station.io.importers import recording, rosbag
+
+    rec = rosbag.read_rosbag(args.bag, topic=args.topic, stamps=args.stamps)
+    _print_report(recording.write_capture(rec, args.output, **_recording_options(args)))
+    return 0
+
+
+def _number(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if value != value or value in (float("inf"), float("-inf")):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+    return value
+
+
+def _count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 2:
+        raise argparse.ArgumentTypeError(f"must be at least 2, got {text!r}")
+    return value
+
+
+def _add_recording_options(p) -> None:
+    """Options shared by the importers of continuous recordings (sections, site, output)."""
+    from station.io.importers import recording
+
+    p.add_argument("-o", "--output", required=True, metavar="CAPTURE", help="new capture directory")
+    p.add_argument("--segments", metavar="FILE",
+                   help="give the sections by hand instead of finding them: YAML/JSON list of {name, kind "
+                        "(static|rotation), start, end (rows from 0, end exclusive) or start_s, end_s, "
+                        "up_body, axis_body}, or imucal's {label: {start, end}}")
+    p.add_argument("--gravity-mps2", type=_positive, default=9.80665,
+                   help="local gravity, m/s^2 (default 9.80665: give your site's)")
+    p.add_argument("--latitude-deg", type=_number, help="site latitude: the Earth rate is then modelled")
+    p.add_argument("--window-s", type=_positive, default=0.5, help="stillness window, s (default 0.5)")
+    p.add_argument("--min-static-s", type=_positive, default=2.0,
+                   help="shortest still interval taken as a pose, s (default 2)")
+    p.add_argument("--rate-threshold-dps", type=_positive, default=1.0,
+                   help="largest mean rate (less the bias) of a still interval, deg/s (default 1)")
+    p.add_argument("--init-rest-s", type=_positive, default=2.0,
+                   help="length of the still rest the recording starts with, s: scales raw outputs of "
+                        "unknown scale (default 2)")
+    p.add_argument("--min-poses", type=_count, default=recording.MIN_POSES,
+                   help=f"fewest static poses accepted (default {recording.MIN_POSES}: the accelerometer's 9 "
+                        "unknowns with unknown attitudes)")
+    p.add_argument("--faces", action="store_true",
+                   help="the IMU was laid on its faces: each pose's up_body is the nearest case axis")
+    p.add_argument("--placement-deg", type=_positive, default=1.0,
+                   help="1-sigma of a hand placement on a face, deg (with --faces or up_body; default 1)")
+    p.add_argument("--model", help="IMU model, recorded in the manifest")
+    p.add_argument("--serial", help="IMU serial number, recorded in the manifest")
+
+
 def _positive(text: str) -> float:
     try:
         value = float(text)
@@ -42,7 +126,7 @@ def _positive(text: str) -> float:
 
 
 def add_parsers(sub) -> None:
-    """Add the ``import`` command (sub-command ``imucal``) to station's subparsers."""
+    """Add the ``import`` command (sub-commands ``imucal``, ``csv``, ``rosbag``) to station's subparsers."""
     from station.io.importers import imucal
     from station.core.units import ACCEL_UNITS, GYRO_UNITS
 
@@ -69,6 +153,39 @@ def add_parsers(sub) -> None:
     p.add_argument("--placement-deg", type=_positive, default=1.0, metavar="DEG",
                    help="1-sigma accuracy of the hand placement and turns (default 1 deg)")
     p.set_defaults(func=cmd_import_imucal)
+
+    from station.io.importers import delimited, rosbag
+
+    c = kinds.add_parser("csv", help="a continuous recording in delimited text: statics and hand turns found in it")
+    c.add_argument("file", metavar="FILE", help="the log (CSV, ';'-, tab- or blank-separated)")
+    c.add_argument("--preset", choices=sorted(delimited.PRESETS),
+                   help="a known layout: station/t-a-g (t,ax,ay,az,gx,gy,gz; s, m/s^2, deg/s), imu_tk (two "
+                        "files 't x y z', accel and --gyro-file; s, m/s^2, rad/s), imucal (its session CSV)")
+    c.add_argument("--columns", metavar="MAP",
+                   help="ROLE=COLUMN,... by header name or index from 0; roles t (time) or index (sample "
+                        "counter), ax ay az gx gy gz (default t-a-g: t=0,ax=1,...,gz=6)")
+    c.add_argument("--delimiter", choices=[",", ";", "tab", "space"], help="default: from the first data line")
+    c.add_argument("--header", choices=["auto", "yes", "no"], help="default auto: a non-numeric first line")
+    c.add_argument("--accel-unit", choices=ACCEL_UNITS, help="default m/s^2 (or the preset's)")
+    c.add_argument("--gyro-unit", choices=GYRO_UNITS, help="default deg/s (or the preset's)")
+    c.add_argument("--accel-nominal", type=_positive, metavar="MPS2_PER_COUNT",
+                   help="raw accelerometer: nominal m/s^2 per count (thresholds, unit check)")
+    c.add_argument("--gyro-nominal", type=_positive, metavar="DPS_PER_COUNT",
+                   help="raw gyro: nominal deg/s per count (thresholds, unit check, the fit's start)")
+    c.add_argument("--time-unit", choices=["s", "ms", "us", "ns"], help="unit of the time column (default s)")
+    c.add_argument("--rate-hz", type=_positive, metavar="HZ",
+                   help="sample rate: time = index column (or row number) / rate, when there is no time column")
+    c.add_argument("--gyro-file", metavar="FILE", help="imu_tk layout: the gyro's file")
+    _add_recording_options(c)
+    c.set_defaults(func=cmd_import_csv)
+
+    b = kinds.add_parser("rosbag", help="sensor_msgs/Imu from a ROS 1 bag or a ROS 2 bag (db3 or MCAP)")
+    b.add_argument("bag", metavar="BAG", help="a .bag file, a ROS 2 bag directory, or an .mcap file")
+    b.add_argument("--topic", help="the Imu topic (default: the bag's only one)")
+    b.add_argument("--stamps", choices=rosbag.STAMPS, default="header",
+                   help="time from each message's header.stamp (default) or the recorder's receive time")
+    _add_recording_options(b)
+    b.set_defaults(func=cmd_import_rosbag)
 
 
 __all__ = ["add_parsers", "UserError"]

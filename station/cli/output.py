@@ -7,6 +7,8 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
+EXIT_POOR_FIT = 3      # the calibration file is written, but its fit fails (see --accept-poor-fit)
+
 out = Console(highlight=False, width=None if sys.stdout.isatty() else 160)
 err = Console(stderr=True, highlight=False)
 
@@ -36,7 +38,10 @@ def print_errors(cal, truth) -> None:
     table = Table(title="estimate against the simulated truth")
     for col in ("parameter", "estimate", "truth", "error", "± 1σ", "unit"):
         table.add_column(col, justify="left" if col in ("parameter", "unit") else "right")
+    dropped = set(cal.fit.get("not_determined", []))
     for name, value, true, error, unit in parameter_errors(cal, truth):
+        if name in dropped:
+            continue
         fmt = "{:.9f}" if "_scale_" in name else "{:.4f}"
         sigma = cal.sigma.get(name)
         if sigma is not None and "_scale_" in name:
@@ -46,6 +51,13 @@ def print_errors(cal, truth) -> None:
     out.print(table)
 
 
+def print_verdict(verdict: dict) -> None:
+    """The fit verdict in one line: passes / fails / untested and why."""
+    result = verdict.get("result", "untested")
+    style = {"passes": "green", "fails": "bold red"}.get(result, "yellow")
+    out.print(f"fit {result}: {verdict.get('reason', '')}", style=style, markup=False, soft_wrap=True)
+
+
 def print_notes(cal) -> None:
     for note in cal.fit.get("notes", []):
-        err.print(f"note: {note}")
+        err.print(f"note: {note}", markup=False, soft_wrap=True)

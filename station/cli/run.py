@@ -5,6 +5,7 @@ the devices are driven by station/bench/sequencer.py.
 from __future__ import annotations
 
 import datetime as _dt
+import re
 import select
 import sys
 from pathlib import Path
@@ -12,12 +13,18 @@ from pathlib import Path
 import yaml
 from rich.table import Table
 
-from station.cli.output import err, out, print_errors, print_notes, print_parameters
+from station.cli.calibration import add_accept_poor_fit, report_calibration
+from station.cli.output import err, out
 from station.core.errors import UserError
 
 RUN_FILE = "run.yaml"
 SCHEME_FILE = "scheme.yaml"
 RUN_FORMAT = "station-run/1"
+try:                                     # a serial port that hangs up mid-call raises termios.error
+    import termios
+    DEVICE_ERRORS: tuple = (OSError, termios.error)
+except ImportError:                      # not on Windows
+    DEVICE_ERRORS = (OSError,)
 CONNECTION = {"imu": ("port", "protocol", "serial", "csv_units", "frame_timeout_s"),
               "table": ("port", "protocol", "serial")}
 
@@ -41,6 +48,7 @@ def add_parsers(sub) -> None:
     run.add_argument("--unattended", action="store_true",
                      help="no operator: never ask for a remount (run.operator: false)")
     run.add_argument("--reset-faults", action="store_true", help="clear a fault latched on the table first")
+    add_accept_poor_fit(run)
     run.set_defaults(func=cmd_run)
 
     schemes = sub.add_parser("schemes", help="list the built-in schemes with their segments and durations")
@@ -140,9 +148,13 @@ def cmd_run(args) -> int:
 
     overrides = {k: v for k, v in (("dwell_s", args.dwell_s), ("rate_dps", args.rate_dps),
                                    ("rotation_s", args.rotation_s)) if v is not None}
-    scheme = load_scheme(args.scheme, overrides)
+    if args.resume and args.sim:
+        raise UserError(f"--resume {args.resume} continues a run on a bench; a --sim dry run is recorded "
+                        "in one go and cannot be resumed: leave out --sim (with --port/--table-port) "
+                        "or run --sim afresh")
     if not args.sim:
         return _run_on_bench(args)
+    scheme = load_scheme(args.scheme, overrides)
     from station.simulate import dryrun
     from station.io.calfile import write_calfile
     from station.estimate import estimate_capture
@@ -156,14 +168,17 @@ def cmd_run(args) -> int:
         capture = dryrun.record_scheme(
             scheme, truth, args.seed, out_dir,
             progress=lambda name, i, n: status.update(f"recording {name} ({i + 1}/{n})"))
+    from station.cli.history import file_quietly
+    from station.cli.noise import characterise_run, is_noise_recording
+
+    if is_noise_recording(scheme.segments):
+        return characterise_run(capture)
     cal, _, provenance = estimate_capture(capture)
     cal_path = write_calfile(capture / "calibration.yaml", cal, provenance)
-    print_errors(cal, dryrun.truth_calibration(truth))
-    print_notes(cal)
-    out.print(f"capture:          {capture}")
-    out.print(f"simulated truth:  {capture / dryrun.TRUTH_FILE}")
-    out.print(f"calibration file: {cal_path}")
-    return 0
+    file_quietly(cal_path)
+    out.print(f"capture:          {capture}", markup=False)
+    out.print(f"simulated truth:  {capture / dryrun.TRUTH_FILE}", markup=False)
+    return report_calibration(cal, "", cal_path, args.accept_poor_fit, truth=dryrun.truth_calibration(truth))
 
 
 def _run_on_bench(args) -> int:
@@ -179,7 +194,7 @@ def _run_on_bench(args) -> int:
     else:
         text, _ = scheme_text(args.scheme)
         scheme = load_scheme(args.scheme, _overrides(args))
-        directory = None
+        directory = _out_dir(args, config, scheme)
     if not config.imu.port:
         raise UserError("no IMU port: give --port (and --table-port), set imu.port in station.yaml "
                         "(station init writes an example), or add --sim for a dry run against the "
@@ -190,7 +205,17 @@ def _run_on_bench(args) -> int:
     steps = _resume_steps(plan, scheme, done, config) if args.resume else plan.steps
     if args.resume and not any(s.segment for s in steps):
         out.print(f"{directory}: every segment is recorded; estimating", markup=False)
-        return _estimate(directory)
+        return _estimate(directory, args.accept_poor_fit, config)
+    try:
+        return _record_and_estimate(args, config, scheme, plan, steps, directory, text if not args.resume else None)
+    except DEVICE_ERRORS as e:
+        where = (f"; what was recorded is kept: continue with station run --resume {directory}"
+                 if (Path(directory) / "manifest.yaml").is_file() else "")
+        raise UserError(f"{config.table.port if scheme.table else config.imu.port}: a device failed or "
+                        f"disconnected ({type(e).__name__}: {str(e)[:100]}){where}") from None
+
+
+def _record_and_estimate(args, config, scheme, plan, steps, directory, text) -> int:
     from station.bench.sequencer import Interrupts, RunAborted, RunPaused, Sequencer
 
     imu, table = _open_devices(config, scheme)
@@ -198,11 +223,10 @@ def _run_on_bench(args) -> int:
         for note in plan.notes:
             err.print(f"note: {note}", markup=False, soft_wrap=True)
         rate_hz = imu.configure(config.imu.rate_hz)
-        if directory is None:
-            directory = _out_dir(args, config, scheme)
+        if not args.resume:
             writer = _new_capture(directory, scheme, text, _overrides(args), config, imu, rate_hz)
         else:
-            writer = _reopen(directory, rate_hz)
+            writer = _reopen(directory, rate_hz, imu_identity(getattr(imu, "identity", None)).get("serial"))
         out.print(f"capture: {directory}", markup=False)
         from station.bench.live import make_display
 
@@ -213,6 +237,9 @@ def _run_on_bench(args) -> int:
                 Sequencer(table=table, imu=imu, writer=writer, config=config, display=display,
                           operator=ConsoleOperator(display), interrupts=interrupts, rate_hz=rate_hz,
                           reset_faults=args.reset_faults).run(steps)
+        except UserError as e:           # a device fault, a table that did not hold: the run stops
+            raise UserError(f"{e}; the table was brought to rest where it answered, what was recorded is "
+                            f"kept: continue with station run --resume {directory}") from None
         except (RunPaused, RunAborted) as e:
             what = "paused" if isinstance(e, RunPaused) else "aborted"
             err.print(f"station run: {what}; the table is at rest and everything recorded is kept; "
@@ -222,7 +249,7 @@ def _run_on_bench(args) -> int:
         for device in (table, imu):
             if device is not None:
                 device.close()
-    return _estimate(directory)
+    return _estimate(directory, args.accept_poor_fit, config)
 
 
 # ------------------------------------------------------------------------------------ operator
@@ -339,7 +366,10 @@ def _new_capture(directory, scheme, scheme_text_, overrides, config, imu, rate_h
         extra["mounting"] = {"offset_m": list(t.imu_offset_m)}
     elif scheme.centred:
         extra["mounting"] = {"offset_m": [0.0, 0.0, 0.0]}
-    writer = CaptureWriter(directory, ImuInfo(rate_hz, "m/s^2", "deg/s", model=imu.identity or None),
+    ident = imu_identity(getattr(imu, "identity", None))
+    writer = CaptureWriter(directory, ImuInfo(rate_hz, "m/s^2", "deg/s", model=ident.get("model"),
+                                              serial=ident.get("serial"),
+                                              extra=({"firmware": ident["firmware"]} if "firmware" in ident else {})),
                            Site(config.site.gravity, latitude_deg=config.site.latitude_deg),
                            scheme.name, extra=extra)
     writer.write_file(SCHEME_FILE, scheme_text_)
@@ -406,26 +436,51 @@ def _resume_steps(plan, scheme, done, config):
     return steps
 
 
-def _reopen(directory, rate_hz):
+def _reopen(directory, rate_hz, serial=None):
     from station.io.capture import CaptureWriter, read_capture
 
     capture = read_capture(directory, load_data=False)
+    if serial is not None and capture.imu.serial is not None and str(capture.imu.serial) != serial:
+        raise UserError(f"{directory}/manifest.yaml: field 'imu.serial': recorded with IMU serial "
+                        f"{capture.imu.serial}, the IMU connected now is serial {serial}: connect the "
+                        "same IMU to resume")
     if abs(capture.imu.sample_rate_hz - rate_hz) > 1e-9:
         raise UserError(f"{directory}: recorded at {capture.imu.sample_rate_hz:g} Hz, the IMU now gives "
                         f"{rate_hz:g} Hz: set imu.rate_hz as in the run")
     return CaptureWriter.reopen(directory)
 
 
-def _estimate(directory) -> int:
+def _estimate(directory, accept_poor_fit: bool = False, config=None) -> int:
     from station.io.calfile import write_calfile
     from station.estimate import estimate_capture
+    from station.cli.noise import characterise_run, is_noise_recording
+    from station.io.capture import read_capture
 
-    cal, capture, provenance = estimate_capture(directory)
+    if is_noise_recording(read_capture(directory, load_data=False).segments):
+        return characterise_run(directory)
+    limits = {} if config is None else {"max_missing_fraction": config.run.max_missing_fraction,
+                                        "max_gap_s": config.run.max_gap_s}
+    cal, capture, provenance = estimate_capture(directory, **limits)
     for w in capture.warnings:
-        err.print(f"warning: {w}", markup=False)
+        err.print(f"warning: {w}", markup=False, soft_wrap=True)
     path = write_calfile(Path(directory) / "calibration.yaml", cal, provenance)
-    print_parameters([(n, v, u, cal.sigma.get(n)) for n, v, u in cal.parameters()],
-                      f"calibration of {directory} ({provenance['method']})")
-    print_notes(cal)
-    out.print(f"calibration file: {path}", markup=False)
-    return 0
+    from station.cli.history import file_quietly
+
+    file_quietly(path)
+    return report_calibration(cal, f"calibration of {directory} ({provenance['method']})", path,
+                              accept_poor_fit)
+
+
+_IDENTITY = re.compile(r"(?P<model>.*?) serial (?P<serial>.*?) firmware (?P<firmware>.*)")
+
+
+def imu_identity(identity: str | None) -> dict:
+    """model, serial, firmware from the driver's identity text ("VN-100 serial 0100 firmware
+    1.0"); a text in another form is the model."""
+    text = (identity or "").strip()
+    if not text:
+        return {}
+    m = _IDENTITY.fullmatch(text)
+    if m is None:
+        return {"model": text[:200]}
+    return {k: v.strip()[:200] for k, v in m.groupdict().items() if v.strip()}

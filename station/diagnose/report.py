@@ -1,13 +1,26 @@
-"""Pictures of a diagnosis: PNG files and an index page in a report directory."""
+"""The report page: one self-contained HTML file (figures embedded as data: URIs) that a person
+reads to judge a calibration: what was measured (capture, IMU, scheme, date), the parameters
+± 1σ, the fit verdict, the residuals before and after each added effect on one y axis, the
+before/after tables, the candidate effects, and the noise (Allan deviation).
+
+``write_report`` keeps the PNG files beside the page for people who want them separately.
+"""
 from __future__ import annotations
 
+import base64
+import datetime as _dt
 import html
+import math
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from station.diagnose.core import PRIOR_QUANTITIES
+import station
 from station.core.errors import UserError
+from station.diagnose.core import PRIOR_QUANTITIES
+from station.diagnose.figures import allan_figure, pyplot, save
+from station.model.registry import EffectRegistry
 
 VARIABLE_LABEL = {
     "rate_squared": "rotation rate squared (deg/s)^2",
@@ -16,15 +29,11 @@ VARIABLE_LABEL = {
     "signed_rate": "signed rotation rate (deg/s)",
     "rate_change": "rate change across the segment (deg/s)",
 }
+SCALE_UNITS = ("1", "raw/(m/s^2)", "raw/(deg/s)")
 
 
 def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+    return pyplot()
 
 
 def _variable(name: str, diagnosis, labels) -> np.ndarray:
@@ -48,9 +57,14 @@ def _variable(name: str, diagnosis, labels) -> np.ndarray:
     return out
 
 
-def _segments_figure(plt, path, panels):
-    """panels: list of (title, diagnosis); bars of the RMS whitened residual per segment."""
-    fig, axes = plt.subplots(len(panels), 1, figsize=(11, 2.8 * len(panels)), squeeze=False)
+def segments_figure(panels, path=None) -> bytes:
+    """panels: list of (title, diagnosis); bars of the RMS whitened residual per segment, every
+    panel on the same (log) y axis so that the fall after each added effect shows."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(len(panels), 1, figsize=(11, 2.8 * len(panels)), squeeze=False, sharey=True)
+    values = [s.rms for _, d in panels for s in d.segments if s.rms > 0]
+    lo = min(min(values, default=1.0), 0.5) / 1.5
+    hi = max(max(values, default=1.0), 2.0) * 1.5
     for ax, (title, d) in zip(axes[:, 0], panels):
         names = [s.name for s in d.segments]
         rms = [s.rms for s in d.segments]
@@ -58,19 +72,20 @@ def _segments_figure(plt, path, panels):
         ax.bar(range(len(names)), rms, color=colours)
         ax.axhline(1.0, color="k", lw=0.8, ls="--")
         ax.set_yscale("log")
+        ax.set_ylim(lo, hi)
         ax.set_xticks(range(len(names)), names, rotation=90, fontsize=7)
         ax.set_ylabel("RMS residual / noise")
-        ax.set_title(f"{title}: reduced chi2 {d.reduced_chi2:.3g} (blue static, orange rotation)")
+        ax.set_title(f"{title}: reduced χ² {d.reduced_chi2:.3g} (blue static, orange rotation; "
+                     "dashed: the noise level)", fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    return save(fig, path)
 
 
-def _candidate_figure(plt, path, diagnosis, cand):
+def candidate_figure(diagnosis, cand, path=None) -> bytes:
+    plt = _pyplot()
     labels = diagnosis.labels
     r = diagnosis.result.model.residuals(diagnosis.result.x)
-    data = np.array([q not in PRIOR_QUANTITIES
-                     for _, _, q, _ in labels])
+    data = np.array([q not in PRIOR_QUANTITIES for _, _, q, _ in labels])
     pred = -cand.signature_rows
     var_name = cand.signature_variable
     var = _variable(var_name, diagnosis, labels)
@@ -87,35 +102,315 @@ def _candidate_figure(plt, path, diagnosis, cand):
     a2.set_ylabel("residual, sigma")
     a2.set_title("residual against its signature variable")
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    return save(fig, path)
 
 
-def write_report(directory, first, steps, final, summary_lines) -> Path:
-    """Write PNGs and index.html; return the index path."""
+# ----------------------------------------------------------------------------------- the page
+
+@dataclass
+class ReportInput:
+    """Everything the page shows; any part may be missing (the page says so)."""
+    title: str
+    facts: list = field(default_factory=list)       # (label, value) about the capture and the IMU
+    calibration: dict | None = None                 # a calibration document (read_calfile)
+    calibration_path: str | None = None
+    verdict: str | None = None                      # the calibration file's fit verdict
+    first: object = None                            # Diagnosis of the model as fitted
+    steps: list = field(default_factory=list)       # auto.Step
+    final: object = None
+    diagnosis_note: str | None = None               # why there is no diagnosis
+    noise: object = None                            # estimate.noise.NoiseResult
+    noise_note: str | None = None
+
+
+CSS = """
+body{font-family:-apple-system,"Segoe UI",Roboto,"Helvetica Neue",Arial,sans-serif;margin:0;
+background:#f4f5f7;color:#1d2330;line-height:1.45}
+main{max-width:1100px;margin:0 auto;padding:24px 28px 48px}
+header{background:#1d2a44;color:#fff;padding:22px 28px}
+header h1{margin:0;font-size:1.5em;font-weight:600}
+header p{margin:4px 0 0;color:#c8d0e0;font-size:.95em}
+section{background:#fff;border-radius:8px;box-shadow:0 1px 3px rgba(0,0,0,.08);
+padding:18px 22px;margin:18px 0}
+h2{font-size:1.15em;margin:0 0 12px;color:#1d2a44;border-bottom:2px solid #e3e7ef;padding-bottom:6px}
+h3{font-size:1em;margin:16px 0 8px}
+table{border-collapse:collapse;width:100%;font-size:.9em}
+th,td{padding:4px 10px;border-bottom:1px solid #e8ebf1;text-align:right;white-space:nowrap}
+th{background:#f0f2f6;font-weight:600}
+td.l,th.l{text-align:left}
+tr:nth-child(even) td{background:#fafbfc}
+dl.facts{display:grid;grid-template-columns:max-content 1fr;gap:4px 18px;margin:0}
+dl.facts dt{font-weight:600;color:#4a5468}
+dl.facts dd{margin:0;word-break:break-all}
+.verdict{display:inline-block;padding:6px 14px;border-radius:6px;font-weight:600;margin:4px 0 10px}
+.pass{background:#e3f5e8;color:#17692f;border:1px solid #9fd9b0}
+.fail{background:#fde8e8;color:#9b1c1c;border:1px solid #f2a7a7}
+.unknown{background:#eef0f4;color:#3b4456;border:1px solid #cfd5e0}
+img{max-width:100%;height:auto;display:block;margin:8px 0}
+.note{color:#5b6478;font-size:.9em}
+.yes{color:#17692f;font-weight:600}
+.flag{color:#9b1c1c;font-weight:600}
+footer{color:#6b7385;font-size:.8em;margin-top:24px}
+"""
+
+
+def _e(text) -> str:
+    return html.escape(str(text), quote=True)
+
+
+def _img(png: bytes, alt: str) -> str:
+    return f"<img alt='{_e(alt)}' src='data:image/png;base64,{base64.b64encode(png).decode()}'>"
+
+
+def _table(header, rows, left=(0,)) -> str:
+    th = "".join(f"<th class='l'>{_e(h)}</th>" if i in left else f"<th>{_e(h)}</th>" for i, h in enumerate(header))
+    body = "".join("<tr>" + "".join(f"<td class='l'>{c}</td>" if i in left else f"<td>{c}</td>"
+                                    for i, c in enumerate(row)) + "</tr>" for row in rows)
+    return f"<table><thead><tr>{th}</tr></thead><tbody>{body}</tbody></table>"
+
+
+def _verdict_class(text: str) -> str:
+    t = text.lower()
+    if t.startswith(("passes", "pass", "the model explains")):
+        return "pass"
+    if t.startswith(("fails", "fail", "the model does not")):
+        return "fail"
+    return "unknown"
+
+
+def _parameters_section(inp: ReportInput) -> str:
+    doc = inp.calibration
+    if doc is None:
+        return "<section><h2>Parameters</h2><p class='note'>No calibration file.</p></section>"
+    rows = []
+    for name, p in doc.get("parameters", {}).items():
+        value, unit, sigma = p["value"], p["unit"], p.get("sigma")
+        if unit in SCALE_UNITS:
+            v = f"{value:.9f}"
+            s = "" if sigma is None or not math.isfinite(sigma) else f"{sigma:.3g} ({sigma / value * 1e6:.3g} ppm)"
+        else:
+            v = f"{value:.4f}"
+            s = "" if sigma is None or not math.isfinite(sigma) else f"{sigma:.3g}"
+        rows.append([_e(name), v, _e(s), _e(unit)])
+    effects = ", ".join(doc.get("effects", []))
+    verdict = inp.verdict or "not stated"
+    fit = doc.get("fit") or {}
+    chi = ""
+    if isinstance(fit.get("reduced_chi2"), (int, float)):
+        chi = (f"<p>χ² {fit.get('chi2', float('nan')):.1f} for {fit.get('dof', '?')} degrees of freedom "
+               f"(reduced {fit['reduced_chi2']:.3f}), method {_e(fit.get('method', ''))}</p>")
+    notes = "".join(f"<li>{_e(n)}</li>" for n in fit.get("notes", []) if isinstance(n, str))
+    return (f"<section><h2>Parameters ± 1σ</h2>"
+            f"<p>Calibration file <code>{_e(inp.calibration_path)}</code>; effects: {_e(effects)}.</p>"
+            f"<div class='verdict {_verdict_class(verdict)}'>fit verdict: {_e(verdict)}</div>{chi}"
+            + _table(["parameter", "value", "± 1σ", "unit"], rows)
+            + (f"<h3>Notes</h3><ul>{notes}</ul>" if notes else "") + "</section>")
+
+
+def _candidates_table(d) -> str:
+    rows = []
+    for c in d.candidates:
+        if c.names:
+            k = max(range(len(c.names)), key=lambda i: abs(c.estimate[i]) / max(c.sigma[i], 1e-300))
+            est = f"{c.names[k]} {c.estimate[k]:.3g} ± {c.sigma[k]:.2g} {c.units[k]}"
+        else:
+            est = ""
+        note = c.advice or ("size implausible for any IMU" if not c.plausible else "")
+        sig = "<span class='yes'>yes</span>" if c.significant else "no"
+        rows.append([_e(c.effect), sig, f"{c.predicted_chi2_drop:.4g}", f"{c.p_value_corrected:.2g}",
+                     _e(est), _e(note)])
+    return _table(["effect", "significant", "predicted Δχ²", "p (Holm)", "largest one-step estimate", "note"],
+                  rows, left=(0, 1, 4, 5))
+
+
+def _diagnosis_section(inp: ReportInput, figures: dict) -> str:
+    from station.diagnose.auto import comparison_rows
+
+    if inp.first is None:
+        return (f"<section><h2>Model against measurements</h2><p class='note'>"
+                f"{_e(inp.diagnosis_note or 'No diagnosis.')}</p></section>")
+    first, final = inp.first, inp.final or inp.first
+    parts = [f"<section><h2>Model against measurements</h2>",
+             f"<div class='verdict {_verdict_class(first.verdict)}'>{_e(first.verdict)}</div>",
+             f"<p>χ² {first.chi2:.1f} for {first.dof} degrees of freedom (reduced {first.reduced_chi2:.3f}, "
+             f"p = {first.p_value:.3g}); effects in the model: {_e(', '.join(first.effects))}.</p>"]
+    if first.failures:
+        parts.append("<h3>Where it fails</h3><ul>" + "".join(f"<li>{_e(f)}</li>" for f in first.failures) + "</ul>")
+    parts.append("<h3>Residual per segment, before and after each added effect (same y axis)</h3>")
+    parts.append(_img(figures["residuals_per_segment.png"], "RMS whitened residual per segment"))
+    for k, st in enumerate(inp.steps, 1):
+        rows = [[_e(what), f"{b:.4g}", f"{a:.4g}"] for what, b, a in comparison_rows(st.before, st.after)]
+        rows += [["predicted χ² drop", f"{st.predicted_drop:.4g}", ""], ["actual χ² drop", f"{st.actual_drop:.4g}", ""]]
+        parts.append(f"<h3>Step {k}: added {_e(st.added)}</h3>" + _table(["", "before", "after"], rows))
+        parts.append("<p>" + "; ".join(_e(f"{n} = {v:.4g} ± {s:.2g} {u}") for n, v, s, u in st.estimate) + "</p>")
+    if inp.steps:
+        parts.append(f"<div class='verdict {_verdict_class(final.verdict)}'>after the added effects: "
+                     f"{_e(final.verdict)}</div>")
+    parts.append("<h3>Candidate effects (score test at the fit as it was first made)</h3>")
+    parts.append(_candidates_table(first))
+    for name, png in figures.items():
+        if name.startswith("candidate_"):
+            effect = name[len("candidate_"):-4]
+            parts.append(f"<h3>{_e(effect)}: residuals against the change it would make, and against "
+                         f"its signature variable</h3>" + _img(png, effect))
+    return "".join(parts) + "</section>"
+
+
+def _filed_noise(inp: ReportInput) -> str:
+    """The calibration file's own noise block (e.g. from a long noise recording), as a table."""
+    block = (inp.calibration or {}).get("noise")
+    if not isinstance(block, dict):
+        return ""
+    rows = []
+    for sensor, key, unit in (("accel", "white_noise_ug_rthz", "µg/√Hz"), ("gyro", "white_noise_dph_rthz", "°/h/√Hz")):
+        for axis, r in (block.get(sensor) or {}).items():
+            if isinstance(r, dict) and isinstance(r.get(key), (int, float)):
+                rows.append([_e(f"{sensor} {axis}"), _e(f"{r[key]:.4g} {unit}")])
+    kal = block.get("kalibr") or {}
+    kal_rows = [[_e(k), _e(f"{v:.4g}")] for k, v in kal.items() if isinstance(v, float)]
+    return (f"<h3>In the calibration file (from {_e(block.get('source', 'station noise'))})</h3>"
+            + _table(["axis", "white noise"], rows) + "<h3>Kalibr</h3>" + _table(["key", "value"], kal_rows))
+
+
+def _noise_section(inp: ReportInput, figures: dict) -> str:
+    if inp.noise is None:
+        return (f"<section><h2>Noise</h2><p class='note'>{_e(inp.noise_note or 'Not characterised.')}"
+                f"</p>{_filed_noise(inp)}</section>")
+    res = inp.noise
+    rows = []
+    for a in res.axes:
+        r = a.report()
+        if a.sensor == "accel":
+            white = f"{r['white_noise_ug_rthz']:.4g} ± {r['white_noise_sigma_ug_rthz']:.2g} µg/√Hz"
+            bi, bu, rw, ru = "bias_instability_ug", "µg", "random_walk_ug_rth", "µg/√h"
+        else:
+            white = f"{r['white_noise_dph_rthz']:.4g} ± {r['white_noise_sigma_dph_rthz']:.2g} °/h/√Hz"
+            bi, bu, rw, ru = "bias_instability_dph", "°/h", "random_walk_dph_rth", "°/h/√h"
+        b = f"{r[bi]:.3g} {bu}" if r[bi] is not None else f"&lt; {r[bi.replace('instability', 'instability_upper')]:.3g} {bu}"
+        w = f"{r[rw]:.3g} {ru}" if r[rw] is not None else f"&lt; {r[rw.replace('random_walk', 'random_walk_upper')]:.3g} {ru}"
+        rows.append([_e(f"{a.sensor} {a.axis}"), _e(white), b, w])
+    return ("<section><h2>Noise (overlapping Allan deviation)</h2>"
+            f"<p>{_e(res.source)}: {res.duration_s:.0f} s at {res.sample_rate_hz:g} Hz. "
+            "Bias instability and random walk are upper bounds (&lt;) when the record is too short "
+            "to show them.</p>"
+            + _table(["axis", "white noise ± 1σ", "bias instability", "bias random walk"], rows)
+            + _img(figures["allan.png"], "Allan deviation") + _filed_noise(inp) + "</section>")
+
+
+def render(inp: ReportInput, figures: dict) -> str:
+    facts = "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in inp.facts)
+    made = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    convention = (inp.calibration or {}).get("convention") or {}
+    conv = "".join(f"<li><b>{_e(k)}</b>: {_e(v)}</li>" for k, v in convention.items() if isinstance(v, str))
+    return (f"<!doctype html><html lang='en'><head><meta charset='utf-8'>"
+            f"<meta name='viewport' content='width=device-width, initial-scale=1'>"
+            f"<title>{_e(inp.title)}</title><style>{CSS}</style></head><body>"
+            f"<header><h1>{_e(inp.title)}</h1><p>station {station.__version__} · report made {made}</p></header>"
+            f"<main><section><h2>What was measured</h2><dl class='facts'>{facts}</dl></section>"
+            + _parameters_section(inp) + _diagnosis_section(inp, figures) + _noise_section(inp, figures)
+            + (f"<section><h2>Convention</h2><ul>{conv}</ul></section>" if conv else "")
+            + "<footer>One self-contained page: every figure is embedded.</footer></main></body></html>\n")
+
+
+def figures_of(inp: ReportInput) -> dict:
+    figures = {}
+    if inp.first is not None:
+        panels = [("as fitted", inp.first)] + [(f"after adding {s.added}", s.after) for s in inp.steps]
+        figures["residuals_per_segment.png"] = segments_figure(panels)
+        for cand in inp.first.candidates[:3]:
+            if cand.signature_rows is not None:
+                figures[f"candidate_{cand.effect}.png"] = candidate_figure(inp.first, cand)
+    if inp.noise is not None:
+        figures["allan.png"] = allan_figure(inp.noise)
+    return figures
+
+
+def write_page(path, inp: ReportInput, png_dir=None) -> Path:
+    """Write the page (and, with ``png_dir``, its figures as PNG files there)."""
+    path = Path(path)
+    figures = figures_of(inp)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(render(inp, figures), encoding="utf-8")
+        if png_dir is not None:
+            for name, png in figures.items():
+                (Path(png_dir) / name).write_bytes(png)
+    except OSError as e:
+        raise UserError(f"{path}: cannot write the report: {e.strerror}") from None
+    return path
+
+
+def write_report(directory, first, steps, final, summary_lines, inp: ReportInput | None = None) -> Path:
+    """``diagnose --report DIR``: DIR/index.html (self-contained) and the PNGs beside it."""
     directory = Path(directory)
     try:
         directory.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise UserError(f"{directory}: cannot create the report directory: {e.strerror}") from None
-    plt = _pyplot()
-    figures = []
-    panels = [("as fitted", first)] + [(f"after adding {s.added}", s.after) for s in steps]
-    _segments_figure(plt, directory / "residuals_per_segment.png", panels)
-    figures.append(("residuals_per_segment.png", "RMS whitened residual per segment, before and "
-                    "after each added effect (1 = the noise level)"))
-    for cand in first.candidates[:3]:
-        if cand.signature_rows is None:
-            continue
-        name = f"candidate_{cand.effect}.png"
-        _candidate_figure(plt, directory / name, first, cand)
-        figures.append((name, f"{cand.effect}: residuals against the change it would make, and "
-                              f"against its signature variable"))
-    items = "\n".join(f"<h3>{html.escape(cap)}</h3><img src='{html.escape(f)}' style='max-width:100%'>"
-                      for f, cap in figures)
-    text = "<br>".join(html.escape(line) for line in summary_lines)
-    index = directory / "index.html"
-    index.write_text(f"<!doctype html><html><head><meta charset='utf-8'><title>station diagnosis"
-                     f"</title></head><body><h1>station diagnosis</h1><p>{text}</p>{items}"
-                     f"</body></html>\n")
-    return index
+    inp = inp or ReportInput(title="station diagnosis")
+    inp.first, inp.steps, inp.final = first, steps, final
+    if not inp.facts:
+        inp.facts = [("summary", line) for line in summary_lines]
+    return write_page(directory / "index.html", inp, png_dir=directory)
+
+
+# ------------------------------------------------------------------- from a capture to the page
+
+def capture_facts(capture, cal_doc=None) -> list:
+    """(label, value) rows: capture, IMU, scheme, dates, site, calibration provenance."""
+    started = [s.extra.get("started_utc") for s in capture.segments if isinstance(s.extra.get("started_utc"), str)]
+    prov = (cal_doc or {}).get("provenance") or {}
+    rows = [("capture", str(capture.path)),
+            ("IMU", f"{capture.imu.model or 'unknown model'}, serial {capture.imu.serial or 'unknown'}"),
+            ("output", f"{capture.imu.sample_rate_hz:g} Hz; accelerometers in {capture.imu.accel_unit}, "
+                       f"gyros in {capture.imu.gyro_unit}"),
+            ("scheme", capture.scheme or "not named"),
+            ("segments", f"{len(capture.complete('static'))} static, {len(capture.complete('rotation'))} "
+                         f"rotation complete of {len(capture.segments)}"),
+            ("recorded (UTC)", f"{min(started)} to {max(started)}" if started else "not stated"),
+            ("site", f"gravity {capture.site.gravity_mps2:.6f} m/s²"
+                     + (f", latitude {capture.site.latitude_deg:g}°" if capture.site.latitude_deg is not None else ""))]
+    if prov:
+        rows.append(("calibrated (UTC)", f"{prov.get('date_utc', 'not stated')} by {prov.get('software', '?')}, "
+                                         f"method {prov.get('method', '?')}"))
+    return rows
+
+
+def noise_of(capture, cal_doc=None):
+    """(NoiseResult or None, note) from the capture's longest static segment."""
+    from station.estimate import noise
+
+    try:
+        result = noise.from_capture(capture, None, cal_doc)
+    except UserError as e:
+        return None, f"Not characterised: {e}"
+    return result, None
+
+
+def report_input(capture, cal_doc=None, cal_path=None, *, effects=(), auto=True) -> ReportInput:
+    """Everything for the page from a capture (read with its data) and its calibration; the
+    diagnosis (with ``auto``, the add-and-refit loop) needs encoder angles on every rotation."""
+    from station.diagnose import auto as auto_loop
+    from station.diagnose.core import diagnose
+    from station.estimate import lsq
+    from station.io.history import verdict_of
+
+    name = Path(str(capture.path)).name
+    inp = ReportInput(title=f"Calibration report: {name}", facts=capture_facts(capture, cal_doc),
+                      calibration=cal_doc, calibration_path=None if cal_path is None else str(cal_path),
+                      verdict=verdict_of(cal_doc) if cal_doc is not None else None)
+    if not capture.complete("rotation"):
+        inp.diagnosis_note = "No rotation segments: nothing to diagnose (a noise recording)."
+    elif any(seg.angle_deg is None for seg in capture.complete("rotation")):
+        inp.diagnosis_note = ("The diagnosis fits the least-squares model, which needs the encoder angle "
+                              "of every rotation; this capture has rotations without one.")
+    else:
+        s = lsq.summarise(capture)
+        if auto:
+            inp.steps, inp.final = auto_loop.run(s, list(effects))
+            inp.first = inp.steps[0].before if inp.steps else inp.final
+        else:
+            registry = EffectRegistry()
+            inp.first = inp.final = diagnose(lsq.fit(s, [registry.create(e) for e in effects]), registry=registry)
+    inp.noise, inp.noise_note = noise_of(capture, cal_doc)
+    return inp

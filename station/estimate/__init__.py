@@ -2,14 +2,17 @@
 from __future__ import annotations
 
 import hashlib
+import math
 from pathlib import Path
+
+import numpy as np
 
 from station.model.calibration import Calibration
 from station.io.capture import Capture, read_capture
 
 METHODS = ("auto", "lsq", "zhang2010", "fourier", "fourier-high")
-# "auto": fourier when any complete rotation segment has no angle_deg (no encoder), lsq
-# otherwise.  "lsq" is the weighted least-squares fit of the full measurement model, started
+# "auto": fourier when any complete rotation segment has no angle_deg (no encoder) and is not a
+# hand turn between statics, lsq otherwise (hand turns of unknown angle are terms of its model).  "lsq" is the weighted least-squares fit of the full measurement model, started
 # from the 2010 algebraic solution ("zhang2010", which is also available alone).  "fourier" is
 # the Fourier method's low-grade variant (Earth rate neglected),
 # "fourier-high" its high-grade variant (Earth rate along each shaft estimated; only |Omega_E|).
@@ -25,17 +28,95 @@ def capture_digest(capture: Capture) -> str:
 
 
 def choose_method(capture: Capture) -> str:
-    """The method "auto" stands for: fourier if any complete rotation lacks angle_deg."""
-    if any(seg.angle_deg is None for seg in capture.complete("rotation")):
+    """The method "auto" stands for: fourier if any complete rotation lacks angle_deg and is
+    not a hand turn (a steady rotation about a shaft); lsq otherwise (hand turns between statics
+    enter its model: station/estimate/hand_rotation.py)."""
+    from station.estimate.hand_rotation import is_hand
+
+    if any(seg.angle_deg is None and not is_hand(seg) for seg in capture.complete("rotation")):
         return "fourier"
     return "lsq"
+
+
+COLUMNS = ("ax", "ay", "az", "gx", "gy", "gz")
+# data-loss limits per segment (the defaults of station.yaml's run.max_missing_fraction, run.max_gap_s)
+MAX_MISSING_FRACTION = 0.01
+MAX_GAP_S = 1.0
+
+
+def data_loss(seg, sample_rate_hz: float) -> tuple[int, float, float]:
+    """(frames missing, their share of the frames, the longest stretch without a frame in s) of
+    a segment's samples, from its time stamps against the nominal rate."""
+    period = 1.0 / sample_rate_hz
+    steps = np.diff(seg.data.t)
+    big = steps > 1.5 * period
+    missing = int(np.round(steps[big] / period - 1.0).sum())
+    n = len(seg.data.t)
+    longest = float(steps.max()) - period if len(steps) else 0.0
+    return missing, missing / (n + missing), max(longest, 0.0)
+
+
+def exclude_lossy_segments(capture: Capture, max_missing_fraction: float = MAX_MISSING_FRACTION,
+                           max_gap_s: float = MAX_GAP_S) -> list[str]:
+    """Mark complete segments that lost more than the limits as ``excluded`` (so that
+    ``capture.complete()`` leaves them out); returns a note for each."""
+    notes = []
+    for seg in capture.complete():
+        if seg.data is None or len(seg.data.t) < 2:
+            continue
+        missing, share, gap = data_loss(seg, capture.imu.sample_rate_hz)
+        problems = []
+        if share > max_missing_fraction:
+            problems.append(f"{missing} frames missing ({100 * share:.2f} %, limit {100 * max_missing_fraction:g} %)")
+        if gap > max_gap_s:
+            problems.append(f"no frame for {gap:.2f} s (limit {max_gap_s:g} s)")
+        if problems:
+            seg.status = "excluded"
+            notes.append(f"segment {seg.name} excluded: {'; '.join(problems)}")
+    return notes
+
+
+def check_resolution(capture: Capture) -> None:
+    """Refuse (UserError naming the file and column) static data quantised coarser than their
+    noise: when the samples' standard deviation is below half the output step, the mean is set
+    by the rounding, not by the sensor, and the noise (the fit's weights) reads as zero."""
+    from station.core.errors import UserError
+
+    for seg in capture.complete("static"):
+        columns = np.column_stack([seg.data.accel, seg.data.gyro])
+        if len(columns) < 2:
+            continue
+        for k, name in enumerate(COLUMNS):
+            values = np.unique(columns[:, k])
+            step = float(np.min(np.diff(values))) if len(values) > 1 else math.inf
+            spread = float(np.std(columns[:, k]))
+            if spread < 0.5 * step:
+                what = ("the same value in every sample" if len(values) == 1
+                        else f"output step {step:.3g}, sample spread {spread:.3g}")
+                raise UserError(f"{capture.path / seg.file}: column '{name}': quantised coarser than its "
+                                f"noise ({what}, in {capture.imu.accel_unit if k < 3 else capture.imu.gyro_unit}): "
+                                "the averages would be set by the rounding; record with a finer output "
+                                "resolution (or floating-point output)")
 
 
 def estimate_with(capture: Capture, method: str = "auto", effects=(), registry=None) -> tuple[Calibration, str]:
     """Estimate from a capture already read; returns the calibration and the method used.
 
     ``effects``: ids of effects to add to the model (least squares only), created by ``registry``
-    (station.model.registry.EffectRegistry: the library, entry points, loaded plugins)."""
+    (station.model.registry.EffectRegistry: the library, entry points, loaded plugins).
+    A fit that breaks down numerically (LinAlgError, overflow) is a UserError naming the capture."""
+    from station.core.errors import UserError
+
+    try:
+        return _estimate_with(capture, method, effects, registry)
+    except (np.linalg.LinAlgError, OverflowError) as e:
+        raise UserError(f"{capture.path / 'manifest.yaml'}: the fit breaks down numerically "
+                        f"({type(e).__name__}: {str(e)[:80]}): the capture cannot determine the model "
+                        "(too few attitudes or rotations for the effects asked for, or values out of "
+                        "range)") from None
+
+
+def _estimate_with(capture: Capture, method: str, effects, registry) -> tuple[Calibration, str]:
     from station.core.errors import UserError
     from station.model.registry import EffectRegistry
 
@@ -47,6 +128,12 @@ def estimate_with(capture: Capture, method: str = "auto", effects=(), registry=N
     instances = [registry.create(e) for e in effects]
     if effects and method != "lsq":
         raise UserError(f"--add needs the least-squares method (lsq); this capture uses {method}")
+    raw = [f"imu.{k}_unit" for k, unit in (("accel", capture.imu.accel_unit), ("gyro", capture.imu.gyro_unit))
+           if unit == "raw"]
+    if effects and raw:
+        raise UserError(f"{capture.path / 'manifest.yaml'}: field '{raw[0]}': raw: the effects of the library "
+                        "are sized in m/s^2 and deg/s, so --add needs a capture in physical units (give "
+                        "m/s^2 or g, deg/s or rad/s in the manifest, converting the samples if needed)")
     if method == "lsq":
         from station.estimate import lsq
 
@@ -60,16 +147,29 @@ def estimate_with(capture: Capture, method: str = "auto", effects=(), registry=N
     return fourier.estimate(capture, "high" if method == "fourier-high" else "low"), method
 
 
-def estimate_capture(path, method: str = "auto", effects=(), registry=None) -> tuple[Calibration, Capture, dict]:
-    """Read a capture, estimate, and return the calibration, the capture and its provenance."""
+def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
+                     max_missing_fraction: float = MAX_MISSING_FRACTION,
+                     max_gap_s: float = MAX_GAP_S) -> tuple[Calibration, Capture, dict]:
+    """Read a capture, estimate, judge the fit (station.estimate.verdict: verdict, honest 1-sigma,
+    parameters not determined) and return the calibration, the capture and its provenance."""
+    from station.estimate.verdict import judge
+
     capture = read_capture(path)
+    check_resolution(capture)
+    excluded = exclude_lossy_segments(capture, max_missing_fraction, max_gap_s)
     cal, method = estimate_with(capture, method, effects, registry)
+    cal.fit.setdefault("notes", []).extend(excluded)
+    if excluded:
+        cal.fit["excluded_segments"] = [n.split()[1] for n in excluded]
+    judge(cal)
+    firmware = capture.imu.extra.get("firmware")
     provenance = {
         "capture": str(Path(capture.path).resolve()),
         "capture_sha256": capture_digest(capture),
         "method": method,
         "imu_model": capture.imu.model,
         "imu_serial": capture.imu.serial,
+        "imu_firmware": firmware if isinstance(firmware, str) else None,
         "scheme": capture.scheme,
     }
     return cal, capture, provenance

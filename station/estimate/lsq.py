@@ -11,6 +11,10 @@ angle A over the window T, phase phi from 0 to A:
   w_p      = (A/T + e) l                                               (e: Earth rate along the axis)
 kappa (gravity along the axis), e and the mounting offset d from the rotation centre are
 nuisances of the bench; psi (where gravity is at the start) is one per segment.
+Hand rotation h of unknown angle from static j to static k (no encoder; station/estimate/
+hand_rotation.py): the up of static j carried through the turn integrated from the compensated
+gyro samples must be the up of static k (two residuals per turn); the statics' gyro means then
+give the gyro bias, with the Earth rate modelled when the latitude is known and as noise when not.
 The data are the segment summaries (station/estimate/summaries.py), each divided by its noise;
 the encoder's angle error enters the gyro integrals' covariance.  The solution starts from the
 2010 algebraic one; the covariance is (J^T J)^-1 at the solution.
@@ -26,7 +30,7 @@ from scipy.spatial.transform import Rotation
 from station.core import units
 from station.model.calibration import Calibration, misalignment_angles
 from station.core.errors import UserError
-from station.estimate import zhang2010
+from station.estimate import hand_rotation, zhang2010
 from station.estimate.summaries import Summaries, summarise
 from station.model.geometry import cross, tangent_basis
 from station.model.effect import Effect, SampleContext
@@ -35,6 +39,8 @@ EARTH_RATE_RAD = 7.292115e-5
 WEAK_PRIOR_RAD = 3.0             # a prior on nuisance angles that only matters when nothing else does
 PHASES = 12                      # phase grid for the harmonics of a rotation (exact to 5th order)
 UP = np.array([0.0, 0.0, 1.0])
+# zero-mean priors (internal units) on the gyro block when no rotation has a known angle
+NO_ROTATION_PRIORS = {"gyro_scale": 1e3, "gyro_misalignment": 1e3, "gyro_bias": 1e6, "inter_triad": 1e3}
 
 # Parameters of the base model: name, internal -> reported scale, reported unit
 GLOBAL = [("accel_scale", 1.0, "1"), ("accel_misalignment", 1 / units.ARCSEC_RAD, "arcsec"),
@@ -97,6 +103,13 @@ def _start(s: Summaries) -> Start:
         b_g = zhang2010.fit_gyro_bias(L_g, means_w)
     except UserError:
         L_g, b_g = np.eye(3), means_w.mean(axis=0)
+        if s.hand_rotations:        # the turns between statics, with the accelerometers' ups
+            ups = (means_a - b_a) @ L_a.T
+            ups /= np.linalg.norm(ups, axis=1)[:, None]
+            nominal = s.gyro_nominal if s.gyro_raw else 1.0     # raw without a nominal: None
+            scale = hand_rotation.start_scale(hand_rotation.Integrator(s.hand_rotations), b_g, ups, nominal)
+            L_g = np.eye(3) / scale
+            notes.append(f"gyro started from the hand rotations: scale {scale:.6g} (a 1-D search)")
     # inter-triad start: each rotation axis seen by the gyros and, through the plane in which
     # gravity turns (the first harmonic), by the accelerometers (eqs. 41 and 44-47)
     axes_o, axes_p = [], []
@@ -115,6 +128,11 @@ def _start(s: Summaries) -> Start:
     kg, Tg = zhang2010.scale_and_T(L_g)
     return Start(ka, misalignment_angles(Ta), b_a, kg, misalignment_angles(Tg), b_g,
                  Rotation.from_matrix(R_po).as_rotvec(), notes)
+
+
+def _start_gyro_matrix(st: Start) -> np.ndarray:
+    """M_g = K_g T_g R_po of a start."""
+    return np.diag(st.kg) @ lower_unit_rows(st.gamma) @ Rotation.from_rotvec(st.theta).as_matrix()
 
 
 def _pairs(s: Summaries) -> list:
@@ -156,12 +174,23 @@ class Model:
         self.t0 = min(starts) if starts else 0.0        # the run's start, for time-dependent terms
         for e in effects:
             e.setup(s)
+        self.hands = list(s.hand_rotations)
         if attitudes == "auto":
             attitudes = "unknown" if len(s.statics) >= 9 else "table"
+            if self.hands and all(st.up_body is not None for st in s.statics):
+                # hand poses on a few faces, repeated: as many attitudes as distinct faces
+                ups = {tuple(np.round(np.asarray(st.up_body, float), 3)) for st in s.statics}
+                attitudes = "unknown" if len(ups) >= 9 else "table"
         if attitudes not in ("unknown", "table"):
             raise UserError(f"attitudes must be 'unknown' or 'table', not {attitudes!r}")
         self.attitudes = attitudes
         self.with_latitude = s.latitude_deg is not None
+        self.hand_earth_vertical = False
+        if self.hands and self.with_latitude and not hand_rotation.heading_visible(
+                s, 1.0 if not s.gyro_raw else s.gyro_nominal or float(np.mean(np.abs(_start(s).kg)))):
+            # hand poses whose gyro cannot see the Earth turn: up only, the Earth rate's vertical
+            # component modelled, its horizontal one (direction unknown) as noise
+            self.with_latitude, self.hand_earth_vertical = False, True
         g, lat = s.gravity_mps2, np.radians(s.latitude_deg or 0.0)
         self.f_n = np.array([0.0, 0.0, g])
         self.omega_n = np.degrees(EARTH_RATE_RAD) * np.array([0.0, np.cos(lat), np.sin(lat)])
@@ -185,6 +214,7 @@ class Model:
             L.add("mounting_offset", 3)
         for e in effects:
             L.add(f"effect:{e.id}", len(e.params))
+        self.static_colour = hand_rotation.static_colours(len(s.statics), self.hands) if self.hands else None
         self.priors: dict[int, float] = {}     # column -> 1-sigma of a zero-mean prior
         self._initialise()
 
@@ -237,7 +267,57 @@ class Model:
             cov = np.diag(s.gyro_sigma**2 * r.duration_s / s.sample_rate_hz)
             cov += s.table_angle_sigma_deg**2 * np.outer(axis_raw, axis_raw)
             self.gyro_whiten.append(np.linalg.inv(np.linalg.cholesky(cov)))
+        if self.hands:
+            self._initialise_hands(st)
         self.x0 = x
+
+    def _initialise_hands(self, st: Start):
+        """Hand rotations: the integrator, the tangent plane of each pose after a turn, and the
+        noise of the matched direction (module doc of hand_rotation)."""
+        s = self.s
+        self.integrator = hand_rotation.Integrator(self.hands)
+        ups = [ref.apply(UP) if self.with_latitude else ref for ref in self.static_ref]
+        self.hand_basis = np.array([tangent_basis(ups[h.after]) for h in self.hands])     # (H,2,3)
+        per_sample_dps = s.gyro_sigma / np.abs(st.kg)
+        omega = np.degrees(EARTH_RATE_RAD)
+        var = np.array([np.mean(per_sample_dps**2) * h.dt**2 * h.samples for h in self.hands])
+        # the Earth rate not modelled, r: all of it without the latitude (a random direction:
+        # r^2/3 per axis), the horizontal part when only the vertical one is (r^2/2 per
+        # horizontal axis); its turn over T moves the up by its component across the up
+        if self.with_latitude:
+            unmodelled, share = 0.0, 0.0
+        elif self.hand_earth_vertical:
+            unmodelled, share = omega * np.cos(np.radians(s.latitude_deg)), 0.5
+        else:
+            unmodelled, share = omega, 1.0 / 3.0
+        var = var + np.array([share * (unmodelled * h.duration_s) ** 2 for h in self.hands])
+        self.hand_sigma_rad = np.radians(np.sqrt(var))
+        self.hand_duration = np.array([h.duration_s for h in self.hands])
+        # without the full attitudes the poses' gyro means give the bias, the unmodelled Earth
+        # rate as noise: covariance white/N + M_g C M_g^T, C = r^2/3 I, or r^2/2 (I - u u^T)
+        # across the pose's up u (fixed at the start's values)
+        M_g = _start_gyro_matrix(st)
+        self.static_gyro_whiten = []
+        for j, stat in enumerate(s.statics):
+            u = ups[j]
+            C = (share * unmodelled**2 * (np.eye(3) - np.outer(u, u)) if self.hand_earth_vertical
+                 else share * unmodelled**2 * np.eye(3))
+            cov = np.diag(s.gyro_sigma**2 / stat.samples) + M_g @ C @ M_g.T
+            self.static_gyro_whiten.append(np.linalg.inv(np.linalg.cholesky(cov)))
+        if self.hand_earth_vertical:
+            self.start.notes.append("Earth rate: its vertical component modelled (latitude known), its "
+                                    "horizontal one as noise: the gyros cannot see the poses' heading")
+
+    def _hand_residuals(self, x, Mg, ups, attitudes) -> np.ndarray:
+        """(H, 2) whitened residuals: the up after each turn against the up before carried through it."""
+        hands = self.hands
+        dR = self.integrator.turns(np.linalg.inv(Mg), x[self.layout["gyro_bias"]])
+        before = np.array([ups[h.before] for h in hands])
+        if self.with_latitude:      # the Earth turns the up during the turn
+            earth = np.array([attitudes[h.before].apply(self.omega_n) for h in hands])
+            before = Rotation.from_rotvec(np.radians(earth) * self.hand_duration[:, None]).apply(before)
+        d = np.array([ups[h.after] for h in hands]) - dR.apply(before, inverse=True)
+        return np.einsum("hkc,hc->hk", self.hand_basis, d) / self.hand_sigma_rad[:, None]
 
     # --- pieces -----------------------------------------------------------------------------
     def _matrices(self, x):
@@ -259,7 +339,9 @@ class Model:
         ref = self.static_ref[j]
         if self.with_latitude:
             return Rotation.from_rotvec(p) * ref
-        t1, t2 = tangent_basis(ref)
+        if not hasattr(self, "_static_basis"):      # fixed: computed once
+            self._static_basis = [tangent_basis(r) for r in self.static_ref]
+        t1, t2 = self._static_basis[j]
         up = ref + p[0] * t1 + p[1] * t2
         return up / np.linalg.norm(up)
 
@@ -300,12 +382,17 @@ class Model:
                 if name.startswith(prefix) and name[len(prefix):].isdigit():
                     j = int(name[len(prefix):])
                     owned = list(rows.get((kind, j), [])) + list(rows.get(("weak", j), []) if kind == "static" else [])
+                    key = prefix
+                    if kind == "static" and self.static_colour is not None:
+                        owned += [r for i, h in enumerate(self.hands) if j in (h.before, h.after)
+                                  for r in rows.get(("hand", i), [])]
+                        key = (prefix, self.static_colour[j])
                     if kind == "axis":
                         owned += list(rows.get(("weak_axis", j), []))
                         owned += [r for i, rot in enumerate(self.s.rotations) if rot.group == j
                                   for r in rows.get(("rot", i), [])]
                     for k in range(sl.stop - sl.start):
-                        local.setdefault((prefix, k), []).append((sl.start + k, np.array(owned, dtype=int)))
+                        local.setdefault((key, k), []).append((sl.start + k, np.array(owned, dtype=int)))
                     break
         local_cols = {c for members in local.values() for c, _ in members}
         dense = [[(c, None)] for c in range(L.size) if c not in local_cols]
@@ -329,6 +416,8 @@ class Model:
             elif kind == "rot":
                 parts = rot_parts if quantity == "rotation" else rot_parts[-3:]
                 labels += [(self.s.rotations[j].name, "rotation", q, a) for q, a in parts]
+            elif kind == "hand":
+                labels += [(self.hands[j].name, "rotation", quantity, a) for a in ("t1", "t2")]
             elif kind == "weak_axis":
                 labels += [(f"axis{j}", "rotation", quantity, "e" if quantity == "earth_prior" else "kappa")]
             elif kind == "axis":
@@ -385,6 +474,7 @@ class Model:
         static_sigma_a = s.accel_sigma
         static_sigma_w = s.gyro_sigma
         C_mount = Rotation.from_rotvec(x[L["mounting_rotation"]]) if self.attitudes == "table" else None
+        ups, attitudes = [], []
         for j, st in enumerate(s.statics):
             att = self._static_attitude(x, j)
             if self.with_latitude:
@@ -393,11 +483,17 @@ class Model:
             else:
                 up_p = att
                 f_p, w_p = (self.f_n[2] * att)[None, :], np.zeros((1, 3))
+                if self.hand_earth_vertical:
+                    w_p = (self.omega_n[2] * att)[None, :]
             a, w = self._predict(x, self._context(f_p, w_p, np.zeros((1, 3)), st.temp_c, Ma, Mg, st), Ma, Mg)
             root_n = np.sqrt(st.samples)
+            ups.append(up_p)
+            attitudes.append(att)
             put(("static", j), (st.accel - a[0]) * root_n / static_sigma_a, "accel")
             if self.with_latitude:
                 put(("static", j), (st.gyro - w[0]) * root_n / static_sigma_w, "gyro")
+            elif self.hands:    # the bias, the unmodelled Earth rate within the noise
+                put(("static", j), self.static_gyro_whiten[j] @ (st.gyro - w[0]), "gyro")
             else:   # only |Omega_E| known: the norm of the compensated rate
                 rate = np.linalg.norm(np.linalg.solve(Mg, st.gyro - x[L["gyro_bias"]]))
                 put(("static", j), np.atleast_1d((rate - self.omega_dps) * root_n / np.mean(static_sigma_w)),
@@ -406,6 +502,9 @@ class Model:
                 put(("static", j), cross(up_p, C_mount.apply(st.up_body)) / self.prior_sigma, "attitude_prior")
             if self.with_latitude:   # keeps the heading finite when the gyros cannot see the Earth turn
                 put(("weak", j), x[L[f"static{j}"]] / WEAK_PRIOR_RAD, "weak_prior")
+        if self.hands:
+            for i, rows in enumerate(self._hand_residuals(x, Mg, ups, attitudes)):
+                put(("hand", i), rows, "gravity_after_turn")
         offset = (x[L["mounting_offset"]] if "mounting_offset" in L.blocks
                   else (s.mounting_offset_m if s.mounting_offset_m is not None else np.zeros(3)))
         phases = 2 * np.pi * np.arange(PHASES) / PHASES
@@ -487,6 +586,7 @@ class FitResult:
     chi2: float
     dof: int
     residuals: np.ndarray
+    rank_deficient: list = field(default_factory=list)   # columns in the Jacobian's null space
 
 
 def _solve(model: Model, x0: np.ndarray):
@@ -506,6 +606,18 @@ def covariance(J: np.ndarray) -> np.ndarray:
     keep = sv > 1e-13 * sv[0]
     v = vt[keep].T / sv[keep]
     return (v @ v.T) / np.outer(norms, norms)
+
+
+def _null_columns(J: np.ndarray) -> list:
+    """Columns that take part in a direction the data cannot see at all (a zero singular value
+    of the column-scaled Jacobian): their value is not determined, whatever covariance() says."""
+    norms = np.linalg.norm(J, axis=0)
+    norms[norms == 0] = 1.0
+    _, sv, vt = np.linalg.svd(J / norms, full_matrices=False)
+    null = vt[sv < 1e-9 * sv[0]]
+    zero = np.flatnonzero(np.linalg.norm(J, axis=0) == 0)
+    return sorted(set(zero.tolist()) | set(np.flatnonzero(np.max(np.abs(null), axis=0) > 1e-6).tolist()
+                                            if null.size else []))
 
 
 def _blind_effect_parameters(model: Model, J: np.ndarray) -> list:
@@ -535,8 +647,23 @@ def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "aut
     ``model.unobservable``, and the fit is repeated: the parameters the capture does reveal then
     carry the uncertainty of the ones it does not, instead of a bias from fixing them.  Which
     ones are blind barely depends on where the fit ends, so the start is examined first."""
+    if not s.rotations and not s.hand_rotations:
+        raise UserError("no rotation segment the least-squares model can use (the gyro scale factors "
+                        "and misalignments need turns)" + (": " + "; ".join(s.skipped) if s.skipped else ""))
     model = Model(s, list(effects or []), attitudes)
     model.unobservable = []
+    if not s.rotations:
+        # nothing turned by a known angle: the gyro block is held only by wide priors (so the fit
+        # stays solvable); station.estimate.verdict then leaves it out of the calibration
+        L = model.layout
+        for block, width in NO_ROTATION_PRIORS.items():
+            for c in range(L[block].start, L[block].stop):
+                model.priors[c] = width
+        model.refresh()
+    rows, columns = len(model.residuals(model.x0)), model.layout.size
+    if rows < columns:
+        raise UserError(f"the capture cannot determine the model: {rows} measurements for {columns} "
+                        "unknowns (record more static attitudes or rotations, or add fewer effects)")
     J = model.jacobian(model.x0)
     x = None
     while True:
@@ -552,7 +679,10 @@ def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "aut
     # gravity along an axis turned only by hand is set by its weak prior, not by the data
     blind_kappa = sum(1 for k in range(s.groups) if not any(rot.steady for rot in s.rotations if rot.group == k))
     dof = len(r) - model.layout.size + blind_kappa
-    return FitResult(x=x, covariance=cov, model=model, chi2=float(r @ r), dof=dof, residuals=r)
+    if not s.rotations:     # the gyro block's wide priors are not data
+        dof -= sum(model.layout[b].stop - model.layout[b].start for b in NO_ROTATION_PRIORS)
+    return FitResult(x=x, covariance=cov, model=model, chi2=float(r @ r), dof=dof, residuals=r,
+                     rank_deficient=_null_columns(J))
 
 
 def reported(result: FitResult, accel_unit: str, gyro_unit: str):
@@ -589,11 +719,24 @@ def reported(result: FitResult, accel_unit: str, gyro_unit: str):
     return names, values, units_, cov
 
 
+def _reported_columns(result: FitResult) -> np.ndarray:
+    """The parameter-vector column of every reported parameter, in the order of reported()."""
+    L = result.model.layout
+    order = ["accel_scale", "accel_misalignment", "gyro_scale", "gyro_misalignment",
+             "accel_bias", "gyro_bias", "inter_triad"]
+    cols = [L[block].start + k for block in order for k in range(3)]
+    for e in result.model.effects:
+        cols += list(range(L[f"effect:{e.id}"].start, L[f"effect:{e.id}"].stop))
+    return np.array(cols, dtype=int)
+
+
 def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=()) -> Calibration:
     model, x = result.model, result.x
     L, s = model.layout, model.s
     names, values, units_, cov = reported(result, accel_unit, gyro_unit)
     sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    # a parameter in the null space has no finite 1-sigma (the pseudo-inverse would say zero)
+    sigma[np.isin(_reported_columns(result), result.rank_deficient)] = np.inf
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(sigma, sigma)
     extra, effect_compensation = {}, []
@@ -611,6 +754,7 @@ def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=())
         "static_segments": len(s.statics),
         "rotation_segments": len(s.rotations),
         "static_attitudes": model.attitudes,
+        "hand_rotations": len(model.hands),
         "noise_per_sample": {"accel_ug": (s.accel_sigma / units.UG_MPS2).tolist(),
                              "gyro_dph": (s.gyro_sigma * 3600).tolist()},
         "notes": list(model.start.notes) + list(s.skipped) + list(notes),

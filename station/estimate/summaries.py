@@ -17,6 +17,7 @@ import numpy as np
 
 from station.core import units
 from station.core.errors import UserError
+from station.estimate import hand_rotation
 
 EDGE_SAMPLES = 3
 STEADY_SPREAD = 0.3     # a rotation whose rate magnitude varies more (std/mean) is a hand turn
@@ -86,6 +87,10 @@ class Summaries:
     table_angle_sigma_deg: float    # 1-sigma of one encoder angle
     mounting_offset_m: np.ndarray | None   # IMU reference point from the table's rotation centre, if known
     skipped: list = field(default_factory=list)
+    hand_rotations: list = field(default_factory=list)   # hand_rotation.HandRotation: turns of unknown
+                                                         #   angle between statics (no encoder)
+    gyro_nominal: float | None = None   # raw gyro: nominal counts per deg/s from the manifest, if any
+    gyro_raw: bool = False
 
     @property
     def groups(self) -> int:
@@ -208,8 +213,11 @@ def summarise(capture, *, table_angle_arcsec: float | None = None) -> Summaries:
     gyro_sigma = np.sqrt(np.mean(np.vstack(resid_g) ** 2, axis=0))
     static_gyro_mean = np.mean([st.gyro for st in statics], axis=0)   # ~ the bias (Earth rate averages out)
 
-    rotations, skipped, axes = [], [], []
+    rotations, skipped, axes, hands = [], [], [], []
     for seg in capture.complete("rotation"):
+        if hand_rotation.is_hand(seg):
+            hands.append(seg)
+            continue
         if seg.angle_deg is None:
             skipped.append(f"{seg.name}: no encoder angle (angle_deg); not used by the least-squares fit")
             continue
@@ -227,6 +235,10 @@ def summarise(capture, *, table_angle_arcsec: float | None = None) -> Summaries:
         summary.temp_rate_c_per_s = _slope(d.t, d.temp)
         rotations.append(summary)
 
+    hand_rotations, hand_skipped = hand_rotation.collect(capture.complete("static"), hands, cg)
+    skipped += hand_skipped
+    nominal = capture.imu.extra.get("gyro_nominal_dps_per_count") if capture.imu.gyro_unit == "raw" else None
+    nominal = 1.0 / float(nominal) if isinstance(nominal, (int, float)) and nominal > 0 else None
     table = capture.extra.get("table") if isinstance(capture.extra.get("table"), dict) else {}
     if table_angle_arcsec is None:
         table_angle_arcsec = table.get("angle_error_arcsec", 0.0)
@@ -241,4 +253,6 @@ def summarise(capture, *, table_angle_arcsec: float | None = None) -> Summaries:
     return Summaries(gravity_mps2=capture.site.gravity_mps2, latitude_deg=capture.site.latitude_deg,
                      accel_factor=ca, gyro_factor=cg, sample_rate_hz=capture.imu.sample_rate_hz,
                      statics=statics, rotations=rotations, accel_sigma=accel_sigma, gyro_sigma=gyro_sigma,
-                     table_angle_sigma_deg=angle_sigma, mounting_offset_m=offset, skipped=skipped)
+                     table_angle_sigma_deg=angle_sigma, mounting_offset_m=offset, skipped=skipped,
+                     hand_rotations=hand_rotations, gyro_nominal=nominal,
+                     gyro_raw=capture.imu.gyro_unit == "raw")

@@ -8,6 +8,8 @@ from __future__ import annotations
 import datetime as _dt
 import math
 import os
+import secrets
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +18,7 @@ import yaml
 import station
 from station.model.calibration import Calibration
 from station.core.errors import UserError
+from station.core.units import ACCEL_UNITS, GYRO_UNITS, gyro_to_dps_factor
 
 FORMAT = "station-calibration/1"
 
@@ -60,27 +63,51 @@ def _parameter(value: float, unit: str, sigma: float | None) -> dict:
     return out
 
 
+MAX_BYTES = 16 * 2**20          # a calibration file is a few kB; refuse anything above 16 MB
+MAX_VALUE = 1e12                # no compensation coefficient is anywhere near this
+GYRO_PASS_THROUGH = "not calibrated: passed through (unit conversion only)"
+
+
+def gyro_calibrated(cal: Calibration) -> bool:
+    return cal.fit.get("gyro_calibrated", True) is not False
+
+
+def _correlation(cal: Calibration, written: list) -> dict:
+    names, matrix = list(cal.correlation[0]), np.asarray(cal.correlation[1])
+    keep = [i for i, n in enumerate(names) if n in written]
+    return {"names": [names[i] for i in keep],
+            "matrix": np.nan_to_num(matrix[np.ix_(keep, keep)]).round(4).tolist()}
+
+
 def to_document(cal: Calibration, provenance: dict) -> dict:
+    dropped = set(cal.fit.get("not_determined", []))
+    written = [(n, v, u) for n, v, u in cal.parameters() if n not in dropped]
+    if gyro_calibrated(cal):
+        gyro = {"gyro_matrix": _floats(cal.gyro_matrix), "gyro_bias": _floats(cal.gyro_bias)}
+    else:
+        gyro = {"gyro": GYRO_PASS_THROUGH}
+    extra = {key: _floats(value) for key, value in cal.compensation_extra.items()
+             if gyro_calibrated(cal) or not key.startswith("gyro_")}
     return {
         "format": FORMAT,
         "convention": CONVENTION,
-        "imu": {"accel_unit": cal.accel_unit, "gyro_unit": cal.gyro_unit},
+        "imu": {"accel_unit": cal.accel_unit, "gyro_unit": cal.gyro_unit,
+                **{key: provenance[f"imu_{key}"] for key in ("model", "serial", "firmware")
+                   if provenance.get(f"imu_{key}") is not None}},
+        "verdict": cal.fit.get("verdict", {"result": "untested", "reason": "not judged"}),
         "effects": list(cal.effects),
-        "parameters": {name: _parameter(value, unit, cal.sigma.get(name))
-                       for name, value, unit in cal.parameters()},
+        "parameters": {name: _parameter(value, unit, cal.sigma.get(name)) for name, value, unit in written},
         "compensation": {
-            **{key: _floats(value) for key, value in cal.compensation_extra.items()},
+            **extra,
             "accel_matrix": _floats(cal.accel_matrix),
             "accel_bias": _floats(cal.accel_bias),
-            "gyro_matrix": _floats(cal.gyro_matrix),
-            "gyro_bias": _floats(cal.gyro_bias),
+            **gyro,
             "raw_units": {"accel": cal.accel_unit, "gyro": cal.gyro_unit},
             "output_units": {"accel": "m/s^2", "gyro": "deg/s"},
             "effects": [_plain(e) for e in cal.effect_compensation],
         },
         "fit": cal.fit,
-        **({"correlation": {"names": list(cal.correlation[0]),
-                            "matrix": np.nan_to_num(np.asarray(cal.correlation[1])).round(4).tolist()}}
+        **({"correlation": _correlation(cal, [n for n, _, _ in written])}
            if cal.correlation is not None else {}),
         "provenance": {
             "software": f"station {station.__version__}",
@@ -91,18 +118,40 @@ def to_document(cal: Calibration, provenance: dict) -> dict:
 
 
 def write_calfile(path, cal: Calibration, provenance: dict) -> Path:
+    """Write atomically: a new temporary file with a random name in the target's folder, opened
+    with O_CREAT|O_EXCL|O_NOFOLLOW (never through a link, never over an existing file), fsynced,
+    renamed over ``path`` (a symbolic link at ``path`` is replaced, its target never written);
+    the temporary file is removed on every path out."""
     path = Path(path)
-    text = yaml.safe_dump(to_document(cal, provenance), sort_keys=False, width=100)
-    tmp = path.with_name(path.name + ".tmp")
+    text = yaml.dump(to_document(cal, provenance), Dumper=_Dumper, sort_keys=False, width=100,
+                     allow_unicode=True)
+    write_new_file(path, text.encode("utf-8"), what="calibration file")
+    return path
+
+
+def write_new_file(path: Path, data: bytes, *, what: str = "file") -> None:
+    """Replace ``path`` with ``data`` atomically through a random-named temporary file in the
+    same folder (O_EXCL|O_NOFOLLOW), removed on every path out (also KeyboardInterrupt)."""
+    tmp = path.with_name(f".{path.name}.{secrets.token_hex(8)}.tmp")
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+    created = False
     try:
-        with open(tmp, "w") as f:
-            f.write(text)
+        fd = os.open(tmp, flags, 0o644)
+        created = True
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
+        created = False
     except OSError as e:
-        raise UserError(f"{path}: cannot write calibration file: {e.strerror}") from None
-    return path
+        raise UserError(f"{path}: cannot write {what}: {e.strerror}") from None
+    finally:
+        if created:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
 
 
 def _matrix(doc: dict, key: str, shape, path) -> np.ndarray:
@@ -113,45 +162,124 @@ def _matrix(doc: dict, key: str, shape, path) -> np.ndarray:
         raise UserError(f"{where}: missing") from None
     except (TypeError, ValueError):
         raise UserError(f"{where}: must be numbers") from None
-    if a.shape != shape or not np.all(np.isfinite(a)):
+    if a.shape != shape or not np.all(np.isfinite(a)) or np.any(np.abs(a) > MAX_VALUE):
         raise UserError(f"{where}: must be {'x'.join(map(str, shape)) or 'a'} finite number"
-                        f"{'s' if shape else ''}")
+                        f"{'s' if shape else ''} of at most {MAX_VALUE:g} in size")
     return a
 
 
-def read_calfile(path) -> dict:
-    """Load and validate a calibration file; compensation arrays come back as numpy arrays."""
-    path = Path(path)
+class _Dumper(yaml.SafeDumper):
+    """safe_dump without anchors and aliases (the reader refuses them)."""
+
+    def ignore_aliases(self, data):
+        return True
+
+
+class _NoAliasLoader(yaml.SafeLoader):
+    """yaml.SafeLoader that refuses aliases (``*name``): a calibration file never needs them,
+    and expanded aliases can make a small file enormous (the "billion laughs")."""
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            mark = self.peek_event().start_mark
+            raise yaml.MarkedYAMLError(problem="aliases (*name) are not allowed in a calibration file",
+                                       problem_mark=mark)
+        return super().compose_node(parent, index)
+
+
+def _read_bytes(path: Path) -> bytes:
+    """The file's bytes: a regular file (not a FIFO, device or folder) of at most MAX_BYTES."""
     try:
-        doc = yaml.safe_load(path.read_text())
+        info = os.stat(path)
+        if not stat.S_ISREG(info.st_mode):
+            raise UserError(f"{path}: not a regular file (a FIFO, device or folder): cannot read "
+                            "calibration file")
+        if info.st_size > MAX_BYTES:
+            raise UserError(f"{path}: {info.st_size} bytes: too large for a calibration file "
+                            f"(at most {MAX_BYTES} bytes)")
+        with open(path, "rb") as f:
+            return f.read(MAX_BYTES + 1)
     except OSError as e:
         raise UserError(f"{path}: cannot read calibration file: {e.strerror}") from None
-    except yaml.YAMLError as e:
-        raise UserError(f"{path}: not valid YAML: {str(e).splitlines()[0]}") from None
+
+
+def _scalar_mapping(doc: dict, key: str, path) -> dict:
+    value = doc.get(key)
+    if value is None:
+        return {}
+    if not isinstance(value, dict) or not all(
+            isinstance(k, str) and (v is None or isinstance(v, (str, int, float, bool)))
+            for k, v in value.items()):
+        raise UserError(f"{path}: field '{key}': must be a mapping of names to text or numbers")
+    return value
+
+
+def read_calfile(path) -> dict:
+    """Load and validate a calibration file; compensation arrays come back as numpy arrays.
+
+    UserError (one line, naming the file and field) for: not a regular file, more than
+    MAX_BYTES, not UTF-8, not YAML, YAML aliases, wrong types.  A calibration without the gyro
+    (``compensation.gyro: not calibrated...``) comes back with ``gyro_pass_through: True`` and
+    a unit-conversion-only gyro_matrix, zero gyro_bias (and zero gyro temperature coefficients)."""
+    path = Path(path)
+    raw = _read_bytes(path)
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise UserError(f"{path}: not UTF-8 text (byte {e.start}): not a calibration file") from None
+    try:
+        doc = yaml.load(text, Loader=_NoAliasLoader)
+    except yaml.MarkedYAMLError as e:
+        line = f"line {e.problem_mark.line + 1}: " if e.problem_mark is not None else ""
+        raise UserError(f"{path}: {line}not valid YAML: {e.problem}") from None
+    except (yaml.YAMLError, ValueError, RecursionError) as e:
+        raise UserError(f"{path}: not valid YAML: {str(e).splitlines()[0] if str(e) else type(e).__name__}") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise UserError(f"{path}: field 'format': not a station calibration file (expected {FORMAT})")
+    effects = doc.get("effects", [])
+    if not isinstance(effects, list) or not all(isinstance(e, str) for e in effects):
+        raise UserError(f"{path}: field 'effects': must be a list of effect names")
+    imu = _scalar_mapping(doc, "imu", path)
+    for key in ("accel_unit", "gyro_unit"):
+        if key in imu and imu[key] not in (ACCEL_UNITS if key == "accel_unit" else GYRO_UNITS):
+            raise UserError(f"{path}: field 'imu.{key}': unknown unit {str(imu[key])[:40]!r}")
+    _scalar_mapping(doc, "provenance", path)
+    verdict = doc.get("verdict")
+    if verdict is not None and not isinstance(verdict, dict):
+        raise UserError(f"{path}: field 'verdict': must be a mapping")
     comp = doc.get("compensation")
     if not isinstance(comp, dict):
         raise UserError(f"{path}: field 'compensation': missing or not a mapping")
     extra = {}
+    pass_through = comp.get("gyro") == GYRO_PASS_THROUGH
+    if pass_through:
+        factor = gyro_to_dps_factor(imu.get("gyro_unit", "deg/s")) or 1.0
+        extra["gyro_matrix"] = factor * np.eye(3)
+        extra["gyro_bias"] = np.zeros(3)
+    elif "gyro" in comp:
+        raise UserError(f"{path}: field 'compensation.gyro': must be {GYRO_PASS_THROUGH!r} or absent")
     if "accel_lever_arm_m" in comp:
         extra["accel_lever_arm_m"] = _matrix(comp, "accel_lever_arm_m", (3, 3), path)
     if "temperature_reference_c" in comp:
         extra["temperature_reference_c"] = float(_matrix(comp, "temperature_reference_c", (), path))
         for key in ("accel_bias_tempco_raw_per_c", "gyro_bias_tempco_raw_per_c"):
+            if key == "gyro_bias_tempco_raw_per_c" and pass_through:
+                extra[key] = np.zeros(3)
+                continue
             extra[key] = _matrix(comp, key, (3,), path)
     doc["compensation"] = {
         **comp,
-        **extra,
         "accel_matrix": _matrix(comp, "accel_matrix", (3, 3), path),
         "accel_bias": _matrix(comp, "accel_bias", (3,), path),
-        "gyro_matrix": _matrix(comp, "gyro_matrix", (3, 3), path),
-        "gyro_bias": _matrix(comp, "gyro_bias", (3,), path),
+        **({} if pass_through else {"gyro_matrix": _matrix(comp, "gyro_matrix", (3, 3), path),
+                                    "gyro_bias": _matrix(comp, "gyro_bias", (3,), path)}),
+        **extra,
     }
     if "effects" in comp:
         doc["compensation"]["effects"] = _effect_entries(comp["effects"], path)
+    doc["gyro_pass_through"] = pass_through
     params = doc.get("parameters")
-    if not isinstance(params, dict):
+    if not isinstance(params, dict) or not all(isinstance(k, str) for k in params):
         raise UserError(f"{path}: field 'parameters': missing or not a mapping")
     for name, p in params.items():
         if not (isinstance(p, dict) and isinstance(p.get("value"), (int, float))
@@ -159,7 +287,7 @@ def read_calfile(path) -> dict:
                 and isinstance(p.get("unit"), str)
                 and (p.get("sigma") is None or (isinstance(p["sigma"], (int, float))
                                                 and not isinstance(p["sigma"], bool)))):
-            raise UserError(f"{path}: field 'parameters.{name}': needs a finite 'value', a 'unit' "
+            raise UserError(f"{path}: field 'parameters.{name[:60]}': needs a finite 'value', a 'unit' "
                             "and, if given, a numeric 'sigma'")
     return doc
 

@@ -10,6 +10,8 @@ import hashlib
 import math
 import os
 import re
+import reprlib
+import stat
 import tempfile
 from collections import Counter
 from dataclasses import dataclass, field
@@ -27,6 +29,15 @@ MANIFEST = "manifest.yaml"
 REQUIRED_COLUMNS = ("t", "ax", "ay", "az", "gx", "gy", "gz")
 STATUSES = ("complete", "incomplete")
 GAP_FACTOR = 1.5  # a time step longer than GAP_FACTOR / sample_rate_hz is a gap (lost samples)
+MAX_MANIFEST_BYTES = 64 * 2**20  # a manifest is kilobytes; refuse to read more than this
+MAX_CSV_VALUE = 1e12  # |value| of any CSV column: beyond any IMU output, time stamp or count
+# ranges of the manifest's numbers (beyond them no bench exists, and sums of squares overflow)
+SAMPLE_RATE_RANGE_HZ = (1e-3, 1e6)
+GRAVITY_RANGE_MPS2 = (9.0, 10.5)  # Earth's surface: 9.76 to 9.84 m/s^2
+MAX_RATE_DPS = 1e5
+MAX_ANGLE_DEG = 1e9
+MAX_VECTOR_COMPONENT = 1e6
+TEMP_SUFFIX = ".tmp"  # temporary files of the writers: "." + name + "." + random + ".tmp"
 
 # Manifest keys in the order the spec lists them; the writer emits them in this order.
 _SEGMENT_KEYS = ("name", "kind", "file", "status", "up_body", "axis_body", "rate_dps", "angle_deg",
@@ -144,9 +155,9 @@ def read_capture(path, *, load_data=True):
     sha256 is not checked.
     """
     path = Path(path)
-    directory, manifest_file = (path.parent, path) if path.is_file() else (path, path / MANIFEST)
+    directory, manifest_file = (path.parent, path) if _is_file(path) else (path, path / MANIFEST)
     try:
-        raw = yaml.safe_load(manifest_file.read_bytes())
+        raw = yaml.safe_load(read_regular_file(manifest_file, limit=MAX_MANIFEST_BYTES))
     except FileNotFoundError:
         raise CaptureError(manifest_file, "no manifest: not a capture bundle") from None
     except OSError as e:
@@ -174,11 +185,34 @@ def read_segment_csv(path, *, sample_rate_hz=None):
     when it is not given, against the median time step."""
     path = Path(path)
     try:
-        raw = path.read_bytes()
+        raw = read_regular_file(path)
     except OSError as e:
         raise CaptureError(path, f"cannot read: {e.strerror}") from None
     return _parse_csv(_csv_lines(raw, partial_last_line=False), sample_rate_hz, path, None,
                       require_rows=True)
+
+
+class NotRegularFile(OSError):
+    """A FIFO, device, socket or folder where a file is expected (reading it could block)."""
+
+
+def read_regular_file(path, *, limit=None) -> bytes:
+    """The bytes of a regular file: opened without blocking (O_NONBLOCK: a FIFO in its place
+    must not hang the reader), checked to be a regular file on the open descriptor, and at most
+    ``limit`` bytes long.  OSError (NotRegularFile, with strerror) otherwise."""
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise NotRegularFile(0, "not a regular file (a FIFO, device or folder)", str(path))
+        if limit is not None and info.st_size > limit:
+            raise NotRegularFile(0, f"{info.st_size} bytes, more than the {limit} allowed", str(path))
+        with os.fdopen(fd, "rb", closefd=True) as f:
+            fd = None
+            return f.read() if limit is None else f.read(limit + 1)
+    finally:
+        if fd is not None:
+            os.close(fd)
 
 
 def _segment_label(index, name):
@@ -203,13 +237,15 @@ class _Fields:
             raise self.fail(key, "required, missing")
         return value
 
-    def number(self, key, *, required=False):
+    def number(self, key, *, required=False, limit=None):
         value = self.get(key, required)
         if value is None:
             return None
         number = _finite_number(value)
         if number is None:
             raise self.fail(key, f"must be a finite number, got {_show(value)}")
+        if limit is not None and abs(number) > limit:
+            raise self.fail(key, f"must be at most {limit:g} in size, got {number:g}")
         return number
 
     def text(self, key, *, required=False):
@@ -230,9 +266,11 @@ class _Fields:
         value = self.get(key, required)
         if value is None:
             return None
-        numbers = [_finite_number(v) for v in value] if isinstance(value, list) else []
+        numbers = [_finite_number(v) for v in value] if isinstance(value, list) and len(value) == 3 else []
         if len(numbers) != 3 or None in numbers:
             raise self.fail(key, f"must be a list of 3 finite numbers, got {_show(value)}")
+        if max(abs(n) for n in numbers) > MAX_VECTOR_COMPONENT:
+            raise self.fail(key, f"components must be at most {MAX_VECTOR_COMPONENT:g} in size")
         vector = np.array(numbers)
         norm = np.linalg.norm(vector)
         if not norm > 0:
@@ -258,8 +296,14 @@ def _finite_number(value):
     return float(value) if math.isfinite(value) else None
 
 
+_SHOW = reprlib.Repr()
+_SHOW.maxlevel, _SHOW.maxlist, _SHOW.maxdict, _SHOW.maxstring, _SHOW.maxother = 2, 4, 4, 60, 60
+
+
 def _show(value, limit=60):
-    text = repr(value)
+    """A short repr: bounded in depth and length, so that a value built from YAML aliases (a
+    "billion laughs") is never expanded."""
+    text = _SHOW.repr(value)
     return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
@@ -301,6 +345,9 @@ def _parse_manifest(raw, directory, manifest_file):
     sample_rate_hz = imu.number("sample_rate_hz", required=True)
     if not sample_rate_hz > 0:
         raise imu.fail("sample_rate_hz", f"must be > 0, got {sample_rate_hz}")
+    if not SAMPLE_RATE_RANGE_HZ[0] <= sample_rate_hz <= SAMPLE_RATE_RANGE_HZ[1]:
+        raise imu.fail("sample_rate_hz", f"must be within [{SAMPLE_RATE_RANGE_HZ[0]:g}, "
+                       f"{SAMPLE_RATE_RANGE_HZ[1]:g}] Hz, got {sample_rate_hz:g}")
     imu_info = ImuInfo(
         sample_rate_hz=sample_rate_hz,
         accel_unit=imu.choice("accel_unit", ACCEL_UNITS),
@@ -313,6 +360,9 @@ def _parse_manifest(raw, directory, manifest_file):
     gravity = site.number("gravity_mps2", required=True)
     if not gravity > 0:
         raise site.fail("gravity_mps2", f"must be > 0, got {gravity}")
+    if not GRAVITY_RANGE_MPS2[0] <= gravity <= GRAVITY_RANGE_MPS2[1]:
+        raise site.fail("gravity_mps2", f"must be a local gravity on Earth, within "
+                        f"[{GRAVITY_RANGE_MPS2[0]:g}, {GRAVITY_RANGE_MPS2[1]:g}] m/s^2, got {gravity:g}")
     latitude = site.number("latitude_deg")
     if latitude is not None and not -90 <= latitude <= 90:
         raise site.fail("latitude_deg", f"must be within [-90, 90], got {latitude}")
@@ -378,8 +428,8 @@ def _parse_segment(entry, index, directory, manifest_file):
         name=name, kind=kind, file=file, status=status,
         up_body=fields.vector("up_body"),
         axis_body=fields.vector("axis_body", required=kind == "rotation"),
-        rate_dps=fields.number("rate_dps"),
-        angle_deg=fields.number("angle_deg"),
+        rate_dps=fields.number("rate_dps", limit=MAX_RATE_DPS),
+        angle_deg=fields.number("angle_deg", limit=MAX_ANGLE_DEG),
         note=fields.text("note"),
         extra=_rest(entry, _SEGMENT_FIELDS))
     return segment
@@ -390,7 +440,7 @@ def _load_segment(capture, segment, label):
     csv_file = capture.path / segment.file
     complete = segment.status == "complete"
     try:
-        raw = csv_file.read_bytes()
+        raw = read_regular_file(csv_file)
     except OSError as e:
         if complete:
             raise CaptureError(csv_file, f"cannot read: {e.strerror}", segment=label) from None
@@ -517,6 +567,12 @@ def _parse_csv(lines, sample_rate_hz, csv_file, label, *, require_rows):
         row, col = np.argwhere(~finite)[0]
         text = rows[row].split(",")[usecols[col]].strip()
         raise fail(f"column '{wanted[col]}': not a finite number: {_show(text)}", row + 2)
+    huge = np.abs(values) > MAX_CSV_VALUE
+    if huge.any():
+        row, col = np.argwhere(huge)[0]
+        text = rows[row].split(",")[usecols[col]].strip()
+        raise fail(f"column '{wanted[col]}': out of range (|value| > {MAX_CSV_VALUE:g}): {_show(text)}",
+                   row + 2)
     t = np.ascontiguousarray(values[:, 0])
     steps = np.diff(t)
     backwards = np.flatnonzero(steps <= 0)
@@ -591,6 +647,7 @@ class CaptureWriter:
         manifest = _without_none(_plain(manifest))
         _check(manifest, directory)
         directory.mkdir(parents=True, exist_ok=True)
+        remove_stray_temporaries(directory)     # a writer killed before its first manifest
         self._dir = directory
         self._save(manifest)
 
@@ -599,19 +656,21 @@ class CaptureWriter:
         """A writer that appends to an existing bundle.
 
         Complete segments are kept untouched; incomplete ones are dropped from the manifest and
-        their files renamed aside (rot1p.csv -> rot1p.csv.incomplete), so they can be recorded
-        again under the same name.
+        their files (whatever they are: a FIFO too) renamed aside (rot1p.csv ->
+        rot1p.csv.incomplete), so they can be recorded again under the same name.  Temporary
+        files left by a writer that was killed (``.NAME.RANDOM.tmp``) are removed.
         """
         directory = Path(directory)
         capture = read_capture(directory, load_data=False)
-        manifest = yaml.safe_load((directory / MANIFEST).read_bytes())
+        manifest = yaml.safe_load(read_regular_file(directory / MANIFEST, limit=MAX_MANIFEST_BYTES))
         kept = []
         for entry, segment in zip(manifest["segments"], capture.segments):
             if segment.status == "complete":
                 kept.append(entry)
-            elif (directory / segment.file).is_file():
+            elif os.path.lexists(directory / segment.file):
                 os.replace(directory / segment.file, _aside_name(directory / segment.file))
         manifest["segments"] = kept
+        remove_stray_temporaries(directory)
         writer = cls.__new__(cls)
         writer._dir = directory
         writer._save(manifest)
@@ -634,14 +693,25 @@ class CaptureWriter:
                  **_plain(meta)}
         entry = _ordered_entry(entry)
         manifest = {**self._manifest, "segments": self._manifest["segments"] + [entry]}
-        _check(manifest, self._dir)
+        self._validate(manifest)
         csv_path = self._dir / entry["file"]
         csv_path.parent.mkdir(parents=True, exist_ok=True)
-        try:
-            handle = open(csv_path, "xb")
-        except FileExistsError:
-            raise UserError(f"{csv_path}: already exists; will not overwrite it") from None
+        if os.path.lexists(csv_path):
+            listed = any(Path(e["file"]) == Path(entry["file"]) for e in self._manifest["segments"])
+            if listed:
+                raise UserError(f"{csv_path}: already exists; will not overwrite it")
+            # not in the manifest: left by a writer killed before it listed the file (older
+            # versions created the file first); kept aside, never overwritten
+            os.replace(csv_path, _aside_name(csv_path, ".unlisted"))
+        # the manifest lists the segment (incomplete) before its file exists: a kill between
+        # the two leaves an incomplete segment without a file, which readers accept
         self._save(manifest)
+        try:
+            fd = os.open(csv_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0)
+                         | getattr(os, "O_CLOEXEC", 0), 0o644)
+        except FileExistsError:
+            raise UserError(f"{csv_path}: appeared while the segment began; will not overwrite it") from None
+        handle = os.fdopen(fd, "wb")
         return SegmentWriter(self, entry, handle)
 
     def write_file(self, relname, text):
@@ -662,9 +732,13 @@ class CaptureWriter:
         segments = list(self._manifest["segments"])
         segments[index] = updated
         manifest = {**self._manifest, "segments": segments}
-        _check(manifest, self._dir)
+        self._validate(manifest)
         self._save(manifest)
         return updated
+
+    def _validate(self, manifest):
+        """Refuse (CaptureError) a manifest that a reader would refuse (before it is saved)."""
+        _check(manifest, self._dir)
 
     def _save(self, manifest):
         """Make `manifest` (already checked) the bundle's manifest, atomically."""
@@ -792,19 +866,42 @@ def _plain(value):
     return value
 
 
-def _aside_name(path):
-    candidate = path.with_name(path.name + ".incomplete")
+def _aside_name(path, suffix=".incomplete"):
+    candidate = path.with_name(path.name + suffix)
     number = 2
-    while candidate.exists():
-        candidate = path.with_name(f"{path.name}.incomplete{number}")
+    while os.path.lexists(candidate):
+        candidate = path.with_name(f"{path.name}{suffix}{number}")
         number += 1
     return candidate
 
 
+_TEMP_NAME = re.compile(r"\..+\.[A-Za-z0-9_]{6,}" + re.escape(TEMP_SUFFIX))
+
+
+def remove_stray_temporaries(directory) -> list:
+    """Remove the temporary files (``.NAME.RANDOM.tmp``) that writers killed mid-write left in
+    ``directory`` (symbolic links of that name are removed, never followed); returns their names."""
+    removed = []
+    try:
+        names = os.listdir(directory)
+    except OSError:
+        return removed
+    for name in names:
+        if _TEMP_NAME.fullmatch(name):
+            try:
+                os.unlink(Path(directory) / name)
+                removed.append(name)
+            except (IsADirectoryError, PermissionError, FileNotFoundError):
+                pass
+    return removed
+
+
 def _atomic_write(path, data):
     """Replace `path` with `data` so that a reader sees either the old or the new file, even
-    after a crash: write a temporary file, flush and fsync it, rename it over, fsync the folder."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    after a crash: write a temporary file, flush and fsync it, rename it over, fsync the folder.
+    The temporary file has a random name in the same folder and is created with O_EXCL and
+    O_NOFOLLOW (tempfile.mkstemp), never through a link; it is removed on every path out."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=TEMP_SUFFIX)
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)

@@ -17,6 +17,15 @@ needed: only how the raw outputs vary.
    to the motion around them.  Each motion between two static intervals gets its rotation
    vector, the integral of (gyro - bias): for a turn about a fixed axis its direction is the
    axis and its length the angle turned.
+
+Units.  The thresholds are physical (m/s^2, deg/s): the outputs are first converted with
+``accel_mps2_per_unit`` and ``gyro_dps_per_unit`` (1 for m/s^2 and deg/s; the declared unit's
+factor, or a raw output's nominal scale).  A raw output of unknown scale (``None``) is scaled
+from the initial rest, the first ``init_rest_s`` seconds, which must be still (as imu_tk asks
+for): the accelerometer by |mean| = standard gravity there (its bias and scale errors move the
+thresholds by a few per cent at most); the gyro's rate threshold becomes ``RAW_RATE_NOISE_FACTOR``
+times the largest per-sample standard deviation of the gyro there.  ``Detection.thresholds``
+says which were used.  Interval means and rotation vectors stay in the input's units.
 """
 from __future__ import annotations
 
@@ -29,6 +38,9 @@ QUIET_PERCENTILE = 20.0
 NOISE_FACTOR = 4.0
 ACCEL_STD_FLOOR_MPS2 = 0.005
 GYRO_STD_FLOOR_DPS = 0.02
+STANDARD_GRAVITY_MPS2 = 9.80665
+RAW_RATE_NOISE_FACTOR = 10.0   # raw gyro of unknown scale: rate threshold / rest noise (per sample)
+DEFAULT_INIT_REST_S = 2.0
 
 
 @dataclass
@@ -62,6 +74,7 @@ class Detection:
     accel_noise: float          # noise floor: windowed standard deviation
     gyro_noise: float
     still: np.ndarray           # (N,) bool
+    thresholds: dict = None     # what "still" meant, in physical units where known
 
     def statics(self) -> list:
         return [i for i in self.intervals if i.kind == "static"]
@@ -84,7 +97,11 @@ def still_mask(accel, gyro, window: int, *, accel_threshold: float, gyro_thresho
 
 
 def detect(t, accel, gyro, *, window_s: float = 0.5, min_static_s: float = 2.0,
-           rate_threshold_dps: float = 1.0) -> Detection:
+           rate_threshold_dps: float = 1.0, accel_mps2_per_unit: float | None = 1.0,
+           gyro_dps_per_unit: float | None = 1.0, init_rest_s: float = DEFAULT_INIT_REST_S) -> Detection:
+    """Static intervals and the motions between them (module docstring).  ``accel`` and
+    ``gyro`` in any unit, with the factors to m/s^2 and deg/s (``None``: raw of unknown scale,
+    scaled from the initial rest)."""
     t = np.asarray(t, float)
     accel = np.asarray(accel, float)
     gyro = np.asarray(gyro, float)
@@ -92,25 +109,53 @@ def detect(t, accel, gyro, *, window_s: float = 0.5, min_static_s: float = 2.0,
         raise ValueError("a recording of at least 4 samples is needed")
     dt = float(np.median(np.diff(t)))
     window = max(3, int(round(window_s / dt)) | 1)
-    sa = _moving_std(accel, window).max(axis=1)
-    sg = _moving_std(gyro, window).max(axis=1)
+    rest = slice(0, max(window, int(round(init_rest_s / dt))))
+    thresholds = {"window_s": window * dt, "min_static_s": float(min_static_s)}
+    if accel_mps2_per_unit is None:
+        norm = float(np.linalg.norm(accel[rest].mean(axis=0)))
+        if not norm > 0:
+            raise ValueError("the initial rest has a zero mean specific force: the accelerometer "
+                             "scale cannot be found from it")
+        accel_mps2_per_unit = STANDARD_GRAVITY_MPS2 / norm
+        thresholds["accel_scale_from"] = "initial rest (|f| = standard gravity)"
+    a = accel * accel_mps2_per_unit
+    if gyro_dps_per_unit is None:
+        rest_sigma = float(np.max(np.std(gyro[rest], axis=0)))
+        steps = np.abs(np.diff(gyro[rest], axis=0))
+        step = float(steps[steps > 0].min()) if (steps > 0).any() else 0.0
+        rate_threshold = RAW_RATE_NOISE_FACTOR * max(rest_sigma, step)
+        g, gyro_floor, g_factor = gyro, step, 1.0
+        thresholds["rate_threshold_raw"] = rate_threshold
+        thresholds["rate_threshold_from"] = (f"initial rest noise ({RAW_RATE_NOISE_FACTOR:g} x "
+                                             f"{max(rest_sigma, step):.3g} raw)")
+    else:
+        g_factor = float(gyro_dps_per_unit)
+        g, gyro_floor = gyro * g_factor, GYRO_STD_FLOOR_DPS
+        rate_threshold = float(rate_threshold_dps)
+        thresholds["rate_threshold_dps"] = rate_threshold
+    sa = _moving_std(a, window).max(axis=1)
+    sg = _moving_std(g, window).max(axis=1)
     noise_a = max(float(np.percentile(sa, QUIET_PERCENTILE)), ACCEL_STD_FLOOR_MPS2 / NOISE_FACTOR)
-    noise_g = max(float(np.percentile(sg, QUIET_PERCENTILE)), GYRO_STD_FLOOR_DPS / NOISE_FACTOR)
+    noise_g = max(float(np.percentile(sg, QUIET_PERCENTILE)), gyro_floor / NOISE_FACTOR)
+    thresholds["accel_std_threshold_mps2"] = NOISE_FACTOR * noise_a
+    thresholds["gyro_std_threshold" + ("_raw" if gyro_dps_per_unit is None else "_dps")] = NOISE_FACTOR * noise_g
     candidate = (sa <= NOISE_FACTOR * noise_a) & (sg <= NOISE_FACTOR * noise_g)
-    bias = np.median(gyro[candidate], axis=0) if candidate.any() else np.zeros(3)
-    mean = uniform_filter1d(gyro, window, axis=0, mode="nearest")
-    still = candidate & (np.linalg.norm(mean - bias, axis=1) <= rate_threshold_dps)
+    bias = np.median(g[candidate], axis=0) if candidate.any() else np.zeros(3)
+    mean = uniform_filter1d(g, window, axis=0, mode="nearest")
+    still = candidate & (np.linalg.norm(mean - bias, axis=1) <= rate_threshold)
 
-    runs = [(a, b) for a, b in _runs(still) if t[b - 1] - t[a] + dt >= min_static_s]
+    runs = [(a0, b0) for a0, b0 in _runs(still) if t[b0 - 1] - t[a0] + dt >= min_static_s]
     half = window // 2
     intervals = []
-    for k, (a, b) in enumerate(runs):
+    bias_in_units = bias / g_factor
+    for k, (a0, b0) in enumerate(runs):
         if k:
             prev = runs[k - 1][1]
-            intervals.append(_interval("motion", prev, a, dt, accel, gyro, bias))
-        s0, s1 = a + half, max(a + half + 1, b - half)
-        intervals.append(_interval("static", s0, s1, dt, accel, gyro, bias))
-    return Detection(intervals, bias, noise_a, noise_g, still)
+            intervals.append(_interval("motion", prev, a0, dt, accel, gyro, bias_in_units))
+        s0, s1 = a0 + half, max(a0 + half + 1, b0 - half)
+        intervals.append(_interval("static", s0, s1, dt, accel, gyro, bias_in_units))
+    return Detection(intervals, bias_in_units, noise_a / accel_mps2_per_unit, noise_g / g_factor, still,
+                     thresholds)
 
 
 def match(detection: Detection, specs, *, max_tilt_deg: float = 30.0, turn_tolerance: float = 0.25,

@@ -1,0 +1,46 @@
+"""``station export``: a calibration file in another tool's format (argument parsing and output)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from station.cli.output import err, out
+
+
+def add_parsers(sub) -> None:
+    from station.io.exporters import FORMATS
+
+    ex = sub.add_parser("export", help="write a calibration file in another tool's format")
+    ex.add_argument("calibration", metavar="CAL.yaml")
+    ex.add_argument("--to", required=True, choices=sorted(FORMATS), metavar="FORMAT",
+                    help="; ".join(f"{name}: {mod.TITLE}" for name, mod in FORMATS.items()))
+    ex.add_argument("-o", "--output", metavar="PATH",
+                    help="default: next to CAL, named CAL-FORMAT with the format's ending")
+    ex.add_argument("--noise", metavar="NOISE.yaml",
+                    help="noise figures from `station noise` when CAL has none (Kalibr needs them)")
+    ex.add_argument("--force", action="store_true", help="use --noise of another IMU serial")
+    ex.set_defaults(func=cmd_export)
+
+
+def cmd_export(args) -> int:
+    from station.io.calfile import read_calfile
+    from station.io.exporters import FORMATS, source_from_document
+    from station.core.errors import UserError
+    from station.io.noise_file import noise_serial, read_noise_block
+
+    fmt = FORMATS[args.to]
+    cal = Path(args.calibration)
+    source = source_from_document(read_calfile(cal), cal)
+    if args.noise:
+        source.noise = read_noise_block(args.noise)
+        other = noise_serial(args.noise)
+        if other and source.imu_serial and other != source.imu_serial and not args.force:
+            raise UserError(f"{args.noise}: noise of IMU {other!r}, calibration of IMU {source.imu_serial!r} "
+                            "(--force to combine them anyway)")
+    target = Path(args.output) if args.output else cal.with_name(f"{cal.stem}-{args.to}{fmt.SUFFIX}")
+    written = fmt.write(source, target)
+    for line in source.header_lines()[1:]:
+        err.print(f"note: {line}", markup=False, soft_wrap=True)
+    out.print(f"convention: {fmt.CONVENTION}", markup=False, soft_wrap=True)
+    for path in written:
+        out.print(f"{args.to}: {path}", markup=False)
+    return 0

@@ -1,0 +1,138 @@
+"""``station history`` and ``station diff``: calibrations filed per IMU serial, listed, compared
+and plotted over time (argument parsing and output only)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from rich.table import Table
+
+from station.cli.output import err, out
+
+
+def add_parsers(sub) -> None:
+    h = sub.add_parser("history", help="calibrations filed per IMU serial: list, file, plot drift")
+    h.add_argument("serial", nargs="?", help="the IMU serial (none: list the serials in the store)")
+    h.add_argument("--add", action="append", default=[], metavar="CAL.yaml",
+                   help="file a calibration into the history (repeatable); estimate and run file theirs")
+    h.add_argument("--drift", metavar="PNG", help="plot every parameter of SERIAL against the date, ± 1σ")
+    h.add_argument("--store", metavar="DIR", help="the history store (default: $STATION_HISTORY_DIR "
+                   "or the user's data directory)")
+    h.set_defaults(func=cmd_history)
+
+    d = sub.add_parser("diff", help="compare two calibrations parameter by parameter, in units and in σ")
+    d.add_argument("a", metavar="A", help="a calibration file or an id of the history (#N)")
+    d.add_argument("b", metavar="B", help="a calibration file or an id of the history (#N)")
+    d.add_argument("--all", action="store_true", help="list unchanged parameters too")
+    d.add_argument("--store", metavar="DIR", help="the history store for ids")
+    d.add_argument("--drift", metavar="PNG", help="also plot the drift over time of A's IMU serial "
+                   "(every calibration of it in the history)")
+    d.set_defaults(func=cmd_diff)
+
+
+def file_quietly(cal_path, store=None) -> None:
+    """File a calibration just written by estimate or run; a store that cannot be written is a
+    warning, never a failure (the calibration file itself is already safe)."""
+    from station.core.errors import UserError
+    from station.io.history import Store
+
+    try:
+        entry, new = Store(store).file(cal_path)
+    except UserError as e:
+        err.print(f"warning: not filed in the calibration history: {e}", markup=False, soft_wrap=True)
+        return
+    if new:
+        out.print(f"history: filed as #{entry.id} for IMU {entry.serial} ({entry.path})", markup=False)
+
+
+def cmd_history(args) -> int:
+    from station.core.errors import UserError
+    from station.io.history import Store
+
+    store = Store(args.store)
+    for cal in args.add:
+        entry, new = store.file(cal)
+        out.print(f"{'filed' if new else 'already filed'}: #{entry.id} {entry.serial} {entry.date_utc} "
+                  f"({entry.path})", markup=False)
+    if args.serial is None:
+        if not args.add:
+            t = Table(title=f"IMU serials in {store.root}")
+            t.add_column("serial")
+            t.add_column("calibrations", justify="right")
+            for serial, n in store.serials():
+                t.add_row(serial, str(n))
+            out.print(t)
+        return 0
+    entries = store.list(args.serial)
+    if not entries:
+        raise UserError(f"no calibration of IMU {args.serial!r} in {store.root} (station history lists the serials)")
+    t = Table(title=f"calibrations of IMU {args.serial}")
+    for col in ("id", "date (UTC)", "scheme", "method", "verdict", "file"):
+        t.add_column(col)
+    for e in entries:
+        t.add_row(f"#{e.id}", e.date_utc, e.scheme or "", e.method or "", e.verdict, str(e.path))
+    out.print(t)
+    if args.drift:
+        _drift(entries, Path(args.drift), args.serial)
+    return 0
+
+
+def _drift(entries, png: Path, serial: str) -> None:
+    from station.core.errors import UserError
+    from station.diagnose.figures import drift_figure
+    from station.io.calfile import read_calfile
+
+    rows: dict = {}
+    for e in entries:
+        doc = read_calfile(e.path)
+        for name, p in doc["parameters"].items():
+            rows.setdefault(name, []).append((e.date_utc, p["value"], p.get("sigma"), p["unit"]))
+    rows = {k: v for k, v in rows.items() if len(v) == len(entries)}
+    try:
+        drift_figure(rows, png, f"IMU {serial}: {len(entries)} calibrations, value ± 1σ")
+    except OSError as e:
+        raise UserError(f"{png}: cannot write: {e.strerror}") from None
+    except ValueError as e:
+        raise UserError(f"{png}: cannot plot the drift: {e}") from None
+    out.print(f"drift plot: {png}", markup=False)
+
+
+def cmd_diff(args) -> int:
+    from station.io.calcompare import FLAG_SIGMA, changes
+    from station.io.calfile import read_calfile
+    from station.io.history import Store
+
+    store = Store(args.store)
+    pa, pb = store.resolve(args.a), store.resolve(args.b)
+    da, db = read_calfile(pa), read_calfile(pb)
+    rows, only_a, only_b = changes(da, db)
+    t = Table(title=f"{pa} → {pb}")
+    for col in ("parameter", "A", "B", "change", "unit", "change / σ", ""):
+        t.add_column(col, justify="left" if col in ("parameter", "unit", "") else "right")
+    flagged = 0
+    for c in rows:
+        if not args.all and not c.flagged and c.z is not None and abs(c.z) < 1:
+            continue
+        flagged += c.flagged
+        value = (lambda v: f"{v:.9f}") if c.change_ppm is not None else (lambda v: f"{v:.4f}")
+        change = f"{c.change_ppm:+.2f} ppm" if c.change_ppm is not None else f"{c.change:+.4f}"
+        t.add_row(c.name, value(c.before), value(c.after), change,
+                  "" if c.change_ppm is not None else c.unit,
+                  "" if c.z is None else f"{c.z:+.2f}", f"> {FLAG_SIGMA:g}σ" if c.flagged else "")
+    out.print(t)
+    da_date = (da.get("provenance") or {}).get("date_utc")
+    db_date = (db.get("provenance") or {}).get("date_utc")
+    out.print(f"A: {da_date}, B: {db_date}; σ combined as sqrt(σA² + σB²); "
+              f"{flagged} of {len(rows)} parameters changed by more than {FLAG_SIGMA:g}σ"
+              + ("" if args.all else " (changes under 1σ not listed; --all lists them)"), markup=False)
+    for label, names in (("only in A", only_a), ("only in B", only_b)):
+        if names:
+            out.print(f"{label}: {', '.join(names)}", markup=False)
+    if args.drift:
+        from station.core.errors import UserError
+
+        serial = (da.get("provenance") or {}).get("imu_serial")
+        entries = store.list(serial) if isinstance(serial, str) else []
+        if not entries:
+            raise UserError(f"{pa}: its IMU serial {serial!r} has no calibration in the history {store.root}")
+        _drift(entries, Path(args.drift), serial)
+    return 0

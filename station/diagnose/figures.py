@@ -1,0 +1,100 @@
+"""Figures shared by the report page and the commands: the Allan deviation with its fitted noise
+terms, and the drift of a calibration's parameters over time.  PNG files (matplotlib, Agg)."""
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+
+from station.core import units
+
+COLOURS = {"x": "tab:red", "y": "tab:green", "z": "tab:blue"}
+SCALE_UNITS = ("1", "raw/(m/s^2)", "raw/(deg/s)")
+
+
+def pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save(fig, path=None) -> bytes:
+    """PNG bytes of a figure; also written to ``path`` when given."""
+    plt = pyplot()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    plt.close(fig)
+    data = buf.getvalue()
+    if path is not None:
+        Path(path).write_bytes(data)
+    return data
+
+
+def allan_figure(result, path=None) -> bytes:
+    """Log-log Allan deviation per axis with its 68 % band and the fitted terms: white noise
+    (slope -1/2), bias instability (flat, 0.664 B) and random walk (slope +1/2)."""
+    from station.estimate.noise import FLICKER_FACTOR
+
+    plt = pyplot()
+    fig, panels = plt.subplots(1, 2, figsize=(12, 4.8))
+    for ax, sensor, scale, unit in ((panels[0], "accel", 1.0 / units.UG_MPS2, "µg"),
+                                    (panels[1], "gyro", 3600.0, "°/h")):
+        for a in (x for x in result.axes if x.sensor == sensor):
+            c = COLOURS[a.axis]
+            ax.fill_between(a.taus, a.lo * scale, a.hi * scale, color=c, alpha=0.2, lw=0)
+            ax.loglog(a.taus, a.adev * scale, color=c, lw=1.4, label=f"{a.axis}")
+            ax.loglog(a.taus, a.white / np.sqrt(a.taus) * scale, color=c, ls="--", lw=0.8)
+            if a.bias_instability is not None:
+                ax.axhline(FLICKER_FACTOR * a.bias_instability * scale, color=c, ls=":", lw=0.8)
+                ax.plot([a.bias_instability_tau], [FLICKER_FACTOR * a.bias_instability * scale], "o", color=c)
+            if a.random_walk is not None:
+                ax.loglog(a.taus, a.random_walk * np.sqrt(a.taus / 3.0) * scale, color=c, ls="-.", lw=0.8)
+        rep = {a.axis: a.report() for a in result.axes if a.sensor == sensor}
+        if sensor == "accel":
+            text = "white " + ", ".join(f"{k} {v['white_noise_ug_rthz']:.3g}" for k, v in rep.items()) + " µg/√Hz"
+        else:
+            text = "white " + ", ".join(f"{k} {v['white_noise_dph_rthz']:.3g}" for k, v in rep.items()) + " °/h/√Hz"
+        ax.set_title(f"{'accelerometers' if sensor == 'accel' else 'gyros'}: {text}", fontsize=9)
+        ax.set_xlabel("averaging time τ (s)")
+        ax.set_ylabel(f"Allan deviation ({unit})")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(title="axis (band: 68 % interval)", fontsize=8, title_fontsize=8)
+    fig.suptitle("overlapping Allan deviation; dashed: white noise (slope −1/2), dotted: bias "
+                 "instability (0.664 B), dash-dot: random walk (slope +1/2)", fontsize=9)
+    fig.tight_layout()
+    return save(fig, path)
+
+
+def drift_figure(rows, path=None, title: str = "") -> bytes:
+    """rows: {parameter: [(date, value, sigma, unit), ...]}; one small panel per parameter with
+    ±1σ error bars against the calibration date."""
+    import datetime as dt
+
+    plt = pyplot()
+    names = list(rows)
+    ncol = 3
+    nrow = max(1, -(-len(names) // ncol))
+    fig, axes = plt.subplots(nrow, ncol, figsize=(12, 2.2 * nrow), squeeze=False)
+    for ax in axes.ravel()[len(names):]:
+        ax.axis("off")
+    for ax, name in zip(axes.ravel(), names):
+        pts = rows[name]
+        when = [dt.datetime.strptime(d, "%Y-%m-%dT%H:%M:%SZ") for d, _, _, _ in pts]
+        vals = np.array([v for _, v, _, _ in pts], float)
+        sig = np.array([s if s is not None else np.nan for _, _, s, _ in pts], float)
+        unit = pts[0][3]
+        if unit in SCALE_UNITS and vals[0]:       # scale factors: ppm from the first calibration
+            vals, sig, unit = (vals / vals[0] - 1.0) * 1e6, sig / vals[0] * 1e6, f"ppm from {pts[0][1]:.6f}"
+        ax.errorbar(when, vals, yerr=np.nan_to_num(sig), fmt="o-", ms=3, lw=0.8, capsize=2)
+        ax.set_title(f"{name} ({unit})", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.yaxis.get_major_formatter().set_useOffset(False)
+    fig.autofmt_xdate()
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
+    return save(fig, path)

@@ -1,0 +1,252 @@
+"""Noise of a still IMU from the overlapping Allan deviation (IEEE Std 952/1554 terms).
+
+For each axis of the (unit-converted, otherwise raw) output of one static recording:
+  * the overlapping Allan deviation sigma(tau) (``allantools.oadev``) at about ten taus per
+    decade from one sample to a fifth of the recording, with a 68.3 % confidence interval from
+    Greenhall's equivalent degrees of freedom for white frequency noise
+    (``allantools.edf_greenhall``, ``allantools.confidence_interval``);
+  * white noise N (sigma = N / sqrt(tau), slope -1/2): the density (ug/sqrt(Hz), deg/h/sqrt(Hz)),
+    i.e. velocity / angle random walk (m/s/sqrt(h), deg/sqrt(h)), read where the local slope is
+    within 1/4 of -1/2 at the tau with the most degrees of freedom; its 1 sigma from that
+    point's confidence interval;
+  * bias random walk K (sigma = K sqrt(tau / 3), slope +1/2) where the local slope after the
+    minimum is within 1/4 of +1/2 and the curve lies significantly above the white-noise line,
+    the white part there taken away; otherwise an upper bound from the longest tau;
+  * bias instability B (flicker floor, slope 0) = sqrt(what remains of sigma^2 once the white
+    and random-walk parts are taken away) / 0.664 at the lowest point where the curve is flat
+    (local slope within 1/4 of 0) and that remainder is significant (3 sigma); otherwise an
+    upper bound, the upper end of the interval at the minimum / 0.664.
+Kalibr's four numbers are the white-noise densities and random walks in SI (rad for the gyro),
+the largest of the three axes per triad.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from station.core import units
+from station.core.errors import UserError
+
+FLICKER_FACTOR = math.sqrt(2.0 * math.log(2.0) / math.pi)    # 0.664: sigma floor of flicker noise
+CONFIDENCE = 0.682689492137086                              # 1 sigma of a normal distribution
+MIN_SAMPLES = 200
+TAUS_PER_DECADE = 10
+SLOPE_TOLERANCE = 0.25
+
+
+@dataclass
+class AxisNoise:
+    sensor: str                  # "accel" or "gyro"
+    axis: str                    # "x", "y", "z"
+    unit: str                    # the unit sigma(tau) is in: m/s^2 or deg/s
+    taus: np.ndarray             # s
+    adev: np.ndarray             # overlapping Allan deviation, unit
+    lo: np.ndarray               # 68.3 % confidence interval of adev
+    hi: np.ndarray
+    white: float                 # N, unit * sqrt(s)
+    white_sigma: float
+    white_tau: float             # where N was read
+    bias_instability: float | None      # B, unit
+    bias_instability_tau: float | None
+    bias_instability_upper: float       # B is below this (the value itself when resolved)
+    random_walk: float | None           # K, unit / sqrt(s)
+    random_walk_sigma: float | None
+    random_walk_tau: float | None
+    random_walk_upper: float            # K is below this (the value itself when resolved)
+
+    def report(self) -> dict:
+        """The figures in engineering units, for the calibration file's ``noise`` block."""
+        if self.sensor == "accel":
+            per = 1.0 / units.UG_MPS2          # ug per m/s^2
+            out = {"white_noise_ug_rthz": self.white * per,
+                   "white_noise_sigma_ug_rthz": self.white_sigma * per,
+                   "velocity_random_walk_mps_rth": self.white * 60.0}
+            bi_unit, rw_unit, rw_factor = "ug", "ug_rth", per * 60.0
+        else:
+            per = 3600.0                       # deg/h per deg/s
+            out = {"white_noise_dph_rthz": self.white * per,
+                   "white_noise_sigma_dph_rthz": self.white_sigma * per,
+                   "angle_random_walk_deg_rth": self.white * 60.0}
+            bi_unit, rw_unit, rw_factor = "dph", "dph_rth", per * 60.0
+        out["white_noise_tau_s"] = self.white_tau
+        out[f"bias_instability_{bi_unit}"] = (None if self.bias_instability is None
+                                              else self.bias_instability * per)
+        out["bias_instability_tau_s"] = self.bias_instability_tau
+        out[f"bias_instability_upper_{bi_unit}"] = self.bias_instability_upper * per
+        out[f"random_walk_{rw_unit}"] = None if self.random_walk is None else self.random_walk * rw_factor
+        out[f"random_walk_sigma_{rw_unit}"] = (None if self.random_walk_sigma is None
+                                               else self.random_walk_sigma * rw_factor)
+        out["random_walk_tau_s"] = self.random_walk_tau
+        out[f"random_walk_upper_{rw_unit}"] = self.random_walk_upper * rw_factor
+        return {k: (None if v is None else float(v)) for k, v in out.items()}
+
+
+@dataclass
+class NoiseResult:
+    axes: list                   # AxisNoise, accel x y z then gyro x y z
+    sample_rate_hz: float
+    duration_s: float
+    source: str                  # what was analysed, in words
+
+    def axis(self, sensor: str, axis: str) -> AxisNoise:
+        return next(a for a in self.axes if a.sensor == sensor and a.axis == axis)
+
+    def kalibr(self) -> dict:
+        """Kalibr's imu.yaml numbers: SI, continuous time, largest axis per triad."""
+        acc = [a for a in self.axes if a.sensor == "accel"]
+        gyr = [a for a in self.axes if a.sensor == "gyro"]
+        rad = math.radians(1.0)
+
+        def walk(axes, factor):
+            resolved = all(a.random_walk is not None for a in axes)
+            value = max((a.random_walk if a.random_walk is not None else a.random_walk_upper)
+                        for a in axes)
+            return float(value * factor), not resolved
+
+        arw, arw_upper = walk(acc, 1.0)
+        grw, grw_upper = walk(gyr, rad)
+        return {"accelerometer_noise_density": float(max(a.white for a in acc)),
+                "accelerometer_random_walk": arw,
+                "accelerometer_random_walk_is_upper_bound": arw_upper,
+                "gyroscope_noise_density": float(max(a.white for a in gyr) * rad),
+                "gyroscope_random_walk": grw,
+                "gyroscope_random_walk_is_upper_bound": grw_upper,
+                "update_rate": float(self.sample_rate_hz)}
+
+    def block(self) -> dict:
+        """The ``noise`` block of a calibration file (docs/calibration-file.md)."""
+        return {
+            "method": ("overlapping Allan deviation (allantools.oadev), 68.3 % confidence from "
+                       "Greenhall's degrees of freedom for white noise; N at slope -1/2, B = "
+                       "min/0.664, K at slope +1/2 (sigma = K sqrt(tau/3))"),
+            "source": self.source,
+            "sample_rate_hz": float(self.sample_rate_hz),
+            "duration_s": float(self.duration_s),
+            "accel": {a.axis: a.report() for a in self.axes if a.sensor == "accel"},
+            "gyro": {a.axis: a.report() for a in self.axes if a.sensor == "gyro"},
+            "kalibr": self.kalibr(),
+        }
+
+
+def _taus(n: int, rate: float) -> np.ndarray:
+    m = np.unique(np.round(np.logspace(0, math.log10(max(n // 5, 2)),
+                                       int(TAUS_PER_DECADE * math.log10(max(n // 5, 2))) + 1)))
+    return m[m >= 1] / rate
+
+
+def allan_axis(y: np.ndarray, rate: float, sensor: str, axis: str, unit: str) -> AxisNoise:
+    """The Allan deviation of one axis (samples in ``unit``) and its noise terms."""
+    import allantools
+
+    y = np.asarray(y, float)
+    taus, adev, _, _ = allantools.oadev(y - y.mean(), rate=rate, data_type="freq", taus=_taus(len(y), rate))
+    keep = np.isfinite(adev) & (adev > 0)
+    taus, adev = taus[keep], adev[keep]
+    if len(taus) < 3:
+        raise UserError(f"{sensor} {axis}: the signal is constant: no noise to characterise")
+    m = np.round(taus * rate).astype(int)
+    edf = np.array([allantools.edf_greenhall(alpha=0, d=2, m=int(k), N=len(y) + 1,
+                                             overlapping=True, modified=False) for k in m], float)
+    lo, hi = np.array([allantools.confidence_interval(float(d), float(e), ci=CONFIDENCE)
+                       for d, e in zip(adev, edf)]).T
+    slope = np.gradient(np.log(adev), np.log(taus))
+
+    white_ok = np.flatnonzero(np.abs(slope + 0.5) <= SLOPE_TOLERANCE)
+    k = int(white_ok[np.argmax(edf[white_ok])]) if len(white_ok) else 0
+    white = adev[k] * math.sqrt(taus[k])
+    white_sigma = 0.5 * (hi[k] - lo[k]) * math.sqrt(taus[k])
+
+    half = 0.5 * (hi - lo)
+    i_min = int(np.argmin(adev))
+    # the random walk: slope +1/2 after the minimum, significantly above the white line
+    white_line = white / np.sqrt(taus)
+    walk_ok = np.flatnonzero((np.abs(slope - 0.5) <= SLOPE_TOLERANCE) & (np.arange(len(taus)) > i_min)
+                             & (lo > white_line))
+    if len(walk_ok) >= 2:        # one point at the end of the curve is no slope
+        j = int(walk_ok[np.argmax(edf[walk_ok])])
+        walk_var = max(adev[j] ** 2 - white_line[j] ** 2, 0.0)      # less the white part there
+        walk, walk_tau = math.sqrt(3.0 * walk_var / taus[j]), taus[j]
+        walk_sigma = 3.0 * adev[j] * half[j] / (taus[j] * max(walk, 1e-300))
+        walk_upper = walk
+    else:
+        walk = walk_sigma = walk_tau = None
+        walk_upper = hi[-1] * math.sqrt(3.0 / taus[-1])
+    # the flicker floor: where the curve is flat, what remains of sigma^2 once the white and
+    # random-walk parts are taken away, if significant (3 sigma of the variance there); the
+    # lowest such point, as IEEE reads B at the minimum of the curve
+    floor_var = adev ** 2 - white_line ** 2 - (walk or 0.0) ** 2 * taus / 3.0
+    flat = (np.abs(slope) <= SLOPE_TOLERANCE) & (floor_var > 3.0 * 2.0 * adev * half)
+    if np.any(flat):
+        i = int(np.flatnonzero(flat)[np.argmin(adev[flat])])
+        bias, bias_tau = math.sqrt(floor_var[i]) / FLICKER_FACTOR, taus[i]
+        bias_upper = bias
+    else:
+        bias, bias_tau, bias_upper = None, None, hi[i_min] / FLICKER_FACTOR
+    return AxisNoise(sensor, axis, unit, taus, adev, lo, hi, float(white), float(white_sigma),
+                     float(taus[k]), bias, bias_tau, float(bias_upper), walk, walk_sigma, walk_tau,
+                     float(walk_upper))
+
+
+def characterise(accel: np.ndarray, gyro: np.ndarray, rate: float, source: str) -> NoiseResult:
+    """Allan analysis of (N,3) accelerometer samples in m/s^2 and gyro samples in deg/s."""
+    accel, gyro = np.asarray(accel, float), np.asarray(gyro, float)
+    n = len(accel)
+    if n < MIN_SAMPLES:
+        raise UserError(f"{source}: {n} samples: the Allan deviation needs at least {MIN_SAMPLES} "
+                        "(a long static recording: hours for the bias instability)")
+    if not (math.isfinite(rate) and rate > 0):
+        raise UserError(f"{source}: sample rate {rate!r} Hz: must be a positive number")
+    axes = [allan_axis(accel[:, i], rate, "accel", a, "m/s^2") for i, a in enumerate("xyz")]
+    axes += [allan_axis(gyro[:, i], rate, "gyro", a, "deg/s") for i, a in enumerate("xyz")]
+    return NoiseResult(axes, rate, n / rate, source)
+
+
+def _factors(imu, cal_doc, where: str) -> tuple[np.ndarray, np.ndarray]:
+    """Per-axis factors turning the raw output into m/s^2 and deg/s (the calibration's scale
+    factors for raw counts; the unit's factor otherwise: a scale error of < 0.1 % does not
+    matter for noise figures)."""
+    fa, fg = units.accel_to_mps2_factor(imu.accel_unit), units.gyro_to_dps_factor(imu.gyro_unit)
+    comp = (cal_doc or {}).get("compensation") or {}
+    if fa is None:
+        if comp.get("accel_matrix") is None:
+            raise UserError(f"{where}: accelerometer output in raw counts: give the calibration "
+                            "(--cal) to turn it into m/s^2")
+        fa = np.abs(np.diag(np.asarray(comp["accel_matrix"], float)))
+    if fg is None:
+        if comp.get("gyro_matrix") is None:
+            raise UserError(f"{where}: gyro output in raw counts: give a calibration with a gyro "
+                            "block (--cal) to turn it into deg/s")
+        fg = np.abs(np.diag(np.asarray(comp["gyro_matrix"], float)))
+    return np.broadcast_to(np.asarray(fa, float), (3,)), np.broadcast_to(np.asarray(fg, float), (3,))
+
+
+def from_capture(capture, segment: str | None = None, cal_doc: dict | None = None) -> NoiseResult:
+    """Characterise the named static segment of a capture, or its longest complete one."""
+    statics = capture.complete("static")
+    if segment is not None:
+        seg = capture.segment(segment)
+        if seg.status != "complete" or seg.kind != "static":
+            raise UserError(f"{capture.path}: segment {segment!r} is not a complete static segment")
+    elif not statics:
+        raise UserError(f"{capture.path}: no complete static segment to characterise")
+    else:
+        seg = max(statics, key=lambda s: len(s.data.t))
+    fa, fg = _factors(capture.imu, cal_doc, str(capture.path))
+    source = f"{capture.path}: static segment {seg.name} ({len(seg.data.t)} samples)"
+    return characterise(seg.data.accel * fa, seg.data.gyro * fg, capture.imu.sample_rate_hz, source)
+
+
+def from_samples(path, data, rate: float | None, accel_unit: str, gyro_unit: str,
+                 cal_doc: dict | None = None) -> NoiseResult:
+    """Characterise a still recording read from a CSV (``read_segment_csv``)."""
+    from types import SimpleNamespace
+
+    if rate is None:
+        steps = np.diff(data.t)
+        if len(steps) == 0 or not np.median(steps) > 0:
+            raise UserError(f"{path}: cannot tell the sample rate from the t column: give --rate-hz")
+        rate = 1.0 / float(np.median(steps))
+    fa, fg = _factors(SimpleNamespace(accel_unit=accel_unit, gyro_unit=gyro_unit), cal_doc, str(path))
+    return characterise(data.accel * fa, data.gyro * fg, rate, f"{path} ({len(data.t)} samples)")

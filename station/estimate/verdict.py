@@ -1,0 +1,204 @@
+"""What a calibration may claim: the fit verdict, honest 1-sigma, and the parameters the capture
+determines.  Applied to every estimate before it is written (station.estimate.estimate_capture).
+
+- **Fit verdict** (``fit.verdict``): the reduced chi-square and its p-value against the chi-square
+  distribution of ``dof`` degrees of freedom; the fit *fails* when the p-value is below
+  ``P_FAIL`` and the reduced chi-square above ``REDUCED_CHI2_FAIL`` (the residuals are then
+  larger than the noise explains: a missing effect, a bad segment, a table that slipped).  A fit
+  without redundant data (0 degrees of freedom, or a method without a chi-square) is
+  *untested*, which is said, not hidden.
+- **Honest 1-sigma**: when the fit fails, every 1-sigma is multiplied by sqrt(reduced chi-square)
+  (the Birge ratio) and ``fit.sigma_scale`` says so.
+- **Identifiability**: a base parameter whose 1-sigma is infinite (it lies in the null space of
+  the fit) or above its bound in ``BOUNDS`` is not determined by the capture and is not written.
+  The gyro block (scale factors, misalignments, biases) is written whole or not at all; without
+  any rotation segment it is never written (a scale factor needs a known rotation: the Earth
+  rate alone is 0.004 deg/s).  The inter-triad rotation alone may be missing: the gyro output
+  then stays in its own frame o.
+- **Words for large rotations**: an inter-triad rotation above ``LARGE_ROTATION_DEG``, or a
+  negative scale factor, is named in the notes (axes swapped or inverted between the triads).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.stats import chi2 as chi2_distribution
+
+from station.core.errors import UserError
+from station.model.calibration import Calibration
+
+P_FAIL = 1e-3               # one honest fit in a thousand fails by chance
+REDUCED_CHI2_FAIL = 1.5     # and only when the residuals exceed the noise by half its variance
+LARGE_ROTATION_DEG = 1.0    # an inter-triad rotation above this is named in the notes
+INVERTED_DEG = 90.0         # above this the triads' axes point (partly) the opposite way
+
+# 1-sigma above which a base parameter is "not determined" (stated in docs/calibration-file.md);
+# scale factors relative, biases in their reported unit (raw units: converted through the scale)
+BOUNDS = {"scale": 1e-2,                # 10,000 ppm
+          "misalignment": 3600.0,       # arcsec (1 deg)
+          "inter_triad": 3600.0,        # arcsec (1 deg)
+          "accel_bias": 1e4,            # ug (0.01 g)
+          "gyro_bias": 360.0}           # deg/h (0.1 deg/s)
+
+ACCEL_BLOCK = [f"accel_{q}_{a}" for q, axes in (("scale", "xyz"), ("misalignment", ("yz", "zy", "zx")),
+                                                ("bias", "xyz")) for a in axes]
+GYRO_BLOCK = [f"gyro_{q}_{a}" for q, axes in (("scale", "xyz"), ("misalignment", ("yz", "zy", "zx")),
+                                              ("bias", "xyz")) for a in axes]
+INTER_TRIAD = [f"inter_triad_{a}" for a in "xyz"]
+
+
+def judge(cal: Calibration) -> Calibration:
+    """Add the verdict, widen the 1-sigma of a failing fit, drop what is not determined, name
+    large rotations; in place, and returned."""
+    _verdict(cal)
+    _identifiability(cal)
+    _rotations_in_words(cal)
+    return cal
+
+
+def fit_fails(cal: Calibration) -> bool:
+    return cal.fit.get("verdict", {}).get("result") == "fails"
+
+
+def not_determined(cal: Calibration) -> list:
+    return list(cal.fit.get("not_determined", []))
+
+
+# ------------------------------------------------------------------------------------ verdict
+
+def _verdict(cal: Calibration) -> None:
+    fit = cal.fit
+    chi2, dof = fit.get("chi2"), fit.get("dof")
+    if chi2 is None or dof is None or not dof > 0 or not math.isfinite(chi2):
+        fit["verdict"] = {"result": "untested",
+                          "reason": f"no redundant data ({max(dof, 0) if dof is not None else 'no'} degrees of "
+                                    f"freedom for method {fit.get('method')}): the model cannot be "
+                                    "checked against the measurements"}
+        return
+    reduced = chi2 / dof
+    p_value = float(chi2_distribution.sf(chi2, dof))
+    fails = p_value < P_FAIL and reduced > REDUCED_CHI2_FAIL
+    verdict = {"result": "fails" if fails else "passes", "reduced_chi2": float(reduced), "dof": int(dof),
+               "p_value": p_value}
+    if fails:
+        verdict["reason"] = (f"reduced chi2 {reduced:.3g} (p = {p_value:.2g} for {dof} degrees of freedom): "
+                             "the residuals are larger than the noise explains (a missing effect, a "
+                             "bad segment, data lost or a table that slipped); station diagnose "
+                             "shows where")
+        scale = math.sqrt(reduced)
+        cal.sigma = {name: s * scale for name, s in cal.sigma.items()}
+        fit["sigma_scale"] = scale
+        fit.setdefault("notes", []).append(
+            f"the fit fails (reduced chi2 {reduced:.3g}): every 1-sigma is multiplied by "
+            f"sqrt(reduced chi2) = {scale:.3g}")
+    else:
+        verdict["reason"] = (f"reduced chi2 {reduced:.3g} (p = {p_value:.2g}): the residuals agree "
+                             "with the noise")
+    fit["verdict"] = verdict
+
+
+# ------------------------------------------------------------------------------------ identifiability
+
+def _bound(name: str, cal: Calibration) -> tuple[float, float]:
+    """(1-sigma in the unit of the bound, the bound) of a base parameter."""
+    sigma = cal.sigma.get(name)
+    sigma = math.inf if sigma is None or not math.isfinite(sigma) else sigma
+    values = {n: v for n, v, _ in cal.parameters()}
+    if "_scale_" in name:
+        value = abs(values[name])
+        return (sigma / value if value > 0 else math.inf), BOUNDS["scale"]
+    if "_misalignment_" in name:
+        return sigma, BOUNDS["misalignment"]
+    if name.startswith("inter_triad"):
+        return sigma, BOUNDS["inter_triad"]
+    axis = name[-1]
+    if name.startswith("accel_bias"):
+        if cal.accel_unit == "raw":           # raw -> m/s^2 -> ug through the scale factor
+            scale = abs(values[f"accel_scale_{axis}"]) or math.inf
+            sigma = sigma / scale / 9.80665e-6
+        return sigma, BOUNDS["accel_bias"]
+    if cal.gyro_unit == "raw":                # raw -> deg/s -> deg/h
+        scale = abs(values[f"gyro_scale_{axis}"]) or math.inf
+        sigma = sigma / scale * 3600.0
+    return sigma, BOUNDS["gyro_bias"]
+
+
+def _undetermined(cal: Calibration, names) -> list:
+    out = []
+    for name in names:
+        sigma, bound = _bound(name, cal)
+        if not sigma <= bound:
+            out.append(name)
+    return out
+
+
+def _identifiability(cal: Calibration) -> None:
+    fit = cal.fit
+    notes = fit.setdefault("notes", [])
+    has_sigma = bool(cal.sigma)
+    accel = _undetermined(cal, ACCEL_BLOCK) if has_sigma else []
+    if accel:
+        raise UserError(f"the capture does not determine the accelerometers ({', '.join(accel)}: 1-sigma "
+                        "infinite or above its bound): record more static attitudes (at least 9, each "
+                        "axis up and down)")
+    rotations = fit.get("rotation_segments", fit.get("rotation_pairs"))
+    gyro = _undetermined(cal, GYRO_BLOCK) if has_sigma else []
+    dropped: list = []
+    if rotations == 0 or gyro:
+        why = ("no rotation segment with a known angle" if rotations == 0
+               else f"{', '.join(gyro)}: 1-sigma infinite or above its bound")
+        dropped = GYRO_BLOCK + INTER_TRIAD
+        fit["gyro_calibrated"] = False
+        cal.R_po = np.eye(3)
+        cal.effects = [e for e in cal.effects if e != "inter_triad"]
+        notes.append(f"accelerometer-only calibration: the capture does not determine the gyros ({why}); "
+                     "the gyro parameters are not written and station apply passes the gyro through "
+                     "untouched (unit conversion only)")
+    else:
+        inter = _undetermined(cal, INTER_TRIAD) if has_sigma else []
+        if inter:
+            dropped = INTER_TRIAD
+            cal.R_po = np.eye(3)
+            cal.effects = [e for e in cal.effects if e != "inter_triad"]
+            notes.append(f"the inter-triad rotation is not determined ({', '.join(inter)}: 1-sigma infinite "
+                         "or above its bound): not written; the compensated gyro output stays in the "
+                         "gyros' own frame o")
+    if dropped:
+        fit["not_determined"] = dropped
+        for name in dropped:
+            cal.sigma.pop(name, None)
+
+
+# ------------------------------------------------------------------------------------ words
+
+def _axis_words(axis: np.ndarray) -> str:
+    return "[" + ", ".join(f"{c:+.3f}" for c in axis) + "]"
+
+
+def _rotations_in_words(cal: Calibration) -> None:
+    notes = cal.fit.setdefault("notes", [])
+    for sensor, scale in (("accelerometer", cal.accel_scale), ("gyro", cal.gyro_scale)):
+        if sensor == "gyro" and cal.fit.get("gyro_calibrated") is False:
+            continue
+        for axis, k in zip("xyz", scale):
+            if k < 0:
+                notes.append(f"warning: the {sensor} {axis} axis is inverted (scale factor {k:.6g}): "
+                             "its sign in the IMU's output is opposite to the case marking")
+    if "inter_triad" not in cal.effects:
+        return
+    rotvec = cal.inter_triad_rad
+    angle = math.degrees(float(np.linalg.norm(rotvec)))
+    if angle <= LARGE_ROTATION_DEG:
+        return
+    axis = rotvec / np.linalg.norm(rotvec)
+    if angle > INVERTED_DEG:
+        inverted = [a for a, d in zip("xyz", np.diag(cal.R_po)) if d < 0]
+        notes.append(f"warning: the gyro axes are inverted against the accelerometers': a rotation of "
+                     f"{angle:.1f} deg about {_axis_words(axis)} between the triads (gyro "
+                     f"{', '.join(inverted) or 'axes'} pointing opposite to the accelerometer ones): check "
+                     "the axis order and signs of the IMU's output")
+    else:
+        notes.append(f"warning: a large rotation between the triads: {angle:.2f} deg about "
+                     f"{_axis_words(axis)} (a mounting or axis-order problem; the usual size is arcseconds "
+                     "to arcminutes)")

@@ -1,0 +1,257 @@
+"""Delimited text logs (CSV, ';'-separated, tab- or space-separated) of a continuous IMU
+recording -> a Recording (station/io/importers/recording.py), which becomes a capture bundle.
+
+The layout is told, not guessed from names (docs/real-recordings.md):
+  columns     role -> column, by header name or by index from 0: ax ay az gx gy gz, and for time
+              either ``t`` (a time column, in ``time_unit``: s, ms, us, ns) or ``index`` (a sample
+              counter, times the period 1 / ``rate_hz``); with neither, the row number / rate_hz;
+  delimiter   ',', ';', tab, 'space' (any run of blanks) or None: from the first data line;
+  header      'auto' (a first line with a field that is not a number), 'yes', 'no';
+  units       per triad: m/s^2 | g | raw and deg/s | rad/s | raw; raw with an optional nominal
+              scale (m/s^2 and deg/s per count).
+Lines starting with '#' or '%' and blank lines are skipped.  Presets fill these in for common
+layouts: ``station`` (t,ax,ay,az,gx,gy,gz; s, m/s^2, deg/s), ``imu_tk`` (two files of
+``t x y z``, accelerometer and gyro, blank-separated, as imu_tk's importAsciiData reads them),
+``imucal`` (imucal's session header, time from n_samples / rate).
+
+All input is untrusted: a bad field raises UserError naming the file, the line and the column.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from station.core.errors import UserError
+from station.core.units import ACCEL_UNITS, GYRO_UNITS
+from station.io.importers.recording import Recording
+
+ROLES = ("t", "index", "ax", "ay", "az", "gx", "gy", "gz")
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "ns": 1e-9}
+DELIMITERS = {",": ",", ";": ";", "tab": "\t", "\t": "\t", "space": None, " ": None}
+MAX_BYTES = 2_000_000_000
+PRESETS = {
+    "station": {"columns": {"t": "t", "ax": "ax", "ay": "ay", "az": "az", "gx": "gx", "gy": "gy", "gz": "gz"},
+                "units": ("m/s^2", "deg/s"), "time_unit": "s"},
+    "t-a-g": {"columns": {"t": 0, "ax": 1, "ay": 2, "az": 3, "gx": 4, "gy": 5, "gz": 6},
+              "units": ("m/s^2", "deg/s"), "time_unit": "s"},
+    "imu_tk": {"columns": {"t": 0, "ax": 1, "ay": 2, "az": 3}, "gyro_columns": {"t": 0, "gx": 1, "gy": 2, "gz": 3},
+               "units": ("raw", "raw"), "time_unit": "s", "delimiter": "space", "header": "no"},
+    "imucal": {"columns": {"index": "n_samples", "ax": "acc_x", "ay": "acc_y", "az": "acc_z",
+                           "gx": "gyr_x", "gy": "gyr_y", "gz": "gyr_z"}, "units": ("m/s^2", "deg/s"),
+               "delimiter": ","},
+}
+
+
+def parse_columns(text: str) -> dict:
+    """'t=time,ax=acc_x,...' or 'ax=1,...' -> {role: name or index}."""
+    out = {}
+    for part in text.split(","):
+        if not part.strip():
+            continue
+        role, eq, col = part.partition("=")
+        role, col = role.strip(), col.strip()
+        if not eq or role not in ROLES or not col:
+            raise UserError(f"--columns: {part.strip()!r}: use ROLE=COLUMN with ROLE one of {', '.join(ROLES)}")
+        if role in out:
+            raise UserError(f"--columns: role {role!r} given twice")
+        out[role] = int(col) if col.isdigit() else col
+    return out
+
+
+class _Table:
+    """The data lines of one file, split into fields, with their line numbers."""
+
+    def __init__(self, path: Path, delimiter, header: str):
+        self.path = path
+        try:
+            size = path.stat().st_size
+            if size > MAX_BYTES:
+                raise UserError(f"{path}: {size} bytes: larger than {MAX_BYTES}")
+            raw = path.read_bytes()
+        except OSError as e:
+            raise UserError(f"{path}: cannot read: {e.strerror}") from None
+        try:
+            text = raw.decode("utf-8-sig")
+        except UnicodeDecodeError as e:
+            line = raw[:e.start].count(b"\n") + 1
+            raise UserError(f"{path}: line {line}: not UTF-8 text") from None
+        rows = [(i, line) for i, line in enumerate(text.splitlines(), start=1)
+                if line.strip() and not line.lstrip().startswith(("#", "%"))]
+        if not rows:
+            raise UserError(f"{path}: no data lines")
+        if delimiter is None:
+            first = rows[-1][1] if len(rows) > 1 else rows[0][1]
+            delimiter = ";" if ";" in first else "," if "," in first else "\t" if "\t" in first else None
+        elif delimiter not in DELIMITERS:
+            raise UserError(f"--delimiter: use one of ',', ';', tab, space (not {delimiter!r})")
+        else:
+            delimiter = DELIMITERS[delimiter]
+        self.delimiter = delimiter
+        fields0 = self._split(rows[0][1])
+        if header == "auto":
+            header = "yes" if any(not _is_number(f) for f in fields0) else "no"
+        if header not in ("yes", "no"):
+            raise UserError(f"--header: yes, no or auto, not {header!r}")
+        self.names = [f.strip() for f in fields0] if header == "yes" else None
+        if header == "yes":
+            rows = rows[1:]
+        if not rows:
+            raise UserError(f"{path}: a header and no data lines")
+        self.numbers = np.array([i for i, _ in rows])
+        self.fields = [self._split(line) for _, line in rows]
+        width = len(self.names) if self.names else len(self.fields[0])
+        counts = np.fromiter((len(f) for f in self.fields), int, len(self.fields))
+        bad = np.flatnonzero(counts != width)
+        if len(bad):
+            k = int(bad[0])
+            raise UserError(f"{path}: line {self.numbers[k]}: {counts[k]} fields, "
+                            f"{'the header has' if self.names else 'the first line has'} {width} "
+                            f"(delimiter {_show_delimiter(self.delimiter)})")
+        self.width = width
+
+    def _split(self, line: str) -> list[str]:
+        return line.split(self.delimiter) if self.delimiter else line.split()
+
+    def index_of(self, role: str, col) -> int:
+        if isinstance(col, int):
+            if not 0 <= col < self.width:
+                raise UserError(f"{self.path}: column {col} for {role}: the lines have {self.width} fields "
+                                f"(indices 0-{self.width - 1})")
+            return col
+        if self.names is None:
+            raise UserError(f"{self.path}: column {col!r} for {role}: the file has no header; give indices")
+        if col not in self.names:
+            raise UserError(f"{self.path}: line {self.numbers[0] - 1}: no column {col!r} for {role} "
+                            f"(header: {', '.join(self.names)[:200]})")
+        return self.names.index(col)
+
+    def column(self, role: str, col) -> np.ndarray:
+        j = self.index_of(role, col)
+        texts = [f[j] for f in self.fields]
+        try:
+            values = np.array(texts, dtype=float)
+        except ValueError:
+            for k, text in enumerate(texts):
+                if not _is_number(text):
+                    raise UserError(f"{self.path}: line {self.numbers[k]}: column {_name(self, j)}: not a number: "
+                                    f"{text.strip()[:40]!r}") from None
+            raise
+        bad = np.flatnonzero(~np.isfinite(values))
+        if len(bad):
+            k = int(bad[0])
+            raise UserError(f"{self.path}: line {self.numbers[k]}: column {_name(self, j)}: not finite "
+                            f"({texts[k].strip()[:20]!r}); {len(bad)} such value(s) in this column")
+        return values
+
+
+def _name(table, j) -> str:
+    return repr(table.names[j]) if table.names else str(j)
+
+
+def _show_delimiter(d) -> str:
+    return {None: "blanks", "\t": "tab"}.get(d, repr(d))
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
+
+
+def _times(table: _Table, cols: dict, time_unit: str, rate_hz: float | None) -> tuple[np.ndarray, str]:
+    if "t" in cols and "index" in cols:
+        raise UserError("--columns: give either a time column 't' or a sample counter 'index', not both")
+    if "t" in cols:
+        if time_unit not in TIME_UNITS:
+            raise UserError(f"--time-unit: one of {', '.join(TIME_UNITS)}, not {time_unit!r}")
+        t = table.column("t", cols["t"]) * TIME_UNITS[time_unit]
+        return t - t[0], f"column {_name(table, table.index_of('t', cols['t']))} in {time_unit}"
+    if rate_hz is None:
+        raise UserError(f"{table.path}: no time column: give --rate-hz (with a sample counter 'index' or the "
+                        "row number), or a time column 't'")
+    if "index" in cols:
+        n = table.column("index", cols["index"])
+        return (n - n[0]) / rate_hz, f"column {_name(table, table.index_of('index', cols['index']))} / {rate_hz:g} Hz"
+    return np.arange(len(table.fields)) / rate_hz, f"row number / {rate_hz:g} Hz"
+
+
+def read_delimited(path, *, preset: str | None = None, columns: dict | None = None, delimiter=None,
+                   header: str | None = None, accel_unit: str | None = None, gyro_unit: str | None = None,
+                   accel_nominal: float | None = None, gyro_nominal: float | None = None,
+                   time_unit: str | None = None, rate_hz: float | None = None, gyro_path=None) -> Recording:
+    path = Path(path)
+    if preset is not None and preset not in PRESETS:
+        raise UserError(f"--preset: one of {', '.join(PRESETS)}, not {preset!r}")
+    p = PRESETS.get(preset, {})
+    cols = dict(p.get("columns", {}))
+    if columns:
+        cols.update(columns)
+    if not cols:
+        cols = dict(PRESETS["t-a-g"]["columns"])
+    header = header or p.get("header", "auto")
+    delimiter = delimiter if delimiter is not None else p.get("delimiter")
+    time_unit = time_unit or p.get("time_unit", "s")
+    units = p.get("units", ("m/s^2", "deg/s"))
+    accel_unit, gyro_unit = accel_unit or units[0], gyro_unit or units[1]
+    if accel_unit not in ACCEL_UNITS or gyro_unit not in GYRO_UNITS:
+        raise UserError(f"units: accelerometer one of {', '.join(ACCEL_UNITS)}, gyro one of {', '.join(GYRO_UNITS)}")
+    for name, unit, nominal in (("--accel-nominal", accel_unit, accel_nominal), ("--gyro-nominal", gyro_unit, gyro_nominal)):
+        if nominal is not None and unit != "raw":
+            raise UserError(f"{name} is the scale of raw counts: it needs the unit raw (declared: {unit})")
+        if nominal is not None and not (math.isfinite(nominal) and nominal > 0):
+            raise UserError(f"{name} must be a positive number, got {nominal!r}")
+    if rate_hz is not None and not (math.isfinite(rate_hz) and rate_hz > 0):
+        raise UserError(f"--rate-hz must be a positive number, got {rate_hz!r}")
+    table = _Table(path, delimiter, header)
+    t, time_from = _times(table, cols, time_unit, rate_hz)
+    accel_roles = ("ax", "ay", "az")
+    gyro_roles = ("gx", "gy", "gz")
+    missing = [r for r in accel_roles if r not in cols]
+    if missing:
+        raise UserError(f"--columns: no column for {', '.join(missing)}")
+    accel = np.column_stack([table.column(r, cols[r]) for r in accel_roles])
+    info = {"preset": preset, "delimiter": _show_delimiter(table.delimiter), "header": table.names is not None}
+    if gyro_path is not None or preset == "imu_tk":
+        if gyro_path is None:
+            raise UserError(f"{path}: the imu_tk layout has the gyro in a second file: give --gyro-file")
+        gcols = dict(p.get("gyro_columns", {"t": 0, "gx": 1, "gy": 2, "gz": 3}))
+        gtable = _Table(Path(gyro_path), delimiter, header)
+        tg, _ = _times(gtable, {k: v for k, v in gcols.items() if k in ("t", "index")}, time_unit, rate_hz)
+        gyro_raw = np.column_stack([gtable.column(r, gcols[r]) for r in gyro_roles])
+        gyro, how = _align(path, Path(gyro_path), table, gtable, cols, gcols, time_unit, gyro_raw, rate_hz)
+        info.update({"gyro_file": Path(gyro_path).name, "gyro_alignment": how})
+    else:
+        missing = [r for r in gyro_roles if r not in cols]
+        if missing:
+            raise UserError(f"--columns: no column for {', '.join(missing)}")
+        gyro = np.column_stack([table.column(r, cols[r]) for r in gyro_roles])
+    return Recording(source=str(path), t=t, accel=accel, gyro=gyro, accel_unit=accel_unit, gyro_unit=gyro_unit,
+                     accel_nominal=accel_nominal, gyro_nominal=gyro_nominal, lines=table.numbers, where="line",
+                     time_from=time_from, info=info)
+
+
+def _align(path, gpath, table, gtable, cols, gcols, time_unit, gyro, rate_hz):
+    """Gyro samples at the accelerometer's times: the same rows when the stamps agree (imu_tk's
+    files from one IMU), else linear interpolation within the common span."""
+    if "t" not in cols or "t" not in gcols:
+        if len(gtable.fields) != len(table.fields):
+            raise UserError(f"{gpath}: {len(gtable.fields)} data lines, {path} has {len(table.fields)}: without "
+                            "time stamps the two files must have one line per sample each")
+        return gyro, "row by row"
+    ta = table.column("t", cols["t"]) * TIME_UNITS[time_unit]
+    tg = gtable.column("t", gcols["t"]) * TIME_UNITS[time_unit]
+    if len(ta) == len(tg):
+        step = np.median(np.diff(ta)) if len(ta) > 1 else 1.0
+        if np.all(np.abs(ta - tg) <= 0.5 * step):
+            return gyro, "row by row (same stamps)"
+    if not (np.all(np.diff(tg) > 0)):
+        k = int(np.flatnonzero(~(np.diff(tg) > 0))[0]) + 1
+        raise UserError(f"{gpath}: line {gtable.numbers[k]}: time does not increase")
+    if ta[0] < tg[0] or ta[-1] > tg[-1]:
+        raise UserError(f"{gpath}: the gyro's time stamps ({tg[0]:.6g}-{tg[-1]:.6g} s) do not cover the "
+                        f"accelerometer's ({ta[0]:.6g}-{ta[-1]:.6g} s)")
+    return np.column_stack([np.interp(ta, tg, gyro[:, i]) for i in range(3)]), "interpolated to the accelerometer's stamps"

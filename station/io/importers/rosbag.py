@@ -1,0 +1,135 @@
+"""ROS bags (ROS 1 ``.bag``; ROS 2 bag directories in sqlite3 ``.db3`` or MCAP storage) of
+``sensor_msgs/Imu`` messages -> a Recording (station/io/importers/recording.py), read with the
+pure-Python ``rosbags`` package.
+
+``sensor_msgs/Imu`` carries ``linear_acceleration`` in m/s^2 and ``angular_velocity`` in rad/s
+(REP 103, the message definition), so the units are fixed.  ``orientation`` and the three
+covariance matrices are ignored.  Time is each message's ``header.stamp`` (the sensor's time,
+the default) or, with ``stamps="bag"``, the time the recorder received it.  One topic is read:
+the only Imu topic of the bag, or the one named.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from station.core.errors import UserError
+from station.io.importers.recording import Recording
+
+IMU_TYPE = "sensor_msgs/msg/Imu"
+MAX_MESSAGES = 20_000_000
+STAMPS = ("header", "bag")
+FORMATS = ("rosbag1", "sqlite3", "mcap")
+
+
+def _typestore():
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_HUMBLE)
+
+
+def read_rosbag(path, *, topic: str | None = None, stamps: str = "header") -> Recording:
+    from rosbags.highlevel import AnyReader
+
+    path = Path(path)
+    if stamps not in STAMPS:
+        raise UserError(f"--stamps: one of {', '.join(STAMPS)}, not {stamps!r}")
+    if not path.exists():
+        raise UserError(f"{path}: no such file or directory")
+    try:
+        reader = AnyReader([path], default_typestore=_typestore())
+        reader.open()
+    except Exception as e:        # rosbags raises its own error types for every kind of bad bag
+        raise UserError(f"{path}: not a readable ROS bag: {str(e).splitlines()[0] if str(e) else type(e).__name__}") from None
+    try:
+        imu = [c for c in reader.connections if c.msgtype == IMU_TYPE]
+        topics = sorted({c.topic for c in imu})
+        if topic is None:
+            if len(topics) != 1:
+                others = sorted({f"{c.topic} ({c.msgtype})" for c in reader.connections})
+                raise UserError(f"{path}: {len(topics)} {IMU_TYPE} topics ({', '.join(topics) or 'none'}): "
+                                + ("name one with --topic" if topics else f"the bag has {', '.join(others)[:300]}"))
+            topic = topics[0]
+        elif topic not in topics:
+            raise UserError(f"{path}: no {IMU_TYPE} topic {topic!r} (Imu topics: {', '.join(topics) or 'none'})")
+        conns = [c for c in imu if c.topic == topic]
+        count = sum(c.msgcount for c in conns)
+        if count > MAX_MESSAGES:
+            raise UserError(f"{path}: topic {topic}: {count} messages, more than {MAX_MESSAGES}")
+        t_ns = np.empty(count, dtype=np.int64)
+        data = np.empty((count, 6))
+        k = 0
+        for conn, bag_ns, raw in reader.messages(connections=conns):
+            if k >= count:
+                raise UserError(f"{path}: topic {topic}: more messages than the bag's index says ({count})")
+            try:
+                msg = reader.deserialize(raw, conn.msgtype)
+                a, w = msg.linear_acceleration, msg.angular_velocity
+                data[k] = (a.x, a.y, a.z, w.x, w.y, w.z)
+                t_ns[k] = (msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+                           if stamps == "header" else bag_ns)
+            except Exception as e:
+                raise UserError(f"{path}: topic {topic}: message {k + 1}: cannot be decoded as {IMU_TYPE}: "
+                                f"{str(e)[:120] or type(e).__name__}") from None
+            k += 1
+    finally:
+        reader.close()
+    t_ns, data = t_ns[:k], data[:k]
+    if k and stamps == "header" and np.all(t_ns == t_ns[0]):
+        raise UserError(f"{path}: topic {topic}: every header stamp is {t_ns[0]} ns: the driver does not "
+                        "stamp its messages; use --stamps bag (the recorder's time)")
+    t = (t_ns - (t_ns[0] if k else 0)).astype(float) * 1e-9
+    info = {"format": "ROS bag", "topic": topic, "stamps": stamps,
+            "ignored": "orientation and the covariance matrices", "first_stamp_ns": int(t_ns[0]) if k else None}
+    return Recording(source=str(path), t=t, accel=data[:, :3], gyro=data[:, 3:], accel_unit="m/s^2",
+                     gyro_unit="rad/s", lines=np.arange(1, k + 1), where="message",
+                     time_from=f"{'header.stamp' if stamps == 'header' else 'bag receive time'} of {topic}",
+                     info=info)
+
+
+def write_imu_bag(path, t_s, accel_mps2, gyro_rads, *, fmt: str = "mcap", topic: str = "/imu/data",
+                  frame_id: str = "imu_link", start_ns: int = 1_700_000_000_000_000_000) -> Path:
+    """Write samples as sensor_msgs/Imu messages into a new bag (``rosbag1``: a .bag file;
+    ``sqlite3``/``mcap``: a ROS 2 bag directory), header stamps and bag times from ``t_s``; no
+    orientation (its covariance[0] = -1, as the message definition asks), covariances 0."""
+    from rosbags.typesys.stores.ros2_humble import (builtin_interfaces__msg__Time as Time,
+                                                    geometry_msgs__msg__Quaternion as Quaternion,
+                                                    geometry_msgs__msg__Vector3 as Vector3,
+                                                    sensor_msgs__msg__Imu as Imu, std_msgs__msg__Header as Header)
+
+    if fmt not in FORMATS:
+        raise ValueError(f"fmt: one of {FORMATS}")
+    path = Path(path)
+    store = _typestore()
+    no_orientation = np.zeros(9)
+    no_orientation[0] = -1.0
+    zero = np.zeros(9)
+
+    def messages():
+        for k in range(len(t_s)):
+            ns = start_ns + int(round(t_s[k] * 1e9))
+            a, w = accel_mps2[k], gyro_rads[k]
+            msg = Imu(header=Header(stamp=Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id=frame_id),
+                      orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0), orientation_covariance=no_orientation,
+                      angular_velocity=Vector3(x=float(w[0]), y=float(w[1]), z=float(w[2])), angular_velocity_covariance=zero,
+                      linear_acceleration=Vector3(x=float(a[0]), y=float(a[1]), z=float(a[2])),
+                      linear_acceleration_covariance=zero)
+            yield ns, msg
+
+    if fmt == "rosbag1":
+        from rosbags.rosbag1 import Writer as Writer1
+
+        with Writer1(path) as writer:
+            conn = writer.add_connection(topic, IMU_TYPE, typestore=store)
+            for ns, msg in messages():
+                writer.write(conn, ns, store.serialize_ros1(msg, IMU_TYPE))
+        return path
+    from rosbags.rosbag2 import StoragePlugin, Writer as Writer2
+
+    plugin = StoragePlugin.MCAP if fmt == "mcap" else StoragePlugin.SQLITE3
+    with Writer2(path, version=9, storage_plugin=plugin) as writer:
+        conn = writer.add_connection(topic, IMU_TYPE, typestore=store)
+        for ns, msg in messages():
+            writer.write(conn, ns, store.serialize_cdr(msg, IMU_TYPE))
+    return path

@@ -1,0 +1,86 @@
+"""Noise figures on file: the ``noise`` block of a calibration file, and ``station-noise/1``
+files for recordings that have no calibration (a ``noise`` scheme run).  docs/calibration-file.md
+describes the block."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import yaml
+
+from station.core.errors import UserError
+
+FORMAT = "station-noise/1"
+CALIBRATION_FORMAT = "station-calibration/1"
+
+
+def _load(path: Path) -> dict:
+    try:
+        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as e:
+        raise UserError(f"{path}: cannot read: {e.strerror}") from None
+    except UnicodeDecodeError:
+        raise UserError(f"{path}: not UTF-8 text") from None
+    except yaml.YAMLError as e:
+        raise UserError(f"{path}: not valid YAML: {str(e).splitlines()[0]}") from None
+    if not isinstance(doc, dict):
+        raise UserError(f"{path}: not a mapping")
+    return doc
+
+
+def _dump(path: Path, doc: dict) -> Path:
+    text = yaml.safe_dump(doc, sort_keys=False, width=100)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "x", encoding="utf-8") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except OSError as e:
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+        raise UserError(f"{path}: cannot write: {e.strerror}") from None
+    return path
+
+
+def write_into_calibration(path, block: dict) -> Path:
+    """Add (or replace) the ``noise`` block of a calibration file; everything else is kept."""
+    from station.io.calfile import read_calfile
+
+    path = Path(path)
+    read_calfile(path)                      # a valid calibration file, or one clear line
+    doc = _load(path)
+    doc["noise"] = block
+    return _dump(path, doc)
+
+
+def write_noise_file(path, block: dict, imu_model=None, imu_serial=None) -> Path:
+    return _dump(Path(path), {"format": FORMAT, "imu": {"model": imu_model, "serial": imu_serial},
+                              "noise": block})
+
+
+def noise_serial(path) -> str | None:
+    """The IMU serial a noise or calibration file names, if any."""
+    doc = _load(Path(path))
+    serial = (doc.get("imu") or {}).get("serial") if isinstance(doc.get("imu"), dict) else None
+    if serial is None and isinstance(doc.get("provenance"), dict):
+        serial = doc["provenance"].get("imu_serial")
+    return serial if isinstance(serial, str) else None
+
+
+def read_noise_block(path) -> dict:
+    """The noise block of a station-noise/1 file or of a calibration file."""
+    path = Path(path)
+    doc = _load(path)
+    if doc.get("format") not in (FORMAT, CALIBRATION_FORMAT):
+        raise UserError(f"{path}: field 'format': expected {FORMAT} or {CALIBRATION_FORMAT}")
+    block = doc.get("noise")
+    if not isinstance(block, dict):
+        raise UserError(f"{path}: field 'noise': missing (run `station noise` first)")
+    kal = block.get("kalibr")
+    if not isinstance(kal, dict):
+        raise UserError(f"{path}: field 'noise.kalibr': missing or not a mapping")
+    return block

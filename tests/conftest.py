@@ -1,0 +1,23 @@
+"""Shared fixtures: every test files calibrations into a temporary history store, never into the
+user's data directory; one short optimal9 dry run for the export, history and report tests."""
+import pytest
+
+from station.cli import main
+
+SHORT = ["--dwell-s", "20", "--rotation-s", "36"]   # one revolution at 10 deg/s: a quick run
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _history_store(tmp_path_factory):
+    mp = pytest.MonkeyPatch()
+    mp.setenv("STATION_HISTORY_DIR", str(tmp_path_factory.mktemp("history-store")))
+    yield
+    mp.undo()
+
+
+@pytest.fixture(scope="session")
+def optimal9_run(tmp_path_factory):
+    """A short optimal9 dry run (seed 13): capture bundle with calibration.yaml."""
+    out = tmp_path_factory.mktemp("optimal9") / "cap"
+    assert main(["run", "--scheme", "optimal9", "--sim", "--seed", "13", "--out", str(out), *SHORT]) == 0
+    return out

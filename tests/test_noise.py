@@ -1,0 +1,125 @@
+"""station noise: the Allan deviation's noise terms against the simulated bench's known white
+noise, and against a synthetic random walk (the simulated IMU has white noise only)."""
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from station.cli import main
+from station.estimate.noise import characterise
+from station.io.capture import read_capture
+
+UG = 9.80665e-6
+
+
+@pytest.fixture(scope="module")
+def noise_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("noise") / "cap"
+    assert main(["run", "--scheme", "noise", "--sim", "--seed", "5", "--dwell-s", "300", "--out", str(out)]) == 0
+    return out
+
+
+def test_noise_run_recovers_the_simulated_white_noise_densities(noise_run):
+    doc = yaml.safe_load((noise_run / "noise.yaml").read_text())
+    truth = yaml.safe_load((noise_run / "sim_truth.yaml").read_text())
+    assert doc["format"] == "station-noise/1" and doc["imu"]["serial"] == "SIM-5"
+    block = doc["noise"]
+    assert block["sample_rate_hz"] == 100.0 and block["duration_s"] == pytest.approx(300.0)
+    # The reported 1 sigma is the half-width of the 68 % interval of sigma(tau) at the tau read
+    # (chi-squared with Greenhall's degrees of freedom: ~0.3 % with 30000 samples); six axes at
+    # 4 sigma: a false alarm of 6 * 6e-5.
+    for sensor, key, true in (("accel", "white_noise_ug_rthz", truth["accelerometer"]["noise_density_ug_rthz"]),
+                              ("gyro", "white_noise_dph_rthz", truth["gyroscope"]["noise_density_dph_rthz"])):
+        for axis in "xyz":
+            r = block[sensor][axis]
+            sigma = r[key.replace("white_noise", "white_noise_sigma")]
+            assert 0 < sigma < 0.01 * true
+            assert abs(r[key] - true) < 4 * sigma, (sensor, axis, r[key], true, sigma)
+    # white noise only: no flicker floor, no random walk may be claimed; upper bounds instead
+    for axis in "xyz":
+        assert block["accel"][axis]["bias_instability_ug"] is None
+        assert block["accel"][axis]["random_walk_ug_rth"] is None
+        assert block["gyro"][axis]["bias_instability_dph"] is None
+        assert block["gyro"][axis]["bias_instability_upper_dph"] > 0
+    kal = block["kalibr"]
+    assert kal["accelerometer_random_walk_is_upper_bound"] and kal["gyroscope_random_walk_is_upper_bound"]
+    assert kal["gyroscope_noise_density"] == pytest.approx(
+        math.radians(max(block["gyro"][a]["white_noise_dph_rthz"] for a in "xyz") / 3600.0))
+    assert (noise_run / "allan.png").stat().st_size > 10_000
+
+
+def test_random_walk_and_white_noise_of_a_synthetic_signal():
+    """White noise N = 1 unit/sqrt(Hz) plus a bias random walk K = 0.1 unit/sqrt(s) (crossing at
+    tau = sqrt(3) N / K = 17 s), 2e5 samples at 10 Hz: both terms within 4 sigma of the reported
+    1 sigma (the confidence half-width at the tau read)."""
+    rng = np.random.default_rng(21)
+    fs, n, N, K = 10.0, 200_000, 1.0, 0.1
+    y = N * math.sqrt(fs) * rng.standard_normal((n, 3)) + np.cumsum(K / math.sqrt(fs) * rng.standard_normal((n, 3)), axis=0)
+    result = characterise(y, y, fs, "synthetic")
+    for a in result.axes[:3]:
+        assert abs(a.white - N) < 4 * a.white_sigma
+        assert a.random_walk is not None and abs(a.random_walk - K) < 4 * a.random_walk_sigma
+        assert a.bias_instability is None   # the dip between the two slopes is no flicker floor
+
+
+def test_flicker_floor_is_found_as_bias_instability():
+    """White noise plus a bias that wanders as flicker (1/f) noise, strong enough for a plateau
+    from ~10 s on: a floor is reported, at the plateau's level / 0.664 (between the lowest and
+    the median point of the flat part: B is read at its lowest significant point)."""
+    rng = np.random.default_rng(4)
+    fs, n = 10.0, 2**17
+    white = 0.02 * math.sqrt(fs) * rng.standard_normal(n)
+    spectrum = np.fft.rfft(rng.standard_normal(n))
+    f = np.fft.rfftfreq(n, 1 / fs)
+    f[0] = f[1]
+    flicker = np.fft.irfft(spectrum / np.sqrt(f), n)
+    flicker *= 0.05 / np.std(flicker)
+    y = np.column_stack([white + flicker] * 3)
+    a = characterise(y, y, fs, "flicker").axes[0]
+    assert a.bias_instability is not None and a.random_walk is None
+    plateau = a.adev[a.taus > 10.0]
+    assert 0.9 * plateau.min() <= 0.664 * a.bias_instability <= np.median(plateau)
+
+
+def test_noise_of_a_csv_file_writes_noise_yaml_beside_it(noise_run, tmp_path):
+    seg = read_capture(noise_run).complete("static")[0]
+    csv = tmp_path / "still.csv"
+    csv.write_text((noise_run / seg.file).read_text())
+    assert main(["noise", str(csv)]) == 0
+    block = yaml.safe_load((tmp_path / "noise.yaml").read_text())["noise"]
+    assert block["sample_rate_hz"] == pytest.approx(100.0)
+    assert (tmp_path / "allan.png").exists()
+
+
+def test_noise_refuses_too_short_a_recording(tmp_path, capsys):
+    csv = tmp_path / "short.csv"
+    csv.write_text("t,ax,ay,az,gx,gy,gz\n" + "".join(f"{i / 100},0,0,9.8,0,0,{i % 3}\n" for i in range(50)))
+    assert main(["noise", str(csv)]) == 2
+    assert "short.csv" in capsys.readouterr().err
+
+
+def test_kalibr_export_takes_the_noise_of_a_noise_run(noise_run, optimal9_run, tmp_path, capsys):
+    """The noise run is of IMU SIM-5, the calibration of SIM-13: refused unless --force."""
+    target = tmp_path / "imu.yaml"
+    cmd = ["export", str(optimal9_run / "calibration.yaml"), "--to", "kalibr",
+           "--noise", str(noise_run / "noise.yaml"), "-o", str(target)]
+    assert main(cmd) == 2
+    assert "'SIM-5'" in capsys.readouterr().err and not target.exists()
+    assert main([*cmd, "--force"]) == 0
+    doc = yaml.safe_load(target.read_text())
+    kal = yaml.safe_load((noise_run / "noise.yaml").read_text())["noise"]["kalibr"]
+    assert all(isinstance(doc[k], float) and doc[k] == kal[k] for k in
+               ("accelerometer_noise_density", "accelerometer_random_walk", "gyroscope_noise_density",
+                "gyroscope_random_walk", "update_rate"))
+    assert "(upper bound)" in target.read_text()
+
+
+def test_noise_is_not_written_into_another_imus_calibration(noise_run, optimal9_run, tmp_path, capsys):
+    import shutil
+
+    cal = tmp_path / "cal.yaml"
+    shutil.copy(optimal9_run / "calibration.yaml", cal)
+    before = cal.read_bytes()
+    assert main(["noise", str(noise_run), "--cal", str(cal)]) == 2
+    assert "SIM-13" in capsys.readouterr().err and cal.read_bytes() == before

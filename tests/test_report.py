@@ -1,0 +1,92 @@
+"""The report page: one self-contained HTML file, checked in a real headless browser (Debian's
+chromium; .ci/run installs it and sets STATION_REQUIRE_BROWSER=1 so that CI cannot skip this)."""
+import os
+import re
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+from station.cli import main
+
+BROWSER = shutil.which("chromium") or shutil.which("chromium-browser")
+HEADER_RGB = (0x1d, 0x2a, 0x44)
+BAR_ORANGE = (255, 127, 14)          # matplotlib tab:orange: the rotation bars of the residual plot
+
+
+@pytest.fixture(scope="module")
+def hidden_effect_capture(tmp_path_factory):
+    """A short optimal9 run of an IMU with accelerometer non-linearity (300, -200, 400 ug/g^2)
+    that the base model lacks: diagnose --auto adds accel_nonlinearity, so the page shows a
+    before/after step."""
+    import yaml
+
+    from sim_devices.truth import default_truth
+
+    base = tmp_path_factory.mktemp("report")
+    truth = default_truth(5).to_yaml_dict()
+    truth["accelerometer"]["nonlinearity_ug_per_g2"] = [300.0, -200.0, 400.0]
+    (base / "truth.yaml").write_text(yaml.safe_dump(truth))
+    cap = base / "nonlinear-cap"
+    assert main(["run", "--sim", "--seed", "5", "--sim-truth", str(base / "truth.yaml"), "--out", str(cap),
+                 "--dwell-s", "20", "--rotation-s", "36"]) == 0
+    return cap
+
+
+@pytest.fixture(scope="module")
+def page(hidden_effect_capture):
+    assert main(["report", str(hidden_effect_capture)]) == 0
+    return hidden_effect_capture / "report.html"
+
+
+def test_the_page_is_self_contained_and_says_what_a_reader_needs(page):
+    text = page.read_text(encoding="utf-8")
+    # nothing fetched from elsewhere: every src is a data: URI, no stylesheet or script link
+    sources = re.findall(r"src='([^']*)'", text)
+    assert sources and all(s.startswith("data:image/png;base64,") for s in sources)
+    assert "<link" not in text and "<script" not in text and "http" not in text.split("</style>")[1]
+    for needed in ("nonlinear-cap", "SIM-5", "optimal9", "recorded (UTC)", "accel_scale_x", "± 1σ",
+                   "fit verdict", "Step 1: added accel_nonlinearity", "predicted χ² drop", "Candidate effects",
+                   "Allan deviation", "white noise"):
+        assert needed in text, needed
+    # the residual panels share one y axis: one figure, before and after
+    assert text.count("RMS whitened residual per segment") == 1
+
+
+def test_diagnose_report_writes_the_same_kind_of_page(hidden_effect_capture, tmp_path):
+    out = tmp_path / "rep"
+    assert main(["diagnose", str(hidden_effect_capture), "--report", str(out)]) == 0
+    text = (out / "index.html").read_text(encoding="utf-8")
+    assert "nonlinear-cap" in text and "SIM-5" in text and "Candidate effects" in text
+    assert all(s.startswith("data:") for s in re.findall(r"src='([^']*)'", text))
+    assert (out / "residuals_per_segment.png").stat().st_size > 1000
+
+
+def test_a_noise_recording_gets_a_page_without_a_diagnosis(tmp_path):
+    cap = tmp_path / "still"
+    assert main(["run", "--scheme", "noise", "--sim", "--seed", "2", "--dwell-s", "30", "--out", str(cap)]) == 0
+    assert main(["report", str(cap), "-o", str(tmp_path / "r.html")]) == 0
+    text = (tmp_path / "r.html").read_text(encoding="utf-8")
+    assert "nothing to diagnose" in text and "Allan deviation" in text
+
+
+@pytest.mark.skipif(BROWSER is None and os.environ.get("STATION_REQUIRE_BROWSER") != "1",
+                    reason="no chromium (CI installs it)")
+def test_chromium_renders_the_page_styled_with_its_figures(page, tmp_path):
+    assert BROWSER is not None, "STATION_REQUIRE_BROWSER=1 but no chromium on PATH"
+    from PIL import Image
+
+    shot = tmp_path / "page.png"
+    subprocess.run([BROWSER, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
+                    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                    f"--user-data-dir={tmp_path / 'profile'}", "--hide-scrollbars",
+                    "--window-size=1200,9000", f"--screenshot={shot}", page.as_uri()],
+                   check=True, capture_output=True, timeout=120)
+    img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+    assert img.shape[:2] == (9000, 1200)
+    # the stylesheet applied: the header band is the page's dark blue
+    assert np.abs(img[20, 20] - HEADER_RGB).max() <= 3
+    # the embedded figures decoded and drawn: the residual plot's orange bars cover pixels
+    orange = np.all(np.abs(img - BAR_ORANGE) <= 6, axis=2).sum()
+    assert orange > 2000, orange
