@@ -647,12 +647,9 @@ def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "aut
     ``model.unobservable``, and the fit is repeated: the parameters the capture does reveal then
     carry the uncertainty of the ones it does not, instead of a bias from fixing them.  Which
     ones are blind barely depends on where the fit ends, so the start is examined first."""
-    if not s.rotations and not s.hand_rotations:
-        raise UserError("no rotation segment the least-squares model can use (the gyro scale factors "
-                        "and misalignments need turns)" + (": " + "; ".join(s.skipped) if s.skipped else ""))
     model = Model(s, list(effects or []), attitudes)
     model.unobservable = []
-    if not s.rotations:
+    if not s.rotations and not s.hand_rotations:
         # nothing turned by a known angle: the gyro block is held only by wide priors (so the fit
         # stays solvable); station.estimate.verdict then leaves it out of the calibration
         L = model.layout
@@ -679,7 +676,7 @@ def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "aut
     # gravity along an axis turned only by hand is set by its weak prior, not by the data
     blind_kappa = sum(1 for k in range(s.groups) if not any(rot.steady for rot in s.rotations if rot.group == k))
     dof = len(r) - model.layout.size + blind_kappa
-    if not s.rotations:     # the gyro block's wide priors are not data
+    if not s.rotations and not s.hand_rotations:     # the gyro block's wide priors are not data
         dof -= sum(model.layout[b].stop - model.layout[b].start for b in NO_ROTATION_PRIORS)
     return FitResult(x=x, covariance=cov, model=model, chi2=float(r @ r), dof=dof, residuals=r,
                      rank_deficient=_null_columns(J))
