@@ -143,6 +143,8 @@ def _identifiability(cal: Calibration) -> None:
                         "infinite or above its bound): record more static attitudes (at least 9, each "
                         "axis up and down)")
     rotations = fit.get("rotation_segments", fit.get("rotation_pairs"))
+    if rotations is not None:       # hand turns of unknown angle calibrate the gyros too
+        rotations += fit.get("hand_rotations", 0)
     gyro = _undetermined(cal, GYRO_BLOCK) if has_sigma else []
     dropped: list = []
     if rotations == 0 or gyro:
