@@ -23,7 +23,9 @@ class SimSegment:
 
     kind   "static" | "rotation"
     t      (N,) the IMU's time stamps, s, continuing across segments (gaps for moves); the
-           sample stamped t was taken at table time t + bench.time_offset_s
+           sample stamped t was taken at table time t + bench.time_offset_s (with
+           bench.time_stamp_jitter_ms the stamps scatter about that regular grid, the
+           samples do not)
     accel  (N,3) raw accelerometer output (m/s^2 nominal)
     gyro   (N,3) raw gyro output (deg/s nominal)
     temp   (N,) IMU temperature, deg C
