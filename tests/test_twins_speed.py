@@ -40,7 +40,8 @@ def test_a_reader_that_falls_behind_a_fast_twin_is_told_so():
         with open_imu(server.imu_path, "vectornav", ImuSettings(frame_timeout_s=2.0)) as imu:
             first = imu.read(100)
             wall0 = time.monotonic()
-            time.sleep(1.0)             # the reader pauses: 300 s of device time, twice the buffer
+            time.sleep(3.0)             # the reader pauses: 900 s of device time, more than the
+                                        #   twin's send buffer holds (2 s of wall time)
             blocks = []
             while imu.counters.missing_frames == 0 and sum(map(len, blocks)) < 100000:
                 blocks.append(imu.read(5000))

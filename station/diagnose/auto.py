@@ -99,21 +99,26 @@ def conclude(d: Diagnosis, summaries, steps=(), search_terms: bool = True) -> Di
     to add, search the dictionary of terms outside the library and say what it found."""
     if not fit_fails(d.result):
         return d
-    added = f" after adding {', '.join(st.added for st in steps)}" if steps else ""
-    pending = [c for c in d.candidates if c.significant and c.effect not in {r.effect for r in d.rejected}]
-    if pending and not steps and not d.rejected:
-        return d                # plain diagnose: the verdict already names the likely effect
-    if search_terms:
-        from station.diagnose import terms
 
-        d.proposal = terms.propose(d, summaries)
-    head = f"the model does not explain the data{added} (reduced chi2 {d.reduced_chi2:.3g})"
     def specific(failures):
         return [f for f in failures if "a step in time" in f or "was moved or remounted" in f
                 or "drift steadily with time" in f]
 
     now = specific(d.failures)
     first = specific(steps[0].before.failures) if steps else []
+    added = f" after adding {', '.join(st.added for st in steps)}" if steps else ""
+    pending = [c for c in d.candidates if c.significant and c.effect not in {r.effect for r in d.rejected}]
+    if pending and not steps and not d.rejected:
+        # plain diagnose: the verdict already names the likely effect; a step, drift or moved
+        # axis in the words comes first all the same
+        if now:
+            d.verdict += f"; but first look at this: {now[0]}"
+        return d
+    if search_terms:
+        from station.diagnose import terms
+
+        d.proposal = terms.propose(d, summaries)
+    head = f"the model does not explain the data{added} (reduced chi2 {d.reduced_chi2:.3g})"
     if now:
         head += f"; first look at this: {now[0]}"
     elif first:

@@ -84,6 +84,18 @@ def cramer_rao(scheme: Scheme, settings: Settings, seed: int = 0) -> np.ndarray:
     return _error_sigmas(cal)
 
 
+def _one_blas_thread() -> None:
+    """Each worker process computes with one BLAS thread: the workers already fill the cores,
+    and a thread pool per worker on top only contends (the fit's matrices are small)."""
+    from threadpoolctl import threadpool_limits
+
+    global _BLAS_LIMIT
+    _BLAS_LIMIT = threadpool_limits(limits=1, user_api="blas")
+
+
+_BLAS_LIMIT = None
+
+
 def run(scheme: Scheme, settings: Settings, runs: int, first_seed: int = 1000,
         workers: int | None = None):
     """((name, unit) per parameter, errors runs x parameters, reported 1σ runs x parameters)."""
@@ -97,6 +109,6 @@ def run(scheme: Scheme, settings: Settings, runs: int, first_seed: int = 1000,
     if workers == 1:
         rows = [one_run(j) for j in jobs]
     else:
-        with ProcessPoolExecutor(workers) as pool:
+        with ProcessPoolExecutor(workers, initializer=_one_blas_thread) as pool:
             rows = list(pool.map(one_run, jobs, chunksize=max(1, runs // (4 * workers))))
     return names, np.array([r[0] for r in rows]), np.array([r[1] for r in rows])
