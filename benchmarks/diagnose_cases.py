@@ -355,7 +355,8 @@ def apply_and_score(cal: Path, test_dir: Path, names: list[str], truth: dict, C_
             np.savetxt(fh, np.column_stack([np.concatenate([fr[c] for fr in frames]) for c in cols]),
                        delimiter=",", fmt="%.12g")
         out = work / f"test_all_{tag}.csv"
-        rc, _, err, _ = run_cli(["apply", str(cal), str(both), "-o", str(out)], work, log)
+        # --force: the test capture is the same simulated IMU under another seed (serial SIM-<seed>)
+        rc, _, err, _ = run_cli(["apply", str(cal), str(both), "-o", str(out), "--force"], work, log)
         if rc != 0:
             raise RuntimeError(f"station apply failed: {err.strip()[-200:]}")
         comp = read_csv(out)
@@ -367,7 +368,7 @@ def apply_and_score(cal: Path, test_dir: Path, names: list[str], truth: dict, C_
     else:
         for n in names:
             out = work / f"{n}_{tag}.csv"
-            rc, _, err, _ = run_cli(["apply", str(cal), str(test_dir / f"{n}.csv"), "-o", str(out)],
+            rc, _, err, _ = run_cli(["apply", str(cal), str(test_dir / f"{n}.csv"), "-o", str(out), "--force"],
                                     work, log)
             if rc != 0:
                 raise RuntimeError(f"station apply failed on {n}: {err.strip()[-200:]}")
@@ -425,13 +426,15 @@ def run_case(args) -> dict:
             reduced_chi2_after=get(auto, "reduced_chi2"),
             verdict_after=get(auto, "verdict"), failures_after=get(auto, "failures"),
             added=added if auto is not None else None)
-        rc, _, err, _ = run_cli(["estimate", str(train), "-o", str(work / "base.yaml")], work, log)
+        # --accept-poor-fit: the base model is expected to fail where an effect is hidden (exit 3)
+        rc, _, err, _ = run_cli(["estimate", str(train), "-o", str(work / "base.yaml"), "--accept-poor-fit"],
+                                work, log)
         if rc != 0:
-            raise RuntimeError(f"station estimate failed: {err.strip()[-200:]}")
+            raise RuntimeError(f"station estimate refused: {err.strip()[-200:]}")
         res["before"] = apply_and_score(work / "base.yaml", test, names, truth_by_segment, C_pb,
                                         opts["rate_hz"], opts["quick"], work, "base", log)
         if added:
-            cmd = ["estimate", str(train), "-o", str(work / "auto.yaml")]
+            cmd = ["estimate", str(train), "-o", str(work / "auto.yaml"), "--accept-poor-fit"]
             for e in added:
                 cmd += ["--add", e]
             rc, _, err, _ = run_cli(cmd, work, log)

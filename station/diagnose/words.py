@@ -70,7 +70,9 @@ def _time_patterns(result, segs) -> list[str]:
         rows.sort(key=lambda r: r[0])
         t = np.array([r[0] for r in rows])
         V = np.array([r[2] for r in rows])
-        ss0 = float(np.sum(V**2))
+        # the baseline is a constant offset over the run (a bias the fit got wrong is not a
+        # function of time): a step or a drift must explain most of what varies around it
+        ss0 = float(np.sum((V - V.mean(axis=0)) ** 2))
         if ss0 < FAIL_RMS**2 * V.size:
             continue
         best = (ss0, None)
