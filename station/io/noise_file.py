@@ -3,12 +3,12 @@ files for recordings that have no calibration (a ``noise`` scheme run).  docs/ca
 describes the block."""
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import yaml
 
 from station.core.errors import UserError
+from station.io.calfile import write_new_file
 
 FORMAT = "station-noise/1"
 CALIBRATION_FORMAT = "station-calibration/1"
@@ -29,20 +29,7 @@ def _load(path: Path) -> dict:
 
 
 def _dump(path: Path, doc: dict) -> Path:
-    text = yaml.safe_dump(doc, sort_keys=False, width=100)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, "x", encoding="utf-8") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except OSError as e:
-        try:
-            tmp.unlink()
-        except OSError:
-            pass
-        raise UserError(f"{path}: cannot write: {e.strerror}") from None
+    write_new_file(path, yaml.safe_dump(doc, sort_keys=False, width=100).encode("utf-8"), what="noise file")
     return path
 
 

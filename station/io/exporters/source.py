@@ -3,7 +3,6 @@ effects an exporter cannot carry, the IMU's identity and (when characterised) it
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -11,6 +10,7 @@ import numpy as np
 
 from station.core import units
 from station.core.errors import UserError
+from station.io.calfile import write_new_file
 
 # Effects a plain "matrix and bias per triad" format carries; everything else is dropped with a note.
 LINEAR_EFFECTS = ("base_triads", "inter_triad")
@@ -121,19 +121,9 @@ def safe_comment(text: str) -> str:
 
 
 def write_text(path: Path, text: str) -> Path:
-    """Write a whole file (replace it atomically); UserError naming the path on failure."""
+    """Write a whole file (replace it atomically, crash-safe); UserError naming the path on failure."""
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, "x", encoding="utf-8") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except OSError as e:
-        try:
-            tmp.unlink()
-        except OSError:
-            pass
-        raise UserError(f"{path}: cannot write: {e.strerror}") from None
+    write_new_file(path, text.encode("utf-8"), what="export")
     return path
 
 
