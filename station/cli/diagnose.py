@@ -217,9 +217,17 @@ def cmd_effects(args) -> int:
         table.add_column("id")
         table.add_column("what")
         table.add_column("source")
+        plugins_seen = []
         for eid in reg.ids():
-            table.add_row(eid, reg.classes[eid].title, reg.source(eid))
+            source = reg.source(eid)
+            if source != "library":
+                plugins_seen.append((eid, source))
+                source = "plugin (below)"
+            table.add_row(eid, reg.classes[eid].title, source)
         out.print(table)
+        # a plugin's path is printed whole, never cut to the table's width
+        for eid, source in plugins_seen:
+            out.print(f"plugin {eid}: {source}", markup=False, highlight=False, soft_wrap=True)
         return 0
     e = reg.create(args.name)
     out.print(f"[bold]{e.id}[/]: {e.title}  ({reg.source(e.id)})\n")
