@@ -26,3 +26,29 @@ def mems_capture(seed=3, scheme="optimal9", overrides=None, out=None, **hidden):
     if out is not None:
         return truth, dryrun.record_scheme(scheme, truth, seed, out)
     return truth, dryrun.simulate_capture(scheme, truth, seed)
+
+
+NINE_STATICS = """\
+  - {static: pos01, up_body: [1, 0, 0]}
+  - {static: pos02, up_body: [-1, 0, 0]}
+  - {static: pos03, up_body: [0, 1, 0]}
+  - {static: pos04, up_body: [0, -1, 0]}
+  - {static: pos05, up_body: [0, 0, 1]}
+  - {static: pos06, up_body: [0, 0, -1]}
+  - {static: pos07, up_body: [1, 1, 0]}
+  - {static: pos08, up_body: [1, 0, 1]}
+  - {static: pos09, up_body: [0, 1, 1]}
+"""
+THREE_ROTATIONS = """\
+  - {rotation: rotx, axis_body: [1, 0, 0]}
+  - {rotation: roty, axis_body: [0, 1, 0]}
+  - {rotation: rotz, axis_body: [0, 0, 1]}
+"""
+
+
+def scheme_yaml(name, dwell_s, rotations=True, title=None):
+    """A small scheme's YAML: nine static attitudes (six faces and three diagonals), then one
+    rotation about each body axis (10 deg/s for 36 s) unless ``rotations`` is False."""
+    head = f"name: {name}\n" + (f"title: {title}\n" if title else "")
+    head += f"defaults: {{dwell_s: {dwell_s}, rate_dps: 10.0, rotation_s: 36.0}}\nsegments:\n"
+    return head + NINE_STATICS + (THREE_ROTATIONS if rotations else "")

@@ -16,25 +16,10 @@ from station.cli import main
 from station.io.capture import CaptureWriter, read_capture
 from station.io.scheme import scheme_from_text
 from station.simulate import dryrun
+from simhelpers import scheme_yaml
 
 HERE = Path(__file__).resolve().parent
-SCHEME = """\
-name: small
-defaults: {dwell_s: 5.0, rate_dps: 10.0, rotation_s: 36.0}
-segments:
-  - {static: pos01, up_body: [1, 0, 0]}
-  - {static: pos02, up_body: [-1, 0, 0]}
-  - {static: pos03, up_body: [0, 1, 0]}
-  - {static: pos04, up_body: [0, -1, 0]}
-  - {static: pos05, up_body: [0, 0, 1]}
-  - {static: pos06, up_body: [0, 0, -1]}
-  - {static: pos07, up_body: [1, 1, 0]}
-  - {static: pos08, up_body: [1, 0, 1]}
-  - {static: pos09, up_body: [0, 1, 1]}
-  - {rotation: rotx, axis_body: [1, 0, 0]}
-  - {rotation: roty, axis_body: [0, 1, 0]}
-  - {rotation: rotz, axis_body: [0, 0, 1]}
-"""
+SCHEME = scheme_yaml("small", 5.0)
 
 
 @pytest.fixture(scope="module")

@@ -12,27 +12,10 @@ from station.io.calfile import read_calfile
 from station.io.capture import read_capture, read_segment_csv
 from station.io.scheme import scheme_from_text
 from station.simulate import dryrun
+from simhelpers import THREE_ROTATIONS, scheme_yaml
 
-STATICS = """\
-name: statics9
-title: nine static attitudes, no rotation
-defaults: {dwell_s: 10.0, rate_dps: 10.0, rotation_s: 36.0}
-segments:
-  - {static: pos01, up_body: [1, 0, 0]}
-  - {static: pos02, up_body: [-1, 0, 0]}
-  - {static: pos03, up_body: [0, 1, 0]}
-  - {static: pos04, up_body: [0, -1, 0]}
-  - {static: pos05, up_body: [0, 0, 1]}
-  - {static: pos06, up_body: [0, 0, -1]}
-  - {static: pos07, up_body: [1, 1, 0]}
-  - {static: pos08, up_body: [1, 0, 1]}
-  - {static: pos09, up_body: [0, 1, 1]}
-"""
-ROTATIONS = """\
-  - {rotation: rotx, axis_body: [1, 0, 0]}
-  - {rotation: roty, axis_body: [0, 1, 0]}
-  - {rotation: rotz, axis_body: [0, 0, 1]}
-"""
+STATICS = scheme_yaml("statics9", 10.0, rotations=False, title="nine static attitudes, no rotation")
+ROTATIONS = THREE_ROTATIONS
 
 
 def record(text, directory, seed=3):

@@ -26,11 +26,11 @@ import numpy as np
 from station.core.errors import UserError
 from station.core.units import ACCEL_UNITS, GYRO_UNITS
 from station.io.importers.recording import Recording
+from station.io.importers.text import read_text
 
 ROLES = ("t", "index", "ax", "ay", "az", "gx", "gy", "gz")
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "ns": 1e-9}
 DELIMITERS = {",": ",", ";": ";", "tab": "\t", "\t": "\t", "space": None, " ": None}
-MAX_BYTES = 2_000_000_000
 PRESETS = {
     "station": {"columns": {"t": "t", "ax": "ax", "ay": "ay", "az": "az", "gx": "gx", "gy": "gy", "gz": "gz"},
                 "units": ("m/s^2", "deg/s"), "time_unit": "s"},
@@ -65,18 +65,7 @@ class _Table:
 
     def __init__(self, path: Path, delimiter, header: str):
         self.path = path
-        try:
-            size = path.stat().st_size
-            if size > MAX_BYTES:
-                raise UserError(f"{path}: {size} bytes: larger than {MAX_BYTES}")
-            raw = path.read_bytes()
-        except OSError as e:
-            raise UserError(f"{path}: cannot read: {e.strerror}") from None
-        try:
-            text = raw.decode("utf-8-sig")
-        except UnicodeDecodeError as e:
-            line = raw[:e.start].count(b"\n") + 1
-            raise UserError(f"{path}: line {line}: not UTF-8 text") from None
+        text = read_text(path)
         rows = [(i, line) for i, line in enumerate(text.splitlines(), start=1)
                 if line.strip() and not line.lstrip().startswith(("#", "%"))]
         if not rows:

@@ -49,6 +49,7 @@ import numpy as np
 from station.io.capture import CaptureWriter, ImuInfo, Site
 from station.core.errors import UserError
 from station.core.units import ACCEL_UNITS, GYRO_UNITS
+from station.io.importers.text import read_text
 
 FORMATS = ("auto", "session", "annotated")
 STATIC_UP = {"x_p": (1, 0, 0), "x_a": (-1, 0, 0), "y_p": (0, 1, 0), "y_a": (0, -1, 0),
@@ -71,15 +72,7 @@ class Section:
 
 
 def _read_lines(path: Path) -> list[str]:
-    try:
-        raw = path.read_bytes()
-    except OSError as e:
-        raise UserError(f"{path}: cannot read: {e.strerror}") from None
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as e:
-        line = raw[:e.start].count(b"\n") + 1
-        raise UserError(f"{path}: line {line}: not UTF-8 text") from None
+    text = read_text(path)
     lines = text.splitlines()
     while lines and not lines[-1].strip():
         lines.pop()
