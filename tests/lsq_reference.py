@@ -10,7 +10,39 @@ from station.model.geometry import cross, tangent_basis
 
 
 class PerSegmentModel(Model):
-    """Model with the per-segment residual of before (same parameters, same rows)."""
+    """Model with the per-segment residual of before (same parameters, same rows) and its
+    forward-difference Jacobian (every hand turn integrated again for each gyro column)."""
+
+    def jacobian_columns(self, x, columns) -> np.ndarray:
+        """Forward-difference Jacobian of the given columns only."""
+        r0 = self.residuals(x)
+        J = np.empty((len(r0), len(columns)))
+        for k, c in enumerate(columns):
+            xp = x.copy()
+            h = 1e-7 * max(abs(x[c]), 1e-2)
+            xp[c] += h
+            J[:, k] = (self.residuals(xp) - r0) / h
+        return J
+
+    def jacobian(self, x) -> np.ndarray:
+        if not hasattr(self, "_groups"):
+            self._groups, self._rows = self._column_groups()
+        r0 = self.residuals(x)
+        J = np.zeros((self._rows, len(x)))
+        for members in self._groups:
+            xp = x.copy()
+            steps = []
+            for c, _ in members:
+                h = 1e-7 * max(abs(x[c]), 1e-2)
+                xp[c] += h
+                steps.append(h)
+            d = self.residuals(xp) - r0
+            for (c, owned), h in zip(members, steps):
+                if owned is None:
+                    J[:, c] = d / h
+                else:
+                    J[owned, c] = d[owned] / h
+        return J
 
     def _hand_residuals(self, x, Mg, ups, attitudes) -> np.ndarray:
         """(H, 2) whitened residuals: the up after each turn against the up before carried through it."""

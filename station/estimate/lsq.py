@@ -384,35 +384,63 @@ class Model:
                 labels += [("prior", "prior", quantity, str(j))]
         return labels
 
+    def _steps(self, x) -> np.ndarray:
+        """Forward-difference steps: 1e-7 of each parameter's size, at least of 1e-2 (internal
+        units) or, for an effect's parameter, of its typical size."""
+        if not hasattr(self, "_step_floor"):
+            floor = np.full(self.layout.size, 1e-2)
+            for e in self.effects:
+                floor[self.layout[f"effect:{e.id}"]] = [max(p.typical / p.scale, 1e-2) if p.scale else 1e-2
+                                                       for p in e.params]
+            self._step_floor = floor
+        return 1e-7 * np.maximum(np.abs(x), self._step_floor)
+
+    def _linearised_hands(self, x):
+        """While the Jacobian is taken, the hand turns to first order about x (no integration per
+        gyro column: hand_rotation.Integrator.linearise)."""
+        if self.hands:
+            _, Mg = self._matrices(x)
+            self.integrator.linearise(np.linalg.inv(Mg), x[self.layout["gyro_bias"]])
+
     def jacobian_columns(self, x, columns) -> np.ndarray:
         """Forward-difference Jacobian of the given columns only."""
         r0 = self.residuals(x)
         J = np.empty((len(r0), len(columns)))
-        for k, c in enumerate(columns):
-            xp = x.copy()
-            h = 1e-7 * max(abs(x[c]), 1e-2)
-            xp[c] += h
-            J[:, k] = (self.residuals(xp) - r0) / h
+        steps = self._steps(x)
+        self._linearised_hands(x)
+        try:
+            for k, c in enumerate(columns):
+                xp = x.copy()
+                xp[c] += steps[c]
+                J[:, k] = (self.residuals(xp) - r0) / steps[c]
+        finally:
+            if self.hands:
+                self.integrator.exact()
         return J
 
     def jacobian(self, x) -> np.ndarray:
+        """Forward differences, the columns that move disjoint rows perturbed together
+        (_column_groups); the hand turns to first order about x."""
         if not hasattr(self, "_groups"):
-            self._groups, self._rows = self._column_groups()
+            self._groups, self._jacobian_rows = self._column_groups()
         r0 = self.residuals(x)
-        J = np.zeros((self._rows, len(x)))
-        for members in self._groups:
-            xp = x.copy()
-            steps = []
-            for c, _ in members:
-                h = 1e-7 * max(abs(x[c]), 1e-2)
-                xp[c] += h
-                steps.append(h)
-            d = self.residuals(xp) - r0
-            for (c, owned), h in zip(members, steps):
-                if owned is None:
-                    J[:, c] = d / h
-                else:
-                    J[owned, c] = d[owned] / h
+        J = np.zeros((self._jacobian_rows, len(x)))
+        all_steps = self._steps(x)
+        self._linearised_hands(x)
+        try:
+            for members in self._groups:
+                xp = x.copy()
+                cols = [c for c, _ in members]
+                xp[cols] += all_steps[cols]
+                d = self.residuals(xp) - r0
+                for c, owned in members:
+                    if owned is None:
+                        J[:, c] = d / all_steps[c]
+                    else:
+                        J[owned, c] = d[owned] / all_steps[c]
+        finally:
+            if self.hands:
+                self.integrator.exact()
         return J
 
     # --- the residuals ----------------------------------------------------------------------
