@@ -44,6 +44,13 @@ class PerSegmentModel(Model):
                     J[owned, c] = d[owned] / h
         return J
 
+    def _axis(self, x, k):
+        p = x[self.layout[f"axis{k}"]]
+        l0 = self.axis_ref[k]
+        t1, t2 = self.axis_basis[k]
+        l = l0 + p[0] * t1 + p[1] * t2
+        return l / np.linalg.norm(l), p[2], p[3]
+
     def _hand_residuals(self, x, Mg, ups, attitudes) -> np.ndarray:
         """(H, 2) whitened residuals: the up after each turn against the up before carried through it."""
         hands = self.hands

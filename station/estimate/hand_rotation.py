@@ -39,6 +39,8 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 from scipy.spatial.transform import Rotation
 
+from station.model.geometry import cross
+
 STEADY_SPREAD = 0.3         # as summaries.STEADY_SPREAD: a rotation whose rate varies more is a hand turn
 MAX_GAP_S = 1.0             # static end -> turn start (and turn end -> static start), IMU still
 MIN_SAMPLES = 2
@@ -167,15 +169,19 @@ class Integrator:
         with np.errstate(invalid="ignore", divide="ignore"):
             c1 = np.where(angle > 1e-4, (1.0 - np.cos(angle)) / angle**2, 0.5 - angle**2 / 24.0)
             c2 = np.where(angle > 1e-4, (angle - np.sin(angle)) / angle**3, 1.0 / 6.0 - angle**2 / 120.0)
-        skew = np.zeros((len(theta), 3, 3))
-        skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -theta[:, 2], theta[:, 1], -theta[:, 0]
-        skew -= skew.transpose(0, 2, 1)
-        J_r = np.eye(3) - c1[:, None, None] * skew + c2[:, None, None] * (skew @ skew)
-        A = np.einsum("kji,kjl->kil", S, J_r) * self.step_rad[:, :, None]         # S_k^T J_r dt
-        u = self.gyro - bias
-        starts = np.concatenate([[0], np.cumsum([h.samples for h in self.hands])[:-1]])
-        T = np.add.reduceat(np.einsum("kai,kj->kaij", A, u).reshape(len(u), 27), starts).reshape(-1, 3, 3, 3)
-        B = np.add.reduceat(A.reshape(len(u), 9), starts).reshape(-1, 3, 3)
+        # row a of S_k^T J_r(theta_k) is J_r^T s_a = s_a + c1 theta x s_a + c2 theta x (theta x s_a),
+        # s_a the column a of S_k
+        rows = []
+        for a in range(3):
+            s_a = S[:, :, a]
+            t_s = cross(theta, s_a)
+            rows.append(s_a + c1[:, None] * t_s + c2[:, None] * cross(theta, t_s))
+        A = np.zeros(self.shape[:2] + (9,))                  # S_k^T J_r dt, in the padded layout
+        A.reshape(-1, 9)[self.flat] = np.concatenate(rows, axis=1) * self.step_rad
+        u = np.zeros(self.shape[:2] + (3,))
+        u.reshape(-1, 3)[self.flat] = self.gyro - bias
+        T = (A.transpose(0, 2, 1) @ u).reshape(-1, 3, 3, 3)       # sum_k A_k (x) u_k per turn
+        B = A.sum(axis=1).reshape(-1, 3, 3)
         self._tangent = (np.array(gyro_inverse, float), np.array(bias, float), self._last, T, B)
 
     def exact(self) -> None:
@@ -186,6 +192,17 @@ class Integrator:
         M0, b0, dR0, T, B = self._tangent
         d_phi = np.einsum("haij,ij->ha", T, gyro_inverse - M0) - B @ (M0 @ (bias - b0))
         return dR0 * Rotation.from_rotvec(d_phi)
+
+    def turns_batch(self, gyro_inverse: np.ndarray, bias: np.ndarray) -> Rotation:
+        """turns() for every row of gyro_inverse (B,3,3) and bias (B,3): B*H turns, the H turns
+        of each row together (to first order about the linearisation point while there is one)."""
+        if self._tangent is None:
+            return Rotation.concatenate([self.turns(m, b) for m, b in zip(gyro_inverse, bias)])
+        M0, b0, dR0, T, B = self._tangent
+        d_phi = (np.einsum("haij,nij->nha", T, gyro_inverse - M0)
+                 - np.einsum("hij,nj->nhi", B, (bias - b0) @ M0.T))
+        base = Rotation.from_quat(np.tile(dR0.as_quat(), (len(bias), 1)))
+        return base * Rotation.from_rotvec(d_phi.reshape(-1, 3))
 
 
 def _product(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -319,13 +319,6 @@ class Model:
               @ Rotation.from_rotvec(x[L["inter_triad"]]).as_matrix())
         return Ma, Mg
 
-    def _axis(self, x, k):
-        p = x[self.layout[f"axis{k}"]]
-        l0 = self.axis_ref[k]
-        t1, t2 = self.axis_basis[k]
-        l = l0 + p[0] * t1 + p[1] * t2
-        return l / np.linalg.norm(l), p[2], p[3]
-
     def _column_groups(self):
         """Columns that can be perturbed together: the same local parameter of every static,
         axis or rotation segment moves disjoint residual rows."""
@@ -406,47 +399,50 @@ class Model:
             self.integrator.linearise(np.linalg.inv(Mg), x[self.layout["gyro_bias"]])
 
     def jacobian_columns(self, x, columns) -> np.ndarray:
-        """Forward-difference Jacobian of the given columns only."""
+        """Forward-difference Jacobian of the given columns only (one batched evaluation)."""
+        x = np.asarray(x, float)
         r0 = self.residuals(x)
-        J = np.empty((len(r0), len(columns)))
-        steps = self._steps(x)
+        columns = np.asarray(columns, int)
+        steps = self._steps(x)[columns]
+        X = np.tile(x, (len(columns), 1))
+        X[np.arange(len(columns)), columns] += steps
         self._linearised_hands(x)
         try:
-            for k, c in enumerate(columns):
-                xp = x.copy()
-                xp[c] += steps[c]
-                J[:, k] = (self.residuals(xp) - r0) / steps[c]
+            R = self._residuals_batch(X) if len(columns) else np.zeros((0, len(r0)))
         finally:
             if self.hands:
                 self.integrator.exact()
-        return J
+        return ((R - r0) / steps[:, None]).T
 
     def jacobian(self, x) -> np.ndarray:
         """Forward differences, the columns that move disjoint rows perturbed together
-        (_column_groups); the hand turns to first order about x."""
+        (_column_groups), every perturbed vector in one batched evaluation; the hand turns to
+        first order about x."""
+        x = np.asarray(x, float)
         if not hasattr(self, "_groups"):
             self._groups, self._jacobian_rows = self._column_groups()
-        key = np.asarray(x, float).tobytes()
+        key = x.tobytes()
         if self._last_jacobian is not None and self._last_jacobian[0] == key:
             return self._last_jacobian[1].copy()     # the solver's last one, at its solution
         r0 = self.residuals(x)
         J = np.zeros((self._jacobian_rows, len(x)))
-        all_steps = self._steps(x)
+        steps = self._steps(x)
+        X = np.tile(x, (len(self._groups), 1))
+        for n, members in enumerate(self._groups):
+            cols = [c for c, _ in members]
+            X[n, cols] += steps[cols]
         self._linearised_hands(x)
         try:
-            for members in self._groups:
-                xp = x.copy()
-                cols = [c for c, _ in members]
-                xp[cols] += all_steps[cols]
-                d = self.residuals(xp) - r0
-                for c, owned in members:
-                    if owned is None:
-                        J[:, c] = d / all_steps[c]
-                    else:
-                        J[owned, c] = d[owned] / all_steps[c]
+            D = self._residuals_batch(X) - r0
         finally:
             if self.hands:
                 self.integrator.exact()
+        for d, members in zip(D, self._groups):
+            for c, owned in members:
+                if owned is None:
+                    J[:, c] = d / steps[c]
+                else:
+                    J[owned, c] = d[owned] / steps[c]
         self._last_jacobian = (key, J.copy())
         return J
 
@@ -592,11 +588,15 @@ class Model:
 
     def residuals(self, x) -> np.ndarray:
         """The whitened residuals, in the order of row_labels()."""
+        return self._residuals_batch(np.asarray(x, float)[None, :])[0]
+
+    def _residuals_batch(self, X) -> np.ndarray:
+        """The residuals of every row of X (B, parameters): (B, rows), in one vectorised pass."""
         if self._rows is None:
             self._row_layout()
-        self.evaluations += 1
-        flat = np.concatenate([b.ravel() for b in self._blocks(np.asarray(x, float))])
-        return flat[self._perm]
+        self.evaluations += len(X)
+        flat = np.concatenate([b.reshape(len(X), -1) for b in self._blocks(X)], axis=1)
+        return flat[:, self._perm]
 
     def _pieces(self, x):
         """The whitened residuals in pieces, and a (tag, length, quantity) per piece naming what
@@ -605,114 +605,140 @@ class Model:
         ends = np.cumsum([n for _, n, _ in self._tags])
         return np.split(r, ends[:-1]) if len(ends) else [], list(self._tags)
 
-    def _blocks(self, x) -> list:
-        """The residual blocks of _row_layout(), each (items, width)."""
+    def _matrices_batch(self, X):
+        """M_a = K_a T_a and M_g = K_g T_g R_po of every row of X: (B,3,3) each."""
+        L = self.layout
+        Ma = X[:, L["accel_scale"], None] * _lower_unit_rows_batch(X[:, L["accel_misalignment"]])
+        Mg = (X[:, L["gyro_scale"], None] * _lower_unit_rows_batch(X[:, L["gyro_misalignment"]])
+              @ Rotation.from_rotvec(X[:, L["inter_triad"]]).as_matrix())
+        return Ma, Mg
+
+    def _blocks(self, X) -> list:
+        """The residual blocks of _row_layout() for every row of X, each (B, items, width)."""
         s, L = self.s, self.layout
-        xe = np.append(x, 0.0)
-        Ma, Mg = self._matrices(x)
-        b_a, b_g = x[L["accel_bias"]], x[L["gyro_bias"]]
-        S, R = len(s.statics), len(s.rotations)
+        B = len(X)
+        Xe = np.concatenate([X, np.zeros((B, 1))], axis=1)
+        Ma, Mg = self._matrices_batch(X)
+        b_a, b_g = X[:, L["accel_bias"]], X[:, L["gyro_bias"]]
+        S, R, K = len(s.statics), len(s.rotations), s.groups
         g = s.gravity_mps2
         # static attitudes: specific force, inertial rate and up, frame p
-        P = x[self._st_cols]
+        P = X[:, self._st_cols]                                                  # (B,S,d)
         if self.with_latitude:
-            C = Rotation.from_rotvec(P).as_matrix() if S else np.zeros((0, 3, 3))
-            f_s, w_s, up = np.einsum("sij,skj->ksi", C, self._st_ref_vectors) if S else np.zeros((3, 0, 3))
+            C = Rotation.from_rotvec(P.reshape(-1, 3)).as_matrix().reshape(B, S, 3, 3) if S else np.zeros((B, 0, 3, 3))
+            f_s, w_s, up = np.einsum("bsij,skj->kbsi", C, self._st_ref_vectors)
         else:
-            up = self._st_ref + np.einsum("sk,skc->sc", P, self._st_basis)
-            up /= np.linalg.norm(up, axis=1)[:, None]
+            up = self._st_ref + np.einsum("bsk,skc->bsc", P, self._st_basis)
+            up /= np.linalg.norm(up, axis=2)[..., None]
             f_s = self.f_n[2] * up
             w_s = self.omega_n[2] * up if self.hand_earth_vertical else np.zeros_like(up)
         # axes and the rotations' phase grids
-        PA = x[self._axis_cols]
-        l_k = self._axis_ref + np.einsum("kj,kjc->kc", PA[:, :2], self._axis_basis)
-        l_k /= np.linalg.norm(l_k, axis=1)[:, None]
-        kappa_k, e_k = PA[:, 2], PA[:, 3]
-        l, kappa, e = l_k[self._rot_group], kappa_k[self._rot_group], e_k[self._rot_group]
-        e1 = self._rot_e1 - np.einsum("rc,rc->r", self._rot_e1, l)[:, None] * l
-        e1 /= np.linalg.norm(e1, axis=1)[:, None]
+        PA = X[:, self._axis_cols]                                               # (B,K,4)
+        l_k = self._axis_ref + np.einsum("bkj,kjc->bkc", PA[..., :2], self._axis_basis)
+        l_k /= np.linalg.norm(l_k, axis=2)[..., None]
+        kappa_k, e_k = PA[..., 2], PA[..., 3]
+        l, kappa, e = l_k[:, self._rot_group], kappa_k[:, self._rot_group], e_k[:, self._rot_group]   # (B,R,..)
+        e1 = self._rot_e1 - np.einsum("rc,brc->br", self._rot_e1, l)[..., None] * l
+        e1 /= np.linalg.norm(e1, axis=2)[..., None]
         e2 = cross(l, e1)
-        psi, chi = xe[self._rot_phase_cols].T
-        v = np.sqrt(np.maximum(g * g - kappa**2, 0.0))[:, None] * (np.cos(psi)[:, None] * e1 + np.sin(psi)[:, None] * e2)
-        earth_perp = (np.sqrt(np.maximum(self.omega_dps**2 - e**2, 0.0))[:, None]
-                      * (np.cos(chi)[:, None] * e1 + np.sin(chi)[:, None] * e2))
+        phase = Xe[:, self._rot_phase_cols]                                      # (B,R,2)
+        psi, chi = phase[..., 0:1], phase[..., 1:2]
+        v = np.sqrt(np.maximum(g * g - kappa**2, 0.0))[..., None] * (np.cos(psi) * e1 + np.sin(psi) * e2)
+        earth_perp = (np.sqrt(np.maximum(self.omega_dps**2 - e**2, 0.0))[..., None]
+                      * (np.cos(chi) * e1 + np.sin(chi) * e2))
         earth_integral = self._rot_earth[:, :1] * earth_perp - self._rot_earth[:, 1:] * cross(l, earth_perp)
-        offset = x[L["mounting_offset"]] if self._offset is None else self._offset
+        offset = X[:, L["mounting_offset"]][:, None, :] if self._offset is None else self._offset
         l_x_d = cross(l, np.broadcast_to(offset, l.shape))
-        w_k, wsq_k, wdot_k = self._rot_rate_shape[:, 0, :, None], self._rot_rate_shape[:, 1, :, None], \
-            self._rot_rate_shape[:, 2, :, None]
-        f_r = (kappa[:, None, None] * l[:, None, :] + self._cos_p[None, :, None] * v[:, None, :]
-               - self._sin_p[None, :, None] * cross(l, v)[:, None, :]
-               + wsq_k * cross(l, l_x_d)[:, None, :] + wdot_k * l_x_d[:, None, :])       # (R, PHASES, 3)
-        w_r = np.broadcast_to(((self._rot_rate + e)[:, None] * l)[:, None, :], f_r.shape)
+        w_k, wsq_k, wdot_k = (self._rot_rate_shape[:, j, :, None] for j in range(3))    # (R,PHASES,1)
+        f_r = (kappa[..., None, None] * l[:, :, None, :] + self._cos_p[:, None] * v[:, :, None, :]
+               - self._sin_p[:, None] * cross(l, v)[:, :, None, :]
+               + wsq_k * cross(l, l_x_d)[:, :, None, :] + wdot_k * l_x_d[:, :, None, :])   # (B,R,PHASES,3)
+        w_r = np.broadcast_to(((self._rot_rate + e)[..., None] * l)[:, :, None, :], f_r.shape)
         # the model's raw outputs at every point, effects included
-        f_p = np.concatenate([f_s, f_r.reshape(-1, 3)])
-        w_p = np.concatenate([w_s, w_r.reshape(-1, 3)])
-        a = f_p @ Ma.T + b_a
-        w = w_p @ Mg.T + b_g
+        f_p = np.concatenate([f_s, f_r.reshape(B, -1, 3)], axis=1)              # (B, S + R PHASES, 3)
+        w_p = np.concatenate([w_s, w_r.reshape(B, -1, 3)], axis=1)
+        a = np.einsum("bnj,bij->bni", f_p, Ma) + b_a[:, None, :]
+        w = np.einsum("bnj,bij->bni", w_p, Mg) + b_g[:, None, :]
         if self.effects:
             zeros = np.zeros((S, 3))
-            ctx = SampleContext(
-                f_p=f_p, w_p=w_p,
-                w_table=np.concatenate([zeros, (w_k * l[:, None, :]).reshape(-1, 3)]),
-                wdot_table=np.concatenate([zeros, (wdot_k * l[:, None, :]).reshape(-1, 3)]),
-                temp_c=self._ctx_temp, accel_matrix=Ma, gyro_matrix=Mg, t_s=self._ctx_t,
-                segment_index=self._ctx_index, temp_rate_c_per_s=self._ctx_temp_rate)
-            for eff in self.effects:
-                px = x[L[f"effect:{eff.id}"]]
-                da, dw = eff.accel(px, ctx), eff.gyro(px, ctx)
-                if da is not None:
-                    a = a + da
-                if dw is not None:
-                    w = w + dw
+            for n in range(B):      # the Effect interface: one parameter vector, N sample points
+                ctx = SampleContext(
+                    f_p=f_p[n], w_p=w_p[n],
+                    w_table=np.concatenate([zeros, (w_k * l[n][:, None, :]).reshape(-1, 3)]),
+                    wdot_table=np.concatenate([zeros, (wdot_k * l[n][:, None, :]).reshape(-1, 3)]),
+                    temp_c=self._ctx_temp, accel_matrix=Ma[n], gyro_matrix=Mg[n], t_s=self._ctx_t,
+                    segment_index=self._ctx_index, temp_rate_c_per_s=self._ctx_temp_rate)
+                for eff in self.effects:
+                    px = X[n, L[f"effect:{eff.id}"]]
+                    da, dw = eff.accel(px, ctx), eff.gyro(px, ctx)
+                    if da is not None:
+                        a[n] = a[n] + da
+                    if dw is not None:
+                        w[n] = w[n] + dw
         blocks = []
         # statics
         root_n = self._st_root_n
-        blocks.append((self._st_data[:, :3] - a[:S]) * root_n / s.accel_sigma)
+        blocks.append((self._st_data[:, :3] - a[:, :S]) * root_n / s.accel_sigma)
         if self.with_latitude:
-            blocks.append((self._st_data[:, 3:] - w[:S]) * root_n / s.gyro_sigma)
+            blocks.append((self._st_data[:, 3:] - w[:, :S]) * root_n / s.gyro_sigma)
         elif self.hands:    # the bias, the unmodelled Earth rate within the noise
-            blocks.append(np.einsum("sij,sj->si", self._st_gyro_whiten, self._st_data[:, 3:] - w[:S]))
+            blocks.append(np.einsum("sij,bsj->bsi", self._st_gyro_whiten, self._st_data[:, 3:] - w[:, :S]))
         else:               # only |Omega_E| known: the norm of the compensated rate
-            rate = np.linalg.norm(np.linalg.solve(Mg, (self._st_data[:, 3:] - b_g).T), axis=0)
-            blocks.append(((rate - self.omega_dps) * root_n[:, 0] / np.mean(s.gyro_sigma))[:, None])
+            rate = np.linalg.norm(np.linalg.solve(Mg, (self._st_data[:, 3:] - b_g[:, None, :]).transpose(0, 2, 1)),
+                                  axis=1)
+            blocks.append(((rate - self.omega_dps) * root_n[:, 0] / np.mean(s.gyro_sigma))[..., None])
         table = self.attitudes == "table"
         if table:
-            C_mount = Rotation.from_rotvec(x[L["mounting_rotation"]]).as_matrix()
-            blocks.append(cross(up[self._st_up_index], self._st_up_body @ C_mount.T) / self.prior_sigma)
+            C_mount = Rotation.from_rotvec(X[:, L["mounting_rotation"]]).as_matrix()
+            blocks.append(cross(up[:, self._st_up_index], np.einsum("uj,bij->bui", self._st_up_body, C_mount))
+                          / self.prior_sigma)
         if self.with_latitude:
             blocks.append(P / WEAK_PRIOR_RAD)
         if self.hands:
             blocks.append(self._hand_block(Mg, b_g, up, w_s))
         if table:
-            blocks.append(cross(l_k, self._axis_body @ C_mount.T) / self.prior_sigma)
-        blocks.append((e_k * np.sqrt(3.0) / self.omega_dps)[:, None])
-        blocks.append((kappa_k / g / WEAK_PRIOR_RAD)[:, None])
+            blocks.append(cross(l_k, np.einsum("kj,bij->bki", self._axis_body, C_mount)) / self.prior_sigma)
+        blocks.append((e_k * np.sqrt(3.0) / self.omega_dps)[..., None])
+        blocks.append((kappa_k / g / WEAK_PRIOR_RAD)[..., None])
         # rotations: mean and harmonics of the accelerometers, gyro integral
-        a_r = a[S:].reshape(R, PHASES, 3)
-        w_mean = w[S:].reshape(R, PHASES, 3).mean(axis=1)
-        harmonics = np.einsum("hk,rkc->rhc", self._harmonics, a_r)
-        integral = w_mean * self._rot_duration[:, None] + earth_integral @ Mg.T
+        a_r = a[:, S:].reshape(B, R, PHASES, 3)
+        w_mean = w[:, S:].reshape(B, R, PHASES, 3).mean(axis=2)
+        harmonics = np.einsum("hk,brkc->brhc", self._harmonics, a_r)
+        integral = w_mean * self._rot_duration[:, None] + np.einsum("brj,bij->bri", earth_integral, Mg)
         for eff in self._integral_effects:
-            px = x[L[f"effect:{eff.id}"]]
-            for i, r in enumerate(s.rotations):
-                term = eff.integral(px, r)
-                if term is not None:
-                    integral[i] += term
-        gyro_rows = np.einsum("rij,rj->ri", self._rot_gyro_whiten, self._rot_gyro - integral)
-        blocks.append(np.concatenate([((self._rot_data - harmonics) * self._rot_weight).reshape(R, 15), gyro_rows],
-                                     axis=1))
-        blocks.append((x[self._prior_cols] / self._prior_sigma)[:, None])
+            for n in range(B):
+                px = X[n, L[f"effect:{eff.id}"]]
+                for i, r in enumerate(s.rotations):
+                    term = eff.integral(px, r)
+                    if term is not None:
+                        integral[n, i] += term
+        gyro_rows = np.einsum("rij,brj->bri", self._rot_gyro_whiten, self._rot_gyro - integral)
+        blocks.append(np.concatenate([((self._rot_data - harmonics) * self._rot_weight).reshape(B, R, 15),
+                                      gyro_rows], axis=2))
+        blocks.append((X[:, self._prior_cols] / self._prior_sigma)[..., None])
         return blocks
 
     def _hand_block(self, Mg, b_g, ups, w_static) -> np.ndarray:
-        """(H, 2) whitened residuals: the up after each turn against the up before carried through it."""
-        dR = self.integrator.turns(np.linalg.inv(Mg), b_g)
-        before = ups[self._hand_before]
+        """(B, H, 2) whitened residuals: the up after each turn against the up before carried through it."""
+        B, H = len(Mg), len(self.hands)
+        dR = self.integrator.turns_batch(np.linalg.inv(Mg), b_g)         # B*H turns
+        before = ups[:, self._hand_before].reshape(-1, 3)
         if self.with_latitude:      # the Earth turns the up during the turn
-            before = Rotation.from_rotvec(np.radians(w_static[self._hand_before]) * self.hand_duration[:, None]).apply(before)
-        d = ups[self._hand_after] - dR.apply(before, inverse=True)
-        return np.einsum("hkc,hc->hk", self.hand_basis, d) / self.hand_sigma_rad[:, None]
+            earth = np.radians(w_static[:, self._hand_before]) * self.hand_duration[:, None]
+            before = Rotation.from_rotvec(earth.reshape(-1, 3)).apply(before)
+        d = ups[:, self._hand_after] - dR.apply(before, inverse=True).reshape(B, H, 3)
+        return np.einsum("hkc,bhc->bhk", self.hand_basis, d) / self.hand_sigma_rad[:, None]
+
+
+def _lower_unit_rows_batch(angles: np.ndarray) -> np.ndarray:
+    """lower_unit_rows of every row of angles (B,3): (B,3,3)."""
+    s_yz, s_zy, s_zx = np.sin(angles[:, 0]), -np.sin(angles[:, 1]), np.sin(angles[:, 2])
+    T = np.zeros((len(angles), 3, 3))
+    T[:, 0, 0] = 1.0
+    T[:, 1, 0], T[:, 1, 1] = s_yz, np.sqrt(1.0 - s_yz**2)
+    T[:, 2, 0], T[:, 2, 1] = s_zy, s_zx
+    T[:, 2, 2] = np.sqrt(np.maximum(1.0 - s_zy**2 - s_zx**2, 0.0))
+    return T
 
 
 @dataclass
