@@ -683,8 +683,9 @@ class Model:
             blocks.append((self._st_data[:, 3:] - w[:, :S]) * root_n / s.gyro_sigma)
         elif self.hands:    # the bias, the unmodelled Earth rate within the noise
             blocks.append(np.einsum("sij,bsj->bsi", self._st_gyro_whiten, self._st_data[:, 3:] - w[:, :S]))
-        else:               # only |Omega_E| known: the norm of the compensated rate
-            rate = np.linalg.norm(np.linalg.solve(Mg, (self._st_data[:, 3:] - b_g[:, None, :]).transpose(0, 2, 1)),
+        else:               # only |Omega_E| known: the norm of the compensated rate (the
+            # pseudo-inverse: finite where a trial step of the solver makes M_g singular)
+            rate = np.linalg.norm(np.linalg.pinv(Mg) @ (self._st_data[:, 3:] - b_g[:, None, :]).transpose(0, 2, 1),
                                   axis=1)
             blocks.append(((rate - self.omega_dps) * root_n[:, 0] / np.mean(s.gyro_sigma))[..., None])
         table = self.attitudes == "table"
