@@ -169,19 +169,16 @@ class Integrator:
         with np.errstate(invalid="ignore", divide="ignore"):
             c1 = np.where(angle > 1e-4, (1.0 - np.cos(angle)) / angle**2, 0.5 - angle**2 / 24.0)
             c2 = np.where(angle > 1e-4, (angle - np.sin(angle)) / angle**3, 1.0 / 6.0 - angle**2 / 120.0)
-        # row a of S_k^T J_r(theta_k) is J_r^T s_a = s_a + c1 theta x s_a + c2 theta x (theta x s_a),
-        # s_a the column a of S_k
-        rows = []
-        for a in range(3):
-            s_a = S[:, :, a]
-            t_s = cross(theta, s_a)
-            rows.append(s_a + c1[:, None] * t_s + c2[:, None] * cross(theta, t_s))
-        A = np.zeros(self.shape[:2] + (9,))                  # S_k^T J_r dt, in the padded layout
-        A.reshape(-1, 9)[self.flat] = np.concatenate(rows, axis=1) * self.step_rad
-        u = np.zeros(self.shape[:2] + (3,))
-        u.reshape(-1, 3)[self.flat] = self.gyro - bias
-        T = (A.transpose(0, 2, 1) @ u).reshape(-1, 3, 3, 3)       # sum_k A_k (x) u_k per turn
-        B = A.sum(axis=1).reshape(-1, 3, 3)
+        # row a of S_k^T J_r(theta_k) is J_r^T s_a = s_a + c1 theta x s_a + c2 theta x (theta x s_a)
+        # = (1 - c2 |theta|^2) s_a + c1 theta x s_a + c2 (theta . s_a) theta, s_a the column a of S_k
+        St = S.transpose(0, 2, 1)                                           # rows: s_a
+        along = np.einsum("nc,nac->na", theta, St)
+        A = ((1.0 - c2 * angle**2)[:, None, None] * St + c1[:, None, None] * cross(theta[:, None, :], St)
+             + c2[:, None, None] * along[:, :, None] * theta[:, None, :]) * self.step_rad[:, :, None]
+        starts = np.concatenate([[0], np.cumsum([h.samples for h in self.hands])[:-1]])
+        outer = A[:, :, :, None] * (self.gyro - bias)[:, None, None, :]    # A_k (x) u_k
+        T = np.add.reduceat(outer.reshape(len(A), 27), starts).reshape(-1, 3, 3, 3)
+        B = np.add.reduceat(A.reshape(len(A), 9), starts).reshape(-1, 3, 3)
         self._tangent = (np.array(gyro_inverse, float), np.array(bias, float), self._last, T, B)
 
     def exact(self) -> None:
