@@ -419,6 +419,7 @@ class Model:
         (_column_groups), every perturbed vector in one batched evaluation; the hand turns to
         first order about x."""
         x = np.asarray(x, float)
+        self._ensure_layout()
         if not hasattr(self, "_groups"):
             self._groups, self._jacobian_rows = self._column_groups()
         key = x.tobytes()
@@ -582,6 +583,7 @@ class Model:
         self._tags = [(tag, len(idx), quantity) for tag, quantity, idx in entries]
         self._perm = np.concatenate([idx for _, _, idx in entries]) if entries else np.zeros(0, int)
         self._block_sizes = [(name, n * w) for name, n, w in blocks]
+        self._prior_key = tuple(self.priors.items())
         self._prior_cols = np.array(list(self.priors), int)
         self._prior_sigma = np.array(list(self.priors.values()), float)
         self._rows = len(self._perm)
@@ -592,11 +594,17 @@ class Model:
 
     def _residuals_batch(self, X) -> np.ndarray:
         """The residuals of every row of X (B, parameters): (B, rows), in one vectorised pass."""
-        if self._rows is None:
-            self._row_layout()
+        self._ensure_layout()
         self.evaluations += len(X)
         flat = np.concatenate([b.reshape(len(X), -1) for b in self._blocks(X)], axis=1)
         return flat[:, self._perm]
+
+    def _ensure_layout(self):
+        """The row layout, rebuilt (with the Jacobian's structure) when the priors were set or
+        changed without refresh()."""
+        if self._rows is None or self._prior_key != tuple(self.priors.items()):
+            self.refresh()
+            self._row_layout()
 
     def _pieces(self, x):
         """The whitened residuals in pieces, and a (tag, length, quantity) per piece naming what
