@@ -18,6 +18,9 @@ give the gyro bias, with the Earth rate modelled when the latitude is known and 
 The data are the segment summaries (station/estimate/summaries.py), each divided by its noise;
 the encoder's angle error enters the gyro integrals' covariance.  The solution starts from the
 2010 algebraic one; the covariance is (J^T J)^-1 at the solution.
+The residual is computed for all segments (and for a batch of parameter vectors) in one
+vectorised pass; the Jacobian is forward differences evaluated as one batch, with the hand turns
+to first order about the point (docs/method-lsq.md, "How the fit is computed").
 """
 from __future__ import annotations
 
