@@ -6,8 +6,9 @@ forward-difference Jacobian of that reference.
 Tolerances: both residuals are whitened (unit noise per row) and computed from the same numbers
 in a different order, so they differ by rounding only: 1e-9 of the row's size (at most ~1e4 here)
 is ~1e5 times the double-precision rounding of the ~100 operations per row and ~1e-5 of the
-noise.  Both Jacobians are forward differences with steps h = 1e-7 max(|x|, 1e-2) (the new one
-partly analytic): the truncation error, ~h/2 times the second derivative, is below 1e-5 of a
+noise.  Both Jacobians are forward differences, the reference's with steps h = 1e-7 max(|x|,
+1e-2), the new one's with the same or larger steps (an effect's typical size) and the hand turns
+to first order about x (an error second order in h): the truncation error, ~h/2 times the second derivative, is below 1e-5 of a
 column's norm, and the rounding error of a row is ~eps D / h, D the size of the whitened numbers
 that cancel in it (the data and the prediction, or the phase points of a harmonic: up to ~1e8
 for a gyro integral): the tolerance is 1e-4 of the column's norm plus 2 x 8 eps D / h, with D
