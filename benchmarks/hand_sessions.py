@@ -1,6 +1,7 @@
 """Real and simulated hand recordings in: import time, statics found vs true, accelerometer and
 gyro errors against the truth with their 1-sigma, and the time of a 51,000-row, 38-pose session
-against imu_tk's 0.42 s (docs/real-recordings.md).
+against imu_tk's 0.42 s (docs/real-recordings.md); the least-squares fit alone (CPU seconds,
+residual evaluations) paired with the per-segment formulation it replaced (tests/lsq_reference.py).
 
     python benchmarks/hand_sessions.py [--seeds N] [--quick]
 
@@ -29,6 +30,9 @@ from station.io.capture import read_capture  # noqa: E402
 from station.io.importers.rosbag import write_imu_bag  # noqa: E402
 from station.model.calibration import Calibration, parameter_errors  # noqa: E402
 from station.simulate.dryrun import truth_calibration  # noqa: E402
+from estimate_optimal9 import CountedReference, fit_figures  # noqa: E402
+from station.estimate import lsq  # noqa: E402
+from station.estimate.summaries import summarise  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "imucal"
 COUNTS = (8 * 9.80665 / 32768, 1000.0 / 32768)      # +-8 g, +-1000 deg/s in 16 bits
@@ -147,6 +151,19 @@ def simulated(tmp: Path, seed: int, kind: str, poses: int, dwell, verbose=True):
     return errs, cal, t_import, t_est
 
 
+def fit_pair(capture, title, repeats=3, latitude=None):
+    """The fit alone on the capture's summaries: vectorised against the per-segment formulation."""
+    s = summarise(capture)
+    if latitude is not None:
+        s.latitude_deg = latitude
+    t_new, n_new, new = fit_figures(s, (), lsq.Model, repeats)
+    t_old, n_old, old = fit_figures(s, (), CountedReference, repeats)
+    dz = np.max(np.abs(new.x - old.x) / np.sqrt(np.maximum(np.diag(old.covariance), 1e-300)))
+    print(f"  fit alone{title}: {t_new:.3f} s CPU, {n_new} residual evaluations ({1e3 * t_new / n_new:.2f} ms each); "
+          f"before (per segment): {t_old:.3f} s, {n_old} evaluations: {t_old / t_new:.1f}x faster; solutions "
+          f"within {dz:.1e} sigma")
+
+
 def imucal_sessions(tmp: Path):
     if not DATA.exists():
         print("shared/data/imucal not present: imucal sessions skipped")
@@ -169,6 +186,7 @@ def imucal_sessions(tmp: Path):
         print(f"\nimucal {title}: import {t_import:.2f} s, {len(statics)} statics and "
               f"{cal.fit['hand_rotations']} hand turns found; estimate {t_est:.2f} s, reduced chi2 "
               f"{cal.fit['reduced_chi2']:.1f}")
+        fit_pair(capture, "")
         if annotated:       # imucal's authors' static sections inside the poses found
             inside = sum(any(int(s.data.t[0] * 102.4) - 2 <= annotated[lab]["start"] + 10 and
                              annotated[lab]["end"] - 10 <= int(s.data.t[-1] * 102.4) + 2 for s in statics)
@@ -205,6 +223,9 @@ def speed(tmp: Path, repeats: int):
     print(f"  station estimate (accelerometer and gyro, with covariance): {t_est:.3f} s, CPU {c_est:.3f} s "
           f"(imu_tk: {IMU_TK_S} s: {'faster' if c_est < IMU_TK_S else 'slower'})")
     print_errors("errors against the truth", errs, cal)
+    fit_pair(capture, "", repeats)
+    fit_pair(capture, f" (latitude {hs.truth['latitude_deg']:g} deg known: the poses' full attitudes)", repeats,
+             hs.truth["latitude_deg"])
 
 
 def honesty(tmp: Path, seeds: int):

@@ -39,6 +39,8 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 from scipy.spatial.transform import Rotation
 
+from station.model.geometry import cross
+
 STEADY_SPREAD = 0.3         # as summaries.STEADY_SPREAD: a rotation whose rate varies more is a hand turn
 MAX_GAP_S = 1.0             # static end -> turn start (and turn end -> static start), IMU still
 MIN_SAMPLES = 2
@@ -115,13 +117,18 @@ class Integrator:
         self.identity[:, 3] = 1.0
         self.shape = (len(hands), width, 4)
         self._key = None
+        self._tangent = None
 
     def turns(self, gyro_inverse: np.ndarray, bias: np.ndarray) -> Rotation:
         """dR of every turn (a stacked Rotation), with w_p = gyro_inverse (gyro - bias), deg/s.
-        The last result is kept: the Jacobian's columns that move neither give it again."""
+        The last result is kept: the Jacobian's columns that move neither give it again.  While
+        linearised (see linearise()), any other gyro_inverse and bias give the first-order turn
+        about the linearisation point instead of a new integration."""
         key = np.concatenate([np.ravel(gyro_inverse), np.ravel(bias)]).tobytes()
         if key == self._key:
             return self._last
+        if self._tangent is not None:
+            return self._linearised(gyro_inverse, bias)
         theta = ((self.gyro - bias) @ gyro_inverse.T) * self.step_rad       # rad, per sample
         angle = np.sqrt(np.einsum("ij,ij->i", theta, theta))
         half = 0.5 * angle
@@ -129,11 +136,70 @@ class Integrator:
             k = np.where(angle > 1e-8, np.sin(half) / angle, 0.5 - angle * angle / 48.0)   # sin(a/2)/a
         Q = self.identity.copy()
         Q[self.flat] = np.column_stack([theta * k[:, None], np.cos(half)])
-        Q = Q.reshape(self.shape)
-        while Q.shape[1] > 1:
-            Q = _product(Q[:, 0::2], Q[:, 1::2])
-        self._key, self._last = key, Rotation.from_quat(Q[:, 0])
+        levels = [Q.reshape(self.shape)]
+        while levels[-1].shape[1] > 1:
+            levels.append(_product(levels[-1][:, 0::2], levels[-1][:, 1::2]))
+        self._key, self._last = key, Rotation.from_quat(levels[-1][:, 0])
+        self._levels, self._theta = levels, theta
         return self._last
+
+    # --- first order about a point, for the Jacobian ---------------------------------------
+    # dR = E_1 ... E_N with E_k = exp(theta_k); a change d theta_k turns it into
+    # dR exp(d phi), d phi = sum_k S_k^T J_r(theta_k) d theta_k, with S_k = E_{k+1} ... E_N (the
+    # rest of the turn after sample k) and J_r the right Jacobian of the exponential map; and
+    # d theta_k = dt (d gyro_inverse (gyro_k - bias) - gyro_inverse d bias) to first order.  The
+    # S_k come from the integration's own pairwise products (a down-sweep of its tree).
+
+    def linearise(self, gyro_inverse: np.ndarray, bias: np.ndarray) -> None:
+        """Integrate at (gyro_inverse, bias) and keep the first-order change of every turn with
+        them: until exact() is called, turns() at other values costs no integration."""
+        self._tangent = None
+        self.turns(gyro_inverse, bias)
+        levels = self._levels
+        suffix = np.zeros_like(levels[-1])
+        suffix[..., 3] = 1.0
+        for level in reversed(levels[:-1]):          # the exclusive suffix product of every node
+            below = np.empty_like(level)
+            below[:, 1::2] = suffix
+            below[:, 0::2] = _product(level[:, 1::2], suffix)
+            suffix = below
+        S = Rotation.from_quat(suffix.reshape(-1, 4)[self.flat]).as_matrix()     # (N,3,3)
+        theta = self._theta
+        angle = np.sqrt(np.einsum("ij,ij->i", theta, theta))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            c1 = np.where(angle > 1e-4, (1.0 - np.cos(angle)) / angle**2, 0.5 - angle**2 / 24.0)
+            c2 = np.where(angle > 1e-4, (angle - np.sin(angle)) / angle**3, 1.0 / 6.0 - angle**2 / 120.0)
+        # row a of S_k^T J_r(theta_k) is J_r^T s_a = s_a + c1 theta x s_a + c2 theta x (theta x s_a)
+        # = (1 - c2 |theta|^2) s_a + c1 theta x s_a + c2 (theta . s_a) theta, s_a the column a of S_k
+        St = S.transpose(0, 2, 1)                                           # rows: s_a
+        along = np.einsum("nc,nac->na", theta, St)
+        A = ((1.0 - c2 * angle**2)[:, None, None] * St + c1[:, None, None] * cross(theta[:, None, :], St)
+             + c2[:, None, None] * along[:, :, None] * theta[:, None, :]) * self.step_rad[:, :, None]
+        starts = np.concatenate([[0], np.cumsum([h.samples for h in self.hands])[:-1]])
+        outer = A[:, :, :, None] * (self.gyro - bias)[:, None, None, :]    # A_k (x) u_k
+        T = np.add.reduceat(outer.reshape(len(A), 27), starts).reshape(-1, 3, 3, 3)
+        B = np.add.reduceat(A.reshape(len(A), 9), starts).reshape(-1, 3, 3)
+        self._tangent = (np.array(gyro_inverse, float), np.array(bias, float), self._last, T, B)
+
+    def exact(self) -> None:
+        """Back to integrating every new gyro_inverse and bias (after linearise())."""
+        self._tangent = None
+
+    def _linearised(self, gyro_inverse, bias) -> Rotation:
+        M0, b0, dR0, T, B = self._tangent
+        d_phi = np.einsum("haij,ij->ha", T, gyro_inverse - M0) - B @ (M0 @ (bias - b0))
+        return dR0 * Rotation.from_rotvec(d_phi)
+
+    def turns_batch(self, gyro_inverse: np.ndarray, bias: np.ndarray) -> Rotation:
+        """turns() for every row of gyro_inverse (B,3,3) and bias (B,3): B*H turns, the H turns
+        of each row together (to first order about the linearisation point while there is one)."""
+        if self._tangent is None:
+            return Rotation.concatenate([self.turns(m, b) for m, b in zip(gyro_inverse, bias)])
+        M0, b0, dR0, T, B = self._tangent
+        d_phi = (np.einsum("haij,nij->nha", T, gyro_inverse - M0)
+                 - np.einsum("hij,nj->nhi", B, (bias - b0) @ M0.T))
+        base = Rotation.from_quat(np.tile(dR0.as_quat(), (len(bias), 1)))
+        return base * Rotation.from_rotvec(d_phi.reshape(-1, 3))
 
 
 def _product(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -18,6 +18,9 @@ give the gyro bias, with the Earth rate modelled when the latitude is known and 
 The data are the segment summaries (station/estimate/summaries.py), each divided by its noise;
 the encoder's angle error enters the gyro integrals' covariance.  The solution starts from the
 2010 algebraic one; the covariance is (J^T J)^-1 at the solution.
+The residual is computed for all segments (and for a batch of parameter vectors) in one
+vectorised pass; the Jacobian is forward differences evaluated as one batch, with the hand turns
+to first order about the point (docs/method-lsq.md, "How the fit is computed").
 """
 from __future__ import annotations
 
@@ -217,10 +220,13 @@ class Model:
         self.static_colour = hand_rotation.static_colours(len(s.statics), self.hands) if self.hands else None
         self.priors: dict[int, float] = {}     # column -> 1-sigma of a zero-mean prior
         self._initialise()
+        self._prepare()
 
     def refresh(self):
-        """Forget the cached Jacobian structure (after priors were added)."""
+        """Forget the cached row layout and Jacobian structure (after priors were added)."""
         self.__dict__.pop("_groups", None)
+        self._rows = None
+        self._last_jacobian = None
 
     # --- initial values ---------------------------------------------------------------------
     def _initialise(self):
@@ -308,17 +314,6 @@ class Model:
             self.start.notes.append("Earth rate: its vertical component modelled (latitude known), its "
                                     "horizontal one as noise: the gyros cannot see the poses' heading")
 
-    def _hand_residuals(self, x, Mg, ups, attitudes) -> np.ndarray:
-        """(H, 2) whitened residuals: the up after each turn against the up before carried through it."""
-        hands = self.hands
-        dR = self.integrator.turns(np.linalg.inv(Mg), x[self.layout["gyro_bias"]])
-        before = np.array([ups[h.before] for h in hands])
-        if self.with_latitude:      # the Earth turns the up during the turn
-            earth = np.array([attitudes[h.before].apply(self.omega_n) for h in hands])
-            before = Rotation.from_rotvec(np.radians(earth) * self.hand_duration[:, None]).apply(before)
-        d = np.array([ups[h.after] for h in hands]) - dR.apply(before, inverse=True)
-        return np.einsum("hkc,hc->hk", self.hand_basis, d) / self.hand_sigma_rad[:, None]
-
     # --- pieces -----------------------------------------------------------------------------
     def _matrices(self, x):
         L = self.layout
@@ -326,46 +321,6 @@ class Model:
         Mg = (np.diag(x[L["gyro_scale"]]) @ lower_unit_rows(x[L["gyro_misalignment"]])
               @ Rotation.from_rotvec(x[L["inter_triad"]]).as_matrix())
         return Ma, Mg
-
-    def _axis(self, x, k):
-        p = x[self.layout[f"axis{k}"]]
-        l0 = self.axis_ref[k]
-        t1, t2 = self.axis_basis[k]
-        l = l0 + p[0] * t1 + p[1] * t2
-        return l / np.linalg.norm(l), p[2], p[3]
-
-    def _static_attitude(self, x, j):
-        p = x[self.layout[f"static{j}"]]
-        ref = self.static_ref[j]
-        if self.with_latitude:
-            return Rotation.from_rotvec(p) * ref
-        if not hasattr(self, "_static_basis"):      # fixed: computed once
-            self._static_basis = [tangent_basis(r) for r in self.static_ref]
-        t1, t2 = self._static_basis[j]
-        up = ref + p[0] * t1 + p[1] * t2
-        return up / np.linalg.norm(up)
-
-    def _predict(self, x, ctx: SampleContext, Ma, Mg):
-        a = ctx.f_p @ Ma.T + x[self.layout["accel_bias"]]
-        w = ctx.w_p @ Mg.T + x[self.layout["gyro_bias"]]
-        for e in self.effects:
-            px = x[self.layout[f"effect:{e.id}"]]
-            da, dw = e.accel(px, ctx), e.gyro(px, ctx)
-            if da is not None:
-                a = a + da
-            if dw is not None:
-                w = w + dw
-        return a, w
-
-    def _context(self, f_p, w_p, w_table, temp, Ma, Mg, seg=None):
-        n = len(f_p)
-        extra = {}
-        if seg is not None:
-            extra = {"t_s": np.full(n, seg.t_mid_s - self.t0), "segment_index": np.full(n, float(seg.index)),
-                     "temp_rate_c_per_s": np.full(n, seg.temp_rate_c_per_s)}
-        return SampleContext(f_p=f_p, w_p=w_p, w_table=w_table, wdot_table=np.zeros((n, 3)),
-                             temp_c=np.full(n, np.nan if temp is None else temp),
-                             accel_matrix=Ma, gyro_matrix=Mg, **extra)
 
     def _column_groups(self):
         """Columns that can be perturbed together: the same local parameter of every static,
@@ -426,156 +381,376 @@ class Model:
                 labels += [("prior", "prior", quantity, str(j))]
         return labels
 
+    def _steps(self, x) -> np.ndarray:
+        """Forward-difference steps: 1e-7 of each parameter's size, at least of 1e-2 (internal
+        units) or, for an effect's parameter, of its typical size when that is finite (a step of
+        1e-9 on a parameter whose typical size is 100 left the column to rounding noise)."""
+        if not hasattr(self, "_step_floor"):
+            floor = np.full(self.layout.size, 1e-2)
+            for e in self.effects:
+                sizes = [p.typical / abs(p.scale) if p.scale and np.isfinite(p.typical / p.scale) else 0.0
+                         for p in e.params]
+                floor[self.layout[f"effect:{e.id}"]] = np.maximum(sizes, 1e-2)
+            self._step_floor = floor
+        return 1e-7 * np.maximum(np.abs(x), self._step_floor)
+
+    def _linearised_hands(self, x):
+        """While the Jacobian is taken, the hand turns to first order about x (no integration per
+        gyro column: hand_rotation.Integrator.linearise)."""
+        if self.hands:
+            _, Mg = self._matrices(x)
+            self.integrator.linearise(np.linalg.inv(Mg), x[self.layout["gyro_bias"]])
+
     def jacobian_columns(self, x, columns) -> np.ndarray:
-        """Forward-difference Jacobian of the given columns only."""
+        """Forward-difference Jacobian of the given columns only (one batched evaluation)."""
+        x = np.asarray(x, float)
         r0 = self.residuals(x)
-        J = np.empty((len(r0), len(columns)))
-        for k, c in enumerate(columns):
-            xp = x.copy()
-            h = 1e-7 * max(abs(x[c]), 1e-2)
-            xp[c] += h
-            J[:, k] = (self.residuals(xp) - r0) / h
-        return J
+        columns = np.asarray(columns, int)
+        steps = self._steps(x)[columns]
+        X = np.tile(x, (len(columns), 1))
+        X[np.arange(len(columns)), columns] += steps
+        self._linearised_hands(x)
+        try:
+            R = self._residuals_batch(X) if len(columns) else np.zeros((0, len(r0)))
+        finally:
+            if self.hands:
+                self.integrator.exact()
+        return ((R - r0) / steps[:, None]).T
 
     def jacobian(self, x) -> np.ndarray:
+        """Forward differences, the columns that move disjoint rows perturbed together
+        (_column_groups), every perturbed vector in one batched evaluation; the hand turns to
+        first order about x."""
+        x = np.asarray(x, float)
+        self._ensure_layout()
         if not hasattr(self, "_groups"):
-            self._groups, self._rows = self._column_groups()
+            self._groups, self._jacobian_rows = self._column_groups()
+        key = x.tobytes()
+        if self._last_jacobian is not None and self._last_jacobian[0] == key:
+            return self._last_jacobian[1].copy()     # the solver's last one, at its solution
         r0 = self.residuals(x)
-        J = np.zeros((self._rows, len(x)))
-        for members in self._groups:
-            xp = x.copy()
-            steps = []
-            for c, _ in members:
-                h = 1e-7 * max(abs(x[c]), 1e-2)
-                xp[c] += h
-                steps.append(h)
-            d = self.residuals(xp) - r0
-            for (c, owned), h in zip(members, steps):
+        J = np.zeros((self._jacobian_rows, len(x)))
+        steps = self._steps(x)
+        X = np.tile(x, (len(self._groups), 1))
+        for n, members in enumerate(self._groups):
+            cols = [c for c, _ in members]
+            X[n, cols] += steps[cols]
+        self._linearised_hands(x)
+        try:
+            D = self._residuals_batch(X) - r0
+        finally:
+            if self.hands:
+                self.integrator.exact()
+        for d, members in zip(D, self._groups):
+            for c, owned in members:
                 if owned is None:
-                    J[:, c] = d / h
+                    J[:, c] = d / steps[c]
                 else:
-                    J[owned, c] = d[owned] / h
+                    J[owned, c] = d[owned] / steps[c]
+        self._last_jacobian = (key, J.copy())
         return J
 
     # --- the residuals ----------------------------------------------------------------------
-    def residuals(self, x) -> np.ndarray:
-        return np.concatenate(self._pieces(x)[0])
+    # One vectorised pass: every static, every rotation on its phase grid and every hand turn at
+    # once, each effect called once with all those sample points stacked (statics first, then
+    # the rotations' phase points); the rows are then put in the order of row_labels() (per
+    # segment) by a fixed permutation.  Everything that does not depend on x is computed once,
+    # in _prepare().
 
-    def _pieces(self, x):
-        """The whitened residuals in pieces, and a (tag, length) per piece naming what owns it."""
+    def _prepare(self):
+        """The constants of the residual: data, weights, index arrays, the row permutation."""
         s, L = self.s, self.layout
-        Ma, Mg = self._matrices(x)
-        out, tags = [], []
-
-        def put(tag, values, quantity):
-            out.append(values)
-            tags.append((tag, len(values), quantity))
-
-        static_sigma_a = s.accel_sigma
-        static_sigma_w = s.gyro_sigma
-        C_mount = Rotation.from_rotvec(x[L["mounting_rotation"]]) if self.attitudes == "table" else None
-        ups, attitudes = [], []
-        for j, st in enumerate(s.statics):
-            att = self._static_attitude(x, j)
-            if self.with_latitude:
-                f_p, w_p = att.apply(self.f_n)[None, :], att.apply(self.omega_n)[None, :]
-                up_p = att.apply(UP)
-            else:
-                up_p = att
-                f_p, w_p = (self.f_n[2] * att)[None, :], np.zeros((1, 3))
-                if self.hand_earth_vertical:
-                    w_p = (self.omega_n[2] * att)[None, :]
-            a, w = self._predict(x, self._context(f_p, w_p, np.zeros((1, 3)), st.temp_c, Ma, Mg, st), Ma, Mg)
-            root_n = np.sqrt(st.samples)
-            ups.append(up_p)
-            attitudes.append(att)
-            put(("static", j), (st.accel - a[0]) * root_n / static_sigma_a, "accel")
-            if self.with_latitude:
-                put(("static", j), (st.gyro - w[0]) * root_n / static_sigma_w, "gyro")
-            elif self.hands:    # the bias, the unmodelled Earth rate within the noise
-                put(("static", j), self.static_gyro_whiten[j] @ (st.gyro - w[0]), "gyro")
-            else:   # only |Omega_E| known: the norm of the compensated rate
-                rate = np.linalg.norm(np.linalg.solve(Mg, st.gyro - x[L["gyro_bias"]]))
-                put(("static", j), np.atleast_1d((rate - self.omega_dps) * root_n / np.mean(static_sigma_w)),
-                    "gyro_norm")
-            if C_mount is not None and st.up_body is not None:
-                put(("static", j), cross(up_p, C_mount.apply(st.up_body)) / self.prior_sigma, "attitude_prior")
-            if self.with_latitude:   # keeps the heading finite when the gyros cannot see the Earth turn
-                put(("weak", j), x[L[f"static{j}"]] / WEAK_PRIOR_RAD, "weak_prior")
-        if self.hands:
-            for i, rows in enumerate(self._hand_residuals(x, Mg, ups, attitudes)):
-                put(("hand", i), rows, "gravity_after_turn")
-        offset = (x[L["mounting_offset"]] if "mounting_offset" in L.blocks
-                  else (s.mounting_offset_m if s.mounting_offset_m is not None else np.zeros(3)))
+        S, R, K = len(s.statics), len(s.rotations), s.groups
+        pad = L.size            # x is extended by a zero: the index of an absent nuisance
+        stat, rots = s.statics, s.rotations
+        self._st_data = np.array([np.concatenate([q.accel, q.gyro]) for q in stat]).reshape(S, 6)
+        self._st_root_n = np.sqrt(np.array([q.samples for q in stat], float)).reshape(S, 1)
+        width = 3 if self.with_latitude else 2
+        self._st_cols = np.array([np.arange(L[f"static{j}"].start, L[f"static{j}"].stop) for j in range(S)],
+                                 int).reshape(S, width)
+        if self.with_latitude:      # C0 f_n, C0 Omega_n, C0 up per static: the attitude's reference
+            C0 = np.array([r.as_matrix() for r in self.static_ref]).reshape(S, 3, 3)
+            self._st_ref_vectors = np.einsum("sij,kj->ski", C0, np.array([self.f_n, self.omega_n, UP]))
+        else:
+            self._st_ref = np.array(self.static_ref, float).reshape(S, 3)
+            self._st_basis = np.array([tangent_basis(r) for r in self.static_ref]).reshape(S, 2, 3)
+        self._st_up_index = np.array([j for j, q in enumerate(stat) if q.up_body is not None], int)
+        self._st_up_body = np.array([np.asarray(stat[j].up_body, float) for j in self._st_up_index]).reshape(-1, 3)
+        if self.hands and not self.with_latitude:
+            self._st_gyro_whiten = np.array(self.static_gyro_whiten).reshape(S, 3, 3)
+        # rotations on the phase grid
         phases = 2 * np.pi * np.arange(PHASES) / PHASES
-        cos_p, sin_p = np.cos(phases), np.sin(phases)
-        cos_2p, sin_2p = np.cos(2 * phases), np.sin(2 * phases)
-        grid = np.column_stack([np.ones(PHASES), cos_p, sin_p, cos_2p, sin_2p])
-        axes = [self._axis(x, k) for k in range(s.groups)]
-        if C_mount is not None:
-            for k, (l, _, _) in enumerate(axes):
-                axis_body = next(r.axis_body for r in s.rotations if r.group == k)
-                put(("axis", k), cross(l, C_mount.apply(axis_body)) / self.prior_sigma, "axis_prior")
-        g = s.gravity_mps2
-        for k, (_, kappa, e) in enumerate(axes):
-            # the Earth rate along an axis lies within +/- Omega_E (uniform: sigma Omega_E/sqrt(3));
-            # without this a single-direction turn could trade it against the scale factor
-            put(("weak_axis", k), np.atleast_1d(e * np.sqrt(3.0) / self.omega_dps), "earth_prior")
-            if not any(r.steady for r in s.rotations if r.group == k):
-                # only unsteady turns about this axis: nothing sees the gravity along it
-                put(("weak_axis", k), np.atleast_1d(kappa / g / WEAK_PRIOR_RAD), "weak_prior")
-        for i, r in enumerate(s.rotations):
-            l, kappa, e = axes[r.group]
-            e1 = self.axis_basis[r.group][0]
-            e1 = e1 - (e1 @ l) * l
-            e1 /= np.linalg.norm(e1)
-            e2 = cross(l, e1)
-            psi, chi = (list(x[L[f"phase{i}"]]) + [0.0, 0.0])[:2]
-            v = np.sqrt(max(g * g - kappa * kappa, 0.0)) * (np.cos(psi) * e1 + np.sin(psi) * e2)
-            # Earth rate across the axis turns with the body: over a whole number of turns it
-            # integrates to zero, over the rest of a turn it does not
-            earth_perp = (np.sqrt(max(self.omega_dps**2 - e * e, 0.0))
-                          * (np.cos(chi) * e1 + np.sin(chi) * e2))
-            A = np.radians(r.angle_deg)
-            earth_integral = np.zeros(3) if not _earth_rate_visible(r, s) else (r.duration_s / A) * (
-                np.sin(A) * earth_perp - (1.0 - np.cos(A)) * cross(l, earth_perp))
-            # at the mounting offset: centripetal w x (w x d) and tangential dw/dt x d, with the
-            # rate's shape over the turn (its harmonics, from the summary): a steady rate gives a
-            # constant centripetal force and no tangential one
+        self._cos_p, self._sin_p = np.cos(phases), np.sin(phases)
+        grid = np.column_stack([np.ones(PHASES), self._cos_p, self._sin_p, np.cos(2 * phases), np.sin(2 * phases)])
+        self._harmonics = (grid * np.array([1.0, 2.0, 2.0, 2.0, 2.0])).T / PHASES        # (5, PHASES)
+        shapes = []
+        for r in rots:
             if r.rate_coef is not None:
-                w_k, wsq_k, wdot_k = grid @ r.rate_coef, grid @ r.rate_sq_coef, grid @ r.rate_dot_coef
+                shapes.append([grid @ r.rate_coef, grid @ r.rate_sq_coef, grid @ r.rate_dot_coef])
             else:
                 w_k = np.full(PHASES, np.radians(r.rate_dps) * np.sqrt(r.rate_sq_factor))
-                wsq_k, wdot_k = w_k**2, np.zeros(PHASES)
-            l_x_d = cross(l, offset)
-            at_offset = np.outer(wsq_k, cross(l, l_x_d)) + np.outer(wdot_k, l_x_d)
-            f_p = kappa * l + np.outer(cos_p, v) - np.outer(sin_p, cross(l, v)) + at_offset
-            w_p = np.tile((r.rate_dps + e) * l, (PHASES, 1))
-            ctx = self._context(f_p, w_p, np.outer(w_k, l), r.temp_c, Ma, Mg, r)
-            ctx.wdot_table = np.outer(wdot_k, l)
-            a, w = self._predict(x, ctx, Ma, Mg)
-            dc, c, sn = a.mean(axis=0), 2 * cos_p @ a / PHASES, 2 * sin_p @ a / PHASES
-            c2, s2 = 2 * cos_2p @ a / PHASES, 2 * sin_2p @ a / PHASES
-            root_n = np.sqrt(r.samples)
-            integral = w.mean(axis=0) * r.duration_s + Mg @ earth_integral
-            for eff in self.effects:
-                term = eff.integral(x[L[f"effect:{eff.id}"]], r)
-                if term is not None:
-                    integral = integral + term
-            gyro_rows = self.gyro_whiten[i] @ (r.gyro_integral - integral)
-            if not r.steady:        # a hand turn: its angle and axis only, through the gyro
-                put(("rot", i), gyro_rows, "rotation_gyro")
-                continue
-            put(("rot", i), np.concatenate([
-                (r.accel_dc - dc) * root_n / s.accel_sigma,
-                (r.accel_cos - c) * root_n / (np.sqrt(2) * s.accel_sigma),
-                (r.accel_sin - sn) * root_n / (np.sqrt(2) * s.accel_sigma),
-                (r.accel_cos2 - c2) * root_n / (np.sqrt(2) * s.accel_sigma),
-                (r.accel_sin2 - s2) * root_n / (np.sqrt(2) * s.accel_sigma),
-                gyro_rows]), "rotation")
-        for c, sigma in self.priors.items():
-            put(("prior", c), np.atleast_1d(x[c] / sigma), "effect_prior")
-        return out, tags
+                shapes.append([w_k, w_k**2, np.zeros(PHASES)])
+        self._rot_rate_shape = np.array(shapes, float).reshape(R, 3, PHASES)     # w, w^2, dw/dt
+        self._rot_group = np.array([r.group for r in rots], int)
+        self._rot_e1 = np.array([self.axis_basis[r.group][0] for r in rots]).reshape(R, 3)
+        self._rot_phase_cols = np.array([(list(range(L[f"phase{i}"].start, L[f"phase{i}"].stop)) + [pad, pad])[:2]
+                                         for i in range(R)], int).reshape(R, 2)
+        self._rot_rate = np.array([r.rate_dps for r in rots], float)
+        self._rot_duration = np.array([r.duration_s for r in rots], float)
+        A = np.radians(np.array([r.angle_deg for r in rots], float))
+        visible = np.array([_earth_rate_visible(r, s) for r in rots], bool)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            self._rot_earth = np.where(visible[:, None], np.column_stack(
+                [self._rot_duration / A * np.sin(A), self._rot_duration / A * (1.0 - np.cos(A))]), 0.0).reshape(R, 2)
+        self._rot_data = np.array([[r.accel_dc, r.accel_cos, r.accel_sin, r.accel_cos2, r.accel_sin2]
+                                   for r in rots], float).reshape(R, 5, 3)
+        self._rot_weight = (np.sqrt(np.array([r.samples for r in rots], float))[:, None, None]
+                            / (np.array([1.0] + [np.sqrt(2)] * 4)[None, :, None] * s.accel_sigma)).reshape(R, 5, 3)
+        self._rot_gyro = np.array([r.gyro_integral for r in rots], float).reshape(R, 3)
+        self._rot_gyro_whiten = np.array(self.gyro_whiten, float).reshape(R, 3, 3)
+        self._axis_cols = np.array([np.arange(L[f"axis{k}"].start, L[f"axis{k}"].stop) for k in range(K)],
+                                   int).reshape(K, 4)
+        self._axis_ref = np.array(self.axis_ref, float).reshape(K, 3)
+        self._axis_basis = np.array(self.axis_basis, float).reshape(K, 2, 3)
+        self._axis_body = np.array([next(r.axis_body for r in rots if r.group == k) for k in range(K)],
+                                   float).reshape(K, 3)
+        self._offset = (None if "mounting_offset" in L.blocks
+                        else np.asarray(s.mounting_offset_m if s.mounting_offset_m is not None else np.zeros(3), float))
+        # the context's columns that do not depend on x: statics, then PHASES rows per rotation
+        segs = list(stat) + [r for r in rots for _ in range(PHASES)]
+        self._ctx_temp = np.array([np.nan if q.temp_c is None else q.temp_c for q in segs], float)
+        self._ctx_t = np.array([q.t_mid_s - self.t0 for q in segs], float)
+        self._ctx_index = np.array([float(q.index) for q in segs], float)
+        self._ctx_temp_rate = np.array([q.temp_rate_c_per_s for q in segs], float)
+        self._last_jacobian = None
+        self.evaluations = 0        # residual evaluations (the Jacobian's included), for benchmarks
+        self._integral_effects = [e for e in self.effects
+                                  if getattr(type(e), "integral", Effect.integral) is not Effect.integral]
+        if self.hands:
+            self._hand_before = np.array([h.before for h in self.hands], int)
+            self._hand_after = np.array([h.after for h in self.hands], int)
+        self._rows = None
+
+    def _row_layout(self):
+        """Tags (segment, rows, quantity) in row order, and the permutation from the blocks
+        computed by _blocks() to that order."""
+        s = self.s
+        S, R, K, H = len(s.statics), len(s.rotations), s.groups, len(self.hands)
+        table = self.attitudes == "table"
+        gyro_block = "s_gyro_norm" if not (self.with_latitude or self.hands) else "s_gyro"
+        blocks = [("s_accel", S, 3), (gyro_block, S, 3 if gyro_block == "s_gyro" else 1)]
+        if table:
+            blocks.append(("s_attitude", len(self._st_up_index), 3))
+        if self.with_latitude:
+            blocks.append(("s_weak", S, 3))
+        if H:
+            blocks.append(("hand", H, 2))
+        if table:
+            blocks.append(("axis_prior", K, 3))
+        blocks += [("weak_e", K, 1), ("weak_kappa", K, 1), ("rot", R, 18), ("prior", len(self.priors), 1)]
+        offset, at = {}, 0
+        for name, n, w in blocks:
+            offset[name] = (at, w)
+            at += n * w
+        entries = []
+
+        def put(tag, quantity, block, item, columns):
+            base, w = offset[block]
+            entries.append((tag, quantity, base + item * w + np.asarray(columns, int)))
+
+        up_item = {j: n for n, j in enumerate(self._st_up_index)}
+        for j in range(S):
+            put(("static", j), "accel", "s_accel", j, range(3))
+            put(("static", j), "gyro" if gyro_block == "s_gyro" else "gyro_norm", gyro_block, j,
+                range(3 if gyro_block == "s_gyro" else 1))
+            if table and j in up_item:
+                put(("static", j), "attitude_prior", "s_attitude", up_item[j], range(3))
+            if self.with_latitude:
+                put(("weak", j), "weak_prior", "s_weak", j, range(3))
+        for i in range(H):
+            put(("hand", i), "gravity_after_turn", "hand", i, range(2))
+        if table:
+            for k in range(K):
+                put(("axis", k), "axis_prior", "axis_prior", k, range(3))
+        for k in range(K):
+            put(("weak_axis", k), "earth_prior", "weak_e", k, [0])
+            if not any(r.steady for r in s.rotations if r.group == k):
+                put(("weak_axis", k), "weak_prior", "weak_kappa", k, [0])
+        for i, r in enumerate(s.rotations):
+            if r.steady:
+                put(("rot", i), "rotation", "rot", i, range(18))
+            else:       # a hand turn: its angle and axis only, through the gyro
+                put(("rot", i), "rotation_gyro", "rot", i, range(15, 18))
+        for n, c in enumerate(self.priors):
+            put(("prior", c), "effect_prior", "prior", n, [0])
+        self._tags = [(tag, len(idx), quantity) for tag, quantity, idx in entries]
+        self._perm = np.concatenate([idx for _, _, idx in entries]) if entries else np.zeros(0, int)
+        self._block_sizes = [(name, n * w) for name, n, w in blocks]
+        self._prior_key = tuple(self.priors.items())
+        self._prior_cols = np.array(list(self.priors), int)
+        self._prior_sigma = np.array(list(self.priors.values()), float)
+        self._rows = len(self._perm)
+
+    def residuals(self, x) -> np.ndarray:
+        """The whitened residuals, in the order of row_labels()."""
+        return self._residuals_batch(np.asarray(x, float)[None, :])[0]
+
+    def _residuals_batch(self, X) -> np.ndarray:
+        """The residuals of every row of X (B, parameters): (B, rows), in one vectorised pass."""
+        self._ensure_layout()
+        self.evaluations += len(X)
+        flat = np.concatenate([b.reshape(len(X), -1) for b in self._blocks(X)], axis=1)
+        return flat[:, self._perm]
+
+    def _ensure_layout(self):
+        """The row layout, rebuilt (with the Jacobian's structure) when the priors were set or
+        changed without refresh()."""
+        if self._rows is None or self._prior_key != tuple(self.priors.items()):
+            self.refresh()
+            self._row_layout()
+
+    def _pieces(self, x):
+        """The whitened residuals in pieces, and a (tag, length, quantity) per piece naming what
+        owns it."""
+        r = self.residuals(x)
+        ends = np.cumsum([n for _, n, _ in self._tags])
+        return np.split(r, ends[:-1]) if len(ends) else [], list(self._tags)
+
+    def _matrices_batch(self, X):
+        """M_a = K_a T_a and M_g = K_g T_g R_po of every row of X: (B,3,3) each."""
+        L = self.layout
+        Ma = X[:, L["accel_scale"], None] * _lower_unit_rows_batch(X[:, L["accel_misalignment"]])
+        Mg = (X[:, L["gyro_scale"], None] * _lower_unit_rows_batch(X[:, L["gyro_misalignment"]])
+              @ Rotation.from_rotvec(X[:, L["inter_triad"]]).as_matrix())
+        return Ma, Mg
+
+    def _blocks(self, X) -> list:
+        """The residual blocks of _row_layout() for every row of X, each (B, items, width)."""
+        s, L = self.s, self.layout
+        B = len(X)
+        Xe = np.concatenate([X, np.zeros((B, 1))], axis=1)
+        Ma, Mg = self._matrices_batch(X)
+        b_a, b_g = X[:, L["accel_bias"]], X[:, L["gyro_bias"]]
+        S, R, K = len(s.statics), len(s.rotations), s.groups
+        g = s.gravity_mps2
+        # static attitudes: specific force, inertial rate and up, frame p
+        P = X[:, self._st_cols]                                                  # (B,S,d)
+        if self.with_latitude:
+            C = Rotation.from_rotvec(P.reshape(-1, 3)).as_matrix().reshape(B, S, 3, 3) if S else np.zeros((B, 0, 3, 3))
+            f_s, w_s, up = np.einsum("bsij,skj->kbsi", C, self._st_ref_vectors)
+        else:
+            up = self._st_ref + np.einsum("bsk,skc->bsc", P, self._st_basis)
+            up /= np.linalg.norm(up, axis=2)[..., None]
+            f_s = self.f_n[2] * up
+            w_s = self.omega_n[2] * up if self.hand_earth_vertical else np.zeros_like(up)
+        # axes and the rotations' phase grids
+        PA = X[:, self._axis_cols]                                               # (B,K,4)
+        l_k = self._axis_ref + np.einsum("bkj,kjc->bkc", PA[..., :2], self._axis_basis)
+        l_k /= np.linalg.norm(l_k, axis=2)[..., None]
+        kappa_k, e_k = PA[..., 2], PA[..., 3]
+        l, kappa, e = l_k[:, self._rot_group], kappa_k[:, self._rot_group], e_k[:, self._rot_group]   # (B,R,..)
+        e1 = self._rot_e1 - np.einsum("rc,brc->br", self._rot_e1, l)[..., None] * l
+        e1 /= np.linalg.norm(e1, axis=2)[..., None]
+        e2 = cross(l, e1)
+        phase = Xe[:, self._rot_phase_cols]                                      # (B,R,2)
+        psi, chi = phase[..., 0:1], phase[..., 1:2]
+        v = np.sqrt(np.maximum(g * g - kappa**2, 0.0))[..., None] * (np.cos(psi) * e1 + np.sin(psi) * e2)
+        earth_perp = (np.sqrt(np.maximum(self.omega_dps**2 - e**2, 0.0))[..., None]
+                      * (np.cos(chi) * e1 + np.sin(chi) * e2))
+        earth_integral = self._rot_earth[:, :1] * earth_perp - self._rot_earth[:, 1:] * cross(l, earth_perp)
+        offset = X[:, L["mounting_offset"]][:, None, :] if self._offset is None else self._offset
+        l_x_d = cross(l, np.broadcast_to(offset, l.shape))
+        w_k, wsq_k, wdot_k = (self._rot_rate_shape[:, j, :, None] for j in range(3))    # (R,PHASES,1)
+        f_r = (kappa[..., None, None] * l[:, :, None, :] + self._cos_p[:, None] * v[:, :, None, :]
+               - self._sin_p[:, None] * cross(l, v)[:, :, None, :]
+               + wsq_k * cross(l, l_x_d)[:, :, None, :] + wdot_k * l_x_d[:, :, None, :])   # (B,R,PHASES,3)
+        w_r = np.broadcast_to(((self._rot_rate + e)[..., None] * l)[:, :, None, :], f_r.shape)
+        # the model's raw outputs at every point, effects included
+        f_p = np.concatenate([f_s, f_r.reshape(B, -1, 3)], axis=1)              # (B, S + R PHASES, 3)
+        w_p = np.concatenate([w_s, w_r.reshape(B, -1, 3)], axis=1)
+        a = np.einsum("bnj,bij->bni", f_p, Ma) + b_a[:, None, :]
+        w = np.einsum("bnj,bij->bni", w_p, Mg) + b_g[:, None, :]
+        if self.effects:
+            zeros = np.zeros((S, 3))
+            for n in range(B):      # the Effect interface: one parameter vector, N sample points
+                ctx = SampleContext(
+                    f_p=f_p[n], w_p=w_p[n],
+                    w_table=np.concatenate([zeros, (w_k * l[n][:, None, :]).reshape(-1, 3)]),
+                    wdot_table=np.concatenate([zeros, (wdot_k * l[n][:, None, :]).reshape(-1, 3)]),
+                    temp_c=self._ctx_temp, accel_matrix=Ma[n], gyro_matrix=Mg[n], t_s=self._ctx_t,
+                    segment_index=self._ctx_index, temp_rate_c_per_s=self._ctx_temp_rate)
+                for eff in self.effects:
+                    px = X[n, L[f"effect:{eff.id}"]]
+                    da, dw = eff.accel(px, ctx), eff.gyro(px, ctx)
+                    if da is not None:
+                        a[n] = a[n] + da
+                    if dw is not None:
+                        w[n] = w[n] + dw
+        blocks = []
+        # statics
+        root_n = self._st_root_n
+        blocks.append((self._st_data[:, :3] - a[:, :S]) * root_n / s.accel_sigma)
+        if self.with_latitude:
+            blocks.append((self._st_data[:, 3:] - w[:, :S]) * root_n / s.gyro_sigma)
+        elif self.hands:    # the bias, the unmodelled Earth rate within the noise
+            blocks.append(np.einsum("sij,bsj->bsi", self._st_gyro_whiten, self._st_data[:, 3:] - w[:, :S]))
+        else:               # only |Omega_E| known: the norm of the compensated rate (the
+            # pseudo-inverse: finite where a trial step of the solver makes M_g singular)
+            rate = np.linalg.norm(np.linalg.pinv(Mg) @ (self._st_data[:, 3:] - b_g[:, None, :]).transpose(0, 2, 1),
+                                  axis=1)
+            blocks.append(((rate - self.omega_dps) * root_n[:, 0] / np.mean(s.gyro_sigma))[..., None])
+        table = self.attitudes == "table"
+        if table:
+            C_mount = Rotation.from_rotvec(X[:, L["mounting_rotation"]]).as_matrix()
+            blocks.append(cross(up[:, self._st_up_index], np.einsum("uj,bij->bui", self._st_up_body, C_mount))
+                          / self.prior_sigma)
+        if self.with_latitude:
+            blocks.append(P / WEAK_PRIOR_RAD)
+        if self.hands:
+            blocks.append(self._hand_block(Mg, b_g, up, w_s))
+        if table:
+            blocks.append(cross(l_k, np.einsum("kj,bij->bki", self._axis_body, C_mount)) / self.prior_sigma)
+        blocks.append((e_k * np.sqrt(3.0) / self.omega_dps)[..., None])
+        blocks.append((kappa_k / g / WEAK_PRIOR_RAD)[..., None])
+        # rotations: mean and harmonics of the accelerometers, gyro integral
+        a_r = a[:, S:].reshape(B, R, PHASES, 3)
+        w_mean = w[:, S:].reshape(B, R, PHASES, 3).mean(axis=2)
+        harmonics = np.einsum("hk,brkc->brhc", self._harmonics, a_r)
+        integral = w_mean * self._rot_duration[:, None] + np.einsum("brj,bij->bri", earth_integral, Mg)
+        for eff in self._integral_effects:
+            for n in range(B):
+                px = X[n, L[f"effect:{eff.id}"]]
+                for i, r in enumerate(s.rotations):
+                    term = eff.integral(px, r)
+                    if term is not None:
+                        integral[n, i] += term
+        gyro_rows = np.einsum("rij,brj->bri", self._rot_gyro_whiten, self._rot_gyro - integral)
+        blocks.append(np.concatenate([((self._rot_data - harmonics) * self._rot_weight).reshape(B, R, 15),
+                                      gyro_rows], axis=2))
+        blocks.append((X[:, self._prior_cols] / self._prior_sigma)[..., None])
+        return blocks
+
+    def _hand_block(self, Mg, b_g, ups, w_static) -> np.ndarray:
+        """(B, H, 2) whitened residuals: the up after each turn against the up before carried through it."""
+        B, H = len(Mg), len(self.hands)
+        dR = self.integrator.turns_batch(np.linalg.inv(Mg), b_g)         # B*H turns
+        before = ups[:, self._hand_before].reshape(-1, 3)
+        if self.with_latitude:      # the Earth turns the up during the turn
+            earth = np.radians(w_static[:, self._hand_before]) * self.hand_duration[:, None]
+            before = Rotation.from_rotvec(earth.reshape(-1, 3)).apply(before)
+        d = ups[:, self._hand_after] - dR.apply(before, inverse=True).reshape(B, H, 3)
+        return np.einsum("hkc,bhc->bhk", self.hand_basis, d) / self.hand_sigma_rad[:, None]
+
+
+def _lower_unit_rows_batch(angles: np.ndarray) -> np.ndarray:
+    """lower_unit_rows of every row of angles (B,3): (B,3,3)."""
+    s_yz, s_zy, s_zx = np.sin(angles[:, 0]), -np.sin(angles[:, 1]), np.sin(angles[:, 2])
+    T = np.zeros((len(angles), 3, 3))
+    T[:, 0, 0] = 1.0
+    T[:, 1, 0], T[:, 1, 1] = s_yz, np.sqrt(1.0 - s_yz**2)
+    T[:, 2, 0], T[:, 2, 1] = s_zy, s_zx
+    T[:, 2, 2] = np.sqrt(np.maximum(1.0 - s_zy**2 - s_zx**2, 0.0))
+    return T
 
 
 @dataclass

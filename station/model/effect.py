@@ -30,7 +30,9 @@ class SampleContext:
 
     All arrays have N rows; frame p; specific force in m/s^2, rates in deg/s (w_p, the
     inertial rate the gyros sense) and rad/s (w_table, the table rate relative to the Earth,
-    and its derivative wdot_table in rad/s^2).
+    and its derivative wdot_table in rad/s^2).  The N points may come from many segments (the
+    least-squares fit passes every static and every rotation's phase points in one call;
+    segment_index says which): a term is computed point by point.
     """
     f_p: np.ndarray           # specific force at the IMU reference point
     w_p: np.ndarray           # inertial angular rate, deg/s

@@ -1,0 +1,162 @@
+"""The vectorised residual of the least-squares model (all segments in one pass, effects called
+once with the stacked sample points) against the per-segment formulation it replaced
+(tests/lsq_reference.py), row by row, at random parameter vectors; and its Jacobian against the
+forward-difference Jacobian of that reference.
+
+Tolerances: both residuals are whitened (unit noise per row) and computed from the same numbers
+in a different order, so they differ by rounding only: 1e-9 of the row's size (at most ~1e4 here)
+is ~1e5 times the double-precision rounding of the ~100 operations per row and ~1e-5 of the
+noise.  Both Jacobians are forward differences, the reference's with steps h = 1e-7 max(|x|,
+1e-2), the new one's with the same or larger steps (an effect's typical size) and the hand turns
+to first order about x (an error second order in h): the truncation error, ~h/2 times the second derivative, is below 1e-5 of a
+column's norm, and the rounding error of a row is ~eps D / h, D the size of the whitened numbers
+that cancel in it (the data and the prediction, or the phase points of a harmonic: up to ~1e8
+for a gyro integral): the tolerance is 1e-4 of the column's norm plus 2 x 8 eps D / h, with D
+the largest whitened prediction or datum of the same segment and sensor (the residual of the
+same model with the data set to zero is minus its prediction)."""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from sim_devices.hand import hand_session
+from sim_devices.truth import mems_truth
+from station import cli
+from station.estimate import lsq
+from station.io.capture import read_capture
+from station.io.scheme import load_scheme
+from station.model import LIBRARY
+from station.simulate import dryrun
+from lsq_reference import PerSegmentModel
+
+ALL_EFFECTS = ("accel_lever_arm", "accel_nonlinearity", "gyro_g_sensitivity", "gyro_scale_asymmetry",
+               "temperature_bias", "time_offset")
+
+
+@pytest.fixture(scope="module")
+def optimal9():
+    truth = dryrun.load_truth(None, 0)
+    truth.sample_rate_hz = 50.0
+    return lsq.summarise(dryrun.simulate_capture(load_scheme("optimal9"), truth, 3))
+
+
+@pytest.fixture(scope="module")
+def hand(tmp_path_factory):
+    """Short simulated hand sessions, imported without and with the site's latitude; the quiet
+    gyro (2 deg/h/rtHz) sees the Earth turn in a pose, the MEMS one (19) does not."""
+    tmp = tmp_path_factory.mktemp("hand")
+    out = {}
+    for gyro, noise in (("mems", None), ("quiet", 2.0)):
+        truth = mems_truth(5)
+        truth.gyro.noise_density = noise or truth.gyro.noise_density
+        hs = hand_session(truth, 5, poses=10, dwell_s=(3.0, 3.5), turn_s=(1.0, 1.4))
+        log = tmp / f"{gyro}.csv"
+        np.savetxt(log, np.column_stack([hs.t, hs.accel, hs.gyro]), delimiter=",", header="t,ax,ay,az,gx,gy,gz",
+                   comments="", fmt="%.10g")
+        for name, extra in (("plain", []), ("latitude", ["--latitude-deg", f"{hs.truth['latitude_deg']:g}"])):
+            assert cli.main(["import", "csv", str(log), "--preset", "station", "-o", str(tmp / f"{gyro}-{name}"),
+                             "--gravity-mps2", str(hs.truth["gravity_mps2"])] + extra) == 0
+            out[gyro, name] = lsq.summarise(read_capture(tmp / f"{gyro}-{name}"))
+    return out
+
+
+def random_x(model, rng):
+    """The start plus a random step: 1e-3 of each parameter's size (1e-2 at least; the effects'
+    typical size), so every term is away from zero and from the start."""
+    x = model.x0.copy()
+    step = 1e-3 * np.maximum(np.abs(x), 1e-2)
+    for e in model.effects:
+        sl = model.layout[f"effect:{e.id}"]
+        step[sl] = [p.typical / p.scale for p in e.params]
+    return x + step * rng.standard_normal(len(x))
+
+
+def models(s, effects=(), attitudes="auto", priors=()):
+    pair = []
+    for cls in (lsq.Model, PerSegmentModel):
+        m = cls(s, [LIBRARY[e]() for e in effects], attitudes)
+        for c in priors:
+            m.priors[c] = 0.5
+        m.refresh()
+        pair.append(m)
+    return pair
+
+
+def prediction(ref, x):
+    """The reference model's residual with every datum set to zero: minus its whitened prediction."""
+    s = ref.s
+    zero = replace(s, statics=[replace(st, accel=0 * st.accel, gyro=0 * st.gyro) for st in s.statics],
+                   rotations=[replace(r, **{k: 0 * getattr(r, k) for k in (
+                       "accel_dc", "accel_cos", "accel_sin", "accel_cos2", "accel_sin2", "gyro_integral")})
+                              for r in s.rotations])
+    ref.s = zero
+    try:
+        return ref.residuals(x)
+    finally:
+        ref.s = s
+
+
+def cancelling_size(ref, x, r):
+    """Per row: the largest |whitened datum| or |whitened prediction| of its segment and sensor."""
+    size = np.maximum(np.abs(r), np.abs(prediction(ref, x)))
+    size = np.maximum(size, np.abs(r - prediction(ref, x)))
+    keys = [(segment, quantity.split("_")[0]) for segment, _, quantity, _ in ref.row_labels(x)]
+    largest = {}
+    for k, v in zip(keys, size):
+        largest[k] = max(largest.get(k, 0.0), v)
+    return np.array([largest[k] for k in keys])
+
+
+def check(new, ref, seed):
+    rng = np.random.default_rng(seed)
+    assert new.layout.blocks == ref.layout.blocks and np.array_equal(new.x0, ref.x0)
+    for x in (new.x0, random_x(new, rng)):
+        pieces_new, tags_new = new._pieces(x)
+        pieces_ref, tags_ref = ref._pieces(x)
+        assert tags_new == tags_ref
+        r_new, r_ref = np.concatenate(pieces_new), np.concatenate(pieces_ref)
+        np.testing.assert_allclose(r_new, r_ref, rtol=1e-9, atol=1e-9 * max(1.0, np.max(np.abs(r_ref))))
+        J_new, J_ref = new.jacobian(x), ref.jacobian(x)
+        D = cancelling_size(ref, x, r_ref)
+        h = 1e-7 * np.maximum(np.abs(x), 1e-2)
+        tolerance = 1e-4 * np.linalg.norm(J_ref, axis=0) + 16 * np.finfo(float).eps * np.outer(D, 1 / h)
+        excess = np.abs(J_new - J_ref) / tolerance
+        assert np.all(excess <= 1), (np.unravel_index(np.argmax(excess), excess.shape), np.max(excess))
+    assert np.array_equal(new.data_rows, ref.data_rows)
+    assert new.row_labels(new.x0) == ref.row_labels(ref.x0)
+
+
+def test_table_scheme_with_latitude(optimal9):
+    new, ref = models(optimal9)
+    assert new.with_latitude and new.attitudes == "unknown"
+    check(new, ref, 1)
+
+
+def test_table_scheme_with_every_library_effect_and_priors(optimal9):
+    new, ref = models(optimal9, ALL_EFFECTS, priors=(0, 30))
+    check(new, ref, 2)
+
+
+def test_table_scheme_without_latitude_attitudes_from_the_table(optimal9):
+    s = lsq.Summaries(**{**optimal9.__dict__, "latitude_deg": None})
+    new, ref = models(s, ("accel_nonlinearity", "gyro_g_sensitivity"), attitudes="table")
+    assert not new.with_latitude and new.attitudes == "table"
+    check(new, ref, 3)
+
+
+def test_hand_turns_without_latitude(hand):
+    new, ref = models(hand["mems", "plain"], ("accel_nonlinearity",))
+    assert new.hands and not new.with_latitude and not new.hand_earth_vertical
+    check(new, ref, 4)
+
+
+def test_hand_turns_with_latitude_vertical_earth_rate_only(hand):
+    new, ref = models(hand["mems", "latitude"])
+    assert new.hands and not new.with_latitude and new.hand_earth_vertical
+    check(new, ref, 5)
+
+
+def test_hand_turns_with_latitude_full_attitudes(hand):
+    new, ref = models(hand["quiet", "latitude"], ("gyro_g_sensitivity",))
+    assert new.hands and new.with_latitude
+    check(new, ref, 6)
