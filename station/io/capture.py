@@ -14,6 +14,7 @@ import reprlib
 import stat
 import tempfile
 from collections import Counter
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path, PurePosixPath, PureWindowsPath
@@ -90,8 +91,9 @@ class Segment:
     angle_deg: float | None = None
     note: str | None = None
     extra: dict = field(default_factory=dict)  # every other manifest key, verbatim
-    data: SegmentData | None = None
+    data: SegmentData | None = None  # None until the samples are loaded (Capture.load_samples)
     problem: str | None = None  # why (part of) an incomplete segment's data could not be read
+    content_sha256: str | None = None  # sha256 (hex) of the file's bytes, set when they are read
 
 
 @dataclass(eq=False)
@@ -133,6 +135,41 @@ class Capture:
                     unpaired_minus = [x for x in unpaired_minus if x is not m]
         return [(p, partner[p.name]) for p in plus if p.name in partner]
 
+    # Samples on demand. A capture read with load_data=False holds no samples; these read a
+    # segment's file when asked (once: read as bytes, hashed and parsed in one pass), so a caller
+    # that summarises one segment at a time never holds more than one segment's samples.
+
+    def read_samples(self, segment) -> SegmentData | None:
+        """The samples of ``segment``: segment.data when loaded, else read from its file now and
+        not kept (each call reads the file again).  Refuses (CaptureError) a complete segment
+        whose file does not follow the format or whose sha256 does not match; None for an
+        incomplete one without readable rows (segment.problem and warnings say why)."""
+        if segment.data is not None:
+            return segment.data
+        return _read_segment_data(self, segment, _segment_label(self.segments.index(segment),
+                                                                 segment.name))
+
+    def load_samples(self, segments=None):
+        """Read the samples of ``segments`` (default: every segment) into segment.data."""
+        for segment in self.segments if segments is None else segments:
+            if segment.data is None:
+                segment.data = self.read_samples(segment)
+
+    @contextmanager
+    def lent_samples(self, segment):
+        """``with capture.lent_samples(seg) as data:`` seg.data holds the samples inside the block
+        (so code written for loaded captures works on them) and is dropped at its end, unless it
+        was loaded before (to keep it, assign it to seg.data again after the block)."""
+        if segment.data is not None:
+            yield segment.data
+            return
+        data = segment.data = self.read_samples(segment)
+        try:
+            yield data
+        finally:
+            if segment.data is data:
+                segment.data = None
+
     def segment(self, name):
         """The segment called `name`; UserError if there is none."""
         for s in self.segments:
@@ -152,7 +189,8 @@ def read_capture(path, *, load_data=True):
     Raises CaptureError for anything that does not follow the format. Incomplete segments never
     raise: what is readable of them is loaded, the rest is described in Segment.problem and in
     Capture.warnings. With load_data=False, CSV files are not read (Segment.data is None) and
-    sha256 is not checked.
+    sha256 is not checked until the samples are asked for (Capture.read_samples, lent_samples,
+    load_samples): the way to summarise a long capture one segment at a time.
     """
     path = Path(path)
     directory, manifest_file = (path.parent, path) if _is_file(path) else (path, path / MANIFEST)
@@ -174,8 +212,7 @@ def read_capture(path, *, load_data=True):
     capture = Capture(path=directory, imu=imu, site=site, scheme=scheme, segments=segments,
                       extra=extra, warnings=[])
     if load_data:
-        for index, segment in enumerate(segments):
-            _load_segment(capture, segment, _segment_label(index, segment.name))
+        capture.load_samples()
     return capture
 
 
@@ -188,8 +225,7 @@ def read_segment_csv(path, *, sample_rate_hz=None):
         raw = read_regular_file(path)
     except OSError as e:
         raise CaptureError(path, f"cannot read: {e.strerror}") from None
-    return _parse_csv(_csv_lines(raw, partial_last_line=False), sample_rate_hz, path, None,
-                      require_rows=True)
+    return parse_segment_csv(raw, sample_rate_hz, path, None)
 
 
 class NotRegularFile(OSError):
@@ -435,44 +471,55 @@ def _parse_segment(entry, index, directory, manifest_file):
     return segment
 
 
-def _load_segment(capture, segment, label):
-    """Read a segment's CSV into segment.data, refusing (complete) or describing (incomplete)."""
+def _read_segment_data(capture, segment, label):
+    """A segment's samples from its file, refusing (complete) or describing (incomplete).
+
+    The file is read once as bytes; those bytes are hashed (segment.content_sha256, checked
+    against the manifest's sha256) and parsed (parse_segment_csv).  Warnings (gaps, what an
+    incomplete segment lacks) are added to capture.warnings once, however often it is read."""
     csv_file = capture.path / segment.file
-    complete = segment.status == "complete"
+    complete = segment.status != "incomplete"     # "excluded" (estimate) was complete
     try:
         raw = read_regular_file(csv_file)
     except OSError as e:
         if complete:
             raise CaptureError(csv_file, f"cannot read: {e.strerror}", segment=label) from None
         segment.problem = f"cannot read {segment.file}: {e.strerror}"
-        capture.warnings.append(f"{label}: incomplete, no data: {segment.problem}")
-        return
+        _warn(capture, f"{label}: incomplete, no data: {segment.problem}")
+        return None
 
+    segment.content_sha256 = hashlib.sha256(raw).hexdigest()
     expected_sha = segment.extra.get("sha256")
     sha_problem = None
-    if expected_sha is not None and hashlib.sha256(raw).hexdigest() != expected_sha.lower():
+    if expected_sha is not None and segment.content_sha256 != expected_sha.lower():
         sha_problem = "file content does not match the manifest's sha256 (changed or corrupted)"
         if complete:
             raise CaptureError(csv_file, sha_problem, segment=label, field="sha256")
 
     rate = capture.imu.sample_rate_hz
     if complete:
-        segment.data = _parse_csv(_csv_lines(raw, partial_last_line=False), rate, csv_file, label,
-                                  require_rows=True)
+        data = parse_segment_csv(raw, rate, csv_file, label)
+        del raw
         samples = segment.extra.get("samples")
-        if samples is not None and samples != len(segment.data.t):
-            raise CaptureError(csv_file, f"has {len(segment.data.t)} data rows, the manifest says "
+        if samples is not None and samples != len(data.t):
+            raise CaptureError(csv_file, f"has {len(data.t)} data rows, the manifest says "
                                f"samples: {samples}", segment=label, field="samples")
     else:
-        segment.data, segment.problem = _parse_incomplete_csv(raw, rate, csv_file, label)
+        data, segment.problem = _parse_incomplete_csv(raw, rate, csv_file, label)
         segment.problem = segment.problem or sha_problem
-        rows = 0 if segment.data is None else len(segment.data.t)
+        rows = 0 if data is None else len(data.t)
         problem = f": {segment.problem}" if segment.problem else ""
-        capture.warnings.append(f"{label}: incomplete, {rows} readable rows{problem}")
+        _warn(capture, f"{label}: incomplete, {rows} readable rows{problem}")
 
-    if segment.data is not None and segment.data.gaps:
-        capture.warnings.append(f"{label}: {segment.data.gaps} gaps in time in {segment.file} "
-                                f"(steps longer than {GAP_FACTOR}/sample_rate_hz: lost samples)")
+    if data is not None and data.gaps:
+        _warn(capture, f"{label}: {data.gaps} gaps in time in {segment.file} "
+                       f"(steps longer than {GAP_FACTOR}/sample_rate_hz: lost samples)")
+    return data
+
+
+def _warn(capture, message):
+    if message not in capture.warnings:
+        capture.warnings.append(message)
 
 
 def _parse_incomplete_csv(raw, rate, csv_file, label):
@@ -522,20 +569,7 @@ def _parse_csv(lines, sample_rate_hz, csv_file, label, *, require_rows):
 
     if not lines:
         raise fail(f"empty file: line 1 must be the header {','.join(REQUIRED_COLUMNS)}", 1)
-    if '"' in lines[0]:
-        raise fail("quoting is not allowed", 1)
-    names = [name.strip() for name in lines[0].split(",")]
-    if _NUMBER_TEXT.fullmatch(names[0]):
-        raise fail(f"no header: line 1 must name the columns {','.join(REQUIRED_COLUMNS)}", 1)
-    duplicates = sorted(n for n, count in Counter(names).items() if count > 1)
-    if duplicates:
-        raise fail(f"duplicate column name(s) {', '.join(map(repr, duplicates))}", 1)
-    missing = [n for n in REQUIRED_COLUMNS if n not in names]
-    if missing:
-        raise fail(f"missing required column(s) {', '.join(map(repr, missing))} in the header", 1)
-
-    wanted = list(REQUIRED_COLUMNS) + (["temp"] if "temp" in names else [])
-    usecols = [names.index(n) for n in wanted]
+    names, wanted, usecols = _parse_header(lines[0], fail)
     commas = len(names) - 1
     bad = next((i for i, line in enumerate(lines)
                 if line.count(",") != commas or '"' in line), None)
@@ -579,16 +613,130 @@ def _parse_csv(lines, sample_rate_hz, csv_file, label, *, require_rows):
     if len(backwards):
         i = backwards[0] + 1
         raise fail(f"time does not increase: t={t[i]:.15g} after t={t[i - 1]:.15g}", i + 2)
-    if sample_rate_hz is not None:
-        step = 1.0 / sample_rate_hz
-    else:
-        step = float(np.median(steps)) if len(steps) else math.inf
     return SegmentData(
         t=t,
         accel=np.ascontiguousarray(values[:, 1:4]),
         gyro=np.ascontiguousarray(values[:, 4:7]),
         temp=np.ascontiguousarray(values[:, 7]) if len(wanted) == 8 else None,
-        gaps=int(np.count_nonzero(steps > GAP_FACTOR * step)))
+        gaps=_count_gaps(steps, sample_rate_hz))
+
+
+def _count_gaps(steps, sample_rate_hz):
+    """Time steps longer than GAP_FACTOR nominal steps (1/sample_rate_hz, or when that is None
+    the median step)."""
+    if sample_rate_hz is not None:
+        step = 1.0 / sample_rate_hz
+    else:
+        step = float(np.median(steps)) if len(steps) else math.inf
+    return int(np.count_nonzero(steps > GAP_FACTOR * step))
+
+
+def _parse_header(header, fail):
+    """(names, wanted, usecols) from a segment CSV's first line; fail(message, line) otherwise."""
+    if '"' in header:
+        raise fail("quoting is not allowed", 1)
+    names = [name.strip() for name in header.split(",")]
+    if _NUMBER_TEXT.fullmatch(names[0]):
+        raise fail(f"no header: line 1 must name the columns {','.join(REQUIRED_COLUMNS)}", 1)
+    duplicates = sorted(n for n, count in Counter(names).items() if count > 1)
+    if duplicates:
+        raise fail(f"duplicate column name(s) {', '.join(map(repr, duplicates))}", 1)
+    missing = [n for n in REQUIRED_COLUMNS if n not in names]
+    if missing:
+        raise fail(f"missing required column(s) {', '.join(map(repr, missing))} in the header", 1)
+    wanted = list(REQUIRED_COLUMNS) + (["temp"] if "temp" in names else [])
+    return names, wanted, [names.index(n) for n in wanted]
+
+
+def parse_segment_csv(raw: bytes, sample_rate_hz, csv_file, label) -> SegmentData:
+    """SegmentData from the bytes of a segment CSV with at least one data row; CaptureError
+    naming the file and line for any violation of the format.
+
+    The fast path parses every row in one pass of a C++ CSV engine (pyarrow.csv, on the
+    machine's cores) straight from the bytes, and checks the values with numpy.  It takes only
+    files it reads exactly as the line-by-line reader (_parse_csv) would: anything unusual
+    (quotes, a lone CR, spaces around values, a blank line, a field it cannot convert, a
+    non-finite value, time that does not increase) sends the file to that reader, which then
+    accepts it or finds the line, column and text to name."""
+    data = _parse_csv_fast(raw, sample_rate_hz)
+    if data is not None:
+        return data
+    return _parse_csv(_csv_lines(raw, partial_last_line=False), sample_rate_hz, csv_file, label,
+                      require_rows=True)
+
+
+_BOM = b"\xef\xbb\xbf"
+_TRAILING_BLANK = b" \t\r\n"
+
+
+def _parse_csv_fast(raw, sample_rate_hz):
+    """SegmentData, or None when the file needs the line-by-line reader (see parse_segment_csv)."""
+    if b'"' in raw or (b"\r" in raw and raw.count(b"\r") != raw.count(b"\r\n")):
+        return None
+    start = len(_BOM) if raw.startswith(_BOM) else 0
+    header_end = raw.find(b"\n", start)
+    end = len(raw)
+    while end > 0 and raw[end - 1] in _TRAILING_BLANK:  # blank lines at the end are allowed
+        end -= 1
+    if header_end < 0 or header_end >= end:
+        return None                                       # no data row
+    try:
+        header = raw[start:header_end].decode("utf-8").removesuffix("\r")
+        names, wanted, usecols = _parse_header(header, lambda message, line: ValueError(message))
+    except ValueError:  # UnicodeDecodeError too
+        return None
+    try:
+        import pyarrow as pa
+        import pyarrow.csv as pacsv
+    except ImportError:  # pragma: no cover - pyarrow is a dependency; the reader still works
+        return None
+    columns = [f"c{i}" for i in range(len(names))]
+    try:
+        table = pacsv.read_csv(
+            pa.py_buffer(memoryview(raw)[header_end + 1:end]),
+            read_options=pacsv.ReadOptions(column_names=columns, use_threads=True),
+            parse_options=pacsv.ParseOptions(delimiter=",", quote_char=False, double_quote=False,
+                                             escape_char=False, newlines_in_values=False,
+                                             ignore_empty_lines=False),
+            convert_options=pacsv.ConvertOptions(
+                include_columns=[columns[c] for c in usecols],
+                column_types={columns[c]: pa.float64() for c in usecols},
+                null_values=[], strings_can_be_null=False, quoted_strings_can_be_null=False))
+    except (pa.ArrowException, ValueError):
+        return None
+    if table.num_columns != len(wanted):
+        return None
+
+    t, accel, gyro = np.empty(table.num_rows), np.empty((table.num_rows, 3)), np.empty((table.num_rows, 3))
+    temp = np.empty(table.num_rows) if len(wanted) == 8 else None
+    targets = [t, accel[:, 0], accel[:, 1], accel[:, 2], gyro[:, 0], gyro[:, 1], gyro[:, 2], temp]
+    if not all(_copy_column(table.column(k), targets[k]) for k in range(len(wanted))):
+        return None
+    del table
+    steps = np.diff(t)
+    for values in (t, accel, gyro) + (() if temp is None else (temp,)):
+        # finite and in range: the line-by-line reader names the first value that is not
+        if not np.all(np.abs(values) <= MAX_CSV_VALUE):
+            return None
+    if not np.all(steps > 0):
+        return None
+    return SegmentData(t=t, accel=accel, gyro=gyro, temp=temp,
+                       gaps=_count_gaps(steps, sample_rate_hz))
+
+
+def _copy_column(chunked, out):
+    """Copy a float64 pyarrow column without nulls into the numpy array ``out``, chunk by chunk
+    (straight from the Arrow buffers: no pandas, no intermediate array); False if it has nulls
+    or another length (which the options given to the engine rule out)."""
+    if chunked.null_count or chunked.type != "double":
+        return False
+    i = 0
+    for chunk in chunked.chunks:
+        n = len(chunk)
+        out[i:i + n] = np.frombuffer(chunk.buffers()[1], dtype=np.float64, count=n,
+                                     offset=chunk.offset * 8)
+        i += n
+    return i == len(out)
 
 
 def _loadtxt(rows, usecols):
