@@ -222,10 +222,13 @@ def read_segment_csv(path, *, sample_rate_hz=None):
     when it is not given, against the median time step."""
     path = Path(path)
     try:
-        raw = read_regular_file(path)
+        data, _ = read_csv_pieces(path, sample_rate_hz)
+        if data is None:
+            data = _parse_csv(_csv_lines(read_regular_file(path), partial_last_line=False),
+                              sample_rate_hz, path, None, require_rows=True)
     except OSError as e:
         raise CaptureError(path, f"cannot read: {e.strerror}") from None
-    return parse_segment_csv(raw, sample_rate_hz, path, None)
+    return data
 
 
 class NotRegularFile(OSError):
@@ -236,6 +239,12 @@ def read_regular_file(path, *, limit=None) -> bytes:
     """The bytes of a regular file: opened without blocking (O_NONBLOCK: a FIFO in its place
     must not hang the reader), checked to be a regular file on the open descriptor, and at most
     ``limit`` bytes long.  OSError (NotRegularFile, with strerror) otherwise."""
+    with open_regular_file(path, limit=limit) as f:
+        return f.read() if limit is None else f.read(limit + 1)
+
+
+def open_regular_file(path, *, limit=None):
+    """A binary file object on a regular file, opened as read_regular_file says."""
     fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
     try:
         info = os.fstat(fd)
@@ -243,9 +252,9 @@ def read_regular_file(path, *, limit=None) -> bytes:
             raise NotRegularFile(0, "not a regular file (a FIFO, device or folder)", str(path))
         if limit is not None and info.st_size > limit:
             raise NotRegularFile(0, f"{info.st_size} bytes, more than the {limit} allowed", str(path))
-        with os.fdopen(fd, "rb", closefd=True) as f:
-            fd = None
-            return f.read() if limit is None else f.read(limit + 1)
+        f = os.fdopen(fd, "rb", closefd=True)
+        fd = None
+        return f
     finally:
         if fd is not None:
             os.close(fd)
@@ -475,38 +484,43 @@ def _read_segment_data(capture, segment, label):
     """A segment's samples from its file, refusing (complete) or describing (incomplete).
 
     The file is read once as bytes; those bytes are hashed (segment.content_sha256, checked
-    against the manifest's sha256) and parsed (parse_segment_csv).  Warnings (gaps, what an
+    against the manifest's sha256) and parsed (read_csv_pieces).  Warnings (gaps, what an
     incomplete segment lacks) are added to capture.warnings once, however often it is read."""
     csv_file = capture.path / segment.file
     complete = segment.status != "incomplete"     # "excluded" (estimate) was complete
-    try:
-        raw = read_regular_file(csv_file)
-    except OSError as e:
-        if complete:
-            raise CaptureError(csv_file, f"cannot read: {e.strerror}", segment=label) from None
-        segment.problem = f"cannot read {segment.file}: {e.strerror}"
-        _warn(capture, f"{label}: incomplete, no data: {segment.problem}")
-        return None
-
-    segment.content_sha256 = hashlib.sha256(raw).hexdigest()
-    expected_sha = segment.extra.get("sha256")
-    sha_problem = None
-    if expected_sha is not None and segment.content_sha256 != expected_sha.lower():
-        sha_problem = "file content does not match the manifest's sha256 (changed or corrupted)"
-        if complete:
-            raise CaptureError(csv_file, sha_problem, segment=label, field="sha256")
-
     rate = capture.imu.sample_rate_hz
+    sha_problem = "file content does not match the manifest's sha256 (changed or corrupted)"
+    expected_sha = segment.extra.get("sha256")
     if complete:
-        data = parse_segment_csv(raw, rate, csv_file, label)
-        del raw
+        try:
+            data, segment.content_sha256 = read_csv_pieces(csv_file, rate)
+            if expected_sha is not None and segment.content_sha256 != expected_sha.lower():
+                raise CaptureError(csv_file, sha_problem, segment=label, field="sha256")
+            if data is None:  # the fast reader refused: the line-by-line one names the problem
+                raw = read_regular_file(csv_file)
+                if hashlib.sha256(raw).hexdigest() != segment.content_sha256:
+                    raise CaptureError(csv_file, "changed while it was read", segment=label)
+                data = _parse_csv(_csv_lines(raw, partial_last_line=False), rate, csv_file, label,
+                                  require_rows=True)
+                del raw
+        except OSError as e:
+            raise CaptureError(csv_file, f"cannot read: {e.strerror}", segment=label) from None
         samples = segment.extra.get("samples")
         if samples is not None and samples != len(data.t):
             raise CaptureError(csv_file, f"has {len(data.t)} data rows, the manifest says "
                                f"samples: {samples}", segment=label, field="samples")
     else:
+        try:
+            raw = read_regular_file(csv_file)
+        except OSError as e:
+            segment.problem = f"cannot read {segment.file}: {e.strerror}"
+            _warn(capture, f"{label}: incomplete, no data: {segment.problem}")
+            return None
+        segment.content_sha256 = hashlib.sha256(raw).hexdigest()
         data, segment.problem = _parse_incomplete_csv(raw, rate, csv_file, label)
-        segment.problem = segment.problem or sha_problem
+        if segment.problem is None and expected_sha is not None \
+                and segment.content_sha256 != expected_sha.lower():
+            segment.problem = sha_problem
         rows = 0 if data is None else len(data.t)
         problem = f": {segment.problem}" if segment.problem else ""
         _warn(capture, f"{label}: incomplete, {rows} readable rows{problem}")
@@ -648,52 +662,150 @@ def _parse_header(header, fail):
     return names, wanted, [names.index(n) for n in wanted]
 
 
-def parse_segment_csv(raw: bytes, sample_rate_hz, csv_file, label) -> SegmentData:
-    """SegmentData from the bytes of a segment CSV with at least one data row; CaptureError
-    naming the file and line for any violation of the format.
-
-    The fast path parses every row in one pass of a C++ CSV engine (pyarrow.csv, on the
-    machine's cores) straight from the bytes, and checks the values with numpy.  It takes only
-    files it reads exactly as the line-by-line reader (_parse_csv) would: anything unusual
-    (quotes, a lone CR, spaces around values, a blank line, a field it cannot convert, a
-    non-finite value, time that does not increase) sends the file to that reader, which then
-    accepts it or finds the line, column and text to name."""
-    data = _parse_csv_fast(raw, sample_rate_hz)
-    if data is not None:
-        return data
-    return _parse_csv(_csv_lines(raw, partial_last_line=False), sample_rate_hz, csv_file, label,
-                      require_rows=True)
-
-
+PIECE_BYTES = 8 * 2**20   # a segment file is read, hashed and parsed this many bytes at a time
 _BOM = b"\xef\xbb\xbf"
-_TRAILING_BLANK = b" \t\r\n"
+_BLANK = b" \t\r\n"
 
 
-def _parse_csv_fast(raw, sample_rate_hz):
-    """SegmentData, or None when the file needs the line-by-line reader (see parse_segment_csv)."""
-    if b'"' in raw or (b"\r" in raw and raw.count(b"\r") != raw.count(b"\r\n")):
-        return None
-    start = len(_BOM) if raw.startswith(_BOM) else 0
-    header_end = raw.find(b"\n", start)
-    end = len(raw)
-    while end > 0 and raw[end - 1] in _TRAILING_BLANK:  # blank lines at the end are allowed
-        end -= 1
-    if header_end < 0 or header_end >= end:
-        return None                                       # no data row
-    try:
-        header = raw[start:header_end].decode("utf-8").removesuffix("\r")
-        names, wanted, usecols = _parse_header(header, lambda message, line: ValueError(message))
-    except ValueError:  # UnicodeDecodeError too
-        return None
+def read_csv_pieces(path, sample_rate_hz) -> tuple[SegmentData | None, str]:
+    """(samples or None, sha256 hex) of a segment CSV, read once.
+
+    The file is read PIECE_BYTES at a time; each piece is hashed and its whole lines parsed in
+    one pass of a C++ CSV engine (pyarrow.csv, on the machine's cores) into arrays that grow to
+    the segment's length, so that neither the file's bytes nor the engine's tables are ever held
+    whole.  It takes only files it reads exactly as the line-by-line reader (_parse_csv) would:
+    anything unusual (quotes, a lone CR, spaces around values, a blank line inside, a field it
+    cannot convert, a non-finite or out-of-range value, time that does not increase, no data
+    row) makes it return None for the samples, and the caller gives the file to that reader,
+    which accepts it or names the line, column and text.  OSError if the file cannot be read."""
+    digest = hashlib.sha256()
+    parser = _PieceParser(sample_rate_hz)
+    with open_regular_file(path) as f:
+        parser.size = os.fstat(f.fileno()).st_size
+        carry = b""
+        while True:
+            piece = f.read(PIECE_BYTES)
+            if not piece:
+                break
+            digest.update(piece)
+            if parser.failed:
+                continue
+            text = carry + piece if carry else piece
+            del piece
+            # whole lines only, and blank lines at the end held back (allowed only at the file's end)
+            end = len(text)
+            while end > 0 and text[end - 1] in _BLANK:
+                end -= 1
+            cut = text.rfind(b"\n", 0, end) + 1
+            if cut > 0:
+                parser.feed(text, cut)
+            carry = text[cut:]
+            del text
+        if not parser.failed:
+            parser.feed(carry, len(carry.rstrip(_BLANK)))
+    return parser.result(), digest.hexdigest()
+
+
+class _PieceParser:
+    """Parses a segment CSV fed as pieces of whole lines (see read_csv_pieces)."""
+
+    def __init__(self, sample_rate_hz):
+        self.sample_rate_hz = sample_rate_hz
+        self.size = 0
+        self.failed = False
+        self.columns = None     # engine column names; None until the header is read
+        self.n = 0
+        self.arrays = None      # t (N,), accel (N, 3), gyro (N, 3), temp (N,) or None
+
+    def feed(self, text: bytes, end: int, start: int = 0):
+        """Parse text[start:end]: whole lines (the last one may lack its line end at the file's
+        end)."""
+        if self.failed or end <= start:
+            return
+        if text.find(b'"', start, end) >= 0 or (text.find(b"\r", start, end) >= 0 and text.count(
+                b"\r", start, end) != text.count(b"\r\n", start, end)):
+            self.failed = True      # quoting, or a CR that does not end a line
+            return
+        if self.columns is None:
+            self._header(text, end, start)
+            return
+        block = memoryview(text)[start:end]
+        table = _arrow_table(block, self.columns, self.usecols)
+        if table is None or table.num_columns != len(self.wanted):
+            self.failed = True
+            return
+        rows = table.num_rows
+        self._reserve(self.n + rows, len(block), rows)
+        t, accel, gyro, temp = self.arrays
+        targets = [t, accel[:, 0], accel[:, 1], accel[:, 2], gyro[:, 0], gyro[:, 1], gyro[:, 2], temp]
+        if not all(_copy_column(table.column(k), targets[k][self.n:self.n + rows])
+                   for k in range(len(self.wanted))):
+            self.failed = True
+            return
+        self.n += rows
+
+    def _header(self, text, end, start):
+        """Read the header off the first block, then feed the rest of it."""
+        if text.startswith(_BOM, start):
+            start += len(_BOM)
+        newline = text.find(b"\n", start, end)
+        if newline < 0:
+            self.failed = True      # no data row
+            return
+        try:
+            header = text[start:newline].decode("utf-8").removesuffix("\r")
+            names, self.wanted, self.usecols = _parse_header(header, lambda message, line: ValueError(message))
+        except ValueError:  # UnicodeDecodeError too
+            self.failed = True
+            return
+        self.columns = [f"c{i}" for i in range(len(names))]
+        self.feed(text, end, newline + 1)
+
+    def _reserve(self, rows, block_bytes, block_rows):
+        """Room for ``rows`` rows: first sized from the file's length and the rows per byte seen."""
+        if self.arrays is not None and len(self.arrays[0]) >= rows:
+            return
+        estimate = int(self.size * block_rows / max(block_bytes, 1) * 1.02) + 16
+        capacity = max(rows, estimate if self.arrays is None else 2 * len(self.arrays[0]))
+        temp = len(self.wanted) == 8
+        new = (np.empty(capacity), np.empty((capacity, 3)), np.empty((capacity, 3)),
+               np.empty(capacity) if temp else None)
+        if self.arrays is not None:
+            for old, grown in zip(self.arrays, new):
+                if old is not None:
+                    grown[:self.n] = old[:self.n]
+        self.arrays = new
+
+    def result(self) -> SegmentData | None:
+        if self.failed or self.n == 0:
+            return None
+        t, accel, gyro, temp = (None if a is None else a[:self.n] for a in self.arrays)
+        if len(self.arrays[0]) > self.n + self.n // 8:     # far more room than rows: give it back
+            t, accel, gyro = t.copy(), accel.copy(), gyro.copy()
+            temp = None if temp is None else temp.copy()
+        self.arrays = None
+        for values in (t, accel, gyro) + (() if temp is None else (temp,)):
+            # finite and in range (NaN fails both): the line-by-line reader names the first that is not
+            if not (values.min() >= -MAX_CSV_VALUE and values.max() <= MAX_CSV_VALUE):
+                return None
+        steps = np.diff(t)
+        if not np.all(steps > 0):
+            return None
+        return SegmentData(t=t, accel=accel, gyro=gyro, temp=temp,
+                           gaps=_count_gaps(steps, self.sample_rate_hz))
+
+
+def _arrow_table(block, columns, usecols):
+    """The wanted columns of a block of whole CSV lines as a pyarrow Table of float64, or None
+    where the engine refuses it."""
     try:
         import pyarrow as pa
         import pyarrow.csv as pacsv
-    except ImportError:  # pragma: no cover - pyarrow is a dependency; the reader still works
+    except ImportError:  # pragma: no cover - a dependency; the line-by-line reader still works
         return None
-    columns = [f"c{i}" for i in range(len(names))]
     try:
-        table = pacsv.read_csv(
-            pa.py_buffer(memoryview(raw)[header_end + 1:end]),
+        return pacsv.read_csv(
+            pa.py_buffer(block),
             read_options=pacsv.ReadOptions(column_names=columns, use_threads=True),
             parse_options=pacsv.ParseOptions(delimiter=",", quote_char=False, double_quote=False,
                                              escape_char=False, newlines_in_values=False,
@@ -704,24 +816,6 @@ def _parse_csv_fast(raw, sample_rate_hz):
                 null_values=[], strings_can_be_null=False, quoted_strings_can_be_null=False))
     except (pa.ArrowException, ValueError):
         return None
-    if table.num_columns != len(wanted):
-        return None
-
-    t, accel, gyro = np.empty(table.num_rows), np.empty((table.num_rows, 3)), np.empty((table.num_rows, 3))
-    temp = np.empty(table.num_rows) if len(wanted) == 8 else None
-    targets = [t, accel[:, 0], accel[:, 1], accel[:, 2], gyro[:, 0], gyro[:, 1], gyro[:, 2], temp]
-    if not all(_copy_column(table.column(k), targets[k]) for k in range(len(wanted))):
-        return None
-    del table
-    steps = np.diff(t)
-    for values in (t, accel, gyro) + (() if temp is None else (temp,)):
-        # finite and in range: the line-by-line reader names the first value that is not
-        if not np.all(np.abs(values) <= MAX_CSV_VALUE):
-            return None
-    if not np.all(steps > 0):
-        return None
-    return SegmentData(t=t, accel=accel, gyro=gyro, temp=temp,
-                       gaps=_count_gaps(steps, sample_rate_hz))
 
 
 def _copy_column(chunked, out):
