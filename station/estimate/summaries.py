@@ -17,6 +17,7 @@ import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from station.core import units
 from station.core.errors import UserError
@@ -165,17 +166,22 @@ MAX_GRAM_CONDITION = 1e8    # normal equations lose about cond * 1e-16 of relati
 
 
 def _least_squares(basis, columns):
-    """Least-squares coefficients (k, m) of ``columns`` (N, m) on ``basis`` (N, k).
+    """Least-squares coefficients (k, m) of ``columns`` (N, m) on the basis functions, given as
+    the rows of ``basis`` (k, N).
 
-    Through the normal equations (two matrix products over the N samples, a k x k solve): the
+    Through the normal equations (matrix products over the N samples, then a k x k solve): the
     harmonic basis of a turn is nearly orthogonal over whole revolutions, so its Gram matrix is
-    well conditioned and this matches an SVD solution to ~cond * 1e-16 while costing a fraction of
-    it; a basis whose Gram matrix is worse conditioned than MAX_GRAM_CONDITION (a short sweep)
-    goes to the SVD solver (numpy.linalg.lstsq)."""
-    gram = basis.T @ basis
+    well conditioned and this matches an SVD solution to about cond * 1e-16 while costing a
+    fraction of it; a basis whose Gram matrix is worse conditioned than MAX_GRAM_CONDITION (a
+    short sweep) goes to the SVD solver (numpy.linalg.lstsq)."""
+    gram = basis @ basis.T
     if np.linalg.cond(gram) < MAX_GRAM_CONDITION:
-        return np.linalg.solve(gram, basis.T @ columns)
-    return np.linalg.lstsq(basis, columns, rcond=None)[0]
+        return np.linalg.solve(gram, np.column_stack([basis @ c for c in columns]))
+    return np.linalg.lstsq(basis.T, np.column_stack(columns), rcond=None)[0]
+
+
+def _contiguous_columns(matrix):
+    return [np.ascontiguousarray(matrix[:, k]) for k in range(matrix.shape[1])]
 
 
 def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
@@ -191,13 +197,19 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
     gyro_integral = (np.trapezoid(gyro, t, axis=0)
                      + 0.5 * (gyro[0] * (t[1] - t[0]) + gyro[-1] * (t[-1] - t[-2])))
     phase = np.radians(angle_deg) * _phase_fraction(t, gyro, start, duration, gyro_sigma_dps)
-    cos, sin = np.cos(phase), np.sin(phase)
-    basis = np.column_stack([np.ones_like(t), cos, sin, cos * cos - sin * sin, 2.0 * sin * cos])
-    del phase, cos, sin
+    basis = np.empty((5, len(t)))          # rows: 1, cos phi, sin phi, cos 2phi, sin 2phi
+    basis[0] = 1.0
+    np.cos(phase, out=basis[1])
+    np.sin(phase, out=basis[2])
+    np.multiply(basis[1], basis[1], out=basis[3])
+    basis[3] -= basis[2] * basis[2]
+    np.multiply(basis[1], basis[2], out=basis[4])
+    basis[4] *= 2.0
+    del phase
     # The table rate w(t) about the axis, its square and its time derivative are projected on the
     # same basis as the accelerometer (one solve for all of them)
     w = _rate(t, gyro, gyro_bias, angle_deg, duration)
-    coefs = _least_squares(basis, np.column_stack([accel, w, w * w, np.gradient(w, t)]))
+    coefs = _least_squares(basis, _contiguous_columns(accel) + [w, w * w, np.gradient(w, t)])
     del basis, w
     coef, rate_coefs = coefs[:, :3], (coefs[:, 3], coefs[:, 4], coefs[:, 5])
     edge = min(EDGE_SAMPLES, len(t) // 4)
@@ -266,7 +278,10 @@ def summarise(capture, *, table_angle_arcsec: float | None = None, check_segment
     streamed = any(seg.data is None for seg in capture.complete())
     kept = _KEPT.get(capture) if streamed and check_segment is None else None
     if kept is None:
-        parts = _summarise_segments(capture, ca, cg, check_segment)
+        # one BLAS thread: vector operations over the samples, which a BLAS thread pool only
+        # slows down (4x on a busy 2-core machine: docs/performance.md)
+        with threadpool_limits(1, user_api="blas"):
+            parts = _summarise_segments(capture, ca, cg, check_segment)
         if streamed:
             _KEPT[capture] = parts
             parts = _copy(parts)
