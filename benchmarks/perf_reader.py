@@ -5,6 +5,8 @@ Records an optimal9 capture with the simulator at each rate (1 kHz: 3.06 M sampl
   estimate   `station estimate CAPTURE` (imports, reading, checks, summaries, fit, file written)
   loadtxt    `python -c` that only imports numpy and np.loadtxt's every segment CSV of the capture
              (float64, the columns the reader uses)
+  summaries  `python -c` that reads the capture as estimate does and summarises it, nothing else
+             (this reader's own cost: read, hash, parse, check, summarise, one segment at a time)
 and prints for each the median wall time, CPU time (user + system, all threads) and peak RSS of
 the child process (os.wait4's rusage: that child alone), and the ratios estimate / loadtxt
 measured in this one run.  The machine is shared: compare the ratios, and repeat.
@@ -31,6 +33,13 @@ for path in sys.argv[1:]:
         names = f.readline().strip().split(",")
     cols = [names.index(n) for n in ("t", "ax", "ay", "az", "gx", "gy", "gz", "temp") if n in names]
     np.loadtxt(path, delimiter=",", skiprows=1, usecols=cols, dtype=np.float64, comments=None)
+"""
+
+SUMMARIES = """
+import sys
+from station.io.capture import read_capture
+from station.estimate.summaries import summarise
+summarise(read_capture(sys.argv[1], load_data=False))
 """
 
 
@@ -66,17 +75,20 @@ def main():
             csvs = sorted(str(p) for p in cap.glob("*.csv"))
             megabytes = sum(os.path.getsize(p) for p in csvs) / 1e6
             samples = int(scheme.duration_s * rate)
-            runs = {"estimate": [], "loadtxt": []}
+            runs = {"estimate": [], "loadtxt": [], "summaries": []}
             for _ in range(a.repeat):          # alternating: both see the same load
                 runs["estimate"].append(run_child([station, "estimate", str(cap), "-o", str(Path(tmp) / "cal.yaml")]))
                 runs["loadtxt"].append(run_child([sys.executable, "-c", LOADTXT, *csvs]))
+                runs["summaries"].append(run_child([sys.executable, "-c", SUMMARIES, str(cap)]))
             med = {k: [statistics.median(r[i] for r in v) for i in range(3)] for k, v in runs.items()}
             print(f"optimal9 at {rate:g} Hz: {samples / 1e6:.2f} M samples, {len(csvs)} CSV files, {megabytes:.0f} MB")
             for k, (wall, cpu, rss) in med.items():
                 print(f"  {k:9s} wall {wall:6.2f} s  cpu {cpu:6.2f} s  peak RSS {rss:5.0f} MB  "
                       f"({1e9 * wall / samples:.0f} ns and {rss * 2**20 / samples:.0f} bytes per sample)")
-            (we, ce, _), (wl, cl, _) = med["estimate"], med["loadtxt"]
-            print(f"  estimate / loadtxt: wall {we / wl:.2f}x, cpu {ce / cl:.2f}x (median of {a.repeat} paired runs)")
+            (wl, cl, _) = med["loadtxt"]
+            for k in ("estimate", "summaries"):
+                print(f"  {k} / loadtxt: wall {med[k][0] / wl:.2f}x, cpu {med[k][1] / cl:.2f}x "
+                      f"(medians of {a.repeat} runs, alternating)")
 
 
 if __name__ == "__main__":

@@ -30,6 +30,31 @@ def test_any_piece_size_reads_and_refuses_as_the_line_reader(tmp_path, monkeypat
         assert expected in message, what
 
 
+FIELDS = ["1.", ".5", "+2", "-.5e-3", "1E0", " 3", "3 ", "\t3", "00012", "1e-400", "4.9e-324",
+          "1.7976931348623157e308", "-0", "nan", "NaN", "-nan", "nan(1)", "inf", "Infinity", "1e999",
+          "1e300", "0x10", "1_0", "1d3", "1e", "+", ".e5", "1..2", "1 2", "\xa01", "1\u2003", "\x0c1",
+          "\u0661", "\uff10", "1e5.5"]
+
+
+@pytest.mark.parametrize("field", FIELDS)
+def test_engine_accepts_a_field_only_as_the_line_reader_does(tmp_path, field):
+    """Whatever a field holds, read_capture (engine first) and the line-by-line reader alone
+    give the same values or the same message."""
+    lines = ["t,ax,ay,az,gx,gy,gz"] + [f"{k / 100},0.1,0.2,9.8,1,2,3" for k in range(4)]
+    lines[3] = f"0.02,0.1,0.2,9.8,{field},2,3"
+    content = ("\n".join(lines) + "\n").encode()
+    directory = make_bundle(tmp_path, files={"pos01.csv": content})
+    path = directory / "pos01.csv"
+    try:
+        reference = capture_io._parse_csv(capture_io._csv_lines(content, partial_last_line=False), 100.0,
+                                          path, "segments[0] (pos01)", require_rows=True)
+    except CaptureError as e:
+        assert refusal(directory) == str(e)
+        return
+    data = read_capture(directory).segments[0].data
+    np.testing.assert_array_equal(data.gyro, reference.gyro)
+
+
 def written_segment(tmp_path, n, seed=3):
     """A segment CSV as the station's writer makes it (%.15g time, %.12g values, temp column)."""
     rng = np.random.default_rng(seed)
