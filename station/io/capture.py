@@ -13,6 +13,7 @@ import re
 import reprlib
 import stat
 import tempfile
+import threading
 from collections import Counter
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -680,14 +681,19 @@ def read_csv_pieces(path, sample_rate_hz) -> tuple[SegmentData | None, str]:
     which accepts it or names the line, column and text.  OSError if the file cannot be read."""
     digest = hashlib.sha256()
     parser = _PieceParser(sample_rate_hz)
+    hashing = None      # the piece being hashed on another thread while the engine parses it
     with open_regular_file(path) as f:
         parser.size = os.fstat(f.fileno()).st_size
         carry = b""
         while True:
             piece = f.read(PIECE_BYTES)
+            if hashing is not None:
+                hashing.join()
             if not piece:
                 break
-            digest.update(piece)
+            # hashlib and the engine both release the GIL: hashing overlaps parsing
+            hashing = threading.Thread(target=digest.update, args=(piece,), daemon=True)
+            hashing.start()
             if parser.failed:
                 continue
             text = carry + piece if carry else piece
