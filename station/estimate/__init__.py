@@ -19,11 +19,16 @@ METHODS = ("auto", "lsq", "zhang2010", "fourier", "fourier-high")
 
 
 def capture_digest(capture: Capture) -> str:
-    """sha256 over the manifest and every complete segment file, in manifest order."""
+    """sha256 over the manifest's bytes followed by the sha256 (32 bytes) of every complete
+    segment file, in manifest order.  A file's sha256 is the one taken when its samples were read
+    (Segment.content_sha256), so no file is read or hashed twice."""
+    from station.io.capture import read_regular_file
+
     h = hashlib.sha256()
     h.update((capture.path / "manifest.yaml").read_bytes())
     for seg in capture.complete():
-        h.update((capture.path / seg.file).read_bytes())
+        file_sha256 = seg.content_sha256 or hashlib.sha256(read_regular_file(capture.path / seg.file)).hexdigest()
+        h.update(bytes.fromhex(file_sha256))
     return h.hexdigest()
 
 
@@ -33,6 +38,10 @@ def choose_method(capture: Capture) -> str:
     enter its model: station/estimate/hand_rotation.py)."""
     from station.estimate.hand_rotation import is_hand
 
+    # a capture read without samples: read those that tell (kept: a hand turn is short, and the
+    # Fourier method needs every sample anyway)
+    capture.load_samples([seg for seg in capture.complete("rotation")
+                          if seg.angle_deg is None and seg.extra.get("motion") != "hand"])
     if any(seg.angle_deg is None and not is_hand(seg) for seg in capture.complete("rotation")):
         return "fourier"
     return "lsq"
@@ -60,36 +69,48 @@ def exclude_lossy_segments(capture: Capture, max_missing_fraction: float = MAX_M
                            max_gap_s: float = MAX_GAP_S) -> list[str]:
     """Mark complete segments that lost more than the limits as ``excluded`` (so that
     ``capture.complete()`` leaves them out); returns a note for each."""
-    notes = []
-    for seg in capture.complete():
-        if seg.data is None or len(seg.data.t) < 2:
-            continue
-        missing, share, gap = data_loss(seg, capture.imu.sample_rate_hz)
-        problems = []
-        if share > max_missing_fraction:
-            problems.append(f"{missing} frames missing ({100 * share:.2f} %, limit {100 * max_missing_fraction:g} %)")
-        if gap > max_gap_s:
-            problems.append(f"no frame for {gap:.2f} s (limit {max_gap_s:g} s)")
-        if problems:
-            seg.status = "excluded"
-            notes.append(f"segment {seg.name} excluded: {'; '.join(problems)}")
-    return notes
+    notes = [_exclude_if_lossy(seg, capture.imu.sample_rate_hz, max_missing_fraction, max_gap_s)
+             for seg in capture.complete()]
+    return [note for note in notes if note]
+
+
+def _exclude_if_lossy(seg, sample_rate_hz, max_missing_fraction, max_gap_s) -> str | None:
+    """Mark one segment (samples in seg.data) ``excluded`` if it lost more than the limits; the
+    note that says so, or None."""
+    if seg.data is None or len(seg.data.t) < 2:
+        return None
+    missing, share, gap = data_loss(seg, sample_rate_hz)
+    problems = []
+    if share > max_missing_fraction:
+        problems.append(f"{missing} frames missing ({100 * share:.2f} %, limit {100 * max_missing_fraction:g} %)")
+    if gap > max_gap_s:
+        problems.append(f"no frame for {gap:.2f} s (limit {max_gap_s:g} s)")
+    if not problems:
+        return None
+    seg.status = "excluded"
+    return f"segment {seg.name} excluded: {'; '.join(problems)}"
 
 
 def check_resolution(capture: Capture) -> None:
     """Refuse (UserError naming the file and column) static data quantised coarser than their
     noise: when the samples' standard deviation is below half the output step, the mean is set
     by the rounding, not by the sensor, and the noise (the fit's weights) reads as zero."""
+    for seg in capture.complete("static"):
+        _check_static_resolution(capture, seg)
+
+
+def _check_static_resolution(capture: Capture, seg) -> None:
+    """check_resolution for one static segment (samples in seg.data)."""
     from station.core.errors import UserError
 
-    for seg in capture.complete("static"):
-        columns = np.column_stack([seg.data.accel, seg.data.gyro])
-        if len(columns) < 2:
-            continue
+    if len(seg.data.t) >= 2:
         for k, name in enumerate(COLUMNS):
-            values = np.unique(columns[:, k])
+            column = seg.data.accel[:, k] if k < 3 else seg.data.gyro[:, k - 3]
+            spread = float(np.std(column))
+            if _finer_than(column, 2.0 * spread):
+                continue
+            values = np.unique(column)
             step = float(np.min(np.diff(values))) if len(values) > 1 else math.inf
-            spread = float(np.std(columns[:, k]))
             if spread < 0.5 * step:
                 what = ("the same value in every sample" if len(values) == 1
                         else f"output step {step:.3g}, sample spread {spread:.3g}")
@@ -97,6 +118,13 @@ def check_resolution(capture: Capture) -> None:
                                 f"noise ({what}, in {capture.imu.accel_unit if k < 3 else capture.imu.gyro_unit}): "
                                 "the averages would be set by the rounding; record with a finer output "
                                 "resolution (or floating-point output)")
+
+
+def _finer_than(column: np.ndarray, step: float) -> bool:
+    """True if two distinct values of ``column`` lie closer than ``step``, found among its first
+    thousand samples (cheap; False means "not shown so", not "no")."""
+    head = np.unique(column[:1000])
+    return len(head) > 1 and float(np.min(np.diff(head))) < step
 
 
 def estimate_with(capture: Capture, method: str = "auto", effects=(), registry=None) -> tuple[Calibration, str]:
@@ -154,10 +182,31 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
     parameters not determined) and return the calibration, the capture and its provenance."""
     from station.estimate.verdict import judge
 
-    capture = read_capture(path)
-    check_resolution(capture)
-    excluded = exclude_lossy_segments(capture, max_missing_fraction, max_gap_s)
-    cal, method = estimate_with(capture, method, effects, registry)
+    capture = read_capture(path, load_data=False)
+    resolved = method
+    if method == "auto":
+        resolved = choose_method(capture)
+    if resolved == "lsq":
+        # one pass: each segment file read, hashed, parsed, checked, summarised and freed in turn
+        # (station.estimate.summaries keeps the summaries with the capture for lsq.estimate)
+        from station.estimate.summaries import summarise
+
+        notes = {}
+
+        def check_segment(seg):
+            if seg.kind == "static":
+                _check_static_resolution(capture, seg)
+            note = _exclude_if_lossy(seg, capture.imu.sample_rate_hz, max_missing_fraction, max_gap_s)
+            if note:
+                notes[seg.name] = note
+
+        summarise(capture, check_segment=check_segment)
+        excluded = [notes[seg.name] for seg in capture.segments if seg.name in notes]
+    else:
+        capture.load_samples()
+        check_resolution(capture)
+        excluded = exclude_lossy_segments(capture, max_missing_fraction, max_gap_s)
+    cal, method = estimate_with(capture, resolved, effects, registry)
     cal.fit.setdefault("notes", []).extend(excluded)
     if excluded:
         cal.fit["excluded_segments"] = [n.split()[1] for n in excluded]

@@ -11,9 +11,13 @@ Arrays are in m/s^2 and deg/s after the manifest's unit conversion ("raw" is tak
 """
 from __future__ import annotations
 
+import copy
+import dataclasses
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from station.core import units
 from station.core.errors import UserError
@@ -145,19 +149,39 @@ def _phase_fraction(t, gyro, start, duration, gyro_sigma_dps):
     return tracked if departure_deg > 3.0 * noise_deg else uniform
 
 
-def _rate_shape(t, gyro, gyro_bias, angle_deg, duration, basis):
-    """The table rate (rad/s, signed), its square and its derivative, projected on ``basis``."""
+def _rate(t, gyro, gyro_bias, angle_deg, duration):
+    """The table rate (rad/s, signed like the angle) at each sample: the gyro along its mean
+    direction (bias removed), rescaled to the encoder's mean rate."""
     g = gyro - (0.0 if gyro_bias is None else gyro_bias)
     direction = g.mean(axis=0)
     norm = np.linalg.norm(direction)
     mean_rate = np.radians(angle_deg) / duration
     if norm == 0 or len(t) < 3:
-        w = np.full(len(t), mean_rate)
-    else:
-        along = g @ (direction / norm)
-        w = along * (mean_rate / along.mean())
-    projector = np.linalg.pinv(basis)
-    return projector @ w, projector @ w**2, projector @ np.gradient(w, t)
+        return np.full(len(t), mean_rate)
+    along = g @ (direction / norm)
+    return along * (mean_rate / along.mean())
+
+
+MAX_GRAM_CONDITION = 1e8    # normal equations lose about cond * 1e-16 of relative precision
+
+
+def _least_squares(basis, columns):
+    """Least-squares coefficients (k, m) of ``columns`` (N, m) on the basis functions, given as
+    the rows of ``basis`` (k, N).
+
+    Through the normal equations (matrix products over the N samples, then a k x k solve): the
+    harmonic basis of a turn is nearly orthogonal over whole revolutions, so its Gram matrix is
+    well conditioned and this matches an SVD solution to about cond * 1e-16 while costing a
+    fraction of it; a basis whose Gram matrix is worse conditioned than MAX_GRAM_CONDITION (a
+    short sweep) goes to the SVD solver (numpy.linalg.lstsq)."""
+    gram = basis @ basis.T
+    if np.linalg.cond(gram) < MAX_GRAM_CONDITION:
+        return np.linalg.solve(gram, np.column_stack([basis @ c for c in columns]))
+    return np.linalg.lstsq(basis.T, np.column_stack(columns), rcond=None)[0]
+
+
+def _contiguous_columns(matrix):
+    return [np.ascontiguousarray(matrix[:, k]) for k in range(matrix.shape[1])]
 
 
 def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
@@ -173,10 +197,21 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
     gyro_integral = (np.trapezoid(gyro, t, axis=0)
                      + 0.5 * (gyro[0] * (t[1] - t[0]) + gyro[-1] * (t[-1] - t[-2])))
     phase = np.radians(angle_deg) * _phase_fraction(t, gyro, start, duration, gyro_sigma_dps)
-    basis = np.column_stack([np.ones_like(t), np.cos(phase), np.sin(phase),
-                             np.cos(2 * phase), np.sin(2 * phase)])
-    coef, *_ = np.linalg.lstsq(basis, accel, rcond=None)
-    rate_coefs = _rate_shape(t, gyro, gyro_bias, angle_deg, duration, basis)
+    basis = np.empty((5, len(t)))          # rows: 1, cos phi, sin phi, cos 2phi, sin 2phi
+    basis[0] = 1.0
+    np.cos(phase, out=basis[1])
+    np.sin(phase, out=basis[2])
+    np.multiply(basis[1], basis[1], out=basis[3])
+    basis[3] -= basis[2] * basis[2]
+    np.multiply(basis[1], basis[2], out=basis[4])
+    basis[4] *= 2.0
+    del phase
+    # The table rate w(t) about the axis, its square and its time derivative are projected on the
+    # same basis as the accelerometer (one solve for all of them)
+    w = _rate(t, gyro, gyro_bias, angle_deg, duration)
+    coefs = _least_squares(basis, _contiguous_columns(accel) + [w, w * w, np.gradient(w, t)])
+    del basis, w
+    coef, rate_coefs = coefs[:, :3], (coefs[:, 3], coefs[:, 4], coefs[:, 5])
     edge = min(EDGE_SAMPLES, len(t) // 4)
     magnitude = np.linalg.norm(gyro, axis=1)
     steady = bool(np.std(magnitude) < STEADY_SPREAD * np.mean(magnitude))
@@ -191,51 +226,147 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
                            rate_coef=rate_coefs[0], rate_sq_coef=rate_coefs[1], rate_dot_coef=rate_coefs[2])
 
 
-def summarise(capture, *, table_angle_arcsec: float | None = None) -> Summaries:
+def _scaled(values, factor):
+    """values * factor, without a copy when the factor is 1 (the arrays are only read)."""
+    return values if factor == 1.0 else values * factor
+
+
+@dataclass
+class _SegmentSummaries:
+    """What summarise keeps of a capture's samples (small: the samples themselves are freed)."""
+    statics: list
+    static_spans: list          # _Span per static, in the order of statics (for the hand turns)
+    accel_diff_sq: np.ndarray   # (3,) sum over the statics of squared first differences / 2
+    gyro_diff_sq: np.ndarray
+    diff_count: int
+    rotations: list
+    skipped: list
+    hands: list                 # complete hand-turn segments, their (short) samples loaded
+
+
+@dataclass
+class _TimeStamps:
+    t: np.ndarray
+
+
+@dataclass
+class _Span:
+    """A static segment's first and last sample time, standing in for its samples where only those
+    are needed (hand_rotation.collect reads seg.data.t[0] and seg.data.t[-1])."""
+    name: str
+    data: _TimeStamps
+
+
+# Summaries of captures read without their samples, kept so that a second summarise of the same
+# capture object (e.g. estimate_capture's pass, then lsq.estimate) reads no file again.
+_KEPT = weakref.WeakKeyDictionary()
+
+
+def summarise(capture, *, table_angle_arcsec: float | None = None, check_segment=None) -> Summaries:
+    """The summaries of ``capture``'s complete static and rotation segments.
+
+    A capture read without its samples (read_capture(..., load_data=False)) is summarised one
+    segment at a time: each file is read once (the statics first: the rotation summaries use their
+    noise and gyro bias), summarised, and its samples freed, so memory does not grow with the
+    capture's length; what was computed is kept with the capture object, so calling summarise
+    again reads nothing.  ``check_segment(seg)`` is called for each complete segment while its
+    samples are in seg.data, before they are used: it may refuse the capture (raise) or leave the
+    segment out (seg.status = "excluded").  A capture whose samples are loaded is summarised from
+    them, as they are now (nothing kept)."""
     ca = units.accel_to_mps2_factor(capture.imu.accel_unit) or 1.0
     cg = units.gyro_to_dps_factor(capture.imu.gyro_unit) or 1.0
-    statics, resid_a, resid_g = [], [], []
+    streamed = any(seg.data is None for seg in capture.complete())
+    kept = _KEPT.get(capture) if streamed and check_segment is None else None
+    if kept is None:
+        # one BLAS thread: vector operations over the samples, which a BLAS thread pool only
+        # slows down (4x on a busy 2-core machine: docs/performance.md)
+        with threadpool_limits(1, user_api="blas"):
+            parts = _summarise_segments(capture, ca, cg, check_segment)
+        if streamed:
+            _KEPT[capture] = parts
+            parts = _copy(parts)
+    else:
+        parts = _copy(kept)
+    return _assemble(capture, parts, ca, cg, table_angle_arcsec)
+
+
+def _copy(parts: _SegmentSummaries) -> _SegmentSummaries:
+    """Kept summaries as new objects (the caller may change what it gets)."""
+    return dataclasses.replace(parts, statics=copy.deepcopy(parts.statics),
+                               rotations=copy.deepcopy(parts.rotations), skipped=list(parts.skipped))
+
+
+def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
     order = {seg.name: k for k, seg in enumerate(capture.segments)}
+    statics, spans = [], []
+    diff_sq_a, diff_sq_g, diff_count = np.zeros(3), np.zeros(3), 0
     for seg in capture.complete("static"):
-        d = seg.data
-        a, g = d.accel * ca, d.gyro * cg
-        statics.append(StaticSummary(seg.name, seg.up_body, a.mean(axis=0), g.mean(axis=0), len(d.t),
-                                     float(d.t[-1] - d.t[0]), None if d.temp is None else float(d.temp.mean()),
-                                     t_mid_s=float(np.mean(d.t)), index=order[seg.name],
-                                     temp_rate_c_per_s=_slope(d.t, d.temp)))
-        # white noise: first differences remove slow drifts (temperature) from the estimate
-        resid_a.append(np.diff(a, axis=0) / np.sqrt(2))
-        resid_g.append(np.diff(g, axis=0) / np.sqrt(2))
+        with capture.lent_samples(seg) as d:
+            if check_segment is not None:
+                check_segment(seg)
+            if seg.status != "complete":
+                continue
+            a, g = _scaled(d.accel, ca), _scaled(d.gyro, cg)
+            statics.append(StaticSummary(seg.name, seg.up_body, a.mean(axis=0), g.mean(axis=0), len(d.t),
+                                         float(d.t[-1] - d.t[0]), None if d.temp is None else float(d.temp.mean()),
+                                         t_mid_s=float(np.mean(d.t)), index=order[seg.name],
+                                         temp_rate_c_per_s=_slope(d.t, d.temp)))
+            spans.append(_Span(seg.name, _TimeStamps(np.array([d.t[0], d.t[-1]]))))
+            # white noise: first differences remove slow drifts (temperature) from the estimate
+            diff_sq_a += np.sum(np.diff(a, axis=0) ** 2, axis=0) / 2
+            diff_sq_g += np.sum(np.diff(g, axis=0) ** 2, axis=0) / 2
+            diff_count += len(d.t) - 1
+            del a, g
     if not statics:
         raise UserError(f"{capture.path}: no complete static segment: the least-squares fit needs "
                         "static segments (biases and the noise level come from them)")
-    accel_sigma = np.sqrt(np.mean(np.vstack(resid_a) ** 2, axis=0))
-    gyro_sigma = np.sqrt(np.mean(np.vstack(resid_g) ** 2, axis=0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        gyro_sigma = np.sqrt(diff_sq_g / diff_count)
     static_gyro_mean = np.mean([st.gyro for st in statics], axis=0)   # ~ the bias (Earth rate averages out)
 
     rotations, skipped, axes, hands = [], [], [], []
     for seg in capture.complete("rotation"):
-        if hand_rotation.is_hand(seg):
-            hands.append(seg)
-            continue
-        if seg.angle_deg is None:
-            skipped.append(f"{seg.name}: no encoder angle (angle_deg); not used by the least-squares fit")
-            continue
-        axis = np.asarray(seg.axis_body, float) / np.linalg.norm(seg.axis_body)
-        group = next((i for i, a in enumerate(axes) if np.allclose(a, axis, atol=1e-6)), None)
-        if group is None:
-            axes.append(axis)
-            group = len(axes) - 1
-        d = seg.data
-        summary = rotation_summary(seg.name, axis, group, seg.angle_deg, d.t, d.accel * ca, d.gyro * cg, d.temp,
-                                   gyro_sigma_dps=gyro_sigma, gyro_bias=static_gyro_mean)
-        if seg.extra.get("motion") == "hand":      # the writer says so (manual schemes)
-            summary.steady = False
-        summary.t_mid_s, summary.index = float(np.mean(d.t)), order[seg.name]
-        summary.temp_rate_c_per_s = _slope(d.t, d.temp)
-        rotations.append(summary)
+        with capture.lent_samples(seg) as d:
+            if check_segment is not None:
+                check_segment(seg)
+            if seg.status != "complete":
+                continue
+            if hand_rotation.is_hand(seg):
+                hands.append((seg, d))
+                continue
+            if seg.angle_deg is None:
+                skipped.append(f"{seg.name}: no encoder angle (angle_deg); not used by the least-squares fit")
+                continue
+            axis = np.asarray(seg.axis_body, float) / np.linalg.norm(seg.axis_body)
+            group = next((i for i, a in enumerate(axes) if np.allclose(a, axis, atol=1e-6)), None)
+            if group is None:
+                axes.append(axis)
+                group = len(axes) - 1
+            summary = rotation_summary(seg.name, axis, group, seg.angle_deg, d.t, _scaled(d.accel, ca), _scaled(d.gyro, cg),
+                                       d.temp, gyro_sigma_dps=gyro_sigma, gyro_bias=static_gyro_mean)
+            if seg.extra.get("motion") == "hand":      # the writer says so (manual schemes)
+                summary.steady = False
+            summary.t_mid_s, summary.index = float(np.mean(d.t)), order[seg.name]
+            summary.temp_rate_c_per_s = _slope(d.t, d.temp)
+            rotations.append(summary)
+    for seg, d in hands:
+        seg.data = d                    # hand turns are short: their samples are kept for the fit
+    if check_segment is not None:       # segments estimation does not use are checked too
+        for seg in capture.complete():
+            if seg.kind not in ("static", "rotation"):
+                with capture.lent_samples(seg):
+                    check_segment(seg)
+    return _SegmentSummaries(statics, spans, diff_sq_a, diff_sq_g, diff_count, rotations, skipped,
+                             [seg for seg, _ in hands])
 
-    hand_rotations, hand_skipped = hand_rotation.collect(capture.complete("static"), hands, cg)
+
+def _assemble(capture, parts: _SegmentSummaries, ca, cg, table_angle_arcsec) -> Summaries:
+    with np.errstate(invalid="ignore", divide="ignore"):
+        accel_sigma = np.sqrt(parts.accel_diff_sq / parts.diff_count)
+        gyro_sigma = np.sqrt(parts.gyro_diff_sq / parts.diff_count)
+    statics, rotations, skipped = parts.statics, parts.rotations, list(parts.skipped)
+
+    hand_rotations, hand_skipped = hand_rotation.collect(parts.static_spans, parts.hands, cg)
     skipped += hand_skipped
     nominal = capture.imu.extra.get("gyro_nominal_dps_per_count") if capture.imu.gyro_unit == "raw" else None
     nominal = 1.0 / float(nominal) if isinstance(nominal, (int, float)) and nominal > 0 else None

@@ -13,7 +13,9 @@ import re
 import reprlib
 import stat
 import tempfile
+import threading
 from collections import Counter
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path, PurePosixPath, PureWindowsPath
@@ -90,8 +92,9 @@ class Segment:
     angle_deg: float | None = None
     note: str | None = None
     extra: dict = field(default_factory=dict)  # every other manifest key, verbatim
-    data: SegmentData | None = None
+    data: SegmentData | None = None  # None until the samples are loaded (Capture.load_samples)
     problem: str | None = None  # why (part of) an incomplete segment's data could not be read
+    content_sha256: str | None = None  # sha256 (hex) of the file's bytes, set when they are read
 
 
 @dataclass(eq=False)
@@ -133,6 +136,41 @@ class Capture:
                     unpaired_minus = [x for x in unpaired_minus if x is not m]
         return [(p, partner[p.name]) for p in plus if p.name in partner]
 
+    # Samples on demand. A capture read with load_data=False holds no samples; these read a
+    # segment's file when asked (once: read as bytes, hashed and parsed in one pass), so a caller
+    # that summarises one segment at a time never holds more than one segment's samples.
+
+    def read_samples(self, segment) -> SegmentData | None:
+        """The samples of ``segment``: segment.data when loaded, else read from its file now and
+        not kept (each call reads the file again).  Refuses (CaptureError) a complete segment
+        whose file does not follow the format or whose sha256 does not match; None for an
+        incomplete one without readable rows (segment.problem and warnings say why)."""
+        if segment.data is not None:
+            return segment.data
+        return _read_segment_data(self, segment, _segment_label(self.segments.index(segment),
+                                                                 segment.name))
+
+    def load_samples(self, segments=None):
+        """Read the samples of ``segments`` (default: every segment) into segment.data."""
+        for segment in self.segments if segments is None else segments:
+            if segment.data is None:
+                segment.data = self.read_samples(segment)
+
+    @contextmanager
+    def lent_samples(self, segment):
+        """``with capture.lent_samples(seg) as data:`` seg.data holds the samples inside the block
+        (so code written for loaded captures works on them) and is dropped at its end, unless it
+        was loaded before (to keep it, assign it to seg.data again after the block)."""
+        if segment.data is not None:
+            yield segment.data
+            return
+        data = segment.data = self.read_samples(segment)
+        try:
+            yield data
+        finally:
+            if segment.data is data:
+                segment.data = None
+
     def segment(self, name):
         """The segment called `name`; UserError if there is none."""
         for s in self.segments:
@@ -152,7 +190,8 @@ def read_capture(path, *, load_data=True):
     Raises CaptureError for anything that does not follow the format. Incomplete segments never
     raise: what is readable of them is loaded, the rest is described in Segment.problem and in
     Capture.warnings. With load_data=False, CSV files are not read (Segment.data is None) and
-    sha256 is not checked.
+    sha256 is not checked until the samples are asked for (Capture.read_samples, lent_samples,
+    load_samples): the way to summarise a long capture one segment at a time.
     """
     path = Path(path)
     directory, manifest_file = (path.parent, path) if _is_file(path) else (path, path / MANIFEST)
@@ -174,8 +213,7 @@ def read_capture(path, *, load_data=True):
     capture = Capture(path=directory, imu=imu, site=site, scheme=scheme, segments=segments,
                       extra=extra, warnings=[])
     if load_data:
-        for index, segment in enumerate(segments):
-            _load_segment(capture, segment, _segment_label(index, segment.name))
+        capture.load_samples()
     return capture
 
 
@@ -185,11 +223,13 @@ def read_segment_csv(path, *, sample_rate_hz=None):
     when it is not given, against the median time step."""
     path = Path(path)
     try:
-        raw = read_regular_file(path)
+        data, _ = read_csv_pieces(path, sample_rate_hz)
+        if data is None:
+            data = _parse_csv(_csv_lines(read_regular_file(path), partial_last_line=False),
+                              sample_rate_hz, path, None, require_rows=True)
     except OSError as e:
         raise CaptureError(path, f"cannot read: {e.strerror}") from None
-    return _parse_csv(_csv_lines(raw, partial_last_line=False), sample_rate_hz, path, None,
-                      require_rows=True)
+    return data
 
 
 class NotRegularFile(OSError):
@@ -200,6 +240,12 @@ def read_regular_file(path, *, limit=None) -> bytes:
     """The bytes of a regular file: opened without blocking (O_NONBLOCK: a FIFO in its place
     must not hang the reader), checked to be a regular file on the open descriptor, and at most
     ``limit`` bytes long.  OSError (NotRegularFile, with strerror) otherwise."""
+    with open_regular_file(path, limit=limit) as f:
+        return f.read() if limit is None else f.read(limit + 1)
+
+
+def open_regular_file(path, *, limit=None):
+    """A binary file object on a regular file, opened as read_regular_file says."""
     fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
     try:
         info = os.fstat(fd)
@@ -207,9 +253,9 @@ def read_regular_file(path, *, limit=None) -> bytes:
             raise NotRegularFile(0, "not a regular file (a FIFO, device or folder)", str(path))
         if limit is not None and info.st_size > limit:
             raise NotRegularFile(0, f"{info.st_size} bytes, more than the {limit} allowed", str(path))
-        with os.fdopen(fd, "rb", closefd=True) as f:
-            fd = None
-            return f.read() if limit is None else f.read(limit + 1)
+        f = os.fdopen(fd, "rb", closefd=True)
+        fd = None
+        return f
     finally:
         if fd is not None:
             os.close(fd)
@@ -435,44 +481,60 @@ def _parse_segment(entry, index, directory, manifest_file):
     return segment
 
 
-def _load_segment(capture, segment, label):
-    """Read a segment's CSV into segment.data, refusing (complete) or describing (incomplete)."""
+def _read_segment_data(capture, segment, label):
+    """A segment's samples from its file, refusing (complete) or describing (incomplete).
+
+    The file is read once as bytes; those bytes are hashed (segment.content_sha256, checked
+    against the manifest's sha256) and parsed (read_csv_pieces).  Warnings (gaps, what an
+    incomplete segment lacks) are added to capture.warnings once, however often it is read."""
     csv_file = capture.path / segment.file
-    complete = segment.status == "complete"
-    try:
-        raw = read_regular_file(csv_file)
-    except OSError as e:
-        if complete:
-            raise CaptureError(csv_file, f"cannot read: {e.strerror}", segment=label) from None
-        segment.problem = f"cannot read {segment.file}: {e.strerror}"
-        capture.warnings.append(f"{label}: incomplete, no data: {segment.problem}")
-        return
-
-    expected_sha = segment.extra.get("sha256")
-    sha_problem = None
-    if expected_sha is not None and hashlib.sha256(raw).hexdigest() != expected_sha.lower():
-        sha_problem = "file content does not match the manifest's sha256 (changed or corrupted)"
-        if complete:
-            raise CaptureError(csv_file, sha_problem, segment=label, field="sha256")
-
+    complete = segment.status != "incomplete"     # "excluded" (estimate) was complete
     rate = capture.imu.sample_rate_hz
+    sha_problem = "file content does not match the manifest's sha256 (changed or corrupted)"
+    expected_sha = segment.extra.get("sha256")
     if complete:
-        segment.data = _parse_csv(_csv_lines(raw, partial_last_line=False), rate, csv_file, label,
+        try:
+            data, segment.content_sha256 = read_csv_pieces(csv_file, rate)
+            if expected_sha is not None and segment.content_sha256 != expected_sha.lower():
+                raise CaptureError(csv_file, sha_problem, segment=label, field="sha256")
+            if data is None:  # the fast reader refused: the line-by-line one names the problem
+                raw = read_regular_file(csv_file)
+                if hashlib.sha256(raw).hexdigest() != segment.content_sha256:
+                    raise CaptureError(csv_file, "changed while it was read", segment=label)
+                data = _parse_csv(_csv_lines(raw, partial_last_line=False), rate, csv_file, label,
                                   require_rows=True)
+                del raw
+        except OSError as e:
+            raise CaptureError(csv_file, f"cannot read: {e.strerror}", segment=label) from None
         samples = segment.extra.get("samples")
-        if samples is not None and samples != len(segment.data.t):
-            raise CaptureError(csv_file, f"has {len(segment.data.t)} data rows, the manifest says "
+        if samples is not None and samples != len(data.t):
+            raise CaptureError(csv_file, f"has {len(data.t)} data rows, the manifest says "
                                f"samples: {samples}", segment=label, field="samples")
     else:
-        segment.data, segment.problem = _parse_incomplete_csv(raw, rate, csv_file, label)
-        segment.problem = segment.problem or sha_problem
-        rows = 0 if segment.data is None else len(segment.data.t)
+        try:
+            raw = read_regular_file(csv_file)
+        except OSError as e:
+            segment.problem = f"cannot read {segment.file}: {e.strerror}"
+            _warn(capture, f"{label}: incomplete, no data: {segment.problem}")
+            return None
+        segment.content_sha256 = hashlib.sha256(raw).hexdigest()
+        data, segment.problem = _parse_incomplete_csv(raw, rate, csv_file, label)
+        if segment.problem is None and expected_sha is not None \
+                and segment.content_sha256 != expected_sha.lower():
+            segment.problem = sha_problem
+        rows = 0 if data is None else len(data.t)
         problem = f": {segment.problem}" if segment.problem else ""
-        capture.warnings.append(f"{label}: incomplete, {rows} readable rows{problem}")
+        _warn(capture, f"{label}: incomplete, {rows} readable rows{problem}")
 
-    if segment.data is not None and segment.data.gaps:
-        capture.warnings.append(f"{label}: {segment.data.gaps} gaps in time in {segment.file} "
-                                f"(steps longer than {GAP_FACTOR}/sample_rate_hz: lost samples)")
+    if data is not None and data.gaps:
+        _warn(capture, f"{label}: {data.gaps} gaps in time in {segment.file} "
+                       f"(steps longer than {GAP_FACTOR}/sample_rate_hz: lost samples)")
+    return data
+
+
+def _warn(capture, message):
+    if message not in capture.warnings:
+        capture.warnings.append(message)
 
 
 def _parse_incomplete_csv(raw, rate, csv_file, label):
@@ -522,20 +584,7 @@ def _parse_csv(lines, sample_rate_hz, csv_file, label, *, require_rows):
 
     if not lines:
         raise fail(f"empty file: line 1 must be the header {','.join(REQUIRED_COLUMNS)}", 1)
-    if '"' in lines[0]:
-        raise fail("quoting is not allowed", 1)
-    names = [name.strip() for name in lines[0].split(",")]
-    if _NUMBER_TEXT.fullmatch(names[0]):
-        raise fail(f"no header: line 1 must name the columns {','.join(REQUIRED_COLUMNS)}", 1)
-    duplicates = sorted(n for n, count in Counter(names).items() if count > 1)
-    if duplicates:
-        raise fail(f"duplicate column name(s) {', '.join(map(repr, duplicates))}", 1)
-    missing = [n for n in REQUIRED_COLUMNS if n not in names]
-    if missing:
-        raise fail(f"missing required column(s) {', '.join(map(repr, missing))} in the header", 1)
-
-    wanted = list(REQUIRED_COLUMNS) + (["temp"] if "temp" in names else [])
-    usecols = [names.index(n) for n in wanted]
+    names, wanted, usecols = _parse_header(lines[0], fail)
     commas = len(names) - 1
     bad = next((i for i, line in enumerate(lines)
                 if line.count(",") != commas or '"' in line), None)
@@ -579,16 +628,215 @@ def _parse_csv(lines, sample_rate_hz, csv_file, label, *, require_rows):
     if len(backwards):
         i = backwards[0] + 1
         raise fail(f"time does not increase: t={t[i]:.15g} after t={t[i - 1]:.15g}", i + 2)
-    if sample_rate_hz is not None:
-        step = 1.0 / sample_rate_hz
-    else:
-        step = float(np.median(steps)) if len(steps) else math.inf
     return SegmentData(
         t=t,
         accel=np.ascontiguousarray(values[:, 1:4]),
         gyro=np.ascontiguousarray(values[:, 4:7]),
         temp=np.ascontiguousarray(values[:, 7]) if len(wanted) == 8 else None,
-        gaps=int(np.count_nonzero(steps > GAP_FACTOR * step)))
+        gaps=_count_gaps(steps, sample_rate_hz))
+
+
+def _count_gaps(steps, sample_rate_hz):
+    """Time steps longer than GAP_FACTOR nominal steps (1/sample_rate_hz, or when that is None
+    the median step)."""
+    if sample_rate_hz is not None:
+        step = 1.0 / sample_rate_hz
+    else:
+        step = float(np.median(steps)) if len(steps) else math.inf
+    return int(np.count_nonzero(steps > GAP_FACTOR * step))
+
+
+def _parse_header(header, fail):
+    """(names, wanted, usecols) from a segment CSV's first line; fail(message, line) otherwise."""
+    if '"' in header:
+        raise fail("quoting is not allowed", 1)
+    names = [name.strip() for name in header.split(",")]
+    if _NUMBER_TEXT.fullmatch(names[0]):
+        raise fail(f"no header: line 1 must name the columns {','.join(REQUIRED_COLUMNS)}", 1)
+    duplicates = sorted(n for n, count in Counter(names).items() if count > 1)
+    if duplicates:
+        raise fail(f"duplicate column name(s) {', '.join(map(repr, duplicates))}", 1)
+    missing = [n for n in REQUIRED_COLUMNS if n not in names]
+    if missing:
+        raise fail(f"missing required column(s) {', '.join(map(repr, missing))} in the header", 1)
+    wanted = list(REQUIRED_COLUMNS) + (["temp"] if "temp" in names else [])
+    return names, wanted, [names.index(n) for n in wanted]
+
+
+PIECE_BYTES = 8 * 2**20   # a segment file is read, hashed and parsed this many bytes at a time
+_BOM = b"\xef\xbb\xbf"
+_BLANK = b" \t\r\n"
+
+
+def read_csv_pieces(path, sample_rate_hz) -> tuple[SegmentData | None, str]:
+    """(samples or None, sha256 hex) of a segment CSV, read once.
+
+    The file is read PIECE_BYTES at a time; each piece is hashed and its whole lines parsed in
+    one pass of a C++ CSV engine (pyarrow.csv, on the machine's cores) into arrays that grow to
+    the segment's length, so that neither the file's bytes nor the engine's tables are ever held
+    whole.  It takes only files it reads exactly as the line-by-line reader (_parse_csv) would:
+    anything unusual (quotes, a lone CR, spaces around values, a blank line inside, a field it
+    cannot convert, a non-finite or out-of-range value, time that does not increase, no data
+    row) makes it return None for the samples, and the caller gives the file to that reader,
+    which accepts it or names the line, column and text.  OSError if the file cannot be read."""
+    digest = hashlib.sha256()
+    parser = _PieceParser(sample_rate_hz)
+    hashing = None      # the piece being hashed on another thread while the engine parses it
+    with open_regular_file(path) as f:
+        parser.size = os.fstat(f.fileno()).st_size
+        carry = b""
+        while True:
+            piece = f.read(PIECE_BYTES)
+            if hashing is not None:
+                hashing.join()
+            if not piece:
+                break
+            # hashlib and the engine both release the GIL: hashing overlaps parsing
+            hashing = threading.Thread(target=digest.update, args=(piece,), daemon=True)
+            hashing.start()
+            if parser.failed:
+                continue
+            text = carry + piece if carry else piece
+            del piece
+            # whole lines only, and blank lines at the end held back (allowed only at the file's end)
+            end = len(text)
+            while end > 0 and text[end - 1] in _BLANK:
+                end -= 1
+            cut = text.rfind(b"\n", 0, end) + 1
+            if cut > 0:
+                parser.feed(text, cut)
+            carry = text[cut:]
+            del text
+        if not parser.failed:
+            parser.feed(carry, len(carry.rstrip(_BLANK)))
+    return parser.result(), digest.hexdigest()
+
+
+class _PieceParser:
+    """Parses a segment CSV fed as pieces of whole lines (see read_csv_pieces)."""
+
+    def __init__(self, sample_rate_hz):
+        self.sample_rate_hz = sample_rate_hz
+        self.size = 0
+        self.failed = False
+        self.columns = None     # engine column names; None until the header is read
+        self.n = 0
+        self.arrays = None      # t (N,), accel (N, 3), gyro (N, 3), temp (N,) or None
+
+    def feed(self, text: bytes, end: int, start: int = 0):
+        """Parse text[start:end]: whole lines (the last one may lack its line end at the file's
+        end)."""
+        if self.failed or end <= start:
+            return
+        if text.find(b'"', start, end) >= 0 or (text.find(b"\r", start, end) >= 0 and text.count(
+                b"\r", start, end) != text.count(b"\r\n", start, end)):
+            self.failed = True      # quoting, or a CR that does not end a line
+            return
+        if self.columns is None:
+            self._header(text, end, start)
+            return
+        block = memoryview(text)[start:end]
+        table = _arrow_table(block, self.columns, self.usecols)
+        if table is None or table.num_columns != len(self.wanted):
+            self.failed = True
+            return
+        rows = table.num_rows
+        self._reserve(self.n + rows, len(block), rows)
+        t, accel, gyro, temp = self.arrays
+        targets = [t, accel[:, 0], accel[:, 1], accel[:, 2], gyro[:, 0], gyro[:, 1], gyro[:, 2], temp]
+        if not all(_copy_column(table.column(k), targets[k][self.n:self.n + rows])
+                   for k in range(len(self.wanted))):
+            self.failed = True
+            return
+        self.n += rows
+
+    def _header(self, text, end, start):
+        """Read the header off the first block, then feed the rest of it."""
+        if text.startswith(_BOM, start):
+            start += len(_BOM)
+        newline = text.find(b"\n", start, end)
+        if newline < 0:
+            self.failed = True      # no data row
+            return
+        try:
+            header = text[start:newline].decode("utf-8").removesuffix("\r")
+            names, self.wanted, self.usecols = _parse_header(header, lambda message, line: ValueError(message))
+        except ValueError:  # UnicodeDecodeError too
+            self.failed = True
+            return
+        self.columns = [f"c{i}" for i in range(len(names))]
+        self.feed(text, end, newline + 1)
+
+    def _reserve(self, rows, block_bytes, block_rows):
+        """Room for ``rows`` rows: first sized from the file's length and the rows per byte seen."""
+        if self.arrays is not None and len(self.arrays[0]) >= rows:
+            return
+        estimate = int(self.size * block_rows / max(block_bytes, 1) * 1.02) + 16
+        capacity = max(rows, estimate if self.arrays is None else 2 * len(self.arrays[0]))
+        temp = len(self.wanted) == 8
+        new = (np.empty(capacity), np.empty((capacity, 3)), np.empty((capacity, 3)),
+               np.empty(capacity) if temp else None)
+        if self.arrays is not None:
+            for old, grown in zip(self.arrays, new):
+                if old is not None:
+                    grown[:self.n] = old[:self.n]
+        self.arrays = new
+
+    def result(self) -> SegmentData | None:
+        if self.failed or self.n == 0:
+            return None
+        t, accel, gyro, temp = (None if a is None else a[:self.n] for a in self.arrays)
+        if len(self.arrays[0]) > self.n + self.n // 8:     # far more room than rows: give it back
+            t, accel, gyro = t.copy(), accel.copy(), gyro.copy()
+            temp = None if temp is None else temp.copy()
+        self.arrays = None
+        for values in (t, accel, gyro) + (() if temp is None else (temp,)):
+            # finite and in range (NaN fails both): the line-by-line reader names the first that is not
+            if not (values.min() >= -MAX_CSV_VALUE and values.max() <= MAX_CSV_VALUE):
+                return None
+        steps = np.diff(t)
+        if not np.all(steps > 0):
+            return None
+        return SegmentData(t=t, accel=accel, gyro=gyro, temp=temp,
+                           gaps=_count_gaps(steps, self.sample_rate_hz))
+
+
+def _arrow_table(block, columns, usecols):
+    """The wanted columns of a block of whole CSV lines as a pyarrow Table of float64, or None
+    where the engine refuses it."""
+    try:
+        import pyarrow as pa
+        import pyarrow.csv as pacsv
+    except ImportError:  # pragma: no cover - a dependency; the line-by-line reader still works
+        return None
+    try:
+        return pacsv.read_csv(
+            pa.py_buffer(block),
+            read_options=pacsv.ReadOptions(column_names=columns, use_threads=True),
+            parse_options=pacsv.ParseOptions(delimiter=",", quote_char=False, double_quote=False,
+                                             escape_char=False, newlines_in_values=False,
+                                             ignore_empty_lines=False),
+            convert_options=pacsv.ConvertOptions(
+                include_columns=[columns[c] for c in usecols],
+                column_types={columns[c]: pa.float64() for c in usecols},
+                null_values=[], strings_can_be_null=False, quoted_strings_can_be_null=False))
+    except (pa.ArrowException, ValueError):
+        return None
+
+
+def _copy_column(chunked, out):
+    """Copy a float64 pyarrow column without nulls into the numpy array ``out``, chunk by chunk
+    (straight from the Arrow buffers: no pandas, no intermediate array); False if it has nulls
+    or another length (which the options given to the engine rule out)."""
+    if chunked.null_count or chunked.type != "double":
+        return False
+    i = 0
+    for chunk in chunked.chunks:
+        n = len(chunk)
+        out[i:i + n] = np.frombuffer(chunk.buffers()[1], dtype=np.float64, count=n,
+                                     offset=chunk.offset * 8)
+        i += n
+    return i == len(out)
 
 
 def _loadtxt(rows, usecols):

@@ -1,0 +1,95 @@
+"""`station estimate` against numpy.loadtxt merely parsing the same CSVs (issue 15, item 3).
+
+Records an optimal9 capture with the simulator at each rate (1 kHz: 3.06 M samples, 4 kHz:
+12.2 M), then runs, alternating, in fresh processes:
+  estimate   `station estimate CAPTURE` (imports, reading, checks, summaries, fit, file written)
+  loadtxt    `python -c` that only imports numpy and np.loadtxt's every segment CSV of the capture
+             (float64, the columns the reader uses)
+  summaries  `python -c` that reads the capture as estimate does and summarises it, nothing else
+             (this reader's own cost: read, hash, parse, check, summarise, one segment at a time)
+and prints for each the median wall time, CPU time (user + system, all threads) and peak RSS of
+the child process (os.wait4's rusage: that child alone), and the ratios estimate / loadtxt
+measured in this one run.  The machine is shared: compare the ratios, and repeat.
+
+Usage: python benchmarks/perf_reader.py [--rates 1000 4000] [--repeat 3] [--keep DIR]
+"""
+import argparse
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from station.io.scheme import load_scheme
+from station.simulate import dryrun
+
+LOADTXT = """
+import sys, numpy as np
+for path in sys.argv[1:]:
+    with open(path) as f:
+        names = f.readline().strip().split(",")
+    cols = [names.index(n) for n in ("t", "ax", "ay", "az", "gx", "gy", "gz", "temp") if n in names]
+    np.loadtxt(path, delimiter=",", skiprows=1, usecols=cols, dtype=np.float64, comments=None)
+"""
+
+SUMMARIES = """
+import sys
+from station.io.capture import read_capture
+from station.estimate.summaries import summarise
+summarise(read_capture(sys.argv[1], load_data=False))
+"""
+
+
+def run_child(argv):
+    """(wall s, cpu s, peak RSS MB) of one child process."""
+    t0 = time.perf_counter()
+    child = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(child.pid, 0)
+    wall = time.perf_counter() - t0
+    child.returncode = os.waitstatus_to_exitcode(status)
+    if child.returncode not in (0,):
+        sys.exit(f"{argv[:3]} failed ({child.returncode}): {child.stderr.read().decode()[-500:]}")
+    child.stderr.close()
+    return wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--rates", type=float, nargs="+", default=[1000.0, 4000.0])
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--keep", metavar="DIR", help="record the captures here and keep them (reused if there)")
+    a = ap.parse_args()
+    station = shutil.which("station") or sys.exit("install the project first (pip install -e .)")
+    scheme = load_scheme("optimal9")
+    with tempfile.TemporaryDirectory() as tmp:
+        base = Path(a.keep) if a.keep else Path(tmp)
+        for rate in a.rates:
+            cap = base / f"optimal9_{rate:g}Hz"
+            if not (cap / "manifest.yaml").exists():
+                truth = dryrun.load_truth(None, 1)
+                truth.sample_rate_hz = rate
+                dryrun.record_scheme(scheme, truth, 1, cap)
+            csvs = sorted(str(p) for p in cap.glob("*.csv"))
+            megabytes = sum(os.path.getsize(p) for p in csvs) / 1e6
+            samples = int(scheme.duration_s * rate)
+            runs = {"estimate": [], "loadtxt": [], "summaries": []}
+            for _ in range(a.repeat):          # alternating: both see the same load
+                runs["estimate"].append(run_child([station, "estimate", str(cap), "-o", str(Path(tmp) / "cal.yaml")]))
+                runs["loadtxt"].append(run_child([sys.executable, "-c", LOADTXT, *csvs]))
+                runs["summaries"].append(run_child([sys.executable, "-c", SUMMARIES, str(cap)]))
+            med = {k: [statistics.median(r[i] for r in v) for i in range(3)] for k, v in runs.items()}
+            print(f"optimal9 at {rate:g} Hz: {samples / 1e6:.2f} M samples, {len(csvs)} CSV files, {megabytes:.0f} MB")
+            for k, (wall, cpu, rss) in med.items():
+                print(f"  {k:9s} wall {wall:6.2f} s  cpu {cpu:6.2f} s  peak RSS {rss:5.0f} MB  "
+                      f"({1e9 * wall / samples:.0f} ns and {rss * 2**20 / samples:.0f} bytes per sample)")
+            (wl, cl, _) = med["loadtxt"]
+            for k in ("estimate", "summaries"):
+                print(f"  {k} / loadtxt: wall {med[k][0] / wl:.2f}x, cpu {med[k][1] / cl:.2f}x "
+                      f"(medians of {a.repeat} runs, alternating)")
+
+
+if __name__ == "__main__":
+    main()

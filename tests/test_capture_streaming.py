@@ -1,0 +1,142 @@
+"""The streaming capture reader (station/io/capture.py, read_csv_pieces) and the one-pass
+estimate (station/estimate/summaries.py): every file read once, in pieces, by the CSV engine, with
+the same values and the same refusals as the line-by-line reader; summaries one segment at a time."""
+import hashlib
+
+import numpy as np
+import pytest
+
+from station.core.errors import CaptureError
+from station.estimate import estimate_capture, estimate_with, summaries
+from station.io import capture as capture_io
+from station.io.capture import CaptureWriter, ImuInfo, Site, read_capture
+from test_capture import CSV_REFUSALS, TOLERATED_CSV, base_manifest, expected_rows, make_bundle, refusal
+
+
+@pytest.mark.parametrize("piece_bytes", [1, 7, 50])
+def test_any_piece_size_reads_and_refuses_as_the_line_reader(tmp_path, monkeypatch, piece_bytes):
+    """Pieces that cut lines, the header, a CRLF or a BOM anywhere: the same rows, the same
+    messages (file, segment, line, what) as whole-file reading."""
+    monkeypatch.setattr(capture_io, "PIECE_BYTES", piece_bytes)
+    for k, (_, content) in enumerate(TOLERATED_CSV):
+        (tmp_path / f"ok{k}").mkdir()
+        data = read_capture(make_bundle(tmp_path / f"ok{k}", files={"pos01.csv": content})).segments[0].data
+        np.testing.assert_array_equal(np.column_stack([data.t, data.accel, data.gyro]), expected_rows())
+    for k, (what, content, line, expected) in enumerate(CSV_REFUSALS):
+        (tmp_path / f"bad{k}").mkdir()
+        directory = make_bundle(tmp_path / f"bad{k}", files={"pos01.csv": content})
+        message = refusal(directory)
+        assert message.startswith(f"{directory / 'pos01.csv'}: segments[0] (pos01): line {line}: "), what
+        assert expected in message, what
+
+
+FIELDS = ["1.", ".5", "+2", "-.5e-3", "1E0", " 3", "3 ", "\t3", "00012", "1e-400", "4.9e-324",
+          "1.7976931348623157e308", "-0", "nan", "NaN", "-nan", "nan(1)", "inf", "Infinity", "1e999",
+          "1e300", "0x10", "1_0", "1d3", "1e", "+", ".e5", "1..2", "1 2", "\xa01", "1\u2003", "\x0c1",
+          "\u0661", "\uff10", "1e5.5"]
+
+
+@pytest.mark.parametrize("field", FIELDS)
+def test_engine_accepts_a_field_only_as_the_line_reader_does(tmp_path, field):
+    """Whatever a field holds, read_capture (engine first) and the line-by-line reader alone
+    give the same values or the same message."""
+    lines = ["t,ax,ay,az,gx,gy,gz"] + [f"{k / 100},0.1,0.2,9.8,1,2,3" for k in range(4)]
+    lines[3] = f"0.02,0.1,0.2,9.8,{field},2,3"
+    content = ("\n".join(lines) + "\n").encode()
+    directory = make_bundle(tmp_path, files={"pos01.csv": content})
+    path = directory / "pos01.csv"
+    try:
+        reference = capture_io._parse_csv(capture_io._csv_lines(content, partial_last_line=False), 100.0,
+                                          path, "segments[0] (pos01)", require_rows=True)
+    except CaptureError as e:
+        assert refusal(directory) == str(e)
+        return
+    data = read_capture(directory).segments[0].data
+    np.testing.assert_array_equal(data.gyro, reference.gyro)
+
+
+def written_segment(tmp_path, n, seed=3):
+    """A segment CSV as the station's writer makes it (%.15g time, %.12g values, temp column)."""
+    rng = np.random.default_rng(seed)
+    t = 1e5 + np.cumsum(rng.uniform(0.5e-3, 2e-3, n))
+    accel = rng.normal(size=(n, 3)) * 10.0 ** rng.integers(-6, 4, size=(n, 3))
+    gyro = rng.normal(size=(n, 3)) * 10.0 ** rng.integers(-9, 3, size=(n, 3))
+    temp = 25 + rng.normal(size=n)
+    writer = CaptureWriter(tmp_path / "cap", ImuInfo(1000.0, "m/s^2", "deg/s"), Site(9.8))
+    with writer.begin_segment("pos01", "static") as seg:
+        seg.write(t, accel, gyro, temp)
+    return tmp_path / "cap" / "pos01.csv"
+
+
+@pytest.mark.parametrize("piece_bytes", [1000, capture_io.PIECE_BYTES])
+def test_engine_values_are_bit_identical_to_the_line_reader(tmp_path, monkeypatch, piece_bytes):
+    monkeypatch.setattr(capture_io, "PIECE_BYTES", piece_bytes)
+    path = written_segment(tmp_path, 3000)
+    fast, digest = capture_io.read_csv_pieces(path, 1000.0)
+    assert fast is not None                                   # the engine read it, no fallback
+    raw = path.read_bytes()
+    assert digest == hashlib.sha256(raw).hexdigest()
+    slow = capture_io._parse_csv(capture_io._csv_lines(raw, partial_last_line=False), 1000.0, path, None,
+                                 require_rows=True)
+    for name in ("t", "accel", "gyro", "temp"):
+        np.testing.assert_array_equal(getattr(fast, name), getattr(slow, name))
+        assert getattr(fast, name).flags.writeable
+    assert fast.gaps == slow.gaps > 0
+
+
+def test_a_changed_file_is_refused_when_its_samples_are_read(tmp_path):
+    manifest = base_manifest()
+    manifest["segments"][0]["sha256"] = "0" * 64
+    capture = read_capture(make_bundle(tmp_path, manifest), load_data=False)   # manifest only
+    with pytest.raises(CaptureError, match=r"pos01.csv: segments\[0\] \(pos01\): field 'sha256': file content"):
+        capture.read_samples(capture.segments[0])
+
+
+@pytest.fixture
+def counted_reads(monkeypatch):
+    """Paths given to read_csv_pieces, in order."""
+    paths = []
+    real = capture_io.read_csv_pieces
+
+    def counting(path, rate):
+        paths.append(path.name)
+        return real(path, rate)
+
+    monkeypatch.setattr(capture_io, "read_csv_pieces", counting)
+    return paths
+
+
+def test_summaries_stream_one_segment_at_a_time_and_match_loaded_samples(optimal9_run, counted_reads):
+    eager = summaries.summarise(read_capture(optimal9_run))
+    counted_reads.clear()
+    lazy_capture = read_capture(optimal9_run, load_data=False)
+    held = []          # segments holding samples whenever a file is read: one at a time
+    real_read = lazy_capture.read_samples
+    lazy_capture.read_samples = lambda seg: (held.append(sum(s.data is not None for s in lazy_capture.segments)),
+                                             real_read(seg))[1]
+    lazy = summaries.summarise(lazy_capture)
+    assert held == [0] * len(held) and len(held) > 0
+    files = [seg.file for seg in lazy_capture.complete() if seg.kind in ("static", "rotation")]
+    assert sorted(counted_reads) == sorted(files)               # each file once
+    assert all(seg.data is None for seg in lazy_capture.segments)   # nothing kept
+    assert summaries.summarise(lazy_capture).rotations[0].accel_cos is not lazy.rotations[0].accel_cos
+    assert len(counted_reads) == len(files)                     # a second summarise reads nothing
+    for a, b in zip(eager.statics + eager.rotations, lazy.statics + lazy.rotations):
+        for name, value in vars(a).items():
+            if isinstance(value, np.ndarray):
+                np.testing.assert_array_equal(value, getattr(b, name))
+    np.testing.assert_array_equal(eager.accel_sigma, lazy.accel_sigma)
+
+
+def test_estimate_reads_each_file_once_and_digests_the_hashes(optimal9_run, counted_reads):
+    cal, capture, provenance = estimate_capture(optimal9_run)
+    complete = capture.complete()
+    assert sorted(counted_reads) == sorted(seg.file for seg in complete)
+    digest = hashlib.sha256((optimal9_run / "manifest.yaml").read_bytes())
+    for seg in complete:      # the documented definition, from the files themselves
+        digest.update(hashlib.sha256((optimal9_run / seg.file).read_bytes()).digest())
+    assert provenance["capture_sha256"] == digest.hexdigest()
+    loaded, _ = estimate_with(read_capture(optimal9_run), "lsq")
+    np.testing.assert_allclose(cal.accel_scale, loaded.accel_scale, rtol=1e-12)
+    np.testing.assert_allclose(cal.gyro_T, loaded.gyro_T, rtol=0, atol=1e-15)
+    assert cal.sigma == pytest.approx(loaded.sigma, rel=1e-9)
