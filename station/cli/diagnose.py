@@ -5,8 +5,6 @@ import json
 import math
 from pathlib import Path
 
-from rich.table import Table
-
 from station.cli import plugins
 from station.cli.output import err, out
 from station.core.errors import UserError
@@ -159,6 +157,8 @@ def to_json(d, steps) -> dict:
 
 
 def _candidates_table(d) -> Table:
+    from rich.table import Table
+
     t = Table(title="candidate effects (score test at the current fit)")
     for col in ("effect", "significant", "pred. Δχ²", "p (Holm)", "largest one-step estimate", "note"):
         t.add_column(col, justify="right" if col in ("pred. Δχ²", "p (Holm)") else "left")
@@ -181,6 +181,8 @@ def _candidates_table(d) -> Table:
 
 
 def _print(out, first, steps, final) -> None:
+    from rich.table import Table
+
     from station.diagnose.auto import comparison_rows
 
     for line in _summary_lines(first):
@@ -211,6 +213,8 @@ def _print(out, first, steps, final) -> None:
 
 
 def cmd_effects(args) -> int:
+    from rich.table import Table
+
     reg = plugins.registry(args)
     if args.name is None:
         table = Table(title="effects the model can add (station estimate --add ID; plugins: docs/effects.md)")

@@ -1,9 +1,6 @@
 """``station montecarlo``: repeat simulate -> estimate, compare with the Cramér-Rao bound."""
 from __future__ import annotations
 
-import numpy as np
-from rich.table import Table
-
 from station.cli.output import out
 from station.core.errors import UserError
 
@@ -24,7 +21,11 @@ def add_parsers(sub) -> None:
 
 
 def cmd_montecarlo(args) -> int:
+    from rich.table import Table
+
     import json
+
+    import numpy as np
 
     from station.simulate import montecarlo
     from station.io.scheme import load_scheme
