@@ -62,6 +62,8 @@ def segments_figure(panels, path=None) -> bytes:
     """panels: list of (title, diagnosis); bars of the RMS whitened residual per segment, every
     panel on the same (log) y axis so that the fall after each added effect shows."""
     plt = _pyplot()
+    from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
+
     height = 2.8 * len(panels)
     fig, axes = plt.subplots(len(panels), 1, figsize=(11, height), squeeze=False, sharey=True)
     # margins in inches from the text they hold (tight_layout measured every tick label: 45 % of
@@ -85,6 +87,10 @@ def segments_figure(panels, path=None) -> bytes:
         ax.axhline(1.0, color="k", lw=0.8, ls="--")
         ax.set_yscale("log")
         ax.set_ylim(lo, hi)
+        # plain numbers at 1-2-5 (mathtext 10^k labels cost 40 % of this figure's time)
+        ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+        ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+        ax.yaxis.set_minor_formatter(NullFormatter())
         ax.set_xticks(range(len(names)), names, rotation=90, fontsize=7)
         ax.set_ylabel("RMS residual / noise")
         ax.set_title(f"{title}: reduced χ² {d.reduced_chi2:.3g} (blue static, orange rotation; "
