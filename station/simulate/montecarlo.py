@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import os
+import signal
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from typing import Callable
@@ -97,6 +98,13 @@ def _one_blas_thread() -> None:
 _BLAS_LIMIT = None
 
 
+def _worker_start() -> None:
+    """A worker ignores Ctrl-C (the parent gets it too, cancels the runs not started and exits
+    with "interrupted"; no traceback from the workers) and computes with one BLAS thread."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _one_blas_thread()
+
+
 def usable_cores() -> int:
     """The cores this process may run on (its CPU affinity, e.g. under taskset or a container's
     cpuset), not the machine's count."""
@@ -152,7 +160,8 @@ def study(scheme: Scheme, settings: Settings, runs: int, first_seed: int = 1000,
                     progress(i + 1, runs)
             crlb = cramer_rao(scheme, settings) if bound else None
     else:
-        with ProcessPoolExecutor(workers, initializer=_one_blas_thread) as pool:
+        pool = ProcessPoolExecutor(workers, initializer=_worker_start)
+        try:
             bound_future = pool.submit(_bound_job, (scheme, settings)) if bound else None
             futures = {pool.submit(one_run, job): i for i, job in enumerate(jobs)}
             for done, future in enumerate(as_completed(futures), 1):
@@ -160,6 +169,12 @@ def study(scheme: Scheme, settings: Settings, runs: int, first_seed: int = 1000,
                 if progress:
                     progress(done, runs)
             crlb = bound_future.result() if bound_future is not None else None
+        except BaseException:
+            # Ctrl-C (the parent's alone) or a failed run: the runs not started are cancelled,
+            # the ones under way end (one run each), then the exception goes on
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise
+        pool.shutdown()
     return Study(names, np.array([r[0] for r in rows]), np.array([r[1] for r in rows]), crlb, workers)
 
 
