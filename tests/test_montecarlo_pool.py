@@ -9,6 +9,7 @@ import io
 import os
 
 import numpy as np
+import pytest
 from rich.console import Console
 
 from station.io.scheme import load_scheme
@@ -61,3 +62,50 @@ def test_the_progress_bar_draws_on_a_terminal_and_stays_silent_in_a_pipe(monkeyp
                 progress(done, 4)
         text = sink.getvalue()
         assert ("4/4" in text) == terminal and ("dry runs" in text) == terminal
+
+
+def _children(pid: int) -> list[int]:
+    path = f"/proc/{pid}/task/{pid}/children"
+    try:
+        with open(path) as f:
+            return [int(x) for x in f.read().split()]
+    except OSError:
+        return []
+
+
+@pytest.mark.skipif(not os.path.exists(f"/proc/{os.getpid()}/task/{os.getpid()}/children"),
+                    reason="needs Linux /proc children lists")
+def test_ctrl_c_ends_the_workers_and_says_interrupted(tmp_path):
+    """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) while the pool runs:
+    exit status 130, the one line "interrupted", no traceback, and no worker left behind."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from station.io.scheme import scheme_text
+
+    text, _ = scheme_text("optimal9")
+    short = text.replace("dwell_s: 100.0", "dwell_s: 3.0").replace("rotation_s: 180.0", "rotation_s: 4.0")
+    assert short != text
+    (tmp_path / "short.yaml").write_text(short)
+    p = subprocess.Popen([sys.executable, "-m", "station.cli", "montecarlo", "--scheme", str(tmp_path / "short.yaml"),
+                          "--runs", "100000", "--method", "zhang2010", "--json"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        for _ in range(1200):                      # until the pool's two workers exist
+            workers = _children(p.pid)
+            if len(workers) >= 2 or p.poll() is not None:
+                break
+            time.sleep(0.05)
+        assert len(workers) >= 2, "the pool did not start"
+        time.sleep(0.5)                            # runs under way
+        os.killpg(p.pid, signal.SIGINT)
+        out, err = p.communicate(timeout=120)
+    finally:
+        if p.poll() is None:                       # its own session: the test's processes only
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+    assert p.returncode == 130 and err.strip() == "interrupted" and out == ""
+    assert not any(os.path.exists(f"/proc/{w}") and open(f"/proc/{w}/stat").read().split()[2] != "Z"
+                   for w in workers)

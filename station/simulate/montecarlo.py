@@ -3,9 +3,9 @@ the Cramér-Rao bound of the scheme and with the uncertainties the estimator rep
 from __future__ import annotations
 
 import copy
+import multiprocessing
 import os
 import signal
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from typing import Callable
 
@@ -99,8 +99,8 @@ _BLAS_LIMIT = None
 
 
 def _worker_start() -> None:
-    """A worker ignores Ctrl-C (the parent gets it too, cancels the runs not started and exits
-    with "interrupted"; no traceback from the workers) and computes with one BLAS thread."""
+    """A worker ignores Ctrl-C (the parent gets it too, ends the workers and exits with
+    "interrupted"; no traceback from them) and computes with one BLAS thread."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _one_blas_thread()
 
@@ -124,6 +124,11 @@ class Study:
     sigmas: np.ndarray
     crlb: np.ndarray | None
     workers: int
+
+
+def _numbered_run(numbered):
+    i, job = numbered
+    return i, one_run(job)
 
 
 def _bound_job(args) -> np.ndarray:
@@ -160,21 +165,19 @@ def study(scheme: Scheme, settings: Settings, runs: int, first_seed: int = 1000,
                     progress(i + 1, runs)
             crlb = cramer_rao(scheme, settings) if bound else None
     else:
-        pool = ProcessPoolExecutor(workers, initializer=_worker_start)
+        pool = multiprocessing.Pool(workers, initializer=_worker_start)
         try:
-            bound_future = pool.submit(_bound_job, (scheme, settings)) if bound else None
-            futures = {pool.submit(one_run, job): i for i, job in enumerate(jobs)}
-            for done, future in enumerate(as_completed(futures), 1):
-                rows[futures[future]] = future.result()
+            pending_bound = pool.apply_async(_bound_job, ((scheme, settings),)) if bound else None
+            for done, (i, row) in enumerate(pool.imap_unordered(_numbered_run, enumerate(jobs)), 1):
+                rows[i] = row
                 if progress:
                     progress(done, runs)
-            crlb = bound_future.result() if bound_future is not None else None
-        except BaseException:
-            # Ctrl-C (the parent's alone) or a failed run: the runs not started are cancelled,
-            # the ones under way end (one run each), then the exception goes on
-            pool.shutdown(wait=True, cancel_futures=True)
-            raise
-        pool.shutdown()
+            crlb = pending_bound.get() if pending_bound is not None else None
+            pool.close()
+        finally:
+            # after Ctrl-C (the parent's alone) or a failed run the workers are ended at once
+            pool.terminate()
+            pool.join()
     return Study(names, np.array([r[0] for r in rows]), np.array([r[1] for r in rows]), crlb, workers)
 
 
