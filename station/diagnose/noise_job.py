@@ -7,6 +7,7 @@ is not a fit (importing allantools and scipy.stats ~0.8 s, the analysis ~0.3 s, 
 it); it sends back the NoiseResult, the note, and the PNG of the figure.  Where fork is not
 available, or the child fails, the same work is done here, in order, with the same result.
 
+matplotlib is imported before the fork, so that both processes have it for one import.
 The child ignores Ctrl-C (the parent is interrupted, ends the child and exits 130 without a
 traceback from either).
 """
@@ -61,6 +62,9 @@ class NoiseJob:
     def __enter__(self) -> "NoiseJob":
         global _INPUT
         if "fork" in multiprocessing.get_all_start_methods():
+            from station.diagnose.figures import pyplot
+
+            pyplot()        # imported once, before the fork: both processes draw (0.4 s saved)
             _INPUT = (self.capture, self.cal_doc)
             try:
                 self._pool = multiprocessing.get_context("fork").Pool(1, initializer=_ignore_interrupts)
