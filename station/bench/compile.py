@@ -246,7 +246,7 @@ class Compiler:
 
     def _mount_step(self, mounting, segment, *, check: bool = False) -> Operator:
         gimbal = self.gimbal0.remounted(mounting)
-        C = gimbal.attitude(self.load_deg).as_matrix()          # case -> ENU at the load position
+        C = gimbal.frames(self.load_deg)[0][0]                  # case -> ENU at the load position
         level = [d for d in ("east", "north", "west", "south") if _case_axis(C.T @ CARDINAL[d])] or ["east"]
         placement = (f"with its {_imu_direction(C.T @ CARDINAL['up'])} pointing up and its "
                      f"{_imu_direction(C.T @ CARDINAL[level[0]])} pointing {level[0]}")

@@ -18,9 +18,12 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+
+if TYPE_CHECKING:       # scipy.spatial is imported only when a Rotation is asked for (not by plan)
+    from scipy.spatial.transform import Rotation
 
 UP_ENU = np.array([0.0, 0.0, 1.0])
 SOLVE_TOL = 1e-10            # residual (unit vectors) of an exact solution: 2e-5 arcsec
@@ -99,6 +102,8 @@ class Gimbal:
 
     def attitude(self, theta_deg) -> Rotation:
         """C_nb (case -> ENU) as a scipy Rotation."""
+        from scipy.spatial.transform import Rotation
+
         C, _ = self.frames(theta_deg)
         return Rotation.from_matrix(C[0] if np.ndim(theta_deg) == 1 else C)
 

@@ -4,19 +4,17 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from station.cli import plugins
+from station.cli.choices import ESTIMATE_METHODS
 from station.cli.output import EXIT_POOR_FIT, err, out, print_notes, print_parameters, print_verdict
 from station.core.errors import UserError
-from station.estimate import METHODS
 
 
 def add_parsers(sub) -> None:
     est = sub.add_parser("estimate", help="estimate a calibration from a capture (no hardware)")
     est.add_argument("capture", help="capture directory (with manifest.yaml)")
     est.add_argument("-o", "--output", metavar="CAL.yaml", help="default: CAPTURE/calibration.yaml")
-    est.add_argument("--method", choices=METHODS, default="auto",
+    est.add_argument("--method", choices=ESTIMATE_METHODS, default="auto",
                      help="auto (default): lsq when rotations have encoder angles, fourier otherwise")
     est.add_argument("--add", action="append", default=[], metavar="EFFECT",
                      help="add an effect to the model: an id (station effects lists them) or a plugin "
@@ -167,6 +165,8 @@ def cmd_apply(args) -> int:
     if verdict.get("result") == "fails":
         err.print(f"warning: {args.calibration}: its fit fails ({verdict.get('reason', '')})",
                   markup=False, soft_wrap=True)
+    import numpy as np
+
     table = np.column_stack([t, f, w])
     try:
         with open(args.output, "w") as fh:

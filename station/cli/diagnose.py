@@ -1,11 +1,10 @@
 """``station diagnose``: compare the model with the measurements, find what is missing."""
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 from pathlib import Path
-
-from rich.table import Table
 
 from station.cli import plugins
 from station.cli.output import err, out
@@ -61,31 +60,40 @@ def cmd_diagnose(args) -> int:
         raise UserError(f"{capture.path}: diagnose fits the least-squares model, which needs the "
                         "encoder angle (angle_deg) of every rotation segment that is not a hand turn "
                         "between statics")
-    s = lsq.summarise(capture)
-    reg = plugins.registry(args)
-    effects = _effects(args, capture, reg)
-    if args.auto:
-        steps, final = auto.run(s, effects, progress=None, registry=reg)
-        first = steps[0].before if steps else final
-    else:
-        steps, first = [], diagnose(lsq.fit(s, [reg.create(e) for e in effects]), registry=reg)
-        auto.conclude(first, s)
-        final = first
-    if args.emit_effect:
-        _emit(args.emit_effect, final)
-    summary = _summary_lines(final)
+    cal_doc = None
+    if args.report and args.calib:
+        from station.io.calfile import read_calfile
+
+        cal_doc = read_calfile(args.calib)
+    with contextlib.ExitStack() as stack:
+        if args.report:       # the report's noise section, in a second process meanwhile
+            from station.diagnose.noise_job import NoiseJob
+
+            noise_job = stack.enter_context(NoiseJob(capture, cal_doc))
+        s = lsq.summarise(capture)
+        reg = plugins.registry(args)
+        effects = _effects(args, capture, reg)
+        if args.auto:
+            steps, final = auto.run(s, effects, progress=None, registry=reg)
+            first = steps[0].before if steps else final
+        else:
+            steps, first = [], diagnose(lsq.fit(s, [reg.create(e) for e in effects]), registry=reg)
+            auto.conclude(first, s)
+            final = first
+        if args.emit_effect:
+            _emit(args.emit_effect, final)
+        summary = _summary_lines(final)
+        if args.report:
+            from station.diagnose.report import ReportInput, capture_facts, diagnosis_figures, write_report
+
+            page = ReportInput(title=f"Diagnosis: {Path(str(capture.path)).name}",
+                               facts=capture_facts(capture, cal_doc) + [("summary", line) for line in summary],
+                               calibration=cal_doc, calibration_path=args.calib,
+                               figures=diagnosis_figures(first, steps))
+            page.noise, page.noise_note, allan_png = noise_job.result()
+            if allan_png is not None:
+                page.figures["allan.png"] = allan_png
     if args.report:
-        from station.diagnose.report import ReportInput, capture_facts, noise_of, write_report
-
-        cal_doc = None
-        if args.calib:
-            from station.io.calfile import read_calfile
-
-            cal_doc = read_calfile(args.calib)
-        page = ReportInput(title=f"Diagnosis: {Path(str(capture.path)).name}",
-                           facts=capture_facts(capture, cal_doc) + [("summary", line) for line in summary],
-                           calibration=cal_doc, calibration_path=args.calib)
-        page.noise, page.noise_note = noise_of(capture, cal_doc)
         index = write_report(args.report, first, steps, final, summary, page)
         if not args.json:
             out.print(f"report: {index}")
@@ -159,6 +167,8 @@ def to_json(d, steps) -> dict:
 
 
 def _candidates_table(d) -> Table:
+    from rich.table import Table
+
     t = Table(title="candidate effects (score test at the current fit)")
     for col in ("effect", "significant", "pred. Δχ²", "p (Holm)", "largest one-step estimate", "note"):
         t.add_column(col, justify="right" if col in ("pred. Δχ²", "p (Holm)") else "left")
@@ -181,6 +191,8 @@ def _candidates_table(d) -> Table:
 
 
 def _print(out, first, steps, final) -> None:
+    from rich.table import Table
+
     from station.diagnose.auto import comparison_rows
 
     for line in _summary_lines(first):
@@ -211,6 +223,8 @@ def _print(out, first, steps, final) -> None:
 
 
 def cmd_effects(args) -> int:
+    from rich.table import Table
+
     reg = plugins.registry(args)
     if args.name is None:
         table = Table(title="effects the model can add (station estimate --add ID; plugins: docs/effects.md)")

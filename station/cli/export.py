@@ -3,16 +3,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from station.cli.choices import EXPORT_FORMATS
 from station.cli.output import err, out
 
 
 def add_parsers(sub) -> None:
-    from station.io.exporters import FORMATS
-
     ex = sub.add_parser("export", help="write a calibration file in another tool's format")
     ex.add_argument("calibration", metavar="CAL.yaml")
-    ex.add_argument("--to", required=True, choices=sorted(FORMATS), metavar="FORMAT",
-                    help="; ".join(f"{name}: {mod.TITLE}" for name, mod in FORMATS.items()))
+    ex.add_argument("--to", required=True, choices=sorted(EXPORT_FORMATS), metavar="FORMAT",
+                    help="; ".join(f"{name}: {title}" for name, title in EXPORT_FORMATS.items()))
     ex.add_argument("-o", "--output", metavar="PATH",
                     help="default: next to CAL, named CAL-FORMAT with the format's ending")
     ex.add_argument("--noise", metavar="NOISE.yaml",

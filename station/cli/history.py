@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from rich.table import Table
-
 from station.cli.output import err, out
 
 
@@ -45,6 +43,8 @@ def file_quietly(cal_path, store=None) -> None:
 
 
 def cmd_history(args) -> int:
+    from rich.table import Table
+
     from station.core.errors import UserError
     from station.io.history import Store
 
@@ -97,6 +97,8 @@ def _drift(entries, png: Path, serial: str) -> None:
 
 
 def cmd_diff(args) -> int:
+    from rich.table import Table
+
     from station.io.calcompare import FLAG_SIGMA, changes
     from station.io.calfile import read_calfile
     from station.io.history import Store

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from station.cli.choices import (CSV_PRESETS, IMUCAL_DEFAULT_GRAVITY_MPS2, IMUCAL_FORMATS,
+                                 RECORDING_MIN_POSES, ROSBAG_STAMPS)
 from station.cli.output import out
 from station.core.errors import UserError
 
@@ -86,8 +88,6 @@ def _count(text: str) -> int:
 
 def _add_recording_options(p) -> None:
     """Options shared by the importers of continuous recordings (sections, site, output)."""
-    from station.io.importers import recording
-
     p.add_argument("-o", "--output", required=True, metavar="CAPTURE", help="new capture directory")
     p.add_argument("--segments", metavar="FILE",
                    help="give the sections by hand instead of finding them: YAML/JSON list of {name, kind "
@@ -104,8 +104,8 @@ def _add_recording_options(p) -> None:
     p.add_argument("--init-rest-s", type=_positive, default=2.0,
                    help="length of the still rest the recording starts with, s: scales raw outputs of "
                         "unknown scale (default 2)")
-    p.add_argument("--min-poses", type=_count, default=recording.MIN_POSES,
-                   help=f"fewest static poses accepted (default {recording.MIN_POSES}: the accelerometer's 9 "
+    p.add_argument("--min-poses", type=_count, default=RECORDING_MIN_POSES,
+                   help=f"fewest static poses accepted (default {RECORDING_MIN_POSES}: the accelerometer's 9 "
                         "unknowns with unknown attitudes)")
     p.add_argument("--faces", action="store_true",
                    help="the IMU was laid on its faces: each pose's up_body is the nearest case axis")
@@ -127,7 +127,6 @@ def _positive(text: str) -> float:
 
 def add_parsers(sub) -> None:
     """Add the ``import`` command (sub-commands ``imucal``, ``csv``, ``rosbag``) to station's subparsers."""
-    from station.io.importers import imucal
     from station.core.units import ACCEL_UNITS, GYRO_UNITS
 
     imp = sub.add_parser("import", help="turn another tool's recording into a capture bundle")
@@ -138,11 +137,11 @@ def add_parsers(sub) -> None:
     p.add_argument("--rate-hz", type=_positive, required=True, metavar="HZ",
                    help="sample rate: imucal files carry none (the example session: 102.4)")
     p.add_argument("-o", "--output", required=True, metavar="CAPTURE", help="new capture directory")
-    p.add_argument("--format", choices=imucal.FORMATS, default="auto",
+    p.add_argument("--format", choices=IMUCAL_FORMATS, default="auto",
                    help="session (JSON sections, m/s^2 and deg/s) or annotated ('part' column, raw counts); "
                         "auto: annotated when the header has 'part'")
-    p.add_argument("--gravity-mps2", type=_positive, default=imucal.DEFAULT_GRAVITY_MPS2,
-                   help=f"local gravity, m/s^2 (default {imucal.DEFAULT_GRAVITY_MPS2}, imucal's)")
+    p.add_argument("--gravity-mps2", type=_positive, default=IMUCAL_DEFAULT_GRAVITY_MPS2,
+                   help=f"local gravity, m/s^2 (default {IMUCAL_DEFAULT_GRAVITY_MPS2}, imucal's)")
     p.add_argument("--accel-unit", choices=ACCEL_UNITS, help="override the layout's accelerometer unit")
     p.add_argument("--gyro-unit", choices=GYRO_UNITS, help="override the layout's gyro unit")
     p.add_argument("--model", help="IMU model, recorded in the manifest")
@@ -154,11 +153,9 @@ def add_parsers(sub) -> None:
                    help="1-sigma accuracy of the hand placement and turns (default 1 deg)")
     p.set_defaults(func=cmd_import_imucal)
 
-    from station.io.importers import delimited, rosbag
-
     c = kinds.add_parser("csv", help="a continuous recording in delimited text: statics and hand turns found in it")
     c.add_argument("file", metavar="FILE", help="the log (CSV, ';'-, tab- or blank-separated)")
-    c.add_argument("--preset", choices=sorted(delimited.PRESETS),
+    c.add_argument("--preset", choices=CSV_PRESETS,
                    help="a known layout: station/t-a-g (t,ax,ay,az,gx,gy,gz; s, m/s^2, deg/s), imu_tk (two "
                         "files 't x y z', accel and --gyro-file; s, m/s^2, rad/s), imucal (its session CSV)")
     c.add_argument("--columns", metavar="MAP",
@@ -182,7 +179,7 @@ def add_parsers(sub) -> None:
     b = kinds.add_parser("rosbag", help="sensor_msgs/Imu from a ROS 1 bag or a ROS 2 bag (db3 or MCAP)")
     b.add_argument("bag", metavar="BAG", help="a .bag file, a ROS 2 bag directory, or an .mcap file")
     b.add_argument("--topic", help="the Imu topic (default: the bag's only one)")
-    b.add_argument("--stamps", choices=rosbag.STAMPS, default="header",
+    b.add_argument("--stamps", choices=ROSBAG_STAMPS, default="header",
                    help="time from each message's header.stamp (default) or the recorder's receive time")
     _add_recording_options(b)
     b.set_defaults(func=cmd_import_rosbag)

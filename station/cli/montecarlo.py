@@ -1,10 +1,9 @@
 """``station montecarlo``: repeat simulate -> estimate, compare with the Cramér-Rao bound."""
 from __future__ import annotations
 
-import numpy as np
-from rich.table import Table
+import contextlib
 
-from station.cli.output import out
+from station.cli.output import err, out
 from station.core.errors import UserError
 
 
@@ -23,8 +22,27 @@ def add_parsers(sub) -> None:
     mc.set_defaults(func=cmd_montecarlo)
 
 
+@contextlib.contextmanager
+def _progress_bar(runs: int):
+    """A progress bar on stderr (a terminal only: nothing in logs or pipes); yields the
+    ``progress(done, total)`` callback of station.simulate.montecarlo.study."""
+    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
+                               TimeRemainingColumn)
+
+    bar = Progress(TextColumn("dry runs"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                   TextColumn("left"), TimeRemainingColumn(), console=err, transient=True,
+                   disable=not err.is_terminal)
+    task = bar.add_task("runs", total=runs)
+    with bar:
+        yield lambda done, total: bar.update(task, completed=done, total=total)
+
+
 def cmd_montecarlo(args) -> int:
     import json
+    import time
+
+    import numpy as np
+    from rich.table import Table
 
     from station.simulate import montecarlo
     from station.io.scheme import load_scheme
@@ -35,8 +53,14 @@ def cmd_montecarlo(args) -> int:
     settings = montecarlo.Settings(accel_noise_ug=args.accel_noise_ug, gyro_noise_dph=args.gyro_noise_dph,
                                    table_angle_arcsec=args.table_angle_arcsec,
                                    accel_disturbance_ug=args.accel_disturbance_ug, method=args.method)
-    names, errors, sigmas = montecarlo.run(scheme, settings, args.runs, first_seed=args.seed)
-    crlb = montecarlo.cramer_rao(scheme, settings)
+    started = time.perf_counter()
+    with _progress_bar(args.runs) as progress:
+        result = montecarlo.study(scheme, settings, args.runs, first_seed=args.seed, bound=True,
+                                  progress=progress)
+    elapsed = time.perf_counter() - started
+    err.print(f"{args.runs} dry runs and the Cramér-Rao bound in {elapsed:.1f} s on {result.workers} "
+              f"worker process(es): {args.runs / elapsed:.2f} runs/s", markup=False)
+    names, errors, sigmas, crlb = result.names, result.errors, result.sigmas, result.crlb
     std = errors.std(axis=0, ddof=1)
     with np.errstate(all="ignore"):
         mean_sigma = np.nanmean(sigmas, axis=0) if np.isfinite(sigmas).any() else np.full(len(std), np.nan)

@@ -3,8 +3,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from rich.table import Table
-
 from station.cli.output import err, out
 
 
@@ -26,6 +24,8 @@ def add_parsers(sub) -> None:
 
 
 def _table(result) -> Table:
+    from rich.table import Table
+
     t = Table(title=f"noise from the overlapping Allan deviation ({result.duration_s:.0f} s at "
                     f"{result.sample_rate_hz:g} Hz)")
     for col in ("axis", "white noise ± 1σ", "random walk of angle/velocity", "bias instability",

@@ -1,11 +1,10 @@
 """What every command prints the same way: the consoles, parameter tables, notes."""
 from __future__ import annotations
 
+import math
 import sys
 
-import numpy as np
 from rich.console import Console
-from rich.table import Table
 
 EXIT_POOR_FIT = 3      # the calibration file is written, but its fit fails (see --accept-poor-fit)
 
@@ -15,6 +14,8 @@ err = Console(stderr=True, highlight=False)
 
 def print_parameters(rows, title: str) -> None:
     """rows: (name, value, unit, 1-sigma or None); scale factors get their 1σ in ppm."""
+    from rich.table import Table
+
     table = Table(title=title)
     table.add_column("parameter")
     table.add_column("value", justify="right")
@@ -22,7 +23,7 @@ def print_parameters(rows, title: str) -> None:
     table.add_column("unit")
     for name, value, unit, sigma in rows:
         is_scale = unit in ("1", "raw/(m/s^2)", "raw/(deg/s)")
-        if sigma is None or not np.isfinite(sigma):
+        if sigma is None or not math.isfinite(sigma):
             spread = ""
         elif is_scale:
             spread = f"{sigma / value * 1e6:.3g} ppm"
@@ -33,6 +34,8 @@ def print_parameters(rows, title: str) -> None:
 
 
 def print_errors(cal, truth) -> None:
+    from rich.table import Table
+
     from station.model.calibration import parameter_errors
 
     table = Table(title="estimate against the simulated truth")

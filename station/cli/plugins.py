@@ -1,7 +1,10 @@
 """The effect-plugin options shared by estimate, diagnose, apply and effects."""
 from __future__ import annotations
 
-from station.model.registry import EffectRegistry, is_spec
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:      # the registry is imported when a command uses it, not to build the parser
+    from station.model.registry import EffectRegistry
 
 
 def add_arguments(p) -> None:
@@ -15,6 +18,7 @@ def registry(args) -> EffectRegistry:
     """Library + installed entry points + $STATION_EFFECTS_PATH + station.yaml's effects section
     (when a configuration file is found) + --effects-dir + --plugin."""
     from station.bench.config import find_config, load_config
+    from station.model.registry import EffectRegistry
 
     reg = EffectRegistry()
     config_path = getattr(args, "config", None)
@@ -27,6 +31,8 @@ def registry(args) -> EffectRegistry:
 
 def effect_ids(reg: EffectRegistry, values) -> list[str]:
     """--add values: effect ids, or plugin specs whose effects are loaded and added."""
+    from station.model.registry import is_spec
+
     ids = []
     for value in values:
         if is_spec(value):

@@ -11,7 +11,6 @@ import sys
 from pathlib import Path
 
 import yaml
-from rich.table import Table
 
 from station.cli.calibration import add_accept_poor_fit, report_calibration
 from station.cli.output import err, out
@@ -91,6 +90,8 @@ def cmd_init(args) -> int:
 
 
 def cmd_schemes(args) -> int:
+    from rich.table import Table
+
     from station.bench.compile import compile_scheme
     from station.bench.config import load_config
     from station.io.scheme import builtin_names, load_scheme

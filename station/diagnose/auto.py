@@ -64,7 +64,7 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
     """Diagnose; while a significant candidate passes the checks, add it, refit, diagnose again."""
     registry = registry or EffectRegistry()
     current = diagnose(lsq.fit(summaries, [registry.create(e) for e in effects], attitudes), registry=registry)
-    h_current = leave_one_segment_out(current.result)
+    h_current = None          # the leave-one-segment-out check, only once a candidate is tried
     steps, rejected = [], []
     refused: set = set()
     while len(steps) < MAX_STEPS:
@@ -75,6 +75,8 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
                 progress(cand.effect)
             ids = [e.id for e in current.result.model.effects] + [cand.effect]
             after = diagnose(lsq.fit(summaries, [registry.create(e) for e in ids], attitudes), registry=registry)
+            if h_current is None:
+                h_current = leave_one_segment_out(current.result)
             h_after = leave_one_segment_out(after.result)
             ok, reason, share, cv_b, cv_a = judge(current, after, h_current, h_after)
             if ok:

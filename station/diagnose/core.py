@@ -116,12 +116,22 @@ def segment_residuals(result, labels) -> list[SegmentResidual]:
     return segs
 
 
+def fit_jacobian(result) -> np.ndarray:
+    """The model's Jacobian at the fitted parameters, computed once per fit and shared by the
+    candidates' basis and the leave-one-segment-out check (callers must not modify it)."""
+    J = getattr(result, "_jacobian", None)
+    if J is None:
+        J = result.model.jacobian(result.x)
+        result._jacobian = J
+    return J
+
+
 def model_basis(result) -> np.ndarray:
     """Orthonormal basis of what the fitted model's parameters can change in the residuals
     (its Jacobian's column space), computed once per fit."""
     cached = getattr(result, "_basis", None)
     if cached is None:
-        J = result.model.jacobian(result.x)
+        J = fit_jacobian(result)
         u, sv, _ = np.linalg.svd(J, full_matrices=False)
         cached = u[:, sv > 1e-10 * sv[0]]
         result._basis = cached

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from station.diagnose.core import fit_fails
+from station.diagnose.core import fit_fails, fit_jacobian
 
 LEVERAGE_LIMIT = 1.0 - 1e-6      # a block whose largest leverage reaches this is unpredictable
 MIN_SHARE = 0.5                  # of the excess chi2 (chi2 - dof) an added effect must explain
@@ -67,7 +67,7 @@ def _blocks(model, x):
 def leave_one_segment_out(result) -> Holdout:
     model, x = result.model, result.x
     r = model.residuals(x)
-    J = model.jacobian(x)
+    J = fit_jacobian(result)
     blocks, n_rows = _blocks(model, x)
     local = np.zeros(J.shape[1], bool)
     for _, _, _, cols in blocks:

@@ -3,9 +3,11 @@ the Cramér-Rao bound of the scheme and with the uncertainties the estimator rep
 from __future__ import annotations
 
 import copy
+import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor
+import signal
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -96,19 +98,91 @@ def _one_blas_thread() -> None:
 _BLAS_LIMIT = None
 
 
-def run(scheme: Scheme, settings: Settings, runs: int, first_seed: int = 1000,
-        workers: int | None = None):
-    """((name, unit) per parameter, errors runs x parameters, reported 1σ runs x parameters)."""
+def _worker_start() -> None:
+    """A worker ignores Ctrl-C (the parent gets it too, ends the workers and exits with
+    "interrupted"; no traceback from them) and computes with one BLAS thread."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _one_blas_thread()
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity, e.g. under taskset or a container's
+    cpuset), not the machine's count."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+@dataclass
+class Study:
+    """A Monte Carlo study: per base parameter its (name, unit), the errors against the truth
+    (runs x parameters, units of parameter_errors: scale factors in ppm) and the reported 1σ
+    (same shape), and the Cramér-Rao bound (None unless asked for)."""
+    names: list
+    errors: np.ndarray
+    sigmas: np.ndarray
+    crlb: np.ndarray | None
+    workers: int
+
+
+def _numbered_run(numbered):
+    i, job = numbered
+    return i, one_run(job)
+
+
+def _bound_job(args) -> np.ndarray:
+    scheme, settings = args
+    return cramer_rao(scheme, settings)
+
+
+def study(scheme: Scheme, settings: Settings, runs: int, first_seed: int = 1000,
+          workers: int | None = None, bound: bool = False,
+          progress: Callable[[int, int], None] | None = None) -> Study:
+    """``runs`` dry runs (seeds first_seed, first_seed + 1, ...) on ``workers`` processes (default:
+    every usable core), one BLAS thread each; with ``bound`` the Cramér-Rao bound is computed in
+    the same pool, submitted first so that it never runs alone at the end.  ``progress(done,
+    runs)`` is called in this process as runs finish (in any order; the results keep the seeds'
+    order)."""
     from station.simulate import dryrun
     from station.model.calibration import parameter_errors
 
     truth_cal = dryrun.truth_calibration(make_truth(settings))
     names = [(e[0], e[4]) for e in parameter_errors(truth_cal, truth_cal)]
     jobs = [(scheme, settings, first_seed + i) for i in range(runs)]
-    workers = workers or min(os.cpu_count() or 1, runs)
+    workers = max(1, min(workers or usable_cores(), runs + bound))
+    rows: list = [None] * runs
+    crlb = None
+    if progress:
+        progress(0, runs)
     if workers == 1:
-        rows = [one_run(j) for j in jobs]
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=1, user_api="blas"):
+            for i, job in enumerate(jobs):
+                rows[i] = one_run(job)
+                if progress:
+                    progress(i + 1, runs)
+            crlb = cramer_rao(scheme, settings) if bound else None
     else:
-        with ProcessPoolExecutor(workers, initializer=_one_blas_thread) as pool:
-            rows = list(pool.map(one_run, jobs, chunksize=max(1, runs // (4 * workers))))
-    return names, np.array([r[0] for r in rows]), np.array([r[1] for r in rows])
+        pool = multiprocessing.Pool(workers, initializer=_worker_start)
+        try:
+            pending_bound = pool.apply_async(_bound_job, ((scheme, settings),)) if bound else None
+            for done, (i, row) in enumerate(pool.imap_unordered(_numbered_run, enumerate(jobs)), 1):
+                rows[i] = row
+                if progress:
+                    progress(done, runs)
+            crlb = pending_bound.get() if pending_bound is not None else None
+            pool.close()
+        finally:
+            # after Ctrl-C (the parent's alone) or a failed run the workers are ended at once
+            pool.terminate()
+            pool.join()
+    return Study(names, np.array([r[0] for r in rows]), np.array([r[1] for r in rows]), crlb, workers)
+
+
+def run(scheme: Scheme, settings: Settings, runs: int, first_seed: int = 1000,
+        workers: int | None = None):
+    """((name, unit) per parameter, errors runs x parameters, reported 1σ runs x parameters)."""
+    result = study(scheme, settings, runs, first_seed, workers)
+    return result.names, result.errors, result.sigmas

@@ -1,0 +1,123 @@
+"""Start-up: ``station --help``, every command's ``--help`` and the light commands (schemes, plan,
+effects) import nothing heavy.  These tests check WHAT a fresh interpreter has imported
+(``sys.modules`` after the command), never how long it took; the time is measured by
+benchmarks/perf_startup.py (docs/performance.md)."""
+from __future__ import annotations
+
+import ast
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# what building the parser must never import: the estimators' and the figures' libraries
+HEAVY = ("scipy", "matplotlib", "allantools", "rich.table", "rich.progress", "sim_devices",
+         "station.estimate", "station.diagnose", "station.simulate", "station.model", "numpy")
+# what the light commands (schemes, plan, effects) may import (numpy, yaml, rich.table to print
+# their table) but not: the fit, the rotations, sparse matrices, statistics, figures
+HEAVY_FOR_LIGHT = ("scipy.optimize", "scipy.spatial", "scipy.sparse", "scipy.stats", "scipy.ndimage",
+                   "matplotlib", "allantools", "station.estimate", "station.diagnose", "station.simulate",
+                   "sim_devices")
+
+COMMANDS_HELP = [[c, "--help"] for c in ("run", "schemes", "plan", "init", "estimate", "show", "apply",
+                                         "diagnose", "effects", "report", "export", "noise", "history",
+                                         "diff", "montecarlo", "probe", "import", "sim")]
+COMMANDS_HELP += [["import", "csv", "--help"], ["import", "imucal", "--help"],
+                  ["import", "rosbag", "--help"], ["sim", "serve", "--help"]]
+
+RUNNER = """
+import contextlib, io, json, sys
+from station.cli import main
+statuses = []
+for argv in json.loads(sys.argv[1]):
+    with contextlib.redirect_stdout(io.StringIO()) as out:
+        try:
+            statuses.append(main(argv))
+        except SystemExit as e:
+            statuses.append(e.code)
+    statuses.append(len(out.getvalue()))
+print(json.dumps({"statuses": statuses, "modules": sorted(sys.modules)}))
+"""
+
+
+def _modules_after(argvs, tmp_path) -> tuple[list, set]:
+    """Run the commands in one fresh interpreter; (exit statuses and output lengths, modules)."""
+    r = subprocess.run([sys.executable, "-c", RUNNER, json.dumps(argvs)], capture_output=True, text=True,
+                       cwd=tmp_path, timeout=120,
+                       env={k: v for k, v in os.environ.items() if not k.startswith("STATION_")})
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(r.stdout.strip().splitlines()[-1])
+    return doc["statuses"], set(doc["modules"])
+
+
+def _heavy(modules: set, heavy) -> list:
+    return sorted(m for m in modules if any(m == h or m.startswith(h + ".") for h in heavy))
+
+
+def test_station_help_imports_nothing_heavy(tmp_path):
+    statuses, modules = _modules_after([["--help"]], tmp_path)
+    assert statuses[0] == 0 and statuses[1] > 500       # the help was printed
+    assert _heavy(modules, HEAVY) == []
+    assert "scipy.optimize" not in modules and "matplotlib" not in modules
+
+
+def test_every_commands_help_imports_nothing_heavy(tmp_path):
+    statuses, modules = _modules_after(COMMANDS_HELP, tmp_path)
+    assert statuses[0::2] == [0] * len(COMMANDS_HELP)
+    assert min(statuses[1::2]) > 100
+    assert _heavy(modules, HEAVY) == []
+
+
+def test_light_commands_import_no_fit_rotations_or_figures(tmp_path):
+    """plan (the scheme compiler, as ``station schemes`` uses it: the noise scheme, one static,
+    compiles in milliseconds) and effects (list and explain) in one interpreter."""
+    argvs = [["plan", "--scheme", "noise"], ["effects"], ["effects", "accel_lever_arm"]]
+    statuses, modules = _modules_after(argvs, tmp_path)
+    assert statuses[0::2] == [0, 0, 0] and min(statuses[1::2]) > 100
+    assert _heavy(modules, HEAVY_FOR_LIGHT) == []
+
+
+def test_the_parsers_static_names_are_the_registries():
+    """station/cli/choices.py copies the names so that --help imports none of their owners; the
+    copies must stay equal to the registries."""
+    from station.cli import choices
+    from station.estimate import METHODS
+    from station.io.exporters import FORMATS
+    from station.io.importers import delimited, imucal, recording, rosbag
+
+    assert tuple(choices.ESTIMATE_METHODS) == tuple(METHODS)
+    assert choices.EXPORT_FORMATS == {name: mod.TITLE for name, mod in FORMATS.items()}
+    assert tuple(choices.IMUCAL_FORMATS) == tuple(imucal.FORMATS)
+    assert choices.IMUCAL_DEFAULT_GRAVITY_MPS2 == imucal.DEFAULT_GRAVITY_MPS2
+    assert tuple(choices.CSV_PRESETS) == tuple(sorted(delimited.PRESETS))
+    assert choices.RECORDING_MIN_POSES == recording.MIN_POSES
+    assert tuple(choices.ROSBAG_STAMPS) == tuple(rosbag.STAMPS)
+
+
+def test_the_help_offers_every_estimation_method(capsys):
+    """The parser built from the static list accepts every method the estimator knows."""
+    from station.cli.app import build_parser
+    from station.estimate import METHODS
+
+    parser = build_parser()
+    for method in METHODS:
+        args = parser.parse_args(["estimate", "CAPTURE", "--method", method])
+        assert args.method == method
+
+
+def test_no_runtime_module_imports_scipy_stats():
+    """scipy.stats costs ~0.5 s to import for chi2.sf / norm.isf; scipy.special has both."""
+    offenders = []
+    for path in sorted((ROOT / "station").rglob("*.py")) + sorted((ROOT / "drivers").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            names = []
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module:
+                names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+            if any(n == "scipy.stats" or n.startswith("scipy.stats.") for n in names):
+                offenders.append(f"{path.relative_to(ROOT)}:{node.lineno}")
+    assert offenders == []
