@@ -91,6 +91,8 @@ class Summaries:
                                                          #   angle between statics (no encoder)
     gyro_nominal: float | None = None   # raw gyro: nominal counts per deg/s from the manifest, if any
     gyro_raw: bool = False
+    accel_raw: bool = False
+    accel_nominal: float | None = None  # raw accelerometer: nominal counts per m/s^2 from the manifest, if any
 
     @property
     def groups(self) -> int:
@@ -239,6 +241,9 @@ def summarise(capture, *, table_angle_arcsec: float | None = None) -> Summaries:
     skipped += hand_skipped
     nominal = capture.imu.extra.get("gyro_nominal_dps_per_count") if capture.imu.gyro_unit == "raw" else None
     nominal = 1.0 / float(nominal) if isinstance(nominal, (int, float)) and nominal > 0 else None
+    accel_nominal = capture.imu.extra.get("accel_nominal_mps2_per_count") if capture.imu.accel_unit == "raw" else None
+    accel_nominal = (1.0 / float(accel_nominal) if isinstance(accel_nominal, (int, float)) and 0 < accel_nominal < np.inf
+                     else None)
     table = capture.extra.get("table") if isinstance(capture.extra.get("table"), dict) else {}
     if table_angle_arcsec is None:
         table_angle_arcsec = table.get("angle_error_arcsec", 0.0)
@@ -255,4 +260,5 @@ def summarise(capture, *, table_angle_arcsec: float | None = None) -> Summaries:
                      statics=statics, rotations=rotations, accel_sigma=accel_sigma, gyro_sigma=gyro_sigma,
                      table_angle_sigma_deg=angle_sigma, mounting_offset_m=offset, skipped=skipped,
                      hand_rotations=hand_rotations, gyro_nominal=nominal,
-                     gyro_raw=capture.imu.gyro_unit == "raw")
+                     gyro_raw=capture.imu.gyro_unit == "raw", accel_raw=capture.imu.accel_unit == "raw",
+                     accel_nominal=accel_nominal)
