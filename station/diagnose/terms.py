@@ -19,7 +19,7 @@ ready-to-edit plugin file (docs/effects.md).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -283,6 +283,7 @@ class Proposal:
     holdout_after: float
     kept: bool                # passes the checks an added effect must pass (auto.judge)
     reason: str
+    redundant: list = field(default_factory=list)   # (effect, why): added before, not needed with the terms
 
     def lines(self) -> list[str]:
         return [t.words(v, sg) for t, v, sg in zip(self.effect.terms, self.values, self.sigmas)]
