@@ -93,6 +93,8 @@ class Summaries:
     gyro_raw: bool = False
     accel_raw: bool = False
     accel_nominal: float | None = None  # raw accelerometer: nominal counts per m/s^2 from the manifest, if any
+    stamp_jitter_s: float = 0.0     # 1-sigma jitter of the time stamps (robust spread of the sample
+                                    #   intervals over sqrt 2, median over the segments), s
 
     @property
     def groups(self) -> int:
@@ -105,6 +107,14 @@ def _slope(t, y) -> float:
         return 0.0
     tc = t - t.mean()
     return float(tc @ (y - y.mean()) / (tc @ tc))
+
+
+def _stamp_jitter(t) -> float:
+    """1-sigma jitter of a segment's time stamps: the robust spread (1.4826 MAD, blind to a few
+    lost samples) of the intervals between them, over sqrt 2 (an interval is the difference of two
+    independently jittered stamps)."""
+    dt = np.diff(np.asarray(t, float))
+    return float(1.4826 * np.median(np.abs(dt - np.median(dt))) / np.sqrt(2.0))
 
 
 def _window(t: np.ndarray) -> tuple[float, float]:
@@ -255,10 +265,12 @@ def summarise(capture, *, table_angle_arcsec: float | None = None) -> Summaries:
     except (TypeError, ValueError):
         raise UserError(f"{capture.path}/manifest.yaml: field 'mounting.offset_m' or "
                         "'table.angle_error_arcsec': must be numbers") from None
+    jitter = [_stamp_jitter(seg.data.t) for kind in ("static", "rotation") for seg in capture.complete(kind)
+              if seg.data is not None and len(seg.data.t) > 8]
     return Summaries(gravity_mps2=capture.site.gravity_mps2, latitude_deg=capture.site.latitude_deg,
                      accel_factor=ca, gyro_factor=cg, sample_rate_hz=capture.imu.sample_rate_hz,
                      statics=statics, rotations=rotations, accel_sigma=accel_sigma, gyro_sigma=gyro_sigma,
                      table_angle_sigma_deg=angle_sigma, mounting_offset_m=offset, skipped=skipped,
                      hand_rotations=hand_rotations, gyro_nominal=nominal,
                      gyro_raw=capture.imu.gyro_unit == "raw", accel_raw=capture.imu.accel_unit == "raw",
-                     accel_nominal=accel_nominal)
+                     accel_nominal=accel_nominal, stamp_jitter_s=float(np.median(jitter)) if jitter else 0.0)
