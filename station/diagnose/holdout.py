@@ -36,18 +36,11 @@ class Holdout:
     score: float                     # sum of squared deleted residuals over predictable segments
     per_segment: dict                # segment name -> its deleted-residual sum of squares
     unpredictable: list = field(default_factory=list)   # segments the others cannot predict
-    by_sensor: dict = field(default_factory=dict)       # "accel"/"gyro" -> segment -> its share of per_segment
 
     def common_score(self, other: "Holdout") -> tuple[float, float]:
         """Both scores over the segments that both models can predict."""
         names = set(self.per_segment) & set(other.per_segment)
         return (sum(self.per_segment[n] for n in names), sum(other.per_segment[n] for n in names))
-
-    def common_sensor_score(self, other: "Holdout", sensor: str) -> tuple[float, float]:
-        """Both scores of one sensor's rows ("accel" or "gyro") over the segments both can predict."""
-        mine, theirs = self.by_sensor.get(sensor, {}), other.by_sensor.get(sensor, {})
-        names = set(mine) & set(theirs)
-        return (sum(mine[n] for n in names), sum(theirs[n] for n in names))
 
 
 def _blocks(model, x):
@@ -95,8 +88,7 @@ def leave_one_segment_out(result) -> Holdout:
     norms[norms == 0] = 1.0
     u, s, _ = np.linalg.svd(X / norms, full_matrices=False)
     u = u[:, s > 1e-10 * s[0]] if len(s) else u[:, :0]
-    sensor_of_row = ["gyro" if label[2].startswith("gyro") else "accel" for label in model.row_labels(x)]
-    per, bad, by_sensor = {}, [], {"accel": {}, "gyro": {}}
+    per, bad = {}, []
     for name, data, weak, _ in blocks:
         rows = np.concatenate([data, weak])
         Ug = u[rows]
@@ -107,11 +99,7 @@ def leave_one_segment_out(result) -> Holdout:
             continue
         deleted = V @ ((V.T @ e[rows]) / (1.0 - w))
         per[name] = float(np.sum(deleted[:len(data)] ** 2))
-        for sensor in by_sensor:
-            mask = np.array([sensor_of_row[i] == sensor for i in data], bool)
-            if mask.any():
-                by_sensor[sensor][name] = float(np.sum(deleted[:len(data)][mask] ** 2))
-    return Holdout(score=float(sum(per.values())), per_segment=per, unpredictable=bad, by_sensor=by_sensor)
+    return Holdout(score=float(sum(per.values())), per_segment=per, unpredictable=bad)
 
 
 def judge(before, after, h_before: Holdout, h_after: Holdout):
@@ -126,17 +114,6 @@ def judge(before, after, h_before: Holdout, h_after: Holdout):
         return (False, f"reduces chi2 by {drop:.1f} but predicts the left-out segments worse "
                        f"(leave-one-segment-out {cv_b:.1f} -> {cv_a:.1f}): it fits noise or another "
                        "effect's misfit", share, cv_b, cv_a)
-    # never worse for either sensor: an effect may cost each sensor's score at most what fitting its
-    # parameters costs by chance (about one per parameter: the expected rise of a leave-one-out sum
-    # of squares for a parameter that explains nothing)
-    allowed = float(max(after.result.model.layout.size - before.result.model.layout.size, 1))
-    for sensor, label in (("accel", "accelerometer"), ("gyro", "gyro")):
-        s_b, s_a = h_before.common_sensor_score(h_after, sensor)
-        if s_a > s_b + allowed:
-            return (False, f"reduces chi2 by {drop:.1f} but predicts the left-out segments of the {label} "
-                           f"worse (leave-one-segment-out {label} {s_b:.1f} -> {s_a:.1f}, more than the "
-                           f"{allowed:.0f} its parameters may cost): it trades one sensor's error for the "
-                           "other's", share, cv_b, cv_a)
     if share is not None and share < MIN_SHARE:
         return (False, f"reduces chi2 by {drop:.1f} but does not explain the failure (only "
                        f"{100 * share:.0f} % of the excess chi2; at least {100 * MIN_SHARE:.0f} % "
