@@ -111,7 +111,8 @@ def test_compensation_inverts_every_library_effect_and_a_plugin():
     dt = next(x for e, x in effects if e.id == "time_offset")[0]
     comp = {"accel_matrix": np.linalg.inv(Ma), "gyro_matrix": np.linalg.inv(Mg), "accel_bias": ba,
             "gyro_bias": bg, "raw_units": {"accel": "m/s^2", "gyro": "deg/s"}}
-    t_c, f, w = compensate_with_effects(comp, effects, t + dt, a, g, temp)
+    # the sample taken at table time t is stamped t - dt (time_offset: stamp + dt is the table's time)
+    t_c, f, w = compensate_with_effects(comp, effects, t - dt, a, g, temp)
     assert np.allclose(t_c, t, atol=1e-12)
     # the rate derivative of the size effect comes from the compensated rate (np.gradient): the
     # same operation on the same values as the forward model above, so it cancels exactly

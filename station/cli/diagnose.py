@@ -142,7 +142,8 @@ def to_json(d, steps) -> dict:
                       for t, v, sg in zip(d.proposal.effect.terms, d.proposal.values, d.proposal.sigmas)],
             "chi2_after": d.proposal.chi2_after, "reduced_chi2_after": d.proposal.reduced_after,
             "holdout_before": d.proposal.holdout_before, "holdout_after": d.proposal.holdout_after,
-            "kept": d.proposal.kept, "reason": d.proposal.reason},
+            "kept": d.proposal.kept, "reason": d.proposal.reason,
+            "redundant": [{"effect": e, "reason": why} for e, why in d.proposal.redundant]},
         "rejected": [{"effect": r.effect, "reason": r.reason, "actual_chi2_drop": r.actual_drop,
                       "holdout_before": r.holdout_before, "holdout_after": r.holdout_after,
                       "share_of_excess": _num(r.share)} for r in d.rejected],
@@ -161,6 +162,7 @@ def to_json(d, steps) -> dict:
                    "chi2_after": st.after.chi2, "reduced_chi2_after": st.after.reduced_chi2,
                    "holdout_before": st.holdout_before, "holdout_after": st.holdout_after,
                    "share_of_excess": _num(st.share), "caveats": st.caveats,
+                   "removed": [{"effect": e, "reason": why} for e, why in st.removed],
                    "estimate": [{"name": n, "value": v, "sigma": sg, "unit": u}
                                 for n, v, sg, u in st.estimate]} for st in steps],
     }
@@ -215,6 +217,8 @@ def _print(out, first, steps, final) -> None:
         out.print("added: " + "; ".join(f"{n} = {v:.4g} ± {s:.2g} {u}" for n, v, s, u in st.estimate))
         for c in st.caveats:
             out.print(f"caveat: {c}")
+        for _, why in st.removed:
+            out.print(f"removed: {why}", markup=False)
     if steps:
         for line in _summary_lines(final):
             out.print(line)

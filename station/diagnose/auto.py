@@ -10,13 +10,19 @@ worse where it is used:
      excess misfit (chi2 - dof); a smaller drop "reduces chi2 but does not explain the failure".
 Candidates that fail are reported with the reason and the next one is tried (at most
 MAX_TRIES per step).
+After each addition every effect the loop added earlier is tested again (backward elimination):
+one that the data no longer need with the new effect in the model (removing it raises chi2 by
+less than the significance level allows, over-dispersion-corrected, and the other segments
+predict each left-out segment no worse without it) is dropped, and the step says so.  An effect
+added early can be the partial stand-in for a later one (a scale asymmetry fitted to part of a
+rate-squared term when the rotations are at several rates).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from station.diagnose.core import Diagnosis, diagnose, fit_fails, rms_by_kind
-from station.diagnose.holdout import judge, leave_one_segment_out
+from station.diagnose.core import ALPHA, Diagnosis, chi2_sf, diagnose, fit_fails, overdispersion, rms_by_kind
+from station.diagnose.holdout import Holdout, judge, leave_one_segment_out
 from station.diagnose.words import caveats
 from station.estimate import lsq
 from station.model.registry import EffectRegistry
@@ -37,6 +43,7 @@ class Step:
     holdout_after: float = float("nan")
     share: float | None = None               # of the excess chi2 explained (None: the fit passed)
     caveats: list = field(default_factory=list)  # what this capture cannot tell apart from it
+    removed: list = field(default_factory=list)  # (effect, reason): earlier additions no longer needed
 
 
 @dataclass
@@ -91,9 +98,76 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
             break
         steps.append(kept)
         current, h_current = kept.after, h_after
+        current, h_current = eliminate(summaries, kept, [st.added for st in steps[:-1]], current, h_current,
+                                       attitudes, registry, refused)
     current.rejected = rejected
     conclude(current, summaries, steps)
     return steps, current
+
+
+def still_needed(with_it: Diagnosis, without: Diagnosis, h_with: Holdout, h_without: Holdout) -> tuple[bool, str]:
+    """Whether the data still need an effect: (needed, why).  Not needed when removing it raises
+    chi2 by less than the significance level allows (the rise divided by the over-dispersion of
+    the fit with it, on as many degrees of freedom as it takes) and the other segments predict
+    each left-out segment no worse without it."""
+    rise = without.chi2 - with_it.chi2
+    k = max(without.dof - with_it.dof, 1)
+    phi = overdispersion(with_it.result)
+    p = chi2_sf(max(rise, 0.0) / phi, k)
+    cv_with, cv_without = h_with.common_score(h_without)
+    if p < ALPHA:
+        return True, f"removing it raises chi2 by {rise:.1f} (p = {p:.2g})"
+    if cv_without > cv_with:
+        return True, (f"without it the left-out segments are predicted worse (leave-one-segment-out "
+                      f"{cv_with:.1f} -> {cv_without:.1f})")
+    return False, (f"removing it raises chi2 by only {rise:.1f} on {k} degrees of "
+                   f"freedom (p = {p:.2g}{f', over-dispersion {phi:.3g}' if phi > 1 else ''}) and the "
+                   f"left-out segments are predicted as well without it (leave-one-segment-out "
+                   f"{cv_with:.1f} -> {cv_without:.1f})")
+
+
+def eliminate(summaries, step: Step, earlier: list, current: Diagnosis, h_current: Holdout, attitudes,
+              registry, refused: set) -> tuple[Diagnosis, Holdout]:
+    """Backward elimination after ``step``: drop each effect added earlier by the loop that the
+    data no longer need (most dispensable first, one at a time, refitting after each)."""
+    remaining = list(earlier)
+    while remaining:
+        trials = []
+        for eid in remaining:
+            ids = [e.id for e in current.result.model.effects if e.id != eid]
+            without = diagnose(lsq.fit(summaries, [registry.create(e) for e in ids], attitudes), registry=registry)
+            h_without = leave_one_segment_out(without.result)
+            needed, why = still_needed(current, without, h_current, h_without)
+            if not needed:
+                trials.append((without.chi2, eid, without, h_without, why))
+        if not trials:
+            break
+        _, eid, current, h_current, why = min(trials, key=lambda t: t[0])
+        step.removed.append((eid, f"{eid}: no longer needed with {step.added} in the model: {why}"))
+        step.after, step.holdout_after = current, h_current.score
+        step.estimate = added_parameters(current, step.added)
+        refused.add(eid)
+        remaining.remove(eid)
+    return current, h_current
+
+
+def redundant_with(d: Diagnosis, extra, added: set, summaries) -> list:
+    """(effect, why) for every effect in ``added`` (added by the loop) that the data no longer
+    need once ``extra`` (the terms found outside the library) is in the model (still_needed)."""
+    effects, attitudes = list(d.result.model.effects), d.result.model.attitudes
+    every = EffectRegistry().ids()          # no candidates ranked: only the fits are compared
+    with_all = diagnose(lsq.fit(summaries, [*effects, extra], attitudes), exclude=every)
+    h_all = leave_one_segment_out(with_all.result)
+    out = []
+    for e in effects:
+        if e.id not in added:
+            continue
+        without = diagnose(lsq.fit(summaries, [x for x in effects if x is not e] + [extra], attitudes),
+                           exclude=every)
+        needed, why = still_needed(with_all, without, h_all, leave_one_segment_out(without.result))
+        if not needed:
+            out.append((e.id, why))
+    return out
 
 
 def conclude(d: Diagnosis, summaries, steps=(), search_terms: bool = True) -> Diagnosis:
@@ -104,7 +178,7 @@ def conclude(d: Diagnosis, summaries, steps=(), search_terms: bool = True) -> Di
 
     def specific(failures):
         return [f for f in failures if "a step in time" in f or "was moved or remounted" in f
-                or "drift steadily with time" in f]
+                or "drift steadily with time" in f or "time stamps jitter" in f]
 
     now = specific(d.failures)
     first = specific(steps[0].before.failures) if steps else []
@@ -120,6 +194,8 @@ def conclude(d: Diagnosis, summaries, steps=(), search_terms: bool = True) -> Di
         from station.diagnose import terms
 
         d.proposal = terms.propose(d, summaries)
+        if d.proposal is not None and d.proposal.kept and steps:
+            d.proposal.redundant = redundant_with(d, d.proposal.effect, {st.added for st in steps}, summaries)
     head = f"the model does not explain the data{added} (reduced chi2 {d.reduced_chi2:.3g})"
     if now:
         head += f"; first look at this: {now[0]}"
@@ -131,8 +207,13 @@ def conclude(d: Diagnosis, summaries, steps=(), search_terms: bool = True) -> Di
     if prop is not None:
         check = ("and predicts left-out segments better" if prop.kept
                  else f"but is not kept: {prop.reason}")
+        instead = ""
+        if prop.redundant:
+            instead = (f"; with these terms {', '.join(e for e, _ in prop.redundant)} "
+                       f"{'is' if len(prop.redundant) == 1 else 'are'} no longer needed "
+                       f"({'; '.join(why for _, why in prop.redundant)}): add the terms instead")
         d.verdict = (f"{head}; outside the library the residuals follow {'; '.join(prop.lines())} "
-                     f"(with these terms reduced chi2 {prop.reduced_after:.3g}, {check}); write them "
+                     f"(with these terms reduced chi2 {prop.reduced_after:.3g}, {check}){instead}; write them "
                      "as an effect plugin with --emit-effect FILE, check the physics, add it with --add")
     else:
         d.verdict = (f"{head}; no effect of the library and no term of the dictionary accounts for it: "

@@ -19,13 +19,14 @@ ready-to-edit plugin file (docs/effects.md).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from station.diagnose.core import ALPHA, chi2_sf, model_basis
 from station.estimate import lsq
 from station.model.effect import Effect, Param
+from station.model.raw_counts import in_capture_units
 
 MAX_TERMS = 6
 AX = "xyz"
@@ -174,7 +175,7 @@ def search(result, max_terms: int = MAX_TERMS) -> list[Found]:
     s = model.s
     reference = _reference_c(s)
     candidates = [Term(sensor, axis, reg) for sensor, _, _ in SENSORS for axis in range(3) for reg in dictionary()]
-    bank = TermsEffect(candidates, reference)
+    bank = in_capture_units(TermsEffect)(candidates, reference)      # counts on a raw capture
     extended = lsq.Model(s, [*model.effects, bank], model.attitudes)
     extended.priors = dict(model.priors)
     n = model.layout.size
@@ -216,7 +217,7 @@ def search(result, max_terms: int = MAX_TERMS) -> list[Found]:
 
 def refit(summaries, result, found: list[Found]):
     """The model with the found terms added as one effect, refitted (values with 1-sigma)."""
-    effect = TermsEffect([f.term for f in found], _reference_c(summaries))
+    effect = in_capture_units(TermsEffect)([f.term for f in found], _reference_c(summaries))
     return lsq.fit(summaries, [*result.model.effects, effect], result.model.attitudes), effect
 
 
@@ -282,6 +283,7 @@ class Proposal:
     holdout_after: float
     kept: bool                # passes the checks an added effect must pass (auto.judge)
     reason: str
+    redundant: list = field(default_factory=list)   # (effect, why): added before, not needed with the terms
 
     def lines(self) -> list[str]:
         return [t.words(v, sg) for t, v, sg in zip(self.effect.terms, self.values, self.sigmas)]

@@ -34,7 +34,7 @@ def describe_failures(result, labels, segs, fails: bool = False) -> list[str]:
         pattern = _pattern(sensor, kind, rows, s)
         out.append(f"{sensor}, {kind} segments {only}: residuals {rms:.1f} times the noise"
                    f"{'; ' + pattern if pattern else ''}; worst: {where}")
-    out = _moved_axes(result) + _time_patterns(result, segs) + out      # specific causes first
+    out = _moved_axes(result) + _time_patterns(result, segs) + _bench_patterns(result, segs) + out   # specific causes first
     if fails and not out:
         out.append(_spread_everywhere(groups))
     return out
@@ -52,52 +52,174 @@ def _spread_everywhere(groups) -> str:
             "segment (--report)")
 
 
+# per segment kind, the residual quantities that carry a bias: a static's means, a rotation's
+# accelerometer mean and gyro integral (its whitened residual is about the bias times sqrt(samples)
+# in units of the per-sample noise, like a static's)
+BIAS_QUANTITIES = {"accelerometer": ("accel", "accel_dc"), "gyro": ("gyro", "gyro_integral")}
+
+
 def _time_patterns(result, segs) -> list[str]:
-    """Static residuals that follow time: a step (a bias jump, a knock) or a drift."""
+    """Residuals that follow time over every segment in time order, statics and rotations alike:
+    a step (a bias jump, a knock; also when the table starts turning) or a drift.  Each segment
+    gives a bias-like 3-vector in units of the per-sample noise, u = r / sqrt(N), weighted by N
+    (its inverse variance), so the sums of squares below are chi2-like whatever the segments'
+    lengths."""
     s = result.model.s
-    stat = {st.name: st for st in s.statics}
+    info = {st.name: ("static", st.t_mid_s, st.samples) for st in s.statics}
+    info.update({r.name: ("rotation", r.t_mid_s, r.samples) for r in s.rotations if r.steady})
+    raw = {"accelerometer": getattr(s, "accel_raw", False), "gyro": getattr(s, "gyro_raw", False)}
     out = []
-    for sensor, prefix in (("accelerometer", "accel"), ("gyro", "gyro")):
+    for sensor, quantities in BIAS_QUANTITIES.items():
         rows = []
         for seg in segs:
-            if seg.name not in stat or not np.isfinite(stat[seg.name].t_mid_s):
+            kind, t_mid, n = info.get(seg.name, (None, float("nan"), 0))
+            if kind is None or not np.isfinite(t_mid) or n <= 0:
                 continue
-            v = [val for (q, _), val in seg.values.items() if q.startswith(prefix)]
-            if v:
-                rows.append((stat[seg.name].t_mid_s, seg.name, np.array(v)))
-        if len(rows) < 5 or len({len(r[2]) for r in rows}) != 1:
+            v = [seg.values.get((q, a)) for q in quantities for a in "xyz"]
+            v = [x for x in v if x is not None]
+            if len(v) == 3:
+                rows.append((t_mid, seg.name, kind, np.array(v) / np.sqrt(n), float(n)))
+        if len(rows) < 5:
             continue
         rows.sort(key=lambda r: r[0])
         t = np.array([r[0] for r in rows])
-        V = np.array([r[2] for r in rows])
+        U = np.array([r[3] for r in rows])
+        w = np.array([r[4] for r in rows])[:, None]
+
+        def ss(u, wt):
+            mean = (wt * u).sum(axis=0) / wt.sum()
+            return float(np.sum(wt * (u - mean) ** 2)), mean
+
         # the baseline is a constant offset over the run (a bias the fit got wrong is not a
         # function of time): a step or a drift must explain most of what varies around it
-        ss0 = float(np.sum((V - V.mean(axis=0)) ** 2))
-        if ss0 < FAIL_RMS**2 * V.size:
+        ss0, _ = ss(U, w)
+        if ss0 < FAIL_RMS**2 * U.size:
             continue
         best = (ss0, None)
         for k in range(2, len(rows) - 1):
-            a, b = V[:k], V[k:]
-            ss = float(np.sum((a - a.mean(axis=0)) ** 2) + np.sum((b - b.mean(axis=0)) ** 2))
-            if ss < best[0]:
-                best = (ss, k)
-        tc = t - t.mean()
-        slope = (tc @ V) / (tc @ tc)
-        ss_drift = float(np.sum((V - V.mean(axis=0) - np.outer(tc, slope)) ** 2))
+            total = ss(U[:k], w[:k])[0] + ss(U[k:], w[k:])[0]
+            if total < best[0]:
+                best = (total, k)
+        tc = t - (w[:, 0] @ t) / w.sum()
+        mean = (w * U).sum(axis=0) / w.sum()
+        slope = ((w[:, 0] * tc) @ (U - mean)) / (w[:, 0] @ tc**2)
+        ss_drift = float(np.sum(w * (U - mean - np.outer(tc, slope)) ** 2))
         ss_step, k = best
+        sigma = s.accel_sigma if sensor == "accelerometer" else s.gyro_sigma
         if k is not None and ss_step < 0.3 * ss0 and ss_step < 0.7 * ss_drift:
-            jump = V[k:].mean(axis=0) - V[:k].mean(axis=0)
-            out.append(f"{sensor}, static segments: the residuals jump between {rows[k - 1][1]} and "
-                       f"{rows[k][1]} (t ≈ {0.5 * (t[k - 1] + t[k]):.0f} s) by up to "
-                       f"{np.max(np.abs(jump)):.1f} sigma and stay: a step in time (a bias jump, a knock, "
-                       "a changed mounting), not a function of the attitude; repeat an attitude at the "
-                       "end of the run to confirm")
+            jump = (ss(U[k:], w[k:])[1] - ss(U[:k], w[:k])[1]) * sigma
+            i = int(np.argmax(np.abs(jump)))
+            size = _bias_words(sensor, jump[i], raw[sensor])
+            kinds = sorted({r[2] for r in rows})
+            where = "every segment kind" if len(kinds) > 1 else f"{kinds[0]} segments"
+            before, after = rows[k - 1], rows[k]
+            words = (f"{sensor}, {where} in time order: the residuals jump between {before[1]} and {after[1]} "
+                     f"(t ≈ {0.5 * (t[k - 1] + t[k]):.0f} s) by {size} on {'xyz'[i]} and stay: a step in "
+                     "time (a bias jump, a knock, a changed mounting), not a function of the attitude")
+            if before[2] != after[2] and all(r[2] == after[2] for r in rows[k:]) and all(
+                    r[2] == before[2] for r in rows[:k]):
+                first = "the table started turning" if after[2] == "rotation" else "the table stopped"
+                words += (f"; it falls where {first} ({before[2]} segments before, {after[2]} after): a bias "
+                          f"that jumped then, or an offset every {after[2]} segment shares; record a static "
+                          f"after the {after[2]}s (or interleave them) to tell them apart")
+            else:
+                words += "; repeat an attitude at the end of the run to confirm"
+            out.append(words)
         elif ss_drift < 0.3 * ss0:
-            out.append(f"{sensor}, static segments: the residuals drift steadily with time "
-                       f"({np.max(np.abs(slope)) * 3600:.2g} sigma per hour): a slow bias drift (warm-up, "
-                       "temperature) rather than a function of the attitude; warm the IMU up longer or "
-                       "record its temperature (temperature_bias)")
+            i = int(np.argmax(np.abs(slope * sigma)))
+            out.append(f"{sensor}, segments in time order: the residuals drift steadily with time "
+                       f"({_bias_words(sensor, slope[i] * sigma[i] * 3600, raw[sensor])} per hour on "
+                       f"{'xyz'[i]}): a slow bias drift (warm-up, temperature) rather than a function of the "
+                       "attitude; warm the IMU up longer or record its temperature (temperature_bias)")
     return out
+
+
+def _bias_words(sensor: str, value: float, raw: bool) -> str:
+    """A bias change in words and units (µg, °/h; output units for a raw capture)."""
+    if raw:
+        return f"{value:+.3g} output units"
+    if sensor == "accelerometer":
+        return f"{value / 9.80665e-6:+.3g} µg"
+    return f"{value * 3600:+.3g} °/h"
+
+
+JITTER_SCATTER = 0.3     # stamp jitter is named when the scatter it adds to a rotation's
+                         #   accelerometer samples exceeds this fraction of their noise
+WOBBLE_RMS = 1.5         # the rotations' second harmonic stands out: RMS above this (whitened) ...
+WOBBLE_RATIO = 1.5       # ... and this many times the mean's and the first harmonic's
+
+
+def _bench_patterns(result, segs) -> list[str]:
+    """Bench causes with a signature of their own: time stamps that jitter (seen in the stamps
+    themselves, and as extra scatter of the rotations' accelerometer harmonics), and a wobbling
+    table axis (a second harmonic of the revolution in every rotation while the statics fit)."""
+    s = result.model.s
+    out = []
+    steady = [r for r in s.rotations if r.steady]
+    period = 1.0 / s.sample_rate_hz if s.sample_rate_hz else float("nan")
+    jitter = float(getattr(s, "stamp_jitter_s", 0.0) or 0.0)
+    if steady and jitter > 0 and np.isfinite(period):
+        # a sample stamped dt late is taken for the attitude the table had dt later: gravity turning
+        # at the rate w across the axis is then off by about g w dt (the accelerometer's noise is
+        # the scale this is compared with; statics are unaffected)
+        rate = max(abs(np.radians(r.rate_dps)) for r in steady)
+        scatter = s.gravity_mps2 * rate * jitter          # m/s^2; the summaries' unit for a raw capture:
+        if getattr(s, "accel_raw", False):
+            scatter *= _counts_per_mps2(s)
+        noise = float(np.mean(s.accel_sigma))
+        if noise > 0 and scatter > JITTER_SCATTER * noise:
+            stat = _rms([v for seg in segs if seg.kind == "static" for (q, _), v in seg.values.items()
+                         if q == "accel"])
+            rot = _rms([v for seg in segs if seg.kind == "rotation" for (q, _), v in seg.values.items()
+                        if q.startswith("accel")])
+            out.append(f"the time stamps jitter: {jitter * 1e3:.3g} ms (1 sigma, {100 * jitter / period:.0f} % of "
+                       f"the sample period, from the intervals between stamps); a sample stamped late is "
+                       f"taken for a later attitude, so at {np.degrees(rate):.0f} °/s gravity turning across "
+                       f"the axis scatters the rotations' accelerometer samples by about {scatter / noise:.2g} "
+                       f"times their noise (rotation residuals {rot:.2f}, statics {stat:.2f}; 1 expected), "
+                       "statics are unaffected: stamp the samples with the IMU's own clock or a hardware "
+                       "counter, or resample them on a uniform time base")
+    if steady:
+        second, rest = [], []
+        per_segment = []
+        for seg in segs:
+            if seg.kind != "rotation":
+                continue
+            v2 = [v for (q, _), v in seg.values.items() if q in ("accel_cos2", "accel_sin2")]
+            v01 = [v for (q, _), v in seg.values.items() if q in ("accel_dc", "accel_cos", "accel_sin")]
+            second += v2
+            rest += v01
+            if v2:
+                per_segment.append(_rms(v2))
+        r2, r01 = _rms(second), _rms(rest)
+        stat = _rms([v for seg in segs if seg.kind == "static" for (q, _), v in seg.values.items() if q == "accel"])
+        consistent = per_segment and np.mean(np.array(per_segment) > 1.2) >= 0.75
+        if r2 > WOBBLE_RMS and r2 > WOBBLE_RATIO * r01 and stat < FAIL_RMS and consistent:
+            n = np.mean([r.samples for r in steady])
+            amplitude = r2 * np.sqrt(2.0) * float(np.mean(s.accel_sigma)) / np.sqrt(n)   # per component
+            size = (f"{amplitude / 9.80665e-6:.3g} µg" if not getattr(s, "accel_raw", False)
+                    else f"{amplitude:.3g} output units")
+            out.append(f"accelerometer, rotation segments: twice per revolution in {np.mean(np.array(per_segment) > 1.2):.0%} "
+                       f"of the rotations (second harmonic {r2:.2f} times the noise, against {r01:.2f} for the "
+                       f"mean and the first harmonic and {stat:.2f} at the statics; about {size} per component): "
+                       "a wobbling or tilted table platter (gravity seen through an axis that nods as it turns), "
+                       "or an accelerometer error even in its input (a nonlinearity, or a scale factor that "
+                       "differs between positive and negative inputs: |a| has a second harmonic too); an even "
+                       "accelerometer error also shows at the ±1 g and 45° statics, which fit here, so long "
+                       "45° statics tell them apart, and so does turning the IMU by 90° on the platter (a "
+                       "table wobble stays with the table, an accelerometer error moves with the IMU); "
+                       "check the table's axis wobble against its specification")
+    return out
+
+
+def _rms(values) -> float:
+    return float(np.sqrt(np.mean(np.square(values)))) if len(values) else 0.0
+
+
+def _counts_per_mps2(s) -> float:
+    from station.model.raw_counts import counts_per_unit
+
+    return counts_per_unit(s)[0]
 
 
 def _moved_axes(result) -> list[str]:

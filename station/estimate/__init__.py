@@ -156,12 +156,6 @@ def _estimate_with(capture: Capture, method: str, effects, registry) -> tuple[Ca
     instances = [registry.create(e) for e in effects]
     if effects and method != "lsq":
         raise UserError(f"--add needs the least-squares method (lsq); this capture uses {method}")
-    raw = [f"imu.{k}_unit" for k, unit in (("accel", capture.imu.accel_unit), ("gyro", capture.imu.gyro_unit))
-           if unit == "raw"]
-    if effects and raw:
-        raise UserError(f"{capture.path / 'manifest.yaml'}: field '{raw[0]}': raw: the effects of the library "
-                        "are sized in m/s^2 and deg/s, so --add needs a capture in physical units (give "
-                        "m/s^2 or g, deg/s or rad/s in the manifest, converting the samples if needed)")
     if method == "lsq":
         from station.estimate import lsq
 

@@ -95,6 +95,10 @@ class Summaries:
                                                          #   angle between statics (no encoder)
     gyro_nominal: float | None = None   # raw gyro: nominal counts per deg/s from the manifest, if any
     gyro_raw: bool = False
+    accel_raw: bool = False
+    accel_nominal: float | None = None  # raw accelerometer: nominal counts per m/s^2 from the manifest, if any
+    stamp_jitter_s: float = 0.0     # 1-sigma jitter of the time stamps (robust spread of the sample
+                                    #   intervals over sqrt 2, median over the segments), s
 
     @property
     def groups(self) -> int:
@@ -107,6 +111,14 @@ def _slope(t, y) -> float:
         return 0.0
     tc = t - t.mean()
     return float(tc @ (y - y.mean()) / (tc @ tc))
+
+
+def _stamp_jitter(t) -> float:
+    """1-sigma jitter of a segment's time stamps: the robust spread (1.4826 MAD, blind to a few
+    lost samples) of the intervals between them, over sqrt 2 (an interval is the difference of two
+    independently jittered stamps)."""
+    dt = np.diff(np.asarray(t, float))
+    return float(1.4826 * np.median(np.abs(dt - np.median(dt))) / np.sqrt(2.0))
 
 
 def _window(t: np.ndarray) -> tuple[float, float]:
@@ -370,6 +382,9 @@ def _assemble(capture, parts: _SegmentSummaries, ca, cg, table_angle_arcsec) -> 
     skipped += hand_skipped
     nominal = capture.imu.extra.get("gyro_nominal_dps_per_count") if capture.imu.gyro_unit == "raw" else None
     nominal = 1.0 / float(nominal) if isinstance(nominal, (int, float)) and nominal > 0 else None
+    accel_nominal = capture.imu.extra.get("accel_nominal_mps2_per_count") if capture.imu.accel_unit == "raw" else None
+    accel_nominal = (1.0 / float(accel_nominal) if isinstance(accel_nominal, (int, float)) and 0 < accel_nominal < np.inf
+                     else None)
     table = capture.extra.get("table") if isinstance(capture.extra.get("table"), dict) else {}
     if table_angle_arcsec is None:
         table_angle_arcsec = table.get("angle_error_arcsec", 0.0)
@@ -381,9 +396,12 @@ def _assemble(capture, parts: _SegmentSummaries, ca, cg, table_angle_arcsec) -> 
     except (TypeError, ValueError):
         raise UserError(f"{capture.path}/manifest.yaml: field 'mounting.offset_m' or "
                         "'table.angle_error_arcsec': must be numbers") from None
+    jitter = [_stamp_jitter(seg.data.t) for kind in ("static", "rotation") for seg in capture.complete(kind)
+              if seg.data is not None and len(seg.data.t) > 8]
     return Summaries(gravity_mps2=capture.site.gravity_mps2, latitude_deg=capture.site.latitude_deg,
                      accel_factor=ca, gyro_factor=cg, sample_rate_hz=capture.imu.sample_rate_hz,
                      statics=statics, rotations=rotations, accel_sigma=accel_sigma, gyro_sigma=gyro_sigma,
                      table_angle_sigma_deg=angle_sigma, mounting_offset_m=offset, skipped=skipped,
                      hand_rotations=hand_rotations, gyro_nominal=nominal,
-                     gyro_raw=capture.imu.gyro_unit == "raw")
+                     gyro_raw=capture.imu.gyro_unit == "raw", accel_raw=capture.imu.accel_unit == "raw",
+                     accel_nominal=accel_nominal, stamp_jitter_s=float(np.median(jitter)) if jitter else 0.0)

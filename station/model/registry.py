@@ -26,6 +26,7 @@ from pathlib import Path
 
 from station.core.errors import UserError
 from station.model.effect import Effect, Param
+from station.model.raw_counts import in_capture_units
 
 ENTRY_POINT_GROUP = "station.effects"
 ENV_PATH = "STATION_EFFECTS_PATH"
@@ -72,7 +73,7 @@ class EffectRegistry:
             raise UserError(f"unknown effect {eid!r}: known are {', '.join(self.ids())} (station effects "
                             "lists them; a plugin is added with --add path/file.py:ClassName)")
         try:
-            effect = self.classes[eid]()
+            effect = in_capture_units(self.classes[eid])()     # counts on a raw capture
             effect._station_source = self.sources[eid]
             return effect
         except Exception as e:      # a plugin's constructor

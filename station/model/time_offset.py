@@ -12,7 +12,8 @@ class TimeOffset(Effect):
                "integrated against the one over which the table measured the angle.  While the "
                "rate is constant the shift changes nothing; where the rate changes it does.")
     term = ("gyro_integral += dt (w_end - w_start): the samples cover the encoder window shifted "
-            "by dt (positive: the IMU's stamps are late)")
+            "by dt (positive: the sample stamped t was taken at t + dt on the table's clock, i.e. "
+            "the IMU's stamps run behind)")
     excited_by = ("rotation segments whose rate differs at their start and end (ramps, rate "
                   "ripple, a rate that drifts); a constant-rate capture cannot reveal it")
     magnitudes = "1-10 ms (USB and serial links, buffered MEMS), < 0.1 ms (hardware-synchronised)"
@@ -25,8 +26,10 @@ class TimeOffset(Effect):
         return (Param("time_offset", "ms", 1e3, 3.0, 200.0),)
 
     def compensate_time(self, x, t):
-        """The IMU's stamps are late by x[0]: the samples belong to t - x[0] on the table's clock."""
-        return t - x[0]
+        """The sample stamped t was taken at t + x[0] on the table's clock (the sign of the integral
+        term: the samples selected by their stamps in the encoder window [t0, t1] cover the table
+        times [t0 + dt, t1 + dt], whose integral is the window's plus dt (w(t1) - w(t0)))."""
+        return t + x[0]
 
     def integral(self, x, rotation):
         return x[0] * (rotation.gyro_end - rotation.gyro_start)
