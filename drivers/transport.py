@@ -104,6 +104,21 @@ class Port:
         except (serial.SerialException, OSError) as e:
             raise DeviceDisconnected(self.name, f"disconnected while writing ({e})") from None
 
+    def read_waiting(self, max_bytes: int = 1 << 22) -> bytes:
+        """Every byte already waiting in the port (never waits for more; at most ``max_bytes``)."""
+        out = bytearray()
+        try:
+            while len(out) < max_bytes:
+                n = self._ser.in_waiting
+                if not n:
+                    break
+                out += self._ser.read(min(n, max_bytes - len(out)))
+        except (serial.SerialException, OSError) as e:
+            raise DeviceDisconnected(self.name, f"disconnected ({e})") from None
+        if out:
+            self.log.debug("%s -> %d bytes (waiting)", self.name, len(out))
+        return bytes(out)
+
     def read_some(self, max_bytes: int = 65536) -> bytes:
         """What is waiting (at least 1 byte), or b'' after one read slice (<= 50 ms)."""
         try:

@@ -8,9 +8,15 @@ up, droppable data (stream frames) is dropped whole and counted, replies never a
 from __future__ import annotations
 
 import errno
+import fcntl
 import os
+import struct
 import termios
 import tty
+
+
+#: the Linux line discipline's receive buffer (N_TTY_BUF_SIZE 4096, one byte kept free)
+LINE_BUFFER = 4095
 
 
 class PtyEndpoint:
@@ -25,6 +31,7 @@ class PtyEndpoint:
         self.max_backlog = max_backlog_bytes
         self._out = bytearray()
         self.dropped_bytes = 0
+        self.paced = False        # write no more than the line discipline takes (line_room)
         self.closed = False
 
     def fileno(self) -> int:
@@ -33,6 +40,22 @@ class PtyEndpoint:
     @property
     def backlog(self) -> int:
         return len(self._out)
+
+    def unread(self) -> int:
+        """Bytes written that the driver has not read yet and that the line already holds
+        (FIONREAD on the slave side: the line discipline's buffer, up to 4 KiB)."""
+        if self.closed:
+            return 0
+        try:
+            return struct.unpack("i", fcntl.ioctl(self._slave, termios.FIONREAD, b"\0\0\0\0"))[0]
+        except OSError:
+            return 0
+
+    def line_room(self) -> int:
+        """Bytes the line discipline can still take (its buffer holds LINE_BUFFER): what is
+        written within that reaches the reader's side at once, not left in the kernel's flip
+        buffers to be pushed later, after the reader has read (an asynchronous kernel worker)."""
+        return max(0, LINE_BUFFER - self.unread())
 
     def read(self) -> bytes:
         if self.closed:
@@ -58,9 +81,13 @@ class PtyEndpoint:
         return True
 
     def flush(self) -> None:
-        while self._out and not self.closed:
+        """Write the queue to the line (``paced``: no more than the line discipline takes)."""
+        limit = self.line_room() if self.paced else None
+        while self._out and not self.closed and (limit is None or limit > 0):
             try:
-                n = os.write(self.master, self._out)
+                n = os.write(self.master, self._out if limit is None else self._out[:limit])
+                if limit is not None:
+                    limit -= n
             except (BlockingIOError, InterruptedError):
                 return
             except OSError as e:
