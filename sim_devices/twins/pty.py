@@ -15,10 +15,6 @@ import termios
 import tty
 
 
-#: the Linux line discipline's receive buffer (N_TTY_BUF_SIZE 4096, one byte kept free)
-LINE_BUFFER = 4095
-
-
 class PtyEndpoint:
     def __init__(self, max_backlog_bytes: int = 8192):
         self.master, self._slave = os.openpty()
@@ -31,7 +27,6 @@ class PtyEndpoint:
         self.max_backlog = max_backlog_bytes
         self._out = bytearray()
         self.dropped_bytes = 0
-        self.paced = False        # write no more than the line discipline takes (line_room)
         self.closed = False
 
     def fileno(self) -> int:
@@ -50,12 +45,6 @@ class PtyEndpoint:
             return struct.unpack("i", fcntl.ioctl(self._slave, termios.FIONREAD, b"\0\0\0\0"))[0]
         except OSError:
             return 0
-
-    def line_room(self) -> int:
-        """Bytes the line discipline can still take (its buffer holds LINE_BUFFER): what is
-        written within that reaches the reader's side at once, not left in the kernel's flip
-        buffers to be pushed later, after the reader has read (an asynchronous kernel worker)."""
-        return max(0, LINE_BUFFER - self.unread())
 
     def read(self) -> bytes:
         if self.closed:
@@ -81,13 +70,9 @@ class PtyEndpoint:
         return True
 
     def flush(self) -> None:
-        """Write the queue to the line (``paced``: no more than the line discipline takes)."""
-        limit = self.line_room() if self.paced else None
-        while self._out and not self.closed and (limit is None or limit > 0):
+        while self._out and not self.closed:
             try:
-                n = os.write(self.master, self._out if limit is None else self._out[:limit])
-                if limit is not None:
-                    limit -= n
+                n = os.write(self.master, self._out)
             except (BlockingIOError, InterruptedError):
                 return
             except OSError as e:

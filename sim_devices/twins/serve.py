@@ -23,7 +23,7 @@ from .imu import ImuTwin
 from .imu_csv import CsvFrontEnd
 from .imu_vectornav import VectorNavFrontEnd
 from .imu_xsens import XsensFrontEnd
-from .pty import LINE_BUFFER, PtyEndpoint
+from .pty import PtyEndpoint
 from .tcp import TcpEndpoint
 from .table import TableConfig, TableTwin
 from .table_acutrol import AcutrolFrontEnd
@@ -61,7 +61,10 @@ class BenchOptions:
 
 
 READER_ACTIVE_S = 0.5             # a reader that took bytes within this (wall s) is reading
-TABLE_WAIT_S = 0.25               # lossless: longest (wall s) the table's commands wait for the IMU's reader
+#: lossless: device time runs at most this many bytes of the stream ahead of the reader (about
+#: what a pty holds: 4 KiB in the line discipline, 16 KiB in the kernel's flip buffers)
+LINE_BYTES = 16384
+TABLE_WAIT_S = 0.1                # lossless: longest (wall s) the table's commands wait for the IMU's reader
 
 
 class BenchServer:
@@ -100,10 +103,6 @@ class BenchServer:
             self.imu_frontend = CsvFrontEnd(self.imu, self.faulter, o.csv_format)
         self.table_port = PtyEndpoint() if o.table_tcp_port is None else TcpEndpoint(o.table_tcp_port)
         self.imu_port = PtyEndpoint()
-        # lossless: the IMU line is written no faster than the line discipline takes, so that
-        # no frame waits in the kernel's flip buffers when the table is answered (they would
-        # reach the reader's side only after it has read, through an asynchronous kernel worker)
-        self.imu_port.paced = o.lossless
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
@@ -139,12 +138,11 @@ class BenchServer:
         defer_table = self._defer_table(wall - self._last_taken_wall < READER_ACTIVE_S)
         if defer_table:
             self.table_deferred_steps += 1
-        if self.clock.capped or (self.imu_port.paced and self.imu_port.backlog):
-            timeout_s = min(timeout_s, 0.001)        # the line takes 4 KiB at a time
+        if self.clock.capped:
+            timeout_s = min(timeout_s, 0.001)        # waiting for the reader
         ports = [p for p in (self.imu_port, self.table_port)
                  if not p.closed and not (p is self.table_port and defer_table)]
-        writers = [p for p in (self.table_port, self.imu_port) if not p.closed and p.backlog
-                   and not (p is self.imu_port and self.options.lossless)]
+        writers = [p for p in (self.table_port, self.imu_port) if not p.closed and p.backlog]
         readable, _, _ = select.select(ports, writers, [], timeout_s) if ports or writers else ([], [], [])
         reader_active = time.monotonic() - self._last_taken_wall < READER_ACTIVE_S
         now = self.clock.now()
@@ -163,8 +161,8 @@ class BenchServer:
             self._serve_table(readable, now, self._defer_table(reader_active))
         if self.options.lossless and reader_active and self.imu_frontend.streaming:
             # the world waits for the reader: device time runs at most as far as the frames
-            # the line discipline holds (none while frames are still queued)
-            lead = 0.0 if self.imu_port.backlog else LINE_BUFFER / (self._bytes_per_frame * self.imu.rate_hz)
+            # the line holds (none while frames are still queued)
+            lead = 0.0 if self.imu_port.backlog else LINE_BYTES / (self._bytes_per_frame * self.imu.rate_hz)
             self.clock.limit(now + lead)
         else:
             self.clock.limit(None)
@@ -183,7 +181,7 @@ class BenchServer:
             if data:
                 self.imu_port.write(self.imu_frontend.receive(data, now))
         if not self.imu_port.closed:
-            if self._imu_behind(self._drop_limit()) and not (self.options.lossless and reader_active):
+            if self._imu_behind(self.imu_port.max_backlog // 2) and not (self.options.lossless and reader_active):
                 # nobody reads: the frames due are lost anyway, do not compute them
                 self.faulter.overflowed(self.imu.sample_times_until(now).size, recorded=False)
             else:
@@ -209,7 +207,8 @@ class BenchServer:
     def _defer_table(self, reader_active: bool) -> bool:
         """Lossless: the table's commands wait while frames already measured are still in the
         IMU's transmit queue and its reader is taking them (at most TABLE_WAIT_S: a reader
-        that has just died does not hold up the table for long)."""
+        that has just died does not hold up the table long).  What the kernel holds reaches
+        the reader when it reads what is waiting (``drivers.transport.Port.read_waiting``)."""
         wait = (self.options.lossless and reader_active and not self.imu_port.closed
                 and self.imu_frontend.streaming and self.imu_port.backlog > 0)
         if not wait:
@@ -219,14 +218,6 @@ class BenchServer:
         if self._table_wait_since is None:
             self._table_wait_since = now
         return now - self._table_wait_since < TABLE_WAIT_S
-
-    def _drop_limit(self) -> int:
-        """Queued bytes beyond which the frames due are dropped when nobody reads: half the
-        transmit queue; lossless before any reader was seen, 4 KiB (what a driver connecting
-        later finds ahead of its first reply stays small: the line is paced)."""
-        if self.options.lossless and not self._reader_seen:
-            return MIN_STREAM_BUFFER // 2
-        return self.imu_port.max_backlog // 2
 
     def _imu_behind(self, limit: int) -> bool:
         """The IMU's transmit queue holds more than ``limit`` bytes its line could not take

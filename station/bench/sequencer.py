@@ -218,6 +218,7 @@ class Sequencer:
             if t_sync is not None:
                 break
             self._check_pause()
+        self.stream.drain()                                  # all at or before t_sync
         t_end = t_sync + seconds - 0.5 / self.rate_hz        # the sample `seconds` after t_sync is kept
         while True:
             dropped, reached = self.stream.discard_before(t_end)
