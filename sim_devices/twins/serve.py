@@ -56,8 +56,8 @@ class BenchOptions:
     lossless: bool = True         # the twins' clock is throttled to the IMU's reader: while a reader
                                   #   that is reading has not taken the frames its line could hold,
                                   #   device time stands still (and the table's commands wait), so no
-                                  #   frame is lost and no frame is late at any --speed; False: frames
-                                  #   the reader did not take are dropped, as a real IMU's UART does
+                                  #   frame is lost at any --speed; False: frames the reader did not
+                                  #   take are dropped, as a real IMU's UART does
 
 
 READER_ACTIVE_S = 0.5             # a reader that took bytes within this (wall s) is reading
@@ -220,9 +220,7 @@ class BenchServer:
         return now - self._table_wait_since < TABLE_WAIT_S
 
     def _imu_behind(self, limit: int) -> bool:
-        """The IMU's transmit queue holds more than ``limit`` bytes its line could not take
-        (half the queue: nobody reads, the frames due are dropped; lossless, any byte while
-        the reader is reading: device time stands still)."""
+        """The IMU's transmit queue holds more than ``limit`` bytes its line could not take."""
         return (not self.imu_port.closed and self.imu_frontend.streaming
                 and self.imu_port.backlog > limit)
 
