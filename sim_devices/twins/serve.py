@@ -60,7 +60,7 @@ class BenchOptions:
                                   #   take are dropped, as a real IMU's UART does
 
 
-READER_ACTIVE_S = 0.5             # a reader that took bytes within this (wall s) is reading
+READER_ACTIVE_S = 2.0             # a reader that took bytes within this (wall s) is reading
 #: lossless: device time runs at most this many bytes of the stream ahead of the reader (about
 #: what a pty holds: 4 KiB in the line discipline, 16 KiB in the kernel's flip buffers)
 LINE_BYTES = 16384
