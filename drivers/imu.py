@@ -123,6 +123,19 @@ class Imu(Device):
         out, self._pending = ImuSamples.concat(blocks).split(n)
         return out
 
+    def read_available(self) -> ImuSamples:
+        """Every sample whose bytes have already reached this computer: those kept from
+        earlier reads and those decoded from what is waiting in the port now.  Never waits for
+        more (the sequencer's settle starts after the newest of them)."""
+        if not self.streaming:
+            self.start()
+        data, self._carry = self._carry + self.port.read_waiting(), b""
+        blocks = [self._pending]
+        if data:
+            blocks.append(self._decode(data))
+        self._pending = ImuSamples.empty()
+        return ImuSamples.concat(blocks)
+
     def read_seconds(self, seconds: float, **kw) -> ImuSamples:
         """``seconds`` of DEVICE time: round(seconds x rate) samples."""
         return self.read(int(round(float(seconds) * self.rate_hz)), **kw)

@@ -20,6 +20,8 @@ PARITIES = {"N": serial.PARITY_NONE, "E": serial.PARITY_EVEN, "O": serial.PARITY
 
 #: longest a single pyserial read blocks, s (deadlines are checked between reads)
 READ_SLICE_S = 0.05
+#: read_waiting looks again after this long before it takes "nothing waiting" for an answer
+WAITING_RECHECK_S = 0.002
 
 
 @dataclass(frozen=True)
@@ -103,6 +105,27 @@ class Port:
             raise DeviceTimeout(self.name, f"write blocked for {self.settings.write_timeout_s} s") from None
         except (serial.SerialException, OSError) as e:
             raise DeviceDisconnected(self.name, f"disconnected while writing ({e})") from None
+
+    def read_waiting(self, max_bytes: int = 1 << 22) -> bytes:
+        """Every byte already waiting in the port (at most ``max_bytes``): reads until nothing
+        is waiting twice, WAITING_RECHECK_S apart."""
+        out = bytearray()
+        quiet = 0
+        try:
+            while len(out) < max_bytes and quiet < 2:
+                n = self._ser.in_waiting
+                if n:
+                    out += self._ser.read(min(n, max_bytes - len(out)))
+                    quiet = 0
+                else:               # a pty passes on what waits in its flip buffers after a
+                    quiet += 1      #   read, asynchronously: look once more, a moment later
+                    if quiet < 2:
+                        time.sleep(WAITING_RECHECK_S)
+        except (serial.SerialException, OSError) as e:
+            raise DeviceDisconnected(self.name, f"disconnected ({e})") from None
+        if out:
+            self.log.debug("%s -> %d bytes (waiting)", self.name, len(out))
+        return bytes(out)
 
     def read_some(self, max_bytes: int = 65536) -> bytes:
         """What is waiting (at least 1 byte), or b'' after one read slice (<= 50 ms)."""

@@ -178,7 +178,9 @@ class XbusParser:
         while True:
             j = buf.find(b"\xfa\xff", i)
             if j < 0:
-                keep = 1 if buf.endswith(b"\xfa") else 0
+                # a last 0xFA may start the next message's preamble, unless it was already
+                # taken (the checksum of the message just parsed: 1 in 256 messages)
+                keep = 1 if len(buf) > i and buf[-1] == 0xFA else 0
                 self._skip(len(buf) - keep - i)
                 i = len(buf) - keep
                 break

@@ -1,6 +1,7 @@
 """The simulated clock shared by the twins: device time runs ``speed`` times wall time."""
 from __future__ import annotations
 
+import threading
 import time
 
 
@@ -13,18 +14,62 @@ class SimClock:
         self.speed = float(speed)
         self._start = float(start_s)
         self._wall0 = time.monotonic()
+        self.held_wall_s = 0.0       # wall time during which device time stood at its cap
+        self._cap: float | None = None
+        self._lock = threading.Lock()        # read by the drivers' and tests' threads too
+
+    def _free(self) -> float:
+        return self._start + self.speed * (time.monotonic() - self._wall0)
 
     def now(self) -> float:
-        return self._start + self.speed * (time.monotonic() - self._wall0)
+        with self._lock:
+            v = self._free()
+            return v if self._cap is None or v < self._cap else self._cap
 
     def wall_until(self, device_t: float) -> float:
         """Wall seconds until device time ``device_t`` (<= 0 if past)."""
         return (device_t - self.now()) / self.speed
 
-    def hold(self, wall_s: float) -> None:
-        """Let ``wall_s`` wall seconds (already passed) add no device time: the world waits."""
-        if wall_s > 0:
-            self._wall0 += wall_s
+    @property
+    def capped(self) -> bool:
+        """Device time stands at its cap (the world waits)."""
+        with self._lock:
+            return self._cap is not None and self._free() >= self._cap
+
+    def limit(self, cap_s: float | None) -> None:
+        """Device time runs on from where it is now, but not beyond ``cap_s`` (None: no cap;
+        ``now()``: it stands still).  Wall time spent at a cap adds no device time: device time
+        stays continuous and never goes back."""
+        with self._lock:
+            v = self._free()
+            cur = v if self._cap is None or v < self._cap else self._cap
+            if v > cur:               # the wall time spent at the old cap
+                self._wall0 += (v - cur) / self.speed
+                self.held_wall_s += (v - cur) / self.speed
+            self._cap = None if cap_s is None else max(float(cap_s), cur)
+
+
+class StepClock:
+    """Device time as the commands of one loop step see it: the time of the step, set by the
+    serve loop, so that every command answered in a step happens at the instant up to which
+    the IMU frames were already sent (``serve.BenchServer.step``)."""
+
+    def __init__(self, clock):
+        self.clock = clock
+        self.t = clock.now()
+
+    @property
+    def speed(self) -> float:
+        return self.clock.speed
+
+    def set(self, t: float) -> None:
+        self.t = float(t)
+
+    def now(self) -> float:
+        return self.t
+
+    def wall_until(self, device_t: float) -> float:
+        return self.clock.wall_until(device_t)
 
 
 class ManualClock:

@@ -14,6 +14,7 @@ starting from any state (braking first when moving away from the target or too f
 """
 from __future__ import annotations
 
+import collections
 import math
 from dataclasses import dataclass
 
@@ -66,6 +67,9 @@ class AxisMotion:
         self.settle_s = settle_s
         self.overshoot = overshoot_deg_per_dps
         self.rng = rng if rng is not None else np.random.default_rng(0)
+        #: (command time, time from which the axis is in its final state: at the goal and
+        #: settling, at the demanded rate, at rest), device s, for the last 10,000 commands
+        self.history: collections.deque = collections.deque(maxlen=10000)
 
     # ------------------------------------------------------------------ evaluation
     def state(self, t: float) -> tuple[float, float, float]:
@@ -91,6 +95,7 @@ class AxisMotion:
     def _replace_from(self, t: float, new: list[Segment]) -> None:
         keep = [s for s in self.segments if s.t0 < t]
         self.segments = keep + new
+        self.history.append((t, new[-1].t0))
 
     def plan_position(self, t: float, goal_deg: float, vmax: float, amax: float) -> None:
         """Move to the unwrapped position ``goal_deg``, then settle and hold."""

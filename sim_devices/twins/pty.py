@@ -8,7 +8,9 @@ up, droppable data (stream frames) is dropped whole and counted, replies never a
 from __future__ import annotations
 
 import errno
+import fcntl
 import os
+import struct
 import termios
 import tty
 
@@ -33,6 +35,16 @@ class PtyEndpoint:
     @property
     def backlog(self) -> int:
         return len(self._out)
+
+    def unread(self) -> int:
+        """Bytes written that the driver has not read yet and that the line already holds
+        (FIONREAD on the slave side: the line discipline's buffer, up to 4 KiB)."""
+        if self.closed:
+            return 0
+        try:
+            return struct.unpack("i", fcntl.ioctl(self._slave, termios.FIONREAD, b"\0\0\0\0"))[0]
+        except OSError:
+            return 0
 
     def read(self) -> bytes:
         if self.closed:

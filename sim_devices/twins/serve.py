@@ -16,7 +16,7 @@ import numpy as np
 
 from drivers.protocols.csvlines import CsvFormat
 
-from .clock import SimClock
+from .clock import SimClock, StepClock
 from .faults import Faults, StreamFaulter
 from .geometry import TableGeometry
 from .imu import ImuTwin
@@ -53,12 +53,18 @@ class BenchOptions:
     table_framing: str = "tcp"    # acutrol replies: "tcp" (error code, length first) or "gpib"
     table_tcp_port: int | None = None   # serve the table on TCP 127.0.0.1:port (0: any free port)
     record: bool = False          # keep the times of the frames sent intact (tests)
-    lossless: bool = False        # device time waits while a reader that is reading falls behind,
-                                  #   instead of frames being lost (tests on a loaded machine, where
-                                  #   --speed 100 outruns a descheduled reader; a real IMU drops them)
+    lossless: bool = True         # the twins' clock is throttled to the IMU's reader: while a reader
+                                  #   that is reading has not taken the frames its line could hold,
+                                  #   device time stands still (and the table's commands wait), so no
+                                  #   frame is lost at any --speed; False: frames the reader did not
+                                  #   take are dropped, as a real IMU's UART does
 
 
-READER_ACTIVE_S = 0.5             # lossless: a reader that took bytes within this (wall) is reading
+READER_ACTIVE_S = 2.0             # a reader that took bytes within this (wall s) is reading
+#: lossless: device time runs at most this many bytes of the stream ahead of the reader (about
+#: what a pty holds: 4 KiB in the line discipline, 16 KiB in the kernel's flip buffers)
+LINE_BYTES = 16384
+TABLE_WAIT_S = 0.1                # lossless: longest (wall s) the table's commands wait for the IMU's reader
 
 
 class BenchServer:
@@ -73,9 +79,10 @@ class BenchServer:
         self.options = o
         self.truth = truth
         self.clock = SimClock(o.speed)
+        self.step_clock = StepClock(self.clock)     # the table's: commands at the step's time
         geo_rng, fault_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(o.seed).spawn(2))
         geometry = TableGeometry.default(o.axes, truth.bench.lever_arm_m)
-        self.table = TableTwin(geometry, self.clock, config=o.table_config,
+        self.table = TableTwin(geometry, self.step_clock, config=o.table_config,
                                ripple_fraction=truth.bench.rate_ripple_fraction,
                                ripple_hz=truth.bench.rate_ripple_hz, rng=geo_rng,
                                faults=o.faults.table,
@@ -99,7 +106,12 @@ class BenchServer:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
-        self._last_wall = self._last_taken_wall = time.monotonic()
+        self._last_taken_wall = time.monotonic() - READER_ACTIVE_S   # no reader yet
+        self._unread = 0                  # bytes on the IMU line not read by its reader, last step
+        self._reader_seen = False         # a reader has taken bytes from the IMU line
+        self._bytes_per_frame = 44.0      # of the IMU stream (measured as frames go out)
+        self._table_wait_since: float | None = None
+        self.table_deferred_steps = 0     # loop steps in which the table's commands waited (lossless)
 
     @property
     def table_path(self) -> str:
@@ -111,34 +123,65 @@ class BenchServer:
 
     # ------------------------------------------------------------------ the loop
     def step(self, timeout_s: float) -> None:
-        ports = [p for p in (self.table_port, self.imu_port) if not p.closed]
-        writers = [p for p in ports if p.backlog]
-        readable, _, _ = select.select(ports, writers, [], timeout_s) if ports else ([], [], [])
+        """One turn of the loop: commands, the IMU frames due, faults.
+
+        Every command of a step happens at the step's device time ``now`` (the table sees a
+        :class:`StepClock`).  While the IMU has a reader, the frames measured up to ``now`` are
+        written to the IMU's line before the table's answers are written to the table's (with
+        no reader, the table is answered first: nobody waits for the frames).  Lossless: while
+        the IMU's transmit queue holds frames its line could not take yet and its reader is
+        reading, device time stands still and the table's commands wait (a few ms: the reader
+        is taking the frames).  So a reader that has received the table's answer and then
+        reads what is waiting on the IMU line has every frame measured before that answer
+        (``station.bench.imu_stream.ImuStream.sync``), at any speed."""
         wall = time.monotonic()
-        held = (self.options.lossless and self._imu_behind()
-                and wall - self._last_taken_wall < READER_ACTIVE_S)
-        if held:
-            self.clock.hold(wall - self._last_wall)      # the simulated world waits for the reader
-        self._last_wall = wall
+        defer_table = self._defer_table(wall - self._last_taken_wall < READER_ACTIVE_S)
+        if defer_table:
+            self.table_deferred_steps += 1
+        if self.clock.capped:
+            timeout_s = min(timeout_s, 0.001)        # waiting for the reader
+        ports = [p for p in (self.imu_port, self.table_port)
+                 if not p.closed and not (p is self.table_port and defer_table)]
+        writers = [p for p in (self.table_port, self.imu_port) if not p.closed and p.backlog]
+        readable, _, _ = select.select(ports, writers, [], timeout_s) if ports or writers else ([], [], [])
+        reader_active = time.monotonic() - self._last_taken_wall < READER_ACTIVE_S
         now = self.clock.now()
+        self.step_clock.set(now)
         self.table.update(now)
         tf, imf = self.options.faults.table, self.options.faults.imu
         if tf.disconnect_at_s is not None and now >= tf.disconnect_at_s:
             self.table_port.close()
         if imf.disconnect_at_s is not None and now >= imf.disconnect_at_s:
             self.imu_port.close()
-        if self.table_port in readable:
+        table_first = not reader_active
+        if table_first:
+            self._serve_table(readable, now, defer_table)
+        reader_active = self._serve_imu(readable, now, reader_active)
+        if not table_first:
+            self._serve_table(readable, now, self._defer_table(reader_active))
+        if self.options.lossless and reader_active and self.imu_frontend.streaming:
+            # the world waits for the reader: device time runs at most as far as the frames
+            # the line holds (none while frames are still queued)
+            lead = 0.0 if self.imu_port.backlog else LINE_BYTES / (self._bytes_per_frame * self.imu.rate_hz)
+            self.clock.limit(now + lead)
+        else:
+            self.clock.limit(None)
+
+    def _serve_table(self, readable, now: float, defer: bool) -> None:
+        if self.table_port in readable and not defer:
             data = self.table_port.read()
             if data and not self.table.stalled(now):
                 self.table_port.write(self.table_frontend.receive(data))
+        self.table_port.flush()
+
+    def _serve_imu(self, readable, now: float, reader_active: bool) -> bool:
+        """IMU commands and the frames due by ``now``; returns whether the reader is active."""
         if self.imu_port in readable:
             data = self.imu_port.read()
             if data:
                 self.imu_port.write(self.imu_frontend.receive(data, now))
         if not self.imu_port.closed:
-            if held:
-                pass                     # nothing came due: device time stood still
-            elif self._imu_behind():
+            if self._imu_behind(self.imu_port.max_backlog // 2) and not (self.options.lossless and reader_active):
                 # nobody reads: the frames due are lost anyway, do not compute them
                 self.faulter.overflowed(self.imu.sample_times_until(now).size, recorded=False)
             else:
@@ -149,18 +192,41 @@ class BenchServer:
                 # lossless: a batch larger than the backlog (this loop itself was descheduled) is kept
                 if frames and not self.imu_port.write(frames, droppable=not self.options.lossless):
                     self.faulter.overflowed(self.faulter.frames_sent - before)
-        backlog = self.imu_port.backlog
-        for p in (self.table_port, self.imu_port):
-            p.flush()
-        if self.imu_port.backlog < backlog or not self.imu_port.backlog:
+        backlog, unread = self.imu_port.backlog, self.imu_port.unread()
+        self.imu_port.flush()
+        # the reader took bytes: fewer wait on the line (only a reader takes them), or, once a
+        # reader was seen, the line took more of the queue (without a reader the line fills
+        # once, ~20 KiB, and takes nothing more)
+        self._reader_seen = self._reader_seen or unread < self._unread
+        if unread < self._unread or (self._reader_seen and self.imu_port.backlog < backlog):
             self._last_taken_wall = time.monotonic()
+            reader_active = True
+        self._unread = self.imu_port.unread()
+        return reader_active
 
-    def _imu_behind(self) -> bool:
+    def _defer_table(self, reader_active: bool) -> bool:
+        """Lossless: the table's commands wait while frames already measured are still in the
+        IMU's transmit queue and its reader is taking them (at most TABLE_WAIT_S: a reader
+        that has just died does not hold up the table long).  What the kernel holds reaches
+        the reader when it reads what is waiting (``drivers.transport.Port.read_waiting``)."""
+        wait = (self.options.lossless and reader_active and not self.imu_port.closed
+                and self.imu_frontend.streaming and self.imu_port.backlog > 0)
+        if not wait:
+            self._table_wait_since = None
+            return False
+        now = time.monotonic()
+        if self._table_wait_since is None:
+            self._table_wait_since = now
+        return now - self._table_wait_since < TABLE_WAIT_S
+
+    def _imu_behind(self, limit: int) -> bool:
+        """The IMU's transmit queue holds more than ``limit`` bytes its line could not take."""
         return (not self.imu_port.closed and self.imu_frontend.streaming
-                and self.imu_port.backlog > self.imu_port.max_backlog // 2)
+                and self.imu_port.backlog > limit)
 
     def _size_stream_buffer(self, bytes_per_frame: float) -> None:
         """Transmit buffer for ``STREAM_BUFFER_WALL_S`` of the stream at the present speed."""
+        self._bytes_per_frame = bytes_per_frame
         wanted = STREAM_BUFFER_WALL_S * self.clock.speed * self.imu.rate_hz * bytes_per_frame
         self.imu_port.max_backlog = max(MIN_STREAM_BUFFER, int(wanted))
 

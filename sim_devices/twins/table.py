@@ -16,6 +16,11 @@ from .geometry import TableGeometry
 from .motion import AxisMotion
 
 
+
+#: device seconds of motion kept (the IMU twin evaluates recent instants; tests look back over
+#: a whole sequence of moves, which at --speed 100 on a loaded machine can exceed a minute)
+MOTION_MEMORY_S = 600.0
+
 class CommandRefused(Exception):
     """The controller cannot execute the command (unknown, bad argument, wrong state)."""
 
@@ -97,7 +102,7 @@ class TableTwin:
 
     # ------------------------------------------------------------------ time and faults
     def update(self, now: float) -> None:
-        """Fire the faults due by ``now``; forget motion older than 60 s."""
+        """Fire the faults due by ``now``; forget motion older than MOTION_MEMORY_S."""
         f = self.faults
         if not self._tripped and f.trip_at_s is not None and now >= f.trip_at_s:
             self._tripped = True
@@ -107,7 +112,7 @@ class TableTwin:
             ax.mode = "off"
             ax.motion.plan_stop(f.trip_at_s, ax.hardware[1])
         for ax in self.axes:
-            ax.motion.prune(now - 60.0)
+            ax.motion.prune(now - MOTION_MEMORY_S)
 
     def stalled(self, now: float) -> bool:
         f = self.faults

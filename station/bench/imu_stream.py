@@ -1,7 +1,8 @@
 """The IMU stream of a run: one thread reads the IMU driver continuously into a queue.
 
 The sequencer takes samples from it by count (device time); while the table moves it drops
-them (``drain``).  Reading all the time keeps the device's and the operating system's buffers
+them (``drain``); a settle drops them by their time stamps, from the newest sample that had
+reached this computer when the table reported its state (``sync``, ``discard_before``).  Reading all the time keeps the device's and the operating system's buffers
 empty, so samples taken after a move are fresh and no frame is lost to an overflow.  Errors of
 the driver (timeouts, disconnection) are raised again in the thread that takes samples.
 """
@@ -46,9 +47,17 @@ class ImuStream:
         self._error: BaseException | None = None
         self._thread: threading.Thread | None = None
         self.last: ImuSamples | None = None        # the newest block (live display)
+        self._sync_asked = self._sync_done = 0
+        self._newest_t: float | None = None       # device time of the newest sample received
 
     # ------------------------------------------------------------------ thread
     def start(self) -> None:
+        """Start the stream and its reader thread (again after :meth:`stop`)."""
+        self._stop.clear()
+        with self._cond:
+            self._queue.clear()
+            self._queued = 0
+            self._error = None
         self.imu.start()
         self._thread = threading.Thread(target=self._run, name="imu-stream", daemon=True)
         self._thread.start()
@@ -58,9 +67,16 @@ class ImuStream:
             while not self._stop.is_set():
                 block = self.imu.read(self._block)
                 with self._cond:
+                    asked = self._sync_asked
+                if asked > self._sync_done:       # everything already here, asked after `asked`
+                    block = ImuSamples.concat([block, self.imu.read_available()])
+                with self._cond:
                     self._queue.append(block)
                     self._queued += len(block)
-                    self.last = block
+                    if len(block):
+                        self.last = block
+                        self._newest_t = float(block.t_s[-1])
+                    self._sync_done = max(self._sync_done, asked)
                     self._cond.notify_all()
         except BaseException as e:          # handed to the consumer
             with self._cond:
@@ -102,6 +118,55 @@ class ImuStream:
                 have += len(block)
             self._queued -= have
         return ImuSamples.concat(blocks)
+
+    def sync(self, *, wait_s: float = 0.25) -> float | None:
+        """The device time of the newest sample that had reached this computer when called:
+        the reader thread reads everything waiting in the port before it answers.  Called once
+        the table has reported its state, every sample measured before that report is then at
+        or before the returned time (the device twins write every frame measured before they
+        answer the table; on hardware the line's latency is milliseconds).  None when the
+        reader has not answered within ``wait_s`` wall seconds (ask again: the caller can check
+        for a pause in between).  Raises the reader's error, if any."""
+        with self._cond:
+            if self._sync_asked <= self._sync_done:
+                self._sync_asked += 1
+            ticket = self._sync_asked
+            deadline = time.monotonic() + wait_s
+            while self._sync_done < ticket and self._error is None:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return None
+                self._cond.wait(left)
+            if self._sync_done < ticket:
+                raise self._error
+            return self._newest_t
+
+    def discard_before(self, t_end: float, *, wait_s: float = 0.25) -> tuple[int, bool]:
+        """Drop the samples time-stamped before ``t_end`` (device s).  Returns how many were
+        dropped and whether a sample at or after ``t_end`` is now first in the queue (waits at
+        most ``wait_s`` wall seconds for samples).  Raises the reader's error, if any."""
+        dropped = 0
+        with self._cond:
+            deadline = time.monotonic() + wait_s
+            while True:
+                while self._queue:
+                    block = self._queue[0]
+                    keep = int(np.searchsorted(block.t_s, t_end, side="left"))
+                    if keep < len(block):
+                        if keep:
+                            self._queue[0] = block.split(keep)[1]
+                        dropped += keep
+                        self._queued -= keep
+                        return dropped, True
+                    self._queue.popleft()
+                    dropped += len(block)
+                    self._queued -= len(block)
+                if self._error is not None:
+                    raise self._error
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return dropped, False
+                self._cond.wait(left)
 
     def drain(self) -> int:
         """Drop every sample received so far; returns how many."""

@@ -208,13 +208,23 @@ class Sequencer:
             self._check_pause()
 
     def _discard(self, seconds: float) -> None:
-        self.stream.drain()
-        n = int(round(seconds * self.rate_hz))
-        done = 0
-        while done < n:
-            got = len(self._take(n - done))
-            done += got
-            self._progress(got)
+        """Settle: drop every sample measured before the table reported its state (the newest
+        sample that had reached this computer then: ``ImuStream.sync``) and ``seconds`` of
+        device time after it, by the samples' own time stamps.  So the settle is ``seconds`` of
+        device time however fast device time runs against wall time (a twin at --speed 500:
+        3 s are 6 ms of wall time, less than the pipeline's latency)."""
+        while True:
+            t_sync = self.stream.sync()
+            if t_sync is not None:
+                break
+            self._check_pause()
+        self.stream.drain()                                  # all at or before t_sync
+        t_end = t_sync + seconds - 0.5 / self.rate_hz        # the sample `seconds` after t_sync is kept
+        while True:
+            dropped, reached = self.stream.discard_before(t_end)
+            self._progress(dropped)
+            if reached:
+                return
             self._check_pause()
 
     def _record(self, seg, n: int, poll) -> dict:
