@@ -91,7 +91,10 @@ def test_ctrl_c_ends_the_workers_and_says_interrupted(tmp_path):
     (tmp_path / "short.yaml").write_text(short)
     p = subprocess.Popen([sys.executable, "-m", "station.cli", "montecarlo", "--scheme", str(tmp_path / "short.yaml"),
                           "--runs", "100000", "--method", "zhang2010", "--json"],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                         # Ctrl-C as a terminal delivers it, even when this test runs with SIGINT ignored
+                         # (a background job): an ignored SIGINT is inherited and Python would keep it
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         for _ in range(1200):                      # until the pool's two workers exist
             workers = _children(p.pid)
