@@ -175,12 +175,7 @@ def _candidates_table(d) -> Table:
     for col in ("effect", "significant", "pred. Δχ²", "p (Holm)", "largest one-step estimate", "note"):
         t.add_column(col, justify="right" if col in ("pred. Δχ²", "p (Holm)") else "left")
     for c in d.candidates:
-        if c.names:
-            k = max(range(len(c.names)), key=lambda i: abs(c.estimate[i]) / max(c.sigma[i], 1e-300))
-            est = f"{c.names[k]} {c.estimate[k]:.3g} ± {c.sigma[k]:.2g} {c.units[k]}"
-        else:
-            est = ""
-        note = c.advice or ("size implausible for any IMU" if not c.plausible else "")
+        est, note = c.largest_estimate(), c.note()
         if not note:
             smallest = {}
             for v, u in zip(c.detectable, c.units):

@@ -68,6 +68,17 @@ class Candidate:
     signature_variable: str = ""
     source: str = "library"
 
+    def largest_estimate(self) -> str:
+        """The one-step estimate largest against its 1-sigma, in words ("" without parameters)."""
+        if not self.names:
+            return ""
+        k = max(range(len(self.names)), key=lambda i: abs(self.estimate[i]) / max(self.sigma[i], 1e-300))
+        return f"{self.names[k]} {self.estimate[k]:.3g} ± {self.sigma[k]:.2g} {self.units[k]}"
+
+    def note(self) -> str:
+        """What to say beside the candidate: its advice, or that its size is implausible."""
+        return self.advice or ("size implausible for any IMU" if not self.plausible else "")
+
 
 @dataclass
 class Diagnosis:

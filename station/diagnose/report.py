@@ -228,12 +228,7 @@ def _parameters_section(inp: ReportInput) -> str:
 def _candidates_table(d) -> str:
     rows = []
     for c in d.candidates:
-        if c.names:
-            k = max(range(len(c.names)), key=lambda i: abs(c.estimate[i]) / max(c.sigma[i], 1e-300))
-            est = f"{c.names[k]} {c.estimate[k]:.3g} ± {c.sigma[k]:.2g} {c.units[k]}"
-        else:
-            est = ""
-        note = c.advice or ("size implausible for any IMU" if not c.plausible else "")
+        est, note = c.largest_estimate(), c.note()
         sig = "<span class='yes'>yes</span>" if c.significant else "no"
         rows.append([_e(c.effect), sig, f"{c.predicted_chi2_drop:.4g}", f"{c.p_value_corrected:.2g}",
                      _e(est), _e(note)])
