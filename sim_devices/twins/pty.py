@@ -2,8 +2,7 @@
 
 The slave side is put in raw mode (no echo, no line editing) at once and kept open by the
 twin, so the line settings hold and the master never reads EIO while no driver is attached.
-Output goes through a small queue like a UART transmit buffer: when the reader does not keep
-up, droppable data (stream frames) is dropped whole and counted, replies never are.
+Output goes through a small queue like a UART transmit buffer (sim_devices/twins/endpoint.py).
 """
 from __future__ import annotations
 
@@ -14,9 +13,12 @@ import struct
 import termios
 import tty
 
+from sim_devices.twins.endpoint import QueuedEndpoint
 
-class PtyEndpoint:
+
+class PtyEndpoint(QueuedEndpoint):
     def __init__(self, max_backlog_bytes: int = 8192):
+        super().__init__(max_backlog_bytes)
         self.master, self._slave = os.openpty()
         tty.setraw(self._slave)
         attrs = termios.tcgetattr(self._slave)
@@ -24,17 +26,9 @@ class PtyEndpoint:
         termios.tcsetattr(self._slave, termios.TCSANOW, attrs)
         os.set_blocking(self.master, False)
         self.path = os.ttyname(self._slave)
-        self.max_backlog = max_backlog_bytes
-        self._out = bytearray()
-        self.dropped_bytes = 0
-        self.closed = False
 
     def fileno(self) -> int:
         return self.master
-
-    @property
-    def backlog(self) -> int:
-        return len(self._out)
 
     def unread(self) -> int:
         """Bytes written that the driver has not read yet and that the line already holds
@@ -58,31 +52,15 @@ class PtyEndpoint:
                 return b""
             raise
 
-    def write(self, data: bytes, droppable: bool = False) -> bool:
-        """Queue ``data``; a droppable block that does not fit in the backlog is dropped."""
-        if self.closed or not data:
-            return False
-        if droppable and len(self._out) + len(data) > self.max_backlog:
-            self.dropped_bytes += len(data)
-            return False
-        self._out += data
-        self.flush()
-        return True
-
-    def flush(self) -> None:
-        while self._out and not self.closed:
-            try:
-                n = os.write(self.master, self._out)
-            except (BlockingIOError, InterruptedError):
-                return
-            except OSError as e:
-                if e.errno == errno.EIO:
-                    return
-                raise
-            del self._out[:n]
-
-    def clear_output(self) -> None:
-        self._out.clear()
+    def _send(self, data: bytearray) -> int | None:
+        try:
+            return os.write(self.master, data)
+        except (BlockingIOError, InterruptedError):
+            return None
+        except OSError as e:
+            if e.errno == errno.EIO:
+                return None
+            raise
 
     def close(self) -> None:
         """Hang up: the driver's next read or write fails (a disconnect)."""

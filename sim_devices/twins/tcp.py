@@ -8,25 +8,20 @@ from __future__ import annotations
 import errno
 import socket
 
+from sim_devices.twins.endpoint import QueuedEndpoint
 
-class TcpEndpoint:
+
+class TcpEndpoint(QueuedEndpoint):
     def __init__(self, port: int = 0, host: str = "127.0.0.1", max_backlog_bytes: int = 1 << 20):
+        super().__init__(max_backlog_bytes)
         self._listener = socket.create_server((host, port), reuse_port=False)
         self._listener.setblocking(False)
         self.host, self.port = self._listener.getsockname()[:2]
         self.path = f"socket://{self.host}:{self.port}"
-        self.max_backlog = max_backlog_bytes
         self._client: socket.socket | None = None
-        self._out = bytearray()
-        self.dropped_bytes = 0
-        self.closed = False
 
     def fileno(self) -> int:
         return (self._client or self._listener).fileno()
-
-    @property
-    def backlog(self) -> int:
-        return len(self._out)
 
     def read(self) -> bytes:
         if self.closed:
@@ -49,31 +44,19 @@ class TcpEndpoint:
             self._drop_client()
         return data
 
-    def write(self, data: bytes, droppable: bool = False) -> bool:
-        if self.closed or not data or self._client is None:
-            return False
-        if droppable and len(self._out) + len(data) > self.max_backlog:
-            self.dropped_bytes += len(data)
-            return False
-        self._out += data
-        self.flush()
-        return True
+    def _connected(self) -> bool:
+        return self._client is not None
 
-    def flush(self) -> None:
-        while self._out and self._client is not None:
-            try:
-                n = self._client.send(self._out)
-            except (BlockingIOError, InterruptedError):
-                return
-            except OSError as e:
-                if e.errno in (errno.EPIPE, errno.ECONNRESET):
-                    self._drop_client()
-                    return
-                raise
-            del self._out[:n]
-
-    def clear_output(self) -> None:
-        self._out.clear()
+    def _send(self, data: bytearray) -> int | None:
+        try:
+            return self._client.send(data)
+        except (BlockingIOError, InterruptedError):
+            return None
+        except OSError as e:
+            if e.errno in (errno.EPIPE, errno.ECONNRESET):
+                self._drop_client()
+                return None
+            raise
 
     def _drop_client(self) -> None:
         if self._client is not None:
