@@ -121,3 +121,49 @@ def test_no_runtime_module_imports_scipy_stats():
             if any(n == "scipy.stats" or n.startswith("scipy.stats.") for n in names):
                 offenders.append(f"{path.relative_to(ROOT)}:{node.lineno}")
     assert offenders == []
+
+
+READER = """
+import sys
+from station.estimate import choose_method
+from station.estimate.summaries import summarise
+from station.io.capture import read_capture
+capture = read_capture(sys.argv[1], load_data=False)
+method = choose_method(capture)
+s = summarise(capture)
+print(method, len(s.statics), len(s.rotations),
+      " ".join(sorted(m for m in sys.modules if m.split(".")[0] == "scipy")))
+"""
+
+
+def test_reading_and_summarising_a_capture_imports_no_scipy(optimal9_run):
+    """`station estimate` imports scipy (~0.25 s) on a second thread while its own thread reads the
+    capture (station.core.preload): the reading path must not need scipy, or the two threads would
+    take turns instead of overlapping (and could wait on each other's import locks)."""
+    r = subprocess.run([sys.executable, "-c", READER, str(optimal9_run)], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr
+    method, statics, rotations, *scipy_modules = r.stdout.split()
+    assert (method, statics, rotations) == ("lsq", "9", "12")   # six +/- pairs
+    assert scipy_modules == []
+
+
+def test_estimate_imports_the_fit_on_the_preload_thread(optimal9_run, tmp_path):
+    """`station estimate` imports scipy.optimize and the fit on the preload thread, not on the
+    thread that reads the capture, and writes its file as always."""
+    code = ("import sys, threading\n"
+            "seen = {}\n"
+            "class Spy:\n"
+            "    def find_spec(self, name, path=None, target=None):\n"
+            "        if name in ('scipy.optimize', 'station.estimate.lsq'):\n"
+            "            seen[name] = threading.current_thread().name\n"
+            "        return None\n"
+            "sys.meta_path.insert(0, Spy())\n"
+            "from station.cli import main\n"
+            "status = main(['estimate', sys.argv[1], '-o', sys.argv[2]])\n"
+            "print(status, seen.get('scipy.optimize'), seen.get('station.estimate.lsq'))\n")
+    r = subprocess.run([sys.executable, "-c", code, str(optimal9_run), str(tmp_path / "cal.yaml")],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split()[-3:] == ["0", "station-preload", "station-preload"]
+    assert (tmp_path / "cal.yaml").is_file()

@@ -82,8 +82,7 @@ def report_calibration(cal, title: str, target, accept_poor_fit: bool, truth=Non
 
 
 def cmd_estimate(args) -> int:
-    from station.io.calfile import write_calfile
-    from station.estimate import estimate_capture
+    from station.estimate import estimate_capture   # scipy and the file writer come later (preload)
 
     reg = plugins.registry(args)
     if not (0 <= args.max_missing_fraction < 1 and args.max_gap_s > 0):
@@ -94,6 +93,8 @@ def cmd_estimate(args) -> int:
     for w in capture.warnings:
         err.print(f"warning: {w}", markup=False, soft_wrap=True)
     target = Path(args.output) if args.output else capture.path / "calibration.yaml"
+    from station.io.calfile import write_calfile
+
     write_calfile(target, cal, provenance)
     from station.cli.history import file_quietly
 

@@ -174,7 +174,7 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
                      max_gap_s: float = MAX_GAP_S) -> tuple[Calibration, Capture, dict]:
     """Read a capture, estimate, judge the fit (station.estimate.verdict: verdict, honest 1-sigma,
     parameters not determined) and return the calibration, the capture and its provenance."""
-    from station.estimate.verdict import judge
+    from station.core import preload
 
     capture = read_capture(path, load_data=False)
     resolved = method
@@ -182,9 +182,11 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
         resolved = choose_method(capture)
     if resolved == "lsq":
         # one pass: each segment file read, hashed, parsed, checked, summarised and freed in turn
-        # (station.estimate.summaries keeps the summaries with the capture for lsq.estimate)
+        # (station.estimate.summaries keeps the summaries with the capture for lsq.estimate),
+        # while the fit's modules (scipy) are imported on another thread
         from station.estimate.summaries import summarise
 
+        importing = preload.start("station.estimate.lsq", "station.estimate.verdict", "station.io.calfile")
         notes = {}
 
         def check_segment(seg):
@@ -195,12 +197,15 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
                 notes[seg.name] = note
 
         summarise(capture, check_segment=check_segment)
+        importing.join()
         excluded = [notes[seg.name] for seg in capture.segments if seg.name in notes]
     else:
         capture.load_samples()
         check_resolution(capture)
         excluded = exclude_lossy_segments(capture, max_missing_fraction, max_gap_s)
     cal, method = estimate_with(capture, resolved, effects, registry)
+    from station.estimate.verdict import judge
+
     cal.fit.setdefault("notes", []).extend(excluded)
     if excluded:
         cal.fit["excluded_segments"] = [n.split()[1] for n in excluded]

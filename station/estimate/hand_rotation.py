@@ -30,15 +30,16 @@ rotation about the vertical: every rotation gives two equations.
 
 The integration is vectorised over all turns: per-sample rotation vectors -> quaternions, then
 the ordered product by pairwise reduction (log2 N steps of scipy Rotation products).
+
+scipy is imported where it is used, not with the module: summaries.py imports this module to
+find the hand turns while a capture is read, and `station estimate` imports scipy on another
+thread meanwhile (station.estimate.estimate_capture).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import minimize_scalar
-from scipy.spatial.transform import Rotation
-
 from station.model.geometry import cross
 
 STEADY_SPREAD = 0.3         # as summaries.STEADY_SPREAD: a rotation whose rate varies more is a hand turn
@@ -124,6 +125,8 @@ class Integrator:
         The last result is kept: the Jacobian's columns that move neither give it again.  While
         linearised (see linearise()), any other gyro_inverse and bias give the first-order turn
         about the linearisation point instead of a new integration."""
+        from scipy.spatial.transform import Rotation
+
         key = np.concatenate([np.ravel(gyro_inverse), np.ravel(bias)]).tobytes()
         if key == self._key:
             return self._last
@@ -153,6 +156,8 @@ class Integrator:
     def linearise(self, gyro_inverse: np.ndarray, bias: np.ndarray) -> None:
         """Integrate at (gyro_inverse, bias) and keep the first-order change of every turn with
         them: until exact() is called, turns() at other values costs no integration."""
+        from scipy.spatial.transform import Rotation
+
         self._tangent = None
         self.turns(gyro_inverse, bias)
         levels = self._levels
@@ -186,6 +191,8 @@ class Integrator:
         self._tangent = None
 
     def _linearised(self, gyro_inverse, bias) -> Rotation:
+        from scipy.spatial.transform import Rotation
+
         M0, b0, dR0, T, B = self._tangent
         d_phi = np.einsum("haij,ij->ha", T, gyro_inverse - M0) - B @ (M0 @ (bias - b0))
         return dR0 * Rotation.from_rotvec(d_phi)
@@ -193,6 +200,8 @@ class Integrator:
     def turns_batch(self, gyro_inverse: np.ndarray, bias: np.ndarray) -> Rotation:
         """turns() for every row of gyro_inverse (B,3,3) and bias (B,3): B*H turns, the H turns
         of each row together (to first order about the linearisation point while there is one)."""
+        from scipy.spatial.transform import Rotation
+
         if self._tangent is None:
             return Rotation.concatenate([self.turns(m, b) for m, b in zip(gyro_inverse, bias)])
         M0, b0, dR0, T, B = self._tangent
@@ -228,6 +237,8 @@ def start_scale(integrator: Integrator, bias: np.ndarray, ups: np.ndarray, nomin
     the manifest's nominal count for raw) refined, or for raw without a nominal scale the
     median ratio of the integrated turn to the gravity direction's change, refined; the
     refinement minimises the mismatch over the scale (a bounded 1-D search)."""
+    from scipy.optimize import minimize_scalar
+
     if nominal is None:
         ratios = []
         for h in integrator.hands:

@@ -16,6 +16,7 @@ import numpy as np
 import yaml
 
 import station
+from station.io import yaml_text
 from station.model.calibration import Calibration
 from station.core.errors import UserError
 from station.core.units import ACCEL_UNITS, GYRO_UNITS, gyro_to_dps_factor
@@ -175,18 +176,6 @@ class _Dumper(yaml.SafeDumper):
         return True
 
 
-class _NoAliasLoader(yaml.SafeLoader):
-    """yaml.SafeLoader that refuses aliases (``*name``): a calibration file never needs them,
-    and expanded aliases can make a small file enormous (the "billion laughs")."""
-
-    def compose_node(self, parent, index):
-        if self.check_event(yaml.AliasEvent):
-            mark = self.peek_event().start_mark
-            raise yaml.MarkedYAMLError(problem="aliases (*name) are not allowed in a calibration file",
-                                       problem_mark=mark)
-        return super().compose_node(parent, index)
-
-
 def _read_bytes(path: Path) -> bytes:
     """The file's bytes: a regular file (not a FIFO, device or folder) of at most MAX_BYTES."""
     try:
@@ -228,7 +217,7 @@ def read_calfile(path) -> dict:
     except UnicodeDecodeError as e:
         raise UserError(f"{path}: not UTF-8 text (byte {e.start}): not a calibration file") from None
     try:
-        doc = yaml.load(text, Loader=_NoAliasLoader)
+        doc = yaml_text.safe_load(text, allow_aliases=False)
     except yaml.MarkedYAMLError as e:
         line = f"line {e.problem_mark.line + 1}: " if e.problem_mark is not None else ""
         raise UserError(f"{path}: {line}not valid YAML: {e.problem}") from None

@@ -23,6 +23,7 @@ from pathlib import Path, PurePosixPath, PureWindowsPath
 import numpy as np
 import yaml
 
+from station.io import yaml_text
 from station.core.errors import CaptureError, UserError
 from station.core.units import ACCEL_UNITS, GYRO_UNITS
 
@@ -196,7 +197,7 @@ def read_capture(path, *, load_data=True):
     path = Path(path)
     directory, manifest_file = (path.parent, path) if _is_file(path) else (path, path / MANIFEST)
     try:
-        raw = yaml.safe_load(read_regular_file(manifest_file, limit=MAX_MANIFEST_BYTES))
+        raw = yaml_text.safe_load(read_regular_file(manifest_file, limit=MAX_MANIFEST_BYTES))
     except FileNotFoundError:
         raise CaptureError(manifest_file, "no manifest: not a capture bundle") from None
     except OSError as e:
@@ -910,7 +911,7 @@ class CaptureWriter:
         """
         directory = Path(directory)
         capture = read_capture(directory, load_data=False)
-        manifest = yaml.safe_load(read_regular_file(directory / MANIFEST, limit=MAX_MANIFEST_BYTES))
+        manifest = yaml_text.safe_load(read_regular_file(directory / MANIFEST, limit=MAX_MANIFEST_BYTES))
         kept = []
         for entry, segment in zip(manifest["segments"], capture.segments):
             if segment.status == "complete":

@@ -20,7 +20,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from station.core import units
 
@@ -75,6 +74,8 @@ class Calibration:
 
     @property
     def inter_triad_rad(self) -> np.ndarray:
+        from scipy.spatial.transform import Rotation   # not at import: estimate reads meanwhile
+
         return Rotation.from_matrix(self.R_po).as_rotvec()
 
     @property

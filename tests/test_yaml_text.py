@@ -1,0 +1,69 @@
+"""station.io.yaml_text: libyaml's speed with the pure-Python loader's results, errors and safety."""
+import subprocess
+import sys
+
+import pytest
+import yaml
+from hypothesis import given, settings, strategies as st
+
+from station.io import yaml_text
+
+DOCS = [
+    "a: 1\nb: [1, 2.5, -3e-4]\nc: {d: x, e: null}\n",
+    "format: station-capture/1\nsegments:\n  - name: pos01\n    t0: 2026-11-23T10:00:00Z\n",
+    "- - - 1\n",
+    "\ufeffkey: value\n",
+    "x: &a [1, 2]\ny: *a\n",
+]
+
+
+@pytest.mark.parametrize("text", DOCS)
+def test_same_document_as_safe_load(text):
+    assert yaml_text.safe_load(text) == yaml.safe_load(text)
+    assert yaml_text.safe_load(text.encode("utf-8")) == yaml.safe_load(text.encode("utf-8"))
+
+
+@pytest.mark.parametrize("text", ["a: [1, 2\n", "a: 1\n b: 2\n", "a: !!python/object:os.system x\n",
+                                  "t: 2026-13-01\n", "\tkey: 1\n"])
+def test_same_error_as_safe_load(text):
+    with pytest.raises(Exception) as expected:
+        yaml.safe_load(text)
+    with pytest.raises(type(expected.value)) as got:
+        yaml_text.safe_load(text)
+    assert str(got.value) == str(expected.value)
+
+
+def test_aliases_refused_with_their_line():
+    with pytest.raises(yaml.MarkedYAMLError) as e:
+        yaml_text.safe_load("x: &a [1]\ny: 2\nz: *a\n", allow_aliases=False)
+    assert "aliases" in e.value.problem and e.value.problem_mark.line == 2
+
+
+def test_deep_nesting_is_an_error_not_a_crash():
+    """The C loader segfaults on 100,000 nested brackets: such text never reaches it."""
+    code = ("import sys; from station.io import yaml_text\n"
+            "try:\n    yaml_text.safe_load('[' * 100000 + ']' * 100000)\n"
+            "except RecursionError:\n    print('refused')\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0 and run.stdout.strip() == "refused", run.stderr[-500:]
+
+
+def test_the_c_loader_is_used_when_present():
+    if yaml_text._C_LOADER is None:
+        pytest.skip("PyYAML without libyaml")
+    assert yaml_text._c_safe(DOCS[1], True) and not yaml_text._c_safe("[" * 6000, True)
+    assert not yaml_text._c_safe(DOCS[4], False)
+
+
+@settings(max_examples=1500, deadline=None)
+@given(st.text(alphabet="ab:-[]{},\n #&*!'\"0123456789.?|>%@`\t\\eE+_~", max_size=80))
+def test_fuzz_same_outcome_as_safe_load(text):
+    try:
+        expected = ("ok", yaml.safe_load(text))
+    except Exception as e:  # noqa: BLE001
+        expected = ("error", type(e).__name__)
+    try:
+        got = ("ok", yaml_text.safe_load(text))
+    except Exception as e:  # noqa: BLE001
+        got = ("error", type(e).__name__)
+    assert got == expected
