@@ -186,7 +186,10 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
         # while the fit's modules (scipy) are imported on another thread
         from station.estimate.summaries import summarise
 
-        importing = preload.start("station.estimate.lsq", "station.estimate.verdict", "station.io.calfile")
+        try:
+            import pyarrow.csv  # noqa: F401 - the reader's engine: imported before the thread starts
+        except ImportError:     # pragma: no cover - a dependency; the line-by-line reader still works
+            pass
         notes = {}
 
         def check_segment(seg):
@@ -196,8 +199,8 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
             if note:
                 notes[seg.name] = note
 
-        summarise(capture, check_segment=check_segment)
-        importing.join()
+        with preload.importing("station.estimate.lsq", "station.estimate.verdict", "station.io.calfile"):
+            summarise(capture, check_segment=check_segment)
         excluded = [notes[seg.name] for seg in capture.segments if seg.name in notes]
     else:
         capture.load_samples()
