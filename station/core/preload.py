@@ -35,9 +35,12 @@ def importing(*modules: str):
             except BaseException:       # noqa: BLE001 - raised again by the caller's own import
                 return
 
+    import os
+    if os.environ.get("X_NOPRELOAD"):
+        run = lambda: None
     thread = threading.Thread(target=run, name="station-preload", daemon=True)
     interval = sys.getswitchinterval()
-    sys.setswitchinterval(min(interval, SWITCH_INTERVAL_S))
+    sys.setswitchinterval(float(os.environ.get("X_SWITCH", min(interval, SWITCH_INTERVAL_S))))
     thread.start()
     try:
         yield thread
