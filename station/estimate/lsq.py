@@ -351,8 +351,9 @@ class Model:
                         owned += list(rows.get(("weak_axis", j), []))
                         owned += [r for i, rot in enumerate(self.s.rotations) if rot.group == j
                                   for r in rows.get(("rot", i), [])]
-                    for k in range(sl.stop - sl.start):
-                        local.setdefault((key, k), []).append((sl.start + k, np.array(owned, dtype=int)))
+                    for k in range(sl.stop - sl.start):     # and its own prior's row, if it has one
+                        own = owned + list(rows.get(("prior", sl.start + k), []))
+                        local.setdefault((key, k), []).append((sl.start + k, np.array(own, dtype=int)))
                     break
         local_cols = {c for members in local.values() for c, _ in members}
         dense = [[(c, None)] for c in range(L.size) if c not in local_cols]
