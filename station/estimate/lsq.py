@@ -668,7 +668,7 @@ class Model:
         P = X[:, self._st_cols]                                                  # (B,S,d)
         if self.with_latitude:
             C = matrix_from_rotvec(P)                                           # (B,S,3,3)
-            f_s, w_s, up = np.einsum("bsij,skj->kbsi", C, self._st_ref_vectors)
+            f_s, w_s, up = np.moveaxis(C @ self._st_ref_vectors.transpose(0, 2, 1), -1, 0)     # (3,B,S,3)
         else:
             up = normalised(self._st_ref + np.einsum("bsk,skc->bsc", P, self._st_basis))
             f_s = self.f_n[2] * up
@@ -696,8 +696,8 @@ class Model:
         # the model's raw outputs at every point, effects included
         f_p = np.concatenate([f_s, f_r.reshape(B, -1, 3)], axis=1)              # (B, S + R PHASES, 3)
         w_p = np.concatenate([w_s, w_r.reshape(B, -1, 3)], axis=1)
-        a = np.einsum("bnj,bij->bni", f_p, Ma) + b_a[:, None, :]
-        w = np.einsum("bnj,bij->bni", w_p, Mg) + b_g[:, None, :]
+        a = f_p @ Ma.transpose(0, 2, 1) + b_a[:, None, :]     # matmul: ~10x einsum here
+        w = w_p @ Mg.transpose(0, 2, 1) + b_g[:, None, :]
         if self.effects:
             a, w = self._add_effects(X, a, w, f_p, w_p, Ma, Mg, l, w_k, wdot_k)
         blocks = []
@@ -734,8 +734,8 @@ class Model:
         # rotations: mean and harmonics of the accelerometers, gyro integral
         a_r = a[:, S:].reshape(B, R, PHASES, 3)
         w_mean = w[:, S:].reshape(B, R, PHASES, 3).mean(axis=2)
-        harmonics = np.einsum("hk,brkc->brhc", self._harmonics, a_r)
-        integral = w_mean * self._rot_duration[:, None] + np.einsum("brj,bij->bri", earth_integral, Mg)
+        harmonics = self._harmonics @ a_r                                        # (B,R,5,3)
+        integral = w_mean * self._rot_duration[:, None] + earth_integral @ Mg.transpose(0, 2, 1)
         for eff in self._integral_effects:
             for n in range(B):
                 px = X[n, L[f"effect:{eff.id}"]]
@@ -743,7 +743,7 @@ class Model:
                     term = eff.integral(px, r)
                     if term is not None:
                         integral[n, i] += term
-        gyro_rows = np.einsum("rij,brj->bri", self._rot_gyro_whiten, self._rot_gyro - integral)
+        gyro_rows = (self._rot_gyro_whiten @ (self._rot_gyro - integral)[..., None])[..., 0]
         blocks.append(np.concatenate([((self._rot_data - harmonics) * self._rot_weight).reshape(B, R, 15),
                                       gyro_rows], axis=2))
         blocks.append((X[:, self._prior_cols] / self._prior_sigma)[..., None])
