@@ -10,6 +10,8 @@ eps D / h per row, D the size of the whitened numbers that cancel in the row (it
 prediction; tests/test_lsq_vectorised.cancelling_size).  The bound is 1e-6 of the column's norm
 plus 4 eps D / h.  Forward differences (the fallback) are held to the bound of
 tests/test_lsq_vectorised.py: 1e-4 of the column's norm plus 16 eps D / h_forward."""
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -18,11 +20,13 @@ from station.io.scheme import load_scheme
 from station.model import LIBRARY
 from station.model.effect import Effect, Param
 from station.model.raw_counts import in_capture_units
+from station.model.registry import EffectRegistry
 from station.simulate import dryrun
 from lsq_reference import PerSegmentModel
 from test_lsq_vectorised import cancelling_size, random_x
 
 EPS = np.finfo(float).eps
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "effects"
 
 
 @pytest.fixture(scope="module")
@@ -70,6 +74,19 @@ def test_every_library_effect_at_once(optimal9):
     effects = [LIBRARY[e]() for e in sorted(LIBRARY)]
     model = lsq.Model(optimal9, effects)
     x = random_x(model, np.random.default_rng(8))
+    J = model.jacobian(x)
+    assert model.complex_step
+    assert excess(model, effects, x, J, np.inf, 1e-6, 0.0) <= 1
+
+
+@pytest.mark.parametrize("spec", ["accel_cross_coupling.py:AccelCrossCoupling", "gyro_rate_squared.py:GyroRateSquared"])
+def test_the_example_plugins_are_complex_step_safe(optimal9, spec):
+    """docs/effects.md's examples declare complex_step = True: it must be true."""
+    registry = EffectRegistry(entry_points=False, environment=False)
+    (eid,) = registry.add(str(EXAMPLES / spec))
+    effects = [registry.create(eid)]
+    model = lsq.Model(optimal9, effects)
+    x = random_x(model, np.random.default_rng(10))
     J = model.jacobian(x)
     assert model.complex_step
     assert excess(model, effects, x, J, np.inf, 1e-6, 0.0) <= 1
