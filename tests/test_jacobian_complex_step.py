@@ -123,7 +123,21 @@ class ClaimsSafeButReal(GyroRateSquaredAbs):
         return np.abs(super().gyro(x, ctx))
 
 
-@pytest.mark.parametrize("plugin", [GyroRateSquaredAbs, ClaimsSafeButCasts, ClaimsSafeButReal])
+class ClaimsSafeIntegralReal(Effect):
+    """A clock offset on the gyro integrals (as time_offset) that says it is safe, then drops the
+    imaginary part with .real."""
+    id = "plugin_integral_real"
+    complex_step = True
+
+    @property
+    def params(self):
+        return (Param("clock_ms", "ms", 1e3, 3.0, 200.0),)
+
+    def integral(self, x, rotation):
+        return x[0].real * (rotation.gyro_end - rotation.gyro_start)
+
+
+@pytest.mark.parametrize("plugin", [GyroRateSquaredAbs, ClaimsSafeButCasts, ClaimsSafeButReal, ClaimsSafeIntegralReal])
 def test_an_unsafe_plugin_falls_back_to_forward_differences(optimal9, plugin):
     effects = [LIBRARY["accel_nonlinearity"](), plugin()]
     model = lsq.Model(optimal9, effects)

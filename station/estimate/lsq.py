@@ -630,7 +630,10 @@ class Model:
         """The residuals of every row of X (B, parameters): (B, rows), in one vectorised pass."""
         self._ensure_layout()
         self.evaluations += len(X)
-        flat = np.concatenate([b.reshape(len(X), -1) for b in self._blocks(X)], axis=1)
+        with warnings.catch_warnings():
+            if np.iscomplexobj(X):      # a complex number cast to float drops the derivative: an error
+                warnings.simplefilter("error", np.exceptions.ComplexWarning)
+            flat = np.concatenate([b.reshape(len(X), -1) for b in self._blocks(X)], axis=1)
         return flat[:, self._perm]
 
     def _ensure_layout(self):
@@ -740,7 +743,7 @@ class Model:
             for n in range(B):
                 px = X[n, L[f"effect:{eff.id}"]]
                 for i, r in enumerate(s.rotations):
-                    term = eff.integral(px, r)
+                    term = _checked(eff, eff.integral, px, r)
                     if term is not None:
                         integral[n, i] += term
         gyro_rows = (self._rot_gyro_whiten @ (self._rot_gyro - integral)[..., None])[..., 0]
@@ -751,35 +754,21 @@ class Model:
 
     def _add_effects(self, X, a, w, f_p, w_p, Ma, Mg, l, w_k, wdot_k):
         """a and w with every effect's terms added (the Effect interface: one parameter vector,
-        all sample points).  Under complex step an effect whose term comes back real, or that
-        casts a complex number to float, raises _ComplexUnsafe."""
+        all sample points; _checked: under complex step an unsafe term raises _ComplexUnsafe)."""
         L, S, B = self.layout, len(self.s.statics), len(X)
         zeros = np.zeros((S, 3))
-        complex_step = np.iscomplexobj(X)
         a, w = a.copy(), w.copy()
-        with warnings.catch_warnings():
-            if complex_step:
-                warnings.simplefilter("error", np.exceptions.ComplexWarning)
-            for n in range(B):
-                ctx = SampleContext(
-                    f_p=f_p[n], w_p=w_p[n],
-                    w_table=np.concatenate([zeros, (w_k * l[n][:, None, :]).reshape(-1, 3)]),
-                    wdot_table=np.concatenate([zeros, (wdot_k * l[n][:, None, :]).reshape(-1, 3)]),
-                    temp_c=self._ctx_temp, accel_matrix=Ma[n], gyro_matrix=Mg[n], t_s=self._ctx_t,
-                    segment_index=self._ctx_index, temp_rate_c_per_s=self._ctx_temp_rate)
-                for eff in self.effects:
-                    px = X[n, L[f"effect:{eff.id}"]]
-                    try:
-                        da, dw = eff.accel(px, ctx), eff.gyro(px, ctx)
-                    except (TypeError, np.exceptions.ComplexWarning):
-                        if complex_step:
-                            raise _ComplexUnsafe(eff.id)
-                        raise
-                    for term, out in ((da, a), (dw, w)):
-                        if term is None:
-                            continue
-                        if complex_step and not np.iscomplexobj(term):
-                            raise _ComplexUnsafe(eff.id)
+        for n in range(B):
+            ctx = SampleContext(
+                f_p=f_p[n], w_p=w_p[n],
+                w_table=np.concatenate([zeros, (w_k * l[n][:, None, :]).reshape(-1, 3)]),
+                wdot_table=np.concatenate([zeros, (wdot_k * l[n][:, None, :]).reshape(-1, 3)]),
+                temp_c=self._ctx_temp, accel_matrix=Ma[n], gyro_matrix=Mg[n], t_s=self._ctx_t,
+                segment_index=self._ctx_index, temp_rate_c_per_s=self._ctx_temp_rate)
+            for eff in self.effects:
+                px = X[n, L[f"effect:{eff.id}"]]
+                for term, out in ((_checked(eff, eff.accel, px, ctx), a), (_checked(eff, eff.gyro, px, ctx), w)):
+                    if term is not None:
                         out[n] = out[n] + term
         return a, w
 
@@ -804,6 +793,22 @@ def _lower_unit_rows_batch(angles: np.ndarray) -> np.ndarray:
     T[:, 2, 0], T[:, 2, 1] = s_zy, s_zx
     T[:, 2, 2] = np.sqrt(positive_part(1.0 - s_zy**2 - s_zx**2))
     return T
+
+
+def _checked(effect, term, px, *args):
+    """An effect's term (accel, gyro or integral) at px.  Under complex step (px complex) a term
+    that comes back real, or a complex number cast to float on the way (TypeError, numpy's
+    ComplexWarning, made an error while the complex batch runs), raises _ComplexUnsafe."""
+    complex_step = np.iscomplexobj(px)
+    try:
+        out = term(px, *args)
+    except (TypeError, np.exceptions.ComplexWarning):
+        if complex_step:
+            raise _ComplexUnsafe(effect.id)
+        raise
+    if complex_step and out is not None and not np.iscomplexobj(out):
+        raise _ComplexUnsafe(effect.id)
+    return out
 
 
 class _ComplexUnsafe(Exception):
