@@ -1,6 +1,9 @@
 """Wall time and peak memory of `station estimate` on a full optimal9 dry-run capture, and the
 least-squares fit alone: its CPU seconds, residual evaluations and ms per evaluation, paired in
-this process with the per-segment residual and Jacobian it replaced (tests/lsq_reference.py).
+this process with the per-segment residual and Jacobian it replaced (tests/lsq_reference.py);
+and one Jacobian at the solution: complex step (the fit's) against forward differences of the
+same model (what it replaced, and the fallback for unsafe plugins), timed in alternation, and
+the largest difference of each from central differences (per column, relative to its norm).
 
 Records the capture once per sample rate, then times the command (a fresh process each time,
 reading the files included).  Usage:
@@ -66,6 +69,38 @@ def fit_figures(s, effects, model_class, repeat):
     return float(np.median(times)), result.model.evaluations, result
 
 
+def jacobian_figures(s, effects, x, pairs=15):
+    """(median ms per Jacobian by complex step, by forward differences, the largest difference
+    of each from central differences relative to the column's norm), the two timed alternately
+    on the same model at x."""
+    model = lsq.Model(copy.deepcopy(s), [LIBRARY[e]() for e in effects])
+    times = {"complex step": [], "forward differences": []}
+    J = {}
+    for _ in range(pairs):
+        for method in times:
+            model._unsafe = [] if method == "complex step" else ["benchmark"]
+            model._last_jacobian = None
+            t0 = time.process_time()
+            J[method] = model.jacobian(x)
+            times[method].append(time.process_time() - t0)
+    # central differences are exact only to their truncation (large steps) and rounding (small
+    # ones, and columns whose rows cancel large numbers): each column is compared with the
+    # closest of five steps, 1e-1 to 1e-5 of the parameter's size (a term linear in its parameter is exact at the largest), for both methods
+    errors = {m: np.full(len(x), np.inf) for m in times}
+    for relative in (1e-1, 1e-2, 1e-3, 1e-4, 1e-5):
+        h = relative * model._sizes(x)
+        central = np.empty_like(J["complex step"])
+        for c in range(len(x)):
+            xp, xm = x.copy(), x.copy()
+            xp[c] += h[c]
+            xm[c] -= h[c]
+            central[:, c] = (model.residuals(xp) - model.residuals(xm)) / (2 * h[c])
+        norms = np.maximum(np.linalg.norm(central, axis=0), 1e-300)
+        for m in times:
+            errors[m] = np.minimum(errors[m], np.max(np.abs(J[m] - central), axis=0) / norms)
+    return [1e3 * float(np.median(times[m])) for m in times] + [float(np.max(errors[m])) for m in times]
+
+
 def compare_fits(cap, repeat, effects):
     s = summarise(read_capture(cap))
     label = f" + {len(effects)} effects" if effects else ""
@@ -77,6 +112,11 @@ def compare_fits(cap, repeat, effects):
     dz = np.max(np.abs(a.x - b.x) / np.sqrt(np.maximum(np.diag(b.covariance), 1e-300)))
     print(f"  fit{label}: vectorised / before = {new[0] / old[0]:.3f} in CPU time; the two solutions differ "
           f"by at most {dz:.1e} sigma, chi2 {a.chi2:.3f} vs {b.chi2:.3f}")
+    cs, fd, cs_err, fd_err = jacobian_figures(s, effects, a.x)
+    print(f"  Jacobian{label} at the solution ({a.model.layout.size} columns, {len(a.model._groups)} groups): "
+          f"complex step {cs:.2f} ms, forward differences {fd:.2f} ms (complex / forward {cs / fd:.2f}); "
+          f"largest difference from central differences (closest of 5 steps), of a column's norm: complex step {cs_err:.1e}, "
+          f"forward differences {fd_err:.1e}")
 
 
 def main():

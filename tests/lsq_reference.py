@@ -44,6 +44,18 @@ class PerSegmentModel(Model):
                     J[owned, c] = d[owned] / h
         return J
 
+    def central_jacobian(self, x, relative=1e-4) -> tuple[np.ndarray, np.ndarray]:
+        """(J, steps): central differences of every column, steps `relative` times each
+        parameter's size (Model._sizes); the hand turns integrated anew for each."""
+        h = relative * self._sizes(x)
+        J = np.empty((len(self.residuals(x)), len(x)))
+        for c in range(len(x)):
+            xp, xm = x.copy(), x.copy()
+            xp[c] += h[c]
+            xm[c] -= h[c]
+            J[:, c] = (self.residuals(xp) - self.residuals(xm)) / (2 * h[c])
+        return J, h
+
     def _axis(self, x, k):
         p = x[self.layout[f"axis{k}"]]
         l0 = self.axis_ref[k]

@@ -22,6 +22,7 @@ class AccelCrossCoupling(Effect):
     signature = ("accelerometer, static segments: an error at the attitudes where gravity is shared "
                  "between two axes, zero at ±1 g on one axis")
     signature_variable = "gravity_along_axis"
+    complex_step = True         # accel() is complex-analytic (products and sums only)
 
     @property
     def params(self):
@@ -29,7 +30,7 @@ class AccelCrossCoupling(Effect):
 
     def accel(self, x, ctx):
         f = ctx.f_p / G0
-        out = np.zeros_like(ctx.f_p)
+        out = np.zeros(ctx.f_p.shape, np.result_type(ctx.f_p, x))     # complex under complex step
         for k, (i, j) in enumerate(PAIRS):
             out[:, i] += x[k] * UG * f[:, i] * f[:, j]
         return out

@@ -3,9 +3,8 @@
 Load it with ``station estimate CAPTURE --add examples/effects/gyro_rate_squared.py:GyroRateSquared``
 (or ``--plugin`` to make it a candidate of ``station diagnose``); docs/effects.md explains each part.
 """
-import numpy as np
-
 from station.model.effect import Effect, Param
+from station.model.geometry import analytic_abs
 
 
 class GyroRateSquared(Effect):
@@ -19,6 +18,7 @@ class GyroRateSquared(Effect):
     signature = ("gyro, rotation segments: an integrated-rate error growing with the square of the "
                  "rate, opposite signs in the two directions")
     signature_variable = "rate_squared"
+    complex_step = True         # gyro() is complex-analytic: |w| through analytic_abs, not np.abs
 
     @property
     def params(self):
@@ -27,5 +27,5 @@ class GyroRateSquared(Effect):
 
     def gyro(self, x, ctx):
         w = ctx.w_p @ ctx.gyro_matrix.T          # the rate along each gyro's sensing axis, deg/s
-        return 1e-6 * x * w * np.abs(w)
+        return 1e-6 * x * w * analytic_abs(w)
 

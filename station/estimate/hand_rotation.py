@@ -40,7 +40,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
 from station.model.geometry import cross
+from station.model.rotation import matrix_from_rotvec, quat_product
 
 STEADY_SPREAD = 0.3         # as summaries.STEADY_SPREAD: a rotation whose rate varies more is a hand turn
 MAX_GAP_S = 1.0             # static end -> turn start (and turn end -> static start), IMU still
@@ -141,7 +143,7 @@ class Integrator:
         Q[self.flat] = np.column_stack([theta * k[:, None], np.cos(half)])
         levels = [Q.reshape(self.shape)]
         while levels[-1].shape[1] > 1:
-            levels.append(_product(levels[-1][:, 0::2], levels[-1][:, 1::2]))
+            levels.append(quat_product(levels[-1][:, 0::2], levels[-1][:, 1::2]))
         self._key, self._last = key, Rotation.from_quat(levels[-1][:, 0])
         self._levels, self._theta = levels, theta
         return self._last
@@ -166,7 +168,7 @@ class Integrator:
         for level in reversed(levels[:-1]):          # the exclusive suffix product of every node
             below = np.empty_like(level)
             below[:, 1::2] = suffix
-            below[:, 0::2] = _product(level[:, 1::2], suffix)
+            below[:, 0::2] = quat_product(level[:, 1::2], suffix)
             suffix = below
         S = Rotation.from_quat(suffix.reshape(-1, 4)[self.flat]).as_matrix()     # (N,3,3)
         theta = self._theta
@@ -197,29 +199,17 @@ class Integrator:
         d_phi = np.einsum("haij,ij->ha", T, gyro_inverse - M0) - B @ (M0 @ (bias - b0))
         return dR0 * Rotation.from_rotvec(d_phi)
 
-    def turns_batch(self, gyro_inverse: np.ndarray, bias: np.ndarray) -> Rotation:
-        """turns() for every row of gyro_inverse (B,3,3) and bias (B,3): B*H turns, the H turns
-        of each row together (to first order about the linearisation point while there is one)."""
-        from scipy.spatial.transform import Rotation
-
+    def turns_batch(self, gyro_inverse: np.ndarray, bias: np.ndarray) -> np.ndarray:
+        """The rotation matrices (B*H,3,3) of turns() for every row of gyro_inverse (B,3,3) and
+        bias (B,3), the H turns of each row together.  While linearised: dR0 exp(d_phi), to
+        first order about the linearisation point, complex-step safe (station/model/rotation.py):
+        the Jacobian's imaginary steps give d_phi's derivative exactly."""
         if self._tangent is None:
-            return Rotation.concatenate([self.turns(m, b) for m, b in zip(gyro_inverse, bias)])
+            return np.concatenate([self.turns(m, b).as_matrix() for m, b in zip(gyro_inverse, bias)])
         M0, b0, dR0, T, B = self._tangent
         d_phi = (np.einsum("haij,nij->nha", T, gyro_inverse - M0)
                  - np.einsum("hij,nj->nhi", B, (bias - b0) @ M0.T))
-        base = Rotation.from_quat(np.tile(dR0.as_quat(), (len(bias), 1)))
-        return base * Rotation.from_rotvec(d_phi.reshape(-1, 3))
-
-
-def _product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product a b of quaternions (..., 4), scalar last (scipy's order): the rotation
-    b first, then a (as Rotation a * b), vectorised over the leading axes."""
-    ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
-    bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
-    return np.stack([aw * bx + bw * ax + ay * bz - az * by,
-                     aw * by + bw * ay + az * bx - ax * bz,
-                     aw * bz + bw * az + ax * by - ay * bx,
-                     aw * bw - ax * bx - ay * by - az * bz], axis=-1)
+        return (dR0.as_matrix()[None] @ matrix_from_rotvec(d_phi)).reshape(-1, 3, 3)
 
 
 def mismatch(integrator: Integrator, gyro_inverse, bias, ups: np.ndarray) -> float:

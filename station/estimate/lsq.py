@@ -19,11 +19,13 @@ The data are the segment summaries (station/estimate/summaries.py), each divided
 the encoder's angle error enters the gyro integrals' covariance.  The solution starts from the
 2010 algebraic one; the covariance is (J^T J)^-1 at the solution.
 The residual is computed for all segments (and for a batch of parameter vectors) in one
-vectorised pass; the Jacobian is forward differences evaluated as one batch, with the hand turns
-to first order about the point (docs/method-lsq.md, "How the fit is computed").
+vectorised pass; the Jacobian is taken by complex step (exact to rounding) in one batch, with the
+hand turns to first order about the point, or by forward differences when an effect is not
+complex-step safe (docs/method-lsq.md, "How the fit is computed").
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -35,8 +37,9 @@ from station.model.calibration import Calibration, misalignment_angles
 from station.core.errors import UserError
 from station.estimate import hand_rotation, zhang2010
 from station.estimate.summaries import Summaries, summarise
-from station.model.geometry import cross, tangent_basis
+from station.model.geometry import cross, normalised, positive_part, tangent_basis
 from station.model.effect import Effect, SampleContext
+from station.model.rotation import matrix_from_rotvec
 
 EARTH_RATE_RAD = 7.292115e-5
 WEAK_PRIOR_RAD = 3.0             # a prior on nuisance angles that only matters when nothing else does
@@ -44,6 +47,8 @@ PHASES = 12                      # phase grid for the harmonics of a rotation (e
 UP = np.array([0.0, 0.0, 1.0])
 # zero-mean priors (internal units) on the gyro block when no rotation has a known angle
 NO_ROTATION_PRIORS = {"gyro_scale": 1e3, "gyro_misalignment": 1e3, "gyro_bias": 1e6, "inter_triad": 1e3}
+COMPLEX_STEP = 1e-20             # the Jacobian's imaginary step, relative to each parameter's size
+FORWARD_STEP = 1e-7              # the forward-difference step (effects that are not complex-step safe)
 
 # Parameters of the base model: name, internal -> reported scale, reported unit
 GLOBAL = [("accel_scale", 1.0, "1"), ("accel_misalignment", 1 / units.ARCSEC_RAD, "arcsec"),
@@ -135,7 +140,7 @@ def _start(s: Summaries) -> Start:
 
 def _start_gyro_matrix(st: Start) -> np.ndarray:
     """M_g = K_g T_g R_po of a start."""
-    return np.diag(st.kg) @ lower_unit_rows(st.gamma) @ Rotation.from_rotvec(st.theta).as_matrix()
+    return np.diag(st.kg) @ lower_unit_rows(st.gamma) @ matrix_from_rotvec(st.theta)
 
 
 def _pairs(s: Summaries) -> list:
@@ -319,7 +324,7 @@ class Model:
         L = self.layout
         Ma = np.diag(x[L["accel_scale"]]) @ lower_unit_rows(x[L["accel_misalignment"]])
         Mg = (np.diag(x[L["gyro_scale"]]) @ lower_unit_rows(x[L["gyro_misalignment"]])
-              @ Rotation.from_rotvec(x[L["inter_triad"]]).as_matrix())
+              @ matrix_from_rotvec(x[L["inter_triad"]]))
         return Ma, Mg
 
     def _column_groups(self):
@@ -346,8 +351,9 @@ class Model:
                         owned += list(rows.get(("weak_axis", j), []))
                         owned += [r for i, rot in enumerate(self.s.rotations) if rot.group == j
                                   for r in rows.get(("rot", i), [])]
-                    for k in range(sl.stop - sl.start):
-                        local.setdefault((key, k), []).append((sl.start + k, np.array(owned, dtype=int)))
+                    for k in range(sl.stop - sl.start):     # and its own prior's row, if it has one
+                        own = owned + list(rows.get(("prior", sl.start + k), []))
+                        local.setdefault((key, k), []).append((sl.start + k, np.array(own, dtype=int)))
                     break
         local_cols = {c for members in local.values() for c, _ in members}
         dense = [[(c, None)] for c in range(L.size) if c not in local_cols]
@@ -381,10 +387,10 @@ class Model:
                 labels += [("prior", "prior", quantity, str(j))]
         return labels
 
-    def _steps(self, x) -> np.ndarray:
-        """Forward-difference steps: 1e-7 of each parameter's size, at least of 1e-2 (internal
-        units) or, for an effect's parameter, of its typical size when that is finite (a step of
-        1e-9 on a parameter whose typical size is 100 left the column to rounding noise)."""
+    def _sizes(self, x) -> np.ndarray:
+        """Each parameter's size, the unit of its Jacobian step: |x|, at least 1e-2 (internal
+        units) or, for an effect's parameter, its typical size when that is finite (a forward
+        step of 1e-9 on a parameter whose typical size is 100 left the column to rounding noise)."""
         if not hasattr(self, "_step_floor"):
             floor = np.full(self.layout.size, 1e-2)
             for e in self.effects:
@@ -392,7 +398,20 @@ class Model:
                          for p in e.params]
                 floor[self.layout[f"effect:{e.id}"]] = np.maximum(sizes, 1e-2)
             self._step_floor = floor
-        return 1e-7 * np.maximum(np.abs(x), self._step_floor)
+        return np.maximum(np.abs(x), self._step_floor)
+
+    @property
+    def complex_step(self) -> bool:
+        """Whether the Jacobian is taken by complex step: every effect says it is safe
+        (``Effect.complex_step``) and none has shown otherwise (_ComplexUnsafe)."""
+        if self._unsafe is None:
+            self._unsafe = [e.id for e in self.effects if not getattr(e, "complex_step", False)]
+        return not self._unsafe
+
+    @property
+    def jacobian_method(self) -> str:
+        """How the Jacobian is taken, in words (for benchmarks and notes)."""
+        return "complex step" if self.complex_step else f"forward differences ({', '.join(self._unsafe)})"
 
     def _linearised_hands(self, x):
         """While the Jacobian is taken, the hand turns to first order about x (no integration per
@@ -401,26 +420,48 @@ class Model:
             _, Mg = self._matrices(x)
             self.integrator.linearise(np.linalg.inv(Mg), x[self.layout["gyro_bias"]])
 
-    def jacobian_columns(self, x, columns) -> np.ndarray:
-        """Forward-difference Jacobian of the given columns only (one batched evaluation)."""
+    def _derivatives(self, x, sets) -> tuple[np.ndarray, np.ndarray]:
+        """(steps, D): D[n] is the change of the residuals when every column c of sets[n] moves
+        by steps[c], to first order; all sets in one batched evaluation, the hand turns to first
+        order about x.  By complex step (D = Im r(x + i steps) exactly: no difference is taken,
+        so no rounding is divided by the step) when the model allows it, else forward
+        differences."""
         x = np.asarray(x, float)
-        r0 = self.residuals(x)
-        columns = np.asarray(columns, int)
-        steps = self._steps(x)[columns]
-        X = np.tile(x, (len(columns), 1))
-        X[np.arange(len(columns)), columns] += steps
+        if self.complex_step:
+            steps = COMPLEX_STEP * self._sizes(x)
+            X = np.tile(x.astype(complex), (len(sets), 1))
+            for n, cols in enumerate(sets):
+                X[n, cols] += 1j * steps[cols]
+        else:
+            r0 = self.residuals(x)
+            steps = FORWARD_STEP * self._sizes(x)
+            X = np.tile(x, (len(sets), 1))
+            for n, cols in enumerate(sets):
+                X[n, cols] += steps[cols]
+        if not len(sets):
+            return steps, np.zeros((0, self._rows))
         self._linearised_hands(x)
         try:
-            R = self._residuals_batch(X) if len(columns) else np.zeros((0, len(r0)))
+            R = self._residuals_batch(X)
+        except _ComplexUnsafe as unsafe:
+            self._unsafe = [unsafe.effect_id]
+            return self._derivatives(x, sets)
         finally:
             if self.hands:
                 self.integrator.exact()
-        return ((R - r0) / steps[:, None]).T
+        return steps, (R.imag if np.iscomplexobj(R) else R - r0)
+
+    def jacobian_columns(self, x, columns) -> np.ndarray:
+        """The Jacobian's given columns only (one batched evaluation, _derivatives)."""
+        self._ensure_layout()
+        columns = np.asarray(columns, int)
+        steps, D = self._derivatives(x, [[c] for c in columns])
+        return (D / steps[columns][:, None]).T
 
     def jacobian(self, x) -> np.ndarray:
-        """Forward differences, the columns that move disjoint rows perturbed together
-        (_column_groups), every perturbed vector in one batched evaluation; the hand turns to
-        first order about x."""
+        """The Jacobian by complex step (forward differences when an effect is not safe), the
+        columns that move disjoint rows perturbed together (_column_groups), every perturbed
+        vector in one batched evaluation; the hand turns to first order about x."""
         x = np.asarray(x, float)
         self._ensure_layout()
         if not hasattr(self, "_groups"):
@@ -428,19 +469,8 @@ class Model:
         key = x.tobytes()
         if self._last_jacobian is not None and self._last_jacobian[0] == key:
             return self._last_jacobian[1].copy()     # the solver's last one, at its solution
-        r0 = self.residuals(x)
+        steps, D = self._derivatives(x, [[c for c, _ in members] for members in self._groups])
         J = np.zeros((self._jacobian_rows, len(x)))
-        steps = self._steps(x)
-        X = np.tile(x, (len(self._groups), 1))
-        for n, members in enumerate(self._groups):
-            cols = [c for c, _ in members]
-            X[n, cols] += steps[cols]
-        self._linearised_hands(x)
-        try:
-            D = self._residuals_batch(X) - r0
-        finally:
-            if self.hands:
-                self.integrator.exact()
         for d, members in zip(D, self._groups):
             for c, owned in members:
                 if owned is None:
@@ -523,6 +553,7 @@ class Model:
         self._ctx_index = np.array([float(q.index) for q in segs], float)
         self._ctx_temp_rate = np.array([q.temp_rate_c_per_s for q in segs], float)
         self._last_jacobian = None
+        self._unsafe = None         # ids of the effects that are not complex-step safe (None: not asked yet)
         self.evaluations = 0        # residual evaluations (the Jacobian's included), for benchmarks
         self._integral_effects = [e for e in self.effects
                                   if getattr(type(e), "integral", Effect.integral) is not Effect.integral]
@@ -599,7 +630,10 @@ class Model:
         """The residuals of every row of X (B, parameters): (B, rows), in one vectorised pass."""
         self._ensure_layout()
         self.evaluations += len(X)
-        flat = np.concatenate([b.reshape(len(X), -1) for b in self._blocks(X)], axis=1)
+        with warnings.catch_warnings():
+            if np.iscomplexobj(X):      # a complex number cast to float drops the derivative: an error
+                warnings.simplefilter("error", np.exceptions.ComplexWarning)
+            flat = np.concatenate([b.reshape(len(X), -1) for b in self._blocks(X)], axis=1)
         return flat[:, self._perm]
 
     def _ensure_layout(self):
@@ -621,7 +655,7 @@ class Model:
         L = self.layout
         Ma = X[:, L["accel_scale"], None] * _lower_unit_rows_batch(X[:, L["accel_misalignment"]])
         Mg = (X[:, L["gyro_scale"], None] * _lower_unit_rows_batch(X[:, L["gyro_misalignment"]])
-              @ Rotation.from_rotvec(X[:, L["inter_triad"]]).as_matrix())
+              @ matrix_from_rotvec(X[:, L["inter_triad"]]))
         return Ma, Mg
 
     def _blocks(self, X) -> list:
@@ -636,26 +670,23 @@ class Model:
         # static attitudes: specific force, inertial rate and up, frame p
         P = X[:, self._st_cols]                                                  # (B,S,d)
         if self.with_latitude:
-            C = Rotation.from_rotvec(P.reshape(-1, 3)).as_matrix().reshape(B, S, 3, 3) if S else np.zeros((B, 0, 3, 3))
-            f_s, w_s, up = np.einsum("bsij,skj->kbsi", C, self._st_ref_vectors)
+            C = matrix_from_rotvec(P)                                           # (B,S,3,3)
+            f_s, w_s, up = np.moveaxis(C @ self._st_ref_vectors.transpose(0, 2, 1), -1, 0)     # (3,B,S,3)
         else:
-            up = self._st_ref + np.einsum("bsk,skc->bsc", P, self._st_basis)
-            up /= np.linalg.norm(up, axis=2)[..., None]
+            up = normalised(self._st_ref + np.einsum("bsk,skc->bsc", P, self._st_basis))
             f_s = self.f_n[2] * up
             w_s = self.omega_n[2] * up if self.hand_earth_vertical else np.zeros_like(up)
         # axes and the rotations' phase grids
         PA = X[:, self._axis_cols]                                               # (B,K,4)
-        l_k = self._axis_ref + np.einsum("bkj,kjc->bkc", PA[..., :2], self._axis_basis)
-        l_k /= np.linalg.norm(l_k, axis=2)[..., None]
+        l_k = normalised(self._axis_ref + np.einsum("bkj,kjc->bkc", PA[..., :2], self._axis_basis))
         kappa_k, e_k = PA[..., 2], PA[..., 3]
         l, kappa, e = l_k[:, self._rot_group], kappa_k[:, self._rot_group], e_k[:, self._rot_group]   # (B,R,..)
-        e1 = self._rot_e1 - np.einsum("rc,brc->br", self._rot_e1, l)[..., None] * l
-        e1 /= np.linalg.norm(e1, axis=2)[..., None]
+        e1 = normalised(self._rot_e1 - np.einsum("rc,brc->br", self._rot_e1, l)[..., None] * l)
         e2 = cross(l, e1)
         phase = Xe[:, self._rot_phase_cols]                                      # (B,R,2)
         psi, chi = phase[..., 0:1], phase[..., 1:2]
-        v = np.sqrt(np.maximum(g * g - kappa**2, 0.0))[..., None] * (np.cos(psi) * e1 + np.sin(psi) * e2)
-        earth_perp = (np.sqrt(np.maximum(self.omega_dps**2 - e**2, 0.0))[..., None]
+        v = np.sqrt(positive_part(g * g - kappa**2))[..., None] * (np.cos(psi) * e1 + np.sin(psi) * e2)
+        earth_perp = (np.sqrt(positive_part(self.omega_dps**2 - e**2))[..., None]
                       * (np.cos(chi) * e1 + np.sin(chi) * e2))
         earth_integral = self._rot_earth[:, :1] * earth_perp - self._rot_earth[:, 1:] * cross(l, earth_perp)
         offset = X[:, L["mounting_offset"]][:, None, :] if self._offset is None else self._offset
@@ -668,24 +699,10 @@ class Model:
         # the model's raw outputs at every point, effects included
         f_p = np.concatenate([f_s, f_r.reshape(B, -1, 3)], axis=1)              # (B, S + R PHASES, 3)
         w_p = np.concatenate([w_s, w_r.reshape(B, -1, 3)], axis=1)
-        a = np.einsum("bnj,bij->bni", f_p, Ma) + b_a[:, None, :]
-        w = np.einsum("bnj,bij->bni", w_p, Mg) + b_g[:, None, :]
+        a = f_p @ Ma.transpose(0, 2, 1) + b_a[:, None, :]     # matmul: ~10x einsum here
+        w = w_p @ Mg.transpose(0, 2, 1) + b_g[:, None, :]
         if self.effects:
-            zeros = np.zeros((S, 3))
-            for n in range(B):      # the Effect interface: one parameter vector, N sample points
-                ctx = SampleContext(
-                    f_p=f_p[n], w_p=w_p[n],
-                    w_table=np.concatenate([zeros, (w_k * l[n][:, None, :]).reshape(-1, 3)]),
-                    wdot_table=np.concatenate([zeros, (wdot_k * l[n][:, None, :]).reshape(-1, 3)]),
-                    temp_c=self._ctx_temp, accel_matrix=Ma[n], gyro_matrix=Mg[n], t_s=self._ctx_t,
-                    segment_index=self._ctx_index, temp_rate_c_per_s=self._ctx_temp_rate)
-                for eff in self.effects:
-                    px = X[n, L[f"effect:{eff.id}"]]
-                    da, dw = eff.accel(px, ctx), eff.gyro(px, ctx)
-                    if da is not None:
-                        a[n] = a[n] + da
-                    if dw is not None:
-                        w[n] = w[n] + dw
+            a, w = self._add_effects(X, a, w, f_p, w_p, Ma, Mg, l, w_k, wdot_k)
         blocks = []
         # statics
         root_n = self._st_root_n
@@ -695,13 +712,18 @@ class Model:
         elif self.hands:    # the bias, the unmodelled Earth rate within the noise
             blocks.append(np.einsum("sij,bsj->bsi", self._st_gyro_whiten, self._st_data[:, 3:] - w[:, :S]))
         else:               # only |Omega_E| known: the norm of the compensated rate (the
-            # pseudo-inverse: finite where a trial step of the solver makes M_g singular)
-            rate = np.linalg.norm(np.linalg.pinv(Mg) @ (self._st_data[:, 3:] - b_g[:, None, :]).transpose(0, 2, 1),
-                                  axis=1)
+            # pseudo-inverse where a trial step of the solver makes M_g singular; the inverse by
+            # LU otherwise, which complex step goes through: an SVD's does not)
+            try:
+                Mg_inv = np.linalg.inv(Mg)
+            except np.linalg.LinAlgError:
+                Mg_inv = np.linalg.pinv(Mg)
+            rate = np.sqrt(np.einsum("bis,bis->bs", *2 * [Mg_inv @ (self._st_data[:, 3:] - b_g[:, None, :])
+                                                           .transpose(0, 2, 1)]))
             blocks.append(((rate - self.omega_dps) * root_n[:, 0] / np.mean(s.gyro_sigma))[..., None])
         table = self.attitudes == "table"
         if table:
-            C_mount = Rotation.from_rotvec(X[:, L["mounting_rotation"]]).as_matrix()
+            C_mount = matrix_from_rotvec(X[:, L["mounting_rotation"]])
             blocks.append(cross(up[:, self._st_up_index], np.einsum("uj,bij->bui", self._st_up_body, C_mount))
                           / self.prior_sigma)
         if self.with_latitude:
@@ -715,42 +737,87 @@ class Model:
         # rotations: mean and harmonics of the accelerometers, gyro integral
         a_r = a[:, S:].reshape(B, R, PHASES, 3)
         w_mean = w[:, S:].reshape(B, R, PHASES, 3).mean(axis=2)
-        harmonics = np.einsum("hk,brkc->brhc", self._harmonics, a_r)
-        integral = w_mean * self._rot_duration[:, None] + np.einsum("brj,bij->bri", earth_integral, Mg)
+        harmonics = self._harmonics @ a_r                                        # (B,R,5,3)
+        integral = w_mean * self._rot_duration[:, None] + earth_integral @ Mg.transpose(0, 2, 1)
         for eff in self._integral_effects:
             for n in range(B):
                 px = X[n, L[f"effect:{eff.id}"]]
                 for i, r in enumerate(s.rotations):
-                    term = eff.integral(px, r)
+                    term = _checked(eff, eff.integral, px, r)
                     if term is not None:
                         integral[n, i] += term
-        gyro_rows = np.einsum("rij,brj->bri", self._rot_gyro_whiten, self._rot_gyro - integral)
+        gyro_rows = (self._rot_gyro_whiten @ (self._rot_gyro - integral)[..., None])[..., 0]
         blocks.append(np.concatenate([((self._rot_data - harmonics) * self._rot_weight).reshape(B, R, 15),
                                       gyro_rows], axis=2))
         blocks.append((X[:, self._prior_cols] / self._prior_sigma)[..., None])
         return blocks
 
+    def _add_effects(self, X, a, w, f_p, w_p, Ma, Mg, l, w_k, wdot_k):
+        """a and w with every effect's terms added (the Effect interface: one parameter vector,
+        all sample points; _checked: under complex step an unsafe term raises _ComplexUnsafe)."""
+        L, S, B = self.layout, len(self.s.statics), len(X)
+        zeros = np.zeros((S, 3))
+        a, w = a.copy(), w.copy()
+        for n in range(B):
+            ctx = SampleContext(
+                f_p=f_p[n], w_p=w_p[n],
+                w_table=np.concatenate([zeros, (w_k * l[n][:, None, :]).reshape(-1, 3)]),
+                wdot_table=np.concatenate([zeros, (wdot_k * l[n][:, None, :]).reshape(-1, 3)]),
+                temp_c=self._ctx_temp, accel_matrix=Ma[n], gyro_matrix=Mg[n], t_s=self._ctx_t,
+                segment_index=self._ctx_index, temp_rate_c_per_s=self._ctx_temp_rate)
+            for eff in self.effects:
+                px = X[n, L[f"effect:{eff.id}"]]
+                for term, out in ((_checked(eff, eff.accel, px, ctx), a), (_checked(eff, eff.gyro, px, ctx), w)):
+                    if term is not None:
+                        out[n] = out[n] + term
+        return a, w
+
     def _hand_block(self, Mg, b_g, ups, w_static) -> np.ndarray:
         """(B, H, 2) whitened residuals: the up after each turn against the up before carried through it."""
         B, H = len(Mg), len(self.hands)
-        dR = self.integrator.turns_batch(np.linalg.inv(Mg), b_g)         # B*H turns
+        dR = self.integrator.turns_batch(np.linalg.inv(Mg), b_g)         # B*H turns, (B*H,3,3)
         before = ups[:, self._hand_before].reshape(-1, 3)
         if self.with_latitude:      # the Earth turns the up during the turn
-            earth = np.radians(w_static[:, self._hand_before]) * self.hand_duration[:, None]
-            before = Rotation.from_rotvec(earth.reshape(-1, 3)).apply(before)
-        d = ups[:, self._hand_after] - dR.apply(before, inverse=True).reshape(B, H, 3)
+            earth = w_static[:, self._hand_before] * (np.pi / 180.0) * self.hand_duration[:, None]   # rad
+            before = np.einsum("nij,nj->ni", matrix_from_rotvec(earth.reshape(-1, 3)), before)
+        d = ups[:, self._hand_after] - np.einsum("nji,nj->ni", dR, before).reshape(B, H, 3)
         return np.einsum("hkc,bhc->bhk", self.hand_basis, d) / self.hand_sigma_rad[:, None]
 
 
 def _lower_unit_rows_batch(angles: np.ndarray) -> np.ndarray:
     """lower_unit_rows of every row of angles (B,3): (B,3,3)."""
     s_yz, s_zy, s_zx = np.sin(angles[:, 0]), -np.sin(angles[:, 1]), np.sin(angles[:, 2])
-    T = np.zeros((len(angles), 3, 3))
+    T = np.zeros((len(angles), 3, 3), dtype=angles.dtype)      # complex under complex step
     T[:, 0, 0] = 1.0
     T[:, 1, 0], T[:, 1, 1] = s_yz, np.sqrt(1.0 - s_yz**2)
     T[:, 2, 0], T[:, 2, 1] = s_zy, s_zx
-    T[:, 2, 2] = np.sqrt(np.maximum(1.0 - s_zy**2 - s_zx**2, 0.0))
+    T[:, 2, 2] = np.sqrt(positive_part(1.0 - s_zy**2 - s_zx**2))
     return T
+
+
+def _checked(effect, term, px, *args):
+    """An effect's term (accel, gyro or integral) at px.  Under complex step (px complex) a term
+    that comes back real, or a complex number cast to float on the way (TypeError, numpy's
+    ComplexWarning, made an error while the complex batch runs), raises _ComplexUnsafe."""
+    complex_step = np.iscomplexobj(px)
+    try:
+        out = term(px, *args)
+    except (TypeError, np.exceptions.ComplexWarning):
+        if complex_step:
+            raise _ComplexUnsafe(effect.id)
+        raise
+    if complex_step and out is not None and not np.iscomplexobj(out):
+        raise _ComplexUnsafe(effect.id)
+    return out
+
+
+class _ComplexUnsafe(Exception):
+    """An effect dropped the imaginary part of the complex step (a cast to float, a real array
+    returned): the Jacobian is then taken by forward differences."""
+
+    def __init__(self, effect_id: str):
+        super().__init__(effect_id)
+        self.effect_id = effect_id
 
 
 @dataclass
@@ -944,7 +1011,7 @@ def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=())
         accel_bias=x[L["accel_bias"]] / s.accel_factor,
         gyro_scale=x[L["gyro_scale"]].copy(), gyro_T=lower_unit_rows(x[L["gyro_misalignment"]]),
         gyro_bias=x[L["gyro_bias"]] / s.gyro_factor,
-        R_po=Rotation.from_rotvec(x[L["inter_triad"]]).as_matrix(),
+        R_po=matrix_from_rotvec(x[L["inter_triad"]]),
         effects=["base_triads", "inter_triad"] + [e.id for e in model.effects],
         fit=fit_stats, sigma=dict(zip(names, sigma.tolist())), correlation=(names, corr),
         extra_parameters=[(n, float(v), u) for n, v, u in zip(names[21:], values[21:], units_[21:])],

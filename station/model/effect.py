@@ -70,6 +70,11 @@ class Effect:
                               #   "temperature" (a temp column), "time" (time stamps: rates of change)
     state_fields: tuple[str, ...] = ()   # attributes set by setup() that the compensation needs;
                               #   written to the calibration file and restored by restore()
+    complex_step = False      # True: accel/gyro/integral are complex-analytic in x and in ctx's
+                              #   f_p, w_p, w_table, wdot_table, accel_matrix, gyro_matrix (no abs,
+                              #   norm, comparison, float(), real part or in-place write into a
+                              #   float array on them), so the fit's Jacobian may be taken by
+                              #   complex step; False: by forward differences (docs/effects.md)
 
     def setup(self, summaries) -> None:
         """Decide the parameters this capture can carry (e.g. a gauge choice)."""

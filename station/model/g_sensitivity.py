@@ -21,6 +21,7 @@ class GyroGSensitivity(Effect):
     signature = ("gyro, static segments: a bias that changes with the attitude, in proportion to "
                  "the gravity components; unexplained by the Earth rate")
     signature_variable = "gravity_along_axis"
+    complex_step = True
 
     @property
     def params(self):

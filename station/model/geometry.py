@@ -18,3 +18,23 @@ def tangent_basis(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     t1 = cross(u, e)
     t1 /= np.linalg.norm(t1)
     return t1, cross(u, t1)
+
+
+# --- complex-step safe forms (the fit's Jacobian, station/estimate/lsq.py) ------------------
+# No absolute value, conjugate or comparison on the values: v . v instead of |v|^2; a branch is
+# chosen on the real part only.
+
+def normalised(v: np.ndarray) -> np.ndarray:
+    """v / |v| over the last axis, with |v| = sqrt(v . v) (analytic in v)."""
+    return v / np.sqrt(np.einsum("...i,...i->...", v, v))[..., None]
+
+
+def positive_part(z: np.ndarray) -> np.ndarray:
+    """max(z, 0), the branch chosen on the real part (analytic where z's real part is not 0)."""
+    return np.where(np.real(z) > 0, z, 0.0)
+
+
+def analytic_abs(z: np.ndarray) -> np.ndarray:
+    """|z| for real z; for complex z, z or -z by the sign of its real part (the analytic
+    continuation of |x| away from 0, what complex step needs: np.abs would give the modulus)."""
+    return np.where(np.real(z) < 0, -z, z)

@@ -23,6 +23,7 @@ class AccelLeverArm(Effect):
     signature = ("accelerometer, rotation segments only: a constant offset growing with the square "
                  "of the rate, the same sign in both directions, different on each axis")
     signature_variable = "rate_squared"
+    complex_step = True
     needs = ("time",)
     state_fields = ("free",)
 
@@ -41,7 +42,7 @@ class AccelLeverArm(Effect):
         return tuple(Param(f"accel_position_{AXES[i]}_{AXES[c]}", "mm", 1e3, 10.0, 50.0) for i, c in self.free)
 
     def positions(self, x: np.ndarray) -> np.ndarray:
-        p = np.zeros((3, 3))
+        p = np.zeros((3, 3), dtype=np.result_type(x, float))     # complex under complex step
         for (i, c), v in zip(self.free, x):
             p[i, c] = v
         return p
@@ -49,7 +50,7 @@ class AccelLeverArm(Effect):
     def accel(self, x, ctx):
         p = self.positions(x)
         w, wd = ctx.w_table, ctx.wdot_table
-        out = np.empty_like(ctx.f_p)
+        out = np.empty(ctx.f_p.shape, np.result_type(ctx.f_p, ctx.accel_matrix, ctx.w_table, p))
         for i in range(3):
             a = cross(wd, p[i]) + cross(w, cross(w, p[i]))
             out[:, i] = a @ ctx.accel_matrix[i]

@@ -1,10 +1,9 @@
 """accel_nonlinearity: second-order scale factor of each accelerometer."""
 from __future__ import annotations
 
-import numpy as np
-
 from station.core import units
 from station.model.effect import Effect, Param
+from station.model.geometry import normalised
 
 
 class AccelNonlinearity(Effect):
@@ -21,11 +20,12 @@ class AccelNonlinearity(Effect):
     signature = ("accelerometer, every segment: an error even in the square of the input, the same "
                  "sign at +1 g and -1 g, half as large at 45°, a second harmonic in rotations")
     signature_variable = "gravity_along_axis"
+    complex_step = True
 
     @property
     def params(self):
         return tuple(Param(f"accel_k2_{a}", "ug/g^2", 1.0, 100.0, 5000.0) for a in "xyz")
 
     def accel(self, x, ctx):
-        along = ctx.f_p @ (ctx.accel_matrix / np.linalg.norm(ctx.accel_matrix, axis=1)[:, None]).T
+        along = ctx.f_p @ normalised(ctx.accel_matrix).T      # along each sensing direction
         return x * units.UG_MPS2 * (along / units.STANDARD_GRAVITY) ** 2

@@ -1,9 +1,8 @@
 """gyro_scale_asymmetry: different scale factors for positive and negative rates."""
 from __future__ import annotations
 
-import numpy as np
-
 from station.model.effect import Effect, Param
+from station.model.geometry import analytic_abs
 
 
 class GyroScaleAsymmetry(Effect):
@@ -18,10 +17,11 @@ class GyroScaleAsymmetry(Effect):
     signature = ("gyro, rotation segments: the ± integrals differ in magnitude by a fraction of the "
                  "angle, same sign for every axis pair; nothing at rest")
     signature_variable = "signed_rate"
+    complex_step = True
 
     @property
     def params(self):
         return tuple(Param(f"gyro_asym_{a}", "ppm", 1.0, 300.0, 20000.0) for a in "xyz")
 
     def gyro(self, x, ctx):
-        return 1e-6 * x * np.abs(ctx.w_p @ ctx.gyro_matrix.T)
+        return 1e-6 * x * analytic_abs(ctx.w_p @ ctx.gyro_matrix.T)

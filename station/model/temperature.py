@@ -20,6 +20,7 @@ class TemperatureBias(Effect):
     signature = ("static segments: residuals that follow the temperature, the same on repeated "
                  "attitudes recorded at different temperatures; both sensors")
     signature_variable = "temperature"
+    complex_step = True
     needs = ("temperature",)
     state_fields = ("reference_c", "available", "factors")
 

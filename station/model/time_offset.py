@@ -20,6 +20,7 @@ class TimeOffset(Effect):
     signature = ("gyro, rotation segments: an integral error proportional to the change of rate "
                  "across the segment; zero for steady rotations")
     signature_variable = "rate_change"
+    complex_step = True
 
     @property
     def params(self):
