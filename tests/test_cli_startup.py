@@ -191,3 +191,18 @@ def test_estimate_runs_blas_on_one_thread(optimal9_run, tmp_path):
     status, libraries = json.loads(r.stdout.strip().splitlines()[-1])
     assert status == 0 and libraries, r.stdout
     assert all(threads == 1 for _, threads in libraries), libraries
+
+
+def test_the_installed_console_script_passes_the_exit_status(optimal9_run, tmp_path):
+    """The `station` script (station.cli:console_main, which freezes the garbage collector
+    before the process ends) exits with main()'s status (0, and 2 for a user error with its one
+    line), and what it wrote is complete."""
+    script = Path(sys.executable).with_name("station")
+    assert script.is_file(), "the project is installed as the README says (pip install -e '.[dev]')"
+    ok = subprocess.run([str(script), "estimate", str(optimal9_run), "-o", str(tmp_path / "cal.yaml")],
+                        capture_output=True, text=True, timeout=120)
+    assert ok.returncode == 0, ok.stderr
+    assert "calibration file:" in ok.stdout and (tmp_path / "cal.yaml").read_text().startswith("format:")
+    bad = subprocess.run([str(script), "estimate", str(tmp_path / "nothing")], capture_output=True, text=True,
+                         timeout=120)
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1, bad.stderr

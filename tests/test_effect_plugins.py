@@ -226,3 +226,55 @@ def test_a_calibration_file_with_a_bad_effects_block_is_one_line(tmp_path):
         cal.write_text(yaml.safe_dump(doc))
         with pytest.raises(UserError, match="compensation.effects"):
             compensation_effects(read_calfile(cal), EffectRegistry(), cal)
+
+
+# --- installed packages' entry points (group station.effects) ----------------------------------
+
+ENTRY_POINTS = """
+import json, sys
+from station.model.registry import EffectRegistry
+reg = EffectRegistry()
+created = "importlib.metadata" in sys.modules      # the installed distributions not scanned yet
+try:
+    ids = reg.ids()
+    print(json.dumps([created, "gyro_rate_squared" in ids, reg.source("gyro_rate_squared")]))
+except Exception as e:
+    print(json.dumps([created, type(e).__name__, str(e)]))
+"""
+
+
+def _installed(tmp_path, module_text, target="rate2mod:GyroRateSquared"):
+    """A folder holding an installed distribution whose entry point (station.effects) is target."""
+    (tmp_path / "rate2mod.py").write_text(module_text)
+    info = tmp_path / "rate2pkg-1.0.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: rate2pkg\nVersion: 1.0\n")
+    (info / "entry_points.txt").write_text(f"[station.effects]\nrate2 = {target}\n")
+    return tmp_path
+
+
+def _registry_in(path):
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "PYTHONPATH": f"{path}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
+    r = subprocess.run([sys.executable, "-c", ENTRY_POINTS], capture_output=True, text=True, env=env,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def test_an_installed_package_adds_its_effect_by_entry_point_when_effects_are_asked_for(tmp_path):
+    text = (ROOT / "examples/effects/gyro_rate_squared.py").read_text()
+    scanned_at_creation, listed, source = _registry_in(_installed(tmp_path, text))
+    assert not scanned_at_creation          # found when asked for, not when the registry is made
+    assert listed and source == "entry point rate2mod:GyroRateSquared"
+
+
+def test_an_entry_point_that_takes_a_library_id_is_refused(tmp_path):
+    text = (ROOT / "examples/effects/gyro_rate_squared.py").read_text()
+    text += "\n\nclass Clash(GyroRateSquared):\n    id = 'accel_nonlinearity'\n"
+    _, error, message = _registry_in(_installed(tmp_path, text, "rate2mod:Clash"))
+    assert error == "UserError" and "taken by library" in message
