@@ -14,6 +14,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import weakref
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,7 +22,6 @@ from threadpoolctl import threadpool_limits
 
 from station.core import units
 from station.core.errors import UserError
-from station.estimate import hand_rotation
 
 EDGE_SAMPLES = 3
 STEADY_SPREAD = 0.3     # a rotation whose rate magnitude varies more (std/mean) is a hand turn
@@ -312,41 +312,46 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
     order = {seg.name: k for k, seg in enumerate(capture.segments)}
     statics, spans = [], []
     diff_sq_a, diff_sq_g, diff_count = np.zeros(3), np.zeros(3), 0
-    for seg in capture.complete("static"):
-        with capture.lent_samples(seg) as d:
-            if check_segment is not None:
-                check_segment(seg)
-            if seg.status != "complete":
-                continue
-            a, g = _scaled(d.accel, ca), _scaled(d.gyro, cg)
-            statics.append(StaticSummary(seg.name, seg.up_body, a.mean(axis=0), g.mean(axis=0), len(d.t),
-                                         float(d.t[-1] - d.t[0]), None if d.temp is None else float(d.temp.mean()),
-                                         t_mid_s=float(np.mean(d.t)), index=order[seg.name],
-                                         temp_rate_c_per_s=_slope(d.t, d.temp)))
-            spans.append(_Span(seg.name, _TimeStamps(np.array([d.t[0], d.t[-1]]))))
-            # white noise: first differences remove slow drifts (temperature) from the estimate
-            diff_sq_a += np.sum(np.diff(a, axis=0) ** 2, axis=0) / 2
-            diff_sq_g += np.sum(np.diff(g, axis=0) ** 2, axis=0) / 2
-            diff_count += len(d.t) - 1
-            del a, g
-    if not statics:
-        raise UserError(f"{capture.path}: no complete static segment: the least-squares fit needs "
-                        "static segments (biases and the noise level come from them)")
-    with np.errstate(invalid="ignore", divide="ignore"):
-        gyro_sigma = np.sqrt(diff_sq_g / diff_count)
-    static_gyro_mean = np.mean([st.gyro for st in statics], axis=0)   # ~ the bias (Earth rate averages out)
-
     rotations, skipped, axes, hands = [], [], [], []
-    for seg in capture.complete("rotation"):
-        with capture.lent_samples(seg) as d:
+    gyro_sigma = static_gyro_mean = None
+    # statics first (the rotation summaries use their noise and gyro bias), then the rotations,
+    # then the segments estimation does not use (only checked); each file is read while the
+    # previous segment is summarised (ReaderAhead)
+    queue = capture.complete("static") + capture.complete("rotation")
+    if check_segment is not None:
+        queue += [seg for seg in capture.complete() if seg.kind not in ("static", "rotation")]
+    with capture.reader_ahead(queue) as reader:
+        for seg in queue:
+            if seg.kind != "static" and gyro_sigma is None:
+                gyro_sigma, static_gyro_mean = _static_noise(capture, statics, diff_sq_g, diff_count)
+            d = reader.take(seg)
             if check_segment is not None:
-                check_segment(seg)
-            if seg.status != "complete":
+                with _holding(seg, d):
+                    check_segment(seg)
+            reader.ahead()
+            if seg.status != "complete" or seg.kind not in ("static", "rotation"):
                 continue
-            if hand_rotation.is_hand(seg):
-                hands.append((seg, d))
+            if seg.kind == "static":
+                a, g = _scaled(d.accel, ca), _scaled(d.gyro, cg)
+                statics.append(StaticSummary(seg.name, seg.up_body, a.mean(axis=0), g.mean(axis=0), len(d.t),
+                                             float(d.t[-1] - d.t[0]), None if d.temp is None else float(d.temp.mean()),
+                                             t_mid_s=float(np.mean(d.t)), index=order[seg.name],
+                                             temp_rate_c_per_s=_slope(d.t, d.temp)))
+                spans.append(_Span(seg.name, _TimeStamps(np.array([d.t[0], d.t[-1]]))))
+                # white noise: first differences remove slow drifts (temperature) from the estimate
+                diff_sq_a += np.sum(np.diff(a, axis=0) ** 2, axis=0) / 2
+                diff_sq_g += np.sum(np.diff(g, axis=0) ** 2, axis=0) / 2
+                diff_count += len(d.t) - 1
+                del a, g, d
                 continue
             if seg.angle_deg is None:
+                from station.estimate import hand_rotation     # scipy: only for turns without an encoder
+
+                with _holding(seg, d):
+                    hand = hand_rotation.is_hand(seg)
+                if hand:
+                    hands.append((seg, d))
+                    continue
                 skipped.append(f"{seg.name}: no encoder angle (angle_deg); not used by the least-squares fit")
                 continue
             axis = np.asarray(seg.axis_body, float) / np.linalg.norm(seg.axis_body)
@@ -361,15 +366,38 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
             summary.t_mid_s, summary.index = float(np.mean(d.t)), order[seg.name]
             summary.temp_rate_c_per_s = _slope(d.t, d.temp)
             rotations.append(summary)
+            del d
+    if gyro_sigma is None:
+        _static_noise(capture, statics, diff_sq_g, diff_count)
     for seg, d in hands:
         seg.data = d                    # hand turns are short: their samples are kept for the fit
-    if check_segment is not None:       # segments estimation does not use are checked too
-        for seg in capture.complete():
-            if seg.kind not in ("static", "rotation"):
-                with capture.lent_samples(seg):
-                    check_segment(seg)
     return _SegmentSummaries(statics, spans, diff_sq_a, diff_sq_g, diff_count, rotations, skipped,
                              [seg for seg, _ in hands])
+
+
+def _static_noise(capture, statics, diff_sq_g, diff_count):
+    """(per-sample gyro white noise, mean gyro output) of the statics summarised; UserError
+    without any."""
+    if not statics:
+        raise UserError(f"{capture.path}: no complete static segment: the least-squares fit needs "
+                        "static segments (biases and the noise level come from them)")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        gyro_sigma = np.sqrt(diff_sq_g / diff_count)
+    return gyro_sigma, np.mean([st.gyro for st in statics], axis=0)   # ~ the bias (Earth rate averages out)
+
+
+@contextmanager
+def _holding(seg, data):
+    """seg.data holds ``data`` inside the block (for code that reads seg.data), as it was after."""
+    if seg.data is not None:
+        yield
+        return
+    seg.data = data
+    try:
+        yield
+    finally:
+        if seg.data is data:
+            seg.data = None
 
 
 def _assemble(capture, parts: _SegmentSummaries, ca, cg, table_angle_arcsec) -> Summaries:
@@ -378,8 +406,13 @@ def _assemble(capture, parts: _SegmentSummaries, ca, cg, table_angle_arcsec) -> 
         gyro_sigma = np.sqrt(parts.gyro_diff_sq / parts.diff_count)
     statics, rotations, skipped = parts.statics, parts.rotations, list(parts.skipped)
 
-    hand_rotations, hand_skipped = hand_rotation.collect(parts.static_spans, parts.hands, cg)
-    skipped += hand_skipped
+    if parts.hands:
+        from station.estimate import hand_rotation     # scipy: only for turns without an encoder
+
+        hand_rotations, hand_skipped = hand_rotation.collect(parts.static_spans, parts.hands, cg)
+        skipped += hand_skipped
+    else:
+        hand_rotations = []
     nominal = capture.imu.extra.get("gyro_nominal_dps_per_count") if capture.imu.gyro_unit == "raw" else None
     nominal = 1.0 / float(nominal) if isinstance(nominal, (int, float)) and nominal > 0 else None
     accel_nominal = capture.imu.extra.get("accel_nominal_mps2_per_count") if capture.imu.accel_unit == "raw" else None

@@ -171,6 +171,12 @@ class Capture:
             if segment.data is data:
                 segment.data = None
 
+    def reader_ahead(self, segments):
+        """A ReaderAhead over ``segments``: ``with capture.reader_ahead(segs) as reader:`` then,
+        for each segment in order, ``reader.take(seg)`` for its samples and ``reader.ahead()`` to
+        read the next one's file on another thread while working on the current one."""
+        return ReaderAhead(self, segments)
+
     def segment(self, name):
         """The segment called `name`; UserError if there is none."""
         for s in self.segments:
@@ -178,6 +184,74 @@ class Capture:
                 return s
         names = ", ".join(s.name for s in self.segments) or "none"
         raise UserError(f"{self.path / MANIFEST}: no segment named {name!r} (segments: {names})")
+
+
+class ReaderAhead:
+    """The samples of a list of segments, taken in their order, with the next segment's file read
+    (Capture.read_samples: read, hashed, parsed, checked) on another thread while the caller works
+    on the current segment's samples: the CSV engine and sha256 on one core, the caller's numpy
+    work on the other.  At most two segments' samples exist at once: the one taken and the one
+    being read.  A read that fails raises its error when that segment is taken, so errors come in
+    the segments' order, as without reading ahead.  Loaded segments (seg.data) are given as they
+    are; nothing is stored in seg.data."""
+
+    def __init__(self, capture, segments):
+        self._capture = capture
+        self._segments = list(segments)
+        self._next = 0              # index of the next segment to take
+        self._pending = None        # (segment, thread, box) of the read under way
+
+    def take(self, segment) -> SegmentData | None:
+        """The samples of ``segment``, the next one in the list (read now unless read ahead)."""
+        if self._next >= len(self._segments) or self._segments[self._next] is not segment:
+            raise ValueError(f"segment {segment.name!r} is not the next one to take")
+        self._next += 1
+        pending, self._pending = self._pending, None
+        if pending is None or pending[0] is not segment:
+            self._join(pending)
+            return self._capture.read_samples(segment)
+        _, thread, box = pending
+        thread.join()
+        if "error" in box:
+            raise box["error"]
+        return box["data"]
+
+    def ahead(self):
+        """Start reading the next segment's file on another thread (nothing if it is loaded, or
+        if there is none or a read is under way)."""
+        if self._pending is not None or self._next >= len(self._segments):
+            return
+        segment = self._segments[self._next]
+        if segment.data is not None:
+            return
+        box = {}
+
+        def read():
+            try:
+                box["data"] = self._capture.read_samples(segment)
+            except BaseException as e:  # noqa: BLE001 - handed to the caller by take()
+                box["error"] = e
+
+        thread = threading.Thread(target=read, name="capture-read-ahead", daemon=True)
+        thread.start()
+        self._pending = (segment, thread, box)
+
+    def close(self):
+        """Wait for a read under way (its result is dropped)."""
+        pending, self._pending = self._pending, None
+        self._join(pending)
+
+    @staticmethod
+    def _join(pending):
+        if pending is not None:
+            pending[1].join()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
 
 
 # ---------------------------------------------------------------------------------------------
