@@ -161,55 +161,34 @@ def _phase_fraction(t, gyro, start, duration, gyro_sigma_dps):
     return tracked if departure_deg > 3.0 * noise_deg else uniform
 
 
-def _rate(t, gyro, gyro_bias, angle_deg, duration):
+def _rate(gyro, gyro_bias, angle_deg, duration):
     """The table rate (rad/s, signed like the angle) at each sample: the gyro along its mean
     direction (bias removed), rescaled to the encoder's mean rate."""
-    g = gyro - (0.0 if gyro_bias is None else gyro_bias)
-    direction = g.mean(axis=0)
+    bias = np.zeros(3) if gyro_bias is None else np.asarray(gyro_bias, float)
+    direction = gyro.mean(axis=0) - bias
     norm = np.linalg.norm(direction)
     mean_rate = np.radians(angle_deg) / duration
-    if norm == 0 or len(t) < 3:
-        return np.full(len(t), mean_rate)
-    along = g @ (direction / norm)
-    return along * (mean_rate / along.mean())
+    if norm == 0:
+        return np.full(len(gyro), mean_rate)
+    direction /= norm
+    along = gyro @ direction            # (gyro - bias) @ direction without an (N, 3) temporary
+    along -= bias @ direction
+    along *= mean_rate / along.mean()
+    return along
 
 
 MAX_GRAM_CONDITION = 1e8    # normal equations lose about cond * 1e-16 of relative precision
+CHUNK_SAMPLES = 1 << 15     # the per-sample work of a rotation summary is done this many samples at a time
 
 
-def _least_squares(basis, columns):
-    """Least-squares coefficients (k, m) of ``columns`` (N, m) on the basis functions, given as
-    the rows of ``basis`` (k, N).
-
-    Through the normal equations (matrix products over the N samples, then a k x k solve): the
-    harmonic basis of a turn is nearly orthogonal over whole revolutions, so its Gram matrix is
-    well conditioned and this matches an SVD solution to about cond * 1e-16 while costing a
-    fraction of it; a basis whose Gram matrix is worse conditioned than MAX_GRAM_CONDITION (a
-    short sweep) goes to the SVD solver (numpy.linalg.lstsq)."""
-    gram = basis @ basis.T
-    if np.linalg.cond(gram) < MAX_GRAM_CONDITION:
-        return np.linalg.solve(gram, np.column_stack([basis @ c for c in columns]))
-    return np.linalg.lstsq(basis.T, np.column_stack(columns), rcond=None)[0]
+def _chunks(n):
+    """(start, stop) of the consecutive chunks of CHUNK_SAMPLES samples covering n samples."""
+    return [(i, min(i + CHUNK_SAMPLES, n)) for i in range(0, n, CHUNK_SAMPLES)]
 
 
-def _contiguous_columns(matrix):
-    return [np.ascontiguousarray(matrix[:, k]) for k in range(matrix.shape[1])]
-
-
-def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
-                     gyro_sigma_dps=None, gyro_bias=None) -> RotationSummary:
-    """``gyro_sigma_dps``: per-sample white gyro noise (deg/s); with it the phase is tracked by
-    the gyro only where the rate varies beyond what that noise would make it seem to.
-    ``gyro_bias``: a rough gyro bias (the statics' mean), removed before the rate's shape is taken."""
-    if len(t) < 8:
-        raise UserError(f"segment '{name}': a rotation segment needs at least 8 samples")
-    start, end = _window(t)
-    duration = end - start
-    # trapezoid over the samples plus half a sample at each end: the integral over the window
-    gyro_integral = (np.trapezoid(gyro, t, axis=0)
-                     + 0.5 * (gyro[0] * (t[1] - t[0]) + gyro[-1] * (t[-1] - t[-2])))
-    phase = np.radians(angle_deg) * _phase_fraction(t, gyro, start, duration, gyro_sigma_dps)
-    basis = np.empty((5, len(t)))          # rows: 1, cos phi, sin phi, cos 2phi, sin 2phi
+def _harmonic_basis(phase):
+    """Rows 1, cos phi, sin phi, cos 2phi, sin 2phi at the given phases (5, n)."""
+    basis = np.empty((5, len(phase)))
     basis[0] = 1.0
     np.cos(phase, out=basis[1])
     np.sin(phase, out=basis[2])
@@ -217,19 +196,75 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
     basis[3] -= basis[2] * basis[2]
     np.multiply(basis[1], basis[2], out=basis[4])
     basis[4] *= 2.0
-    del phase
-    # The table rate w(t) about the axis, its square and its time derivative are projected on the
+    return basis
+
+
+def _gradient_chunk(w, t, i, j):
+    """np.gradient(w, t)[i:j], computed from w[i-1:j+1] only (the same values: the gradient at a
+    sample uses its two neighbours, and the end formula at the segment's ends)."""
+    lo, hi = max(i - 1, 0), min(j + 1, len(t))
+    return np.gradient(w[lo:hi], t[lo:hi])[i - lo:i - lo + (j - i)]
+
+
+def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
+                     gyro_sigma_dps=None, gyro_bias=None) -> RotationSummary:
+    """``gyro_sigma_dps``: per-sample white gyro noise (deg/s); with it the phase is tracked by
+    the gyro only where the rate varies beyond what that noise would make it seem to.
+    ``gyro_bias``: a rough gyro bias (the statics' mean), removed before the rate's shape is taken.
+
+    The accelerometer, the rate, its square and its derivative are projected on the harmonic
+    basis CHUNK_SAMPLES samples at a time (the Gram matrix and the projections summed over the
+    chunks, then one 5 x 5 solve): the same least-squares coefficients as with whole arrays, to
+    rounding, with temporaries that fit in the processor's cache instead of five to ten copies
+    of the segment's length."""
+    n = len(t)
+    if n < 8:
+        raise UserError(f"segment '{name}': a rotation segment needs at least 8 samples")
+    start, end = _window(t)
+    duration = end - start
+    spans = _chunks(n)
+    # trapezoid over the samples plus half a sample at each end: the integral over the window
+    gyro_integral = 0.5 * (gyro[0] * (t[1] - t[0]) + gyro[-1] * (t[-1] - t[-2]))
+    for i, j in spans:
+        hi = min(j + 1, n)
+        gyro_integral = gyro_integral + np.trapezoid(gyro[i:hi], t[i:hi], axis=0)
+    fraction = _phase_fraction(t, gyro, start, duration, gyro_sigma_dps)
+    # the table rate w(t) about the axis, its square and its time derivative are projected on the
     # same basis as the accelerometer (one solve for all of them)
-    w = _rate(t, gyro, gyro_bias, angle_deg, duration)
-    coefs = _least_squares(basis, _contiguous_columns(accel) + [w, w * w, np.gradient(w, t)])
-    del basis, w
+    w = _rate(gyro, gyro_bias, angle_deg, duration)
+    angle_rad = np.radians(angle_deg)
+    gram = np.zeros((5, 5))
+    projections = np.zeros((5, 6))      # accel x, y, z; w, w^2, dw/dt
+    sum_m = sum_m2 = np.float64(0.0)    # the gyro's magnitude: its sum and sum of squares
+    columns = np.empty((CHUNK_SAMPLES, 6))
+    for i, j in spans:
+        basis = _harmonic_basis(angle_rad * fraction[i:j])
+        c = columns[:j - i]
+        c[:, :3] = accel[i:j]
+        c[:, 3] = w[i:j]
+        np.multiply(c[:, 3], c[:, 3], out=c[:, 4])
+        c[:, 5] = _gradient_chunk(w, t, i, j)
+        gram += basis @ basis.T
+        projections += basis @ c
+        g = gyro[i:j]
+        m2 = np.einsum("ij,ij->i", g, g)
+        sum_m2 += m2.sum()
+        sum_m += np.sqrt(m2, out=m2).sum()
+    if np.linalg.cond(gram) < MAX_GRAM_CONDITION:
+        coefs = np.linalg.solve(gram, projections)
+    else:   # a short sweep: the SVD solver on the whole basis
+        basis = _harmonic_basis(angle_rad * fraction)
+        coefs = np.linalg.lstsq(basis.T, np.column_stack([accel, w, w * w, np.gradient(w, t)]),
+                                rcond=None)[0]
+    del w, fraction
     coef, rate_coefs = coefs[:, :3], (coefs[:, 3], coefs[:, 4], coefs[:, 5])
-    edge = min(EDGE_SAMPLES, len(t) // 4)
-    magnitude = np.linalg.norm(gyro, axis=1)
-    steady = bool(np.std(magnitude) < STEADY_SPREAD * np.mean(magnitude))
-    rate_sq_factor = float(np.mean(magnitude**2) / np.mean(magnitude) ** 2)
+    edge = min(EDGE_SAMPLES, n // 4)
+    mean_m, mean_m2 = sum_m / n, sum_m2 / n
+    spread = np.sqrt(max(mean_m2 - mean_m * mean_m, 0.0))     # the magnitude's standard deviation
+    steady = bool(spread < STEADY_SPREAD * mean_m)
+    rate_sq_factor = float(mean_m2 / mean_m ** 2)
     return RotationSummary(name=name, axis_body=axis_body, group=group, angle_deg=float(angle_deg),
-                           duration_s=float(duration), samples=len(t), accel_dc=coef[0],
+                           duration_s=float(duration), samples=n, accel_dc=coef[0],
                            accel_cos=coef[1], accel_sin=coef[2], accel_cos2=coef[3],
                            accel_sin2=coef[4], gyro_integral=gyro_integral,
                            temp_c=None if temp is None else float(np.mean(temp)),
