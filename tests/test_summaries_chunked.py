@@ -72,3 +72,14 @@ def test_a_short_sweep_takes_the_svd_solver_and_still_agrees(monkeypatch):
         np.testing.assert_allclose(getattr(chunked, name), getattr(whole, name), rtol=1e-6, atol=1e-9,
                                    err_msg=name)
     assert chunked.samples == whole.samples == n
+
+
+@pytest.mark.parametrize("chunk", [7, 1 << 15])
+def test_static_noise_sums_chunk_by_chunk_equal_the_whole_array_ones(monkeypatch, chunk):
+    """The statics' white noise (half the sum of squared first differences) chunk by chunk."""
+    rng = np.random.default_rng(2)
+    x = rng.normal([0.1, -0.2, 9.8], 0.01, (50_001, 3))
+    monkeypatch.setattr(summaries, "CHUNK_SAMPLES", chunk)
+    whole = np.sum(np.diff(x, axis=0) ** 2, axis=0) / 2
+    np.testing.assert_allclose(summaries._half_sum_sq_diff(x), whole, rtol=4 * len(x) * EPS, atol=0)
+    assert summaries._half_sum_sq_diff(x[:1]).tolist() == [0.0, 0.0, 0.0]

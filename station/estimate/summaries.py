@@ -126,20 +126,45 @@ def _window(t: np.ndarray) -> tuple[float, float]:
     return t[0] - 0.5 * dt_first, t[-1] + 0.5 * dt_last
 
 
+CHUNK_SAMPLES = 1 << 15     # the per-sample work of a rotation summary is done this many samples at a time
+
+
+def _chunks(n):
+    """(start, stop) of the consecutive chunks of CHUNK_SAMPLES samples covering n samples."""
+    return [(i, min(i + CHUNK_SAMPLES, n)) for i in range(0, n, CHUNK_SAMPLES)]
+
+
 def _turned_fraction(t, gyro, start, duration) -> np.ndarray:
     """Fraction of the segment's turn reached at each sample, from the gyro's own integral about
     its mean rate direction (scale errors cancel in the ratio; a rate that ripples or drifts is
-    followed, where a uniform rate would smear the harmonics)."""
+    followed, where a uniform rate would smear the harmonics).  Computed chunk by chunk into the
+    one array it returns (the running sum carried from chunk to chunk: the same sums)."""
+    n = len(t)
     direction = gyro.mean(axis=0)
     norm = np.linalg.norm(direction)
     if norm == 0:
-        return (t - start) / duration
-    rate = gyro @ (direction / norm)
-    dt = np.diff(t)
-    turned = np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * dt)])
-    turned += 0.5 * rate[0] * (t[1] - t[0])                    # from the window's start
-    total = turned[-1] + 0.5 * rate[-1] * (t[-1] - t[-2])
-    return turned / total if total != 0 else (t - start) / duration
+        return _uniform_fraction(t, start, duration)
+    direction = direction / norm
+    turned = np.empty(n)
+    turned[0] = 0.0
+    for i, j in _chunks(n - 1):         # the steps between samples i..j
+        rate = gyro[i:j + 1] @ direction
+        steps = np.empty(j - i + 1)
+        steps[0] = turned[i]            # the running sum so far, then this chunk's trapezoids
+        np.multiply(rate[1:] + rate[:-1], 0.5, out=steps[1:])
+        steps[1:] *= np.diff(t[i:j + 1])
+        turned[i + 1:j + 1] = np.cumsum(steps)[1:]
+    rate_first, rate_last = gyro[0] @ direction, gyro[-1] @ direction
+    turned += 0.5 * rate_first * (t[1] - t[0])                  # from the window's start
+    total = turned[-1] + 0.5 * rate_last * (t[-1] - t[-2])
+    if total == 0:
+        return _uniform_fraction(t, start, duration)
+    turned /= total
+    return turned
+
+
+def _uniform_fraction(t, start, duration):
+    return (t - start) / duration
 
 
 def _phase_fraction(t, gyro, start, duration, gyro_sigma_dps):
@@ -149,16 +174,25 @@ def _phase_fraction(t, gyro, start, duration, gyro_sigma_dps):
     harmonics.  So the gyro-tracked phase is used only where its departure from a uniform phase is
     more than three times that noise, i.e. where the rate ripples or drifts."""
     tracked = _turned_fraction(t, gyro, start, duration)
-    uniform = (t - start) / duration
     if gyro_sigma_dps is None:
         return tracked
     rate = np.linalg.norm(gyro.mean(axis=0))
     if rate == 0:
         return tracked
-    dt = duration / len(t)
+    n = len(t)
+    dt = duration / n
     noise_deg = float(np.max(gyro_sigma_dps)) * np.sqrt(dt * duration / 6.0)
-    departure_deg = float(np.sqrt(np.mean(((tracked - uniform) * rate * duration) ** 2)))
-    return tracked if departure_deg > 3.0 * noise_deg else uniform
+    squares = 0.0
+    for i, j in _chunks(n):
+        departure = tracked[i:j] - _uniform_fraction(t[i:j], start, duration)
+        departure *= rate * duration
+        squares += float(departure @ departure)
+    departure_deg = float(np.sqrt(squares / n))
+    if departure_deg > 3.0 * noise_deg:
+        return tracked
+    np.subtract(t, start, out=tracked)      # uniform, in the same array
+    tracked /= duration
+    return tracked
 
 
 def _rate(gyro, gyro_bias, angle_deg, duration):
@@ -178,12 +212,13 @@ def _rate(gyro, gyro_bias, angle_deg, duration):
 
 
 MAX_GRAM_CONDITION = 1e8    # normal equations lose about cond * 1e-16 of relative precision
-CHUNK_SAMPLES = 1 << 15     # the per-sample work of a rotation summary is done this many samples at a time
-
-
-def _chunks(n):
-    """(start, stop) of the consecutive chunks of CHUNK_SAMPLES samples covering n samples."""
-    return [(i, min(i + CHUNK_SAMPLES, n)) for i in range(0, n, CHUNK_SAMPLES)]
+def _half_sum_sq_diff(x):
+    """Half the sum of the squared first differences of each column of x (N, k), chunk by chunk."""
+    total = np.zeros(x.shape[1])
+    for i, j in _chunks(len(x) - 1):
+        step = x[i + 1:j + 1] - x[i:j]
+        total += np.einsum("ij,ij->j", step, step)
+    return total / 2
 
 
 def _harmonic_basis(phase):
@@ -374,8 +409,8 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
                                              temp_rate_c_per_s=_slope(d.t, d.temp)))
                 spans.append(_Span(seg.name, _TimeStamps(np.array([d.t[0], d.t[-1]]))))
                 # white noise: first differences remove slow drifts (temperature) from the estimate
-                diff_sq_a += np.sum(np.diff(a, axis=0) ** 2, axis=0) / 2
-                diff_sq_g += np.sum(np.diff(g, axis=0) ** 2, axis=0) / 2
+                diff_sq_a += _half_sum_sq_diff(a)
+                diff_sq_g += _half_sum_sq_diff(g)
                 diff_count += len(d.t) - 1
                 del a, g, d
                 continue
