@@ -755,34 +755,44 @@ def read_csv_pieces(path, sample_rate_hz) -> tuple[SegmentData | None, str]:
     which accepts it or names the line, column and text.  OSError if the file cannot be read."""
     digest = hashlib.sha256()
     parser = _PieceParser(sample_rate_hz)
-    hashing = None      # the piece being hashed on another thread while the engine parses it
+    # One buffer for the whole file: a partial last line is moved to its start and the next piece
+    # read in after it (no copy of a piece to join it to the line it ends)
+    buffer = bytearray(PIECE_BYTES + 4096)
+    held = 0            # bytes at the buffer's start: the partial line carried over
     with open_regular_file(path) as f:
         parser.size = os.fstat(f.fileno()).st_size
-        carry = b""
         while True:
-            piece = f.read(PIECE_BYTES)
-            if hashing is not None:
-                hashing.join()
-            if not piece:
-                break
-            # hashlib and the engine both release the GIL: hashing overlaps parsing
-            hashing = threading.Thread(target=digest.update, args=(piece,), daemon=True)
-            hashing.start()
-            if parser.failed:
-                continue
-            text = carry + piece if carry else piece
-            del piece
-            # whole lines only, and blank lines at the end held back (allowed only at the file's end)
-            end = len(text)
-            while end > 0 and text[end - 1] in _BLANK:
-                end -= 1
-            cut = text.rfind(b"\n", 0, end) + 1
-            if cut > 0:
-                parser.feed(text, cut)
-            carry = text[cut:]
-            del text
+            if len(buffer) < held + PIECE_BYTES:    # a line longer than the room left
+                grown = bytearray(held + PIECE_BYTES)
+                grown[:held] = buffer[:held]
+                buffer = grown
+            with memoryview(buffer) as view:
+                got = f.readinto(view[held:held + PIECE_BYTES])
+                if not got:
+                    break
+                # hashlib and the engine both release the GIL: hashing overlaps parsing
+                hashing = threading.Thread(target=digest.update, args=(view[held:held + got],),
+                                           daemon=True)
+                hashing.start()
+                end = held + got
+                cut = 0
+                if not parser.failed:
+                    # whole lines only, and blank lines at the end held back (allowed only at the
+                    # file's end)
+                    stop = end
+                    while stop > 0 and buffer[stop - 1] in _BLANK:
+                        stop -= 1
+                    cut = buffer.rfind(b"\n", 0, stop) + 1
+                    if cut > 0:
+                        parser.feed(buffer, cut)
+                hashing.join()          # before the buffer's bytes are moved or read over
+            held = 0 if parser.failed else end - cut
+            buffer[:held] = buffer[cut:end]
         if not parser.failed:
-            parser.feed(carry, len(carry.rstrip(_BLANK)))
+            stop = held
+            while stop > 0 and buffer[stop - 1] in _BLANK:
+                stop -= 1
+            parser.feed(buffer, stop)
     return parser.result(), digest.hexdigest()
 
 
