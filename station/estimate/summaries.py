@@ -240,10 +240,12 @@ def _harmonic_basis(phase):
 
 
 def _gradient_chunk(w, t, i, j):
-    """np.gradient(w, t)[i:j], computed from w[i-1:j+1] only (the same values: the gradient at a
-    sample uses its two neighbours, and the end formula at the segment's ends)."""
-    lo, hi = max(i - 1, 0), min(j + 1, len(t))
-    return np.gradient(w[lo:hi], t[lo:hi])[i - lo:i - lo + (j - i)]
+    """np.gradient(w, t)[i:j] (t None: unit spacing), computed from w[i-1:j+1] only (the same
+    values: the gradient at a sample uses its two neighbours, and the end formula at the
+    segment's ends)."""
+    lo, hi = max(i - 1, 0), min(j + 1, len(w))
+    part = np.gradient(w[lo:hi]) if t is None else np.gradient(w[lo:hi], t[lo:hi])
+    return part[i - lo:i - lo + (j - i)]
 
 
 def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
@@ -263,11 +265,6 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
     start, end = _window(t)
     duration = end - start
     spans = _chunks(n)
-    # trapezoid over the samples plus half a sample at each end: the integral over the window
-    gyro_integral = 0.5 * (gyro[0] * (t[1] - t[0]) + gyro[-1] * (t[-1] - t[-2]))
-    for i, j in spans:
-        hi = min(j + 1, n)
-        gyro_integral = gyro_integral + np.trapezoid(gyro[i:hi], t[i:hi], axis=0)
     gyro_mean = _column_means(gyro)
     fraction = _phase_fraction(t, gyro, start, duration, gyro_sigma_dps, gyro_mean)
     # the table rate w(t) about the axis, its square and its time derivative are projected on the
@@ -278,7 +275,12 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
     projections = np.zeros((5, 6))      # accel x, y, z; w, w^2, dw/dt
     sum_m = sum_m2 = np.float64(0.0)    # the gyro's magnitude: its sum and sum of squares
     columns = np.empty((CHUNK_SAMPLES, 6))
+    # the gyro integral over the window: the trapezoid over the samples plus half a sample at each
+    # end, i.e. each sample weighted by half the time between its neighbours (np.gradient(t): a
+    # whole step at the ends)
+    gyro_integral = np.zeros(3)
     for i, j in spans:
+        gyro_integral += _gradient_chunk(t, None, i, j) @ gyro[i:j]
         basis = _harmonic_basis(angle_rad * fraction[i:j])
         c = columns[:j - i]
         c[:, :3] = accel[i:j]
