@@ -787,7 +787,8 @@ def read_csv_pieces(path, sample_rate_hz) -> tuple[SegmentData | None, str]:
                         parser.feed(buffer, cut)
                 hashing.join()          # before the buffer's bytes are moved or read over
             held = 0 if parser.failed else end - cut
-            buffer[:held] = buffer[cut:end]
+            if held:        # same length: the buffer is never resized (views of it may live on)
+                buffer[:held] = buffer[cut:end]
         if not parser.failed:
             stop = held
             while stop > 0 and buffer[stop - 1] in _BLANK:
