@@ -206,12 +206,11 @@ class ReaderAhead:
         if self._next >= len(self._segments) or self._segments[self._next] is not segment:
             raise ValueError(f"segment {segment.name!r} is not the next one to take")
         self._next += 1
-        pending, self._pending = self._pending, None
-        if pending is None or pending[0] is not segment:
-            self._join(pending)
+        if self._pending is None:
             return self._capture.read_samples(segment)
-        _, thread, box = pending
+        _, thread, box = self._pending      # ahead() reads only the next segment: this one
         thread.join()
+        self._pending = None                # after the join: an interrupted join leaves it to close()
         if "error" in box:
             raise box["error"]
         return box["data"]
@@ -238,13 +237,9 @@ class ReaderAhead:
 
     def close(self):
         """Wait for a read under way (its result is dropped)."""
-        pending, self._pending = self._pending, None
-        self._join(pending)
-
-    @staticmethod
-    def _join(pending):
-        if pending is not None:
-            pending[1].join()
+        if self._pending is not None:
+            self._pending[1].join()
+            self._pending = None
 
     def __enter__(self):
         return self
