@@ -10,11 +10,15 @@ Records an optimal9 capture with the simulator at each rate (1 kHz: 3.06 M sampl
   before     (with --before SRC) the same as summaries with SRC (a source tree of an earlier
              commit, e.g. `git archive COMMIT station drivers | tar -x -C SRC`) first on the
              module path: the reader's change measured in the same run
+  ahead      (with --ahead-pairs N) in this process, N alternating pairs of summarise(read_capture(
+             CAPTURE, load_data=False)) with and without reading the next segment ahead
+             (ReaderAhead.ahead made a no-op): what reading ahead gains, the rest being equal
 and prints for each the median wall time, CPU time (user + system, all threads) and peak RSS of
 the child process (os.wait4's rusage: that child alone), and the ratios estimate / loadtxt
 measured in this one run.  The machine is shared: compare the ratios, and repeat.
 
 Usage: python benchmarks/perf_reader.py [--rates 1000 4000] [--repeat 3] [--keep DIR] [--before SRC]
+                                       [--ahead-pairs N]
 """
 import argparse
 import os
@@ -63,11 +67,34 @@ def run_child(argv, pythonpath=None):
     return wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024
 
 
+def ahead_pairs(cap, pairs):
+    """Median (wall s, cpu s) of summarising ``cap`` in this process with and without reading ahead."""
+    from station.estimate.summaries import summarise
+    from station.io import capture as capture_io
+
+    real = capture_io.ReaderAhead.ahead
+    runs = {"with reading ahead": [], "without": []}
+    try:
+        for _ in range(pairs):
+            for name in runs:
+                capture_io.ReaderAhead.ahead = real if name.startswith("with ") else (lambda self: None)
+                wall, cpu = time.perf_counter(), time.process_time()
+                summarise(capture_io.read_capture(cap, load_data=False))
+                runs[name].append((time.perf_counter() - wall, time.process_time() - cpu))
+    finally:
+        capture_io.ReaderAhead.ahead = real
+    for name, values in runs.items():
+        print(f"  in process, {name}: wall {statistics.median(v[0] for v in values):.3f} s, "
+              f"cpu {statistics.median(v[1] for v in values):.3f} s (medians of {pairs})")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--rates", type=float, nargs="+", default=[1000.0, 4000.0])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--keep", metavar="DIR", help="record the captures here and keep them (reused if there)")
+    ap.add_argument("--ahead-pairs", type=int, default=0, metavar="N",
+                    help="also time summarising in this process with and without reading ahead, N pairs")
     ap.add_argument("--before", metavar="SRC", help="a source tree of an earlier commit: its reader and "
                     "summaries timed in the same run (row 'before')")
     a = ap.parse_args()
@@ -107,6 +134,8 @@ def main():
                 print(f"  summaries / before: wall {statistics.median(n[0] / b[0] for n, b in pairs):.2f}x, "
                       f"cpu {statistics.median(n[1] / b[1] for n, b in pairs):.2f}x, peak RSS "
                       f"{statistics.median(n[2] / b[2] for n, b in pairs):.2f}x (medians of the per-pair ratios)")
+            if a.ahead_pairs:
+                ahead_pairs(cap, a.ahead_pairs)
 
 
 if __name__ == "__main__":
