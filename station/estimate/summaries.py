@@ -211,6 +211,8 @@ def _rate(gyro, gyro_bias, angle_deg, duration, gyro_mean):
 
 
 MAX_GRAM_CONDITION = 1e8    # normal equations lose about cond * 1e-16 of relative precision
+
+
 def _column_means(x):
     """The mean of each column of x (N, k): column by column (numpy's pairwise sum, 10x faster
     than x.mean(axis=0), which adds the rows one after the other)."""
