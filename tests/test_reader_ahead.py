@@ -68,3 +68,21 @@ def test_summaries_raise_the_first_segments_error_first(tmp_path):
     with pytest.raises(CaptureError, match=r"pos02.csv: segments\[1\] \(pos02\): line 4: "):
         summaries.summarise(read_capture(directory, load_data=False), check_segment=lambda seg: checked.append(seg.name))
     assert checked == ["pos01"] and not reading_threads()
+
+
+def test_summarise_runs_on_a_thread_that_is_not_the_main_one(optimal9_run):
+    """The estimate command may read and summarise the capture on a second thread while the main
+    one imports the fit: the same summaries there."""
+    here = summaries.summarise(read_capture(optimal9_run, load_data=False))
+    result = {}
+    worker = threading.Thread(target=lambda: result.update(
+        s=summaries.summarise(read_capture(optimal9_run, load_data=False))))
+    worker.start()
+    worker.join()
+    there = result["s"]
+    for a, b in zip(here.statics + here.rotations, there.statics + there.rotations):
+        for name, value in vars(a).items():
+            if isinstance(value, np.ndarray):
+                np.testing.assert_array_equal(value, getattr(b, name))
+    np.testing.assert_array_equal(here.gyro_sigma, there.gyro_sigma)
+    assert len(here.rotations) == len(there.rotations) > 0
