@@ -14,6 +14,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import weakref
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,7 +22,6 @@ from threadpoolctl import threadpool_limits
 
 from station.core import units
 from station.core.errors import UserError
-from station.estimate import hand_rotation
 
 EDGE_SAMPLES = 3
 STEADY_SPREAD = 0.3     # a rotation whose rate magnitude varies more (std/mean) is a hand turn
@@ -126,90 +126,111 @@ def _window(t: np.ndarray) -> tuple[float, float]:
     return t[0] - 0.5 * dt_first, t[-1] + 0.5 * dt_last
 
 
-def _turned_fraction(t, gyro, start, duration) -> np.ndarray:
+CHUNK_SAMPLES = 1 << 15     # the per-sample work of a rotation summary is done this many samples at a time
+
+
+def _chunks(n):
+    """(start, stop) of the consecutive chunks of CHUNK_SAMPLES samples covering n samples."""
+    return [(i, min(i + CHUNK_SAMPLES, n)) for i in range(0, n, CHUNK_SAMPLES)]
+
+
+def _turned_fraction(t, gyro, start, duration, gyro_mean) -> np.ndarray:
     """Fraction of the segment's turn reached at each sample, from the gyro's own integral about
     its mean rate direction (scale errors cancel in the ratio; a rate that ripples or drifts is
-    followed, where a uniform rate would smear the harmonics)."""
-    direction = gyro.mean(axis=0)
-    norm = np.linalg.norm(direction)
+    followed, where a uniform rate would smear the harmonics).  Computed chunk by chunk into the
+    one array it returns (the running sum carried from chunk to chunk: the same sums)."""
+    n = len(t)
+    norm = np.linalg.norm(gyro_mean)
     if norm == 0:
-        return (t - start) / duration
-    rate = gyro @ (direction / norm)
-    dt = np.diff(t)
-    turned = np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * dt)])
-    turned += 0.5 * rate[0] * (t[1] - t[0])                    # from the window's start
-    total = turned[-1] + 0.5 * rate[-1] * (t[-1] - t[-2])
-    return turned / total if total != 0 else (t - start) / duration
+        return _uniform_fraction(t, start, duration)
+    direction = gyro_mean / norm
+    turned = np.empty(n)
+    turned[0] = 0.0
+    for i, j in _chunks(n - 1):         # the steps between samples i..j
+        rate = gyro[i:j + 1] @ direction
+        steps = np.empty(j - i + 1)
+        steps[0] = turned[i]            # the running sum so far, then this chunk's trapezoids
+        np.multiply(rate[1:] + rate[:-1], 0.5, out=steps[1:])
+        steps[1:] *= np.diff(t[i:j + 1])
+        turned[i + 1:j + 1] = np.cumsum(steps)[1:]
+    rate_first, rate_last = gyro[0] @ direction, gyro[-1] @ direction
+    turned += 0.5 * rate_first * (t[1] - t[0])                  # from the window's start
+    total = turned[-1] + 0.5 * rate_last * (t[-1] - t[-2])
+    if total == 0:
+        return _uniform_fraction(t, start, duration)
+    turned /= total
+    return turned
 
 
-def _phase_fraction(t, gyro, start, duration, gyro_sigma_dps):
+def _uniform_fraction(t, start, duration):
+    return (t - start) / duration
+
+
+def _phase_fraction(t, gyro, start, duration, gyro_sigma_dps, gyro_mean):
     """Fraction of the turn at each sample: from the gyro when the rate really varies, else
     uniform in time.  Integrating the gyro adds its noise as a random walk of the phase (pinned
     at both ends: RMS sigma sqrt(dt T / 6)); over a few revolutions that wander projects onto the
     harmonics.  So the gyro-tracked phase is used only where its departure from a uniform phase is
     more than three times that noise, i.e. where the rate ripples or drifts."""
-    tracked = _turned_fraction(t, gyro, start, duration)
-    uniform = (t - start) / duration
+    tracked = _turned_fraction(t, gyro, start, duration, gyro_mean)
     if gyro_sigma_dps is None:
         return tracked
-    rate = np.linalg.norm(gyro.mean(axis=0))
+    rate = np.linalg.norm(gyro_mean)
     if rate == 0:
         return tracked
-    dt = duration / len(t)
+    n = len(t)
+    dt = duration / n
     noise_deg = float(np.max(gyro_sigma_dps)) * np.sqrt(dt * duration / 6.0)
-    departure_deg = float(np.sqrt(np.mean(((tracked - uniform) * rate * duration) ** 2)))
-    return tracked if departure_deg > 3.0 * noise_deg else uniform
+    squares = 0.0
+    for i, j in _chunks(n):
+        departure = tracked[i:j] - _uniform_fraction(t[i:j], start, duration)
+        departure *= rate * duration
+        squares += float(departure @ departure)
+    departure_deg = float(np.sqrt(squares / n))
+    if departure_deg > 3.0 * noise_deg:
+        return tracked
+    np.subtract(t, start, out=tracked)      # uniform, in the same array
+    tracked /= duration
+    return tracked
 
 
-def _rate(t, gyro, gyro_bias, angle_deg, duration):
+def _rate(gyro, gyro_bias, angle_deg, duration, gyro_mean):
     """The table rate (rad/s, signed like the angle) at each sample: the gyro along its mean
     direction (bias removed), rescaled to the encoder's mean rate."""
-    g = gyro - (0.0 if gyro_bias is None else gyro_bias)
-    direction = g.mean(axis=0)
+    bias = np.zeros(3) if gyro_bias is None else np.asarray(gyro_bias, float)
+    direction = gyro_mean - bias
     norm = np.linalg.norm(direction)
     mean_rate = np.radians(angle_deg) / duration
-    if norm == 0 or len(t) < 3:
-        return np.full(len(t), mean_rate)
-    along = g @ (direction / norm)
-    return along * (mean_rate / along.mean())
+    if norm == 0:
+        return np.full(len(gyro), mean_rate)
+    direction /= norm
+    along = gyro @ direction            # (gyro - bias) @ direction without an (N, 3) temporary
+    along -= bias @ direction
+    along *= mean_rate / along.mean()
+    return along
 
 
 MAX_GRAM_CONDITION = 1e8    # normal equations lose about cond * 1e-16 of relative precision
 
 
-def _least_squares(basis, columns):
-    """Least-squares coefficients (k, m) of ``columns`` (N, m) on the basis functions, given as
-    the rows of ``basis`` (k, N).
-
-    Through the normal equations (matrix products over the N samples, then a k x k solve): the
-    harmonic basis of a turn is nearly orthogonal over whole revolutions, so its Gram matrix is
-    well conditioned and this matches an SVD solution to about cond * 1e-16 while costing a
-    fraction of it; a basis whose Gram matrix is worse conditioned than MAX_GRAM_CONDITION (a
-    short sweep) goes to the SVD solver (numpy.linalg.lstsq)."""
-    gram = basis @ basis.T
-    if np.linalg.cond(gram) < MAX_GRAM_CONDITION:
-        return np.linalg.solve(gram, np.column_stack([basis @ c for c in columns]))
-    return np.linalg.lstsq(basis.T, np.column_stack(columns), rcond=None)[0]
+def _column_means(x):
+    """The mean of each column of x (N, k): column by column (numpy's pairwise sum, 10x faster
+    than x.mean(axis=0), which adds the rows one after the other)."""
+    return np.array([x[:, k].mean() for k in range(x.shape[1])])
 
 
-def _contiguous_columns(matrix):
-    return [np.ascontiguousarray(matrix[:, k]) for k in range(matrix.shape[1])]
+def _half_sum_sq_diff(x):
+    """Half the sum of the squared first differences of each column of x (N, k), chunk by chunk."""
+    total = np.zeros(x.shape[1])
+    for i, j in _chunks(len(x) - 1):
+        step = x[i + 1:j + 1] - x[i:j]
+        total += np.einsum("ij,ij->j", step, step)
+    return total / 2
 
 
-def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
-                     gyro_sigma_dps=None, gyro_bias=None) -> RotationSummary:
-    """``gyro_sigma_dps``: per-sample white gyro noise (deg/s); with it the phase is tracked by
-    the gyro only where the rate varies beyond what that noise would make it seem to.
-    ``gyro_bias``: a rough gyro bias (the statics' mean), removed before the rate's shape is taken."""
-    if len(t) < 8:
-        raise UserError(f"segment '{name}': a rotation segment needs at least 8 samples")
-    start, end = _window(t)
-    duration = end - start
-    # trapezoid over the samples plus half a sample at each end: the integral over the window
-    gyro_integral = (np.trapezoid(gyro, t, axis=0)
-                     + 0.5 * (gyro[0] * (t[1] - t[0]) + gyro[-1] * (t[-1] - t[-2])))
-    phase = np.radians(angle_deg) * _phase_fraction(t, gyro, start, duration, gyro_sigma_dps)
-    basis = np.empty((5, len(t)))          # rows: 1, cos phi, sin phi, cos 2phi, sin 2phi
+def _harmonic_basis(phase):
+    """Rows 1, cos phi, sin phi, cos 2phi, sin 2phi at the given phases (5, n)."""
+    basis = np.empty((5, len(phase)))
     basis[0] = 1.0
     np.cos(phase, out=basis[1])
     np.sin(phase, out=basis[2])
@@ -217,19 +238,78 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
     basis[3] -= basis[2] * basis[2]
     np.multiply(basis[1], basis[2], out=basis[4])
     basis[4] *= 2.0
-    del phase
-    # The table rate w(t) about the axis, its square and its time derivative are projected on the
+    return basis
+
+
+def _gradient_chunk(w, t, i, j):
+    """np.gradient(w, t)[i:j] (t None: unit spacing), computed from w[i-1:j+1] only (the same
+    values: the gradient at a sample uses its two neighbours, and the end formula at the
+    segment's ends)."""
+    lo, hi = max(i - 1, 0), min(j + 1, len(w))
+    part = np.gradient(w[lo:hi]) if t is None else np.gradient(w[lo:hi], t[lo:hi])
+    return part[i - lo:i - lo + (j - i)]
+
+
+def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
+                     gyro_sigma_dps=None, gyro_bias=None) -> RotationSummary:
+    """``gyro_sigma_dps``: per-sample white gyro noise (deg/s); with it the phase is tracked by
+    the gyro only where the rate varies beyond what that noise would make it seem to.
+    ``gyro_bias``: a rough gyro bias (the statics' mean), removed before the rate's shape is taken.
+
+    The accelerometer, the rate, its square and its derivative are projected on the harmonic
+    basis CHUNK_SAMPLES samples at a time (the Gram matrix and the projections summed over the
+    chunks, then one 5 x 5 solve): the same least-squares coefficients as with whole arrays, to
+    rounding, with temporaries that fit in the processor's cache instead of five to ten copies
+    of the segment's length."""
+    n = len(t)
+    if n < 8:
+        raise UserError(f"segment '{name}': a rotation segment needs at least 8 samples")
+    start, end = _window(t)
+    duration = end - start
+    spans = _chunks(n)
+    gyro_mean = _column_means(gyro)
+    fraction = _phase_fraction(t, gyro, start, duration, gyro_sigma_dps, gyro_mean)
+    # the table rate w(t) about the axis, its square and its time derivative are projected on the
     # same basis as the accelerometer (one solve for all of them)
-    w = _rate(t, gyro, gyro_bias, angle_deg, duration)
-    coefs = _least_squares(basis, _contiguous_columns(accel) + [w, w * w, np.gradient(w, t)])
-    del basis, w
+    w = _rate(gyro, gyro_bias, angle_deg, duration, gyro_mean)
+    angle_rad = np.radians(angle_deg)
+    gram = np.zeros((5, 5))
+    projections = np.zeros((5, 6))      # accel x, y, z; w, w^2, dw/dt
+    sum_m = sum_m2 = np.float64(0.0)    # the gyro's magnitude: its sum and sum of squares
+    columns = np.empty((CHUNK_SAMPLES, 6))
+    # the gyro integral over the window: the trapezoid over the samples plus half a sample at each
+    # end, i.e. each sample weighted by half the time between its neighbours (np.gradient(t): a
+    # whole step at the ends)
+    gyro_integral = np.zeros(3)
+    for i, j in spans:
+        gyro_integral += _gradient_chunk(t, None, i, j) @ gyro[i:j]
+        basis = _harmonic_basis(angle_rad * fraction[i:j])
+        c = columns[:j - i]
+        c[:, :3] = accel[i:j]
+        c[:, 3] = w[i:j]
+        np.multiply(c[:, 3], c[:, 3], out=c[:, 4])
+        c[:, 5] = _gradient_chunk(w, t, i, j)
+        gram += basis @ basis.T
+        projections += basis @ c
+        g = gyro[i:j]
+        m2 = np.einsum("ij,ij->i", g, g)
+        sum_m2 += m2.sum()
+        sum_m += np.sqrt(m2, out=m2).sum()
+    if np.linalg.cond(gram) < MAX_GRAM_CONDITION:
+        coefs = np.linalg.solve(gram, projections)
+    else:   # a short sweep: the SVD solver on the whole basis
+        basis = _harmonic_basis(angle_rad * fraction)
+        coefs = np.linalg.lstsq(basis.T, np.column_stack([accel, w, w * w, np.gradient(w, t)]),
+                                rcond=None)[0]
+    del w, fraction
     coef, rate_coefs = coefs[:, :3], (coefs[:, 3], coefs[:, 4], coefs[:, 5])
-    edge = min(EDGE_SAMPLES, len(t) // 4)
-    magnitude = np.linalg.norm(gyro, axis=1)
-    steady = bool(np.std(magnitude) < STEADY_SPREAD * np.mean(magnitude))
-    rate_sq_factor = float(np.mean(magnitude**2) / np.mean(magnitude) ** 2)
+    edge = min(EDGE_SAMPLES, n // 4)
+    mean_m, mean_m2 = sum_m / n, sum_m2 / n
+    spread = np.sqrt(max(mean_m2 - mean_m * mean_m, 0.0))     # the magnitude's standard deviation
+    steady = bool(spread < STEADY_SPREAD * mean_m)
+    rate_sq_factor = float(mean_m2 / mean_m ** 2)
     return RotationSummary(name=name, axis_body=axis_body, group=group, angle_deg=float(angle_deg),
-                           duration_s=float(duration), samples=len(t), accel_dc=coef[0],
+                           duration_s=float(duration), samples=n, accel_dc=coef[0],
                            accel_cos=coef[1], accel_sin=coef[2], accel_cos2=coef[3],
                            accel_sin2=coef[4], gyro_integral=gyro_integral,
                            temp_c=None if temp is None else float(np.mean(temp)),
@@ -312,41 +392,46 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
     order = {seg.name: k for k, seg in enumerate(capture.segments)}
     statics, spans = [], []
     diff_sq_a, diff_sq_g, diff_count = np.zeros(3), np.zeros(3), 0
-    for seg in capture.complete("static"):
-        with capture.lent_samples(seg) as d:
-            if check_segment is not None:
-                check_segment(seg)
-            if seg.status != "complete":
-                continue
-            a, g = _scaled(d.accel, ca), _scaled(d.gyro, cg)
-            statics.append(StaticSummary(seg.name, seg.up_body, a.mean(axis=0), g.mean(axis=0), len(d.t),
-                                         float(d.t[-1] - d.t[0]), None if d.temp is None else float(d.temp.mean()),
-                                         t_mid_s=float(np.mean(d.t)), index=order[seg.name],
-                                         temp_rate_c_per_s=_slope(d.t, d.temp)))
-            spans.append(_Span(seg.name, _TimeStamps(np.array([d.t[0], d.t[-1]]))))
-            # white noise: first differences remove slow drifts (temperature) from the estimate
-            diff_sq_a += np.sum(np.diff(a, axis=0) ** 2, axis=0) / 2
-            diff_sq_g += np.sum(np.diff(g, axis=0) ** 2, axis=0) / 2
-            diff_count += len(d.t) - 1
-            del a, g
-    if not statics:
-        raise UserError(f"{capture.path}: no complete static segment: the least-squares fit needs "
-                        "static segments (biases and the noise level come from them)")
-    with np.errstate(invalid="ignore", divide="ignore"):
-        gyro_sigma = np.sqrt(diff_sq_g / diff_count)
-    static_gyro_mean = np.mean([st.gyro for st in statics], axis=0)   # ~ the bias (Earth rate averages out)
-
     rotations, skipped, axes, hands = [], [], [], []
-    for seg in capture.complete("rotation"):
-        with capture.lent_samples(seg) as d:
+    gyro_sigma = static_gyro_mean = None
+    # statics first (the rotation summaries use their noise and gyro bias), then the rotations,
+    # then the segments estimation does not use (only checked); each file is read while the
+    # previous segment is summarised (ReaderAhead)
+    queue = capture.complete("static") + capture.complete("rotation")
+    if check_segment is not None:
+        queue += [seg for seg in capture.complete() if seg.kind not in ("static", "rotation")]
+    with capture.reader_ahead(queue) as reader:
+        for seg in queue:
+            if seg.kind != "static" and gyro_sigma is None:
+                gyro_sigma, static_gyro_mean = _static_noise(capture, statics, diff_sq_g, diff_count)
+            d = reader.take(seg)
             if check_segment is not None:
-                check_segment(seg)
-            if seg.status != "complete":
+                with _holding(seg, d):
+                    check_segment(seg)
+            reader.ahead()
+            if seg.status != "complete" or seg.kind not in ("static", "rotation"):
                 continue
-            if hand_rotation.is_hand(seg):
-                hands.append((seg, d))
+            if seg.kind == "static":
+                a, g = _scaled(d.accel, ca), _scaled(d.gyro, cg)
+                statics.append(StaticSummary(seg.name, seg.up_body, _column_means(a), _column_means(g), len(d.t),
+                                             float(d.t[-1] - d.t[0]), None if d.temp is None else float(d.temp.mean()),
+                                             t_mid_s=float(np.mean(d.t)), index=order[seg.name],
+                                             temp_rate_c_per_s=_slope(d.t, d.temp)))
+                spans.append(_Span(seg.name, _TimeStamps(np.array([d.t[0], d.t[-1]]))))
+                # white noise: first differences remove slow drifts (temperature) from the estimate
+                diff_sq_a += _half_sum_sq_diff(a)
+                diff_sq_g += _half_sum_sq_diff(g)
+                diff_count += len(d.t) - 1
+                del a, g, d
                 continue
             if seg.angle_deg is None:
+                from station.estimate import hand_rotation     # scipy: only for turns without an encoder
+
+                with _holding(seg, d):
+                    hand = hand_rotation.is_hand(seg)
+                if hand:
+                    hands.append((seg, d))
+                    continue
                 skipped.append(f"{seg.name}: no encoder angle (angle_deg); not used by the least-squares fit")
                 continue
             axis = np.asarray(seg.axis_body, float) / np.linalg.norm(seg.axis_body)
@@ -361,15 +446,38 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
             summary.t_mid_s, summary.index = float(np.mean(d.t)), order[seg.name]
             summary.temp_rate_c_per_s = _slope(d.t, d.temp)
             rotations.append(summary)
+            del d
+    if gyro_sigma is None:
+        _static_noise(capture, statics, diff_sq_g, diff_count)
     for seg, d in hands:
         seg.data = d                    # hand turns are short: their samples are kept for the fit
-    if check_segment is not None:       # segments estimation does not use are checked too
-        for seg in capture.complete():
-            if seg.kind not in ("static", "rotation"):
-                with capture.lent_samples(seg):
-                    check_segment(seg)
     return _SegmentSummaries(statics, spans, diff_sq_a, diff_sq_g, diff_count, rotations, skipped,
                              [seg for seg, _ in hands])
+
+
+def _static_noise(capture, statics, diff_sq_g, diff_count):
+    """(per-sample gyro white noise, mean gyro output) of the statics summarised; UserError
+    without any."""
+    if not statics:
+        raise UserError(f"{capture.path}: no complete static segment: the least-squares fit needs "
+                        "static segments (biases and the noise level come from them)")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        gyro_sigma = np.sqrt(diff_sq_g / diff_count)
+    return gyro_sigma, np.mean([st.gyro for st in statics], axis=0)   # ~ the bias (Earth rate averages out)
+
+
+@contextmanager
+def _holding(seg, data):
+    """seg.data holds ``data`` inside the block (for code that reads seg.data), as it was after."""
+    if seg.data is not None:
+        yield
+        return
+    seg.data = data
+    try:
+        yield
+    finally:
+        if seg.data is data:
+            seg.data = None
 
 
 def _assemble(capture, parts: _SegmentSummaries, ca, cg, table_angle_arcsec) -> Summaries:
@@ -378,8 +486,13 @@ def _assemble(capture, parts: _SegmentSummaries, ca, cg, table_angle_arcsec) -> 
         gyro_sigma = np.sqrt(parts.gyro_diff_sq / parts.diff_count)
     statics, rotations, skipped = parts.statics, parts.rotations, list(parts.skipped)
 
-    hand_rotations, hand_skipped = hand_rotation.collect(parts.static_spans, parts.hands, cg)
-    skipped += hand_skipped
+    if parts.hands:
+        from station.estimate import hand_rotation     # scipy: only for turns without an encoder
+
+        hand_rotations, hand_skipped = hand_rotation.collect(parts.static_spans, parts.hands, cg)
+        skipped += hand_skipped
+    else:
+        hand_rotations = []
     nominal = capture.imu.extra.get("gyro_nominal_dps_per_count") if capture.imu.gyro_unit == "raw" else None
     nominal = 1.0 / float(nominal) if isinstance(nominal, (int, float)) and nominal > 0 else None
     accel_nominal = capture.imu.extra.get("accel_nominal_mps2_per_count") if capture.imu.accel_unit == "raw" else None

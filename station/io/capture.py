@@ -172,6 +172,12 @@ class Capture:
             if segment.data is data:
                 segment.data = None
 
+    def reader_ahead(self, segments):
+        """A ReaderAhead over ``segments``: ``with capture.reader_ahead(segs) as reader:`` then,
+        for each segment in order, ``reader.take(seg)`` for its samples and ``reader.ahead()`` to
+        read the next one's file on another thread while working on the current one."""
+        return ReaderAhead(self, segments)
+
     def segment(self, name):
         """The segment called `name`; UserError if there is none."""
         for s in self.segments:
@@ -179,6 +185,69 @@ class Capture:
                 return s
         names = ", ".join(s.name for s in self.segments) or "none"
         raise UserError(f"{self.path / MANIFEST}: no segment named {name!r} (segments: {names})")
+
+
+class ReaderAhead:
+    """The samples of a list of segments, taken in their order, with the next segment's file read
+    (Capture.read_samples: read, hashed, parsed, checked) on another thread while the caller works
+    on the current segment's samples: the CSV engine and sha256 on one core, the caller's numpy
+    work on the other.  At most two segments' samples exist at once: the one taken and the one
+    being read.  A read that fails raises its error when that segment is taken, so errors come in
+    the segments' order, as without reading ahead.  Loaded segments (seg.data) are given as they
+    are; nothing is stored in seg.data."""
+
+    def __init__(self, capture, segments):
+        self._capture = capture
+        self._segments = list(segments)
+        self._next = 0              # index of the next segment to take
+        self._pending = None        # (segment, thread, box) of the read under way
+
+    def take(self, segment) -> SegmentData | None:
+        """The samples of ``segment``, the next one in the list (read now unless read ahead)."""
+        if self._next >= len(self._segments) or self._segments[self._next] is not segment:
+            raise ValueError(f"segment {segment.name!r} is not the next one to take")
+        self._next += 1
+        if self._pending is None:
+            return self._capture.read_samples(segment)
+        _, thread, box = self._pending      # ahead() reads only the next segment: this one
+        thread.join()
+        self._pending = None                # after the join: an interrupted join leaves it to close()
+        if "error" in box:
+            raise box["error"]
+        return box["data"]
+
+    def ahead(self):
+        """Start reading the next segment's file on another thread (nothing if it is loaded, or
+        if there is none or a read is under way)."""
+        if self._pending is not None or self._next >= len(self._segments):
+            return
+        segment = self._segments[self._next]
+        if segment.data is not None:
+            return
+        box = {}
+
+        def read():
+            try:
+                box["data"] = self._capture.read_samples(segment)
+            except BaseException as e:  # noqa: BLE001 - handed to the caller by take()
+                box["error"] = e
+
+        thread = threading.Thread(target=read, name="capture-read-ahead", daemon=True)
+        thread.start()
+        self._pending = (segment, thread, box)
+
+    def close(self):
+        """Wait for a read under way (its result is dropped)."""
+        if self._pending is not None:
+            self._pending[1].join()
+            self._pending = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
 
 
 # ---------------------------------------------------------------------------------------------
@@ -682,34 +751,45 @@ def read_csv_pieces(path, sample_rate_hz) -> tuple[SegmentData | None, str]:
     which accepts it or names the line, column and text.  OSError if the file cannot be read."""
     digest = hashlib.sha256()
     parser = _PieceParser(sample_rate_hz)
-    hashing = None      # the piece being hashed on another thread while the engine parses it
+    # One buffer for the whole file: a partial last line is moved to its start and the next piece
+    # read in after it (no copy of a piece to join it to the line it ends)
+    buffer = bytearray(PIECE_BYTES + 4096)
+    held = 0            # bytes at the buffer's start: the partial line carried over
     with open_regular_file(path) as f:
         parser.size = os.fstat(f.fileno()).st_size
-        carry = b""
         while True:
-            piece = f.read(PIECE_BYTES)
-            if hashing is not None:
-                hashing.join()
-            if not piece:
-                break
-            # hashlib and the engine both release the GIL: hashing overlaps parsing
-            hashing = threading.Thread(target=digest.update, args=(piece,), daemon=True)
-            hashing.start()
-            if parser.failed:
-                continue
-            text = carry + piece if carry else piece
-            del piece
-            # whole lines only, and blank lines at the end held back (allowed only at the file's end)
-            end = len(text)
-            while end > 0 and text[end - 1] in _BLANK:
-                end -= 1
-            cut = text.rfind(b"\n", 0, end) + 1
-            if cut > 0:
-                parser.feed(text, cut)
-            carry = text[cut:]
-            del text
+            if len(buffer) < held + PIECE_BYTES:    # a line longer than the room left
+                grown = bytearray(held + PIECE_BYTES)
+                grown[:held] = buffer[:held]
+                buffer = grown
+            with memoryview(buffer) as view:
+                got = f.readinto(view[held:held + PIECE_BYTES])
+                if not got:
+                    break
+                # hashlib and the engine both release the GIL: hashing overlaps parsing
+                hashing = threading.Thread(target=digest.update, args=(view[held:held + got],),
+                                           daemon=True)
+                hashing.start()
+                end = held + got
+                cut = 0
+                if not parser.failed:
+                    # whole lines only, and blank lines at the end held back (allowed only at the
+                    # file's end)
+                    stop = end
+                    while stop > 0 and buffer[stop - 1] in _BLANK:
+                        stop -= 1
+                    cut = buffer.rfind(b"\n", 0, stop) + 1
+                    if cut > 0:
+                        parser.feed(buffer, cut)
+                hashing.join()          # before the buffer's bytes are moved or read over
+            held = 0 if parser.failed else end - cut
+            if held:        # same length: the buffer is never resized (views of it may live on)
+                buffer[:held] = buffer[cut:end]
         if not parser.failed:
-            parser.feed(carry, len(carry.rstrip(_BLANK)))
+            stop = held
+            while stop > 0 and buffer[stop - 1] in _BLANK:
+                stop -= 1
+            parser.feed(buffer, stop)
     return parser.result(), digest.hexdigest()
 
 

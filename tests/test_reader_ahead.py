@@ -1,0 +1,88 @@
+"""Reading the next segment while the current one is worked on (station/io/capture.py,
+ReaderAhead): the same samples as reading in turn, errors at their segment's turn and in the
+segments' order, no reading thread left behind."""
+import threading
+
+import numpy as np
+import pytest
+
+from station.core.errors import CaptureError, UserError
+from station.estimate import summaries
+from station.io.capture import read_capture
+from test_capture import base_manifest, csv_text, make_bundle
+
+BROKEN = csv_text().replace("\n0.02,", "\n0.02,x", 1)      # line 4: column 'ax' is not a number
+
+
+def reading_threads():
+    return [t for t in threading.enumerate() if t.name == "capture-read-ahead"]
+
+
+def test_the_samples_taken_are_those_read_in_turn(tmp_path):
+    capture = read_capture(make_bundle(tmp_path), load_data=False)
+    with capture.reader_ahead(capture.segments) as reader:
+        taken = []
+        for seg in capture.segments:
+            taken.append(reader.take(seg))
+            reader.ahead()
+    for seg, data in zip(capture.segments, taken):
+        expected = capture.read_samples(seg)
+        np.testing.assert_array_equal(np.column_stack([data.t, data.accel, data.gyro]),
+                                      np.column_stack([expected.t, expected.accel, expected.gyro]))
+    assert all(seg.data is None for seg in capture.segments)
+    with capture.reader_ahead(capture.segments) as reader, pytest.raises(ValueError, match="next one"):
+        reader.take(capture.segments[1])
+
+
+def test_a_read_that_fails_ahead_raises_at_its_segments_turn(tmp_path):
+    capture = read_capture(make_bundle(tmp_path, files={"rot1p.csv": BROKEN}), load_data=False)
+    with capture.reader_ahead(capture.segments) as reader:
+        reader.take(capture.segments[0])
+        reader.ahead()                      # rot1p is read (and fails) on the other thread
+        with pytest.raises(CaptureError) as info:
+            reader.take(capture.segments[1])
+    assert str(info.value).startswith(f"{capture.path / 'rot1p.csv'}: segments[1] (rot1p): line 4: "
+                                      "column 'ax': not a number")
+    assert not reading_threads()
+
+
+def test_summaries_raise_the_first_segments_error_first(tmp_path):
+    """The check of the first segment refuses: its error is raised, not the broken second one's
+    (whose file is read only once the first segment has passed its check); when the first passes,
+    the second one's error is raised at its turn.  No reading thread is left either way."""
+    manifest = base_manifest()
+    manifest["segments"].insert(1, {"name": "pos02", "kind": "static", "file": "pos02.csv",
+                                    "status": "complete", "up_body": [0, 0, -1]})
+    directory = make_bundle(tmp_path, manifest, files={"pos02.csv": BROKEN})
+    checked = []
+
+    def check(seg):
+        checked.append((seg.name, seg.data is not None))
+        if seg.name == "pos01":
+            raise UserError("pos01 refused by the check")
+
+    with pytest.raises(UserError, match="pos01 refused"):
+        summaries.summarise(read_capture(directory, load_data=False), check_segment=check)
+    assert checked == [("pos01", True)] and not reading_threads()
+    checked.clear()
+    with pytest.raises(CaptureError, match=r"pos02.csv: segments\[1\] \(pos02\): line 4: "):
+        summaries.summarise(read_capture(directory, load_data=False), check_segment=lambda seg: checked.append(seg.name))
+    assert checked == ["pos01"] and not reading_threads()
+
+
+def test_summarise_runs_on_a_thread_that_is_not_the_main_one(optimal9_run):
+    """The estimate command may read and summarise the capture on a second thread while the main
+    one imports the fit: the same summaries there."""
+    here = summaries.summarise(read_capture(optimal9_run, load_data=False))
+    result = {}
+    worker = threading.Thread(target=lambda: result.update(
+        s=summaries.summarise(read_capture(optimal9_run, load_data=False))))
+    worker.start()
+    worker.join()
+    there = result["s"]
+    for a, b in zip(here.statics + here.rotations, there.statics + there.rotations):
+        for name, value in vars(a).items():
+            if isinstance(value, np.ndarray):
+                np.testing.assert_array_equal(value, getattr(b, name))
+    np.testing.assert_array_equal(here.gyro_sigma, there.gyro_sigma)
+    assert len(here.rotations) == len(there.rotations) > 0

@@ -1,0 +1,85 @@
+"""Rotation summaries computed chunk by chunk (station/estimate/summaries.py, CHUNK_SAMPLES) against
+the same summaries computed with whole arrays (tests/summaries_reference.py, the code they replace):
+equal to rounding, whatever the chunk size, for a steady and a rippling rate and a short sweep."""
+import numpy as np
+import pytest
+
+from station.estimate import summaries
+from summaries_reference import rotation_summary as reference_summary
+
+RATE_HZ = 1000.0
+EPS = np.finfo(float).eps
+
+
+def rotation(n, *, rate_dps=30.0, ripple=0.0, seed=5):
+    """A rotation segment about x: (t, accel, gyro, temp, angle_deg, gyro_sigma, gyro_bias).
+    Jittered time stamps, white noise, a rate that ripples by ``ripple`` (relative) once a turn,
+    gravity turning in the y-z plane with a second harmonic and an offset."""
+    rng = np.random.default_rng(seed)
+    t = 100.0 + np.arange(n) / RATE_HZ + rng.normal(0, 2e-6, n)
+    omega = np.radians(rate_dps)
+    phase = omega * (t - t[0]) + ripple * np.sin(omega * (t - t[0]))
+    rate = np.gradient(phase, t)
+    gyro = np.column_stack([np.degrees(rate), np.zeros(n), np.zeros(n)]) + [0.01, -0.02, 0.005]
+    gyro += rng.normal(0, 0.01, (n, 3))
+    accel = np.column_stack([0.05 + 0.0 * t, 9.8 * np.cos(phase) + 1e-3 * np.cos(2 * phase),
+                             9.8 * np.sin(phase) - 2e-3 * np.sin(2 * phase)])
+    accel += rng.normal(0, 0.01, (n, 3))
+    temp = 25.0 + 1e-3 * (t - t[0])
+    angle_deg = np.degrees(phase[-1] - phase[0]) * n / (n - 1)
+    return t, accel, gyro, temp, angle_deg, np.full(3, 0.01), np.array([0.01, -0.02, 0.005])
+
+
+def assert_equal_to_rounding(chunked, whole, n):
+    """Every number of the two summaries equal to what the order of n additions can change
+    (n eps relative to the largest value of each quantity, which the harmonic fit's Gram matrix,
+    close to n/2 times the identity, does not amplify)."""
+    for name, value in vars(whole).items():
+        other = getattr(chunked, name)
+        if isinstance(value, np.ndarray):
+            scale = max(float(np.max(np.abs(value))), 1e-300)
+            np.testing.assert_allclose(other, value, rtol=0, atol=4 * n * EPS * scale, err_msg=name)
+        elif isinstance(value, float):
+            assert other == pytest.approx(value, rel=4 * n * EPS, abs=1e-300, nan_ok=True), name
+        else:
+            assert other == value, name
+
+
+@pytest.mark.parametrize("chunk", [7, 1000, 1 << 15])
+@pytest.mark.parametrize("ripple", [0.0, 0.05])
+def test_chunked_rotation_summary_equals_the_whole_array_one(monkeypatch, chunk, ripple):
+    n = 36_001                          # 3 turns at 30 deg/s, not a multiple of any chunk size
+    t, accel, gyro, temp, angle, sigma, bias = rotation(n, ripple=ripple)
+    whole = reference_summary("rot", np.array([1.0, 0, 0]), 0, angle, t, accel, gyro, temp, sigma, bias)
+    monkeypatch.setattr(summaries, "CHUNK_SAMPLES", chunk)
+    chunked = summaries.rotation_summary("rot", np.array([1.0, 0, 0]), 0, angle, t, accel, gyro, temp,
+                                         sigma, bias)
+    assert_equal_to_rounding(chunked, whole, n)
+    assert abs(chunked.accel_cos[1] - 9.8) < 0.01 and chunked.steady
+
+
+def test_a_short_sweep_takes_the_svd_solver_and_still_agrees(monkeypatch):
+    """A 3-degree sweep: the harmonic basis is nearly collinear (Gram condition far above
+    MAX_GRAM_CONDITION), so the whole-basis SVD solve is used, as before."""
+    n = 100
+    t, accel, gyro, temp, angle, sigma, bias = rotation(n)
+    whole = reference_summary("rot", np.array([1.0, 0, 0]), 0, angle, t, accel, gyro, temp, sigma, bias)
+    monkeypatch.setattr(summaries, "CHUNK_SAMPLES", 16)
+    chunked = summaries.rotation_summary("rot", np.array([1.0, 0, 0]), 0, angle, t, accel, gyro, temp,
+                                         sigma, bias)
+    # the SVD solution of an ill-conditioned basis: agreement to rounding times its condition
+    for name in ("accel_dc", "accel_cos", "accel_sin", "gyro_integral", "rate_coef"):
+        np.testing.assert_allclose(getattr(chunked, name), getattr(whole, name), rtol=1e-6, atol=1e-9,
+                                   err_msg=name)
+    assert chunked.samples == whole.samples == n
+
+
+@pytest.mark.parametrize("chunk", [7, 1 << 15])
+def test_static_noise_sums_chunk_by_chunk_equal_the_whole_array_ones(monkeypatch, chunk):
+    """The statics' white noise (half the sum of squared first differences) chunk by chunk."""
+    rng = np.random.default_rng(2)
+    x = rng.normal([0.1, -0.2, 9.8], 0.01, (50_001, 3))
+    monkeypatch.setattr(summaries, "CHUNK_SAMPLES", chunk)
+    whole = np.sum(np.diff(x, axis=0) ** 2, axis=0) / 2
+    np.testing.assert_allclose(summaries._half_sum_sq_diff(x), whole, rtol=4 * len(x) * EPS, atol=0)
+    assert summaries._half_sum_sq_diff(x[:1]).tolist() == [0.0, 0.0, 0.0]
