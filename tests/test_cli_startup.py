@@ -11,6 +11,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 # what building the parser must never import: the estimators' and the figures' libraries
@@ -137,9 +139,9 @@ print(method, len(s.statics), len(s.rotations),
 
 
 def test_reading_and_summarising_a_capture_imports_no_scipy(optimal9_run):
-    """`station estimate` imports scipy (~0.25 s) on a second thread while its own thread reads the
-    capture (station.core.preload): the reading path must not need scipy, or the two threads would
-    take turns instead of overlapping (and could wait on each other's import locks)."""
+    """`station estimate` reads the capture in a forked child while it imports scipy (~0.2 s)
+    itself (station.estimate._summarise_while_importing): the reading must not need scipy, or the
+    child would spend that time importing it too."""
     r = subprocess.run([sys.executable, "-c", READER, str(optimal9_run)], capture_output=True, text=True,
                        timeout=120)
     assert r.returncode == 0, r.stderr
@@ -148,25 +150,43 @@ def test_reading_and_summarising_a_capture_imports_no_scipy(optimal9_run):
     assert scipy_modules == []
 
 
-def test_estimate_imports_the_fit_on_the_preload_thread(optimal9_run, tmp_path):
-    """`station estimate` imports scipy.optimize and the fit on the preload thread, not on the
-    thread that reads the capture, and writes its file as always."""
-    code = ("import sys, threading\n"
-            "seen = {}\n"
-            "class Spy:\n"
-            "    def find_spec(self, name, path=None, target=None):\n"
-            "        if name in ('scipy.optimize', 'station.estimate.lsq'):\n"
-            "            seen[name] = threading.current_thread().name\n"
-            "        return None\n"
-            "sys.meta_path.insert(0, Spy())\n"
-            "from station.cli import main\n"
-            "status = main(['estimate', sys.argv[1], '-o', sys.argv[2]])\n"
-            "print(status, seen.get('scipy.optimize'), seen.get('station.estimate.lsq'))\n")
-    r = subprocess.run([sys.executable, "-c", code, str(optimal9_run), str(tmp_path / "cal.yaml")],
-                       capture_output=True, text=True, timeout=120)
+SPY = """
+import json, os, sys
+import station.io.capture as capture_module
+readers = set()
+original = capture_module.read_csv_pieces
+def spy(*args, **kwargs):
+    readers.add(os.getpid())
+    return original(*args, **kwargs)
+capture_module.read_csv_pieces = spy
+from station.estimate import estimate_capture
+cal, capture, provenance = estimate_capture(sys.argv[1])
+print(json.dumps([sorted(readers) == [os.getpid()], "scipy.optimize" in sys.modules,
+                  provenance["capture_sha256"], cal.fit["chi2"],
+                  [(s.name, s.status, s.content_sha256) for s in capture.segments]]))
+"""
+
+
+def _estimate_spied(capture_dir, **env):
+    r = subprocess.run([sys.executable, "-c", SPY, str(capture_dir)], capture_output=True, text=True,
+                       timeout=120, env={**os.environ, **env})
     assert r.returncode == 0, r.stderr
-    assert r.stdout.split()[-3:] == ["0", "station-preload", "station-preload"]
-    assert (tmp_path / "cal.yaml").is_file()
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the forked reader is used on Linux only")
+def test_estimate_reads_the_capture_in_a_child_process_with_the_same_result(optimal9_run):
+    """The capture's files are read in another process (not one read here) while this one
+    imports the fit, and what comes back (segments' sha256 and status, the capture's digest, the
+    fit) is what reading in this process gives ($STATION_READ_IN_PROCESS)."""
+    read_here, imported, digest, chi2, segments = _estimate_spied(optimal9_run)
+    assert not read_here and imported
+    read_here_too, _, digest_here, chi2_here, segments_here = _estimate_spied(optimal9_run,
+                                                                             STATION_READ_IN_PROCESS="1")
+    assert read_here_too
+    assert (digest, segments) == (digest_here, segments_here)
+    assert chi2 == chi2_here
+    assert all(sha for _, status, sha in segments if status == "complete")
 
 
 BLAS = """

@@ -82,7 +82,7 @@ def report_calibration(cal, title: str, target, accept_poor_fit: bool, truth=Non
 
 
 def cmd_estimate(args) -> int:
-    from station.estimate import estimate_capture   # scipy and the file writer come later (preload)
+    from station.estimate import estimate_capture   # scipy and the file writer: while the capture is read
 
     reg = plugins.registry(args)
     if not (0 <= args.max_missing_fraction < 1 and args.max_gap_s > 0):

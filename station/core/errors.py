@@ -21,6 +21,9 @@ class CaptureError(UserError):
         self.segment = segment
         super().__init__(str(self))
 
+    def __reduce__(self):           # pickled whole (a forked reader sends it to its parent)
+        return (_capture_error, (self.file, self.message, self.line, self.field, self.segment))
+
     def __str__(self):
         parts = [self.file]
         if self.segment is not None:
@@ -31,3 +34,7 @@ class CaptureError(UserError):
             parts.append(f"field '{self.field}'")
         parts.append(self.message)
         return ": ".join(parts).replace("\r", " ").replace("\n", " ")
+
+
+def _capture_error(file, message, line, field, segment) -> CaptureError:
+    return CaptureError(file, message, line=line, field=field, segment=segment)

@@ -169,13 +169,52 @@ def _estimate_with(capture: Capture, method: str, effects, registry) -> tuple[Ca
     return fourier.estimate(capture, "high" if method == "fourier-high" else "low"), method
 
 
+# what the fit needs once the capture is summarised: ~0.2 s of imports (scipy.optimize, scipy.special)
+FIT_MODULES = ("station.estimate.lsq", "station.estimate.verdict", "station.io.calfile")
+READ_IN_PROCESS = "STATION_READ_IN_PROCESS"     # set (to anything): no forked reader
+
+
+def _summarise_while_importing(capture, check_segment, notes: dict) -> None:
+    """summarise(capture, check_segment=...) and import FIT_MODULES.  On Linux the capture is
+    read and summarised in a forked child (station.core.forked) while this process imports: the
+    child sends back what reading made (the summaries, kept with the capture; the segments, with
+    their status, sha256, problem and the hand turns' samples; the warnings; the notes), or the
+    error it raised, raised here.  Elsewhere, with $STATION_READ_IN_PROCESS set, or when the
+    child is lost, here, one after the other."""
+    import importlib
+    import os
+
+    from station.core import forked
+    from station.estimate import summaries
+
+    def read():
+        summaries.summarise(capture, check_segment=check_segment)
+        return summaries.kept(capture), capture.segments, capture.warnings, notes
+
+    child = None
+    if forked.available() and not os.environ.get(READ_IN_PROCESS):
+        child = forked.Forked(read)     # which imports the CSV engine (pyarrow): this one never needs it
+    try:
+        for name in FIT_MODULES:
+            importlib.import_module(name)
+        if child is not None:
+            parts, capture.segments, capture.warnings, child_notes = child.result()
+            notes.update(child_notes)
+            summaries.keep(capture, parts)
+            return
+    except forked.ChildLost:
+        pass                    # read here instead
+    finally:
+        if child is not None:
+            child.close()
+    summaries.summarise(capture, check_segment=check_segment)
+
+
 def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
                      max_missing_fraction: float = MAX_MISSING_FRACTION,
                      max_gap_s: float = MAX_GAP_S) -> tuple[Calibration, Capture, dict]:
     """Read a capture, estimate, judge the fit (station.estimate.verdict: verdict, honest 1-sigma,
     parameters not determined) and return the calibration, the capture and its provenance."""
-    from station.core import preload
-
     capture = read_capture(path, load_data=False)
     resolved = method
     if method == "auto":
@@ -183,13 +222,7 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
     if resolved == "lsq":
         # one pass: each segment file read, hashed, parsed, checked, summarised and freed in turn
         # (station.estimate.summaries keeps the summaries with the capture for lsq.estimate),
-        # while the fit's modules (scipy) are imported on another thread
-        from station.estimate.summaries import summarise
-
-        try:
-            import pyarrow.csv  # noqa: F401 - the reader's engine: imported before the thread starts
-        except ImportError:     # pragma: no cover - a dependency; the line-by-line reader still works
-            pass
+        # while the fit's modules (scipy) are imported
         notes = {}
 
         def check_segment(seg):
@@ -199,8 +232,7 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
             if note:
                 notes[seg.name] = note
 
-        with preload.importing("station.estimate.lsq", "station.estimate.verdict", "station.io.calfile"):
-            summarise(capture, check_segment=check_segment)
+        _summarise_while_importing(capture, check_segment, notes)
         excluded = [notes[seg.name] for seg in capture.segments if seg.name in notes]
     else:
         capture.load_samples()

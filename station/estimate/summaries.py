@@ -354,6 +354,18 @@ class _Span:
 _KEPT = weakref.WeakKeyDictionary()
 
 
+def kept(capture):
+    """What summarise() computed and kept for ``capture`` (None if nothing): a picklable object
+    that keep() gives to another Capture object of the same capture (one read in another
+    process: station.estimate.estimate_capture)."""
+    return _KEPT.get(capture)
+
+
+def keep(capture, parts) -> None:
+    """Keep ``parts`` (from kept()) for ``capture``: summarise(capture) then reads nothing."""
+    _KEPT[capture] = parts
+
+
 def summarise(capture, *, table_angle_arcsec: float | None = None, check_segment=None) -> Summaries:
     """The summaries of ``capture``'s complete static and rotation segments.
 

@@ -1,0 +1,90 @@
+"""station.core.forked (one function in a forked child) and `estimate`'s reader in a child:
+results, errors raised as in process, a lost child, a child ended when its parent stops."""
+import os
+import sys
+import time
+
+import pytest
+
+from station.core import forked
+from station.core.errors import CaptureError
+from station.estimate import estimate_capture, summaries
+
+pytestmark = pytest.mark.skipif(not forked.available(), reason="fork is used on Linux only")
+
+
+def test_the_result_of_the_function_comes_back():
+    with forked.Forked(lambda: (os.getpid(), [1.5, "x"])) as child:
+        pid, value = child.result()
+    assert pid != os.getpid() and value == [1.5, "x"]
+
+
+def test_an_error_in_the_child_is_raised_here_with_its_fields():
+    def fail():
+        raise CaptureError("cap/pos01.csv", "not a number: 'abc'", line=12, field="gx", segment="segments[0] (pos01)")
+
+    with pytest.raises(CaptureError) as e, forked.Forked(fail) as child:
+        child.result()
+    assert str(e.value) == "cap/pos01.csv: segments[0] (pos01): line 12: field 'gx': not a number: 'abc'"
+    assert (e.value.line, e.value.field) == (12, "gx")
+
+
+def test_a_child_that_dies_is_lost_not_waited_for():
+    with pytest.raises(forked.ChildLost), forked.Forked(lambda: os._exit(3)) as child:
+        child.result()
+
+
+def test_closing_ends_a_child_that_still_runs():
+    child = forked.Forked(lambda: time.sleep(60))
+    pid = child.pid
+    child.close()
+    with pytest.raises(ChildProcessError):
+        os.waitpid(pid, os.WNOHANG)          # ended and reaped: no such child any more
+
+
+def test_estimate_reads_in_process_when_its_reader_is_lost(optimal9_run, monkeypatch):
+    """A reader killed (out of memory, a signal) costs only time: the capture is read here."""
+    parent = os.getpid()
+    real = summaries.summarise
+
+    def dies_in_the_child(*args, **kwargs):
+        if os.getpid() != parent:
+            os._exit(9)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(summaries, "summarise", dies_in_the_child)
+    cal, capture, provenance = estimate_capture(optimal9_run)
+    monkeypatch.setenv("STATION_READ_IN_PROCESS", "1")
+    cal_here, _, provenance_here = estimate_capture(optimal9_run)
+    assert provenance["capture_sha256"] == provenance_here["capture_sha256"]
+    assert cal.fit["chi2"] == cal_here.fit["chi2"]
+
+
+def test_estimate_raises_the_readers_error_as_reading_here_does(optimal9_run, tmp_path):
+    """A bad line in a segment: the same message (file, segment, line, column) from the child."""
+    import hashlib
+    import shutil
+
+    import yaml
+
+    bad = tmp_path / "cap"
+    shutil.copytree(optimal9_run, bad)
+    csv = bad / "pos03.csv"
+    lines = csv.read_text().splitlines(keepends=True)
+    lines[40] = lines[40].replace(",", ",abc", 1)
+    csv.write_text("".join(lines))
+    manifest = yaml.safe_load((bad / "manifest.yaml").read_text())
+    for seg in manifest["segments"]:
+        if seg["file"] == "pos03.csv":
+            seg["sha256"] = hashlib.sha256(csv.read_bytes()).hexdigest()
+    (bad / "manifest.yaml").write_text(yaml.safe_dump(manifest, sort_keys=False))
+    messages = []
+    for env in ({}, {"STATION_READ_IN_PROCESS": "1"}):
+        os.environ.update(env)
+        try:
+            with pytest.raises(CaptureError) as e:
+                estimate_capture(bad)
+            messages.append(str(e.value))
+        finally:
+            os.environ.pop("STATION_READ_IN_PROCESS", None)
+    assert messages[0] == messages[1] and "pos03.csv" in messages[0] and "line 41" in messages[0]
