@@ -31,9 +31,9 @@ rotation about the vertical: every rotation gives two equations.
 The integration is vectorised over all turns: per-sample rotation vectors -> quaternions, then
 the ordered product by pairwise reduction (log2 N steps of scipy Rotation products).
 
-scipy is imported where it is used, not with the module: summaries.py imports this module to
-find the hand turns while a capture is read, and `station estimate` imports scipy on another
-thread meanwhile (station.estimate.estimate_capture).
+scipy is imported where it is used, not with the module: summaries.py may import this module to
+find the hand turns while a capture is read, in the child process that reads while `station
+estimate` imports scipy itself (station.estimate._summarise_while_importing).
 """
 from __future__ import annotations
 
