@@ -60,6 +60,15 @@ def test_estimate_reads_in_process_when_its_reader_is_lost(optimal9_run, monkeyp
     assert cal.fit["chi2"] == cal_here.fit["chi2"]
 
 
+def test_estimate_reads_in_process_when_no_process_can_be_forked(optimal9_run, monkeypatch):
+    def no_fork():
+        raise BlockingIOError(11, "Resource temporarily unavailable")
+
+    monkeypatch.setattr(os, "fork", no_fork)
+    cal, capture, provenance = estimate_capture(optimal9_run)
+    assert cal.fit["chi2"] > 0 and all(seg.content_sha256 for seg in capture.complete())
+
+
 def test_estimate_raises_the_readers_error_as_reading_here_does(optimal9_run, tmp_path):
     """A bad line in a segment: the same message (file, segment, line, column) from the child."""
     import hashlib

@@ -9,8 +9,8 @@ child has its own interpreter, so the child reads while the parent imports, on t
 exception it raised (pickled); ``result()`` waits for it and returns it or raises that
 exception, in this process, as if ``fn()`` had run here.  The child inherits everything this
 process holds at the fork (nothing is copied to it) and must only return what it computed.
-``ChildLost`` when the child ended without sending anything (killed, out of memory): the
-caller then does the work itself.
+``ChildLost`` when the child ended without sending anything (killed, out of memory), and
+OSError from ``Forked()`` when no process can be forked: the caller then does the work itself.
 
 Fork is used on Linux only (``available()``): macOS's system libraries are not safe to use in
 a forked child, and Windows has no fork.  The child ignores Ctrl-C: the parent is interrupted,

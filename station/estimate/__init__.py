@@ -179,8 +179,8 @@ def _summarise_while_importing(capture, check_segment, notes: dict) -> None:
     read and summarised in a forked child (station.core.forked) while this process imports: the
     child sends back what reading made (the summaries, kept with the capture; the segments, with
     their status, sha256, problem and the hand turns' samples; the warnings; the notes), or the
-    error it raised, raised here.  Elsewhere, with $STATION_READ_IN_PROCESS set, or when the
-    child is lost, here, one after the other."""
+    error it raised, raised here.  Elsewhere, with $STATION_READ_IN_PROCESS set, or when no
+    child can be forked or it is lost, here, one after the other."""
     import importlib
     import os
 
@@ -193,7 +193,10 @@ def _summarise_while_importing(capture, check_segment, notes: dict) -> None:
 
     child = None
     if forked.available() and not os.environ.get(READ_IN_PROCESS):
-        child = forked.Forked(read)     # which imports the CSV engine (pyarrow): this one never needs it
+        try:
+            child = forked.Forked(read)     # it imports the CSV engine (pyarrow): this one never needs it
+        except OSError:                     # no process to be had (EAGAIN, ENOMEM): read here
+            child = None
     try:
         for name in FIT_MODULES:
             importlib.import_module(name)
