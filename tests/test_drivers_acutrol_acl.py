@@ -123,7 +123,7 @@ def _wait_settled(read, goal, tol, what, polls=3, timeout_s=30.0, sleep=time.sle
     the band twice a cycle while its amplitude is still larger (at ``SPEED``, 50 ms of device
     time is 1 ms of wall time).  Polls ``POLL_S`` apart are ``POLL_S * SPEED`` = 1 s of device
     time apart while the twins' clock runs free (nobody reads the IMU: the tests check
-    ``clock.held_wall_s``), longer than the settle takes to stay within 1e-4 deg (0.9 s).
+    ``clock.held_wall_s``), longer than the settle takes to stay within 1e-4 deg (0.84 s).
     ``timeout_s`` (wall) is a bound, not a measurement."""
     end = time.monotonic() + timeout_s
     in_band = 0
@@ -168,7 +168,7 @@ def test_one_reading_within_the_band_is_not_a_settled_axis():
         return table.read_position(1)
 
     # a reading within the band while the swings still exceed it: where the oscillation
-    # crosses the goal (a damped 2 Hz oscillation decaying in 1 s: after ~0.4 s and ~0.65 s)
+    # crosses the goal (a damped 2 Hz oscillation decaying in 1 s: at 0.40 s and 0.64 s)
     ts = settle_t0 + np.arange(0.0, 1.0, 1e-3)
     crossing = next(t for t in ts if t > settle_t0 + 0.5 and abs(read_at(t) - 20.0) <= 1e-4)
     assert abs(read_at(crossing + 0.1) - 20.0) > 1.5e-4     # the swing the flake read, 2 ms later
