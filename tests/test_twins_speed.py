@@ -6,7 +6,9 @@ Everything is judged on device time (the frames' own time stamps), not on wall t
 """
 from __future__ import annotations
 
+import os
 import time
+import types
 
 import numpy as np
 import pytest
@@ -15,6 +17,9 @@ from drivers.base import ImuSettings
 from drivers.registry import open_imu
 from drivers.samples import ImuSamples
 from sim_devices.truth import default_truth
+from sim_devices.twins import clock as clock_module
+from sim_devices.twins import serve
+from sim_devices.twins.endpoint import QueuedEndpoint
 from sim_devices.twins.serve import BenchOptions, BenchServer
 from station.bench.imu_stream import lost_frames_note
 
@@ -57,3 +62,86 @@ def test_a_reader_that_falls_behind_a_fast_twin_is_told_so():
 def test_lost_frames_at_the_pace_of_hardware_are_not_blamed_on_a_twin():
     note = lost_frames_note("static-1", 3, device_s=20.0, wall_s=20.1)
     assert "cannot keep up" not in note and "3 frames lost while recording" in note
+
+
+class _Line(QueuedEndpoint):
+    """A pseudo-terminal's line as the kernel keeps it, without the kernel: the read buffer
+    (n_tty, 4095 bytes in raw mode; what FIONREAD counts) and the flip buffers behind it, which
+    refill the read buffer as soon as a reader has read (the kernel's worker does it within
+    microseconds).  Never readable or writable for ``select`` (an idle pipe's read end)."""
+
+    def __init__(self, flip_bytes=16384):
+        super().__init__(8192)
+        self._rfd, self._wfd = os.pipe()
+        self.n_tty = self.flip = self.taken = self.accepted = 0
+        self.flip_bytes = flip_bytes
+
+    def fileno(self):
+        return self._rfd
+
+    def read(self):
+        return b""
+
+    def unread(self):
+        return self.n_tty
+
+    def _send(self, data):
+        n = min(len(data), self.flip_bytes - self.flip)
+        if n == 0:
+            return None
+        self.flip += n
+        self.accepted += n
+        self._refill()
+        return n
+
+    def _refill(self):
+        m = min(4095 - self.n_tty, self.flip)
+        self.n_tty, self.flip = self.n_tty + m, self.flip - m
+
+    def reader_takes(self, n):
+        while n > 0 and self.n_tty > 0:
+            m = min(n, self.n_tty)
+            self.n_tty, self.taken, n = self.n_tty - m, self.taken + m, n - m
+            self._refill()
+
+    def close(self):
+        if not self.closed:
+            self.closed = True
+            os.close(self._rfd)
+            os.close(self._wfd)
+
+
+def test_a_reader_of_a_line_the_queue_keeps_full_is_seen_and_waited_for(monkeypatch):
+    """The twins' clock waits for a reader that reads (lossless): it must see the reader
+    although the unread count never falls.  A csv twin streams from power-up, nobody reads for
+    0.5 s of wall time (its queue grows), then a reader takes half of what the twin makes
+    (a reader slower than --speed asks).  The kernel refills the read buffer from the flip
+    buffers, which the twin refills from its queue, before the twin looks: the unread count
+    stays 4095.  Before, such a reader was taken for absent: the clock ran free and the twin
+    dropped frames once its queue was half full (the flake of the test above at --speed 500,
+    under load).  Wall time is simulated (steps of 10 ms); nothing depends on the machine."""
+    wall = [1000.0]
+    fake_time = types.SimpleNamespace(monotonic=lambda: wall[0])
+    monkeypatch.setattr(serve, "time", fake_time)
+    monkeypatch.setattr(clock_module, "time", fake_time)
+    server = BenchServer(default_truth(2), BenchOptions(speed=50.0, imu_protocol="csv"))
+    server.imu_port.close()
+    server.imu_port = line = _Line()
+    try:
+        def run(seconds, take_per_step=0):
+            for _ in range(round(seconds / 0.01)):
+                wall[0] += 0.01
+                server.step(0.0)
+                line.reader_takes(take_per_step)
+                assert line.unread() == 4095 or line.taken == 0      # the count never falls
+        run(0.5)                        # nobody reads
+        made = line.accepted + line.backlog                  # 0.5 s of the stream at speed 50
+        assert line.taken == 0 and server.faulter.frames_overflowed == 0 and not server.clock.capped
+        run(3.0, made // 100)           # a reader taking half of the stream's bytes per 10 ms
+        assert line.taken > made        # it read the queue of the first 0.5 s and more
+        assert server.faulter.frames_overflowed == 0          # no frame dropped
+        # device time stood still while the reader took the 0.5 s of queue (1 s at half the
+        # pace), then ran at half the speed
+        assert server.clock.held_wall_s > 1.0
+    finally:
+        server.close_ports()

@@ -11,6 +11,7 @@ class QueuedEndpoint:
         self.max_backlog = max_backlog_bytes
         self._out = bytearray()
         self.dropped_bytes = 0
+        self.sent_bytes = 0           # taken by the transport since the end point was made
         self.closed = False
 
     @property
@@ -42,6 +43,7 @@ class QueuedEndpoint:
             if n is None:
                 return
             del self._out[:n]
+            self.sent_bytes += n
 
     def clear_output(self) -> None:
         self._out.clear()

@@ -64,6 +64,10 @@ READER_ACTIVE_S = 2.0             # a reader that took bytes within this (wall s
 #: lossless: device time runs at most this many bytes of the stream ahead of the reader (about
 #: what a pty holds: 4 KiB in the line discipline, 16 KiB in the kernel's flip buffers)
 LINE_BYTES = 16384
+#: a line without a reader never takes more than this in all: the kernel's flip buffers hold at
+#: most 64 KiB (TTYB_DEFAULT_MEM_LIMIT, the most any tty port has) besides the unread bytes of
+#: n_tty's read buffer (a pty took 14-22 KiB in all on Linux 6.18, by the size of the writes)
+FLIP_MAX_BYTES = 65536
 TABLE_WAIT_S = 0.1                # lossless: longest (wall s) the table's commands wait for the IMU's reader
 
 
@@ -176,6 +180,7 @@ class BenchServer:
 
     def _serve_imu(self, readable, now: float, reader_active: bool) -> bool:
         """IMU commands and the frames due by ``now``; returns whether the reader is active."""
+        sent = self.imu_port.sent_bytes
         if self.imu_port in readable:
             data = self.imu_port.read()
             if data:
@@ -192,13 +197,19 @@ class BenchServer:
                 # lossless: a batch larger than the backlog (this loop itself was descheduled) is kept
                 if frames and not self.imu_port.write(frames, droppable=not self.options.lossless):
                     self.faulter.overflowed(self.faulter.frames_sent - before)
-        backlog, unread = self.imu_port.backlog, self.imu_port.unread()
+        unread = self.imu_port.unread()
         self.imu_port.flush()
         # the reader took bytes: fewer wait on the line (only a reader takes them), or, once a
-        # reader was seen, the line took more of the queue (without a reader the line fills
-        # once, ~20 KiB, and takes nothing more)
-        self._reader_seen = self._reader_seen or unread < self._unread
-        if unread < self._unread or (self._reader_seen and self.imu_port.backlog < backlog):
+        # reader was seen, the line took bytes in this step (when writing the frames or
+        # flushing: without a reader the line fills once, ~20 KiB, and takes nothing more).  A
+        # reader is seen when fewer wait on the line, or when the line has passed on more than
+        # it can hold without one: while the queue keeps the line full, the kernel refills the
+        # read buffer from its flip buffers as soon as the reader has read, so the unread count
+        # may never be seen to fall (the reader was then taken for absent and frames dropped)
+        took = self.imu_port.sent_bytes > sent
+        self._reader_seen = (self._reader_seen or unread < self._unread
+                             or self.imu_port.sent_bytes - unread > FLIP_MAX_BYTES)
+        if unread < self._unread or (self._reader_seen and took):
             self._last_taken_wall = time.monotonic()
             reader_active = True
         self._unread = self.imu_port.unread()
