@@ -97,3 +97,43 @@ def test_estimate_raises_the_readers_error_as_reading_here_does(optimal9_run, tm
         finally:
             os.environ.pop("STATION_READ_IN_PROCESS", None)
     assert messages[0] == messages[1] and "pos03.csv" in messages[0] and "line 41" in messages[0]
+
+
+CTRL_C = """
+import os, sys, time
+from station.estimate import summaries
+real = summaries.summarise
+parent = os.getpid()
+def slow(*args, **kwargs):
+    if os.getpid() != parent:            # the forked reader: a long read
+        print(os.getpid(), flush=True)
+        time.sleep(60)
+    return real(*args, **kwargs)
+summaries.summarise = slow
+from station.cli import main
+sys.exit(main(["estimate", sys.argv[1], "-o", sys.argv[2]]))
+"""
+
+
+def test_ctrl_c_while_the_child_reads_ends_both(optimal9_run, tmp_path):
+    """Ctrl-C (SIGINT to the process group, as a terminal sends it) while the forked reader
+    reads: exit status 130, "interrupted", and no reader left running."""
+    import signal
+    import subprocess
+
+    p = subprocess.Popen([sys.executable, "-c", CTRL_C, str(optimal9_run), str(tmp_path / "cal.yaml")],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=lambda: (signal.signal(signal.SIGINT, signal.SIG_DFL), os.setsid()))
+    try:
+        reader = int(p.stdout.readline())        # the child says it is reading
+        os.killpg(p.pid, signal.SIGINT)
+        out, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 130 and err.strip().splitlines()[-1] == "interrupted"
+    deadline = time.monotonic() + 10
+    while os.path.exists(f"/proc/{reader}") and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not os.path.exists(f"/proc/{reader}")
+    assert not (tmp_path / "cal.yaml").exists()
