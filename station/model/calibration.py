@@ -74,7 +74,7 @@ class Calibration:
 
     @property
     def inter_triad_rad(self) -> np.ndarray:
-        from scipy.spatial.transform import Rotation   # not at import: estimate reads meanwhile
+        from scipy.spatial.transform import Rotation   # not at import: reading a capture needs no scipy
 
         return Rotation.from_matrix(self.R_po).as_rotvec()
 
