@@ -27,7 +27,7 @@ def test_noise_run_recovers_the_simulated_white_noise_densities(noise_run):
     block = doc["noise"]
     assert block["sample_rate_hz"] == 100.0 and block["duration_s"] == pytest.approx(300.0)
     # The reported 1 sigma is the half-width of the 68 % interval of sigma(tau) at the tau read
-    # (chi-squared with Greenhall's degrees of freedom: ~0.3 % with 30000 samples); six axes at
+    # (chi-squared with the estimator's degrees of freedom: ~0.3 % with 30000 samples); six axes at
     # 4 sigma: a false alarm of 6 * 6e-5.
     for sensor, key, true in (("accel", "white_noise_ug_rthz", truth["accelerometer"]["noise_density_ug_rthz"]),
                               ("gyro", "white_noise_dph_rthz", truth["gyroscope"]["noise_density_dph_rthz"])):

@@ -19,7 +19,7 @@ import numpy as np
 import station
 from station.core.errors import UserError
 from station.diagnose.core import PRIOR_QUANTITIES
-from station.diagnose.figures import allan_figure, pyplot, save
+from station.diagnose.figures import TITLE_Y, allan_figure, plain_log_axis, pyplot, save
 from station.diagnose.noise_job import NoiseJob, noise_of
 from station.model.registry import EffectRegistry
 
@@ -62,7 +62,6 @@ def segments_figure(panels, path=None) -> bytes:
     """panels: list of (title, diagnosis); bars of the RMS whitened residual per segment, every
     panel on the same (log) y axis so that the fall after each added effect shows."""
     plt = _pyplot()
-    from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
     height = 2.8 * len(panels)
     fig, axes = plt.subplots(len(panels), 1, figsize=(11, height), squeeze=False, sharey=True)
@@ -87,14 +86,11 @@ def segments_figure(panels, path=None) -> bytes:
         ax.axhline(1.0, color="k", lw=0.8, ls="--")
         ax.set_yscale("log")
         ax.set_ylim(lo, hi)
-        # plain numbers at 1-2-5 (mathtext 10^k labels cost 40 % of this figure's time)
-        ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
-        ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
-        ax.yaxis.set_minor_formatter(NullFormatter())
+        plain_log_axis(ax.yaxis)      # mathtext 10^k labels cost 40 % of this figure's time
         ax.set_xticks(range(len(names)), names, rotation=90, fontsize=7)
         ax.set_ylabel("RMS residual / noise")
         ax.set_title(f"{title}: reduced χ² {d.reduced_chi2:.3g} (blue static, orange rotation; "
-                     "dashed: the noise level)", fontsize=9)
+                     "dashed: the noise level)", fontsize=9, y=TITLE_Y)
     return save(fig, path)
 
 
@@ -113,12 +109,12 @@ def candidate_figure(diagnosis, cand, path=None) -> bytes:
     a1.plot([-lim, lim], [-lim, lim], "k--", lw=0.8)
     a1.set_xlabel(f"change {cand.effect} would make (one step), sigma")
     a1.set_ylabel("residual, sigma")
-    a1.set_title(f"{cand.effect}: predicted chi2 drop {cand.predicted_chi2_drop:.3g}")
+    a1.set_title(f"{cand.effect}: predicted chi2 drop {cand.predicted_chi2_drop:.3g}", y=TITLE_Y)
     ok = data & np.isfinite(var)
     a2.scatter(var[ok], r[ok], s=6)
     a2.set_xlabel(VARIABLE_LABEL.get(var_name, var_name))
     a2.set_ylabel("residual, sigma")
-    a2.set_title("residual against its signature variable")
+    a2.set_title("residual against its signature variable", y=TITLE_Y)
     return save(fig, path)
 
 

@@ -1,10 +1,13 @@
 """Noise of a still IMU from the overlapping Allan deviation (IEEE Std 952/1554 terms).
 
 For each axis of the (unit-converted, otherwise raw) output of one static recording:
-  * the overlapping Allan deviation sigma(tau) (``allantools.oadev``) at about ten taus per
-    decade from one sample to a fifth of the recording, with a 68.3 % confidence interval from
-    Greenhall's equivalent degrees of freedom for white frequency noise
-    (``allantools.edf_greenhall``, ``allantools.confidence_interval``);
+  * the overlapping Allan deviation sigma(tau) (NIST SP 1065 eq. 11, from the phase x_k, the
+    cumulative sum of the mean-removed samples) at about ten taus per decade from one sample
+    to a fifth of the recording, with a 68.3 % confidence interval from the chi-square
+    distribution (SP 1065 eq. 45) with the equivalent degrees of freedom of the estimator for
+    white noise, computed exactly (``white_noise_edf``; Greenhall's tables approximate the same
+    sum and are 5-17 % off for one to five samples: tests/test_allan.py checks both it and
+    the deviation against allantools and a Monte Carlo);
   * white noise N (sigma = N / sqrt(tau), slope -1/2): the density (ug/sqrt(Hz), deg/h/sqrt(Hz)),
     i.e. velocity / angle random walk (m/s/sqrt(h), deg/sqrt(h)), read where the local slope is
     within 1/4 of -1/2 at the tau with the most degrees of freedom; its 1 sigma from that
@@ -18,6 +21,10 @@ For each axis of the (unit-converted, otherwise raw) output of one static record
     upper bound, the upper end of the interval at the minimum / 0.664.
 Kalibr's four numbers are the white-noise densities and random walks in SI (rad for the gyro),
 the largest of the three axes per triad.
+
+Written here rather than imported from allantools (which computes the same deviation): its
+import pulls in scipy.stats, interpolate, signal and integrate, 0.3 s of the 0.7 s a
+``diagnose --report`` may take (issue 15); allantools stays the tests' reference.
 """
 from __future__ import annotations
 
@@ -118,9 +125,9 @@ class NoiseResult:
     def block(self) -> dict:
         """The ``noise`` block of a calibration file (docs/calibration-file.md)."""
         return {
-            "method": ("overlapping Allan deviation (allantools.oadev), 68.3 % confidence from "
-                       "Greenhall's degrees of freedom for white noise; N at slope -1/2, B = "
-                       "min/0.664, K at slope +1/2 (sigma = K sqrt(tau/3))"),
+            "method": ("overlapping Allan deviation (NIST SP 1065 eq. 11), 68.3 % confidence from "
+                       "chi-square with the exact degrees of freedom for white noise; N at slope "
+                       "-1/2, B = min/0.664, K at slope +1/2 (sigma = K sqrt(tau/3))"),
             "source": self.source,
             "sample_rate_hz": float(self.sample_rate_hz),
             "duration_s": float(self.duration_s),
@@ -130,27 +137,75 @@ class NoiseResult:
         }
 
 
-def _taus(n: int, rate: float) -> np.ndarray:
-    m = np.unique(np.round(np.logspace(0, math.log10(max(n // 5, 2)),
-                                       int(TAUS_PER_DECADE * math.log10(max(n // 5, 2))) + 1)))
-    return m[m >= 1] / rate
+def averaging_factors(n: int) -> np.ndarray:
+    """The averaging factors m (tau = m / rate): about ten per decade from 1 to n // 5."""
+    top = max(n // 5, 2)
+    m = np.unique(np.round(np.logspace(0, math.log10(top), int(TAUS_PER_DECADE * math.log10(top)) + 1)))
+    return m[m >= 1].astype(np.int64)
+
+
+def overlapping_adev(y: np.ndarray, rate: float, m: np.ndarray) -> np.ndarray:
+    """The overlapping Allan deviation of the samples ``y`` (a rate, e.g. deg/s, at ``rate`` Hz)
+    at tau = m / rate, NIST SP 1065 eq. (11): with the phase x_k = sum_{i<k} (y_i - mean) / rate
+    (k = 0..n), sigma^2(tau) = sum_k (x_{k+2m} - 2 x_{k+m} + x_k)^2 / (2 tau^2 (n + 1 - 2m))."""
+    y = np.asarray(y, float)
+    x = np.empty(len(y) + 1)
+    x[0] = 0.0
+    np.cumsum((y - y.mean()) / rate, out=x[1:])
+    out = np.empty(len(m))
+    for i, k in enumerate(np.asarray(m, np.int64)):
+        k = int(k)
+        v = x[2 * k:] - 2.0 * x[k:len(x) - k] + x[:len(x) - 2 * k]
+        out[i] = math.sqrt(float(np.dot(v, v)) / (2.0 * len(v))) * rate / k
+    return out
+
+
+def white_noise_edf(m: np.ndarray, n: int) -> np.ndarray:
+    """The equivalent degrees of freedom 2 E[s^2]^2 / Var[s^2] of the overlapping Allan variance
+    s^2 at averaging factor m from n samples of white noise, exactly.
+
+    The second differences v_k = x_{k+2m} - 2 x_{k+m} + x_k (M = n + 1 - 2m of them) are a
+    moving sum of the samples with weights -1 (m of them) then +1 (m): their autocovariance at a
+    lag of j samples is, in units of the samples' variance / rate^2, R_j = 2m - 3j for j <= m,
+    j - 2m for m <= j <= 2m, 0 beyond.  s^2 is proportional to sum_k v_k^2, a Gaussian quadratic
+    form: E = M R_0, Var = 2 sum_{|j|<M} (M - |j|) R_j^2, so edf = M^2 R_0^2 / sum_{|j|<M} (M - |j|) R_j^2.
+    (Greenhall and Riley's algorithm approximates this sum; it tends to 3 M / (2 m) for M >> m.)"""
+    out = np.empty(len(m))
+    for i, k in enumerate(np.asarray(m, np.int64)):
+        k = int(k)
+        big_m = n + 1 - 2 * k
+        j = np.arange(min(2 * k, big_m), dtype=float)
+        r = np.where(j <= k, 2.0 * k - 3.0 * j, j - 2.0 * k)
+        weight = 2.0 * (big_m - j)
+        weight[0] = big_m
+        out[i] = big_m * big_m * r[0] * r[0] / float(np.dot(weight, r * r))
+    return out
+
+
+def deviation_interval(dev: np.ndarray, edf: np.ndarray, confidence: float = CONFIDENCE) -> tuple:
+    """(lower, upper) ends of the two-sided ``confidence`` interval of deviations ``dev`` with
+    ``edf`` degrees of freedom, from the chi-square distribution (NIST SP 1065 eq. 45)."""
+    from scipy.special import chdtri       # the chi-square quantile, without scipy.stats' import
+
+    tail = (1.0 - confidence) / 2.0
+    var = np.asarray(dev, float) ** 2
+    edf = np.asarray(edf, float)
+    return (np.sqrt(edf * var / chdtri(edf, tail)),         # chi2 quantile 1 - tail
+            np.sqrt(edf * var / chdtri(edf, 1.0 - tail)))   # chi2 quantile tail
 
 
 def allan_axis(y: np.ndarray, rate: float, sensor: str, axis: str, unit: str) -> AxisNoise:
     """The Allan deviation of one axis (samples in ``unit``) and its noise terms."""
-    import allantools
-
     y = np.asarray(y, float)
-    taus, adev, _, _ = allantools.oadev(y - y.mean(), rate=rate, data_type="freq", taus=_taus(len(y), rate))
+    m = averaging_factors(len(y))
+    adev = overlapping_adev(y, rate, m)
     keep = np.isfinite(adev) & (adev > 0)
-    taus, adev = taus[keep], adev[keep]
+    m, adev = m[keep], adev[keep]
+    taus = m / rate
     if len(taus) < 3:
         raise UserError(f"{sensor} {axis}: the signal is constant: no noise to characterise")
-    m = np.round(taus * rate).astype(int)
-    edf = np.array([allantools.edf_greenhall(alpha=0, d=2, m=int(k), N=len(y) + 1,
-                                             overlapping=True, modified=False) for k in m], float)
-    lo, hi = np.array([allantools.confidence_interval(float(d), float(e), ci=CONFIDENCE)
-                       for d, e in zip(adev, edf)]).T
+    edf = white_noise_edf(m, len(y))
+    lo, hi = deviation_interval(adev, edf)
     slope = np.gradient(np.log(adev), np.log(taus))
 
     white_ok = np.flatnonzero(np.abs(slope + 0.5) <= SLOPE_TOLERANCE)
