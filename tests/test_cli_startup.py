@@ -140,7 +140,7 @@ print(method, len(s.statics), len(s.rotations),
 
 def test_reading_and_summarising_a_capture_imports_no_scipy(optimal9_run):
     """`station estimate` reads the capture in a forked child while it imports scipy (~0.2 s)
-    itself (station.estimate._summarise_while_importing): the reading must not need scipy, or the
+    itself (station.estimate.summarise_while_importing): the reading must not need scipy, or the
     child would spend that time importing it too."""
     r = subprocess.run([sys.executable, "-c", READER, str(optimal9_run)], capture_output=True, text=True,
                        timeout=120)

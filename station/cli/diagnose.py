@@ -48,28 +48,58 @@ def _effects(args, capture, reg) -> list[str]:
     return plugins.effect_ids(reg, effects + args.add)
 
 
-def cmd_diagnose(args) -> int:
-    from station.io.capture import read_capture
-    from station.diagnose import auto
-    from station.diagnose.core import diagnose
-    from station.estimate import lsq
-    from station.estimate.hand_rotation import is_hand
+# what diagnose needs once the capture is summarised (imported while a child reads it)
+DIAGNOSE_MODULES = ("station.estimate.lsq", "station.diagnose.auto", "station.diagnose.core")
 
-    capture = read_capture(args.capture)
-    if any(seg.angle_deg is None and not is_hand(seg) for seg in capture.complete("rotation")):
-        raise UserError(f"{capture.path}: diagnose fits the least-squares model, which needs the "
-                        "encoder angle (angle_deg) of every rotation segment that is not a hand turn "
-                        "between statics")
+
+def _refuse_rotation_without_angle(capture):
+    def check(seg) -> None:
+        """A rotation without its encoder angle that no hand made: the model cannot use it."""
+        from station.estimate.hand_rotation import is_hand
+
+        if seg.kind == "rotation" and seg.angle_deg is None and not is_hand(seg):
+            raise UserError(f"{capture.path}: diagnose fits the least-squares model, which needs the "
+                            "encoder angle (angle_deg) of every rotation segment that is not a hand turn "
+                            "between statics")
+    return check
+
+
+def cmd_diagnose(args) -> int:
+    from station.estimate import summarise_while_importing
+    from station.io.capture import read_capture
+
+    capture = read_capture(args.capture, load_data=False)      # the manifest: samples below
     cal_doc = None
     if args.report and args.calib:
         from station.io.calfile import read_calfile
 
         cal_doc = read_calfile(args.calib)
+    refuse = _refuse_rotation_without_angle(capture)
     with contextlib.ExitStack() as stack:
-        if args.report:       # the report's noise section, in a second process meanwhile
-            from station.diagnose.noise_job import NoiseJob
+        job = longest = None
+        if args.report:       # the figures in a second process; the noise where the capture is read
+            from station.diagnose.figure_job import FigureJob
+            from station.estimate.noise import LongestStatic
 
-            noise_job = stack.enter_context(NoiseJob(capture, cal_doc))
+            job, longest = FigureJob(), LongestStatic(capture, cal_doc)
+
+        def check(seg) -> None:
+            refuse(seg)
+            if longest is not None:
+                longest.check(seg)
+
+        # each segment read, checked and summarised (in a child, while the fit is imported here)
+        curves = summarise_while_importing(capture, check, modules=DIAGNOSE_MODULES,
+                                           then=longest.curves if longest is not None else None,
+                                           meanwhile=(lambda: stack.enter_context(job)) if job else None)
+        if args.report:
+            noise, noise_note = longest.noise(curves)
+            if noise is not None:
+                job.draw({"allan.png": noise})
+        from station.diagnose import auto
+        from station.diagnose.core import diagnose
+        from station.estimate import lsq
+
         s = lsq.summarise(capture)
         reg = plugins.registry(args)
         effects = _effects(args, capture, reg)
@@ -84,16 +114,16 @@ def cmd_diagnose(args) -> int:
             _emit(args.emit_effect, final)
         summary = _summary_lines(final)
         if args.report:
-            from station.diagnose.report import ReportInput, capture_facts, diagnosis_figures, write_report
+            from station.diagnose.report import ReportInput, capture_facts, diagnosis_figure_specs
 
+            job.draw(diagnosis_figure_specs(first, steps))
             page = ReportInput(title=f"Diagnosis: {Path(str(capture.path)).name}",
                                facts=capture_facts(capture, cal_doc) + [("summary", line) for line in summary],
                                calibration=cal_doc, calibration_path=args.calib,
-                               figures=diagnosis_figures(first, steps))
-            page.noise, page.noise_note, allan_png = noise_job.result()
-            if allan_png is not None:
-                page.figures["allan.png"] = allan_png
+                               noise=noise, noise_note=noise_note, figures=job.result())
     if args.report:
+        from station.diagnose.report import write_report
+
         index = write_report(args.report, first, steps, final, summary, page)
         if not args.json:
             out.print(f"report: {index}")

@@ -11,6 +11,7 @@ line), fixed margins instead of ``tight_layout``, and a fast PNG compression lev
 from __future__ import annotations
 
 import io
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -51,6 +52,94 @@ def plain_log_axis(axis) -> None:
     axis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
     axis.set_major_formatter(FormatStrFormatter("%g"))
     axis.set_minor_locator(NullLocator())
+
+
+@dataclass
+class SegmentPanel:
+    title: str
+    reduced_chi2: float
+    names: list              # segment names, in capture order
+    kinds: list              # "static" or "rotation"
+    rms: list                # RMS whitened residual per segment (1 = the noise level)
+
+
+@dataclass
+class SegmentsFigure:
+    """The residual per segment of the model as fitted and after each added effect."""
+    panels: list             # SegmentPanel
+
+
+@dataclass
+class CandidateFigure:
+    """A candidate effect: the residuals against the change it would make (one Gauss-Newton
+    step), and against its signature variable; in units of each residual's sigma."""
+    effect: str
+    predicted_chi2_drop: float
+    change: np.ndarray
+    residual: np.ndarray
+    variable_label: str
+    variable: np.ndarray
+    variable_residual: np.ndarray
+
+
+def draw(specs: dict) -> dict:
+    """{file name: PNG} of {file name: SegmentsFigure, CandidateFigure or a NoiseResult}."""
+    from station.estimate.noise import NoiseResult
+
+    drawers = {SegmentsFigure: segments_figure, CandidateFigure: candidate_figure, NoiseResult: allan_figure}
+    return {name: drawers[type(spec)](spec) for name, spec in specs.items()}
+
+
+def segments_figure(spec: SegmentsFigure, path=None) -> bytes:
+    """Bars of the RMS whitened residual per segment, every panel on the same (log) y axis so
+    that the fall after each added effect shows."""
+    plt = pyplot()
+    panels = spec.panels
+    height = 2.8 * len(panels)
+    fig, axes = plt.subplots(len(panels), 1, figsize=(11, height), squeeze=False, sharey=True)
+    # margins in inches from the text they hold: 0.35 in above the first panel for its title;
+    # below each panel the rotated segment names (7 pt: under 0.06 in a character) and, between
+    # panels, a title
+    longest = max((len(name) for p in panels for name in p.names), default=8)
+    top = 0.35
+    bottom = max(0.95, 0.3 + 0.06 * longest)
+    gap = bottom + 0.15
+    panel = (height - top - bottom - gap * (len(panels) - 1)) / len(panels)
+    fig.subplots_adjust(left=0.065, right=0.99, top=1.0 - top / height, bottom=bottom / height,
+                        hspace=gap / panel)
+    values = [v for p in panels for v in p.rms if v > 0]
+    lo = min(min(values, default=1.0), 0.5) / 1.5
+    hi = max(max(values, default=1.0), 2.0) * 1.5
+    for ax, p in zip(axes[:, 0], panels):
+        colours = ["tab:blue" if kind == "static" else "tab:orange" for kind in p.kinds]
+        ax.bar(range(len(p.names)), p.rms, color=colours)
+        ax.axhline(1.0, color="k", lw=0.8, ls="--")
+        ax.set_yscale("log")
+        ax.set_ylim(lo, hi)
+        plain_log_axis(ax.yaxis)
+        ax.set_xticks(range(len(p.names)), p.names, rotation=90, fontsize=7)
+        ax.set_ylabel("RMS residual / noise")
+        ax.set_title(f"{p.title}: reduced χ² {p.reduced_chi2:.3g} (blue static, orange rotation; "
+                     "dashed: the noise level)", fontsize=9, y=TITLE_Y)
+    return save(fig, path)
+
+
+def candidate_figure(spec: CandidateFigure, path=None) -> bytes:
+    plt = pyplot()
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
+    fig.subplots_adjust(left=0.065, right=0.975, bottom=0.13, top=0.92, wspace=0.22)
+    a1.scatter(spec.change, spec.residual, s=6)
+    lim = np.nanmax(np.abs(np.concatenate([spec.change, spec.residual]))) if len(spec.change) else 0.0
+    lim = lim or 1.0
+    a1.plot([-lim, lim], [-lim, lim], "k--", lw=0.8)
+    a1.set_xlabel(f"change {spec.effect} would make (one step), sigma")
+    a1.set_ylabel("residual, sigma")
+    a1.set_title(f"{spec.effect}: predicted chi2 drop {spec.predicted_chi2_drop:.3g}", y=TITLE_Y)
+    a2.scatter(spec.variable, spec.variable_residual, s=6)
+    a2.set_xlabel(spec.variable_label)
+    a2.set_ylabel("residual, sigma")
+    a2.set_title("residual against its signature variable", y=TITLE_Y)
+    return save(fig, path)
 
 
 def allan_figure(result, path=None) -> bytes:

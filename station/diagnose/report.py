@@ -19,8 +19,8 @@ import numpy as np
 import station
 from station.core.errors import UserError
 from station.diagnose.core import PRIOR_QUANTITIES
-from station.diagnose.figures import TITLE_Y, allan_figure, plain_log_axis, pyplot, save
-from station.diagnose.noise_job import NoiseJob, noise_of
+from station.diagnose.figures import CandidateFigure, SegmentPanel, SegmentsFigure, allan_figure, draw
+from station.diagnose.figure_job import FigureJob
 from station.model.registry import EffectRegistry
 
 VARIABLE_LABEL = {
@@ -31,10 +31,6 @@ VARIABLE_LABEL = {
     "rate_change": "rate change across the segment (deg/s)",
 }
 SCALE_UNITS = ("1", "raw/(m/s^2)", "raw/(deg/s)")
-
-
-def _pyplot():
-    return pyplot()
 
 
 def _variable(name: str, diagnosis, labels) -> np.ndarray:
@@ -58,64 +54,39 @@ def _variable(name: str, diagnosis, labels) -> np.ndarray:
     return out
 
 
-def segments_figure(panels, path=None) -> bytes:
-    """panels: list of (title, diagnosis); bars of the RMS whitened residual per segment, every
-    panel on the same (log) y axis so that the fall after each added effect shows."""
-    plt = _pyplot()
-
-    height = 2.8 * len(panels)
-    fig, axes = plt.subplots(len(panels), 1, figsize=(11, height), squeeze=False, sharey=True)
-    # margins in inches from the text they hold (tight_layout measured every tick label: 45 % of
-    # the figure's time): 0.35 in above the first panel for its title; below each panel the
-    # rotated segment names (7 pt: under 0.06 in a character) and, between panels, a title
-    longest = max((len(s.name) for _, d in panels for s in d.segments), default=8)
-    top = 0.35
-    bottom = max(0.95, 0.3 + 0.06 * longest)
-    gap = bottom + 0.15
-    panel = (height - top - bottom - gap * (len(panels) - 1)) / len(panels)
-    fig.subplots_adjust(left=0.065, right=0.99, top=1.0 - top / height, bottom=bottom / height,
-                        hspace=gap / panel)
-    values = [s.rms for _, d in panels for s in d.segments if s.rms > 0]
-    lo = min(min(values, default=1.0), 0.5) / 1.5
-    hi = max(max(values, default=1.0), 2.0) * 1.5
-    for ax, (title, d) in zip(axes[:, 0], panels):
-        names = [s.name for s in d.segments]
-        rms = [s.rms for s in d.segments]
-        colours = ["tab:blue" if s.kind == "static" else "tab:orange" for s in d.segments]
-        ax.bar(range(len(names)), rms, color=colours)
-        ax.axhline(1.0, color="k", lw=0.8, ls="--")
-        ax.set_yscale("log")
-        ax.set_ylim(lo, hi)
-        plain_log_axis(ax.yaxis)      # mathtext 10^k labels cost 40 % of this figure's time
-        ax.set_xticks(range(len(names)), names, rotation=90, fontsize=7)
-        ax.set_ylabel("RMS residual / noise")
-        ax.set_title(f"{title}: reduced χ² {d.reduced_chi2:.3g} (blue static, orange rotation; "
-                     "dashed: the noise level)", fontsize=9, y=TITLE_Y)
-    return save(fig, path)
+def segments_spec(panels) -> SegmentsFigure:
+    """panels: list of (title, diagnosis): the RMS whitened residual per segment of each."""
+    return SegmentsFigure([SegmentPanel(title, d.reduced_chi2, [s.name for s in d.segments],
+                                        [s.kind for s in d.segments], [s.rms for s in d.segments])
+                           for title, d in panels])
 
 
-def candidate_figure(diagnosis, cand, path=None) -> bytes:
-    plt = _pyplot()
+def candidate_spec(diagnosis, cand) -> CandidateFigure:
+    """The residuals against the change the candidate would make, and against its signature
+    variable (data rows only, not the priors)."""
     labels = diagnosis.labels
     r = diagnosis.result.model.residuals(diagnosis.result.x)
     data = np.array([q not in PRIOR_QUANTITIES for _, _, q, _ in labels])
-    pred = -cand.signature_rows
-    var_name = cand.signature_variable
-    var = _variable(var_name, diagnosis, labels)
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
-    fig.subplots_adjust(left=0.065, right=0.975, bottom=0.13, top=0.92, wspace=0.22)   # not tight_layout: see above
-    a1.scatter(pred[data], r[data], s=6)
-    lim = np.nanmax(np.abs(np.concatenate([pred[data], r[data]]))) or 1.0
-    a1.plot([-lim, lim], [-lim, lim], "k--", lw=0.8)
-    a1.set_xlabel(f"change {cand.effect} would make (one step), sigma")
-    a1.set_ylabel("residual, sigma")
-    a1.set_title(f"{cand.effect}: predicted chi2 drop {cand.predicted_chi2_drop:.3g}", y=TITLE_Y)
+    var = _variable(cand.signature_variable, diagnosis, labels)
     ok = data & np.isfinite(var)
-    a2.scatter(var[ok], r[ok], s=6)
-    a2.set_xlabel(VARIABLE_LABEL.get(var_name, var_name))
-    a2.set_ylabel("residual, sigma")
-    a2.set_title("residual against its signature variable", y=TITLE_Y)
-    return save(fig, path)
+    return CandidateFigure(cand.effect, float(cand.predicted_chi2_drop), -cand.signature_rows[data], r[data],
+                           VARIABLE_LABEL.get(cand.signature_variable, cand.signature_variable), var[ok], r[ok])
+
+
+def diagnosis_figure_specs(first, steps) -> dict:
+    """{file name: what to draw}: the residuals per segment (before and after each step) and the
+    three leading candidates."""
+    panels = [("as fitted", first)] + [(f"after adding {s.added}", s.after) for s in steps]
+    specs = {"residuals_per_segment.png": segments_spec(panels)}
+    for cand in first.candidates[:3]:
+        if cand.signature_rows is not None:
+            specs[f"candidate_{cand.effect}.png"] = candidate_spec(first, cand)
+    return specs
+
+
+def diagnosis_figures(first, steps) -> dict:
+    """{file name: PNG}, drawn here (a ReportJob draws them in its worker)."""
+    return draw(diagnosis_figure_specs(first, steps))
 
 
 # ----------------------------------------------------------------------------------- the page
@@ -134,7 +105,7 @@ class ReportInput:
     diagnosis_note: str | None = None               # why there is no diagnosis
     noise: object = None                            # estimate.noise.NoiseResult
     noise_note: str | None = None
-    figures: dict = field(default_factory=dict)     # PNGs already drawn (allan.png by a NoiseJob)
+    figures: dict = field(default_factory=dict)     # PNGs already drawn (by a ReportJob)
 
 
 CSS = """
@@ -321,16 +292,6 @@ def render(inp: ReportInput, figures: dict) -> str:
             + "<footer>One self-contained page: every figure is embedded.</footer></main></body></html>\n")
 
 
-def diagnosis_figures(first, steps) -> dict:
-    """The residuals per segment (before and after each step) and the three leading candidates."""
-    panels = [("as fitted", first)] + [(f"after adding {s.added}", s.after) for s in steps]
-    figures = {"residuals_per_segment.png": segments_figure(panels)}
-    for cand in first.candidates[:3]:
-        if cand.signature_rows is not None:
-            figures[f"candidate_{cand.effect}.png"] = candidate_figure(first, cand)
-    return figures
-
-
 def figures_of(inp: ReportInput) -> dict:
     """Every figure of the page: those already drawn (inp.figures, e.g. while the noise was
     computed in a second process), the others drawn now."""
@@ -411,7 +372,7 @@ def report_input(capture, cal_doc=None, cal_path=None, *, effects=(), auto=True)
     elif any(seg.angle_deg is None for seg in capture.complete("rotation")):
         inp.diagnosis_note = ("The diagnosis fits the least-squares model, which needs the encoder angle "
                               "of every rotation; this capture has rotations without one.")
-    with NoiseJob(capture, cal_doc) as noise_job:     # in a second process, meanwhile
+    with FigureJob() as job:          # the figures in a second process, meanwhile
         if inp.diagnosis_note is None:
             s = lsq.summarise(capture)
             if auto:
@@ -421,8 +382,24 @@ def report_input(capture, cal_doc=None, cal_path=None, *, effects=(), auto=True)
                 registry = EffectRegistry()
                 inp.first = inp.final = diagnose(lsq.fit(s, [registry.create(e) for e in effects]),
                                                  registry=registry)
-            inp.figures.update(diagnosis_figures(inp.first, inp.steps))
-        inp.noise, inp.noise_note, allan_png = noise_job.result()
-    if allan_png is not None:
-        inp.figures["allan.png"] = allan_png
+            job.draw(diagnosis_figure_specs(inp.first, inp.steps))
+        inp.noise, inp.noise_note = noise_of(capture, cal_doc)
+        if inp.noise is not None:
+            job.draw({"allan.png": inp.noise})
+        inp.figures.update(job.result())
     return inp
+
+
+# ----------------------------------------------------------------------------------- the noise
+
+def noise_of(capture, cal_doc=None) -> tuple:
+    """(NoiseResult or None, note) of the capture's longest static segment."""
+    from station.estimate import noise
+
+    statics = capture.complete("static")
+    try:
+        if any(seg.data is None for seg in statics):       # read without its samples
+            capture.load_samples(statics)
+        return noise.from_capture(capture, None, cal_doc), None
+    except UserError as e:
+        return None, f"Not characterised: {e}"

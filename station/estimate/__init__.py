@@ -174,22 +174,30 @@ FIT_MODULES = ("station.estimate.lsq", "station.estimate.verdict", "station.io.c
 READ_IN_PROCESS = "STATION_READ_IN_PROCESS"     # set (to anything): no forked reader
 
 
-def _summarise_while_importing(capture, check_segment, notes: dict) -> None:
-    """summarise(capture, check_segment=...) and import FIT_MODULES.  On Linux the capture is
-    read and summarised in a forked child (station.core.forked) while this process imports: the
-    child sends back what reading made (the summaries, kept with the capture; the segments, with
-    their status, sha256, problem and the hand turns' samples; the warnings; the notes), or the
-    error it raised, raised here.  Elsewhere, with $STATION_READ_IN_PROCESS set, or when no
-    child can be forked or it is lost, here, one after the other."""
+def summarise_while_importing(capture, check_segment=None, notes: dict | None = None,
+                              modules=FIT_MODULES, then=None, meanwhile=None):
+    """summarise(capture, check_segment=...) and import ``modules``; then ``then()`` where the
+    capture was read (what check_segment kept of the samples is there), and its value returned.
+    ``meanwhile()`` is called here once the reading has begun (after the fork: whatever threads
+    it starts are not in the child).
+    On Linux the capture is read and summarised in a forked child (station.core.forked) while
+    this process imports: the child sends back what reading made (the summaries, kept with the
+    capture; the segments, with their status, sha256, problem and the hand turns' samples; the
+    warnings; the notes; what ``then`` returned), or the error it raised, raised here.
+    Elsewhere, with $STATION_READ_IN_PROCESS set, or when no child can be forked or it is lost,
+    here, one after the other."""
     import importlib
     import os
 
     from station.core import forked
     from station.estimate import summaries
 
+    notes = {} if notes is None else notes
+
     def read():
         summaries.summarise(capture, check_segment=check_segment)
-        return summaries.kept(capture), capture.segments, capture.warnings, notes
+        return (summaries.kept(capture), capture.segments, capture.warnings, notes,
+                then() if then is not None else None)
 
     child = None
     if forked.available() and not os.environ.get(READ_IN_PROCESS):
@@ -197,20 +205,23 @@ def _summarise_while_importing(capture, check_segment, notes: dict) -> None:
             child = forked.Forked(read)     # it imports the CSV engine (pyarrow): this one never needs it
         except OSError:                     # no process to be had (EAGAIN, ENOMEM): read here
             child = None
+    if meanwhile is not None:
+        meanwhile()
     try:
-        for name in FIT_MODULES:
+        for name in modules:
             importlib.import_module(name)
         if child is not None:
-            parts, capture.segments, capture.warnings, child_notes = child.result()
+            parts, capture.segments, capture.warnings, child_notes, value = child.result()
             notes.update(child_notes)
             summaries.keep(capture, parts)
-            return
+            return value
     except forked.ChildLost:
         pass                    # read here instead
     finally:
         if child is not None:
             child.close()
     summaries.summarise(capture, check_segment=check_segment)
+    return then() if then is not None else None
 
 
 def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
@@ -235,7 +246,7 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
             if note:
                 notes[seg.name] = note
 
-        _summarise_while_importing(capture, check_segment, notes)
+        summarise_while_importing(capture, check_segment, notes)
         excluded = [notes[seg.name] for seg in capture.segments if seg.name in notes]
     else:
         capture.load_samples()

@@ -33,7 +33,7 @@ the ordered product by pairwise reduction (log2 N steps of scipy Rotation produc
 
 scipy is imported where it is used, not with the module: summaries.py may import this module to
 find the hand turns while a capture is read, in the child process that reads while `station
-estimate` imports scipy itself (station.estimate._summarise_while_importing).
+estimate` imports scipy itself (station.estimate.summarise_while_importing).
 """
 from __future__ import annotations
 

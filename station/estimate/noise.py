@@ -194,17 +194,32 @@ def deviation_interval(dev: np.ndarray, edf: np.ndarray, confidence: float = CON
             np.sqrt(edf * var / chdtri(edf, 1.0 - tail)))   # chi2 quantile tail
 
 
-def allan_axis(y: np.ndarray, rate: float, sensor: str, axis: str, unit: str) -> AxisNoise:
-    """The Allan deviation of one axis (samples in ``unit``) and its noise terms."""
+@dataclass
+class AllanCurve:
+    """One axis's overlapping Allan deviation: numpy only (computed where the samples are)."""
+    sensor: str
+    axis: str
+    unit: str
+    m: np.ndarray                # averaging factors (tau = m / rate)
+    adev: np.ndarray
+    edf: np.ndarray              # equivalent degrees of freedom for white noise
+
+
+def allan_curve(y: np.ndarray, rate: float, sensor: str, axis: str, unit: str) -> AllanCurve:
     y = np.asarray(y, float)
     m = averaging_factors(len(y))
     adev = overlapping_adev(y, rate, m)
     keep = np.isfinite(adev) & (adev > 0)
     m, adev = m[keep], adev[keep]
-    taus = m / rate
-    if len(taus) < 3:
+    if len(m) < 3:
         raise UserError(f"{sensor} {axis}: the signal is constant: no noise to characterise")
-    edf = white_noise_edf(m, len(y))
+    return AllanCurve(sensor, axis, unit, m, adev, white_noise_edf(m, len(y)))
+
+
+def axis_terms(curve: AllanCurve, rate: float) -> AxisNoise:
+    """The noise terms of one axis's curve (see the module doc)."""
+    m, adev, edf = curve.m, curve.adev, curve.edf
+    taus = m / rate
     lo, hi = deviation_interval(adev, edf)
     slope = np.gradient(np.log(adev), np.log(taus))
 
@@ -239,13 +254,14 @@ def allan_axis(y: np.ndarray, rate: float, sensor: str, axis: str, unit: str) ->
         bias_upper = bias
     else:
         bias, bias_tau, bias_upper = None, None, hi[i_min] / FLICKER_FACTOR
-    return AxisNoise(sensor, axis, unit, taus, adev, lo, hi, float(white), float(white_sigma),
+    return AxisNoise(curve.sensor, curve.axis, curve.unit, taus, adev, lo, hi, float(white), float(white_sigma),
                      float(taus[k]), bias, bias_tau, float(bias_upper), walk, walk_sigma, walk_tau,
                      float(walk_upper))
 
 
-def characterise(accel: np.ndarray, gyro: np.ndarray, rate: float, source: str) -> NoiseResult:
-    """Allan analysis of (N,3) accelerometer samples in m/s^2 and gyro samples in deg/s."""
+def allan_curves(accel: np.ndarray, gyro: np.ndarray, rate: float, source: str) -> list:
+    """AllanCurve per axis of (N,3) accelerometer samples in m/s^2 and gyro samples in deg/s,
+    accel x y z then gyro x y z."""
     accel, gyro = np.asarray(accel, float), np.asarray(gyro, float)
     n = len(accel)
     if n < MIN_SAMPLES:
@@ -253,9 +269,49 @@ def characterise(accel: np.ndarray, gyro: np.ndarray, rate: float, source: str) 
                         "(a long static recording: hours for the bias instability)")
     if not (math.isfinite(rate) and rate > 0):
         raise UserError(f"{source}: sample rate {rate!r} Hz: must be a positive number")
-    axes = [allan_axis(accel[:, i], rate, "accel", a, "m/s^2") for i, a in enumerate("xyz")]
-    axes += [allan_axis(gyro[:, i], rate, "gyro", a, "deg/s") for i, a in enumerate("xyz")]
-    return NoiseResult(axes, rate, n / rate, source)
+    curves = [allan_curve(accel[:, i], rate, "accel", a, "m/s^2") for i, a in enumerate("xyz")]
+    return curves + [allan_curve(gyro[:, i], rate, "gyro", a, "deg/s") for i, a in enumerate("xyz")]
+
+
+def from_curves(curves: list, rate: float, samples: int, source: str) -> NoiseResult:
+    return NoiseResult([axis_terms(c, rate) for c in curves], rate, samples / rate, source)
+
+
+def characterise(accel: np.ndarray, gyro: np.ndarray, rate: float, source: str) -> NoiseResult:
+    """Allan analysis of (N,3) accelerometer samples in m/s^2 and gyro samples in deg/s."""
+    return from_curves(allan_curves(accel, gyro, rate, source), rate, len(accel), source)
+
+
+class LongestStatic:
+    """from_capture's noise computed where a capture is read without its samples (station.
+    estimate.summarise_while_importing: diagnose --report): ``check`` (a check_segment) keeps the
+    samples of the longest complete static segment as the segments go by; ``curves`` (its
+    ``then``) computes their Allan curves there, numpy only; ``noise(value)`` finishes them where
+    scipy is: (NoiseResult or None, note).  The same segment and numbers as from_capture."""
+
+    def __init__(self, capture, cal_doc=None):
+        self.capture, self.cal_doc = capture, cal_doc
+        self.seg = self.data = None
+
+    def check(self, seg) -> None:
+        if seg.kind == "static" and seg.status == "complete" and (
+                self.data is None or len(seg.data.t) > len(self.data.t)):
+            self.seg, self.data = seg, seg.data
+
+    def curves(self) -> tuple:
+        if self.seg is None:
+            return None, f"Not characterised: {self.capture.path}: no complete static segment to characterise"
+        try:
+            return segment_curves(self.capture, self.seg, self.data, self.cal_doc), None
+        except UserError as e:
+            return None, f"Not characterised: {e}"
+        finally:
+            self.seg = self.data = None
+
+    @staticmethod
+    def noise(value) -> tuple:
+        curves, note = value
+        return (None, note) if curves is None else (from_curves(*curves), None)
 
 
 def _factors(imu, cal_doc, where: str) -> tuple[np.ndarray, np.ndarray]:
@@ -288,9 +344,17 @@ def from_capture(capture, segment: str | None = None, cal_doc: dict | None = Non
         raise UserError(f"{capture.path}: no complete static segment to characterise")
     else:
         seg = max(statics, key=lambda s: len(s.data.t))
+    return from_curves(*segment_curves(capture, seg, seg.data, cal_doc))
+
+
+def segment_curves(capture, seg, data, cal_doc: dict | None = None) -> tuple:
+    """(curves, rate, samples, source) of one static segment's samples ``data`` (SegmentData):
+    the part of from_capture that needs the samples, and no scipy (a process that reads the
+    capture computes it: station diagnose --report); from_curves(*...) finishes it."""
     fa, fg = _factors(capture.imu, cal_doc, str(capture.path))
-    source = f"{capture.path}: static segment {seg.name} ({len(seg.data.t)} samples)"
-    return characterise(seg.data.accel * fa, seg.data.gyro * fg, capture.imu.sample_rate_hz, source)
+    rate = capture.imu.sample_rate_hz
+    source = f"{capture.path}: static segment {seg.name} ({len(data.t)} samples)"
+    return allan_curves(data.accel * fa, data.gyro * fg, rate, source), rate, len(data.t), source
 
 
 def from_samples(path, data, rate: float | None, accel_unit: str, gyro_unit: str,

@@ -1,0 +1,132 @@
+"""The report's figures drawn in a forked worker (station/diagnose/figure_job.py) and its noise
+computed where the capture is read (station.estimate.noise.LongestStatic): the same bytes and the
+same numbers as in this process; a worker or a drawing process that fails or dies costs only
+time (the figures are drawn here), never a hang or a missing figure."""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+from station.core import forked
+from station.diagnose import auto, figure_job
+from station.diagnose.figure_job import FigureJob
+from station.diagnose.figures import draw
+from station.diagnose.report import diagnosis_figure_specs, noise_of
+from station.estimate import READ_IN_PROCESS, lsq, noise, summarise_while_importing
+from station.io.capture import read_capture
+
+
+@pytest.fixture(scope="module")
+def specs(optimal9_run):
+    capture = read_capture(optimal9_run)
+    steps, final = auto.run(lsq.summarise(capture), [])
+    result, note = noise_of(capture)
+    assert note is None
+    return {"allan.png": result}, diagnosis_figure_specs(steps[0].before if steps else final, steps)
+
+
+def _drawn_by_job(specs) -> dict:
+    allan, diagnosis = specs
+    with FigureJob() as job:
+        assert job._pool is not None            # Linux: forked, beside this process
+        job.draw(allan)
+        job.draw(diagnosis)
+        pngs = job.result()
+    assert job._pool is None                     # ended on leaving the block
+    return pngs
+
+
+def test_the_worker_draws_the_bytes_drawn_here(specs):
+    here = draw({**specs[0], **specs[1]})
+    there = _drawn_by_job(specs)
+    assert list(there) == list(here) and len(here) >= 3
+    for name in here:
+        assert there[name] == here[name], name
+        assert here[name][:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_failing_worker_costs_only_time(specs, monkeypatch):
+    def broken(_specs):
+        raise RuntimeError("the worker failed")
+
+    monkeypatch.setattr(figure_job, "_draw_task", broken)       # the forked worker inherits it
+    assert _drawn_by_job(specs) == draw({**specs[0], **specs[1]})
+
+
+def test_a_worker_that_dies_costs_only_time(specs, monkeypatch):
+    monkeypatch.setattr(figure_job, "_draw_task", lambda _specs: os._exit(9))
+    assert _drawn_by_job(specs) == draw({**specs[0], **specs[1]})
+
+
+def test_a_drawing_process_that_dies_is_replaced_by_the_worker(specs, monkeypatch):
+    class Dying(forked.Forked):
+        def __init__(self, fn):
+            super().__init__(lambda: os._exit(9))
+
+    monkeypatch.setattr(forked, "Forked", Dying)
+    assert _drawn_by_job(specs) == draw({**specs[0], **specs[1]})
+
+
+@pytest.mark.parametrize("in_process", [False, True])
+def test_the_noise_computed_where_the_capture_is_read_is_from_capture(optimal9_run, monkeypatch, in_process):
+    if in_process:
+        monkeypatch.setenv(READ_IN_PROCESS, "1")
+    capture = read_capture(optimal9_run, load_data=False)
+    longest = noise.LongestStatic(capture)
+    value = summarise_while_importing(capture, longest.check, then=longest.curves)
+    got, note = longest.noise(value)
+    want = noise.from_capture(read_capture(optimal9_run))
+    assert note is None and got.source == want.source
+    for a, b in zip(got.axes, want.axes):
+        np.testing.assert_array_equal(a.adev, b.adev)
+        assert a.report() == b.report()
+
+
+def test_no_static_segment_is_a_note_not_a_failure(optimal9_run):
+    capture = read_capture(optimal9_run, load_data=False)
+    capture.segments = [s for s in capture.segments if s.kind != "static"]
+    longest = noise.LongestStatic(capture)
+    for seg in capture.segments:          # (summarise refuses a capture without statics first)
+        longest.check(seg)
+    result, note = longest.noise(longest.curves())
+    assert result is None and note.startswith("Not characterised:") and "no complete static segment" in note
+    assert noise_of(capture) == (None, note)
+
+
+PARENT = """
+import sys
+from station.cli import main
+rc = main(["diagnose", sys.argv[1], "--auto", "--report", sys.argv[2]])
+print(rc, "matplotlib" in sys.modules)
+"""
+
+READER = """
+import sys
+from station.estimate.noise import LongestStatic
+from station.estimate.summaries import summarise
+from station.io.capture import read_capture
+capture = read_capture(sys.argv[1], load_data=False)
+longest = LongestStatic(capture)
+summarise(capture, check_segment=longest.check)
+curves, note = longest.curves()
+print(note is None and len(curves[0]) == 6, any(m.split(".")[0] == "scipy" for m in sys.modules))
+"""
+
+
+def test_diagnose_report_imports_matplotlib_only_in_its_worker_and_the_reader_no_scipy(optimal9_run, tmp_path):
+    """The point of the two processes: the one that fits never pays for matplotlib (~0.25 s), and
+    the one that reads the capture computes the Allan curves without importing scipy (~0.2 s)."""
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-c", PARENT, str(optimal9_run), str(tmp_path / "report")],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split()[-2:] == ["0", "False"]
+    assert (tmp_path / "report" / "allan.png").stat().st_size > 0
+    assert (tmp_path / "report" / "residuals_per_segment.png").stat().st_size > 0
+    r = subprocess.run([sys.executable, "-c", READER, str(optimal9_run)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["True", "False"]
