@@ -22,6 +22,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from station.model.geometry import cross
+
 if TYPE_CHECKING:       # scipy.spatial is imported only when a Rotation is asked for (not by plan)
     from scipy.spatial.transform import Rotation
 
@@ -44,6 +46,10 @@ def heading_enu(heading_deg: float) -> np.ndarray:
 
 def right_angle_mountings() -> list[np.ndarray]:
     """The 24 mountings of a box on a face: proper rotation matrices with entries 0, +-1."""
+    return list(_RIGHT_ANGLE_MOUNTINGS)
+
+
+def _right_angle_mountings() -> tuple:
     out = []
     for perm in itertools.permutations(range(3)):
         for signs in itertools.product((1.0, -1.0), repeat=3):
@@ -54,15 +60,29 @@ def right_angle_mountings() -> list[np.ndarray]:
                 out.append(m)
     # identity first, then a fixed order
     out.sort(key=lambda m: (not np.allclose(m, np.eye(3)), tuple(-m.ravel())))
-    return out
+    for m in out:
+        m.setflags(write=False)         # shared by every call
+    return tuple(out)
 
 
-def _rodrigues(axis: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
-    """(S, 3, 3) rotation matrices about the unit ``axis`` by ``angle_rad`` (S,)."""
+_RIGHT_ANGLE_MOUNTINGS = _right_angle_mountings()
+
+
+def _skew(axis) -> tuple[np.ndarray, np.ndarray]:
+    """(K, K @ K) of the unit ``axis``: K v = axis x v."""
     x, y, z = axis
     K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    return K, K @ K
+
+
+def _rodrigues(skew: tuple, angle_rad: np.ndarray) -> np.ndarray:
+    """(S, 3, 3) rotation matrices about the axis of ``skew`` (_skew) by ``angle_rad`` (S,)."""
+    K, K2 = skew
     s, c = np.sin(angle_rad)[:, None, None], np.cos(angle_rad)[:, None, None]
-    return np.eye(3) + s * K + (1.0 - c) * (K @ K)
+    return _EYE3 + s * K + (1.0 - c) * K2
+
+
+_EYE3 = np.eye(3)
 
 
 @dataclass(frozen=True)
@@ -79,6 +99,7 @@ class Gimbal:
         object.__setattr__(self, "mounting", np.asarray(self.mounting, dtype=float).reshape(3, 3))
         limits = tuple(self.angle_limits_deg) or (None,) * len(axes)
         object.__setattr__(self, "angle_limits_deg", limits)
+        object.__setattr__(self, "_axes", tuple((np.array(a), _skew(a)) for a in axes))   # not a field
 
     @property
     def n_axes(self) -> int:
@@ -94,10 +115,9 @@ class Gimbal:
         S, k = th.shape
         P = np.broadcast_to(np.eye(3), (S, 3, 3)).copy()
         b = np.empty((S, k, 3))
-        for j in range(k):
-            a = np.asarray(self.axes_enu[j])
+        for j, (a, skew) in enumerate(self._axes):
             b[:, j] = P @ a
-            P = P @ _rodrigues(a, th[:, j])
+            P = P @ _rodrigues(skew, th[:, j])
         return P @ self.mounting, b
 
     def attitude(self, theta_deg) -> Rotation:
@@ -130,7 +150,7 @@ class Gimbal:
             for v_body, v_enu in pairs:
                 w = C @ v_body                                  # (S, 3)
                 res.append(w - v_enu)
-                jac.append(np.cross(b, w[:, None, :]).transpose(0, 2, 1))   # (S, 3, k)
+                jac.append(cross(b, w[:, None, :]).transpose(0, 2, 1))   # (S, 3, k)
             return np.concatenate(res, axis=1), np.concatenate(jac, axis=1)
 
         return self._solve(residual, theta0, free=list(range(self.n_axes)))
@@ -150,8 +170,8 @@ class Gimbal:
             w = C @ a                                           # (S, 3)
             bi = b[:, i]
             res = np.concatenate([w - sign * bi, (sign * bi[:, 2] - target)[:, None]], axis=1)
-            jw = np.cross(b, w[:, None, :]).transpose(0, 2, 1)  # (S, 3, k)
-            jb = np.cross(b, bi[:, None, :]).transpose(0, 2, 1)
+            jw = cross(b, w[:, None, :]).transpose(0, 2, 1)  # (S, 3, k)
+            jb = cross(b, bi[:, None, :]).transpose(0, 2, 1)
             jb[:, :, i:] = 0.0                                  # b_i depends on outer axes only
             jac = np.concatenate([jw - sign * jb, sign * jb[:, 2:3, :]], axis=1)
             return res[:, :rows], jac[:, :rows]
