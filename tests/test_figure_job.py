@@ -130,3 +130,46 @@ def test_diagnose_report_imports_matplotlib_only_in_its_worker_and_the_reader_no
     r = subprocess.run([sys.executable, "-c", READER, str(optimal9_run)], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert r.stdout.split() == ["True", "False"]
+
+
+CTRL_C = """
+import os, sys, time
+from station.diagnose import figures
+real = figures.draw
+parent = os.getpid()
+def slow(specs):
+    if os.getpid() != parent and "allan.png" not in specs:   # the diagnosis figures: a long draw
+        print(os.getpid(), flush=True)
+        time.sleep(60)
+    return real(specs)
+figures.draw = slow
+from station.cli import main
+sys.exit(main(["diagnose", sys.argv[1], "--auto", "--report", sys.argv[2]]))
+"""
+
+
+def test_ctrl_c_while_the_figures_are_drawn_leaves_no_process(optimal9_run, tmp_path):
+    """Ctrl-C (SIGINT to the process group, as a terminal sends it) while the worker and the
+    process it forked draw: exit status 130, "interrupted", no page, and neither left running
+    (the worker is killed on leaving the job; the process it forked dies with it)."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    p = subprocess.Popen([sys.executable, "-c", CTRL_C, str(optimal9_run), str(tmp_path / "report")],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=lambda: (signal.signal(signal.SIGINT, signal.SIG_DFL), os.setsid()))
+    try:
+        drawers = {int(p.stdout.readline()) for _ in range(min(2, os.cpu_count() or 1))}
+        os.killpg(p.pid, signal.SIGINT)
+        out, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 130 and err.strip().splitlines()[-1] == "interrupted"
+    deadline = time.monotonic() + 10
+    while any(os.path.exists(f"/proc/{pid}") for pid in drawers) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not [pid for pid in drawers if os.path.exists(f"/proc/{pid}")]
+    assert not (tmp_path / "report" / "index.html").exists()

@@ -8,7 +8,8 @@ child has its own interpreter, so the child reads while the parent imports, on t
 ``Forked(fn)`` forks at once; the child calls ``fn()`` and sends back its result or the
 exception it raised (pickled); ``result()`` waits for it and returns it or raises that
 exception, in this process, as if ``fn()`` had run here.  The child inherits everything this
-process holds at the fork (nothing is copied to it) and must only return what it computed.
+process holds at the fork (nothing is copied to it) and must only return what it computed; it
+is killed when this process ends, whatever ends it (no child outlives its parent).
 ``ChildLost`` when the child ended without sending anything (killed, out of memory), and
 OSError from ``Forked()`` when no process can be forked: the caller then does the work itself.
 
@@ -32,15 +33,32 @@ def available() -> bool:
     return sys.platform.startswith("linux") and hasattr(os, "fork")
 
 
+def _end_with(parent: int) -> None:
+    """In a child: be killed when ``parent`` ends, however it ends (prctl PR_SET_PDEATHSIG), so
+    that no child outlives a parent killed by a signal; a parent already gone ends it now.
+    (Linux sends the signal when the *thread* that forked ends: fork from the thread that waits.)"""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)     # 1: PR_SET_PDEATHSIG (linux/prctl.h)
+    except (OSError, AttributeError):                   # no prctl: the pipe's EPIPE ends it later
+        return
+    if os.getppid() != parent:
+        os._exit(0)
+
+
 class Forked:
     """``with Forked(fn) as child: ...; value = child.result()``"""
 
     def __init__(self, fn):
         readable, writable = os.pipe()
+        parent = os.getpid()
         pid = os.fork()
         if pid == 0:                                    # the child
             try:
                 signal.signal(signal.SIGINT, signal.SIG_IGN)
+                _end_with(parent)
                 os.close(readable)
                 try:
                     reply = (True, fn())
