@@ -61,7 +61,7 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--split", type=int, default=5)
     a = ap.parse_args()
-    from station.simulate.montecarlo import usable_cores
+    from station.core.forked import usable_cores
 
     walls = [whole(a.runs) for _ in range(a.repeat)]
     rate = a.runs / statistics.median(walls)

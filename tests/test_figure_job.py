@@ -27,6 +27,15 @@ def specs(optimal9_run):
     return {"allan.png": result}, diagnosis_figure_specs(steps[0].before if steps else final, steps)
 
 
+def _running(pid: int) -> bool:
+    """The process exists and is not a zombie (one nobody reaped yet has ended)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, ProcessLookupError, IndexError):
+        return False
+
+
 def _drawn_by_job(specs) -> dict:
     allan, diagnosis = specs
     with FigureJob() as job:
@@ -47,19 +56,32 @@ def test_the_worker_draws_the_bytes_drawn_here(specs):
         assert here[name][:8] == b"\x89PNG\r\n\x1a\n"
 
 
-def test_a_failing_worker_costs_only_time(specs, monkeypatch):
-    def broken(_specs):
-        raise RuntimeError("the worker failed")
+# module-level: the task is sent to the worker by name (a local function could not be, and would
+# fail in this process instead of in the worker)
+def _fail_in_the_worker(_specs):
+    raise RuntimeError("the worker failed")
 
-    monkeypatch.setattr(figure_job, "_draw_task", broken)       # the forked worker inherits it
+
+def _die_in_the_worker(_specs):
+    os._exit(9)
+
+
+@pytest.mark.parametrize("task", [_fail_in_the_worker, _die_in_the_worker])
+def test_a_worker_that_fails_or_dies_costs_only_time(specs, monkeypatch, task):
+    calls = []
+    real = figure_job._draw_here
+
+    def drawn_here(s):
+        calls.append(os.getpid())
+        return real(s)
+
+    monkeypatch.setattr(figure_job, "_draw_task", task)
+    monkeypatch.setattr(figure_job, "_draw_here", drawn_here)
     assert _drawn_by_job(specs) == draw({**specs[0], **specs[1]})
+    assert calls == [os.getpid()] * 2          # both tasks failed there and were drawn here
 
 
-def test_a_worker_that_dies_costs_only_time(specs, monkeypatch):
-    monkeypatch.setattr(figure_job, "_draw_task", lambda _specs: os._exit(9))
-    assert _drawn_by_job(specs) == draw({**specs[0], **specs[1]})
-
-
+@pytest.mark.skipif(forked.usable_cores() < 2, reason="one core: the worker forks no drawing process")
 def test_a_drawing_process_that_dies_is_replaced_by_the_worker(specs, monkeypatch):
     class Dying(forked.Forked):
         def __init__(self, fn):
@@ -161,7 +183,7 @@ def test_ctrl_c_while_the_figures_are_drawn_leaves_no_process(optimal9_run, tmp_
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                          preexec_fn=lambda: (signal.signal(signal.SIGINT, signal.SIG_DFL), os.setsid()))
     try:
-        drawers = {int(p.stdout.readline()) for _ in range(min(2, os.cpu_count() or 1))}
+        drawers = {int(p.stdout.readline()) for _ in range(min(2, forked.usable_cores()))}
         os.killpg(p.pid, signal.SIGINT)
         out, err = p.communicate(timeout=60)
     finally:
@@ -169,7 +191,35 @@ def test_ctrl_c_while_the_figures_are_drawn_leaves_no_process(optimal9_run, tmp_
             p.kill()
     assert p.returncode == 130 and err.strip().splitlines()[-1] == "interrupted"
     deadline = time.monotonic() + 10
-    while any(os.path.exists(f"/proc/{pid}") for pid in drawers) and time.monotonic() < deadline:
+    while any(_running(pid) for pid in drawers) and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert not [pid for pid in drawers if os.path.exists(f"/proc/{pid}")]
+    assert not [pid for pid in drawers if _running(pid)]
     assert not (tmp_path / "report" / "index.html").exists()
+
+
+@pytest.mark.parametrize("how", ["SIGKILL", "SIGTERM"])
+def test_a_killed_diagnose_leaves_no_figure_process(optimal9_run, tmp_path, how):
+    """The parent killed while its worker and the process the worker forked draw (the out-of-memory
+    killer, a closed terminal, `timeout`): both end with it, nothing is left running."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    p = subprocess.Popen([sys.executable, "-c", CTRL_C, str(optimal9_run), str(tmp_path / "report")],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=lambda: (signal.signal(signal.SIGINT, signal.SIG_DFL), os.setsid()))
+    try:
+        drawers = {int(p.stdout.readline()) for _ in range(min(2, forked.usable_cores()))}
+        p.send_signal(getattr(signal, how))         # the parent alone, not its process group
+        p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    deadline = time.monotonic() + 10
+    while any(_running(pid) for pid in drawers) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    left = [pid for pid in drawers if _running(pid)]
+    for pid in left:                                 # not to leave them to the next tests
+        os.kill(pid, signal.SIGKILL)
+    assert not left

@@ -53,14 +53,19 @@ DIAGNOSE_MODULES = ("station.estimate.lsq", "station.diagnose.auto", "station.di
 
 
 def _refuse_rotation_without_angle(capture):
+    """A check_segment refusing a rotation without its encoder angle that no hand made (the
+    model cannot use it); said before reading when there is no static for a hand turn to lie
+    between (a screwdriver's capture)."""
+    message = (f"{capture.path}: diagnose fits the least-squares model, which needs the encoder "
+               "angle (angle_deg) of every rotation segment that is not a hand turn between statics")
+    if not capture.complete("static") and any(seg.angle_deg is None for seg in capture.complete("rotation")):
+        raise UserError(message)
+
     def check(seg) -> None:
-        """A rotation without its encoder angle that no hand made: the model cannot use it."""
         from station.estimate.hand_rotation import is_hand
 
         if seg.kind == "rotation" and seg.angle_deg is None and not is_hand(seg):
-            raise UserError(f"{capture.path}: diagnose fits the least-squares model, which needs the "
-                            "encoder angle (angle_deg) of every rotation segment that is not a hand turn "
-                            "between statics")
+            raise UserError(message)
     return check
 
 

@@ -33,7 +33,16 @@ def available() -> bool:
     return sys.platform.startswith("linux") and hasattr(os, "fork")
 
 
-def _end_with(parent: int) -> None:
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity, e.g. under taskset or a container's
+    cpuset), not the machine's count."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+def end_with_parent(parent: int) -> None:
     """In a child: be killed when ``parent`` ends, however it ends (prctl PR_SET_PDEATHSIG), so
     that no child outlives a parent killed by a signal; a parent already gone ends it now.
     (Linux sends the signal when the *thread* that forked ends: fork from the thread that waits.)"""
@@ -58,7 +67,7 @@ class Forked:
         if pid == 0:                                    # the child
             try:
                 signal.signal(signal.SIGINT, signal.SIG_IGN)
-                _end_with(parent)
+                end_with_parent(parent)
                 os.close(readable)
                 try:
                     reply = (True, fn())

@@ -9,18 +9,23 @@ worker shares them out between itself and a forked process per other core (matpl
 imported there), so the figures are drawn on every core while this process waits.  ``result()``
 returns {file name: PNG}.  This process never imports matplotlib.
 
-Where fork is not available, or the worker fails, the figures are drawn here, in order, with
-the same pixels.  The worker ignores Ctrl-C (the parent is interrupted, ends it on leaving the
+Where fork is not used (station.core.forked.available: Linux), or the worker fails or dies, the
+figures are drawn here, in order, with the same pixels.  The worker and the processes it forks
+are killed when this process ends, however it ends.  The worker ignores Ctrl-C (the parent is interrupted, ends it on leaving the
 ``with`` block and exits 130 without a traceback from either).
 """
 from __future__ import annotations
 
 import multiprocessing
+import os
 import signal
 
+from station.core import forked
 
-def _start_worker() -> None:
+
+def _start_worker(parent: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    forked.end_with_parent(parent)        # killed with this process, however it ends
 
 
 def _import_matplotlib() -> None:
@@ -40,12 +45,8 @@ def _draw_task(specs: dict) -> dict:
     core, each drawing every n-th figure.  (A fork of a process with matplotlib costs the pages
     it copies: one per core, not one per figure; and a process forked for the Allan figure alone,
     to leave this one free for the next task, measured 5 % slower in all.)"""
-    import os
-
-    from station.core import forked
-
     names = list(specs)
-    shares = max(1, min(len(names), os.cpu_count() or 1))
+    shares = max(1, min(len(names), forked.usable_cores()))
     parts = [{name: specs[name] for name in names[k::shares]} for k in range(shares)]
     children = []
     try:
@@ -75,13 +76,13 @@ class FigureJob:
         self._tasks = []              # (specs, Future or None), in the order given
 
     def __enter__(self) -> "FigureJob":
-        if "fork" in multiprocessing.get_all_start_methods():
+        if forked.available():
             from concurrent.futures import ProcessPoolExecutor
 
             try:
                 # a worker that dies fails its futures (BrokenProcessPool): drawn here instead
                 self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork"),
-                                                 initializer=_start_worker)
+                                                 initializer=_start_worker, initargs=(os.getpid(),))
                 self._pool.submit(_import_matplotlib)
             except OSError:           # no process to spare: drawn here, in result()
                 self._pool = None

@@ -85,7 +85,7 @@ def diagnosis_figure_specs(first, steps) -> dict:
 
 
 def diagnosis_figures(first, steps) -> dict:
-    """{file name: PNG}, drawn here (a ReportJob draws them in its worker)."""
+    """{file name: PNG}, drawn here (a FigureJob draws them in its worker)."""
     return draw(diagnosis_figure_specs(first, steps))
 
 
@@ -105,7 +105,7 @@ class ReportInput:
     diagnosis_note: str | None = None               # why there is no diagnosis
     noise: object = None                            # estimate.noise.NoiseResult
     noise_note: str | None = None
-    figures: dict = field(default_factory=dict)     # PNGs already drawn (by a ReportJob)
+    figures: dict = field(default_factory=dict)     # PNGs already drawn (by a FigureJob)
 
 
 CSS = """
@@ -293,8 +293,8 @@ def render(inp: ReportInput, figures: dict) -> str:
 
 
 def figures_of(inp: ReportInput) -> dict:
-    """Every figure of the page: those already drawn (inp.figures, e.g. while the noise was
-    computed in a second process), the others drawn now."""
+    """Every figure of the page: those already drawn (inp.figures, by a FigureJob), the others
+    drawn now."""
     figures = {}
     if inp.first is not None:
         drawn = {name: png for name, png in inp.figures.items() if name != "allan.png"}

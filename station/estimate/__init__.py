@@ -205,9 +205,9 @@ def summarise_while_importing(capture, check_segment=None, notes: dict | None = 
             child = forked.Forked(read)     # it imports the CSV engine (pyarrow): this one never needs it
         except OSError:                     # no process to be had (EAGAIN, ENOMEM): read here
             child = None
-    if meanwhile is not None:
-        meanwhile()
     try:
+        if meanwhile is not None:
+            meanwhile()
         for name in modules:
             importlib.import_module(name)
         if child is not None:

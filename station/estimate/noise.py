@@ -6,7 +6,7 @@ For each axis of the (unit-converted, otherwise raw) output of one static record
     to a fifth of the recording, with a 68.3 % confidence interval from the chi-square
     distribution (SP 1065 eq. 45) with the equivalent degrees of freedom of the estimator for
     white noise, computed exactly (``white_noise_edf``; Greenhall's tables approximate the same
-    sum and are 5-17 % off for one to five samples: tests/test_allan.py checks both it and
+    sum: 17 % high at one sample, 5-12 % low at two to ten: tests/test_allan.py checks both it and
     the deviation against allantools and a Monte Carlo);
   * white noise N (sigma = N / sqrt(tau), slope -1/2): the density (ug/sqrt(Hz), deg/h/sqrt(Hz)),
     i.e. velocity / angle random walk (m/s/sqrt(h), deg/sqrt(h)), read where the local slope is

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import copy
 import multiprocessing
-import os
 import signal
 from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
+from station.core.forked import usable_cores
 from station.io.scheme import Scheme
 
 BASE_PARAMETERS = 21
@@ -103,15 +103,6 @@ def _worker_start() -> None:
     "interrupted"; no traceback from them) and computes with one BLAS thread."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _one_blas_thread()
-
-
-def usable_cores() -> int:
-    """The cores this process may run on (its CPU affinity, e.g. under taskset or a container's
-    cpuset), not the machine's count."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):
-        return max(1, os.cpu_count() or 1)
 
 
 @dataclass
