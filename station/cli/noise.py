@@ -63,7 +63,9 @@ def cmd_noise(args) -> int:
     cal_doc = read_calfile(args.cal) if args.cal else None
     model = serial = None
     if src.is_dir() or src.name == "manifest.yaml":
-        capture = read_capture(src)
+        capture = read_capture(src, load_data=False)
+        # only the static segments' samples: the noise comes from one of them
+        capture.load_samples([capture.segment(args.segment)] if args.segment else capture.complete("static"))
         here = capture.path
         default_cal = here / "calibration.yaml"
         if cal_doc is None and default_cal.exists():
