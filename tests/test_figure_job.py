@@ -9,6 +9,7 @@ import os
 import numpy as np
 import pytest
 
+from processes import interrupt, start_script, still_running
 from station.core import forked
 from station.diagnose import auto, figure_job
 from station.diagnose.figure_job import FigureJob
@@ -25,15 +26,6 @@ def specs(optimal9_run):
     result, note = noise_of(capture)
     assert note is None
     return {"allan.png": result}, diagnosis_figure_specs(steps[0].before if steps else final, steps)
-
-
-def _running(pid: int) -> bool:
-    """The process exists and is not a zombie (one nobody reaped yet has ended)."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except (FileNotFoundError, ProcessLookupError, IndexError):
-        return False
 
 
 def _drawn_by_job(specs) -> dict:
@@ -174,26 +166,13 @@ def test_ctrl_c_while_the_figures_are_drawn_leaves_no_process(optimal9_run, tmp_
     """Ctrl-C (SIGINT to the process group, as a terminal sends it) while the worker and the
     process it forked draw: exit status 130, "interrupted", no page, and neither left running
     (the worker is killed on leaving the job; the process it forked dies with it)."""
-    import signal
-    import subprocess
-    import sys
-    import time
-
-    p = subprocess.Popen([sys.executable, "-c", CTRL_C, str(optimal9_run), str(tmp_path / "report")],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                         preexec_fn=lambda: (signal.signal(signal.SIGINT, signal.SIG_DFL), os.setsid()))
+    p = start_script(CTRL_C, optimal9_run, tmp_path / "report")
     try:
         drawers = {int(p.stdout.readline()) for _ in range(min(2, forked.usable_cores()))}
-        os.killpg(p.pid, signal.SIGINT)
-        out, err = p.communicate(timeout=60)
     finally:
-        if p.poll() is None:
-            p.kill()
+        out, err = interrupt(p)
     assert p.returncode == 130 and err.strip().splitlines()[-1] == "interrupted"
-    deadline = time.monotonic() + 10
-    while any(_running(pid) for pid in drawers) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert not [pid for pid in drawers if _running(pid)]
+    assert still_running(drawers) == []
     assert not (tmp_path / "report" / "index.html").exists()
 
 
@@ -202,24 +181,13 @@ def test_a_killed_diagnose_leaves_no_figure_process(optimal9_run, tmp_path, how)
     """The parent killed while its worker and the process the worker forked draw (the out-of-memory
     killer, a closed terminal, `timeout`): both end with it, nothing is left running."""
     import signal
-    import subprocess
-    import sys
-    import time
 
-    p = subprocess.Popen([sys.executable, "-c", CTRL_C, str(optimal9_run), str(tmp_path / "report")],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                         preexec_fn=lambda: (signal.signal(signal.SIGINT, signal.SIG_DFL), os.setsid()))
+    p = start_script(CTRL_C, optimal9_run, tmp_path / "report")
     try:
         drawers = {int(p.stdout.readline()) for _ in range(min(2, forked.usable_cores()))}
-        p.send_signal(getattr(signal, how))         # the parent alone, not its process group
-        p.communicate(timeout=60)
     finally:
-        if p.poll() is None:
-            p.kill()
-    deadline = time.monotonic() + 10
-    while any(_running(pid) for pid in drawers) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    left = [pid for pid in drawers if _running(pid)]
+        interrupt(p, getattr(signal, how), group=False)     # the parent alone, not its group
+    left = still_running(drawers)
     for pid in left:                                 # not to leave them to the next tests
         os.kill(pid, signal.SIGKILL)
     assert not left

@@ -6,6 +6,7 @@ import time
 
 import pytest
 
+from processes import interrupt, start_script, still_running
 from station.core import forked
 from station.core.errors import CaptureError
 from station.estimate import estimate_capture, summaries
@@ -118,22 +119,11 @@ sys.exit(main(["estimate", sys.argv[1], "-o", sys.argv[2]]))
 def test_ctrl_c_while_the_child_reads_ends_both(optimal9_run, tmp_path):
     """Ctrl-C (SIGINT to the process group, as a terminal sends it) while the forked reader
     reads: exit status 130, "interrupted", and no reader left running."""
-    import signal
-    import subprocess
-
-    p = subprocess.Popen([sys.executable, "-c", CTRL_C, str(optimal9_run), str(tmp_path / "cal.yaml")],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                         preexec_fn=lambda: (signal.signal(signal.SIGINT, signal.SIG_DFL), os.setsid()))
+    p = start_script(CTRL_C, optimal9_run, tmp_path / "cal.yaml")
     try:
         reader = int(p.stdout.readline())        # the child says it is reading
-        os.killpg(p.pid, signal.SIGINT)
-        out, err = p.communicate(timeout=60)
     finally:
-        if p.poll() is None:
-            p.kill()
+        out, err = interrupt(p)
     assert p.returncode == 130 and err.strip().splitlines()[-1] == "interrupted"
-    deadline = time.monotonic() + 10
-    while os.path.exists(f"/proc/{reader}") and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert not os.path.exists(f"/proc/{reader}")
+    assert still_running([reader]) == []
     assert not (tmp_path / "cal.yaml").exists()

@@ -1,0 +1,48 @@
+"""Test helpers for commands that fork: start a script in its own process group (as a terminal
+starts a command), and wait until given processes have ended."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+
+def start_script(script: str, *args) -> subprocess.Popen:
+    """``python -c script args`` in a new session (its own process group), with Ctrl-C's
+    default action (a test runner may have it ignored), stdout and stderr as text pipes."""
+    return subprocess.Popen([sys.executable, "-c", script, *map(str, args)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: (signal.signal(signal.SIGINT, signal.SIG_DFL), os.setsid()))
+
+
+def running(pid: int) -> bool:
+    """The process exists and has not ended (a zombie nobody reaped yet has ended)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, ProcessLookupError, IndexError):
+        return False
+
+
+def still_running(pids, seconds: float = 10.0) -> list:
+    """The processes among ``pids`` still running after waiting up to ``seconds`` for them."""
+    deadline = time.monotonic() + seconds
+    while any(running(pid) for pid in pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return [pid for pid in pids if running(pid)]
+
+
+def interrupt(p: subprocess.Popen, how=signal.SIGINT, group: bool = True) -> tuple:
+    """Send ``how`` to ``p``'s process group (as a terminal's Ctrl-C does) or to ``p`` alone, and
+    (stdout, stderr) once it has ended (killed after 60 s)."""
+    try:
+        if group:
+            os.killpg(p.pid, how)
+        else:
+            p.send_signal(how)
+        return p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
