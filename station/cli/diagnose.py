@@ -48,10 +48,6 @@ def _effects(args, capture, reg) -> list[str]:
     return plugins.effect_ids(reg, effects + args.add)
 
 
-# what diagnose needs once the capture is summarised (imported while a child reads it)
-DIAGNOSE_MODULES = ("station.estimate.lsq", "station.diagnose.auto", "station.diagnose.core")
-
-
 def _refuse_rotation_without_angle(capture):
     """A check_segment refusing a rotation without its encoder angle that no hand made (the
     model cannot use it); said before reading when there is no static for a hand turn to lie
@@ -70,6 +66,7 @@ def _refuse_rotation_without_angle(capture):
 
 
 def cmd_diagnose(args) -> int:
+    from station.diagnose import DIAGNOSIS_MODULES
     from station.estimate import summarise_while_importing
     from station.io.capture import read_capture
 
@@ -94,7 +91,7 @@ def cmd_diagnose(args) -> int:
                 longest.check(seg)
 
         # each segment read, checked and summarised (in a child, while the fit is imported here)
-        curves = summarise_while_importing(capture, check, modules=DIAGNOSE_MODULES,
+        curves = summarise_while_importing(capture, check, modules=DIAGNOSIS_MODULES,
                                            then=longest.curves if longest is not None else None,
                                            meanwhile=(lambda: stack.enter_context(job)) if job else None)
         if args.report:

@@ -22,7 +22,7 @@ def cmd_report(args) -> int:
     from station.io.calfile import read_calfile
     from station.io.capture import read_capture
 
-    capture = read_capture(args.capture)
+    capture = read_capture(args.capture, load_data=False)     # the manifest: samples as needed
     cal_path = Path(args.cal) if args.cal else capture.path / "calibration.yaml"
     cal_doc = read_calfile(cal_path) if (args.cal or cal_path.exists()) else None
     effects = [e for e in (cal_doc or {}).get("effects", []) if e not in ("base_triads", "inter_triad")]

@@ -18,6 +18,7 @@ import numpy as np
 
 import station
 from station.core.errors import UserError
+from station.diagnose import DIAGNOSIS_MODULES
 from station.diagnose.core import PRIOR_QUANTITIES
 from station.diagnose.figures import CandidateFigure, SegmentPanel, SegmentsFigure, allan_figure, draw
 from station.diagnose.figure_job import FigureJob
@@ -356,15 +357,18 @@ def capture_facts(capture, cal_doc=None) -> list:
 
 
 def report_input(capture, cal_doc=None, cal_path=None, *, effects=(), auto=True) -> ReportInput:
-    """Everything for the page from a capture (read with its data) and its calibration; the
-    diagnosis (with ``auto``, the add-and-refit loop) needs encoder angles on every rotation."""
-    from station.diagnose import auto as auto_loop
-    from station.diagnose.core import diagnose
-    from station.estimate import lsq
+    """Everything for the page from a capture (read with or without its samples) and its
+    calibration; the diagnosis (with ``auto``, the add-and-refit loop) needs encoder angles on
+    every rotation.  As ``diagnose --report``: the capture is read and summarised in a child
+    while the fit is imported, which also computes the noise's Allan curves, and the figures
+    are drawn by a FigureJob."""
+    import contextlib
+
+    from station.estimate import summarise_while_importing
+    from station.estimate.noise import LongestStatic
     from station.io.history import verdict_of
 
-    name = Path(str(capture.path)).name
-    inp = ReportInput(title=f"Calibration report: {name}", facts=capture_facts(capture, cal_doc),
+    inp = ReportInput(title=f"Calibration report: {Path(str(capture.path)).name}",
                       calibration=cal_doc, calibration_path=None if cal_path is None else str(cal_path),
                       verdict=verdict_of(cal_doc) if cal_doc is not None else None)
     if not capture.complete("rotation"):
@@ -372,22 +376,40 @@ def report_input(capture, cal_doc=None, cal_path=None, *, effects=(), auto=True)
     elif any(seg.angle_deg is None for seg in capture.complete("rotation")):
         inp.diagnosis_note = ("The diagnosis fits the least-squares model, which needs the encoder angle "
                               "of every rotation; this capture has rotations without one.")
-    with FigureJob() as job:          # the figures in a second process, meanwhile
+    with contextlib.ExitStack() as stack:
+        job = FigureJob()             # the figures in a second process, meanwhile
         if inp.diagnosis_note is None:
-            s = lsq.summarise(capture)
-            if auto:
-                inp.steps, inp.final = auto_loop.run(s, list(effects))
-                inp.first = inp.steps[0].before if inp.steps else inp.final
-            else:
-                registry = EffectRegistry()
-                inp.first = inp.final = diagnose(lsq.fit(s, [registry.create(e) for e in effects]),
-                                                 registry=registry)
+            longest = LongestStatic(capture, cal_doc)
+            curves = summarise_while_importing(capture, longest.check, modules=DIAGNOSIS_MODULES,
+                                               then=longest.curves, meanwhile=lambda: stack.enter_context(job))
+            inp.noise, inp.noise_note = longest.noise(curves)
+            if inp.noise is not None:
+                job.draw({"allan.png": inp.noise})
+            inp.first, inp.steps, inp.final = _diagnosis(capture, effects, auto)
             job.draw(diagnosis_figure_specs(inp.first, inp.steps))
-        inp.noise, inp.noise_note = noise_of(capture, cal_doc)
-        if inp.noise is not None:
-            job.draw({"allan.png": inp.noise})
+        else:
+            stack.enter_context(job)
+            inp.noise, inp.noise_note = noise_of(capture, cal_doc)
+            if inp.noise is not None:
+                job.draw({"allan.png": inp.noise})
         inp.figures.update(job.result())
+    inp.facts = capture_facts(capture, cal_doc)       # the segments as read (their status)
     return inp
+
+
+def _diagnosis(capture, effects, auto: bool) -> tuple:
+    """(first, steps, final) of the capture's (summarised) least-squares fit."""
+    from station.diagnose import auto as auto_loop
+    from station.diagnose.core import diagnose
+    from station.estimate import lsq
+
+    s = lsq.summarise(capture)
+    if auto:
+        steps, final = auto_loop.run(s, list(effects))
+        return (steps[0].before if steps else final), steps, final
+    registry = EffectRegistry()
+    first = diagnose(lsq.fit(s, [registry.create(e) for e in effects]), registry=registry)
+    return first, [], first
 
 
 # ----------------------------------------------------------------------------------- the noise
