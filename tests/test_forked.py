@@ -43,6 +43,47 @@ def test_closing_ends_a_child_that_still_runs():
         os.waitpid(pid, os.WNOHANG)          # ended and reaped: no such child any more
 
 
+def _waits_for_the_last(item):
+    """Item 0 waits (up to 30 s) for the last item's file: only if the others were started while
+    it still ran, i.e. if a slow child does not hold the rest back."""
+    x, flag = item
+    if x == 0:
+        deadline = time.monotonic() + 30
+        while not flag.exists() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        return os.getpid(), flag.exists()
+    if x == 6:
+        flag.touch()
+    return os.getpid(), x * x
+
+
+@pytest.mark.skipif(forked.usable_cores() < 2, reason="one core: one child at a time")
+def test_map_in_children_keeps_the_order_and_starts_the_next_when_any_ends(tmp_path):
+    parent = os.getpid()
+    out = forked.map_in_children(_waits_for_the_last, [(x, tmp_path / "last") for x in range(7)])
+    assert out[0][1] is True                               # the last one ran while the first waited
+    assert [value for _, value in out[1:]] == [x * x for x in range(1, 7)]
+    pids = {pid for pid, _ in out}
+    assert parent not in pids and len(pids) == 7           # one child each
+
+
+def test_map_in_children_raises_the_first_error_in_order_and_recovers_lost_children(monkeypatch):
+    parent = os.getpid()
+
+    def f(x):
+        if x in (2, 4):
+            raise ValueError(f"item {x}")
+        if x == 1 and os.getpid() != parent:
+            os._exit(9)                               # lost in its child: computed here instead
+        return x
+
+    with pytest.raises(ValueError, match="item 2"):
+        forked.map_in_children(f, range(6))
+    assert forked.map_in_children(f, [0, 1, 3]) == [0, 1, 3]
+    monkeypatch.setattr(forked, "available", lambda: False)
+    assert forked.map_in_children(lambda x: (os.getpid(), x), [5, 6]) == [(parent, 5), (parent, 6)]
+
+
 def test_estimate_reads_in_process_when_its_reader_is_lost(optimal9_run, monkeypatch):
     """A reader killed (out of memory, a signal) costs only time: the capture is read here."""
     parent = os.getpid()

@@ -84,6 +84,10 @@ class Forked:
         os.close(writable)
         self.pid, self._pipe = pid, os.fdopen(readable, "rb")
 
+    def fileno(self) -> int:
+        """The pipe the result comes through (select: readable once the child sends or ends)."""
+        return self._pipe.fileno()
+
     def result(self):
         """What fn() returned in the child, or the exception it raised, raised here."""
         try:
@@ -116,3 +120,50 @@ class Forked:
     def __exit__(self, *exc):
         self.close()
         return False
+
+
+def map_in_children(fn, items) -> list:
+    """[fn(item) for item in items], each computed in a forked child, as many at a time as this
+    process has cores (the next one started when any ends), the results in order; in this
+    process where fork is not used, when no child can be forked, or when one is lost.  If fn
+    raises, the exception of the first such item is raised here once all have ended."""
+    import select
+
+    items = list(items)
+    if not available():
+        return [fn(item) for item in items]
+    outcomes = [None] * len(items)      # (True, value) or (False, exception)
+
+    def here(i):
+        try:
+            return True, fn(items[i])
+        except Exception as e:          # noqa: BLE001 - raised below, in the items' order
+            return False, e
+
+    running, started = {}, 0
+    try:
+        while started < len(items) or running:
+            while started < len(items) and len(running) < usable_cores():
+                try:
+                    running[started] = Forked(lambda item=items[started]: fn(item))
+                except OSError:                       # no process to spare: computed here
+                    outcomes[started] = here(started)
+                started += 1
+            if not running:
+                continue
+            ready, _, _ = select.select(list(running.values()), [], [])
+            for i in [i for i, child in running.items() if child in ready]:
+                child = running.pop(i)
+                try:
+                    outcomes[i] = (True, child.result())
+                except ChildLost:
+                    outcomes[i] = here(i)
+                except Exception as e:                # noqa: BLE001 - fn raised it in the child
+                    outcomes[i] = (False, e)
+    finally:
+        for child in running.values():
+            child.close()
+    for ok, value in outcomes:
+        if not ok:
+            raise value
+    return [value for _, value in outcomes]
