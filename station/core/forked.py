@@ -19,6 +19,7 @@ and the ``with`` block (or ``close()``) ends the child.  Only the standard libra
 """
 from __future__ import annotations
 
+import gc
 import os
 import pickle
 import signal
@@ -67,6 +68,7 @@ class Forked:
         if pid == 0:                                    # the child
             try:
                 signal.signal(signal.SIGINT, signal.SIG_IGN)
+                gc.disable()        # it lives for one function: the cyclic collector only costs time
                 end_with_parent(parent)
                 os.close(readable)
                 try:
