@@ -123,3 +123,18 @@ def test_noise_is_not_written_into_another_imus_calibration(noise_run, optimal9_
     before = cal.read_bytes()
     assert main(["noise", str(noise_run), "--cal", str(cal)]) == 2
     assert "SIM-13" in capsys.readouterr().err and cal.read_bytes() == before
+
+
+def test_noise_of_a_named_segment_of_a_calibration_capture(optimal9_run, tmp_path, capsys):
+    """--segment: that static segment only is read and characterised (the others are not read:
+    nothing of theirs may be asked for)."""
+    import shutil
+
+    cap = tmp_path / "cap"
+    shutil.copytree(optimal9_run, cap)
+    (cap / "calibration.yaml").unlink()          # noise.yaml beside it, not into the calibration
+    assert main(["noise", str(cap), "--segment", "pos02"]) == 0
+    block = yaml.safe_load((cap / "noise.yaml").read_text())["noise"]
+    assert "static segment pos02" in block["source"]
+    assert main(["noise", str(cap), "--segment", "rotx_p"]) == 2
+    assert "not a complete static segment" in capsys.readouterr().err

@@ -76,7 +76,7 @@ def cmd_noise(args) -> int:
         if serial and cal_serial and serial != cal_serial and not getattr(args, "force", False):
             raise UserError(f"{args.cal}: calibration of IMU {cal_serial!r}, recording of IMU {serial!r}: "
                             "the noise belongs to the IMU recorded (--force to write it anyway)")
-        if capture.complete("static") and any(s.data.gaps for s in capture.complete("static")):
+        if any(s.data is not None and s.data.gaps for s in capture.complete("static")):   # those read
             err.print("warning: the recording has gaps; the Allan deviation assumes even sampling")
     else:
         if args.segment:
