@@ -86,3 +86,25 @@ def test_the_interval_is_allantools_confidence_interval(edf):
     ref = allantools.confidence_interval(0.37, edf, ci=CONFIDENCE)
     assert (lo[0], hi[0]) == pytest.approx(ref, rel=1e-10)
     assert lo[0] < 0.37 < hi[0]
+
+
+def test_the_closed_form_is_the_sum_over_the_lags():
+    """white_noise_edf's power sums against the sum over the 2m lags written out (as the
+    estimator's definition above), for every m of a few lengths and the short-record case."""
+    def by_lags(k, n):
+        big_m = n + 1 - 2 * k
+        j = np.arange(min(2 * k, big_m), dtype=float)
+        r = np.where(j <= k, 2.0 * k - 3.0 * j, j - 2.0 * k)
+        weight = 2.0 * (big_m - j)
+        weight[0] = big_m
+        return big_m * big_m * r[0] * r[0] / float(np.dot(weight, r * r))
+
+    for n in (7, 40, 1001, 30000):
+        for k in range(1, (n - 1) // 2 + 1) if n < 2000 else averaging_factors(n):
+            assert white_noise_edf(np.array([k]), n)[0] == pytest.approx(by_lags(int(k), n), rel=1e-12), (n, k)
+    # ten hours at 1 kHz (m up to 7.2 million, no array of lags): Greenhall's large-m form
+    # r / (2/3 - 1/(3r)), r = M / m, to its discretisation term, which is ~5/(4m^2)
+    n = 36_000_000
+    m = averaging_factors(n)
+    r = (n + 1 - 2 * m) / m
+    assert np.all(np.abs(white_noise_edf(m, n) * (2 / 3 - 1 / (3 * r)) / r - 1) < 1.5 / m.astype(float) ** 2)

@@ -169,17 +169,32 @@ def white_noise_edf(m: np.ndarray, n: int) -> np.ndarray:
     lag of j samples is, in units of the samples' variance / rate^2, R_j = 2m - 3j for j <= m,
     j - 2m for m <= j <= 2m, 0 beyond.  s^2 is proportional to sum_k v_k^2, a Gaussian quadratic
     form: E = M R_0, Var = 2 sum_{|j|<M} (M - |j|) R_j^2, so edf = M^2 R_0^2 / sum_{|j|<M} (M - |j|) R_j^2.
+    R_j being piecewise linear, the sum is a polynomial in m and M (power sums), computed here in
+    exact integers: no array of 2m lags (hours of samples give m in the millions).
     (Greenhall and Riley's algorithm approximates this sum; it tends to 3 M / (2 m) for M >> m.)"""
     out = np.empty(len(m))
     for i, k in enumerate(np.asarray(m, np.int64)):
-        k = int(k)
-        big_m = n + 1 - 2 * k
-        j = np.arange(min(2 * k, big_m), dtype=float)
-        r = np.where(j <= k, 2.0 * k - 3.0 * j, j - 2.0 * k)
-        weight = 2.0 * (big_m - j)
-        weight[0] = big_m
-        out[i] = big_m * big_m * r[0] * r[0] / float(np.dot(weight, r * r))
+        k, big_m = int(k), n + 1 - 2 * int(k)
+        out[i] = big_m * big_m * 4 * k * k / _weighted_square_sum(k, big_m)
     return out
+
+
+def _power_sums(m: int) -> tuple[int, int, int]:
+    """sum j, sum j^2, sum j^3 for j = 1..m."""
+    s1 = m * (m + 1) // 2
+    return s1, m * (m + 1) * (2 * m + 1) // 6, s1 * s1
+
+
+def _weighted_square_sum(m: int, big_m: int) -> int:
+    """sum_{|j|<M} (M - |j|) R_j^2 of white_noise_edf, in integers."""
+    if big_m <= 2 * m:            # fewer differences than the autocovariance is long: the sum itself
+        return big_m * 4 * m * m + 2 * sum((big_m - j) * (2 * m - 3 * j if j <= m else j - 2 * m) ** 2
+                                           for j in range(1, big_m))
+    s1, s2, s3 = _power_sums(m)               # j = 1..m: (M - j)(2m - 3j)^2
+    first = big_m * (4 * m * m * m - 12 * m * s1 + 9 * s2) - (4 * m * m * s1 - 12 * m * s2 + 9 * s3)
+    _, t2, t3 = _power_sums(m - 1)            # j = 2m - i, i = 1..m-1: (M - 2m + i) i^2
+    second = (big_m - 2 * m) * t2 + t3
+    return big_m * 4 * m * m + 2 * (first + second)
 
 
 def deviation_interval(dev: np.ndarray, edf: np.ndarray, confidence: float = CONFIDENCE) -> tuple:
