@@ -11,8 +11,9 @@ returns {file name: PNG}.  This process never imports matplotlib.
 
 Where fork is not used (station.core.forked.available: Linux), or the worker fails or dies, the
 figures are drawn here, in order, with the same pixels.  The worker and the processes it forks
-are killed when this process ends, however it ends.  The worker ignores Ctrl-C (the parent is interrupted, ends it on leaving the
-``with`` block and exits 130 without a traceback from either).
+are killed when this process ends, however it ends.  The worker ignores Ctrl-C (the parent is
+interrupted, ends it on leaving the ``with`` block and exits 130 without a traceback from
+either).
 """
 from __future__ import annotations
 

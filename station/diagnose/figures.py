@@ -1,5 +1,6 @@
-"""Figures shared by the report page and the commands: the Allan deviation with its fitted noise
-terms, and the drift of a calibration's parameters over time.  PNG files (matplotlib, Agg).
+"""The figures, drawn from plain numbers (so that another process can draw them): the report's
+residuals per segment and candidate effects, the Allan deviation with its fitted noise terms,
+and the drift of a calibration's parameters over time.  PNG files (matplotlib, Agg).
 
 What a figure costs is mostly matplotlib's text machinery, not the data (docs/performance.md,
 "Diagnose and the report"), so the figures here avoid its expensive defaults: titles at a fixed
