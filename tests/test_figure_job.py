@@ -74,13 +74,27 @@ def test_a_worker_that_fails_or_dies_costs_only_time(specs, monkeypatch, task):
 
 
 @pytest.mark.skipif(forked.usable_cores() < 2, reason="one core: the worker forks no drawing process")
-def test_a_drawing_process_that_dies_is_replaced_by_the_worker(specs, monkeypatch):
+def test_a_drawing_process_that_dies_is_replaced_by_the_worker(specs, monkeypatch, tmp_path):
+    """The worker draws what its dying process did not: every figure is drawn in the worker, none
+    here (where each drawing happened is written down by the drawing processes themselves)."""
     class Dying(forked.Forked):
         def __init__(self, fn):
             super().__init__(lambda: os._exit(9))
 
+    real = figure_job._draw_here
+    log = tmp_path / "drawn-by"
+
+    def drawn_here(s):
+        with open(log, "a") as f:
+            f.write(f"{os.getpid()} {len(s)}\n")
+        return real(s)
+
     monkeypatch.setattr(forked, "Forked", Dying)
+    monkeypatch.setattr(figure_job, "_draw_here", drawn_here)
     assert _drawn_by_job(specs) == draw({**specs[0], **specs[1]})
+    calls = [line.split() for line in log.read_text().splitlines()]
+    assert calls and all(int(pid) != os.getpid() for pid, _ in calls)
+    assert sum(int(n) for _, n in calls) == len(specs[0]) + len(specs[1])
 
 
 @pytest.mark.parametrize("in_process", [False, True])
