@@ -78,26 +78,14 @@ def cmd_diagnose(args) -> int:
         cal_doc = read_calfile(args.calib)
     refuse = _refuse_rotation_without_angle(capture)
     with contextlib.ExitStack() as stack:
-        job = longest = None
-        if args.report:       # the figures in a second process; the noise where the capture is read
-            from station.diagnose.figure_job import FigureJob
-            from station.estimate.noise import LongestStatic
-
-            job, longest = FigureJob(), LongestStatic(capture, cal_doc)
-
-        def check(seg) -> None:
-            refuse(seg)
-            if longest is not None:
-                longest.check(seg)
-
-        # each segment read, checked and summarised (in a child, while the fit is imported here)
-        curves = summarise_while_importing(capture, check, modules=DIAGNOSIS_MODULES,
-                                           then=longest.curves if longest is not None else None,
-                                           meanwhile=(lambda: stack.enter_context(job)) if job else None)
+        # each segment read, checked and summarised (in a child, while the fit is imported here);
+        # with --report, the figures in a second process and the noise where the capture is read
         if args.report:
-            noise, noise_note = longest.noise(curves)
-            if noise is not None:
-                job.draw({"allan.png": noise})
+            from station.diagnose.figure_job import read_for_report
+
+            job, noise, noise_note = read_for_report(capture, cal_doc, stack, refuse)
+        else:
+            summarise_while_importing(capture, refuse, modules=DIAGNOSIS_MODULES)
         from station.diagnose import auto
         from station.diagnose.core import diagnose
         from station.estimate import lsq

@@ -128,3 +128,28 @@ class FigureJob:
             for process in list((getattr(pool, "_processes", None) or {}).values()):
                 process.kill()        # what kill_workers does, before 3.14
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def read_for_report(capture, cal_doc, stack, check_segment=None) -> tuple:
+    """Read and summarise ``capture`` as a report needs it (station.estimate.
+    summarise_while_importing, the diagnosis' modules imported meanwhile): a FigureJob entered
+    on ``stack`` once the reading has begun, the longest static segment's Allan curves computed
+    where the capture is read (station.estimate.noise.LongestStatic) and its figure given to the
+    job.  (job, NoiseResult or None, note or None)."""
+    from station.diagnose import DIAGNOSIS_MODULES
+    from station.estimate import summarise_while_importing
+    from station.estimate.noise import LongestStatic
+
+    job, longest = FigureJob(), LongestStatic(capture, cal_doc)
+
+    def check(seg) -> None:
+        if check_segment is not None:
+            check_segment(seg)
+        longest.check(seg)
+
+    curves = summarise_while_importing(capture, check, modules=DIAGNOSIS_MODULES, then=longest.curves,
+                                       meanwhile=lambda: stack.enter_context(job))
+    noise, note = longest.noise(curves)
+    if noise is not None:
+        job.draw({"allan.png": noise})
+    return job, noise, note

@@ -18,7 +18,6 @@ import numpy as np
 
 import station
 from station.core.errors import UserError
-from station.diagnose import DIAGNOSIS_MODULES
 from station.diagnose.core import PRIOR_QUANTITIES
 from station.diagnose.figures import CandidateFigure, SegmentPanel, SegmentsFigure, allan_figure, draw
 from station.diagnose.figure_job import FigureJob
@@ -364,8 +363,7 @@ def report_input(capture, cal_doc=None, cal_path=None, *, effects=(), auto=True)
     are drawn by a FigureJob."""
     import contextlib
 
-    from station.estimate import summarise_while_importing
-    from station.estimate.noise import LongestStatic
+    from station.diagnose.figure_job import read_for_report
     from station.io.history import verdict_of
 
     inp = ReportInput(title=f"Calibration report: {Path(str(capture.path)).name}",
@@ -377,18 +375,12 @@ def report_input(capture, cal_doc=None, cal_path=None, *, effects=(), auto=True)
         inp.diagnosis_note = ("The diagnosis fits the least-squares model, which needs the encoder angle "
                               "of every rotation; this capture has rotations without one.")
     with contextlib.ExitStack() as stack:
-        job = FigureJob()             # the figures in a second process, meanwhile
         if inp.diagnosis_note is None:
-            longest = LongestStatic(capture, cal_doc)
-            curves = summarise_while_importing(capture, longest.check, modules=DIAGNOSIS_MODULES,
-                                               then=longest.curves, meanwhile=lambda: stack.enter_context(job))
-            inp.noise, inp.noise_note = longest.noise(curves)
-            if inp.noise is not None:
-                job.draw({"allan.png": inp.noise})
+            job, inp.noise, inp.noise_note = read_for_report(capture, cal_doc, stack)
             inp.first, inp.steps, inp.final = _diagnosis(capture, effects, auto)
             job.draw(diagnosis_figure_specs(inp.first, inp.steps))
         else:
-            stack.enter_context(job)
+            job = stack.enter_context(FigureJob())      # the figures in a second process
             inp.noise, inp.noise_note = noise_of(capture, cal_doc)
             if inp.noise is not None:
                 job.draw({"allan.png": inp.noise})
