@@ -1,7 +1,6 @@
 """station.core.forked (one function in a forked child) and `estimate`'s reader in a child:
 results, errors raised as in process, a lost child, a child ended when its parent stops."""
 import os
-import sys
 import time
 
 import pytest

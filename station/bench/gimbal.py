@@ -179,7 +179,6 @@ class Gimbal:
         return self._solve(residual, theta0, free=[j for j in range(self.n_axes) if j != i])
 
     def _solve(self, residual, theta0, free):
-        k = self.n_axes
         theta0 = self.unwrap(theta0)
         if free:
             grid = np.arange(0.0, 360.0, GRID_DEG)
