@@ -167,7 +167,7 @@ real = figures.draw
 parent = os.getpid()
 def slow(specs):
     if os.getpid() != parent and "allan.png" not in specs:   # the diagnosis figures: a long draw
-        print(os.getpid(), flush=True)
+        print("drawing", os.getpid(), flush=True)
         time.sleep(60)
     return real(specs)
 figures.draw = slow
@@ -176,13 +176,25 @@ sys.exit(main(["diagnose", sys.argv[1], "--auto", "--report", sys.argv[2]]))
 """
 
 
+def drawing(p) -> set:
+    """The pids of the processes drawing, as CTRL_C's script prints them (among the command's
+    own output: the diagnosis is printed while the figures are drawn)."""
+    pids = set()
+    while len(pids) < min(2, forked.usable_cores()):
+        line = p.stdout.readline()
+        assert line, "the command ended before its figures were drawn"
+        if line.startswith("drawing "):
+            pids.add(int(line.split()[1]))
+    return pids
+
+
 def test_ctrl_c_while_the_figures_are_drawn_leaves_no_process(optimal9_run, tmp_path):
     """Ctrl-C (SIGINT to the process group, as a terminal sends it) while the worker and the
     process it forked draw: exit status 130, "interrupted", no page, and neither left running
     (the worker is killed on leaving the job; the process it forked dies with it)."""
     p = start_script(CTRL_C, optimal9_run, tmp_path / "report")
     try:
-        drawers = {int(p.stdout.readline()) for _ in range(min(2, forked.usable_cores()))}
+        drawers = drawing(p)
     finally:
         out, err = interrupt(p)
     assert p.returncode == 130 and err.strip().splitlines()[-1] == "interrupted"
@@ -198,7 +210,7 @@ def test_a_killed_diagnose_leaves_no_figure_process(optimal9_run, tmp_path, how)
 
     p = start_script(CTRL_C, optimal9_run, tmp_path / "report")
     try:
-        drawers = {int(p.stdout.readline()) for _ in range(min(2, forked.usable_cores()))}
+        drawers = drawing(p)
     finally:
         interrupt(p, getattr(signal, how), group=False)     # the parent alone, not its group
     left = still_running(drawers)

@@ -107,6 +107,8 @@ def cmd_diagnose(args) -> int:
             from station.diagnose.report import ReportInput, capture_facts, diagnosis_figure_specs
 
             job.draw(diagnosis_figure_specs(first, steps))
+            if not args.json:
+                _print(out, first, steps, final)        # while the figures are drawn
             page = ReportInput(title=f"Diagnosis: {Path(str(capture.path)).name}",
                                facts=capture_facts(capture, cal_doc) + [("summary", line) for line in summary],
                                calibration=cal_doc, calibration_path=args.calib,
@@ -119,8 +121,8 @@ def cmd_diagnose(args) -> int:
             out.print(f"report: {index}")
     if args.json:
         print(json.dumps(to_json(final, steps), indent=1))
-        return 0
-    _print(out, first, steps, final)
+    elif not args.report:
+        _print(out, first, steps, final)
     return 0
 
 

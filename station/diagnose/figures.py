@@ -55,6 +55,16 @@ def plain_log_axis(axis) -> None:
     axis.set_minor_locator(NullLocator())
 
 
+def few_ticks(*axes, most: int = 5) -> None:
+    """At most ``most`` + 1 labelled ticks on each linear axis (matplotlib's default is up to
+    ten on an axis this wide: every tick is a dozen artists to create, measure and draw)."""
+    from matplotlib.ticker import MaxNLocator
+
+    for ax in axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            axis.set_major_locator(MaxNLocator(most, steps=[1, 2, 2.5, 5, 10]))
+
+
 @dataclass
 class SegmentPanel:
     title: str
@@ -93,32 +103,35 @@ def draw(specs: dict) -> dict:
 
 def segments_figure(spec: SegmentsFigure, path=None) -> bytes:
     """Bars of the RMS whitened residual per segment, every panel on the same (log) y axis so
-    that the fall after each added effect shows."""
+    that the fall after each added effect shows; the segment names under the last panel when
+    every panel has the same segments (one fit of one capture: they do), else under each."""
     plt = pyplot()
     panels = spec.panels
-    height = 2.8 * len(panels)
-    fig, axes = plt.subplots(len(panels), 1, figsize=(11, height), squeeze=False, sharey=True)
-    # margins in inches from the text they hold: 0.35 in above the first panel for its title;
-    # below each panel the rotated segment names (7 pt: under 0.06 in a character) and, between
-    # panels, a title
+    shared = all(p.names == panels[0].names for p in panels)
+    # heights in inches from the text they hold: 0.35 in above the first panel for its title;
+    # under a panel with names, the rotated names (7 pt: under 0.06 in a character); between
+    # panels, a title (and the names when they are not shared)
     longest = max((len(name) for p in panels for name in p.names), default=8)
-    top = 0.35
+    top, plot = 0.35, 1.6
     bottom = max(0.95, 0.3 + 0.06 * longest)
-    gap = bottom + 0.15
-    panel = (height - top - bottom - gap * (len(panels) - 1)) / len(panels)
+    gap = 0.45 if shared else bottom + 0.15
+    height = top + bottom + plot * len(panels) + gap * (len(panels) - 1)
+    fig, axes = plt.subplots(len(panels), 1, figsize=(11, height), squeeze=False, sharey=True,
+                             sharex=shared)
     fig.subplots_adjust(left=0.065, right=0.99, top=1.0 - top / height, bottom=bottom / height,
-                        hspace=gap / panel)
+                        hspace=gap / plot)
     values = [v for p in panels for v in p.rms if v > 0]
     lo = min(min(values, default=1.0), 0.5) / 1.5
     hi = max(max(values, default=1.0), 2.0) * 1.5
-    for ax, p in zip(axes[:, 0], panels):
+    for k, (ax, p) in enumerate(zip(axes[:, 0], panels)):
         colours = ["tab:blue" if kind == "static" else "tab:orange" for kind in p.kinds]
         ax.bar(range(len(p.names)), p.rms, color=colours)
         ax.axhline(1.0, color="k", lw=0.8, ls="--")
         ax.set_yscale("log")
         ax.set_ylim(lo, hi)
         plain_log_axis(ax.yaxis)
-        ax.set_xticks(range(len(p.names)), p.names, rotation=90, fontsize=7)
+        if not shared or k == len(panels) - 1:
+            ax.set_xticks(range(len(p.names)), p.names, rotation=90, fontsize=7)
         ax.set_ylabel("RMS residual / noise")
         ax.set_title(f"{p.title}: reduced χ² {p.reduced_chi2:.3g} (blue static, orange rotation; "
                      "dashed: the noise level)", fontsize=9, y=TITLE_Y)
@@ -140,6 +153,7 @@ def candidate_figure(spec: CandidateFigure, path=None) -> bytes:
     a2.set_xlabel(spec.variable_label)
     a2.set_ylabel("residual, sigma")
     a2.set_title("residual against its signature variable", y=TITLE_Y)
+    few_ticks(a1, a2)
     return save(fig, path)
 
 

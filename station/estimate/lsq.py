@@ -176,8 +176,13 @@ def _earth_rate_visible(r, s: Summaries) -> bool:
 class Model:
     """The whitened residual function of the base model plus effects."""
 
-    def __init__(self, s: Summaries, effects: list[Effect], attitudes: str = "auto"):
+    def __init__(self, s: Summaries, effects: list[Effect], attitudes: str = "auto",
+                 start: Start | None = None):
+        """``start``: the algebraic start of these summaries when it is known (another Model's
+        ``start``: a candidate effect's score test builds a model per candidate), else made here."""
         self.s, self.effects = s, effects
+        self.start = start if start is not None else _start(s)
+        self.notes = list(self.start.notes)     # the start is shared: never appended to
         starts = [x.t_mid_s for x in (*s.statics, *s.rotations) if np.isfinite(x.t_mid_s)]
         self.t0 = min(starts) if starts else 0.0        # the run's start, for time-dependent terms
         for e in effects:
@@ -195,7 +200,7 @@ class Model:
         self.with_latitude = s.latitude_deg is not None
         self.hand_earth_vertical = False
         if self.hands and self.with_latitude and not hand_rotation.heading_visible(
-                s, 1.0 if not s.gyro_raw else s.gyro_nominal or float(np.mean(np.abs(_start(s).kg)))):
+                s, 1.0 if not s.gyro_raw else s.gyro_nominal or float(np.mean(np.abs(self.start.kg)))):
             # hand poses whose gyro cannot see the Earth turn: up only, the Earth rate's vertical
             # component modelled, its horizontal one (direction unknown) as noise
             self.with_latitude, self.hand_earth_vertical = False, True
@@ -236,7 +241,7 @@ class Model:
     # --- initial values ---------------------------------------------------------------------
     def _initialise(self):
         s, L = self.s, self.layout
-        st = self.start = _start(s)
+        st = self.start
         x = np.zeros(L.size)
         for name, value in (("accel_scale", st.ka), ("accel_misalignment", st.alpha), ("accel_bias", st.ba),
                             ("gyro_scale", st.kg), ("gyro_misalignment", st.gamma), ("gyro_bias", st.bg),
@@ -316,7 +321,7 @@ class Model:
             cov = np.diag(s.gyro_sigma**2 / stat.samples) + M_g @ C @ M_g.T
             self.static_gyro_whiten.append(np.linalg.inv(np.linalg.cholesky(cov)))
         if self.hand_earth_vertical:
-            self.start.notes.append("Earth rate: its vertical component modelled (latitude known), its "
+            self.notes.append("Earth rate: its vertical component modelled (latitude known), its "
                                     "horizontal one as noise: the gyros cannot see the poses' heading")
 
     # --- pieces -----------------------------------------------------------------------------
@@ -996,7 +1001,7 @@ def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=())
         "hand_rotations": len(model.hands),
         "noise_per_sample": {"accel_ug": (s.accel_sigma / units.UG_MPS2).tolist(),
                              "gyro_dph": (s.gyro_sigma * 3600).tolist()},
-        "notes": list(model.start.notes) + list(s.skipped) + list(notes),
+        "notes": list(model.notes) + list(s.skipped) + list(notes),
     }
     if model.unobservable:
         fit_stats["notes"].append(
