@@ -164,3 +164,19 @@ def test_hand_turns_with_latitude_full_attitudes(hand):
     new, ref = models(hand["quiet", "latitude"], ("gyro_g_sensitivity",))
     assert new.hands and new.with_latitude
     check(new, ref, 6)
+
+
+def test_a_model_built_on_another_models_start_is_the_same_model(hand):
+    """A candidate's score test builds its model on the fitted model's algebraic start
+    (``Model(..., start=model.start)``): the same reference values and residuals as a model that
+    made its own, and the start is not written to (its notes stay the start's: the hand turns'
+    Earth-rate note is the model's, said once by each model)."""
+    s = hand["mems", "latitude"]
+    base = lsq.Model(s, [])
+    notes = list(base.start.notes)
+    shared = lsq.Model(s, [LIBRARY["accel_nonlinearity"]()], base.attitudes, start=base.start)
+    own = lsq.Model(s, [LIBRARY["accel_nonlinearity"]()], base.attitudes)
+    assert shared.start is base.start and base.start.notes == notes
+    assert shared.notes == own.notes and sum("Earth rate" in n for n in shared.notes) == 1
+    np.testing.assert_array_equal(shared.x0, own.x0)
+    np.testing.assert_array_equal(shared.residuals(shared.x0), own.residuals(own.x0))
