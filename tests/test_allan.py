@@ -7,12 +7,13 @@ import allantools
 import numpy as np
 import pytest
 
-from station.estimate.noise import (CONFIDENCE, averaging_factors, deviation_interval, overlapping_adev,
+from station.estimate.noise import (CHUNK, CONFIDENCE, averaging_factors, deviation_interval, overlapping_adev,
                                     white_noise_edf)
 
 
 @pytest.mark.parametrize("n, rate, kind", [(201, 1.0, "white"), (3000, 100.0, "white"),
-                                           (20000, 400.0, "walk"), (5001, 7.5, "drift")])
+                                           (20000, 400.0, "walk"), (5001, 7.5, "drift"),
+                                           (3 * CHUNK + 17, 1000.0, "walk")])     # summed in pieces
 def test_the_deviation_is_allantools_oadev(n, rate, kind):
     rng = np.random.default_rng(n)
     y = rng.standard_normal(n) * 0.3 + 12.0
@@ -24,6 +25,16 @@ def test_the_deviation_is_allantools_oadev(n, rate, kind):
     taus, ref, _, _ = allantools.oadev(y - y.mean(), rate=rate, data_type="freq", taus=m / rate)
     np.testing.assert_array_equal(np.round(taus * rate), m)
     np.testing.assert_allclose(overlapping_adev(y, rate, m), ref, rtol=1e-9)
+
+
+def test_a_scaled_column_is_the_deviation_of_the_scaled_samples():
+    """overlapping_adev(column, rate, m, scale) of a column of a larger (integer) array, not
+    copied: the deviation of the column times scale (what the noise of raw counts uses)."""
+    rng = np.random.default_rng(5)
+    counts = rng.integers(-3000, 3000, size=(2 * CHUNK + 5, 6))
+    m = averaging_factors(len(counts))
+    np.testing.assert_allclose(overlapping_adev(counts[:, 4], 200.0, m, 0.0123),
+                               overlapping_adev(counts[:, 4] * 0.0123, 200.0, m), rtol=1e-12)
 
 
 def test_averaging_factors_are_ten_per_decade_up_to_a_fifth():

@@ -138,3 +138,32 @@ def test_noise_of_a_named_segment_of_a_calibration_capture(optimal9_run, tmp_pat
     assert "static segment pos02" in block["source"]
     assert main(["noise", str(cap), "--segment", "rotx_p"]) == 2
     assert "not a complete static segment" in capsys.readouterr().err
+
+
+def test_the_longest_static_is_found_holding_one_segment_at_a_time(optimal9_run, monkeypatch):
+    """from_capture on a capture read without its samples reads the static segments one at a
+    time and keeps only the longest (a capture of several long recordings is never held whole):
+    no other segment's samples are alive when the next is read, and the result is that of the
+    capture loaded whole."""
+    import weakref
+
+    from station.estimate import noise
+    from station.io import capture as capture_io
+
+    loaded = read_capture(optimal9_run)
+    want = noise.from_capture(loaded)
+    cap = read_capture(optimal9_run, load_data=False)
+    alive, real = [], capture_io.Capture.read_samples
+
+    def read(self, segment):
+        held = [ref() for ref in alive if ref() is not None]
+        assert len(held) <= 1, f"{len(held)} segments' samples held while reading {segment.name}"
+        data = real(self, segment)
+        alive.append(weakref.ref(data))
+        return data
+    monkeypatch.setattr(capture_io.Capture, "read_samples", read)
+    got = noise.from_capture(cap)
+    assert got.source == want.source and len(alive) == len(cap.complete("static"))
+    for a, b in zip(got.axes, want.axes):
+        np.testing.assert_array_equal(a.adev, b.adev)
+    assert [s.name for s in cap.segments if s.data is not None] == [got.source.split("segment ")[1].split()[0]]

@@ -63,9 +63,7 @@ def cmd_noise(args) -> int:
     cal_doc = read_calfile(args.cal) if args.cal else None
     model = serial = None
     if src.is_dir() or src.name == "manifest.yaml":
-        capture = read_capture(src, load_data=False)
-        # only the static segments' samples: the noise comes from one of them
-        capture.load_samples([capture.segment(args.segment)] if args.segment else capture.complete("static"))
+        capture = read_capture(src, load_data=False)     # from_capture reads the static segments
         here = capture.path
         default_cal = here / "calibration.yaml"
         if cal_doc is None and default_cal.exists():
@@ -76,7 +74,7 @@ def cmd_noise(args) -> int:
         if serial and cal_serial and serial != cal_serial and not getattr(args, "force", False):
             raise UserError(f"{args.cal}: calibration of IMU {cal_serial!r}, recording of IMU {serial!r}: "
                             "the noise belongs to the IMU recorded (--force to write it anyway)")
-        if any(s.data is not None and s.data.gaps for s in capture.complete("static")):   # those read
+        if any(s.data is not None and s.data.gaps for s in capture.complete("static")):   # the one used
             err.print("warning: the recording has gaps; the Allan deviation assumes even sampling")
     else:
         if args.segment:

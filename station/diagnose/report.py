@@ -410,10 +410,7 @@ def noise_of(capture, cal_doc=None) -> tuple:
     """(NoiseResult or None, note) of the capture's longest static segment."""
     from station.estimate import noise
 
-    statics = capture.complete("static")
     try:
-        if any(seg.data is None for seg in statics):       # read without its samples
-            capture.load_samples(statics)
-        return noise.from_capture(capture, None, cal_doc), None
+        return noise.from_capture(capture, None, cal_doc), None     # reads what is not loaded
     except UserError as e:
         return None, f"Not characterised: {e}"

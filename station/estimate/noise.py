@@ -40,6 +40,7 @@ FLICKER_FACTOR = math.sqrt(2.0 * math.log(2.0) / math.pi)    # 0.664: sigma floo
 CONFIDENCE = 0.682689492137086                              # 1 sigma of a normal distribution
 MIN_SAMPLES = 200
 TAUS_PER_DECADE = 10
+CHUNK = 1 << 16         # second differences summed this many at a time (bounded temporaries)
 SLOPE_TOLERANCE = 0.25
 
 
@@ -144,19 +145,35 @@ def averaging_factors(n: int) -> np.ndarray:
     return m[m >= 1].astype(np.int64)
 
 
-def overlapping_adev(y: np.ndarray, rate: float, m: np.ndarray) -> np.ndarray:
-    """The overlapping Allan deviation of the samples ``y`` (a rate, e.g. deg/s, at ``rate`` Hz)
-    at tau = m / rate, NIST SP 1065 eq. (11): with the phase x_k = sum_{i<k} (y_i - mean) / rate
-    (k = 0..n), sigma^2(tau) = sum_k (x_{k+2m} - 2 x_{k+m} + x_k)^2 / (2 tau^2 (n + 1 - 2m))."""
-    y = np.asarray(y, float)
-    x = np.empty(len(y) + 1)
+def overlapping_adev(y: np.ndarray, rate: float, m: np.ndarray, scale: float = 1.0) -> np.ndarray:
+    """The overlapping Allan deviation of the samples ``y`` times ``scale`` (a rate, e.g. deg/s,
+    at ``rate`` Hz) at tau = m / rate, NIST SP 1065 eq. (11): with the phase
+    x_k = sum_{i<k} (y_i - mean) scale / rate (k = 0..n),
+    sigma^2(tau) = sum_k (x_{k+2m} - 2 x_{k+m} + x_k)^2 / (2 tau^2 (n + 1 - 2m)).
+    Memory: the phase (8 bytes a sample) and pieces of CHUNK second differences, whatever the
+    length (``y`` may be a column of a larger array: it is not copied)."""
+    n = len(y)
+    x = np.empty(n + 1)
     x[0] = 0.0
-    np.cumsum((y - y.mean()) / rate, out=x[1:])
+    phase = x[1:]
+    phase[:] = y
+    phase -= phase.mean()
+    phase *= scale / rate
+    np.cumsum(phase, out=phase)
     out = np.empty(len(m))
+    piece = np.empty(min(CHUNK, n + 1))
     for i, k in enumerate(np.asarray(m, np.int64)):
         k = int(k)
-        v = x[2 * k:] - 2.0 * x[k:len(x) - k] + x[:len(x) - 2 * k]
-        out[i] = math.sqrt(float(np.dot(v, v)) / (2.0 * len(v))) * rate / k
+        count = n + 1 - 2 * k                   # second differences at this m
+        total = 0.0
+        for a in range(0, count, CHUNK):
+            b = min(a + CHUNK, count)
+            v = piece[:b - a]
+            np.multiply(x[a + k:b + k], -2.0, out=v)
+            v += x[a + 2 * k:b + 2 * k]
+            v += x[a:b]
+            total += float(np.dot(v, v))
+        out[i] = math.sqrt(total / (2.0 * count)) * rate / k
     return out
 
 
@@ -220,10 +237,11 @@ class AllanCurve:
     edf: np.ndarray              # equivalent degrees of freedom for white noise
 
 
-def allan_curve(y: np.ndarray, rate: float, sensor: str, axis: str, unit: str) -> AllanCurve:
-    y = np.asarray(y, float)
+def allan_curve(y: np.ndarray, rate: float, sensor: str, axis: str, unit: str,
+                scale: float = 1.0) -> AllanCurve:
+    """The curve of the samples ``y`` times ``scale`` (into ``unit``)."""
     m = averaging_factors(len(y))
-    adev = overlapping_adev(y, rate, m)
+    adev = overlapping_adev(y, rate, m, scale)
     keep = np.isfinite(adev) & (adev > 0)
     m, adev = m[keep], adev[keep]
     if len(m) < 3:
@@ -274,18 +292,22 @@ def axis_terms(curve: AllanCurve, rate: float) -> AxisNoise:
                      float(walk_upper))
 
 
-def allan_curves(accel: np.ndarray, gyro: np.ndarray, rate: float, source: str) -> list:
-    """AllanCurve per axis of (N,3) accelerometer samples in m/s^2 and gyro samples in deg/s,
-    accel x y z then gyro x y z."""
-    accel, gyro = np.asarray(accel, float), np.asarray(gyro, float)
+def allan_curves(accel: np.ndarray, gyro: np.ndarray, rate: float, source: str,
+                 accel_scale=(1.0, 1.0, 1.0), gyro_scale=(1.0, 1.0, 1.0)) -> list:
+    """AllanCurve per axis of (N,3) accelerometer samples times ``accel_scale`` (per axis, into
+    m/s^2) and gyro samples times ``gyro_scale`` (into deg/s), accel x y z then gyro x y z.  The
+    samples are neither copied nor scaled whole: one axis's phase at a time."""
+    accel, gyro = np.asarray(accel), np.asarray(gyro)
     n = len(accel)
     if n < MIN_SAMPLES:
         raise UserError(f"{source}: {n} samples: the Allan deviation needs at least {MIN_SAMPLES} "
                         "(a long static recording: hours for the bias instability)")
     if not (math.isfinite(rate) and rate > 0):
         raise UserError(f"{source}: sample rate {rate!r} Hz: must be a positive number")
-    curves = [allan_curve(accel[:, i], rate, "accel", a, "m/s^2") for i, a in enumerate("xyz")]
-    return curves + [allan_curve(gyro[:, i], rate, "gyro", a, "deg/s") for i, a in enumerate("xyz")]
+    curves = [allan_curve(accel[:, i], rate, "accel", a, "m/s^2", float(accel_scale[i]))
+              for i, a in enumerate("xyz")]
+    return curves + [allan_curve(gyro[:, i], rate, "gyro", a, "deg/s", float(gyro_scale[i]))
+                     for i, a in enumerate("xyz")]
 
 
 def from_curves(curves: list, rate: float, samples: int, source: str) -> NoiseResult:
@@ -349,16 +371,26 @@ def _factors(imu, cal_doc, where: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def from_capture(capture, segment: str | None = None, cal_doc: dict | None = None) -> NoiseResult:
-    """Characterise the named static segment of a capture, or its longest complete one."""
+    """Characterise the named static segment of a capture, or its longest complete one.  Static
+    segments not loaded are read one at a time and only the longest is kept (a capture with
+    several long recordings is never held whole); the one characterised is left loaded (its
+    ``data``: its gaps, for instance)."""
     statics = capture.complete("static")
     if segment is not None:
         seg = capture.segment(segment)
         if seg.status != "complete" or seg.kind != "static":
             raise UserError(f"{capture.path}: segment {segment!r} is not a complete static segment")
+        seg.data = capture.read_samples(seg)
     elif not statics:
         raise UserError(f"{capture.path}: no complete static segment to characterise")
     else:
-        seg = max(statics, key=lambda s: len(s.data.t))
+        seg, data = None, None
+        for candidate in statics:
+            samples = capture.read_samples(candidate)     # segment.data when loaded
+            if data is None or len(samples.t) > len(data.t):
+                seg, data = candidate, samples
+            del samples
+        seg.data = data
     return from_curves(*segment_curves(capture, seg, seg.data, cal_doc))
 
 
@@ -369,7 +401,7 @@ def segment_curves(capture, seg, data, cal_doc: dict | None = None) -> tuple:
     fa, fg = _factors(capture.imu, cal_doc, str(capture.path))
     rate = capture.imu.sample_rate_hz
     source = f"{capture.path}: static segment {seg.name} ({len(data.t)} samples)"
-    return allan_curves(data.accel * fa, data.gyro * fg, rate, source), rate, len(data.t), source
+    return allan_curves(data.accel, data.gyro, rate, source, fa, fg), rate, len(data.t), source
 
 
 def from_samples(path, data, rate: float | None, accel_unit: str, gyro_unit: str,
@@ -383,4 +415,5 @@ def from_samples(path, data, rate: float | None, accel_unit: str, gyro_unit: str
             raise UserError(f"{path}: cannot tell the sample rate from the t column: give --rate-hz")
         rate = 1.0 / float(np.median(steps))
     fa, fg = _factors(SimpleNamespace(accel_unit=accel_unit, gyro_unit=gyro_unit), cal_doc, str(path))
-    return characterise(data.accel * fa, data.gyro * fg, rate, f"{path} ({len(data.t)} samples)")
+    source = f"{path} ({len(data.t)} samples)"
+    return from_curves(allan_curves(data.accel, data.gyro, rate, source, fa, fg), rate, len(data.t), source)
