@@ -167,3 +167,26 @@ def test_the_longest_static_is_found_holding_one_segment_at_a_time(optimal9_run,
     for a, b in zip(got.axes, want.axes):
         np.testing.assert_array_equal(a.adev, b.adev)
     assert [s.name for s in cap.segments if s.data is not None] == [got.source.split("segment ")[1].split()[0]]
+
+
+def test_the_gap_warning_is_about_the_segment_characterised(optimal9_run, tmp_path, capsys):
+    """A gap in a static segment that is not the one characterised says nothing; in the one
+    characterised (--segment), the warning that the Allan deviation assumes even sampling."""
+    import hashlib
+    import shutil
+
+    cap = tmp_path / "cap"
+    shutil.copytree(optimal9_run, cap)
+    (cap / "calibration.yaml").unlink()
+    lines = (cap / "pos01.csv").read_bytes().splitlines(keepends=True)
+    half = len(lines) // 2
+    gapped = lines[:half] + lines[half + 50:]          # 50 samples missing in pos01
+    (cap / "pos01.csv").write_bytes(b"".join(gapped))
+    manifest = yaml.safe_load((cap / "manifest.yaml").read_text())
+    seg = next(s for s in manifest["segments"] if s["name"] == "pos01")
+    seg["samples"], seg["sha256"] = len(gapped) - 1, hashlib.sha256(b"".join(gapped)).hexdigest()
+    (cap / "manifest.yaml").write_text(yaml.safe_dump(manifest, sort_keys=False))
+    assert main(["noise", str(cap)]) == 0              # the longest: another segment
+    assert "gaps" not in capsys.readouterr().err
+    assert main(["noise", str(cap), "--segment", "pos01"]) == 0
+    assert "the recording has gaps" in capsys.readouterr().err

@@ -55,9 +55,13 @@ def test_the_page_is_self_contained_and_says_what_a_reader_needs(page):
     assert text.count("RMS whitened residual per segment") == 1
 
 
-def test_diagnose_report_writes_the_same_kind_of_page(hidden_effect_capture, tmp_path):
+def test_diagnose_report_writes_the_same_kind_of_page(hidden_effect_capture, tmp_path, capsys):
+    """... and prints the diagnosis (while the figures are drawn), then the page's path last."""
     out = tmp_path / "rep"
     assert main(["diagnose", str(hidden_effect_capture), "--report", str(out)]) == 0
+    printed = [line for line in capsys.readouterr().out.splitlines() if line.strip()]
+    assert "candidate" in "\n".join(printed[:-1]).lower()
+    assert printed[-1] == f"report: {out / 'index.html'}"
     text = (out / "index.html").read_text(encoding="utf-8")
     assert "nonlinear-cap" in text and "SIM-5" in text and "Candidate effects" in text
     assert all(s.startswith("data:") for s in re.findall(r"src='([^']*)'", text))

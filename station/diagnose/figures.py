@@ -56,13 +56,15 @@ def plain_log_axis(axis) -> None:
 
 
 def few_ticks(*axes, most: int = 5) -> None:
-    """At most ``most`` + 1 labelled ticks on each linear axis (matplotlib's default is up to
-    ten on an axis this wide: every tick is a dozen artists to create, measure and draw)."""
+    """At most ``most`` + 1 labelled ticks on each linear axis of ``axes`` (matplotlib's default
+    is up to ten on an axis this wide: every tick is a dozen artists to create, measure and
+    draw); log axes are left as they are (plain_log_axis)."""
     from matplotlib.ticker import MaxNLocator
 
     for ax in axes:
         for axis in (ax.xaxis, ax.yaxis):
-            axis.set_major_locator(MaxNLocator(most, steps=[1, 2, 2.5, 5, 10]))
+            if axis.get_scale() == "linear":
+                axis.set_major_locator(MaxNLocator(most, steps=[1, 2, 2.5, 5, 10]))
 
 
 @dataclass

@@ -165,6 +165,8 @@ def overlapping_adev(y: np.ndarray, rate: float, m: np.ndarray, scale: float = 1
     for i, k in enumerate(np.asarray(m, np.int64)):
         k = int(k)
         count = n + 1 - 2 * k                   # second differences at this m
+        if count <= 0:
+            raise ValueError(f"averaging factor {k}: needs at least {2 * k} samples, got {n}")
         total = 0.0
         for a in range(0, count, CHUNK):
             b = min(a + CHUNK, count)
@@ -314,9 +316,11 @@ def from_curves(curves: list, rate: float, samples: int, source: str) -> NoiseRe
     return NoiseResult([axis_terms(c, rate) for c in curves], rate, samples / rate, source)
 
 
-def characterise(accel: np.ndarray, gyro: np.ndarray, rate: float, source: str) -> NoiseResult:
-    """Allan analysis of (N,3) accelerometer samples in m/s^2 and gyro samples in deg/s."""
-    return from_curves(allan_curves(accel, gyro, rate, source), rate, len(accel), source)
+def characterise(accel: np.ndarray, gyro: np.ndarray, rate: float, source: str,
+                 accel_scale=(1.0, 1.0, 1.0), gyro_scale=(1.0, 1.0, 1.0)) -> NoiseResult:
+    """Allan analysis of (N,3) accelerometer samples times ``accel_scale`` (into m/s^2) and gyro
+    samples times ``gyro_scale`` (into deg/s)."""
+    return from_curves(allan_curves(accel, gyro, rate, source, accel_scale, gyro_scale), rate, len(accel), source)
 
 
 class LongestStatic:
@@ -415,5 +419,4 @@ def from_samples(path, data, rate: float | None, accel_unit: str, gyro_unit: str
             raise UserError(f"{path}: cannot tell the sample rate from the t column: give --rate-hz")
         rate = 1.0 / float(np.median(steps))
     fa, fg = _factors(SimpleNamespace(accel_unit=accel_unit, gyro_unit=gyro_unit), cal_doc, str(path))
-    source = f"{path} ({len(data.t)} samples)"
-    return from_curves(allan_curves(data.accel, data.gyro, rate, source, fa, fg), rate, len(data.t), source)
+    return characterise(data.accel, data.gyro, rate, f"{path} ({len(data.t)} samples)", fa, fg)
