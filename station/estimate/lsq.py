@@ -322,7 +322,7 @@ class Model:
             self.static_gyro_whiten.append(np.linalg.inv(np.linalg.cholesky(cov)))
         if self.hand_earth_vertical:
             self.notes.append("Earth rate: its vertical component modelled (latitude known), its "
-                                    "horizontal one as noise: the gyros cannot see the poses' heading")
+                              "horizontal one as noise: the gyros cannot see the poses' heading")
 
     # --- pieces -----------------------------------------------------------------------------
     def _matrices(self, x):
