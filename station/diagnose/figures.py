@@ -5,9 +5,11 @@ and the drift of a calibration's parameters over time.  PNG files (matplotlib, A
 What a figure costs is mostly matplotlib's text machinery, not the data (docs/performance.md,
 "Diagnose and the report"), so the figures here avoid its expensive defaults: titles at a fixed
 height (``TITLE_Y``: an automatic title measures every tick label of the axis below it), log
-axes labelled 1-2-5 in plain numbers without minor ticks (``plain_log_axis``: mathtext powers of
-ten are parsed per label), legends in a named corner (``"best"`` tests every place against every
-line), fixed margins instead of ``tight_layout``, and a fast PNG compression level.
+axes labelled 1-2-5 (τ: decades) in plain numbers without minor ticks (``plain_log_axis``:
+mathtext powers of ten are parsed per label), at most six ticks on a linear axis
+(``few_ticks``: each tick is a dozen artists), legends in a named corner (``"best"`` tests every
+place against every line), fixed margins instead of ``tight_layout``, and a fast PNG
+compression level.
 """
 from __future__ import annotations
 
@@ -46,11 +48,12 @@ def save(fig, path=None) -> bytes:
     return data
 
 
-def plain_log_axis(axis) -> None:
-    """A log axis labelled at 1, 2 and 5 times powers of ten in plain numbers, no minor ticks."""
+def plain_log_axis(axis, subs=(1.0, 2.0, 5.0)) -> None:
+    """A log axis labelled at ``subs`` (1, 2 and 5; (1,): the decades) times powers of ten in
+    plain numbers, no minor ticks."""
     from matplotlib.ticker import FormatStrFormatter, LogLocator, NullLocator
 
-    axis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+    axis.set_major_locator(LogLocator(subs=subs))
     axis.set_major_formatter(FormatStrFormatter("%g"))
     axis.set_minor_locator(NullLocator())
 
@@ -188,7 +191,7 @@ def allan_figure(result, path=None) -> bytes:
         ax.set_title(f"{'accelerometers' if sensor == 'accel' else 'gyros'}: {text}", fontsize=9, y=TITLE_Y)
         ax.set_xlabel("averaging time τ (s)")
         ax.set_ylabel(f"Allan deviation ({unit})")
-        plain_log_axis(ax.xaxis)
+        plain_log_axis(ax.xaxis, subs=(1.0,))     # τ spans decades (the tick labels: 20 % of the figure)
         plain_log_axis(ax.yaxis)
         ax.grid(True, alpha=0.3)
         # the curves fall from the upper left: the upper right is free unless a random walk rises
