@@ -137,6 +137,7 @@ def test_statics_only_with_add_and_diagnose_auto_are_not_tracebacks(cap, capsys)
     ("effects: 5", ["field 'effects'"]),
     ("parameters: [1, 2]", ["field 'parameters'"]),
     ("parameters: {a: {value: 1e300e, unit: x}}", ["parameters.a"]),
+    ('parameters: {"a\\nb": 5}', ["parameters.a\\nb"]),       # a name with a line end: shown escaped
     ("compensation: {accel_matrix: 5}", ["compensation.accel_matrix"]),
     ("compensation: {accel_matrix: [[1e300, 0, 0], [0, 1, 0], [0, 0, 1]]}", ["compensation.accel_matrix"]),
     ("provenance: {imu_serial: [1, 2]}", ["field 'provenance'"]),

@@ -276,7 +276,8 @@ def read_calfile(path) -> dict:
                 and isinstance(p.get("unit"), str)
                 and (p.get("sigma") is None or (isinstance(p["sigma"], (int, float))
                                                 and not isinstance(p["sigma"], bool)))):
-            raise UserError(f"{path}: field 'parameters.{name[:60]}': needs a finite 'value', a 'unit' "
+            shown = name[:60] if name[:60].isprintable() else repr(name[:60])[1:-1]   # one line
+            raise UserError(f"{path}: field 'parameters.{shown}': needs a finite 'value', a 'unit' "
                             "and, if given, a numeric 'sigma'")
     return doc
 

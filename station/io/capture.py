@@ -294,9 +294,10 @@ def read_segment_csv(path, *, sample_rate_hz=None):
     path = Path(path)
     try:
         data, _ = read_csv_pieces(path, sample_rate_hz)
-        if data is None:
-            data = _parse_csv(_csv_lines(read_regular_file(path), partial_last_line=False),
-                              sample_rate_hz, path, None, require_rows=True)
+        if data is None:    # the fast reader refused: the line-by-line one names the problem
+            data, problem, _ = _parse_csv_file(path, sample_rate_hz, path, None)
+            if problem is not None:
+                raise problem
     except OSError as e:
         raise CaptureError(path, f"cannot read: {e.strerror}") from None
     return data
@@ -568,12 +569,11 @@ def _read_segment_data(capture, segment, label):
             if expected_sha is not None and segment.content_sha256 != expected_sha.lower():
                 raise CaptureError(csv_file, sha_problem, segment=label, field="sha256")
             if data is None:  # the fast reader refused: the line-by-line one names the problem
-                raw = read_regular_file(csv_file)
-                if hashlib.sha256(raw).hexdigest() != segment.content_sha256:
+                data, problem, digest = _parse_csv_file(csv_file, rate, csv_file, label)
+                if digest != segment.content_sha256:
                     raise CaptureError(csv_file, "changed while it was read", segment=label)
-                data = _parse_csv(_csv_lines(raw, partial_last_line=False), rate, csv_file, label,
-                                  require_rows=True)
-                del raw
+                if problem is not None:
+                    raise problem
         except OSError as e:
             raise CaptureError(csv_file, f"cannot read: {e.strerror}", segment=label) from None
         samples = segment.extra.get("samples")
@@ -582,13 +582,12 @@ def _read_segment_data(capture, segment, label):
                                f"samples: {samples}", segment=label, field="samples")
     else:
         try:
-            raw = read_regular_file(csv_file)
+            data, segment.problem, segment.content_sha256 = _parse_csv_file(csv_file, rate, csv_file, label,
+                                                                            incomplete=True)
         except OSError as e:
             segment.problem = f"cannot read {segment.file}: {e.strerror}"
             _warn(capture, f"{label}: incomplete, no data: {segment.problem}")
             return None
-        segment.content_sha256 = hashlib.sha256(raw).hexdigest()
-        data, segment.problem = _parse_incomplete_csv(raw, rate, csv_file, label)
         if segment.problem is None and expected_sha is not None \
                 and segment.content_sha256 != expected_sha.lower():
             segment.problem = sha_problem
@@ -607,103 +606,179 @@ def _warn(capture, message):
         capture.warnings.append(message)
 
 
-def _parse_incomplete_csv(raw, rate, csv_file, label):
-    """(data or None, problem or None): the rows before the first unreadable line, and what is
-    wrong with that line."""
-    lines = _csv_lines(raw, partial_last_line=True)
-    problem = None
-    while True:
-        try:
-            return _parse_csv(lines, rate, csv_file, label, require_rows=False), problem
-        except CaptureError as e:
-            problem = str(e)
-            if e.line is None or e.line < 2:
-                return None, problem
-            lines = lines[:e.line - 1]  # header and the rows before the bad line
-
-
-def _csv_lines(raw, *, partial_last_line):
-    """The file's lines without line ends or trailing blank lines.
+def _csv_lines_in_pieces(f, *, partial_last_line):
+    """The lines of a segment CSV read from the binary file ``f`` PIECE_BYTES at a time, as
+    (lines, number of the first line) pieces of whole lines: decoded (a bad byte then fails as
+    "not a number"), a BOM at the start dropped, CRLF read as LF, and blank lines at the end of the
+    file left out (a piece's trailing blank lines are held back until a line follows them).
 
     partial_last_line: the writer may have been stopped mid-line, so whatever follows the last
-    line end is dropped.
-    """
-    text = raw.decode("utf-8", errors="replace")  # a bad byte then fails as "not a number"
-    if text.startswith("\ufeff"):
-        text = text[1:]
-    if "\r" in text:
-        text = text.replace("\r\n", "\n")
-    lines = text.split("\n")
-    if partial_last_line:
-        lines.pop()
-    while lines and not lines[-1].strip():
-        lines.pop()
-    return lines
+    line end is dropped."""
+    carry, held, number, first = b"", [], 1, True
+
+    def decoded(raw: bytes) -> str:
+        nonlocal first
+        text = raw.decode("utf-8", errors="replace")
+        if first:
+            text, first = text.removeprefix("\ufeff"), False
+        return text.replace("\r\n", "\n") if "\r" in text else text
+
+    while True:
+        block = f.read(PIECE_BYTES)
+        if not block:
+            break
+        data = carry + block
+        cut = data.rfind(b"\n") + 1
+        carry = data[cut:]
+        if not cut:
+            continue
+        lines = held + decoded(data[:cut]).split("\n")[:-1]    # whole lines: the last ends the piece
+        k = len(lines)
+        while k and not lines[k - 1].strip():
+            k -= 1
+        held = lines[k:]
+        if k:
+            yield lines[:k], number
+            number += k
+    if carry and not partial_last_line:
+        lines = held + decoded(carry).split("\n")
+        while lines and not lines[-1].strip():
+            lines.pop()
+        if lines:
+            yield lines, number
 
 
-def _parse_csv(lines, sample_rate_hz, csv_file, label, *, require_rows):
-    """SegmentData from the lines of a segment CSV (header first); CaptureError for any violation.
+class _LineParser:
+    """The line-by-line reader: a segment CSV fed as pieces of its lines (header first), every
+    line checked, the first violation in the file's order refused by CaptureError naming its
+    line, column and text; the rows before it kept (an incomplete segment's)."""
 
-    sample_rate_hz: nominal rate for counting gaps; None: the median time step is the nominal one.
+    def __init__(self, sample_rate_hz, csv_file, label):
+        self.sample_rate_hz, self.csv_file, self.label = sample_rate_hz, csv_file, label
+        self.names = self.wanted = self.usecols = None
+        self.values = []           # (rows, k) arrays of the pieces read
+        self.last_t = None
 
-    The fast path parses all rows at once with np.loadtxt; only when it fails are the rows
-    searched for the first bad one, to name its line and column.
-    """
-    def fail(message, line):
-        return CaptureError(csv_file, message, line=line, segment=label)
+    def fail(self, message, line):
+        return CaptureError(self.csv_file, message, line=line, segment=self.label)
 
-    if not lines:
-        raise fail(f"empty file: line 1 must be the header {','.join(REQUIRED_COLUMNS)}", 1)
-    names, wanted, usecols = _parse_header(lines[0], fail)
-    commas = len(names) - 1
-    bad = next((i for i, line in enumerate(lines)
-                if line.count(",") != commas or '"' in line), None)
-    if bad is not None:
-        if '"' in lines[bad]:
-            raise fail("quoting is not allowed", bad + 1)
-        if not lines[bad].strip():
-            raise fail("blank line (only allowed at the end of the file)", bad + 1)
-        raise fail(f"{lines[bad].count(',') + 1} fields, the header has {len(names)}", bad + 1)
+    def feed(self, lines, number):
+        """Parse ``lines`` (the first is line ``number``); CaptureError at the first bad one."""
+        if self.names is None:
+            self.names, self.wanted, self.usecols = _parse_header(lines[0], self.fail)
+            lines, number = lines[1:], number + 1
+        if not lines:
+            return
+        values, error = self._values(lines)
+        if len(values):
+            checked = self._checks(values, lines)
+            if checked is not None and (error is None or checked[1] < error[1]):
+                error = checked
+            rows = len(values) if error is None else min(error[1], len(values))
+            if rows:
+                self.values.append(values[:rows])
+                self.last_t = float(values[rows - 1, 0])
+        if error is not None:
+            raise self.fail(error[0], number + error[1])
 
-    rows = lines[1:]
-    if not rows:
-        if require_rows:
-            raise fail("no data rows after the header", 2)
-        values = np.empty((0, len(wanted)))
-    else:
-        values = _loadtxt(rows, usecols)
+    def _values(self, lines):
+        """(values of the rows before the first that has the wrong fields or does not parse,
+        (message, index) of that row or None)."""
+        commas = len(self.names) - 1
+        bad = next((i for i, line in enumerate(lines) if line.count(",") != commas or '"' in line), None)
+        error = None
+        if bad is not None:
+            if '"' in lines[bad]:
+                error = ("quoting is not allowed", bad)
+            elif not lines[bad].strip():
+                error = ("blank line (only allowed at the end of the file)", bad)
+            else:
+                error = (f"{lines[bad].count(',') + 1} fields, the header has {len(self.names)}", bad)
+            lines = lines[:bad]
+        values = _loadtxt(lines, self.usecols) if lines else np.empty((0, len(self.wanted)))
         if values is None:
-            index = _first_unparsable(rows, usecols)
-            fields = rows[index].split(",")
-            column = next((c for c in usecols if _loadtxt([f"0,{fields[c]}"], [1]) is None), None)
-            if column is None:
-                raise fail("cannot parse the numbers", index + 2)
-            raise fail(f"column '{names[column]}': not a number: {_show(fields[column].strip())}",
-                       index + 2)
+            index = _first_unparsable(lines, self.usecols)
+            fields = lines[index].split(",")
+            column = next((c for c in self.usecols if _loadtxt([f"0,{fields[c]}"], [1]) is None), None)
+            error = (("cannot parse the numbers" if column is None else
+                      f"column '{self.names[column]}': not a number: {_show(fields[column].strip())}"), index)
+            values = _loadtxt(lines[:index], self.usecols) if index else np.empty((0, len(self.wanted)))
+        return values, error
 
-    finite = np.isfinite(values)
-    if not finite.all():
-        row, col = np.argwhere(~finite)[0]
-        text = rows[row].split(",")[usecols[col]].strip()
-        raise fail(f"column '{wanted[col]}': not a finite number: {_show(text)}", row + 2)
-    huge = np.abs(values) > MAX_CSV_VALUE
-    if huge.any():
-        row, col = np.argwhere(huge)[0]
-        text = rows[row].split(",")[usecols[col]].strip()
-        raise fail(f"column '{wanted[col]}': out of range (|value| > {MAX_CSV_VALUE:g}): {_show(text)}",
-                   row + 2)
-    t = np.ascontiguousarray(values[:, 0])
-    steps = np.diff(t)
-    backwards = np.flatnonzero(steps <= 0)
-    if len(backwards):
-        i = backwards[0] + 1
-        raise fail(f"time does not increase: t={t[i]:.15g} after t={t[i - 1]:.15g}", i + 2)
-    return SegmentData(
-        t=t,
-        accel=np.ascontiguousarray(values[:, 1:4]),
-        gyro=np.ascontiguousarray(values[:, 4:7]),
-        temp=np.ascontiguousarray(values[:, 7]) if len(wanted) == 8 else None,
-        gaps=_count_gaps(steps, sample_rate_hz))
+    def _checks(self, values, lines):
+        """(message, index) of the first row not finite, out of range or not later than the one
+        before it (the previous piece's last for the first), or None."""
+        found = []
+        finite = np.isfinite(values)
+        if not finite.all():
+            row, col = np.argwhere(~finite)[0]
+            text = lines[row].split(",")[self.usecols[col]].strip()
+            found.append((f"column '{self.wanted[col]}': not a finite number: {_show(text)}", row))
+        huge = np.abs(values) > MAX_CSV_VALUE
+        if huge.any():
+            row, col = np.argwhere(huge)[0]
+            text = lines[row].split(",")[self.usecols[col]].strip()
+            found.append((f"column '{self.wanted[col]}': out of range (|value| > {MAX_CSV_VALUE:g}): "
+                          f"{_show(text)}", row))
+        t = values[:, 0]
+        before = np.concatenate([[-math.inf if self.last_t is None else self.last_t], t[:-1]])
+        backwards = np.flatnonzero(~(t > before))      # (a NaN is not finite first)
+        if len(backwards):
+            i = backwards[0]
+            found.append((f"time does not increase: t={t[i]:.15g} after t={before[i]:.15g}", i))
+        return min(found, key=lambda e: e[1], default=None)
+
+    def result(self, *, require_rows) -> SegmentData:
+        if self.names is None:
+            raise self.fail(f"empty file: line 1 must be the header {','.join(REQUIRED_COLUMNS)}", 1)
+        values = np.concatenate(self.values) if self.values else np.empty((0, len(self.wanted)))
+        self.values = []
+        if not len(values) and require_rows:
+            raise self.fail("no data rows after the header", 2)
+        t = np.ascontiguousarray(values[:, 0])
+        return SegmentData(
+            t=t,
+            accel=np.ascontiguousarray(values[:, 1:4]),
+            gyro=np.ascontiguousarray(values[:, 4:7]),
+            temp=np.ascontiguousarray(values[:, 7]) if len(self.wanted) == 8 else None,
+            gaps=_count_gaps(np.diff(t), self.sample_rate_hz))
+
+
+class _Hashing:
+    """A binary file read through, every byte read added to ``digest``."""
+
+    def __init__(self, f, digest):
+        self.f, self.digest = f, digest
+
+    def read(self, n):
+        block = self.f.read(n)
+        self.digest.update(block)
+        return block
+
+
+def _parse_csv_file(path, sample_rate_hz, csv_file, label, *, incomplete=False):
+    """(SegmentData or None, the first problem or None, sha256 hex of the bytes read) of a
+    segment CSV read line by line, a piece at a time (memory: a piece and the samples, not the
+    file's text).  A complete segment's file (``incomplete`` False) with a bad line gives no data
+    and the CaptureError naming the line, once the whole file is hashed (the caller compares the
+    digest first: a file that changed while it was read is said so); an incomplete one gives the
+    rows before its first bad line (None: not even a header) and that line's problem (a str),
+    and drops a partial last line.  OSError when the file cannot be read."""
+    digest = hashlib.sha256()
+    parser = _LineParser(sample_rate_hz, csv_file, label)
+    with open_regular_file(path) as f:
+        source = _Hashing(f, digest)
+        try:
+            for lines, number in _csv_lines_in_pieces(source, partial_last_line=incomplete):
+                parser.feed(lines, number)
+            return parser.result(require_rows=not incomplete), None, digest.hexdigest()
+        except CaptureError as e:
+            while source.read(PIECE_BYTES):     # the rest hashed all the same
+                pass
+            if not incomplete:
+                return None, e, digest.hexdigest()
+            data = parser.result(require_rows=False) if parser.names is not None else None
+            return data, str(e), digest.hexdigest()
 
 
 def _count_gaps(steps, sample_rate_hz):
@@ -744,7 +819,7 @@ def read_csv_pieces(path, sample_rate_hz) -> tuple[SegmentData | None, str]:
     The file is read PIECE_BYTES at a time; each piece is hashed and its whole lines parsed in
     one pass of a C++ CSV engine (pyarrow.csv, on the machine's cores) into arrays that grow to
     the segment's length, so that neither the file's bytes nor the engine's tables are ever held
-    whole.  It takes only files it reads exactly as the line-by-line reader (_parse_csv) would:
+    whole.  It takes only files it reads exactly as the line-by-line reader (_LineParser) would:
     anything unusual (quotes, a lone CR, spaces around values, a blank line inside, a field it
     cannot convert, a non-finite or out-of-range value, time that does not increase, no data
     row) makes it return None for the samples, and the caller gives the file to that reader,
