@@ -207,3 +207,13 @@ def test_a_refused_line_near_the_end_of_a_long_file_is_found_in_bounded_memory(t
     assert data is None and f"line {n + 1}: " in str(problem), problem
     samples = n * 7 * 8                          # the float64 values of the rows
     assert peak < 1.25 * samples + 8 * capture_io.PIECE_BYTES < len(content) * 2, (peak, samples, len(content))
+
+
+def test_the_digest_of_a_capture_not_read_hashes_its_files_as_reading_would(optimal9_run):
+    """capture_digest of a capture whose samples were never read hashes each file itself (a
+    buffer at a time): the same digest as after reading them."""
+    from station.estimate import capture_digest
+
+    unread = read_capture(optimal9_run, load_data=False)
+    assert all(seg.content_sha256 is None for seg in unread.complete())
+    assert capture_digest(unread) == capture_digest(read_capture(optimal9_run))

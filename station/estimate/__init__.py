@@ -22,12 +22,15 @@ def capture_digest(capture: Capture) -> str:
     """sha256 over the manifest's bytes followed by the sha256 (32 bytes) of every complete
     segment file, in manifest order.  A file's sha256 is the one taken when its samples were read
     (Segment.content_sha256), so no file is read or hashed twice."""
-    from station.io.capture import read_regular_file
+    from station.io.capture import open_regular_file
 
     h = hashlib.sha256()
     h.update((capture.path / "manifest.yaml").read_bytes())
     for seg in capture.complete():
-        file_sha256 = seg.content_sha256 or hashlib.sha256(read_regular_file(capture.path / seg.file)).hexdigest()
+        file_sha256 = seg.content_sha256
+        if file_sha256 is None:         # not read: hashed here, a buffer at a time
+            with open_regular_file(capture.path / seg.file) as f:
+                file_sha256 = hashlib.file_digest(f, "sha256").hexdigest()
         h.update(bytes.fromhex(file_sha256))
     return h.hexdigest()
 
