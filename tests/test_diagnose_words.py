@@ -66,3 +66,17 @@ def test_no_time_or_bench_words_on_a_clean_capture():
     d = diagnose(lsq.fit(s))
     assert not [f for f in d.failures if "a step in time" in f or "drift steadily" in f
                 or "stamps jitter" in f or "twice per revolution" in f], d.failures
+
+
+def test_stamp_jitter_is_named_by_the_command_that_reads_the_capture_segment_by_segment(tmp_path, capsys):
+    """`station diagnose CAPTURE` reads the capture a segment at a time (its samples are freed):
+    the jitter is taken from each segment as it goes by, not from samples kept afterwards (it
+    read 0 there, and the finding never reached the command)."""
+    from station.cli import main
+    from station.io.capture import read_capture
+
+    _, path = simhelpers.mems_capture(3, "optimal9", SHORT, out=tmp_path / "cap", bench__time_stamp_jitter_ms=1.0)
+    streamed = lsq.summarise(read_capture(path, load_data=False))
+    assert abs(streamed.stamp_jitter_s - lsq.summarise(read_capture(path)).stamp_jitter_s) < 1e-12
+    assert main(["diagnose", str(path)]) == 0
+    assert "the time stamps jitter: 1" in " ".join(capsys.readouterr().out.split())    # however it wraps
