@@ -137,7 +137,7 @@ def test_noise_of_a_named_segment_of_a_calibration_capture(optimal9_run, tmp_pat
     block = yaml.safe_load((cap / "noise.yaml").read_text())["noise"]
     assert "static segment pos02" in block["source"]
     assert main(["noise", str(cap), "--segment", "rotx_p"]) == 2
-    assert "not a complete static segment" in capsys.readouterr().err
+    assert "is not a static segment" in capsys.readouterr().err
 
 
 def test_the_longest_static_is_found_holding_one_segment_at_a_time(optimal9_run, monkeypatch):
@@ -190,3 +190,37 @@ def test_the_gap_warning_is_about_the_segment_characterised(optimal9_run, tmp_pa
     assert "gaps" not in capsys.readouterr().err
     assert main(["noise", str(cap), "--segment", "pos01"]) == 0
     assert "the recording has gaps" in capsys.readouterr().err
+
+
+def test_a_stopped_noise_recording_is_characterised_from_the_rows_it_holds(noise_run, tmp_path, capsys):
+    """A noise recording killed before its end (an incomplete segment, its last line cut):
+    `station noise` characterises the rows recorded, says so on screen and in the source, and
+    gives the same numbers as those rows as a complete recording would."""
+    import shutil
+
+    cap = tmp_path / "cap"
+    shutil.copytree(noise_run, cap)
+    for name in ("calibration.yaml", "noise.yaml"):
+        (cap / name).unlink(missing_ok=True)
+    manifest = yaml.safe_load((cap / "manifest.yaml").read_text())
+    seg = manifest["segments"][0]
+    content = (cap / seg["file"]).read_bytes()
+    kept = content[:content.rfind(b"\n", 0, len(content) * 2 // 3) + 1]     # whole lines
+    (cap / seg["file"]).write_bytes(kept + b"12.3,4")          # killed mid-line
+    seg["status"] = "incomplete"
+    for key in ("sha256", "samples"):
+        seg.pop(key, None)
+    (cap / "manifest.yaml").write_text(yaml.safe_dump(manifest, sort_keys=False))
+    assert main(["noise", str(cap)]) == 0
+    err = " ".join(capsys.readouterr().err.split())
+    rows = kept.count(b"\n") - 1
+    assert f"is incomplete (the recording stopped): its {rows} samples" in err
+    block = yaml.safe_load((cap / "noise.yaml").read_text())["noise"]
+    assert f"({rows} samples, incomplete" in block["source"]
+    # the same rows as a complete segment
+    (cap / seg["file"]).write_bytes(kept)
+    seg["status"] = "complete"
+    (cap / "manifest.yaml").write_text(yaml.safe_dump(manifest, sort_keys=False))
+    assert main(["noise", str(cap)]) == 0
+    again = yaml.safe_load((cap / "noise.yaml").read_text())["noise"]
+    assert {k: v for k, v in again.items() if k != "source"} == {k: v for k, v in block.items() if k != "source"}

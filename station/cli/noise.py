@@ -74,8 +74,12 @@ def cmd_noise(args) -> int:
         if serial and cal_serial and serial != cal_serial and not getattr(args, "force", False):
             raise UserError(f"{args.cal}: calibration of IMU {cal_serial!r}, recording of IMU {serial!r}: "
                             "the noise belongs to the IMU recorded (--force to write it anyway)")
-        if any(s.data is not None and s.data.gaps for s in capture.complete("static")):   # the one used
+        used = next(s for s in capture.segments if s.kind == "static" and s.data is not None)
+        if used.data.gaps:
             err.print("warning: the recording has gaps; the Allan deviation assumes even sampling")
+        if used.status == "incomplete":
+            err.print(f"warning: segment {used.name} is incomplete (the recording stopped): its "
+                      f"{len(used.data.t)} samples before it stopped are characterised", markup=False, soft_wrap=True)
     else:
         if args.segment:
             raise UserError("--segment applies to a capture bundle, not to a CSV file")

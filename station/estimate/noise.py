@@ -341,7 +341,9 @@ class LongestStatic:
 
     def curves(self) -> tuple:
         if self.seg is None:
-            return None, f"Not characterised: {self.capture.path}: no complete static segment to characterise"
+            some = any(s.kind == "static" for s in self.capture.segments)
+            return None, (f"Not characterised: {self.capture.path}: no {'complete ' if some else ''}static "
+                          "segment to characterise")
         try:
             return segment_curves(self.capture, self.seg, self.data, self.cal_doc), None
         except UserError as e:
@@ -375,26 +377,32 @@ def _factors(imu, cal_doc, where: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def from_capture(capture, segment: str | None = None, cal_doc: dict | None = None) -> NoiseResult:
-    """Characterise the named static segment of a capture, or its longest complete one.  Static
+    """Characterise the named static segment of a capture, or its longest complete one; without
+    a complete one, the longest incomplete one (a noise recording that was stopped or killed:
+    the rows it holds before the recording stopped), which the result's source says.  Static
     segments not loaded are read one at a time and only the longest is kept (a capture with
     several long recordings is never held whole); the one characterised is left loaded (its
     ``data``: its gaps, for instance)."""
     statics = capture.complete("static")
     if segment is not None:
         seg = capture.segment(segment)
-        if seg.status != "complete" or seg.kind != "static":
-            raise UserError(f"{capture.path}: segment {segment!r} is not a complete static segment")
-        seg.data = capture.read_samples(seg)
-    elif not statics:
-        raise UserError(f"{capture.path}: no complete static segment to characterise")
+        if seg.kind != "static" or seg.status not in ("complete", "incomplete"):
+            raise UserError(f"{capture.path}: segment {segment!r} is not a static segment")
+        candidates = [seg]
     else:
-        seg, data = None, None
-        for candidate in statics:
-            samples = capture.read_samples(candidate)     # segment.data when loaded
-            if data is None or len(samples.t) > len(data.t):
-                seg, data = candidate, samples
-            del samples
-        seg.data = data
+        candidates = statics or [s for s in capture.segments if s.kind == "static" and s.status == "incomplete"]
+        if not candidates:
+            raise UserError(f"{capture.path}: no static segment to characterise")
+    seg, data = None, None
+    for candidate in candidates:
+        samples = capture.read_samples(candidate)     # segment.data when loaded; None: no readable row
+        if samples is not None and (data is None or len(samples.t) > len(data.t)):
+            seg, data = candidate, samples
+        del samples
+    if seg is None:
+        problem = candidates[0].problem or "no readable row"
+        raise UserError(f"{capture.path}: static segment {candidates[0].name!r} is incomplete: {problem}")
+    seg.data = data
     return from_curves(*segment_curves(capture, seg, seg.data, cal_doc))
 
 
@@ -404,7 +412,8 @@ def segment_curves(capture, seg, data, cal_doc: dict | None = None) -> tuple:
     capture computes it: station diagnose --report); from_curves(*...) finishes it."""
     fa, fg = _factors(capture.imu, cal_doc, str(capture.path))
     rate = capture.imu.sample_rate_hz
-    source = f"{capture.path}: static segment {seg.name} ({len(data.t)} samples)"
+    stopped = ", incomplete: the recording stopped there" if seg.status == "incomplete" else ""
+    source = f"{capture.path}: static segment {seg.name} ({len(data.t)} samples{stopped})"
     return allan_curves(data.accel, data.gyro, rate, source, fa, fg), rate, len(data.t), source
 
 
