@@ -167,7 +167,8 @@ real = figures.draw
 parent = os.getpid()
 def slow(specs):
     if os.getpid() != parent and "allan.png" not in specs:   # the diagnosis figures: a long draw
-        print("drawing", os.getpid(), flush=True)
+        with open(sys.argv[3], "a") as f:            # not stdout: the diagnosis is printed there
+            f.write(f"{os.getpid()}\\n")
         time.sleep(60)
     return real(specs)
 figures.draw = slow
@@ -176,15 +177,18 @@ sys.exit(main(["diagnose", sys.argv[1], "--auto", "--report", sys.argv[2]]))
 """
 
 
-def drawing(p) -> set:
-    """The pids of the processes drawing, as CTRL_C's script prints them (among the command's
-    own output: the diagnosis is printed while the figures are drawn)."""
+def drawing(p, pid_file) -> set:
+    """The pids of the processes drawing, as CTRL_C's script writes them into ``pid_file`` (each
+    line written whole by one process: on stdout they could land inside a line of the diagnosis,
+    which is printed meanwhile), once every drawing process has begun."""
+    import time
+
     pids = set()
     while len(pids) < min(2, forked.usable_cores()):
-        line = p.stdout.readline()
-        assert line, "the command ended before its figures were drawn"
-        if line.startswith("drawing "):
-            pids.add(int(line.split()[1]))
+        assert p.poll() is None, "the command ended before its figures were drawn"
+        time.sleep(0.02)
+        if pid_file.exists():
+            pids = {int(line) for line in pid_file.read_text().split("\n")[:-1]}   # whole lines only
     return pids
 
 
@@ -192,9 +196,9 @@ def test_ctrl_c_while_the_figures_are_drawn_leaves_no_process(optimal9_run, tmp_
     """Ctrl-C (SIGINT to the process group, as a terminal sends it) while the worker and the
     process it forked draw: exit status 130, "interrupted", no page, and neither left running
     (the worker is killed on leaving the job; the process it forked dies with it)."""
-    p = start_script(CTRL_C, optimal9_run, tmp_path / "report")
+    p = start_script(CTRL_C, optimal9_run, tmp_path / "report", tmp_path / "drawing")
     try:
-        drawers = drawing(p)
+        drawers = drawing(p, tmp_path / "drawing")
     finally:
         out, err = interrupt(p)
     assert p.returncode == 130 and err.strip().splitlines()[-1] == "interrupted"
@@ -208,9 +212,9 @@ def test_a_killed_diagnose_leaves_no_figure_process(optimal9_run, tmp_path, how)
     killer, a closed terminal, `timeout`): both end with it, nothing is left running."""
     import signal
 
-    p = start_script(CTRL_C, optimal9_run, tmp_path / "report")
+    p = start_script(CTRL_C, optimal9_run, tmp_path / "report", tmp_path / "drawing")
     try:
-        drawers = drawing(p)
+        drawers = drawing(p, tmp_path / "drawing")
     finally:
         interrupt(p, getattr(signal, how), group=False)     # the parent alone, not its group
     left = still_running(drawers)
