@@ -217,3 +217,54 @@ def test_the_digest_of_a_capture_not_read_hashes_its_files_as_reading_would(opti
     unread = read_capture(optimal9_run, load_data=False)
     assert all(seg.content_sha256 is None for seg in unread.complete())
     assert capture_digest(unread) == capture_digest(read_capture(optimal9_run))
+
+
+def test_estimate_warns_of_an_incomplete_segment_as_a_loaded_read_does(optimal9_run, tmp_path, capsys):
+    """A run stopped during its last segment: `station estimate` (which reads the capture a
+    segment at a time, in a child process) says what the incomplete segment holds, as reading
+    the capture whole does, and estimates from the complete ones."""
+    import shutil
+
+    import yaml
+
+    from station.cli import main
+
+    cap = tmp_path / "cap"
+    shutil.copytree(optimal9_run, cap)
+    manifest = yaml.safe_load((cap / "manifest.yaml").read_text())
+    content = (cap / "pos01.csv").read_bytes()
+    (cap / "extra.csv").write_bytes(content[:content.rfind(b"\n", 0, len(content) // 2) + 1] + b"12.3,4")
+    manifest["segments"].append({"name": "extra", "kind": "static", "file": "extra.csv", "status": "incomplete",
+                                 "up_body": [0, 0, 1]})
+    (cap / "manifest.yaml").write_text(yaml.safe_dump(manifest, sort_keys=False))
+    expected = read_capture(cap).warnings
+    assert any("segments[21] (extra): incomplete, " in w and "readable rows" in w for w in expected), expected
+    assert main(["estimate", str(cap), "-o", str(tmp_path / "cal.yaml")]) == 0
+    err = capsys.readouterr().err
+    assert all(f"warning: {w}" in " ".join(err.split()) for w in expected), (err, expected)
+
+
+def test_lossy_segments_and_resolution_are_checked_on_a_capture_read_without_its_samples(optimal9_run, tmp_path):
+    """exclude_lossy_segments and check_resolution read each segment in turn when the capture was
+    read without its samples (they found nothing to check: no segment excluded, silently)."""
+    import shutil
+
+    import yaml
+
+    from station.estimate import check_resolution, exclude_lossy_segments
+
+    cap = tmp_path / "cap"
+    shutil.copytree(optimal9_run, cap)
+    lines = (cap / "pos02.csv").read_bytes().splitlines(keepends=True)
+    lossy = lines[:1] + lines[1::2]                       # every other frame lost
+    (cap / "pos02.csv").write_bytes(b"".join(lossy))
+    manifest = yaml.safe_load((cap / "manifest.yaml").read_text())
+    seg = next(s for s in manifest["segments"] if s["name"] == "pos02")
+    seg["samples"], seg["sha256"] = len(lossy) - 1, hashlib.sha256(b"".join(lossy)).hexdigest()
+    (cap / "manifest.yaml").write_text(yaml.safe_dump(manifest, sort_keys=False))
+    want = exclude_lossy_segments(read_capture(cap))
+    streamed = read_capture(cap, load_data=False)
+    assert exclude_lossy_segments(streamed) == want and len(want) == 1 and "pos02" in want[0]
+    assert [s.name for s in streamed.segments if s.status == "excluded"] == ["pos02"]
+    assert all(s.data is None for s in streamed.segments)          # each read in turn, none kept
+    check_resolution(read_capture(cap, load_data=False))            # no AttributeError: checked

@@ -74,7 +74,7 @@ def cmd_noise(args) -> int:
         if serial and cal_serial and serial != cal_serial and not getattr(args, "force", False):
             raise UserError(f"{args.cal}: calibration of IMU {cal_serial!r}, recording of IMU {serial!r}: "
                             "the noise belongs to the IMU recorded (--force to write it anyway)")
-        used = next(s for s in capture.segments if s.kind == "static" and s.data is not None)
+        used = capture.segment(result.segment)
         if used.data.gaps:
             err.print("warning: the recording has gaps; the Allan deviation assumes even sampling")
         if used.status == "incomplete":

@@ -72,8 +72,10 @@ def exclude_lossy_segments(capture: Capture, max_missing_fraction: float = MAX_M
                            max_gap_s: float = MAX_GAP_S) -> list[str]:
     """Mark complete segments that lost more than the limits as ``excluded`` (so that
     ``capture.complete()`` leaves them out); returns a note for each."""
-    notes = [_exclude_if_lossy(seg, capture.imu.sample_rate_hz, max_missing_fraction, max_gap_s)
-             for seg in capture.complete()]
+    notes = []
+    for seg in capture.complete():
+        with capture.lent_samples(seg):          # a capture read without its samples: each in turn
+            notes.append(_exclude_if_lossy(seg, capture.imu.sample_rate_hz, max_missing_fraction, max_gap_s))
     return [note for note in notes if note]
 
 
@@ -99,7 +101,8 @@ def check_resolution(capture: Capture) -> None:
     noise: when the samples' standard deviation is below half the output step, the mean is set
     by the rounding, not by the sensor, and the noise (the fit's weights) reads as zero."""
     for seg in capture.complete("static"):
-        _check_static_resolution(capture, seg)
+        with capture.lent_samples(seg):          # a capture read without its samples: each in turn
+            _check_static_resolution(capture, seg)
 
 
 def _check_static_resolution(capture: Capture, seg) -> None:

@@ -97,6 +97,7 @@ class NoiseResult:
     sample_rate_hz: float
     duration_s: float
     source: str                  # what was analysed, in words
+    segment: str | None = None   # the capture's segment analysed (None: a CSV file)
 
     def axis(self, sensor: str, axis: str) -> AxisNoise:
         return next(a for a in self.axes if a.sensor == sensor and a.axis == axis)
@@ -312,8 +313,8 @@ def allan_curves(accel: np.ndarray, gyro: np.ndarray, rate: float, source: str,
                      for i, a in enumerate("xyz")]
 
 
-def from_curves(curves: list, rate: float, samples: int, source: str) -> NoiseResult:
-    return NoiseResult([axis_terms(c, rate) for c in curves], rate, samples / rate, source)
+def from_curves(curves: list, rate: float, samples: int, source: str, segment: str | None = None) -> NoiseResult:
+    return NoiseResult([axis_terms(c, rate) for c in curves], rate, samples / rate, source, segment)
 
 
 def characterise(accel: np.ndarray, gyro: np.ndarray, rate: float, source: str,
@@ -407,14 +408,14 @@ def from_capture(capture, segment: str | None = None, cal_doc: dict | None = Non
 
 
 def segment_curves(capture, seg, data, cal_doc: dict | None = None) -> tuple:
-    """(curves, rate, samples, source) of one static segment's samples ``data`` (SegmentData):
+    """(curves, rate, samples, source, segment name) of one static segment's samples ``data`` (SegmentData):
     the part of from_capture that needs the samples, and no scipy (a process that reads the
     capture computes it: station diagnose --report); from_curves(*...) finishes it."""
     fa, fg = _factors(capture.imu, cal_doc, str(capture.path))
     rate = capture.imu.sample_rate_hz
     stopped = ", incomplete: the recording stopped there" if seg.status == "incomplete" else ""
     source = f"{capture.path}: static segment {seg.name} ({len(data.t)} samples{stopped})"
-    return allan_curves(data.accel, data.gyro, rate, source, fa, fg), rate, len(data.t), source
+    return allan_curves(data.accel, data.gyro, rate, source, fa, fg), rate, len(data.t), source, seg.name
 
 
 def from_samples(path, data, rate: float | None, accel_unit: str, gyro_unit: str,
