@@ -140,6 +140,14 @@ def test_raw_counts_without_timestamps_and_with_earth_rate(tmp_path, capsys):
     assert statics_inside_truth(capture, hs) == 16
     cal, _, _ = estimate_capture(out)
     check_against_truth(cal, counts_truth(truth, COUNTS))
+    # diagnose: the candidates whose gyro term cannot be sized without a nominal scale say so;
+    # they do not stop the diagnosis (it exited 2 on them)
+    capsys.readouterr()
+    assert cli.main(["diagnose", str(out), "--json"]) == 0
+    untestable = {c["effect"]: c for c in json.loads(capsys.readouterr().out)["candidates"]
+                  if c["advice"].startswith("cannot be tested on this capture")}
+    assert "gyro_g_sensitivity" in untestable and "nominal scale" in untestable["gyro_g_sensitivity"]["advice"]
+    assert all(not c["significant"] and c["dof"] == 0 for c in untestable.values())
     # with the nominal scales declared: thresholds in physical units, the same fit
     out2 = tmp_path / "cap2"
     assert cli.main(["import", "csv", str(log), "--columns", "ax=0,ay=1,az=2,gx=3,gy=4,gz=5",

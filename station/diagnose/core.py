@@ -203,6 +203,21 @@ def score_test(result, effect_id, registry: EffectRegistry | None = None, overdi
     return cand
 
 
+def _tested(result, effect_id, registry, phi) -> Candidate:
+    """score_test, or a candidate that says why it cannot be tested on this capture (an effect
+    whose term cannot be sized here, e.g. a raw gyro without a nominal scale): one candidate
+    that cannot be tested does not stop the diagnosis."""
+    from station.core.errors import UserError
+
+    try:
+        return score_test(result, effect_id, registry, phi)
+    except UserError as e:
+        effect = registry.create(effect_id)
+        return Candidate(effect=effect_id, title=effect.title, predicted_chi2_drop=0.0, dof=0, p_value=1.0,
+                         overdispersion=phi, advice=f"cannot be tested on this capture: {e}",
+                         source=getattr(effect, "_station_source", "library"))
+
+
 def fit_fails(result) -> bool:
     """The fit's chi2 is beyond what the noise explains (p below ALPHA / 10)."""
     return result.dof > 0 and chi2_sf(result.chi2, result.dof) < ALPHA / 10
@@ -219,7 +234,7 @@ def rank_candidates(result, exclude=(), registry: EffectRegistry | None = None) 
     registry = registry or EffectRegistry()
     ids = [e for e in registry.ids() if e not in {m.id for m in result.model.effects} and e not in exclude]
     phi = overdispersion(result)
-    cands = [score_test(result, e, registry, phi) for e in ids]
+    cands = [_tested(result, e, registry, phi) for e in ids]
     m = len(cands)
     threshold = norm_isf(ALPHA / (2 * max(m, 1))) + POWER_Z
     # Holm's step-down correction over the family of candidates
