@@ -95,3 +95,36 @@ def test_chromium_renders_the_page_styled_with_its_figures(page, tmp_path):
     # the embedded figures decoded and drawn: the residual plot's orange bars cover pixels
     orange = np.all(np.abs(img - BAR_ORANGE) <= 6, axis=2).sum()
     assert orange > 2000, orange
+
+
+def test_a_hand_pose_log_gets_its_diagnosis_on_the_page(tmp_path, capsys):
+    """Hand turns between statics have no encoder angle, yet the least-squares model (and so
+    `station diagnose`) uses them: the page diagnoses them too (it said it could not); a rotation
+    without angle that no hand made still leaves the page without a diagnosis, saying why."""
+    from test_import_recordings import session, write_csv
+
+    _, hs = session(poses=12)
+    log = write_csv(tmp_path / "log.csv", hs)
+    cap = tmp_path / "cap"
+    assert main(["import", "csv", str(log), "--preset", "station", "-o", str(cap),
+                 "--gravity-mps2", str(hs.truth["gravity_mps2"])]) == 0
+    assert main(["report", str(cap), "-o", str(tmp_path / "page.html")]) == 0
+    text = (tmp_path / "page.html").read_text(encoding="utf-8")
+    assert "Candidate effects" in text and "needs the encoder angle" not in text
+    assert text.count("data:image/png") >= 3          # residuals, candidates, noise
+
+
+def test_a_steady_rotation_without_angle_leaves_the_page_without_a_diagnosis(optimal9_run, tmp_path):
+    """A table rotation whose encoder angle is missing (steady: no hand made it), found while the
+    capture is read: the page says why there is no diagnosis and still shows the noise."""
+    import yaml
+
+    cap = tmp_path / "cap"
+    shutil.copytree(optimal9_run, cap)
+    manifest = yaml.safe_load((cap / "manifest.yaml").read_text())
+    next(s for s in manifest["segments"] if s["kind"] == "rotation").pop("angle_deg")
+    (cap / "manifest.yaml").write_text(yaml.safe_dump(manifest, sort_keys=False))
+    assert main(["report", str(cap), "-o", str(tmp_path / "page.html")]) == 0
+    text = (tmp_path / "page.html").read_text(encoding="utf-8")
+    assert "needs the encoder angle of every rotation that is not a hand turn" in text
+    assert "Candidate effects" not in text and text.count("data:image/png") == 1     # the noise

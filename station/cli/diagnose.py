@@ -48,25 +48,8 @@ def _effects(args, capture, reg) -> list[str]:
     return plugins.effect_ids(reg, effects + args.add)
 
 
-def _refuse_rotation_without_angle(capture):
-    """A check_segment refusing a rotation without its encoder angle that no hand made (the
-    model cannot use it); said before reading when there is no static for a hand turn to lie
-    between (a screwdriver's capture)."""
-    message = (f"{capture.path}: diagnose fits the least-squares model, which needs the encoder "
-               "angle (angle_deg) of every rotation segment that is not a hand turn between statics")
-    if not capture.complete("static") and any(seg.angle_deg is None for seg in capture.complete("rotation")):
-        raise UserError(message)
-
-    def check(seg) -> None:
-        from station.estimate.hand_rotation import is_hand
-
-        if seg.kind == "rotation" and seg.angle_deg is None and not is_hand(seg):
-            raise UserError(message)
-    return check
-
-
 def cmd_diagnose(args) -> int:
-    from station.diagnose import DIAGNOSIS_MODULES
+    from station.diagnose import DIAGNOSIS_MODULES, rotation_angle_check
     from station.estimate import summarise_while_importing
     from station.io.capture import read_capture
 
@@ -76,7 +59,7 @@ def cmd_diagnose(args) -> int:
         from station.io.calfile import read_calfile
 
         cal_doc = read_calfile(args.calib)
-    refuse = _refuse_rotation_without_angle(capture)
+    refuse = rotation_angle_check(capture)
     with contextlib.ExitStack() as stack:
         # each segment read, checked and summarised (in a child, while the fit is imported here);
         # with --report, the figures in a second process and the noise where the capture is read

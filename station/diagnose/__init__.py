@@ -1,5 +1,28 @@
 """Compare the model with the measurements (docs/diagnose.md)."""
+from station.core.errors import UserError
 
 # what a diagnosis needs once the capture is summarised, imported while a forked child reads the
 # capture (station.estimate.summarise_while_importing): here, so that naming them imports nothing
 DIAGNOSIS_MODULES = ("station.estimate.lsq", "station.diagnose.auto", "station.diagnose.core")
+
+
+class RotationWithoutAngle(UserError):
+    """A rotation segment without its encoder angle, not a hand turn: the least-squares model
+    (the diagnosis) cannot use the capture."""
+
+
+def rotation_angle_check(capture):
+    """A check_segment refusing (RotationWithoutAngle) a rotation without its encoder angle that
+    no hand made (the least-squares model cannot use it); raised at once when there is no static
+    for a hand turn to lie between (a screwdriver's capture)."""
+    message = (f"{capture.path}: diagnose fits the least-squares model, which needs the encoder "
+               "angle (angle_deg) of every rotation segment that is not a hand turn between statics")
+    if not capture.complete("static") and any(seg.angle_deg is None for seg in capture.complete("rotation")):
+        raise RotationWithoutAngle(message)
+
+    def check(seg) -> None:
+        from station.estimate.hand_rotation import is_hand
+
+        if seg.kind == "rotation" and seg.angle_deg is None and not is_hand(seg):
+            raise RotationWithoutAngle(message)
+    return check

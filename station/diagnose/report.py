@@ -363,20 +363,30 @@ def report_input(capture, cal_doc=None, cal_path=None, *, effects=(), auto=True)
     are drawn by a FigureJob."""
     import contextlib
 
+    from station.diagnose import RotationWithoutAngle, rotation_angle_check
     from station.diagnose.figure_job import read_for_report
     from station.io.history import verdict_of
 
     inp = ReportInput(title=f"Calibration report: {Path(str(capture.path)).name}",
                       calibration=cal_doc, calibration_path=None if cal_path is None else str(cal_path),
                       verdict=verdict_of(cal_doc) if cal_doc is not None else None)
+    without_angle = ("The diagnosis fits the least-squares model, which needs the encoder angle of every "
+                     "rotation that is not a hand turn between statics; this capture has rotations without one.")
+    check = None
     if not capture.complete("rotation"):
         inp.diagnosis_note = "No rotation segments: nothing to diagnose (a noise recording)."
-    elif any(seg.angle_deg is None for seg in capture.complete("rotation")):
-        inp.diagnosis_note = ("The diagnosis fits the least-squares model, which needs the encoder angle "
-                              "of every rotation; this capture has rotations without one.")
+    else:
+        try:
+            check = rotation_angle_check(capture)       # hand turns between statics are diagnosed
+        except RotationWithoutAngle:
+            inp.diagnosis_note = without_angle
     with contextlib.ExitStack() as stack:
         if inp.diagnosis_note is None:
-            job, inp.noise, inp.noise_note = read_for_report(capture, cal_doc, stack)
+            try:
+                job, inp.noise, inp.noise_note = read_for_report(capture, cal_doc, stack, check)
+            except RotationWithoutAngle:                # a rotation without angle, not a hand's
+                inp.diagnosis_note = without_angle
+        if inp.diagnosis_note is None:
             inp.first, inp.steps, inp.final = _diagnosis(capture, effects, auto)
             job.draw(diagnosis_figure_specs(inp.first, inp.steps))
         else:
