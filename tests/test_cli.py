@@ -77,7 +77,6 @@ def test_show_prints_parameters(dry_run, capsys):
     (["run", "--scheme", "nope", "--sim"], "unknown scheme 'nope'"),
     (["run", "--scheme", "optimal9"], "add --sim"),
     (["run", "--sim", "--sim-truth", "/nonexistent-truth.yaml"], "nonexistent-truth.yaml"),
-    (["run", "--sim", "--rate-dps", "-0"], "rate_dps"),
 ])
 def test_user_errors_are_one_line_with_status_2(argv, expected, capsys):
     assert main(argv) == 2
@@ -100,3 +99,57 @@ def test_console_script_exit_status():
     done = subprocess.run([sys.executable, "-m", "station.cli", "estimate", "/nonexistent/cap"],
                           capture_output=True, text=True)
     assert done.returncode == 2 and done.stderr.count("\n") == 1
+
+
+def exit_status(argv) -> int:
+    """main()'s status; argparse's refusals exit (SystemExit) instead of returning."""
+    try:
+        return main(argv)
+    except SystemExit as e:
+        return e.code
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["run", "--scheme", "optimal9", "--sim", "--seed", "-1"], "argument --seed: must be at least 0"),
+    (["run", "--scheme", "optimal9", "--sim", "--dwell-s", "0.001"], "gives fewer than 2 samples"),
+    (["run", "--scheme", "optimal9", "--sim", "--dwell-s", "1e7"], "more than the simulator holds at once"),
+    (["run", "--scheme", "optimal9", "--sim", "--rate-dps", "1e9"], "argument --rate-dps: must be from"),
+    (["run", "--scheme", "optimal9", "--sim", "--rate-dps", "-0"], "argument --rate-dps: must be from"),
+    (["montecarlo", "--runs", "2", "--table-angle-arcsec", "1e9"], "argument --table-angle-arcsec"),
+    (["montecarlo", "--runs", "2", "--gyro-noise-dph", "nan"], "must be finite"),
+    (["montecarlo", "--runs", "2", "--accel-noise-ug", "-1"], "argument --accel-noise-ug"),
+    (["sim", "serve", "--speed", "0"], "argument --speed: must be a positive number"),
+])
+def test_options_out_of_range_are_refused_before_anything_runs(tmp_path, capsys, argv, words):
+    """Options a simulation or a Monte Carlo could not use (they ended in a traceback, a
+    worker's traceback, or the out-of-memory killer): exit 2, one line, nothing written."""
+    out = tmp_path / "cap"
+    assert exit_status(argv + (["--out", str(out)] if argv[0] == "run" else [])) == 2
+    err = capsys.readouterr().err.strip()
+    assert words in err and len(err.splitlines()) == 1 and "Traceback" not in err, err
+    assert not out.exists()
+
+
+def test_the_rate_option_allows_what_a_capture_may_record(capsys):
+    """--rate-dps's bound is the capture format's (written twice: the parser must not import the
+    reader, for --help's speed)."""
+    from station.io.capture import MAX_RATE_DPS
+
+    assert exit_status(["plan", "--scheme", "optimal9", "--rate-dps", f"{MAX_RATE_DPS * 1.01:g}"]) == 2
+    assert f"must be from 0.001 to {MAX_RATE_DPS:g}" in capsys.readouterr().err
+
+
+def test_output_to_a_reader_that_went_away_ends_quietly(optimal9_run, tmp_path):
+    """`station diagnose CAPTURE --json | head -0`: the pipe closed before the output is written
+    (print(), not rich's console, which handles it itself): no traceback, status 1."""
+    import os
+
+    read, write = os.pipe()
+    os.close(read)                     # nobody reads: the first write fails with EPIPE
+    try:
+        r = subprocess.run([sys.executable, "-m", "station.cli", "diagnose", str(optimal9_run), "--json"],
+                           stdout=write, stderr=subprocess.PIPE, text=True, timeout=300,
+                           env={**os.environ, "STATION_HISTORY_DIR": str(tmp_path / "history")})
+    finally:
+        os.close(write)
+    assert r.returncode == 1 and "Traceback" not in r.stderr and "BrokenPipe" not in r.stderr, r.stderr

@@ -76,6 +76,13 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         err.print("interrupted", markup=False)
         return 130
+    except BrokenPipeError:
+        # whatever read the output went away (`station probe ... | head -1`): stop quietly, as rich
+        # does for the tables (Python's advice: stdout onto /dev/null, so that the flush at exit
+        # does not fail again, and status 1)
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 1
 
 
 if __name__ == "__main__":

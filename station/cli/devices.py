@@ -10,6 +10,7 @@ import signal
 import sys
 import threading
 
+from station.cli import argtypes
 from station.core.errors import UserError
 
 
@@ -19,10 +20,10 @@ def add_parsers(sub) -> None:
     sim_sub = sim.add_subparsers(dest="sim_command", required=True, metavar="SIM_COMMAND",
                                  parser_class=type(sim))
     serve = sim_sub.add_parser("serve", help="serve a table twin and an IMU twin on pseudo-terminals")
-    serve.add_argument("--speed", type=float, default=1.0,
+    serve.add_argument("--speed", type=argtypes.positive, default=1.0,
                        help="device time per wall time (default 1; 50 = fifty times faster)")
     serve.add_argument("--sim-truth", metavar="FILE", help="true sensor errors and bench (YAML)")
-    serve.add_argument("--seed", type=int, default=1, help="seed of the default truth and the noise")
+    serve.add_argument("--seed", type=argtypes.seed, default=1, help="seed of the default truth and the noise")
     serve.add_argument("--faults", metavar="FILE", help="faults to inject (YAML, docs/twins.md)")
     serve.add_argument("--axes", type=int, choices=(1, 2, 3),
                        help="table axes (default 3 for acutrol, 1 for aerosmith)")
@@ -42,9 +43,9 @@ def add_parsers(sub) -> None:
     probe = sub.add_parser("probe", help="read an IMU and/or a rate table and report")
     probe.add_argument("--port", metavar="URL", help="IMU port (device path or pyserial URL)")
     probe.add_argument("--imu-protocol", default="vectornav", help="vectornav (default), xsens or csv")
-    probe.add_argument("--seconds", type=float, default=10.0,
+    probe.add_argument("--seconds", type=argtypes.positive, default=10.0,
                        help="IMU device time to read, s (default 10)")
-    probe.add_argument("--rate-hz", type=float, default=100.0, help="IMU output rate, Hz (default 100)")
+    probe.add_argument("--rate-hz", type=argtypes.positive, default=100.0, help="IMU output rate, Hz (default 100)")
     probe.add_argument("--csv-units", metavar="SPEC", default="", help="units of a csv IMU (see sim serve)")
     probe.add_argument("--imu-baud", type=int, metavar="BAUD",
                        help="vectornav: set the sensor's baud rate (register 05) after connecting, then "
@@ -55,7 +56,7 @@ def add_parsers(sub) -> None:
     probe.add_argument("--table-protocol", default="acutrol", help="acutrol (default) or aerosmith")
     probe.add_argument("--baud", type=int,
                        help="baud rate (default 115200; 9600 for --table-protocol aerosmith)")
-    probe.add_argument("--timeout-s", type=float, default=2.0,
+    probe.add_argument("--timeout-s", type=argtypes.positive, default=2.0,
                        help="longest wait for a reply or a frame, s (default 2)")
     probe.add_argument("--json", action="store_true", help="print JSON instead of text")
     probe.set_defaults(func=cmd_probe)

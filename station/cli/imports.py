@@ -2,10 +2,10 @@
 output only; the work is in station.io.importers)."""
 from __future__ import annotations
 
-import argparse
 
 from station.cli.choices import (CSV_PRESETS, IMUCAL_DEFAULT_GRAVITY_MPS2, IMUCAL_FORMATS,
                                  RECORDING_MIN_POSES, ROSBAG_STAMPS)
+from station.cli import argtypes
 from station.cli.output import out
 from station.core.errors import UserError
 
@@ -66,26 +66,6 @@ def cmd_import_rosbag(args) -> int:
     return 0
 
 
-def _number(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if value != value or value in (float("inf"), float("-inf")):
-        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
-    return value
-
-
-def _count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
-    if value < 2:
-        raise argparse.ArgumentTypeError(f"must be at least 2, got {text!r}")
-    return value
-
-
 def _add_recording_options(p) -> None:
     """Options shared by the importers of continuous recordings (sections, site, output)."""
     p.add_argument("-o", "--output", required=True, metavar="CAPTURE", help="new capture directory")
@@ -93,36 +73,26 @@ def _add_recording_options(p) -> None:
                    help="give the sections by hand instead of finding them: YAML/JSON list of {name, kind "
                         "(static|rotation), start, end (rows from 0, end exclusive) or start_s, end_s, "
                         "up_body, axis_body}, or imucal's {label: {start, end}}")
-    p.add_argument("--gravity-mps2", type=_positive, default=9.80665,
+    p.add_argument("--gravity-mps2", type=argtypes.positive, default=9.80665,
                    help="local gravity, m/s^2 (default 9.80665: give your site's)")
-    p.add_argument("--latitude-deg", type=_number, help="site latitude: the Earth rate is then modelled")
-    p.add_argument("--window-s", type=_positive, default=0.5, help="stillness window, s (default 0.5)")
-    p.add_argument("--min-static-s", type=_positive, default=2.0,
+    p.add_argument("--latitude-deg", type=argtypes.finite, help="site latitude: the Earth rate is then modelled")
+    p.add_argument("--window-s", type=argtypes.positive, default=0.5, help="stillness window, s (default 0.5)")
+    p.add_argument("--min-static-s", type=argtypes.positive, default=2.0,
                    help="shortest still interval taken as a pose, s (default 2)")
-    p.add_argument("--rate-threshold-dps", type=_positive, default=1.0,
+    p.add_argument("--rate-threshold-dps", type=argtypes.positive, default=1.0,
                    help="largest mean rate (less the bias) of a still interval, deg/s (default 1)")
-    p.add_argument("--init-rest-s", type=_positive, default=2.0,
+    p.add_argument("--init-rest-s", type=argtypes.positive, default=2.0,
                    help="length of the still rest the recording starts with, s: scales raw outputs of "
                         "unknown scale (default 2)")
-    p.add_argument("--min-poses", type=_count, default=RECORDING_MIN_POSES,
+    p.add_argument("--min-poses", type=argtypes.whole(2), default=RECORDING_MIN_POSES,
                    help=f"fewest static poses accepted (default {RECORDING_MIN_POSES}: the accelerometer's 9 "
                         "unknowns with unknown attitudes)")
     p.add_argument("--faces", action="store_true",
                    help="the IMU was laid on its faces: each pose's up_body is the nearest case axis")
-    p.add_argument("--placement-deg", type=_positive, default=1.0,
+    p.add_argument("--placement-deg", type=argtypes.positive, default=1.0,
                    help="1-sigma of a hand placement on a face, deg (with --faces or up_body; default 1)")
     p.add_argument("--model", help="IMU model, recorded in the manifest")
     p.add_argument("--serial", help="IMU serial number, recorded in the manifest")
-
-
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not value > 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
-    return value
 
 
 def add_parsers(sub) -> None:
@@ -134,22 +104,22 @@ def add_parsers(sub) -> None:
     p = kinds.add_parser("imucal", help="an imucal Ferraris session (CSV, with a JSON section list or a 'part' column)")
     p.add_argument("csv", metavar="CSV", help="imucal session CSV")
     p.add_argument("--sections", metavar="JSON", help="imucal section list {label: {start, end}} (session layout)")
-    p.add_argument("--rate-hz", type=_positive, required=True, metavar="HZ",
+    p.add_argument("--rate-hz", type=argtypes.positive, required=True, metavar="HZ",
                    help="sample rate: imucal files carry none (the example session: 102.4)")
     p.add_argument("-o", "--output", required=True, metavar="CAPTURE", help="new capture directory")
     p.add_argument("--format", choices=IMUCAL_FORMATS, default="auto",
                    help="session (JSON sections, m/s^2 and deg/s) or annotated ('part' column, raw counts); "
                         "auto: annotated when the header has 'part'")
-    p.add_argument("--gravity-mps2", type=_positive, default=IMUCAL_DEFAULT_GRAVITY_MPS2,
+    p.add_argument("--gravity-mps2", type=argtypes.positive, default=IMUCAL_DEFAULT_GRAVITY_MPS2,
                    help=f"local gravity, m/s^2 (default {IMUCAL_DEFAULT_GRAVITY_MPS2}, imucal's)")
     p.add_argument("--accel-unit", choices=ACCEL_UNITS, help="override the layout's accelerometer unit")
     p.add_argument("--gyro-unit", choices=GYRO_UNITS, help="override the layout's gyro unit")
     p.add_argument("--model", help="IMU model, recorded in the manifest")
     p.add_argument("--serial", help="IMU serial number, recorded in the manifest")
-    p.add_argument("--turn-deg", type=_positive, metavar="DEG",
+    p.add_argument("--turn-deg", type=argtypes.positive, metavar="DEG",
                    help="record each rotation section as a turn of DEG (imucal's protocol: 360) so "
                         "that the least-squares model can use it; no encoder measured it")
-    p.add_argument("--placement-deg", type=_positive, default=1.0, metavar="DEG",
+    p.add_argument("--placement-deg", type=argtypes.positive, default=1.0, metavar="DEG",
                    help="1-sigma accuracy of the hand placement and turns (default 1 deg)")
     p.set_defaults(func=cmd_import_imucal)
 
@@ -165,12 +135,12 @@ def add_parsers(sub) -> None:
     c.add_argument("--header", choices=["auto", "yes", "no"], help="default auto: a non-numeric first line")
     c.add_argument("--accel-unit", choices=ACCEL_UNITS, help="default m/s^2 (or the preset's)")
     c.add_argument("--gyro-unit", choices=GYRO_UNITS, help="default deg/s (or the preset's)")
-    c.add_argument("--accel-nominal", type=_positive, metavar="MPS2_PER_COUNT",
+    c.add_argument("--accel-nominal", type=argtypes.positive, metavar="MPS2_PER_COUNT",
                    help="raw accelerometer: nominal m/s^2 per count (thresholds, unit check)")
-    c.add_argument("--gyro-nominal", type=_positive, metavar="DPS_PER_COUNT",
+    c.add_argument("--gyro-nominal", type=argtypes.positive, metavar="DPS_PER_COUNT",
                    help="raw gyro: nominal deg/s per count (thresholds, unit check, the fit's start)")
     c.add_argument("--time-unit", choices=["s", "ms", "us", "ns"], help="unit of the time column (default s)")
-    c.add_argument("--rate-hz", type=_positive, metavar="HZ",
+    c.add_argument("--rate-hz", type=argtypes.positive, metavar="HZ",
                    help="sample rate: time = index column (or row number) / rate, when there is no time column")
     c.add_argument("--gyro-file", metavar="FILE", help="imu_tk layout: the gyro's file")
     _add_recording_options(c)

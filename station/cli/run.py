@@ -12,6 +12,7 @@ from pathlib import Path
 
 import yaml
 
+from station.cli import argtypes
 from station.cli.calibration import add_accept_poor_fit, report_calibration
 from station.cli.output import err, out
 from station.core.errors import UserError
@@ -35,7 +36,7 @@ def add_parsers(sub) -> None:
     run.add_argument("--scheme", default="optimal9", help="built-in scheme name or a scheme YAML file")
     run.add_argument("--sim", action="store_true", help="dry run against the simulated bench")
     run.add_argument("--sim-truth", metavar="FILE", help="true sensor errors for --sim (YAML)")
-    run.add_argument("--seed", type=int, default=1, help="seed of the simulated truth and noise")
+    run.add_argument("--seed", type=argtypes.seed, default=1, help="seed of the simulated truth and noise")
     run.add_argument("--out", metavar="DIR", help="capture directory (default captures/<scheme>-sim-<time>)")
     _add_scheme_overrides(run)
     run.add_argument("--port", metavar="URL", help="IMU port (device path or pyserial URL)")
@@ -68,9 +69,11 @@ def add_parsers(sub) -> None:
 
 
 def _add_scheme_overrides(p) -> None:
-    p.add_argument("--dwell-s", type=float, help="override the scheme's dwell per attitude, s")
-    p.add_argument("--rate-dps", type=float, help="override the scheme's rotation rate, deg/s")
-    p.add_argument("--rotation-s", type=float, help="override the scheme's rotation time per direction, s")
+    p.add_argument("--dwell-s", type=argtypes.positive, help="override the scheme's dwell per attitude, s")
+    # up to what a capture may record (station.io.capture.MAX_RATE_DPS; not imported here: --help)
+    p.add_argument("--rate-dps", type=argtypes.between(1e-3, 1e5), help="override the scheme's rotation rate, deg/s")
+    p.add_argument("--rotation-s", type=argtypes.positive,
+                   help="override the scheme's rotation time per direction, s")
 
 
 # ------------------------------------------------------------------------------------ commands

@@ -11,6 +11,7 @@ from typing import Callable, Iterator
 import numpy as np
 import yaml
 
+from station.core.errors import UserError
 from station.io.capture import Capture, CaptureWriter, ImuInfo, Segment, SegmentData, Site
 from station.io.scheme import RotationSpec, Scheme
 
@@ -22,6 +23,24 @@ def load_truth(truth_path: str | None, seed: int):
     from sim_devices.truth import Truth, default_truth
 
     return Truth.from_yaml(truth_path) if truth_path else default_truth(seed)
+
+
+MAX_SIMULATED_SAMPLES = 5_000_000   # per segment: the simulator holds a segment whole (~1 GB at this)
+
+
+def _check_lengths(scheme: Scheme, rate_hz: float) -> None:
+    """UserError naming the segment when one gives fewer than 2 samples, or more than the
+    simulator holds at once, before anything is simulated or written."""
+    for spec in scheme.segments:
+        n = spec.duration_s * rate_hz
+        what = "--dwell-s or the scheme's dwell_s" if spec.kind == "static" else "--rotation-s or the scheme's rotation_s"
+        if n < 2:
+            raise UserError(f"scheme {scheme.name}: segment {spec.name!r}: {spec.duration_s:g} s gives fewer "
+                            f"than 2 samples at {rate_hz:g} Hz ({what})")
+        if n > MAX_SIMULATED_SAMPLES:
+            raise UserError(f"scheme {scheme.name}: segment {spec.name!r}: {spec.duration_s:g} s is {n:.3g} samples "
+                            f"at {rate_hz:g} Hz, more than the simulator holds at once ({MAX_SIMULATED_SAMPLES:,}; "
+                            f"{what})")
 
 
 def _simulate(scheme: Scheme, bench) -> Iterator[tuple[object, object, dict]]:
@@ -69,6 +88,7 @@ def record_scheme(scheme: Scheme, truth, seed: int, out_dir: Path,
     from sim_devices.bench import SimulatedBench
 
     bench = SimulatedBench(_mounted(truth, scheme), seed)
+    _check_lengths(scheme, bench.sample_rate_hz)
     imu, site = _headers(bench, seed)
     writer = CaptureWriter(out_dir, imu, site, scheme.name,
                            extra={**_bench_keys(truth, scheme),
@@ -91,6 +111,7 @@ def simulate_capture(scheme: Scheme, truth, seed: int) -> Capture:
     from sim_devices.bench import SimulatedBench
 
     bench = SimulatedBench(_mounted(truth, scheme), seed)
+    _check_lengths(scheme, bench.sample_rate_hz)
     imu, site = _headers(bench, seed)
     segments = []
     for spec, seg, meta in _simulate(scheme, bench):
