@@ -116,3 +116,21 @@ def test_station_schemes_lists_segments_and_durations(capsys):
     cells = [c.strip() for c in row.split("│")[1:-1]]
     assert cells[:4] == ["traditional24", "24", "6", "3480"]     # 24 x 100 s + 6 x 180 s of recording
     assert float(cells[4]) > 3480 and cells[5] == "1"            # moves, settling; the mounting check
+
+
+def test_every_builtin_scheme_by_hand_runs_dry_and_writes_its_turns_as_the_bench_does(tmp_path, capsys):
+    """manual6's dry run: its turns written with the protocol's angle and `motion: hand`, as the
+    bench writes what a hand did (station/bench/manual.py), and estimated (it ended in exit 2:
+    turns without any angle went to the Fourier method, which needs a horizontal shaft)."""
+    import yaml
+
+    from station.cli import main
+
+    for name in (n for n in builtin_names() if not load_scheme(n).table):
+        out = tmp_path / name
+        assert main(["run", "--scheme", name, "--sim", "--out", str(out)]) == 0, capsys.readouterr().err
+        turns = [s for s in yaml.safe_load((out / "manifest.yaml").read_text())["segments"] if s["kind"] == "rotation"]
+        specs = {s.name: s for s in load_scheme(name).segments}
+        assert turns and all(t["motion"] == "hand" and abs(t["angle_deg"]) == specs[t["name"]].turn_deg
+                             for t in turns), turns
+        assert (out / "calibration.yaml").exists()

@@ -47,12 +47,20 @@ def _simulate(scheme: Scheme, bench) -> Iterator[tuple[object, object, dict]]:
     """(spec, simulated segment, commanded manifest keys) for every segment, in order."""
     for spec in scheme.segments:
         if isinstance(spec, RotationSpec):
-            drift = 0.0 if spec.encoder else bench.truth.bench.rate_drift_fraction
+            # a turn without an encoder: a screwdriver's (its rate drifts, its angle is unknown) or
+            # a hand's by protocol (turn_deg: back to the same edge; the hand's placement is the
+            # bench's angle error), written as the bench writes it (station/bench/manual.py)
+            protocol = not spec.encoder and spec.turn_deg is not None
+            drift = 0.0 if spec.encoder or protocol else bench.truth.bench.rate_drift_fraction
             seg = bench.rotation(spec.axis_body, spec.rate_dps, spec.duration_s,
                                  axis_elevation_deg=spec.axis_elevation_deg,
                                  drift_fraction=drift, encoder=spec.encoder)
             meta = {"axis_body": list(spec.axis_body), "rate_dps": spec.rate_dps}
-            if not spec.encoder:
+            if protocol:
+                meta.update(angle_deg=float(np.sign(spec.rate_dps)) * spec.turn_deg, motion="hand",
+                            note=f"angle_deg is the protocol's turn ({spec.turn_deg:g} deg by hand), not an "
+                                 "encoder reading")
+            elif not spec.encoder:
                 meta["note"] = "no encoder: rate_dps is the nominal rate and gives the direction only"
             yield spec, seg, meta
         else:
@@ -119,7 +127,8 @@ def simulate_capture(scheme: Scheme, truth, seed: int) -> Capture:
             name=spec.name, kind=spec.kind, file=f"{spec.name}.csv", status="complete",
             up_body=np.array(meta["up_body"]) if "up_body" in meta else None,
             axis_body=np.array(meta["axis_body"]) if "axis_body" in meta else None,
-            rate_dps=meta.get("rate_dps"), angle_deg=seg.meta.get("angle_deg"), note=meta.get("note"),
+            rate_dps=meta.get("rate_dps"), angle_deg=seg.meta.get("angle_deg", meta.get("angle_deg")),
+            note=meta.get("note"), extra={k: meta[k] for k in ("motion",) if k in meta},
             data=SegmentData(t=seg.t, accel=seg.accel, gyro=seg.gyro, temp=seg.temp, gaps=0)))
     return Capture(path=Path(f"<simulated seed {seed}>"), imu=imu, site=site, scheme=scheme.name,
                    segments=segments, extra=_bench_keys(truth, scheme), warnings=[])
