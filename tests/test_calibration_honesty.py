@@ -211,3 +211,27 @@ def test_a_segment_over_the_data_loss_limits_is_excluded_with_a_note(with_rotati
     # with a looser limit it is used
     assert main(["estimate", str(cap), "--max-gap-s", "2", "--max-missing-fraction", "0.2"]) == 0
     assert read_calfile(cap / "calibration.yaml")["fit"]["static_segments"] == 9
+
+
+def test_an_accelerometer_only_calibration_writes_no_gyro_calibration_anywhere(statics_only, tmp_path, capsys):
+    """Its exports carry no gyro block (the unit factor read_calfile passes the gyro through with
+    is no calibration: a raw gyro's was 1, counts taken for deg/s), and apply refuses a raw gyro
+    it has no scale for instead of writing counts under deg/s."""
+    import yaml
+
+    from station.io.exporters import source_from_document
+
+    cap = copy_capture(statics_only, tmp_path / "cap")
+    assert main(["estimate", str(cap)]) == 0
+    cal = cap / "calibration.yaml"
+    assert source_from_document(read_calfile(cal), cal).has_gyro is False
+    capsys.readouterr()
+    assert main(["export", str(cal), "--to", "ros", "-o", str(tmp_path / "ros.yaml")]) == 0
+    assert "gyro block is absent" in capsys.readouterr().err
+    doc = yaml.safe_load(cal.read_text())
+    doc["imu"]["gyro_unit"] = "raw"
+    raw_cal = tmp_path / "raw.yaml"
+    raw_cal.write_text(yaml.safe_dump(doc, sort_keys=False))
+    assert main(["apply", str(raw_cal), str(cap / "pos05.csv"), "-o", str(tmp_path / "out.csv")]) == 2
+    assert "no scale to write the gyros in deg/s" in capsys.readouterr().err
+    assert not (tmp_path / "out.csv").exists()

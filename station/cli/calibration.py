@@ -136,6 +136,10 @@ def cmd_apply(args) -> int:
 
     doc = read_calfile(args.calibration)
     check_serial(doc, args.calibration, _input_serial(args), args.force, args.input)
+    if doc.get("gyro_pass_through") and (doc.get("imu") or {}).get("gyro_unit") == "raw":
+        raise UserError(f"{args.calibration}: calibrates the accelerometers only, and the gyro output is in "
+                        "raw counts: apply has no scale to write the gyros in deg/s (calibrate the gyros: "
+                        "rotations with encoder angles, or hand turns between statics)")
     data = read_segment_csv(Path(args.input))
     comp = doc["compensation"]
     if "effects" in comp:

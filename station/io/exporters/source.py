@@ -93,6 +93,8 @@ def source_from_document(doc: dict, origin) -> ExportSource:
     accel_bias = _array(comp, "accel_bias", (3,), origin)
     gyro_matrix = _array(comp, "gyro_matrix", (3, 3), origin, optional=True)
     gyro_bias = _array(comp, "gyro_bias", (3,), origin, optional=True)
+    if doc.get("gyro_pass_through"):     # an accelerometer-only calibration: read_calfile's unit
+        gyro_matrix = gyro_bias = None   #   factor is no gyro calibration to write (raw: none at all)
     for key, m in (("accel_matrix", accel_matrix), ("gyro_matrix", gyro_matrix)):
         if m is not None and not (np.all(np.diag(m) != 0.0) and np.linalg.cond(m) < 1e12):
             raise UserError(f"{origin}: field 'compensation.{key}': singular or with a zero diagonal "
