@@ -128,3 +128,19 @@ def test_a_steady_rotation_without_angle_leaves_the_page_without_a_diagnosis(opt
     text = (tmp_path / "page.html").read_text(encoding="utf-8")
     assert "needs the encoder angle of every rotation that is not a hand turn" in text
     assert "Candidate effects" not in text and text.count("data:image/png") == 1     # the noise
+
+
+def test_a_calibration_of_another_imu_is_refused_on_the_page_unless_forced(optimal9_run, tmp_path, capsys):
+    """As diagnose, apply and noise: a --cal made for another IMU serial is refused (exit 2),
+    --force uses it with a warning."""
+    import yaml
+
+    doc = yaml.safe_load((optimal9_run / "calibration.yaml").read_text())
+    doc["provenance"]["imu_serial"] = "OTHER-1"
+    other = tmp_path / "other.yaml"
+    other.write_text(yaml.safe_dump(doc, sort_keys=False))
+    page = tmp_path / "page.html"
+    assert main(["report", str(optimal9_run), "--cal", str(other), "-o", str(page), "--no-auto"]) == 2
+    assert "made for IMU serial OTHER-1" in capsys.readouterr().err and not page.exists()
+    assert main(["report", str(optimal9_run), "--cal", str(other), "-o", str(page), "--no-auto", "--force"]) == 0
+    assert "used anyway (--force)" in capsys.readouterr().err and page.exists()
