@@ -90,8 +90,9 @@ def main() -> int:
         print("\nstation estimate:")
         for method in ("auto", "zhang2010", "fourier-high"):
             try:
-                estimate_capture(path, method)
-                print(f"  {method}: estimated (unexpected)")
+                cal, _, prov = estimate_capture(path, method)
+                what = "with the gyros" if cal.fit.get("gyro_calibrated", True) else "accelerometer-only calibration"
+                print(f"  {method}: estimated ({prov['method']}, {what})")
             except UserError as e:
                 print(f"  {method}: refused: {e}")
 
@@ -102,17 +103,21 @@ def main() -> int:
         cal, _, _ = estimate_capture(path360, "auto")
         p = {n: (v, cal.sigma.get(n)) for n, v, _ in cal.parameters()}
         print("\nstation estimate --method lsq after `station import imucal --turn-deg 360`"
-              f" (reduced chi2 {cal.fit['reduced_chi2']:.2f}):")
-        for label, names, k in (("accel gain", [f"accel_scale_{a}" for a in "xyz"], 1.0),
-                                ("accel bias m/s^2", [f"accel_bias_{a}" for a in "xyz"], 9.80665e-6),
-                                ("gyro gain", [f"gyro_scale_{a}" for a in "xyz"], 1.0),
-                                ("gyro bias deg/s", [f"gyro_bias_{a}" for a in "xyz"], 1 / 3600)):
+              f" ({cal.fit['dof']} degrees of freedom, reduced chi2 {cal.fit['reduced_chi2']:.2f}):")
+        result = {}
+        for label, key, names, k in (("accel gain", "K_a", [f"accel_scale_{a}" for a in "xyz"], 1.0),
+                                     ("accel bias m/s^2", "b_a", [f"accel_bias_{a}" for a in "xyz"], 9.80665e-6),
+                                     ("gyro gain", "K_g", [f"gyro_scale_{a}" for a in "xyz"], 1.0),
+                                     ("gyro bias deg/s", "b_g", [f"gyro_bias_{a}" for a in "xyz"], 1 / 3600)):
+            if any(None in p.get(n, (None, None)) for n in names):     # not determined: not written
+                print(f"  {label:18s} not written")
+                continue
             print(f"  {label:18s} " + ", ".join(f"{p[n][0] * k:+.4f} ± {p[n][1] * k:.4f}" for n in names))
-        station_result = {"K_a": [p[f"accel_scale_{a}"][0] for a in "xyz"],
-                          "b_a": [p[f"accel_bias_{a}"][0] * 9.80665e-6 for a in "xyz"],
-                          "K_g": [p[f"gyro_scale_{a}"][0] for a in "xyz"],
-                          "b_g": [p[f"gyro_bias_{a}"][0] / 3600 for a in "xyz"]}
-        print("  " + json.dumps({k: np.round(v, 4).tolist() for k, v in station_result.items()}))
+            result[key] = [p[n][0] * k for n in names]
+        for note in cal.fit.get("notes", []):
+            if note.startswith("accelerometer-only"):
+                print(f"  note: {note}")
+        print("  " + json.dumps({k: np.round(v, 4).tolist() for k, v in result.items()}))
 
         try:
             import imucal  # noqa: F401
