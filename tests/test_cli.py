@@ -72,7 +72,8 @@ def test_show_prints_parameters(dry_run, capsys):
 
 
 @pytest.mark.parametrize("argv, expected", [
-    (["estimate", "/nonexistent/cap"], "manifest.yaml"),
+    (["estimate", "/nonexistent/cap"], "/nonexistent/cap: no such directory"),
+    (["estimate", __file__], "a file, not a capture bundle"),
     (["show", "/nonexistent.yaml"], "/nonexistent.yaml"),
     (["run", "--scheme", "nope", "--sim"], "unknown scheme 'nope'"),
     (["run", "--scheme", "optimal9"], "add --sim"),
@@ -153,3 +154,14 @@ def test_output_to_a_reader_that_went_away_ends_quietly(optimal9_run, tmp_path):
     finally:
         os.close(write)
     assert r.returncode == 1 and "Traceback" not in r.stderr and "BrokenPipe" not in r.stderr, r.stderr
+
+
+def test_estimate_of_a_single_static_recording_is_one_line(tmp_path, capsys):
+    """A noise recording (one attitude) given to estimate: the one-line refusal, without scipy's
+    two-line warning about a rotation not uniquely defined before it."""
+    cap = tmp_path / "noise"
+    assert main(["run", "--scheme", "noise", "--sim", "--dwell-s", "30", "--out", str(cap)]) == 0
+    r = subprocess.run([sys.executable, "-m", "station.cli", "estimate", str(cap), "-o", str(tmp_path / "cal.yaml")],
+                       capture_output=True, text=True, timeout=300)      # a process: its own warnings
+    err = r.stderr.strip()
+    assert r.returncode == 2 and len(err.splitlines()) == 1 and "cannot determine" in err, err

@@ -128,7 +128,9 @@ def _start(s: Summaries) -> Start:
             axes_o.append(l_o / np.linalg.norm(l_o))
             axes_p.append(l_p / np.linalg.norm(l_p))
     if len(axes_o) >= 2:
-        R_po = Rotation.align_vectors(np.array(axes_o), np.array(axes_p))[0].as_matrix()
+        with warnings.catch_warnings():    # degenerate axes: the fit's identifiability says so, in words
+            warnings.filterwarnings("ignore", "Optimal rotation is not uniquely or poorly defined", UserWarning)
+            R_po = Rotation.align_vectors(np.array(axes_o), np.array(axes_p))[0].as_matrix()
     else:
         R_po = np.eye(3)
         notes.append("no algebraic start for the inter-triad rotation: started from zero")
@@ -256,7 +258,10 @@ class Model:
             up_p /= np.linalg.norm(up_p)
             if self.with_latitude:
                 earth_p = Lg @ (stat.gyro - st.bg)
-                C0, _ = Rotation.align_vectors([up_p, earth_p], [UP, self.omega_n], weights=[1e6, 1.0])
+                with warnings.catch_warnings():    # (as in _start)
+                    warnings.filterwarnings("ignore", "Optimal rotation is not uniquely or poorly defined",
+                                            UserWarning)
+                    C0, _ = Rotation.align_vectors([up_p, earth_p], [UP, self.omega_n], weights=[1e6, 1.0])
                 self.static_ref.append(C0)
             else:
                 self.static_ref.append(up_p)

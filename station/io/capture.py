@@ -265,9 +265,13 @@ def read_capture(path, *, load_data=True):
     """
     path = Path(path)
     directory, manifest_file = (path.parent, path) if _is_file(path) else (path, path / MANIFEST)
+    if manifest_file.name != MANIFEST:        # e.g. a segment's CSV given for its capture
+        raise CaptureError(path, f"a file, not a capture bundle (a directory holding {MANIFEST}, or that file)")
     try:
         raw = yaml_text.safe_load(read_regular_file(manifest_file, limit=MAX_MANIFEST_BYTES))
     except FileNotFoundError:
+        if not directory.exists():
+            raise CaptureError(directory, "no such directory") from None
         raise CaptureError(manifest_file, "no manifest: not a capture bundle") from None
     except OSError as e:
         raise CaptureError(manifest_file, f"cannot read: {e.strerror}") from None
