@@ -88,10 +88,12 @@ def test_probe_user_errors(capsys):
     assert main(["probe"]) == 2
     assert main(["probe", "--port", "/dev/nope-no-such-port", "--seconds", "1"]) == 2
     assert main(["probe", "--port", "x", "--imu-protocol", "nope"]) == 2
-    assert main(["probe", "--port", "x", "--seconds", "-1"]) == 2
+    with pytest.raises(SystemExit) as refused:              # by its type, before anything runs
+        main(["probe", "--port", "x", "--seconds", "-1"])
+    assert refused.value.code == 2
     err = capsys.readouterr().err
     assert "give --port" in err and "cannot open /dev/nope-no-such-port" in err
-    assert "unknown IMU protocol 'nope'" in err and "--seconds must be > 0" in err
+    assert "unknown IMU protocol 'nope'" in err and "argument --seconds: must be a positive number" in err
 
 
 def _serve(*args):
@@ -126,7 +128,7 @@ def test_sim_serve_user_errors(tmp_path):
     bad.write_text("imu:\n  drop: {probability: 2}\n")
     for args, message in ((["--faults", str(bad)], "field 'imu.drop.probability': must be <= 1.0"),
                           (["--table-protocol", "aerosmith", "--axes", "3"], "single-axis"),
-                          (["--speed", "0"], "--speed must be > 0")):
+                          (["--speed", "0"], "argument --speed: must be a positive number")):
         r = subprocess.run([sys.executable, "-m", "station.cli", "sim", "serve", *args],
                            capture_output=True, text=True, timeout=30)
         assert r.returncode == 2 and message in r.stderr and r.stdout == ""
