@@ -271,3 +271,25 @@ def _parser_with(build, func):
                 sub.set_defaults(func=func)
         return parser
     return build_and_patch
+
+
+def test_a_dead_axis_is_refused_by_diagnose_and_report_as_by_estimate(capture_dir, tmp_path, capsys):
+    """A gyro axis that reads 0 in every sample: the fit's start has no rotation to align
+    (scipy's SVD did not converge: a traceback in diagnose and report); refused in one line, as
+    estimate refuses it (quantised coarser than its noise)."""
+    import hashlib
+    import shutil
+
+    cap = tmp_path / "cap"
+    shutil.copytree(capture_dir, cap)
+    manifest = yaml.safe_load((cap / "manifest.yaml").read_text())
+    for seg in manifest["segments"]:
+        lines = (cap / seg["file"]).read_text().splitlines()
+        k = lines[0].split(",").index("gx")
+        lines = lines[:1] + [",".join("0" if i == k else v for i, v in enumerate(line.split(",")))
+                             for line in lines[1:]]
+        (cap / seg["file"]).write_text("\n".join(lines) + "\n")
+        seg["sha256"] = hashlib.sha256((cap / seg["file"]).read_bytes()).hexdigest()
+    (cap / "manifest.yaml").write_text(yaml.safe_dump(manifest, sort_keys=False))
+    for argv in (["diagnose", cap], ["report", cap, "-o", tmp_path / "page.html"]):
+        one_line_exit_2(argv, capsys, "column 'gx': quantised coarser than its noise")

@@ -14,15 +14,19 @@ class RotationWithoutAngle(UserError):
 def rotation_angle_check(capture):
     """A check_segment refusing (RotationWithoutAngle) a rotation without its encoder angle that
     no hand made (the least-squares model cannot use it); raised at once when there is no static
-    for a hand turn to lie between (a screwdriver's capture)."""
+    for a hand turn to lie between (a screwdriver's capture).  Static segments quantised coarser
+    than their noise (a dead axis) are refused as estimate refuses them (UserError)."""
     message = (f"{capture.path}: diagnose fits the least-squares model, which needs the encoder "
                "angle (angle_deg) of every rotation segment that is not a hand turn between statics")
     if not capture.complete("static") and any(seg.angle_deg is None for seg in capture.complete("rotation")):
         raise RotationWithoutAngle(message)
 
     def check(seg) -> None:
+        from station.estimate import _check_static_resolution
         from station.estimate.hand_rotation import is_hand
 
+        if seg.kind == "static":        # as estimate: a dead or coarsely quantised axis is refused
+            _check_static_resolution(capture, seg)
         if seg.kind == "rotation" and seg.angle_deg is None and not is_hand(seg):
             raise RotationWithoutAngle(message)
     return check
