@@ -49,7 +49,7 @@ def _effects(args, capture, reg) -> list[str]:
 
 
 def cmd_diagnose(args) -> int:
-    from station.diagnose import DIAGNOSIS_MODULES, rotation_angle_check
+    from station.diagnose import DIAGNOSIS_MODULES, segment_check
     from station.estimate import summarise_while_importing
     from station.io.capture import read_capture
 
@@ -59,16 +59,16 @@ def cmd_diagnose(args) -> int:
         from station.io.calfile import read_calfile
 
         cal_doc = read_calfile(args.calib)
-    refuse = rotation_angle_check(capture)
+    check = segment_check(capture)
     with contextlib.ExitStack() as stack:
         # each segment read, checked and summarised (in a child, while the fit is imported here);
         # with --report, the figures in a second process and the noise where the capture is read
         if args.report:
             from station.diagnose.figure_job import read_for_report
 
-            job, noise, noise_note = read_for_report(capture, cal_doc, stack, refuse)
+            job, noise, noise_note = read_for_report(capture, cal_doc, stack, check)
         else:
-            summarise_while_importing(capture, refuse, modules=DIAGNOSIS_MODULES)
+            summarise_while_importing(capture, check, modules=DIAGNOSIS_MODULES)
         from station.diagnose import auto
         from station.diagnose.core import diagnose
         from station.estimate import lsq

@@ -2,10 +2,9 @@
 output only; the work is in station.io.importers)."""
 from __future__ import annotations
 
-
+from station.cli import argtypes
 from station.cli.choices import (CSV_PRESETS, IMUCAL_DEFAULT_GRAVITY_MPS2, IMUCAL_FORMATS,
                                  RECORDING_MIN_POSES, ROSBAG_STAMPS)
-from station.cli import argtypes
 from station.cli.output import out
 from station.core.errors import UserError
 

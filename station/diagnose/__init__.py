@@ -11,8 +11,8 @@ class RotationWithoutAngle(UserError):
     (the diagnosis) cannot use the capture."""
 
 
-def rotation_angle_check(capture):
-    """A check_segment refusing (RotationWithoutAngle) a rotation without its encoder angle that
+def segment_check(capture):
+    """The check_segment of a diagnosis: refuses (RotationWithoutAngle) a rotation without its encoder angle that
     no hand made (the least-squares model cannot use it); raised at once when there is no static
     for a hand turn to lie between (a screwdriver's capture).  Static segments quantised coarser
     than their noise (a dead axis) are refused as estimate refuses them (UserError)."""
@@ -22,11 +22,11 @@ def rotation_angle_check(capture):
         raise RotationWithoutAngle(message)
 
     def check(seg) -> None:
-        from station.estimate import _check_static_resolution
+        from station.estimate import check_static_resolution
         from station.estimate.hand_rotation import is_hand
 
         if seg.kind == "static":        # as estimate: a dead or coarsely quantised axis is refused
-            _check_static_resolution(capture, seg)
+            check_static_resolution(capture, seg)
         if seg.kind == "rotation" and seg.angle_deg is None and not is_hand(seg):
             raise RotationWithoutAngle(message)
     return check

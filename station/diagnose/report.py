@@ -363,7 +363,7 @@ def report_input(capture, cal_doc=None, cal_path=None, *, effects=(), auto=True)
     are drawn by a FigureJob."""
     import contextlib
 
-    from station.diagnose import RotationWithoutAngle, rotation_angle_check
+    from station.diagnose import RotationWithoutAngle, segment_check
     from station.diagnose.figure_job import read_for_report
     from station.io.history import verdict_of
 
@@ -377,7 +377,7 @@ def report_input(capture, cal_doc=None, cal_path=None, *, effects=(), auto=True)
         inp.diagnosis_note = "No rotation segments: nothing to diagnose (a noise recording)."
     else:
         try:
-            check = rotation_angle_check(capture)       # hand turns between statics are diagnosed
+            check = segment_check(capture)       # hand turns between statics are diagnosed
         except RotationWithoutAngle:
             inp.diagnosis_note = without_angle
     with contextlib.ExitStack() as stack:

@@ -102,10 +102,10 @@ def check_resolution(capture: Capture) -> None:
     by the rounding, not by the sensor, and the noise (the fit's weights) reads as zero."""
     for seg in capture.complete("static"):
         with capture.lent_samples(seg):          # a capture read without its samples: each in turn
-            _check_static_resolution(capture, seg)
+            check_static_resolution(capture, seg)
 
 
-def _check_static_resolution(capture: Capture, seg) -> None:
+def check_static_resolution(capture: Capture, seg) -> None:
     """check_resolution for one static segment (samples in seg.data)."""
     from station.core.errors import UserError
 
@@ -247,7 +247,7 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
 
         def check_segment(seg):
             if seg.kind == "static":
-                _check_static_resolution(capture, seg)
+                check_static_resolution(capture, seg)
             note = _exclude_if_lossy(seg, capture.imu.sample_rate_hz, max_missing_fraction, max_gap_s)
             if note:
                 notes[seg.name] = note

@@ -95,6 +95,14 @@ class Start:
     notes: list = field(default_factory=list)
 
 
+def _align_vectors(a, b, weights=None) -> Rotation:
+    """Rotation.align_vectors(a, b)'s rotation, without scipy's warning when it is not uniquely
+    defined (degenerate vectors: the fit's identifiability then says so, in words)."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "Optimal rotation is not uniquely or poorly defined", UserWarning)
+        return Rotation.align_vectors(a, b, weights)[0]
+
+
 def _start(s: Summaries) -> Start:
     means_a = np.array([st.accel for st in s.statics])
     means_w = np.array([st.gyro for st in s.statics])
@@ -128,9 +136,7 @@ def _start(s: Summaries) -> Start:
             axes_o.append(l_o / np.linalg.norm(l_o))
             axes_p.append(l_p / np.linalg.norm(l_p))
     if len(axes_o) >= 2:
-        with warnings.catch_warnings():    # degenerate axes: the fit's identifiability says so, in words
-            warnings.filterwarnings("ignore", "Optimal rotation is not uniquely or poorly defined", UserWarning)
-            R_po = Rotation.align_vectors(np.array(axes_o), np.array(axes_p))[0].as_matrix()
+        R_po = _align_vectors(np.array(axes_o), np.array(axes_p)).as_matrix()
     else:
         R_po = np.eye(3)
         notes.append("no algebraic start for the inter-triad rotation: started from zero")
@@ -258,10 +264,7 @@ class Model:
             up_p /= np.linalg.norm(up_p)
             if self.with_latitude:
                 earth_p = Lg @ (stat.gyro - st.bg)
-                with warnings.catch_warnings():    # (as in _start)
-                    warnings.filterwarnings("ignore", "Optimal rotation is not uniquely or poorly defined",
-                                            UserWarning)
-                    C0, _ = Rotation.align_vectors([up_p, earth_p], [UP, self.omega_n], weights=[1e6, 1.0])
+                C0 = _align_vectors([up_p, earth_p], [UP, self.omega_n], weights=[1e6, 1.0])
                 self.static_ref.append(C0)
             else:
                 self.static_ref.append(up_p)

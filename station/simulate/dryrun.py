@@ -28,9 +28,13 @@ def load_truth(truth_path: str | None, seed: int):
 MAX_SIMULATED_SAMPLES = 5_000_000   # per segment: the simulator holds a segment whole (~1 GB at this)
 
 
-def _check_lengths(scheme: Scheme, rate_hz: float) -> None:
-    """UserError naming the segment when one gives fewer than 2 samples, or more than the
-    simulator holds at once, before anything is simulated or written."""
+def _bench(scheme: Scheme, truth, seed: int):
+    """The simulated bench for ``scheme``; UserError naming the segment when one gives fewer than
+    2 samples, or more than the simulator holds at once, before anything is simulated or written."""
+    from sim_devices.bench import SimulatedBench
+
+    bench = SimulatedBench(_mounted(truth, scheme), seed)
+    rate_hz = bench.sample_rate_hz
     for spec in scheme.segments:
         n = spec.duration_s * rate_hz
         what = "--dwell-s or the scheme's dwell_s" if spec.kind == "static" else "--rotation-s or the scheme's rotation_s"
@@ -41,6 +45,7 @@ def _check_lengths(scheme: Scheme, rate_hz: float) -> None:
             raise UserError(f"scheme {scheme.name}: segment {spec.name!r}: {spec.duration_s:g} s is {n:.3g} samples "
                             f"at {rate_hz:g} Hz, more than the simulator holds at once ({MAX_SIMULATED_SAMPLES:,}; "
                             f"{what})")
+    return bench
 
 
 def _simulate(scheme: Scheme, bench) -> Iterator[tuple[object, object, dict]]:
@@ -93,10 +98,7 @@ def _headers(bench, seed: int) -> tuple[ImuInfo, Site]:
 def record_scheme(scheme: Scheme, truth, seed: int, out_dir: Path,
                   progress: Callable[[str, int, int], None] | None = None) -> Path:
     """Simulate every segment of ``scheme`` and write the capture bundle to ``out_dir``."""
-    from sim_devices.bench import SimulatedBench
-
-    bench = SimulatedBench(_mounted(truth, scheme), seed)
-    _check_lengths(scheme, bench.sample_rate_hz)
+    bench = _bench(scheme, truth, seed)
     imu, site = _headers(bench, seed)
     writer = CaptureWriter(out_dir, imu, site, scheme.name,
                            extra={**_bench_keys(truth, scheme),
@@ -116,10 +118,7 @@ def record_scheme(scheme: Scheme, truth, seed: int, out_dir: Path,
 
 def simulate_capture(scheme: Scheme, truth, seed: int) -> Capture:
     """The capture a dry run would write, kept in memory (for Monte Carlo runs)."""
-    from sim_devices.bench import SimulatedBench
-
-    bench = SimulatedBench(_mounted(truth, scheme), seed)
-    _check_lengths(scheme, bench.sample_rate_hz)
+    bench = _bench(scheme, truth, seed)
     imu, site = _headers(bench, seed)
     segments = []
     for spec, seg, meta in _simulate(scheme, bench):
