@@ -79,7 +79,7 @@ def stages(capture: Path) -> None:
         t.append(time.perf_counter())
         pyplot()
         t.append(time.perf_counter())
-        draw({"allan.png": noise})
+        draw({"allan.svg": noise})
         t.append(time.perf_counter())
         draw(diagnosis_figure_specs(steps[0].before if steps else final, steps))
         t.append(time.perf_counter())

@@ -83,7 +83,7 @@ def test_cli_json_and_report(tmp_path, capsys):
     drops = [c["predicted_chi2_drop"] for c in doc["candidates"] if not c["significant"]]
     assert drops == sorted(drops, reverse=True)
     assert (tmp_path / "rep" / "index.html").exists()
-    assert (tmp_path / "rep" / "residuals_per_segment.png").stat().st_size > 1000
+    assert (tmp_path / "rep" / "residuals_per_segment.svg").stat().st_size > 1000
 
 
 def mems_capture(seed=3, **hidden):

@@ -25,7 +25,7 @@ def specs(optimal9_run):
     steps, final = auto.run(lsq.summarise(capture), [])
     result, note = noise_of(capture)
     assert note is None
-    return {"allan.png": result}, diagnosis_figure_specs(steps[0].before if steps else final, steps)
+    return {"allan.svg": result}, diagnosis_figure_specs(steps[0].before if steps else final, steps)
 
 
 def _drawn_by_job(specs) -> dict:
@@ -45,7 +45,7 @@ def test_the_worker_draws_the_bytes_drawn_here(specs):
     assert list(there) == list(here) and len(here) >= 3
     for name in here:
         assert there[name] == here[name], name
-        assert here[name][:8] == b"\x89PNG\r\n\x1a\n"
+        assert here[name].startswith(b"<?xml") and b"</svg>" in here[name][-100:]      # SVG by the name
 
 
 # module-level: the task is sent to the worker by name (a local function could not be, and would
@@ -153,8 +153,8 @@ def test_diagnose_report_imports_matplotlib_only_in_its_worker_and_the_reader_no
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert r.stdout.split()[-2:] == ["0", "False"]
-    assert (tmp_path / "report" / "allan.png").stat().st_size > 0
-    assert (tmp_path / "report" / "residuals_per_segment.png").stat().st_size > 0
+    assert (tmp_path / "report" / "allan.svg").stat().st_size > 0
+    assert (tmp_path / "report" / "residuals_per_segment.svg").stat().st_size > 0
     r = subprocess.run([sys.executable, "-c", READER, str(optimal9_run)], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert r.stdout.split() == ["True", "False"]
@@ -166,7 +166,7 @@ from station.diagnose import figures
 real = figures.draw
 parent = os.getpid()
 def slow(specs):
-    if os.getpid() != parent and "allan.png" not in specs:   # the diagnosis figures: a long draw
+    if os.getpid() != parent and "allan.svg" not in specs:   # the diagnosis figures: a long draw
         with open(sys.argv[3], "a") as f:            # not stdout: the diagnosis is printed there
             f.write(f"{os.getpid()}\\n")
         time.sleep(60)

@@ -1,5 +1,6 @@
 """The report page: one self-contained HTML file, checked in a real headless browser (Debian's
 chromium; .ci/run installs it and sets STATION_REQUIRE_BROWSER=1 so that CI cannot skip this)."""
+import base64
 import os
 import re
 import shutil
@@ -45,8 +46,12 @@ def test_the_page_is_self_contained_and_says_what_a_reader_needs(page):
     text = page.read_text(encoding="utf-8")
     # nothing fetched from elsewhere: every src is a data: URI, no stylesheet or script link
     sources = re.findall(r"src='([^']*)'", text)
-    assert sources and all(s.startswith("data:image/png;base64,") for s in sources)
+    assert sources and all(s.startswith("data:image/svg+xml;base64,") for s in sources)
     assert "<link" not in text and "<script" not in text and "http" not in text.split("</style>")[1]
+    for s in sources:       # and the figures refer to nothing outside themselves either
+        svg = base64.b64decode(s.split(",", 1)[1]).decode()
+        assert "<svg" in svg and "<script" not in svg and "<image" not in svg
+        assert not re.search(r"""href=["'](?!#)""", svg)          # only links to its own elements
     for needed in ("nonlinear-cap", "SIM-5", "optimal9", "recorded (UTC)", "accel_scale_x", "± 1σ",
                    "fit verdict", "Step 1: added accel_nonlinearity", "predicted χ² drop", "Candidate effects",
                    "Allan deviation", "white noise"):
@@ -65,7 +70,7 @@ def test_diagnose_report_writes_the_same_kind_of_page(hidden_effect_capture, tmp
     text = (out / "index.html").read_text(encoding="utf-8")
     assert "nonlinear-cap" in text and "SIM-5" in text and "Candidate effects" in text
     assert all(s.startswith("data:") for s in re.findall(r"src='([^']*)'", text))
-    assert (out / "residuals_per_segment.png").stat().st_size > 1000
+    assert (out / "residuals_per_segment.svg").stat().st_size > 1000
 
 
 def test_a_noise_recording_gets_a_page_without_a_diagnosis(tmp_path):
@@ -111,7 +116,7 @@ def test_a_hand_pose_log_gets_its_diagnosis_on_the_page(tmp_path, capsys):
     assert main(["report", str(cap), "-o", str(tmp_path / "page.html")]) == 0
     text = (tmp_path / "page.html").read_text(encoding="utf-8")
     assert "Candidate effects" in text and "needs the encoder angle" not in text
-    assert text.count("data:image/png") >= 3          # residuals, candidates, noise
+    assert text.count("data:image/svg+xml") >= 3          # residuals, candidates, noise
 
 
 def test_a_steady_rotation_without_angle_leaves_the_page_without_a_diagnosis(optimal9_run, tmp_path):
@@ -127,7 +132,7 @@ def test_a_steady_rotation_without_angle_leaves_the_page_without_a_diagnosis(opt
     assert main(["report", str(cap), "-o", str(tmp_path / "page.html")]) == 0
     text = (tmp_path / "page.html").read_text(encoding="utf-8")
     assert "needs the encoder angle of every rotation that is not a hand turn" in text
-    assert "Candidate effects" not in text and text.count("data:image/png") == 1     # the noise
+    assert "Candidate effects" not in text and text.count("data:image/svg+xml") == 1     # the noise
 
 
 def test_a_calibration_of_another_imu_is_refused_on_the_page_unless_forced(optimal9_run, tmp_path, capsys):

@@ -76,8 +76,13 @@ def cmd_diagnose(args) -> int:
         s = lsq.summarise(capture)
         reg = plugins.registry(args)
         effects = _effects(args, capture, reg)
+        if args.report:
+            from station.diagnose.report import DiagnosisFigures
+
+            figures = DiagnosisFigures(job)
         if args.auto:
-            steps, final = auto.run(s, effects, progress=None, registry=reg)
+            steps, final = auto.run(s, effects, progress=None, registry=reg,
+                                    on_first=figures.first_known if args.report else None)
             first = steps[0].before if steps else final
         else:
             steps, first = [], diagnose(lsq.fit(s, [reg.create(e) for e in effects]), registry=reg)
@@ -87,9 +92,9 @@ def cmd_diagnose(args) -> int:
             _emit(args.emit_effect, final)
         summary = _summary_lines(final)
         if args.report:
-            from station.diagnose.report import ReportInput, capture_facts, diagnosis_figure_specs
+            from station.diagnose.report import ReportInput, capture_facts
 
-            job.draw(diagnosis_figure_specs(first, steps))
+            figures.known(first, steps)
             if not args.json:
                 _print(out, first, steps, final)        # while the figures are drawn
             page = ReportInput(title=f"Diagnosis: {Path(str(capture.path)).name}",

@@ -67,10 +67,14 @@ def added_parameters(after: Diagnosis, effect_id: str) -> list:
 
 
 def run(summaries, effects=(), attitudes="auto", progress=None,
-        registry: EffectRegistry | None = None) -> tuple[list[Step], Diagnosis]:
-    """Diagnose; while a significant candidate passes the checks, add it, refit, diagnose again."""
+        registry: EffectRegistry | None = None, on_first=None) -> tuple[list[Step], Diagnosis]:
+    """Diagnose; while a significant candidate passes the checks, add it, refit, diagnose again.
+    ``on_first(diagnosis)``, when given, is called with the diagnosis of the model as fitted as
+    soon as it is made (a report draws its candidates' figures meanwhile)."""
     registry = registry or EffectRegistry()
     current = diagnose(lsq.fit(summaries, [registry.create(e) for e in effects], attitudes), registry=registry)
+    if on_first is not None:
+        on_first(current)
     h_current = None          # the leave-one-segment-out check, only once a candidate is tried
     steps, rejected = [], []
     refused: set = set()

@@ -7,7 +7,8 @@ fits; ``draw(specs)`` gives it figures to draw as plain numbers ({file name: Seg
 CandidateFigure or NoiseResult}: the diagnosis objects stay here), as soon as each is known; the
 worker shares them out between itself and a forked process per other core (matplotlib already
 imported there), so the figures are drawn on every core while this process waits.  ``result()``
-returns {file name: PNG}.  This process never imports matplotlib.
+returns {file name: bytes} (the format of each name: station.diagnose.figures.figure_format).
+This process never imports matplotlib.
 
 Where fork is not used (station.core.forked.available: Linux), or the worker fails or dies, the
 figures are drawn here, in order, with the same pixels.  The worker and the processes it forks
@@ -23,6 +24,9 @@ import os
 import signal
 
 from station.core import forked
+
+ALLAN_FIGURE = "allan.svg"                          # the report's figures, by file name
+SEGMENTS_FIGURE = "residuals_per_segment.svg"
 
 
 def _start_worker(parent: int) -> None:
@@ -72,7 +76,7 @@ def _draw_task(specs: dict) -> dict:
 
 
 class FigureJob:
-    """``with FigureJob() as job: job.draw({name: spec}); ...; pngs = job.result()``"""
+    """``with FigureJob() as job: job.draw({name: spec}); ...; figures = job.result()``"""
 
     def __init__(self):
         self._pool = None
@@ -104,8 +108,8 @@ class FigureJob:
             self._tasks.append((specs, pending))
 
     def result(self) -> dict:
-        """{file name: PNG} of every figure given to draw(), in the order given."""
-        pngs = {}
+        """{file name: bytes} of every figure given to draw(), in the order given."""
+        figures = {}
         for specs, pending in self._tasks:
             drawn = None
             if pending is not None:
@@ -113,8 +117,8 @@ class FigureJob:
                     drawn = pending.result()
                 except Exception:     # noqa: BLE001 -- the worker failed: drawn here, which says why
                     drawn = None
-            pngs.update(drawn if drawn is not None else _draw_here(specs))
-        return pngs
+            figures.update(drawn if drawn is not None else _draw_here(specs))
+        return figures
 
     def __exit__(self, *exc) -> None:
         pool, self._pool = self._pool, None
@@ -151,5 +155,5 @@ def read_for_report(capture, cal_doc, stack, check_segment=None) -> tuple:
                                        meanwhile=lambda: stack.enter_context(job))
     noise, note = longest.noise(curves)
     if noise is not None:
-        job.draw({"allan.png": noise})
+        job.draw({ALLAN_FIGURE: noise})
     return job, noise, note

@@ -3,7 +3,7 @@ reads to judge a calibration: what was measured (capture, IMU, scheme, date), th
 ± 1σ, the fit verdict, the residuals before and after each added effect on one y axis, the
 before/after tables, the candidate effects, and the noise (Allan deviation).
 
-``write_report`` keeps the PNG files beside the page for people who want them separately.
+``write_report`` keeps the figures (SVG) beside the page for people who want them separately.
 """
 from __future__ import annotations
 
@@ -19,8 +19,9 @@ import numpy as np
 import station
 from station.core.errors import UserError
 from station.diagnose.core import PRIOR_QUANTITIES
-from station.diagnose.figures import CandidateFigure, SegmentPanel, SegmentsFigure, allan_figure, draw
-from station.diagnose.figure_job import FigureJob
+from station.diagnose.figures import (CandidateFigure, SegmentPanel, SegmentsFigure, allan_figure, draw,
+                                      figure_format)
+from station.diagnose.figure_job import ALLAN_FIGURE, SEGMENTS_FIGURE, FigureJob
 from station.model.registry import EffectRegistry
 
 VARIABLE_LABEL = {
@@ -73,19 +74,48 @@ def candidate_spec(diagnosis, cand) -> CandidateFigure:
                            VARIABLE_LABEL.get(cand.signature_variable, cand.signature_variable), var[ok], r[ok])
 
 
+def candidate_figure_specs(first) -> dict:
+    """{file name: what to draw} of the three leading candidates of the model as fitted (known
+    before any effect is added)."""
+    return {f"candidate_{cand.effect}.svg": candidate_spec(first, cand)
+            for cand in first.candidates[:3] if cand.signature_rows is not None}
+
+
+def segments_figure_specs(first, steps) -> dict:
+    """{file name: what to draw}: the residuals per segment, before and after each step."""
+    panels = [("as fitted", first)] + [(f"after adding {s.added}", s.after) for s in steps]
+    return {SEGMENTS_FIGURE: segments_spec(panels)}
+
+
 def diagnosis_figure_specs(first, steps) -> dict:
     """{file name: what to draw}: the residuals per segment (before and after each step) and the
     three leading candidates."""
-    panels = [("as fitted", first)] + [(f"after adding {s.added}", s.after) for s in steps]
-    specs = {"residuals_per_segment.png": segments_spec(panels)}
-    for cand in first.candidates[:3]:
-        if cand.signature_rows is not None:
-            specs[f"candidate_{cand.effect}.png"] = candidate_spec(first, cand)
-    return specs
+    return {**segments_figure_specs(first, steps), **candidate_figure_specs(first)}
+
+
+class DiagnosisFigures:
+    """Gives a FigureJob the diagnosis' figures as soon as each is known: the candidates' when
+    the model as fitted is diagnosed (``first_known``, station.diagnose.auto.run's on_first) if
+    the loop then refits (a significant candidate: drawn while it does), the residuals per
+    segment, and the candidates' if not given yet, once every step is known (``known``).  (Not
+    given early when nothing is refitted: the job would then draw them and the residuals one
+    task after the other, not on two cores at once.)"""
+
+    def __init__(self, job: FigureJob):
+        self.job, self.candidates_given = job, False
+
+    def first_known(self, first) -> None:
+        if any(c.significant for c in first.candidates):
+            self.job.draw(candidate_figure_specs(first))
+            self.candidates_given = True
+
+    def known(self, first, steps) -> None:
+        self.job.draw(segments_figure_specs(first, steps) if self.candidates_given
+                      else diagnosis_figure_specs(first, steps))
 
 
 def diagnosis_figures(first, steps) -> dict:
-    """{file name: PNG}, drawn here (a FigureJob draws them in its worker)."""
+    """{file name: SVG}, drawn here (a FigureJob draws them in its worker)."""
     return draw(diagnosis_figure_specs(first, steps))
 
 
@@ -105,7 +135,7 @@ class ReportInput:
     diagnosis_note: str | None = None               # why there is no diagnosis
     noise: object = None                            # estimate.noise.NoiseResult
     noise_note: str | None = None
-    figures: dict = field(default_factory=dict)     # PNGs already drawn (by a FigureJob)
+    figures: dict = field(default_factory=dict)     # {file name: bytes} already drawn (by a FigureJob)
 
 
 CSS = """
@@ -143,8 +173,9 @@ def _e(text) -> str:
     return html.escape(str(text), quote=True)
 
 
-def _img(png: bytes, alt: str) -> str:
-    return f"<img alt='{_e(alt)}' src='data:image/png;base64,{base64.b64encode(png).decode()}'>"
+def _img(name: str, figures: dict, alt: str) -> str:
+    kind = "svg+xml" if figure_format(name) == "svg" else "png"
+    return f"<img alt='{_e(alt)}' src='data:image/{kind};base64,{base64.b64encode(figures[name]).decode()}'>"
 
 
 def _table(header, rows, left=(0,)) -> str:
@@ -217,7 +248,7 @@ def _diagnosis_section(inp: ReportInput, figures: dict) -> str:
     if first.failures:
         parts.append("<h3>Where it fails</h3><ul>" + "".join(f"<li>{_e(f)}</li>" for f in first.failures) + "</ul>")
     parts.append("<h3>Residual per segment, before and after each added effect (same y axis)</h3>")
-    parts.append(_img(figures["residuals_per_segment.png"], "RMS whitened residual per segment"))
+    parts.append(_img(SEGMENTS_FIGURE, figures, "RMS whitened residual per segment"))
     for k, st in enumerate(inp.steps, 1):
         rows = [[_e(what), f"{b:.4g}", f"{a:.4g}"] for what, b, a in comparison_rows(st.before, st.after)]
         rows += [["predicted χ² drop", f"{st.predicted_drop:.4g}", ""], ["actual χ² drop", f"{st.actual_drop:.4g}", ""]]
@@ -228,11 +259,11 @@ def _diagnosis_section(inp: ReportInput, figures: dict) -> str:
                      f"{_e(final.verdict)}</div>")
     parts.append("<h3>Candidate effects (score test at the fit as it was first made)</h3>")
     parts.append(_candidates_table(first))
-    for name, png in figures.items():
+    for name in figures:
         if name.startswith("candidate_"):
-            effect = name[len("candidate_"):-4]
+            effect = name[len("candidate_"):-len(".svg")]
             parts.append(f"<h3>{_e(effect)}: residuals against the change it would make, and against "
-                         f"its signature variable</h3>" + _img(png, effect))
+                         f"its signature variable</h3>" + _img(name, figures, effect))
     return "".join(parts) + "</section>"
 
 
@@ -274,7 +305,7 @@ def _noise_section(inp: ReportInput, figures: dict) -> str:
             "Bias instability and random walk are upper bounds (&lt;) when the record is too short "
             "to show them.</p>"
             + _table(["axis", "white noise ± 1σ", "bias instability", "bias random walk"], rows)
-            + _img(figures["allan.png"], "Allan deviation") + _filed_noise(inp) + "</section>")
+            + _img(ALLAN_FIGURE, figures, "Allan deviation") + _filed_noise(inp) + "</section>")
 
 
 def render(inp: ReportInput, figures: dict) -> str:
@@ -297,30 +328,30 @@ def figures_of(inp: ReportInput) -> dict:
     drawn now."""
     figures = {}
     if inp.first is not None:
-        drawn = {name: png for name, png in inp.figures.items() if name != "allan.png"}
+        drawn = {name: data for name, data in inp.figures.items() if name != ALLAN_FIGURE}
         figures.update(drawn or diagnosis_figures(inp.first, inp.steps))
     if inp.noise is not None:
-        figures["allan.png"] = inp.figures.get("allan.png") or allan_figure(inp.noise)
+        figures[ALLAN_FIGURE] = inp.figures.get(ALLAN_FIGURE) or allan_figure(inp.noise, fmt="svg")
     return figures
 
 
-def write_page(path, inp: ReportInput, png_dir=None) -> Path:
-    """Write the page (and, with ``png_dir``, its figures as PNG files there)."""
+def write_page(path, inp: ReportInput, figure_dir=None) -> Path:
+    """Write the page (and, with ``figure_dir``, its figures as files there)."""
     path = Path(path)
     figures = figures_of(inp)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(render(inp, figures), encoding="utf-8")
-        if png_dir is not None:
-            for name, png in figures.items():
-                (Path(png_dir) / name).write_bytes(png)
+        if figure_dir is not None:
+            for name, data in figures.items():
+                (Path(figure_dir) / name).write_bytes(data)
     except OSError as e:
         raise UserError(f"{path}: cannot write the report: {e.strerror}") from None
     return path
 
 
 def write_report(directory, first, steps, final, summary_lines, inp: ReportInput | None = None) -> Path:
-    """``diagnose --report DIR``: DIR/index.html (self-contained) and the PNGs beside it."""
+    """``diagnose --report DIR``: DIR/index.html (self-contained) and the figures beside it."""
     directory = Path(directory)
     try:
         directory.mkdir(parents=True, exist_ok=True)
@@ -330,7 +361,7 @@ def write_report(directory, first, steps, final, summary_lines, inp: ReportInput
     inp.first, inp.steps, inp.final = first, steps, final
     if not inp.facts:
         inp.facts = [("summary", line) for line in summary_lines]
-    return write_page(directory / "index.html", inp, png_dir=directory)
+    return write_page(directory / "index.html", inp, figure_dir=directory)
 
 
 # ------------------------------------------------------------------- from a capture to the page
@@ -387,27 +418,29 @@ def report_input(capture, cal_doc=None, cal_path=None, *, effects=(), auto=True)
             except RotationWithoutAngle:                # a rotation without angle, not a hand's
                 inp.diagnosis_note = without_angle
         if inp.diagnosis_note is None:
-            inp.first, inp.steps, inp.final = _diagnosis(capture, effects, auto)
-            job.draw(diagnosis_figure_specs(inp.first, inp.steps))
+            figures = DiagnosisFigures(job)
+            inp.first, inp.steps, inp.final = _diagnosis(capture, effects, auto, on_first=figures.first_known)
+            figures.known(inp.first, inp.steps)
         else:
             job = stack.enter_context(FigureJob())      # the figures in a second process
             inp.noise, inp.noise_note = noise_of(capture, cal_doc)
             if inp.noise is not None:
-                job.draw({"allan.png": inp.noise})
+                job.draw({ALLAN_FIGURE: inp.noise})
         inp.figures.update(job.result())
     inp.facts = capture_facts(capture, cal_doc)       # the segments as read (their status)
     return inp
 
 
-def _diagnosis(capture, effects, auto: bool) -> tuple:
-    """(first, steps, final) of the capture's (summarised) least-squares fit."""
+def _diagnosis(capture, effects, auto: bool, on_first=None) -> tuple:
+    """(first, steps, final) of the capture's (summarised) least-squares fit; ``on_first`` as
+    in station.diagnose.auto.run (``auto`` only)."""
     from station.diagnose import auto as auto_loop
     from station.diagnose.core import diagnose
     from station.estimate import lsq
 
     s = lsq.summarise(capture)
     if auto:
-        steps, final = auto_loop.run(s, list(effects))
+        steps, final = auto_loop.run(s, list(effects), on_first=on_first)
         return (steps[0].before if steps else final), steps, final
     registry = EffectRegistry()
     first = diagnose(lsq.fit(s, [registry.create(e) for e in effects]), registry=registry)
