@@ -31,12 +31,13 @@ def specs(optimal9_run):
 def _drawn_by_job(specs) -> dict:
     allan, diagnosis = specs
     with FigureJob() as job:
-        assert job._pool is not None            # Linux: forked, beside this process
         job.draw(allan)
+        assert job._worker is not None           # Linux: forked, beside this process
         job.draw(diagnosis)
-        pngs = job.result()
-    assert job._pool is None                     # ended on leaving the block
-    return pngs
+        figures = job.result()
+        directory = job._dir
+    assert job._worker is None and not os.path.exists(directory)      # ended on leaving the block
+    return figures
 
 
 def test_the_worker_draws_the_bytes_drawn_here(specs):
@@ -48,53 +49,88 @@ def test_the_worker_draws_the_bytes_drawn_here(specs):
         assert here[name].startswith(b"<?xml") and b"</svg>" in here[name][-100:]      # SVG by the name
 
 
-# module-level: the task is sent to the worker by name (a local function could not be, and would
-# fail in this process instead of in the worker)
-def _fail_in_the_worker(_specs):
-    raise RuntimeError("the worker failed")
+def _logged(log, real):
+    """``real`` (figure_job._draw_here or _draw_one), each call written down in ``log`` by the
+    process that makes it (pid and how many figures)."""
+    def logged(*args):
+        with open(log, "a") as f:
+            f.write(f"{os.getpid()} {len(args[0]) if isinstance(args[0], dict) else 1}\n")
+        return real(*args)
+    return logged
 
 
-def _die_in_the_worker(_specs):
+def _calls(log) -> list:
+    return [tuple(map(int, line.split())) for line in log.read_text().splitlines()] if log.exists() else []
+
+
+def _fail(name, spec):
+    raise RuntimeError("drawing failed there")
+
+
+def _die(name, spec):
     os._exit(9)
 
 
-@pytest.mark.parametrize("task", [_fail_in_the_worker, _die_in_the_worker])
-def test_a_worker_that_fails_or_dies_costs_only_time(specs, monkeypatch, task):
-    calls = []
-    real = figure_job._draw_here
-
-    def drawn_here(s):
-        calls.append(os.getpid())
-        return real(s)
-
-    monkeypatch.setattr(figure_job, "_draw_task", task)
-    monkeypatch.setattr(figure_job, "_draw_here", drawn_here)
+@pytest.mark.parametrize("how", [_fail, _die])
+def test_figures_that_fail_or_whose_processes_die_are_drawn_here(specs, monkeypatch, tmp_path, how):
+    """Every drawing process fails (or dies at its first figure): every figure is drawn here,
+    once, with the same bytes; nothing hangs."""
+    log = tmp_path / "drawn-here"
+    monkeypatch.setattr(figure_job, "_draw_one", how)        # before the fork: theirs too
+    monkeypatch.setattr(figure_job, "_draw_here", _logged(log, figure_job._draw_here))
     assert _drawn_by_job(specs) == draw({**specs[0], **specs[1]})
-    assert calls == [os.getpid()] * 2          # both tasks failed there and were drawn here
+    calls = _calls(log)
+    assert {pid for pid, _ in calls} == {os.getpid()}
+    assert sum(n for _, n in calls) == len(specs[0]) + len(specs[1])
 
 
 @pytest.mark.skipif(forked.usable_cores() < 2, reason="one core: the worker forks no drawing process")
-def test_a_drawing_process_that_dies_is_replaced_by_the_worker(specs, monkeypatch, tmp_path):
-    """The worker draws what its dying process did not: every figure is drawn in the worker, none
-    here (where each drawing happened is written down by the drawing processes themselves)."""
-    class Dying(forked.Forked):
-        def __init__(self, fn):
-            super().__init__(lambda: os._exit(9))
-
-    real = figure_job._draw_here
+def test_a_drawing_process_that_dies_leaves_its_figure_to_the_others(specs, monkeypatch, tmp_path):
+    """The process the worker forked dies at the first figure it takes: the worker draws it and
+    every other figure, none is drawn here (each drawing process writes down what it drew)."""
+    me = os.getpid()
     log = tmp_path / "drawn-by"
+    real = _logged(log, figure_job._draw_one)
 
-    def drawn_here(s):
-        with open(log, "a") as f:
-            f.write(f"{os.getpid()} {len(s)}\n")
-        return real(s)
+    def worker_only(name, spec):
+        if os.getppid() != me:        # not the worker (forked by this process): its drawing process
+            os._exit(9)
+        return real(name, spec)
 
-    monkeypatch.setattr(forked, "Forked", Dying)
-    monkeypatch.setattr(figure_job, "_draw_here", drawn_here)
+    monkeypatch.setattr(figure_job, "_draw_one", worker_only)
     assert _drawn_by_job(specs) == draw({**specs[0], **specs[1]})
-    calls = [line.split() for line in log.read_text().splitlines()]
-    assert calls and all(int(pid) != os.getpid() for pid, _ in calls)
-    assert sum(int(n) for _, n in calls) == len(specs[0]) + len(specs[1])
+    calls = _calls(log)
+    assert len({pid for pid, _ in calls}) == 1 and me not in {pid for pid, _ in calls}
+    assert len(calls) == len(specs[0]) + len(specs[1])        # each figure once
+
+
+@pytest.mark.skipif(forked.usable_cores() < 2, reason="one core: the worker forks no drawing process")
+def test_a_drawing_process_that_dies_while_taking_a_figure_loses_none(specs, monkeypatch, tmp_path):
+    """It dies after saying it takes a figure and before saying which (killed at that instant):
+    every figure no living process holds is given again; all are drawn there, none here."""
+    me = os.getpid()
+    log = tmp_path / "drawn-by"
+    real_read = figure_job._read_whole
+
+    def dying_read(fd, size):
+        if size == figure_job.TASK.size and os.getppid() != me:
+            os._exit(9)
+        return real_read(fd, size)
+
+    monkeypatch.setattr(figure_job, "_read_whole", dying_read)
+    monkeypatch.setattr(figure_job, "_draw_one", _logged(log, figure_job._draw_one))
+    monkeypatch.setattr(figure_job, "_draw_here", _logged(tmp_path / "here", figure_job._draw_here))
+    assert _drawn_by_job(specs) == draw({**specs[0], **specs[1]})
+    assert me not in {pid for pid, _ in _calls(tmp_path / "here")}       # (_draw_one draws through it)
+    assert len(_calls(log)) >= len(specs[0]) + len(specs[1]) and me not in {pid for pid, _ in _calls(log)}
+
+
+def test_without_a_worker_the_figures_are_drawn_here(specs, monkeypatch):
+    monkeypatch.setattr(forked, "available", lambda: False)
+    with FigureJob() as job:
+        job.draw(specs[0])
+        assert job._worker is None
+        assert job.result() == draw(specs[0])
 
 
 @pytest.mark.parametrize("in_process", [False, True])
@@ -192,10 +228,13 @@ def drawing(p, pid_file) -> set:
     return pids
 
 
-def test_ctrl_c_while_the_figures_are_drawn_leaves_no_process(optimal9_run, tmp_path):
+def test_ctrl_c_while_the_figures_are_drawn_leaves_no_process(optimal9_run, tmp_path, monkeypatch):
     """Ctrl-C (SIGINT to the process group, as a terminal sends it) while the worker and the
     process it forked draw: exit status 130, "interrupted", no page, and neither left running
     (the worker is killed on leaving the job; the process it forked dies with it)."""
+    temporary = tmp_path / "tmp"
+    temporary.mkdir()
+    monkeypatch.setenv("TMPDIR", str(temporary))          # where the job keeps its figures
     p = start_script(CTRL_C, optimal9_run, tmp_path / "report", tmp_path / "drawing")
     try:
         drawers = drawing(p, tmp_path / "drawing")
@@ -204,14 +243,19 @@ def test_ctrl_c_while_the_figures_are_drawn_leaves_no_process(optimal9_run, tmp_
     assert p.returncode == 130 and err.strip().splitlines()[-1] == "interrupted"
     assert still_running(drawers) == []
     assert not (tmp_path / "report" / "index.html").exists()
+    assert list(temporary.iterdir()) == []
 
 
 @pytest.mark.parametrize("how", ["SIGKILL", "SIGTERM"])
-def test_a_killed_diagnose_leaves_no_figure_process(optimal9_run, tmp_path, how):
+def test_a_killed_diagnose_leaves_no_figure_process(optimal9_run, tmp_path, how, monkeypatch):
     """The parent killed while its worker and the process the worker forked draw (the out-of-memory
-    killer, a closed terminal, `timeout`): both end with it, nothing is left running."""
+    killer, a closed terminal, `timeout`): both end with it, nothing is left running, and the
+    worker removes the figures' temporary directory, which the parent could not."""
     import signal
 
+    temporary = tmp_path / "tmp"
+    temporary.mkdir()
+    monkeypatch.setenv("TMPDIR", str(temporary))
     p = start_script(CTRL_C, optimal9_run, tmp_path / "report", tmp_path / "drawing")
     try:
         drawers = drawing(p, tmp_path / "drawing")
@@ -221,3 +265,4 @@ def test_a_killed_diagnose_leaves_no_figure_process(optimal9_run, tmp_path, how)
     for pid in left:                                 # not to leave them to the next tests
         os.kill(pid, signal.SIGKILL)
     assert not left
+    assert list(temporary.iterdir()) == []

@@ -22,7 +22,7 @@ def add_parsers(sub) -> None:
     d.add_argument("--auto", action="store_true",
                    help="add the most significant candidate, refit, repeat until none is significant")
     d.add_argument("--json", action="store_true", help="print the diagnosis as JSON (docs/diagnose.md)")
-    d.add_argument("--report", metavar="DIR", help="write PNG pictures and index.html into DIR")
+    d.add_argument("--report", metavar="DIR", help="write index.html and its figures (SVG) into DIR")
     d.add_argument("--emit-effect", metavar="FILE.py",
                    help="write the terms found outside the library as a ready-to-edit effect plugin")
     d.add_argument("--config", metavar="FILE", help="station.yaml (its effects section names plugins)")
@@ -49,58 +49,13 @@ def _effects(args, capture, reg) -> list[str]:
 
 
 def cmd_diagnose(args) -> int:
-    from station.diagnose import DIAGNOSIS_MODULES, segment_check
-    from station.estimate import summarise_while_importing
-    from station.io.capture import read_capture
-
-    capture = read_capture(args.capture, load_data=False)      # the manifest: samples below
-    cal_doc = None
-    if args.report and args.calib:
-        from station.io.calfile import read_calfile
-
-        cal_doc = read_calfile(args.calib)
-    check = segment_check(capture)
     with contextlib.ExitStack() as stack:
-        # each segment read, checked and summarised (in a child, while the fit is imported here);
-        # with --report, the figures in a second process and the noise where the capture is read
-        if args.report:
-            from station.diagnose.figure_job import read_for_report
+        job = None
+        if args.report:     # the figures' processes (started once the capture is about to be read)
+            from station.diagnose.figure_job import FigureJob
 
-            job, noise, noise_note = read_for_report(capture, cal_doc, stack, check)
-        else:
-            summarise_while_importing(capture, check, modules=DIAGNOSIS_MODULES)
-        from station.diagnose import auto
-        from station.diagnose.core import diagnose
-        from station.estimate import lsq
-
-        s = lsq.summarise(capture)
-        reg = plugins.registry(args)
-        effects = _effects(args, capture, reg)
-        if args.report:
-            from station.diagnose.report import DiagnosisFigures
-
-            figures = DiagnosisFigures(job)
-        if args.auto:
-            steps, final = auto.run(s, effects, progress=None, registry=reg,
-                                    on_first=figures.first_known if args.report else None)
-            first = steps[0].before if steps else final
-        else:
-            steps, first = [], diagnose(lsq.fit(s, [reg.create(e) for e in effects]), registry=reg)
-            auto.conclude(first, s)
-            final = first
-        if args.emit_effect:
-            _emit(args.emit_effect, final)
-        summary = _summary_lines(final)
-        if args.report:
-            from station.diagnose.report import ReportInput, capture_facts
-
-            figures.known(first, steps)
-            if not args.json:
-                _print(out, first, steps, final)        # while the figures are drawn
-            page = ReportInput(title=f"Diagnosis: {Path(str(capture.path)).name}",
-                               facts=capture_facts(capture, cal_doc) + [("summary", line) for line in summary],
-                               calibration=cal_doc, calibration_path=args.calib,
-                               noise=noise, noise_note=noise_note, figures=job.result())
+            job = stack.enter_context(FigureJob())
+        first, steps, final, summary, page = _diagnose(args, job)
     if args.report:
         from station.diagnose.report import write_report
 
@@ -112,6 +67,63 @@ def cmd_diagnose(args) -> int:
     elif not args.report:
         _print(out, first, steps, final)
     return 0
+
+
+def _diagnose(args, job) -> tuple:
+    """(first, steps, final, summary lines, the page's ReportInput or None); with a FigureJob
+    (--report), its figures drawn and the diagnosis printed meanwhile."""
+    from station.diagnose import DIAGNOSIS_MODULES, segment_check
+    from station.estimate import summarise_while_importing
+    from station.io.capture import read_capture
+
+    capture = read_capture(args.capture, load_data=False)      # the manifest: samples below
+    cal_doc = None
+    if args.report and args.calib:
+        from station.io.calfile import read_calfile
+
+        cal_doc = read_calfile(args.calib)
+    check = segment_check(capture)
+    # each segment read, checked and summarised (in a child, while the fit is imported here);
+    # with --report, the noise where the capture is read
+    if job is not None:
+        from station.diagnose.figure_job import read_for_report
+
+        noise, noise_note = read_for_report(capture, cal_doc, job, check)
+        from station.diagnose.report import DiagnosisFigures       # (imported while reading)
+
+        figures = DiagnosisFigures(job)
+    else:
+        summarise_while_importing(capture, check, modules=DIAGNOSIS_MODULES)
+    from station.diagnose import auto
+    from station.diagnose.core import diagnose
+    from station.estimate import lsq
+
+    s = lsq.summarise(capture)
+    reg = plugins.registry(args)
+    effects = _effects(args, capture, reg)
+    if args.auto:
+        steps, final = auto.run(s, effects, progress=None, registry=reg,
+                                on_first=figures.first_known if job is not None else None)
+        first = steps[0].before if steps else final
+    else:
+        steps, first = [], diagnose(lsq.fit(s, [reg.create(e) for e in effects]), registry=reg)
+        auto.conclude(first, s)
+        final = first
+    if args.emit_effect:
+        _emit(args.emit_effect, final)
+    summary = _summary_lines(final)
+    page = None
+    if job is not None:
+        from station.diagnose.report import ReportInput, capture_facts
+
+        figures.known(first, steps)
+        if not args.json:
+            _print(out, first, steps, final)        # while the figures are drawn
+        page = ReportInput(title=f"Diagnosis: {Path(str(capture.path)).name}",
+                           facts=capture_facts(capture, cal_doc) + [("summary", line) for line in summary],
+                           calibration=cal_doc, calibration_path=args.calib,
+                           noise=noise, noise_note=noise_note, figures=job.result())
+    return first, steps, final, summary, page
 
 
 def _emit(path, d) -> None:

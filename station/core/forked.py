@@ -43,18 +43,20 @@ def usable_cores() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def end_with_parent(parent: int) -> None:
-    """In a child: be killed when ``parent`` ends, however it ends (prctl PR_SET_PDEATHSIG), so
-    that no child outlives a parent killed by a signal; a parent already gone ends it now.
-    (Linux sends the signal when the *thread* that forked ends: fork from the thread that waits.)"""
+def end_with_parent(parent: int, sig: int = signal.SIGKILL) -> None:
+    """In a child: be sent ``sig`` (by default killed) when ``parent`` ends, however it ends
+    (prctl PR_SET_PDEATHSIG), so that no child outlives a parent killed by a signal; a parent
+    already gone sends it now.  (Linux sends the signal when the *thread* that forked ends: fork
+    from the thread that waits.)"""
     try:
         import ctypes
 
         libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)     # 1: PR_SET_PDEATHSIG (linux/prctl.h)
+        libc.prctl(1, int(sig), 0, 0, 0)                # 1: PR_SET_PDEATHSIG (linux/prctl.h)
     except (OSError, AttributeError):                   # no prctl: the pipe's EPIPE ends it later
         return
     if os.getppid() != parent:
+        signal.raise_signal(sig)
         os._exit(0)
 
 

@@ -159,7 +159,7 @@ def score_test(result, effect_id, registry: EffectRegistry | None = None, overdi
         effect = (registry or EffectRegistry()).create(effect_id)
     else:
         effect, effect_id = effect_id, effect_id.id
-    extended = lsq.Model(model.s, [*model.effects, effect], model.attitudes, start=model.start)
+    extended = lsq.Model(model.s, [*model.effects, effect], model.attitudes, like=model)
     extended.priors = dict(model.priors)
     n = model.layout.size
     x = np.concatenate([result.x, np.zeros(extended.layout.size - n)])

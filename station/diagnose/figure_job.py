@@ -1,44 +1,53 @@
-"""The report's figures drawn in a second process while this one reads and fits.
+"""The report's figures drawn in other processes while this one reads and fits.
 
 A report's figures cost more CPU than its fit (docs/performance.md, "Diagnose and the report"):
-importing matplotlib (~0.25 s) and drawing five figures (0.06-0.12 s each).  ``FigureJob()``
-forks a worker at once (Linux) that imports matplotlib while this process reads the capture and
-fits; ``draw(specs)`` gives it figures to draw as plain numbers ({file name: SegmentsFigure,
-CandidateFigure or NoiseResult}: the diagnosis objects stay here), as soon as each is known; the
-worker shares them out between itself and a forked process per other core (matplotlib already
-imported there), so the figures are drawn on every core while this process waits.  ``result()``
-returns {file name: bytes} (the format of each name: station.diagnose.figures.figure_format).
-This process never imports matplotlib.
+importing matplotlib (~0.28 s) and drawing five figures (0.03-0.06 s each).  A FigureJob's
+``start()`` (called where the capture is about to be read) forks a worker (Linux) that imports
+matplotlib while this process reads the capture and fits, then forks a drawing process per
+other core: every one of them takes the next figure given as soon as it may (one queue: no
+figure waits behind another while a process is idle).  ``draw(specs)`` gives figures as plain numbers ({file name: SegmentsFigure,
+CandidateFigure or NoiseResult}: the diagnosis objects stay here) as soon as each is known;
+``result()`` waits for them and returns {file name: bytes} (the format of each name:
+station.diagnose.figures.figure_format).  This process never imports matplotlib, and starts no
+thread (a reader forked after the job is made forks a process with one thread).
 
-Where fork is not used (station.core.forked.available: Linux), or the worker fails or dies, the
-figures are drawn here, in order, with the same pixels.  The worker and the processes it forks
-are killed when this process ends, however it ends.  The worker ignores Ctrl-C (the parent is
-interrupted, ends it on leaving the ``with`` block and exits 130 without a traceback from
-either).
+How: each figure's numbers are pickled into a private temporary directory and its number
+written to a pipe every drawing process reads (a record of a few bytes: written and read whole,
+so each figure is taken by one process); the process writes the figure into the directory and
+its number back through a second pipe.  Each drawing process holds a third pipe open, whose end
+here reads end-of-file when it ends, however it ends: what it took and did not draw is given
+again to the others, or drawn here when none is left.
+
+While this process works, the drawing processes draw one figure at a time per core it leaves
+free (a permit each, read from a fourth pipe); once it waits (``result()``), one more: figures
+drawn on every core while it still fits would slow the fit the last figure waits for.
+
+Where fork is not used (station.core.forked.available: Linux), or drawing fails there, the
+figures are drawn here, with the same bytes.  The worker and the processes it forks end when
+this process ends, however it ends (killed, the worker first removing the temporary directory),
+and ignore Ctrl-C (this process is interrupted, ends them on leaving the ``with`` block and
+exits 130 without a traceback from them).
 """
 from __future__ import annotations
 
 import gc
-import multiprocessing
 import os
+import pickle
+import select
+import shutil
 import signal
+import struct
+import tempfile
 
 from station.core import forked
 
 ALLAN_FIGURE = "allan.svg"                          # the report's figures, by file name
 SEGMENTS_FIGURE = "residuals_per_segment.svg"
-
-
-def _start_worker(parent: int) -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    forked.end_with_parent(parent)        # killed with this process, however it ends
-    gc.disable()      # it lives for one command: the collector only costs time (7-10 % of drawing)
-
-
-def _import_matplotlib() -> None:
-    from station.diagnose.figures import pyplot
-
-    pyplot()
+MOST_PROCESSES = 4          # drawing processes at most (a report has five figures)
+TASK = struct.Struct("<i")                          # to the drawing processes: a figure's number
+DONE = struct.Struct("<iii")                        # back: (number, TAKING/.../FAILED, process)
+TAKING, TAKEN, DRAWN, FAILED = 0, 1, 2, 3          # TAKING: about to take one (its number: -1)
+PERMIT = b"p"       # one byte per figure that may be drawn at once
 
 
 def _draw_here(specs: dict) -> dict:
@@ -47,113 +56,267 @@ def _draw_here(specs: dict) -> dict:
     return draw(specs)
 
 
-def _draw_task(specs: dict) -> dict:
-    """In the worker: the figures shared out between this process and a forked one per other
-    core, each drawing every n-th figure.  (A fork of a process with matplotlib costs the pages
-    it copies: one per core, not one per figure; and a process forked for the Allan figure alone,
-    to leave this one free for the next task, measured 5 % slower in all.)"""
-    names = list(specs)
-    shares = max(1, min(len(names), forked.usable_cores()))
-    parts = [{name: specs[name] for name in names[k::shares]} for k in range(shares)]
-    children = []
+def _draw_one(name: str, spec) -> bytes:
+    """In a drawing process: one figure's bytes."""
+    return _draw_here({name: spec})[name]
+
+
+def _read_whole(fd: int, size: int) -> bytes:
+    """``size`` bytes from a pipe, or b"" at its end."""
+    data = b""
+    while len(data) < size:
+        part = os.read(fd, size - len(data))
+        if not part:
+            return b""
+        data += part
+    return data
+
+
+def _worker(parent: int, tasks: int, done: int, permits: tuple, alive: list, directory: str) -> None:
+    """In the forked worker: matplotlib imported, a drawing process forked per other core (each
+    holding its own end of ``alive``), then every one of them draws (_drawing)."""
+    def parent_gone(*_):                  # the directory removed, which the parent cannot do
+        shutil.rmtree(directory, ignore_errors=True)         # when it is killed
+        os._exit(0)
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, parent_gone)
+    forked.end_with_parent(parent, signal.SIGTERM)      # ended with this process, however it ends
+    gc.disable()      # it lives for one command: the collector only costs time (7-10 % of drawing)
     try:
-        for part in parts[1:]:
-            try:
-                children.append((part, forked.Forked(lambda part=part: _draw_here(part))))
-            except OSError:           # no process to spare: drawn here below
-                children.append((part, None))
-        drawn = _draw_here(parts[0])
-        for part, child in children:
-            try:
-                drawn.update(child.result() if child is not None else _draw_here(part))
-            except forked.ChildLost:
-                drawn.update(_draw_here(part))
-        return {name: drawn[name] for name in names}
-    finally:
-        for _, child in children:
-            if child is not None:
-                child.close()
+        from station.diagnose.figures import pyplot
+        from station.estimate.noise import NoiseResult  # noqa: F401 -- what an Allan figure's numbers are
+
+        pyplot()
+    except Exception:       # noqa: BLE001 -- each figure then fails there and is drawn here, which says why
+        pass
+    me, index = os.getpid(), 0
+    for k in range(1, len(alive)):
+        try:
+            pid = os.fork()
+        except OSError:       # fewer processes: the others draw its share
+            break
+        if pid == 0:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+            forked.end_with_parent(me)
+            index = k
+            break
+    for k, fd in enumerate(alive):
+        if k != index:
+            os.close(fd)
+    _drawing(index, tasks, done, permits, directory)
+
+
+def _drawing(index: int, tasks: int, done: int, permits: tuple, directory: str) -> None:
+    """With a permit, take a figure, draw it, say so, give the permit back; until the pipe of
+    figures is closed."""
+    while True:
+        if not _read_whole(permits[0], 1):
+            return
+        os.write(done, DONE.pack(-1, TAKING, index))
+        record = _read_whole(tasks, TASK.size)
+        if not record:
+            return
+        (number,) = TASK.unpack(record)
+        os.write(done, DONE.pack(number, TAKEN, index))
+        try:
+            with open(os.path.join(directory, f"{number}.spec"), "rb") as f:
+                name, spec = pickle.load(f)
+            data = _draw_one(name, spec)
+            with open(os.path.join(directory, f"{number}.figure"), "wb") as f:
+                f.write(data)
+            status = DRAWN
+        except Exception:   # noqa: BLE001 -- drawn here instead, which says why
+            status = FAILED
+        os.write(done, DONE.pack(number, status, index))
+        os.write(permits[1], PERMIT)
 
 
 class FigureJob:
-    """``with FigureJob() as job: job.draw({name: spec}); ...; figures = job.result()``"""
+    """``with FigureJob() as job: job.start(); job.draw({name: spec}); ...; figures = job.result()``"""
 
     def __init__(self):
-        self._pool = None
-        self._tasks = []              # (specs, Future or None), in the order given
+        self._names, self._specs = [], []
+        self._drawn: dict = {}            # number -> bytes
+        self._here: list = []             # numbers to draw here
+        self._hand: dict = {}             # drawing process -> the number it holds, "taking" or None
+        self._alive: dict = {}            # fd -> drawing process, while it lives
+        self._worker = self._tasks = self._done = self._permits = self._dir = None
+        self._started, self._waiting = False, False
+        self._buffer = b""
 
     def __enter__(self) -> "FigureJob":
-        if forked.available():
-            from concurrent.futures import ProcessPoolExecutor
-
-            try:
-                # a worker that dies fails its futures (BrokenProcessPool): drawn here instead
-                self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork"),
-                                                 initializer=_start_worker, initargs=(os.getpid(),))
-                self._pool.submit(_import_matplotlib)
-            except OSError:           # no process to spare: drawn here, in result()
-                self._pool = None
         return self
 
-    def draw(self, specs: dict) -> None:
-        """Draw these figures ({file name: spec}) in the worker, after those given before."""
-        specs = dict(specs)
-        if specs:
-            pending = None
-            if self._pool is not None:
+    def start(self) -> None:
+        """Fork the worker now (Linux; once): it imports matplotlib while this process goes on.
+        (After the modules both need are imported here, so that it does not import them again;
+        it starts no thread here.)  draw() starts it when not started."""
+        if self._started:
+            return
+        self._started = True
+        if forked.available():
+            try:
+                self._start()
+            except OSError:           # no process or pipe to spare: drawn here, in result()
+                self._stop()
+
+    def _start(self) -> None:
+        count = max(1, min(forked.usable_cores(), MOST_PROCESSES))
+        self._dir = tempfile.mkdtemp(prefix="station-figures-")
+        fds = []              # the ends only the processes forked keep, closed here
+        try:
+            tasks_r, self._tasks = os.pipe()
+            fds.append(tasks_r)
+            self._done, done_w = os.pipe()
+            fds.append(done_w)
+            permits_r, self._permits = os.pipe()
+            fds.append(permits_r)
+            alive = []
+            for k in range(count):
+                r, w = os.pipe()
+                self._alive[r] = k
+                alive.append((r, w))
+                fds.append(w)
+            parent = os.getpid()
+            pid = os.fork()
+            if pid == 0:
                 try:
-                    pending = self._pool.submit(_draw_task, specs)
-                except RuntimeError:  # the worker is gone (BrokenProcessPool): drawn here
-                    pending = None
-            self._tasks.append((specs, pending))
+                    for fd in (self._tasks, self._done, *self._alive):
+                        os.close(fd)
+                    _worker(parent, tasks_r, done_w, (permits_r, self._permits), [w for _, w in alive], self._dir)
+                finally:
+                    os._exit(0)       # no atexit handlers, no buffers flushed twice
+            self._worker = pid
+            os.write(self._permits, PERMIT * max(1, count - 1))      # this process is busy
+        finally:
+            for fd in fds:
+                os.close(fd)
+
+    def draw(self, specs: dict) -> None:
+        """Draw these figures ({file name: spec}): each taken by the first drawing process free."""
+        self.start()
+        for name, spec in specs.items():
+            number = len(self._names)
+            self._names.append(name)
+            self._specs.append(spec)
+            if not self._alive or not self._give(number):
+                self._here.append(number)
+
+    def _give(self, number: int) -> bool:
+        try:
+            path = os.path.join(self._dir, f"{number}.spec")
+            if not os.path.exists(path):
+                with open(path, "wb") as f:
+                    pickle.dump((self._names[number], self._specs[number]), f, protocol=pickle.HIGHEST_PROTOCOL)
+            os.write(self._tasks, TASK.pack(number))
+            return True
+        except (OSError, pickle.PicklingError, TypeError, AttributeError):
+            return False
 
     def result(self) -> dict:
         """{file name: bytes} of every figure given to draw(), in the order given."""
-        figures = {}
-        for specs, pending in self._tasks:
-            drawn = None
-            if pending is not None:
-                try:
-                    drawn = pending.result()
-                except Exception:     # noqa: BLE001 -- the worker failed: drawn here, which says why
-                    drawn = None
-            figures.update(drawn if drawn is not None else _draw_here(specs))
-        return figures
+        waiting = {n for n in range(len(self._names)) if n not in self._drawn and n not in self._here}
+        if self._alive and not self._waiting:       # this process waits now: its core too
+            self._waiting = True
+            self._permit(len(self._alive) - max(1, len(self._alive) - 1))
+        while waiting and self._alive:
+            ready, _, _ = select.select([self._done, *self._alive], [], [])
+            if self._done in ready:
+                self._buffer += os.read(self._done, DONE.size * 64)
+                whole = len(self._buffer) - len(self._buffer) % DONE.size
+                for number, status, index in DONE.iter_unpack(self._buffer[:whole]):
+                    self._hand[index] = ("taking" if status == TAKING else number if status == TAKEN else None)
+                    if number not in waiting or status in (TAKING, TAKEN):
+                        continue              # (given twice below, and drawn already)
+                    if status == DRAWN and self._read_figure(number):
+                        waiting.discard(number)
+                    else:                     # failed there, or its file is unreadable
+                        waiting.discard(number)
+                        self._here.append(number)
+                self._buffer = self._buffer[whole:]
+            for fd in [fd for fd in ready if fd in self._alive]:
+                # a drawing process ended (its pipe's end-of-file): the figure it held is given
+                # again (or drawn here below); if it ended while taking one, not knowing which,
+                # every figure no living process holds (some may then be drawn twice)
+                index = self._alive.pop(fd)
+                os.close(fd)
+                self._permit(1)               # the one it may have held
+                held = self._hand.pop(index, None)
+                living = {n for n in self._hand.values() if isinstance(n, int)}
+                again = sorted(n for n in waiting if n not in living) if held == "taking" else [held]
+                for number in again:
+                    if number in waiting and (not self._alive or not self._give(number)):
+                        waiting.discard(number)
+                        self._here.append(number)
+        self._here.extend(sorted(waiting))
+        if self._here:
+            numbers = sorted(set(self._here))
+            drawn = _draw_here({self._names[n]: self._specs[n] for n in numbers})
+            self._drawn.update({n: drawn[self._names[n]] for n in numbers})
+            self._here = []
+        return {self._names[n]: self._drawn[n] for n in range(len(self._names))}
+
+    def _permit(self, count: int) -> None:
+        try:
+            os.write(self._permits, PERMIT * count)
+        except OSError:       # every drawing process ended: drawn here
+            pass
+
+    def _read_figure(self, number: int) -> bool:
+        try:
+            with open(os.path.join(self._dir, f"{number}.figure"), "rb") as f:
+                self._drawn[number] = f.read()
+            return True
+        except OSError:
+            return False
 
     def __exit__(self, *exc) -> None:
-        pool, self._pool = self._pool, None
-        if pool is None:
-            return
-        # end the worker now (it may be drawing: Ctrl-C, or an error here), not after its task
-        kill = getattr(pool, "kill_workers", None)                  # Python 3.14
-        if kill is not None:
-            kill()
-        else:
-            for process in list((getattr(pool, "_processes", None) or {}).values()):
-                process.kill()        # what kill_workers does, before 3.14
-        pool.shutdown(wait=True, cancel_futures=True)
+        self._stop()
+
+    def _stop(self) -> None:
+        """End the worker now (it may be drawing: Ctrl-C, or an error here; the processes it forked
+        die with it), close the pipes, remove the directory."""
+        if self._worker is not None:
+            try:
+                os.kill(self._worker, signal.SIGKILL)
+                os.waitpid(self._worker, 0)
+            except (ProcessLookupError, ChildProcessError):
+                pass
+            self._worker = None
+        for fd in (self._tasks, self._done, self._permits, *self._alive):
+            if fd is not None:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        self._tasks = self._done = self._permits = None
+        self._alive = {}
+        if self._dir is not None:
+            shutil.rmtree(self._dir, ignore_errors=True)
+            self._dir = None
 
 
-def read_for_report(capture, cal_doc, stack, check_segment=None) -> tuple:
+def read_for_report(capture, cal_doc, job: FigureJob, check_segment=None) -> tuple:
     """Read and summarise ``capture`` as a report needs it (station.estimate.
-    summarise_while_importing, the diagnosis' modules imported meanwhile): a FigureJob entered
-    on ``stack`` once the reading has begun, the longest static segment's Allan curves computed
-    where the capture is read (station.estimate.noise.LongestStatic) and its figure given to the
-    job.  (job, NoiseResult or None, note or None)."""
+    summarise_while_importing, the diagnosis' modules imported meanwhile), the longest static
+    segment's Allan curves computed where the capture is read (station.estimate.noise.
+    LongestStatic) and its figure given to ``job`` (entered before: matplotlib is imported there
+    meanwhile).  (NoiseResult or None, note or None)."""
     from station.diagnose import DIAGNOSIS_MODULES
     from station.estimate import summarise_while_importing
     from station.estimate.noise import LongestStatic
 
-    job, longest = FigureJob(), LongestStatic(capture, cal_doc)
+    longest = LongestStatic(capture, cal_doc)
 
     def check(seg) -> None:
         if check_segment is not None:
             check_segment(seg)
         longest.check(seg)
 
-    curves = summarise_while_importing(capture, check, modules=DIAGNOSIS_MODULES, then=longest.curves,
-                                       meanwhile=lambda: stack.enter_context(job))
+    job.start()       # here: numpy and the capture's modules are imported, the reader not forked
+    curves = summarise_while_importing(capture, check, modules=DIAGNOSIS_MODULES, then=longest.curves)
     noise, note = longest.noise(curves)
     if noise is not None:
         job.draw({ALLAN_FIGURE: noise})
-    return job, noise, note
+    return noise, note

@@ -74,11 +74,11 @@ def candidate_spec(diagnosis, cand) -> CandidateFigure:
                            VARIABLE_LABEL.get(cand.signature_variable, cand.signature_variable), var[ok], r[ok])
 
 
-def candidate_figure_specs(first) -> dict:
-    """{file name: what to draw} of the three leading candidates of the model as fitted (known
-    before any effect is added)."""
-    return {f"candidate_{cand.effect}.svg": candidate_spec(first, cand)
-            for cand in first.candidates[:3] if cand.signature_rows is not None}
+def candidate_figure_specs(first, leading: int = 3, skip=()) -> dict:
+    """{file name: what to draw} of the ``leading`` candidates of the model as fitted (known
+    before any effect is added), but those named in ``skip``."""
+    names = [(f"candidate_{cand.effect}.svg", cand) for cand in first.candidates[:3] if cand.signature_rows is not None]
+    return {name: candidate_spec(first, cand) for name, cand in names[:leading] if name not in skip}
 
 
 def segments_figure_specs(first, steps) -> dict:
@@ -95,23 +95,21 @@ def diagnosis_figure_specs(first, steps) -> dict:
 
 class DiagnosisFigures:
     """Gives a FigureJob the diagnosis' figures as soon as each is known: the candidates' when
-    the model as fitted is diagnosed (``first_known``, station.diagnose.auto.run's on_first) if
-    the loop then refits (a significant candidate: drawn while it does), the residuals per
-    segment, and the candidates' if not given yet, once every step is known (``known``).  (Not
-    given early when nothing is refitted: the job would then draw them and the residuals one
-    task after the other, not on two cores at once.)"""
+    the model as fitted is diagnosed (``first_known``, station.diagnose.auto.run's on_first), if
+    the loop then refits (a significant candidate: drawn meanwhile); the residuals per segment,
+    and the candidates' if not given yet, once every step is known (``known``)."""
 
-    def __init__(self, job: FigureJob):
-        self.job, self.candidates_given = job, False
+    def __init__(self, job: FigureJob, early: int = 2):
+        self.job, self.early, self.given = job, early, set()
 
     def first_known(self, first) -> None:
         if any(c.significant for c in first.candidates):
-            self.job.draw(candidate_figure_specs(first))
-            self.candidates_given = True
+            specs = candidate_figure_specs(first, leading=self.early)
+            self.job.draw(specs)
+            self.given.update(specs)
 
     def known(self, first, steps) -> None:
-        self.job.draw(segments_figure_specs(first, steps) if self.candidates_given
-                      else diagnosis_figure_specs(first, steps))
+        self.job.draw({**segments_figure_specs(first, steps), **candidate_figure_specs(first, skip=self.given)})
 
 
 def diagnosis_figures(first, steps) -> dict:
@@ -392,8 +390,6 @@ def report_input(capture, cal_doc=None, cal_path=None, *, effects=(), auto=True)
     every rotation.  As ``diagnose --report``: the capture is read and summarised in a child
     while the fit is imported, which also computes the noise's Allan curves, and the figures
     are drawn by a FigureJob."""
-    import contextlib
-
     from station.diagnose import RotationWithoutAngle, segment_check
     from station.diagnose.figure_job import read_for_report
     from station.io.history import verdict_of
@@ -411,10 +407,10 @@ def report_input(capture, cal_doc=None, cal_path=None, *, effects=(), auto=True)
             check = segment_check(capture)       # hand turns between statics are diagnosed
         except RotationWithoutAngle:
             inp.diagnosis_note = without_angle
-    with contextlib.ExitStack() as stack:
+    with FigureJob() as job:          # started where the capture is read: matplotlib imported meanwhile
         if inp.diagnosis_note is None:
             try:
-                job, inp.noise, inp.noise_note = read_for_report(capture, cal_doc, stack, check)
+                inp.noise, inp.noise_note = read_for_report(capture, cal_doc, job, check)
             except RotationWithoutAngle:                # a rotation without angle, not a hand's
                 inp.diagnosis_note = without_angle
         if inp.diagnosis_note is None:
@@ -422,7 +418,6 @@ def report_input(capture, cal_doc=None, cal_path=None, *, effects=(), auto=True)
             inp.first, inp.steps, inp.final = _diagnosis(capture, effects, auto, on_first=figures.first_known)
             figures.known(inp.first, inp.steps)
         else:
-            job = stack.enter_context(FigureJob())      # the figures in a second process
             inp.noise, inp.noise_note = noise_of(capture, cal_doc)
             if inp.noise is not None:
                 job.draw({ALLAN_FIGURE: inp.noise})

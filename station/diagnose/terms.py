@@ -176,7 +176,7 @@ def search(result, max_terms: int = MAX_TERMS) -> list[Found]:
     reference = _reference_c(s)
     candidates = [Term(sensor, axis, reg) for sensor, _, _ in SENSORS for axis in range(3) for reg in dictionary()]
     bank = in_capture_units(TermsEffect)(candidates, reference)      # counts on a raw capture
-    extended = lsq.Model(s, [*model.effects, bank], model.attitudes, start=model.start)
+    extended = lsq.Model(s, [*model.effects, bank], model.attitudes, like=model)
     extended.priors = dict(model.priors)
     n = model.layout.size
     x = np.concatenate([result.x, np.zeros(len(candidates))])

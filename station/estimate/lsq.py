@@ -185,9 +185,14 @@ class Model:
     """The whitened residual function of the base model plus effects."""
 
     def __init__(self, s: Summaries, effects: list[Effect], attitudes: str = "auto",
-                 start: Start | None = None):
+                 start: Start | None = None, like: "Model | None" = None):
         """``start``: the algebraic start of these summaries when it is known (another Model's
-        ``start``: a candidate effect's score test builds a model per candidate), else made here."""
+        ``start``: a candidate effect's score test builds a model per candidate), else made here.
+        ``like``: a model of the same summaries, start and attitudes with other effects, whose
+        initial nuisances (static attitudes, rotation axes, whitening) are taken instead of
+        computed again (they do not depend on the effects)."""
+        if like is not None:
+            start = like.start
         self.s, self.effects = s, effects
         self.start = start if start is not None else _start(s)
         self.notes = list(self.start.notes)     # the start is shared: never appended to
@@ -237,8 +242,16 @@ class Model:
             L.add(f"effect:{e.id}", len(e.params))
         self.static_colour = hand_rotation.static_colours(len(s.statics), self.hands) if self.hands else None
         self.priors: dict[int, float] = {}     # column -> 1-sigma of a zero-mean prior
-        self._initialise()
+        self._initialise(like if like is not None and self._same_nuisances(like) else None)
         self._prepare()
+
+    def _same_nuisances(self, other: "Model") -> bool:
+        """Whether ``other`` has this model's summaries, start and parameters but the effects'."""
+        mine = {k: v for k, v in self.layout.blocks.items() if not k.startswith("effect:")}
+        theirs = {k: v for k, v in other.layout.blocks.items() if not k.startswith("effect:")}
+        return (other.s is self.s and other.start is self.start and mine == theirs
+                and (other.attitudes, other.with_latitude, other.hand_earth_vertical)
+                == (self.attitudes, self.with_latitude, self.hand_earth_vertical))
 
     def refresh(self):
         """Forget the cached row layout and Jacobian structure (after priors were added)."""
@@ -247,10 +260,20 @@ class Model:
         self._last_jacobian = None
 
     # --- initial values ---------------------------------------------------------------------
-    def _initialise(self):
+    def _initialise(self, like: "Model | None" = None):
         s, L = self.s, self.layout
         st = self.start
         x = np.zeros(L.size)
+        if like is not None:        # the same nuisances (_same_nuisances): taken, not computed
+            for name, sl in L.blocks.items():
+                if not name.startswith("effect:"):
+                    x[sl] = like.x0[like.layout[name]]
+            self.static_ref, self.axis_ref = like.static_ref, like.axis_ref
+            self.axis_basis, self.gyro_whiten = like.axis_basis, like.gyro_whiten
+            if self.hands:
+                self._initialise_hands(st)
+            self.x0 = x
+            return
         for name, value in (("accel_scale", st.ka), ("accel_misalignment", st.alpha), ("accel_bias", st.ba),
                             ("gyro_scale", st.kg), ("gyro_misalignment", st.gamma), ("gyro_bias", st.bg),
                             ("inter_triad", st.theta)):
