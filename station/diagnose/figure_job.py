@@ -48,6 +48,8 @@ TASK = struct.Struct("<i")                          # to the drawing processes: 
 DONE = struct.Struct("<iii")                        # back: (number, TAKING/.../FAILED, process)
 TAKING, TAKEN, DRAWN, FAILED = 0, 1, 2, 3          # TAKING: about to take one (its number: -1)
 PERMIT = b"p"       # one byte per figure that may be drawn at once
+# what matplotlib imports at the first figure drawn and saved as SVG (~10 ms)
+WARM_MODULES = ("matplotlib.backends.backend_agg", "matplotlib.backends.backend_svg")
 
 
 def _draw_here(specs: dict) -> dict:
@@ -84,10 +86,14 @@ def _worker(parent: int, tasks: int, done: int, permits: tuple, alive: list, dir
     forked.end_with_parent(parent, signal.SIGTERM)      # ended with this process, however it ends
     gc.disable()      # it lives for one command: the collector only costs time (7-10 % of drawing)
     try:
+        import importlib
+
         from station.diagnose.figures import pyplot
         from station.estimate.noise import NoiseResult  # noqa: F401 -- what an Allan figure's numbers are
 
         pyplot()
+        for name in WARM_MODULES:         # imported here once, not in each process at its first figure
+            importlib.import_module(name)
     except Exception:       # noqa: BLE001 -- each figure then fails there and is drawn here, which says why
         pass
     me, index = os.getpid(), 0
