@@ -235,3 +235,31 @@ def test_an_accelerometer_only_calibration_writes_no_gyro_calibration_anywhere(s
     assert main(["apply", str(raw_cal), str(cap / "pos05.csv"), "-o", str(tmp_path / "out.csv")]) == 2
     assert "no scale to write the gyros in deg/s" in capsys.readouterr().err
     assert not (tmp_path / "out.csv").exists()
+
+
+def test_frames_missing_are_counted_from_the_span_not_from_jittering_steps():
+    """Stamps that jitter by up to ±0.3 period (host time stamps) lose no frame (to one: the
+    first and last stamps' own jitter), though some steps reach 1.6 periods; frames really
+    dropped are counted through the jitter (to one); a device 4 % off its stated rate loses
+    nothing; every other frame dropped is half lost."""
+    from types import SimpleNamespace
+
+    from station.estimate import data_loss
+
+    rate, n = 100.0, 20_000
+    rng = np.random.default_rng(5)
+    jitter = rng.uniform(-0.3, 0.3, n) / rate
+
+    def loss(t):
+        return data_loss(SimpleNamespace(data=SimpleNamespace(t=t)), rate)
+
+    exact = np.arange(n) / rate
+    assert np.diff(exact + jitter).max() > 1.5 / rate          # the old step-by-step count saw losses
+    assert loss(exact + jitter)[0] <= 1
+    kept = np.delete(np.arange(n), [100, 101, 102, 5000, 9000])   # five frames dropped
+    missing, share, gap = loss(kept / rate + jitter[kept])
+    assert abs(missing - 5) <= 1 and share == pytest.approx(missing / (n - 5 + missing))
+    assert gap == pytest.approx(3 / rate, abs=0.61 / rate)
+    assert loss(np.arange(n) / (1.04 * rate))[0] == 0
+    missing, share, _ = loss(np.arange(0, n, 2) / rate)
+    assert missing == n // 2 - 1 and share == pytest.approx(0.5, abs=1e-3)

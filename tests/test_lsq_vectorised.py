@@ -180,3 +180,18 @@ def test_a_model_built_on_another_models_start_is_the_same_model(hand):
     assert shared.notes == own.notes and sum("Earth rate" in n for n in shared.notes) == 1
     np.testing.assert_array_equal(shared.x0, own.x0)
     np.testing.assert_array_equal(shared.residuals(shared.x0), own.residuals(own.x0))
+
+
+def test_a_model_like_another_takes_its_nuisances_and_is_the_same_model(hand, optimal9):
+    """A candidate's score test builds its model ``like`` the fitted one (its start and initial
+    nuisances taken, not computed again): the same start values and residuals as a model that
+    computed its own; and its sparse Jacobian is its dense one."""
+    for s in (hand["mems", "latitude"], hand["quiet", "latitude"], optimal9):
+        base = lsq.Model(s, [])
+        like = lsq.Model(s, [LIBRARY["accel_nonlinearity"]()], base.attitudes, like=base)
+        own = lsq.Model(s, [LIBRARY["accel_nonlinearity"]()], base.attitudes)
+        assert like.start is base.start and like.notes == own.notes
+        np.testing.assert_array_equal(like.x0, own.x0)
+        np.testing.assert_array_equal(like.residuals(like.x0), own.residuals(own.x0))
+        x = random_x(like, np.random.default_rng(3))
+        np.testing.assert_array_equal(like.sparse_jacobian(x).toarray(), own.jacobian(x))

@@ -47,6 +47,7 @@ PHASES = 12                      # phase grid for the harmonics of a rotation (e
 UP = np.array([0.0, 0.0, 1.0])
 # zero-mean priors (internal units) on the gyro block when no rotation has a known angle
 NO_ROTATION_PRIORS = {"gyro_scale": 1e3, "gyro_misalignment": 1e3, "gyro_bias": 1e6, "inter_triad": 1e3}
+LARGE_MODEL = 300                # parameters above which the fit works on a sparse Jacobian (Model.is_large)
 COMPLEX_STEP = 1e-20             # the Jacobian's imaginary step, relative to each parameter's size
 FORWARD_STEP = 1e-7              # the forward-difference step (effects that are not complex-step safe)
 
@@ -498,23 +499,57 @@ class Model:
         """The Jacobian by complex step (forward differences when an effect is not safe), the
         columns that move disjoint rows perturbed together (_column_groups), every perturbed
         vector in one batched evaluation; the hand turns to first order about x."""
+        return self._jacobian(x, sparse=False)
+
+    def sparse_jacobian(self, x):
+        """jacobian(x) as a scipy.sparse CSR matrix, never held dense: each segment's nuisances
+        move only that segment's rows (a large model: is_large)."""
+        return self._jacobian(x, sparse=True)
+
+    def _jacobian(self, x, sparse: bool):
         x = np.asarray(x, float)
         self._ensure_layout()
         if not hasattr(self, "_groups"):
             self._groups, self._jacobian_rows = self._column_groups()
-        key = x.tobytes()
+        key = (x.tobytes(), sparse)
         if self._last_jacobian is not None and self._last_jacobian[0] == key:
             return self._last_jacobian[1].copy()     # the solver's last one, at its solution
         steps, D = self._derivatives(x, [[c for c, _ in members] for members in self._groups])
-        J = np.zeros((self._jacobian_rows, len(x)))
+        every = np.arange(self._jacobian_rows)
+        rows, cols, values = [], [], []
         for d, members in zip(D, self._groups):
             for c, owned in members:
-                if owned is None:
-                    J[:, c] = d / steps[c]
-                else:
-                    J[owned, c] = d[owned] / steps[c]
+                at = every if owned is None else owned
+                rows.append(at)
+                cols.append(np.full(len(at), c))
+                values.append(d[at] / steps[c])
+        rows, cols, values = (np.concatenate(a) if a else np.zeros(0) for a in (rows, cols, values))
+        if sparse:
+            from scipy.sparse import csr_matrix
+
+            J = csr_matrix((values, (rows.astype(int), cols.astype(int))), shape=(self._jacobian_rows, len(x)))
+        else:
+            J = np.zeros((self._jacobian_rows, len(x)))
+            J[rows.astype(int), cols.astype(int)] = values
         self._last_jacobian = (key, J.copy())
         return J
+
+    @property
+    def is_large(self) -> bool:
+        """Whether the fit works on the sparse Jacobian (least_squares' trust-region method with
+        LSMR steps) rather than MINPACK's Levenberg-Marquardt, whose dense QR costs rows x
+        parameters^2 a step: 3.6 s at 300 segments, 15 minutes at 2,000."""
+        return self.layout.size > LARGE_MODEL
+
+    def local_columns(self) -> np.ndarray:
+        """The columns of each segment's own nuisances (static attitudes, rotation phases): the
+        others (the calibration, the effects, the axes, the mounting) are few whatever the
+        capture's length."""
+        def local(name):
+            return any(name.startswith(p) and name[len(p):].isdigit() for p in ("static", "phase"))
+
+        return np.array(sorted(c for name, sl in self.layout.blocks.items() if local(name)
+                               for c in range(sl.start, sl.stop)), dtype=int)
 
     # --- the residuals ----------------------------------------------------------------------
     # One vectorised pass: every static, every rotation on its phase grid and every hand turn at
@@ -859,19 +894,73 @@ class _ComplexUnsafe(Exception):
 @dataclass
 class FitResult:
     x: np.ndarray
-    covariance: np.ndarray          # of the full parameter vector (internal units)
+    covariance: np.ndarray          # of the parameters in covariance_columns (internal units)
     model: Model
     chi2: float
     dof: int
     residuals: np.ndarray
     rank_deficient: list = field(default_factory=list)   # columns in the Jacobian's null space
+    covariance_columns: np.ndarray | None = None         # None: every column, in order
+
+    def covariance_of(self, columns) -> np.ndarray:
+        """The covariance of these columns of x (a large model keeps it only for the columns
+        that are not a segment's own nuisance: Model.local_columns)."""
+        columns = np.asarray(columns, int)
+        if self.covariance_columns is not None:
+            where = {c: k for k, c in enumerate(self.covariance_columns)}
+            columns = np.array([where[c] for c in columns], int)
+        return self.covariance[np.ix_(columns, columns)]
+
+
+class _Reduced:
+    """The Jacobian for what is computed from it at the solution (covariance, null space, blind
+    effect parameters).  A small model: J itself, every column.  A large one (Model.is_large,
+    J sparse): the columns that are not a segment's own nuisance (G), with those nuisances (L)
+    eliminated: J_G - J_L B, B the least-squares fit of J_G by J_L (normal equations of J_L,
+    which are block-diagonal: one small block per segment, by sparse LU).  Its Gram matrix is
+    the Schur complement of J^T J, so its SVD gives the covariance of G and the directions of G
+    the data cannot see exactly as the whole Jacobian's would, at a cost linear in the segments."""
+
+    def __init__(self, model: Model, J):
+        if not model.is_large:
+            self.J, self.columns = np.asarray(J), np.arange(model.layout.size)
+            return
+        from scipy.sparse.linalg import splu
+
+        local = model.local_columns()
+        mask = np.ones(model.layout.size, bool)
+        mask[local] = False
+        self.columns = np.flatnonzero(mask)
+        J = J.tocsc()
+        J_L, J_G = J[:, local], J[:, self.columns].toarray()
+        N = (J_L.T @ J_L).tocsc()
+        try:
+            B = splu(N).solve(np.asarray(J_L.T @ J_G))
+        except RuntimeError:              # a nuisance the data cannot see: least squares instead
+            from scipy.sparse.linalg import lsmr
+
+            B = np.column_stack([lsmr(J_L, J_G[:, k], atol=1e-14, btol=1e-14)[0] for k in range(J_G.shape[1])])
+        self.J = J_G - J_L @ B
+
+    def full(self, columns) -> list:
+        """Columns of the reduced J (indices into it) back to columns of x."""
+        return [int(self.columns[k]) for k in columns]
 
 
 def _solve(model: Model, x0: np.ndarray):
-    res = least_squares(model.residuals, x0, jac=model.jacobian, method="lm", x_scale="jac",
-                        xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=100)
-    J = model.jacobian(res.x)
-    return res.x, covariance(J), res.fun, J
+    """(x, covariance of reduced.columns, residuals, reduced Jacobian) at the solution."""
+    if model.is_large:
+        # each step solved to rounding (LSMR's default, as many iterations as parameters, stops
+        # short on ill-conditioned models such as hand-pose logs: 100 steps and twice the chi2)
+        res = least_squares(model.residuals, x0, jac=model.sparse_jacobian, method="trf", tr_solver="lsmr",
+                            tr_options={"atol": 1e-14, "btol": 1e-14, "maxiter": 10 * model.layout.size},
+                            x_scale="jac", xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=100)
+        reduced = _Reduced(model, model.sparse_jacobian(res.x))
+    else:
+        res = least_squares(model.residuals, x0, jac=model.jacobian, method="lm", x_scale="jac",
+                            xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=100)
+        reduced = _Reduced(model, model.jacobian(res.x))
+    return res.x, covariance(reduced.J), res.fun, reduced
 
 
 def covariance(J: np.ndarray) -> np.ndarray:
@@ -898,14 +987,18 @@ def _null_columns(J: np.ndarray) -> list:
                                             if null.size else []))
 
 
-def _blind_effect_parameters(model: Model, J: np.ndarray) -> list:
+def _blind_effect_parameters(model: Model, reduced: _Reduced) -> list:
     """Effect parameters the data cannot reveal: in the null space of the Jacobian (exactly
     aliased with other parameters), or with a 1-sigma above their typical size."""
+    if not model.effects:
+        return []
+    J = reduced.J
     norms = np.linalg.norm(J, axis=0)
     norms[norms == 0] = 1.0
     _, sv, vt = np.linalg.svd(J / norms, full_matrices=False)
     null = vt[sv < 1e-9 * sv[0]]
     cov = covariance(J)
+    where = {int(c): k for k, c in enumerate(reduced.columns)}
     blind = []
     for e in model.effects:
         sl = model.layout[f"effect:{e.id}"]
@@ -913,8 +1006,9 @@ def _blind_effect_parameters(model: Model, J: np.ndarray) -> list:
             c = sl.start + k
             if c in model.priors:
                 continue
-            aliased = null.size and np.max(np.abs(null[:, c])) > 1e-6
-            if aliased or np.sqrt(cov[c, c]) * p.scale > p.typical:
+            j = where[c]          # (an effect's columns are never a segment's own nuisance)
+            aliased = null.size and np.max(np.abs(null[:, j])) > 1e-6
+            if aliased or np.sqrt(cov[j, j]) * p.scale > p.typical:
                 blind.append((c, p))
     return blind
 
@@ -939,17 +1033,17 @@ def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "aut
     if rows < columns:
         raise UserError(f"the capture cannot determine the model: {rows} measurements for {columns} "
                         "unknowns (record more static attitudes or rotations, or add fewer effects)")
-    J = model.jacobian(model.x0)
+    reduced = _Reduced(model, model.sparse_jacobian(model.x0) if model.is_large else model.jacobian(model.x0))
     x = None
     while True:
-        blind = _blind_effect_parameters(model, J)
+        blind = _blind_effect_parameters(model, reduced)
         if not blind and x is not None:
             break
         for c, p in blind:
             model.priors[c] = p.typical / p.scale
             model.unobservable.append(p.name)
         model.refresh()
-        x, cov, r, J = _solve(model, model.x0)
+        x, cov, r, reduced = _solve(model, model.x0)
     r = r[model.data_rows]      # the weak priors on nuisance angles are not data
     # gravity along an axis turned only by hand is set by its weak prior, not by the data
     blind_kappa = sum(1 for k in range(s.groups) if not any(rot.steady for rot in s.rotations if rot.group == k))
@@ -957,7 +1051,8 @@ def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "aut
     if not s.rotations and not s.hand_rotations:     # the gyro block's wide priors are not data
         dof -= sum(model.layout[b].stop - model.layout[b].start for b in NO_ROTATION_PRIORS)
     return FitResult(x=x, covariance=cov, model=model, chi2=float(r @ r), dof=dof, residuals=r,
-                     rank_deficient=_null_columns(J))
+                     rank_deficient=reduced.full(_null_columns(reduced.J)),
+                     covariance_columns=reduced.columns if model.is_large else None)
 
 
 def reported(result: FitResult, accel_unit: str, gyro_unit: str):
@@ -990,7 +1085,7 @@ def reported(result: FitResult, accel_unit: str, gyro_unit: str):
             units_.append(p.unit)
     index, factors = np.array(index, dtype=int), np.array(factors)
     values = x[index] * factors
-    cov = result.covariance[np.ix_(index, index)] * np.outer(factors, factors)
+    cov = result.covariance_of(index) * np.outer(factors, factors)
     return names, values, units_, cov
 
 

@@ -1,0 +1,74 @@
+"""The fit of a large model (many segments: Model.is_large) works on the sparse Jacobian
+(least_squares' trust-region method with LSMR steps) and computes the covariance, the null
+space and the blind effect parameters from the Jacobian with each segment's own nuisances
+eliminated (lsq._Reduced): the same calibration as the dense path (MINPACK's
+Levenberg-Marquardt and the whole Jacobian's SVD), which is forced here on small captures by
+lowering the threshold.
+
+Tolerances: both solvers stop when a step changes the parameters by less than 1e-10 of their
+size (xtol) or chi2 by less than 1e-10 of itself (ftol), so the two solutions differ by a
+fraction of that step, far below 1e-4 of a 1-sigma (a 1-sigma is ~1e-3 to 1e-6 of the
+parameter's size here); the covariances come from the same Jacobian at (so nearly) the same x:
+1e-6 relative; the sets of unobservable and rank-deficient parameters must be equal."""
+import numpy as np
+import pytest
+
+from sim_devices.hand import hand_session
+from sim_devices.truth import mems_truth
+from station import cli
+from station.estimate import lsq
+from station.io.capture import read_capture
+from station.io.scheme import load_scheme
+from station.model import LIBRARY
+from station.simulate import dryrun
+
+
+@pytest.fixture(scope="module")
+def captures(tmp_path_factory):
+    truth = dryrun.load_truth(None, 0)
+    truth.sample_rate_hz = 50.0
+    out = {"optimal9": lsq.summarise(dryrun.simulate_capture(load_scheme("optimal9"), truth, 3))}
+    tmp = tmp_path_factory.mktemp("hand-large")
+    truth = mems_truth(5)
+    truth.gyro.noise_density = 2.0        # sees the Earth turn in a pose: full attitudes
+    hs = hand_session(truth, 7, poses=12, dwell_s=(3.0, 3.5), turn_s=(1.0, 1.4))
+    log = tmp / "hand.csv"
+    np.savetxt(log, np.column_stack([hs.t, hs.accel, hs.gyro]), delimiter=",", header="t,ax,ay,az,gx,gy,gz",
+               comments="", fmt="%.10g")
+    assert cli.main(["import", "csv", str(log), "--preset", "station", "-o", str(tmp / "hand"),
+                     "--gravity-mps2", str(hs.truth["gravity_mps2"]),
+                     "--latitude-deg", f"{hs.truth['latitude_deg']:g}"]) == 0
+    out["hand"] = lsq.summarise(read_capture(tmp / "hand"))
+    return out
+
+
+def fitted(s, effects, monkeypatch, large: bool):
+    monkeypatch.setattr(lsq, "LARGE_MODEL", 0 if large else 10**9)
+    result = lsq.fit(s, [LIBRARY[e]() for e in effects])
+    assert result.model.is_large is large
+    return result
+
+
+@pytest.mark.parametrize("name, effects", [("optimal9", ()), ("optimal9", ("accel_nonlinearity", "accel_lever_arm")),
+                                           ("hand", ("accel_nonlinearity",))])
+def test_the_sparse_fit_gives_the_dense_fits_calibration(captures, monkeypatch, name, effects):
+    s = captures[name]
+    dense, large = (fitted(s, effects, monkeypatch, flag) for flag in (False, True))
+    names, v_dense, _, cov_dense = lsq.reported(dense, "m/s^2", "deg/s")
+    names_l, v_large, _, cov_large = lsq.reported(large, "m/s^2", "deg/s")
+    assert names == names_l
+    sigma = np.sqrt(np.diag(cov_dense))
+    assert np.all(sigma > 0)
+    assert np.max(np.abs(v_large - v_dense) / sigma) < 1e-4
+    np.testing.assert_allclose(np.sqrt(np.diag(cov_large)), sigma, rtol=1e-6)
+    np.testing.assert_allclose(cov_large, cov_dense, rtol=1e-6, atol=1e-6 * np.outer(sigma, sigma).max())
+    assert large.model.unobservable == dense.model.unobservable
+    assert sorted(large.rank_deficient) == sorted(c for c in dense.rank_deficient
+                                                  if c not in set(large.model.local_columns()))
+    assert large.chi2 == pytest.approx(dense.chi2, rel=1e-8) and large.dof == dense.dof
+    # the calibration file's numbers: the same
+    c_dense, c_large = (lsq.to_calibration(r, "m/s^2", "deg/s") for r in (dense, large))
+    for key in c_dense.sigma:
+        assert c_large.sigma[key] == pytest.approx(c_dense.sigma[key], rel=1e-6), key
+    if "accel_lever_arm" in effects:      # six of its parameters cannot be seen: the same six
+        assert large.model.unobservable
