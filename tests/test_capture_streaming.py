@@ -268,3 +268,56 @@ def test_lossy_segments_and_resolution_are_checked_on_a_capture_read_without_its
     assert [s.name for s in streamed.segments if s.status == "excluded"] == ["pos02"]
     assert all(s.data is None for s in streamed.segments)          # each read in turn, none kept
     check_resolution(read_capture(cap, load_data=False))            # no AttributeError: checked
+
+
+@pytest.mark.parametrize("piece_bytes", [7, 1 << 16])
+def test_an_incomplete_segment_is_counted_for_its_warnings_not_kept(tmp_path, monkeypatch, piece_bytes):
+    """What `estimate` reads an incomplete segment for (its readable rows, its gaps, what is
+    wrong with its last line) is said as a loaded read says it, from its rows counted a piece
+    at a time: no sample kept (it held 162 bytes a sample of samples never used: 1.6 GB for a
+    stopped 10 M-row recording)."""
+    import tracemalloc
+
+    monkeypatch.setattr(capture_io, "PIECE_BYTES", piece_bytes)
+    n = 40_000 if piece_bytes > 100 else 400
+    times = np.delete(np.arange(n + 5), [10, 11, n // 2]) / 100.0          # two gaps
+    rows = "".join(f"{t:.2f},0.1,0.2,9.8,0.01,0.02,0.03\n" for t in times)
+    content = "t,ax,ay,az,gx,gy,gz\n" + rows + "12.3,4"                 # stopped mid-line
+    manifest = base_manifest()
+    manifest["segments"][0]["status"] = "incomplete"
+    bundle = make_bundle(tmp_path, manifest, files={"pos01.csv": content})
+    loaded = read_capture(bundle)
+    streamed = read_capture(bundle, load_data=False)
+    seg = streamed.segments[0]
+    tracemalloc.start()
+    try:
+        streamed.check_incomplete(seg)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert seg.data is None and seg.problem == loaded.segments[0].problem
+    assert streamed.warnings == loaded.warnings
+    assert any(f"incomplete, {len(times)} readable rows" in w for w in loaded.warnings), loaded.warnings
+    assert any("2 gaps in time" in w for w in loaded.warnings), loaded.warnings
+    if piece_bytes > 100:
+        assert peak < 16 * piece_bytes < len(times) * 7 * 8, peak   # pieces, not the samples
+
+
+@pytest.mark.parametrize("status", ["complete", "incomplete"])
+def test_a_line_without_end_is_refused_at_its_start_not_read_to_its_end(tmp_path, monkeypatch, status):
+    """Hundreds of megabytes without a line end took time quadratic in their size and seven
+    times it in memory: a line longer than MAX_LINE_BYTES is refused as soon as it is seen,
+    naming its line, after the lines before it (an incomplete segment keeps them)."""
+    monkeypatch.setattr(capture_io, "PIECE_BYTES", 1000)
+    monkeypatch.setattr(capture_io, "MAX_LINE_BYTES", 5000)
+    rows = "".join(f"{k / 100:.2f},0.1,0.2,9.8,0.01,0.02,0.03\n" for k in range(200))
+    content = "t,ax,ay,az,gx,gy,gz\n" + rows + "1" * 10**6          # line 202: no end
+    manifest = base_manifest()
+    manifest["segments"][0]["status"] = status
+    bundle = make_bundle(tmp_path, manifest, files={"pos01.csv": content})
+    if status == "complete":
+        message = refusal(bundle)
+        assert ": line 202: a line longer than 5000 bytes" in message, message
+    else:
+        seg = read_capture(bundle).segments[0]
+        assert len(seg.data.t) == 200 and "line 202: a line longer than 5000 bytes" in seg.problem

@@ -67,3 +67,26 @@ def test_fuzz_same_outcome_as_safe_load(text):
     except Exception as e:  # noqa: BLE001
         got = ("error", type(e).__name__)
     assert got == expected
+
+
+def test_a_large_manifest_is_read_by_libyaml_and_deep_nesting_never_is():
+    """A 20,000-segment manifest (every segment a mapping with a flow sequence) goes to the C
+    loader, with safe_load's result; texts nested deeper than MAX_C_DEPTH never do, whatever
+    hides their closing brackets (quotes, comments, stray closers before them) or however they
+    nest (flow, block indentation, compact forms)."""
+    if yaml_text._C_LOADER is None:
+        pytest.skip("PyYAML without libyaml")
+    doc = {"format": "station-capture/1",
+           "segments": [{"name": f"s{i:05d}", "kind": "static", "file": f"s{i:05d}.csv",
+                         "status": "complete", "up_body": [0.0, 0.0, 1.0]} for i in range(20_000)]}
+    text = yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
+    assert yaml_text._c_safe(text, True) and yaml_text.safe_load(text) == doc
+    deep = yaml_text.MAX_C_DEPTH + 10
+    for nested in ("[" * deep + "]" * deep,
+                   "".join(f'[ "]" ' for _ in range(deep)),               # quoted closers
+                   "".join("[ # ]\n" for _ in range(deep)),               # commented-out closers
+                   "a: " + "]" * deep + "\nb: " + "[" * deep + "]" * deep,  # stray closers first
+                   "".join(" " * k + f"k{k}:\n" for k in range(deep)),     # block, by indentation
+                   "- " * deep + "x\n"):                                  # block, compact
+        assert yaml_text.nesting_bound(nested) > yaml_text.MAX_C_DEPTH
+        assert not yaml_text._c_safe(nested, True)

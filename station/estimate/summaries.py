@@ -420,17 +420,11 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
     queue = capture.complete("static") + capture.complete("rotation")
     if check_segment is not None:
         queue += [seg for seg in capture.complete() if seg.kind not in ("static", "rotation")]
-    # incomplete segments (a run stopped or killed) are read for what reading them says (the rows
-    # they hold, what is wrong with their last line: capture.warnings), as a loaded capture's are
-    queue += [seg for seg in capture.segments if seg.status == "incomplete" and seg.data is None]
     with capture.reader_ahead(queue) as reader:
         for seg in queue:
             if seg.kind != "static" and gyro_sigma is None:
                 gyro_sigma, static_gyro_mean = _static_noise(capture, statics, diff_sq_g, diff_count)
             d = reader.take(seg)
-            if seg.status == "incomplete":
-                reader.ahead()
-                continue
             if check_segment is not None:
                 with _holding(seg, d):
                     check_segment(seg)
@@ -475,6 +469,12 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
             summary.temp_rate_c_per_s = _slope(d.t, d.temp)
             rotations.append(summary)
             del d
+    # incomplete segments (a run stopped or killed) are read for what reading them says (the rows
+    # they hold, what is wrong with their last line: capture.warnings), as a loaded capture's
+    # are; their rows counted, not kept
+    for seg in capture.segments:
+        if seg.status == "incomplete" and seg.data is None:
+            capture.check_incomplete(seg)
     if gyro_sigma is None:
         _static_noise(capture, statics, diff_sq_g, diff_count)
     for seg, d in hands:

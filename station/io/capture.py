@@ -80,6 +80,17 @@ class SegmentData:
     temp: np.ndarray | None  # (N,) deg C, None when the file has no temp column
     gaps: int  # time steps longer than GAP_FACTOR / sample_rate_hz
 
+    @property
+    def rows(self) -> int:
+        return len(self.t)
+
+
+@dataclass
+class _RowCount:
+    """What an incomplete segment's file holds when its rows are counted, not kept."""
+    rows: int
+    gaps: int
+
 
 @dataclass(eq=False)
 class Segment:
@@ -148,8 +159,26 @@ class Capture:
         incomplete one without readable rows (segment.problem and warnings say why)."""
         if segment.data is not None:
             return segment.data
-        return _read_segment_data(self, segment, _segment_label(self.segments.index(segment),
-                                                                 segment.name))
+        return _read_segment_data(self, segment, self._label(segment))
+
+    def check_incomplete(self, segment) -> None:
+        """Read an incomplete segment's file for what reading it says (its readable rows, what
+        is wrong with its last line, its gaps: segment.problem and capture.warnings, as
+        read_samples says them), counting its rows without keeping them."""
+        if segment.data is None:
+            _read_segment_data(self, segment, self._label(segment), keep=False)
+
+    def _label(self, segment) -> str:
+        """"segments[k] (name)": k found through a table of the list's positions, made again when
+        the list changes (list.index for each of many segments was quadratic)."""
+        table = self.__dict__.get("_positions")
+        if table is None or table[0] is not self.segments or table[1] != len(self.segments):
+            table = (self.segments, len(self.segments), {id(s): k for k, s in enumerate(self.segments)})
+            self._positions = table
+        k = table[2].get(id(segment))
+        if k is None or self.segments[k] is not segment:
+            k = self.segments.index(segment)
+        return _segment_label(k, segment.name)
 
     def load_samples(self, segments=None):
         """Read the samples of ``segments`` (default: every segment) into segment.data."""
@@ -556,12 +585,13 @@ def _parse_segment(entry, index, directory, manifest_file):
     return segment
 
 
-def _read_segment_data(capture, segment, label):
+def _read_segment_data(capture, segment, label, keep=True):
     """A segment's samples from its file, refusing (complete) or describing (incomplete).
 
     The file is read once as bytes; those bytes are hashed (segment.content_sha256, checked
     against the manifest's sha256) and parsed (read_csv_pieces).  Warnings (gaps, what an
-    incomplete segment lacks) are added to capture.warnings once, however often it is read."""
+    incomplete segment lacks) are added to capture.warnings once, however often it is read.
+    ``keep`` False (an incomplete segment only): its rows counted, not kept; None returned."""
     csv_file = capture.path / segment.file
     complete = segment.status != "incomplete"     # "excluded" (estimate) was complete
     rate = capture.imu.sample_rate_hz
@@ -587,7 +617,7 @@ def _read_segment_data(capture, segment, label):
     else:
         try:
             data, segment.problem, segment.content_sha256 = _parse_csv_file(csv_file, rate, csv_file, label,
-                                                                            incomplete=True)
+                                                                            incomplete=True, keep=keep)
         except OSError as e:
             segment.problem = f"cannot read {segment.file}: {e.strerror}"
             _warn(capture, f"{label}: incomplete, no data: {segment.problem}")
@@ -595,26 +625,38 @@ def _read_segment_data(capture, segment, label):
         if segment.problem is None and expected_sha is not None \
                 and segment.content_sha256 != expected_sha.lower():
             segment.problem = sha_problem
-        rows = 0 if data is None else len(data.t)
+        rows = 0 if data is None else data.rows
         problem = f": {segment.problem}" if segment.problem else ""
         _warn(capture, f"{label}: incomplete, {rows} readable rows{problem}")
 
     if data is not None and data.gaps:
         _warn(capture, f"{label}: {data.gaps} gaps in time in {segment.file} "
                        f"(steps longer than {GAP_FACTOR}/sample_rate_hz: lost samples)")
-    return data
+    return data if keep else None
 
 
 def _warn(capture, message):
-    if message not in capture.warnings:
+    """Add ``message`` to capture.warnings unless it is there (a set of them kept beside the
+    list, made again when the list changed otherwise: a scan of the list for each of many
+    segments' warnings was quadratic)."""
+    seen = capture.__dict__.get("_warned")
+    if seen is None or seen[0] is not capture.warnings or seen[1] != len(capture.warnings):
+        seen = [capture.warnings, len(capture.warnings), set(capture.warnings)]
+        capture._warned = seen
+    if message not in seen[2]:
         capture.warnings.append(message)
+        seen[2].add(message)
+        seen[1] += 1
 
 
-def _csv_lines_in_pieces(f, *, partial_last_line):
+def _csv_lines_in_pieces(f, *, partial_last_line, fail):
     """The lines of a segment CSV read from the binary file ``f`` PIECE_BYTES at a time, as
     (lines, number of the first line) pieces of whole lines: decoded (a bad byte then fails as
     "not a number"), a BOM at the start dropped, CRLF read as LF, and blank lines at the end of the
-    file left out (a piece's trailing blank lines are held back until a line follows them).
+    file left out (a piece's trailing blank lines are held back until a line follows them).  A
+    line longer than MAX_LINE_BYTES raises fail(message, line number) as soon as it is seen
+    (a file of hundreds of megabytes without a line end took time quadratic in its size and
+    seven times its size in memory).
 
     partial_last_line: the writer may have been stopped mid-line, so whatever follows the last
     line end is dropped."""
@@ -634,16 +676,20 @@ def _csv_lines_in_pieces(f, *, partial_last_line):
         data = carry + block
         cut = data.rfind(b"\n") + 1
         carry = data[cut:]
-        if not cut:
-            continue
-        lines = held + decoded(data[:cut]).split("\n")[:-1]    # whole lines: the last ends the piece
-        k = len(lines)
-        while k and not lines[k - 1].strip():
-            k -= 1
-        held = lines[k:]
-        if k:
-            yield lines[:k], number
-            number += k
+        if cut:
+            lines = held + decoded(data[:cut]).split("\n")[:-1]    # whole lines: the last ends the piece
+            k = len(lines)
+            while k and not lines[k - 1].strip():
+                k -= 1
+            held = lines[k:]
+            if k:
+                yield lines[:k], number
+                number += k
+        if len(carry) > MAX_LINE_BYTES:     # (the lines before it parsed first: the first bad one is named)
+            if held:
+                yield held, number              # blank lines before a line: refused there
+            raise fail(f"a line longer than {MAX_LINE_BYTES} bytes (a segment CSV's rows are a few numbers)",
+                       number + len(held))
     if carry and not partial_last_line:
         lines = held + decoded(carry).split("\n")
         while lines and not lines[-1].strip():
@@ -657,10 +703,11 @@ class _LineParser:
     line checked, the first violation in the file's order refused by CaptureError naming its
     line, column and text; the rows before it kept (an incomplete segment's)."""
 
-    def __init__(self, sample_rate_hz, csv_file, label):
+    def __init__(self, sample_rate_hz, csv_file, label, keep=True):
         self.sample_rate_hz, self.csv_file, self.label = sample_rate_hz, csv_file, label
         self.names = self.wanted = self.usecols = None
-        self.values = []           # (rows, k) arrays of the pieces read
+        self.values = []           # (rows, k) arrays of the pieces read (keep)
+        self.keep, self.rows, self.gaps = keep, 0, 0      # (not keep: counted only)
         self.last_t = None
 
     def fail(self, message, line):
@@ -680,7 +727,12 @@ class _LineParser:
                 error = checked
             rows = len(values) if error is None else min(error[1], len(values))
             if rows:
-                self.values.append(values[:rows])
+                if self.keep:
+                    self.values.append(values[:rows])
+                else:
+                    t = values[:rows, 0] if self.last_t is None else np.concatenate([[self.last_t], values[:rows, 0]])
+                    self.rows += rows
+                    self.gaps += _count_gaps(np.diff(t), self.sample_rate_hz)
                 self.last_t = float(values[rows - 1, 0])
         if error is not None:
             raise self.fail(error[0], number + error[1])
@@ -732,9 +784,13 @@ class _LineParser:
             found.append((f"time does not increase: t={t[i]:.15g} after t={before[i]:.15g}", i))
         return min(found, key=lambda e: e[1], default=None)
 
-    def result(self, *, require_rows) -> SegmentData:
+    def result(self, *, require_rows) -> SegmentData | _RowCount:
         if self.names is None:
             raise self.fail(f"empty file: line 1 must be the header {','.join(REQUIRED_COLUMNS)}", 1)
+        if not self.keep:
+            if not self.rows and require_rows:
+                raise self.fail("no data rows after the header", 2)
+            return _RowCount(self.rows, self.gaps)
         values = np.concatenate(self.values) if self.values else np.empty((0, len(self.wanted)))
         self.values = []
         if not len(values) and require_rows:
@@ -760,20 +816,21 @@ class _Hashing:
         return block
 
 
-def _parse_csv_file(path, sample_rate_hz, csv_file, label, *, incomplete=False):
+def _parse_csv_file(path, sample_rate_hz, csv_file, label, *, incomplete=False, keep=True):
     """(SegmentData or None, the first problem or None, sha256 hex of the bytes read) of a
     segment CSV read line by line, a piece at a time (memory: a piece and the samples, not the
     file's text).  A complete segment's file (``incomplete`` False) with a bad line gives no data
     and the CaptureError naming the line, once the whole file is hashed (the caller compares the
     digest first: a file that changed while it was read is said so); an incomplete one gives the
     rows before its first bad line (None: not even a header) and that line's problem (a str),
-    and drops a partial last line.  OSError when the file cannot be read."""
+    and drops a partial last line.  ``keep`` False: the rows counted, not kept (a _RowCount
+    instead of the SegmentData).  OSError when the file cannot be read."""
     digest = hashlib.sha256()
-    parser = _LineParser(sample_rate_hz, csv_file, label)
+    parser = _LineParser(sample_rate_hz, csv_file, label, keep=keep)
     with open_regular_file(path) as f:
         source = _Hashing(f, digest)
         try:
-            for lines, number in _csv_lines_in_pieces(source, partial_last_line=incomplete):
+            for lines, number in _csv_lines_in_pieces(source, partial_last_line=incomplete, fail=parser.fail):
                 parser.feed(lines, number)
             return parser.result(require_rows=not incomplete), None, digest.hexdigest()
         except CaptureError as e:
@@ -813,6 +870,7 @@ def _parse_header(header, fail):
 
 
 PIECE_BYTES = 8 * 2**20   # a segment file is read, hashed and parsed this many bytes at a time
+MAX_LINE_BYTES = 2**16    # a segment CSV line longer than this is refused (not read to its end)
 _BOM = b"\xef\xbb\xbf"
 _BLANK = b" \t\r\n"
 
@@ -860,6 +918,8 @@ def read_csv_pieces(path, sample_rate_hz) -> tuple[SegmentData | None, str]:
                     cut = buffer.rfind(b"\n", 0, stop) + 1
                     if cut > 0:
                         parser.feed(buffer, cut)
+                    if end - cut > MAX_LINE_BYTES:     # a line without end: the line reader names
+                        parser.failed = True            # it (grown here, quadratic in its length)
                 hashing.join()          # before the buffer's bytes are moved or read over
             held = 0 if parser.failed else end - cut
             if held:        # same length: the buffer is never resized (views of it may live on)

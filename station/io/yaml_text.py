@@ -7,9 +7,15 @@ is one libyaml can take safely, through the pure-Python loader otherwise:
   same message and line as before (and a text only one of the two accepts is judged by the
   pure-Python loader when the C loader refuses it);
 - the C loader composes nodes recursively without a depth limit: a text whose nesting could be
-  deep (brackets, braces, dashes, colons, question marks and lines counted together exceed
-  MAX_C_DEPTH) goes to the pure-Python loader, whose recursion limit ends in a RecursionError,
-  not in a crash of the interpreter (a 100,000-deep ``[[[...]]]`` segfaults the C loader);
+  deep (``nesting_bound`` above MAX_C_DEPTH) goes to the pure-Python loader, whose recursion
+  limit ends in a RecursionError, not in a crash of the interpreter (a 100,000-deep
+  ``[[[...]]]`` segfaults the C loader).  The bound is the flow collections' depth (brackets
+  and braces open at once; every one in the text when a quote or a comment could hide a
+  closing one) plus the block collections' (a block level is indented further than its parent,
+  but for a sequence that is a mapping's value and the compact ``- - x`` / ``? x`` / ``a: b``
+  forms on one line: twice the indentation plus the dashes, question marks and colons of the
+  line, at most over the lines).  A 20,000-segment manifest is thus read by libyaml (it was
+  sent to the pure-Python loader, minutes, by a count of every mark in the text);
 - a text with a tab, a tag (``!``) or a block scalar (``|``, ``>``) goes to the pure-Python loader: the
   two differ on some malformed ones (``!`` alone is None for one and '' for the other, ``|#`` an
   error for one and '' for the other, ``0<TAB>`` too: found by tests/test_yaml_text.py's fuzzing); station's
@@ -20,6 +26,8 @@ is one libyaml can take safely, through the pure-Python loader otherwise:
 Both loaders construct the same Python objects (yaml.SafeConstructor).
 """
 from __future__ import annotations
+
+import re
 
 import yaml
 
@@ -39,10 +47,32 @@ class NoAliasLoader(yaml.SafeLoader):
 
 
 def _c_safe(text: str | bytes, allow_aliases: bool) -> bool:
-    marks = "\t!|>*[{-:?\n" if isinstance(text, str) else [bytes([c]) for c in b"\t!|>*[{-:?\n"]
-    if _C_LOADER is None or any(m in text for m in marks[:4]) or (not allow_aliases and marks[4] in text):
+    if isinstance(text, bytes):
+        try:
+            text = text.decode("utf-8")
+        except UnicodeDecodeError:      # (libyaml reads UTF-16 too): judged by the pure-Python loader
+            return False
+    if _C_LOADER is None or any(m in text for m in "\t!|>") or (not allow_aliases and "*" in text):
         return False
-    return sum(text.count(c) for c in marks[5:]) <= MAX_C_DEPTH
+    return nesting_bound(text) <= MAX_C_DEPTH
+
+
+_FLOW = re.compile(r"[\[\]{}]")
+_INDENT = re.compile(r"^ *", re.MULTILINE)
+
+
+def nesting_bound(text: str) -> int:
+    """An upper bound of the depth of the YAML node tree in ``text`` (module doc)."""
+    if any(c in text for c in "\"'#"):           # a closing bracket could be quoted or commented out
+        flow = text.count("[") + text.count("{")
+    else:                   # brackets are structure (a stray closer outside a collection: ignored)
+        flow = depth = 0
+        for m in _FLOW.finditer(text):
+            depth = depth + 1 if m.group() in "[{" else max(0, depth - 1)
+            flow = max(flow, depth)
+    indent = max(map(len, _INDENT.findall(text)), default=0)
+    marks = max((line.count("-") + line.count("?") + line.count(":") for line in text.split("\n")), default=0)
+    return flow + 2 * (indent + 1) + marks      # (the largest of each: a bound of their sum per line)
 
 
 def safe_load(text: str | bytes, allow_aliases: bool = True):
