@@ -765,3 +765,25 @@ def test_units():
     assert gyro_to_dps_factor("deg/s") == 1.0 and gyro_to_dps_factor("raw") is None
     with pytest.raises(ValueError):
         gyro_to_dps_factor("dps")
+
+
+def test_two_segments_reading_one_file_are_said_to(tmp_path):
+    """A manifest entry copied without changing its file: both segments would use the same
+    samples; the reader says so (a warning naming both), it does not refuse (the format does
+    not forbid it)."""
+    manifest = base_manifest()
+    twin = dict(manifest["segments"][0], name="pos01-again", file="./pos01.csv")
+    manifest["segments"].append(twin)
+    capture = read_capture(make_bundle(tmp_path, manifest))
+    shared = [w for w in capture.warnings if "reads the same file" in w]
+    assert len(shared) == 1 and "(pos01-again)" in shared[0] and "(pos01)" in shared[0], capture.warnings
+
+
+def test_a_very_long_segment_name_is_shortened_in_messages(tmp_path):
+    """Names have no length limit; a message names a 30,000-character one by its start and
+    length, not whole."""
+    manifest = base_manifest()
+    name = "n" * 30_000
+    manifest["segments"][0]["name"] = name
+    message = refusal(make_bundle(tmp_path, manifest, files={"pos01.csv": "t,ax,ay,az,gx,gy,gz\n0,1,2,3,4,5\n"}))
+    assert "(30000 characters)" in message and len(message) < 600, message[:300]

@@ -30,8 +30,19 @@ TITLE_Y = 1.0          # an axes title's height in axes coordinates, fixed (see 
 PNG_COMPRESSION = 1    # zlib level: 1 encodes in a third of the time of 6 for ~10 % more bytes
 
 
+def _short(name: str, most: int = 32) -> str:
+    """A segment name as a tick label: at most ``most`` characters (the page's tables have it whole)."""
+    return name if len(name) <= most else name[:most - 1] + "…"
+
+
 def pyplot():
+    import warnings
+
     import matplotlib
+
+    # a glyph the font lacks (a segment named in CJK): an SVG's text is drawn by the viewer's
+    # fonts, and a PNG's box is the only thing to say; not a warning on the user's terminal
+    warnings.filterwarnings("ignore", r"Glyph \d+ .*missing from", UserWarning)
 
     matplotlib.use("Agg")
     # SVG: text as text (the viewer's font), and the same bytes on every run (fixed element ids)
@@ -131,7 +142,8 @@ def segments_figure(spec: SegmentsFigure, path=None, fmt: str | None = None) -> 
     from matplotlib.ticker import NullLocator
 
     plt = pyplot()
-    panels = spec.panels
+    panels = [SegmentPanel(p.title, p.reduced_chi2, [_short(name) for name in p.names], p.kinds, p.rms)
+              for p in spec.panels]
     shared = all(p.names == panels[0].names for p in panels)
     # heights in inches from the text they hold: 0.35 in above the first panel for its title;
     # under a panel with names, the rotated names (7 pt: under 0.06 in a character); between

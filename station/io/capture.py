@@ -315,9 +315,26 @@ def read_capture(path, *, load_data=True):
     imu, site, scheme, segments, extra = _parse_manifest(raw, directory, manifest_file)
     capture = Capture(path=directory, imu=imu, site=site, scheme=scheme, segments=segments,
                       extra=extra, warnings=[])
+    _warn_shared_files(capture)
     if load_data:
         capture.load_samples()
     return capture
+
+
+def _warn_shared_files(capture) -> None:
+    """A file that two complete segments point to (a manifest edited by copying an entry): its
+    samples would count twice; said, not refused (the format does not forbid it)."""
+    first = {}
+    for k, seg in enumerate(capture.segments):
+        if seg.status == "incomplete":
+            continue
+        key = os.path.normcase(os.path.normpath(seg.file))
+        if key in first:
+            _, other = first[key]
+            _warn(capture, f"{capture._label(seg)} reads the same file as {capture._label(other)} "
+                           f"({_show(seg.file)}): its samples count twice")
+        else:
+            first[key] = (k, seg)
 
 
 def read_segment_csv(path, *, sample_rate_hz=None):
@@ -366,7 +383,14 @@ def open_regular_file(path, *, limit=None):
 
 
 def _segment_label(index, name):
-    return f"segments[{index}] ({name})" if name is not None else f"segments[{index}]"
+    """"segments[k] (name)" for messages; a name over 60 characters shortened (the manifest's
+    names have no length limit: a 30,000-character one was repeated whole in every message)."""
+    if name is None:
+        return f"segments[{index}]"
+    text = str(name)
+    if len(text) > 60:
+        text = f"{text[:40]}... ({len(text)} characters)"
+    return f"segments[{index}] ({text})"
 
 
 class _Fields:
