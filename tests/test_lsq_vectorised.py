@@ -195,3 +195,15 @@ def test_a_model_like_another_takes_its_nuisances_and_is_the_same_model(hand, op
         np.testing.assert_array_equal(like.residuals(like.x0), own.residuals(own.x0))
         x = random_x(like, np.random.default_rng(3))
         np.testing.assert_array_equal(like.sparse_jacobian(x).toarray(), own.jacobian(x))
+
+
+def test_a_refit_like_another_fit_is_the_same_fit(optimal9, hand):
+    """The add-and-refit loop refits ``like`` the model it adds to (its start and initial
+    nuisances taken): the same solution and covariance as a fit that computed them."""
+    for s in (optimal9, hand["quiet", "latitude"]):
+        base = lsq.fit(s, [])
+        effects = [LIBRARY["accel_nonlinearity"]()]
+        like, own = lsq.fit(s, effects, like=base.model), lsq.fit(s, list(effects))
+        np.testing.assert_allclose(like.x, own.x, rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(like.covariance, own.covariance, rtol=1e-9, atol=1e-300)
+        assert like.chi2 == pytest.approx(own.chi2, rel=1e-12)

@@ -85,7 +85,8 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
             if progress:
                 progress(cand.effect)
             ids = [e.id for e in current.result.model.effects] + [cand.effect]
-            after = diagnose(lsq.fit(summaries, [registry.create(e) for e in ids], attitudes), registry=registry)
+            after = diagnose(lsq.fit(summaries, [registry.create(e) for e in ids], attitudes,
+                                     like=current.result.model), registry=registry)
             if h_current is None:
                 h_current = leave_one_segment_out(current.result)
             h_after = leave_one_segment_out(after.result)
@@ -139,7 +140,8 @@ def eliminate(summaries, step: Step, earlier: list, current: Diagnosis, h_curren
         trials = []
         for eid in remaining:
             ids = [e.id for e in current.result.model.effects if e.id != eid]
-            without = diagnose(lsq.fit(summaries, [registry.create(e) for e in ids], attitudes), registry=registry)
+            without = diagnose(lsq.fit(summaries, [registry.create(e) for e in ids], attitudes,
+                                       like=current.result.model), registry=registry)
             h_without = leave_one_segment_out(without.result)
             needed, why = still_needed(current, without, h_current, h_without)
             if not needed:
@@ -160,14 +162,14 @@ def redundant_with(d: Diagnosis, extra, added: set, summaries) -> list:
     need once ``extra`` (the terms found outside the library) is in the model (still_needed)."""
     effects, attitudes = list(d.result.model.effects), d.result.model.attitudes
     every = EffectRegistry().ids()          # no candidates ranked: only the fits are compared
-    with_all = diagnose(lsq.fit(summaries, [*effects, extra], attitudes), exclude=every)
+    with_all = diagnose(lsq.fit(summaries, [*effects, extra], attitudes, like=d.result.model), exclude=every)
     h_all = leave_one_segment_out(with_all.result)
     out = []
     for e in effects:
         if e.id not in added:
             continue
-        without = diagnose(lsq.fit(summaries, [x for x in effects if x is not e] + [extra], attitudes),
-                           exclude=every)
+        without = diagnose(lsq.fit(summaries, [x for x in effects if x is not e] + [extra], attitudes,
+                                   like=d.result.model), exclude=every)
         needed, why = still_needed(with_all, without, h_all, leave_one_segment_out(without.result))
         if not needed:
             out.append((e.id, why))

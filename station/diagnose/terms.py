@@ -218,7 +218,7 @@ def search(result, max_terms: int = MAX_TERMS) -> list[Found]:
 def refit(summaries, result, found: list[Found]):
     """The model with the found terms added as one effect, refitted (values with 1-sigma)."""
     effect = in_capture_units(TermsEffect)([f.term for f in found], _reference_c(summaries))
-    return lsq.fit(summaries, [*result.model.effects, effect], result.model.attitudes), effect
+    return lsq.fit(summaries, [*result.model.effects, effect], result.model.attitudes, like=result.model), effect
 
 
 def plugin_source(effect: TermsEffect, values, sigmas, class_name: str = "DiscoveredTerms") -> str:

@@ -1013,13 +1013,16 @@ def _blind_effect_parameters(model: Model, reduced: _Reduced) -> list:
     return blind
 
 
-def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "auto") -> FitResult:
+def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "auto",
+        like: Model | None = None) -> FitResult:
     """Fit the model.  An effect parameter this capture cannot reveal (aliased with others, or
     1-sigma above its typical size) gets a prior of zero +/- its typical size, is named in
     ``model.unobservable``, and the fit is repeated: the parameters the capture does reveal then
     carry the uncertainty of the ones it does not, instead of a bias from fixing them.  Which
-    ones are blind barely depends on where the fit ends, so the start is examined first."""
-    model = Model(s, list(effects or []), attitudes)
+    ones are blind barely depends on where the fit ends, so the start is examined first.
+    ``like``: a model of the same summaries with other effects (a refit that adds or removes
+    one), whose start and initial nuisances are taken (Model's like: the same fit, less work)."""
+    model = Model(s, list(effects or []), attitudes, like=like if like is not None and like.s is s else None)
     model.unobservable = []
     if not s.rotations and not s.hand_rotations:
         # nothing turned by a known angle: the gyro block is held only by wide priors (so the fit
