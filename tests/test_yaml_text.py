@@ -90,3 +90,12 @@ def test_a_large_manifest_is_read_by_libyaml_and_deep_nesting_never_is():
                    "- " * deep + "x\n"):                                  # block, compact
         assert yaml_text.nesting_bound(nested) > yaml_text.MAX_C_DEPTH
         assert not yaml_text._c_safe(nested, True)
+
+
+@pytest.mark.parametrize("brk", ["\n\r", "\r", "\n\x85", "\u2028", "\u2029"])
+def test_every_kind_of_line_break_counts_for_the_nesting_bound(brk):
+    """YAML breaks lines at CR, NEL, LS and PS too: indentation after any of them counts (found
+    by a review: lines joined by "\\n\\r" measured no indentation, and libyaml crashed on them)."""
+    lines = [" " * (40 * j) + "- " * 30 for j in range(40)]
+    text = brk.join(lines) + "x"
+    assert yaml_text.nesting_bound(text) >= 40 * 39

@@ -77,8 +77,19 @@ def _read_whole(fd: int, size: int) -> bytes:
 def _worker(parent: int, tasks: int, done: int, permits: tuple, alive: list, directory: str) -> None:
     """In the forked worker: matplotlib imported, a drawing process forked per other core (each
     holding its own end of ``alive``), then every one of them draws (_drawing)."""
-    def parent_gone(*_):                  # the directory removed, which the parent cannot do
-        shutil.rmtree(directory, ignore_errors=True)         # when it is killed
+    helpers = []
+
+    def parent_gone(*_):
+        """Sent by the parent's _stop, or by the kernel when the parent ended (killed): the
+        drawing processes ended first (so that none writes into the directory after), then the
+        directory removed, which a killed parent cannot do."""
+        for pid in helpers:
+            try:
+                os.kill(pid, signal.SIGKILL)
+                os.waitpid(pid, 0)
+            except (ProcessLookupError, ChildProcessError):
+                pass
+        shutil.rmtree(directory, ignore_errors=True)
         os._exit(0)
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -107,6 +118,7 @@ def _worker(parent: int, tasks: int, done: int, permits: tuple, alive: list, dir
             forked.end_with_parent(me)
             index = k
             break
+        helpers.append(pid)
     for k, fd in enumerate(alive):
         if k != index:
             os.close(fd)
@@ -129,13 +141,33 @@ def _drawing(index: int, tasks: int, done: int, permits: tuple, directory: str) 
             with open(os.path.join(directory, f"{number}.spec"), "rb") as f:
                 name, spec = pickle.load(f)
             data = _draw_one(name, spec)
-            with open(os.path.join(directory, f"{number}.figure"), "wb") as f:
-                f.write(data)
+            aside = os.path.join(directory, f"{number}.{index}.part")    # a figure drawn twice (given
+            with open(aside, "wb") as f:                                  # again) is never read half
+                f.write(data)                                             # written
+            os.replace(aside, os.path.join(directory, f"{number}.figure"))
             status = DRAWN
         except Exception:   # noqa: BLE001 -- drawn here instead, which says why
             status = FAILED
         os.write(done, DONE.pack(number, status, index))
         os.write(permits[1], PERMIT)
+
+
+def _end(worker: int, grace_s: float = 2.0) -> None:
+    """End the worker: SIGTERM (it ends its drawing processes and removes the directory, within
+    the figure it may be drawing), SIGKILL if it has not ended within ``grace_s``; reaped."""
+    import time
+
+    try:
+        os.kill(worker, signal.SIGTERM)
+        deadline = time.monotonic() + grace_s
+        while os.waitpid(worker, os.WNOHANG) == (0, 0):
+            if time.monotonic() > deadline:
+                os.kill(worker, signal.SIGKILL)
+                os.waitpid(worker, 0)
+                break
+            time.sleep(0.002)
+    except (ProcessLookupError, ChildProcessError):
+        pass
 
 
 class FigureJob:
@@ -194,6 +226,7 @@ class FigureJob:
                 finally:
                     os._exit(0)       # no atexit handlers, no buffers flushed twice
             self._worker = pid
+            os.set_blocking(self._done, False)      # read to its end, never waited on (select does)
             os.write(self._permits, PERMIT * max(1, count - 1))      # this process is busy
         finally:
             for fd in fds:
@@ -228,19 +261,19 @@ class FigureJob:
             self._permit(len(self._alive) - max(1, len(self._alive) - 1))
         while waiting and self._alive:
             ready, _, _ = select.select([self._done, *self._alive], [], [])
-            if self._done in ready:
-                self._buffer += os.read(self._done, DONE.size * 64)
-                whole = len(self._buffer) - len(self._buffer) % DONE.size
-                for number, status, index in DONE.iter_unpack(self._buffer[:whole]):
-                    self._hand[index] = ("taking" if status == TAKING else number if status == TAKEN else None)
-                    if number not in waiting or status in (TAKING, TAKEN):
-                        continue              # (given twice below, and drawn already)
-                    if status == DRAWN and self._read_figure(number):
-                        waiting.discard(number)
-                    else:                     # failed there, or its file is unreadable
-                        waiting.discard(number)
-                        self._here.append(number)
-                self._buffer = self._buffer[whole:]
+            # every record written so far read first (a process that ended wrote its last ones
+            # before its end-of-file): what it held is then known
+            for number, status, index in self._records():
+                if index not in self._alive.values():
+                    continue                  # (an ended process's: its figure is given again)
+                self._hand[index] = ("taking" if status == TAKING else number if status == TAKEN else None)
+                if number not in waiting or status in (TAKING, TAKEN):
+                    continue                  # (given twice below, and drawn already)
+                if status == DRAWN and self._read_figure(number):
+                    waiting.discard(number)
+                else:                         # failed there, or its file is unreadable
+                    waiting.discard(number)
+                    self._here.append(number)
             for fd in [fd for fd in ready if fd in self._alive]:
                 # a drawing process ended (its pipe's end-of-file): the figure it held is given
                 # again (or drawn here below); if it ended while taking one, not knowing which,
@@ -263,6 +296,20 @@ class FigureJob:
             self._here = []
         return {self._names[n]: self._drawn[n] for n in range(len(self._names))}
 
+    def _records(self) -> list:
+        """Every whole record in the pipe of records now (it is read without waiting)."""
+        while True:
+            try:
+                part = os.read(self._done, DONE.size * 256)
+            except BlockingIOError:
+                break
+            if not part:
+                break
+            self._buffer += part
+        whole = len(self._buffer) - len(self._buffer) % DONE.size
+        records, self._buffer = list(DONE.iter_unpack(self._buffer[:whole])), self._buffer[whole:]
+        return records
+
     def _permit(self, count: int) -> None:
         try:
             os.write(self._permits, PERMIT * count)
@@ -284,11 +331,7 @@ class FigureJob:
         """End the worker now (it may be drawing: Ctrl-C, or an error here; the processes it forked
         die with it), close the pipes, remove the directory."""
         if self._worker is not None:
-            try:
-                os.kill(self._worker, signal.SIGKILL)
-                os.waitpid(self._worker, 0)
-            except (ProcessLookupError, ChildProcessError):
-                pass
+            _end(self._worker)
             self._worker = None
         for fd in (self._tasks, self._done, self._permits, *self._alive):
             if fd is not None:

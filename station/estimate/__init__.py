@@ -56,14 +56,20 @@ MAX_MISSING_FRACTION = 0.01
 MAX_GAP_S = 1.0
 
 
+JUMP_WINDOW = 8      # samples each side of a long step over which data_loss averages the stamps
+
+
 def data_loss(seg, sample_rate_hz: float) -> tuple[int, float, float]:
     """(frames missing, their share of the frames, the longest stretch without a frame in s) of
-    a segment's samples, from its time stamps.  At the stated rate (the median step within 2 %
-    of its period) the frames missing are those the span holds less those received: stamps that
-    jitter (a late one lengthens a step by as much as it shortens the next; host stamps of ±0.3
-    period make steps of 1.6 periods) then lose no frame, to one frame (the first and the last
-    stamp's own jitter).  Off the stated rate (a device a few % slower or faster than it says),
-    step by step at the median step; losing every other frame, at the stated period."""
+    a segment's samples, from its time stamps.  The period is the median step (a device a few %
+    off its stated rate loses nothing), or the stated one when the median is not within half of
+    it (every other frame lost: each step then lost its length in periods less one).  A step
+    longer than 1.5 periods lost frames only if the stamps jump there: the mean offset of the
+    JUMP_WINDOW stamps after it from a steady clock, less that of the ones before (neither
+    window past the long steps beside it), rounded.
+    Stamps that jitter (a late one lengthens a step by as much as it shortens the next: host
+    stamps of ±0.3 period made steps of 1.6 periods, each a frame lost when counted step by
+    step) average out over the windows; a lost frame does not."""
     t = seg.data.t
     n = len(t)
     if n < 2:
@@ -71,13 +77,21 @@ def data_loss(seg, sample_rate_hz: float) -> tuple[int, float, float]:
     nominal = 1.0 / sample_rate_hz
     steps = np.diff(t)
     median = float(np.median(steps))
-    if abs(median / nominal - 1.0) < 0.02:
-        period = nominal
-        missing = max(0, int(round(float(t[-1] - t[0]) / period)) - (n - 1))
+    steady = 0.5 * nominal < median < 1.5 * nominal
+    period = median if steady else nominal
+    long = np.flatnonzero(steps > 1.5 * period)
+    if not steady or not len(long):
+        missing = int(np.round(steps[long] / period - 1.0).sum())
     else:
-        period = median if 0.5 * nominal < median < 1.5 * nominal else nominal
-        big = steps > 1.5 * period
-        missing = int(np.round(steps[big] / period - 1.0).sum())
+        offset = t / period - np.arange(n)                     # in periods, from a steady clock
+        total = np.concatenate([[0.0], np.cumsum(offset - offset[0])])
+        # the windows end at the long steps beside (a frame lost nearby is not this step's jump)
+        before = np.concatenate([[-1], long[:-1]]) + 1
+        after = np.concatenate([long[1:], [n - 1]]) + 1
+        cut = long + 1
+        lo, hi = np.maximum(cut - JUMP_WINDOW, before), np.minimum(cut + JUMP_WINDOW, after)
+        jump = (total[hi] - total[cut]) / (hi - cut) - (total[cut] - total[lo]) / (cut - lo)
+        missing = int(np.maximum(np.round(jump), 0).sum())
     longest = float(steps.max()) - period
     return missing, missing / (n + missing), max(longest, 0.0)
 
