@@ -158,7 +158,8 @@ def fit_pair(capture, title, repeats=3, latitude=None):
         s.latitude_deg = latitude
     t_new, n_new, new = fit_figures(s, (), lsq.Model, repeats)
     t_old, n_old, old = fit_figures(s, (), CountedReference, repeats)
-    dz = np.max(np.abs(new.x - old.x) / np.sqrt(np.maximum(np.diag(old.covariance), 1e-300)))
+    dz = np.max(np.abs(new.x - old.x)[(old.covariance_columns if old.covariance_columns is not None else slice(None))]
+                / np.sqrt(np.maximum(np.diag(old.covariance), 1e-300)))   # (a large model: its calibration's columns)
     print(f"  fit alone{title}: {t_new:.3f} s CPU, {n_new} residual evaluations ({1e3 * t_new / n_new:.2f} ms each); "
           f"before (per segment): {t_old:.3f} s, {n_old} evaluations: {t_old / t_new:.1f}x faster; solutions "
           f"within {dz:.1e} sigma")

@@ -72,3 +72,35 @@ def test_the_sparse_fit_gives_the_dense_fits_calibration(captures, monkeypatch, 
         assert c_large.sigma[key] == pytest.approx(c_dense.sigma[key], rel=1e-6), key
     if "accel_lever_arm" in effects:      # six of its parameters cannot be seen: the same six
         assert large.model.unobservable
+
+
+def test_a_parameter_the_segments_nuisances_produce_exactly_is_found_null():
+    """A column of the calibration that the segments' own nuisances reproduce exactly is
+    rounding after the reduction: measured against its size before it (not its own norm), it
+    is in the null space, as the whole Jacobian's SVD finds (found by a review: it was blown up
+    to a unit column, the aliasing missed and a 1-sigma of 1e14 reported)."""
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(1)
+    segments, own, rows, calibration = 200, 2, 6, 4
+    J_L = sp.block_diag([rng.normal(size=(rows, own)) for _ in range(segments)]).toarray()
+    J_G = rng.normal(size=(segments * rows, calibration))
+    J_G[:, 3] = J_L @ rng.normal(size=segments * own)          # aliased with the nuisances
+    J_G[:, 2] *= 1e4                                            # and columns of unequal sizes
+    J = np.hstack([J_G, J_L])
+
+    class Layout:
+        size = J.shape[1]
+
+    class Large:
+        is_large, layout = True, Layout
+
+        @staticmethod
+        def local_columns():
+            return np.arange(calibration, J.shape[1])
+
+    reduced = lsq._Reduced(Large(), sp.csr_matrix(J))
+    assert reduced.full(lsq._null_columns(reduced.J, reduced.scale)) == \
+        [c for c in lsq._null_columns(J) if c < calibration] == [3]
+    full = lsq.covariance(J)[:3, :3]
+    np.testing.assert_allclose(lsq.covariance(reduced.J, reduced.scale)[:3, :3], full, rtol=1e-8)

@@ -923,8 +923,9 @@ class _Reduced:
 
     def __init__(self, model: Model, J):
         if not model.is_large:
-            self.J, self.columns = np.asarray(J), np.arange(model.layout.size)
+            self.J, self.columns, self.scale = np.asarray(J), np.arange(model.layout.size), None
             return
+        from scipy.sparse import diags
         from scipy.sparse.linalg import splu
 
         local = model.local_columns()
@@ -933,14 +934,22 @@ class _Reduced:
         self.columns = np.flatnonzero(mask)
         J = J.tocsc()
         J_L, J_G = J[:, local], J[:, self.columns].toarray()
+        # J_L's columns scaled to unit norm (a zero one left out: it projects nothing)
+        norms = np.sqrt(np.asarray(J_L.multiply(J_L).sum(axis=0))).ravel()
+        J_L = J_L[:, np.flatnonzero(norms > 0)] @ diags(1.0 / norms[norms > 0])
         N = (J_L.T @ J_L).tocsc()
         try:
             B = splu(N).solve(np.asarray(J_L.T @ J_G))
-        except RuntimeError:              # a nuisance the data cannot see: least squares instead
+        except RuntimeError:              # nuisances the data cannot tell apart: least squares
             from scipy.sparse.linalg import lsmr
 
-            B = np.column_stack([lsmr(J_L, J_G[:, k], atol=1e-14, btol=1e-14)[0] for k in range(J_G.shape[1])])
+            B = np.column_stack([lsmr(J_L, J_G[:, k], atol=1e-14, btol=1e-14, maxiter=10 * J_L.shape[1])[0]
+                                 for k in range(J_G.shape[1])])
         self.J = J_G - J_L @ B
+        # what the reduced columns are measured against: their own size before the reduction
+        # (a column the nuisances produce exactly is left as rounding, which its own norm would
+        # blow up to a unit column: aliasing missed, a 1-sigma of 1e13 instead of none)
+        self.scale = np.linalg.norm(J_G, axis=0)
 
     def full(self, columns) -> list:
         """Columns of the reduced J (indices into it) back to columns of x."""
@@ -960,26 +969,32 @@ def _solve(model: Model, x0: np.ndarray):
         res = least_squares(model.residuals, x0, jac=model.jacobian, method="lm", x_scale="jac",
                             xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=100)
         reduced = _Reduced(model, model.jacobian(res.x))
-    return res.x, covariance(reduced.J), res.fun, reduced
+    return res.x, covariance(reduced.J, reduced.scale), res.fun, reduced
 
 
-def covariance(J: np.ndarray) -> np.ndarray:
+def _column_scale(J: np.ndarray, scale=None) -> np.ndarray:
+    """The columns' norms (or ``scale``: _Reduced's), a zero one taken as 1."""
+    norms = np.array(np.linalg.norm(J, axis=0) if scale is None else scale, float)
+    norms[norms == 0] = 1.0
+    return norms
+
+
+def covariance(J: np.ndarray, scale=None) -> np.ndarray:
     """(J^T J)^-1 through the SVD of the column-scaled J (J^T J would square its condition).
     A direction the data cannot see at all (a zero singular value, e.g. a nuisance with a zero
-    column) gets zero variance and leaves the others untouched."""
-    norms = np.linalg.norm(J, axis=0)
-    norms[norms == 0] = 1.0
+    column) gets zero variance and leaves the others untouched.  ``scale``: the columns' sizes
+    to scale by (default their norms)."""
+    norms = _column_scale(J, scale)
     _, sv, vt = np.linalg.svd(J / norms, full_matrices=False)
     keep = sv > 1e-13 * sv[0]
     v = vt[keep].T / sv[keep]
     return (v @ v.T) / np.outer(norms, norms)
 
 
-def _null_columns(J: np.ndarray) -> list:
+def _null_columns(J: np.ndarray, scale=None) -> list:
     """Columns that take part in a direction the data cannot see at all (a zero singular value
     of the column-scaled Jacobian): their value is not determined, whatever covariance() says."""
-    norms = np.linalg.norm(J, axis=0)
-    norms[norms == 0] = 1.0
+    norms = _column_scale(J, scale)
     _, sv, vt = np.linalg.svd(J / norms, full_matrices=False)
     null = vt[sv < 1e-9 * sv[0]]
     zero = np.flatnonzero(np.linalg.norm(J, axis=0) == 0)
@@ -993,11 +1008,10 @@ def _blind_effect_parameters(model: Model, reduced: _Reduced) -> list:
     if not model.effects:
         return []
     J = reduced.J
-    norms = np.linalg.norm(J, axis=0)
-    norms[norms == 0] = 1.0
+    norms = _column_scale(J, reduced.scale)
     _, sv, vt = np.linalg.svd(J / norms, full_matrices=False)
     null = vt[sv < 1e-9 * sv[0]]
-    cov = covariance(J)
+    cov = covariance(J, reduced.scale)
     where = {int(c): k for k, c in enumerate(reduced.columns)}
     blind = []
     for e in model.effects:
@@ -1036,7 +1050,9 @@ def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "aut
     if rows < columns:
         raise UserError(f"the capture cannot determine the model: {rows} measurements for {columns} "
                         "unknowns (record more static attitudes or rotations, or add fewer effects)")
-    reduced = _Reduced(model, model.sparse_jacobian(model.x0) if model.is_large else model.jacobian(model.x0))
+    reduced = None            # (the start's Jacobian: only to look for blind effect parameters)
+    if model.effects:
+        reduced = _Reduced(model, model.sparse_jacobian(model.x0) if model.is_large else model.jacobian(model.x0))
     x = None
     while True:
         blind = _blind_effect_parameters(model, reduced)
@@ -1054,7 +1070,7 @@ def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "aut
     if not s.rotations and not s.hand_rotations:     # the gyro block's wide priors are not data
         dof -= sum(model.layout[b].stop - model.layout[b].start for b in NO_ROTATION_PRIORS)
     return FitResult(x=x, covariance=cov, model=model, chi2=float(r @ r), dof=dof, residuals=r,
-                     rank_deficient=reduced.full(_null_columns(reduced.J)),
+                     rank_deficient=reduced.full(_null_columns(reduced.J, reduced.scale)),
                      covariance_columns=reduced.columns if model.is_large else None)
 
 
