@@ -189,9 +189,9 @@ class Model:
                  start: Start | None = None, like: "Model | None" = None):
         """``start``: the algebraic start of these summaries when it is known (another Model's
         ``start``: a candidate effect's score test builds a model per candidate), else made here.
-        ``like``: a model of the same summaries, start and attitudes with other effects, whose
-        initial nuisances (static attitudes, rotation axes, whitening) are taken instead of
-        computed again (they do not depend on the effects)."""
+        ``like``: a model of the same summaries and attitudes with other effects, whose start
+        (``start`` is then not used) and initial nuisances (static attitudes, rotation axes,
+        whitening) are taken instead of computed again (they do not depend on the effects)."""
         if like is not None:
             start = like.start
         self.s, self.effects = s, effects

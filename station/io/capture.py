@@ -678,9 +678,10 @@ def _csv_lines_in_pieces(f, *, partial_last_line, fail):
     (lines, number of the first line) pieces of whole lines: decoded (a bad byte then fails as
     "not a number"), a BOM at the start dropped, CRLF read as LF, and blank lines at the end of the
     file left out (a piece's trailing blank lines are held back until a line follows them).  A
-    line longer than MAX_LINE_BYTES raises fail(message, line number) as soon as it is seen
-    (a file of hundreds of megabytes without a line end took time quadratic in its size and
-    seven times its size in memory).
+    line still open more than MAX_LINE_BYTES after a piece's end raises fail(message, line
+    number) there (a file of hundreds of megabytes without a line end took time quadratic in
+    its size and seven times its size in memory; a long line inside a piece is parsed, and
+    refused as a row).
 
     partial_last_line: the writer may have been stopped mid-line, so whatever follows the last
     line end is dropped."""
@@ -894,7 +895,7 @@ def _parse_header(header, fail):
 
 
 PIECE_BYTES = 8 * 2**20   # a segment file is read, hashed and parsed this many bytes at a time
-MAX_LINE_BYTES = 2**16    # a segment CSV line longer than this is refused (not read to its end)
+MAX_LINE_BYTES = 2**16    # a line still open after this many bytes at a piece's end is refused
 _DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 _BOM = b"\xef\xbb\xbf"
 _BLANK = b" \t\r\n"
