@@ -31,7 +31,6 @@ import time
 from pathlib import Path
 
 from station.io.scheme import load_scheme
-from station.simulate import dryrun
 
 LOADTXT = """
 import sys, numpy as np
@@ -49,6 +48,17 @@ assert station.__file__.startswith(sys.argv[2]), station.__file__   # the source
 from station.io.capture import read_capture
 from station.estimate.summaries import summarise
 summarise(read_capture(sys.argv[1], load_data=False))
+"""
+
+
+RECORD = """
+import sys
+from pathlib import Path
+from station.io.scheme import load_scheme
+from station.simulate import dryrun
+truth = dryrun.load_truth(None, 1)
+truth.sample_rate_hz = float(sys.argv[2])
+dryrun.record_scheme(load_scheme("optimal9"), truth, 1, Path(sys.argv[1]))
 """
 
 
@@ -105,9 +115,9 @@ def main():
         for rate in a.rates:
             cap = base / f"optimal9_{rate:g}Hz"
             if not (cap / "manifest.yaml").exists():
-                truth = dryrun.load_truth(None, 1)
-                truth.sample_rate_hz = rate
-                dryrun.record_scheme(scheme, truth, 1, cap)
+                # in a process of its own: a child forked from this one after it simulated 12 M
+                # samples would start with this one's memory, counted in its peak RSS
+                subprocess.run([sys.executable, "-c", RECORD, str(cap), str(rate)], check=True)
             csvs = sorted(str(p) for p in cap.glob("*.csv"))
             megabytes = sum(os.path.getsize(p) for p in csvs) / 1e6
             samples = int(scheme.duration_s * rate)

@@ -256,9 +256,7 @@ class FigureJob:
     def result(self) -> dict:
         """{file name: bytes} of every figure given to draw(), in the order given."""
         waiting = {n for n in range(len(self._names)) if n not in self._drawn and n not in self._here}
-        if self._alive and not self._waiting:       # this process waits now: its core too
-            self._waiting = True
-            self._permit(len(self._alive) - max(1, len(self._alive) - 1))
+        self.all_cores()
         while waiting and self._alive:
             ready, _, _ = select.select([self._done, *self._alive], [], [])
             # every record written so far read first (a process that ended wrote its last ones
@@ -295,6 +293,13 @@ class FigureJob:
             self._drawn.update({n: drawn[self._names[n]] for n in numbers})
             self._here = []
         return {self._names[n]: self._drawn[n] for n in range(len(self._names))}
+
+    def all_cores(self) -> None:
+        """This process has little left to do before it waits for the figures (result()): the
+        drawing processes may draw on its core too (once)."""
+        if self._alive and not self._waiting:
+            self._waiting = True
+            self._permit(len(self._alive) - max(1, len(self._alive) - 1))
 
     def _records(self) -> list:
         """Every whole record in the pipe of records now (it is read without waiting)."""

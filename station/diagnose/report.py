@@ -110,6 +110,7 @@ class DiagnosisFigures:
 
     def known(self, first, steps) -> None:
         self.job.draw({**segments_figure_specs(first, steps), **candidate_figure_specs(first, skip=self.given)})
+        self.job.all_cores()          # what is left here (printing, the page) is little
 
 
 def diagnosis_figures(first, steps) -> dict:
