@@ -104,3 +104,19 @@ def test_a_parameter_the_segments_nuisances_produce_exactly_is_found_null():
         [c for c in lsq._null_columns(J) if c < calibration] == [3]
     full = lsq.covariance(J)[:3, :3]
     np.testing.assert_allclose(lsq.covariance(reduced.J, reduced.scale)[:3, :3], full, rtol=1e-8)
+
+
+@pytest.mark.parametrize("large", [False, True])
+def test_a_fit_stopped_at_its_evaluation_limit_says_so(captures, monkeypatch, large):
+    """least_squares stopping at max_nfev (status 0) was silent; the fit's notes (on screen and
+    in the file) now say the values are those where it stopped."""
+    real = lsq.least_squares
+
+    def stopped_early(*args, **kwargs):
+        return real(*args, **{**kwargs, "max_nfev": 2})
+
+    monkeypatch.setattr(lsq, "least_squares", stopped_early)
+    result = fitted(captures["optimal9"], (), monkeypatch, large)
+    assert sum("stopped at its limit" in n for n in result.model.notes) == 1
+    monkeypatch.setattr(lsq, "least_squares", real)
+    assert not any("stopped at its limit" in n for n in fitted(captures["optimal9"], (), monkeypatch, large).model.notes)

@@ -149,3 +149,17 @@ def test_a_calibration_of_another_imu_is_refused_on_the_page_unless_forced(optim
     assert "made for IMU serial OTHER-1" in capsys.readouterr().err and not page.exists()
     assert main(["report", str(optimal9_run), "--cal", str(other), "-o", str(page), "--no-auto", "--force"]) == 0
     assert "used anyway (--force)" in capsys.readouterr().err and page.exists()
+
+
+def test_segment_names_are_text_not_formulas_and_keep_their_ends(tmp_path):
+    """A segment named like a matplotlib formula ("$\\\\foo$" crashed the residuals' figure with a
+    traceback) is drawn as written; long names that share a prefix keep the ends that differ."""
+    from station.diagnose.figures import SegmentPanel, SegmentsFigure, _short, segments_figure
+
+    names = ["$\\foo$", "cost $5 and $6", "labB_vn100_sn0100-1234_2026-11-23_seg07",
+             "labB_vn100_sn0100-1234_2026-11-23_seg08"]
+    svg = segments_figure(SegmentsFigure([SegmentPanel("as fitted", 1.0, names, ["static"] * 4,
+                                                       [1.0, 2.0, 1.5, 0.7])]), fmt="svg").decode()
+    assert "$\\foo$" in svg and "cost $5 and $6" in svg
+    shorts = [_short(n) for n in names[2:]]
+    assert len(set(shorts)) == 2 and all(len(s) <= 32 and s.endswith(n[-8:]) for s, n in zip(shorts, names[2:]))

@@ -31,8 +31,12 @@ PNG_COMPRESSION = 1    # zlib level: 1 encodes in a third of the time of 6 for ~
 
 
 def _short(name: str, most: int = 32) -> str:
-    """A segment name as a tick label: at most ``most`` characters (the page's tables have it whole)."""
-    return name if len(name) <= most else name[:most - 1] + "…"
+    """A segment name as a tick label: at most ``most`` characters, its start and its end (names
+    that share a long prefix differ at the end; the page's tables have them whole)."""
+    if len(name) <= most:
+        return name
+    tail = (most - 1) // 2
+    return name[:most - 1 - tail] + "…" + name[-tail:]
 
 
 def pyplot():
@@ -45,8 +49,9 @@ def pyplot():
     warnings.filterwarnings("ignore", r"Glyph \d+ .*missing from", UserWarning)
 
     matplotlib.use("Agg")
-    # SVG: text as text (the viewer's font), and the same bytes on every run (fixed element ids)
-    matplotlib.rcParams.update({"svg.fonttype": "none", "svg.hashsalt": "station"})
+    # SVG: text as text (the viewer's font), and the same bytes on every run (fixed element ids);
+    # no text is a formula: a segment named "$\foo$" was parsed as mathtext (and crashed it)
+    matplotlib.rcParams.update({"svg.fonttype": "none", "svg.hashsalt": "station", "text.parse_math": False})
     import matplotlib.pyplot as plt
 
     return plt

@@ -388,8 +388,8 @@ def _segment_label(index, name):
     if name is None:
         return f"segments[{index}]"
     text = str(name)
-    if len(text) > 60:
-        text = f"{text[:40]}... ({len(text)} characters)"
+    if len(text) > 60:          # its start and its end (names that share a prefix differ there)
+        text = f"{text[:24]}...{text[-24:]} ({len(text)} characters)"
     return f"segments[{index}] ({text})"
 
 
