@@ -621,7 +621,7 @@ def test_gaps_are_counted_and_reported(tmp_path):
     capture = read_capture(make_bundle(tmp_path, files={"rot1p.csv": "\n".join(lines)}))
     assert capture.segments[1].data.gaps == 2
     assert capture.warnings == ["segments[1] (rot1p): 2 gaps in time in rot1p.csv "
-                                "(steps longer than 1.5/sample_rate_hz: lost samples)"]
+                                "(steps longer than 1.5 periods where the stamps jump: lost samples)"]
 
 
 def test_read_segment_csv_alone(tmp_path):

@@ -321,3 +321,21 @@ def test_a_line_without_end_is_refused_at_its_start_not_read_to_its_end(tmp_path
     else:
         seg = read_capture(bundle).segments[0]
         assert len(seg.data.t) == 200 and "line 202: a line longer than 5000 bytes" in seg.problem
+
+
+def test_jittering_stamps_are_no_gaps_but_a_lost_frame_is(tmp_path):
+    """Host stamps jittering by ±0.3 period made steps of 1.6 periods, each warned of as a gap
+    ("lost samples": a stress test found 133 in one segment); a frame really lost through the
+    jitter is still a gap (station.io.capture.stamp_gaps)."""
+    rng = np.random.default_rng(2)
+    n = 3000
+    times = np.arange(n) / 100.0 + rng.uniform(-0.3, 0.3, n) / 100.0
+    assert np.diff(times).max() > 1.5 / 100.0
+    for name, t in (("jitter", times), ("lost", np.delete(times, 1500))):
+        rows = "".join(f"{x:.5f},0.1,0.2,9.8,0.01,0.02,0.03\n" for x in t)
+        directory = tmp_path / name
+        directory.mkdir()
+        capture = read_capture(make_bundle(directory, files={"pos01.csv": "t,ax,ay,az,gx,gy,gz\n" + rows}))
+        gaps = capture.segments[0].data.gaps
+        assert gaps == (0 if name == "jitter" else 1), (name, gaps, capture.warnings)
+        assert any("gaps in time" in w for w in capture.warnings) == (name == "lost")

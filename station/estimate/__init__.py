@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from station.model.calibration import Calibration
-from station.io.capture import Capture, read_capture
+from station.io.capture import Capture, read_capture, stamp_gaps
 
 METHODS = ("auto", "lsq", "zhang2010", "fourier", "fourier-high")
 # "auto": fourier when any complete rotation segment has no angle_deg (no encoder) and is not a
@@ -56,43 +56,17 @@ MAX_MISSING_FRACTION = 0.01
 MAX_GAP_S = 1.0
 
 
-JUMP_WINDOW = 8      # samples each side of a long step over which data_loss averages the stamps
-
-
 def data_loss(seg, sample_rate_hz: float) -> tuple[int, float, float]:
     """(frames missing, their share of the frames, the longest stretch without a frame in s) of
-    a segment's samples, from its time stamps.  The period is the median step (a device a few %
-    off its stated rate loses nothing), or the stated one when the median is not within half of
-    it (every other frame lost: each step then lost its length in periods less one).  A step
-    longer than 1.5 periods lost frames only if the stamps jump there: the mean offset of the
-    JUMP_WINDOW stamps after it from a steady clock, less that of the ones before (neither
-    window past the long steps beside it), rounded.
-    Stamps that jitter (a late one lengthens a step by as much as it shortens the next: host
-    stamps of ±0.3 period made steps of 1.6 periods, each a frame lost when counted step by
-    step) average out over the windows; a lost frame does not."""
+    a segment's samples, from its time stamps (station.io.capture.stamp_gaps: counted where the
+    stamps jump, so that stamps that jitter or a device a few % off its stated rate lose
+    nothing)."""
     t = seg.data.t
     n = len(t)
     if n < 2:
         return 0, 0.0, 0.0
-    nominal = 1.0 / sample_rate_hz
-    steps = np.diff(t)
-    median = float(np.median(steps))
-    steady = 0.5 * nominal < median < 1.5 * nominal
-    period = median if steady else nominal
-    long = np.flatnonzero(steps > 1.5 * period)
-    if not steady or not len(long):
-        missing = int(np.round(steps[long] / period - 1.0).sum())
-    else:
-        offset = t / period - np.arange(n)                     # in periods, from a steady clock
-        total = np.concatenate([[0.0], np.cumsum(offset - offset[0])])
-        # the windows end at the long steps beside (a frame lost nearby is not this step's jump)
-        before = np.concatenate([[-1], long[:-1]]) + 1
-        after = np.concatenate([long[1:], [n - 1]]) + 1
-        cut = long + 1
-        lo, hi = np.maximum(cut - JUMP_WINDOW, before), np.minimum(cut + JUMP_WINDOW, after)
-        jump = (total[hi] - total[cut]) / (hi - cut) - (total[cut] - total[lo]) / (cut - lo)
-        missing = int(np.maximum(np.round(jump), 0).sum())
-    longest = float(steps.max()) - period
+    _, missing, period = stamp_gaps(t, sample_rate_hz)
+    longest = float(np.diff(t).max()) - period
     return missing, missing / (n + missing), max(longest, 0.0)
 
 

@@ -655,7 +655,7 @@ def _read_segment_data(capture, segment, label, keep=True):
 
     if data is not None and data.gaps:
         _warn(capture, f"{label}: {data.gaps} gaps in time in {segment.file} "
-                       f"(steps longer than {GAP_FACTOR}/sample_rate_hz: lost samples)")
+                       f"(steps longer than {GAP_FACTOR} periods where the stamps jump: lost samples)")
     return data if keep else None
 
 
@@ -757,7 +757,7 @@ class _LineParser:
                 else:
                     t = values[:rows, 0] if self.last_t is None else np.concatenate([[self.last_t], values[:rows, 0]])
                     self.rows += rows
-                    self.gaps += _count_gaps(np.diff(t), self.sample_rate_hz)
+                    self.gaps += _count_gaps(t, self.sample_rate_hz)
                 self.last_t = float(values[rows - 1, 0])
         if error is not None:
             raise self.fail(error[0], number + error[1])
@@ -826,7 +826,7 @@ class _LineParser:
             accel=np.ascontiguousarray(values[:, 1:4]),
             gyro=np.ascontiguousarray(values[:, 4:7]),
             temp=np.ascontiguousarray(values[:, 7]) if len(self.wanted) == 8 else None,
-            gaps=_count_gaps(np.diff(t), self.sample_rate_hz))
+            gaps=_count_gaps(t, self.sample_rate_hz))
 
 
 class _Hashing:
@@ -867,14 +867,49 @@ def _parse_csv_file(path, sample_rate_hz, csv_file, label, *, incomplete=False, 
             return data, str(e), digest.hexdigest()
 
 
-def _count_gaps(steps, sample_rate_hz):
-    """Time steps longer than GAP_FACTOR nominal steps (1/sample_rate_hz, or when that is None
-    the median step)."""
-    if sample_rate_hz is not None:
-        step = 1.0 / sample_rate_hz
+JUMP_WINDOW = 8      # stamps each side of a long step over which stamp_gaps averages them
+
+
+def stamp_gaps(t, sample_rate_hz=None) -> tuple[int, int, float]:
+    """(gaps, frames missing, period) of time stamps ``t``.  The period is the median step (a
+    device a few % off its stated rate loses nothing), or the stated one (1/sample_rate_hz) when
+    the median is not within half of it (every other frame lost: each step longer than
+    GAP_FACTOR periods is then a gap of its length in periods less one).  A step longer than
+    GAP_FACTOR periods is a gap only if the stamps jump there: the mean offset of the
+    JUMP_WINDOW stamps after it from a steady clock, less that of the ones before (neither
+    window past the long steps beside it), rounded, is the frames lost.  Stamps that jitter (a
+    late one lengthens a step by as much as it shortens the next: host stamps of ±0.3 period
+    made steps of 1.6 periods, each a "gap" before) average out over the windows; a lost frame
+    does not."""
+    t = np.asarray(t, float)
+    n = len(t)
+    if n < 2:
+        return 0, 0, (1.0 / sample_rate_hz if sample_rate_hz else math.inf)
+    steps = np.diff(t)
+    median = float(np.median(steps))
+    nominal = 1.0 / sample_rate_hz if sample_rate_hz else median
+    steady = 0.5 * nominal < median < 1.5 * nominal
+    period = median if steady else nominal
+    long = np.flatnonzero(steps > GAP_FACTOR * period)
+    if not len(long):
+        return 0, 0, period
+    if not steady:
+        lost = np.round(steps[long] / period - 1.0)
     else:
-        step = float(np.median(steps)) if len(steps) else math.inf
-    return int(np.count_nonzero(steps > GAP_FACTOR * step))
+        offset = t / period - np.arange(n)                     # in periods, from a steady clock
+        total = np.concatenate([[0.0], np.cumsum(offset - offset[0])])
+        before = np.concatenate([[-1], long[:-1]]) + 1
+        after = np.concatenate([long[1:], [n - 1]]) + 1
+        cut = long + 1
+        lo, hi = np.maximum(cut - JUMP_WINDOW, before), np.minimum(cut + JUMP_WINDOW, after)
+        jump = (total[hi] - total[cut]) / (hi - cut) - (total[cut] - total[lo]) / (cut - lo)
+        lost = np.maximum(np.round(jump), 0.0)
+    return int(np.count_nonzero(lost > 0)), int(lost.sum()), period
+
+
+def _count_gaps(t, sample_rate_hz):
+    """stamp_gaps' gaps."""
+    return stamp_gaps(t, sample_rate_hz)[0]
 
 
 def _parse_header(header, fail):
@@ -1044,7 +1079,7 @@ class _PieceParser:
         if not np.all(steps > 0):
             return None
         return SegmentData(t=t, accel=accel, gyro=gyro, temp=temp,
-                           gaps=_count_gaps(steps, self.sample_rate_hz))
+                           gaps=_count_gaps(t, self.sample_rate_hz))
 
 
 def _arrow_table(block, columns, usecols):
