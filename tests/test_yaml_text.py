@@ -83,7 +83,7 @@ def test_a_large_manifest_is_read_by_libyaml_and_deep_nesting_never_is():
     assert yaml_text._c_safe(text, True) and yaml_text.safe_load(text) == doc
     deep = yaml_text.MAX_C_DEPTH + 10
     for nested in ("[" * deep + "]" * deep,
-                   "".join(f'[ "]" ' for _ in range(deep)),               # quoted closers
+                   '[ "]" ' * deep,                                        # quoted closers
                    "".join("[ # ]\n" for _ in range(deep)),               # commented-out closers
                    "a: " + "]" * deep + "\nb: " + "[" * deep + "]" * deep,  # stray closers first
                    "".join(" " * k + f"k{k}:\n" for k in range(deep)),     # block, by indentation

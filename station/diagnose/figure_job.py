@@ -48,8 +48,9 @@ TASK = struct.Struct("<i")                          # to the drawing processes: 
 DONE = struct.Struct("<iii")                        # back: (number, TAKING/.../FAILED, process)
 TAKING, TAKEN, DRAWN, FAILED = 0, 1, 2, 3          # TAKING: about to take one (its number: -1)
 PERMIT = b"p"       # one byte per figure that may be drawn at once
-# what matplotlib imports at the first figure drawn and saved as SVG (~10 ms)
-WARM_MODULES = ("matplotlib.backends.backend_agg", "matplotlib.backends.backend_svg")
+# what matplotlib imports at the first figure drawn and saved as SVG (~10 ms), and what an Allan
+# figure's numbers are (station.estimate.noise.NoiseResult, unpickled there)
+WARM_MODULES = ("matplotlib.backends.backend_agg", "matplotlib.backends.backend_svg", "station.estimate.noise")
 
 
 def _draw_here(specs: dict) -> dict:
@@ -100,7 +101,6 @@ def _worker(parent: int, tasks: int, done: int, permits: tuple, alive: list, dir
         import importlib
 
         from station.diagnose.figures import pyplot
-        from station.estimate.noise import NoiseResult  # noqa: F401 -- what an Allan figure's numbers are
 
         pyplot()
         for name in WARM_MODULES:         # imported here once, not in each process at its first figure
