@@ -192,6 +192,8 @@ class Model:
         ``like``: a model of the same summaries and attitudes with other effects, whose start
         (``start`` is then not used) and initial nuisances (static attitudes, rotation axes,
         whitening) are taken instead of computed again (they do not depend on the effects)."""
+        if like is not None and like.s is not s:
+            like = None                 # (of other summaries: nothing to take)
         if like is not None:
             start = like.start
         self.s, self.effects = s, effects
@@ -952,6 +954,13 @@ class _Reduced:
         # blow up to a unit column: aliasing missed, a 1-sigma of 1e13 instead of none)
         self.scale = np.linalg.norm(J_G, axis=0)
 
+    @property
+    def svd(self) -> "_ScaledSVD":
+        """The scaled SVD of the reduced J (computed once)."""
+        if "_svd" not in self.__dict__:
+            self._svd = _ScaledSVD(self.J, self.scale)
+        return self._svd
+
     def full(self, columns) -> list:
         """Columns of the reduced J (indices into it) back to columns of x."""
         return [int(self.columns[k]) for k in columns]
@@ -976,37 +985,49 @@ def _solve(model: Model, x0: np.ndarray):
                 "the values and 1-sigma are those where it stopped")
         if note not in model.notes:
             model.notes.append(note)
-    return res.x, covariance(reduced.J, reduced.scale), res.fun, reduced
+    return res.x, reduced.svd.covariance(), res.fun, reduced
 
 
-def _column_scale(J: np.ndarray, scale=None) -> np.ndarray:
-    """The columns' norms (or ``scale``: _Reduced's), a zero one taken as 1."""
-    norms = np.array(np.linalg.norm(J, axis=0) if scale is None else scale, float)
-    norms[norms == 0] = 1.0
-    return norms
+class _ScaledSVD:
+    """The SVD of J with its columns scaled by their norms (or ``scale``: _Reduced's; a zero one
+    taken as 1), from which the covariance and the null space are read: computed once per
+    Jacobian (each reading took its own SVD: four per fit)."""
+
+    def __init__(self, J: np.ndarray, scale=None):
+        self.J = J
+        self.norms = np.array(np.linalg.norm(J, axis=0) if scale is None else scale, float)
+        self.norms[self.norms == 0] = 1.0
+        _, self.sv, self.vt = np.linalg.svd(J / self.norms, full_matrices=False)
+
+    def covariance(self) -> np.ndarray:
+        """(J^T J)^-1 (J^T J would square J's condition).  A direction the data cannot see at
+        all (a zero singular value, e.g. a nuisance with a zero column) gets zero variance and
+        leaves the others untouched."""
+        keep = self.sv > 1e-13 * self.sv[0]
+        v = self.vt[keep].T / self.sv[keep]
+        return (v @ v.T) / np.outer(self.norms, self.norms)
+
+    def null(self) -> np.ndarray:
+        """The directions the data cannot see at all (rows, in scaled columns)."""
+        return self.vt[self.sv < 1e-9 * self.sv[0]]
+
+    def null_columns(self) -> list:
+        """Columns that take part in a direction the data cannot see at all: their value is not
+        determined, whatever covariance() says."""
+        null = self.null()
+        zero = np.flatnonzero(np.linalg.norm(self.J, axis=0) == 0)
+        return sorted(set(zero.tolist()) | set(np.flatnonzero(np.max(np.abs(null), axis=0) > 1e-6).tolist()
+                                                if null.size else []))
 
 
 def covariance(J: np.ndarray, scale=None) -> np.ndarray:
-    """(J^T J)^-1 through the SVD of the column-scaled J (J^T J would square its condition).
-    A direction the data cannot see at all (a zero singular value, e.g. a nuisance with a zero
-    column) gets zero variance and leaves the others untouched.  ``scale``: the columns' sizes
-    to scale by (default their norms)."""
-    norms = _column_scale(J, scale)
-    _, sv, vt = np.linalg.svd(J / norms, full_matrices=False)
-    keep = sv > 1e-13 * sv[0]
-    v = vt[keep].T / sv[keep]
-    return (v @ v.T) / np.outer(norms, norms)
+    """(J^T J)^-1 through the SVD of the column-scaled J (_ScaledSVD.covariance)."""
+    return _ScaledSVD(J, scale).covariance()
 
 
 def _null_columns(J: np.ndarray, scale=None) -> list:
-    """Columns that take part in a direction the data cannot see at all (a zero singular value
-    of the column-scaled Jacobian): their value is not determined, whatever covariance() says."""
-    norms = _column_scale(J, scale)
-    _, sv, vt = np.linalg.svd(J / norms, full_matrices=False)
-    null = vt[sv < 1e-9 * sv[0]]
-    zero = np.flatnonzero(np.linalg.norm(J, axis=0) == 0)
-    return sorted(set(zero.tolist()) | set(np.flatnonzero(np.max(np.abs(null), axis=0) > 1e-6).tolist()
-                                            if null.size else []))
+    """_ScaledSVD.null_columns of J."""
+    return _ScaledSVD(J, scale).null_columns()
 
 
 def _blind_effect_parameters(model: Model, reduced: _Reduced) -> list:
@@ -1014,11 +1035,7 @@ def _blind_effect_parameters(model: Model, reduced: _Reduced) -> list:
     aliased with other parameters), or with a 1-sigma above their typical size."""
     if not model.effects:
         return []
-    J = reduced.J
-    norms = _column_scale(J, reduced.scale)
-    _, sv, vt = np.linalg.svd(J / norms, full_matrices=False)
-    null = vt[sv < 1e-9 * sv[0]]
-    cov = covariance(J, reduced.scale)
+    null, cov = reduced.svd.null(), reduced.svd.covariance()
     where = {int(c): k for k, c in enumerate(reduced.columns)}
     blind = []
     for e in model.effects:
@@ -1043,7 +1060,7 @@ def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "aut
     ones are blind barely depends on where the fit ends, so the start is examined first.
     ``like``: a model of the same summaries with other effects (a refit that adds or removes
     one), whose start and initial nuisances are taken (Model's like: the same fit, less work)."""
-    model = Model(s, list(effects or []), attitudes, like=like if like is not None and like.s is s else None)
+    model = Model(s, list(effects or []), attitudes, like=like)
     model.unobservable = []
     if not s.rotations and not s.hand_rotations:
         # nothing turned by a known angle: the gyro block is held only by wide priors (so the fit
@@ -1077,7 +1094,7 @@ def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "aut
     if not s.rotations and not s.hand_rotations:     # the gyro block's wide priors are not data
         dof -= sum(model.layout[b].stop - model.layout[b].start for b in NO_ROTATION_PRIORS)
     return FitResult(x=x, covariance=cov, model=model, chi2=float(r @ r), dof=dof, residuals=r,
-                     rank_deficient=reduced.full(_null_columns(reduced.J, reduced.scale)),
+                     rank_deficient=reduced.full(reduced.svd.null_columns()),
                      covariance_columns=reduced.columns if model.is_large else None)
 
 
