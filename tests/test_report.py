@@ -73,6 +73,22 @@ def test_diagnose_report_writes_the_same_kind_of_page(hidden_effect_capture, tmp
     assert (out / "residuals_per_segment.svg").stat().st_size > 1000
 
 
+def test_the_page_draws_the_significant_candidates_or_the_leading_one(hidden_effect_capture, optimal9_run, tmp_path):
+    """A candidate's figure is drawn when the candidate is significant (here the non-linearity the
+    IMU has; the lever arm and the temperature bias rank next on the misfit it leaves, and are
+    not); when none is, the leading one's only (optimal9 of the default IMU)."""
+    for cap, out in ((hidden_effect_capture, tmp_path / "hidden"), (optimal9_run, tmp_path / "plain")):
+        assert main(["diagnose", str(cap), "--auto", "--report", str(out), "--json"]) == 0
+    hidden = sorted(p.name for p in (tmp_path / "hidden").glob("candidate_*.svg"))
+    assert hidden == ["candidate_accel_nonlinearity.svg"]
+    plain = sorted(p.name for p in (tmp_path / "plain").glob("candidate_*.svg"))
+    text = (tmp_path / "plain" / "index.html").read_text(encoding="utf-8")
+    leading = re.search(r"<h3>Candidate effects.*?<tbody><tr><td class='l'>([a-z_0-9]+)</td><td class='l'>no</td>",
+                        text).group(1)
+    assert plain == [f"candidate_{leading}.svg"]
+    assert text.count("residuals against the change it would make") == 1
+
+
 def test_a_noise_recording_gets_a_page_without_a_diagnosis(tmp_path):
     cap = tmp_path / "still"
     assert main(["run", "--scheme", "noise", "--sim", "--seed", "2", "--dwell-s", "30", "--out", str(cap)]) == 0

@@ -56,12 +56,12 @@ def cmd_diagnose(args) -> int:
 
             job = stack.enter_context(FigureJob())
         first, steps, final, summary, page = _diagnose(args, job)
-    if args.report:
-        from station.diagnose.report import write_report
+        if args.report:       # (while the figures' processes end)
+            from station.diagnose.report import write_report
 
-        index = write_report(args.report, first, steps, final, summary, page)
-        if not args.json:
-            out.print(f"report: {index}")
+            index = write_report(args.report, first, steps, final, summary, page)
+            if not args.json:
+                out.print(f"report: {index}")
     if args.json:
         print(json.dumps(to_json(final, steps), indent=1))
     elif not args.report:

@@ -1,7 +1,7 @@
 """The report's figures drawn in other processes while this one reads and fits.
 
 A report's figures cost more CPU than its fit (docs/performance.md, "Diagnose and the report"):
-importing matplotlib (~0.28 s) and drawing five figures (0.03-0.06 s each).  A FigureJob's
+importing matplotlib (~0.28 s) and drawing three to five figures (0.04-0.07 s each).  A FigureJob's
 ``start()`` (called where the capture is about to be read) forks a worker (Linux) that imports
 matplotlib while this process reads the capture and fits, then forks a drawing process per
 other core: every one of them takes the next figure given as soon as it may (one queue: no
@@ -43,7 +43,7 @@ from station.core import forked
 
 ALLAN_FIGURE = "allan.svg"                          # the report's figures, by file name
 SEGMENTS_FIGURE = "residuals_per_segment.svg"
-MOST_PROCESSES = 4          # drawing processes at most (a report has five figures)
+MOST_PROCESSES = 4          # drawing processes at most (a report has three to five figures)
 TASK = struct.Struct("<i")                          # to the drawing processes: a figure's number
 DONE = struct.Struct("<iii")                        # back: (number, TAKING/.../FAILED, process)
 TAKING, TAKEN, DRAWN, FAILED = 0, 1, 2, 3          # TAKING: about to take one (its number: -1)
@@ -180,7 +180,7 @@ class FigureJob:
         self._hand: dict = {}             # drawing process -> the number it holds, "taking" or None
         self._alive: dict = {}            # fd -> drawing process, while it lives
         self._worker = self._tasks = self._done = self._permits = self._dir = None
-        self._started, self._waiting = False, False
+        self._started, self._waiting, self._killed = False, False, False
         self._buffer = b""
 
     def __enter__(self) -> "FigureJob":
@@ -292,6 +292,15 @@ class FigureJob:
             drawn = _draw_here({self._names[n]: self._specs[n] for n in numbers})
             self._drawn.update({n: drawn[self._names[n]] for n in numbers})
             self._here = []
+        if self._worker is not None:
+            # every figure is here: the worker killed now (its drawing processes die with it,
+            # idle), so that it ends while this process writes the page; reaped and its directory
+            # removed on leaving the ``with`` block (a SIGTERM would have it wait for each)
+            try:
+                os.kill(self._worker, signal.SIGKILL)
+                self._killed = True
+            except ProcessLookupError:
+                pass
         return {self._names[n]: self._drawn[n] for n in range(len(self._names))}
 
     def all_cores(self) -> None:
@@ -336,7 +345,10 @@ class FigureJob:
         """End the worker now (it may be drawing: Ctrl-C, or an error here; the processes it forked
         die with it), close the pipes, remove the directory."""
         if self._worker is not None:
-            _end(self._worker)
+            if self._killed:
+                os.waitpid(self._worker, 0)
+            else:
+                _end(self._worker)
             self._worker = None
         for fd in (self._tasks, self._done, self._permits, *self._alive):
             if fd is not None:

@@ -74,11 +74,16 @@ def candidate_spec(diagnosis, cand) -> CandidateFigure:
                            VARIABLE_LABEL.get(cand.signature_variable, cand.signature_variable), var[ok], r[ok])
 
 
-def candidate_figure_specs(first, leading: int = 3, skip=()) -> dict:
-    """{file name: what to draw} of the ``leading`` candidates of the model as fitted (known
-    before any effect is added), but those named in ``skip``."""
-    names = [(f"candidate_{cand.effect}.svg", cand) for cand in first.candidates[:3] if cand.signature_rows is not None]
-    return {name: candidate_spec(first, cand) for name, cand in names[:leading] if name not in skip}
+def candidate_figure_specs(first, most: int = 3, skip=()) -> dict:
+    """{file name: what to draw} of the candidates of the model as fitted (known before any effect
+    is added) that are significant, at most ``most``, or of the leading one when none is; but
+    those named in ``skip``.  (A candidate that is not significant scatters noise, or the share
+    of a failing fit's misfit that another effect explains; the page's table has every
+    candidate's numbers.)"""
+    drawable = [cand for cand in first.candidates if cand.signature_rows is not None]
+    chosen = [cand for cand in drawable if cand.significant][:most] or drawable[:1]
+    names = [(f"candidate_{cand.effect}.svg", cand) for cand in chosen]
+    return {name: candidate_spec(first, cand) for name, cand in names if name not in skip}
 
 
 def segments_figure_specs(first, steps) -> dict:
@@ -89,7 +94,7 @@ def segments_figure_specs(first, steps) -> dict:
 
 def diagnosis_figure_specs(first, steps) -> dict:
     """{file name: what to draw}: the residuals per segment (before and after each step) and the
-    three leading candidates."""
+    significant candidates (candidate_figure_specs)."""
     return {**segments_figure_specs(first, steps), **candidate_figure_specs(first)}
 
 
@@ -99,12 +104,12 @@ class DiagnosisFigures:
     the loop then refits (a significant candidate: drawn meanwhile); the residuals per segment,
     and the candidates' if not given yet, once every step is known (``known``)."""
 
-    def __init__(self, job: FigureJob, early: int = 2):
-        self.job, self.early, self.given = job, early, set()
+    def __init__(self, job: FigureJob):
+        self.job, self.given = job, set()
 
     def first_known(self, first) -> None:
         if any(c.significant for c in first.candidates):
-            specs = candidate_figure_specs(first, leading=self.early)
+            specs = candidate_figure_specs(first)
             self.job.draw(specs)
             self.given.update(specs)
 
