@@ -10,7 +10,10 @@ fit takes the sparse path above lsq.LARGE_MODEL parameters (about 100 segments).
 Each segment adds 2-3 parameters (a static's attitude, a rotation's phase) and 6-18 residual
 rows: the dense path costs rows x parameters^2 (cubic in N), the sparse one grows linearly.
 
-Usage: python benchmarks/perf_many_segments.py [--statics 50 100 250 500 1000] [--dense-up-to 500]
+With --diagnosis, also what `station diagnose` computes from the fit (every candidate's score
+test and the leave-one-segment-out scores), on the large model's reduced Jacobian.
+
+Usage: python benchmarks/perf_many_segments.py [--statics 50 100 250 500 1000] [--dense-up-to 500] [--diagnosis]
 """
 import os
 
@@ -52,10 +55,24 @@ def timed_fit(s, large: bool):
     return result, time.perf_counter() - t0, time.process_time() - c0
 
 
+def timed_diagnosis(result) -> float:
+    """Wall seconds of what `station diagnose` computes from a fit: the score tests of every
+    library candidate (station.diagnose.core.diagnose) and the leave-one-segment-out scores."""
+    from station.diagnose.core import diagnose
+    from station.diagnose.holdout import leave_one_segment_out
+
+    t0 = time.perf_counter()
+    diagnose(result)
+    leave_one_segment_out(result)
+    return time.perf_counter() - t0
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--statics", type=int, nargs="+", default=[50, 100, 250, 500, 1000])
     ap.add_argument("--dense-up-to", type=int, default=500, help="statics above which the dense path is not timed")
+    ap.add_argument("--diagnosis", action="store_true",
+                    help="also time the diagnosis of the sparse fit (score tests, leave-one-segment-out)")
     a = ap.parse_args()
     default = lsq.LARGE_MODEL
     with tempfile.TemporaryDirectory() as tmp:
@@ -66,6 +83,8 @@ def main() -> None:
             size, rows = sparse.model.layout.size, len(sparse.residuals)
             line = (f"{len(s.statics):5d} statics {len(s.rotations):4d} rotations: {size:5d} parameters, "
                     f"{rows:6d} rows; sparse {wall_s:7.2f} s (cpu {cpu_s:6.2f} s)")
+            if a.diagnosis:
+                line += f", its diagnosis {timed_diagnosis(sparse):6.2f} s"
             if n <= a.dense_up_to:
                 dense, wall_d, cpu_d = timed_fit(s, False)
                 _, v_s, _, cov_s = lsq.reported(sparse, "m/s^2", "deg/s")

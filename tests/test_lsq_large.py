@@ -106,6 +106,80 @@ def test_a_parameter_the_segments_nuisances_produce_exactly_is_found_null():
     np.testing.assert_allclose(lsq.covariance(reduced.J, reduced.scale)[:3, :3], full, rtol=1e-8)
 
 
+def test_what_the_model_cannot_produce_is_the_whole_jacobians_complement():
+    """_Reduced.outside (the score tests' projection, linear in the segments) against the whole
+    Jacobian's SVD, on columns of every kind: random, produced by the model (nothing is left),
+    produced by the nuisances only, and a mixture."""
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(2)
+    segments, own, rows, calibration = 150, 2, 6, 5
+    J_L = sp.block_diag([rng.normal(size=(rows, own)) for _ in range(segments)]).toarray()
+    J_G = rng.normal(size=(segments * rows, calibration))
+    J_G[:, 4] = J_L @ rng.normal(size=segments * own)          # aliased with the nuisances
+    J_G[:, 1] *= 1e4
+    J = np.hstack([J_G, J_L])
+
+    class Large:
+        is_large = True
+
+        class layout:
+            size = J.shape[1]
+
+        @staticmethod
+        def local_columns():
+            return np.arange(calibration, J.shape[1])
+
+    M = np.column_stack([rng.normal(size=J.shape[0]), J @ rng.normal(size=J.shape[1]),
+                         J_L @ rng.normal(size=segments * own),
+                         rng.normal(size=J.shape[0]) + J_G @ rng.normal(size=calibration)])
+    u, sv, _ = np.linalg.svd(J, full_matrices=False)
+    u = u[:, sv > 1e-10 * sv[0]]
+    dense = M - u @ (u.T @ M)
+    got = lsq._Reduced(Large(), sp.csr_matrix(J)).outside(M)
+    size = np.linalg.norm(M, axis=0)
+    assert np.all(np.linalg.norm(got - dense, axis=0) < 1e-9 * size)
+    assert np.linalg.norm(got[:, 1]) < 1e-9 * size[1] and np.linalg.norm(got[:, 2]) < 1e-9 * size[2]
+    assert np.linalg.norm(got[:, 0]) > 0.5 * size[0]
+
+
+def test_the_diagnosis_of_a_large_model_is_the_dense_ones(monkeypatch):
+    """The score tests, the terms found outside the library and the leave-one-segment-out
+    scores at one fit, computed as a large model's (sparse Jacobian, nuisances eliminated) and
+    as a small one's (the whole Jacobian), on optimal9 of an IMU with a non-linearity the model
+    lacks: the same numbers to rounding (1e-8: the two differ in the order of their sums)."""
+    import dataclasses
+
+    from station.diagnose import holdout, terms
+    from station.diagnose.core import diagnose
+
+    truth = dryrun.load_truth(None, 4)
+    truth.sample_rate_hz = 50.0
+    truth.accel.nonlinearity_ug_per_g2 = np.array([300.0, -200.0, 400.0])
+    s = lsq.summarise(dryrun.simulate_capture(load_scheme("optimal9"), truth, 5))
+    fit = fitted(s, (), monkeypatch, False)
+    found = {}
+    for large in (False, True):
+        monkeypatch.setattr(lsq, "LARGE_MODEL", 0 if large else 10**9)
+        result = dataclasses.replace(fit)             # the same fit, nothing computed from it yet
+        assert result.model.is_large is large
+        d = diagnose(result)
+        found[large] = ({c.effect: (c.predicted_chi2_drop, c.sigma, c.significant) for c in d.candidates},
+                        holdout.leave_one_segment_out(result).per_segment,
+                        [(f.term.name, f.value) for f in terms.search(result)])
+    (cands_d, hold_d, terms_d), (cands_l, hold_l, terms_l) = found[False], found[True]
+    assert cands_d["accel_nonlinearity"][2] and cands_l.keys() == cands_d.keys()
+    for effect, (drop, sigma, significant) in cands_d.items():
+        assert cands_l[effect][0] == pytest.approx(drop, rel=1e-8, abs=1e-8), effect
+        np.testing.assert_allclose(cands_l[effect][1], sigma, rtol=1e-8, err_msg=effect)
+        assert cands_l[effect][2] == significant, effect
+    assert hold_l.keys() == hold_d.keys()
+    for name, score in hold_d.items():
+        assert hold_l[name] == pytest.approx(score, rel=1e-8, abs=1e-10), name
+    assert [n for n, _ in terms_l] == [n for n, _ in terms_d] and terms_d
+    np.testing.assert_allclose([v for _, v in terms_l], [v for _, v in terms_d], rtol=1e-8)
+
+
 @pytest.mark.parametrize("large", [False, True])
 def test_a_fit_stopped_at_its_evaluation_limit_says_so(captures, monkeypatch, large):
     """least_squares stopping at max_nfev (status 0) was silent; the fit's notes (on screen and

@@ -67,19 +67,21 @@ def _blocks(model, x):
 def leave_one_segment_out(result) -> Holdout:
     model, x = result.model, result.x
     r = model.residuals(x)
-    J = fit_jacobian(result)
+    # a large model's Jacobian sparse (the whole of it dense: rows x columns, 290 MB at 1,000
+    # segments); only the shared columns are needed whole
+    J = model.sparse_jacobian(x).tocsr() if model.is_large else fit_jacobian(result)
     blocks, n_rows = _blocks(model, x)
     local = np.zeros(J.shape[1], bool)
     for _, _, _, cols in blocks:
         local[cols] = True
-    shared = ~local
-    X = J[:, shared].copy()
+    shared = np.flatnonzero(~local)
+    X = J[:, shared].toarray() if model.is_large else J[:, shared].copy()
     e = r.copy()
     for _, data, weak, cols in blocks:
         rows = np.concatenate([data, weak])
         if not len(cols):
             continue
-        Jl = J[np.ix_(rows, cols)]
+        Jl = J[rows][:, cols].toarray() if model.is_large else J[np.ix_(rows, cols)]
         q, s, _ = np.linalg.svd(Jl, full_matrices=False)
         q = q[:, s > 1e-10 * max(s.max(initial=0.0), 1e-300)]
         X[rows] -= q @ (q.T @ X[rows])

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from station.diagnose.core import ALPHA, chi2_sf, model_basis
+from station.diagnose.core import ALPHA, chi2_sf, outside_model
 from station.estimate import lsq
 from station.model.effect import Effect, Param
 from station.model.raw_counts import in_capture_units
@@ -183,8 +183,7 @@ def search(result, max_terms: int = MAX_TERMS) -> list[Found]:
     r = extended.residuals(x)
     cols = list(range(n, n + len(candidates)))
     Jc = extended.jacobian_columns(x, cols)             # d(residual)/d(coefficient)
-    basis = model_basis(result)
-    Jp = Jc - basis @ (basis.T @ Jc)
+    Jp = outside_model(result, Jc)
     m = len(candidates)
     data = model.data_rows if hasattr(model, "data_rows") else np.ones(len(r), bool)
     found: list[Found] = []

@@ -940,19 +940,39 @@ class _Reduced:
         # J_L's columns scaled to unit norm (a zero one left out: it projects nothing)
         norms = np.sqrt(np.asarray(J_L.multiply(J_L).sum(axis=0))).ravel()
         J_L = J_L[:, np.flatnonzero(norms > 0)] @ diags(1.0 / norms[norms > 0])
-        N = (J_L.T @ J_L).tocsc()
+        self._J_L = J_L
         try:
-            B = splu(N).solve(np.asarray(J_L.T @ J_G))
+            self._lu = splu((J_L.T @ J_L).tocsc())
         except RuntimeError:              # nuisances the data cannot tell apart: least squares
-            from scipy.sparse.linalg import lsmr
-
-            B = np.column_stack([lsmr(J_L, J_G[:, k], atol=1e-14, btol=1e-14, maxiter=10 * J_L.shape[1])[0]
-                                 for k in range(J_G.shape[1])])
-        self.J = J_G - J_L @ B
+            self._lu = None
+        self.J = self._local_fit_removed(J_G)
         # what the reduced columns are measured against: their own size before the reduction
         # (a column the nuisances produce exactly is left as rounding, which its own norm would
         # blow up to a unit column: aliasing missed, a 1-sigma of 1e13 instead of none)
         self.scale = np.linalg.norm(J_G, axis=0)
+
+    def _local_fit_removed(self, M: np.ndarray) -> np.ndarray:
+        """M - J_L B, B the least-squares fit of M's columns by the nuisances' columns J_L."""
+        J_L = self._J_L
+        if self._lu is not None:
+            return M - J_L @ self._lu.solve(np.asarray(J_L.T @ M))
+        from scipy.sparse.linalg import lsmr
+
+        B = np.column_stack([lsmr(J_L, M[:, k], atol=1e-14, btol=1e-14, maxiter=10 * J_L.shape[1])[0]
+                             for k in range(M.shape[1])])
+        return M - J_L @ B.reshape(J_L.shape[1], M.shape[1])
+
+    def outside(self, M: np.ndarray) -> np.ndarray:
+        """A large model's: M (rows x k) less its projection on the Jacobian's column space, what
+        the model's parameters cannot produce (a score test's candidate columns).  That space is
+        the nuisances' columns' and, orthogonal to it, the reduced columns' (self.J, measured
+        against their size before the reduction: a column the nuisances produce adds nothing):
+        a cost linear in the segments, where the whole Jacobian's SVD is cubic."""
+        if "_basis" not in self.__dict__:
+            u, sv, _ = np.linalg.svd(self.J / np.where(self.scale > 0, self.scale, 1.0), full_matrices=False)
+            self._basis = u[:, sv > 1e-10 * sv[0]] if len(sv) else u
+        W = self._local_fit_removed(np.asarray(M, float))
+        return W - self._basis @ (self._basis.T @ W)
 
     @property
     def svd(self) -> "_ScaledSVD":
@@ -964,6 +984,16 @@ class _Reduced:
     def full(self, columns) -> list:
         """Columns of the reduced J (indices into it) back to columns of x."""
         return [int(self.columns[k]) for k in columns]
+
+
+def reduced_at_solution(result: FitResult) -> _Reduced:
+    """A large model's Jacobian at the solution with the segments' nuisances eliminated
+    (_Reduced; computed once per result): what is read from the Jacobian after the fit, at a
+    cost linear in the segments (e.g. _Reduced.outside, for the diagnosis' score tests)."""
+    reduced = result.__dict__.get("_reduced")
+    if reduced is None:
+        reduced = result._reduced = _Reduced(result.model, result.model.sparse_jacobian(result.x))
+    return reduced
 
 
 def _solve(model: Model, x0: np.ndarray):
