@@ -9,6 +9,7 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from station.io import capture as capture_module
 from station.io.capture import CaptureWriter, ImuInfo, Site, read_capture, read_segment_csv
 from station.core.errors import CaptureError, UserError
 from station.core.units import (ACCEL_UNITS, GYRO_UNITS, STANDARD_GRAVITY, accel_to_mps2_factor,
@@ -189,6 +190,51 @@ def test_writer_refuses_what_a_reader_would_refuse(tmp_path):
         writer.write_file("manifest.yaml", "")
     with pytest.raises(ValueError, match=r"\.\."):
         writer.write_file("../x.txt", "")
+
+
+def test_the_writer_writes_the_manifest_a_whole_dump_would(tmp_path, monkeypatch):
+    """The writer keeps each segment's text and checks only the segment that begins or ends (a
+    run was quadratic in its segments); the manifest is the text a dump of the whole would be,
+    extra keys (after the segments), unicode and folded long strings included, and a segment
+    that fails its checks or its write leaves the manifest and the writer as they were."""
+    writer = CaptureWriter(tmp_path / "cap", ImuInfo(RATE, "g", "deg/s", serial="ü-1"), Site(9.8, 45.0),
+                           scheme="x", extra={"operator": "a long note " * 12, "tags": [1, 2]})
+    for k in range(4):
+        with writer.begin_segment(f"s{k}", "static", up_body=np.array([0.0, 0.0, 1.0]), note="é" * 90) as seg:
+            write_rows(seg, rows(5))
+    path = tmp_path / "cap" / "manifest.yaml"
+    text = path.read_text(encoding="utf-8")
+    whole = yaml.safe_load(text)
+    assert list(whole) == ["format", "imu", "site", "scheme", "segments", "operator", "tags"]
+    assert text == yaml.safe_dump(whole, sort_keys=False, default_flow_style=None, allow_unicode=True)
+    with pytest.raises(CaptureError, match=r"segments\[4\] \(s1\): field 'name': duplicate segment name \(also segments\[1\]\)"):
+        writer.begin_segment("s1", "static", file="again.csv")
+    with pytest.raises(CaptureError, match="field 'file'"):
+        writer.begin_segment("t", "static", file="../t.csv")
+    assert path.read_text(encoding="utf-8") == text
+    with writer.begin_segment("t", "static") as seg:          # the writer goes on where it was
+        write_rows(seg, rows(5))
+    capture = read_capture(tmp_path / "cap")
+    assert [s.name for s in capture.segments] == ["s0", "s1", "s2", "s3", "t"] and capture.warnings == []
+    # a manifest that cannot be written: the segment is not begun, the writer unchanged
+    text = path.read_text(encoding="utf-8")
+    real = capture_module._atomic_write
+
+    def full_disk(*args):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(capture_module, "_atomic_write", full_disk)
+    with pytest.raises(OSError):
+        writer.begin_segment("u", "static")
+    monkeypatch.setattr(capture_module, "_atomic_write", real)
+    assert path.read_text(encoding="utf-8") == text and not (tmp_path / "cap" / "u.csv").exists()
+    # reopened: the names it holds are known to it
+    writer = CaptureWriter.reopen(tmp_path / "cap")
+    with pytest.raises(CaptureError, match=r"duplicate segment name \(also segments\[4\]\)"):
+        writer.begin_segment("t", "static", file="t2.csv")
+    with writer.begin_segment("u", "static") as seg:
+        write_rows(seg, rows(5))
+    assert [s.name for s in read_capture(tmp_path / "cap").segments] == ["s0", "s1", "s2", "s3", "t", "u"]
 
 
 def test_closing_a_segment_without_samples_as_complete_records_it_incomplete(tmp_path):

@@ -45,28 +45,21 @@ IMUCAL_AXIS = {"x_rot": (1, 0, 0), "y_rot": (0, 1, 0), "z_rot": (0, 0, 1)}
 
 
 class _ImportWriter(CaptureWriter):
-    """A CaptureWriter that checks and writes the manifest when created and when ``finish`` is
-    called, not at every segment: a run's writer does so at each segment so that a killed run
-    can resume, which costs O(segments^2) here (an import is redone, not resumed; its source
-    file is untouched)."""
+    """A CaptureWriter that writes the manifest when created and when ``finish`` is called, not
+    at every segment (each segment is checked as it begins and ends, as a run's): a run's writer
+    writes it at each segment so that a killed run can resume, two synced writes a segment
+    here (an import is redone, not resumed; its source file is untouched)."""
 
     _deferred = False
 
-    def _validate(self, manifest):
+    def _save(self):
         if not self._deferred:
-            super()._validate(manifest)
-
-    def _save(self, manifest):
-        if self._deferred:
-            self._manifest = manifest
-        else:
-            super()._save(manifest)
+            super()._save()
             self._deferred = True
 
     def finish(self):
         self._deferred = False
-        self._validate(self._manifest)
-        self._save(self._manifest)
+        self._save()
 
 
 @dataclass
