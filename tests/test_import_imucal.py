@@ -72,6 +72,21 @@ def test_annotated_session_detected_raw_and_inverted_gyro(tmp_path):
     assert capture.segment("x_p").data.accel.mean(axis=0)[0] > 2000            # ~2048 counts per g
 
 
+def test_a_raw_gyro_without_a_scale_is_diagnosed_and_reported(tmp_path, capsys):
+    """The annotated session (raw counts, hand turns without encoder angles): the gyro terms
+    outside the library cannot be sized, so they are not searched, and the diagnosis and the
+    page say so (both refused the capture, naming an internal effect 'discovered_terms')."""
+    path = imucal.import_imucal(ANNOTATED, tmp_path / "a", rate_hz=204.8)
+    capsys.readouterr()
+    assert cli.main(["diagnose", str(path)]) == 0
+    printed = " ".join(capsys.readouterr().out.split())
+    assert "terms outside the library searched in the accelerometers only" in printed
+    assert "discovered_terms" not in printed
+    assert cli.main(["report", str(path), "-o", str(tmp_path / "page.html")]) == 0
+    page = (tmp_path / "page.html").read_text(encoding="utf-8")
+    assert "Notes on the diagnosis" in page and "searched in the accelerometers only" in page
+
+
 def test_cli_import_and_what_station_can_estimate(tmp_path, capsys):
     out = tmp_path / "cli"
     assert cli.main(["import", "imucal", str(SESSION), "--sections", str(SECTIONS), "--rate-hz", "102.4",

@@ -199,6 +199,14 @@ def conclude(d: Diagnosis, summaries, steps=(), search_terms: bool = True) -> Di
     if search_terms:
         from station.diagnose import terms
 
+        searched = [sensor for sensor, _, _ in terms.searchable(summaries)]
+        if searched == ["accel"]:
+            d.notes.append("terms outside the library searched in the accelerometers only: a raw gyro "
+                           "output without a nominal scale (imu.gyro_nominal_dps_per_count) or a rotation "
+                           "with an encoder angle cannot be sized")
+        elif not searched:
+            d.notes.append("no term outside the library searched: a raw accelerometer output without a "
+                           "nominal scale (imu.accel_nominal_mps2_per_count) or statics cannot be sized")
         d.proposal = terms.propose(d, summaries)
         if d.proposal is not None and d.proposal.kept and steps:
             d.proposal.redundant = redundant_with(d, d.proposal.effect, {st.added for st in steps}, summaries)

@@ -251,6 +251,9 @@ def _diagnosis_section(inp: ReportInput, figures: dict) -> str:
              f"p = {first.p_value:.3g}); effects in the model: {_e(', '.join(first.effects))}.</p>"]
     if first.failures:
         parts.append("<h3>Where it fails</h3><ul>" + "".join(f"<li>{_e(f)}</li>" for f in first.failures) + "</ul>")
+    notes = list(dict.fromkeys([*first.notes, *final.notes]))
+    if notes:
+        parts.append("<h3>Notes on the diagnosis</h3><ul>" + "".join(f"<li>{_e(n)}</li>" for n in notes) + "</ul>")
     parts.append("<h3>Residual per segment, before and after each added effect (same y axis)</h3>")
     parts.append(_img(SEGMENTS_FIGURE, figures, "RMS whitened residual per segment"))
     for k, st in enumerate(inp.steps, 1):

@@ -23,10 +23,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from station.core.errors import UserError
 from station.diagnose.core import ALPHA, chi2_sf, outside_model
 from station.estimate import lsq
 from station.model.effect import Effect, Param
-from station.model.raw_counts import in_capture_units
+from station.model.raw_counts import counts_per_unit, in_capture_units
 
 MAX_TERMS = 6
 AX = "xyz"
@@ -169,12 +170,26 @@ def _reference_c(s) -> float:
     return float(np.mean(temps)) if temps else 0.0
 
 
+def searchable(s) -> tuple:
+    """The SENSORS whose terms can be sized on this capture: not a raw gyro's without a nominal
+    scale or a rotation with an encoder angle, nothing of a raw accelerometer's without a
+    nominal scale or statics (station.model.raw_counts)."""
+    try:
+        _, n_g = counts_per_unit(s)
+    except UserError:
+        return ()
+    return tuple(x for x in SENSORS if x[0] != "gyro" or n_g is not None)
+
+
 def search(result, max_terms: int = MAX_TERMS) -> list[Found]:
-    """Forward selection over the dictionary at the current fit (linearised score tests)."""
+    """Forward selection over the dictionary at the current fit (linearised score tests), on
+    the sensors whose terms can be sized (``searchable``)."""
     model = result.model
     s = model.s
     reference = _reference_c(s)
-    candidates = [Term(sensor, axis, reg) for sensor, _, _ in SENSORS for axis in range(3) for reg in dictionary()]
+    candidates = [Term(sensor, axis, reg) for sensor, _, _ in searchable(s) for axis in range(3) for reg in dictionary()]
+    if not candidates:
+        return []
     bank = in_capture_units(TermsEffect)(candidates, reference)      # counts on a raw capture
     extended = lsq.Model(s, [*model.effects, bank], model.attitudes, like=model)
     extended.priors = dict(model.priors)
