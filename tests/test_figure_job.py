@@ -266,3 +266,28 @@ def test_a_killed_diagnose_leaves_no_figure_process(optimal9_run, tmp_path, how,
         os.kill(pid, signal.SIGKILL)
     assert not left
     assert list(temporary.iterdir()) == []
+
+
+def test_directories_a_killed_process_group_left_are_removed(tmp_path):
+    """A process group killed at once (SIGKILL) leaves the figures' temporary directory: the
+    next worker removes those of this user's processes that are gone, and nothing else."""
+    import subprocess
+    import sys
+
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()                                   # a process number no process has now
+    prefix = figure_job.DIRECTORY_PREFIX
+    orphan = tmp_path / f"{prefix}{gone.pid}-abc123"
+    (orphan / "sub").mkdir(parents=True)
+    (orphan / "sub" / "0.figure").write_bytes(b"x")
+    living = tmp_path / f"{prefix}{os.getpid()}-def456"
+    living.mkdir()
+    not_a_directory = tmp_path / f"{prefix}{gone.pid}-ghi789"
+    not_a_directory.write_bytes(b"")
+    link = tmp_path / f"{prefix}{gone.pid}-jkl012"
+    link.symlink_to(living)
+    other = tmp_path / f"other-{gone.pid}-abc123"
+    other.mkdir()
+    assert figure_job.remove_orphaned_directories(str(tmp_path)) == [orphan.name]
+    assert not orphan.exists()
+    assert living.is_dir() and not_a_directory.exists() and link.is_symlink() and other.is_dir()

@@ -26,7 +26,10 @@ Where fork is not used (station.core.forked.available: Linux), or drawing fails 
 figures are drawn here, with the same bytes.  The worker and the processes it forks end when
 this process ends, however it ends (killed, the worker first removing the temporary directory),
 and ignore Ctrl-C (this process is interrupted, ends them on leaving the ``with`` block and
-exits 130 without a traceback from them).
+exits 130 without a traceback from them).  Once every figure is here, the worker is killed so
+that it ends while the page is written.  A directory whose processes were all killed at once
+(SIGKILL to the process group: nothing is left to remove it) is removed by the next worker
+(``remove_orphaned_directories``: the directory's name holds its process's number).
 """
 from __future__ import annotations
 
@@ -48,9 +51,45 @@ TASK = struct.Struct("<i")                          # to the drawing processes: 
 DONE = struct.Struct("<iii")                        # back: (number, TAKING/.../FAILED, process)
 TAKING, TAKEN, DRAWN, FAILED = 0, 1, 2, 3          # TAKING: about to take one (its number: -1)
 PERMIT = b"p"       # one byte per figure that may be drawn at once
+DIRECTORY_PREFIX = "station-figures-"    # + the pid of the process that made it + "-" + random
 # what matplotlib imports at the first figure drawn and saved as SVG (~10 ms), and what an Allan
 # figure's numbers are (station.estimate.noise.NoiseResult, unpickled there)
 WARM_MODULES = ("matplotlib.backends.backend_agg", "matplotlib.backends.backend_svg", "station.estimate.noise")
+
+
+def remove_orphaned_directories(directory: str | None = None) -> list:
+    """Remove the figures' temporary directories (in ``directory``, by default the system's
+    temporary one) that this user's processes made and that outlived them: a process group
+    killed at once (SIGKILL) leaves its directory, nothing being left to remove it.  One whose
+    process lives, that another user owns, or that is not a plain directory is left.  The names
+    of those removed."""
+    import re
+    import stat
+
+    directory = directory or tempfile.gettempdir()
+    removed = []
+    try:
+        names = os.listdir(directory)
+    except OSError:
+        return removed
+    pattern = re.compile(re.escape(DIRECTORY_PREFIX) + r"(\d+)-[A-Za-z0-9_]+")
+    for name in names:
+        match = pattern.fullmatch(name)
+        if not match:
+            continue
+        path = os.path.join(directory, name)
+        try:
+            info = os.lstat(path)
+            if not stat.S_ISDIR(info.st_mode) or info.st_uid != os.getuid():
+                continue
+            os.kill(int(match.group(1)), 0)
+            continue                      # its process lives (or another's has its number)
+        except ProcessLookupError:
+            shutil.rmtree(path, ignore_errors=True)
+            removed.append(name)
+        except (OSError, OverflowError, ValueError):
+            continue
+    return removed
 
 
 def _draw_here(specs: dict) -> dict:
@@ -107,6 +146,7 @@ def _worker(parent: int, tasks: int, done: int, permits: tuple, alive: list, dir
             importlib.import_module(name)
     except Exception:       # noqa: BLE001 -- each figure then fails there and is drawn here, which says why
         pass
+    remove_orphaned_directories()       # here: not on the command's path
     me, index = os.getpid(), 0
     for k in range(1, len(alive)):
         try:
@@ -201,7 +241,7 @@ class FigureJob:
 
     def _start(self) -> None:
         count = max(1, min(forked.usable_cores(), MOST_PROCESSES))
-        self._dir = tempfile.mkdtemp(prefix="station-figures-")
+        self._dir = tempfile.mkdtemp(prefix=f"{DIRECTORY_PREFIX}{os.getpid()}-")
         fds = []              # the ends only the processes forked keep, closed here
         try:
             tasks_r, self._tasks = os.pipe()
