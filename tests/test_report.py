@@ -179,3 +179,22 @@ def test_segment_names_are_text_not_formulas_and_keep_their_ends(tmp_path):
     assert "$\\foo$" in svg and "cost $5 and $6" in svg
     shorts = [_short(n) for n in names[2:]]
     assert len(set(shorts)) == 2 and all(len(s) <= 32 and s.endswith(n[-8:]) for s, n in zip(shorts, names[2:]))
+
+
+def test_hundreds_of_segments_are_named_one_in_every_few():
+    """1,000 segment names under a panel were a black band: at most MOST_NAMES are drawn, in
+    capture order, the axis says how many there are and how often one is named; 60 are all
+    named."""
+    from station.diagnose.figures import MOST_NAMES, SegmentPanel, SegmentsFigure, segments_figure
+
+    def drawn(count):
+        names = [f"seg{k:04d}" for k in range(count)]
+        svg = segments_figure(SegmentsFigure([SegmentPanel("as fitted", 1.0, names, ["static"] * count,
+                                                           [1.0] * count)]), fmt="svg").decode()
+        return [n for n in names if f">{n}<" in svg], svg
+
+    named, svg = drawn(1000)
+    assert 0 < len(named) <= MOST_NAMES and named[0] == "seg0000" and named[1] == "seg0017"
+    assert "1000 segments in capture order, one named every 17" in svg
+    named, svg = drawn(MOST_NAMES)
+    assert len(named) == MOST_NAMES and "one named every" not in svg

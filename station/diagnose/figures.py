@@ -28,6 +28,7 @@ COLOURS = {"x": "tab:red", "y": "tab:green", "z": "tab:blue"}
 SCALE_UNITS = ("1", "raw/(m/s^2)", "raw/(deg/s)")
 TITLE_Y = 1.0          # an axes title's height in axes coordinates, fixed (see above)
 PNG_COMPRESSION = 1    # zlib level: 1 encodes in a third of the time of 6 for ~10 % more bytes
+MOST_NAMES = 60        # segment names under a panel at most: more, rotated at 7 pt, are a black band
 
 
 def _short(name: str, most: int = 32) -> str:
@@ -140,7 +141,8 @@ def draw(specs: dict) -> dict:
 def segments_figure(spec: SegmentsFigure, path=None, fmt: str | None = None) -> bytes:
     """Bars of the RMS whitened residual per segment, every panel on the same (log) y axis so
     that the fall after each added effect shows; the segment names under the last panel when
-    every panel has the same segments (one fit of one capture: they do), else under each.  The
+    every panel has the same segments (one fit of one capture: they do), else under each (every
+    segment's up to MOST_NAMES, every k-th beyond, said under the axis).  The
     bars of a panel are one collection (``bar`` makes an artist per bar) and a panel without
     names has no x ticks (each is a dozen artists)."""
     from matplotlib.collections import PolyCollection
@@ -155,7 +157,7 @@ def segments_figure(spec: SegmentsFigure, path=None, fmt: str | None = None) -> 
     # panels, a title (and the names when they are not shared)
     longest = max((len(name) for p in panels for name in p.names), default=8)
     top, plot = 0.35, 1.6
-    bottom = max(0.95, 0.3 + 0.06 * longest)
+    bottom = max(0.95, 0.3 + 0.06 * longest) + (0.2 if any(len(p.names) > MOST_NAMES for p in panels) else 0.0)
     gap = 0.45 if shared else bottom + 0.15
     height = top + bottom + plot * len(panels) + gap * (len(panels) - 1)
     fig, axes = plt.subplots(len(panels), 1, figsize=(11, height), squeeze=False, sharey=True)
@@ -176,7 +178,12 @@ def segments_figure(spec: SegmentsFigure, path=None, fmt: str | None = None) -> 
         ax.set_xlim(-0.6, len(p.names) - 0.4)
         plain_log_axis(ax.yaxis)
         if not shared or k == len(panels) - 1:
-            ax.set_xticks(range(len(p.names)), p.names, rotation=90, fontsize=7)
+            # every segment named up to MOST_NAMES; beyond, every step-th (in capture order)
+            step = -(-len(p.names) // MOST_NAMES)
+            named = range(0, len(p.names), max(step, 1))
+            ax.set_xticks(list(named), [p.names[i] for i in named], rotation=90, fontsize=7)
+            if step > 1:
+                ax.set_xlabel(f"{len(p.names)} segments in capture order, one named every {step}", fontsize=8)
         else:
             ax.xaxis.set_major_locator(NullLocator())
         ax.set_ylabel("RMS residual / noise")
