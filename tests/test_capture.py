@@ -833,3 +833,22 @@ def test_a_very_long_segment_name_is_shortened_in_messages(tmp_path):
     manifest["segments"][0]["name"] = name
     message = refusal(make_bundle(tmp_path, manifest, files={"pos01.csv": "t,ax,ay,az,gx,gy,gz\n0,1,2,3,4,5\n"}))
     assert "(30000 characters)" in message and len(message) < 600, message[:300]
+
+
+def test_segments_of_a_kind_station_does_not_use_are_said_once_with_the_kind_meant(tmp_path):
+    """The format allows any kind (left out of estimation): a typo ("statc") dropped a static
+    without a word; one warning now names them, with the kind a typo may have meant."""
+    manifest = base_manifest()
+    manifest["segments"][0]["kind"] = "statc"
+    extra = []
+    for k in range(5):
+        entry = dict(manifest["segments"][1], name=f"warm{k}", kind="warmup")
+        extra.append(entry)
+    manifest["segments"] += extra
+    capture = read_capture(make_bundle(tmp_path, manifest))
+    (warning,) = [w for w in capture.warnings if "kind" in w]
+    assert warning.startswith("6 segments of a kind station does not use, left out of estimation")
+    assert "kind 'statc' (segments[0] (pos01)): meant 'static'?" in warning
+    assert "kind 'warmup' (segments[2] (warm0), segments[3] (warm1), segments[4] (warm2) and 2 more)" in warning
+    assert "warmup'" in warning and "meant 'static'?; " in warning
+    assert capture.complete("static") == []

@@ -316,6 +316,7 @@ def read_capture(path, *, load_data=True):
     capture = Capture(path=directory, imu=imu, site=site, scheme=scheme, segments=segments,
                       extra=extra, warnings=[])
     _warn_shared_files(capture)
+    _warn_unused_kinds(capture)
     if load_data:
         capture.load_samples()
     return capture
@@ -332,6 +333,31 @@ def _warn_shared_files(capture) -> None:
         if other is not seg:
             _warn(capture, f"{capture._label(seg)} reads the same file as {capture._label(other)} "
                            f"({_show(seg.file)}): its samples count twice")
+
+
+USED_KINDS = ("static", "rotation", "session")   # the kinds station's estimators and importers read
+
+
+def _warn_unused_kinds(capture) -> None:
+    """Complete segments of a kind station does not use (the format allows any: they are left
+    out of estimation) in one warning, with the kind they may have meant ("statc": static): a typo
+    would otherwise drop a segment without a word."""
+    import difflib
+
+    unused = {}
+    for seg in capture.segments:
+        if seg.kind not in USED_KINDS and seg.status == "complete":     # (an incomplete one is said)
+            unused.setdefault(seg.kind, []).append(seg)
+    if not unused:
+        return
+    parts = []
+    for kind, segs in unused.items():
+        close = difflib.get_close_matches(str(kind).lower(), USED_KINDS, n=1, cutoff=0.6)
+        named = ", ".join(capture._label(seg) for seg in segs[:3]) + (f" and {len(segs) - 3} more" if len(segs) > 3 else "")
+        parts.append(f"kind {_show(kind)} ({named})" + (f": meant {close[0]!r}?" if close else ""))
+    count = sum(len(segs) for segs in unused.values())
+    _warn(capture, f"{count} segment{'s' if count > 1 else ''} of a kind station does not use, left out of "
+                   f"estimation ({', '.join(USED_KINDS)} are used): " + "; ".join(parts))
 
 
 def read_segment_csv(path, *, sample_rate_hz=None):
