@@ -86,6 +86,18 @@ def test_imu_tk_files_read_back_give_the_same_output(cal, raw, tmp_path):
         assert "convention" in (tmp_path / name).read_text()
 
 
+def test_an_output_directory_gets_the_default_names_inside_it(cal, tmp_path, capsys):
+    """-o DIR wrote imu_tk's pair next to DIR with DIR as the prefix (DIR_acc.calib) and the
+    other formats failed on a directory: the default names now go inside it."""
+    out = tmp_path / "exports"
+    out.mkdir()
+    for fmt in ("imu_tk", "json"):
+        assert main(["export", str(cal), "--to", fmt, "-o", str(out)]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["calibration-imu_tk_acc.calib", "calibration-imu_tk_gyro.calib",
+                                                     "calibration-json.json"]
+    assert not list(tmp_path.glob("exports_*"))
+
+
 def test_imu_tk_accelerometer_only_writes_one_file(cal, tmp_path):
     paths = FORMATS["imu_tk"].write(no_gyro_source(cal), tmp_path / "imu")
     assert [p.name for p in paths] == ["imu_acc.calib"]

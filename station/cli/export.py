@@ -13,7 +13,8 @@ def add_parsers(sub) -> None:
     ex.add_argument("--to", required=True, choices=sorted(EXPORT_FORMATS), metavar="FORMAT",
                     help="; ".join(f"{name}: {title}" for name, title in EXPORT_FORMATS.items()))
     ex.add_argument("-o", "--output", metavar="PATH",
-                    help="default: next to CAL, named CAL-FORMAT with the format's ending")
+                    help="default: next to CAL, named CAL-FORMAT with the format's ending; a "
+                    "directory: that name inside it")
     ex.add_argument("--noise", metavar="NOISE.yaml",
                     help="noise figures from `station noise` when CAL has none (Kalibr needs them)")
     ex.add_argument("--force", action="store_true", help="use --noise of another IMU serial")
@@ -35,7 +36,10 @@ def cmd_export(args) -> int:
         if other and source.imu_serial and other != source.imu_serial and not args.force:
             raise UserError(f"{args.noise}: noise of IMU {other!r}, calibration of IMU {source.imu_serial!r} "
                             "(--force to combine them anyway)")
-    target = Path(args.output) if args.output else cal.with_name(f"{cal.stem}-{args.to}{fmt.SUFFIX}")
+    name = f"{cal.stem}-{args.to}{fmt.SUFFIX}"
+    target = Path(args.output) if args.output else cal.with_name(name)
+    if args.output and (target.is_dir() or args.output.endswith(("/", "\\"))):
+        target = target / name            # a directory: the default name inside it
     written = fmt.write(source, target)
     for line in source.header_lines()[1:]:
         err.print(f"note: {line}", markup=False, soft_wrap=True)
