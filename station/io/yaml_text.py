@@ -19,7 +19,8 @@ is one libyaml can take safely, through the pure-Python loader otherwise:
 - a text with a tab, a tag (``!``) or a block scalar (``|``, ``>``) goes to the pure-Python loader: the
   two differ on some malformed ones (``!`` alone is None for one and '' for the other, ``|#`` an
   error for one and '' for the other, ``0<TAB>`` too: found by tests/test_yaml_text.py's fuzzing); station's
-  files need neither;
+  files need neither; nor does a text with a ``?`` and a flow collection (``{0?}``: the plain
+  scalar ``0?`` for libyaml, an error for PyYAML, where ``?`` ends a plain scalar in a flow);
 - ``allow_aliases=False`` refuses ``*alias`` nodes (the "billion laughs"): a text with a ``*``
   goes to the pure-Python loader, which names the alias's line.
 
@@ -54,6 +55,8 @@ def _c_safe(text: str | bytes, allow_aliases: bool) -> bool:
             return False
     if _C_LOADER is None or any(m in text for m in "\t!|>") or (not allow_aliases and "*" in text):
         return False
+    if "?" in text and ("[" in text or "{" in text):      # "{0?}": a plain scalar "0?" for libyaml,
+        return False                                      # an error for PyYAML ("?" ends it in a flow)
     return nesting_bound(text) <= MAX_C_DEPTH
 
 
