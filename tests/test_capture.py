@@ -237,6 +237,28 @@ def test_the_writer_writes_the_manifest_a_whole_dump_would(tmp_path, monkeypatch
     assert [s.name for s in read_capture(tmp_path / "cap").segments] == ["s0", "s1", "s2", "s3", "t", "u"]
 
 
+def test_a_reopened_manifest_with_aliases_in_its_entries_stays_readable(tmp_path):
+    """Each segment's text is dumped on its own: two entries that each use one object twice (an
+    alias in another tool's manifest) would each define the anchor &id001, which PyYAML refuses
+    in one document; objects are written out instead of aliased."""
+    writer = CaptureWriter(tmp_path / "cap", ImuInfo(RATE, "g", "deg/s"), Site(9.8))
+    for name in ("a", "b"):
+        with writer.begin_segment(name, "static", up_body=[0, 0, 1]) as seg:
+            write_rows(seg, rows(5))
+    path = tmp_path / "cap" / "manifest.yaml"
+    text = path.read_text()
+    for anchor in ("u", "v"):
+        text = text.replace("  up_body: [0, 0, 1]\n", f"  up_body: &{anchor} [0, 0, 1]\n  also_up: *{anchor}\n", 1)
+    assert text.count("also_up") == 2
+    path.write_text(text)
+    writer = CaptureWriter.reopen(tmp_path / "cap")
+    with writer.begin_segment("c", "static", up_body=[0, 0, 1]) as seg:
+        write_rows(seg, rows(5))
+    capture = read_capture(tmp_path / "cap")
+    assert [s.name for s in capture.segments] == ["a", "b", "c"]
+    assert capture.segment("b").extra["also_up"] == [0, 0, 1] and "&" not in path.read_text()
+
+
 def test_closing_a_segment_without_samples_as_complete_records_it_incomplete(tmp_path):
     writer = CaptureWriter(tmp_path / "cap", ImuInfo(RATE, "g", "deg/s"), Site(9.8))
     with pytest.raises(ValueError, match="no samples"):

@@ -1267,7 +1267,7 @@ class CaptureWriter:
                  **_plain(meta)}
         entry = _ordered_entry(entry)
         segments = self._manifest["segments"]
-        self._validate(entry, len(segments))
+        name = self._validate(entry, len(segments))
         csv_path = self._dir / entry["file"]
         csv_path.parent.mkdir(parents=True, exist_ok=True)
         if os.path.lexists(csv_path):
@@ -1287,7 +1287,7 @@ class CaptureWriter:
             segments.pop()
             self._texts.pop()
             raise
-        self._first.setdefault(entry["name"], len(segments) - 1)
+        self._first.setdefault(name, len(segments) - 1)
         try:
             fd = os.open(csv_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0)
                          | getattr(os, "O_CLOEXEC", 0), 0o644)
@@ -1326,12 +1326,14 @@ class CaptureWriter:
 
     def _validate(self, entry, index):
         """Refuse (CaptureError) a segment entry at ``index`` that a reader would refuse (before
-        it is saved): its own fields, and its name if an earlier segment has it."""
+        it is saved): its own fields, and its name if an earlier segment has it.  Its name as the
+        reader reads it."""
         manifest_file = self._dir / MANIFEST
         segment = _parse_segment(entry, index, self._dir, manifest_file)
         first = self._first.get(segment.name, index)
         if first < index:
             raise _duplicate_name(manifest_file, first, index, segment.name)
+        return segment.name
 
     def _save(self):
         """Make the manifest held (its parts' texts) the bundle's manifest, atomically."""
@@ -1423,10 +1425,19 @@ class SegmentWriter:
         return False
 
 
+class _PartDumper(_DUMPER):
+    """The writer's dumper: no anchors and aliases (each part of the manifest is dumped on its
+    own, so two parts would each define ``&id001``, a duplicate anchor that PyYAML refuses: an
+    object that appears twice is written twice)."""
+
+    def ignore_aliases(self, data):
+        return True
+
+
 def _yaml(value) -> str:
     """A manifest's part as the writer writes it: libyaml's emitter when PyYAML has it (four times
     faster), block style with lists of plain values in flow style ([x, y, z]), keys in order."""
-    return yaml.dump(value, Dumper=_DUMPER, sort_keys=False, default_flow_style=None, allow_unicode=True)
+    return yaml.dump(value, Dumper=_PartDumper, sort_keys=False, default_flow_style=None, allow_unicode=True)
 
 
 def _check(manifest, directory):
