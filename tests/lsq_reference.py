@@ -215,13 +215,14 @@ class PerSegmentModel(Model):
             if not r.steady:        # a hand turn: its angle and axis only, through the gyro
                 put(("rot", i), gyro_rows, "rotation_gyro")
                 continue
-            put(("rot", i), np.concatenate([
-                (r.accel_dc - dc) * root_n / s.accel_sigma,
-                (r.accel_cos - c) * root_n / (np.sqrt(2) * s.accel_sigma),
-                (r.accel_sin - sn) * root_n / (np.sqrt(2) * s.accel_sigma),
-                (r.accel_cos2 - c2) * root_n / (np.sqrt(2) * s.accel_sigma),
-                (r.accel_sin2 - s2) * root_n / (np.sqrt(2) * s.accel_sigma),
-                gyro_rows]), "rotation")
+            # the coefficients' covariance sigma^2 / n * G^-1 (G per sample, over the arc recorded):
+            # whitened by G's symmetric square root (whole turns: 1, 1/sqrt 2, ...)
+            G = np.diag([1.0, 0.5, 0.5, 0.5, 0.5]) if r.gram is None else np.asarray(r.gram)
+            lam, V = np.linalg.eigh(G)
+            root_G = V @ np.diag(np.sqrt(np.clip(lam, 0.0, None))) @ V.T
+            diff = np.array([r.accel_dc - dc, r.accel_cos - c, r.accel_sin - sn, r.accel_cos2 - c2, r.accel_sin2 - s2])
+            rows = root_G @ diff * root_n / s.accel_sigma
+            put(("rot", i), np.concatenate([*rows, gyro_rows]), "rotation")
         for c, sigma in self.priors.items():
             put(("prior", c), np.atleast_1d(x[c] / sigma), "effect_prior")
         return out, tags

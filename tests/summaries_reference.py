@@ -100,6 +100,7 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
     # same basis as the accelerometer (one solve for all of them)
     w = _rate(t, gyro, gyro_bias, angle_deg, duration)
     coefs = _least_squares(basis, _contiguous_columns(accel) + [w, w * w, np.gradient(w, t)])
+    gram = basis @ basis.T / len(t)
     del basis, w
     coef, rate_coefs = coefs[:, :3], (coefs[:, 3], coefs[:, 4], coefs[:, 5])
     edge = min(EDGE_SAMPLES, len(t) // 4)
@@ -113,6 +114,7 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
                            temp_c=None if temp is None else float(np.mean(temp)),
                            gyro_start=gyro[:edge].mean(axis=0), gyro_end=gyro[-edge:].mean(axis=0),
                            steady=steady, rate_sq_factor=rate_sq_factor,
-                           rate_coef=rate_coefs[0], rate_sq_coef=rate_coefs[1], rate_dot_coef=rate_coefs[2])
+                           rate_coef=rate_coefs[0], rate_sq_coef=rate_coefs[1], rate_dot_coef=rate_coefs[2],
+                           gram=gram)
 
 

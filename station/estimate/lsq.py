@@ -608,8 +608,15 @@ class Model:
                 [self._rot_duration / A * np.sin(A), self._rot_duration / A * (1.0 - np.cos(A))]), 0.0).reshape(R, 2)
         self._rot_data = np.array([[r.accel_dc, r.accel_cos, r.accel_sin, r.accel_cos2, r.accel_sin2]
                                    for r in rots], float).reshape(R, 5, 3)
-        self._rot_weight = (np.sqrt(np.array([r.samples for r in rots], float))[:, None, None]
-                            / (np.array([1.0] + [np.sqrt(2)] * 4)[None, :, None] * s.accel_sigma)).reshape(R, 5, 3)
+        # the harmonics' whitening: the noise covariance of a rotation's coefficients is
+        # sigma^2 / samples * G^-1, G the basis' Gram matrix per sample over the arc recorded
+        # (RotationSummary.gram): whitened by G's symmetric square root, diag(1, 1/sqrt 2, ...)
+        # over whole revolutions; over part of one the coefficients are correlated and far less
+        # certain (200 degrees: a condition of 186; the whole-revolution weights made a fit
+        # of such rotations fail with a reduced chi2 of 20)
+        self._rot_whiten = np.array([_harmonic_whitening(r.gram) for r in rots], float).reshape(R, 5, 5)
+        self._rot_weight = (np.sqrt(np.array([r.samples for r in rots], float))[:, None]
+                            / np.asarray(s.accel_sigma, float)[None, :]).reshape(R, 1, 3)
         self._rot_gyro = np.array([r.gyro_integral for r in rots], float).reshape(R, 3)
         self._rot_gyro_whiten = np.array(self.gyro_whiten, float).reshape(R, 3, 3)
         self._axis_cols = np.array([np.arange(L[f"axis{k}"].start, L[f"axis{k}"].stop) for k in range(K)],
@@ -821,7 +828,8 @@ class Model:
                     if term is not None:
                         integral[n, i] += term
         gyro_rows = (self._rot_gyro_whiten @ (self._rot_gyro - integral)[..., None])[..., 0]
-        blocks.append(np.concatenate([((self._rot_data - harmonics) * self._rot_weight).reshape(B, R, 15),
+        whitened = np.einsum("rij,brjc->bric", self._rot_whiten, self._rot_data - harmonics) * self._rot_weight
+        blocks.append(np.concatenate([whitened.reshape(B, R, 15),
                                       gyro_rows], axis=2))
         blocks.append((X[:, self._prior_cols] / self._prior_sigma)[..., None])
         return blocks
@@ -994,6 +1002,16 @@ def reduced_at_solution(result: FitResult) -> _Reduced:
     if reduced is None:
         reduced = result._reduced = _Reduced(result.model, result.model.sparse_jacobian(result.x))
     return reduced
+
+
+FULL_CIRCLE_GRAM = np.diag([1.0, 0.5, 0.5, 0.5, 0.5])   # of 1, cos, sin, cos 2, sin 2 over whole turns
+
+
+def _harmonic_whitening(gram) -> np.ndarray:
+    """The symmetric square root of a rotation's Gram matrix per sample (whole revolutions when
+    None): rows that whiten its harmonic coefficients (times sqrt(samples) / sigma)."""
+    w, V = np.linalg.eigh(FULL_CIRCLE_GRAM if gram is None else np.asarray(gram, float))
+    return (V * np.sqrt(np.clip(w, 0.0, None))) @ V.T
 
 
 def _solve(model: Model, x0: np.ndarray):

@@ -71,6 +71,10 @@ class RotationSummary:
     rate_coef: np.ndarray | None = None        # (5,) rad/s
     rate_sq_coef: np.ndarray | None = None     # (5,) rad^2/s^2
     rate_dot_coef: np.ndarray | None = None    # (5,) rad/s^2
+    # The basis' Gram matrix over the window divided by the samples (whole revolutions: diag(1,
+    # 1/2, 1/2, 1/2, 1/2)); the coefficients' noise covariance is sigma^2 / samples * gram^-1.
+    # None: whole revolutions taken.
+    gram: np.ndarray | None = None
 
     @property
     def rate_dps(self) -> float:
@@ -302,6 +306,7 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
         m2 = np.einsum("ij,ij->i", g, g)
         sum_m2 += m2.sum()
         sum_m += np.sqrt(m2, out=m2).sum()
+    gram_per_sample = gram / n
     if np.linalg.cond(gram) < MAX_GRAM_CONDITION:
         coefs = np.linalg.solve(gram, projections)
     else:   # a short sweep: the SVD solver on the whole basis
@@ -322,7 +327,8 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
                            temp_c=None if temp is None else float(np.mean(temp)),
                            gyro_start=gyro[:edge].mean(axis=0), gyro_end=gyro[-edge:].mean(axis=0),
                            steady=steady, rate_sq_factor=rate_sq_factor,
-                           rate_coef=rate_coefs[0], rate_sq_coef=rate_coefs[1], rate_dot_coef=rate_coefs[2])
+                           rate_coef=rate_coefs[0], rate_sq_coef=rate_coefs[1], rate_dot_coef=rate_coefs[2],
+                           gram=gram_per_sample)
 
 
 def _scaled(values, factor):
