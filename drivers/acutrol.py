@@ -19,7 +19,7 @@ from .table import RateTable, TableStatus
 from .transport import Port
 from .visa_port import SCHEME as VISA, VisaPort
 
-_MODE_CMD = {"position": "mode_position", "rate": "mode_rate", "off": "mode_off"}
+_MODE_CMD = {"position": "mode_position", "rate": "mode_rate"}
 _LIMIT_MODE = {"position": "P", "rate": "R"}
 _MODE_NAME = {"P": "position", "R": "rate", "A": "rate", "O": "off"}
 
@@ -197,8 +197,13 @@ class AcutrolTable(RateTable):
     def _interlock(self, axis, close):
         self._exchange(("interlock_close" if close else "interlock_open", axis))
 
-    def _set_mode(self, axis, mode):
-        self._exchange((_MODE_CMD[mode], axis))
+    _DEMAND = {"position": "demand_position", "rate": "demand_rate"}
+    _halt_mode = "rate"
+
+    def _set_mode(self, axis, mode, demand):
+        # one message, the demand first: ":Demand:Rate 1,0.000000;:Mode:Rate 1" (the controller
+        # executes the loaded demand on entering the mode; docs/protocols.md)
+        self._exchange((self._DEMAND[mode], axis, demand), (_MODE_CMD[mode], axis))
 
     def _demand_position(self, axis, position_deg):
         self._exchange(("demand_position", axis, position_deg))
@@ -207,11 +212,6 @@ class AcutrolTable(RateTable):
         self._exchange(("demand_rate", axis, rate_dps))
 
     def _halt(self, axis, mode):
-        # rate mode with a zero demand: brakes at the rate-mode acceleration limit
-        if mode == "rate":
-            self._exchange(("demand_rate", axis, 0.0))
-        elif mode != "off":
-            self._exchange(("mode_rate", axis))
-
-    def _after_halt(self, axis):
-        self._exchange(("mode_position", axis))
+        # a zero rate demand, then rate mode, whatever mode the axis is in: it brakes at the
+        # rate-mode acceleration limit and cannot resume an earlier rate demand
+        self._set_mode(axis, "rate", 0.0)

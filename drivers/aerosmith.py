@@ -85,13 +85,14 @@ class AerosmithTable(RateTable):
     def _interlock(self, axis, close):
         self._exchange("servo", 1 if close else 0)
 
-    def _set_mode(self, axis, mode):
+    _halt_mode = "position"         # STO brakes to rest and holds there
+
+    def _set_mode(self, axis, mode, demand):
+        # the dialect's motion commands carry their demand: JOG<rate>, MOV<position>
         if mode == "rate":
-            self._exchange("jog", 0.0)
-        elif mode == "position":
-            self._exchange("stop")
+            self._exchange("jog", demand)
         else:
-            raise NotSupported(self.name, "the three-letter dialect has no servo-off command")
+            self._exchange("move", demand)
 
     def _demand_position(self, axis, position_deg):
         self._exchange("move", position_deg)
@@ -101,3 +102,6 @@ class AerosmithTable(RateTable):
 
     def _halt(self, axis, mode):
         self._exchange("stop")
+
+    def _after_halt(self, axis, position_deg):
+        pass            # STO holds where the axis came to rest

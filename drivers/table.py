@@ -176,15 +176,31 @@ class RateTable(Device):
             self._modes[axis - 1] = "off"
 
     # ------------------------------------------------------------------ motion
-    def position_mode(self, axis: int) -> None:
+    # A controller executes the demand loaded for a mode when the mode is entered (IEAv-EFO's
+    # notes from a real ACUTROL3000: "if new demand is loaded when mode is activated the axis
+    # will go to new demand as fast as possible"; docs/protocols.md, "Demands before modes").
+    # So every mode change here sends the demand the mode must execute first, in the same
+    # message where the protocol allows (``_set_mode``): no path enters a mode with whatever
+    # demand an earlier run, program or operator left.
+
+    def position_mode(self, axis: int, hold_deg: float | None = None) -> None:
+        """Position mode holding ``hold_deg`` (default: the position measured now; call it at
+        rest, as :meth:`stop` does)."""
         self._check_axis(axis)
-        self._set_mode(axis, "position")
-        self._modes[axis - 1] = "position"
+        if hold_deg is None:
+            hold_deg = float(self.read_positions_deg()[axis - 1])
+        self._enter_mode(axis, "position", float(wrap_deg(float(hold_deg))))
 
     def rate_mode(self, axis: int) -> None:
+        """Rate mode at a zero rate demand (the demand is sent first)."""
         self._check_axis(axis)
-        self._set_mode(axis, "rate")
-        self._modes[axis - 1] = "rate"
+        self._enter_mode(axis, "rate", 0.0)
+
+    def _enter_mode(self, axis: int, mode: str, demand: float) -> None:
+        if not math.isfinite(demand):
+            raise LimitError(self.name, f"axis {axis}: demand {demand!r} is not finite")
+        self._set_mode(axis, mode, demand)
+        self._modes[axis - 1] = mode
 
     def move_to(self, positions_deg, *, wait: bool = True) -> np.ndarray:
         """Move the axes to ``positions_deg`` (one per axis; None leaves an axis alone).
@@ -209,10 +225,12 @@ class RateTable(Device):
         for axis, target in enumerate(targets, 1):
             if target is None:
                 continue
+            demand = float(wrap_deg(float(target)))
+            self.log.info("%s: axis %d -> %.6f deg", self.name, axis, demand)
             if self._modes[axis - 1] != "position":
-                self.position_mode(axis)
-            self.log.info("%s: axis %d -> %.6f deg", self.name, axis, float(target))
-            self._demand_position(axis, float(wrap_deg(float(target))))
+                self._enter_mode(axis, "position", demand)      # the target, then the mode
+            else:
+                self._demand_position(axis, demand)
         if not wait:
             return start
         return self._wait_positions(targets, expected)
@@ -226,11 +244,12 @@ class RateTable(Device):
         if not math.isfinite(rate) or abs(rate) > lim.max_rate_dps:
             raise LimitError(self.name, f"axis {axis}: rate {rate_dps!r} deg/s beyond the limit "
                                         f"{lim.max_rate_dps:g} deg/s")
-        if self._modes[axis - 1] != "rate":
-            self.rate_mode(axis)
         before = float(self.read_rates_dps()[axis - 1])
         self.log.info("%s: axis %d at %.6f deg/s", self.name, axis, rate)
-        self._demand_rate(axis, rate)
+        if self._modes[axis - 1] != "rate":
+            self._enter_mode(axis, "rate", rate)               # the demand, then the mode
+        else:
+            self._demand_rate(axis, rate)
         if not wait:
             return before
         expected = abs(rate - before) / self._rate_accel[axis - 1]
@@ -249,15 +268,22 @@ class RateTable(Device):
             self._rate_accel[axis - 1] = accel_dps2
 
     def stop(self) -> np.ndarray:
-        """Controlled stop: every axis brakes to rest and holds there.  Returns the positions."""
+        """Controlled stop: every axis brakes to rest and holds there.  Returns the positions.
+
+        Whatever mode the driver believes an axis is in (a previous run may have left it
+        turning, the front panel may have changed it), each axis with its interlock closed is
+        braked by a zero rate demand sent before (or with) the mode that executes it; once all
+        are at rest each holds the position measured there, sent before position mode."""
         closed, _, _ = self._status()
         active = [axis for axis in self.axes if closed[axis - 1]]   # open interlock: brakes itself
         rates = self.read_rates_dps()
         for axis in active:
             self._halt(axis, self._modes[axis - 1])
-        # each axis brakes at the acceleration of its mode
-        expected = max((abs(rates[axis - 1]) / (self._rate_accel[axis - 1] if self._modes[axis - 1] == "rate"
-                                                else self.limits[axis - 1].move_accel_dps2)
+            if self._halt_mode is not None:
+                self._modes[axis - 1] = self._halt_mode
+        # each axis brakes at the acceleration of its braking mode (the slower, when unsure)
+        expected = max((abs(rates[axis - 1]) / min(self._rate_accel[axis - 1],
+                                                   self.limits[axis - 1].move_accel_dps2)
                         for axis in self.axes), default=0.0)
         deadline = time.monotonic() + expected + self.settings.wait_margin_s
         still = 0
@@ -268,10 +294,10 @@ class RateTable(Device):
                 raise DeviceTimeout(self.name, f"did not come to rest (rates {np.round(rates, 4).tolist()} "
                                                f"deg/s)")
             time.sleep(self.settings.poll_interval_s)
+        rest = self.read_positions_deg()
         for axis in self.axes:
             if axis in active:
-                self._after_halt(axis)
-                self._modes[axis - 1] = "position"
+                self._after_halt(axis, float(rest[axis - 1]))
             else:
                 self._modes[axis - 1] = "off"
         return self.read_positions_deg()
@@ -382,7 +408,9 @@ class RateTable(Device):
     def _interlock(self, axis: int, close: bool) -> None: ...
 
     @abc.abstractmethod
-    def _set_mode(self, axis: int, mode: str) -> None: ...
+    def _set_mode(self, axis: int, mode: str, demand: float) -> None:
+        """Enter ``mode`` (``position``/``rate``) executing ``demand`` (deg, deg/s): the demand
+        reaches the controller before the mode, in one message where the protocol allows."""
 
     @abc.abstractmethod
     def _demand_position(self, axis: int, position_deg: float) -> None: ...
@@ -390,9 +418,15 @@ class RateTable(Device):
     @abc.abstractmethod
     def _demand_rate(self, axis: int, rate_dps: float) -> None: ...
 
+    #: the mode an axis is in once ``_halt`` was sent (None: unchanged)
+    _halt_mode: str | None = None
+
     @abc.abstractmethod
     def _halt(self, axis: int, mode: str) -> None:
-        """Start braking ``axis`` (in ``mode``) to rest."""
+        """Start braking ``axis`` (believed to be in ``mode``) to rest, by commands that cannot
+        execute an older demand."""
 
-    def _after_halt(self, axis: int) -> None:
-        """Once every axis is at rest: hold ``axis`` where it is (position mode)."""
+    def _after_halt(self, axis: int, position_deg: float) -> None:
+        """Once every axis is at rest: hold ``axis`` at ``position_deg``, where it came to rest
+        (position mode, the demand sent first)."""
+        self._enter_mode(axis, "position", float(wrap_deg(position_deg)))

@@ -236,7 +236,7 @@ def test_the_public_pyvisa_driver_strings_work_against_the_twin():
             inst.write(":int:open 1")
             assert inst.query(":interlock? 1") == "Open\n"
             # a refused command: bit 7 (error queue) and MSS, the queue says why
-            inst.write(":dem:rate 1,5")
+            inst.write(":dem:rate 1,1000000")           # beyond the rate-mode rate limit
             assert inst.query("*stb?") == "192\n"
             assert inst.query("*stb?") == "0\n"                    # reading clears it
             assert inst.query(":Status:MSG? QERROR").startswith(f"{P.ERR_ILLEGAL},")
@@ -295,8 +295,8 @@ def test_the_public_tcp_driver_strings_work_against_the_twin_on_tcp():
             assert _tcp_command(sock, ":mode:position 1") == (0, "OK")
             assert _tcp_command(sock, ":demand:position 1, " + format(90.0, "06.3f")) == (0, "OK")
             # a refused command carries its error code and says why
-            code, text = _tcp_command(sock, ":demand:rate 1, 5")
-            assert code == P.ERR_ILLEGAL and "rate mode" in text
+            code, text = _tcp_command(sock, ":demand:rate 1, 1000000")
+            assert code == P.ERR_ILLEGAL and "beyond the rate limit" in text
             # "shutdown"
             for cmd in (":mode:off 1", ":interlock:open 1"):
                 assert _tcp_command(sock, cmd) == (0, "OK"), cmd

@@ -190,10 +190,11 @@ def test_a_demand_refused_for_an_open_interlock_is_a_table_fault(bench):
     with _open(server, protocol) as table:
         if protocol == "aerosmith":             # enabled from power-up; SRV0 opens it
             table.open_interlocks([1])
-            with pytest.raises(TableFault, match=r"'JOG0.0000' refused: axis 1: interlock OPEN"):
+            with pytest.raises(TableFault, match=r"'JOG10.0000' refused: axis 1: interlock OPEN"):
                 table.set_rate(1, 10.0)
         else:
-            with pytest.raises(TableFault, match=r"':Mode:Rate 1(;\*STB\?)?' refused \(error 4: .*\): "
+            with pytest.raises(TableFault, match=r"':Demand:Rate 1,10.000000;:Mode:Rate 1(;\*STB\?)?' refused "
+                                                 r"\(error 4: .*\): "
                                                  r"axis 1: interlock OPEN"):
                 table.set_rate(1, 10.0)
         table.close_interlocks([1])

@@ -140,6 +140,11 @@ class TableTwin:
         self._brake(ax, "off")
 
     def set_mode(self, axis: int, mode: str) -> None:
+        """Enter ``mode``: it executes the demand loaded for it (docs/protocols.md, "Demands
+        before modes": the IEAv-EFO notes from a real ACUTROL3000, ``:d:p 1,0`` then ``:m:p ALL``
+        "send all axis to demanded position").  Position mode drives to the position demand,
+        rate mode ramps to the rate demand, whatever they were set to and whenever; off mode
+        brakes to zero rate whatever the demands (TM-8004 §4.7.3: "No demands affect Off Mode")."""
         ax = self._axis(axis)
         now = self.clock.now()
         if mode == "off":
@@ -147,40 +152,41 @@ class TableTwin:
             return
         if not ax.interlock_closed:
             raise CommandRefused(f"axis {axis}: interlock open")
-        if mode == "position":
-            p, _, _ = ax.motion.state(now)
-            rate, acc = ax.limits["P"]
-            ax.motion.plan_position(now, p, rate, acc)
-            ax.demand_deg = float(p % 360.0)
-        elif mode == "rate":
-            ax.motion.plan_rate(now, 0.0, ax.limits["R"][1])
-            ax.rate_demand_dps = 0.0
-        else:
+        if mode not in ("position", "rate"):
             raise CommandRefused(f"unknown mode {mode!r}")
         ax.mode = mode
+        if mode == "position":
+            self._plan_position(axis, ax, now)
+        else:
+            ax.motion.plan_rate(now, ax.rate_demand_dps, ax.limits["R"][1])
 
     def demand_position(self, axis: int, position_deg: float) -> None:
+        """Load a position demand (any mode, interlock open or closed); executed at once in
+        position mode, else when position mode is entered."""
         ax = self._axis(axis)
-        if ax.mode != "position" or not ax.interlock_closed:
-            raise CommandRefused(f"axis {axis}: not in position mode")
-        now = self.clock.now()
+        ax.demand_deg = float(position_deg)
+        if ax.mode == "position" and ax.interlock_closed:
+            self._plan_position(axis, ax, self.clock.now())
+
+    def demand_rate(self, axis: int, rate_dps: float) -> None:
+        """Load a rate demand (any mode); executed at once in rate mode, else when rate mode
+        is entered.  Refused beyond the rate-mode rate limit."""
+        ax = self._axis(axis)
+        rate, acc = ax.limits["R"]
+        if abs(rate_dps) > rate:
+            raise CommandRefused(f"axis {axis}: {rate_dps} deg/s beyond the rate limit {rate}")
+        ax.rate_demand_dps = float(rate_dps)
+        if ax.mode == "rate" and ax.interlock_closed:
+            ax.motion.plan_rate(self.clock.now(), rate_dps, acc)
+
+    def _plan_position(self, axis: int, ax: AxisState, now: float) -> None:
+        """Move to the position demand the shortest way round (a stuck axis stops short)."""
         p, _, _ = ax.motion.state(now)
-        delta = (position_deg - p + 180.0) % 360.0 - 180.0      # the shortest way round
+        delta = (ax.demand_deg - p + 180.0) % 360.0 - 180.0
         if self.faults.stuck_axis == axis:
             delta = math.copysign(max(0.0, abs(delta) - self.faults.shortfall_deg), delta)
         rate, acc = ax.limits["P"]
         ax.motion.plan_position(now, p + delta, rate, acc)
-        ax.demand_deg = float(position_deg)
-
-    def demand_rate(self, axis: int, rate_dps: float) -> None:
-        ax = self._axis(axis)
-        if ax.mode != "rate" or not ax.interlock_closed:
-            raise CommandRefused(f"axis {axis}: not in rate mode")
-        rate, acc = ax.limits["R"]
-        if abs(rate_dps) > rate:
-            raise CommandRefused(f"axis {axis}: {rate_dps} deg/s beyond the rate limit {rate}")
-        ax.motion.plan_rate(self.clock.now(), rate_dps, acc)
-        ax.rate_demand_dps = float(rate_dps)
 
     def set_limit(self, mode: str, axis: int, *, rate_dps=None, accel_dps2=None) -> None:
         ax = self._axis(axis)
@@ -195,11 +201,14 @@ class TableTwin:
             ax.limits[mode][1] = float(accel_dps2)
 
     def stop(self, axis: int) -> None:
-        """Brake to rest and hold there (position mode)."""
+        """Brake to rest and hold there (position mode; the position demand becomes the
+        position where the axis comes to rest, the rate demand 0)."""
         ax = self._axis(axis)
         if not ax.interlock_closed:
             raise CommandRefused(f"axis {axis}: interlock open")
         self._brake(ax, "position")
+        ax.demand_deg = float(ax.motion.segments[-1].p0 % 360.0)      # the rest position
+        ax.rate_demand_dps = 0.0
 
     def read_position(self, axis: int) -> float:
         p, _, _ = self._axis(axis).motion.state(self.clock.now())

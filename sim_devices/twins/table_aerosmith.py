@@ -57,16 +57,16 @@ class AerosmithFrontEnd:
             self.table.interlock_open(1)
 
     def _move(self, position_deg: float) -> None:
-        t = self.table
+        t = self.table              # the new demand first: entering the mode executes it
+        t.demand_position(1, position_deg)
         if t.axes[0].mode != "position":
             t.set_mode(1, "position")
-        t.demand_position(1, position_deg)
 
     def _jog(self, rate_dps: float) -> None:
         t = self.table
+        t.demand_rate(1, rate_dps)
         if t.axes[0].mode != "rate":
             t.set_mode(1, "rate")
-        t.demand_rate(1, rate_dps)
 
     def _status(self) -> int:
         ax = self.table.axes[0]

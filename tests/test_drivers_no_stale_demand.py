@@ -1,0 +1,157 @@
+"""No driver path lets the controller execute a stale demand (issue 23, docs/protocols.md
+"Demands before modes").
+
+A real ACUTROL3000 executes the demand loaded for a mode when the mode is entered (IEAv-EFO's
+notes from one: ``:d:p 1,0`` then ``:m:p ALL`` "send all axis to demanded position"; "if new
+demand is loaded when mode is activated the axis will go to new demand as fast as possible"),
+and so does the twin.  Each test below first leaves a stale demand on the controller, as
+another program or an earlier run would (a ±250 deg/s rate, a far position), then runs one
+driver path and reads the twin's own motion over the whole interval: the axis must never have
+moved toward the stale demand.  Each fails on a driver that sends a mode before its demand
+(the driver before issue 23: ``:Mode:Rate n`` to brake a moving axis, ``:Mode:Position n`` to
+hold it, ``:mode 1,pos`` before the target).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from drivers.base import TableSettings
+from drivers.registry import open_table
+from sim_devices.truth import default_truth
+from sim_devices.twins.serve import BenchOptions, BenchServer
+
+SPEED = 50.0
+STALE_RATE = 250.0          # deg/s: the last rotation of an earlier run
+TRANSPORTS = ["pty", "gpib", "tcp"]
+
+
+@pytest.fixture(params=TRANSPORTS)
+def bench(request):
+    transport = request.param
+    server = BenchServer(default_truth(3), BenchOptions(
+        speed=SPEED, axes=1, table_protocol="acutrol",
+        table_framing="gpib" if transport == "gpib" else "tcp",
+        table_tcp_port=0 if transport == "tcp" else None))
+    server.url = server.table_path + ("#gpib" if transport == "gpib" else "")
+    with server:
+        yield server
+
+
+def _connect(server):
+    table = open_table(server.url, "acutrol", TableSettings())
+    table.connect()
+    table.close_interlocks()
+    return table
+
+
+def _raw(table, *commands):
+    """What another program sends: raw ACL commands, no driver logic."""
+    table._exchange(*commands)
+
+
+def _motion(server, t0, t1, n=4000):
+    """The twin's own axis-1 positions (unwrapped deg) and rates (deg/s) over [t0, t1]."""
+    t = np.linspace(t0, t1, n)
+    th, thd, _ = server.table.axis_states(t)
+    return th[:, 0], thd[:, 0]
+
+
+def _braked_and_held(pos, rate, rest_deg):
+    """Braking only (never faster than at the start, never reversing), then held where it came
+    to rest: within the encoder's resolution, the hold's settling of 1e-5 deg."""
+    assert np.max(np.abs(rate)) <= abs(rate[0]) + 1e-6
+    assert np.all(rate * np.sign(rate[0]) >= -1e-3)
+    assert abs(rate[-1]) < 1e-3
+    assert abs(((pos[-1] - rest_deg) + 180) % 360 - 180) < 0.002
+
+
+def _now(server):
+    return server.table.clock.now()
+
+
+def test_rate_mode_enters_at_zero_rate(bench):
+    table = _connect(bench)
+    _raw(table, ("demand_rate", 1, STALE_RATE))            # loaded in off mode: not executed
+    t0 = _now(bench)
+    table.rate_mode(1)
+    table.stop()
+    _, rate = _motion(bench, t0, _now(bench))
+    assert np.max(np.abs(rate)) < 0.01
+
+
+def test_position_mode_holds_where_the_axis_is(bench):
+    table = _connect(bench)
+    _raw(table, ("demand_position", 1, 150.0))
+    t0 = _now(bench)
+    table.position_mode(1)
+    table.stop()
+    pos, rate = _motion(bench, t0, _now(bench))
+    assert np.max(np.abs(pos)) < 0.01 and np.max(np.abs(rate)) < 0.01
+
+
+def test_move_from_rate_mode_goes_straight_to_its_target(bench):
+    table = _connect(bench)
+    table.rate_mode(1)
+    _raw(table, ("demand_position", 1, 200.0))             # the short way to 200 is through -160
+    t0 = _now(bench)
+    table.move_to([30.0])
+    pos, _ = _motion(bench, t0, _now(bench))
+    assert pos.min() > -0.02 and pos.max() < 30.0 + 0.02   # the overshoot is at most 0.01 deg
+
+
+def test_set_rate_from_position_mode_never_exceeds_its_rate(bench):
+    table = _connect(bench)
+    table.move_to([10.0])
+    _raw(table, ("demand_rate", 1, STALE_RATE))            # loaded in position mode: stored
+    t0 = _now(bench)
+    table.set_rate(1, 20.0)
+    table.stop()
+    _, rate = _motion(bench, t0, _now(bench))
+    assert rate.max() < 20.0 + 0.01 and rate.min() > -0.01
+
+
+def test_stop_during_a_move_brakes_without_a_stale_rate(bench):
+    table = _connect(bench)
+    table.move_to([0.5])
+    _raw(table, ("demand_rate", 1, STALE_RATE))
+    t0 = _now(bench)
+    table.move_to([180.0], wait=False)                     # at the position-mode limit, 60 deg/s
+    for _ in range(200):
+        if abs(table.read_rates_dps()[0]) > 10.0:
+            break
+    table.stop()
+    _, rate = _motion(bench, t0, _now(bench))
+    move_rate = table.limits[0].move_rate_dps
+    assert np.max(np.abs(rate)) <= move_rate + 0.01
+    assert abs(table.read_rates_dps()[0]) < 0.01
+
+
+def test_stop_while_turning_holds_where_the_axis_came_to_rest(bench):
+    table = _connect(bench)
+    table.set_rate(1, 40.0)
+    _raw(table, ("demand_position", 1, 300.0))             # a far position demand, left in rate mode
+    t0 = _now(bench)
+    rest = table.stop()
+    t1 = _now(bench)
+    pos, rate = _motion(bench, t0, t1 + 5.0)              # and 5 device s of what is planned after
+    _braked_and_held(pos, rate, rest[0])
+    assert table.read_modes() == ["position"]
+    assert float(table._exchange(("demand_position_query", 1))[0]) == pytest.approx(rest[0], abs=0.002)
+
+
+def test_a_new_connection_stops_an_axis_left_turning(bench):
+    """An earlier run killed during a rotation: the axis turns at 250 deg/s, a position demand
+    far away.  A new driver knows nothing of its mode; stop() brakes it and holds it."""
+    table = _connect(bench)
+    table.set_rate(1, STALE_RATE)
+    _raw(table, ("demand_position", 1, 123.0))
+    table.close()
+    fresh = open_table(bench.url, "acutrol", TableSettings())
+    fresh.connect()
+    assert fresh.status().mode == ("unknown",)
+    t0 = _now(bench)
+    rest = fresh.stop()
+    pos, rate = _motion(bench, t0, _now(bench) + 5.0)
+    _braked_and_held(pos, rate, rest[0])
+    fresh.close()
