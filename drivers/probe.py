@@ -62,10 +62,15 @@ def probe_imu(url: str, protocol: str, seconds: float, settings: ImuSettings) ->
 
 
 def probe_table(url: str, protocol: str, settings: TableSettings) -> dict:
-    """Identify the table and read its axes (nothing moves)."""
+    """Identify the table and read its axes.  Nothing is moved, except that an axis found
+    moving when the port is opened (left turning by an earlier run) is braked to rest and held:
+    ``found_moving`` says which, at what rate, and where it now rests."""
     with open_table(url, protocol, settings) as table:
         st = table.status()
         return {
+            "found_moving": [{"axis": m.axis, "rate_dps": m.rate_dps, "rest_deg": m.rest_deg}
+                             for m in table.found_moving],
+            "found_moving_note": table.describe_leftover(),
             "port": url,
             "protocol": protocol,
             "identity": table.identity,

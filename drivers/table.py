@@ -86,6 +86,16 @@ class TableStatus:
         return "; ".join(parts) + f" (status {self.raw:#04x})"
 
 
+@dataclass(frozen=True)
+class LeftoverMotion:
+    """An axis found moving when the port was opened: its rate then (deg/s) and where it was
+    braked to rest and held (deg)."""
+
+    axis: int
+    rate_dps: float
+    rest_deg: float
+
+
 def wrap_deg(x):
     """Angle in [0, 360)."""
     return np.mod(x, 360.0)
@@ -110,6 +120,7 @@ class RateTable(Device):
         self.n_axes = 0
         self.limits: tuple[AxisLimits, ...] = ()
         self._modes: list[str] = []
+        self.found_moving: list[LeftoverMotion] = []
 
     # ------------------------------------------------------------------ connection
     def _on_connect(self) -> str:
@@ -128,7 +139,32 @@ class RateTable(Device):
         self._rate_accel = [lim.max_accel_dps2 for lim in self.limits]   # rate-mode ramps, deg/s^2
         for axis, lim in enumerate(self.limits, 1):
             self._set_move_limits(axis, lim.move_rate_dps, lim.move_accel_dps2)
+        self.found_moving = self._stop_leftover_motion()
         return f"{self.identity}, {self.n_axes} axes"
+
+    def _stop_leftover_motion(self) -> list[LeftoverMotion]:
+        """At connect: an axis still moving was left so by an earlier run, program or operator
+        (a run killed during a rotation keeps turning): brake every axis to rest and hold it
+        there (:meth:`stop`, which cannot resume an old demand).  What was found and done is
+        kept in ``found_moving`` for the command to say (``describe_leftover``)."""
+        rates = self.read_rates_dps()
+        moving = [axis for axis in self.axes
+                  if abs(rates[axis - 1]) > max(self.settings.rate_tolerance_dps, 1e-3)]
+        if not moving:
+            return []
+        self.log.warning("%s: axes %s moving at connect (%s deg/s): stopping them", self.name, moving,
+                         [round(float(rates[a - 1]), 6) for a in moving])
+        rest = self.stop()
+        return [LeftoverMotion(axis, float(rates[axis - 1]), float(rest[axis - 1])) for axis in moving]
+
+    def describe_leftover(self) -> str:
+        """One sentence on the motion found at connect and what was done ('' when none)."""
+        if not self.found_moving:
+            return ""
+        parts = [f"axis {m.axis} was turning at {m.rate_dps:.6g} deg/s" for m in self.found_moving]
+        held = ", ".join(f"axis {m.axis} at {m.rest_deg:.6f} deg" for m in self.found_moving)
+        return (f"{self.name}: {'; '.join(parts)} when the port was opened (left by an earlier run or "
+                f"another program): braked to rest and held ({held})")
 
     @property
     def axes(self) -> tuple[int, ...]:

@@ -9,6 +9,7 @@ with 21 parameters, max |z| < 4.5 fails by chance with probability ~1e-4, and th
 """
 import hashlib
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -219,6 +220,64 @@ def test_ctrl_c_pauses_at_a_safe_point_with_the_table_at_rest(bench, config, tmp
     assert capture.segment("zup").status == "complete"
     assert all(bench.table.read_rate(axis) == 0.0 for axis in (1, 2, 3))  # brought to rest
     assert all(ax.mode == "position" for ax in bench.table.axes)
+
+
+def _small_scheme(tmp_path):
+    scheme = tmp_path / "small.yaml"
+    scheme.write_text("name: small\ndefaults: {dwell_s: 20, rate_dps: 10, rotation_s: 36}\nsegments:\n"
+                      "  - {static: zup, up_body: [0, 0, 1]}\n  - {rotation: rotx, axis_body: [1, 0, 0]}\n")
+    return scheme
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
+def test_sigterm_and_sighup_abort_with_the_table_at_rest(bench, config, tmp_path, sig):
+    """The terminal or SSH session closed (SIGHUP), or a service manager's stop (SIGTERM), during
+    a rotation: like a second Ctrl-C, the table is braked to rest and what was recorded is kept."""
+    out = tmp_path / "cap"
+    proc = station(bench, config, "--scheme", str(_small_scheme(tmp_path)), "--out", str(out))
+    try:
+        assert wait_for_recording(out, after=1) == "rotx_p"
+        assert any(abs(bench.table.read_rate(axis)) > 1.0 for axis in (1, 2, 3))     # turning
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err[-2000:]
+    assert "aborted" in err and f"--resume {out}" in err and "Traceback" not in err
+    assert all(bench.table.read_rate(axis) == 0.0 for axis in (1, 2, 3))
+    assert all(ax.mode == "position" for ax in bench.table.axes)
+    capture = read_capture(out)
+    assert capture.segment("zup").status == "complete"
+    assert capture.segment("rotx_p").status == "incomplete"
+
+
+def test_a_table_left_turning_by_a_killed_run_is_found_and_stopped(bench, config, tmp_path):
+    """SIGKILL cannot be caught: the run dies during a rotation and the table keeps turning.  The
+    next station command that opens the table port (here `station probe --table-port`) finds the
+    axis moving, says so, brakes it without resuming any old demand and holds it."""
+    out = tmp_path / "cap"
+    proc = station(bench, config, "--scheme", str(_small_scheme(tmp_path)), "--out", str(out))
+    try:
+        assert wait_for_recording(out, after=1) == "rotx_p"
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    rates = [bench.table.read_rate(axis) for axis in (1, 2, 3)]
+    turning = [axis for axis, r in zip((1, 2, 3), rates) if abs(r) > 1.0]
+    assert turning, rates                                  # still turning after the kill
+    probe = subprocess.run([sys.executable, "-m", "station.cli", "probe", "--table-port", bench.table_path],
+                           capture_output=True, text=True, timeout=60)
+    assert probe.returncode == 0, probe.stderr
+    found = {int(a): float(r) for a, r in re.findall(r"axis (\d) was turning at (\S+) deg/s", probe.stdout)}
+    assert set(found) == set(turning), probe.stdout
+    for axis in turning:                                   # the rate it had (still at speed)
+        assert found[axis] == pytest.approx(rates[axis - 1], abs=0.05)
+    assert "braked to rest and held" in probe.stdout
+    assert all(bench.table.read_rate(axis) == 0.0 for axis in (1, 2, 3))
+    assert all(bench.table.axes[axis - 1].mode == "position" for axis in turning)
 
 
 @pytest.mark.parametrize("argv, expected", [

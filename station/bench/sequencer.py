@@ -10,8 +10,8 @@ is commanded; whatever happens, the table is brought to rest in a ``finally``.  
 a pause: at the next safe point (between blocks of samples, between steps) the table is brought
 to rest and the segment being recorded is closed as ``incomplete`` (everything recorded is
 kept); on a terminal the operator can then continue, otherwise the run stops and
-``station run --resume CAPTURE`` continues later.  A second Ctrl-C (or SIGTERM) aborts at once,
-still stopping the table.  Hand-performed schemes (no table) are recorded as one continuous
+``station run --resume CAPTURE`` continues later.  A second Ctrl-C, SIGTERM or SIGHUP (the
+terminal or the SSH session closed) aborts at once, still stopping the table.  Hand-performed schemes (no table) are recorded as one continuous
 session and split into segments by station/io/segment_detect.py.
 """
 from __future__ import annotations
@@ -41,7 +41,7 @@ class PauseRequested(Exception):
 
 
 class RunAborted(KeyboardInterrupt):
-    """A second Ctrl-C, or SIGTERM."""
+    """A second Ctrl-C, SIGTERM or SIGHUP."""
 
 
 class RunPaused(Exception):
@@ -53,7 +53,8 @@ class SequencerError(UserError):
 
 
 class Interrupts:
-    """SIGINT: the first asks for a pause, the second aborts; SIGTERM aborts."""
+    """SIGINT: the first asks for a pause, the second aborts; SIGTERM and SIGHUP (the terminal
+    or SSH session gone: nobody is left to answer a pause) abort like a second Ctrl-C."""
 
     def __init__(self):
         self.count = 0
@@ -78,6 +79,8 @@ class Interrupts:
         if threading.current_thread() is threading.main_thread():
             self._previous = {signal.SIGINT: signal.signal(signal.SIGINT, self._sigint),
                               signal.SIGTERM: signal.signal(signal.SIGTERM, self._sigterm)}
+            if hasattr(signal, "SIGHUP"):
+                self._previous[signal.SIGHUP] = signal.signal(signal.SIGHUP, self._sigterm)
         return self
 
     def __exit__(self, *exc):

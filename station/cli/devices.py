@@ -80,7 +80,8 @@ def cmd_sim_serve(args) -> int:
     except OSError as e:
         raise UserError(f"--table-tcp-port {args.table_tcp_port}: {e}") from None
     stop = threading.Event()
-    previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
+    previous = {s: signal.signal(s, lambda *_: stop.set())
+                for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
     try:
         print(f"table: {server.table_path}", flush=True)
         print(f"imu: {server.imu_path}", flush=True)
@@ -126,6 +127,8 @@ def cmd_probe(args) -> int:
     if "table" in report:
         t = report["table"]
         print(f"table {t['port']} ({t['protocol']}): {t['identity']}")
+        if t["found_moving_note"]:
+            print(f"  {t['found_moving_note']}")
         for i in range(t["axes"]):
             print(f"  axis {i + 1}: {t['positions_deg'][i]:.6f} deg, {t['rates_dps'][i]:.6f} deg/s, "
                   f"interlock {'closed' if t['interlock_closed'][i] else 'open'}"

@@ -239,6 +239,8 @@ def _record_and_estimate(args, config, scheme, plan, steps, directory, text) -> 
 
     imu, table = _open_devices(config, scheme)
     try:
+        if table is not None and table.found_moving:      # left turning by an earlier run: stopped
+            err.print(f"warning: {table.describe_leftover()}", markup=False, soft_wrap=True)
         for note in plan.notes:
             err.print(f"note: {note}", markup=False, soft_wrap=True)
         rate_hz = imu.configure(config.imu.rate_hz)
