@@ -252,32 +252,86 @@ def test_sigterm_and_sighup_abort_with_the_table_at_rest(bench, config, tmp_path
     assert capture.segment("rotx_p").status == "incomplete"
 
 
-def test_a_table_left_turning_by_a_killed_run_is_found_and_stopped(bench, config, tmp_path):
-    """SIGKILL cannot be caught: the run dies during a rotation and the table keeps turning.  The
-    next station command that opens the table port (here `station probe --table-port`) finds the
-    axis moving, says so, brakes it without resuming any old demand and holds it."""
+def _guardians(run_pid):
+    """pids of the table guardians started by the run ``run_pid`` (station.bench.guardian)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                cmd = (entry / "cmdline").read_bytes().split(b"\0")
+            except OSError:
+                continue
+            if b"station.bench.guardian" in cmd and f'"run_pid": {run_pid}'.encode() in b" ".join(cmd):
+                found.append(int(entry.name))
+    return found
+
+
+def test_a_run_killed_during_a_rotation_has_its_table_stopped_by_its_guardian(bench, config, tmp_path):
+    """SIGKILL cannot be caught and the run's finally never runs: its guardian (a process of its
+    own session, station/bench/guardian.py) sees the run gone, opens the table port, brakes the
+    turning axis without resuming an old demand, holds it, writes what it did and exits."""
+    from processes import running, still_running
+
     out = tmp_path / "cap"
     proc = station(bench, config, "--scheme", str(_small_scheme(tmp_path)), "--out", str(out))
     try:
         assert wait_for_recording(out, after=1) == "rotx_p"
+        guardians = _guardians(proc.pid)
+        assert len(guardians) == 1 and running(guardians[0])
+        rates = [bench.table.read_rate(axis) for axis in (1, 2, 3)]
+        turning = [axis for axis, r in zip((1, 2, 3), rates) if abs(r) > 1.0]
+        assert turning, rates
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(10)
     finally:
         if proc.poll() is None:
             proc.kill()
-    rates = [bench.table.read_rate(axis) for axis in (1, 2, 3)]
-    turning = [axis for axis, r in zip((1, 2, 3), rates) if abs(r) > 1.0]
-    assert turning, rates                                  # still turning after the kill
+    assert still_running(guardians, 30.0) == []            # it did its work and ended
+    assert all(bench.table.read_rate(axis) == 0.0 for axis in (1, 2, 3))
+    assert all(bench.table.axes[axis - 1].mode == "position" for axis in turning)
+    log = (out / "guardian.log").read_text()
+    assert f"(pid {proc.pid}) ended without stopping the table" in log
+    found = {int(a): float(r) for a, r in re.findall(r"axis (\d) was turning at (\S+) deg/s", log)}
+    assert set(found) == set(turning), log
+    assert "braked to rest and held" in log
+
+
+def test_a_run_that_ends_leaves_no_guardian_and_the_table_untouched(bench, config, tmp_path):
+    out = tmp_path / "cap"
+    proc = station(bench, config, "--scheme", str(_small_scheme(tmp_path)), "--out", str(out))
+    try:
+        assert wait_for_recording(out, after=1) == "rotx_p"
+        guardians = _guardians(proc.pid)
+        assert len(guardians) == 1
+        proc.send_signal(signal.SIGTERM)                    # aborted in its own hands
+        proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    from processes import still_running
+
+    assert still_running(guardians, 10.0) == []
+    assert not (out / "guardian.log").exists()              # it never opened the port
+
+
+def test_probe_finds_a_table_left_turning_and_stops_it(bench):
+    """An axis left turning (a killed program without a guardian, another tool): `station probe
+    --table-port` finds it moving, says so, brakes it without resuming any old demand and holds it."""
+    from drivers.registry import open_table
+
+    with open_table(bench.table_path) as table:
+        table.close_interlocks()
+        table.set_rate(2, -25.0)
+        table._exchange(("demand_position", 2, 200.0))     # a stale demand, as another tool leaves
     probe = subprocess.run([sys.executable, "-m", "station.cli", "probe", "--table-port", bench.table_path],
                            capture_output=True, text=True, timeout=60)
     assert probe.returncode == 0, probe.stderr
     found = {int(a): float(r) for a, r in re.findall(r"axis (\d) was turning at (\S+) deg/s", probe.stdout)}
-    assert set(found) == set(turning), probe.stdout
-    for axis in turning:                                   # the rate it had (still at speed)
-        assert found[axis] == pytest.approx(rates[axis - 1], abs=0.05)
-    assert "braked to rest and held" in probe.stdout
-    assert all(bench.table.read_rate(axis) == 0.0 for axis in (1, 2, 3))
-    assert all(bench.table.axes[axis - 1].mode == "position" for axis in turning)
+    assert found == {2: pytest.approx(-25.0, abs=0.01)}, probe.stdout
+    rest = float(re.search(r"held \(axis 2 at (\S+) deg\)", probe.stdout).group(1))
+    assert bench.table.read_rate(2) == 0.0 and bench.table.axes[1].mode == "position"
+    assert abs((bench.table.read_position(2) - rest + 180) % 360 - 180) < 0.002
+    assert all(ax.interlock_closed for ax in bench.table.axes)
 
 
 @pytest.mark.parametrize("argv, expected", [

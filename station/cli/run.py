@@ -237,10 +237,15 @@ def _run_on_bench(args) -> int:
 def _record_and_estimate(args, config, scheme, plan, steps, directory, text) -> int:
     from station.bench.sequencer import Interrupts, RunAborted, RunPaused, Sequencer
 
+    from station.bench.guardian import start_guardian
+
     imu, table = _open_devices(config, scheme)
+    guardian = None
     try:
         if table is not None and table.found_moving:      # left turning by an earlier run: stopped
             err.print(f"warning: {table.describe_leftover()}", markup=False, soft_wrap=True)
+        if table is not None:         # stops the table should this process die (SIGKILL, a crash)
+            guardian = start_guardian(table.url, table.protocol, table.settings, directory)
         for note in plan.notes:
             err.print(f"note: {note}", markup=False, soft_wrap=True)
         rate_hz = imu.configure(config.imu.rate_hz)
@@ -270,6 +275,8 @@ def _record_and_estimate(args, config, scheme, plan, steps, directory, text) -> 
         for device in (table, imu):
             if device is not None:
                 device.close()
+        if guardian is not None:
+            guardian.release()
     return _estimate(directory, args.accept_poor_fit, config)
 
 
