@@ -13,12 +13,17 @@ The transport and the reply framing are chosen by the port URL (docs/protocols.m
 """
 from __future__ import annotations
 
-from .errors import ProtocolError, TableFault
+import time
+
+from .errors import DeviceTimeout, ProtocolError, TableFault
 from .protocols import acutrol as P
 from .table import RateTable, TableStatus
 from .transport import Port
 from .visa_port import SCHEME as VISA, VisaPort
 
+#: how long a line is left to go quiet when a stale reply was found at connect (s): a reply in
+#: flight when its program died arrives within the controller's reply time
+STALE_REPLY_S = 0.5
 _MODE_CMD = {"position": "mode_position", "rate": "mode_rate"}
 _LIMIT_MODE = {"position": "P", "rate": "R"}
 _MODE_NAME = {"P": "position", "R": "rate", "A": "rate", "O": "off"}
@@ -132,7 +137,22 @@ class AcutrolTable(RateTable):
 
     # ---------------------------------------------------------------- protocol part
     def _identify(self) -> str:
-        return self._exchange(("idn",))[0]
+        """``*IDN?`` twice: the same answer both times, or the line held a reply that an earlier
+        program never read (it died mid-exchange, e.g. a run killed while its guardian
+        connects): then the line is left to go quiet, cleared, and asked again."""
+        try:
+            first, second = (self._exchange(("idn",))[0] for _ in range(2))
+        except (ProtocolError, DeviceTimeout):
+            first, second = None, ""
+        if first != second:
+            self.log.warning("%s: a stale reply on the line at connect: resynchronising", self.name)
+            time.sleep(STALE_REPLY_S)
+            self._rx.clear()
+            self.port.discard_input()
+            first, second = (self._exchange(("idn",))[0] for _ in range(2))
+            if first != second:
+                raise ProtocolError(self.name, f"*IDN? answered {first[:40]!r}, then {second[:40]!r}")
+        return second
 
     def _count_axes(self) -> int:
         answer = self._exchange(("query_system",))[0]

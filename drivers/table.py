@@ -7,14 +7,19 @@ waiting for arrival, timeouts, logging) and calls one small protocol-specific me
 from __future__ import annotations
 
 import abc
+import errno
+import fcntl
+import hashlib
 import math
+import os
+import tempfile
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .device import Device
-from .errors import DeviceTimeout, LimitError, TableFault
+from .errors import DeviceError, DeviceTimeout, LimitError, TableFault
 from .transport import SerialSettings
 
 
@@ -96,6 +101,72 @@ class LeftoverMotion:
     rest_deg: float
 
 
+#: how long opening a table waits for another station process (a guardian stopping the table of
+#: a run that died) to let go of it: braking from 300 deg/s at 100 deg/s^2 and settling
+LOCK_WAIT_S = 20.0
+
+
+class TableLock:
+    """One station process at a time talks to a table: an advisory lock (``flock``) on a file
+    named after the table's port (``$TMPDIR/station-table-<hash>.lock``), whatever the
+    transport.  Two processes on one line would read each other's replies; the case that
+    matters is a run started again at once after one was killed, while the killed run's
+    guardian (station/bench/guardian.py) is still stopping the table.  Within one process the
+    lock is shared (counted): drivers of one program are that program's business."""
+
+    _held: dict[str, list] = {}          # lock path -> [fd, count] held by this process
+
+    def __init__(self, url: str, name: str):
+        key = url.rpartition("#")[0] if "#" in url else url
+        if os.path.exists(key):
+            key = os.path.realpath(key)          # /dev/serial/by-id/... and /dev/ttyUSB0 alike
+        digest = hashlib.sha256(key.encode("utf-8", "replace")).hexdigest()[:20]
+        self.path = os.path.join(tempfile.gettempdir(), f"station-table-{digest}.lock")
+        self.name = name
+        self._mine = False
+
+    def acquire(self, wait_s: float = LOCK_WAIT_S) -> None:
+        if self._mine:
+            return
+        held = self._held.get(self.path)
+        if held is not None and held[0] is not None:
+            held[1] += 1
+            self._mine = True
+            return
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o666)
+        deadline = time.monotonic() + wait_s
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except OSError as e:
+                if e.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                    os.close(fd)
+                    raise DeviceError(self.name, f"cannot lock {self.path} ({e})") from None
+                if time.monotonic() > deadline:
+                    holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+                    os.close(fd)
+                    raise DeviceError(self.name, f"in use by another station process (pid {holder or '?'}) "
+                                                 f"for over {wait_s:g} s") from None
+                time.sleep(0.05)
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        self._held[self.path] = [fd, 1]
+        self._mine = True
+
+    def release(self) -> None:
+        if not self._mine:
+            return
+        self._mine = False
+        held = self._held.get(self.path)
+        if held is None:
+            return
+        held[1] -= 1
+        if held[1] <= 0:
+            del self._held[self.path]
+            os.close(held[0])                    # closing the file releases the lock
+
+
 def wrap_deg(x):
     """Angle in [0, 360)."""
     return np.mod(x, 360.0)
@@ -121,6 +192,23 @@ class RateTable(Device):
         self.limits: tuple[AxisLimits, ...] = ()
         self._modes: list[str] = []
         self.found_moving: list[LeftoverMotion] = []
+        self._lock = TableLock(url, self.name)
+
+    def connect(self) -> str:
+        """Take the table's lock (another station process may be stopping it), then open the
+        port and bring the table up; the lock is held until :meth:`close`."""
+        self._lock.acquire()
+        try:
+            return super().connect()
+        except BaseException:
+            self._lock.release()
+            raise
+
+    def close(self) -> None:
+        try:
+            super().close()
+        finally:
+            self._lock.release()
 
     # ------------------------------------------------------------------ connection
     def _on_connect(self) -> str:

@@ -170,3 +170,31 @@ def test_a_connection_to_a_table_at_rest_moves_nothing(bench):
     with open_table(bench.url, "acutrol", TableSettings()) as table:
         assert table.found_moving == [] and table.describe_leftover() == ""
         assert table.read_modes() == ["off"]            # no command was sent to the axis
+
+
+@pytest.mark.parametrize("framing", ["tcp", "gpib"])
+def test_a_reply_left_on_the_line_is_not_taken_for_the_identity(framing, monkeypatch):
+    """A program killed mid-exchange leaves its reply in flight; the next to connect (the run's
+    guardian, a run started again at once) must not read it as its own answer: after the
+    connect's discard a stale reply arrives, and the driver still reads the axes right."""
+    from drivers.protocols import acutrol as P
+    from drivers.transport import Port
+
+    with BenchServer(default_truth(3), BenchOptions(speed=SPEED, axes=2, table_framing=framing)) as server:
+        stale = (P.pack_response(0, "250.000000;0.000000") if framing == "tcp" else b"250.000000;0.000000;0\n")
+        discard = Port.discard_input
+        injected = []
+
+        def discard_then_stale(self):
+            discard(self)
+            if not injected:                      # the killed program's reply, arriving late
+                injected.append(True)
+                server.table_port.write(stale)
+
+        monkeypatch.setattr(Port, "discard_input", discard_then_stale)
+        url = server.table_path + ("#gpib" if framing == "gpib" else "")
+        with open_table(url, "acutrol", TableSettings()) as table:
+            assert injected and "ACUTROL3000" in table.identity
+            assert table.n_axes == 2
+            np.testing.assert_array_equal(table.read_rates_dps(), [0.0, 0.0])
+            assert table.found_moving == []
