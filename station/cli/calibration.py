@@ -72,10 +72,11 @@ def report_calibration(cal, title: str, target, accept_poor_fit: bool, truth=Non
     print_verdict(cal.fit.get("verdict", {}))
     out.print(f"calibration file: {target}", markup=False)
     if fit_fails(cal):
+        what = "fails" if cal.fit["verdict"]["result"] == "fails" else "did not converge"
         if accept_poor_fit:
-            err.print("note: the fit fails; accepted (--accept-poor-fit): exit status 0", markup=False)
+            err.print(f"note: the fit {what}; accepted (--accept-poor-fit): exit status 0", markup=False)
             return 0
-        err.print(f"station: the fit fails (exit status {EXIT_POOR_FIT}); the file says so; "
+        err.print(f"station: the fit {what} (exit status {EXIT_POOR_FIT}); the file says so; "
                   "station diagnose shows where, --accept-poor-fit accepts it", markup=False, soft_wrap=True)
         return EXIT_POOR_FIT
     return 0
@@ -167,8 +168,9 @@ def cmd_apply(args) -> int:
         err.print(f"note: {args.calibration} calibrates the accelerometers only: the gyro columns are "
                   "passed through untouched (converted to deg/s only)", markup=False, soft_wrap=True)
     verdict = doc.get("verdict") or {}
-    if verdict.get("result") == "fails":
-        err.print(f"warning: {args.calibration}: its fit fails ({verdict.get('reason', '')})",
+    if verdict.get("result") in ("fails", "not converged"):
+        err.print(f"warning: {args.calibration}: its fit {verdict['result'].replace('not converged', 'did not converge')} "
+                  f"({verdict.get('reason', '')})",
                   markup=False, soft_wrap=True)
     import numpy as np
 

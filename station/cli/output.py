@@ -57,7 +57,7 @@ def print_errors(cal, truth) -> None:
 def print_verdict(verdict: dict) -> None:
     """The fit verdict in one line: passes / fails / untested and why."""
     result = verdict.get("result", "untested")
-    style = {"passes": "green", "fails": "bold red"}.get(result, "yellow")
+    style = {"passes": "green", "fails": "bold red", "not converged": "bold red"}.get(result, "yellow")
     out.print(f"fit {result}: {verdict.get('reason', '')}", style=style, markup=False, soft_wrap=True)
 
 

@@ -193,7 +193,7 @@ def _verdict_class(text: str) -> str:
     t = text.lower()
     if t.startswith(("passes", "pass", "the model explains")):
         return "pass"
-    if t.startswith(("fails", "fail", "the model does not")):
+    if t.startswith(("fails", "fail", "the model does not", "not converged")):
         return "fail"
     return "unknown"
 

@@ -1027,6 +1027,7 @@ def _solve(model: Model, x0: np.ndarray):
         res = least_squares(model.residuals, x0, jac=model.jacobian, method="lm", x_scale="jac",
                             xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=100)
         reduced = _Reduced(model, model.jacobian(res.x))
+    model.converged = res.status != 0
     if res.status == 0:       # max_nfev: said, not hidden (a stress test found statics-only captures there)
         note = ("the fit stopped at its limit of 100 evaluations before it converged (a direction the "
                 "data barely see: with static attitudes only, the poses' headings and the gyro block); "
@@ -1219,6 +1220,7 @@ def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=())
         "noise_per_sample": {"accel_ug": (s.accel_sigma / units.UG_MPS2).tolist(),
                              "gyro_dph": (s.gyro_sigma * 3600).tolist()},
         "notes": list(model.notes) + list(s.skipped) + list(notes),
+        "converged": bool(getattr(model, "converged", True)),
     }
     if model.unobservable:
         fit_stats["notes"].append(

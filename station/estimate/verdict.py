@@ -4,9 +4,15 @@ determines.  Applied to every estimate before it is written (station.estimate.es
 - **Fit verdict** (``fit.verdict``): the reduced chi-square and its p-value against the chi-square
   distribution of ``dof`` degrees of freedom; the fit *fails* when the p-value is below
   ``P_FAIL`` and the reduced chi-square above ``REDUCED_CHI2_FAIL`` (the residuals are then
-  larger than the noise explains: a missing effect, a bad segment, a table that slipped).  A fit
-  without redundant data (0 degrees of freedom, or a method without a chi-square) is
-  *untested*, which is said, not hidden.
+  larger than the noise explains: a missing effect, a bad segment, a table that slipped).  The
+  fit is *noise overestimated* when the lower tail is as improbable (P(chi2 < observed) below
+  ``P_FAIL``) and the reduced chi-square below 1 / ``REDUCED_CHI2_FAIL``: the residuals are
+  smaller than the stated noise, so every 1-sigma is too large (kept: conservative, said).  A
+  least-squares fit stopped at its evaluation limit is *not converged* whatever its chi-square:
+  the values are where it stopped, not a minimum.  A fit without redundant data (0 degrees of
+  freedom, or a method without a chi-square) is *untested*, which is said, not hidden.  The
+  verdicts that make ``estimate``/``run`` exit 3: ``fails`` and ``not converged``
+  (:data:`UNUSABLE`).
 - **Honest 1-sigma**: when the fit fails, every 1-sigma is multiplied by sqrt(reduced chi-square)
   (the Birge ratio) and ``fit.sigma_scale`` says so.
 - **Identifiability**: a base parameter whose 1-sigma is infinite (it lies in the null space of
@@ -30,6 +36,9 @@ from station.model.calibration import Calibration
 
 P_FAIL = 1e-3               # one honest fit in a thousand fails by chance
 REDUCED_CHI2_FAIL = 1.5     # and only when the residuals exceed the noise by half its variance
+#: the verdicts a calibration file may carry, and those it must not be used with (exit status 3)
+VERDICTS = ("passes", "fails", "not converged", "noise overestimated", "untested")
+UNUSABLE = ("fails", "not converged")
 LARGE_ROTATION_DEG = 1.0    # an inter-triad rotation above this is named in the notes
 INVERTED_DEG = 90.0         # above this the triads' axes point (partly) the opposite way
 
@@ -58,7 +67,8 @@ def judge(cal: Calibration) -> Calibration:
 
 
 def fit_fails(cal: Calibration) -> bool:
-    return cal.fit.get("verdict", {}).get("result") == "fails"
+    """The fit fails or did not converge: the file says so and the command exits 3."""
+    return cal.fit.get("verdict", {}).get("result") in UNUSABLE
 
 
 def not_determined(cal: Calibration) -> list:
@@ -78,9 +88,28 @@ def _verdict(cal: Calibration) -> None:
         return
     reduced = chi2 / dof
     p_value = float(special.chdtrc(dof, chi2))       # P(chi2_dof > chi2); scipy.stats costs 0.5 s to import
+    p_below = float(special.chdtr(dof, chi2))        # P(chi2_dof < chi2)
     fails = p_value < P_FAIL and reduced > REDUCED_CHI2_FAIL
-    verdict = {"result": "fails" if fails else "passes", "reduced_chi2": float(reduced), "dof": int(dof),
-               "p_value": p_value}
+    overestimated = p_below < P_FAIL and reduced < 1.0 / REDUCED_CHI2_FAIL
+    result = "fails" if fails else "noise overestimated" if overestimated else "passes"
+    verdict = {"result": result, "reduced_chi2": float(reduced), "dof": int(dof), "p_value": p_value}
+    if fit.get("converged") is False:
+        verdict["result"] = "not converged"
+        verdict["reason"] = (f"the fit stopped at its evaluation limit before it converged (reduced chi2 "
+                             f"{reduced:.3g} where it stopped): the values and 1-sigma are not those of a "
+                             "minimum; do not use this calibration (station diagnose shows which "
+                             "parameters the data barely see)")
+        fit["verdict"] = verdict
+        return
+    if overestimated:
+        verdict["p_below"] = p_below
+        verdict["reason"] = (f"reduced chi2 {reduced:.3g} (P(chi2 below) = {p_below:.2g} for {dof} degrees of "
+                             f"freedom): the residuals are smaller than the stated noise, so every 1-sigma "
+                             f"is too large, by up to {1 / math.sqrt(reduced):.3g} times (kept as they are: "
+                             "conservative); the noise given to the fit is overestimated (a noise figure "
+                             "from a datasheet, or samples averaged before recording)")
+        fit["verdict"] = verdict
+        return
     if fails:
         verdict["reason"] = (f"reduced chi2 {reduced:.3g} (p = {p_value:.2g} for {dof} degrees of freedom): "
                              "the residuals are larger than the noise explains (a missing effect, a "
