@@ -210,6 +210,12 @@ class RateTable(Device):
         finally:
             self._lock.release()
 
+    def __del__(self):
+        # a driver dropped without close(): its port goes with it, and so does the table's lock
+        lock = getattr(self, "_lock", None)
+        if lock is not None:
+            lock.release()
+
     # ------------------------------------------------------------------ connection
     def _on_connect(self) -> str:
         """Identify the controller, find its axes, set the move limits."""

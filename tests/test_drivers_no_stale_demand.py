@@ -34,12 +34,16 @@ def bench(request):
         table_framing="gpib" if transport == "gpib" else "tcp",
         table_tcp_port=0 if transport == "tcp" else None))
     server.url = server.table_path + ("#gpib" if transport == "gpib" else "")
+    server.opened = []
     with server:
         yield server
+        for table in server.opened:          # (the table lock too: another process may want it)
+            table.close()
 
 
 def _connect(server):
     table = open_table(server.url, "acutrol", TableSettings())
+    server.opened.append(table)
     table.close_interlocks()
     return table
 
