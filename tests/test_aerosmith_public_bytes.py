@@ -142,7 +142,8 @@ def test_the_driver_always_terminates_and_reads_both_framings(bench):
         table.set_rate(1, 10.0)
         table.stop()
         assert all(d.endswith(b"\r") and d.count(b"\r") == 1 for d in sent)
-        assert b"STO\r" not in sent and sent[:2] == [b"JOG0\r", b"STA\r"]
-        assert b"JOG10\r" in sent
-        i = sent.index(b"JOG10\r")
-        assert sent[i + 1] == b"STA\r"
+        assert b"STO\r" not in sent
+        i, j = sent.index(b"JOG10\r"), sent.index(b"JOG0\r")      # the rate, then the stop
+        assert i < j and sent[i + 1] == sent[j + 1] == b"STA\r"
+        mov = max(k for k, d in enumerate(sent) if d.startswith(b"MOV"))
+        assert mov > j and sent[mov - 1] == b"PPO\r"                 # held where it rests

@@ -99,33 +99,38 @@ def test_move_after_a_rotation_never_heads_for_the_old_target(bench):
         _turning(table)
         n = len(bench.table_frontend.demands)
         table.move_to([200.0])
-        demands = _demands_since(bench, n)
-        assert [k for k, _ in demands] == ["MOV", "MOV"] and demands[-1] == ("MOV", 200.0)
-        assert abs(float(angle_diff_deg(demands[0][1], 90.0))) > 20.0
+        assert _demands_since(bench, n) == [("MOV", 200.0)]          # the target is the entry
 
 
-def test_rate_mode_is_entered_by_its_own_zero_demand(bench):
+def test_rate_mode_is_entered_by_its_own_demand(bench):
     with _open(bench) as table:
         table.move_to([90.0])
         n = len(bench.table_frontend.demands)
+        table.rate_mode(1)
+        assert _demands_since(bench, n) == [("JOG", 0.0)]
+        table.move_to([90.0])
+        n = len(bench.table_frontend.demands)
         table.set_rate(1, 10.0)
-        assert _demands_since(bench, n) == [("JOG", 0.0), ("JOG", 10.0)]
+        assert _demands_since(bench, n) == [("JOG", 10.0)]
         table.stop()
 
 
 class _StopsBySTO(AerosmithTable):
     """The pattern of the old driver: position mode and the stop by STO."""
 
-    def _set_mode(self, axis, mode):
+    _halt_mode = "position"
+
+    def _set_mode(self, axis, mode, demand):
         if mode == "position":
             self._motion("stop")
+            self._exchange("move", demand)
         else:
-            super()._set_mode(axis, mode)
+            super()._set_mode(axis, mode, demand)
 
     def _halt(self, axis, mode):
         self._motion("stop")
 
-    def _after_halt(self, axis):
+    def _after_halt(self, axis, position_deg):
         self._motion("stop")
 
 
