@@ -190,7 +190,8 @@ def test_a_demand_refused_for_an_open_interlock_is_a_table_fault(bench):
     with _open(server, protocol) as table:
         if protocol == "aerosmith":             # enabled from power-up; SRV0 opens it
             table.open_interlocks([1])
-            with pytest.raises(TableFault, match=r"'JOG10.0000' refused: axis 1: interlock OPEN"):
+            with pytest.raises(TableFault, match=r"'JOG10' refused: axis 1: interlock OPEN \(status 0x00\) "
+                                                 r"\(unverified: STA bit assignment\)"):
                 table.set_rate(1, 10.0)
         else:
             with pytest.raises(TableFault, match=r"':Demand:Rate 1,10.000000;:Mode:Rate 1(;\*STB\?)?' refused "
@@ -211,6 +212,7 @@ def test_aerosmith_dialect_strings_are_data_and_9600_baud_is_the_default():
     assert AerosmithTable("/dev/null").settings.serial.baudrate == 9600
     cs = A.dialect((("move", "mpa"), ("position", "PPS")))
     assert cs.format("move", 12.5) == "MPA12.5000" and cs.parse("pps")[0].name == "position"
+    assert cs.format("move", 90.0) == "MPA90"          # whole numbers as the public client writes them
     with pytest.raises(ValueError, match="unknown aerosmith commands"):
         A.dialect((("fly", "FLY"),))
     with pytest.raises(ValueError, match="not three letters"):

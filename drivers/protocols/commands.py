@@ -23,6 +23,7 @@ class Arg:
     choices: tuple[str, ...] = ()
     decimals: int = 6
     doc: str = ""
+    compact: bool = False      # float: a whole number written as an integer ("90", not "90.0000")
 
     def format(self, value) -> str:
         if self.kind in ("axis", "int"):
@@ -31,6 +32,8 @@ class Arg:
             x = float(value)
             if not math.isfinite(x):
                 raise ValueError(f"{self.name}: not a finite number: {value!r}")
+            if self.compact and x == round(x) and abs(x) < 1e12:
+                return str(int(round(x)))
             return f"{x:.{self.decimals}f}"
         if self.kind == "choice":
             s = str(value).upper()

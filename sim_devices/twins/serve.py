@@ -52,6 +52,7 @@ class BenchOptions:
     table_config: TableConfig = field(default_factory=TableConfig)
     table_framing: str = "tcp"    # acutrol replies: "tcp" (error code, length first) or "gpib"
     table_tcp_port: int | None = None   # serve the table on TCP 127.0.0.1:port (0: any free port)
+    table_silent_motion: bool = False   # aerosmith: JOG, STO, SGO not answered (docs/protocols.md)
     record: bool = False          # keep the times of the frames sent intact (tests)
     lossless: bool = True         # the twins' clock is throttled to the IMU's reader: while a reader
                                   #   that is reading has not taken the frames its line could hold,
@@ -97,7 +98,7 @@ class BenchServer:
         if o.table_protocol == "acutrol":
             self.table_frontend = AcutrolFrontEnd(self.table, o.table_framing)
         else:
-            self.table_frontend = AerosmithFrontEnd(self.table)
+            self.table_frontend = AerosmithFrontEnd(self.table, silent_motion=o.table_silent_motion)
         if o.imu_protocol == "vectornav":
             self.imu_frontend = VectorNavFrontEnd(self.imu, self.faulter,
                                                   serial_number=f"01{o.seed:08d}"[-10:])
