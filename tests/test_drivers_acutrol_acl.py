@@ -207,16 +207,17 @@ def test_the_public_pyvisa_driver_strings_work_against_the_twin():
             assert float(inst.query(":limit:acc? rate,1")) == 200.0
             assert float(inst.query(":limit:rate? pos,1")) == 100.0
             assert float(inst.query(":limit:rate? rate,1")) == 100.0
-            # send_rate(20)
-            assert inst.query(":mode? 1") == "Rate\n"
+            # send_rate(20): the mode answers its letter (TM-8004 §4.7: ':MODE? 2' -> 'P'), so
+            # the client's comparison with "Rate\n" fails and it takes its other branch
+            assert inst.query(":mode? 1") == "R\n"
             inst.write(":dem:rate 1,20")
             _wait_rate(inst, 1, 20.0)
             pos, rate, acc = (float(x) for x in inst.query(":read:pos? 1;rate? 1;acc? 1").split(";"))
             assert rate == pytest.approx(20.0, abs=1e-3) and acc == 0.0
             assert float(inst.query(":read:acc? 1")) == 0.0
-            # send_position(30): the mode query answers Rate, so the driver switches modes
+            # send_position(30): the mode query answers R, so the driver switches modes
             inst.write(":mode 1,pos")
-            assert inst.query(":mode? 1") == "Position\n"
+            assert inst.query(":mode? 1") == "P\n"
             inst.write(":dem:pos 1,30")
             _wait_position(inst, 1, 30.0)
             assert float(inst.query(":read:pos? 1")) == pytest.approx(30.0, abs=1e-4)
@@ -235,11 +236,13 @@ def test_the_public_pyvisa_driver_strings_work_against_the_twin():
             inst.write(":dem:rate 1,0")
             inst.write(":int:open 1")
             assert inst.query(":interlock? 1") == "Open\n"
-            # a refused command: bit 7 (error queue) and MSS, the queue says why
+            # a refused command: bit 7 (error queue), no MSS (*SRE enables SI only); bit 7
+            # stays while the queue holds the message (TM-8004 §4.11.4), the queue says why
             inst.write(":dem:rate 1,1000000")           # beyond the rate-mode rate limit
-            assert inst.query("*stb?") == "192\n"
-            assert inst.query("*stb?") == "0\n"                    # reading clears it
+            assert inst.query("*stb?") == "128\n"
+            assert inst.query("*stb?") == "128\n"
             assert inst.query(":Status:MSG? QERROR").startswith(f"{P.ERR_ILLEGAL},")
+            assert inst.query("*stb?") == "0\n"
         finally:
             inst.close()
             rm.close()

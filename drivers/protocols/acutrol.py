@@ -65,6 +65,16 @@ COMMANDS: tuple[AclCommand, ...] = (
     AclCommand("ese_query", ("*ESE",), "yes", source="TM-8004 §3.2"),
     AclCommand("cls", ("*CLS",), "no", source="TM-8004 §3.1",
                doc="clear the status byte, the event register and the error queue"),
+    AclCommand("sre", ("*SRE",), "no", ("float",), source="TM-8004 §3.9",
+               doc="service request enable register: the status bits that set MSS (bit 6)"),
+    AclCommand("sre_query", ("*SRE",), "yes", source="TM-8004 §3.9"),
+    # Configure (§4.2): the oscillator settings, kept and reported (synthesis is not simulated)
+    AclCommand("configure_oscillator", ("Configure", "Oscillator"), "no",
+               ("axis", "word", "float", "float", "word", "word"), source="TM-8004 §4.2.19",
+               doc="<axis>,<Enable|Disable>,<amp_slew>,<freq_slew>,<Pos|Rate|Accel>,<Log|Lin>"),
+    AclCommand("configure_oscillator_query", ("Configure", "Oscillator"), "optional", ("axis",),
+               source="TM-8004 §4.2.19 (the example reads without ?); IEAv-EFO (:con:osc? 1)",
+               doc="Enable|Disable, amp_slew, freq_slew, amp_mode, freq_mode"),
     # Demand (§4.3)
     AclCommand("demand_position", ("Demand", "Position"), "no", ("axis", "float"),
                source="TM-8004 §4.3.5", doc="position demand, deg (position mode)"),
@@ -76,6 +86,13 @@ COMMANDS: tuple[AclCommand, ...] = (
     AclCommand("demand_delta", ("Demand", "DeltaPosition"), "no", ("axis", "float"),
                source="TM-8004 §4.3.2; IEAv-EFO driver (:dem:delta)",
                doc="change the position demand by a step, deg"),
+    AclCommand("demand_delta_query", ("Demand", "DeltaPosition"), "yes", ("axis",),
+               source="TM-8004 §4.3.2", doc="the last step received, deg"),
+    AclCommand("demand_oscillator", ("Demand", "Oscillator"), "no", ("axis", "float", "float", "float"),
+               source="TM-8004 §4.3.4; IEAv-EFO driver (:dem:osc)",
+               doc="synthesis demand: magnitude, frequency Hz, phase deg (kept; synthesis not simulated)"),
+    AclCommand("demand_oscillator_query", ("Demand", "Oscillator"), "yes", ("axis",),
+               source="TM-8004 §4.3.4", doc="magnitude;frequency;phase"),
     # Interlock (§4.5): Close before Configure/Control so that :I:C is Close (§4.5.1 example)
     AclCommand("interlock_close", ("Interlock", "Close"), "no", ("axis_all",),
                source="TM-8004 §4.5.1", doc="close the interlock and servo the axis"),
@@ -89,7 +106,11 @@ COMMANDS: tuple[AclCommand, ...] = (
                doc="Close, Open or Fault"),
     AclCommand("interlock_control_query", ("Interlock", "Control"), "yes", ("axis",),
                source="TM-8004 §4.5.3", doc="Close, Open or Fault"),
-    # Limit (§4.6): Acceleration before Absolute (:LIM:H P,4,180.0;...;A P,4,2000.0, §4.6.2)
+    # Limit (§4.6): <axis|ALL>,<mode>,<rate>,<acc>,<jerk> on the subsystem node itself
+    AclCommand("limit_set", ("Limit",), "no", ("axis_all", "mode", "float", "float", "float"),
+               source="TM-8004 §4.6; IEAv-EFO routine_example.cfg (:limit ALL,P,100,100,1)",
+               doc="rate, acceleration and jerk limits of a mode"),
+    # Acceleration before Absolute (:LIM:H P,4,180.0;...;A P,4,2000.0, §4.6.2)
     AclCommand("limit_acceleration", ("Limit", "Acceleration"), "no", ("mode", "axis_all", "float"),
                source="TM-8004 §4.6.2", doc="acceleration limit of a mode, deg/s²"),
     AclCommand("limit_acceleration_query", ("Limit", "Acceleration"), "yes", ("mode", "axis"),
@@ -100,11 +121,37 @@ COMMANDS: tuple[AclCommand, ...] = (
     AclCommand("limit_absolute_query", ("Limit", "Absolute"), "yes", ("axis",),
                source="TM-8004 §4.6.1; IEAv-EFO driver (:limit:absolute? 1)",
                doc="factory limits: rate, acceleration, jerk, low and high position, velocity trip"),
+    # High/LowPosition after Absolute/Acceleration (:L:A stays Acceleration); the manual's
+    # forms: <mode>,<axis>,<limit> and <axis>,<limit> (:L:H 1,-180), queries <mode>,<axis>
+    # (:LIM:HPOS? P,3) and <axis> (:L:H? 2); HPOS/LPOS are the short forms (SHORT_FORMS)
+    AclCommand("limit_high", ("Limit", "HighPosition"), "no", ("mode", "axis_all", "float"),
+               source="TM-8004 §4.6.6", doc="high position limit of a mode, deg"),
+    AclCommand("limit_high_axis", ("Limit", "HighPosition"), "no", ("axis_all", "float"),
+               source="TM-8004 §4.6.6 (:L:H 1,-180)", doc="high position limit, position mode"),
+    AclCommand("limit_high_query", ("Limit", "HighPosition"), "yes", ("mode", "axis"),
+               source="TM-8004 §4.6.6 (:LIM:HPOS? P,3)"),
+    AclCommand("limit_high_axis_query", ("Limit", "HighPosition"), "yes", ("axis",),
+               source="TM-8004 §4.6.6 (:L:H? 2)", doc="position mode's"),
+    AclCommand("limit_low", ("Limit", "LowPosition"), "no", ("mode", "axis_all", "float"),
+               source="TM-8004 §4.6.7", doc="low position limit of a mode, deg"),
+    AclCommand("limit_low_axis", ("Limit", "LowPosition"), "no", ("axis_all", "float"),
+               source="TM-8004 §4.6.7 (as §4.6.6)", doc="low position limit, position mode"),
+    AclCommand("limit_low_query", ("Limit", "LowPosition"), "yes", ("mode", "axis"),
+               source="TM-8004 §4.6.7 (:LIM:LPOS? P,3)"),
+    AclCommand("limit_low_axis_query", ("Limit", "LowPosition"), "yes", ("axis",),
+               source="TM-8004 §4.6.7 (:L:L? 2)", doc="position mode's"),
     # Mode (§4.7)
     AclCommand("mode_position", ("Mode", "Position"), "no", ("axis_all",), source="TM-8004 §4.7.4"),
     AclCommand("mode_rate", ("Mode", "Rate"), "no", ("axis_all",), source="TM-8004 §4.7.5"),
     AclCommand("mode_off", ("Mode", "Off"), "no", ("axis_all",), source="TM-8004 §4.7.3",
                doc="rate mode with demand 0: a controlled stop, held at zero rate"),
+    AclCommand("mode_arate", ("Mode", "Arate"), "no", ("axis_all",), source="TM-8004 §4.7.1",
+               doc="absolute rate mode: refused by the twin (not simulated)"),
+    AclCommand("mode_synthesis", ("Mode", "Synthesis"), "no", ("axis_all",),
+               source="TM-8004 §4.7.6; IEAv-EFO (:mode:synt 1)",
+               doc="synthesis mode: refused by the twin (not simulated)"),
+    AclCommand("mode_track", ("Mode", "Track"), "no", ("axis_all",), source="TM-8004 §4.7.7",
+               doc="track mode: refused by the twin (not simulated)"),
     AclCommand("mode_set", ("Mode",), "no", ("axis_all", "mode"), source="TM-8004 §4.7",
                doc=":Mode <axis|ALL>,<mode>"),
     AclCommand("mode_query", ("Mode",), "yes", ("axis",), source="TM-8004 §4.7",
@@ -121,6 +168,9 @@ COMMANDS: tuple[AclCommand, ...] = (
                source="TM-8004 §4.10.4", doc="position, deg"),
     AclCommand("read_rate", ("Read", "Rate"), "optional", ("axis",), source="TM-8004 §4.10.5",
                doc="rate, deg/s"),
+    AclCommand("read_variable", ("Read", "Variable"), "optional", ("word",) * 8, optional_args=7,
+               source="TM-8004 §4.10.3 (:R:V 3100, :R:V? 1021;V? 2083); numbers TM-9374A",
+               doc="system variables x000, x001, x082, x083, x163, x176 (x = axis); up to 8"),
     # Status (§4.11)
     AclCommand("status_stb", ("Status", "STB"), "yes", source="TM-8004 §4.11.6",
                doc="the status byte without clearing it"),
@@ -132,12 +182,20 @@ COMMANDS: tuple[AclCommand, ...] = (
     AclCommand("utility_format", ("Utility", "Format"), "no", ("word",),
                source="TM-8004 §4.14.1; williamsea/Acutrol (:u:f f)",
                doc="response format: FLOat only here (BINary is not implemented)"),
+    AclCommand("utility_format_query", ("Utility", "Format"), "yes", source="TM-8004 §4.14.1 (:U:F? -> FLOAT)"),
     AclCommand("utility_lockout", ("Utility", "Lockoutmode"), "no", ("word",),
                source="TM-8004 §4.14.2; AcutronicRobotics driver (:utility:lockout on)",
-               doc="front-panel lockout: accepted, no effect in the twin"),
+               doc="front-panel lockout ON|OFF: kept, no other effect in the twin"),
+    AclCommand("utility_lockout_query", ("Utility", "Lockoutmode"), "yes",
+               source="TM-8004 §4.14.2 (:U:L? -> OFF)"),
 )
 
 BY_KEY = {c.key: c for c in COMMANDS}
+
+#: short forms that are not prefixes of the long form: the capitals of the manual's headings
+#: ("High POSition", "Low POSition", TM-8004 §4.6.6/§4.6.7), used in its examples
+#: (:LIM:HPOS P,2,179.0, :LIM:LPOS? P,3)
+SHORT_FORMS = {"HIGHPOSITION": ("HPOS",), "LOWPOSITION": ("LPOS",)}
 
 #: servo modes (TM-8004 §4.7), in the order one-letter forms resolve ("A" is Arate)
 MODES = ("Position", "Rate", "Arate", "Synthesis", "Track", "Abort", "Off")
@@ -205,10 +263,13 @@ def pack_response(error: int, data: str) -> bytes:
 
 # ------------------------------------------------------------------------------ parsing
 class AclError(Exception):
-    """A command of a message that cannot be executed: ``code`` is one of ``ERR_*``."""
+    """A command of a message that cannot be executed: ``code`` is one of ``ERR_*``.
+    ``base``: where the parser stands after it (the subsystem the next relative command of
+    the message continues in, TM-8004 §2.3), when the header says; None when it does not."""
 
-    def __init__(self, code: int, message: str = ""):
+    def __init__(self, code: int, message: str = "", base: tuple[str, ...] | None = None):
         self.code = code
+        self.base = base
         super().__init__(message or ERROR_TEXT.get(code, "error"))
 
 
@@ -240,7 +301,7 @@ def _resolve(node: _Node, mnemonic: str) -> _Node:
     if not m or not m.isalnum():
         raise AclError(ERR_UNKNOWN, f"bad mnemonic {mnemonic[:20]!r}")
     for key, child in node.children.items():
-        if key.startswith(m):
+        if key.startswith(m) or m in SHORT_FORMS.get(key, ()):
             return child
     raise AclError(ERR_UNKNOWN, f"{mnemonic[:20]!r} not recognized")
 
@@ -259,7 +320,12 @@ def split_message(text: str) -> list[str]:
 
 
 def parse_command(text: str, base: tuple[str, ...] = ()) -> Parsed:
-    """One command of a message, relative to the subsystem ``base`` of the previous one."""
+    """One command of a message, relative to the subsystem ``base`` of the previous one.
+
+    A refused command still moves the parser (TM-8004 §2.3: "the parser location can be found
+    by finding the last colon before the last mnemonic in the compound header"): the
+    :class:`AclError` carries in ``base`` the subsystem the next relative command continues in,
+    so that one bad element of ``:LIM:H ...;L ...;R ...`` does not break the rest of the chain."""
     s = text.strip()
     head, _, rest = s.partition(" ")
     if "\t" in head:
@@ -274,23 +340,34 @@ def parse_command(text: str, base: tuple[str, ...] = ()) -> Parsed:
     if head.startswith("*"):
         candidates = _COMMON.get(head.upper())
         if not candidates:
-            raise AclError(ERR_UNKNOWN, f"{head[:20]!r} not recognized")
+            raise AclError(ERR_UNKNOWN, f"{head[:20]!r} not recognized", base)
         path, next_base = candidates[0].path, base
     else:
         absolute = head.startswith(":") or not base
         parts = head.lstrip(":").split(":") if head.strip(":") else []
         if not parts or any(not p for p in parts):
-            raise AclError(ERR_SYNTAX, f"bad header {head[:40]!r}")
-        node = _TREE
-        if not absolute:
-            for name in base:
-                node = node.children[name.upper()]
-        names = [n.name for n in _path_nodes(node, parts)]
-        path = (tuple(base) if not absolute else ()) + tuple(names)
-        candidates = _find_node(path).commands
-        next_base = path[:-1]
-    cmd = _choose(candidates, is_query, head)
-    return Parsed(cmd, parse_args(cmd, rest), is_query, next_base)
+            raise AclError(ERR_SYNTAX, f"bad header {head[:40]!r}", None)
+        start = () if absolute else tuple(base)
+        node = _find_node(start)
+        try:
+            subsystem = [n.name for n in _path_nodes(node, parts[:-1])]
+        except AclError as e:
+            e.base = None                   # the subsystem itself is not known
+            raise
+        next_base = start + tuple(subsystem)
+        try:
+            last = _resolve(_find_node(next_base), parts[-1])
+        except AclError as e:
+            e.base = next_base
+            raise
+        candidates = last.commands
+    try:
+        cmd = _choose(candidates, is_query, head, rest)
+        args = parse_args(cmd, rest)
+    except AclError as e:
+        e.base = next_base
+        raise
+    return Parsed(cmd, args, is_query, next_base)
 
 
 def _path_nodes(node, parts):
@@ -308,10 +385,16 @@ def _find_node(path):
     return node
 
 
-def _choose(candidates, is_query: bool, head: str) -> AclCommand:
-    for c in candidates:
-        if c.query == "optional" or (c.query == "yes") == is_query:
+def _choose(candidates, is_query: bool, head: str, rest: str = "") -> AclCommand:
+    """The command a header stands for: query or not, then (where one header has several
+    forms, :L:H P,1,90 and :L:H 1,-180) the first whose number of arguments fits."""
+    fits = [c for c in candidates if c.query == "optional" or (c.query == "yes") == is_query]
+    n = len(rest.split(",")) if rest else 0
+    for c in fits:
+        if len(c.args) - c.optional_args <= n <= len(c.args):
             return c
+    if fits:
+        return fits[0]
     raise AclError(ERR_UNKNOWN, f"{head[:40]!r}{'?' if is_query else ''} not recognized")
 
 
