@@ -31,8 +31,12 @@ class TableConfig:
     outer first), encoder and rate readback resolution, settling time after a move, the
     limits in force at power-up."""
 
+    # absolute (factory) limits: 1000 deg/s is the BD125 rate range (its datasheet, public in
+    # IEAv-EFO/acutrol3000 doc/) and IEAv-EFO's set_limits(lim_rate=1000); 8300 deg/s² is
+    # IEAv-EFO's set_limits(lim_acc=8300) (the BD125 datasheet: 4200 deg/s² without load, the
+    # figure of IEAv-EFO's routine.py), above the manual's 1500 and 2000 (TM-8004 §4.6.2)
     max_rate_dps: float | tuple[float, ...] = 1000.0
-    max_accel_dps2: float | tuple[float, ...] = 1000.0
+    max_accel_dps2: float | tuple[float, ...] = 8300.0
     move_rate_dps: float = 60.0          # position-mode limits at power-up
     move_accel_dps2: float = 60.0
     rate_accel_dps2: float = 100.0       # rate-mode acceleration limit at power-up
