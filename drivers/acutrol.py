@@ -7,7 +7,8 @@ The transport and the reply framing are chosen by the port URL (docs/protocols.m
   an error code and a length first;
 * ``visa://GPIB0::1::INSTR`` (pyvisa, backend pyvisa-py): framing ``gpib``: only queries are
   answered; the driver ends each message with ``*STB?`` so that every message gets an answer
-  and an error (bit 7 of the status byte, the error queue) is seen at once;
+  and an error (bit 7 of the status byte: the error queue is not empty) is seen at once; the
+  queue is emptied at connect (``*CLS``) and by reading it after each refusal;
   ``visa://TCPIP0::host::9878::SOCKET`` uses the ``tcp`` framing;
 * ``#gpib`` or ``#tcp`` at the end of any URL chooses the framing explicitly.
 """
@@ -141,7 +142,7 @@ class AcutrolTable(RateTable):
         program never read (it died mid-exchange, e.g. a run killed while its guardian
         connects): then the line is left to go quiet, cleared, and asked again."""
         try:
-            first, second = (self._exchange(("idn",))[0] for _ in range(2))
+            first, second = (self._ask_identity() for _ in range(2))
         except (ProtocolError, DeviceTimeout):
             first, second = None, ""
         if first != second:
@@ -149,10 +150,18 @@ class AcutrolTable(RateTable):
             time.sleep(STALE_REPLY_S)
             self._rx.clear()
             self.port.discard_input()
-            first, second = (self._exchange(("idn",))[0] for _ in range(2))
+            first, second = (self._ask_identity() for _ in range(2))
             if first != second:
                 raise ProtocolError(self.name, f"*IDN? answered {first[:40]!r}, then {second[:40]!r}")
         return second
+
+    def _ask_identity(self) -> str:
+        if self.framing == "gpib":
+            # bit 7 of the status byte stays set while the error queue holds messages
+            # (TM-8004 §4.11.4), so messages left by an earlier session would read as a refusal
+            # of every message: *CLS empties the queue first (§3.1)
+            return self._exchange(("cls",), ("idn",))[0]
+        return self._exchange(("idn",))[0]
 
     def _count_axes(self) -> int:
         answer = self._exchange(("query_system",))[0]
