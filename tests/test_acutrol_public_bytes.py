@@ -19,7 +19,8 @@ length first (little-endian), ``OK`` for a message without queries; ``gpib``: on
 answered, one line ended by ``\\n``.
 
 The demand semantics of issue 23 (a demand is accepted in any mode and executed when its mode
-is entered) are not assumed: the tests that need them are marked ``xfail(strict=True)``.
+is entered, IEAv-EFO's README and routine_example.cfg) are the twin's; one manual example the
+twin still refuses (a mode entered before the interlock is closed) is ``xfail(strict=True)``.
 """
 from __future__ import annotations
 
@@ -34,7 +35,9 @@ from sim_devices.twins.table import TableConfig, TableFaults, TableTwin
 from sim_devices.twins.table_acutrol import AcutrolFrontEnd
 
 FRAMINGS = ("tcp", "gpib")
-NEEDS_DEMAND_SEMANTICS = pytest.mark.xfail(strict=True, reason="needs demand semantics from main")
+MODE_BEFORE_INTERLOCK = pytest.mark.xfail(
+    strict=True, reason="the twin refuses a mode while the interlock is open (TableTwin.set_mode); "
+                        "TM-8004 §4.5.6 enters position mode before closing it")
 
 
 def tcp_bytes(data: bytes, code: int = 0) -> bytes:
@@ -405,7 +408,7 @@ def test_interlock_examples():
         assert acl.query(":Interlock:Control? 1") == "Close"        # §4.5.3's answer words
 
 
-@NEEDS_DEMAND_SEMANTICS
+@MODE_BEFORE_INTERLOCK
 @pytest.mark.parametrize("framing", FRAMINGS)
 def test_the_interlock_reset_example_sets_demand_and_mode_before_closing(framing):
     """§4.5.6: ':D:P 2,0.0;:I:R;:M:P 2;:I C 2' (set position on axis 2, reset, position mode,
@@ -498,7 +501,6 @@ def test_ieav_efo_acutrol3000_py_strings():
     assert acl.raw(":interlock? 1") == b"Open\n"
 
 
-@NEEDS_DEMAND_SEMANTICS
 def test_ieav_efo_routine_example_cfg():
     """examples/routine_example.cfg, line by line (comments after '%' dropped), on two axes
     with their interlocks closed, after moving both axes away from 0: ':d:p 1,0' ... ':m:p ALL'
