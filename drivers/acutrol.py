@@ -223,8 +223,14 @@ class AcutrolTable(RateTable):
     def _reset(self):
         self._exchange(("interlock_reset",))
 
-    def _interlock(self, axis, close):
-        self._exchange(("interlock_close" if close else "interlock_open", axis))
+    def _interlock(self, axis, close, hold_deg):
+        if not close:
+            self._exchange(("interlock_open", axis))
+            return
+        # one message: harmless demands for every mode, Off selected ("no demands affect Off
+        # Mode", §4.7.3), then the close that servoes the axis in it (§4.5.6's order)
+        self._exchange(("demand_rate", axis, 0.0), ("demand_position", axis, hold_deg),
+                       ("mode_off", axis), ("interlock_close", axis))
 
     _DEMAND = {"position": "demand_position", "rate": "demand_rate"}
     _halt_mode = "rate"

@@ -145,8 +145,14 @@ class AerosmithTable(RateTable):
         raise NotSupported(self.name, "the three-letter dialect cannot reset faults: reset them "
                                       "on the controller's front panel")
 
-    def _interlock(self, axis, close):
+    _closed_mode = "rate"
+
+    def _interlock(self, axis, close, hold_deg):
         self._exchange("servo", 1 if close else 0)
+        if close:
+            # what SRV1 servoes to is unverified (a stored JOG or MOV could resume): JOG0 at
+            # once, so that the axis holds zero rate whatever the controller kept
+            self._motion("jog", 0.0)
 
     def _set_mode(self, axis, mode, demand):
         # the dialect's motion commands carry their demand: JOG<rate>, MOV<position>

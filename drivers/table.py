@@ -296,13 +296,28 @@ class RateTable(Device):
         self._reset()
 
     def close_interlocks(self, axes=None) -> TableStatus:
-        for axis in self._axes_arg(axes):
-            self._interlock(axis, True)
+        """Close the interlocks of ``axes`` (all) that are open and servo them holding still.
+
+        Closing an interlock servoes the axis in its selected mode, executing that mode's demand
+        (TM-8004 §4.5.6: ``:D:P 2,0.0;:I:R;:M:P 2;:I C 2``), and the mode selected before the
+        interlock opened may still be selected with its old demand (a rotation of an earlier
+        run).  So each driver sends, before the close and in the same message where it can,
+        what makes the axis hold still where it is (``_interlock(axis, True, hold_deg)``).  An
+        axis whose interlock is already closed is left alone ("no effect on an axis that is
+        already servoed", §4.5.6)."""
+        axes = self._axes_arg(axes)
+        closed, _, _ = self._status()
+        to_close = [a for a in axes if not closed[a - 1]]
+        if to_close:
+            pos = self.read_positions_deg()
+            for axis in to_close:
+                self._interlock(axis, True, float(pos[axis - 1]))
+                self._modes[axis - 1] = self._closed_mode
         return self.status()
 
     def open_interlocks(self, axes=None) -> None:
         for axis in self._axes_arg(axes):
-            self._interlock(axis, False)
+            self._interlock(axis, False, None)
             self._modes[axis - 1] = "off"
 
     # ------------------------------------------------------------------ motion
@@ -534,8 +549,13 @@ class RateTable(Device):
     @abc.abstractmethod
     def _reset(self) -> None: ...
 
+    #: the mode an axis is in once ``_interlock(axis, True, ...)`` has closed it
+    _closed_mode: str = "off"
+
     @abc.abstractmethod
-    def _interlock(self, axis: int, close: bool) -> None: ...
+    def _interlock(self, axis: int, close: bool, hold_deg: float | None) -> None:
+        """Open, or close (then the axis must hold still at ``hold_deg``, its measured position,
+        whatever mode and demand it had: see :meth:`close_interlocks`)."""
 
     @abc.abstractmethod
     def _set_mode(self, axis: int, mode: str, demand: float) -> None:

@@ -20,7 +20,8 @@ answered, one line ended by ``\\n``.
 
 The demand semantics of issue 23 (a demand is accepted in any mode and executed when its mode
 is entered, IEAv-EFO's README and routine_example.cfg) are the twin's; one manual example the
-twin still refuses (a mode entered before the interlock is closed) is ``xfail(strict=True)``.
+twin refused before (a mode selected before the interlock is closed, §4.5.6) now runs: the twin
+selects the mode with the interlock open and servoes the axis in it when it is closed.
 """
 from __future__ import annotations
 
@@ -35,11 +36,6 @@ from sim_devices.twins.table import TableConfig, TableFaults, TableTwin
 from sim_devices.twins.table_acutrol import AcutrolFrontEnd
 
 FRAMINGS = ("tcp", "gpib")
-MODE_BEFORE_INTERLOCK = pytest.mark.xfail(
-    strict=True, reason="the twin refuses a mode while the interlock is open (TableTwin.set_mode); "
-                        "TM-8004 §4.5.6 enters position mode before closing it")
-
-
 def tcp_bytes(data: bytes, code: int = 0) -> bytes:
     """A reply in the tcp framing: int32 code, uint32 length, little-endian, then the data."""
     return struct.pack("<iI", code, len(data)) + data
@@ -408,7 +404,6 @@ def test_interlock_examples():
         assert acl.query(":Interlock:Control? 1") == "Close"        # §4.5.3's answer words
 
 
-@MODE_BEFORE_INTERLOCK
 @pytest.mark.parametrize("framing", FRAMINGS)
 def test_the_interlock_reset_example_sets_demand_and_mode_before_closing(framing):
     """§4.5.6: ':D:P 2,0.0;:I:R;:M:P 2;:I C 2' (set position on axis 2, reset, position mode,

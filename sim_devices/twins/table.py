@@ -112,8 +112,7 @@ class TableTwin:
             self._tripped = True
             ax = self._axis(f.trip_axis)
             ax.fault = True
-            ax.interlock_closed = False
-            ax.mode = "off"
+            ax.interlock_closed = False         # the mode stays selected (interlock_open)
             ax.motion.plan_stop(f.trip_at_s, ax.hardware[1])
         for ax in self.axes:
             ax.motion.prune(now - MOTION_MEMORY_S)
@@ -133,15 +132,28 @@ class TableTwin:
             ax.fault = False
 
     def interlock_close(self, axis: int) -> None:
+        """Close the interlock and servo the axis in its selected mode, executing that mode's
+        demand (TM-8004 §4.5.6's example selects the mode before closing: ``:D:P 2,0.0;:I:R;
+        :M:P 2;:I C 2``, "Change axis 2 to Position mode; Close axis 2 interlocks and servo"):
+        whatever demand the mode holds, however old.  Off holds zero rate."""
         ax = self._axis(axis)
         if ax.fault:
             raise CommandRefused(f"axis {axis}: fault latched (reset first)")
+        if ax.interlock_closed:
+            return                              # "no effect on an axis that is already servoed"
         ax.interlock_closed = True
+        self._servo(axis, ax, self.clock.now())
 
-    def interlock_open(self, axis: int) -> None:
+    def interlock_open(self, axis: int, keep_mode: bool = True) -> None:
+        """Open the interlock: the axis brakes to rest unpowered.  Its mode stays selected (with
+        its demand) unless ``keep_mode`` is False: nothing public says a controller forgets
+        it, and closing the interlock again servoes the axis in it (the pessimistic reading)."""
         ax = self._axis(axis)
         ax.interlock_closed = False
+        mode = ax.mode
         self._brake(ax, "off")
+        if keep_mode:
+            ax.mode = mode
 
     def set_mode(self, axis: int, mode: str) -> None:
         """Enter ``mode``: it executes the demand loaded for it (docs/protocols.md, "Demands
@@ -150,19 +162,20 @@ class TableTwin:
         rate mode ramps to the rate demand, whatever they were set to and whenever; off mode
         brakes to zero rate whatever the demands (TM-8004 §4.7.3: "No demands affect Off Mode")."""
         ax = self._axis(axis)
-        now = self.clock.now()
-        if mode == "off":
-            self._brake(ax, "off")
-            return
-        if not ax.interlock_closed:
-            raise CommandRefused(f"axis {axis}: interlock open")
-        if mode not in ("position", "rate"):
+        if mode not in ("position", "rate", "off"):
             raise CommandRefused(f"unknown mode {mode!r}")
         ax.mode = mode
-        if mode == "position":
+        if ax.interlock_closed:        # with the interlock open the mode is selected, for its close
+            self._servo(axis, ax, self.clock.now())
+
+    def _servo(self, axis: int, ax: AxisState, now: float) -> None:
+        """Execute the selected mode: its demand, or zero rate in off mode."""
+        if ax.mode == "position":
             self._plan_position(axis, ax, now)
-        else:
+        elif ax.mode == "rate":
             ax.motion.plan_rate(now, ax.rate_demand_dps, ax.limits["R"][1])
+        else:
+            self._brake(ax, "off")
 
     def demand_position(self, axis: int, position_deg: float) -> None:
         """Load a position demand (any mode, interlock open or closed); executed at once in

@@ -95,8 +95,8 @@ class AerosmithFrontEnd:
             raise CommandRefused("SRV takes 0 or 1")
         if on:
             self.table.interlock_close(1)
-        else:
-            self.table.interlock_open(1)
+        else:       # SRV0: servo off; SRV1 then holds where the axis is (unverified either way)
+            self.table.interlock_open(1, keep_mode=False)
 
     def _powered(self):
         ax = self.table.axes[0]
