@@ -289,3 +289,40 @@ def test_bad_recordings_say_what_is_wrong(tmp_path, capsys):
     run_bad(["import", "rosbag", str(tmp_path / "nobag.bag"), "-o", str(tmp_path / "o11")], capsys,
             "not a readable ROS bag")
     assert not any((tmp_path / f"o{k}").exists() for k in range(1, 13))
+
+
+def test_offset_binary_counts_with_and_without_nominal_scales(tmp_path, capsys):
+    """Unsigned 16-bit counts centred on 32768 (imu_tk's own sample, many ADC logs): with the
+    nominal scales the unit checks measure |f| about the offset the statics are centred on (a
+    sphere through the pose means), not about zero (it said "the unit is wrong" with raw
+    declared); without them nothing is assumed.  The fit takes the offset as the bias; every
+    stored noise figure is in the unit it is labelled with (micro-g, deg/h), not counts."""
+    truth, hs = session(seed=SEED + 3, counts=COUNTS)
+    hs.accel = hs.accel + 32768.0
+    hs.gyro = hs.gyro + 32768.0
+    assert hs.accel.min() >= 0 and hs.accel.max() < 65536
+    log = write_csv(tmp_path / "u16.txt", hs, columns="none", delimiter=" ")
+    expected = counts_truth(truth, COUNTS)
+    expected.accel_bias = expected.accel_bias + 32768.0
+    expected.gyro_bias = expected.gyro_bias + 32768.0
+    for nominal in ([], ["--accel-nominal", str(COUNTS[0]), "--gyro-nominal", str(COUNTS[1])]):
+        out = tmp_path / ("nominal" if nominal else "plain")
+        code = cli.main(["import", "csv", str(log), "--columns", "ax=0,ay=1,az=2,gx=3,gy=4,gz=5",
+                         "--accel-unit", "raw", "--gyro-unit", "raw", *nominal, "--rate-hz", "100", "-o",
+                         str(out), "--gravity-mps2", str(hs.truth["gravity_mps2"]), "--latitude-deg", "45"])
+        text = capsys.readouterr()
+        assert code == 0, text.err
+        if nominal:
+            assert "static |f| = " in text.out and "about the statics' centre" in text.out, text.out
+        cal, _, _ = estimate_capture(out)
+        check_against_truth(cal, expected)
+        noise = cal.fit["noise_per_sample"]
+        # the simulated MEMS noise per sample with the quantisation's LSB^2/12, in micro-g and
+        # deg/h (not counts: one count is 244 micro-g and 110 deg/h), within a factor 2
+        accel_ug = np.array(noise["accel_ug"])
+        gyro_dph = np.array(noise["gyro_dph"])
+        lsb_ug, lsb_dph = COUNTS[0] / 9.80665e-6, COUNTS[1] * 3600
+        true_accel_ug = np.hypot(truth.accel_noise_sigma / 9.80665e-6, lsb_ug / np.sqrt(12))
+        true_gyro_dph = np.hypot(truth.gyro_noise_sigma * 3600, lsb_dph / np.sqrt(12))
+        assert np.all(np.abs(np.log(accel_ug / true_accel_ug)) < np.log(2)), (accel_ug, true_accel_ug)
+        assert np.all(np.abs(np.log(gyro_dph / true_gyro_dph)) < np.log(2)), (gyro_dph, true_gyro_dph)

@@ -1197,6 +1197,26 @@ def _reported_columns(result: FitResult) -> np.ndarray:
     return np.array(cols, dtype=int)
 
 
+def _noise_per_sample(model: Model, x: np.ndarray) -> dict:
+    """The white noise per sample the fit was weighted with, in micro-g and deg/h whatever the
+    capture's units: raw counts through the fitted scale factors (counts per m/s^2, per deg/s),
+    or the nominal scale of a gyro the capture cannot calibrate; None where neither exists."""
+    s, L = model.s, model.layout
+    accel = s.accel_sigma.astype(float)
+    if getattr(s, "accel_raw", False):
+        accel = accel / np.abs(x[L["accel_scale"]])
+    gyro = s.gyro_sigma.astype(float)
+    if getattr(s, "gyro_raw", False):
+        if s.rotations or model.hands:
+            gyro = gyro / np.abs(x[L["gyro_scale"]])
+        elif getattr(s, "gyro_nominal", None):
+            gyro = gyro / s.gyro_nominal
+        else:
+            gyro = None
+    return {"accel_ug": (accel / units.UG_MPS2).tolist(),
+            "gyro_dph": None if gyro is None else (gyro * 3600).tolist()}
+
+
 def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=()) -> Calibration:
     model, x = result.model, result.x
     L, s = model.layout, model.s
@@ -1222,8 +1242,7 @@ def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=())
         "rotation_segments": len(s.rotations),
         "static_attitudes": model.attitudes,
         "hand_rotations": len(model.hands),
-        "noise_per_sample": {"accel_ug": (s.accel_sigma / units.UG_MPS2).tolist(),
-                             "gyro_dph": (s.gyro_sigma * 3600).tolist()},
+        "noise_per_sample": _noise_per_sample(model, x),
         "notes": list(model.notes) + list(s.skipped) + list(notes),
         "converged": bool(getattr(model, "converged", True)),
     }

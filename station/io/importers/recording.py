@@ -250,7 +250,7 @@ def _gyro_unit_at_rest(rec: Recording, det: Detection, min_static_s: float) -> N
     from scipy.ndimage import uniform_filter1d
 
     fg = rec.gyro_factor
-    if fg is None:
+    if fg is None or rec.gyro_unit == "raw":     # raw counts: the zero (offset) is unknown
         return
     fa = rec.accel_factor or 1.0
     window = max(3, int(round(det.thresholds["window_s"] * len(rec.t) / max(rec.t[-1] - rec.t[0], 1e-9))) | 1)
@@ -277,16 +277,26 @@ def check_units(rec: Recording, sections: list[Section], gravity_mps2: float) ->
     fa = rec.accel_factor
     means = np.array([rec.accel[s.start:s.stop].mean(axis=0) for s in statics])
     if fa is not None and len(statics):
-        f = float(np.median(np.linalg.norm(means, axis=1))) * fa
+        centre = np.zeros(3)
+        if rec.accel_unit == "raw":     # counts may sit on an offset (offset binary: 32768)
+            centre = _sphere_centre(means)
+            if centre is None:
+                notes.append("static |f| not checked: raw counts about an unknown offset and too few "
+                             "distinct poses to find it")
+                fa = None
+        if fa is not None:
+            f = float(np.median(np.linalg.norm(means - centre, axis=1))) * fa
         if abs(f / gravity_mps2 - 1.0) > GRAVITY_TOLERANCE:
             unit = rec.accel_unit if rec.accel_unit != "raw" else f"raw x {rec.accel_nominal:g} m/s^2"
             guess = _guess_accel(f, gravity_mps2)
             raise UserError(f"{rec.source}: the static poses read |f| = {f:.4g} m/s^2 (median) in the declared "
                             f"accelerometer unit ({unit}), far from gravity {gravity_mps2:.4g} m/s^2: the unit "
                             f"is wrong{guess}")
-        notes.append(f"static |f| = {f:.4g} m/s^2 (median over the poses), gravity {gravity_mps2:.4g}")
+        where = (f" about the statics' centre {np.round(centre).astype(int).tolist()} counts"
+                 if rec.accel_unit == "raw" else "")
+        notes.append(f"static |f| = {f:.4g} m/s^2 (median over the poses{where}), gravity {gravity_mps2:.4g}")
     fg = rec.gyro_factor
-    if fg is not None and len(statics):
+    if fg is not None and len(statics) and rec.gyro_unit != "raw":     # raw: the zero is unknown
         rate = float(np.median([np.linalg.norm(rec.gyro[s.start:s.stop].mean(axis=0)) for s in statics])) * fg
         if rate > GYRO_AT_REST_DPS:
             unit = rec.gyro_unit if rec.gyro_unit != "raw" else f"raw x {rec.gyro_nominal:g} deg/s"
@@ -322,6 +332,22 @@ def check_units(rec: Recording, sections: list[Section], gravity_mps2: float) ->
                             f"wrong{guess}")
         notes.append(f"gyro turns / gravity-direction change: {ratio:.3g} (median of {len(ratios)} turns, >= 1)")
     return notes
+
+
+def _sphere_centre(means: np.ndarray):
+    """The centre of the sphere through the static pose means (linear least squares on
+    |m|^2 = 2 m.c + k), or None when the poses do not span three dimensions well enough to
+    place it (fewer than 4, or nearly coplanar)."""
+    if len(means) < 4:
+        return None
+    A = np.column_stack([2.0 * means, np.ones(len(means))])
+    b = np.einsum("ij,ij->i", means, means)
+    spread = means - means.mean(axis=0)
+    sv = np.linalg.svd(spread, compute_uv=False)
+    if sv[-1] < 0.2 * sv[0]:
+        return None
+    sol, *_ = np.linalg.lstsq(A, b, rcond=None)
+    return sol[:3]
 
 
 def _guess_accel(f, g) -> str:
