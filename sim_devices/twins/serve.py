@@ -53,6 +53,8 @@ class BenchOptions:
     table_framing: str = "tcp"    # acutrol replies: "tcp" (error code, length first) or "gpib"
     table_tcp_port: int | None = None   # serve the table on TCP 127.0.0.1:port (0: any free port)
     table_silent_motion: bool = False   # aerosmith: JOG, STO, SGO not answered (docs/protocols.md)
+    imu_startup: str = "factory"  # vectornav power-up: "factory" ($VNYMR at 40 Hz, binary off, as a
+                                  #   VN-100 leaves the factory) or "binary" (station's binary output on)
     record: bool = False          # keep the times of the frames sent intact (tests)
     lossless: bool = True         # the twins' clock is throttled to the IMU's reader: while a reader
                                   #   that is reading has not taken the frames its line could hold,
@@ -100,7 +102,7 @@ class BenchServer:
         else:
             self.table_frontend = AerosmithFrontEnd(self.table, silent_motion=o.table_silent_motion)
         if o.imu_protocol == "vectornav":
-            self.imu_frontend = VectorNavFrontEnd(self.imu, self.faulter,
+            self.imu_frontend = VectorNavFrontEnd(self.imu, self.faulter, startup=o.imu_startup,
                                                   serial_number=f"01{o.seed:08d}"[-10:])
         elif o.imu_protocol == "xsens":
             self.imu_frontend = XsensFrontEnd(self.imu, self.faulter)
