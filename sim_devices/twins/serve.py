@@ -110,6 +110,8 @@ class BenchServer:
             self.imu_frontend = CsvFrontEnd(self.imu, self.faulter, o.csv_format)
         self.table_port = PtyEndpoint() if o.table_tcp_port is None else TcpEndpoint(o.table_tcp_port)
         self.imu_port = PtyEndpoint()
+        # a driver at another baud rate than the IMU's reads garbage, as on a serial line
+        self.imu_port.emulate_baud(lambda: self.imu_frontend.line_baud)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
@@ -187,7 +189,10 @@ class BenchServer:
         if self.imu_port in readable:
             data = self.imu_port.read()
             if data:
-                self.imu_port.write(self.imu_frontend.receive(data, now))
+                # the replies go out at the rate in effect when the commands came (a new baud
+                # rate, register 05, applies after its reply)
+                baud = self.imu_frontend.line_baud
+                self.imu_port.write(self.imu_frontend.receive(data, now), baud=baud)
         if not self.imu_port.closed:
             if self._imu_behind(self.imu_port.max_backlog // 2) and not (self.options.lossless and reader_active):
                 # nobody reads: the frames due are lost anyway, do not compute them
