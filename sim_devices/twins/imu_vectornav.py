@@ -164,22 +164,34 @@ class VectorNavFrontEnd:
     def _imu_values(self, now: float) -> str:
         """Register 54 / $VNIMU: the newest sample on the output grid (no magnetometer or
         barometer in the twin: mag 0, pressure 101.325 kPa)."""
-        t = np.array([np.floor(now * self.imu.rate_hz) / self.imu.rate_hz])
-        accel, gyro, temp = self.imu.measure(t)
-        return V.imu_values((0.0, 0.0, 0.0), accel[0], np.radians(gyro[0]), float(temp[0]), 101.325)
+        return self._imu_lines(np.array([now]))[0]
 
     def _ymr_values(self, now: float) -> str:
-        """Register 27 / $VNYMR: the newest sample on the output grid.  Yaw, pitch, roll: the
-        case axes' attitude relative to ENU from the table twin (intrinsic Z-Y-X angles; the
-        sensor's own filter estimates it relative to NED: the twin has none); mag: a constant
-        field (MAG_ENU_GAUSS) in the case axes; accel (m/s²) and gyro (rad/s) as measured."""
-        t = np.array([np.floor(now * self.imu.rate_hz) / self.imu.rate_hz])
+        return self._ymr_lines(np.array([now]))[0]
+
+    def _grid(self, times) -> np.ndarray:
+        """The newest sample time on the output grid at each of ``times``."""
+        return np.floor(np.asarray(times, dtype=float) * self.imu.rate_hz) / self.imu.rate_hz
+
+    def _imu_lines(self, times) -> list[str]:
+        accel, gyro, temp = self.imu.measure(self._grid(times))
+        w = np.radians(gyro)
+        return [V.imu_values((0.0, 0.0, 0.0), a, g, float(c), 101.325) for a, g, c in zip(accel, w, temp)]
+
+    def _ymr_lines(self, times) -> list[str]:
+        """Register 27 / $VNYMR at each of ``times`` (one measurement for all).  Yaw, pitch,
+        roll: the case axes' attitude relative to ENU from the table twin (intrinsic Z-Y-X
+        angles; the sensor's own filter estimates it relative to NED: the twin has none); mag:
+        a constant field (MAG_ENU_GAUSS) in the case axes; accel (m/s²) and gyro (rad/s) as
+        measured."""
+        t = self._grid(times)
         accel, gyro, _ = self.imu.measure(t)
         C_bn = self.imu.table.kinematics_at(t)[0]
-        C_bn = C_bn if C_bn.single else C_bn[0]
-        ypr = Rotation.from_matrix(C_bn.as_matrix()).inv().as_euler("ZYX", degrees=True)
-        mag = C_bn.apply(MAG_ENU_GAUSS)
-        return V.ymr_values(ypr, mag, accel[0], np.radians(gyro[0]))
+        m = C_bn.as_matrix().reshape(-1, 3, 3)
+        ypr = Rotation.from_matrix(np.swapaxes(m, 1, 2)).as_euler("ZYX", degrees=True)
+        mag = m @ MAG_ENU_GAUSS
+        w = np.radians(gyro)
+        return [V.ymr_values(*row) for row in zip(ypr, mag, accel, w)]
 
     def _output_bytes_per_s(self, ador=None, adof_hz=None, async_mode=None, divisor=None,
                             frame_length=None) -> float:
@@ -267,16 +279,17 @@ class VectorNavFrontEnd:
     def _produce_ascii(self, now: float) -> bytes:
         if not self.async_on or self.ador not in (V.ADOR_VNYMR, V.ADOR_VNIMU):
             return b""
-        header, values = (("VNYMR,", self._ymr_values) if self.ador == V.ADOR_VNYMR
-                          else ("VNIMU,", self._imu_values))
+        header, lines = (("VNYMR,", self._ymr_lines) if self.ador == V.ADOR_VNYMR
+                         else ("VNIMU,", self._imu_lines))
         last = int(np.floor(now * self.adof_hz))
         if self._next_ascii_k is None:
             self._next_ascii_k = last + 1
-        out = []
-        for k in range(max(self._next_ascii_k, last - 50), last + 1):
-            out.append(V.format_message(header + values(k / self.adof_hz)))
+        first = max(self._next_ascii_k, last - 50)
         self._next_ascii_k = last + 1
-        return b"".join(out)
+        if first > last:
+            return b""
+        bodies = lines(np.arange(first, last + 1) / self.adof_hz)
+        return b"".join(V.format_message(header + body) for body in bodies)
 
     def _produce_binary(self, now: float) -> bytes:
         if not self.async_on or self.async_mode == V.ASYNC_MODE_NONE:
