@@ -219,3 +219,16 @@ def test_the_twin_refuses_outputs_the_baud_rate_cannot_carry(server):
         assert _ask(port, "VNWRG,06,14")[0] == "VNWRG,06,14"                  # + 1 x 116 bytes
         assert _ask(port, "VNWRG,07,10")[0] == "VNERR,0C"
         assert _ask(port, "VNRRG,75")[0] == "VNRRG,75,1,80,05,0001,001C"       # refused: unchanged
+
+
+def test_the_twin_writes_vnymr_as_the_manual_does():
+    """VN-100 UM001 7.2.3, register 27's example response, byte for byte (its checksum too);
+    VN-200 UM004 5.6, register 05's."""
+    example = (b"$VNRRG,27,+006.380,+000.023,-001.953,+1.0640,-0.2531,+3.0614,+00.005,+00.344,"
+               b"-09.758,-0.001222,-0.000450,-0.001218*4F\r\n")
+    body, end = V.find_message(example)
+    assert end == len(example)
+    v = [float(x) for x in body.split(",")[2:]]
+    assert V.format_message("VNRRG,27," + V.ymr_values(v[0:3], v[3:6], v[6:9], v[9:12])) == example
+    assert len(example) - len(b"$VNRRG,27,") + len(b"$VNYMR,") == V.ASCII_MESSAGE_BYTES[V.ADOR_VNYMR]
+    assert V.format_message("VNRRG,05,115200") == b"$VNRRG,05,115200*5D\r\n"
