@@ -21,7 +21,15 @@ class Device(abc.ABC):
         self.name = f"{self.kind} {url} ({self.protocol})"
         self.log = logging.getLogger(f"drivers.{self.protocol}")
         self._port: Port | None = None
+        self._bytes_closed = 0            # bytes received through ports since closed
         self.identity = ""
+
+    @property
+    def bytes_received(self) -> int:
+        """Bytes received from the device since this driver was made (also after close():
+        line diagnostics after a failed connect)."""
+        now = getattr(self._port, "bytes_received", 0) if self._port is not None else 0
+        return self._bytes_closed + now
 
     @property
     def port(self) -> Port:
@@ -55,6 +63,7 @@ class Device(abc.ABC):
         if self._port is not None:
             self._before_close()
             self._port.close()
+            self._bytes_closed += getattr(self._port, "bytes_received", 0)
             self._port = None
 
     def __enter__(self):

@@ -1,24 +1,72 @@
 """``station probe``: read an IMU or a table for a moment and report what came.
 
 No simulation here: this talks to whatever is on the port (hardware or a twin).
+
+Line diagnostics (IMU): when bytes arrive but no valid frame or reply does, the error says how
+many bytes came at which baud rate and that this looks like a baud-rate mismatch;
+:func:`scan_imu_baud` tries the protocol's baud rates and reports which gives valid frames.
 """
 from __future__ import annotations
 
+import dataclasses
+import logging
 import time
 
 import numpy as np
 
 from .base import ImuSettings, TableSettings
-from .registry import open_imu, open_table
+from .errors import DeviceError, DeviceTimeout
+from .protocols import vectornav as V
+from .protocols import xbus as X
+from .protocols.csvlines import CsvDecoder
+from .protocols.vectornav_binary import VectorNavDecoder
+from .registry import imu_driver, open_table
+from .transport import Port
 
 #: samples read per block (stats are accumulated block by block)
 BLOCK_SECONDS = 1.0
+#: baud rates tried by --scan-baud: VectorNav's register 05 values (VN-100 UM001 / VN-200 UM004
+#: "Serial Baud Rate Register"), the Xsens ones of mtdef.py ``Baudrates``, for csv the same
+#: common rates as VectorNav's
+SCAN_BAUDS = {"vectornav": V.BAUD_RATES,
+              "xsens": tuple(sorted(set(X.BAUD_IDS.values()))),
+              "csv": V.BAUD_RATES}
+#: longest time a scanned rate is listened to, s
+SCAN_WINDOW_S = 0.5
+#: after switching to a rate, bytes that were on their way are dropped for this long, s
+SCAN_SETTLE_S = 0.05
+
+
+def _mismatch_note(imu, settings: ImuSettings) -> str | None:
+    """What to say when bytes came but no valid frame or reply: None if nothing came, or
+    frames did."""
+    n = imu.bytes_received
+    if n == 0 or imu.counters.frames:
+        return None
+    return (f"{n} bytes arrived at {settings.serial.baudrate} baud but no valid frame or reply: "
+            f"this looks like a baud-rate mismatch (the device sends at another rate); find its "
+            f"rate with station probe --port {imu.url} --imu-protocol {imu.protocol} --scan-baud, "
+            f"then give it with --baud")
 
 
 def probe_imu(url: str, protocol: str, seconds: float, settings: ImuSettings) -> dict:
     """Stream ``seconds`` of DEVICE time (round(seconds x rate) samples) and summarise."""
+    imu = imu_driver(protocol)(url, settings)
+    try:
+        return _probe_imu(imu, url, protocol, seconds)
+    except DeviceTimeout as e:
+        note = _mismatch_note(imu, settings)
+        if note is None:
+            raise
+        raise DeviceTimeout(e.device, f"{e.message}; {note}") from None
+    finally:
+        imu.close()
+
+
+def _probe_imu(imu, url: str, protocol: str, seconds: float) -> dict:
     wall0 = time.monotonic()
-    with open_imu(url, protocol, settings) as imu:
+    imu.connect()
+    with imu:
         rate = imu.configure()
         imu.start()
         total = int(round(seconds * rate))
@@ -59,6 +107,69 @@ def probe_imu(url: str, protocol: str, seconds: float, settings: ImuSettings) ->
             "missing_frames": c.missing_frames,
             "wall_seconds": time.monotonic() - wall0,
         }
+
+
+def _valid_messages(protocol: str, data: bytes) -> int:
+    """How many valid frames, lines or replies of ``protocol`` are in ``data``."""
+    if protocol == "vectornav":
+        n, pos = 0, 0
+        while (found := V.find_message(data, pos)) is not None:
+            n, pos = n + 1, found[1]
+        d = VectorNavDecoder(V.STATION_LAYOUT)       # station's frames, if it left them on
+        d.feed(data)
+        return n + d.frames
+    if protocol == "xsens":
+        messages = X.XbusParser().feed(data)
+        # garbage holds a valid-looking message now and then (1 in 256 FA FF pairs): one
+        # message counts only if it answers the query
+        return len(messages) if len(messages) >= 2 or any(m == X.MID.DeviceID for m, _ in messages) else 0
+    d = CsvDecoder()
+    d.feed(data)
+    return d.frames if d.frames >= 2 else 0
+
+
+def _scan_query(protocol: str) -> bytes:
+    """A harmless query the device answers in any state (nothing for csv)."""
+    if protocol == "vectornav":
+        return V.format_message(f"VNRRG,{V.REG_MODEL:02d}")
+    if protocol == "xsens":
+        return X.message(X.MID.ReqDID)
+    return b""
+
+
+def scan_imu_baud(url: str, protocol: str, settings: ImuSettings,
+                  window_s: float = SCAN_WINDOW_S) -> dict:
+    """Listen at each of the protocol's baud rates (after a harmless query: VectorNav
+    ``$VNRRG,01``, Xsens ReqDID) and count the valid frames, lines or replies; the rate with
+    the most is the device's.  Nothing is written to the device's settings."""
+    if protocol not in SCAN_BAUDS:
+        raise DeviceError(f"imu {url} ({protocol})", f"--scan-baud knows the baud rates of "
+                                                     f"{', '.join(SCAN_BAUDS)} only")
+    name = f"imu {url} ({protocol})"
+    log = logging.getLogger(f"drivers.{protocol}")
+    rates = []
+    for baud in SCAN_BAUDS[protocol]:
+        line = dataclasses.replace(settings.serial, baudrate=baud)
+        port = Port(url, line, name, log)
+        try:
+            port.discard_input()            # what came at the previous rate, and, a moment
+            time.sleep(SCAN_SETTLE_S)       #   later, what was still on its way
+            port.read_waiting()
+            port.discard_input()
+            query = _scan_query(protocol)
+            if query:
+                port.write(query)
+            data, end = bytearray(), time.monotonic() + window_s
+            while time.monotonic() < end:
+                data += port.read_some()
+                if len(data) > 256 and _valid_messages(protocol, bytes(data)) >= 3:
+                    break
+        finally:
+            port.close()
+        rates.append({"baud": baud, "bytes": len(data), "valid": _valid_messages(protocol, bytes(data))})
+    best = max(rates, key=lambda r: r["valid"])
+    return {"port": url, "protocol": protocol, "window_s": window_s, "rates": rates,
+            "baud": best["baud"] if best["valid"] else None}
 
 
 def probe_table(url: str, protocol: str, settings: TableSettings) -> dict:

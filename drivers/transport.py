@@ -77,6 +77,7 @@ class Port:
         except (serial.SerialException, OSError, ValueError) as e:
             raise DeviceError(name, f"cannot open {url}: {e}") from None
         self._ser = ser
+        self.bytes_received = 0           # every byte read from the port (line diagnostics)
 
     # ------------------------------------------------------------------ basics
     def close(self) -> None:
@@ -124,6 +125,7 @@ class Port:
         except (serial.SerialException, OSError) as e:
             raise DeviceDisconnected(self.name, f"disconnected ({e})") from None
         if out:
+            self.bytes_received += len(out)
             self.log.debug("%s -> %d bytes (waiting)", self.name, len(out))
         return bytes(out)
 
@@ -135,6 +137,7 @@ class Port:
         except (serial.SerialException, OSError) as e:
             raise DeviceDisconnected(self.name, f"disconnected ({e})") from None
         if data:
+            self.bytes_received += len(data)
             self.log.debug("%s -> %d bytes", self.name, len(data))
         return data
 

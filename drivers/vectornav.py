@@ -1,8 +1,8 @@
 """Driver for VectorNav IMUs in binary output mode (protocol ``vectornav``).
 
 Start-up over the ASCII protocol, as VectorNav's programming library does it: pause
-asynchronous output (``$VNASY,0``), turn the ASCII async output off (register 06 = 0, so that
-no ``$VNYMR``-like lines mix with the binary frames), read the model, hardware revision,
+asynchronous output (``$VNASY,0``), turn the ASCII async output off (register 06 = 0: a
+factory-default sensor streams ``$VNYMR`` at 40 Hz, which would mix with the binary frames), read the model, hardware revision,
 serial number and firmware registers (01-04), set the baud rate (register 05) when asked,
 write binary output register 1 (75) with time since startup, uncompensated acceleration and
 rate and temperature at 800 Hz / divisor (checked against what the baud rate carries),
@@ -48,12 +48,7 @@ class VectorNavImu(Imu):
                     self._carry = bytes(buf[end:])
                     return reply.split(",")[len(key.split(",")):]
                 if reply.startswith("VNERR"):
-                    code = reply.split(",")[1] if "," in reply else "?"
-                    try:
-                        meaning = V.ERRORS.get(int(code), "unknown error")
-                    except ValueError:
-                        meaning = "unknown error"
-                    raise ProtocolError(self.name, f"${body} refused: VNERR {code} ({meaning})")
+                    raise ProtocolError(self.name, f"${body} refused: {self._error_text(reply)}")
                 pos = end
                 found = V.find_message(buf, pos)
             if len(buf) > MAX_REPLY_SCAN:
@@ -64,8 +59,27 @@ class VectorNavImu(Imu):
                                                f"{self.settings.serial.timeout_s:g} s")
             buf += self.port.read_some()
 
+    def _error_text(self, reply: str) -> str:
+        """``VNERR 0C (error 12: insufficient baud rate; ...what to do)``: the code is hex."""
+        text = reply.split(",")[1] if "," in reply else "?"
+        code = V.parse_error_code(text)
+        if code is None:
+            return f"VNERR {text} (not a hex error code)"
+        meaning = V.ERRORS.get(code, "unknown error")
+        if code == V.ERROR_INSUFFICIENT_BAUD:
+            baud = getattr(self, "baudrate", self.settings.serial.baudrate)
+            meaning += (f": the outputs configured need more bytes per second than {baud} baud "
+                        f"carries (10 bits a byte); lower the output rate, turn other outputs off "
+                        f"(register 06 ASCII, 75-77 binary) or set a higher baud rate (register 05: "
+                        f"ImuSettings.device_baud, station probe --imu-baud)")
+        return f"VNERR {text} (error {code}: {meaning})"
+
     # ---------------------------------------------------------------- protocol part
     def _identify(self) -> str:
+        baud = self.settings.device_baud
+        if baud is not None and baud not in V.BAUD_RATES:       # before anything is sent
+            raise LimitError(self.name, f"baud rate {baud} is not one of "
+                                        f"{', '.join(map(str, V.BAUD_RATES))}")
         self._ask("VNASY,0")
         self.port.discard_input()
         self._ask(f"VNWRG,{V.REG_ADOR:02d},{V.ADOR_OFF}")
@@ -73,11 +87,7 @@ class VectorNavImu(Imu):
         hardware = ",".join(self._ask(f"VNRRG,{V.REG_HARDWARE:02d}"))
         serial_no = ",".join(self._ask(f"VNRRG,{V.REG_SERIAL:02d}"))
         firmware = ",".join(self._ask(f"VNRRG,{V.REG_FIRMWARE:02d}"))
-        baud = self.settings.device_baud
         if baud is not None:
-            if baud not in V.BAUD_RATES:
-                raise LimitError(self.name, f"baud rate {baud} is not one of "
-                                            f"{', '.join(map(str, V.BAUD_RATES))}")
             self._ask(f"VNWRG,{V.REG_BAUD:02d},{baud}")      # answered at the old rate
             self.port.set_baudrate(baud)
         self.baudrate = baud or self.settings.serial.baudrate

@@ -133,7 +133,7 @@ def test_output_rate_and_refusals(bench):
             imu.configure(300.0)
         with pytest.raises(LimitError, match=r"400 Hz of 49-byte messages needs 196000 baud"):
             imu.configure(400.0)
-    with serial.Serial(server.imu_path, timeout=0.5) as port:      # outputs the twin refuses
+    with serial.Serial(server.imu_path, 115200, timeout=0.5) as port:      # outputs the twin refuses
         port.write(X.message(X.MID.GoToConfig))
         port.write(X.message(X.MID.SetOutputConfiguration, X.output_configuration([(0x2010, 100)])))
         got = X.XbusParser().feed(port.read(200))

@@ -133,3 +133,69 @@ def test_sim_serve_user_errors(tmp_path):
                            capture_output=True, text=True, timeout=30)
         assert r.returncode == 2 and message in r.stderr and r.stdout == ""
         assert len(r.stderr.strip().splitlines()) == 1
+
+
+# ------------------------------------------------------------------------------ baud rates
+
+@pytest.mark.parametrize("protocol", ["vectornav", "xsens", "csv"])
+def test_a_probe_at_the_wrong_baud_rate_says_so(protocol, capsys):
+    """Bytes arrive but no valid frame or reply: the message counts them and names the likely
+    cause, instead of only "no reply within 2 s"."""
+    with BenchServer(default_truth(2), BenchOptions(speed=50, imu_protocol=protocol)) as server:
+        assert main(["probe", "--port", server.imu_path, "--imu-protocol", protocol, "--baud", "9600",
+                     "--seconds", "1", "--timeout-s", "1"]) == 2
+    err = capsys.readouterr().err
+    assert f"imu {server.imu_path} ({protocol}): " in err
+    assert " bytes arrived at 9600 baud but no valid frame or reply: this looks like a baud-rate " \
+           "mismatch" in err
+    assert int(err.split(" bytes arrived")[0].rsplit(" ", 1)[1]) > 100
+    assert f"--imu-protocol {protocol} --scan-baud" in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_no_bytes_at_all_is_not_called_a_baud_mismatch(capsys):
+    with BenchServer(default_truth(2), BenchOptions(speed=50, faults=Faults(imu=ImuFaults(stall_at_s=0.0)),
+                                                   imu_protocol="csv")) as server:
+        assert main(["probe", "--port", server.imu_path, "--imu-protocol", "csv", "--seconds", "1",
+                     "--timeout-s", "0.5"]) == 2
+    err = capsys.readouterr().err
+    assert "no csv line within 0.5 s" in err and "baud" in err and "mismatch" not in err
+
+
+@pytest.mark.parametrize("protocol,device_baud", [("vectornav", 115200), ("vectornav", 57600),
+                                                  ("xsens", 115200), ("csv", 115200)])
+def test_scan_baud_finds_the_rate_that_gives_valid_frames(protocol, device_baud, capsys):
+    with BenchServer(default_truth(2), BenchOptions(speed=50, imu_protocol=protocol)) as server:
+        if device_baud != 115200:
+            server.imu_frontend.baudrate = device_baud          # as if register 05 had been saved
+        assert main(["probe", "--port", server.imu_path, "--imu-protocol", protocol, "--scan-baud"]) == 0
+        out = capsys.readouterr().out
+        assert main(["probe", "--port", server.imu_path, "--imu-protocol", protocol, "--scan-baud",
+                     "--json"]) == 0
+        r = json.loads(capsys.readouterr().out)
+        # and the rate it found works
+        if protocol == "vectornav":
+            assert main(["probe", "--port", server.imu_path, "--baud", str(device_baud), "--seconds", "1",
+                         "--json"]) == 0
+            assert json.loads(capsys.readouterr().out)["frames"] == 100
+    assert f"the device answers at {device_baud} baud: use --baud {device_baud}" in out
+    assert r["baud"] == device_baud
+    rates = {x["baud"]: x for x in r["rates"]}
+    from drivers.probe import SCAN_BAUDS
+    assert list(rates) == list(SCAN_BAUDS[protocol])
+    assert rates[device_baud]["valid"] >= 3
+    assert all(x["valid"] == 0 for b, x in rates.items() if b != device_baud)
+    assert sum(x["bytes"] > 0 for b, x in rates.items() if b != device_baud) >= len(rates) - 2
+
+
+def test_scan_baud_says_when_nothing_answers(capsys, tmp_path):
+    import pty as _pty
+    master, slave = _pty.openpty()                # a silent line: nothing on it
+    try:
+        assert main(["probe", "--port", os.ttyname(slave), "--scan-baud", "--timeout-s", "0.1"]) == 2
+    finally:
+        os.close(master)
+        os.close(slave)
+    cap = capsys.readouterr()
+    assert "0 bytes, no valid frame or reply" in cap.out
+    assert "no baud rate gave a valid frame or reply" in cap.err

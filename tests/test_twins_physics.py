@@ -140,7 +140,8 @@ def test_same_seed_same_bytes_whatever_the_batching():
         clock = ManualClock()
         truth = default_truth(3)
         table = TableTwin(TableGeometry.default(2, truth.bench.lever_arm_m), clock)
-        fe = VectorNavFrontEnd(ImuTwin(table, truth, seed=9), StreamFaulter(ImuFaults(), None))
+        fe = VectorNavFrontEnd(ImuTwin(table, truth, seed=9), StreamFaulter(ImuFaults(), None),
+                               startup="binary")          # frames from power-up, no driver
         fe.imu.restart(0.0)
         out = b""
         for dt in steps:

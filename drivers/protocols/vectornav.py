@@ -2,7 +2,9 @@
 
 ASCII: ``$`` body ``*`` XX ``\\r\\n``, XX the XOR of the body's bytes in two upper-case hex
 digits (``XX`` literally: "no checksum", accepted by the sensor).  Replies echo the command's
-body (``$VNWRG,75,...``), errors are ``$VNERR,NN``.
+body (``$VNWRG,75,...``), errors are ``$VNERR,XX`` with the code in two hex digits
+(``$VNERR,0C``: error 12, insufficient baud rate; vnproglib ``Packet::parseError`` reads it
+with ``to_uint8_from_hexstr``).
 
 Binary output (VectorNav binary protocol, as documented for the VN-100/VN-200): sync byte
 0xFA, the group byte (bit g-1 set: group g present), one little-endian uint16 field mask per
@@ -68,7 +70,7 @@ REG_HARDWARE = 2          # hardware revision
 REG_SERIAL = 3
 REG_FIRMWARE = 4
 REG_BAUD = 5              # serial baud rate: VNWRG,05,<baud>[,<port>]
-REG_ADOR = 6              # async data output type (ASCII messages): 0 off
+REG_ADOR = 6              # async data output type (ASCII messages): 0 off, 14 $VNYMR, 19 $VNIMU
 REG_ADOF = 7              # async data output frequency, Hz
 REG_IMU = 54              # IMU measurements: mag (3), accel (3, m/s²), gyro (3, rad/s), temp (°C), pressure (kPa)
 REG_BINARY_OUTPUT_1 = 75
@@ -76,7 +78,10 @@ REG_BINARY_OUTPUT_2 = 76
 REG_BINARY_OUTPUT_3 = 77
 ASYNC_MODE_NONE, ASYNC_MODE_PORT1, ASYNC_MODE_PORT2, ASYNC_MODE_BOTH = 0, 1, 2, 3
 ADOR_OFF = 0
+ADOR_VNYMR = 14           # $VNYMR: yaw, pitch, roll, mag, accel, gyro (register 27; types.h: VNYMR = 14)
 ADOR_VNIMU = 19           # $VNIMU: the register 54 values (types.h: VNIMU = 19)
+#: a factory-default VN-100: $VNYMR at 40 Hz on the serial port, binary outputs off
+FACTORY_ADOR, FACTORY_ADOF_HZ, FACTORY_BAUD = ADOR_VNYMR, 40, 115200
 BAUD_RATES = (9600, 19200, 38400, 57600, 115200, 128000, 230400, 460800, 921600)
 ADOF_HZ = (1, 2, 4, 5, 10, 20, 25, 40, 50, 100, 200)
 #: bits on the line per byte (8 data bits, no parity, 1 start and 1 stop bit)
@@ -88,12 +93,46 @@ def max_rate_hz(frame_length: int, baudrate: int) -> float:
     ``frame_length`` bytes (44-byte frames at 115200 baud: 261.8 Hz)."""
     return baudrate / (BITS_PER_BYTE * frame_length)
 
+#: error codes (VN-100 UM001 / VN-200 UM004 "System Error Codes"); sent as two hex digits
+ERROR_INSUFFICIENT_BAUD = 12
 ERRORS = {
     1: "hard fault", 2: "serial buffer overflow", 3: "invalid checksum", 4: "invalid command",
     5: "not enough parameters", 6: "too many parameters", 7: "invalid parameter",
     8: "invalid register", 9: "unauthorized access", 10: "watchdog reset",
     11: "output buffer overflow", 12: "insufficient baud rate", 255: "error buffer overflow",
 }
+
+
+
+def error_body(code: int) -> str:
+    """The body of the error message for ``code``: ``VNERR,0C`` for 12 (two hex digits)."""
+    return f"VNERR,{code:02X}"
+
+
+def parse_error_code(text: str) -> int | None:
+    """The code of ``$VNERR,<text>`` (hex, as the sensor sends it), None if not hex."""
+    return int(text, 16) if re.fullmatch(r"[0-9A-Fa-f]{1,2}", text.strip()) else None
+
+
+def ymr_values(ypr_deg, mag_gauss, accel_mps2, gyro_rad_s) -> str:
+    """The 12 fields of register 27 / ``$VNYMR`` in the manual's widths (UM001 §7.2.3 example
+    ``+006.380,...,+1.0640,...,-09.758,-0.001222``)."""
+    return ",".join([f"{v:+08.3f}" for v in ypr_deg] + [f"{v:+07.4f}" for v in mag_gauss]
+                    + [f"{v:+07.3f}" for v in accel_mps2] + [f"{v:+09.6f}" for v in gyro_rad_s])
+
+
+def imu_values(mag_gauss, accel_mps2, gyro_rad_s, temp_c, pressure_kpa) -> str:
+    """The 11 fields of register 54 / ``$VNIMU``."""
+    return ",".join([f"{v:+.4f}" for v in mag_gauss] + [f"{v:+.4f}" for v in accel_mps2]
+                    + [f"{v:+.6f}" for v in gyro_rad_s] + [f"{temp_c:+.1f}", f"{pressure_kpa:+.3f}"])
+
+
+#: bytes of one async ASCII message of each type the twin makes (fixed-width fields; at rest)
+ASCII_MESSAGE_BYTES = {
+    ADOR_VNYMR: len(b"$VNYMR," + ymr_values((0, 0, 0), (0, 0, 0), (0, 0, -9.81), (0, 0, 0)).encode() + b"*XX\r\n"),
+    ADOR_VNIMU: len(b"$VNIMU," + imu_values((0, 0, 0), (0, 0, 9.81), (0, 0, 0), 25.0, 101.325).encode() + b"*XX\r\n"),
+}
+
 
 #: the ASCII commands used: (syntax, meaning, example body sent, example body answered)
 ASCII_COMMANDS = (
@@ -107,13 +146,16 @@ ASCII_COMMANDS = (
     ("VNRRG,02", "read the hardware revision", "VNRRG,02", "VNRRG,02,2"),
     ("VNWRG,05,<baud>[,<port>]", "serial baud rate; the reply comes at the old rate",
      "VNWRG,05,230400", "VNWRG,05,230400"),
-    ("VNWRG,06,<type>[,<port>]", "async ASCII output type: 0 off, 19 $VNIMU", "VNWRG,06,0", "VNWRG,06,0"),
+    ("VNWRG,06,<type>[,<port>]", "async ASCII output type: 0 off, 14 $VNYMR (factory default), 19 $VNIMU",
+     "VNWRG,06,0", "VNWRG,06,0"),
     ("VNWRG,07,<Hz>[,<port>]", "async ASCII output frequency", "VNWRG,07,40", "VNWRG,07,40"),
     ("VNRRG,54", "IMU measurements: mag, accel m/s², gyro rad/s, temp °C, pressure kPa", "VNRRG,54",
      "VNRRG,54,+0.0000,+0.0000,+0.0000,+0.0100,-0.0200,+9.8100,+0.001000,+0.000000,-0.000500,+25.0,+101.325"),
     ("VNWNV", "write the settings to non-volatile memory", "VNWNV", "VNWNV"),
     ("VNRST", "reset: the settings come back from non-volatile memory", "VNRST", "VNRST"),
     ("(error)", "any command the sensor cannot execute", "VNWRG,75,1,8,40,0001", "VNERR,07"),
+    ("(error 12)", "an output that needs more bytes per second than the baud rate carries "
+     "(a public VN-100 transcript: $VNYMR at 100 Hz on 115200 baud)", "VNWRG,07,100", "VNERR,0C"),
 )
 
 

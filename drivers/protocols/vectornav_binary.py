@@ -57,12 +57,14 @@ class VectorNavDecoder:
         self.checksum_errors = 0
         self.resyncs = 0
         self.bytes_discarded = 0
+        self._run_open = False       # bytes being skipped continue a run already counted (or
+                                     #   belong to a frame that failed its CRC): no new resync
 
     def feed(self, data: bytes) -> ImuSamples:
         """Decode what ``data`` completes; keep an incomplete frame for the next call."""
         buf = bytes(self._buf) + data if self._buf else bytes(data)
         H, h, L = self._header_bytes, len(self._header_bytes), self.length
-        pos, good, after_bad = 0, [], False
+        pos, good = 0, []
         while True:
             i = buf.find(H, pos)
             if i < 0:
@@ -70,12 +72,12 @@ class VectorNavDecoder:
                 # a partial header can only be a suffix of the buffer starting with the sync byte
                 j = buf.find(H[:1], keep)
                 keep = j if j >= 0 else len(buf)
-                self._skip(keep - pos, after_bad)
+                self._skip(keep - pos)
                 pos = keep
                 break
             if i > pos:
-                self._skip(i - pos, after_bad)
-            after_bad = False
+                self._skip(i - pos)
+            self._run_open = False
             k = min((len(buf) - i) // L, self._window)
             if k == 0:
                 pos = i
@@ -92,7 +94,7 @@ class VectorNavDecoder:
             self._window = 8
             if buf[bad:bad + h] == H:
                 self.checksum_errors += 1
-                after_bad = True
+                self._run_open = True       # the rest of this frame: discarded, no resync
                 self.bytes_discarded += 1
                 pos = bad + 1
             else:
@@ -125,8 +127,9 @@ class VectorNavDecoder:
         ok &= crc16_rows(rows[:, 1:]) == 0
         return k if ok.all() else int(np.argmin(ok))
 
-    def _skip(self, n: int, after_bad: bool) -> None:
+    def _skip(self, n: int) -> None:
         if n > 0:
             self.bytes_discarded += n
-            if not after_bad:
+            if not self._run_open:
                 self.resyncs += 1
+            self._run_open = True

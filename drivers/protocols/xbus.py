@@ -165,11 +165,16 @@ def parse_mtdata2(data: bytes):
 class XbusParser:
     """Splits a byte stream into XBus messages: :meth:`feed` returns ``[(mid, data), ...]``
     of the messages whose checksum holds; counts ``checksum_errors``, ``resyncs`` and
-    ``bytes_discarded``.  Never raises."""
+    ``bytes_discarded`` by the rule of docs/protocols.md "Counters and gaps" (the same as the
+    VectorNav decoder's): a message whose start (``FA FF``) is found but whose checksum or
+    length fails is one checksum error, and its bytes up to the next start are discarded
+    without a resync; a run of bytes that is not a message start is one resync.  Never
+    raises."""
 
     def __init__(self):
         self._buf = bytearray()
         self.checksum_errors = self.resyncs = self.bytes_discarded = 0
+        self._after_bad = False      # the bytes being skipped belong to a failed message
 
     def feed(self, data: bytes) -> list[tuple[int, bytes]]:
         buf = self._buf
@@ -197,27 +202,31 @@ class XbusParser:
                     break
                 n = (buf[j + 4] << 8) | buf[j + 5]
                 head = 6
-            if n > MAX_DATA:
-                self._skip(1)
+            end = j + head + n + 1
+            if n > MAX_DATA or (end <= len(buf) and sum(buf[j + 1:end]) & 0xFF):
+                self._bad()                 # a message start whose length or checksum fails
                 i = j + 1
                 continue
-            end = j + head + n + 1
             if end > len(buf):
                 i = j
                 break
-            if sum(buf[j + 1:end]) & 0xFF:
-                self.checksum_errors += 1
-                i = j + 1
-                continue
             out.append((mid, bytes(buf[j + head:end - 1])))
+            self._after_bad = False
             i = end
         del buf[:i]
         return out
 
+    def _bad(self) -> None:
+        self.checksum_errors += 1
+        self.bytes_discarded += 1
+        self._after_bad = True
+
     def _skip(self, n: int) -> None:
         if n > 0:
-            self.resyncs += 1
+            if not self._after_bad:
+                self.resyncs += 1
             self.bytes_discarded += n
+            self._after_bad = True          # one run of skipped bytes: one resync
 
 
 class XsensDecoder:

@@ -15,6 +15,7 @@ class CsvFrontEnd:
         self.faulter = faulter
         self.fmt = fmt
         self.streaming = True
+        self.line_baud = 115200         # the serial line's rate (a microcontroller's fixed UART)
 
     def receive(self, data: bytes, now: float) -> bytes:
         return b""

@@ -37,6 +37,13 @@ class XsensFrontEnd:
     def streaming(self) -> bool:
         return self.state == MEASUREMENT
 
+    @property
+    def line_baud(self) -> int:
+        """The serial line's rate: 115200, the MTi's default.  SetBaudrate is stored and read
+        back but, as on the device (it takes effect after a reset), does not change the line:
+        the twin models no reset (**unverified** beyond mtdef.py's message list)."""
+        return 115200
+
     def receive(self, data: bytes, now: float) -> bytes:
         return b"".join(self._execute(mid, payload, now) for mid, payload in self.parser.feed(data))
 

@@ -3,17 +3,30 @@
 The slave side is put in raw mode (no echo, no line editing) at once and kept open by the
 twin, so the line settings hold and the master never reads EIO while no driver is attached.
 Output goes through a small queue like a UART transmit buffer (sim_devices/twins/endpoint.py).
+
+With :meth:`PtyEndpoint.emulate_baud` the end point behaves like a serial line between a device
+at one baud rate and a driver at another: the driver's baud rate is the one it set on the
+pseudo-terminal (termios, read back with TCGETS2), the device's is given; when they differ,
+bytes each way come out as a UART at the other rate would receive them
+(sim_devices/twins/uart.py): garbage, fewer or more bytes by the ratio of the rates.
 """
 from __future__ import annotations
 
+import array
 import errno
 import fcntl
 import os
 import struct
 import termios
 import tty
+from typing import Callable
 
 from sim_devices.twins.endpoint import QueuedEndpoint
+from sim_devices.twins.uart import reframe
+
+#: ioctl reading ``struct termios2`` (Linux): its c_ispeed and c_ospeed hold any baud rate
+TCGETS2 = getattr(termios, "TCGETS2", 0x802C542A)
+_TERMIOS2_WORDS = 11          # 4 flags, c_line + 19 c_cc (5 words), c_ispeed, c_ospeed
 
 
 class PtyEndpoint(QueuedEndpoint):
@@ -26,6 +39,66 @@ class PtyEndpoint(QueuedEndpoint):
         termios.tcsetattr(self._slave, termios.TCSANOW, attrs)
         os.set_blocking(self.master, False)
         self.path = os.ttyname(self._slave)
+        self._device_baud: Callable[[], int] | None = None
+        self._line_seen: int | None = None
+
+    # ---------------------------------------------------------------- baud rates
+    def emulate_baud(self, device_baud: Callable[[], int]) -> None:
+        """From now on the device's side of the line runs at ``device_baud()``; the line starts
+        at that rate (a driver that sets another one gets garbage)."""
+        self._device_baud = device_baud
+        self.set_line_baud(device_baud())
+        self._line_seen = self.line_baud()
+
+    def line_baud(self) -> int | None:
+        """The baud rate the driver has set on the pseudo-terminal (None: unknown)."""
+        try:
+            words = array.array("I", [0] * (_TERMIOS2_WORDS + 8))
+            fcntl.ioctl(self._slave, TCGETS2, words)
+            return int(words[10]) or None
+        except OSError:
+            return None
+
+    def set_line_baud(self, baud: int) -> None:
+        """Set the pseudo-terminal's baud rate as a driver opening it at ``baud`` would."""
+        speed = getattr(termios, f"B{int(baud)}", None)
+        if speed is None:
+            return
+        attrs = termios.tcgetattr(self._slave)
+        attrs[4] = attrs[5] = speed
+        termios.tcsetattr(self._slave, termios.TCSANOW, attrs)
+
+    def _mismatch(self, device: int | None = None) -> tuple[int, int] | None:
+        """(device baud, line baud) when they differ, else None."""
+        if self._device_baud is None:
+            return None
+        device = device or self._device_baud()
+        line = self.line_baud()
+        if line != self._line_seen and self._out:
+            self.flush()                  # drops what was made for the old rate
+        self._line_seen = line
+        return (device, line) if line and line != device else None
+
+    def flush(self) -> None:
+        """Send what the line takes; bytes queued for a driver that has since changed its baud
+        rate are dropped (they were made for the old rate: in flight, they would be garbage)."""
+        if self._device_baud is not None and self._out:
+            line = self.line_baud()
+            if line != self._line_seen:
+                self._line_seen = line
+                self.dropped_bytes += len(self._out)
+                self.clear_output()
+        super().flush()
+
+    def write(self, data: bytes, droppable: bool = False, baud: int | None = None) -> bool:
+        """Queue ``data`` sent by the device at ``baud`` (default: its present rate), as the
+        driver's UART receives it."""
+        m = self._mismatch(baud) if data else None
+        if m is not None:
+            data = reframe(data, *m)
+            if not data:
+                return True
+        return super().write(data, droppable)
 
     def fileno(self) -> int:
         return self.master
@@ -44,7 +117,9 @@ class PtyEndpoint(QueuedEndpoint):
         if self.closed:
             return b""
         try:
-            return os.read(self.master, 65536)
+            data = os.read(self.master, 65536)
+            m = self._mismatch() if data else None
+            return reframe(data, m[1], m[0]) if m is not None else data
         except (BlockingIOError, InterruptedError):
             return b""
         except OSError as e:

@@ -53,6 +53,8 @@ class BenchOptions:
     table_framing: str = "tcp"    # acutrol replies: "tcp" (error code, length first) or "gpib"
     table_tcp_port: int | None = None   # serve the table on TCP 127.0.0.1:port (0: any free port)
     table_silent_motion: bool = False   # aerosmith: JOG, STO, SGO not answered (docs/protocols.md)
+    imu_startup: str = "factory"  # vectornav power-up: "factory" ($VNYMR at 40 Hz, binary off, as a
+                                  #   VN-100 leaves the factory) or "binary" (station's binary output on)
     record: bool = False          # keep the times of the frames sent intact (tests)
     lossless: bool = True         # the twins' clock is throttled to the IMU's reader: while a reader
                                   #   that is reading has not taken the frames its line could hold,
@@ -100,7 +102,7 @@ class BenchServer:
         else:
             self.table_frontend = AerosmithFrontEnd(self.table, silent_motion=o.table_silent_motion)
         if o.imu_protocol == "vectornav":
-            self.imu_frontend = VectorNavFrontEnd(self.imu, self.faulter,
+            self.imu_frontend = VectorNavFrontEnd(self.imu, self.faulter, startup=o.imu_startup,
                                                   serial_number=f"01{o.seed:08d}"[-10:])
         elif o.imu_protocol == "xsens":
             self.imu_frontend = XsensFrontEnd(self.imu, self.faulter)
@@ -108,6 +110,8 @@ class BenchServer:
             self.imu_frontend = CsvFrontEnd(self.imu, self.faulter, o.csv_format)
         self.table_port = PtyEndpoint() if o.table_tcp_port is None else TcpEndpoint(o.table_tcp_port)
         self.imu_port = PtyEndpoint()
+        # a driver at another baud rate than the IMU's reads garbage, as on a serial line
+        self.imu_port.emulate_baud(lambda: self.imu_frontend.line_baud)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
@@ -185,7 +189,10 @@ class BenchServer:
         if self.imu_port in readable:
             data = self.imu_port.read()
             if data:
-                self.imu_port.write(self.imu_frontend.receive(data, now))
+                # the replies go out at the rate in effect when the commands came (a new baud
+                # rate, register 05, applies after its reply)
+                baud = self.imu_frontend.line_baud
+                self.imu_port.write(self.imu_frontend.receive(data, now), baud=baud)
         if not self.imu_port.closed:
             if self._imu_behind(self.imu_port.max_backlog // 2) and not (self.options.lossless and reader_active):
                 # nobody reads: the frames due are lost anyway, do not compute them

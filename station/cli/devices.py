@@ -55,6 +55,9 @@ def add_parsers(sub) -> None:
     probe.add_argument("--table-protocol", default="acutrol", help="acutrol (default) or aerosmith")
     probe.add_argument("--baud", type=int,
                        help="baud rate (default 115200; 9600 for --table-protocol aerosmith)")
+    probe.add_argument("--scan-baud", action="store_true",
+                       help="IMU: try the protocol's baud rates (vectornav 9600..921600, xsens as "
+                            "mtdef.py, csv the common ones) and report which gives valid frames")
     probe.add_argument("--timeout-s", type=argtypes.positive, default=2.0,
                        help="longest wait for a reply or a frame, s (default 2)")
     probe.add_argument("--json", action="store_true", help="print JSON instead of text")
@@ -100,6 +103,8 @@ def cmd_sim_serve(args) -> int:
 def cmd_probe(args) -> int:
     if not args.port and not args.table_port:
         raise UserError("give --port (an IMU) and/or --table-port (a rate table)")
+    if args.scan_baud:
+        return _scan_baud(args)
     from drivers.base import ImuSettings, TableSettings
     from drivers.probe import probe_imu, probe_table
     from drivers.registry import imu_driver, table_driver
@@ -145,6 +150,36 @@ def cmd_probe(args) -> int:
                   f"{r['mean_gyro_norm_dps']:.6f} deg/s{temp}")
         print(f"  checksum errors {r['checksum_errors']}, resyncs {r['resyncs']}, gaps {r['gaps']} "
               f"({r['missing_frames']} frames missing), {r['bytes_discarded']} bytes discarded")
+    return 0
+
+
+def _scan_baud(args) -> int:
+    """``station probe --port P --scan-baud``: which baud rate gives valid frames."""
+    if not args.port:
+        raise UserError("--scan-baud needs --port (an IMU)")
+    from drivers.base import ImuSettings
+    from drivers.probe import SCAN_WINDOW_S, scan_imu_baud
+    from drivers.registry import imu_driver
+    from drivers.transport import SerialSettings
+
+    imu_driver(args.imu_protocol)                    # an unknown name fails before any I/O
+    settings = ImuSettings(serial=SerialSettings(timeout_s=args.timeout_s))
+    r = scan_imu_baud(args.port, args.imu_protocol, settings, min(SCAN_WINDOW_S, args.timeout_s))
+    if args.json:
+        print(json.dumps(r, indent=2))
+    else:
+        print(f"imu {r['port']} ({r['protocol']}): {len(r['rates'])} baud rates, "
+              f"{r['window_s']:g} s each")
+        for rate in r["rates"]:
+            what = (f"{rate['valid']} valid frames or replies" if rate["valid"]
+                    else "no valid frame or reply")
+            mark = "  <- the device" if rate["baud"] == r["baud"] else ""
+            print(f"  {rate['baud']:>7d} baud: {rate['bytes']:>7d} bytes, {what}{mark}")
+        if r["baud"] is not None:
+            print(f"the device answers at {r['baud']} baud: use --baud {r['baud']}")
+    if r["baud"] is None:
+        raise UserError(f"imu {args.port} ({args.imu_protocol}): no baud rate gave a valid frame or "
+                        f"reply: check the protocol (--imu-protocol), the wiring and the power")
     return 0
 
 
