@@ -204,17 +204,23 @@ def test_a_reply_left_on_the_line_is_not_taken_for_the_identity(framing, monkeyp
             assert table.found_moving == []
 
 
-def test_closing_the_interlock_never_resumes_the_mode_left_selected(bench):
-    """An earlier run turning at 250 deg/s had its interlock opened (an operator's remount, a
-    trip): the axis braked unpowered but rate mode stays selected with its 250 deg/s demand, and
-    closing the interlock servoes the axis in it (TM-8004 §4.5.6).  close_interlocks() sends
-    harmless demands and Off before the close: the axis holds still where it is."""
+def _turning_then_unpowered(bench):
+    """A table turning at 250 deg/s whose interlock was then opened, once it has coasted to rest."""
     table = _connect(bench)
     table.set_rate(1, STALE_RATE)
     table.open_interlocks()
     for _ in range(2000):
         if abs(table.read_rates_dps()[0]) < 1e-3:
             break
+    return table
+
+
+def test_closing_the_interlock_never_resumes_the_mode_left_selected(bench):
+    """An earlier run turning at 250 deg/s had its interlock opened (an operator's remount, a
+    trip): the axis braked unpowered but rate mode stays selected with its 250 deg/s demand, and
+    closing the interlock servoes the axis in it (TM-8004 §4.5.6).  close_interlocks() sends
+    harmless demands and Off before the close: the axis holds still where it is."""
+    table = _turning_then_unpowered(bench)
     assert bench.table.axes[0].mode == "rate" and bench.table.axes[0].rate_demand_dps == STALE_RATE
     t0 = _now(bench)
     table.close_interlocks()
@@ -226,12 +232,7 @@ def test_closing_the_interlock_never_resumes_the_mode_left_selected(bench):
 def test_the_twin_catches_a_close_that_resumes_the_selected_mode(bench):
     """The same with a bare ':Interlock:Close 1' (the driver before issue 23): the twin spins
     the axis back up toward 250 deg/s, so the test above can fail."""
-    table = _connect(bench)
-    table.set_rate(1, STALE_RATE)
-    table.open_interlocks()
-    for _ in range(2000):
-        if abs(table.read_rates_dps()[0]) < 1e-3:
-            break
+    table = _turning_then_unpowered(bench)
     t0 = _now(bench)
     _raw(table, ("interlock_close", 1))
     _, rate = _motion(bench, t0, _now(bench) + 5.0)
