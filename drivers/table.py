@@ -12,6 +12,7 @@ import fcntl
 import hashlib
 import math
 import os
+import stat
 import tempfile
 import time
 from dataclasses import dataclass, field
@@ -108,7 +109,7 @@ LOCK_WAIT_S = 20.0
 
 class TableLock:
     """One station process at a time talks to a table: an advisory lock (``flock``) on a file
-    named after the table's port (``$TMPDIR/station-table-<hash>.lock``), whatever the
+    named after the table's port (``$TMPDIR/station-<uid>/table-<hash>.lock``), whatever the
     transport.  Two processes on one line would read each other's replies; the case that
     matters is a run started again at once after one was killed, while the killed run's
     guardian (station/bench/guardian.py) is still stopping the table.  Within one process the
@@ -121,9 +122,23 @@ class TableLock:
         if os.path.exists(key):
             key = os.path.realpath(key)          # /dev/serial/by-id/... and /dev/ttyUSB0 alike
         digest = hashlib.sha256(key.encode("utf-8", "replace")).hexdigest()[:20]
-        self.path = os.path.join(tempfile.gettempdir(), f"station-table-{digest}.lock")
+        self.dir = os.path.join(tempfile.gettempdir(), f"station-{os.getuid()}")
+        self.path = os.path.join(self.dir, f"table-{digest}.lock")
         self.name = name
         self._mine = False
+
+    def _open(self) -> int:
+        """The lock file, in a directory of this user's only (0700, never a link: a file another
+        user planted in the shared temporary directory is never opened, let alone written)."""
+        try:
+            os.makedirs(self.dir, mode=0o700, exist_ok=True)
+            st = os.lstat(self.dir)
+            if not stat.S_ISDIR(st.st_mode) or st.st_uid != os.getuid() or st.st_mode & 0o077:
+                raise DeviceError(self.name, f"{self.dir} is not a private directory of this user: "
+                                             "remove it (the table lock lives there)")
+            return os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o600)
+        except OSError as e:
+            raise DeviceError(self.name, f"cannot open the table lock {self.path} ({e.strerror})") from None
 
     def acquire(self, wait_s: float = LOCK_WAIT_S) -> None:
         if self._mine:
@@ -133,7 +148,7 @@ class TableLock:
             held[1] += 1
             self._mine = True
             return
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o666)
+        fd = self._open()
         deadline = time.monotonic() + wait_s
         while True:
             try:

@@ -66,3 +66,29 @@ def test_within_one_process_the_lock_is_shared():
     with BenchServer(default_truth(3), BenchOptions(speed=50, axes=1)) as server:
         with open_table(server.table_path) as a, open_table(server.table_path) as b:
             assert a.n_axes == b.n_axes == 1
+
+
+def test_the_lock_lives_in_a_private_directory_and_never_follows_a_link(tmp_path, monkeypatch):
+    """Another user (or anything) may plant a link where a lock file would go in the shared
+    temporary directory: the lock lives in a 0700 directory of this user's, and its file is
+    never opened through a link (a truncate through one would clobber the link's target)."""
+    import os
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    lock = TableLock("/dev/ttyUSB9", "table T")
+    target = tmp_path / "precious"
+    target.write_text("keep me")
+    os.makedirs(lock.dir, mode=0o700)
+    os.symlink(target, lock.path)
+    with pytest.raises(DeviceError, match="cannot open the table lock"):
+        lock.acquire(wait_s=0.1)
+    assert target.read_text() == "keep me"
+    os.unlink(lock.path)
+    os.chmod(lock.dir, 0o777)                       # not private: refused with what to do
+    with pytest.raises(DeviceError, match="is not a private directory of this user: remove it"):
+        lock.acquire(wait_s=0.1)
+    os.chmod(lock.dir, 0o700)
+    lock.acquire(wait_s=0.1)
+    assert oct(os.stat(lock.path).st_mode & 0o777) == "0o600"
+    lock.release()
