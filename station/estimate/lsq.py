@@ -9,11 +9,13 @@ angle A over the window T, phase phi from 0 to A:
   f_p(phi) = kappa l + cos(phi) v - sin(phi) (l x v) + w x (w x d)     v = g sin(alpha) (cos psi e1 + sin psi e2)
 (its mean, first and second harmonics are compared with the data's)
   w_p      = (A/T + e) l                                               (e: Earth rate along the axis)
-kappa = g cos(alpha) (gravity along the axis), e = Omega_E cos(beta) and the mounting offset d
-from the rotation centre are nuisances of the bench (the angles alpha from up and beta from the
-Earth's axis, so that gravity and the Earth rate across the axis, g sin(alpha) and Omega_E
-sin(beta), never reach a square root's edge); psi (where gravity is at the start) is one per
+kappa = g cos(alpha) (gravity along the axis: alpha, the axis' angle from up, so that gravity
+across it, g sin(alpha), never reaches a square root's edge), e and the mounting offset d from
+the rotation centre are nuisances of the bench; psi (where gravity is at the start) is one per
 segment, and so is chi, where the Earth rate across the axis is at the start, over a part turn.
+(e is not bounded by Omega_E as alpha bounds kappa: a turn whose encoder angle is off then
+shows it as e with its prior, and the fit converges to a failing chi2 rather than stalling at
+the bound.)
 Hand rotation h of unknown angle from static j to static k (no encoder; station/estimate/
 hand_rotation.py): the up of static j carried through the turn integrated from the compensated
 gyro samples must be the up of static k (two residuals per turn); the statics' gyro means then
@@ -237,7 +239,7 @@ class Model:
         for j in range(len(s.statics)):
             L.add(f"static{j}", 3 if self.with_latitude else 2)
         for k in range(s.groups):
-            L.add(f"axis{k}", 4)           # axis tangent (2), alpha (from up), beta (from the Earth's axis)
+            L.add(f"axis{k}", 4)           # axis tangent (2), alpha (from up), e
         for i in range(len(s.rotations)):
             # where gravity is at the start; and the Earth rate, unless the turns are whole
             r = self.s.rotations[i]
@@ -278,7 +280,10 @@ class Model:
             self.axis_basis, self.gyro_whiten = like.axis_basis, like.gyro_whiten
             if self.hands:
                 self._initialise_hands(st)
-            self.x0 = x
+            self.x0, self.x0_plain = x, x.copy()
+            for name, sl in L.blocks.items():
+                if not name.startswith("effect:"):
+                    self.x0_plain[sl] = like.x0_plain[like.layout[name]]
             return
         for name, value in (("accel_scale", st.ka), ("accel_misalignment", st.alpha), ("accel_bias", st.ba),
                             ("gyro_scale", st.kg), ("gyro_misalignment", st.gamma), ("gyro_bias", st.bg),
@@ -305,7 +310,7 @@ class Model:
             l0 = v / np.linalg.norm(v)
             self.axis_ref.append(l0)
             kappa = np.mean([l0 @ (La @ (r.accel_dc - st.ba)) for r in segs])
-            x[L[f"axis{k}"]][2:] = [np.arccos(np.clip(kappa / s.gravity_mps2, -0.999, 0.999)), np.pi / 2]
+            x[L[f"axis{k}"]][2] = np.arccos(np.clip(kappa / s.gravity_mps2, -0.999, 0.999))
         self.axis_basis = [tangent_basis(l0) for l0 in self.axis_ref]
         for i, r in enumerate(s.rotations):
             if not r.steady:
@@ -314,6 +319,7 @@ class Model:
             e1, e2 = self.axis_basis[r.group]
             v = La @ r.accel_cos
             x[L[f"phase{i}"].start] = np.arctan2(v @ e2, v @ e1)
+        self.x0_plain = x.copy()        # the start before the Earth-rate phases are started
         self._earth_phase_start(x)
         # gyro integral whitening: white noise plus the encoder error along the axis
         self.gyro_whiten = []
@@ -373,8 +379,8 @@ class Model:
             design = np.vstack([np.column_stack([rate, np.ones(len(segs))]) / noise[:, None],
                                 [[1.0 / 1e-2, 0.0], [0.0, np.sqrt(3.0) / self.omega_dps]]])
             e = float(np.linalg.lstsq(design, np.append((y @ l / T - rate) / noise, [0.0, 0.0]), rcond=None)[0][1])
-            beta = float(np.arccos(np.clip(e / self.omega_dps, -0.9, 0.9)))
-            e, across = self.omega_dps * np.cos(beta), self.omega_dps * np.sin(beta)
+            e = float(np.clip(e, -0.9 * self.omega_dps, 0.9 * self.omega_dps))
+            across = np.sqrt(self.omega_dps**2 - e * e)
             A = np.radians([r.angle_deg for r in rots])
             f = T / A * (np.sin(A) - 1j * (1.0 - np.cos(A)))       # E = f u in the tangent plane
             c = (rate + e) * T
@@ -393,7 +399,7 @@ class Model:
                 x[axis.start:axis.start + 2] = [tilted @ t1 / (tilted @ ref), tilted @ t2 / (tilted @ ref)]
             else:
                 chi = np.angle(z) - np.angle(f)
-            x[axis.start + 3] = beta
+            x[axis.start + 3] = e
             for i, value in zip(segs, chi):
                 x[L[f"phase{i}"].start + 1] = np.angle(np.exp(1j * value))
         return x
@@ -837,17 +843,17 @@ class Model:
         # axes and the rotations' phase grids
         PA = X[:, self._axis_cols]                                               # (B,K,4)
         l_k = normalised(self._axis_ref + np.einsum("bkj,kjc->bkc", PA[..., :2], self._axis_basis))
-        alpha_k, beta_k = PA[..., 2], PA[..., 3]
-        kappa_k, e_k = g * np.cos(alpha_k), self.omega_dps * np.cos(beta_k)
+        alpha_k, e_k = PA[..., 2], PA[..., 3]
+        kappa_k = g * np.cos(alpha_k)
         l, kappa, e = l_k[:, self._rot_group], kappa_k[:, self._rot_group], e_k[:, self._rot_group]   # (B,R,..)
         g_across = g * np.sin(alpha_k[:, self._rot_group])
-        earth_across = self.omega_dps * np.sin(beta_k[:, self._rot_group])
         e1 = normalised(self._rot_e1 - np.einsum("rc,brc->br", self._rot_e1, l)[..., None] * l)
         e2 = cross(l, e1)
         phase = Xe[:, self._rot_phase_cols]                                      # (B,R,2)
         psi, chi = phase[..., 0:1], phase[..., 1:2]
         v = g_across[..., None] * (np.cos(psi) * e1 + np.sin(psi) * e2)
-        earth_perp = earth_across[..., None] * (np.cos(chi) * e1 + np.sin(chi) * e2)
+        earth_perp = (np.sqrt(positive_part(self.omega_dps**2 - e**2))[..., None]
+                      * (np.cos(chi) * e1 + np.sin(chi) * e2))
         earth_integral = self._rot_earth[:, :1] * earth_perp - self._rot_earth[:, 1:] * cross(l, earth_perp)
         offset = X[:, L["mounting_offset"]][:, None, :] if self._offset is None else self._offset
         l_x_d = cross(l, np.broadcast_to(offset, l.shape))
@@ -1098,7 +1104,7 @@ def _harmonic_whitening(gram) -> np.ndarray:
 MAX_EVALUATIONS = 1000
 
 AXES_FIRST_GYRO_WEIGHT = 1e-3     # the rotations' gyro integrals' weight while the axes are fitted first
-AXES_FIRST_EVALUATIONS = 10       # and that fit's evaluations: only a start (chi and beta, barely held by
+AXES_FIRST_EVALUATIONS = 10       # and that fit's evaluations: only a start (chi and e, barely held by
                                   #   the weak gyro rows, wander there without converging; 8 to 100 gave
                                   #   the same final fit of optimal9's part turns at 10-300 deg/s)
 
@@ -1111,13 +1117,18 @@ def _has_earth_phases(model: Model) -> bool:
 
 def _minimise(model: Model, x0: np.ndarray, solve):
     """solve(x0); where some rotation has an Earth-rate phase, also solve from the axes fitted
-    first (_axes_first) and keep the lower sum of squares (neither start alone found the right
-    basin on every part-turn capture tried: single turns one way, axes near the vertical)."""
+    first (_axes_first) and from the start as it was before the Earth-rate phases were started
+    (Model.x0_plain: chi and e at 0), and keep the lowest sum of squares: no start alone found
+    the right basin on every part-turn capture tried (single turns one way, axes near the
+    vertical or the Earth's axis), and with the plain one among them no fit ends worse than it
+    did from it alone."""
     res = solve(x0)
     if not _has_earth_phases(model):
         return res
-    other = solve(_axes_first(model, x0, solve))
-    return other if other.cost < res.cost else res
+    for start in (_axes_first(model, x0, solve), model.x0_plain):
+        other = solve(start)
+        res = other if other.cost < res.cost else res
+    return res
 
 
 def _axes_first(model: Model, x0: np.ndarray, solve) -> np.ndarray:
