@@ -376,12 +376,15 @@ class Model:
             # cannot tell e from s (e then stays near 0), and over a short turn the encoder's
             # angle error alone is a large part of the Earth rate (2" over 0.4 s: 0.33 omega)
             noise = np.sqrt(np.max(s.gyro_sigma)**2 * T / s.sample_rate_hz + s.table_angle_sigma_deg**2) / T
+            noise = np.maximum(noise, 1e-12)    # (a quantised gyro without an encoder error: no noise seen)
             design = np.vstack([np.column_stack([rate, np.ones(len(segs))]) / noise[:, None],
                                 [[1.0 / 1e-2, 0.0], [0.0, np.sqrt(3.0) / self.omega_dps]]])
             e = float(np.linalg.lstsq(design, np.append((y @ l / T - rate) / noise, [0.0, 0.0]), rcond=None)[0][1])
             e = float(np.clip(e, -0.9 * self.omega_dps, 0.9 * self.omega_dps))
             across = np.sqrt(self.omega_dps**2 - e * e)
             A = np.radians([r.angle_deg for r in rots])
+            if not np.all(np.isfinite(y)) or np.any(A == 0.0):
+                continue
             f = T / A * (np.sin(A) - 1j * (1.0 - np.cos(A)))       # E = f u in the tangent plane
             c = (rate + e) * T
             resid = y - c[:, None] * l
