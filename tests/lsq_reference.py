@@ -1,6 +1,7 @@
 """The least-squares model's residual as it was written before it was vectorised: one static,
 one rotation and one SampleContext at a time (station/estimate/lsq.py up to commit 1e2f926).
-tests/test_lsq_vectorised.py checks the vectorised residual against it, row by row."""
+tests/test_lsq_vectorised.py checks the vectorised residual against it, row by row.  Since issue 24
+the gravity along an axis is g cos(alpha), across it g sin(alpha), alpha the axis' angle from up."""
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -61,7 +62,9 @@ class PerSegmentModel(Model):
         l0 = self.axis_ref[k]
         t1, t2 = self.axis_basis[k]
         l = l0 + p[0] * t1 + p[1] * t2
-        return l / np.linalg.norm(l), p[2], p[3]
+        # the axis' angle from up (alpha): gravity along it and across it; the Earth rate along it
+        g, alpha, e = self.s.gravity_mps2, p[2], p[3]
+        return l / np.linalg.norm(l), (g * np.cos(alpha), g * np.sin(alpha)), e
 
     def _hand_residuals(self, x, Mg, ups, attitudes) -> np.ndarray:
         """(H, 2) whitened residuals: the up after each turn against the up before carried through it."""
@@ -166,7 +169,7 @@ class PerSegmentModel(Model):
                 axis_body = next(r.axis_body for r in s.rotations if r.group == k)
                 put(("axis", k), cross(l, C_mount.apply(axis_body)) / self.prior_sigma, "axis_prior")
         g = s.gravity_mps2
-        for k, (_, kappa, e) in enumerate(axes):
+        for k, (_, (kappa, _), e) in enumerate(axes):
             # the Earth rate along an axis lies within +/- Omega_E (uniform: sigma Omega_E/sqrt(3));
             # without this a single-direction turn could trade it against the scale factor
             put(("weak_axis", k), np.atleast_1d(e * np.sqrt(3.0) / self.omega_dps), "earth_prior")
@@ -174,13 +177,13 @@ class PerSegmentModel(Model):
                 # only unsteady turns about this axis: nothing sees the gravity along it
                 put(("weak_axis", k), np.atleast_1d(kappa / g / WEAK_PRIOR_RAD), "weak_prior")
         for i, r in enumerate(s.rotations):
-            l, kappa, e = axes[r.group]
+            l, (kappa, g_across), e = axes[r.group]
             e1 = self.axis_basis[r.group][0]
             e1 = e1 - (e1 @ l) * l
             e1 /= np.linalg.norm(e1)
             e2 = cross(l, e1)
             psi, chi = (list(x[L[f"phase{i}"]]) + [0.0, 0.0])[:2]
-            v = np.sqrt(max(g * g - kappa * kappa, 0.0)) * (np.cos(psi) * e1 + np.sin(psi) * e2)
+            v = g_across * (np.cos(psi) * e1 + np.sin(psi) * e2)
             # Earth rate across the axis turns with the body: over a whole number of turns it
             # integrates to zero, over the rest of a turn it does not
             earth_perp = (np.sqrt(max(self.omega_dps**2 - e * e, 0.0))

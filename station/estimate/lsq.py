@@ -6,11 +6,16 @@ Static segment j (attitude C_pn,j unknown: a nuisance):
   f_p = C_pn [0, 0, g],   w_p = C_pn Omega_E,n          (Omega_E,n from the site latitude)
 Rotation segment s about table axis l (unit, in p; one per physical axis, a nuisance), encoder
 angle A over the window T, phase phi from 0 to A:
-  f_p(phi) = kappa l + cos(phi) v - sin(phi) (l x v) + w x (w x d)     v = |g_perp| (cos psi e1 + sin psi e2)
+  f_p(phi) = kappa l + cos(phi) v - sin(phi) (l x v) + w x (w x d)     v = g sin(alpha) (cos psi e1 + sin psi e2)
 (its mean, first and second harmonics are compared with the data's)
   w_p      = (A/T + e) l                                               (e: Earth rate along the axis)
-kappa (gravity along the axis), e and the mounting offset d from the rotation centre are
-nuisances of the bench; psi (where gravity is at the start) is one per segment.
+kappa = g cos(alpha) (gravity along the axis: alpha, the axis' angle from up, so that gravity
+across it, g sin(alpha), never reaches a square root's edge), e and the mounting offset d from
+the rotation centre are nuisances of the bench; psi (where gravity is at the start) is one per
+segment, and so is chi, where the Earth rate across the axis is at the start, over a part turn.
+(e is not bounded by Omega_E as alpha bounds kappa: a turn whose encoder angle is off then
+shows it as e with its prior, and the fit converges to a failing chi2 rather than stalling at
+the bound.)
 Hand rotation h of unknown angle from static j to static k (no encoder; station/estimate/
 hand_rotation.py): the up of static j carried through the turn integrated from the compensated
 gyro samples must be the up of static k (two residuals per turn); the statics' gyro means then
@@ -234,7 +239,7 @@ class Model:
         for j in range(len(s.statics)):
             L.add(f"static{j}", 3 if self.with_latitude else 2)
         for k in range(s.groups):
-            L.add(f"axis{k}", 4)           # axis tangent (2), kappa, e
+            L.add(f"axis{k}", 4)           # axis tangent (2), alpha (from up), e
         for i in range(len(s.rotations)):
             # where gravity is at the start; and the Earth rate, unless the turns are whole
             r = self.s.rotations[i]
@@ -275,7 +280,10 @@ class Model:
             self.axis_basis, self.gyro_whiten = like.axis_basis, like.gyro_whiten
             if self.hands:
                 self._initialise_hands(st)
-            self.x0 = x
+            self.x0, self.x0_plain = x, x.copy()
+            for name, sl in L.blocks.items():
+                if not name.startswith("effect:"):
+                    self.x0_plain[sl] = like.x0_plain[like.layout[name]]
             return
         for name, value in (("accel_scale", st.ka), ("accel_misalignment", st.alpha), ("accel_bias", st.ba),
                             ("gyro_scale", st.kg), ("gyro_misalignment", st.gamma), ("gyro_bias", st.bg),
@@ -301,7 +309,8 @@ class Model:
             v = sum(np.sign(r.angle_deg) * (Lg @ (r.gyro_integral - st.bg * r.duration_s)) for r in segs)
             l0 = v / np.linalg.norm(v)
             self.axis_ref.append(l0)
-            x[L[f"axis{k}"]][2] = np.mean([l0 @ (La @ (r.accel_dc - st.ba)) for r in segs])
+            kappa = np.mean([l0 @ (La @ (r.accel_dc - st.ba)) for r in segs])
+            x[L[f"axis{k}"]][2] = np.arccos(np.clip(kappa / s.gravity_mps2, -0.999, 0.999))
         self.axis_basis = [tangent_basis(l0) for l0 in self.axis_ref]
         for i, r in enumerate(s.rotations):
             if not r.steady:
@@ -310,6 +319,8 @@ class Model:
             e1, e2 = self.axis_basis[r.group]
             v = La @ r.accel_cos
             x[L[f"phase{i}"].start] = np.arctan2(v @ e2, v @ e1)
+        self.x0_plain = x.copy()        # the start before the Earth-rate phases are started
+        self._earth_phase_start(x)
         # gyro integral whitening: white noise plus the encoder error along the axis
         self.gyro_whiten = []
         for r in s.rotations:
@@ -320,6 +331,81 @@ class Model:
         if self.hands:
             self._initialise_hands(st)
         self.x0 = x
+
+    def _earth_phase_start(self, x):
+        """Start the Earth-rate phases chi of the rotations that end elsewhere than they start
+        (their second phase nuisance), with the axis tilt and the Earth rate e along it, from
+        the gyro integrals at the calibration, axes and psi of x (changed in place).
+
+        Over a part turn the Earth rate across the axis integrates to E = (T/A)(sin A u -
+        (1 - cos A) l x u), u the Earth rate across the axis at the start, at angle chi in the
+        axis' tangent plane.  Started at chi = 0 (and the axis from the gyro integrals, which E
+        tilts by about |E| / A) the fit fell into a wrong basin: each chi settles where E and a
+        tilt of the shared axis l together make up the integrals, and the accelerometer harmonics,
+        which see the true axis, are left with a misfit (120 degree turns: a reduced chi2 of 3.5
+        on the station's own simulator, 3 with no noise at all).  Gravity and the Earth rate are
+        both fixed to the Earth, so across a table axis the angle from gravity to the Earth rate,
+        delta = chi - psi, is the same for every segment about it (psi: where gravity is at the
+        start, from the accelerometers' first harmonic).  In the tangent plane as complex
+        numbers (l x w is i w) the integral across the axis is c_i d + g_i exp(i delta), d a
+        further tilt of the axis, c_i = (rate_i + e) T_i, g_i = (f1_i - i f2_i) |u| exp(i psi_i):
+        linear in d and w = exp(i delta), solved by least squares (a ridge keeps d small where
+        the segments cannot tell them apart, e.g. one turn about an axis).  Where gravity barely
+        has a part across the axis (psi then unknown) each chi is taken from its own integral
+        with the axis as it is.  Only the start: the model keeps a chi per segment."""
+        s, L = self.s, self.layout
+        _, Mg = self._matrices(x)
+        Lg, bg = np.linalg.inv(Mg), x[L["gyro_bias"]]
+        for k in range(s.groups):
+            segs = [i for i, r in enumerate(s.rotations)
+                    if r.group == k and L[f"phase{i}"].stop - L[f"phase{i}"].start == 2]
+            if not segs:
+                continue
+            axis = L[f"axis{k}"]
+            ref, (t1, t2) = self.axis_ref[k], self.axis_basis[k]
+            l = normalised(ref + x[axis.start] * t1 + x[axis.start + 1] * t2)
+            e1 = normalised(t1 - (t1 @ l) * l)          # as _blocks: psi and chi are angles from e1
+            e2 = cross(l, e1)
+            rots = [s.rotations[i] for i in segs]
+            T = np.array([r.duration_s for r in rots])
+            y = np.array([Lg @ (r.gyro_integral - bg * r.duration_s) for r in rots])    # deg
+            rate = np.array([r.rate_dps for r in rots])
+            # e from the integrals along the axis, (1 + s)(rate + e) T with s what is left of the
+            # gyro's scale error along it: by least squares with e's prior (0 +- omega / sqrt 3,
+            # the weak_e rows) and s's (1 %), each row weighted by its noise.  Turns one way only
+            # cannot tell e from s (e then stays near 0), and over a short turn the encoder's
+            # angle error alone is a large part of the Earth rate (2" over 0.4 s: 0.33 omega)
+            noise = np.sqrt(np.max(s.gyro_sigma)**2 * T / s.sample_rate_hz + s.table_angle_sigma_deg**2) / T
+            noise = np.maximum(noise, 1e-12)    # (a quantised gyro without an encoder error: no noise seen)
+            design = np.vstack([np.column_stack([rate, np.ones(len(segs))]) / noise[:, None],
+                                [[1.0 / 1e-2, 0.0], [0.0, np.sqrt(3.0) / self.omega_dps]]])
+            e = float(np.linalg.lstsq(design, np.append((y @ l / T - rate) / noise, [0.0, 0.0]), rcond=None)[0][1])
+            e = float(np.clip(e, -0.9 * self.omega_dps, 0.9 * self.omega_dps))
+            across = np.sqrt(self.omega_dps**2 - e * e)
+            A = np.radians([r.angle_deg for r in rots])
+            if not np.all(np.isfinite(y)) or np.any(A == 0.0):
+                continue
+            f = T / A * (np.sin(A) - 1j * (1.0 - np.cos(A)))       # E = f u in the tangent plane
+            c = (rate + e) * T
+            resid = y - c[:, None] * l
+            z = resid @ e1 + 1j * (resid @ e2)
+            psi = np.array([x[L[f"phase{i}"].start] for i in segs])
+            if np.sin(x[axis.start + 2])**2 > 0.04:       # gravity across the axis: psi is seen
+                g = f * across * np.exp(1j * psi)
+                noise = np.sqrt(np.max(s.gyro_sigma)**2 * np.max(T) / s.sample_rate_hz
+                                + s.table_angle_sigma_deg**2)
+                ridge = max(noise / 1e-2, 1e-6 * float(np.sqrt(np.mean(c * c))))     # |d| ~ 10 mrad
+                design = np.vstack([np.column_stack([c, g]), [ridge, 0.0]])
+                d, w = np.linalg.lstsq(design, np.append(z, 0.0), rcond=None)[0]
+                chi = psi + np.angle(w)
+                tilted = l + d.real * e1 + d.imag * e2
+                x[axis.start:axis.start + 2] = [tilted @ t1 / (tilted @ ref), tilted @ t2 / (tilted @ ref)]
+            else:
+                chi = np.angle(z) - np.angle(f)
+            x[axis.start + 3] = e
+            for i, value in zip(segs, chi):
+                x[L[f"phase{i}"].start + 1] = np.angle(np.exp(1j * value))
+        return x
 
     def _initialise_hands(self, st: Start):
         """Hand rotations: the integrator, the tangent plane of each pose after a turn, and the
@@ -760,13 +846,15 @@ class Model:
         # axes and the rotations' phase grids
         PA = X[:, self._axis_cols]                                               # (B,K,4)
         l_k = normalised(self._axis_ref + np.einsum("bkj,kjc->bkc", PA[..., :2], self._axis_basis))
-        kappa_k, e_k = PA[..., 2], PA[..., 3]
+        alpha_k, e_k = PA[..., 2], PA[..., 3]
+        kappa_k = g * np.cos(alpha_k)
         l, kappa, e = l_k[:, self._rot_group], kappa_k[:, self._rot_group], e_k[:, self._rot_group]   # (B,R,..)
+        g_across = g * np.sin(alpha_k[:, self._rot_group])
         e1 = normalised(self._rot_e1 - np.einsum("rc,brc->br", self._rot_e1, l)[..., None] * l)
         e2 = cross(l, e1)
         phase = Xe[:, self._rot_phase_cols]                                      # (B,R,2)
         psi, chi = phase[..., 0:1], phase[..., 1:2]
-        v = np.sqrt(positive_part(g * g - kappa**2))[..., None] * (np.cos(psi) * e1 + np.sin(psi) * e2)
+        v = g_across[..., None] * (np.cos(psi) * e1 + np.sin(psi) * e2)
         earth_perp = (np.sqrt(positive_part(self.omega_dps**2 - e**2))[..., None]
                       * (np.cos(chi) * e1 + np.sin(chi) * e2))
         earth_integral = self._rot_earth[:, :1] * earth_perp - self._rot_earth[:, 1:] * cross(l, earth_perp)
@@ -1018,19 +1106,73 @@ def _harmonic_whitening(gram) -> np.ndarray:
 #: hand session (six poses, no usable turn) needs 209; twin captures 5 to 30
 MAX_EVALUATIONS = 1000
 
+AXES_FIRST_GYRO_WEIGHT = 1e-3     # the rotations' gyro integrals' weight while the axes are fitted first
+AXES_FIRST_EVALUATIONS = 10       # and that fit's evaluations: only a start (chi and e, barely held by
+                                  #   the weak gyro rows, wander there without converging; 8 to 100 gave
+                                  #   the same final fit of optimal9's part turns at 10-300 deg/s)
+
+
+def _has_earth_phases(model: Model) -> bool:
+    """Whether some rotation ends elsewhere than it starts (an Earth-rate phase chi among its
+    nuisances)."""
+    return any(sl.stop - sl.start == 2 for name, sl in model.layout.blocks.items() if name.startswith("phase"))
+
+
+def _minimise(model: Model, x0: np.ndarray, solve):
+    """solve(x0); where some rotation has an Earth-rate phase, also solve from the axes fitted
+    first (_axes_first) and from the start as it was before the Earth-rate phases were started
+    (Model.x0_plain: chi and e at 0), and keep the lowest sum of squares: no start alone found
+    the right basin on every part-turn capture tried (single turns one way, axes near the
+    vertical or the Earth's axis), and with the plain one among them no fit ends worse than it
+    did from it alone."""
+    res = solve(x0)
+    if not _has_earth_phases(model):
+        return res
+    for start in (_axes_first(model, x0, solve), model.x0_plain):
+        other = solve(start)
+        res = other if other.cost < res.cost else res
+    return res
+
+
+def _axes_first(model: Model, x0: np.ndarray, solve) -> np.ndarray:
+    """Where some rotation ends elsewhere than it starts (an Earth-rate phase chi among its
+    nuisances), a start fitted with the rotations' gyro integrals at a small weight.  Their part
+    across the axis is the Earth rate's integral over the part turn, which chi turns about the
+    axis and a tilt of the axis l (shared by the segments about it) can stand in for: from a start
+    with l a little off, the fit can settle in a basin where chi and the tilt make up the integrals
+    together and the accelerometers, which see the true axis, keep a misfit (noise-free captures
+    of single turns one way, or about tilted axes: reduced chi2 0.7 to 16 from the start alone).  The accelerometers
+    (the plane in which gravity turns, gravity along the axis) and the statics put the axes where
+    they are first; with l right each chi has one basin.  The model and its weights are the
+    same after (the gyro integrals still determine chi and e in this first fit)."""
+    whiten = model._rot_gyro_whiten
+    model._rot_gyro_whiten = whiten * AXES_FIRST_GYRO_WEIGHT
+    model._last_jacobian = None
+    try:
+        x = solve(x0, AXES_FIRST_EVALUATIONS).x
+    finally:
+        model._rot_gyro_whiten = whiten
+        model._last_jacobian = None
+    # the gyro integrals' weight was small: chi may have wandered; started again at these axes
+    return model._earth_phase_start(x.copy())
+
 
 def _solve(model: Model, x0: np.ndarray):
     """(x, covariance of reduced.columns, residuals, reduced Jacobian) at the solution."""
     if model.is_large:
         # each step solved to rounding (LSMR's default, as many iterations as parameters, stops
         # short on ill-conditioned models such as hand-pose logs: 100 steps and twice the chi2)
-        res = least_squares(model.residuals, x0, jac=model.sparse_jacobian, method="trf", tr_solver="lsmr",
-                            tr_options={"atol": 1e-14, "btol": 1e-14, "maxiter": 10 * model.layout.size},
-                            x_scale="jac", xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=MAX_EVALUATIONS)
+        def solve(start, evaluations=MAX_EVALUATIONS):
+            return least_squares(model.residuals, start, jac=model.sparse_jacobian, method="trf", tr_solver="lsmr",
+                                 tr_options={"atol": 1e-14, "btol": 1e-14, "maxiter": 10 * model.layout.size},
+                                 x_scale="jac", xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=evaluations)
+        res = _minimise(model, x0, solve)
         reduced = _Reduced(model, model.sparse_jacobian(res.x))
     else:
-        res = least_squares(model.residuals, x0, jac=model.jacobian, method="lm", x_scale="jac",
-                            xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=MAX_EVALUATIONS)
+        def solve(start, evaluations=MAX_EVALUATIONS):
+            return least_squares(model.residuals, start, jac=model.jacobian, method="lm", x_scale="jac",
+                                 xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=evaluations)
+        res = _minimise(model, x0, solve)
         reduced = _Reduced(model, model.jacobian(res.x))
     model.converged = res.status != 0
     if res.status == 0:       # max_nfev: said, not hidden (a stress test found statics-only captures there)
