@@ -104,8 +104,9 @@ def test_alternating_samples_make_the_noise_overestimated():
 
 
 def test_an_unconverged_fit_is_said_and_exits_3(tmp_path, monkeypatch, capsys):
-    """A fit stopped at its evaluation limit: the file says "not converged", `estimate` exits 3,
-    `show` and the report page say it."""
+    """A fit stopped at its evaluation limit far from its minimum: the file says "not converged",
+    `estimate` exits 3, `show` says it.  One stopped at its limit with every written parameter
+    at the minimum (the step left below 1 % of each 1-sigma) passes, with a note."""
     from station.cli import main
 
     truth, _ = _capture()
@@ -113,11 +114,11 @@ def test_an_unconverged_fit_is_said_and_exits_3(tmp_path, monkeypatch, capsys):
     dryrun.record_scheme(load_scheme("optimal9", {"dwell_s": 20.0, "rotation_s": 36.0}), truth, 5, cap)
     real = lsq.least_squares
 
-    def two_evaluations(*args, **kw):
-        kw["max_nfev"] = 2
-        return real(*args, **kw)
+    def one_evaluation_from_afar(fun, x0, *args, **kw):
+        kw["max_nfev"] = 1          # no step taken: x is the start, 1e-3 from the minimum in every
+        return real(fun, x0 + 1e-3, *args, **kw)     # coordinate (1000 ppm in a scale factor)
 
-    monkeypatch.setattr(lsq, "least_squares", two_evaluations)
+    monkeypatch.setattr(lsq, "least_squares", one_evaluation_from_afar)
     assert main(["estimate", str(cap), "--method", "lsq"]) == 3
     captured = capsys.readouterr()
     assert "fit not converged" in captured.out and "the fit did not converge (exit status 3)" in captured.err
@@ -126,6 +127,20 @@ def test_an_unconverged_fit_is_said_and_exits_3(tmp_path, monkeypatch, capsys):
     assert main(["show", str(cap / "calibration.yaml")]) == 0
     assert "fit not converged" in capsys.readouterr().out
     assert main(["estimate", str(cap), "--method", "lsq", "--accept-poor-fit", "-o", str(tmp_path / "c2.yaml")]) == 0
+    doc = yaml.safe_load((cap / "calibration.yaml").read_text())
+    assert max(doc["fit"]["remaining_step_sigma"].values()) > 1.0
+
+    def two_evaluations(*args, **kw):           # from the algebraic start: at the minimum
+        kw["max_nfev"] = 2
+        return real(*args, **kw)
+
+    monkeypatch.setattr(lsq, "least_squares", two_evaluations)
+    assert main(["estimate", str(cap), "--method", "lsq"]) == 0
+    doc = yaml.safe_load((cap / "calibration.yaml").read_text())
+    assert doc["verdict"]["result"] == "passes" and doc["fit"]["converged"] is False
+    assert max(doc["fit"]["remaining_step_sigma"].values()) < 0.01
+    assert any("every parameter written is at the minimum" in n for n in doc["fit"]["notes"])
     monkeypatch.setattr(lsq, "least_squares", real)
     assert main(["estimate", str(cap), "--method", "lsq"]) == 0
-    assert yaml.safe_load((cap / "calibration.yaml").read_text())["verdict"]["result"] == "passes"
+    doc = yaml.safe_load((cap / "calibration.yaml").read_text())
+    assert doc["verdict"]["result"] == "passes" and doc["fit"]["converged"] is True

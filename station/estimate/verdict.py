@@ -62,6 +62,7 @@ def judge(cal: Calibration) -> Calibration:
     large rotations; in place, and returned."""
     _verdict(cal)
     _identifiability(cal)
+    _convergence(cal)
     _rotations_in_words(cal)
     return cal
 
@@ -93,7 +94,7 @@ def _verdict(cal: Calibration) -> None:
     overestimated = p_below < P_FAIL and reduced < 1.0 / REDUCED_CHI2_FAIL
     result = "fails" if fails else "noise overestimated" if overestimated else "passes"
     verdict = {"result": result, "reduced_chi2": float(reduced), "dof": int(dof), "p_value": p_value}
-    if fit.get("converged") is False:
+    if fit.get("converged") is False and not _written_at_minimum(cal, fit.get("remaining_step_sigma")):
         verdict["result"] = "not converged"
         verdict["reason"] = (f"the fit stopped at its evaluation limit before it converged (reduced chi2 "
                              f"{reduced:.3g} where it stopped): the values and 1-sigma are not those of a "
@@ -125,6 +126,47 @@ def _verdict(cal: Calibration) -> None:
         verdict["reason"] = (f"reduced chi2 {reduced:.3g} (p = {p_value:.2g}): the residuals agree "
                              "with the noise")
     fit["verdict"] = verdict
+
+
+REMAINING_STEP_SIGMA = 0.01   # a stopped fit whose written parameters would all move less is at its minimum
+
+
+def _written_at_minimum(cal: Calibration, steps) -> bool:
+    """The solver stopped at its limit, but the step it would still take moves no parameter that
+    can be written by REMAINING_STEP_SIGMA of its 1-sigma or more: what remains is in directions
+    the data barely see (the poses' headings, an undetermined gyro block), which are not written.
+    The parameters not determined are judged after this (_convergence does it again then)."""
+    if not steps:
+        return False
+    dropped = set(cal.fit.get("not_determined", []))
+    moving = {n: v for n, v in steps.items() if n not in dropped and n in cal.sigma}
+    return bool(moving) and max(moving.values()) < REMAINING_STEP_SIGMA
+
+
+def _convergence(cal: Calibration) -> None:
+    """Once the undetermined parameters are left out: a stopped fit whose written parameters are
+    at the minimum is said so (a note); one whose verdict said otherwise is not converged."""
+    fit = cal.fit
+    if fit.get("converged") is not False:
+        return
+    steps = fit.get("remaining_step_sigma") or {}
+    if _written_at_minimum(cal, steps):
+        if fit["verdict"].get("result") == "not converged":      # judged before the dropping
+            fit["verdict"].pop("result")
+            _verdict_without_convergence(cal)
+        worst = max((v for n, v in steps.items() if n in cal.sigma), default=0.0)
+        fit.setdefault("notes", []).append(
+            f"the solver stopped at its evaluation limit, but every parameter written is at the "
+            f"minimum: the step it would still take is at most {worst:.2g} of a 1-sigma (what remains "
+            f"is in directions the data barely see, not written)")
+
+
+def _verdict_without_convergence(cal: Calibration) -> None:
+    converged = cal.fit.pop("converged")
+    try:
+        _verdict(cal)
+    finally:
+        cal.fit["converged"] = converged
 
 
 # ------------------------------------------------------------------------------------ identifiability
