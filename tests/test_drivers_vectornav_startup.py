@@ -232,3 +232,20 @@ def test_the_twin_writes_vnymr_as_the_manual_does():
     assert V.format_message("VNRRG,27," + V.ymr_values(v[0:3], v[3:6], v[6:9], v[9:12])) == example
     assert len(example) - len(b"$VNRRG,27,") + len(b"$VNYMR,") == V.ASCII_MESSAGE_BYTES[V.ADOR_VNYMR]
     assert V.format_message("VNRRG,05,115200") == b"$VNRRG,05,115200*5D\r\n"
+
+
+def test_binary_output_off_as_vectornavs_library_writes_it(server):
+    """VectorNav's own library turns binary output off with its default register value,
+    `$VNWRG,75,0,0,0` (async mode 0, no group, no field mask): accepted, the stream stops, the
+    register reads back as at power-up (the twin answered error 7 to it)."""
+    with serial.Serial(server.imu_path, 115200, timeout=0.05) as port:
+        assert _ask(port, "VNWRG,06,0")[0] == "VNWRG,06,0"
+        assert _ask(port, "VNWRG,75,1,8,05,0001,001C")[0] == "VNWRG,75,1,8,05,0001,001C"
+        time.sleep(0.2)
+        assert 0xFA in port.read(65536)                         # binary frames flow
+        assert _ask(port, "VNWRG,75,0,0,0")[0] == "VNWRG,75,0,0,0"
+        time.sleep(0.1)
+        port.reset_input_buffer()
+        time.sleep(0.3)
+        assert 0xFA not in port.read(65536)                     # and stop
+        assert _ask(port, "VNRRG,75")[0] == "VNRRG,75,0,0,00"

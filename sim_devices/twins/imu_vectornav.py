@@ -246,6 +246,11 @@ class VectorNavFrontEnd:
             return "VNWRG," + ",".join(args)
         if reg != V.REG_BINARY_OUTPUT_1:
             raise _VnError(8 if reg not in self.registers else 9)
+        if len(args) >= 2 and _int(args[1]) == V.ASYNC_MODE_NONE and all(_int(a, 16) == 0 for a in args[2:4]):
+            # output off as VectorNav's own library writes it ($VNWRG,75,0,0,0: its default
+            # BinaryOutputRegister): async mode 0, no group; reads back 0,0,00 as at power-up
+            self.async_mode, self.binary_set = V.ASYNC_MODE_NONE, False
+            return "VNWRG," + ",".join(args)
         try:
             async_mode, divisor, layout = V.parse_register_75(args[1:])
         except ValueError:
@@ -313,8 +318,8 @@ class _VnError(Exception):
         self.code = code
 
 
-def _int(text: str) -> int:
+def _int(text: str, base: int = 10) -> int:
     try:
-        return int(text)
+        return int(text, base)
     except ValueError:
         raise _VnError(7) from None
