@@ -18,6 +18,12 @@ Physics (frames and conventions of :mod:`sim_devices.world`: ENU, C_bn takes ENU
 * Specific force f_b = C_bn ([0, 0, g] + a_n), inertial rate w_ib = w_eb + C_bn Omega_E (site
   of the truth's bench), then the sensor model of :class:`sim_devices.truth.Truth` (noise,
   biases, scale factors, misalignments, temperature) at the true sample times.
+* ``turn_error_deg``: a turn the gyro does not follow exactly (1-sigma per axis, deg): the
+  gyro's output during turn k carries an extra rate e_k (2/T) sin^2(pi tau) (rad/s, e_k a random
+  rotation vector, N(0, turn_error^2) per axis), which integrates to e_k over the turn and
+  vanishes at its ends: what a hand-held turn adds beyond the white noise (g-sensitivity and
+  vibration rectification while shaken, bias instability over the turn, bandwidth), so that
+  the turn integrated from the gyro misses the true one by e_k.  The statics are untouched.
 * ``counts``: the outputs in raw counts (m/s^2 and deg/s per count), rounded to integers.
 
 Returns the samples and the truth: the sample ranges of the still poses (between turns) and
@@ -66,7 +72,7 @@ def _pose(rng, faces: bool) -> Rotation:
 
 def hand_session(truth: Truth, seed: int, *, poses: int = 38, dwell_s=(2.5, 4.0), turn_s=(1.0, 2.0),
                  init_rest_s: float = 5.0, wobble_deg: float = 10.0, lift_m: float = 0.05,
-                 faces: bool = False, counts: tuple | None = None) -> HandSession:
+                 faces: bool = False, counts: tuple | None = None, turn_error_deg: float = 0.0) -> HandSession:
     rng = np.random.default_rng(seed)
     noise_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
     site = world.Site(truth.bench.latitude_deg, truth.bench.height_m)
@@ -76,7 +82,9 @@ def hand_session(truth: Truth, seed: int, *, poses: int = 38, dwell_s=(2.5, 4.0)
     R = [_pose(rng, faces)]
     for _ in range(poses - 1):
         R.append(_pose(rng, faces))
-    pieces_R, pieces_w, pieces_a, statics = [], [], [], []
+    err_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[1])   # (draws only when asked)
+    pieces_R, pieces_w, pieces_a, pieces_e, statics = [], [], [], [], []
+    turn_errors = []
     n = 0
 
     def hold(Rp: Rotation, seconds: float):
@@ -86,6 +94,7 @@ def hand_session(truth: Truth, seed: int, *, poses: int = 38, dwell_s=(2.5, 4.0)
         pieces_R.append(Rotation.concatenate([Rp] * m))
         pieces_w.append(np.zeros((m, 3)))
         pieces_a.append(np.zeros((m, 3)))
+        pieces_e.append(np.zeros((m, 3)))
         n += m
 
     def turn(Ra: Rotation, Rb: Rotation, seconds: float):
@@ -109,6 +118,11 @@ def hand_session(truth: Truth, seed: int, *, poses: int = 38, dwell_s=(2.5, 4.0)
         pieces_R.append(Rk)
         pieces_w.append(w)
         pieces_a.append(a_n)
+        e_k = (np.radians(turn_error_deg) * err_rng.standard_normal(3) if turn_error_deg > 0
+               else np.zeros(3))
+        turn_errors.append(np.degrees(e_k))
+        # the midpoint rule of the rate below integrates to e_k over the m samples (to 1e-6 rel.)
+        pieces_e.append(np.outer(2.0 / T * np.sin(np.pi * tk / T) ** 2, e_k))
         n += m
 
     hold(R[0], init_rest_s)
@@ -120,7 +134,7 @@ def hand_session(truth: Truth, seed: int, *, poses: int = 38, dwell_s=(2.5, 4.0)
     w_eb = np.vstack(pieces_w)
     a_n = np.vstack(pieces_a)
     f_b = C_bn.apply(g_up + a_n)
-    w_ib = w_eb + C_bn.apply(site.earth_rate_enu)
+    w_ib = w_eb + C_bn.apply(site.earth_rate_enu) + np.vstack(pieces_e)     # rad/s
     t = np.arange(n) * dt
     temp = truth.temperature.at(t)
     accel, gyro = truth.measure(f_b, np.degrees(w_ib), temp, noise_rng)
@@ -129,4 +143,5 @@ def hand_session(truth: Truth, seed: int, *, poses: int = 38, dwell_s=(2.5, 4.0)
         gyro = np.round(gyro / counts[1])
     return HandSession(t=t, accel=accel, gyro=gyro, temp=temp, statics=statics,
                        attitudes=[r.inv() for r in R], counts=counts,
-                       truth={"gravity_mps2": site.g, "latitude_deg": float(truth.bench.latitude_deg)})
+                       truth={"gravity_mps2": site.g, "latitude_deg": float(truth.bench.latitude_deg),
+                              "turn_errors_deg": np.array(turn_errors).reshape(-1, 3)})
