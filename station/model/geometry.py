@@ -38,3 +38,31 @@ def analytic_abs(z: np.ndarray) -> np.ndarray:
     """|z| for real z; for complex z, z or -z by the sign of its real part (the analytic
     continuation of |x| away from 0, what complex step needs: np.abs would give the modulus)."""
     return np.where(np.real(z) < 0, -z, z)
+
+
+#: gravity directions closer than this are one attitude (a hand pose repeated on the same face
+#: lies within a degree; two poses chosen to differ are tens of degrees apart)
+ATTITUDE_TOLERANCE_DEG = 5.0
+
+
+def distinct_directions(vectors, tolerance_deg: float = ATTITUDE_TOLERANCE_DEG) -> np.ndarray:
+    """Cluster label of each vector (rows, any length) by direction: a vector joins the first
+    cluster whose first member is within ``tolerance_deg`` of it, else starts a new one.  The
+    number of distinct directions is ``labels.max() + 1``.  Used on the static poses'
+    accelerometer means: poses are not attitudes (a pose held twice on the same face gives the
+    accelerometers the same equation twice)."""
+    v = np.asarray(vectors, float).reshape(-1, 3)
+    n = np.linalg.norm(v, axis=1)
+    u = v / np.where(n > 0, n, 1.0)[:, None]
+    cos_tol = np.cos(np.radians(tolerance_deg))
+    labels = np.full(len(u), -1, int)
+    heads: list = []
+    for i, d in enumerate(u):
+        for k, h in enumerate(heads):
+            if d @ h >= cos_tol:
+                labels[i] = k
+                break
+        else:
+            labels[i] = len(heads)
+            heads.append(d)
+    return labels

@@ -31,9 +31,14 @@ from station.core import units
 from station.core.errors import UserError
 from station.io.capture import CaptureWriter, ImuInfo, Site
 from station.io.segment_detect import Detection, Interval, detect
+from station.model.geometry import ATTITUDE_TOLERANCE_DEG, distinct_directions
 
 GAP_FACTOR = 1.5            # a time step above GAP_FACTOR times the median is lost samples
 MIN_POSES = 9               # accelerometer: 9 unknowns, 3 - 2 = 1 equation per pose of unknown attitude
+# ... and per distinct attitude: a pose held twice on the same face repeats its equation.  Below
+# MIN_POSES distinct attitudes the misalignments are not written (station/estimate/poses.py);
+# below MIN_ATTITUDES not even the scale factors and biases (6 unknowns) can be found
+MIN_ATTITUDES = 6
 RECOMMENDED_POSES = "36-50"     # imu_tk's advice for hand poses
 GRAVITY_TOLERANCE = 0.2     # static |f| within 20 % of g, else the declared unit is wrong
 GYRO_RATIO_RANGE = (0.5, 20.0)  # turn seen by the gyro / change of gravity direction seen by the accel
@@ -388,12 +393,23 @@ def write_capture(rec: Recording, out_dir, *, gravity_mps2: float, latitude_deg:
         _faces(rec, statics)
     notes = check_units(rec, sections, gravity_mps2)
     known_up = all(s.up_body is not None for s in statics)
+    distinct = distinct_attitudes(rec, statics)
     need = 6 if known_up else min_poses
     if len(statics) < need:
         raise UserError(f"{rec.source}: {len(statics)} static pose(s) found; a calibration from hand poses "
                         f"needs at least {need} in different attitudes"
                         + ("" if known_up else f" (9 for the accelerometers' 9 unknowns when the attitudes are "
                            f"unknown; imu_tk recommends {RECOMMENDED_POSES}, with a turn between each two)"))
+    if not known_up and distinct is not None and distinct < MIN_ATTITUDES:
+        raise UserError(f"{rec.source}: {len(statics)} static poses found in only {distinct} distinct attitude(s) "
+                        f"(gravity directions within {ATTITUDE_TOLERANCE_DEG:g} deg are one): a calibration from "
+                        f"hand poses of unknown attitude needs at least {MIN_ATTITUDES} for the accelerometers' "
+                        f"scale factors and biases and {min_poses} for their misalignments (one equation per "
+                        "distinct gravity direction); poses held again on the same face add none")
+    if not known_up and distinct is not None and distinct < min_poses:
+        notes.append(f"only {distinct} distinct attitudes among the {len(statics)} poses: the accelerometer "
+                     f"misalignments need {min_poses} (one equation per distinct gravity direction when the "
+                     "attitudes are unknown) and will not be written; the scale factors and biases will")
     imu_extra = {}
     if rec.accel_nominal is not None:
         imu_extra["accel_nominal_mps2_per_count"] = float(rec.accel_nominal)
@@ -435,7 +451,7 @@ def write_capture(rec: Recording, out_dir, *, gravity_mps2: float, latitude_deg:
             seg.write(rec.t[sl], rec.accel[sl], rec.gyro[sl])
             seg.close()
     writer.finish()
-    lines = _report_lines(rec, sections, det, rate, notes)
+    lines = _report_lines(rec, sections, det, rate, notes, distinct)
     return ImportReport(writer.path, rate, len(rec.t), float(rec.t[-1] - rec.t[0]), sections, det, lines)
 
 
@@ -465,7 +481,20 @@ def _still_bias(rec, statics) -> np.ndarray:
     return np.mean([rec.gyro[s.start:s.stop].mean(axis=0) for s in statics], axis=0)
 
 
-def _report_lines(rec, sections, det, rate, notes) -> list[str]:
+def distinct_attitudes(rec: Recording, statics: list) -> int | None:
+    """How many distinct gravity directions the static poses hold (station.model.geometry:
+    within ATTITUDE_TOLERANCE_DEG), their accelerometer means taken about the centre of the
+    sphere through them for raw counts (offset binary); None when that centre cannot be found."""
+    means = np.array([rec.accel[s.start:s.stop].mean(axis=0) for s in statics])
+    if rec.accel_unit == "raw":
+        centre = _sphere_centre(means)
+        if centre is None:
+            return None
+        means = means - centre
+    return int(distinct_directions(means).max()) + 1 if len(means) else 0
+
+
+def _report_lines(rec, sections, det, rate, notes, distinct=None) -> list[str]:
     statics = [s for s in sections if s.kind == "static"]
     turns = [s for s in sections if s.kind == "rotation"]
     lines = [f"{rec.source}: {len(rec.t)} samples, {rec.t[-1] - rec.t[0]:.1f} s at {rate:.4g} Hz "
@@ -484,7 +513,8 @@ def _report_lines(rec, sections, det, rate, notes) -> list[str]:
         lines.append(f"still: {'; '.join(parts)}; over {th['window_s']:.2g} s windows, for >= "
                      f"{th['min_static_s']:g} s")
     durations = [(s.stop - s.start) / rate for s in statics]
-    lines.append(f"found {len(statics)} static poses ({min(durations):.1f}-{max(durations):.1f} s, "
+    where = f" in {distinct} distinct attitudes" if distinct is not None else ""
+    lines.append(f"found {len(statics)} static poses{where} ({min(durations):.1f}-{max(durations):.1f} s, "
                  f"{sum(durations):.0f} s in all) and {len(turns)} turns between them")
     fa = rec.accel_factor or 1.0
     for s in sections:
