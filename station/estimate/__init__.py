@@ -165,9 +165,10 @@ def _estimate_with(capture: Capture, method: str, effects, registry) -> tuple[Ca
     if effects and method != "lsq":
         raise UserError(f"--add needs the least-squares method (lsq); this capture uses {method}")
     if method == "lsq":
-        from station.estimate import lsq
+        from station.estimate import poses
 
-        return lsq.estimate(capture, instances), method
+        # the joint fit, checked against the poses' own accelerometer fit (station/estimate/poses.py)
+        return poses.estimate(capture, instances), method
     if method == "zhang2010":
         from station.estimate import zhang2010
 

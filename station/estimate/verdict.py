@@ -117,11 +117,15 @@ def _verdict(cal: Calibration) -> None:
                              "bad segment, data lost or a table that slipped); station diagnose "
                              "shows where")
         scale = math.sqrt(reduced)
-        cal.sigma = {name: s * scale for name, s in cal.sigma.items()}
+        # a pose-only accelerometer block (station.estimate.poses) carries its own fit's scale
+        own = set(ACCEL_BLOCK) if str(fit.get("pose_check", {}).get("written", "")).startswith("pose-only") else set()
+        cal.sigma = {name: s * (1.0 if name in own else scale) for name, s in cal.sigma.items()}
         fit["sigma_scale"] = scale
         fit.setdefault("notes", []).append(
             f"the fit fails (reduced chi2 {reduced:.3g}): every 1-sigma is multiplied by "
-            f"sqrt(reduced chi2) = {scale:.3g}")
+            f"sqrt(reduced chi2) = {scale:.3g}"
+            + (f", except the accelerometers', which are the poses' own fit's (scaled by its own "
+               f"sqrt(reduced chi2) = {fit['pose_check'].get('sigma_scale', 1.0):.3g})" if own else ""))
     else:
         verdict["reason"] = (f"reduced chi2 {reduced:.3g} (p = {p_value:.2g}): the residuals agree "
                              "with the noise")
@@ -208,7 +212,10 @@ def _identifiability(cal: Calibration) -> None:
     fit = cal.fit
     notes = fit.setdefault("notes", [])
     has_sigma = bool(cal.sigma)
-    accel = _undetermined(cal, ACCEL_BLOCK) if has_sigma else []
+    # accelerometer parameters the poses cannot determine (station.estimate.poses: too few
+    # distinct attitudes), held at 0 in the fit: not written, the reason in the notes
+    held = [n for n in fit.get("accel_not_determined", []) if n in ACCEL_BLOCK]
+    accel = [n for n in _undetermined(cal, ACCEL_BLOCK) if n not in held] if has_sigma else []
     if accel:
         raise UserError(f"the capture does not determine the accelerometers ({', '.join(accel)}: 1-sigma "
                         "infinite or above its bound): record more static attitudes (at least 9, each "
@@ -237,6 +244,7 @@ def _identifiability(cal: Calibration) -> None:
             notes.append(f"the inter-triad rotation is not determined ({', '.join(inter)}: 1-sigma infinite "
                          "or above its bound): not written; the compensated gyro output stays in the "
                          "gyros' own frame o")
+    dropped = held + dropped
     if dropped:
         fit["not_determined"] = dropped
         for name in dropped:
