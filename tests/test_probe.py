@@ -168,17 +168,21 @@ def test_scan_baud_finds_the_rate_that_gives_valid_frames(protocol, device_baud,
     with BenchServer(default_truth(2), BenchOptions(speed=50, imu_protocol=protocol)) as server:
         if device_baud != 115200:
             server.imu_frontend.baudrate = device_baud          # as if register 05 had been saved
-        assert main(["probe", "--port", server.imu_path, "--imu-protocol", protocol, "--scan-baud"]) == 0
-        out = capsys.readouterr().out
+        # each rate listened to for 0.25 s (--timeout-s; 0.5 s by default): a twin at --speed 50
+        # sends 3 valid frames or replies within a few ms of wall time at the right rate
+        if device_baud != 115200:                            # the words, once
+            assert main(["probe", "--port", server.imu_path, "--imu-protocol", protocol, "--scan-baud",
+                         "--timeout-s", "0.25"]) == 0
+            out = capsys.readouterr().out
+            assert f"the device answers at {device_baud} baud: use --baud {device_baud}" in out
         assert main(["probe", "--port", server.imu_path, "--imu-protocol", protocol, "--scan-baud",
-                     "--json"]) == 0
+                     "--timeout-s", "0.25", "--json"]) == 0
         r = json.loads(capsys.readouterr().out)
         # and the rate it found works
         if protocol == "vectornav":
             assert main(["probe", "--port", server.imu_path, "--baud", str(device_baud), "--seconds", "1",
                          "--json"]) == 0
             assert json.loads(capsys.readouterr().out)["frames"] == 100
-    assert f"the device answers at {device_baud} baud: use --baud {device_baud}" in out
     assert r["baud"] == device_baud
     rates = {x["baud"]: x for x in r["rates"]}
     from drivers.probe import SCAN_BAUDS
