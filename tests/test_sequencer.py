@@ -218,8 +218,20 @@ def test_ctrl_c_pauses_at_a_safe_point_with_the_table_at_rest(bench, config, tmp
     seg = capture.segment("rotx_p")
     assert seg.status == "incomplete" and len(seg.data.t) > 0          # kept, marked incomplete
     assert capture.segment("zup").status == "complete"
-    assert all(bench.table.read_rate(axis) == 0.0 for axis in (1, 2, 3))  # brought to rest
+    assert _comes_to_rest(bench)                                       # brought to rest
     assert all(ax.mode == "position" for ax in bench.table.axes)
+
+
+def _comes_to_rest(bench, wall_s=10.0):
+    """Every axis of the twin reads a rate of exactly 0 within ``wall_s`` (the hold at the rest
+    position may still correct by a fraction of an encoder count for a moment after the stop
+    returned: waited for, not slept over)."""
+    deadline = time.monotonic() + wall_s
+    while time.monotonic() < deadline:
+        if all(bench.table.read_rate(axis) == 0.0 for axis in (1, 2, 3)):
+            return True
+        time.sleep(0.01)
+    return False
 
 
 def _small_scheme(tmp_path):
@@ -245,7 +257,7 @@ def test_sigterm_and_sighup_abort_with_the_table_at_rest(bench, config, tmp_path
             proc.kill()
     assert proc.returncode == 130, err[-2000:]
     assert "aborted" in err and f"--resume {out}" in err and "Traceback" not in err
-    assert all(bench.table.read_rate(axis) == 0.0 for axis in (1, 2, 3))
+    assert _comes_to_rest(bench)
     assert all(ax.mode == "position" for ax in bench.table.axes)
     capture = read_capture(out)
     assert capture.segment("zup").status == "complete"
@@ -287,7 +299,7 @@ def test_a_run_killed_during_a_rotation_has_its_table_stopped_by_its_guardian(be
         if proc.poll() is None:
             proc.kill()
     assert still_running(guardians, 30.0) == []            # it did its work and ended
-    assert all(bench.table.read_rate(axis) == 0.0 for axis in (1, 2, 3))
+    assert _comes_to_rest(bench)
     assert all(bench.table.axes[axis - 1].mode == "position" for axis in turning)
     log = (out / "guardian.log").read_text()
     assert f"(pid {proc.pid}) ended without stopping the table" in log
