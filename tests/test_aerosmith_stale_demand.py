@@ -146,3 +146,19 @@ def test_the_twin_catches_a_driver_that_stops_by_sto(bench):
         assert ("HOLD", 90.0) in _demands_since(bench, 0)
     finally:
         table.close()
+
+
+def test_closing_the_servo_is_followed_by_a_zero_rate(bench):
+    """close_interlocks(): SRV1, then JOG0 at once (what SRV1 servoes to is unverified: a
+    controller that kept the last JOG or MOV could resume it); an axis already enabled is left
+    alone."""
+    with _open(bench) as table:
+        table.move_to([45.0])
+        n = len(bench.table_frontend.demands)
+        table.close_interlocks()                       # enabled since power-up: nothing sent
+        assert _demands_since(bench, n) == []
+        table.open_interlocks()
+        table.close_interlocks()
+        assert _demands_since(bench, n) == [("JOG", 0.0)]
+        assert table.status().interlock_closed == (True,)
+        assert abs(angle_diff_deg(_at_rest(table), 45.0)) < 0.01
