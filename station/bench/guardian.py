@@ -80,12 +80,21 @@ def _settings(d: dict):
 
 
 def _log(path: str, text: str) -> None:
+    """Append to the capture's guardian.log; where the capture directory is not there (the run
+    died before it made it) to ``$TMPDIR/station-<uid>/guardian.log`` instead."""
+    import tempfile
+
     stamp = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
-    try:
-        with open(path, "a", encoding="utf-8") as f:
-            f.write(f"{stamp} {text}\n")
-    except OSError:
-        pass
+    fallback = os.path.join(tempfile.gettempdir(), f"station-{os.getuid()}", LOG_NAME)
+    for target in (path, fallback):
+        try:
+            if target == fallback:
+                os.makedirs(os.path.dirname(fallback), mode=0o700, exist_ok=True)
+            with open(target, "a", encoding="utf-8") as f:
+                f.write(f"{stamp} {text}\n")
+            return
+        except OSError:
+            continue
 
 
 def guard(spec: dict, stdin=None) -> int:
