@@ -1364,6 +1364,22 @@ def _reported_columns(result: FitResult) -> np.ndarray:
     return np.array(cols, dtype=int)
 
 
+def _noise_groups(result: FitResult) -> list:
+    """Each data group's scatter against its stated noise (station/estimate/noise_groups.py);
+    [] for a large model (its Jacobian is not taken dense)."""
+    model = result.model
+    if model.is_large:
+        return []
+    from station.estimate.noise_groups import variance_components
+
+    labels = model.row_labels(result.x)
+    r = model.residuals(result.x)
+    J = model.jacobian(result.x)
+    if len(labels) != len(r) or J.shape[0] != len(r):
+        return []
+    return variance_components(labels, r, np.asarray(J))
+
+
 def _noise_per_sample(model: Model, x: np.ndarray) -> dict:
     """The white noise per sample the fit was weighted with, in micro-g and deg/h whatever the
     capture's units: raw counts through the fitted scale factors (counts per m/s^2, per deg/s),
@@ -1413,6 +1429,19 @@ def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=())
         "notes": list(model.notes) + list(s.skipped) + list(notes),
         "converged": bool(getattr(model, "converged", True)),
     }
+    components = _noise_groups(result)
+    if components:
+        from station.estimate.noise_groups import words
+
+        fit_stats["noise_groups"] = components
+        fit_stats["notes"] += words(components)
+        redundancy = sum(c["redundancy"] for c in components)
+        fit_stats["data_redundancy"] = redundancy
+        if result.dof - redundancy > 0.5:
+            fit_stats["notes"].append(
+                f"the fit counts {result.dof} degrees of freedom, the data's own redundancy is "
+                f"{redundancy:.1f} (the rest is taken by priors): the chi-square verdict rests on "
+                f"{result.dof - redundancy:.1f} degrees of freedom that are not data")
     if getattr(model, "remaining_step", None) is not None:      # where the solver stopped short
         _, index, factors, _ = _reported_index(result, accel_unit, gyro_unit)
         with np.errstate(invalid="ignore", divide="ignore"):

@@ -87,6 +87,13 @@ def _verdict(cal: Calibration) -> None:
                                     f"freedom for method {fit.get('method')}): the model cannot be "
                                     "checked against the measurements"}
         return
+    redundancy = fit.get("data_redundancy")
+    if redundancy is not None and redundancy < 0.5:
+        fit["verdict"] = {"result": "untested",
+                          "reason": f"the data have no redundancy of their own ({redundancy:.2g}; the "
+                                    f"{dof} degrees of freedom counted are the priors'): the model "
+                                    "cannot be checked against the measurements"}
+        return
     reduced = chi2 / dof
     p_value = float(special.chdtrc(dof, chi2))       # P(chi2_dof > chi2); scipy.stats costs 0.5 s to import
     p_below = float(special.chdtr(dof, chi2))        # P(chi2_dof < chi2)
