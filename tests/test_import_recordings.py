@@ -326,3 +326,18 @@ def test_offset_binary_counts_with_and_without_nominal_scales(tmp_path, capsys):
         true_gyro_dph = np.hypot(truth.gyro_noise_sigma * 3600, lsb_dph / np.sqrt(12))
         assert np.all(np.abs(np.log(accel_ug / true_accel_ug)) < np.log(2)), (accel_ug, true_accel_ug)
         assert np.all(np.abs(np.log(gyro_dph / true_gyro_dph)) < np.log(2)), (gyro_dph, true_gyro_dph)
+
+
+def test_offset_binary_counts_with_too_few_poses_say_so_in_one_line(tmp_path, capsys):
+    """Three poses of offset-binary counts with nominal scales: the offset cannot be placed,
+    |f| is not checked (it raised UnboundLocalError), and the importer's own refusal of too few
+    poses is the one line, exit 2."""
+    truth, hs = session(seed=9, counts=COUNTS, poses=3)
+    hs.accel = hs.accel + 32768.0
+    hs.gyro = hs.gyro + 32768.0
+    log = write_csv(tmp_path / "u16.txt", hs, columns="none", delimiter=" ")
+    assert cli.main(["import", "csv", str(log), "--columns", "ax=0,ay=1,az=2,gx=3,gy=4,gz=5",
+                     "--accel-unit", "raw", "--gyro-unit", "raw", "--accel-nominal", str(COUNTS[0]),
+                     "--gyro-nominal", str(COUNTS[1]), "--rate-hz", "100", "-o", str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "3 static pose(s) found" in err

@@ -280,17 +280,12 @@ def check_units(rec: Recording, sections: list[Section], gravity_mps2: float) ->
     statics = [s for s in sections if s.kind == "static"]
     notes = []
     fa = rec.accel_factor
-    means = np.array([rec.accel[s.start:s.stop].mean(axis=0) for s in statics])
-    if fa is not None and len(statics):
-        centre = np.zeros(3)
-        if rec.accel_unit == "raw":     # counts may sit on an offset (offset binary: 32768)
-            centre = _sphere_centre(means)
-            if centre is None:
-                notes.append("static |f| not checked: raw counts about an unknown offset and too few "
-                             "distinct poses to find it")
-                fa = None
-        if fa is not None:
-            f = float(np.median(np.linalg.norm(means - centre, axis=1))) * fa
+    means, centre = pose_means(rec, statics)
+    if fa is not None and len(statics) and centre is None:      # raw counts: their offset not found
+        notes.append("static |f| not checked: raw counts about an unknown offset and too few "
+                     "distinct poses to find it")
+    elif fa is not None and len(statics):
+        f = float(np.median(np.linalg.norm(means, axis=1))) * fa
         if abs(f / gravity_mps2 - 1.0) > GRAVITY_TOLERANCE:
             unit = rec.accel_unit if rec.accel_unit != "raw" else f"raw x {rec.accel_nominal:g} m/s^2"
             guess = _guess_accel(f, gravity_mps2)
@@ -316,8 +311,10 @@ def check_units(rec: Recording, sections: list[Section], gravity_mps2: float) ->
         after = next((p for p in statics if p.start >= s.stop), None)
         if before is None or after is None:
             continue
-        u0 = rec.accel[before.start:before.stop].mean(axis=0)
-        u1 = rec.accel[after.start:after.stop].mean(axis=0)
+        if centre is None:          # raw counts about an offset not found: no direction to compare
+            break
+        u0 = rec.accel[before.start:before.stop].mean(axis=0) - centre     # gravity's direction
+        u1 = rec.accel[after.start:after.stop].mean(axis=0) - centre
         tilt = math.degrees(math.acos(np.clip(u0 @ u1 / np.linalg.norm(u0) / np.linalg.norm(u1), -1, 1)))
         if tilt < MIN_TILT_FOR_UNIT_CHECK_DEG:
             continue
@@ -481,16 +478,24 @@ def _still_bias(rec, statics) -> np.ndarray:
     return np.mean([rec.gyro[s.start:s.stop].mean(axis=0) for s in statics], axis=0)
 
 
-def distinct_attitudes(rec: Recording, statics: list) -> int | None:
+def pose_means(rec: Recording, statics: list):
+    """(the static poses' accelerometer means about their centre, the centre): zero in physical
+    units; for raw counts (offset binary or not) the centre of the sphere through them, and
+    (the raw means, None) when it cannot be placed."""
+    means = np.array([rec.accel[s.start:s.stop].mean(axis=0) for s in statics]).reshape(-1, 3)
+    if rec.accel_unit != "raw":
+        return means, np.zeros(3)
+    centre = _sphere_centre(means)
+    return (means, None) if centre is None else (means - centre, centre)
+
+
+def distinct_attitudes(rec: Recording, statics: list, centred=None) -> int | None:
     """How many distinct gravity directions the static poses hold (station.model.geometry:
-    within ATTITUDE_TOLERANCE_DEG), their accelerometer means taken about the centre of the
-    sphere through them for raw counts (offset binary); None when that centre cannot be found."""
-    means = np.array([rec.accel[s.start:s.stop].mean(axis=0) for s in statics])
-    if rec.accel_unit == "raw":
-        centre = _sphere_centre(means)
-        if centre is None:
-            return None
-        means = means - centre
+    within ATTITUDE_TOLERANCE_DEG), their accelerometer means taken about their centre
+    (pose_means, or ``centred``: its result); None when that centre cannot be found."""
+    means, centre = centred if centred is not None else pose_means(rec, statics)
+    if centre is None:
+        return None
     return int(distinct_directions(means).max()) + 1 if len(means) else 0
 
 
