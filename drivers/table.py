@@ -144,7 +144,7 @@ class TableLock:
         if self._mine:
             return
         held = self._held.get(self.path)
-        if held is not None and held[0] is not None:
+        if held is not None:                     # this process holds it already: counted
             held[1] += 1
             self._mine = True
             return
