@@ -12,12 +12,12 @@ from station.core.errors import UserError
 from station.estimate import estimate_capture
 from station.io.importers import imucal
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "imucal"
+DATA = Path(__file__).resolve().parent / "data" / "imucal"
 SESSION = DATA / "example_ferraris_session.csv"
 SECTIONS = DATA / "example_ferraris_session_list.json"
 ANNOTATED = DATA / "annotated_session.csv"
 
-pytestmark = pytest.mark.skipif(not SESSION.exists(), reason="shared/data/imucal not present")
+pytestmark = pytest.mark.skipif(not SESSION.exists(), reason="tests/data/imucal not present")
 
 
 def test_session_round_trip(tmp_path):

@@ -1,7 +1,7 @@
 """Continuous recordings in (station import csv / rosbag) and the gyro calibrated from hand turns
 of unknown angle between statics (station/estimate/hand_rotation.py, inside the least-squares
 model), against simulated hand sessions with known truth (sim_devices/hand.py) and the imucal
-recording in shared/data.
+recording in tests/data/imucal.
 
 Tolerances.  Every estimated parameter is compared with the truth at 4.5 times its reported 1-sigma:
 for 21 Gaussian errors the chance that any exceeds 4.5 sigma is 21 x 6.8e-6 = 1.4e-4, so a
@@ -27,7 +27,7 @@ from station.io.importers.rosbag import read_rosbag, write_imu_bag
 from station.model.calibration import Calibration, parameter_errors
 from station.simulate.dryrun import truth_calibration
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "imucal"
+DATA = Path(__file__).resolve().parent / "data" / "imucal"
 COUNTS = (8 * 9.80665 / 32768, 1000.0 / 32768)      # +-8 g and +-1000 deg/s in 16 bits
 SEED = 7
 
@@ -206,7 +206,7 @@ def test_imu_tk_pair_and_segments_file(tmp_path, capsys):
     assert cal.fit["hand_rotations"] == 9
 
 
-@pytest.mark.skipif(not DATA.exists(), reason="shared/data/imucal not present")
+@pytest.mark.skipif(not DATA.exists(), reason="tests/data/imucal not present")
 def test_imucal_session_by_the_csv_importer_agrees_with_imucal(tmp_path, capsys):
     out = tmp_path / "cap"
     assert cli.main(["import", "csv", str(DATA / "example_ferraris_session.csv"), "--preset", "imucal",

@@ -57,10 +57,10 @@ def test_missed_turns_are_named_first(tmp_path):
         assert abs(g["scatter"] ** 2 - 1.0) < 4.5 * np.sqrt(2.0 / g["redundancy"]), g
 
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "imucal"
+DATA = Path(__file__).resolve().parent / "data" / "imucal"
 
 
-@pytest.mark.skipif(not DATA.exists(), reason="shared/data/imucal not present")
+@pytest.mark.skipif(not DATA.exists(), reason="tests/data/imucal not present")
 def test_imucals_session_has_no_data_redundancy_and_is_untested(tmp_path):
     """imucal's session through `station import imucal`: six poses, the turns not usable. The
     fit counted 6 degrees of freedom and called the noise overestimated (reduced chi2 0.03);

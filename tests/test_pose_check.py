@@ -24,7 +24,7 @@ from station.model.calibration import parameter_errors
 from station.model.geometry import distinct_directions
 from station.simulate.dryrun import truth_calibration
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "imucal"
+DATA = Path(__file__).resolve().parent / "data" / "imucal"
 ACCEL = poses.NAMES
 
 
@@ -171,7 +171,7 @@ def test_too_few_distinct_attitudes_are_refused_at_import(tmp_path, capsys):
     assert "13 static poses found in only 5 distinct attitude(s)" in err and "at least 6" in err
 
 
-@pytest.mark.skipif(not DATA.exists(), reason="shared/data/imucal not present")
+@pytest.mark.skipif(not DATA.exists(), reason="tests/data/imucal not present")
 def test_imucal_session_13_poses_6_attitudes_turns_named(tmp_path, capsys):
     out = tmp_path / "cap"
     assert cli.main(["import", "csv", str(DATA / "example_ferraris_session.csv"), "--preset", "imucal",

@@ -10,13 +10,13 @@ from scipy.spatial.transform import Rotation, Slerp
 from station.io.scheme import load_scheme
 from station.io.segment_detect import detect, match, still_mask
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "imucal"
+DATA = Path(__file__).resolve().parent / "data" / "imucal"
 RATE = 102.4
 STATIC_UP = {"x_p": "xup", "x_a": "xdown", "y_p": "yup", "y_a": "ydown", "z_p": "zup", "z_a": "zdown"}
 TURNS = {"x_rot": "turnx", "y_rot": "turny", "z_rot": "turnz"}
 
 
-@pytest.mark.skipif(not DATA.exists(), reason="shared/data/imucal not present")
+@pytest.mark.skipif(not DATA.exists(), reason="tests/data/imucal not present")
 def test_the_imucal_session_is_split_where_its_authors_annotated_it():
     raw = np.genfromtxt(DATA / "example_ferraris_session.csv", delimiter=",", names=True)
     gyro = np.column_stack([raw["gyr_x"], raw["gyr_y"], raw["gyr_z"]])
