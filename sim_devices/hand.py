@@ -24,6 +24,12 @@ Physics (frames and conventions of :mod:`sim_devices.world`: ENU, C_bn takes ENU
   vanishes at its ends: what a hand-held turn adds beyond the white noise (g-sensitivity and
   vibration rectification while shaken, bias instability over the turn, bandwidth), so that
   the turn integrated from the gyro misses the true one by e_k.  The statics are untouched.
+* ``bias_instability``: (accelerometer ug, gyro deg/h) 1-sigma of a bias that wanders while the
+  session runs, each axis a first-order Gauss-Markov process of correlation time
+  ``bias_tau_s`` (exact discretisation b_k+1 = phi b_k + sqrt(1 - phi^2) sigma w_k, phi =
+  exp(-dt / tau), started in its stationary distribution), added at the sensor's input (to the
+  specific force and the rate it senses: an output bias to within the scale factor's error):
+  what makes real pose means scatter beyond their white noise (flicker over seconds).
 * ``counts``: the outputs in raw counts (m/s^2 and deg/s per count), rounded to integers.
 
 Returns the samples and the truth: the sample ranges of the still poses (between turns) and
@@ -35,6 +41,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import signal
 from scipy.spatial.transform import Rotation
 
 from . import world
@@ -72,7 +79,8 @@ def _pose(rng, faces: bool) -> Rotation:
 
 def hand_session(truth: Truth, seed: int, *, poses: int = 38, dwell_s=(2.5, 4.0), turn_s=(1.0, 2.0),
                  init_rest_s: float = 5.0, wobble_deg: float = 10.0, lift_m: float = 0.05,
-                 faces: bool = False, counts: tuple | None = None, turn_error_deg: float = 0.0) -> HandSession:
+                 faces: bool = False, counts: tuple | None = None, turn_error_deg: float = 0.0,
+                 bias_instability: tuple = (0.0, 0.0), bias_tau_s: float = 10.0) -> HandSession:
     rng = np.random.default_rng(seed)
     noise_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
     site = world.Site(truth.bench.latitude_deg, truth.bench.height_m)
@@ -137,6 +145,18 @@ def hand_session(truth: Truth, seed: int, *, poses: int = 38, dwell_s=(2.5, 4.0)
     w_ib = w_eb + C_bn.apply(site.earth_rate_enu) + np.vstack(pieces_e)     # rad/s
     t = np.arange(n) * dt
     temp = truth.temperature.at(t)
+    if any(bias_instability):
+        walk_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(3)[2])
+        phi = math.exp(-dt / bias_tau_s)
+        start = walk_rng.standard_normal(6)                        # stationary at the first sample
+        drive = walk_rng.standard_normal((n, 6)) * math.sqrt(1.0 - phi * phi)
+        b, _ = signal.lfilter([1.0], [1.0, -phi], drive, axis=0, zi=(phi * start)[None, :])
+        f_b = f_b + b[:, :3] * bias_instability[0] * world.MICRO_G
+        w_ib = w_ib + b[:, 3:] * np.radians(bias_instability[1] / 3600.0)
+        still = np.concatenate([np.arange(i, j) for i, j in statics])
+        walk_mean = b[still].mean(axis=0) * np.repeat(bias_instability, 3)     # ug, deg/h
+    else:
+        walk_mean = np.zeros(6)
     accel, gyro = truth.measure(f_b, np.degrees(w_ib), temp, noise_rng)
     if counts is not None:
         accel = np.round(accel / counts[0])
@@ -144,4 +164,7 @@ def hand_session(truth: Truth, seed: int, *, poses: int = 38, dwell_s=(2.5, 4.0)
     return HandSession(t=t, accel=accel, gyro=gyro, temp=temp, statics=statics,
                        attitudes=[r.inv() for r in R], counts=counts,
                        truth={"gravity_mps2": site.g, "latitude_deg": float(truth.bench.latitude_deg),
-                              "turn_errors_deg": np.array(turn_errors).reshape(-1, 3)})
+                              "turn_errors_deg": np.array(turn_errors).reshape(-1, 3),
+                              # the wandering bias' mean over the still samples (accel ug, gyro
+                              # deg/h): the session's own bias is the truth's plus this
+                              "bias_walk_mean": walk_mean})

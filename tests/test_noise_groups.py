@@ -40,13 +40,13 @@ def test_clean_captures_scatter_as_stated_and_name_no_group():
 
 
 def test_missed_turns_are_named_first(tmp_path):
-    """The same hand session (0.061 deg/s gyro LSB) with turns the gyro misses by 1 degree:
-    the hand turns scatter most (62 times their stated noise on seed 11) and are named; the fit
-    is not reweighted by these estimates yet, so the turns also push the poses' residuals
-    (the statics scatter too, and are named after them).  Without the turn errors nothing is
+    """The same hand session (0.061 deg/s gyro LSB) with turns the gyro misses by 1 degree,
+    weighted by their white noise alone (turn_sigma_deg=0: stated, not estimated): the hand
+    turns scatter most (62 times their stated noise on seed 11) and are named; they also push
+    the poses' residuals (the statics scatter too, and are named after them).  Without the turn errors nothing is
     named and every group scatters as stated."""
     truth, hs = coarse_session(turn_error_deg=1.0)
-    cal, _, _ = estimate_capture(import_session(tmp_path, hs, "missed"))
+    cal, _, _ = estimate_capture(import_session(tmp_path, hs, "missed"), turn_sigma_deg=0.0)
     groups = sorted(cal.fit["noise_groups"], key=lambda g: -g["scatter"])
     assert groups[0]["group"] == "hand turn" and groups[0]["scatter"] > 5 and groups[0]["p_value"] < 1e-6
     assert any(n.startswith("the hand turns (gravity after each turn) scatter") for n in cal.fit["notes"])
@@ -74,4 +74,4 @@ def test_imucals_session_has_no_data_redundancy_and_is_untested(tmp_path):
     assert cal.fit["data_redundancy"] < 0.5 and cal.fit["dof"] == 6
     assert cal.fit["verdict"]["result"] == "untested"
     assert "the data have no redundancy of their own" in cal.fit["verdict"]["reason"]
-    assert any("the chi-square verdict rests on" in n for n in cal.fit["notes"])
+    assert any("the chi-square verdict is taken on the data's" in n for n in cal.fit["notes"])

@@ -25,6 +25,9 @@ def add_parsers(sub) -> None:
                      help="leave out a segment that lost more than this share of its frames (default 0.01)")
     est.add_argument("--max-gap-s", type=float, default=1.0, metavar="S",
                      help="leave out a segment with a longer stretch without a frame, s (default 1)")
+    est.add_argument("--turn-sigma-deg", type=float, default=None, metavar="DEG",
+                     help="hand turns: their 1-sigma per turn, degrees (default: estimated from their "
+                          "scatter when it exceeds their white noise; stated, the turns are tested)")
     add_accept_poor_fit(est)
     est.set_defaults(func=cmd_estimate)
 
@@ -88,9 +91,11 @@ def cmd_estimate(args) -> int:
     reg = plugins.registry(args)
     if not (0 <= args.max_missing_fraction < 1 and args.max_gap_s > 0):
         raise UserError("--max-missing-fraction must be within [0, 1) and --max-gap-s > 0")
+    if args.turn_sigma_deg is not None and not (0 <= args.turn_sigma_deg < 90):
+        raise UserError(f"--turn-sigma-deg {args.turn_sigma_deg}: must be within [0, 90) degrees")
     cal, capture, provenance = estimate_capture(args.capture, args.method, plugins.effect_ids(reg, args.add), reg,
                                                 max_missing_fraction=args.max_missing_fraction,
-                                                max_gap_s=args.max_gap_s)
+                                                max_gap_s=args.max_gap_s, turn_sigma_deg=args.turn_sigma_deg)
     for w in capture.warnings:
         err.print(f"warning: {w}", markup=False, soft_wrap=True)
     target = Path(args.output) if args.output else capture.path / "calibration.yaml"

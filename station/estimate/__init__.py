@@ -135,16 +135,19 @@ def _finer_than(column: np.ndarray, step: float) -> bool:
     return len(head) > 1 and float(np.min(np.diff(head))) < step
 
 
-def estimate_with(capture: Capture, method: str = "auto", effects=(), registry=None) -> tuple[Calibration, str]:
+def estimate_with(capture: Capture, method: str = "auto", effects=(), registry=None, *,
+                  turn_sigma_deg: float | None = None) -> tuple[Calibration, str]:
     """Estimate from a capture already read; returns the calibration and the method used.
 
     ``effects``: ids of effects to add to the model (least squares only), created by ``registry``
     (station.model.registry.EffectRegistry: the library, entry points, loaded plugins).
+    ``turn_sigma_deg``: the hand turns' stated 1-sigma per turn, degrees (None: estimated from
+    their scatter; station/estimate/noise_model.py).
     A fit that breaks down numerically (LinAlgError, overflow) is a UserError naming the capture."""
     from station.core.errors import UserError
 
     try:
-        return _estimate_with(capture, method, effects, registry)
+        return _estimate_with(capture, method, effects, registry, turn_sigma_deg)
     except (np.linalg.LinAlgError, OverflowError) as e:
         raise UserError(f"{capture.path / 'manifest.yaml'}: the fit breaks down numerically "
                         f"({type(e).__name__}: {str(e)[:80]}): the capture cannot determine the model "
@@ -152,7 +155,7 @@ def estimate_with(capture: Capture, method: str = "auto", effects=(), registry=N
                         "range)") from None
 
 
-def _estimate_with(capture: Capture, method: str, effects, registry) -> tuple[Calibration, str]:
+def _estimate_with(capture: Capture, method: str, effects, registry, turn_sigma_deg=None) -> tuple[Calibration, str]:
     from station.core.errors import UserError
     from station.model.registry import EffectRegistry
 
@@ -168,7 +171,7 @@ def _estimate_with(capture: Capture, method: str, effects, registry) -> tuple[Ca
         from station.estimate import poses
 
         # the joint fit, checked against the poses' own accelerometer fit (station/estimate/poses.py)
-        return poses.estimate(capture, instances), method
+        return poses.estimate(capture, instances, turn_sigma_deg=turn_sigma_deg), method
     if method == "zhang2010":
         from station.estimate import zhang2010
 
@@ -235,7 +238,8 @@ def summarise_while_importing(capture, check_segment=None, notes: dict | None = 
 
 def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
                      max_missing_fraction: float = MAX_MISSING_FRACTION,
-                     max_gap_s: float = MAX_GAP_S) -> tuple[Calibration, Capture, dict]:
+                     max_gap_s: float = MAX_GAP_S, turn_sigma_deg: float | None = None
+                     ) -> tuple[Calibration, Capture, dict]:
     """Read a capture, estimate, judge the fit (station.estimate.verdict: verdict, honest 1-sigma,
     parameters not determined) and return the calibration, the capture and its provenance."""
     capture = read_capture(path, load_data=False)
@@ -261,7 +265,7 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
         capture.load_samples()
         check_resolution(capture)
         excluded = exclude_lossy_segments(capture, max_missing_fraction, max_gap_s)
-    cal, method = estimate_with(capture, resolved, effects, registry)
+    cal, method = estimate_with(capture, resolved, effects, registry, turn_sigma_deg=turn_sigma_deg)
     from station.estimate.verdict import judge
 
     cal.fit.setdefault("notes", []).extend(excluded)

@@ -30,6 +30,8 @@ complex-step safe (docs/method-lsq.md, "How the fit is computed").
 """
 from __future__ import annotations
 
+import copy
+import dataclasses
 import warnings
 from dataclasses import dataclass, field
 
@@ -40,7 +42,7 @@ from scipy.spatial.transform import Rotation
 from station.core import units
 from station.model.calibration import Calibration, misalignment_angles
 from station.core.errors import UserError
-from station.estimate import hand_rotation, zhang2010
+from station.estimate import hand_rotation, noise_model, zhang2010
 from station.estimate.summaries import Summaries, summarise
 from station.model.geometry import cross, normalised, positive_part, tangent_basis
 from station.model.effect import Effect, SampleContext
@@ -202,6 +204,12 @@ class Model:
         if like is not None:
             start = like.start
         self.s, self.effects = s, effects
+        self.noise = noise_model.of(s)
+        self.turn_sigma_deg = like.turn_sigma_deg if like is not None else 0.0
+        # variance added to every pose mean (accel 3, gyro 3, summary units^2; its gyro part also
+        # to the gyro integrals, times T^2): the noise model's terms, raised by lsq.fit where a
+        # group is reweighted (noise_model: the bias moving between poses)
+        self.pose_extra = (like.pose_extra if like is not None else self.noise.pose_variance()).copy()
         self.start = start if start is not None else _start(s)
         self.notes = list(self.start.notes)     # the start is shared: never appended to
         starts = [x.t_mid_s for x in (*s.statics, *s.rotations) if np.isfinite(x.t_mid_s)]
@@ -278,6 +286,7 @@ class Model:
                     x[sl] = like.x0[like.layout[name]]
             self.static_ref, self.axis_ref = like.static_ref, like.axis_ref
             self.axis_basis, self.gyro_whiten = like.axis_basis, like.gyro_whiten
+            self._rotation_axes_raw = like._rotation_axes_raw
             if self.hands:
                 self._initialise_hands(st)
             self.x0, self.x0_plain = x, x.copy()
@@ -321,16 +330,30 @@ class Model:
             x[L[f"phase{i}"].start] = np.arctan2(v @ e2, v @ e1)
         self.x0_plain = x.copy()        # the start before the Earth-rate phases are started
         self._earth_phase_start(x)
-        # gyro integral whitening: white noise plus the encoder error along the axis
-        self.gyro_whiten = []
-        for r in s.rotations:
-            axis_raw = Mg @ self.axis_ref[r.group]
-            cov = np.diag(s.gyro_sigma**2 * r.duration_s / s.sample_rate_hz)
-            cov += s.table_angle_sigma_deg**2 * np.outer(axis_raw, axis_raw)
-            self.gyro_whiten.append(np.linalg.inv(np.linalg.cholesky(cov)))
+        self._rotation_axes_raw = [Mg @ self.axis_ref[r.group] for r in s.rotations]
+        self._gyro_integral_whitening()
         if self.hands:
             self._initialise_hands(st)
         self.x0 = x
+
+    def _gyro_integral_whitening(self):
+        """The rotations' gyro integral whitening: white noise, the bias' instability over the
+        window (pose_extra's gyro part times T^2) and the encoder error along the axis."""
+        s = self.s
+        self.gyro_whiten = []
+        for r, axis_raw in zip(s.rotations, self._rotation_axes_raw):
+            cov = np.diag(s.gyro_sigma**2 * r.duration_s / s.sample_rate_hz + self.pose_extra[3:] * r.duration_s**2)
+            cov += s.table_angle_sigma_deg**2 * np.outer(axis_raw, axis_raw)
+            self.gyro_whiten.append(np.linalg.inv(np.linalg.cholesky(cov)))
+
+    def set_pose_extra(self, extra) -> None:
+        """Set the variance added to every pose mean (6,) and rebuild the weights that use it."""
+        self.pose_extra = np.asarray(extra, float).copy()
+        self._gyro_integral_whitening()
+        if self.hands:
+            self._hand_weights()
+        self._prepare()
+        self.refresh()
 
     def _earth_phase_start(self, x):
         """Start the Earth-rate phases chi of the rotations that end elsewhere than they start
@@ -414,9 +437,8 @@ class Model:
         self.integrator = hand_rotation.Integrator(self.hands)
         ups = [ref.apply(UP) if self.with_latitude else ref for ref in self.static_ref]
         self.hand_basis = np.array([tangent_basis(ups[h.after]) for h in self.hands])     # (H,2,3)
-        per_sample_dps = s.gyro_sigma / np.abs(st.kg)
+        self._hand_kg = np.abs(st.kg)
         omega = np.degrees(EARTH_RATE_RAD)
-        var = np.array([np.mean(per_sample_dps**2) * h.dt**2 * h.samples for h in self.hands])
         # the Earth rate not modelled, r: all of it without the latitude (a random direction:
         # r^2/3 per axis), the horizontal part when only the vertical one is (r^2/2 per
         # horizontal axis); its turn over T moves the up by its component across the up
@@ -426,23 +448,42 @@ class Model:
             unmodelled, share = omega * np.cos(np.radians(s.latitude_deg)), 0.5
         else:
             unmodelled, share = omega, 1.0 / 3.0
-        var = var + np.array([share * (unmodelled * h.duration_s) ** 2 for h in self.hands])
-        self.hand_sigma_rad = np.radians(np.sqrt(var))
+        self._hand_earth_var = np.array([share * (unmodelled * h.duration_s) ** 2 for h in self.hands])
         self.hand_duration = np.array([h.duration_s for h in self.hands])
         # without the full attitudes the poses' gyro means give the bias, the unmodelled Earth
         # rate as noise: covariance white/N + M_g C M_g^T, C = r^2/3 I, or r^2/2 (I - u u^T)
         # across the pose's up u (fixed at the start's values)
         M_g = _start_gyro_matrix(st)
-        self.static_gyro_whiten = []
+        self._hand_static_earth = []
         for j, stat in enumerate(s.statics):
             u = ups[j]
             C = (share * unmodelled**2 * (np.eye(3) - np.outer(u, u)) if self.hand_earth_vertical
                  else share * unmodelled**2 * np.eye(3))
-            cov = np.diag(s.gyro_sigma**2 / stat.samples) + M_g @ C @ M_g.T
-            self.static_gyro_whiten.append(np.linalg.inv(np.linalg.cholesky(cov)))
+            self._hand_static_earth.append(M_g @ C @ M_g.T)
+        self._hand_weights()
         if self.hand_earth_vertical:
             self.notes.append("Earth rate: its vertical component modelled (latitude known), its "
                               "horizontal one as noise: the gyros cannot see the poses' heading")
+
+    def _hand_weights(self):
+        """The turns' variance (deg^2: white noise integrated over the turn, the bias' instability
+        over it, the Earth rate not modelled) and the poses' gyro whitening (white over the
+        samples, pose_extra, the Earth rate not modelled: M_g C M_g^T)."""
+        s = self.s
+        per_sample_dps = s.gyro_sigma / self._hand_kg
+        var = np.array([np.mean(per_sample_dps**2) * h.dt**2 * h.samples for h in self.hands])
+        var = var + np.mean(self.pose_extra[3:] / self._hand_kg**2) * self.hand_duration**2 + self._hand_earth_var
+        self._hand_var_deg2 = var
+        self.set_turn_sigma(self.turn_sigma_deg)
+        self.static_gyro_whiten = [
+            np.linalg.inv(np.linalg.cholesky(np.diag(s.gyro_sigma**2 / stat.samples + self.pose_extra[3:]) + earth))
+            for stat, earth in zip(s.statics, self._hand_static_earth)]
+
+    def set_turn_sigma(self, sigma_deg: float) -> None:
+        """The hand turns' explicit 1-sigma per turn (deg, noise_model), added to each turn's
+        white-noise and bias-instability variance."""
+        self.turn_sigma_deg = float(sigma_deg)
+        self.hand_sigma_rad = np.radians(np.sqrt(self._hand_var_deg2 + self.turn_sigma_deg**2))
 
     # --- pieces -----------------------------------------------------------------------------
     def _matrices(self, x):
@@ -655,6 +696,14 @@ class Model:
         stat, rots = s.statics, s.rotations
         self._st_data = np.array([np.concatenate([q.accel, q.gyro]) for q in stat]).reshape(S, 6)
         self._st_root_n = np.sqrt(np.array([q.samples for q in stat], float)).reshape(S, 1)
+        # each pose mean's weight: white noise over its samples and the noise model's terms per
+        # pose (noise_model: quantised mean, bias instability); root n / sigma when they are 0
+        extra = self.pose_extra
+        sigma = np.concatenate([s.accel_sigma, s.gyro_sigma]).astype(float)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            self._st_weight = self._st_root_n / np.sqrt(sigma**2 + self._st_root_n**2 * extra)     # (S, 6)
+            self._st_norm_weight = self._st_root_n[:, 0] / np.sqrt(np.mean(s.gyro_sigma)**2
+                                                                  + self._st_root_n[:, 0]**2 * np.mean(extra[3:]))
         width = 3 if self.with_latitude else 2
         self._st_cols = np.array([np.arange(L[f"static{j}"].start, L[f"static{j}"].stop) for j in range(S)],
                                  int).reshape(S, width)
@@ -874,10 +923,9 @@ class Model:
             a, w = self._add_effects(X, a, w, f_p, w_p, Ma, Mg, l, w_k, wdot_k)
         blocks = []
         # statics
-        root_n = self._st_root_n
-        blocks.append((self._st_data[:, :3] - a[:, :S]) * root_n / s.accel_sigma)
+        blocks.append((self._st_data[:, :3] - a[:, :S]) * self._st_weight[:, :3])
         if self.with_latitude:
-            blocks.append((self._st_data[:, 3:] - w[:, :S]) * root_n / s.gyro_sigma)
+            blocks.append((self._st_data[:, 3:] - w[:, :S]) * self._st_weight[:, 3:])
         elif self.hands:    # the bias, the unmodelled Earth rate within the noise
             blocks.append(np.einsum("sij,bsj->bsi", self._st_gyro_whiten, self._st_data[:, 3:] - w[:, :S]))
         else:               # only |Omega_E| known: the norm of the compensated rate (the
@@ -889,7 +937,7 @@ class Model:
                 Mg_inv = np.linalg.pinv(Mg)
             rate = np.sqrt(np.einsum("bis,bis->bs", *2 * [Mg_inv @ (self._st_data[:, 3:] - b_g[:, None, :])
                                                            .transpose(0, 2, 1)]))
-            blocks.append(((rate - self.omega_dps) * root_n[:, 0] / np.mean(s.gyro_sigma))[..., None])
+            blocks.append(((rate - self.omega_dps) * self._st_norm_weight)[..., None])
         table = self.attitudes == "table"
         if table:
             C_mount = matrix_from_rotvec(X[:, L["mounting_rotation"]])
@@ -1267,15 +1315,39 @@ def _blind_effect_parameters(model: Model, reduced: _Reduced) -> list:
 
 
 def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "auto",
-        like: Model | None = None) -> FitResult:
+        like: Model | None = None, turn_sigma_deg: float | None = None, pose_extra=None) -> FitResult:
     """Fit the model.  An effect parameter this capture cannot reveal (aliased with others, or
     1-sigma above its typical size) gets a prior of zero +/- its typical size, is named in
     ``model.unobservable``, and the fit is repeated: the parameters the capture does reveal then
     carry the uncertainty of the ones it does not, instead of a bias from fixing them.  Which
     ones are blind barely depends on where the fit ends, so the start is examined first.
     ``like``: a model of the same summaries with other effects (a refit that adds or removes
-    one), whose start and initial nuisances are taken (Model's like: the same fit, less work)."""
+    one), whose start and initial nuisances are taken (Model's like: the same fit, less work).
+    ``turn_sigma_deg``: the hand turns' 1-sigma per turn (station/estimate/noise_model.py), or
+    None: estimated from the turns' scatter when they scatter beyond their white noise.
+    ``pose_extra``: the variance added to every pose mean (6,), another fit's (the poses' own fit
+    is weighted as the joint one was: station/estimate/poses.py), not estimated here.  Else,
+    when the poses' halves show a sensor's bias moving (noise_model), its static means' scatter
+    between the poses is estimated: the accelerometers' from the poses alone (a fit of the
+    statics only: no turn or rotation can push them there, and the pose check compares the
+    accelerometer block with that fit), the gyros' in the joint fit (without turns or rotations
+    the poses see the gyro only through the Earth rate's magnitude)."""
     model = Model(s, list(effects or []), attitudes, like=like)
+    model.turn_source, model.turn_scatter_before, model.reweighted = None, None, {}
+    statics = [] if pose_extra is not None else _static_groups(model)
+    if "static accel" in statics and (s.rotations or s.hand_rotations):
+        own = fit(dataclasses.replace(s, rotations=[], hand_rotations=[], skipped=[]),
+                  copy.deepcopy(list(effects or [])), attitudes)
+        pose_extra = model.pose_extra.copy()
+        pose_extra[:3] = own.model.pose_extra[:3]
+        if "static accel" in own.model.reweighted:
+            model.reweighted["static accel"] = own.model.reweighted["static accel"]
+        statics = [g for g in statics if g != "static accel"]
+    if pose_extra is not None:
+        model.set_pose_extra(pose_extra)
+    if model.hands and turn_sigma_deg is not None:
+        model.set_turn_sigma(turn_sigma_deg)
+        model.turn_source = "stated"
     model.unobservable = []
     if not s.rotations and not s.hand_rotations:
         # nothing turned by a known angle: the gyro block is held only by wide priors (so the fit
@@ -1302,6 +1374,7 @@ def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "aut
             model.unobservable.append(p.name)
         model.refresh()
         x, cov, r, reduced = _solve(model, model.x0)
+    x, cov, r, reduced = _reweight(model, x, cov, r, reduced, turns=turn_sigma_deg is None, statics=statics)
     r = r[model.data_rows]      # the weak priors on nuisance angles are not data
     # gravity along an axis turned only by hand is set by its weak prior, not by the data
     blind_kappa = sum(1 for k in range(s.groups) if not any(rot.steady for rot in s.rotations if rot.group == k))
@@ -1311,6 +1384,79 @@ def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "aut
     return FitResult(x=x, covariance=cov, model=model, chi2=float(r @ r), dof=dof, residuals=r,
                      rank_deficient=reduced.full(reduced.svd.null_columns()),
                      covariance_columns=reduced.columns if model.is_large else None)
+
+
+def _static_groups(model: Model) -> list:
+    """The static groups whose noise may be estimated from their scatter: a sensor whose poses'
+    halves show its bias moving within a pose (noise_model.PoseInstability.sensor_p)."""
+    inst = model.noise.instability
+    if inst is None:
+        return []
+    limit = noise_model.P_TERM / 2.0
+    return [g for g, p in zip(("static accel", "static gyro"), inst.sensor_p) if p < limit]
+
+
+def _reweight(model: Model, x, cov, r, reduced, turns: bool, statics: list):
+    """Groups whose noise is estimated from their own scatter (noise_model): the hand turns'
+    1-sigma per turn (``turns``: not stated), and a sensor's static means when its poses' halves
+    show that its bias moves within a pose (the mechanism seen in data the fit does not use; its
+    size between poses, over the session, is what the group's scatter says).  While such a group
+    scatters beyond its stated noise (p < noise_groups.P_NAMED), its variance is raised by what
+    its variance component says is missing (the harmonic mean of its rows' variances times
+    s^2 - 1: exact when they are equal) and the model refitted from where it is.  Every other
+    group keeps its stated noise and is tested against it.  ``statics``: the static groups that
+    may be reweighted here (_static_groups, less those estimated elsewhere)."""
+    from station.estimate.noise_groups import P_NAMED, variance_components
+
+    def components(x):
+        J = None if model.is_large else np.asarray(model.jacobian(x))
+        out = variance_components(model.row_labels(x), model.residuals(x), J, parameters=model.layout.size)
+        return {c["group"]: c for c in out}
+
+    eligible = (["hand turn"] if model.hands and turns else []) + list(statics)
+    if not eligible:
+        return x, cov, r, reduced
+    comps = components(x)
+    active = [g for g in eligible if g in comps and comps[g].get("p_value", 1.0) < P_NAMED and comps[g]["scatter"] > 1.0]
+    model.reweighted.update({g: {"scatter_before": float(comps[g]["scatter"])} for g in active})
+    if "hand turn" in active:
+        model.turn_source, model.turn_scatter_before = "estimated", float(comps["hand turn"]["scatter"])
+    if not active:
+        return x, cov, r, reduced
+    s = model.s
+    base, turn = model.pose_extra.copy(), 0.0
+    extra = base.copy()
+    samples = np.array([st.samples for st in s.statics], float)
+    sigma = np.concatenate([s.accel_sigma, s.gyro_sigma]).astype(float)
+    for _ in range(noise_model.TURN_ITERATIONS):
+        ratios = {g: comps.get(g, {}).get("scatter", 1.0) ** 2 for g in active}
+        if all(abs(v - 1.0) < noise_model.TURN_TOLERANCE for v in ratios.values()):
+            break
+        for g, s2 in ratios.items():
+            if g == "hand turn":
+                current = model._hand_var_deg2 + turn
+                turn = max(0.0, turn + (s2 - 1.0) * len(current) / float(np.sum(1.0 / current)))
+            else:
+                k = slice(0, 3) if g == "static accel" else slice(3, 6)
+                current = (sigma[k][None, :] ** 2 / samples[:, None] + extra[k][None, :]).ravel()
+                step = (s2 - 1.0) * len(current) / float(np.sum(1.0 / current))
+                extra[k] = np.maximum(base[k], extra[k] + step)
+        if model.hands:
+            model.set_turn_sigma(np.sqrt(turn))
+        model.set_pose_extra(extra)
+        x, cov, r, reduced = _solve(model, x)
+        comps = components(x)
+    for g in active:        # a group whose noise needed nothing added keeps its test
+        if g == "hand turn":
+            if turn <= 0.0:
+                del model.reweighted[g]
+            continue
+        k = slice(0, 3) if g == "static accel" else slice(3, 6)
+        if np.all(extra[k] <= base[k]):
+            del model.reweighted[g]
+        else:
+            model.reweighted[g]["extra"] = (extra[k] - base[k]).tolist()
+    return x, cov, r, reduced
 
 
 def reported(result: FitResult, accel_unit: str, gyro_unit: str):
@@ -1377,7 +1523,35 @@ def _noise_groups(result: FitResult) -> list:
     J = model.jacobian(result.x)
     if len(labels) != len(r) or J.shape[0] != len(r):
         return []
-    return variance_components(labels, r, np.asarray(J))
+    return variance_components(labels, r, np.asarray(J), parameters=model.layout.size)
+
+
+def _noise_model_block(model: Model, x: np.ndarray, tested: dict | None) -> dict:
+    """fit.noise_model (station/estimate/noise_model.py) in µg, °/h and degrees."""
+    s, L = model.s, model.layout
+    accel = np.full(3, 1.0 / units.UG_MPS2)
+    if getattr(s, "accel_raw", False):
+        accel = accel / np.abs(x[L["accel_scale"]])
+    gyro = np.full(3, 3600.0)
+    if getattr(s, "gyro_raw", False):
+        if s.rotations or model.hands:
+            gyro = gyro / np.abs(x[L["gyro_scale"]])
+        elif getattr(s, "gyro_nominal", None):
+            gyro = gyro / s.gyro_nominal
+        else:
+            gyro = None
+    turn = None
+    if model.hands and getattr(model, "turn_source", None) is not None:
+        turn = {"sigma": model.turn_sigma_deg, "source": model.turn_source,
+                "scatter_before": model.turn_scatter_before}
+    seconds = float(np.median([st.duration_s for st in s.statics])) if s.statics else 0.0
+    between = {}
+    for group, entry in getattr(model, "reweighted", {}).items():
+        if "extra" in entry:
+            factor = accel if group == "static accel" else (gyro if gyro is not None else np.ones(3))
+            between[group] = {"scatter_before": entry["scatter_before"],
+                              "sigma": (np.sqrt(np.maximum(entry["extra"], 0.0)) * factor).tolist()}
+    return noise_model.describe(model.noise, accel, gyro, seconds, turn, tested, between)
 
 
 def _noise_per_sample(model: Model, x: np.ndarray) -> dict:
@@ -1430,6 +1604,7 @@ def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=())
         "converged": bool(getattr(model, "converged", True)),
     }
     components = _noise_groups(result)
+    tested = None
     if components:
         from station.estimate.noise_groups import words
 
@@ -1440,8 +1615,16 @@ def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=())
         if result.dof - redundancy > 0.5:
             fit_stats["notes"].append(
                 f"the fit counts {result.dof} degrees of freedom, the data's own redundancy is "
-                f"{redundancy:.1f} (the rest is taken by priors): the chi-square verdict rests on "
-                f"{result.dof - redundancy:.1f} degrees of freedom that are not data")
+                f"{redundancy:.1f} (the rest is taken by priors): the chi-square verdict is taken "
+                "on the data's")
+        # the verdict's test: the data's chi2 on the data's redundancy, less the groups whose
+        # noise was estimated from their own scatter (they carry no test of the model)
+        estimated = [c for c in components if c["group"] in getattr(model, "reweighted", {})]
+        tested = {"chi2": result.chi2 - sum(c["chi2"] for c in estimated),
+                  "redundancy": redundancy - sum(c["redundancy"] for c in estimated),
+                  "left_out": [c["group"] for c in estimated]}
+    fit_stats["noise_model"] = _noise_model_block(model, x, tested)
+    fit_stats["notes"] += noise_model.words(model.noise, fit_stats["noise_model"])
     if getattr(model, "remaining_step", None) is not None:      # where the solver stopped short
         _, index, factors, _ = _reported_index(result, accel_unit, gyro_unit)
         with np.errstate(invalid="ignore", divide="ignore"):

@@ -1,5 +1,7 @@
-"""How much each data group scatters against the noise it was weighted with (issue 24, item 1:
-a first part, the estimates; the fit's weights are not changed by them yet).
+"""How much each data group scatters against the noise it was weighted with (issue 24, item 1).
+The hand turns' group is reweighted by it (an explicit turn-angle 1-sigma: station/estimate/
+noise_model.py and lsq.fit); every other group is tested against its stated noise and named
+when it scatters beyond it.
 
 The residuals of a least-squares fit are whitened by the noise model (white noise per sample from
 the statics' first differences, the rotations' arcs, the hand turns' integration): each should be
@@ -33,6 +35,18 @@ GROUP_WORDS = {"static accel": "the static accelerometer means",
                "hand turn": "the hand turns (gravity after each turn)"}
 
 
+CAUSES = {
+    "static accel": ("a missing effect (station diagnose), or a bias that moves between the poses although "
+                     "their halves do not show it moving (then record longer poses, or fewer and longer)"),
+    "static gyro": ("a missing effect (g-sensitivity: station diagnose), or a bias that moves between the "
+                    "poses although their halves do not show it moving (then record longer poses)"),
+    "rotation accel": "a missing effect or a bench fault (station diagnose shows which segments)",
+    "rotation gyro": "a missing effect, an encoder angle off, or a table that slipped (station diagnose)",
+    "hand turn": ("the turns miss by more than their stated 1-sigma (--turn-sigma-deg; without it the "
+                  "station estimates it from their scatter)"),
+}
+
+
 def group_of(kind: str, quantity: str) -> str | None:
     """The data group of a residual row from its label (lsq.Model.row_labels); None: not data."""
     if kind == "static":
@@ -57,12 +71,14 @@ def leverages(J: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", U[:, keep], U[:, keep])
 
 
-def variance_components(labels, residuals: np.ndarray, J: np.ndarray) -> list[dict]:
+def variance_components(labels, residuals: np.ndarray, J: np.ndarray | None, parameters: int | None = None) -> list[dict]:
     """Per data group: rows, redundancy, chi2, the scatter factor s_g and its p-value.
 
     ``labels``: lsq.Model.row_labels of every row of ``J`` (and ``residuals``), priors included;
-    the prior rows take their share of the leverage but belong to no group."""
-    h = leverages(J)
+    the prior rows take their share of the leverage but belong to no group.  ``J`` None (a large
+    model, whose Jacobian is not taken dense): every row takes the same share of the
+    ``parameters`` (an approximation, used only to reweight the hand turns)."""
+    h = leverages(J) if J is not None else np.full(len(residuals), (parameters or 0) / max(len(residuals), 1))
     groups: dict[str, list[int]] = {}
     for i, (_, kind, quantity, _) in enumerate(labels):
         g = group_of(kind, quantity)
@@ -88,6 +104,5 @@ def words(components: list[dict]) -> list[str]:
         if c.get("p_value", 1.0) < P_NAMED and c["scatter"] > 1.0:
             notes.append(f"{GROUP_WORDS.get(c['group'], c['group'])} scatter {c['scatter']:.3g} times their "
                          f"stated noise (chi2 {c['chi2']:.4g} on a redundancy of {c['redundancy']:.1f}, "
-                         f"p = {c['p_value']:.2g}): their noise is understated (for hand turns: the "
-                         "operator's turns, quantisation, bias instability during a turn)")
+                         f"p = {c['p_value']:.2g}): " + CAUSES.get(c["group"], "a missing effect or an understated noise"))
     return notes

@@ -86,15 +86,19 @@ def attitudes(s, result: lsq.FitResult | None = None) -> tuple[int, int]:
 
 # ------------------------------------------------------------------------------------ fits
 
-def pose_only(s, attitudes_mode: str, hold_misalignment: bool = False, effects=()) -> lsq.FitResult:
+def pose_only(s, attitudes_mode: str, hold_misalignment: bool = False, effects=(), pose_extra=None) -> lsq.FitResult:
     """The fit of the static poses alone (rotations and turns left out), in the joint model's
     attitude mode and with its effects (copies: an effect is set up for the summaries it
-    models); the misalignments held at 0 when asked (prior rows of HELD_PRIOR_RAD)."""
+    models) and its poses' weights (``pose_extra``: the joint model's, so that the two fits
+    weight the shared static data alike, as the comparison's covariance assumes); the
+    misalignments held at 0 when asked (prior rows of HELD_PRIOR_RAD)."""
     sp = dataclasses.replace(s, rotations=[], hand_rotations=[], skipped=[])
     effects = copy.deepcopy(list(effects))
     if not hold_misalignment:
-        return lsq.fit(sp, effects, attitudes_mode)
+        return lsq.fit(sp, effects, attitudes_mode, pose_extra=pose_extra)
     model = lsq.Model(sp, effects, attitudes_mode)
+    if pose_extra is not None:
+        model.set_pose_extra(pose_extra)
     model.unobservable = []
     L = model.layout
     held = 0
@@ -233,7 +237,7 @@ def check(s, joint: lsq.FitResult, accel_unit: str) -> tuple[dict, lsq.FitResult
     poses, distinct = attitudes(s, joint)
     mode = joint.model.attitudes
     few = mode == "unknown" and distinct < MIN_ATTITUDES
-    pose = pose_only(s, mode, hold_misalignment=few, effects=joint.model.effects)
+    pose = pose_only(s, mode, hold_misalignment=few, effects=joint.model.effects, pose_extra=joint.model.pose_extra)
     k2 = max(1.0, pose.chi2 / pose.dof) if pose.dof > 0 else 1.0
     cov_pose = pose.covariance_of(ACCEL_COLUMNS) * k2
     cov_joint = joint.covariance_of(ACCEL_COLUMNS) * k2
@@ -304,10 +308,12 @@ def check(s, joint: lsq.FitResult, accel_unit: str) -> tuple[dict, lsq.FitResult
     return {**record, "notes": notes}, refit
 
 
-def estimate(capture, effects=None, attitudes_mode: str = "auto", table_angle_arcsec=None):
-    """lsq.estimate with the pose check: the calibration to write, ``fit.pose_check`` said."""
+def estimate(capture, effects=None, attitudes_mode: str = "auto", table_angle_arcsec=None,
+             turn_sigma_deg: float | None = None):
+    """lsq.estimate with the pose check: the calibration to write, ``fit.pose_check`` said.
+    ``turn_sigma_deg``: the hand turns' stated 1-sigma per turn (None: estimated, lsq.fit)."""
     s = summarise(capture, table_angle_arcsec=table_angle_arcsec)
-    joint = lsq.fit(s, effects, attitudes_mode)
+    joint = lsq.fit(s, effects, attitudes_mode, turn_sigma_deg=turn_sigma_deg)
     au, gu = capture.imu.accel_unit, capture.imu.gyro_unit
     poses, distinct = attitudes(s, joint)
     if not (s.rotations or s.hand_rotations) or len(s.statics) < 2:

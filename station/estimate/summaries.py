@@ -39,6 +39,11 @@ class StaticSummary:
     t_mid_s: float = float("nan")   # mean sample time (the capture's clock), s
     index: int = -1                 # position of the segment in the capture
     temp_rate_c_per_s: float = 0.0  # temperature slope over the segment, deg C/s
+    # the mean of the first half of the samples less that of the second (accel 3, gyro 3): under
+    # white noise N(0, sigma^2 (1/n1 + 1/n2)); what exceeds that is the bias moving within the
+    # pose (station/estimate/noise_model.py: bias instability over a pose)
+    half_diff: np.ndarray | None = None
+    lsb: np.ndarray | None = None   # (6,) output step of each column (0: not quantised, see _lsb)
 
 
 @dataclass
@@ -237,6 +242,28 @@ def _half_sum_sq_diff(x):
         step = x[i + 1:j + 1] - x[i:j]
         total += np.einsum("ij,ij->j", step, step)
     return total / 2
+
+
+def _half_difference(x) -> np.ndarray:
+    """Mean of the first half of the rows of x (N, k) less that of the second half."""
+    h = len(x) // 2
+    return _column_means(x[:h]) - _column_means(x[h:2 * h]) if h >= 1 else np.full(x.shape[1], np.nan)
+
+
+def _lsb(x, head: int = 2000) -> np.ndarray:
+    """The output step of each column of x (N, k) from its first ``head`` samples: the smallest
+    gap between distinct values when every gap is a whole multiple of it (within 2 %), else 0
+    (not quantised on a grid the samples show: floating-point output)."""
+    out = np.zeros(x.shape[1])
+    for k in range(x.shape[1]):
+        values = np.unique(x[:head, k])
+        if len(values) < 2:
+            continue
+        gaps = np.diff(values)
+        q = float(gaps.min())
+        if q > 0 and np.all(np.abs(gaps / q - np.round(gaps / q)) < 0.02):
+            out[k] = q
+    return out
 
 
 def _harmonic_basis(phase):
@@ -444,7 +471,9 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
                 statics.append(StaticSummary(seg.name, seg.up_body, _column_means(a), _column_means(g), len(d.t),
                                              float(d.t[-1] - d.t[0]), None if d.temp is None else float(d.temp.mean()),
                                              t_mid_s=float(np.mean(d.t)), index=order[seg.name],
-                                             temp_rate_c_per_s=_slope(d.t, d.temp)))
+                                             temp_rate_c_per_s=_slope(d.t, d.temp),
+                                             half_diff=np.concatenate([_half_difference(a), _half_difference(g)]),
+                                             lsb=np.concatenate([_lsb(a), _lsb(g)])))
                 spans.append(_Span(seg.name, _TimeStamps(np.array([d.t[0], d.t[-1]]))))
                 # white noise: first differences remove slow drifts (temperature) from the estimate
                 diff_sq_a += _half_sum_sq_diff(a)

@@ -94,13 +94,31 @@ def _verdict(cal: Calibration) -> None:
                                     f"{dof} degrees of freedom counted are the priors'): the model "
                                     "cannot be checked against the measurements"}
         return
+    # the test: the data's chi2 on the data's own redundancy (the leverages: priors take none
+    # of it), less a group whose noise was estimated from its own scatter (noise_model: the hand
+    # turns), when the fit says what it tested; else the counted degrees of freedom
+    tested = (fit.get("noise_model") or {}).get("tested")
+    left_out = []
+    if tested:
+        chi2, dof, left_out = float(tested["chi2"]), float(tested["redundancy"]), list(tested.get("left_out", []))
+        if dof < 0.5:
+            fit["verdict"] = {"result": "untested",
+                              "reason": f"no redundancy is left to test the model ({dof:.2g}) once the noise of "
+                                        f"{', '.join(left_out) or 'the data'} is estimated from its own scatter"}
+            return
     reduced = chi2 / dof
     p_value = float(special.chdtrc(dof, chi2))       # P(chi2_dof > chi2); scipy.stats costs 0.5 s to import
     p_below = float(special.chdtr(dof, chi2))        # P(chi2_dof < chi2)
     fails = p_value < P_FAIL and reduced > REDUCED_CHI2_FAIL
     overestimated = p_below < P_FAIL and reduced < 1.0 / REDUCED_CHI2_FAIL
     result = "fails" if fails else "noise overestimated" if overestimated else "passes"
-    verdict = {"result": result, "reduced_chi2": float(reduced), "dof": int(dof), "p_value": p_value}
+    verdict = {"result": result, "reduced_chi2": float(reduced), "dof": round(dof, 2) if tested else int(dof),
+               "p_value": p_value}
+    if left_out:
+        verdict["left_out"] = left_out
+    terms = (fit.get("noise_model") or {}).get("terms")
+    if terms:
+        verdict["noise_model"] = ", ".join(terms)
     if fit.get("converged") is False and not _written_at_minimum(cal, fit.get("remaining_step_sigma")):
         verdict["result"] = "not converged"
         verdict["reason"] = (f"the fit stopped at its evaluation limit before it converged (reduced chi2 "
@@ -135,7 +153,9 @@ def _verdict(cal: Calibration) -> None:
                f"sqrt(reduced chi2) = {fit['pose_check'].get('sigma_scale', 1.0):.3g})" if own else ""))
     else:
         verdict["reason"] = (f"reduced chi2 {reduced:.3g} (p = {p_value:.2g}): the residuals agree "
-                             "with the noise")
+                             "with the noise" + (f" model ({verdict['noise_model']})" if terms and terms != ["white"] else "")
+                             + (f"; {', '.join(left_out)} not tested (their noise estimated from their scatter)"
+                                if left_out else ""))
     fit["verdict"] = verdict
 
 
