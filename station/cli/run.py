@@ -372,6 +372,15 @@ def _open_devices(config, scheme):
     return imu, table
 
 
+def table_geometry(t) -> dict:
+    """The table's geometry as the capture records it (manifest ``table.geometry``; the
+    estimator's station/estimate/table_geometry.py reads it)."""
+    out = {"axes_intersect": bool(t.axes_intersect)}
+    if t.level_arcsec is not None:
+        out["level_arcsec"] = float(t.level_arcsec)
+    return out
+
+
 def _out_dir(args, config, scheme) -> Path:
     if args.out:
         return Path(args.out)
@@ -386,7 +395,8 @@ def _new_capture(directory, scheme, scheme_text_, overrides, config, imu, rate_h
     extra = {"run": {"file": RUN_FILE, "scheme_file": SCHEME_FILE}}
     if scheme.table:
         extra["table"] = {"protocol": t.protocol, "axes": t.axes, "axes_enu": t.axis_list(),
-                          "mounting": list(t.mounting), "angle_error_arcsec": t.angle_error_arcsec}
+                          "mounting": list(t.mounting), "angle_error_arcsec": t.angle_error_arcsec,
+                          "geometry": table_geometry(t)}
     else:
         extra["table"] = {"angle_error_arcsec": 3600.0,
                           "note": "no table: the IMU was placed and turned by hand (1 deg)"}
