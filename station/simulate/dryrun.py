@@ -61,6 +61,8 @@ def _simulate(scheme: Scheme, bench) -> Iterator[tuple[object, object, dict]]:
                                  axis_elevation_deg=spec.axis_elevation_deg,
                                  drift_fraction=drift, encoder=spec.encoder)
             meta = {"axis_body": list(spec.axis_body), "rate_dps": spec.rate_dps}
+            if spec.encoder:        # on the table: the elevation it turned axis_body at (as station run records)
+                meta["axis_elevation_deg"] = float(spec.axis_elevation_deg)
             if protocol:
                 meta.update(angle_deg=float(np.sign(spec.rate_dps)) * spec.turn_deg, motion="hand",
                             note=f"angle_deg is the protocol's turn ({spec.turn_deg:g} deg by hand), not an "
@@ -127,7 +129,7 @@ def simulate_capture(scheme: Scheme, truth, seed: int) -> Capture:
             up_body=np.array(meta["up_body"]) if "up_body" in meta else None,
             axis_body=np.array(meta["axis_body"]) if "axis_body" in meta else None,
             rate_dps=meta.get("rate_dps"), angle_deg=seg.meta.get("angle_deg", meta.get("angle_deg")),
-            note=meta.get("note"), extra={k: meta[k] for k in ("motion",) if k in meta},
+            note=meta.get("note"), extra={k: meta[k] for k in ("motion", "axis_elevation_deg") if k in meta},
             data=SegmentData(t=seg.t, accel=seg.accel, gyro=seg.gyro, temp=seg.temp, gaps=0)))
     return Capture(path=Path(f"<simulated seed {seed}>"), imu=imu, site=site, scheme=scheme.name,
                    segments=segments, extra=_bench_keys(truth, scheme), warnings=[])
