@@ -12,7 +12,7 @@ own-axis positions with the mounting offset unknown) are said to be so.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -41,17 +41,19 @@ def reveals(scheme, config, plan=None, effect_ids=("accel_lever_arm",), seed: in
     geometry = {"axes_intersect": bool(t.axes_intersect)}
     if t.level_arcsec is not None:
         geometry["level_arcsec"] = float(t.level_arcsec)
+    elevation = {}
+    if plan is not None and not plan.manual:
+        # the elevations the compiler chose (an unattended table turns some axes at another one)
+        elevation = {s.spec.name: float(s.elevation_deg) for s in plan.steps
+                     if type(s).__name__ == "Rotate" and getattr(s, "spec", None) is not None}
+        scheme = replace(scheme, segments=[replace(spec, axis_elevation_deg=elevation[spec.name])
+                                           if spec.name in elevation else spec for spec in scheme.segments])
     capture = dryrun.simulate_capture(scheme, truth, seed, geometry if scheme.table else None)
     if t.imu_offset_m is not None:
         capture.extra["mounting"] = {"offset_m": [float(x) for x in t.imu_offset_m]}
-    if plan is not None and not plan.manual:
-        elevation = {s.spec.name: float(s.elevation_deg) for s in plan.steps
-                     if type(s).__name__ == "Rotate" and getattr(s, "spec", None) is not None}
-        for seg in capture.segments:
-            if seg.name in plan.mounting_of:
-                seg.extra["mounting"] = [str(m) for m in plan.mounting_of[seg.name]]
-            if seg.name in elevation and "axis_elevation_deg" in seg.extra:
-                seg.extra["axis_elevation_deg"] = elevation[seg.name]
+    for seg in capture.segments:
+        if plan is not None and seg.name in plan.mounting_of:
+            seg.extra["mounting"] = [str(m) for m in plan.mounting_of[seg.name]]
     effects = [EFFECTS[e]() for e in effect_ids]
     result = lsq.fit(summarise(capture), effects)
     model, rows = result.model, []
