@@ -39,6 +39,16 @@ segments:
   - {rotation: r4, axis_body: [1, 2, -2], pair: false}
 """, "test50")
 INTERSECTING = {"axes_intersect": True, "level_arcsec": 2.0}
+
+
+@pytest.fixture(autouse=True)
+def one_blas_thread():
+    """Small matrices: BLAS threads only contend (an SVD of the fit's Jacobian took 10x longer on
+    a loaded machine)."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(1):
+        yield
 CROSS = [(i, c) for i in range(3) for c in range(3) if i != c]
 
 
@@ -211,3 +221,20 @@ def test_station_plan_reveals_lists_what_the_scheme_reveals(tmp_path, capsys):
     for i, c in CROSS:
         assert f"accel_position_{'xyz'[i]}_{'xyz'[c]} +/- " in revealed
     assert "accel_scale_x +/- " in revealed
+
+
+@pytest.mark.parametrize("intersect", [True, False])
+def test_the_jacobian_of_the_geometry_terms_is_exact(intersect):
+    """Per-axis offsets and the level rows: the complex-step Jacobian (dense and sparse, with its
+    column groups) against central differences."""
+    cap = dryrun.simulate_capture(TRAIN, _truth(), 1, {"axes_intersect": intersect, "level_arcsec": 2.0})
+    model = lsq.Model(summarise(cap), [EFFECTS["accel_lever_arm"]()])
+    x = model.x0
+    J = model.jacobian(x)
+    assert np.array_equal(J, model.sparse_jacobian(x).toarray())
+    for j in range(model.layout.size):
+        h = 1e-6 * max(abs(x[j]), 1e-2)
+        e = np.zeros_like(x)
+        e[j] = h
+        column = (model.residuals(x + e) - model.residuals(x - e)) / (2 * h)
+        assert np.linalg.norm(J[:, j] - column) <= 1e-5 * np.linalg.norm(J[:, j]) + 1e-6, j
