@@ -166,6 +166,7 @@ def test_captures_without_the_geometry_fit_as_before_and_a_remount_splits_the_of
     ("{level_arcsec: 7200}", "table.geometry.level_arcsec"),
     ("{intersect: true}", "table.geometry.intersect"),
     ("[true]", "table.geometry"),
+    ("{axes_intersect: false}, imu_offset_m: [0, 0, 0.1]", "table.imu_offset_m"),
 ])
 def test_bad_geometry_in_station_yaml_is_named_with_exit_2(tmp_path, capsys, geometry, field):
     from station.cli import main

@@ -261,6 +261,10 @@ def _check_table(table: TableConfig, v: "_Validator") -> TableConfig:
     if table.axes_enu and not 1 <= n <= 3:
         raise v.fail("table.axes_enu", f"a table has 1 to 3 axes, got {n}")
     table = replace(table, axes=n)
+    if table.imu_offset_m is not None and not table.axes_intersect:
+        raise v.fail("table.imu_offset_m", "is the IMU's offset from the axes' intersection: with "
+                                           "geometry.axes_intersect false there is none (leave it out: the fit "
+                                           "takes an offset across each axis)")
     if len(table.limits) not in (1, n):
         raise v.fail("table.limits", f"one entry for every axis or one per axis ({n}), got {len(table.limits)}")
     if table.load_position_deg and len(table.load_position_deg) != n:
