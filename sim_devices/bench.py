@@ -224,7 +224,10 @@ class SimulatedBench:
         else:
             C_bn = world.table_attitude(C_bn0, a_n, theta)
             w_b, wdot_b = world.table_rates_body(C_bn0, a_n, theta_dot, theta_ddot)
-        f_b, w_ib = world.body_kinematics(C_bn, w_b, wdot_b, bench.lever_arm_m, self.site)
+        # the sensing point from the line this rotation turns about: the table axis that turns the
+        # IMU about case axis k (the nearest to axis_body) is axis_offsets_m[k] further away
+        lever = bench.lever_arm_m + bench.axis_offsets_m[int(np.argmax(np.abs(a_cmd)))]
+        f_b, w_ib = world.body_kinematics(C_bn, w_b, wdot_b, lever, self.site)
         vibration_phase = math.radians(bench.vibration_phase_deg)
         if np.any(bench.vibration_mg):
             a_vib = world.table_vibration_enu(a_n, theta, bench.vibration_mg * 1e-3 * G_STANDARD,
@@ -252,6 +255,7 @@ class SimulatedBench:
                 "heading_deg": math.degrees(heading),
                 "attitude_error_rad": delta,
                 "remount_error_rad": remount,
+                "lever_arm_m": lever,
                 "axis_body_true": C_bn0.apply(a_n),
                 "swept_angle_deg": swept_deg,
                 "encoder_error_arcsec": enc_err_arcsec,

@@ -254,6 +254,11 @@ class BenchSettings:
     latitude_deg: float = 45.0
     height_m: float = 0.0
     lever_arm_m: np.ndarray = field(default_factory=lambda: np.array([0.03, 0.0, 0.04]))
+    # a table whose axes do not intersect: the table axis that turns the IMU about case axis k
+    # (the case axis nearest the rotation's axis) runs along a line that is axis_offsets_m[k]
+    # (case axes, m) further from the IMU than lever_arm_m says: that rotation's lever arm is
+    # lever_arm_m + axis_offsets_m[k].  Zero: the axes meet at one point.
+    axis_offsets_m: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
     table_angle_error_arcsec: float = 2.0
     rate_ripple_fraction: float = 0.0
     rate_drift_fraction: float = 0.0      # rate change over a rotation without encoder (screwdriver)
@@ -283,6 +288,7 @@ class BenchSettings:
 
     def __post_init__(self):
         self.lever_arm_m = np.asarray(self.lever_arm_m, dtype=float).reshape(3)
+        self.axis_offsets_m = np.asarray(self.axis_offsets_m, dtype=float).reshape(3, 3)
         self.vibration_mg = np.asarray(self.vibration_mg, dtype=float).reshape(3)
 
 
@@ -335,7 +341,7 @@ _GYR_KEYS = {"scale", "axis_tilt_arcsec", "bias_dph", "bias_tempco_dph_per_c",
              "rate_squared_ppm_per_dps", "anisoelastic_dph_per_g2"}
 _TEMP_KEYS = {"start_c", "reference_c", "drift_c_per_h", "warmup_delta_c",
               "warmup_time_constant_s"}
-_BENCH_KEYS = {"latitude_deg", "height_m", "lever_arm_m", "table_angle_error_arcsec",
+_BENCH_KEYS = {"latitude_deg", "height_m", "lever_arm_m", "axis_offsets_m", "table_angle_error_arcsec",
                "rate_ripple_fraction", "rate_ripple_hz", "rate_drift_fraction", "accel_disturbance_ug",
                "move_s", "settle_s", "time_offset_s", "wobble_arcsec", "wobble_phase_deg",
                "vibration_mg", "vibration_phase_deg", "remount_error_arcsec", "remount_rotations",
@@ -555,6 +561,7 @@ class Truth:
                 "latitude_deg": float(self.bench.latitude_deg),
                 "height_m": float(self.bench.height_m),
                 "lever_arm_m": fl(self.bench.lever_arm_m),
+                "axis_offsets_m": [fl(r) for r in self.bench.axis_offsets_m],
                 "table_angle_error_arcsec": float(self.bench.table_angle_error_arcsec),
                 "rate_ripple_fraction": float(self.bench.rate_ripple_fraction),
                 "rate_drift_fraction": float(self.bench.rate_drift_fraction),
@@ -683,6 +690,8 @@ class Truth:
             bench.height_m = c.number(d["height_m"], "bench.height_m", lo=-1000.0, hi=20000.0)
         if "lever_arm_m" in d:
             bench.lever_arm_m = c.vector(d["lever_arm_m"], "bench.lever_arm_m", lo=-2.0, hi=2.0)
+        if "axis_offsets_m" in d:
+            bench.axis_offsets_m = c.matrix(d["axis_offsets_m"], "bench.axis_offsets_m", 3, 3, lo=-2.0, hi=2.0)
         if "table_angle_error_arcsec" in d:
             bench.table_angle_error_arcsec = c.number(
                 d["table_angle_error_arcsec"], "bench.table_angle_error_arcsec", lo=0.0, hi=36000.0)

@@ -60,6 +60,12 @@ class TableConfig:
     rate_tolerance_dps: float = 0.01
     angle_error_arcsec: float = 2.0       # 1-sigma of the table's angles (into the capture)
     imu_offset_m: tuple | None = None     # IMU reference point from the axes' intersection
+    # the table's geometry (docs/method-lsq.md, "The table's geometry"): whether the axes meet at
+    # one point (then the IMU's offset from it is one vector in the IMU frame for every rotation
+    # while the IMU stays mounted), and the 1-sigma of the rotation axes' elevation (levelling and
+    # the axes' squareness; None: not known, the fit leaves gravity along each axis free)
+    axes_intersect: bool = True
+    level_arcsec: float | None = None
 
     def axis_list(self) -> list:
         return [list(a) for a in (self.axes_enu or DEFAULT_AXES_ENU[self.axes])]
@@ -142,6 +148,7 @@ class Config:
         doc = _plain(self)
         doc["table"]["axes_enu"] = self.table.axis_list()
         doc["table"]["load_position_deg"] = list(self.table.load_position_deg or [0.0] * self.table.axes)
+        doc["table"]["geometry"] = {k: doc["table"].pop(k) for k in GEOMETRY_KEYS}
         return doc
 
 
@@ -201,12 +208,13 @@ def parse_config(doc, source: str) -> Config:
     imu = v.section(doc, "imu", ImuConfig, {
         "port": v.text, "protocol": v.text, "serial": v.serial, "rate_hz": v.positive,
         "csv_units": v.text_or_empty, "frame_timeout_s": v.positive})
+    doc, geometry = _geometry(doc, v)
     table = v.section(doc, "table", TableConfig, {
         "port": v.text, "protocol": v.text, "serial": v.serial, "axes": v.axes_count,
         "axes_enu": v.vectors, "mounting": v.mounting, "limits": v.limits,
         "load_position_deg": v.numbers, "position_tolerance_deg": v.positive,
         "rate_tolerance_dps": v.positive, "angle_error_arcsec": v.non_negative,
-        "imu_offset_m": v.vector})
+        "imu_offset_m": v.vector, "geometry": None})
     site = v.section(doc, "site", SiteConfig, {
         "latitude_deg": v.latitude, "height_m": v.number, "gravity_mps2": v.gravity})
     warmup = v.section(doc, "warmup", WarmupConfig, {
@@ -219,10 +227,33 @@ def parse_config(doc, source: str) -> Config:
     effects = v.section(doc, "effects", EffectsConfig, {
         "plugins": lambda value, where: v.paths(value, where, source),
         "folders": lambda value, where: v.paths(value, where, source)})
-    table = _check_table(table, v)
+    table = _check_table(replace(table, **geometry), v)
     if warmup.temp_slope_c_per_h is not None and warmup.max_s is None:
         raise v.fail("warmup.max_s", "needed with temp_slope_c_per_h (the longest warm-up)")
     return Config(imu=imu, table=table, site=site, warmup=warmup, run=run, effects=effects, source=source)
+
+
+GEOMETRY_KEYS = ("axes_intersect", "level_arcsec")
+
+
+def _geometry(doc: dict, v: "_Validator") -> tuple[dict, dict]:
+    """(the document without ``table.geometry``, that mapping's values as TableConfig fields)."""
+    table = doc.get("table")
+    if not isinstance(table, dict) or table.get("geometry") is None:
+        return doc, {}
+    value, where = table["geometry"], "table.geometry"
+    if not isinstance(value, dict):
+        raise v.fail(where, f"must be a mapping (axes_intersect, level_arcsec), got {type(value).__name__}")
+    v.known(value, f"{where}.", GEOMETRY_KEYS)
+    out = {}
+    if value.get("axes_intersect") is not None:
+        out["axes_intersect"] = v.boolean(value["axes_intersect"], f"{where}.axes_intersect")
+    if value.get("level_arcsec") is not None:
+        level = v.positive(value["level_arcsec"], f"{where}.level_arcsec")
+        if level > 3600.0:
+            raise v.fail(f"{where}.level_arcsec", f"must be at most 3600 (1 deg), got {value['level_arcsec']!r}")
+        out["level_arcsec"] = level
+    return {**doc, "table": {k: x for k, x in table.items() if k != "geometry"}}, out
 
 
 def _check_table(table: TableConfig, v: "_Validator") -> TableConfig:
@@ -230,6 +261,10 @@ def _check_table(table: TableConfig, v: "_Validator") -> TableConfig:
     if table.axes_enu and not 1 <= n <= 3:
         raise v.fail("table.axes_enu", f"a table has 1 to 3 axes, got {n}")
     table = replace(table, axes=n)
+    if table.imu_offset_m is not None and not table.axes_intersect:
+        raise v.fail("table.imu_offset_m", "is the IMU's offset from the axes' intersection: with "
+                                           "geometry.axes_intersect false there is none (leave it out: the fit "
+                                           "takes an offset across each axis)")
     if len(table.limits) not in (1, n):
         raise v.fail("table.limits", f"one entry for every axis or one per axis ({n}), got {len(table.limits)}")
     if table.load_position_deg and len(table.load_position_deg) != n:
@@ -453,6 +488,14 @@ table:
   rate_tolerance_dps: 0.01
   angle_error_arcsec: 2.0        # 1-sigma of the table's angles (recorded in the capture)
   # imu_offset_m: [0, 0, 0]      # IMU reference point from the axes' intersection, if known
+  # The table's geometry (recorded in every capture; docs/method-lsq.md "The table's geometry"):
+  # axes_intersect: the axes meet at one point, so the IMU's offset from it is one vector for
+  # every rotation while the IMU stays mounted (false: each axis turns about its own line).
+  # level_arcsec: 1-sigma of the rotation axes' elevation (levelling, squareness of the axes);
+  # given, the fit knows gravity along each axis and one rate reveals the size effect's
+  # cross positions from diagonal axes.
+  geometry: {axes_intersect: true}
+  #   level_arcsec: 5
 
 site:
   latitude_deg: 45.0

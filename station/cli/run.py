@@ -61,6 +61,12 @@ def add_parsers(sub) -> None:
     _add_scheme_overrides(plan)
     plan.add_argument("--unattended", action="store_true", help="compile without remount steps")
     plan.add_argument("--all", action="store_true", help="also list settle and checkpoint steps")
+    plan.add_argument("--reveals", action="store_true",
+                      help="say which parameters the scheme reveals on this table (a simulated capture "
+                           "fitted with the size effect and any --add; a few seconds)")
+    plan.add_argument("--add", action="append", default=[], metavar="EFFECT",
+                      help="with --reveals: also this effect (an id; repeatable)")
+    plan.add_argument("--sim-truth", metavar="FILE", help="with --reveals: the simulated IMU (default: the simulator's)")
     plan.set_defaults(func=cmd_plan)
 
     init = sub.add_parser("init", help="write a commented example configuration (station.yaml)")
@@ -159,7 +165,34 @@ def cmd_plan(args) -> int:
     out.print(f"total: {plan.duration_s:.0f} s ({plan.duration_s / 3600:.2f} h) of device time, "
               f"{len(plan.steps)} steps, {sum(type(s).__name__ == 'Operator' for s in plan)} operator steps",
               markup=False)
+    if getattr(args, "reveals", False):
+        _print_reveals(scheme, config, plan, args)
     return 0
+
+
+def _print_reveals(scheme, config, plan, args) -> None:
+    """What the scheme reveals on this table: station/simulate/reveal.py."""
+    from station.model import EFFECTS
+    from station.simulate.reveal import reveals
+
+    ids = ["accel_lever_arm"] + [e for e in args.add if e != "accel_lever_arm"]
+    for e in ids:
+        if e not in EFFECTS:
+            raise UserError(f"--add {e}: not an effect of the library ({', '.join(EFFECTS)})")
+    rows, notes = reveals(scheme, config, plan, ids, truth_path=getattr(args, "sim_truth", None))
+    out.print(f"reveals (a simulated capture of {scheme.name} on this table, fitted with {', '.join(ids)}):",
+              markup=False)
+    for status in ("revealed", "not revealed", "convention"):
+        chosen = [r for r in rows if r.status == status]
+        if not chosen:
+            continue
+        words = {"revealed": "revealed (1 sigma)", "not revealed": "not revealed",
+                 "convention": "0 by convention (not estimated)"}[status]
+        items = [r.name if r.sigma is None or status != "revealed" else f"{r.name} +/- {r.sigma:.3g} {r.unit}"
+                 for r in chosen]
+        out.print(f"  {words}: {', '.join(items)}", markup=False, soft_wrap=True)
+    for note in notes:
+        out.print(f"  note: {note}", markup=False, soft_wrap=True)
 
 
 def cmd_run(args) -> int:
@@ -179,6 +212,8 @@ def cmd_run(args) -> int:
     from station.estimate import estimate_capture
 
     truth = dryrun.load_truth(args.sim_truth, args.seed)
+    # the table's geometry as station.yaml states it, recorded as station run records it
+    geometry = table_geometry(_config(args).table) if scheme.table else None
     stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
     out_dir = Path(args.out) if args.out else Path("captures") / f"{scheme.name}-sim-{stamp}"
     out.print(f"dry run: scheme [bold]{scheme.name}[/] ({len(scheme.segments)} segments, "
@@ -186,7 +221,7 @@ def cmd_run(args) -> int:
     with out.status("recording") as status:
         capture = dryrun.record_scheme(
             scheme, truth, args.seed, out_dir,
-            progress=lambda name, i, n: status.update(f"recording {name} ({i + 1}/{n})"))
+            progress=lambda name, i, n: status.update(f"recording {name} ({i + 1}/{n})"), geometry=geometry)
     from station.cli.history import file_quietly
     from station.cli.noise import characterise_run, is_noise_recording
 
@@ -372,6 +407,15 @@ def _open_devices(config, scheme):
     return imu, table
 
 
+def table_geometry(t) -> dict:
+    """The table's geometry as the capture records it (manifest ``table.geometry``; the
+    estimator's station/estimate/table_geometry.py reads it)."""
+    out = {"axes_intersect": bool(t.axes_intersect)}
+    if t.level_arcsec is not None:
+        out["level_arcsec"] = float(t.level_arcsec)
+    return out
+
+
 def _out_dir(args, config, scheme) -> Path:
     if args.out:
         return Path(args.out)
@@ -386,7 +430,8 @@ def _new_capture(directory, scheme, scheme_text_, overrides, config, imu, rate_h
     extra = {"run": {"file": RUN_FILE, "scheme_file": SCHEME_FILE}}
     if scheme.table:
         extra["table"] = {"protocol": t.protocol, "axes": t.axes, "axes_enu": t.axis_list(),
-                          "mounting": list(t.mounting), "angle_error_arcsec": t.angle_error_arcsec}
+                          "mounting": list(t.mounting), "angle_error_arcsec": t.angle_error_arcsec,
+                          "geometry": table_geometry(t)}
     else:
         extra["table"] = {"angle_error_arcsec": 3600.0,
                           "note": "no table: the IMU was placed and turned by hand (1 deg)"}

@@ -42,7 +42,7 @@ from scipy.spatial.transform import Rotation
 from station.core import units
 from station.model.calibration import Calibration, misalignment_angles
 from station.core.errors import UserError
-from station.estimate import hand_rotation, noise_model, zhang2010
+from station.estimate import hand_rotation, noise_model, table_geometry, zhang2010
 from station.estimate.summaries import Summaries, summarise
 from station.model.geometry import cross, normalised, positive_part, tangent_basis
 from station.model.effect import Effect, SampleContext
@@ -252,8 +252,20 @@ class Model:
             # where gravity is at the start; and the Earth rate, unless the turns are whole
             r = self.s.rotations[i]
             L.add(f"phase{i}", 0 if not r.steady else 2 if _earth_rate_visible(r, s) else 1)
+        # the mounting offset(s) from the table's rotation centre: one vector for every rotation
+        # unless the capture's table geometry says otherwise (table_geometry.py)
+        self.geometry = s.geometry if s.geometry is not None else table_geometry.unstated()
+        self.offset_set, self.offset_axis = self.geometry.offset_sets(s.rotations)
         if s.rotations and s.mounting_offset_m is None:
-            L.add("mounting_offset", 3)
+            if self.offset_axis == [None]:
+                L.add("mounting_offset", 3)
+            else:           # per mounting, or across each axis (2: its part along the axis is not seen)
+                for m, k in enumerate(self.offset_axis):
+                    L.add(f"mounting_offset{m}", 3 if k is None else 2)
+        # gravity along each axis from the table's recorded elevation of it (1-sigma level_sigma_rad)
+        self.level_groups = ([k for k in range(s.groups) if k in self.geometry.elevation_deg
+                              and any(r.steady for r in s.rotations if r.group == k)]
+                             if self.geometry.level_sigma_rad else [])
         for e in effects:
             L.add(f"effect:{e.id}", len(e.params))
         self.static_colour = hand_rotation.static_colours(len(s.statics), self.hands) if self.hands else None
@@ -514,7 +526,7 @@ class Model:
                                   for r in rows.get(("hand", i), [])]
                         key = (prefix, self.static_colour[j])
                     if kind == "axis":
-                        owned += list(rows.get(("weak_axis", j), []))
+                        owned += list(rows.get(("weak_axis", j), [])) + list(rows.get(("level", j), []))
                         owned += [r for i, rot in enumerate(self.s.rotations) if rot.group == j
                                   for r in rows.get(("rot", i), [])]
                     for k in range(sl.stop - sl.start):     # and its own prior's row, if it has one
@@ -547,6 +559,8 @@ class Model:
                 labels += [(self.hands[j].name, "rotation", quantity, a) for a in ("t1", "t2")]
             elif kind == "weak_axis":
                 labels += [(f"axis{j}", "rotation", quantity, "e" if quantity == "earth_prior" else "kappa")]
+            elif kind == "level":
+                labels += [(f"axis{j}", "rotation", quantity, "elevation")]
             elif kind == "axis":
                 labels += [(f"axis{j}", "rotation", quantity, a) for a in "xyz"]
             else:
@@ -760,8 +774,20 @@ class Model:
         self._axis_basis = np.array(self.axis_basis, float).reshape(K, 2, 3)
         self._axis_body = np.array([next(r.axis_body for r in rots if r.group == k) for k in range(K)],
                                    float).reshape(K, 3)
-        self._offset = (None if "mounting_offset" in L.blocks
+        self._offset = (None if s.rotations and s.mounting_offset_m is None
                         else np.asarray(s.mounting_offset_m if s.mounting_offset_m is not None else np.zeros(3), float))
+        # each rotation's offset: its set's columns (pad: none) times a basis (3-vector: identity;
+        # across one axis: that axis' tangent basis), so that offset_r = sum_k x[cols_rk] basis_rk
+        cols, basis = np.full((R, 3), pad, int), np.zeros((R, 3, 3))
+        for i, m in enumerate(self.offset_set if self._offset is None else []):
+            block = L["mounting_offset"] if "mounting_offset" in L.blocks else L[f"mounting_offset{m}"]
+            k = self.offset_axis[m]
+            cols[i, :block.stop - block.start] = np.arange(block.start, block.stop)
+            basis[i, :block.stop - block.start] = np.eye(3) if k is None else self.axis_basis[k]
+        self._offset_cols, self._offset_basis = cols, basis
+        self._level_cols = np.array([L[f"axis{k}"].start + 2 for k in self.level_groups], int)
+        self._level_alpha = np.radians(90.0 - np.array([self.geometry.elevation_deg[k] for k in self.level_groups],
+                                                       float))
         # the context's columns that do not depend on x: statics, then PHASES rows per rotation
         segs = list(stat) + [r for r in rots for _ in range(PHASES)]
         self._ctx_temp = np.array([np.nan if q.temp_c is None else q.temp_c for q in segs], float)
@@ -794,7 +820,8 @@ class Model:
             blocks.append(("hand", H, 2))
         if table:
             blocks.append(("axis_prior", K, 3))
-        blocks += [("weak_e", K, 1), ("weak_kappa", K, 1), ("rot", R, 18), ("prior", len(self.priors), 1)]
+        blocks += [("weak_e", K, 1), ("weak_kappa", K, 1), ("rot", R, 18), ("prior", len(self.priors), 1),
+                   ("level", len(self.level_groups), 1)]
         offset, at = {}, 0
         for name, n, w in blocks:
             offset[name] = (at, w)
@@ -823,6 +850,8 @@ class Model:
             put(("weak_axis", k), "earth_prior", "weak_e", k, [0])
             if not any(r.steady for r in s.rotations if r.group == k):
                 put(("weak_axis", k), "weak_prior", "weak_kappa", k, [0])
+        for n, k in enumerate(self.level_groups):
+            put(("level", k), "level_prior", "level", n, [0])
         for i, r in enumerate(s.rotations):
             if r.steady:
                 put(("rot", i), "rotation", "rot", i, range(18))
@@ -907,7 +936,8 @@ class Model:
         earth_perp = (np.sqrt(positive_part(self.omega_dps**2 - e**2))[..., None]
                       * (np.cos(chi) * e1 + np.sin(chi) * e2))
         earth_integral = self._rot_earth[:, :1] * earth_perp - self._rot_earth[:, 1:] * cross(l, earth_perp)
-        offset = X[:, L["mounting_offset"]][:, None, :] if self._offset is None else self._offset
+        offset = (np.einsum("brk,rkc->brc", Xe[:, self._offset_cols], self._offset_basis)
+                  if self._offset is None else self._offset)
         l_x_d = cross(l, np.broadcast_to(offset, l.shape))
         w_k, wsq_k, wdot_k = (self._rot_rate_shape[:, j, :, None] for j in range(3))    # (R,PHASES,1)
         f_r = (kappa[..., None, None] * l[:, :, None, :] + self._cos_p[:, None] * v[:, :, None, :]
@@ -968,6 +998,8 @@ class Model:
         blocks.append(np.concatenate([whitened.reshape(B, R, 15),
                                       gyro_rows], axis=2))
         blocks.append((X[:, self._prior_cols] / self._prior_sigma)[..., None])
+        # the table's elevation of each axis: alpha, its angle from up, is 90 deg - elevation
+        blocks.append(((X[:, self._level_cols] - self._level_alpha) / (self.geometry.level_sigma_rad or 1.0))[..., None])
         return blocks
 
     def _add_effects(self, X, a, w, f_p, w_p, Ma, Mg, l, w_k, wdot_k):
@@ -1635,8 +1667,17 @@ def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=())
             f"not revealed by this capture (1-sigma above the typical size), held at 0 +/- the "
             f"typical size by a prior: "
             f"{', '.join(model.unobservable)}")
+    for e in model.effects:       # what an effect's own convention fixes (not the capture's doing)
+        fit_stats["notes"] += list(e.notes()) if hasattr(e, "notes") else []
+    if model.geometry.describe(s.rotations):
+        fit_stats["notes"].append(model.geometry.describe(s.rotations))
     if "mounting_offset" in L.blocks:
         fit_stats["mounting_offset_mm"] = (x[L["mounting_offset"]] * 1e3).tolist()
+    elif model.s.rotations and model.s.mounting_offset_m is None:
+        # per mounting or per axis (an offset seen about one axis only: its part across it)
+        fit_stats["mounting_offsets_mm"] = [
+            (x[L[f"mounting_offset{m}"]] @ (np.eye(3) if k is None else model.axis_basis[k]) * 1e3).tolist()
+            for m, k in enumerate(model.offset_axis)]
     return Calibration(
         accel_unit=accel_unit, gyro_unit=gyro_unit,
         accel_scale=x[L["accel_scale"]].copy(), accel_T=lower_unit_rows(x[L["accel_misalignment"]]),

@@ -22,6 +22,7 @@ from threadpoolctl import threadpool_limits
 
 from station.core import units
 from station.core.errors import UserError
+from station.estimate import table_geometry
 
 EDGE_SAMPLES = 3
 STEADY_SPREAD = 0.3     # a rotation whose rate magnitude varies more (std/mean) is a hand turn
@@ -108,6 +109,8 @@ class Summaries:
     accel_nominal: float | None = None  # raw accelerometer: nominal counts per m/s^2 from the manifest, if any
     stamp_jitter_s: float = 0.0     # 1-sigma jitter of the time stamps (robust spread of the sample
                                     #   intervals over sqrt 2, median over the segments), s
+    geometry: object = None         # table_geometry.TableGeometry: which rotations share a mounting
+                                    #   offset, the axes' elevation (None: not stated, as before)
 
     @property
     def groups(self) -> int:
@@ -579,4 +582,5 @@ def _assemble(capture, parts: _SegmentSummaries, ca, cg, table_angle_arcsec) -> 
                      table_angle_sigma_deg=angle_sigma, mounting_offset_m=offset, skipped=skipped,
                      hand_rotations=hand_rotations, gyro_nominal=nominal,
                      gyro_raw=capture.imu.gyro_unit == "raw", accel_raw=capture.imu.accel_unit == "raw",
-                     accel_nominal=accel_nominal, stamp_jitter_s=float(np.median(jitter)) if jitter else 0.0)
+                     accel_nominal=accel_nominal, stamp_jitter_s=float(np.median(jitter)) if jitter else 0.0,
+                     geometry=table_geometry.read(capture, rotations))

@@ -95,6 +95,11 @@ class Effect:
         """Additive term of a rotation segment's gyro integral (deg before unit conversion)."""
         return None
 
+    def notes(self) -> tuple[str, ...]:
+        """Sentences for the calibration's fit.notes about what setup() decided (e.g. parameters a
+        convention fixes, so that they are not mistaken for ones the capture failed to reveal)."""
+        return ()
+
     def report(self, x: np.ndarray, cov: np.ndarray | None) -> dict:
         """Extra content for the calibration file's compensation block, for other programs
         (e.g. the element positions of the size effect); station itself uses state()."""

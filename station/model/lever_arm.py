@@ -37,6 +37,16 @@ class AccelLeverArm(Effect):
         known = summaries.mounting_offset_m is not None
         self.free = [(i, c) for i in range(3) for c in range(3) if known or i != c]
 
+    def notes(self) -> tuple[str, ...]:
+        """What the convention fixes: said as such, not as something the capture failed to reveal."""
+        fixed = [f"accel_position_{AXES[i]}_{AXES[i]}" for i in range(3) if (i, i) not in self.free]
+        if not fixed:
+            return ()
+        return (f"{', '.join(fixed)}: 0 by convention, not estimated: with the mounting offset unknown, "
+                "a shift common to the three accelerometers is the offset itself, so no capture can "
+                "reveal them; each element's coordinate along its own axis defines the reference point "
+                "(give the offset, table.imu_offset_m, to estimate them)",)
+
     @property
     def params(self):
         return tuple(Param(f"accel_position_{AXES[i]}_{AXES[c]}", "mm", 1e3, 10.0, 50.0) for i, c in self.free)

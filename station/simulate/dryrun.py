@@ -61,6 +61,8 @@ def _simulate(scheme: Scheme, bench) -> Iterator[tuple[object, object, dict]]:
                                  axis_elevation_deg=spec.axis_elevation_deg,
                                  drift_fraction=drift, encoder=spec.encoder)
             meta = {"axis_body": list(spec.axis_body), "rate_dps": spec.rate_dps}
+            if spec.encoder:        # on the table: the elevation it turned axis_body at (as station run records)
+                meta["axis_elevation_deg"] = float(spec.axis_elevation_deg)
             if protocol:
                 meta.update(angle_deg=float(np.sign(spec.rate_dps)) * spec.turn_deg, motion="hand",
                             note=f"angle_deg is the protocol's turn ({spec.turn_deg:g} deg by hand), not an "
@@ -72,9 +74,13 @@ def _simulate(scheme: Scheme, bench) -> Iterator[tuple[object, object, dict]]:
             yield spec, bench.static(spec.up_body, spec.dwell_s), {"up_body": list(spec.up_body)}
 
 
-def _bench_keys(truth, scheme: Scheme) -> dict:
-    """What the bench's datasheet says (manifest keys beyond the spec, kept by every reader)."""
+def _bench_keys(truth, scheme: Scheme, geometry: dict | None = None) -> dict:
+    """What the bench's datasheet says (manifest keys beyond the spec, kept by every reader);
+    ``geometry``: the table's geometry as the station's configuration states it (``station run``
+    records it: manifest ``table.geometry``), None: not stated."""
     keys = {"table": {"angle_error_arcsec": float(truth.bench.table_angle_error_arcsec)}}
+    if geometry is not None:
+        keys["table"]["geometry"] = dict(geometry)
     if scheme.centred:
         keys["mounting"] = {"offset_m": [0.0, 0.0, 0.0]}
     return keys
@@ -96,12 +102,13 @@ def _headers(bench, seed: int) -> tuple[ImuInfo, Site]:
 
 
 def record_scheme(scheme: Scheme, truth, seed: int, out_dir: Path,
-                  progress: Callable[[str, int, int], None] | None = None) -> Path:
-    """Simulate every segment of ``scheme`` and write the capture bundle to ``out_dir``."""
+                  progress: Callable[[str, int, int], None] | None = None, geometry: dict | None = None) -> Path:
+    """Simulate every segment of ``scheme`` and write the capture bundle to ``out_dir``
+    (``geometry``: the table's as stated, _bench_keys)."""
     bench = _bench(scheme, truth, seed)
     imu, site = _headers(bench, seed)
     writer = CaptureWriter(out_dir, imu, site, scheme.name,
-                           extra={**_bench_keys(truth, scheme),
+                           extra={**_bench_keys(truth, scheme, geometry),
                                   "simulation": {"seed": seed, "truth_file": TRUTH_FILE}})
     writer.write_file(TRUTH_FILE, yaml.safe_dump(truth.to_yaml_dict(), sort_keys=False))
     block = max(1, int(round(BLOCK_SECONDS * bench.sample_rate_hz)))
@@ -116,7 +123,7 @@ def record_scheme(scheme: Scheme, truth, seed: int, out_dir: Path,
     return writer.path
 
 
-def simulate_capture(scheme: Scheme, truth, seed: int) -> Capture:
+def simulate_capture(scheme: Scheme, truth, seed: int, geometry: dict | None = None) -> Capture:
     """The capture a dry run would write, kept in memory (for Monte Carlo runs)."""
     bench = _bench(scheme, truth, seed)
     imu, site = _headers(bench, seed)
@@ -127,10 +134,10 @@ def simulate_capture(scheme: Scheme, truth, seed: int) -> Capture:
             up_body=np.array(meta["up_body"]) if "up_body" in meta else None,
             axis_body=np.array(meta["axis_body"]) if "axis_body" in meta else None,
             rate_dps=meta.get("rate_dps"), angle_deg=seg.meta.get("angle_deg", meta.get("angle_deg")),
-            note=meta.get("note"), extra={k: meta[k] for k in ("motion",) if k in meta},
+            note=meta.get("note"), extra={k: meta[k] for k in ("motion", "axis_elevation_deg") if k in meta},
             data=SegmentData(t=seg.t, accel=seg.accel, gyro=seg.gyro, temp=seg.temp, gaps=0)))
     return Capture(path=Path(f"<simulated seed {seed}>"), imu=imu, site=site, scheme=scheme.name,
-                   segments=segments, extra=_bench_keys(truth, scheme), warnings=[])
+                   segments=segments, extra=_bench_keys(truth, scheme, geometry), warnings=[])
 
 
 def truth_calibration(truth):
