@@ -93,7 +93,8 @@ AXES = ("accel x", "accel y", "accel z", "gyro x", "gyro y", "gyro z")
 
 def of(s) -> NoiseModel:
     """The noise model of the summaries (computed once per Summaries, then kept on it)."""
-    cached = getattr(s, "_noise_model", None)
+    kept = getattr(s, "noise_model", None)
+    cached = kept[1] if isinstance(kept, tuple) and kept[0] is s.statics else None
     if cached is None:
         sigma = np.concatenate([np.asarray(s.accel_sigma, float), np.asarray(s.gyro_sigma, float)])
         lsb = _lsb(s.statics)
@@ -101,7 +102,7 @@ def of(s) -> NoiseModel:
             widrow = np.where(lsb > 0, 0.5 * (lsb / np.pi) ** 2 * np.exp(-4.0 * np.pi**2 * sigma**2 / lsb**2), 0.0)
         widrow = np.nan_to_num(widrow)
         cached = NoiseModel(instability=pose_instability(s.statics, sigma), lsb=lsb, widrow_variance=widrow)
-        s._noise_model = cached
+        s.noise_model = (s.statics, cached)     # kept with the statics it was computed from
     return cached
 
 

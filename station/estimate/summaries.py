@@ -109,6 +109,8 @@ class Summaries:
     accel_nominal: float | None = None  # raw accelerometer: nominal counts per m/s^2 from the manifest, if any
     stamp_jitter_s: float = 0.0     # 1-sigma jitter of the time stamps (robust spread of the sample
                                     #   intervals over sqrt 2, median over the segments), s
+    # (statics, noise_model.NoiseModel) computed from them (station/estimate/noise_model.of)
+    noise_model: object = field(default=None, repr=False, compare=False)
     geometry: object = None         # table_geometry.TableGeometry: which rotations share a mounting
                                     #   offset, the axes' elevation (None: not stated, as before)
 
