@@ -95,11 +95,11 @@ def test_compensation_inverts_every_library_effect_and_a_plugin():
     reg.add(CROSS)
     sizes = {"accel_lever_arm": 0.05, "accel_nonlinearity": 3000.0, "gyro_g_sensitivity": 300.0,
              "gyro_scale_asymmetry": 3000.0, "temperature_bias": 300.0, "time_offset": 0.004,
-             "gyro_rate_squared": 50.0, "accel_cross_coupling": 3000.0}
+             "gyro_rate_squared": 50.0, "accel_cross_coupling": 3000.0, "accel_cubic": 3000.0}
     effects = []
     for eid, size in sizes.items():
         e = reg.create(eid)
-        if eid == "temperature_bias":
+        if eid in ("temperature_bias", "scale_temperature", "temperature_bias_quadratic"):
             e.reference_c = 26.0
         effects.append((e, size * rng.uniform(-1, 1, len(e.params))))      # internal units
     # forward: what the sensors output at the true (table-clock) times

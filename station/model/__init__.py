@@ -5,6 +5,7 @@ rotation, and the nuisances of the bench) lives in ``station.estimate.lsq``; eve
 adds parameters and a term to the predicted raw outputs.  ``LIBRARY`` (also ``EFFECTS``) maps
 the library's ids to classes; station.model.registry adds the user's own (plugins).
 """
+from station.model.accel_cubic import AccelCubic
 from station.model.effect import Effect, Param, SampleContext
 from station.model.g_sensitivity import GyroGSensitivity
 from station.model.lever_arm import AccelLeverArm
@@ -14,7 +15,8 @@ from station.model.temperature import TemperatureBias
 from station.model.time_offset import TimeOffset
 
 LIBRARY = {cls.id: cls for cls in (AccelLeverArm, AccelNonlinearity, GyroGSensitivity,
-                                   GyroScaleAsymmetry, TemperatureBias, TimeOffset)}
+                                   GyroScaleAsymmetry, TemperatureBias, TimeOffset,
+                                   AccelCubic)}
 EFFECTS = LIBRARY
 
 __all__ = ["EFFECTS", "LIBRARY", "Effect", "Param", "SampleContext"]
