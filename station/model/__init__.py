@@ -11,12 +11,13 @@ from station.model.g_sensitivity import GyroGSensitivity
 from station.model.lever_arm import AccelLeverArm
 from station.model.nonlinearity import AccelNonlinearity
 from station.model.scale_asymmetry import GyroScaleAsymmetry
+from station.model.scale_temperature import ScaleTemperature
 from station.model.temperature import TemperatureBias
 from station.model.time_offset import TimeOffset
 
 LIBRARY = {cls.id: cls for cls in (AccelLeverArm, AccelNonlinearity, GyroGSensitivity,
                                    GyroScaleAsymmetry, TemperatureBias, TimeOffset,
-                                   AccelCubic)}
+                                   AccelCubic, ScaleTemperature)}
 EFFECTS = LIBRARY
 
 __all__ = ["EFFECTS", "LIBRARY", "Effect", "Param", "SampleContext"]
