@@ -13,11 +13,12 @@ from station.model.nonlinearity import AccelNonlinearity
 from station.model.scale_asymmetry import GyroScaleAsymmetry
 from station.model.scale_temperature import ScaleTemperature
 from station.model.temperature import TemperatureBias
+from station.model.temperature_quadratic import TemperatureBiasQuadratic
 from station.model.time_offset import TimeOffset
 
 LIBRARY = {cls.id: cls for cls in (AccelLeverArm, AccelNonlinearity, GyroGSensitivity,
                                    GyroScaleAsymmetry, TemperatureBias, TimeOffset,
-                                   AccelCubic, ScaleTemperature)}
+                                   AccelCubic, ScaleTemperature, TemperatureBiasQuadratic)}
 EFFECTS = LIBRARY
 
 __all__ = ["EFFECTS", "LIBRARY", "Effect", "Param", "SampleContext"]
