@@ -8,6 +8,7 @@ the library's ids to classes; station.model.registry adds the user's own (plugin
 from station.model.accel_cubic import AccelCubic
 from station.model.effect import Effect, Param, SampleContext
 from station.model.g_sensitivity import GyroGSensitivity
+from station.model.gyro_anisoelastic import GyroAnisoelastic
 from station.model.lever_arm import AccelLeverArm
 from station.model.nonlinearity import AccelNonlinearity
 from station.model.scale_asymmetry import GyroScaleAsymmetry
@@ -18,7 +19,8 @@ from station.model.time_offset import TimeOffset
 
 LIBRARY = {cls.id: cls for cls in (AccelLeverArm, AccelNonlinearity, GyroGSensitivity,
                                    GyroScaleAsymmetry, TemperatureBias, TimeOffset,
-                                   AccelCubic, ScaleTemperature, TemperatureBiasQuadratic)}
+                                   AccelCubic, ScaleTemperature, TemperatureBiasQuadratic,
+                                   GyroAnisoelastic)}
 EFFECTS = LIBRARY
 
 __all__ = ["EFFECTS", "LIBRARY", "Effect", "Param", "SampleContext"]
