@@ -5,6 +5,7 @@ rotation, and the nuisances of the bench) lives in ``station.estimate.lsq``; eve
 adds parameters and a term to the predicted raw outputs.  ``LIBRARY`` (also ``EFFECTS``) maps
 the library's ids to classes; station.model.registry adds the user's own (plugins).
 """
+from station.model.accel_cross_axis import AccelCrossAxis
 from station.model.accel_cubic import AccelCubic
 from station.model.effect import Effect, Param, SampleContext
 from station.model.g_sensitivity import GyroGSensitivity
@@ -20,7 +21,7 @@ from station.model.time_offset import TimeOffset
 LIBRARY = {cls.id: cls for cls in (AccelLeverArm, AccelNonlinearity, GyroGSensitivity,
                                    GyroScaleAsymmetry, TemperatureBias, TimeOffset,
                                    AccelCubic, ScaleTemperature, TemperatureBiasQuadratic,
-                                   GyroAnisoelastic)}
+                                   GyroAnisoelastic, AccelCrossAxis)}
 EFFECTS = LIBRARY
 
 __all__ = ["EFFECTS", "LIBRARY", "Effect", "Param", "SampleContext"]
