@@ -97,7 +97,8 @@ def test_compensation_inverts_every_library_effect_and_a_plugin():
              "gyro_scale_asymmetry": 3000.0, "temperature_bias": 300.0, "time_offset": 0.004,
              "gyro_rate_squared": 50.0, "accel_cross_coupling": 3000.0, "accel_cubic": 3000.0,
              "scale_temperature": 3000.0, "temperature_bias_quadratic": 100.0,
-             "gyro_anisoelastic": 300.0, "accel_cross_axis": 3000.0}
+             "gyro_anisoelastic": 300.0, "accel_cross_axis": 3000.0,
+             "gyro_rate_nonlinearity": 50.0}
     effects = []
     for eid, size in sizes.items():
         e = reg.create(eid)

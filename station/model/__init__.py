@@ -10,6 +10,7 @@ from station.model.accel_cubic import AccelCubic
 from station.model.effect import Effect, Param, SampleContext
 from station.model.g_sensitivity import GyroGSensitivity
 from station.model.gyro_anisoelastic import GyroAnisoelastic
+from station.model.gyro_rate_nonlinearity import GyroRateNonlinearity
 from station.model.lever_arm import AccelLeverArm
 from station.model.nonlinearity import AccelNonlinearity
 from station.model.scale_asymmetry import GyroScaleAsymmetry
@@ -21,7 +22,7 @@ from station.model.time_offset import TimeOffset
 LIBRARY = {cls.id: cls for cls in (AccelLeverArm, AccelNonlinearity, GyroGSensitivity,
                                    GyroScaleAsymmetry, TemperatureBias, TimeOffset,
                                    AccelCubic, ScaleTemperature, TemperatureBiasQuadratic,
-                                   GyroAnisoelastic, AccelCrossAxis)}
+                                   GyroAnisoelastic, AccelCrossAxis, GyroRateNonlinearity)}
 EFFECTS = LIBRARY
 
 __all__ = ["EFFECTS", "LIBRARY", "Effect", "Param", "SampleContext"]
