@@ -98,7 +98,7 @@ def test_compensation_inverts_every_library_effect_and_a_plugin():
              "gyro_rate_squared": 50.0, "accel_cross_coupling": 3000.0, "accel_cubic": 3000.0,
              "scale_temperature": 3000.0, "temperature_bias_quadratic": 100.0,
              "gyro_anisoelastic": 300.0, "accel_cross_axis": 3000.0,
-             "gyro_rate_nonlinearity": 50.0}
+             "gyro_rate_nonlinearity": 50.0, "bias_drift": 1000.0}
     effects = []
     for eid, size in sizes.items():
         e = reg.create(eid)
@@ -108,7 +108,7 @@ def test_compensation_inverts_every_library_effect_and_a_plugin():
     # forward: what the sensors output at the true (table-clock) times
     w_rad = np.radians(w_p)
     ctx = SampleContext(f_p=f_p, w_p=w_p, w_table=w_rad, wdot_table=np.gradient(w_rad, t, axis=0),
-                        temp_c=temp, accel_matrix=Ma, gyro_matrix=Mg)
+                        temp_c=temp, accel_matrix=Ma, gyro_matrix=Mg, t_s=t - t[0])
     a = f_p @ Ma.T + ba + sum(e.accel(x, ctx) for e, x in effects if e.accel(x, ctx) is not None)
     g = w_p @ Mg.T + bg + sum(e.gyro(x, ctx) for e, x in effects if e.gyro(x, ctx) is not None)
     dt = next(x for e, x in effects if e.id == "time_offset")[0]

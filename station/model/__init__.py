@@ -7,6 +7,7 @@ the library's ids to classes; station.model.registry adds the user's own (plugin
 """
 from station.model.accel_cross_axis import AccelCrossAxis
 from station.model.accel_cubic import AccelCubic
+from station.model.bias_drift import BiasDrift
 from station.model.effect import Effect, Param, SampleContext
 from station.model.g_sensitivity import GyroGSensitivity
 from station.model.gyro_anisoelastic import GyroAnisoelastic
@@ -22,7 +23,8 @@ from station.model.time_offset import TimeOffset
 LIBRARY = {cls.id: cls for cls in (AccelLeverArm, AccelNonlinearity, GyroGSensitivity,
                                    GyroScaleAsymmetry, TemperatureBias, TimeOffset,
                                    AccelCubic, ScaleTemperature, TemperatureBiasQuadratic,
-                                   GyroAnisoelastic, AccelCrossAxis, GyroRateNonlinearity)}
+                                   GyroAnisoelastic, AccelCrossAxis, GyroRateNonlinearity,
+                                   BiasDrift)}
 EFFECTS = LIBRARY
 
 __all__ = ["EFFECTS", "LIBRARY", "Effect", "Param", "SampleContext"]
