@@ -259,3 +259,29 @@ def test_bias_drift_is_recovered_and_named():
     assert before.accel_ug > 2 * after.accel_ug, (before, after, floor)
     sig, _ = first_significant(base)
     assert sig[0] == "bias_drift", sig
+
+
+ISSUE_25_FAILURES = {
+    # what the user's captures had: (hidden, scheme, what --auto must add)
+    "accel_k3_taken_for_gyro_w_abs_w": ({"accel__cubic_ug_per_g3": [800.0, -600.0, 1000.0]}, "OPTIMAL9_FAST",
+                                     ["accel_cubic"]),
+    "gyro_scale_tempco_taken_for_w_abs_w": ({"accel__scale_tempco_ppm_per_c": [100.0, -80.0, 60.0],
+                                          "gyro__scale_tempco_ppm_per_c": [300.0, -200.0, 250.0], **WARM},
+                                         "WARM3", ["scale_temperature"]),
+    "quadratic_temperature_bias_taken_for_segment_index": ({"accel__bias_tempco2": [20.0, -15.0, 12.0], **WARM},
+                                                           "WARM3", ["temperature_bias", "temperature_bias_quadratic"]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(ISSUE_25_FAILURES))
+def test_diagnose_auto_adds_the_library_effect_instead_of_terms_outside_it(case):
+    """Issue 25's failures: diagnose --auto on each capture adds the library's effect(s), the model
+    then explains the data and no term outside the library is proposed."""
+    from station.diagnose import auto
+    from station.estimate import lsq
+
+    hidden, scheme_name, added = ISSUE_25_FAILURES[case]
+    steps, final = auto.run(lsq.summarise(simulate(mems(**hidden), globals()[scheme_name])))
+    assert [s.added for s in steps] == added
+    assert "explains the data" in final.verdict, final.verdict
+    assert final.proposal is None or not final.proposal.kept
