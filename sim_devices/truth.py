@@ -56,6 +56,7 @@ MAX_RATE_SQUARED_PPM_PER_DPS = 1e4    # 1 % per deg/s
 MAX_ANISOELASTIC_DPH_PER_G2 = 1e6
 MAX_VIBRATION_MG = 1e4                # 10 g
 MAX_REMOUNT_ARCSEC = 36000.0          # 10 degrees
+MAX_ENCODER_SCALE_PPM = 1e4            # 1 %
 MAX_JITTER_FRACTION = 0.1             # stamp jitter 1 sigma <= 10 % of the sample period
 
 # The two "other" axes of each case axis, in x<y<z order: the columns of
@@ -293,6 +294,9 @@ class BenchSettings:
     # the IMU's time stamps jitter: stamp = nominal sample time + N(0, sigma) (ms); the samples
     # themselves are taken on the regular grid
     time_stamp_jitter_ms: float = 0.0
+    # the table turns (1 + e 1e-6) times the angle its encoder reads (a scale error of the
+    # encoder or of its gearing): the encoder reports the swept angle / (1 + e 1e-6)
+    encoder_scale_error_ppm: float = 0.0
 
     def __post_init__(self):
         self.lever_arm_m = np.asarray(self.lever_arm_m, dtype=float).reshape(3)
@@ -361,7 +365,7 @@ _BENCH_KEYS = {"latitude_deg", "height_m", "lever_arm_m", "table_angle_error_arc
                "rate_ripple_fraction", "rate_ripple_hz", "rate_drift_fraction", "accel_disturbance_ug",
                "move_s", "settle_s", "time_offset_s", "wobble_arcsec", "wobble_phase_deg",
                "vibration_mg", "vibration_phase_deg", "remount_error_arcsec", "remount_rotations",
-               "time_stamp_jitter_ms"}
+               "time_stamp_jitter_ms", "encoder_scale_error_ppm"}
 
 
 @dataclass
@@ -610,6 +614,7 @@ class Truth:
                 "remount_error_arcsec": float(self.bench.remount_error_arcsec),
                 "remount_rotations": bool(self.bench.remount_rotations),
                 "time_stamp_jitter_ms": float(self.bench.time_stamp_jitter_ms),
+                "encoder_scale_error_ppm": float(self.bench.encoder_scale_error_ppm),
             },
         }
 
@@ -783,6 +788,9 @@ class Truth:
                        f"must be <= {bound:g} ms (10 % of the sample period at {rate:g} Hz, so that "
                        f"the stamps keep increasing), got {jitter!r}")
             bench.time_stamp_jitter_ms = jitter
+        if "encoder_scale_error_ppm" in d:
+            bench.encoder_scale_error_ppm = c.number(d["encoder_scale_error_ppm"], "bench.encoder_scale_error_ppm",
+                                                     lo=-MAX_ENCODER_SCALE_PPM, hi=MAX_ENCODER_SCALE_PPM)
         return cls(accel=accel, gyro=gyro, sample_rate_hz=rate, temperature=temp, bench=bench)
 
 

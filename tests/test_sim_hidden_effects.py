@@ -63,6 +63,7 @@ def test_new_hidden_effects_yaml_round_trip(tmp_path):
     truth.accel.bias_drift_per_h = np.array([100.0, 0.0, -50.0])
     truth.gyro.bias_drift_per_h = np.array([0.0, 10.0, 0.0])
     truth.gyro.rate_odd_squared_ppm_per_dps = np.array([4.0, -3.0, 5.0])
+    truth.bench.encoder_scale_error_ppm = 300.0
     path = tmp_path / "t.yaml"
     truth.to_yaml(path)
     back = Truth.from_yaml(path)
@@ -395,3 +396,22 @@ def test_gyro_odd_rate_squared_plus_minus_rotations():
     np.testing.assert_allclose(minus.gyro[:, 0], k * (-w + E) + k * q * 1e-6 * (-w + E) * abs(-w + E), rtol=0,
                                atol=tol)
     assert k * q * 1e-6 * w * w * 3600.0 == pytest.approx(144.1, abs=0.1)   # deg/h at 100 deg/s
+
+
+def test_encoder_scale_error():
+    """The table turns (1 + e) times what its encoder reads: the angle reported is the swept angle
+    over (1 + e), and the sensors see the swept one (a perfect gyro's integral over the window is
+    (1 + e) times the encoder's angle, plus the Earth rate's share).  By hand: 300 ppm of two
+    turns is 0.216 deg, 778 arcsec."""
+    e = 300.0
+    truth = perfect_truth(encoder_scale_error_ppm=e)
+    bench = SimulatedBench(truth, 2)
+    w = 100.0
+    seg = bench.rotation([0, 0, 1], w, 7.2)
+    swept = seg.truth["swept_angle_deg"]
+    assert seg.meta["angle_deg"] == pytest.approx(swept / (1 + 1e-6 * e), rel=0, abs=1e-12)
+    dt = 1.0 / bench.sample_rate_hz
+    integral = seg.gyro[:, 2].sum() * dt - earth_along(seg) * len(seg.t) * dt
+    assert integral == pytest.approx(swept, abs=1e-9)
+    assert swept - seg.meta["angle_deg"] == pytest.approx(720.0 * 300e-6, rel=1e-3)
+    assert 720.0 * 300e-6 * 3600 == pytest.approx(777.6)
