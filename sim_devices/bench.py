@@ -241,7 +241,8 @@ class SimulatedBench:
                                          **prof)
         swept_deg = math.degrees(edges[1] - edges[0])
         enc_err_arcsec = float(self._enc_rng.normal(0.0, bench.table_angle_error_arcsec))
-        angle_deg = swept_deg + enc_err_arcsec / 3600.0
+        # an encoder scale error: the table turned (1 + e) times what the encoder reads
+        angle_deg = swept_deg / (1.0 + 1e-6 * bench.encoder_scale_error_ppm) + enc_err_arcsec / 3600.0
 
         accel, gyro, temp = self._measure(tau, f_b, w_ib, w_b, wdot_b)
         meta = {"axis_body": [float(x) for x in a_cmd], "rate_dps": r}

@@ -56,6 +56,7 @@ MAX_RATE_SQUARED_PPM_PER_DPS = 1e4    # 1 % per deg/s
 MAX_ANISOELASTIC_DPH_PER_G2 = 1e6
 MAX_VIBRATION_MG = 1e4                # 10 g
 MAX_REMOUNT_ARCSEC = 36000.0          # 10 degrees
+MAX_ENCODER_SCALE_PPM = 1e4            # 1 %
 MAX_JITTER_FRACTION = 0.1             # stamp jitter 1 sigma <= 10 % of the sample period
 
 # The two "other" axes of each case axis, in x<y<z order: the columns of
@@ -191,6 +192,14 @@ class TriadTruth:
     # gyros only: anisoelastic term N (deg/h per g^2), row i: gyro i, columns the products
     # F_x^2, F_y^2, F_z^2, F_x F_y, F_x F_z, F_y F_z (F: case axes, g; ANISOELASTIC_PRODUCTS)
     anisoelastic_dph_per_g2: np.ndarray = field(default_factory=lambda: np.zeros((3, 6)))
+    # accelerometers only: third-order nonlinearity K3_i (ug/g^3), accel i adds K3_i a_i^3
+    cubic_ug_per_g3: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    # second-order bias temperature coefficient c2_i (bias units per degC^2): b += c2 dT^2
+    bias_tempco2: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    # bias drifting linearly in bench time (bias units per hour): b += d t / 3600
+    bias_drift_per_h: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    # gyros only: odd rate-squared scale term q'_i (ppm per deg/s): gyro i adds k_i q'_i 1e-6 r_i |r_i|
+    rate_odd_squared_ppm_per_dps: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     def __post_init__(self):
         self.scale = np.asarray(self.scale, dtype=float).reshape(3)
@@ -213,6 +222,11 @@ class TriadTruth:
                                                    dtype=float).reshape(3)
         self.anisoelastic_dph_per_g2 = np.asarray(self.anisoelastic_dph_per_g2,
                                                   dtype=float).reshape(3, 6)
+        self.cubic_ug_per_g3 = np.asarray(self.cubic_ug_per_g3, dtype=float).reshape(3)
+        self.bias_tempco2 = np.asarray(self.bias_tempco2, dtype=float).reshape(3)
+        self.bias_drift_per_h = np.asarray(self.bias_drift_per_h, dtype=float).reshape(3)
+        self.rate_odd_squared_ppm_per_dps = np.asarray(self.rate_odd_squared_ppm_per_dps,
+                                                       dtype=float).reshape(3)
         if np.any(np.diag(self.cross_coupling_ug_per_g2) != 0.0):
             raise ValueError("cross_coupling_ug_per_g2 must have a zero diagonal "
                              "(the a_i^2 term is nonlinearity_ug_per_g2)")
@@ -285,6 +299,9 @@ class BenchSettings:
     # the IMU's time stamps jitter: stamp = nominal sample time + N(0, sigma) (ms); the samples
     # themselves are taken on the regular grid
     time_stamp_jitter_ms: float = 0.0
+    # the table turns (1 + e 1e-6) times the angle its encoder reads (a scale error of the
+    # encoder or of its gearing): the encoder reports the swept angle / (1 + e 1e-6)
+    encoder_scale_error_ppm: float = 0.0
 
     def __post_init__(self):
         self.lever_arm_m = np.asarray(self.lever_arm_m, dtype=float).reshape(3)
@@ -320,6 +337,13 @@ def _step(t, step_time_s: float) -> np.ndarray:
     return (np.asarray(t, dtype=float).reshape(-1, 1) >= step_time_s).astype(float)
 
 
+def _hours(t) -> np.ndarray:
+    """(N,1): the bench time t in hours (a bias drift is linear in it from t = 0)."""
+    if t is None:
+        raise ValueError("a bias drift needs the sample times: pass t= to Truth.measure")
+    return np.asarray(t, dtype=float).reshape(-1, 1) / 3600.0
+
+
 def _quantise(x: np.ndarray, lsb: float) -> np.ndarray:
     if lsb <= 0.0:
         return x
@@ -334,18 +358,20 @@ _TOP_KEYS = {"version", "sample_rate_hz", "accelerometer", "gyroscope", "tempera
 _ACC_KEYS = {"scale", "axis_tilt_arcsec", "bias_ug", "bias_tempco_ug_per_c",
              "noise_density_ug_rthz", "lsb_mps2", "position_m", "nonlinearity_ug_per_g2",
              "cross_coupling_ug_per_g2", "scale_asymmetry_ppm", "scale_tempco_ppm_per_c",
-             "bias_step_ug", "bias_step_time_s"}
+             "bias_step_ug", "bias_step_time_s", "cubic_ug_per_g3", "bias_tempco2_ug_per_c2",
+             "bias_drift_ug_per_h"}
 _GYR_KEYS = {"scale", "axis_tilt_arcsec", "bias_dph", "bias_tempco_dph_per_c",
              "noise_density_dph_rthz", "lsb_dps", "g_sensitivity_dph_per_g", "scale_asymmetry_ppm",
              "scale_tempco_ppm_per_c", "bias_step_dph", "bias_step_time_s",
-             "rate_squared_ppm_per_dps", "anisoelastic_dph_per_g2"}
+             "rate_squared_ppm_per_dps", "anisoelastic_dph_per_g2", "bias_tempco2_dph_per_c2",
+             "bias_drift_dph_per_h", "rate_odd_squared_ppm_per_dps"}
 _TEMP_KEYS = {"start_c", "reference_c", "drift_c_per_h", "warmup_delta_c",
               "warmup_time_constant_s"}
 _BENCH_KEYS = {"latitude_deg", "height_m", "lever_arm_m", "axis_offsets_m", "table_angle_error_arcsec",
                "rate_ripple_fraction", "rate_ripple_hz", "rate_drift_fraction", "accel_disturbance_ug",
                "move_s", "settle_s", "time_offset_s", "wobble_arcsec", "wobble_phase_deg",
                "vibration_mg", "vibration_phase_deg", "remount_error_arcsec", "remount_rotations",
-               "time_stamp_jitter_ms"}
+               "time_stamp_jitter_ms", "encoder_scale_error_ppm"}
 
 
 @dataclass
@@ -385,17 +411,24 @@ class Truth:
         Per accelerometer i, with a_i = u_i . f_i / g0 and F = f_i / g0 (g0 = 9.80665 m/s^2),
         k_i(T) = k_i (1 + s_i 1e-6 dT), H = 1 if t >= the step time else 0:
             accel_i = k_i(T) u_i . f_i + k_i A_i 1e-6 |u_i . f_i|
-                      + [b_i + c_i dT + H step_i + K2_i a_i^2 + sum_{j != i} C_ij a_i F_j] ug
+                      + [b_i + c_i dT + c2_i dT^2 + d_i t_h + H step_i + K2_i a_i^2 + K3_i a_i^3
+                         + sum_{j != i} C_ij a_i F_j] ug
         per gyro i, with r_i = u_gi . w_b (deg/s) and F = f_b / g0 (case axes):
-            gyro_i = k_i(T) r_i + k_i A_i 1e-6 |r_i| + k_i q_i 1e-6 r_i^2
-                     + [b_i + c_i dT + H step_i + sum_j G_ij F_j + sum_jk N_i,jk F_j F_k] deg/h
+            gyro_i = k_i(T) r_i + k_i A_i 1e-6 |r_i| + k_i q_i 1e-6 r_i^2 + k_i q'_i 1e-6 r_i |r_i|
+                     + [b_i + c_i dT + c2_i dT^2 + d_i t_h + H step_i + sum_j G_ij F_j
+                        + sum_jk N_i,jk F_j F_k] deg/h
+        (t_h: the bench time in hours, dT = T - reference_c)
         then noise and quantisation.
         """
         f_b = np.atleast_2d(np.asarray(f_b, dtype=float))
         w_b = np.atleast_2d(np.asarray(w_b_dps, dtype=float))
         dT = (np.asarray(temp, dtype=float) - self.temperature.reference_c).reshape(-1, 1)
-        ba = (self.accel.bias + self.accel.bias_tempco * dT) * MICRO_G
-        bg = (self.gyro.bias + self.gyro.bias_tempco * dT) * DEG_PER_HOUR
+        ba = (self.accel.bias + self.accel.bias_tempco * dT + self.accel.bias_tempco2 * dT * dT) * MICRO_G
+        bg = (self.gyro.bias + self.gyro.bias_tempco * dT + self.gyro.bias_tempco2 * dT * dT) * DEG_PER_HOUR
+        if np.any(self.accel.bias_drift_per_h):
+            ba = ba + _hours(t) * self.accel.bias_drift_per_h * MICRO_G
+        if np.any(self.gyro.bias_drift_per_h):
+            bg = bg + _hours(t) * self.gyro.bias_drift_per_h * DEG_PER_HOUR
         if np.any(self.accel.bias_step):
             ba = ba + _step(t, self.accel.bias_step_time_s) * self.accel.bias_step * MICRO_G
         if np.any(self.gyro.bias_step):
@@ -412,12 +445,13 @@ class Truth:
                 accel[:, i] += extra @ self.accel.matrix[i]
         K2 = self.accel.nonlinearity_ug_per_g2
         C = self.accel.cross_coupling_ug_per_g2
-        if np.any(K2) or np.any(C):
+        K3 = self.accel.cubic_ug_per_g3
+        if np.any(K2) or np.any(C) or np.any(K3):
             S = self.accel.axes
             for i in range(3):
                 F = (f_b if extras is None else f_b + extras[i]) / G_STANDARD   # g, case axes
                 a = F @ S[i]                                                    # g, sensing axis
-                accel[:, i] += (K2[i] * a + F @ C[i]) * a * MICRO_G
+                accel[:, i] += (K2[i] * a + F @ C[i] + K3[i] * a * a) * a * MICRO_G
         sa, Aa = self.accel.scale_tempco_ppm_per_c, self.accel.scale_asymmetry_ppm
         if np.any(sa) or np.any(Aa):
             S = self.accel.axes
@@ -436,6 +470,10 @@ class Truth:
             r = w_b @ self.gyro.axes.T           # deg/s along each sensing axis
             gyro += r * (self.gyro.scale * sg * 1e-6) * dT
             gyro += r * r * (self.gyro.scale * q * 1e-6)
+        q_odd = self.gyro.rate_odd_squared_ppm_per_dps
+        if np.any(q_odd):
+            r = w_b @ self.gyro.axes.T           # deg/s along each sensing axis
+            gyro += r * np.abs(r) * (self.gyro.scale * q_odd * 1e-6)
         G = self.gyro.g_sensitivity_dph_per_g
         if np.any(G):
             gyro += (f_b / G_STANDARD) @ G.T * DEG_PER_HOUR
@@ -534,6 +572,9 @@ class Truth:
                 "scale_tempco_ppm_per_c": fl(self.accel.scale_tempco_ppm_per_c),
                 "bias_step_ug": fl(self.accel.bias_step),
                 "bias_step_time_s": float(self.accel.bias_step_time_s),
+                "cubic_ug_per_g3": fl(self.accel.cubic_ug_per_g3),
+                "bias_tempco2_ug_per_c2": fl(self.accel.bias_tempco2),
+                "bias_drift_ug_per_h": fl(self.accel.bias_drift_per_h),
             },
             "gyroscope": {
                 "scale": fl(self.gyro.scale),
@@ -549,6 +590,9 @@ class Truth:
                 "bias_step_time_s": float(self.gyro.bias_step_time_s),
                 "rate_squared_ppm_per_dps": fl(self.gyro.rate_squared_ppm_per_dps),
                 "anisoelastic_dph_per_g2": [fl(r) for r in self.gyro.anisoelastic_dph_per_g2],
+                "bias_tempco2_dph_per_c2": fl(self.gyro.bias_tempco2),
+                "bias_drift_dph_per_h": fl(self.gyro.bias_drift_per_h),
+                "rate_odd_squared_ppm_per_dps": fl(self.gyro.rate_odd_squared_ppm_per_dps),
             },
             "temperature": {
                 "start_c": float(self.temperature.start_c),
@@ -577,6 +621,7 @@ class Truth:
                 "remount_error_arcsec": float(self.bench.remount_error_arcsec),
                 "remount_rotations": bool(self.bench.remount_rotations),
                 "time_stamp_jitter_ms": float(self.bench.time_stamp_jitter_ms),
+                "encoder_scale_error_ppm": float(self.bench.encoder_scale_error_ppm),
             },
         }
 
@@ -610,7 +655,7 @@ class Truth:
                         lo=0.0, lo_open=True, hi=1e6)
 
         def triad(sec: str, keys: set[str], bias_key, tc_key, noise_key, lsb_key,
-                  noise_default, step_key) -> TriadTruth:
+                  noise_default, step_key, tc2_key, drift_key) -> TriadTruth:
             d = c.mapping(top.get(sec), sec, keys)
             t = TriadTruth(noise_density=noise_default)
             if "scale" in d:
@@ -660,14 +705,25 @@ class Truth:
                 t.anisoelastic_dph_per_g2 = c.matrix(
                     d["anisoelastic_dph_per_g2"], f"{sec}.anisoelastic_dph_per_g2", 3, 6,
                     lo=-MAX_ANISOELASTIC_DPH_PER_G2, hi=MAX_ANISOELASTIC_DPH_PER_G2)
+            if "cubic_ug_per_g3" in d:
+                t.cubic_ug_per_g3 = c.vector(d["cubic_ug_per_g3"], f"{sec}.cubic_ug_per_g3",
+                                             lo=-MAX_SECOND_ORDER_UG_PER_G2, hi=MAX_SECOND_ORDER_UG_PER_G2)
+            if tc2_key in d:
+                t.bias_tempco2 = c.vector(d[tc2_key], f"{sec}.{tc2_key}")
+            if drift_key in d:
+                t.bias_drift_per_h = c.vector(d[drift_key], f"{sec}.{drift_key}")
+            if "rate_odd_squared_ppm_per_dps" in d:
+                t.rate_odd_squared_ppm_per_dps = c.vector(
+                    d["rate_odd_squared_ppm_per_dps"], f"{sec}.rate_odd_squared_ppm_per_dps",
+                    lo=-MAX_RATE_SQUARED_PPM_PER_DPS, hi=MAX_RATE_SQUARED_PPM_PER_DPS)
             return t
 
         accel = triad("accelerometer", _ACC_KEYS, "bias_ug", "bias_tempco_ug_per_c",
                       "noise_density_ug_rthz", "lsb_mps2", DEFAULT_ACCEL_NOISE_UG_RTHZ,
-                      "bias_step_ug")
+                      "bias_step_ug", "bias_tempco2_ug_per_c2", "bias_drift_ug_per_h")
         gyro = triad("gyroscope", _GYR_KEYS, "bias_dph", "bias_tempco_dph_per_c",
                      "noise_density_dph_rthz", "lsb_dps", DEFAULT_GYRO_NOISE_DPH_RTHZ,
-                     "bias_step_dph")
+                     "bias_step_dph", "bias_tempco2_dph_per_c2", "bias_drift_dph_per_h")
 
         d = c.mapping(top.get("temperature"), "temperature", _TEMP_KEYS)
         temp = TemperatureTruth()
@@ -741,6 +797,9 @@ class Truth:
                        f"must be <= {bound:g} ms (10 % of the sample period at {rate:g} Hz, so that "
                        f"the stamps keep increasing), got {jitter!r}")
             bench.time_stamp_jitter_ms = jitter
+        if "encoder_scale_error_ppm" in d:
+            bench.encoder_scale_error_ppm = c.number(d["encoder_scale_error_ppm"], "bench.encoder_scale_error_ppm",
+                                                     lo=-MAX_ENCODER_SCALE_PPM, hi=MAX_ENCODER_SCALE_PPM)
         return cls(accel=accel, gyro=gyro, sample_rate_hz=rate, temperature=temp, bench=bench)
 
 

@@ -52,3 +52,26 @@ def scheme_yaml(name, dwell_s, rotations=True, title=None):
     head = f"name: {name}\n" + (f"title: {title}\n" if title else "")
     head += f"defaults: {{dwell_s: {dwell_s}, rate_dps: 10.0, rotation_s: 36.0}}\nsegments:\n"
     return head + NINE_STATICS + (THREE_ROTATIONS if rotations else "")
+
+
+# The simulator's accelerometer cross-coupling (C_ij a_i F_j) is the library's accel_cross_axis;
+# the tests of what diagnose does with an effect OUTSIDE the library take it out of the library.
+CROSS_AXIS = "accel_cross_axis"
+
+
+def registry_without(*ids):
+    """An EffectRegistry of the library's effects but ``ids``."""
+    from station.model.registry import EffectRegistry
+
+    reg = EffectRegistry()
+    for eid in ids:
+        reg.classes.pop(eid)
+        reg.sources.pop(eid)
+    return reg
+
+
+def library_without(monkeypatch, *ids):
+    """Every EffectRegistry made from now on in this test (the CLI's too) lacks ``ids``."""
+    from station.model import LIBRARY, registry
+
+    monkeypatch.setattr(registry, "_library", lambda: {k: v for k, v in LIBRARY.items() if k not in ids})

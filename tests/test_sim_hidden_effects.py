@@ -57,6 +57,13 @@ def test_new_hidden_effects_yaml_round_trip(tmp_path):
     truth.bench.remount_error_arcsec = 3600.0
     truth.bench.remount_rotations = True
     truth.bench.time_stamp_jitter_ms = 1.0
+    truth.accel.cubic_ug_per_g3 = np.array([800.0, -600.0, 1000.0])
+    truth.accel.bias_tempco2 = np.array([20.0, -15.0, 12.0])
+    truth.gyro.bias_tempco2 = np.array([3.0, -2.0, 2.5])
+    truth.accel.bias_drift_per_h = np.array([100.0, 0.0, -50.0])
+    truth.gyro.bias_drift_per_h = np.array([0.0, 10.0, 0.0])
+    truth.gyro.rate_odd_squared_ppm_per_dps = np.array([4.0, -3.0, 5.0])
+    truth.bench.encoder_scale_error_ppm = 300.0
     path = tmp_path / "t.yaml"
     truth.to_yaml(path)
     back = Truth.from_yaml(path)
@@ -328,3 +335,83 @@ def test_the_imu_twin_applies_the_bias_step_at_its_device_time():
     earth = np.degrees(world.Site(45.0).earth_rate_enu)       # table at 0 deg: body = ENU
     np.testing.assert_allclose(gyro - earth, [[0, 0, 0], [0, 0, 0], [0, 0.01, 0], [0, 0.01, 0]],
                                rtol=0, atol=1e-15)
+
+
+def test_accel_cubic_at_one_g_and_45_degrees():
+    """accel_i += K3_i a_i^3 ug, a_i = u_i . f / g0: +1 g reads k g + K3 (g/g0)^3 ug, -1 g the
+    opposite (odd, like the scale factor), up = (x + y)/sqrt 2 gives K3 (g/g0)^3 / 2^1.5 on x
+    and y (0.354 K3, where the scale factor's share is 0.707)."""
+    truth = perfect_truth()
+    k3 = np.array([800.0, -600.0, 1000.0])
+    truth.accel.cubic_ug_per_g3 = k3
+    bench = SimulatedBench(truth, 0)
+    g = bench.gravity_mps2
+    g3 = (g / G_STANDARD) ** 3
+    tol = 16 * EPS * g
+    plus, minus, diag = bench.static([1, 0, 0], 0.1), bench.static([-1, 0, 0], 0.1), bench.static([1, 1, 0], 0.1)
+    np.testing.assert_allclose(plus.accel[:, 0], g + k3[0] * g3 * MICRO_G, rtol=0, atol=tol)
+    np.testing.assert_allclose(minus.accel[:, 0], -g - k3[0] * g3 * MICRO_G, rtol=0, atol=tol)
+    np.testing.assert_allclose(diag.accel[:, :2], np.tile(g / math.sqrt(2) + k3[:2] * g3 / 2 ** 1.5 * MICRO_G,
+                                                          (len(diag.t), 1)), rtol=0, atol=tol)
+    assert k3[0] / 2 ** 1.5 == pytest.approx(282.8, abs=0.1)          # ug, by hand
+
+
+def test_quadratic_temperature_bias_and_bias_drift():
+    """b += c2 (T - T_ref)^2 + d t/3600: a static at up = z over a 6 degC warm-up reads, minus the
+    truth's own linear part, exactly c2 dT^2 + d t_h (t the bench time the sample was taken)."""
+    truth = perfect_truth(warmup_delta_c=6.0)
+    truth.temperature.warmup_time_constant_s = 60.0
+    c2a, c2g = np.array([20.0, -15.0, 12.0]), np.array([3.0, -2.0, 2.5])
+    da, dg = np.array([100.0, 0.0, -50.0]), np.array([0.0, 36.0, 0.0])
+    truth.accel.bias_tempco2, truth.gyro.bias_tempco2 = c2a, c2g
+    truth.accel.bias_drift_per_h, truth.gyro.bias_drift_per_h = da, dg
+    bench = SimulatedBench(truth, 0)
+    seg = bench.static([0, 0, 1], 60.0)
+    dT = (seg.temp - truth.temperature.reference_c)[:, None]
+    assert np.ptp(dT) > 2.0
+    t_h = (seg.t + truth.bench.time_offset_s)[:, None] / 3600.0
+    g = bench.gravity_mps2
+    np.testing.assert_allclose(seg.accel - [0.0, 0.0, g], (c2a * dT**2 + da * t_h) * MICRO_G, rtol=0,
+                               atol=16 * EPS * g)
+    np.testing.assert_allclose(seg.gyro - seg.truth["w_ib_dps"], (c2g * dT**2 + dg * t_h) / 3600.0, rtol=0,
+                               atol=1e-15)
+    # by hand: 20 ug/degC^2 at 5 degC is 500 ug; 36 deg/h/h after 100 s is 1 deg/h
+    assert 20.0 * 5.0**2 == 500.0 and 36.0 * 100.0 / 3600.0 == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="sample times"):
+        truth.measure(np.zeros((1, 3)), np.zeros((1, 3)), 25.0, None)
+
+
+def test_gyro_odd_rate_squared_plus_minus_rotations():
+    """gyro_x += k q' 1e-6 r |r|: odd in the rate, so a +- pair's difference carries
+    2 k q' 1e-6 w^2 (the scale factor's share is 2 k w) and the sum nothing but the Earth rate."""
+    truth = perfect_truth()
+    k, q, w = 1.0007, 4.0, 100.0
+    truth.gyro.scale = np.array([k, 1.0, 1.0])
+    truth.gyro.rate_odd_squared_ppm_per_dps = np.array([q, -3.0, 5.0])
+    bench = SimulatedBench(truth, 1)
+    plus, minus = bench.rotation([1, 0, 0], w, 3.6), bench.rotation([1, 0, 0], -w, 3.6)
+    E = earth_along(plus)
+    tol = 64 * EPS * w
+    np.testing.assert_allclose(plus.gyro[:, 0], k * (w + E) + k * q * 1e-6 * (w + E) * abs(w + E), rtol=0, atol=tol)
+    np.testing.assert_allclose(minus.gyro[:, 0], k * (-w + E) + k * q * 1e-6 * (-w + E) * abs(-w + E), rtol=0,
+                               atol=tol)
+    assert k * q * 1e-6 * w * w * 3600.0 == pytest.approx(144.1, abs=0.1)   # deg/h at 100 deg/s
+
+
+def test_encoder_scale_error():
+    """The table turns (1 + e) times what its encoder reads: the angle reported is the swept angle
+    over (1 + e), and the sensors see the swept one (a perfect gyro's integral over the window is
+    (1 + e) times the encoder's angle, plus the Earth rate's share).  By hand: 300 ppm of two
+    turns is 0.216 deg, 778 arcsec."""
+    e = 300.0
+    truth = perfect_truth(encoder_scale_error_ppm=e)
+    bench = SimulatedBench(truth, 2)
+    w = 100.0
+    seg = bench.rotation([0, 0, 1], w, 7.2)
+    swept = seg.truth["swept_angle_deg"]
+    assert seg.meta["angle_deg"] == pytest.approx(swept / (1 + 1e-6 * e), rel=0, abs=1e-12)
+    dt = 1.0 / bench.sample_rate_hz
+    integral = seg.gyro[:, 2].sum() * dt - earth_along(seg) * len(seg.t) * dt
+    assert integral == pytest.approx(swept, abs=1e-9)
+    assert swept - seg.meta["angle_deg"] == pytest.approx(720.0 * 300e-6, rel=1e-3)
+    assert 720.0 * 300e-6 * 3600 == pytest.approx(777.6)

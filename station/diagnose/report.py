@@ -30,6 +30,7 @@ VARIABLE_LABEL = {
     "gravity_along_axis": "commanded gravity along the residual's axis (g)",
     "signed_rate": "signed rotation rate (deg/s)",
     "rate_change": "rate change across the segment (deg/s)",
+    "time": "segment mid-time in the run (s)",
 }
 SCALE_UNITS = ("1", "raw/(m/s^2)", "raw/(deg/s)")
 
@@ -50,6 +51,8 @@ def _variable(name: str, diagnosis, labels) -> np.ndarray:
         elif name == "temperature":
             seg_ = r or st
             out[i] = seg_.temp_c if seg_ is not None and seg_.temp_c is not None else np.nan
+        elif name == "time" and (r or st) is not None:
+            out[i] = (r or st).t_mid_s
         elif name == "gravity_along_axis" and st is not None and st.up_body is not None and axis in "xyz":
             out[i] = st.up_body["xyz".index(axis)]
     return out

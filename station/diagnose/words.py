@@ -258,7 +258,7 @@ def caveats(summaries, effect_id: str) -> list[str]:
     """What the capture cannot tell apart from ``effect_id``, and the segment that would."""
     rates = sorted({round(abs(r.rate_dps), 1) for r in summaries.rotations if r.steady})
     out = []
-    if effect_id in ("gyro_scale_asymmetry", "gyro_rate_squared") and len(rates) == 1:
+    if effect_id in ("gyro_scale_asymmetry", "gyro_rate_squared", "gyro_rate_nonlinearity") and len(rates) == 1:
         out.append(f"every rotation is at one rate ({rates[0]:g} °/s): a scale asymmetry (|w|) and a "
                    "term in the square of the rate (w|w|) act alike there; turn at two rates to tell "
                    "them apart")

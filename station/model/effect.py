@@ -65,7 +65,7 @@ class Effect:
     magnitudes = ""           # typical sizes, consumer MEMS to navigation grade
     signature = ""            # what its residuals look like when it is missing
     signature_variable = ""   # what to plot its residuals against: rate_squared, temperature,
-                              #   gravity_along_axis, signed_rate, rate_change
+                              #   gravity_along_axis, signed_rate, rate_change, time
     needs: tuple[str, ...] = ()   # inputs its compensation needs beyond the samples:
                               #   "temperature" (a temp column), "time" (time stamps: rates of change)
     state_fields: tuple[str, ...] = ()   # attributes set by setup() that the compensation needs;

@@ -1,0 +1,58 @@
+"""bias_drift: biases drifting linearly in time."""
+from __future__ import annotations
+
+import numpy as np
+
+from station.core import units
+from station.model.effect import Effect, Param
+
+
+class BiasDrift(Effect):
+    id = "bias_drift"
+    title = "Accelerometer and gyro biases drifting linearly in time (per axis)"
+    physics = ("After power-on the biases wander as the sensor settles (charging, stress relief, "
+               "outgassing): over a run of minutes to hours the wander is close to a straight line "
+               "in time, whatever the temperature does.")
+    term = ("accel_raw += d_a (t - t_ref) (µg/h); gyro_raw += d_g (t - t_ref) (°/h per hour); t the "
+            "time in the run (the fit counts it from the first segment's mean time, station apply "
+            "from the first sample of the data it is given), t_ref the statics' mean time: apply "
+            "compensates a recording that starts where the capture started (the same time after "
+            "power-on)")
+    excited_by = ("static attitudes repeated at the start and the end of the run (the same attitude "
+                  "at two times); a capture whose attitudes are each visited once spreads the drift "
+                  "over the attitudes' own parameters")
+    magnitudes = ("10-500 µg/h and 1-50 °/h per hour (MEMS in the first hour), < 10 µg/h and "
+                  "< 0.1 °/h per hour (navigation grade)")
+    signature = ("static segments: residuals that follow the time in the run, the same on repeated "
+                 "attitudes; both sensors.  Where the temperature follows the time (a warm-up) it "
+                 "is aliased with temperature_bias: only a capture whose temperature and time part "
+                 "ways (a drift after the warm-up, or a temperature that goes back) tells them apart")
+    signature_variable = "time"
+    complex_step = True
+    needs = ("time",)
+    state_fields = ("reference_s",)
+
+    def __init__(self):
+        self.reference_s = 0.0
+
+    def setup(self, summaries) -> None:
+        # time as the fit sees it: from the earliest segment's mean time (station.estimate.lsq)
+        mids = [x.t_mid_s for x in (*summaries.statics, *summaries.rotations) if np.isfinite(x.t_mid_s)]
+        t0 = min(mids) if mids else 0.0
+        statics = [st.t_mid_s - t0 for st in summaries.statics if np.isfinite(st.t_mid_s)]
+        self.reference_s = float(np.mean(statics)) if statics else 0.0
+
+    @property
+    def params(self):
+        return (tuple(Param(f"accel_bias_drift_{a}", "ug/h", 1.0, 100.0, 1e5) for a in "xyz")
+                + tuple(Param(f"gyro_bias_drift_{a}", "deg/h/h", 1.0, 10.0, 1e4) for a in "xyz"))
+
+    def _hours(self, ctx):
+        t = ctx.column("t_s") - self.reference_s
+        return np.where(np.isfinite(t), t, 0.0)[:, None] / 3600.0
+
+    def accel(self, x, ctx):
+        return self._hours(ctx) * x[:3] * units.UG_MPS2
+
+    def gyro(self, x, ctx):
+        return self._hours(ctx) * x[3:] / 3600.0

@@ -1,0 +1,54 @@
+"""temperature_bias_quadratic: the second-order term of the biases' temperature dependence."""
+from __future__ import annotations
+
+import numpy as np
+
+from station.core import units
+from station.model.effect import Effect, Param
+
+
+class TemperatureBiasQuadratic(Effect):
+    id = "temperature_bias_quadratic"
+    title = "Accelerometer and gyro biases quadratic in temperature (the T² term)"
+    physics = ("Over a wider temperature range the bias curve bends: the second-order term of its "
+               "temperature dependence.  It is the T² term only, about the same reference as "
+               "temperature_bias, so the two add (the linear term is temperature_bias's; alone, "
+               "this effect says the slope is zero at T_ref).")
+    term = ("accel_raw += c2_a (T - T_ref)^2 (µg/°C²); gyro_raw += c2_g (T - T_ref)^2 (°/h/°C²); "
+            "T_ref the mean temperature of the static segments (temperature_bias's)")
+    excited_by = ("segments recorded over a temperature range of several °C, with the same attitude "
+                  "(or the same bias) repeated at three or more temperatures")
+    magnitudes = ("1-20 µg/°C² and 0.05-2 °/h/°C² (MEMS), < 0.5 µg/°C² and < 0.01 °/h/°C² (FOG, "
+                  "quartz)")
+    signature = ("static segments: residuals that follow the square of the temperature's distance "
+                 "from the mean (after the linear term is fitted: a bow, the ends of the warm-up "
+                 "against its middle); both sensors.  Over a warm-up that is a function of time it "
+                 "is aliased with any smooth drift in time")
+    signature_variable = "temperature"
+    complex_step = True
+    needs = ("temperature",)
+    state_fields = ("reference_c", "available")
+
+    def __init__(self):
+        self.reference_c = 0.0
+        self.available = True
+
+    def setup(self, summaries) -> None:
+        temps = [st.temp_c for st in summaries.statics if st.temp_c is not None]
+        self.available = bool(temps)
+        self.reference_c = float(np.mean(temps)) if temps else 0.0
+
+    @property
+    def params(self):
+        return (tuple(Param(f"accel_bias_tempco2_{a}", "ug/degC^2", 1.0, 5.0, 500.0) for a in "xyz")
+                + tuple(Param(f"gyro_bias_tempco2_{a}", "deg/h/degC^2", 1.0, 0.5, 100.0) for a in "xyz"))
+
+    def _dt2(self, ctx):
+        dt = ctx.temp_c - self.reference_c
+        return np.where(np.isfinite(dt), dt * dt, 0.0)[:, None]
+
+    def accel(self, x, ctx):
+        return self._dt2(ctx) * x[:3] * units.UG_MPS2
+
+    def gyro(self, x, ctx):
+        return self._dt2(ctx) * x[3:] / 3600.0
