@@ -1,0 +1,505 @@
+"""Data faults found before the fit: samples at a rail, stuck samples, a temperature that changes.
+
+Each complete segment's samples are scanned per sensor axis before they are summarised
+(station.estimate.summaries calls ``Scanner.scan`` with each segment's samples, in the
+capture's units converted to m/s^2 and deg/s):
+
+* **At a rail** (saturated, clipped).  An output that saturates sits at one extreme value, its
+  rail, for as long as the input stays beyond it: a flat top.  Found by its shape: the number
+  of samples at the axis' extreme value in the segment (its top or bottom), against the number
+  at the next value inside.  Without a rail the extreme is in the tail of the noise and holds no
+  more samples than the level next to it (a Gaussian tail falls level by level; a noiseless
+  sinusoid quantised to levels puts at most 1 + sqrt 2 = 2.41 times as many samples in its top
+  level as in the next, the arcsine law of its values), so more than RAIL_RATIO times the next
+  level's count (+1), beyond a Poisson tail of RAIL_ALPHA, is a rail.  With a declared full scale
+  (the manifest's ``imu.accel_full_scale`` / ``imu.gyro_full_scale``, +- in the capture's units,
+  one number or one per axis) every sample at it is at the rail as well.
+* **Stuck** (the output stops updating and repeats its last value).  A run of identical
+  consecutive values is compared with what the axis' own noise and output step make likely: for
+  independent samples the chance that a run of L equal values starts at a given sample is at most
+  p^(L-1), p the largest probability of one output level (for noise sigma and step q,
+  erf(q / (2 sqrt 2 sigma)), the level centred on the mean), taken no smaller than the segment's
+  own share of repeated samples and of its commonest value (a sensor whose noise is below its
+  step, or a logger that writes every frame twice, repeats legitimately).  A run longer than
+  1 + log(STUCK_ALPHA / N) / log p (N the segment's samples) is stuck; for a whole sensor (all
+  three axes repeating at once) p is the product over the axes, or the segment's own share of
+  repeated frames if that is larger.
+
+What is done (each sample left out is counted and said):
+
+* a static segment with samples at a rail is left out whole (the samples left below the rail
+  are a truncated sample of the noise: their mean is biased);
+* a rotation whose accelerometer reaches a rail keeps its gyro samples and its accelerometer
+  harmonics are fitted without the phases of the turn near the rail (the same phases of every
+  revolution, chosen from where the rail was reached plus a margin in which the signal is
+  within RAIL_GUARD_SIGMA noise sigma of it: a choice made by phase, not by each sample's value,
+  leaves the rest unbiased); a rotation whose gyro reaches a rail is left out (its integral is
+  not the turn's);
+* stuck samples are left out: a static's and a gyro's as lost frames (a rotation that loses more
+  than MAX_STUCK_FRACTION of its samples so is left out, like a segment that lost frames),
+  an accelerometer's from the rotation's harmonics;
+* a hand turn (no encoder) with any of them is left out.
+
+The temperature column, when there is one, is followed over the capture: its range and its
+fastest rate.  A change of TEMPERATURE_TESTABLE_C or more is said with the effects that follow
+temperature (station.model.LIBRARY's effects that need it): a MEMS scale factor's typical
+100 ppm/degC moves it by 100 ppm per degC, about a typical capture's 1-sigma of a MEMS scale, and
+a bias's typical 0.1 mg/degC by ten times a static mean's 1-sigma: below 1 degC no library effect
+that follows temperature could be told from the noise of a typical capture.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+RAIL_RATIO = 2.5            # > 1 + sqrt 2: a quantised noiseless sinusoid's top level over the next
+RAIL_ALPHA = 1e-6           # Poisson tail of a rail by chance, per axis, side and segment
+RAIL_GUARD_SIGMA = 8.0      # a rotation's phases within this many noise sigma of a rail are left out
+STUCK_ALPHA = 1e-6          # chance of a run this long, per axis (or sensor) and segment
+MIN_STUCK_RUN = 4           # shorter runs are never called stuck, whatever the statistics say
+MAX_STUCK_FRACTION = 0.01   # a rotation's gyro may lose this share of its samples (as lost frames)
+MIN_HARMONIC_SHARE = 0.25   # a rotation keeps at least this share of its accelerometer samples
+TEMPERATURE_TESTABLE_C = 1.0
+AXES = "xyz"
+SENSORS = (("accelerometer", "accel"), ("gyro", "gyro"))
+
+
+@dataclass
+class Finding:
+    """One fault on one sensor axis (or a whole sensor: axis None), summed over the segments."""
+    kind: str                   # "rail" | "stuck"
+    sensor: str                 # "accelerometer" | "gyro"
+    axis: int | None            # 0..2, None: every axis of the sensor at once (frozen frames)
+    unit: str
+    value: float | None = None  # the rail, in unit
+    side: str = ""              # "above" | "below" (rails)
+    samples: int = 0            # samples at the rail / in stuck runs
+    runs: int = 0
+    longest: int = 0            # longest run, samples
+    threshold: int = 0          # shortest run called stuck (the largest over the segments)
+    segments: list = field(default_factory=list)
+
+    def what(self) -> str:
+        axis = f"{AXES[self.axis]} {self.sensor}" if self.axis is not None else f"{self.sensor} (all three axes)"
+        return axis
+
+    def as_dict(self) -> dict:
+        out = {"kind": self.kind, "sensor": self.sensor, "axis": None if self.axis is None else AXES[self.axis],
+               "unit": self.unit, "samples": int(self.samples), "segments": list(self.segments)}
+        if self.kind == "rail":
+            out.update(value=float(self.value), side=self.side)
+        else:
+            out.update(runs=int(self.runs), longest_run=int(self.longest), shortest_run_called_stuck=int(self.threshold))
+        return out
+
+
+@dataclass
+class Verdict:
+    """What to do with one segment's samples."""
+    drop: str | None = None                 # the reason the segment is left out
+    rows: np.ndarray | None = None          # (N,) bool, rows kept (None: all)
+    accel_stuck: np.ndarray | None = None   # (N,) bool, accelerometer rows left out of harmonics
+    accel_rail: np.ndarray | None = None    # (N,) bool, accelerometer samples at a rail
+    rail_axes: list = field(default_factory=list)   # accelerometer axes at a rail
+    accel_sigma: np.ndarray | None = None   # (3,) accelerometer noise sigma (the statics')
+
+    @property
+    def masks(self) -> bool:
+        """Some accelerometer samples are to be left out of a rotation's harmonics."""
+        return self.accel_stuck is not None or self.accel_rail is not None
+
+    def accel_keep(self, phase: np.ndarray, accel: np.ndarray) -> np.ndarray | None:
+        """(N,) bool: the rotation's samples its accelerometer harmonics use (None: all), given
+        each sample's phase of the turn (rad) and the accelerometer samples.  Stuck samples are
+        left out; for an axis at a rail, every sample whose phase (modulo a revolution) lies
+        within the band of phases where the rail was reached, widened to where the signal comes
+        within RAIL_GUARD_SIGMA noise sigma of the rail, is left out: the same phases of every
+        revolution, whatever each sample's value."""
+        keep = None if self.accel_stuck is None else ~self.accel_stuck
+        if self.accel_rail is None or not self.rail_axes:
+            return keep
+        keep = np.ones(len(phase), bool) if keep is None else keep
+        psi = np.mod(phase, 2.0 * np.pi)
+        bins = PHASE_BINS
+        width = 2.0 * np.pi / bins
+        index = np.minimum((psi / width).astype(int), bins - 1)
+        for k in self.rail_axes:
+            at, _ = rail_mask(accel[:, k])
+            at &= self.accel_rail
+            if not at.any():
+                continue
+            column = accel[:, k]
+            amplitude = max(0.5 * float(np.max(column) - np.min(column)), 1e-300)
+            sigma = 0.0 if self.accel_sigma is None else float(self.accel_sigma[k])
+            marked = np.bincount(index[at], minlength=bins) > 0
+            for centre, half in _bands(marked, width):
+                guard = math.sqrt(half * half + 2.0 * RAIL_GUARD_SIGMA * sigma / amplitude) + width
+                distance = np.abs(np.mod(psi - centre + np.pi, 2.0 * np.pi) - np.pi)
+                keep &= distance > guard
+        return keep
+
+
+PHASE_BINS = 720            # a turn's phases are grouped in half degrees to find the rail's bands
+
+
+def _bands(marked: np.ndarray, width: float):
+    """(centre, half-width) in rad of the circular runs of marked phase bins (gaps of up to two
+    bins closed)."""
+    bins = len(marked)
+    if marked.all():
+        return [(math.pi, math.pi)]
+    m = marked.copy()
+    for gap in (1, 2):                  # close small gaps (a noisy edge)
+        for shift in range(1, gap + 1):
+            m |= np.roll(marked, shift) & np.roll(marked, -(gap + 1 - shift))
+    start = int(np.flatnonzero(~m)[0])      # rotate so that the sequence starts outside a band
+    r = np.roll(m, -start)
+    starts, lengths = _true_runs(r)
+    out = []
+    for a, L in zip(starts, lengths):
+        lo = (a + start) * width
+        out.append((lo + 0.5 * L * width, 0.5 * L * width))
+    return out
+
+
+def _true_runs(flags: np.ndarray):
+    """(start, length) of the runs of True in ``flags``."""
+    f = np.concatenate([[False], flags, [False]]).astype(np.int8)
+    d = np.diff(f)
+    starts = np.flatnonzero(d == 1)
+    return starts, np.flatnonzero(d == -1) - starts
+
+
+def _runs(equal: np.ndarray):
+    """(start, length) of the runs of identical values, from ``equal`` (N-1,) (sample i+1 equals
+    sample i); length counts samples (a run of L values has L-1 equal steps)."""
+    if not len(equal):
+        return np.zeros(0, int), np.zeros(0, int)
+    e = np.concatenate([[False], equal, [False]])
+    d = np.diff(e.astype(np.int8))
+    starts = np.flatnonzero(d == 1)
+    ends = np.flatnonzero(d == -1)
+    return starts, ends - starts + 1
+
+
+def _step(column: np.ndarray) -> float:
+    """The output step (the smallest difference between two distinct values; 0 for one value)."""
+    values = np.unique(column)
+    if len(values) < 2:
+        return 0.0
+    return float(np.min(np.diff(values)))
+
+
+def _level_probability(sigma: float, step: float) -> float:
+    """The largest probability of one output level for Gaussian noise ``sigma`` and output step
+    ``step`` (the level centred on the mean)."""
+    if step <= 0.0:
+        return 0.0
+    if sigma <= 0.0:
+        return 1.0
+    return math.erf(step / (2.0 * math.sqrt(2.0) * sigma))
+
+
+def _longest_chance_run(p: float, n: int) -> int:
+    """The shortest run called stuck: runs of that length have a chance below STUCK_ALPHA in
+    ``n`` samples with level probability ``p``."""
+    if p <= 0.0:
+        return MIN_STUCK_RUN
+    if p >= 1.0:
+        return n + 1                        # nothing can be told from a sensor that never moves
+    return max(MIN_STUCK_RUN, int(math.ceil(1.0 + math.log(STUCK_ALPHA / max(n, 1)) / math.log(p))))
+
+
+def _poisson_tail_bound(k: int, lam: float) -> float:
+    """Chernoff bound on P(Poisson(lam) >= k) (1 for k <= lam)."""
+    if k <= lam:
+        return 1.0
+    return math.exp(-lam + k * (1.0 + math.log(lam / k)))
+
+
+def rail_mask(column: np.ndarray, full_scale: float | None = None):
+    """(mask of samples at a rail, [(side, value, count)]) of one axis' samples in one segment."""
+    n = len(column)
+    mask = np.zeros(n, bool)
+    rails = []
+    if n < 8:
+        return mask, rails
+    values, counts = np.unique(column, return_counts=True)
+    step = float(np.min(np.diff(values))) if len(values) > 1 else 0.0
+    for side, top, nxt in (("above", -1, -2), ("below", 0, 1)):
+        value, count = float(values[top]), int(counts[top])
+        inner = int(counts[nxt]) if len(values) > 1 else 0
+        declared = (full_scale is not None and full_scale > 0
+                    and abs(value) >= full_scale - max(step, 1e-9 * full_scale)
+                    and (value > 0) == (side == "above"))
+        shaped = count >= 3 and _poisson_tail_bound(count, RAIL_RATIO * (inner + 1)) < RAIL_ALPHA
+        if len(values) == 1:
+            shaped = False          # one value throughout: a dead or stuck axis, not a rail
+        if declared or shaped:
+            at = column == value
+            mask |= at
+            rails.append((side, value, int(at.sum())))
+    return mask, rails
+
+
+class Scanner:
+    """Scans a capture's segments one at a time (statics first) and keeps what it found."""
+
+    def __init__(self, capture, accel_factor: float, gyro_factor: float):
+        from station.core import units
+
+        self.units = ("m/s^2" if units.accel_to_mps2_factor(capture.imu.accel_unit) else capture.imu.accel_unit,
+                      "deg/s" if units.gyro_to_dps_factor(capture.imu.gyro_unit) else capture.imu.gyro_unit)
+        self.factors = (accel_factor, gyro_factor)
+        self.full_scale = tuple(self._declared(capture, key, factor)
+                                for key, factor in (("accel_full_scale", accel_factor), ("gyro_full_scale", gyro_factor)))
+        self.static_sigma = [[], []]        # per sensor: (3,) noise sigma of each static scanned
+        self.findings: dict = {}
+        self.left_out: list = []            # {"segment", "reason"}
+        self.harmonics_left_out: list = []  # {"segment", "samples", "of"}
+        self.rows_left_out: dict = {}       # segment -> rows removed (stuck)
+        self.samples = 0
+        self.segments = 0
+        self.temp = {"min": math.inf, "max": -math.inf, "rate": 0.0, "t0": math.inf, "t1": -math.inf,
+                     "segments": 0}
+
+    @staticmethod
+    def _declared(capture, key, factor):
+        value = capture.imu.extra.get(key)
+        try:
+            fs = np.broadcast_to(np.asarray(value, float), (3,)) * factor
+        except (TypeError, ValueError):
+            return None
+        if value is None or not np.all(np.isfinite(fs)) or np.any(fs <= 0):
+            return None
+        return fs
+
+    # ------------------------------------------------------------------ the scan
+
+    def scan(self, seg, t, accel, gyro, temp) -> Verdict:
+        """The verdict on one segment's samples (accel, gyro in m/s^2, deg/s or raw)."""
+        n = len(t)
+        self.samples += n
+        self.segments += 1
+        self._temperature(t, temp)
+        verdict = Verdict()
+        if n < 8:
+            return verdict
+        static = seg.kind == "static"
+        encoder = seg.kind == "rotation" and seg.angle_deg is not None and seg.extra.get("motion") != "hand"
+        rail = [np.zeros(n, bool), np.zeros(n, bool)]
+        stuck = [np.zeros(n, bool), np.zeros(n, bool)]
+        rail_words, stuck_words = [], []
+        for s, (sensor, _) in enumerate(SENSORS):
+            data = accel if s == 0 else gyro
+            fs = self.full_scale[s]
+            for k in range(3):
+                mask, rails = rail_mask(data[:, k], None if fs is None else float(fs[k]))
+                if rails:
+                    rail[s] |= mask
+                    if s == 0:
+                        verdict.rail_axes.append(k)
+                for side, value, count in rails:
+                    f = self._finding("rail", sensor, k, value=value, side=side)
+                    f.samples += count
+                    f.segments.append(seg.name)
+                    rail_words.append(f"{AXES[k]} {sensor} at its rail {value:.4g} {self.units[s]} in {count} "
+                                      f"of {n} samples")
+            stuck[s] = self._stuck(seg, s, data, static, rail[s])
+            if stuck[s].any():
+                stuck_words.append(f"{sensor} stuck in {int(stuck[s].sum())} samples")
+            if static:
+                self.static_sigma[s].append(self._noise(data))
+        if static:
+            if rail[0].any() or rail[1].any():
+                verdict.drop = ("static left out: " + "; ".join(rail_words)
+                                + " (the samples below a rail are a truncated sample: their mean is biased)")
+            else:
+                keep = ~(stuck[0] | stuck[1])
+                if not keep.all():
+                    if keep.sum() < n // 2:
+                        verdict.drop = f"static left out: {'; '.join(stuck_words)} of {n} (more than half)"
+                    else:
+                        verdict.rows = keep
+        elif not encoder:
+            if rail[0].any() or rail[1].any() or stuck[0].any() or stuck[1].any():
+                verdict.drop = ("turn without an encoder left out: " + "; ".join(rail_words + stuck_words)
+                                + " (its samples are integrated whole)")
+        else:
+            if rail[1].any():
+                verdict.drop = ("rotation left out: " + "; ".join(w for w in rail_words if " gyro " in w)
+                                + " (the gyro integral over the turn is not the turn's)")
+            elif stuck[1].sum() > MAX_STUCK_FRACTION * n:
+                verdict.drop = (f"rotation left out: gyro stuck in {int(stuck[1].sum())} of {n} samples "
+                                f"(more than {100 * MAX_STUCK_FRACTION:g} %, the limit of frames lost)")
+            else:
+                if stuck[1].any():
+                    verdict.rows = ~stuck[1]
+                if stuck[0].any():
+                    verdict.accel_stuck = stuck[0]
+                if rail[0].any():
+                    verdict.accel_rail = rail[0]
+                    verdict.accel_sigma = self._sigma(0, accel)
+        if verdict.drop:
+            self.left_out.append({"segment": seg.name, "reason": verdict.drop})
+        elif verdict.rows is not None:
+            self.rows_left_out[seg.name] = int((~verdict.rows).sum())
+        return verdict
+
+    def restrict(self, verdict: Verdict, rows: np.ndarray):
+        """The verdict's accelerometer masks on the rows kept."""
+        if verdict.accel_stuck is not None:
+            verdict.accel_stuck = verdict.accel_stuck[rows]
+        if verdict.accel_rail is not None:
+            verdict.accel_rail = verdict.accel_rail[rows]
+
+    def _finding(self, kind, sensor, axis, value=None, side=""):
+        key = (kind, sensor, axis, side, None if value is None else float(value))
+        if key not in self.findings:
+            unit = self.units[0 if sensor == "accelerometer" else 1]
+            self.findings[key] = Finding(kind, sensor, axis, unit, value, side)
+        return self.findings[key]
+
+    @staticmethod
+    def _noise(data) -> np.ndarray:
+        """Per-axis white-noise sigma from first differences (drift-free), robust to a few jumps."""
+        d = np.diff(data, axis=0)
+        return np.std(d, axis=0) / math.sqrt(2.0)
+
+    def _sigma(self, s, data) -> np.ndarray:
+        """The noise of sensor ``s``: the median over the statics scanned, or this segment's own."""
+        if self.static_sigma[s]:
+            return np.median(np.array(self.static_sigma[s]), axis=0)
+        return self._noise(data)
+
+    def _stuck(self, seg, s, data, static, at_rail) -> np.ndarray:
+        """(N,) bool: the samples in runs of identical values longer than chance (rows at a rail
+        are not counted: a rail is its own fault)."""
+        n = len(data)
+        sigma = self._sigma(s, data)
+        stuck = np.zeros(n, bool)
+        sensor = SENSORS[s][0]
+        equal_axes = [data[1:, k] == data[:-1, k] for k in range(3)]
+        p_axes, limits = [], []
+        for k in range(3):
+            col, equal = data[:, k], equal_axes[k]
+            p = max(_level_probability(float(sigma[k]), _step(col)), float(equal.mean()))
+            if static:
+                _, counts = np.unique(col, return_counts=True)
+                p = max(p, float(counts.max()) / n)
+            p_axes.append(p)
+            limits.append(_longest_chance_run(p, n))
+        # frozen frames (all three axes repeating at once) first, then single axes
+        joint = equal_axes[0] & equal_axes[1] & equal_axes[2]
+        p_joint = max(float(np.prod(p_axes)), float(joint.mean()))
+        self._mark(stuck, joint, _longest_chance_run(p_joint, n), at_rail, sensor, None, seg.name)
+        for k in range(3):
+            self._mark(stuck, equal_axes[k], limits[k], at_rail, sensor, k, seg.name)
+        return stuck
+
+    def _mark(self, stuck, equal, limit, at_rail, sensor, axis, name):
+        starts, lengths = _runs(equal)
+        long = lengths >= limit
+        if not long.any():
+            return
+        runs = 0
+        samples = 0
+        longest = 0
+        for a, L in zip(starts[long], lengths[long]):
+            if at_rail[a:a + L].any():
+                continue
+            if stuck[a:a + L].all():
+                continue        # part of frozen frames already counted
+            samples += int((~stuck[a:a + L]).sum())
+            stuck[a:a + L] = True
+            runs += 1
+            longest = max(longest, int(L))
+        if runs:
+            f = self._finding("stuck", sensor, axis)
+            f.runs += runs
+            f.samples += samples
+            f.longest = max(f.longest, longest)
+            f.threshold = max(f.threshold, int(limit))
+            if name not in f.segments:
+                f.segments.append(name)
+
+    def _temperature(self, t, temp):
+        if temp is None or not len(temp):
+            return
+        tr = self.temp
+        tr["min"] = min(tr["min"], float(np.min(temp)))
+        tr["max"] = max(tr["max"], float(np.max(temp)))
+        tr["t0"], tr["t1"] = min(tr["t0"], float(t[0])), max(tr["t1"], float(t[-1]))
+        tr["segments"] += 1
+        if len(t) > 2 and np.ptp(t) > 0:
+            tc = t - t.mean()
+            slope = float(tc @ (temp - temp.mean()) / (tc @ tc))
+            tr["rate"] = max(tr["rate"], abs(slope) * 60.0)
+
+    def harmonics(self, seg_name: str, used: int, of: int) -> None:
+        """A rotation's accelerometer harmonics were fitted over ``used`` of ``of`` samples."""
+        if used < of:
+            self.harmonics_left_out.append({"segment": seg_name, "samples": int(of - used), "of": int(of)})
+
+    # ------------------------------------------------------------------ what is said
+
+    def report(self) -> dict:
+        """The findings as plain data (the calibration file's fit.data_faults)."""
+        out = {"segments_scanned": self.segments, "samples_scanned": self.samples,
+               "faults": [f.as_dict() for f in self.findings.values()],
+               "segments_left_out": list(self.left_out),
+               "stuck_samples_left_out": dict(self.rows_left_out),
+               "harmonics_left_out": list(self.harmonics_left_out)}
+        tr = self.temp
+        if tr["segments"]:
+            out["temperature"] = {"min_c": tr["min"], "max_c": tr["max"], "range_c": tr["max"] - tr["min"],
+                                  "max_rate_c_per_min": tr["rate"],
+                                  "testable": tr["max"] - tr["min"] >= TEMPERATURE_TESTABLE_C}
+        return out
+
+    def notes(self) -> list[str]:
+        return notes_of(self.report())
+
+
+def temperature_effects() -> list[str]:
+    """The library's effects that follow the temperature column."""
+    from station.model import LIBRARY
+
+    return sorted(eid for eid, cls in LIBRARY.items() if "temperature" in getattr(cls, "needs", ()))
+
+
+def notes_of(report: dict) -> list[str]:
+    """The words of a data-fault report (Scanner.report)."""
+    notes = []
+    harmonics = {h["segment"]: h for h in report.get("harmonics_left_out", [])}
+    dropped = {d["segment"]: d["reason"] for d in report.get("segments_left_out", [])}
+    for f in report.get("faults", []):
+        what = f"{f['axis']} {f['sensor']}" if f["axis"] else f"{f['sensor']} (all three axes at once)"
+        segs = ", ".join(f["segments"][:6]) + (f" and {len(f['segments']) - 6} more" if len(f["segments"]) > 6 else "")
+        if f["kind"] == "rail":
+            left = sum(harmonics[s]["samples"] for s in set(f["segments"]) if s in harmonics)
+            gone = [s for s in dict.fromkeys(f["segments"]) if s in dropped]
+            parts = []
+            if left:
+                parts.append(f"{left} samples left out of the rotations' accelerometer harmonics (the phases "
+                             f"of the turn within {RAIL_GUARD_SIGMA:g} sigma of the rail)")
+            if gone:
+                parts.append(f"segments left out: {', '.join(gone)}")
+            notes.append(f"{what} saturates {f['side']} {f['value']:.4g} {f['unit']}: {f['samples']} samples at "
+                         f"the rail ({segs}); " + ("; ".join(parts) if parts else "left out"))
+        else:
+            notes.append(f"{what} stuck: {f['samples']} samples in {f['runs']} runs of identical values (longest "
+                         f"{f['longest']}; by chance no run reaches {f['shortest_run_called_stuck']}) in {segs}: left out")
+    for d in report.get("segments_left_out", []):
+        notes.append(f"{d['segment']}: {d['reason']}")
+    temp = report.get("temperature")
+    if temp and temp["testable"]:
+        effects = temperature_effects()
+        offer = (": effects that follow temperature can be tested: " + ", ".join(f"--add {e}" for e in effects)
+                 if effects else "")
+        notes.append(f"temperature {temp['min_c']:.1f}–{temp['max_c']:.1f} °C over the capture "
+                     f"({temp['range_c']:.1f} °C, at most {temp['max_rate_c_per_min']:.2g} °C/min within a segment)"
+                     + offer)
+    return notes
