@@ -191,6 +191,16 @@ class TriadTruth:
     # gyros only: anisoelastic term N (deg/h per g^2), row i: gyro i, columns the products
     # F_x^2, F_y^2, F_z^2, F_x F_y, F_x F_z, F_y F_z (F: case axes, g; ANISOELASTIC_PRODUCTS)
     anisoelastic_dph_per_g2: np.ndarray = field(default_factory=lambda: np.zeros((3, 6)))
+    # full-scale range (raw units; 0: none): the converter's output cannot go beyond +-full_scale,
+    # an input beyond it reads the rail (the last code), as a real ADC saturates
+    full_scale: float = 0.0
+    # stuck samples: from each bench time in stuck_at_s on, for stuck_duration_s, the output
+    # register of the axes in stuck_axes (0..2) stops updating and repeats the sample taken at
+    # (or first after) that time, as a sensor whose data-ready is missed or a driver that resends
+    # its last frame
+    stuck_at_s: list = field(default_factory=list)
+    stuck_duration_s: float = 0.0
+    stuck_axes: list = field(default_factory=lambda: [0, 1, 2])
 
     def __post_init__(self):
         self.scale = np.asarray(self.scale, dtype=float).reshape(3)
@@ -213,6 +223,12 @@ class TriadTruth:
                                                    dtype=float).reshape(3)
         self.anisoelastic_dph_per_g2 = np.asarray(self.anisoelastic_dph_per_g2,
                                                   dtype=float).reshape(3, 6)
+        self.full_scale = float(self.full_scale)
+        self.stuck_at_s = [float(x) for x in np.asarray(self.stuck_at_s, dtype=float).reshape(-1)]
+        self.stuck_duration_s = float(self.stuck_duration_s)
+        self.stuck_axes = [int(k) for k in self.stuck_axes]
+        if any(k not in (0, 1, 2) for k in self.stuck_axes):
+            raise ValueError("stuck_axes must name axes 0, 1 or 2")
         if np.any(np.diag(self.cross_coupling_ug_per_g2) != 0.0):
             raise ValueError("cross_coupling_ug_per_g2 must have a zero diagonal "
                              "(the a_i^2 term is nonlinearity_ug_per_g2)")
@@ -320,6 +336,36 @@ def _quantise(x: np.ndarray, lsb: float) -> np.ndarray:
     return np.round(x / lsb) * lsb
 
 
+def _converted(x: np.ndarray, triad: "TriadTruth", t) -> np.ndarray:
+    """The analogue value ``x`` (N,3) through the converter: clipped at +-full_scale (an input
+    beyond the range reads the rail), quantised to the LSB, then held where the output is stuck
+    (the axes' register repeats the sample taken at the start of each stuck window, or at the
+    first sample of this block inside it)."""
+    if triad.full_scale > 0.0:
+        x = np.clip(x, -triad.full_scale, triad.full_scale)
+    x = _quantise(x, triad.lsb)
+    if triad.stuck_at_s and triad.stuck_duration_s > 0.0:
+        if t is None:
+            raise ValueError("stuck samples need the sample times: pass t= to Truth.measure")
+        t = np.asarray(t, dtype=float).reshape(-1)
+        for start in triad.stuck_at_s:
+            inside = np.flatnonzero((t >= start) & (t < start + triad.stuck_duration_s))
+            if len(inside):
+                x[inside[:, None], triad.stuck_axes] = x[inside[0], triad.stuck_axes]
+    return x
+
+
+def _converter_keys(triad: "TriadTruth", fs_key: str) -> dict:
+    """The converter's faults in the truth file, only when set (older files stay as they were)."""
+    out = {}
+    if triad.full_scale > 0.0:
+        out[fs_key] = float(triad.full_scale)
+    if triad.stuck_at_s and triad.stuck_duration_s > 0.0:
+        out.update(stuck_at_s=[float(x) for x in triad.stuck_at_s],
+                   stuck_duration_s=float(triad.stuck_duration_s), stuck_axes=list(triad.stuck_axes))
+    return out
+
+
 # --------------------------------------------------------------------------
 # Truth
 # --------------------------------------------------------------------------
@@ -328,11 +374,13 @@ _TOP_KEYS = {"version", "sample_rate_hz", "accelerometer", "gyroscope", "tempera
 _ACC_KEYS = {"scale", "axis_tilt_arcsec", "bias_ug", "bias_tempco_ug_per_c",
              "noise_density_ug_rthz", "lsb_mps2", "position_m", "nonlinearity_ug_per_g2",
              "cross_coupling_ug_per_g2", "scale_asymmetry_ppm", "scale_tempco_ppm_per_c",
-             "bias_step_ug", "bias_step_time_s"}
+             "bias_step_ug", "bias_step_time_s", "full_scale_mps2", "stuck_at_s", "stuck_duration_s",
+             "stuck_axes"}
 _GYR_KEYS = {"scale", "axis_tilt_arcsec", "bias_dph", "bias_tempco_dph_per_c",
              "noise_density_dph_rthz", "lsb_dps", "g_sensitivity_dph_per_g", "scale_asymmetry_ppm",
              "scale_tempco_ppm_per_c", "bias_step_dph", "bias_step_time_s",
-             "rate_squared_ppm_per_dps", "anisoelastic_dph_per_g2"}
+             "rate_squared_ppm_per_dps", "anisoelastic_dph_per_g2", "full_scale_dps", "stuck_at_s",
+             "stuck_duration_s", "stuck_axes"}
 _TEMP_KEYS = {"start_c", "reference_c", "drift_c_per_h", "warmup_delta_c",
               "warmup_time_constant_s"}
 _BENCH_KEYS = {"latitude_deg", "height_m", "lever_arm_m", "table_angle_error_arcsec",
@@ -443,7 +491,7 @@ class Truth:
                 accel += self.accel_noise_sigma * rng.standard_normal(accel.shape)
             if self.gyro.noise_density > 0.0:
                 gyro += self.gyro_noise_sigma * rng.standard_normal(gyro.shape)
-        return _quantise(accel, self.accel.lsb), _quantise(gyro, self.gyro.lsb)
+        return _converted(accel, self.accel, t), _converted(gyro, self.gyro, t)
 
     # ------------------------------------------------------ paper parameters
     def paper_parameters(self) -> dict[str, Any]:
@@ -528,6 +576,7 @@ class Truth:
                 "scale_tempco_ppm_per_c": fl(self.accel.scale_tempco_ppm_per_c),
                 "bias_step_ug": fl(self.accel.bias_step),
                 "bias_step_time_s": float(self.accel.bias_step_time_s),
+                **_converter_keys(self.accel, "full_scale_mps2"),
             },
             "gyroscope": {
                 "scale": fl(self.gyro.scale),
@@ -543,6 +592,7 @@ class Truth:
                 "bias_step_time_s": float(self.gyro.bias_step_time_s),
                 "rate_squared_ppm_per_dps": fl(self.gyro.rate_squared_ppm_per_dps),
                 "anisoelastic_dph_per_g2": [fl(r) for r in self.gyro.anisoelastic_dph_per_g2],
+                **_converter_keys(self.gyro, "full_scale_dps"),
             },
             "temperature": {
                 "start_c": float(self.temperature.start_c),
@@ -603,9 +653,23 @@ class Truth:
                         lo=0.0, lo_open=True, hi=1e6)
 
         def triad(sec: str, keys: set[str], bias_key, tc_key, noise_key, lsb_key,
-                  noise_default, step_key) -> TriadTruth:
+                  noise_default, step_key, fs_key) -> TriadTruth:
             d = c.mapping(top.get(sec), sec, keys)
             t = TriadTruth(noise_density=noise_default)
+            if fs_key in d:
+                t.full_scale = c.number(d[fs_key], f"{sec}.{fs_key}", lo=0.0)
+            if "stuck_at_s" in d:
+                at = d["stuck_at_s"]
+                at = at if isinstance(at, list) else [at]
+                t.stuck_at_s = [c.number(v, f"{sec}.stuck_at_s[{i}]", lo=0.0) for i, v in enumerate(at)]
+            if "stuck_duration_s" in d:
+                t.stuck_duration_s = c.number(d["stuck_duration_s"], f"{sec}.stuck_duration_s", lo=0.0)
+            if "stuck_axes" in d:
+                axes = d["stuck_axes"]
+                if (not isinstance(axes, list) or not axes
+                        or any(isinstance(k, bool) or k not in (0, 1, 2) for k in axes)):
+                    c.fail(f"{sec}.stuck_axes", f"expected a list of axes 0, 1, 2, got {axes!r}")
+                t.stuck_axes = [int(k) for k in axes]
             if "scale" in d:
                 t.scale = c.vector(d["scale"], f"{sec}.scale", lo=0.0, lo_open=True)
             if "axis_tilt_arcsec" in d:
@@ -657,10 +721,10 @@ class Truth:
 
         accel = triad("accelerometer", _ACC_KEYS, "bias_ug", "bias_tempco_ug_per_c",
                       "noise_density_ug_rthz", "lsb_mps2", DEFAULT_ACCEL_NOISE_UG_RTHZ,
-                      "bias_step_ug")
+                      "bias_step_ug", "full_scale_mps2")
         gyro = triad("gyroscope", _GYR_KEYS, "bias_dph", "bias_tempco_dph_per_c",
                      "noise_density_dph_rthz", "lsb_dps", DEFAULT_GYRO_NOISE_DPH_RTHZ,
-                     "bias_step_dph")
+                     "bias_step_dph", "full_scale_dps")
 
         d = c.mapping(top.get("temperature"), "temperature", _TEMP_KEYS)
         temp = TemperatureTruth()
