@@ -344,14 +344,16 @@ def _converted(x: np.ndarray, triad: "TriadTruth", t) -> np.ndarray:
     if triad.full_scale > 0.0:
         x = np.clip(x, -triad.full_scale, triad.full_scale)
     x = _quantise(x, triad.lsb)
-    if triad.stuck_at_s and triad.stuck_duration_s > 0.0:
+    starts = np.asarray(triad.stuck_at_s, dtype=float).reshape(-1)
+    if len(starts) and triad.stuck_duration_s > 0.0:
         if t is None:
             raise ValueError("stuck samples need the sample times: pass t= to Truth.measure")
         t = np.asarray(t, dtype=float).reshape(-1)
-        for start in triad.stuck_at_s:
+        axes = np.asarray(triad.stuck_axes, dtype=int).reshape(-1)
+        for start in starts:
             inside = np.flatnonzero((t >= start) & (t < start + triad.stuck_duration_s))
             if len(inside):
-                x[inside[:, None], triad.stuck_axes] = x[inside[0], triad.stuck_axes]
+                x[inside[:, None], axes] = x[inside[0], axes]
     return x
 
 
@@ -360,7 +362,7 @@ def _converter_keys(triad: "TriadTruth", fs_key: str) -> dict:
     out = {}
     if triad.full_scale > 0.0:
         out[fs_key] = float(triad.full_scale)
-    if triad.stuck_at_s and triad.stuck_duration_s > 0.0:
+    if len(triad.stuck_at_s) and triad.stuck_duration_s > 0.0:
         out.update(stuck_at_s=[float(x) for x in triad.stuck_at_s],
                    stuck_duration_s=float(triad.stuck_duration_s), stuck_axes=list(triad.stuck_axes))
     return out

@@ -278,7 +278,8 @@ def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diag
     else:
         verdict = (f"the model does not explain the data (reduced chi2 {reduced:.3g}, p = {p:.2g}) "
                    "and no effect of the library accounts for it: see where it fails")
-    notes = []
+    # the data faults found before the fit (station/estimate/data_faults.py): what was left out
+    notes = list(getattr(result.model.s, "data_fault_notes", None) or [])
     phi = overdispersion(result)
     if phi > 1.0:
         notes.append(f"the fit fails, so the candidates' chi2 drops are divided and their 1-sigma "

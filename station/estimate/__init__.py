@@ -267,6 +267,15 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
     cal.fit.setdefault("notes", []).extend(excluded)
     if excluded:
         cal.fit["excluded_segments"] = [n.split()[1] for n in excluded]
+    if resolved == "lsq":
+        from station.estimate import summaries
+
+        # what the data-fault scan found and left out (station/estimate/data_faults.py): its words
+        # are among the notes already (the summaries' skipped)
+        parts = summaries.kept(capture)
+        report = getattr(parts, "data_faults", None) if parts is not None else None
+        if report is not None:
+            cal.fit["data_faults"] = report
     judge(cal)
     firmware = capture.imu.extra.get("firmware")
     provenance = {

@@ -490,8 +490,12 @@ def notes_of(report: dict) -> list[str]:
             notes.append(f"{what} saturates {f['side']} {f['value']:.4g} {f['unit']}: {f['samples']} samples at "
                          f"the rail ({segs}); " + ("; ".join(parts) if parts else "left out"))
         else:
-            notes.append(f"{what} stuck: {f['samples']} samples in {f['runs']} runs of identical values (longest "
-                         f"{f['longest']}; by chance no run reaches {f['shortest_run_called_stuck']}) in {segs}: left out")
+            runs = f"{f['runs']} run{'s' if f['runs'] != 1 else ''}"
+            how = ("frozen (all three axes repeat the previous sample)" if f["axis"] is None
+                   else "stuck (repeats the previous sample)")
+            notes.append(f"{what.replace(' (all three axes at once)', '')} {how}: {f['samples']} samples in {runs} "
+                         f"(longest {f['longest_run']} samples; by chance no run reaches "
+                         f"{f['shortest_run_called_stuck']} here) in {segs}: left out")
     for d in report.get("segments_left_out", []):
         notes.append(f"{d['segment']}: {d['reason']}")
     temp = report.get("temperature")
