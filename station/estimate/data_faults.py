@@ -61,6 +61,7 @@ STUCK_ALPHA = 1e-6          # chance of a run this long, per axis (or sensor) an
 MIN_STUCK_RUN = 4           # shorter runs are never called stuck, whatever the statistics say
 MAX_STUCK_FRACTION = 0.01   # a rotation's gyro may lose this share of its samples (as lost frames)
 MIN_HARMONIC_SHARE = 0.25   # a rotation keeps at least this share of its accelerometer samples
+MAX_LEVELS = 1 << 22        # a static's commonest value is counted on a grid of at most this many levels
 TEMPERATURE_TESTABLE_C = 1.0
 AXES = "xyz"
 SENSORS = (("accelerometer", "accel"), ("gyro", "gyro"))
@@ -93,6 +94,10 @@ class Finding:
         else:
             out.update(runs=int(self.runs), longest_run=int(self.longest), shortest_run_called_stuck=int(self.threshold))
         return out
+
+
+class TooLittleLeft(Exception):
+    """A rotation whose accelerometer harmonics would keep too little of the turn: left out."""
 
 
 @dataclass
@@ -138,6 +143,9 @@ class Verdict:
                 guard = math.sqrt(half * half + 2.0 * RAIL_GUARD_SIGMA * sigma / amplitude) + width
                 distance = np.abs(np.mod(psi - centre + np.pi, 2.0 * np.pi) - np.pi)
                 keep &= distance > guard
+        if keep.sum() < MIN_HARMONIC_SHARE * len(keep):
+            raise TooLittleLeft(f"rotation left out: its accelerometer harmonics would keep {int(keep.sum())} of "
+                                f"{len(keep)} samples away from the rail (less than {100 * MIN_HARMONIC_SHARE:g} %)")
         return keep
 
 
@@ -184,12 +192,28 @@ def _runs(equal: np.ndarray):
     return starts, ends - starts + 1
 
 
-def _step(column: np.ndarray) -> float:
-    """The output step (the smallest difference between two distinct values; 0 for one value)."""
-    values = np.unique(column)
-    if len(values) < 2:
+def _mode_share(column: np.ndarray, step: float) -> float:
+    """The share of the samples at the commonest value (0 when the values are not on a grid of
+    ``step`` with fewer than MAX_LEVELS levels: continuous outputs, which do not repeat)."""
+    if step <= 0.0:
         return 0.0
-    return float(np.min(np.diff(values)))
+    lo = float(column.min())
+    levels = (float(column.max()) - lo) / step
+    if not levels < MAX_LEVELS:
+        return 0.0
+    index = np.rint((column - lo) / step).astype(np.int64)
+    return float(np.bincount(index).max()) / len(column)
+
+
+def _extreme(column: np.ndarray, top: bool):
+    """(the extreme value, its count, the count at the next value inside) (O(N))."""
+    value = float(column.max() if top else column.min())
+    at = column == value
+    inside = column[~at]
+    if not len(inside):
+        return value, int(at.sum()), 0
+    nxt = inside.max() if top else inside.min()
+    return value, int(at.sum()), int((inside == nxt).sum())
 
 
 def _level_probability(sigma: float, step: float) -> float:
@@ -219,24 +243,38 @@ def _poisson_tail_bound(k: int, lam: float) -> float:
     return math.exp(-lam + k * (1.0 + math.log(lam / k)))
 
 
-def rail_mask(column: np.ndarray, full_scale: float | None = None):
+class _Column:
+    """One axis' samples in one segment and what the scan takes from their first differences:
+    which samples repeat the previous one, the output step (from above: the smallest change
+    between consecutive samples, 0 when the column never changes; at least the true step, so the
+    level probability it gives is not understated) and the white noise (their spread over
+    sqrt 2: drifts do not enter).  One pass, no sort of a long segment."""
+
+    def __init__(self, column):
+        self.values = np.ascontiguousarray(column)
+        d = np.diff(self.values)
+        self.equal = d == 0
+        change = np.abs(d[~self.equal])
+        self.step = float(change.min()) if len(change) else 0.0
+        self.sigma = float(np.sqrt(np.mean(d * d) - np.mean(d) ** 2) / math.sqrt(2.0)) if len(d) else 0.0
+
+
+def rail_mask(column: np.ndarray, full_scale: float | None = None, stats: "_Column | None" = None):
     """(mask of samples at a rail, [(side, value, count)]) of one axis' samples in one segment."""
     n = len(column)
     mask = np.zeros(n, bool)
     rails = []
     if n < 8:
         return mask, rails
-    values, counts = np.unique(column, return_counts=True)
-    step = float(np.min(np.diff(values))) if len(values) > 1 else 0.0
-    for side, top, nxt in (("above", -1, -2), ("below", 0, 1)):
-        value, count = float(values[top]), int(counts[top])
-        inner = int(counts[nxt]) if len(values) > 1 else 0
+    if column.min() == column.max():
+        return mask, rails          # one value throughout: a dead or stuck axis, not a rail
+    step = (stats.step if stats is not None else _Column(column).step) if full_scale else 0.0
+    for side, top in (("above", True), ("below", False)):
+        value, count, inner = _extreme(column, top)
         declared = (full_scale is not None and full_scale > 0
                     and abs(value) >= full_scale - max(step, 1e-9 * full_scale)
                     and (value > 0) == (side == "above"))
         shaped = count >= 3 and _poisson_tail_bound(count, RAIL_RATIO * (inner + 1)) < RAIL_ALPHA
-        if len(values) == 1:
-            shaped = False          # one value throughout: a dead or stuck axis, not a rail
         if declared or shaped:
             at = column == value
             mask |= at
@@ -295,8 +333,9 @@ class Scanner:
         for s, (sensor, _) in enumerate(SENSORS):
             data = accel if s == 0 else gyro
             fs = self.full_scale[s]
-            for k in range(3):
-                mask, rails = rail_mask(data[:, k], None if fs is None else float(fs[k]))
+            columns = [_Column(data[:, k]) for k in range(3)]
+            for k, c in enumerate(columns):
+                mask, rails = rail_mask(c.values, None if fs is None else float(fs[k]), c)
                 if rails:
                     rail[s] |= mask
                     if s == 0:
@@ -307,11 +346,11 @@ class Scanner:
                     f.segments.append(seg.name)
                     rail_words.append(f"{AXES[k]} {sensor} at its rail {value:.4g} {self.units[s]} in {count} "
                                       f"of {n} samples")
-            stuck[s] = self._stuck(seg, s, data, static, rail[s])
+            if static:
+                self.static_sigma[s].append(np.array([c.sigma for c in columns]))
+            stuck[s] = self._stuck(seg, s, columns, static, rail[s])
             if stuck[s].any():
                 stuck_words.append(f"{sensor} stuck in {int(stuck[s].sum())} samples")
-            if static:
-                self.static_sigma[s].append(self._noise(data))
         if static:
             if rail[0].any() or rail[1].any():
                 verdict.drop = ("static left out: " + "; ".join(rail_words)
@@ -341,7 +380,7 @@ class Scanner:
                     verdict.accel_stuck = stuck[0]
                 if rail[0].any():
                     verdict.accel_rail = rail[0]
-                    verdict.accel_sigma = self._sigma(0, accel)
+                    verdict.accel_sigma = self._sigma(0, [_Column(accel[:, k]) for k in range(3)])
         if verdict.drop:
             self.left_out.append({"segment": seg.name, "reason": verdict.drop})
         elif verdict.rows is not None:
@@ -362,33 +401,25 @@ class Scanner:
             self.findings[key] = Finding(kind, sensor, axis, unit, value, side)
         return self.findings[key]
 
-    @staticmethod
-    def _noise(data) -> np.ndarray:
-        """Per-axis white-noise sigma from first differences (drift-free), robust to a few jumps."""
-        d = np.diff(data, axis=0)
-        return np.std(d, axis=0) / math.sqrt(2.0)
-
-    def _sigma(self, s, data) -> np.ndarray:
+    def _sigma(self, s, columns) -> np.ndarray:
         """The noise of sensor ``s``: the median over the statics scanned, or this segment's own."""
         if self.static_sigma[s]:
             return np.median(np.array(self.static_sigma[s]), axis=0)
-        return self._noise(data)
+        return np.array([c.sigma for c in columns])
 
-    def _stuck(self, seg, s, data, static, at_rail) -> np.ndarray:
+    def _stuck(self, seg, s, columns, static, at_rail) -> np.ndarray:
         """(N,) bool: the samples in runs of identical values longer than chance (rows at a rail
         are not counted: a rail is its own fault)."""
-        n = len(data)
-        sigma = self._sigma(s, data)
+        n = len(columns[0].values)
+        sigma = self._sigma(s, columns)
         stuck = np.zeros(n, bool)
         sensor = SENSORS[s][0]
-        equal_axes = [data[1:, k] == data[:-1, k] for k in range(3)]
+        equal_axes = [c.equal for c in columns]
         p_axes, limits = [], []
-        for k in range(3):
-            col, equal = data[:, k], equal_axes[k]
-            p = max(_level_probability(float(sigma[k]), _step(col)), float(equal.mean()))
+        for k, c in enumerate(columns):
+            p = max(_level_probability(float(sigma[k]), c.step), float(c.equal.mean()))
             if static:
-                _, counts = np.unique(col, return_counts=True)
-                p = max(p, float(counts.max()) / n)
+                p = max(p, _mode_share(c.values, c.step))
             p_axes.append(p)
             limits.append(_longest_chance_run(p, n))
         # frozen frames (all three axes repeating at once) first, then single axes
@@ -437,6 +468,10 @@ class Scanner:
             tc = t - t.mean()
             slope = float(tc @ (temp - temp.mean()) / (tc @ tc))
             tr["rate"] = max(tr["rate"], abs(slope) * 60.0)
+
+    def drop(self, seg_name: str, reason: str) -> None:
+        """A segment left out after its scan (a rotation with too little left away from a rail)."""
+        self.left_out.append({"segment": seg_name, "reason": reason})
 
     def harmonics(self, seg_name: str, used: int, of: int) -> None:
         """A rotation's accelerometer harmonics were fitted over ``used`` of ``of`` samples."""

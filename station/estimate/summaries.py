@@ -486,9 +486,14 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
             if group is None:
                 axes.append(axis)
                 group = len(axes) - 1
-            summary = rotation_summary(seg.name, axis, group, seg.angle_deg, d.t, _scaled(d.accel, ca), _scaled(d.gyro, cg),
-                                       d.temp, gyro_sigma_dps=gyro_sigma, gyro_bias=static_gyro_mean,
-                                       accel_mask=verdict.accel_keep if verdict.masks else None)
+            try:
+                summary = rotation_summary(seg.name, axis, group, seg.angle_deg, d.t, _scaled(d.accel, ca),
+                                           _scaled(d.gyro, cg), d.temp, gyro_sigma_dps=gyro_sigma,
+                                           gyro_bias=static_gyro_mean,
+                                           accel_mask=verdict.accel_keep if verdict.masks else None)
+            except data_faults.TooLittleLeft as e:
+                scanner.drop(seg.name, str(e))
+                continue
             scanner.harmonics(seg.name, summary.samples, len(d.t))
             if seg.extra.get("motion") == "hand":      # the writer says so (manual schemes)
                 summary.steady = False
