@@ -244,3 +244,35 @@ def test_the_truth_file_keeps_the_converter_faults(tmp_path):
     accel, gyro = back.measure(f, w, 25.0, None, t=np.array([3.0, 3.1, 3.3]))
     assert accel[1, 2] == pytest.approx(78.4532) and accel[2, 2] == pytest.approx(-78.4532)
     assert gyro[1, 2] == gyro[0, 2] and gyro[2, 2] != gyro[0, 2]
+
+
+def test_a_turn_mostly_at_the_rail_is_left_out_and_said():
+    truth, capture = mems_capture(seed=4)
+    x = capture.segment("roty_p").data.accel[:, 0]          # a sinusoid of 1 g about y
+    x[:] = np.minimum(x, -8.0)                              # at a rail 290 deg of each turn
+    s = summaries.summarise(capture)
+    assert "roty_p" not in [r.name for r in s.rotations] and len(s.rotations) == 11
+    words = " ".join(s.skipped)
+    assert "x accelerometer saturates above -8 m/s^2" in words
+    assert "roty_p: rotation left out: its accelerometer harmonics would keep" in words and "less than 25 %" in words
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 7, 8, 9, 40])
+def test_odd_samples_never_crash_the_scan(n):
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(n)
+    capture = SimpleNamespace(imu=SimpleNamespace(accel_unit="raw", gyro_unit="raw",
+                                                  extra={"accel_full_scale": "bad", "gyro_full_scale": [0, 1]}))
+    t = np.arange(n) / 100.0
+    cases = [np.zeros((n, 3)), np.ones((n, 3)) * 1e11, rng.integers(-2, 2, (n, 3)).astype(float),
+             rng.normal(size=(n, 3)), np.repeat(rng.normal(size=(1, 3)), n, axis=0)]
+    for kind, angle in (("static", None), ("rotation", 360.0), ("rotation", None)):
+        scanner = data_faults.Scanner(capture, 1.0, 1.0)
+        seg = SimpleNamespace(kind=kind, name="s", angle_deg=angle, extra={})
+        for a in cases:
+            for g in cases:
+                verdict = scanner.scan(seg, t, a, g, t * 0.0 + 20.0 if n else None)
+                if verdict.masks:
+                    verdict.accel_keep(np.linspace(0, 2 * np.pi, n), a)
+        assert isinstance(data_faults.notes_of(scanner.report()), list)
