@@ -276,3 +276,21 @@ def test_odd_samples_never_crash_the_scan(n):
                 if verdict.masks:
                     verdict.accel_keep(np.linspace(0, 2 * np.pi, n), a)
         assert isinstance(data_faults.notes_of(scanner.report()), list)
+
+
+def test_a_declared_rail_reached_twice_still_guards_the_turn():
+    """Two samples at a declared full scale are no shape, but they are at the rail: found, and
+    the turn's harmonics fitted without the phases near it."""
+    truth, capture = mems_capture(seed=3, bench__lever_arm_m=[0.0, 0.0, -0.1])    # the turns peak highest
+    rail = float(np.sort(np.concatenate([seg.data.accel[:, 2] for seg in capture.segments]))[-2])
+    for seg in capture.segments:
+        np.minimum(seg.data.accel[:, 2], rail, out=seg.data.accel[:, 2])
+    reached = {seg.name for seg in capture.segments if (seg.data.accel[:, 2] == rail).any()}
+    assert sum(int((seg.data.accel[:, 2] == rail).sum()) for seg in capture.segments) == 2
+    report = summaries.summarise(capture).data_faults
+    assert report["faults"] == []                                   # by its shape: nothing
+    capture.imu.extra["accel_full_scale"] = [100.0, 100.0, rail]
+    report = summaries.summarise(capture).data_faults
+    assert [(f["axis"], f["value"], f["samples"]) for f in report["faults"]] == [("z", rail, 2)]
+    left = {h["segment"]: h["samples"] for h in report["harmonics_left_out"]}
+    assert set(left) == reached and all(0 < n < 0.25 * 3600 for n in left.values())

@@ -82,10 +82,6 @@ class Finding:
     threshold: int = 0          # shortest run called stuck (the largest over the segments)
     segments: list = field(default_factory=list)
 
-    def what(self) -> str:
-        axis = f"{AXES[self.axis]} {self.sensor}" if self.axis is not None else f"{self.sensor} (all three axes)"
-        return axis
-
     def as_dict(self) -> dict:
         out = {"kind": self.kind, "sensor": self.sensor, "axis": None if self.axis is None else AXES[self.axis],
                "unit": self.unit, "samples": int(self.samples), "segments": list(self.segments)}
@@ -106,8 +102,7 @@ class Verdict:
     drop: str | None = None                 # the reason the segment is left out
     rows: np.ndarray | None = None          # (N,) bool, rows kept (None: all)
     accel_stuck: np.ndarray | None = None   # (N,) bool, accelerometer rows left out of harmonics
-    accel_rail: np.ndarray | None = None    # (N,) bool, accelerometer samples at a rail
-    rail_axes: list = field(default_factory=list)   # accelerometer axes at a rail
+    accel_rail: dict | None = None          # accelerometer axis -> (N,) bool, its samples at a rail
     accel_sigma: np.ndarray | None = None   # (3,) accelerometer noise sigma (the statics')
 
     @property
@@ -123,16 +118,14 @@ class Verdict:
         within RAIL_GUARD_SIGMA noise sigma of the rail, is left out: the same phases of every
         revolution, whatever each sample's value."""
         keep = None if self.accel_stuck is None else ~self.accel_stuck
-        if self.accel_rail is None or not self.rail_axes:
+        if not self.accel_rail:
             return keep
         keep = np.ones(len(phase), bool) if keep is None else keep
         psi = np.mod(phase, 2.0 * np.pi)
         bins = PHASE_BINS
         width = 2.0 * np.pi / bins
         index = np.minimum((psi / width).astype(int), bins - 1)
-        for k in self.rail_axes:
-            at, _ = rail_mask(accel[:, k])
-            at &= self.accel_rail
+        for k, at in self.accel_rail.items():
             if not at.any():
                 continue
             column = accel[:, k]
@@ -330,6 +323,7 @@ class Scanner:
         rail = [np.zeros(n, bool), np.zeros(n, bool)]
         stuck = [np.zeros(n, bool), np.zeros(n, bool)]
         rail_words, stuck_words = [], []
+        rail_axes = {}
         for s, (sensor, _) in enumerate(SENSORS):
             data = accel if s == 0 else gyro
             fs = self.full_scale[s]
@@ -339,7 +333,7 @@ class Scanner:
                 if rails:
                     rail[s] |= mask
                     if s == 0:
-                        verdict.rail_axes.append(k)
+                        rail_axes[k] = mask
                 for side, value, count in rails:
                     f = self._finding("rail", sensor, k, value=value, side=side)
                     f.samples += count
@@ -378,8 +372,8 @@ class Scanner:
                     verdict.rows = ~stuck[1]
                 if stuck[0].any():
                     verdict.accel_stuck = stuck[0]
-                if rail[0].any():
-                    verdict.accel_rail = rail[0]
+                if rail_axes:
+                    verdict.accel_rail = rail_axes
                     verdict.accel_sigma = self._sigma(0, [_Column(accel[:, k]) for k in range(3)])
         if verdict.drop:
             self.left_out.append({"segment": seg.name, "reason": verdict.drop})
@@ -392,7 +386,7 @@ class Scanner:
         if verdict.accel_stuck is not None:
             verdict.accel_stuck = verdict.accel_stuck[rows]
         if verdict.accel_rail is not None:
-            verdict.accel_rail = verdict.accel_rail[rows]
+            verdict.accel_rail = {k: at[rows] for k, at in verdict.accel_rail.items()}
 
     def _finding(self, kind, sensor, axis, value=None, side=""):
         key = (kind, sensor, axis, side, None if value is None else float(value))
