@@ -294,3 +294,32 @@ def test_a_declared_rail_reached_twice_still_guards_the_turn():
     assert [(f["axis"], f["value"], f["samples"]) for f in report["faults"]] == [("z", rail, 2)]
     left = {h["segment"]: h["samples"] for h in report["harmonics_left_out"]}
     assert set(left) == reached and all(0 < n < 0.25 * 3600 for n in left.values())
+
+
+@pytest.mark.parametrize("rho", [0.0, 0.95, 0.99])
+@pytest.mark.parametrize("lsb", [0.005, 0.02, 0.2])
+def test_filtered_and_coarse_outputs_raise_no_alarm(rho, lsb):
+    """Noise low-pass filtered (AR(1), rho: successive samples alike, as an IMU's digital filter
+    makes them) and quantised from sigma/3 to 12 sigma: repeats and flat peaks come from the
+    filter and the step, not from a fault.  A static, then ten revolutions of 1 g."""
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(int(1000 * rho + 1000 * lsb))
+    capture = SimpleNamespace(imu=SimpleNamespace(accel_unit="m/s^2", gyro_unit="deg/s", extra={}))
+    n = 3600
+    t = np.arange(n) / 100.0
+    phase = np.linspace(0.0, 20.0 * np.pi, n)
+    for _ in range(4):
+        scanner = data_faults.Scanner(capture, 1.0, 1.0)
+        for kind, angle, signal in (("static", None, np.zeros((n, 6))),
+                                    ("rotation", 3600.0, np.column_stack([9.8 * np.cos(phase), 9.8 * np.sin(phase),
+                                                                          np.full(n, 0.3), np.full(n, 100.0),
+                                                                          np.zeros(n), np.zeros(n)]))):
+            w = np.empty((n, 6))
+            w[0] = rng.normal(size=6)
+            e = rng.normal(size=(n, 6)) * np.sqrt(1.0 - rho * rho)
+            for i in range(1, n):
+                w[i] = rho * w[i - 1] + e[i]
+            x = np.round((signal + 0.016 * w) / lsb) * lsb
+            scanner.scan(SimpleNamespace(kind=kind, name=kind, angle_deg=angle, extra={}), t, x[:, :3], x[:, 3:], None)
+        assert scanner.findings == {}
