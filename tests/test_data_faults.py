@@ -220,8 +220,9 @@ def test_estimate_writes_the_faults_and_diagnose_says_them(tmp_path, capsys):
         [("rail", "accelerometer", "z", RAIL)]
     assert sum(h["samples"] for h in faults["harmonics_left_out"]) > faults["faults"][0]["samples"]
     assert cli.main(["diagnose", str(path), "--json"]) == 0
-    notes = json.loads(capsys.readouterr().out)["notes"]
-    assert any(n.startswith("z accelerometer saturates above 10 m/s^2") for n in notes)
+    diagnosis = json.loads(capsys.readouterr().out)
+    assert any(n.startswith("z accelerometer saturates above 10 m/s^2") for n in diagnosis["notes"])
+    assert diagnosis["data_faults"]["faults"] == faults["faults"]
 
 
 def test_the_truth_file_keeps_the_converter_faults(tmp_path):
