@@ -324,3 +324,36 @@ def test_filtered_and_coarse_outputs_raise_no_alarm(rho, lsb):
             x = np.round((signal + 0.016 * w) / lsb) * lsb
             scanner.scan(SimpleNamespace(kind=kind, name=kind, angle_deg=angle, extra={}), t, x[:, :3], x[:, 3:], None)
         assert scanner.findings == {}
+
+
+def test_every_static_at_a_rail_is_one_line_that_says_so():
+    from station.core.errors import UserError
+
+    truth, capture = mems_capture(seed=3)
+    for seg in capture.complete("static"):              # the axis nearest 1 g clips a tenth of the time
+        k = int(np.argmax(np.abs(seg.data.accel.mean(axis=0))))
+        column = seg.data.accel[:, k]
+        top = np.quantile(column, 0.9)
+        bottom = np.quantile(column, 0.1)
+        column[:] = np.minimum(column, top) if column.mean() > 0 else np.maximum(column, bottom)
+    with pytest.raises(UserError, match="every static segment was left out for a data fault, and the least-squares "
+                                        "fit needs them: pos01: static left out: x accelerometer at its rail .* "
+                                        "\\(and 8 more\\)"):
+        summaries.summarise(capture)
+
+
+def test_an_axis_at_a_declared_rail_throughout_is_a_rail_not_a_dead_axis():
+    from station.estimate import check_static_resolution
+    from station.core.errors import UserError
+
+    truth, capture = mems_capture(seed=3)
+    seg = capture.segment("pos05")
+    seg.data.accel[:, 2] = 9.5                          # z up, at a rail below 1 g the whole dwell
+    with pytest.raises(UserError, match="the same value in every sample: a dead axis, or one at its rail throughout"):
+        check_static_resolution(capture, seg)
+    capture.imu.extra["accel_full_scale"] = [16.0, 16.0, 9.5]
+    check_static_resolution(capture, seg)               # a declared rail: not refused, left out below
+    s = summaries.summarise(capture)
+    assert "pos05" not in [st.name for st in s.statics]
+    assert any(n.startswith("pos05: static left out: z accelerometer at its rail 9.5 m/s^2 in 10000 of 10000")
+               for n in s.skipped), s.skipped

@@ -119,13 +119,24 @@ def check_static_resolution(capture: Capture, seg) -> None:
                 continue
             values = np.unique(column)
             step = float(np.min(np.diff(values))) if len(values) > 1 else math.inf
+            if len(values) == 1 and _at_declared_rail(capture, k, float(values[0])):
+                continue        # at the manifest's full scale: the data-fault scan leaves it out and says so
             if spread < 0.5 * step:
-                what = ("the same value in every sample" if len(values) == 1
+                what = ("the same value in every sample: a dead axis, or one at its rail throughout" if len(values) == 1
                         else f"output step {step:.3g}, sample spread {spread:.3g}")
                 raise UserError(f"{capture.path / seg.file}: column '{name}': quantised coarser than its "
                                 f"noise ({what}, in {capture.imu.accel_unit if k < 3 else capture.imu.gyro_unit}): "
                                 "the averages would be set by the rounding; record with a finer output "
                                 "resolution (or floating-point output)")
+
+
+def _at_declared_rail(capture: Capture, k: int, value: float) -> bool:
+    """``value`` of column k (accel x, y, z, gyro x, y, z) is at the manifest's declared full
+    scale (imu.accel_full_scale / imu.gyro_full_scale, station/estimate/data_faults.py)."""
+    from station.estimate.data_faults import declared_full_scale
+
+    fs = declared_full_scale(capture, "accel_full_scale" if k < 3 else "gyro_full_scale", 1.0)
+    return fs is not None and abs(value) >= float(fs[k % 3]) * (1.0 - 1e-9)
 
 
 def _finer_than(column: np.ndarray, step: float) -> bool:

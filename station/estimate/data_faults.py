@@ -259,20 +259,34 @@ def rail_mask(column: np.ndarray, full_scale: float | None = None, stats: "_Colu
     rails = []
     if n < 8:
         return mask, rails
-    if column.min() == column.max():
-        return mask, rails          # one value throughout: a dead or stuck axis, not a rail
-    step = (stats.step if stats is not None else _Column(column).step) if full_scale else 0.0
+    constant = column.min() == column.max()     # one value throughout: a dead or stuck axis, unless
+    step = (stats.step if stats is not None else _Column(column).step) if full_scale else 0.0   # declared
     for side, top in (("above", True), ("below", False)):
         value, count, inner = _extreme(column, top)
         declared = (full_scale is not None and full_scale > 0
                     and abs(value) >= full_scale - max(step, 1e-9 * full_scale)
                     and (value > 0) == (side == "above"))
-        shaped = count >= 3 and _poisson_tail_bound(count, RAIL_RATIO * (inner + 1)) < RAIL_ALPHA
+        shaped = not constant and count >= 3 and _poisson_tail_bound(count, RAIL_RATIO * (inner + 1)) < RAIL_ALPHA
         if declared or shaped:
             at = column == value
             mask |= at
             rails.append((side, value, int(at.sum())))
     return mask, rails
+
+
+def declared_full_scale(capture, key: str, factor: float) -> np.ndarray | None:
+    """The manifest's imu.<key> (+- full scale, one number or one per axis, in the capture's
+    units) times ``factor``, (3,); None when absent or not three positive finite numbers."""
+    value = capture.imu.extra.get(key)
+    if value is None or isinstance(value, (bool, str)):
+        return None
+    try:
+        fs = np.broadcast_to(np.asarray(value, float), (3,)) * factor
+    except (TypeError, ValueError):
+        return None
+    if not np.all(np.isfinite(fs)) or np.any(fs <= 0):
+        return None
+    return fs
 
 
 class Scanner:
@@ -284,7 +298,7 @@ class Scanner:
         self.units = ("m/s^2" if units.accel_to_mps2_factor(capture.imu.accel_unit) else capture.imu.accel_unit,
                       "deg/s" if units.gyro_to_dps_factor(capture.imu.gyro_unit) else capture.imu.gyro_unit)
         self.factors = (accel_factor, gyro_factor)
-        self.full_scale = tuple(self._declared(capture, key, factor)
+        self.full_scale = tuple(declared_full_scale(capture, key, factor)
                                 for key, factor in (("accel_full_scale", accel_factor), ("gyro_full_scale", gyro_factor)))
         self.static_sigma = [[], []]        # per sensor: (3,) noise sigma of each static scanned
         self.findings: dict = {}
@@ -295,17 +309,6 @@ class Scanner:
         self.segments = 0
         self.temp = {"min": math.inf, "max": -math.inf, "rate": 0.0, "t0": math.inf, "t1": -math.inf,
                      "segments": 0}
-
-    @staticmethod
-    def _declared(capture, key, factor):
-        value = capture.imu.extra.get(key)
-        try:
-            fs = np.broadcast_to(np.asarray(value, float), (3,)) * factor
-        except (TypeError, ValueError):
-            return None
-        if value is None or not np.all(np.isfinite(fs)) or np.any(fs <= 0):
-            return None
-        return fs
 
     # ------------------------------------------------------------------ the scan
 

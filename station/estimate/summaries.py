@@ -445,6 +445,7 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
     with capture.reader_ahead(queue) as reader:
         for seg in queue:
             if seg.kind != "static" and gyro_sigma is None:
+                _statics_left(capture, statics, scanner)
                 gyro_sigma, static_gyro_mean = _static_noise(capture, statics, diff_sq_g, diff_count)
             d = reader.take(seg)
             if check_segment is not None:
@@ -508,6 +509,7 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
         if seg.status == "incomplete" and seg.data is None:
             capture.check_incomplete(seg)
     if gyro_sigma is None:
+        _statics_left(capture, statics, scanner)
         _static_noise(capture, statics, diff_sq_g, diff_count)
     for seg, d in hands:
         seg.data = d                    # hand turns are short: their samples are kept for the fit
@@ -528,6 +530,15 @@ def _scanned(scanner, seg, d, ca, cg):
                         temp=None if d.temp is None else d.temp[rows], gaps=d.gaps)
         scanner.restrict(verdict, rows)
     return d, verdict
+
+
+def _statics_left(capture, statics, scanner) -> None:
+    """UserError saying why when every static segment was left out for a data fault."""
+    left = [d for d in scanner.left_out if d["reason"].startswith("static left out")]
+    if not statics and left:
+        raise UserError(f"{capture.path}: every static segment was left out for a data fault, and the "
+                        f"least-squares fit needs them: {left[0]['segment']}: {left[0]['reason']}"
+                        + (f" (and {len(left) - 1} more)" if len(left) > 1 else ""))
 
 
 def _static_noise(capture, statics, diff_sq_g, diff_count):
