@@ -357,3 +357,27 @@ def test_an_axis_at_a_declared_rail_throughout_is_a_rail_not_a_dead_axis():
     assert "pos05" not in [st.name for st in s.statics]
     assert any(n.startswith("pos05: static left out: z accelerometer at its rail 9.5 m/s^2 in 10000 of 10000")
                for n in s.skipped), s.skipped
+
+
+def test_the_fourier_method_says_the_faults_it_does_not_leave_out(tmp_path):
+    from station.estimate import estimate_capture
+
+    truth, path = mems_capture(seed=3, out=tmp_path / "cap", overrides={"rate_dps": 100.0, "rotation_s": 40.0},
+                               **CLIPPING)                                  # 11 revolutions: enough for it
+    cal, _, _ = estimate_capture(path, "fourier")
+    said = [n for n in cal.fit["notes"] if n.startswith("z accelerometer saturates above 10 m/s^2")]
+    assert len(said) == 1 and "NOT left out" in said[0] and "--method lsq" in said[0], cal.fit["notes"]
+    assert cal.fit["data_faults"]["left_out"] is False and cal.fit["data_faults"]["faults"][0]["axis"] == "z"
+
+
+def test_a_gyro_at_its_rail_throughout_a_turn_is_one_value_the_statics_say_is_stuck():
+    """100 deg/s turns through a 90 deg/s gyro: the turn's axis reads 90 deg/s in every sample, no
+    flat top to see; the statics show that axis moving, so one value throughout is stuck (said
+    with its value), and the turn is left out."""
+    truth, capture = mems_capture(seed=3, gyro__full_scale=90.0)
+    s = summaries.summarise(capture)
+    words = " ".join(s.skipped)
+    assert "x gyro stuck (repeats the previous sample)" in words and "at 90 deg/s" in words, words
+    assert "rotx_p: rotation left out: gyro stuck in 3600 of 3600 samples" in words
+    assert {"rotx_p", "rotx_m", "roty_p", "roty_m", "rotz_p", "rotz_m"}.isdisjoint(r.name for r in s.rotations)
+    assert len(s.rotations) == 6                                    # the diagonal turns (71 deg/s per axis)

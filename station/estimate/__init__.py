@@ -272,6 +272,10 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
         capture.load_samples()
         check_resolution(capture)
         excluded = exclude_lossy_segments(capture, max_missing_fraction, max_gap_s)
+        from station.estimate import data_faults
+
+        # found and said, not left out: these methods read every sample themselves
+        fault_report = data_faults.scan_capture(capture)
     cal, method = estimate_with(capture, resolved, effects, registry)
     from station.estimate.verdict import judge
 
@@ -287,6 +291,9 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
         report = getattr(parts, "data_faults", None) if parts is not None else None
         if report is not None:
             cal.fit["data_faults"] = report
+    else:
+        cal.fit["data_faults"] = fault_report
+        cal.fit["notes"].extend(data_faults.notes_of(fault_report))
     judge(cal)
     firmware = capture.imu.extra.get("firmware")
     provenance = {

@@ -89,6 +89,8 @@ class Finding:
             out.update(value=float(self.value), side=self.side)
         else:
             out.update(runs=int(self.runs), longest_run=int(self.longest), shortest_run_called_stuck=int(self.threshold))
+            if self.value is not None:
+                out["value_of_longest_run"] = float(self.value)
         return out
 
 
@@ -183,6 +185,16 @@ def _runs(equal: np.ndarray):
     starts = np.flatnonzero(d == 1)
     ends = np.flatnonzero(d == -1)
     return starts, ends - starts + 1
+
+
+def _share_outside_longest(equal: np.ndarray) -> float:
+    """The share of samples repeating the previous one, the longest run of repeats left out (a
+    fault's own repeats do not make it look like chance)."""
+    if not len(equal):
+        return 0.0
+    _, lengths = _runs(equal)
+    longest = int(lengths.max()) - 1 if len(lengths) else 0
+    return float(equal.sum() - longest) / max(len(equal) - longest, 1)
 
 
 def _mode_share(column: np.ndarray, step: float) -> float:
@@ -301,6 +313,7 @@ class Scanner:
         self.full_scale = tuple(declared_full_scale(capture, key, factor)
                                 for key, factor in (("accel_full_scale", accel_factor), ("gyro_full_scale", gyro_factor)))
         self.static_sigma = [[], []]        # per sensor: (3,) noise sigma of each static scanned
+        self.static_p = [[], []]            # per sensor: ((3,) level probability, (3,) step) per static
         self.findings: dict = {}
         self.left_out: list = []            # {"segment", "reason"}
         self.harmonics_left_out: list = []  # {"segment", "samples", "of"}
@@ -412,22 +425,37 @@ class Scanner:
         stuck = np.zeros(n, bool)
         sensor = SENSORS[s][0]
         equal_axes = [c.equal for c in columns]
+        reference = self.static_p[s]                # the level probabilities the statics showed
         p_axes, limits = [], []
         for k, c in enumerate(columns):
-            p = max(_level_probability(float(sigma[k]), c.step), float(c.equal.mean()))
+            step = c.step
+            if step == 0.0:
+                # one value throughout: stuck only if the statics show this axis moving (a static
+                # at one value is the resolution check's; without statics it cannot be told)
+                steps = [r[1][k] for r in reference] if not static else []
+                step = float(np.median(steps)) if steps and min(steps) > 0.0 else 0.0
+                if step == 0.0:
+                    p_axes.append(1.0)
+                    limits.append(n + 1)
+                    continue
+            p = max(_level_probability(float(sigma[k]), step), _share_outside_longest(c.equal))
             if static:
                 p = max(p, _mode_share(c.values, c.step))
+            elif reference:
+                p = max(p, max(r[0][k] for r in reference))
             p_axes.append(p)
             limits.append(_longest_chance_run(p, n))
+        if static:
+            self.static_p[s].append((np.array(p_axes), np.array([c.step for c in columns])))
         # frozen frames (all three axes repeating at once) first, then single axes
         joint = equal_axes[0] & equal_axes[1] & equal_axes[2]
-        p_joint = max(float(np.prod(p_axes)), float(joint.mean()))
+        p_joint = max(float(np.prod(p_axes)), _share_outside_longest(joint))
         self._mark(stuck, joint, _longest_chance_run(p_joint, n), at_rail, sensor, None, seg.name)
         for k in range(3):
-            self._mark(stuck, equal_axes[k], limits[k], at_rail, sensor, k, seg.name)
+            self._mark(stuck, equal_axes[k], limits[k], at_rail, sensor, k, seg.name, columns[k].values)
         return stuck
 
-    def _mark(self, stuck, equal, limit, at_rail, sensor, axis, name):
+    def _mark(self, stuck, equal, limit, at_rail, sensor, axis, name, values=None):
         starts, lengths = _runs(equal)
         long = lengths >= limit
         if not long.any():
@@ -443,11 +471,15 @@ class Scanner:
             samples += int((~stuck[a:a + L]).sum())
             stuck[a:a + L] = True
             runs += 1
+            if L > longest and values is not None:
+                value = float(values[a])
             longest = max(longest, int(L))
         if runs:
             f = self._finding("stuck", sensor, axis)
             f.runs += runs
             f.samples += samples
+            if longest > f.longest and values is not None:
+                f.value = value
             f.longest = max(f.longest, longest)
             f.threshold = max(f.threshold, int(limit))
             if name not in f.segments:
@@ -495,6 +527,26 @@ class Scanner:
         return notes_of(self.report())
 
 
+def scan_capture(capture) -> dict:
+    """Scan a capture whose samples are loaded, statics first, and report what is found without
+    leaving anything out (the methods that read every sample themselves: Fourier, 2010): the
+    report's ``left_out`` is False and its words say so."""
+    from station.core import units
+
+    ca = units.accel_to_mps2_factor(capture.imu.accel_unit) or 1.0
+    cg = units.gyro_to_dps_factor(capture.imu.gyro_unit) or 1.0
+    scanner = Scanner(capture, ca, cg)
+    order = capture.complete("static") + [seg for seg in capture.complete() if seg.kind != "static"]
+    for seg in order:
+        d = seg.data
+        if d is None or seg.kind not in ("static", "rotation"):
+            continue
+        scanner.scan(seg, d.t, d.accel * ca, d.gyro * cg, d.temp)
+    report = scanner.report()
+    report.update(left_out=False, segments_left_out=[], stuck_samples_left_out={}, harmonics_left_out=[])
+    return report
+
+
 def temperature_effects() -> list[str]:
     """The library's effects that follow the temperature column."""
     from station.model import LIBRARY
@@ -503,13 +555,22 @@ def temperature_effects() -> list[str]:
 
 
 def notes_of(report: dict) -> list[str]:
-    """The words of a data-fault report (Scanner.report)."""
+    """The words of a data-fault report (Scanner.report, or scan_capture's: found, not left out)."""
     notes = []
+    kept = report.get("left_out", True) is False
     harmonics = {h["segment"]: h for h in report.get("harmonics_left_out", [])}
     dropped = {d["segment"]: d["reason"] for d in report.get("segments_left_out", [])}
     for f in report.get("faults", []):
         what = f"{f['axis']} {f['sensor']}" if f["axis"] else f"{f['sensor']} (all three axes at once)"
         segs = ", ".join(f["segments"][:6]) + (f" and {len(f['segments']) - 6} more" if len(f["segments"]) > 6 else "")
+        if kept:
+            detail = (f"{f['samples']} samples at the rail" if f["kind"] == "rail"
+                      else f"{f['samples']} samples in {f['runs']} runs of identical values")
+            side = f" {f['side']} {f['value']:.4g} {f['unit']}" if f["kind"] == "rail" else ""
+            notes.append(f"{what} {'saturates' if f['kind'] == 'rail' else 'stuck'}{side}: {detail} ({segs}): "
+                         "NOT left out (this method uses every sample; the least-squares method, --method lsq, "
+                         "leaves them out)")
+            continue
         if f["kind"] == "rail":
             left = sum(harmonics[s]["samples"] for s in set(f["segments"]) if s in harmonics)
             gone = [s for s in dict.fromkeys(f["segments"]) if s in dropped]
@@ -525,8 +586,9 @@ def notes_of(report: dict) -> list[str]:
             runs = f"{f['runs']} run{'s' if f['runs'] != 1 else ''}"
             how = ("frozen (all three axes repeat the previous sample)" if f["axis"] is None
                    else "stuck (repeats the previous sample)")
+            at = (f", at {f['value_of_longest_run']:.4g} {f['unit']}" if "value_of_longest_run" in f else "")
             notes.append(f"{what.replace(' (all three axes at once)', '')} {how}: {f['samples']} samples in {runs} "
-                         f"(longest {f['longest_run']} samples; by chance no run reaches "
+                         f"(longest {f['longest_run']} samples{at}; by chance no run reaches "
                          f"{f['shortest_run_called_stuck']} here) in {segs}: left out")
     for d in report.get("segments_left_out", []):
         notes.append(f"{d['segment']}: {d['reason']}")
