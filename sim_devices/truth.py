@@ -200,6 +200,16 @@ class TriadTruth:
     bias_drift_per_h: np.ndarray = field(default_factory=lambda: np.zeros(3))
     # gyros only: odd rate-squared scale term q'_i (ppm per deg/s): gyro i adds k_i q'_i 1e-6 r_i |r_i|
     rate_odd_squared_ppm_per_dps: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    # full-scale range (raw units; 0: none): the converter's output cannot go beyond +-full_scale,
+    # an input beyond it reads the rail (the last code), as a real ADC saturates
+    full_scale: float = 0.0
+    # stuck samples: from each bench time in stuck_at_s on, for stuck_duration_s, the output
+    # register of the axes in stuck_axes (0..2) stops updating and repeats the sample taken at
+    # (or first after) that time, as a sensor whose data-ready is missed or a driver that resends
+    # its last frame
+    stuck_at_s: list = field(default_factory=list)
+    stuck_duration_s: float = 0.0
+    stuck_axes: list = field(default_factory=lambda: [0, 1, 2])
 
     def __post_init__(self):
         self.scale = np.asarray(self.scale, dtype=float).reshape(3)
@@ -227,6 +237,12 @@ class TriadTruth:
         self.bias_drift_per_h = np.asarray(self.bias_drift_per_h, dtype=float).reshape(3)
         self.rate_odd_squared_ppm_per_dps = np.asarray(self.rate_odd_squared_ppm_per_dps,
                                                        dtype=float).reshape(3)
+        self.full_scale = float(self.full_scale)
+        self.stuck_at_s = [float(x) for x in np.asarray(self.stuck_at_s, dtype=float).reshape(-1)]
+        self.stuck_duration_s = float(self.stuck_duration_s)
+        self.stuck_axes = [int(k) for k in self.stuck_axes]
+        if any(k not in (0, 1, 2) for k in self.stuck_axes):
+            raise ValueError("stuck_axes must name axes 0, 1 or 2")
         if np.any(np.diag(self.cross_coupling_ug_per_g2) != 0.0):
             raise ValueError("cross_coupling_ug_per_g2 must have a zero diagonal "
                              "(the a_i^2 term is nonlinearity_ug_per_g2)")
@@ -350,6 +366,38 @@ def _quantise(x: np.ndarray, lsb: float) -> np.ndarray:
     return np.round(x / lsb) * lsb
 
 
+def _converted(x: np.ndarray, triad: "TriadTruth", t) -> np.ndarray:
+    """The analogue value ``x`` (N,3) through the converter: clipped at +-full_scale (an input
+    beyond the range reads the rail), quantised to the LSB, then held where the output is stuck
+    (the axes' register repeats the sample taken at the start of each stuck window, or at the
+    first sample of this block inside it)."""
+    if triad.full_scale > 0.0:
+        x = np.clip(x, -triad.full_scale, triad.full_scale)
+    x = _quantise(x, triad.lsb)
+    starts = np.asarray(triad.stuck_at_s, dtype=float).reshape(-1)
+    if len(starts) and triad.stuck_duration_s > 0.0:
+        if t is None:
+            raise ValueError("stuck samples need the sample times: pass t= to Truth.measure")
+        t = np.asarray(t, dtype=float).reshape(-1)
+        axes = np.asarray(triad.stuck_axes, dtype=int).reshape(-1)
+        for start in starts:
+            inside = np.flatnonzero((t >= start) & (t < start + triad.stuck_duration_s))
+            if len(inside):
+                x[inside[:, None], axes] = x[inside[0], axes]
+    return x
+
+
+def _converter_keys(triad: "TriadTruth", fs_key: str) -> dict:
+    """The converter's faults in the truth file, only when set (older files stay as they were)."""
+    out = {}
+    if triad.full_scale > 0.0:
+        out[fs_key] = float(triad.full_scale)
+    if len(triad.stuck_at_s) and triad.stuck_duration_s > 0.0:
+        out.update(stuck_at_s=[float(x) for x in triad.stuck_at_s],
+                   stuck_duration_s=float(triad.stuck_duration_s), stuck_axes=list(triad.stuck_axes))
+    return out
+
+
 # --------------------------------------------------------------------------
 # Truth
 # --------------------------------------------------------------------------
@@ -359,12 +407,14 @@ _ACC_KEYS = {"scale", "axis_tilt_arcsec", "bias_ug", "bias_tempco_ug_per_c",
              "noise_density_ug_rthz", "lsb_mps2", "position_m", "nonlinearity_ug_per_g2",
              "cross_coupling_ug_per_g2", "scale_asymmetry_ppm", "scale_tempco_ppm_per_c",
              "bias_step_ug", "bias_step_time_s", "cubic_ug_per_g3", "bias_tempco2_ug_per_c2",
-             "bias_drift_ug_per_h"}
+             "bias_drift_ug_per_h", "full_scale_mps2", "stuck_at_s", "stuck_duration_s",
+             "stuck_axes"}
 _GYR_KEYS = {"scale", "axis_tilt_arcsec", "bias_dph", "bias_tempco_dph_per_c",
              "noise_density_dph_rthz", "lsb_dps", "g_sensitivity_dph_per_g", "scale_asymmetry_ppm",
              "scale_tempco_ppm_per_c", "bias_step_dph", "bias_step_time_s",
              "rate_squared_ppm_per_dps", "anisoelastic_dph_per_g2", "bias_tempco2_dph_per_c2",
-             "bias_drift_dph_per_h", "rate_odd_squared_ppm_per_dps"}
+             "bias_drift_dph_per_h", "rate_odd_squared_ppm_per_dps", "full_scale_dps", "stuck_at_s",
+             "stuck_duration_s", "stuck_axes"}
 _TEMP_KEYS = {"start_c", "reference_c", "drift_c_per_h", "warmup_delta_c",
               "warmup_time_constant_s"}
 _BENCH_KEYS = {"latitude_deg", "height_m", "lever_arm_m", "axis_offsets_m", "table_angle_error_arcsec",
@@ -487,7 +537,7 @@ class Truth:
                 accel += self.accel_noise_sigma * rng.standard_normal(accel.shape)
             if self.gyro.noise_density > 0.0:
                 gyro += self.gyro_noise_sigma * rng.standard_normal(gyro.shape)
-        return _quantise(accel, self.accel.lsb), _quantise(gyro, self.gyro.lsb)
+        return _converted(accel, self.accel, t), _converted(gyro, self.gyro, t)
 
     # ------------------------------------------------------ paper parameters
     def paper_parameters(self) -> dict[str, Any]:
@@ -575,6 +625,7 @@ class Truth:
                 "cubic_ug_per_g3": fl(self.accel.cubic_ug_per_g3),
                 "bias_tempco2_ug_per_c2": fl(self.accel.bias_tempco2),
                 "bias_drift_ug_per_h": fl(self.accel.bias_drift_per_h),
+                **_converter_keys(self.accel, "full_scale_mps2"),
             },
             "gyroscope": {
                 "scale": fl(self.gyro.scale),
@@ -593,6 +644,7 @@ class Truth:
                 "bias_tempco2_dph_per_c2": fl(self.gyro.bias_tempco2),
                 "bias_drift_dph_per_h": fl(self.gyro.bias_drift_per_h),
                 "rate_odd_squared_ppm_per_dps": fl(self.gyro.rate_odd_squared_ppm_per_dps),
+                **_converter_keys(self.gyro, "full_scale_dps"),
             },
             "temperature": {
                 "start_c": float(self.temperature.start_c),
@@ -655,9 +707,23 @@ class Truth:
                         lo=0.0, lo_open=True, hi=1e6)
 
         def triad(sec: str, keys: set[str], bias_key, tc_key, noise_key, lsb_key,
-                  noise_default, step_key, tc2_key, drift_key) -> TriadTruth:
+                  noise_default, step_key, tc2_key, drift_key, fs_key) -> TriadTruth:
             d = c.mapping(top.get(sec), sec, keys)
             t = TriadTruth(noise_density=noise_default)
+            if fs_key in d:
+                t.full_scale = c.number(d[fs_key], f"{sec}.{fs_key}", lo=0.0)
+            if "stuck_at_s" in d:
+                at = d["stuck_at_s"]
+                at = at if isinstance(at, list) else [at]
+                t.stuck_at_s = [c.number(v, f"{sec}.stuck_at_s[{i}]", lo=0.0) for i, v in enumerate(at)]
+            if "stuck_duration_s" in d:
+                t.stuck_duration_s = c.number(d["stuck_duration_s"], f"{sec}.stuck_duration_s", lo=0.0)
+            if "stuck_axes" in d:
+                axes = d["stuck_axes"]
+                if (not isinstance(axes, list) or not axes
+                        or any(isinstance(k, bool) or k not in (0, 1, 2) for k in axes)):
+                    c.fail(f"{sec}.stuck_axes", f"expected a list of axes 0, 1, 2, got {axes!r}")
+                t.stuck_axes = [int(k) for k in axes]
             if "scale" in d:
                 t.scale = c.vector(d["scale"], f"{sec}.scale", lo=0.0, lo_open=True)
             if "axis_tilt_arcsec" in d:
@@ -720,10 +786,10 @@ class Truth:
 
         accel = triad("accelerometer", _ACC_KEYS, "bias_ug", "bias_tempco_ug_per_c",
                       "noise_density_ug_rthz", "lsb_mps2", DEFAULT_ACCEL_NOISE_UG_RTHZ,
-                      "bias_step_ug", "bias_tempco2_ug_per_c2", "bias_drift_ug_per_h")
+                      "bias_step_ug", "bias_tempco2_ug_per_c2", "bias_drift_ug_per_h", "full_scale_mps2")
         gyro = triad("gyroscope", _GYR_KEYS, "bias_dph", "bias_tempco_dph_per_c",
                      "noise_density_dph_rthz", "lsb_dps", DEFAULT_GYRO_NOISE_DPH_RTHZ,
-                     "bias_step_dph", "bias_tempco2_dph_per_c2", "bias_drift_dph_per_h")
+                     "bias_step_dph", "bias_tempco2_dph_per_c2", "bias_drift_dph_per_h", "full_scale_dps")
 
         d = c.mapping(top.get("temperature"), "temperature", _TEMP_KEYS)
         temp = TemperatureTruth()

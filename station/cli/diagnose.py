@@ -158,6 +158,8 @@ def to_json(d, steps) -> dict:
         "effects": d.effects,
         "failures": d.failures,
         "notes": d.notes,
+        # what the scan before the fit found and left out (station/estimate/data_faults.py)
+        "data_faults": getattr(getattr(getattr(d.result, "model", None), "s", None), "data_faults", None),
         "terms_outside_library": None if d.proposal is None else {
             "terms": [{"sensor": t.sensor, "axis": "xyz"[t.axis], "regressor": t.regressor.text,
                        "parameter": t.name, "unit": t.unit, "value": v, "sigma": sg, "words": t.words(v, sg)}

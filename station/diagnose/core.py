@@ -284,6 +284,8 @@ def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diag
         notes.append(f"the fit fails, so the candidates' chi2 drops are divided and their 1-sigma "
                      f"multiplied by the over-dispersion (reduced chi2 {phi:.3g}, square root for "
                      "the 1-sigma): only a drop large against the misfit counts")
+    # the data faults found before the fit (station/estimate/data_faults.py): what was left out
+    notes += list(getattr(result.model.s, "data_fault_notes", None) or [])
     return Diagnosis(effects=["base_triads", "inter_triad"] + [e.id for e in result.model.effects],
                      chi2=result.chi2, dof=result.dof, reduced_chi2=reduced, p_value=p,
                      segments=segs, candidates=cands, failures=failures, verdict=verdict,

@@ -119,13 +119,24 @@ def check_static_resolution(capture: Capture, seg) -> None:
                 continue
             values = np.unique(column)
             step = float(np.min(np.diff(values))) if len(values) > 1 else math.inf
+            if len(values) == 1 and _at_declared_rail(capture, k, float(values[0])):
+                continue        # at the manifest's full scale: the data-fault scan leaves it out and says so
             if spread < 0.5 * step:
-                what = ("the same value in every sample" if len(values) == 1
+                what = ("the same value in every sample: a dead axis, or one at its rail throughout" if len(values) == 1
                         else f"output step {step:.3g}, sample spread {spread:.3g}")
                 raise UserError(f"{capture.path / seg.file}: column '{name}': quantised coarser than its "
                                 f"noise ({what}, in {capture.imu.accel_unit if k < 3 else capture.imu.gyro_unit}): "
                                 "the averages would be set by the rounding; record with a finer output "
                                 "resolution (or floating-point output)")
+
+
+def _at_declared_rail(capture: Capture, k: int, value: float) -> bool:
+    """``value`` of column k (accel x, y, z, gyro x, y, z) is at the manifest's declared full
+    scale (imu.accel_full_scale / imu.gyro_full_scale, station/estimate/data_faults.py)."""
+    from station.estimate.data_faults import declared_full_scale
+
+    fs = declared_full_scale(capture, "accel_full_scale" if k < 3 else "gyro_full_scale", 1.0)
+    return fs is not None and abs(value) >= float(fs[k % 3]) * (1.0 - 1e-9)
 
 
 def _finer_than(column: np.ndarray, step: float) -> bool:
@@ -265,12 +276,28 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
         capture.load_samples()
         check_resolution(capture)
         excluded = exclude_lossy_segments(capture, max_missing_fraction, max_gap_s)
+        from station.estimate import data_faults
+
+        # found and said, not left out: these methods read every sample themselves
+        fault_report = data_faults.scan_capture(capture)
     cal, method = estimate_with(capture, resolved, effects, registry, turn_sigma_deg=turn_sigma_deg)
     from station.estimate.verdict import judge
 
     cal.fit.setdefault("notes", []).extend(excluded)
     if excluded:
         cal.fit["excluded_segments"] = [n.split()[1] for n in excluded]
+    if resolved == "lsq":
+        from station.estimate import summaries
+
+        # what the data-fault scan found and left out (station/estimate/data_faults.py): its words
+        # are among the notes already (the summaries' skipped)
+        parts = summaries.kept(capture)
+        report = getattr(parts, "data_faults", None) if parts is not None else None
+        if report is not None:
+            cal.fit["data_faults"] = report
+    else:
+        cal.fit["data_faults"] = fault_report
+        cal.fit["notes"].extend(data_faults.notes_of(fault_report))
     judge(cal)
     firmware = capture.imu.extra.get("firmware")
     provenance = {

@@ -23,6 +23,8 @@ from threadpoolctl import threadpool_limits
 from station.core import units
 from station.core.errors import UserError
 from station.estimate import table_geometry
+from station.estimate import data_faults
+from station.io.capture import SegmentData
 
 EDGE_SAMPLES = 3
 STEADY_SPREAD = 0.3     # a rotation whose rate magnitude varies more (std/mean) is a hand turn
@@ -113,6 +115,8 @@ class Summaries:
     noise_model: object = field(default=None, repr=False, compare=False)
     geometry: object = None         # table_geometry.TableGeometry: which rotations share a mounting
                                     #   offset, the axes' elevation (None: not stated, as before)
+    data_faults: dict | None = None     # station.estimate.data_faults: what was found and left out
+    data_fault_notes: list = field(default_factory=list)   # the same in words (also in skipped)
 
     @property
     def groups(self) -> int:
@@ -294,8 +298,11 @@ def _gradient_chunk(w, t, i, j):
 
 
 def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
-                     gyro_sigma_dps=None, gyro_bias=None) -> RotationSummary:
-    """``gyro_sigma_dps``: per-sample white gyro noise (deg/s); with it the phase is tracked by
+                     gyro_sigma_dps=None, gyro_bias=None, accel_mask=None) -> RotationSummary:
+    """``accel_mask(phase, accel)``: the samples (N,) bool the accelerometer harmonics use, or None
+    for all (station.estimate.data_faults.Verdict.accel_keep: samples near a rail or stuck left
+    out); the basis is then summed over those samples only.
+    ``gyro_sigma_dps``: per-sample white gyro noise (deg/s); with it the phase is tracked by
     the gyro only where the rate varies beyond what that noise would make it seem to.
     ``gyro_bias``: a rough gyro bias (the statics' mean), removed before the rate's shape is taken.
 
@@ -316,6 +323,10 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
     # same basis as the accelerometer (one solve for all of them)
     w = _rate(gyro, gyro_bias, angle_deg, duration, gyro_mean)
     angle_rad = np.radians(angle_deg)
+    keep = None if accel_mask is None else accel_mask(angle_rad * fraction, accel)
+    used = n if keep is None else int(keep.sum())
+    if used < 8:
+        raise UserError(f"segment '{name}': fewer than 8 accelerometer samples left for its harmonics")
     gram = np.zeros((5, 5))
     projections = np.zeros((5, 6))      # accel x, y, z; w, w^2, dw/dt
     sum_m = sum_m2 = np.float64(0.0)    # the gyro's magnitude: its sum and sum of squares
@@ -327,6 +338,8 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
     for i, j in spans:
         gyro_integral += _gradient_chunk(t, None, i, j) @ gyro[i:j]
         basis = _harmonic_basis(angle_rad * fraction[i:j])
+        if keep is not None:
+            basis *= keep[i:j]
         c = columns[:j - i]
         c[:, :3] = accel[i:j]
         c[:, 3] = w[i:j]
@@ -338,12 +351,13 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
         m2 = np.einsum("ij,ij->i", g, g)
         sum_m2 += m2.sum()
         sum_m += np.sqrt(m2, out=m2).sum()
-    gram_per_sample = gram / n
+    gram_per_sample = gram / used
     if np.linalg.cond(gram) < MAX_GRAM_CONDITION:
         coefs = np.linalg.solve(gram, projections)
     else:   # a short sweep: the SVD solver on the whole basis
         basis = _harmonic_basis(angle_rad * fraction)
-        coefs = np.linalg.lstsq(basis.T, np.column_stack([accel, w, w * w, np.gradient(w, t)]),
+        rows = slice(None) if keep is None else keep
+        coefs = np.linalg.lstsq(basis.T[rows], np.column_stack([accel, w, w * w, np.gradient(w, t)])[rows],
                                 rcond=None)[0]
     del w, fraction
     coef, rate_coefs = coefs[:, :3], (coefs[:, 3], coefs[:, 4], coefs[:, 5])
@@ -353,7 +367,7 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
     steady = bool(spread < STEADY_SPREAD * mean_m)
     rate_sq_factor = float(mean_m2 / mean_m ** 2)
     return RotationSummary(name=name, axis_body=axis_body, group=group, angle_deg=float(angle_deg),
-                           duration_s=float(duration), samples=n, accel_dc=coef[0],
+                           duration_s=float(duration), samples=used, accel_dc=coef[0],
                            accel_cos=coef[1], accel_sin=coef[2], accel_cos2=coef[3],
                            accel_sin2=coef[4], gyro_integral=gyro_integral,
                            temp_c=None if temp is None else float(np.mean(temp)),
@@ -380,6 +394,7 @@ class _SegmentSummaries:
     skipped: list
     hands: list                 # complete hand-turn segments, their (short) samples loaded
     stamp_jitters: list         # _stamp_jitter of each static and rotation with more than 8 samples
+    data_faults: dict | None = None     # data_faults.Scanner.report()
 
 
 @dataclass
@@ -452,6 +467,7 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
     diff_sq_a, diff_sq_g, diff_count = np.zeros(3), np.zeros(3), 0
     rotations, skipped, axes, hands, jitters = [], [], [], [], []
     gyro_sigma = static_gyro_mean = None
+    scanner = data_faults.Scanner(capture, ca, cg)     # rails, stuck samples, the temperature
     # statics first (the rotation summaries use their noise and gyro bias), then the rotations,
     # then the segments estimation does not use (only checked); each file is read while the
     # previous segment is summarised (ReaderAhead)
@@ -461,6 +477,7 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
     with capture.reader_ahead(queue) as reader:
         for seg in queue:
             if seg.kind != "static" and gyro_sigma is None:
+                _statics_left(capture, statics, scanner)
                 gyro_sigma, static_gyro_mean = _static_noise(capture, statics, diff_sq_g, diff_count)
             d = reader.take(seg)
             if check_segment is not None:
@@ -471,6 +488,9 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
                 continue
             if len(d.t) > 8:
                 jitters.append(_stamp_jitter(d.t))
+            d, verdict = _scanned(scanner, seg, d, ca, cg)
+            if d is None:
+                continue
             if seg.kind == "static":
                 a, g = _scaled(d.accel, ca), _scaled(d.gyro, cg)
                 statics.append(StaticSummary(seg.name, seg.up_body, _column_means(a), _column_means(g), len(d.t),
@@ -501,8 +521,15 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
             if group is None:
                 axes.append(axis)
                 group = len(axes) - 1
-            summary = rotation_summary(seg.name, axis, group, seg.angle_deg, d.t, _scaled(d.accel, ca), _scaled(d.gyro, cg),
-                                       d.temp, gyro_sigma_dps=gyro_sigma, gyro_bias=static_gyro_mean)
+            try:
+                summary = rotation_summary(seg.name, axis, group, seg.angle_deg, d.t, _scaled(d.accel, ca),
+                                           _scaled(d.gyro, cg), d.temp, gyro_sigma_dps=gyro_sigma,
+                                           gyro_bias=static_gyro_mean,
+                                           accel_mask=verdict.accel_keep if verdict.masks else None)
+            except data_faults.TooLittleLeft as e:
+                scanner.drop(seg.name, str(e))
+                continue
+            scanner.harmonics(seg.name, summary.samples, len(d.t))
             if seg.extra.get("motion") == "hand":      # the writer says so (manual schemes)
                 summary.steady = False
             summary.t_mid_s, summary.index = float(np.mean(d.t)), order[seg.name]
@@ -516,11 +543,36 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
         if seg.status == "incomplete" and seg.data is None:
             capture.check_incomplete(seg)
     if gyro_sigma is None:
+        _statics_left(capture, statics, scanner)
         _static_noise(capture, statics, diff_sq_g, diff_count)
     for seg, d in hands:
         seg.data = d                    # hand turns are short: their samples are kept for the fit
     return _SegmentSummaries(statics, spans, diff_sq_a, diff_sq_g, diff_count, rotations, skipped,
-                             [seg for seg, _ in hands], jitters)
+                             [seg for seg, _ in hands], jitters, scanner.report())
+
+
+def _scanned(scanner, seg, d, ca, cg):
+    """(the samples to summarise, the verdict) of one segment after the data-fault scan
+    (station.estimate.data_faults); (None, verdict) when the segment is left out.  Rows of stuck
+    samples are removed as frames lost would be."""
+    verdict = scanner.scan(seg, d.t, _scaled(d.accel, ca), _scaled(d.gyro, cg), d.temp)
+    if verdict.drop:
+        return None, verdict
+    if verdict.rows is not None:
+        rows = verdict.rows
+        d = SegmentData(t=d.t[rows], accel=d.accel[rows], gyro=d.gyro[rows],
+                        temp=None if d.temp is None else d.temp[rows], gaps=d.gaps)
+        scanner.restrict(verdict, rows)
+    return d, verdict
+
+
+def _statics_left(capture, statics, scanner) -> None:
+    """UserError saying why when every static segment was left out for a data fault."""
+    left = [d for d in scanner.left_out if d["reason"].startswith("static left out")]
+    if not statics and left:
+        raise UserError(f"{capture.path}: every static segment was left out for a data fault, and the "
+                        f"least-squares fit needs them: {left[0]['segment']}: {left[0]['reason']}"
+                        + (f" (and {len(left) - 1} more)" if len(left) > 1 else ""))
 
 
 def _static_noise(capture, statics, diff_sq_g, diff_count):
@@ -578,6 +630,9 @@ def _assemble(capture, parts: _SegmentSummaries, ca, cg, table_angle_arcsec) -> 
         raise UserError(f"{capture.path}/manifest.yaml: field 'mounting.offset_m' or "
                         "'table.angle_error_arcsec': must be numbers") from None
     jitter = parts.stamp_jitters        # from every segment summarised, read whole or streamed
+    report = getattr(parts, "data_faults", None)
+    fault_notes = data_faults.notes_of(report) if report else []
+    skipped += fault_notes
     return Summaries(gravity_mps2=capture.site.gravity_mps2, latitude_deg=capture.site.latitude_deg,
                      accel_factor=ca, gyro_factor=cg, sample_rate_hz=capture.imu.sample_rate_hz,
                      statics=statics, rotations=rotations, accel_sigma=accel_sigma, gyro_sigma=gyro_sigma,
@@ -586,3 +641,4 @@ def _assemble(capture, parts: _SegmentSummaries, ca, cg, table_angle_arcsec) -> 
                      gyro_raw=capture.imu.gyro_unit == "raw", accel_raw=capture.imu.accel_unit == "raw",
                      accel_nominal=accel_nominal, stamp_jitter_s=float(np.median(jitter)) if jitter else 0.0,
                      geometry=table_geometry.read(capture, rotations))
+                     data_faults=report, data_fault_notes=fault_notes)
