@@ -640,5 +640,5 @@ def _assemble(capture, parts: _SegmentSummaries, ca, cg, table_angle_arcsec) -> 
                      hand_rotations=hand_rotations, gyro_nominal=nominal,
                      gyro_raw=capture.imu.gyro_unit == "raw", accel_raw=capture.imu.accel_unit == "raw",
                      accel_nominal=accel_nominal, stamp_jitter_s=float(np.median(jitter)) if jitter else 0.0,
-                     geometry=table_geometry.read(capture, rotations))
+                     geometry=table_geometry.read(capture, rotations),
                      data_faults=report, data_fault_notes=fault_notes)
