@@ -198,7 +198,8 @@ def test_a_warm_up_is_said_with_its_range_and_the_effects_that_follow_temperatur
     said = [n for n in s.skipped if n.startswith("temperature ")]
     assert said == [f"temperature {temps.min():.1f}–{temps.max():.1f} °C over the capture "
                     f"({temps.max() - temps.min():.1f} °C, at most {s.data_faults['temperature']['max_rate_c_per_min']:.2g} "
-                    "°C/min within a segment): effects that follow temperature can be tested: --add temperature_bias"]
+                    "°C/min within a segment): effects that follow temperature can be tested: "
+                    "--add scale_temperature, --add temperature_bias, --add temperature_bias_quadratic"]
     assert s.data_faults["temperature"]["testable"] and s.data_faults["faults"] == []
     # a steady temperature is not offered
     truth, capture = mems_capture(seed=3, temperature__warmup_delta_c=0.0)
