@@ -19,19 +19,33 @@ def store(tmp_path, monkeypatch):
 
 
 def shifted_copy(cal, target, name, n_sigma, date):
+    """A later calibration of the same IMU (another capture: a re-estimate of the same capture
+    and model would not be filed again)."""
     doc = yaml.safe_load(cal.read_text())
     p = doc["parameters"][name]
     p["value"] += n_sigma * p["sigma"]
     doc["provenance"]["date_utc"] = date
+    doc["provenance"]["capture_sha256"] = "f" * 64
     target.write_text(yaml.safe_dump(doc, sort_keys=False))
     return target
 
 
-def test_estimate_files_the_calibration_and_history_lists_it(optimal9_run, store, tmp_path, capsys):
+def test_estimate_files_only_when_asked_and_simulations_apart(optimal9_run, store, tmp_path, capsys):
+    """The history holds real calibrations: `estimate` files nothing unless asked; a simulated
+    IMU's calibration (serial SIM-...) goes to the simulations' own store, never the lab's."""
     target = tmp_path / "again.yaml"
     assert main(["estimate", str(optimal9_run), "-o", str(target)]) == 0
+    assert "history:" not in capsys.readouterr().out and not (store / INDEX).exists()
+    assert main(["estimate", str(optimal9_run), "-o", str(tmp_path / "asked.yaml"), "--history"]) == 0
     assert "history: filed as #1 for IMU SIM-13" in capsys.readouterr().out
-    assert main(["history", "--add", str(target)]) == 0          # the same bytes: filed once
+    assert not (store / INDEX).exists() and (store.with_name("store-simulations") / INDEX).exists()
+    # estimated again (same capture, same model): not filed twice
+    assert main(["estimate", str(optimal9_run), "-o", str(tmp_path / "twice.yaml"), "--history"]) == 0
+    assert "already filed as #1 (this file, or the same capture and model)" in capsys.readouterr().out
+    # asked explicitly, history --add files into the lab's store; the same bytes once
+    assert main(["history", "--add", str(target)]) == 0
+    assert "filed: #1" in capsys.readouterr().out
+    assert main(["history", "--add", str(target)]) == 0
     assert "already filed: #1" in capsys.readouterr().out
     assert main(["history", "SIM-13"]) == 0
     listing = capsys.readouterr().out
@@ -80,3 +94,62 @@ def test_unknown_serial_and_unknown_id_are_one_line_errors(store, capsys):
     assert "NOPE" in capsys.readouterr().err
     assert main(["diff", "#7", "#8"]) == 2
     assert "#7" in capsys.readouterr().err
+
+
+def test_bench_runs_file_real_imus_unless_told_not_to(optimal9_run, store, tmp_path, capsys):
+    """A bench run's calibration of a real IMU is filed (run._estimate asks unless --no-history);
+    not when not asked; one without a serial is never filed by itself."""
+    from station.cli.history import file_quietly
+
+    doc = yaml.safe_load((optimal9_run / "calibration.yaml").read_text())
+    doc["provenance"]["imu_serial"] = "VN100-0042"
+    real = tmp_path / "real.yaml"
+    real.write_text(yaml.safe_dump(doc, sort_keys=False))
+    file_quietly(real, asked=False)
+    assert not (store / INDEX).exists()
+    file_quietly(real, asked=True)
+    assert "history: filed as #1 for IMU VN100-0042" in capsys.readouterr().out
+    doc["provenance"]["imu_serial"] = None
+    anonymous = tmp_path / "anonymous.yaml"
+    anonymous.write_text(yaml.safe_dump(doc, sort_keys=False))
+    file_quietly(anonymous, asked=True)
+    assert "not filed: the calibration names no IMU serial" in capsys.readouterr().out
+    assert [e.serial for e in Store(store).list("VN100-0042")] == ["VN100-0042"] and Store(store).serials() == [("VN100-0042", 1)]
+
+
+def test_an_index_from_before_the_capture_columns_is_migrated(store, optimal9_run):
+    """An index written before capture_sha256/model existed: opened, the columns added, filed."""
+    store.mkdir(parents=True)
+    db = sqlite3.connect(store / INDEX)
+    db.execute("""CREATE TABLE calibrations (id INTEGER PRIMARY KEY, serial TEXT NOT NULL, date_utc TEXT NOT NULL,
+        scheme TEXT, method TEXT, verdict TEXT, file TEXT NOT NULL, source TEXT, sha256 TEXT NOT NULL UNIQUE,
+        filed_utc TEXT NOT NULL)""")
+    db.commit()
+    db.close()
+    entry, new = Store(store).file(optimal9_run / "calibration.yaml")
+    assert new and entry.id == 1
+
+
+def test_diff_and_drift_mark_what_is_not_a_calibration(optimal9_run, store, tmp_path, capsys):
+    """A parameter without a 1sigma is not counted as 'unchanged' (it is not judged, and said);
+    a calibration whose fit fails is marked in diff and drawn apart in the drift plot."""
+    cal = optimal9_run / "calibration.yaml"
+    doc = yaml.safe_load(cal.read_text())
+    doc["parameters"]["accel_bias_x"]["sigma"] = None
+    doc["verdict"] = {"result": "fails", "reason": "reduced chi2 4210"}
+    doc["provenance"]["date_utc"] = "2031-01-01T00:00:00Z"
+    doc["provenance"]["capture_sha256"] = "e" * 64
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump(doc, sort_keys=False))
+    capsys.readouterr()
+    assert main(["diff", str(cal), str(bad)]) == 0
+    captured = capsys.readouterr()
+    assert "of 20 parameters with a 1σ on both sides" in captured.out
+    assert "1 of 21 parameters have no 1σ in A or B: their change is not judged (accel_bias_x)" in " ".join(captured.out.split())
+    assert "warning: B's fit does not pass (fails)" in captured.err
+    assert main(["history", "--add", str(cal), "--add", str(bad)]) == 0
+    png = tmp_path / "drift.png"
+    capsys.readouterr()
+    assert main(["history", "SIM-13", "--drift", str(png)]) == 0
+    assert "drawn apart in the drift plot (not passing): #2 fails" in capsys.readouterr().err
+    assert png.stat().st_size > 20_000

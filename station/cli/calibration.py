@@ -29,6 +29,9 @@ def add_parsers(sub) -> None:
                      help="hand turns: their 1-sigma per turn, degrees (default: estimated from their "
                           "scatter when it exceeds their white noise; stated, the turns are tested)")
     add_accept_poor_fit(est)
+    from station.cli.history import add_history_option
+
+    add_history_option(est, "default: not filed")
     est.set_defaults(func=cmd_estimate)
 
     app = sub.add_parser("apply", help="compensate raw samples with a calibration file (every effect)")
@@ -104,7 +107,7 @@ def cmd_estimate(args) -> int:
     write_calfile(target, cal, provenance)
     from station.cli.history import file_quietly
 
-    file_quietly(target)
+    file_quietly(target, asked=bool(args.history))
     return report_calibration(cal, f"calibration of {capture.path} ({provenance['method']})", target,
                               args.accept_poor_fit)
 

@@ -2,6 +2,7 @@
 and plotted over time (argument parsing and output only)."""
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 from station.cli.output import err, out
@@ -27,19 +28,45 @@ def add_parsers(sub) -> None:
     d.set_defaults(func=cmd_diff)
 
 
-def file_quietly(cal_path, store=None) -> None:
-    """File a calibration just written by estimate or run; a store that cannot be written is a
-    warning, never a failure (the calibration file itself is already safe)."""
-    from station.core.errors import UserError
-    from station.io.history import Store
+def add_history_option(parser, default: str) -> None:
+    parser.add_argument("--history", action=argparse.BooleanOptionalAction, default=None,
+                        help=f"file the calibration in the IMU's history ({default}; a simulated run "
+                             "only in the simulations' own store; only an IMU with a serial)")
 
+
+def file_quietly(cal_path, store=None, *, asked: bool, simulated: bool = False) -> None:
+    """File a calibration just written, by the history's policy (docs/calibration-file.md,
+    "History"), when ``asked`` (the callers' defaults: a bench run files unless
+    ``--no-history``; ``estimate`` and a simulated run only with ``--history``): a calibration of
+    a real IMU (its serial known) into the store; a simulated run or a simulated IMU's (serial
+    SIM-...) into the simulations' own store; one without a serial not at all.  A calibration of
+    the same capture and model already filed is not filed again.  A store that cannot be written
+    is a warning, never a failure (the calibration file itself is already safe)."""
+    from station.core.errors import UserError
+    from station.io.calfile import read_calfile
+    from station.io.history import SIMULATED_PREFIX, Store, real_serial, simulation_store
+
+    if not asked:
+        return
     try:
-        entry, new = Store(store).file(cal_path)
+        doc = read_calfile(cal_path)
+        serial = ((doc.get("provenance") or {}).get("imu_serial") or "")
+        if simulated or (isinstance(serial, str) and serial.startswith(SIMULATED_PREFIX)):
+            root = simulation_store(store)
+        elif real_serial(doc) is None:
+            out.print("history: not filed: the calibration names no IMU serial (station history --add "
+                      "files it anyway, under 'unknown')", markup=False)
+            return
+        else:
+            root = store
+        entry, new = Store(root).file(cal_path)
     except UserError as e:
         err.print(f"warning: not filed in the calibration history: {e}", markup=False, soft_wrap=True)
         return
     if new:
         out.print(f"history: filed as #{entry.id} for IMU {entry.serial} ({entry.path})", markup=False)
+    else:
+        out.print(f"history: already filed as #{entry.id} (this file, or the same capture and model)", markup=False)
 
 
 def cmd_history(args) -> int:
@@ -78,14 +105,19 @@ def cmd_history(args) -> int:
 
 def _drift(entries, png: Path, serial: str) -> None:
     from station.core.errors import UserError
-    from station.diagnose.figures import drift_figure
+    from station.diagnose.figures import drift_figure, drift_status
     from station.io.calfile import read_calfile
 
     rows: dict = {}
     for e in entries:
         doc = read_calfile(e.path)
+        status = drift_status(e.verdict)
         for name, p in doc["parameters"].items():
-            rows.setdefault(name, []).append((e.date_utc, p["value"], p.get("sigma"), p["unit"]))
+            rows.setdefault(name, []).append((e.date_utc, p["value"], p.get("sigma"), p["unit"], status))
+    marked = [f"#{e.id} {e.verdict.split(':')[0]}" for e in entries if drift_status(e.verdict) != "passes"]
+    if marked:
+        err.print(f"note: drawn apart in the drift plot (not passing): {', '.join(marked)}", markup=False,
+                  soft_wrap=True)
     rows = {k: v for k, v in rows.items() if len(v) == len(entries)}
     try:
         drift_figure(rows, png, f"IMU {serial}: {len(entries)} calibrations, value ± 1σ")
@@ -123,9 +155,21 @@ def cmd_diff(args) -> int:
     out.print(t)
     da_date = (da.get("provenance") or {}).get("date_utc")
     db_date = (db.get("provenance") or {}).get("date_utc")
+    compared = [c for c in rows if c.z is not None]
     out.print(f"A: {da_date}, B: {db_date}; σ combined as sqrt(σA² + σB²); "
-              f"{flagged} of {len(rows)} parameters changed by more than {FLAG_SIGMA:g}σ"
+              f"{flagged} of {len(compared)} parameters with a 1σ on both sides changed by more than "
+              f"{FLAG_SIGMA:g}σ"
               + ("" if args.all else " (changes under 1σ not listed; --all lists them)"), markup=False)
+    if len(compared) < len(rows):
+        out.print(f"{len(rows) - len(compared)} of {len(rows)} parameters have no 1σ in A or B: their change is "
+                  "not judged (" + ", ".join(c.name for c in rows if c.z is None) + ")", markup=False, soft_wrap=True)
+    from station.io.history import verdict_of
+
+    for label, doc in (("A", da), ("B", db)):
+        verdict = verdict_of(doc)
+        if not verdict.startswith("passes"):
+            err.print(f"warning: {label}'s fit does not pass ({verdict.split(': ')[0]}): its numbers are not a "
+                      "calibration to compare against", markup=False, soft_wrap=True)
     for label, names in (("only in A", only_a), ("only in B", only_b)):
         if names:
             out.print(f"{label}: {', '.join(names)}", markup=False)

@@ -49,6 +49,9 @@ def add_parsers(sub) -> None:
                      help="no operator: never ask for a remount (run.operator: false)")
     run.add_argument("--reset-faults", action="store_true", help="clear a fault latched on the table first")
     add_accept_poor_fit(run)
+    from station.cli.history import add_history_option
+
+    add_history_option(run, "default: a bench run's is filed, a simulated run's is not")
     run.set_defaults(func=cmd_run)
 
     schemes = sub.add_parser("schemes", help="list the built-in schemes with their segments and durations")
@@ -229,7 +232,7 @@ def cmd_run(args) -> int:
         return characterise_run(capture)
     cal, _, provenance = estimate_capture(capture)
     cal_path = write_calfile(capture / "calibration.yaml", cal, provenance)
-    file_quietly(cal_path)
+    file_quietly(cal_path, asked=bool(args.history), simulated=True)
     out.print(f"capture:          {capture}", markup=False)
     out.print(f"simulated truth:  {capture / dryrun.TRUTH_FILE}", markup=False)
     return report_calibration(cal, "", cal_path, args.accept_poor_fit, truth=dryrun.truth_calibration(truth))
@@ -259,7 +262,7 @@ def _run_on_bench(args) -> int:
     steps = _resume_steps(plan, scheme, done, config) if args.resume else plan.steps
     if args.resume and not any(s.segment for s in steps):
         out.print(f"{directory}: every segment is recorded; estimating", markup=False)
-        return _estimate(directory, args.accept_poor_fit, config)
+        return _estimate(directory, args.accept_poor_fit, config, history=args.history)
     try:
         return _record_and_estimate(args, config, scheme, plan, steps, directory, text if not args.resume else None)
     except DEVICE_ERRORS as e:
@@ -312,7 +315,7 @@ def _record_and_estimate(args, config, scheme, plan, steps, directory, text) -> 
                 device.close()
         if guardian is not None:
             guardian.release()
-    return _estimate(directory, args.accept_poor_fit, config)
+    return _estimate(directory, args.accept_poor_fit, config, history=args.history)
 
 
 # ------------------------------------------------------------------------------------ operator
@@ -523,7 +526,7 @@ def _reopen(directory, rate_hz, serial=None):
     return CaptureWriter.reopen(directory)
 
 
-def _estimate(directory, accept_poor_fit: bool = False, config=None) -> int:
+def _estimate(directory, accept_poor_fit: bool = False, config=None, history: bool | None = None) -> int:
     from station.io.calfile import write_calfile
     from station.estimate import estimate_capture
     from station.cli.noise import characterise_run, is_noise_recording
@@ -539,7 +542,7 @@ def _estimate(directory, accept_poor_fit: bool = False, config=None) -> int:
     path = write_calfile(Path(directory) / "calibration.yaml", cal, provenance)
     from station.cli.history import file_quietly
 
-    file_quietly(path)
+    file_quietly(path, asked=True if history is None else history)
     return report_calibration(cal, f"calibration of {directory} ({provenance['method']})", path,
                               accept_poor_fit)
 

@@ -250,9 +250,21 @@ def allan_figure(result, path=None, fmt: str | None = None) -> bytes:
     return save(fig, path, fmt)
 
 
+DRIFT_MARKS = {"passes": ("o", "C0", "passes"), "fails": ("X", "C3", "fails / not converged"),
+               "other": ("s", "0.55", "untested / noise overestimated / not stated")}
+
+
+def drift_status(verdict: str) -> str:
+    """The drift plot's class of a calibration's verdict (history's words)."""
+    word = (verdict or "").split(":")[0].strip()
+    return "passes" if word == "passes" else "fails" if word in ("fails", "not converged") else "other"
+
+
 def drift_figure(rows, path=None, title: str = "", fmt: str | None = None) -> bytes:
-    """rows: {parameter: [(date, value, sigma, unit), ...]}; one small panel per parameter with
-    ±1σ error bars against the calibration date."""
+    """rows: {parameter: [(date, value, sigma, unit[, status]), ...]}; one small panel per
+    parameter with ±1σ error bars against the calibration date.  ``status`` (drift_status):
+    failing calibrations drawn as red crosses, untested ones as grey squares, apart from the
+    passing ones; a point without a 1σ has no bar and an open marker."""
     import datetime as dt
 
     plt = pyplot()
@@ -264,18 +276,34 @@ def drift_figure(rows, path=None, title: str = "", fmt: str | None = None) -> by
         ax.axis("off")
     for ax, name in zip(axes.ravel(), names):
         pts = rows[name]
-        when = [dt.datetime.strptime(d, "%Y-%m-%dT%H:%M:%SZ") for d, _, _, _ in pts]
-        vals = np.array([v for _, v, _, _ in pts], float)
-        sig = np.array([s if s is not None else np.nan for _, _, s, _ in pts], float)
+        when = [dt.datetime.strptime(p[0], "%Y-%m-%dT%H:%M:%SZ") for p in pts]
+        vals = np.array([p[1] for p in pts], float)
+        sig = np.array([p[2] if p[2] is not None else np.nan for p in pts], float)
         unit = pts[0][3]
         if unit in SCALE_UNITS and vals[0]:       # scale factors: ppm from the first calibration
             vals, sig, unit = (vals / vals[0] - 1.0) * 1e6, sig / vals[0] * 1e6, f"ppm from {pts[0][1]:.6f}"
-        ax.errorbar(when, vals, yerr=np.nan_to_num(sig), fmt="o-", ms=3, lw=0.8, capsize=2)
+        status = [p[4] if len(p) > 4 else "passes" for p in pts]
+        ax.plot(when, vals, "-", lw=0.6, color="0.7")
+        for kind, (marker, colour, _) in DRIFT_MARKS.items():
+            k = [i for i, s in enumerate(status) if s == kind]
+            if not k:
+                continue
+            with_sigma = [i for i in k if np.isfinite(sig[i])]
+            without = [i for i in k if not np.isfinite(sig[i])]
+            if with_sigma:
+                ax.errorbar([when[i] for i in with_sigma], vals[with_sigma], yerr=sig[with_sigma], fmt=marker,
+                            color=colour, ms=4, lw=0.8, capsize=2)
+            if without:
+                ax.plot([when[i] for i in without], vals[without], marker, ms=5, mfc="none", color=colour)
         ax.set_title(f"{name} ({unit})", fontsize=8, y=TITLE_Y)
         ax.tick_params(labelsize=7)
         ax.yaxis.get_major_formatter().set_useOffset(False)
     fig.autofmt_xdate()
     if title:
+        seen = {p[4] if len(p) > 4 else "passes" for pts in rows.values() for p in pts}
+        if seen - {"passes"}:
+            title += "   (" + "; ".join(f"{m}: {words}" for kind, (m, _, words) in DRIFT_MARKS.items()
+                                         if kind in seen) + "; open marker: no 1σ)"
         fig.suptitle(title, fontsize=10)
     fig.tight_layout(rect=(0, 0, 1, 0.97))
     return save(fig, path, fmt)

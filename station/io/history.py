@@ -6,7 +6,10 @@ place, first found of: the ``--store`` option, the ``STATION_HISTORY_DIR`` envir
 the user's data directory (``$XDG_DATA_HOME/station/calibrations``, default
 ``~/.local/share/station/calibrations``; ``~/Library/Application Support/station/calibrations``
 on macOS, ``%LOCALAPPDATA%\\station\\calibrations`` on Windows).  Filing the same file twice
-files it once (by its sha256).
+files it once (by its sha256), and a calibration of a capture and model already filed (the same
+capture's sha256, method and effects: a re-estimate) is not filed again.  What is filed at all is
+the CLI's policy (station/cli/history.py): real IMUs (a serial), simulations only when asked and
+then in their own store (:func:`simulation_store`).
 """
 from __future__ import annotations
 
@@ -33,8 +36,12 @@ SCHEMA = """CREATE TABLE IF NOT EXISTS calibrations (
     file TEXT NOT NULL,
     source TEXT,
     sha256 TEXT NOT NULL UNIQUE,
-    filed_utc TEXT NOT NULL)"""
+    filed_utc TEXT NOT NULL,
+    capture_sha256 TEXT,
+    model TEXT)"""
+ADDED_COLUMNS = (("capture_sha256", "TEXT"), ("model", "TEXT"))    # index files written before them
 UNKNOWN_SERIAL = "unknown"
+SIMULATED_PREFIX = "SIM-"           # the serial station's simulated IMUs carry (station.simulate.dryrun)
 
 
 @dataclass
@@ -61,6 +68,29 @@ def default_store() -> Path:
     else:
         base = Path(os.environ.get("XDG_DATA_HOME") or home / ".local" / "share")
     return base / "station" / "calibrations"
+
+
+def simulation_store(root=None) -> Path:
+    """Where simulated runs are filed when asked: beside the calibrations' store, never in it."""
+    base = Path(root) if root else default_store()
+    return base.with_name(base.name + "-simulations")
+
+
+def real_serial(doc: dict) -> str | None:
+    """The IMU serial a calibration states, if it names a real IMU (not unknown, not simulated)."""
+    prov = doc.get("provenance") if isinstance(doc.get("provenance"), dict) else {}
+    serial = _text(prov.get("imu_serial"))
+    if not serial or not serial.strip() or serial == UNKNOWN_SERIAL or serial.startswith(SIMULATED_PREFIX):
+        return None
+    return serial
+
+
+def model_key(doc: dict) -> str:
+    """What a calibration modelled: its method and effects (a re-estimate with another model is
+    another calibration of the same capture)."""
+    prov = doc.get("provenance") if isinstance(doc.get("provenance"), dict) else {}
+    effects = doc.get("effects") if isinstance(doc.get("effects"), list) else []
+    return f"{_text(prov.get('method')) or '?'}:{','.join(sorted(str(e) for e in effects))}"
 
 
 def _text(v) -> str | None:
@@ -105,6 +135,10 @@ class Store:
                 self.root.mkdir(parents=True, exist_ok=True)
             db = sqlite3.connect(index)
             db.execute(SCHEMA)
+            have = {row[1] for row in db.execute("PRAGMA table_info(calibrations)")}
+            for name, kind in ADDED_COLUMNS:
+                if name not in have:
+                    db.execute(f"ALTER TABLE calibrations ADD COLUMN {name} {kind}")
             return db
         except (OSError, sqlite3.Error) as e:
             raise UserError(f"{index}: cannot open the calibration history: {e}") from None
@@ -120,9 +154,14 @@ class Store:
         prov = doc.get("provenance") if isinstance(doc.get("provenance"), dict) else {}
         serial = _text(prov.get("imu_serial")) or UNKNOWN_SERIAL
         date = _text(prov.get("date_utc")) or _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+        capture_digest = _text(prov.get("capture_sha256"))
+        model = model_key(doc)
         db = self._connect(create=True)
         with db:
             row = db.execute("SELECT id FROM calibrations WHERE sha256 = ?", (digest,)).fetchone()
+            if row is None and capture_digest:
+                row = db.execute("SELECT id FROM calibrations WHERE capture_sha256 = ? AND model = ? AND serial = ?",
+                                 (capture_digest, model, serial)).fetchone()
             if row:
                 return self.get(row[0]), False
             rel = Path(serial_folder(serial)) / f"{re.sub(r'[^0-9A-Za-z]', '', date)[:15]}-{digest[:8]}.yaml"
@@ -137,10 +176,10 @@ class Store:
                 raise UserError(f"{target}: cannot file the calibration: {e.strerror}") from None
             cur = db.execute(
                 "INSERT INTO calibrations (serial, date_utc, scheme, method, verdict, file, source, "
-                "sha256, filed_utc) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                "sha256, filed_utc, capture_sha256, model) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (serial, date, _text(prov.get("scheme")), _text(prov.get("method")), verdict_of(doc),
                  rel.as_posix(), str(cal_path.resolve()), digest,
-                 _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")))
+                 _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"), capture_digest, model))
             new_id = cur.lastrowid
         db.close()
         return self.get(new_id), True
