@@ -83,13 +83,16 @@ def test_flicker_floor_is_found_as_bias_instability():
 
 
 def test_noise_of_a_csv_file_writes_noise_yaml_beside_it(noise_run, tmp_path):
+    """Named after the CSV: two recordings in one folder keep their own noise file and plot."""
     seg = read_capture(noise_run).complete("static")[0]
-    csv = tmp_path / "still.csv"
-    csv.write_text((noise_run / seg.file).read_text())
-    assert main(["noise", str(csv)]) == 0
-    block = yaml.safe_load((tmp_path / "noise.yaml").read_text())["noise"]
-    assert block["sample_rate_hz"] == pytest.approx(100.0)
-    assert (tmp_path / "allan.png").exists()
+    for name in ("still", "other"):
+        (tmp_path / f"{name}.csv").write_text((noise_run / seg.file).read_text())
+        assert main(["noise", str(tmp_path / f"{name}.csv")]) == 0
+    for name in ("still", "other"):
+        block = yaml.safe_load((tmp_path / f"{name}-noise.yaml").read_text())["noise"]
+        assert block["sample_rate_hz"] == pytest.approx(100.0)
+        assert (tmp_path / f"{name}-allan.png").exists()
+    assert not (tmp_path / "allan.png").exists() and not (tmp_path / "noise.yaml").exists()
 
 
 def test_noise_refuses_too_short_a_recording(tmp_path, capsys):

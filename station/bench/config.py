@@ -462,7 +462,7 @@ version: 1
 
 imu:
   port: /dev/ttyUSB0          # device path or pyserial URL (socket://host:port, spy://...)
-  protocol: vectornav         # vectornav | csv
+  protocol: vectornav         # vectornav | xsens | csv
   rate_hz: 100                # vectornav: 800 / N
   # csv_units: t=ms,accel=g,gyro=rad/s   # csv only (default t=s,accel=m/s^2,gyro=deg/s)
   frame_timeout_s: 2.0

@@ -49,7 +49,8 @@ def add_parsers(sub) -> None:
     app.set_defaults(func=cmd_apply)
 
     show = sub.add_parser("show", help="print a calibration file")
-    show.add_argument("calibration", metavar="CAL.yaml")
+    show.add_argument("calibration", metavar="CAL.yaml",
+                      help="a calibration file (station-calibration/1): its parameters ± 1σ, verdict and notes")
     show.set_defaults(func=cmd_show)
 
 

@@ -10,8 +10,9 @@ from station.core.errors import UserError
 
 def add_parsers(sub) -> None:
     mc = sub.add_parser("montecarlo", help="repeat simulate -> estimate; compare with the Cramér-Rao bound")
-    mc.add_argument("--scheme", default="optimal9")
-    mc.add_argument("--runs", type=argtypes.whole(2), default=100)
+    mc.add_argument("--scheme", default="optimal9", help="built-in scheme name or scheme file (default optimal9)")
+    mc.add_argument("--runs", type=argtypes.whole(2), default=100,
+                    help="simulate -> estimate repetitions, at least 2 (default 100)")
     # bounds: what a MEMS IMU on a poor table reaches, ten times over
     mc.add_argument("--accel-noise-ug", type=argtypes.between(1e-3, 1e5), default=100.0, help="µg/√Hz (default 100)")
     mc.add_argument("--gyro-noise-dph", type=argtypes.between(1e-6, 1e5), default=0.03, help="°/h/√Hz (default 0.03)")
@@ -19,9 +20,11 @@ def add_parsers(sub) -> None:
                     help="1σ table angle error (default 2)")
     mc.add_argument("--accel-disturbance-ug", type=argtypes.between(0, 1e5), default=50.0,
                     help="1σ white acceleration disturbance (default 50, the 2010 paper's)")
-    mc.add_argument("--method", choices=("lsq", "zhang2010"), default="lsq")
+    mc.add_argument("--method", choices=("lsq", "zhang2010"), default="lsq",
+                    help="estimation method (default lsq)")
     mc.add_argument("--seed", type=argtypes.seed, default=1000, help="first seed (runs use seed, seed+1, ...)")
-    mc.add_argument("--json", action="store_true")
+    mc.add_argument("--json", action="store_true",
+                    help="print the per-parameter table as JSON on stdout (error std, Cramér–Rao bound, mean 1σ)")
     mc.set_defaults(func=cmd_montecarlo)
 
 

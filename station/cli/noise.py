@@ -87,11 +87,14 @@ def cmd_noise(args) -> int:
         here = src.parent
         result = noise.from_samples(src, data, args.rate_hz, args.accel_unit, args.gyro_unit, cal_doc)
     block = result.block()
+    # a capture holds one noise file and plot; a CSV's are named after it (two recordings in one
+    # folder do not overwrite each other's)
+    stem = "" if (src.is_dir() or src.name == "manifest.yaml") else f"{src.stem}-"
     if args.cal:
         target = write_into_calibration(args.cal, block)
     else:
-        target = write_noise_file(here / "noise.yaml", block, model, serial)
-    png = Path(args.plot) if args.plot else Path(target).with_name("allan.png")
+        target = write_noise_file(here / f"{stem}noise.yaml", block, model, serial)
+    png = Path(args.plot) if args.plot else Path(target).with_name(f"{stem}allan.png")
     try:
         allan_figure(result, png)
     except OSError as e:

@@ -41,7 +41,7 @@ def add_parsers(sub) -> None:
     _add_scheme_overrides(run)
     run.add_argument("--port", metavar="URL", help="IMU port (device path or pyserial URL)")
     run.add_argument("--table-port", metavar="URL", help="rate-table port (device path or pyserial URL)")
-    run.add_argument("--imu-protocol", help="vectornav (default) or csv")
+    run.add_argument("--imu-protocol", help="vectornav (default), xsens or csv")
     run.add_argument("--table-protocol", help="acutrol (default) or aerosmith")
     run.add_argument("--config", metavar="FILE", help="station.yaml (default: $STATION_CONFIG, ./station.yaml)")
     run.add_argument("--resume", metavar="CAPTURE", help="continue a stopped run from its first missing segment")
@@ -73,7 +73,8 @@ def add_parsers(sub) -> None:
     plan.set_defaults(func=cmd_plan)
 
     init = sub.add_parser("init", help="write a commented example configuration (station.yaml)")
-    init.add_argument("path", nargs="?", default="station.yaml")
+    init.add_argument("path", nargs="?", default="station.yaml",
+                      help="where to write it (default ./station.yaml; an existing file is not overwritten)")
     init.set_defaults(func=cmd_init)
 
 
