@@ -165,3 +165,14 @@ def test_estimate_of_a_single_static_recording_is_one_line(tmp_path, capsys):
                        capture_output=True, text=True, timeout=300)      # a process: its own warnings
     err = r.stderr.strip()
     assert r.returncode == 2 and len(err.splitlines()) == 1 and "cannot determine" in err, err
+
+
+def test_plan_says_a_shaft_scheme_is_not_a_table_scheme(capsys):
+    """`plan --scheme screwdriver` on the default table: its 720 deg/s shaft turns exceed the table;
+    the one line says what the scheme is and that run --sim simulates it (issue 26)."""
+    from station.cli import main as station_main
+
+    assert station_main(["plan", "--scheme", "screwdriver"]) == 2
+    line = " ".join(capsys.readouterr().err.split())
+    assert "scheme screwdriver is not a table scheme: its rotations have no encoder" in line
+    assert "station run --scheme screwdriver --sim" in line and "max_rate_dps (300)" in line

@@ -152,7 +152,15 @@ def cmd_plan(args) -> int:
 
     config = _config(args)
     scheme = load_scheme(args.scheme, _overrides(args))
-    plan = compile_scheme(scheme, config)
+    try:
+        plan = compile_scheme(scheme, config)
+    except UserError as e:
+        rotations = [seg for seg in scheme.segments if getattr(seg, "kind", "") == "rotation"]
+        if rotations and all(not getattr(seg, "encoder", True) for seg in rotations):
+            raise UserError(f"scheme {scheme.name} is not a table scheme: its rotations have no encoder (a "
+                            "shaft, a screwdriver or a hand turns the IMU; `station run --scheme "
+                            f"{scheme.name} --sim` simulates it); on this table: {e}") from None
+        raise
     t = config.table
     where = "by hand (no table)" if plan.manual else (
         f"{t.axes}-axis table, axes at zero (east-north-up) {t.axis_list()}, IMU mounted "
