@@ -149,8 +149,7 @@ def cmd_diff(args) -> int:
         flagged += c.flagged
         value = (lambda v: f"{v:.9f}") if c.change_ppm is not None else (lambda v: f"{v:.4f}")
         change = f"{c.change_ppm:+.2f} ppm" if c.change_ppm is not None else f"{c.change:+.4f}"
-        t.add_row(c.name, value(c.before), value(c.after), change,
-                  "" if c.change_ppm is not None else c.unit,
+        t.add_row(c.name, value(c.before), value(c.after), change, c.unit,
                   "" if c.z is None else f"{c.z:+.2f}", f"> {FLAG_SIGMA:g}σ" if c.flagged else "")
     out.print(t)
     da_date = (da.get("provenance") or {}).get("date_utc")

@@ -21,16 +21,22 @@ def print_parameters(rows, title: str) -> None:
     table.add_column("value", justify="right")
     table.add_column("± 1σ", justify="right")
     table.add_column("unit")
+    blank = []
     for name, value, unit, sigma in rows:
         is_scale = unit in ("1", "raw/(m/s^2)", "raw/(deg/s)")
         if sigma is None or not math.isfinite(sigma):
-            spread = ""
+            spread = "—"
+            blank.append(name)
         elif is_scale:
             spread = f"{sigma / value * 1e6:.3g} ppm"
         else:
             spread = f"{sigma:.3g}"
-        table.add_row(name, f"{value:.9g}" if is_scale else f"{value:.4f}", spread, unit)
+        # scale factors as run and diff print them: 9 decimals, their 1-sigma (and changes) in ppm
+        table.add_row(name, f"{value:.9f}" if is_scale else f"{value:.4f}", spread, unit)
     out.print(table)
+    if blank:
+        out.print(f"—: no 1σ in the file for {', '.join(blank)} (a parameter written without one: a "
+                  "method without a covariance, or an older file)", markup=False, soft_wrap=True)
 
 
 def print_errors(cal, truth) -> None:
