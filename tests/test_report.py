@@ -198,3 +198,27 @@ def test_hundreds_of_segments_are_named_one_in_every_few():
     assert "1000 segments in capture order, one named every 17" in svg
     named, svg = drawn(MOST_NAMES)
     assert len(named) == MOST_NAMES and "one named every" not in svg
+
+
+def test_the_page_never_contradicts_the_calibration_it_describes(optimal9_run, tmp_path):
+    """A calibration file whose fit fails, over a capture whose refit explains the data: the
+    page's diagnosis box takes the file's colour and says the file's verdict (issue 26); and
+    `diagnose --report` shows the capture's own calibration without --calib."""
+    import yaml
+
+    doc = yaml.safe_load((optimal9_run / "calibration.yaml").read_text())
+    doc["verdict"] = {"result": "fails", "reason": "reduced chi2 4210 (planted)"}
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump(doc, sort_keys=False))
+    page = tmp_path / "page.html"
+    assert main(["report", str(optimal9_run), "--cal", str(bad), "-o", str(page), "--no-auto"]) == 0
+    text = page.read_text(encoding="utf-8")
+    boxes = re.findall(r"<div class='verdict (\w+)'>([^<]*)</div>", text)
+    assert ("fail", "fit verdict: fails: reduced chi2 4210 (planted)") in boxes
+    diagnosis = [(c, t) for c, t in boxes if "explains the data" in t]
+    assert diagnosis and all(c == "fail" for c, _ in diagnosis)
+    assert all("own fit verdict is: fails" in t for _, t in diagnosis)
+    out = tmp_path / "rep"
+    assert main(["diagnose", str(optimal9_run), "--report", str(out)]) == 0
+    text = (out / "index.html").read_text(encoding="utf-8")
+    assert "No calibration file" not in text and "fit verdict: passes" in text

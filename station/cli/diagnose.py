@@ -77,11 +77,13 @@ def _diagnose(args, job) -> tuple:
     from station.io.capture import read_capture
 
     capture = read_capture(args.capture, load_data=False)      # the manifest: samples below
-    cal_doc = None
-    if args.report and args.calib:
+    cal_doc = cal_path = None
+    if args.report:     # the page shows the calibration it describes: --calib, else the capture's own
         from station.io.calfile import read_calfile
 
-        cal_doc = read_calfile(args.calib)
+        cal_path = args.calib or (capture.path / "calibration.yaml" if (capture.path / "calibration.yaml").is_file()
+                                  else None)
+        cal_doc = read_calfile(cal_path) if cal_path else None
     check = segment_check(capture)
     # each segment read, checked and summarised (in a child, while the fit is imported here);
     # with --report, the noise where the capture is read
@@ -115,13 +117,15 @@ def _diagnose(args, job) -> tuple:
     page = None
     if job is not None:
         from station.diagnose.report import ReportInput, capture_facts
+        from station.io.history import verdict_of
 
         figures.known(first, steps)
         if not args.json:
             _print(out, first, steps, final)        # while the figures are drawn
         page = ReportInput(title=f"Diagnosis: {Path(str(capture.path)).name}",
                            facts=capture_facts(capture, cal_doc) + [("summary", line) for line in summary],
-                           calibration=cal_doc, calibration_path=args.calib,
+                           calibration=cal_doc, calibration_path=None if cal_path is None else str(cal_path),
+                           verdict=verdict_of(cal_doc) if cal_doc is not None else None,
                            noise=noise, noise_note=noise_note, figures=job.result())
     return first, steps, final, summary, page
 
