@@ -188,6 +188,17 @@ def _earth_rate_visible(r, s: Summaries) -> bool:
     return largest > 3.0 * noise
 
 
+def _earth_angle_group(s: Summaries, k: int) -> bool:
+    """Whether axis k's Earth rate is parametrised by its angle beta from the axis (Model.
+    _earth_along_across): some turn about it has an Earth-rate phase, and it is turned both
+    ways (the gyro integrals of the two directions then fix the axis' tilt, so the Earth rate
+    across it is measured and |e| <= Omega matters).  Turned one way only, the tilt is seen by
+    the accelerometers alone, and over a short turn that leaves the Earth rate across the axis
+    unresolved: beta then sits at its bound (|e| = 0, all of Omega across) and wanders."""
+    segs = [r for r in s.rotations if r.group == k and r.steady]
+    return (any(_earth_rate_visible(r, s) for r in segs)
+            and any(r.angle_deg > 0 for r in segs) and any(r.angle_deg < 0 for r in segs))
+
 
 class Model:
     """The whitened residual function of the base model plus effects."""
@@ -252,6 +263,11 @@ class Model:
             # where gravity is at the start; and the Earth rate, unless the turns are whole
             r = self.s.rotations[i]
             L.add(f"phase{i}", 0 if not r.steady else 2 if _earth_rate_visible(r, s) else 1)
+        # the axes about which some turn ends elsewhere than it starts (an Earth-rate phase chi):
+        # their fourth column is the Earth's axis' angle from the table axis, beta, the Earth
+        # rate along the axis Omega cos beta and across it Omega sin beta; elsewhere it is e, the
+        # rate along the axis, itself (_earth_along_across)
+        self.earth_angle = np.array([_earth_angle_group(s, k) for k in range(s.groups)], bool)
         # the mounting offset(s) from the table's rotation centre: one vector for every rotation
         # unless the capture's table geometry says otherwise (table_geometry.py)
         self.geometry = s.geometry if s.geometry is not None else table_geometry.unstated()
@@ -340,6 +356,8 @@ class Model:
             e1, e2 = self.axis_basis[r.group]
             v = La @ r.accel_cos
             x[L[f"phase{i}"].start] = np.arctan2(v @ e2, v @ e1)
+        for k in np.flatnonzero(self.earth_angle):
+            x[L[f"axis{k}"].start + 3] = np.pi / 2      # beta: no Earth rate along the axis
         self.x0_plain = x.copy()        # the start before the Earth-rate phases are started
         self._earth_phase_start(x)
         self._rotation_axes_raw = [Mg @ self.axis_ref[r.group] for r in s.rotations]
@@ -437,7 +455,7 @@ class Model:
                 x[axis.start:axis.start + 2] = [tilted @ t1 / (tilted @ ref), tilted @ t2 / (tilted @ ref)]
             else:
                 chi = np.angle(z) - np.angle(f)
-            x[axis.start + 3] = e
+            x[axis.start + 3] = np.arccos(e / self.omega_dps) if self.earth_angle[k] else e
             for i, value in zip(segs, chi):
                 x[L[f"phase{i}"].start + 1] = np.angle(np.exp(1j * value))
         return x
@@ -924,7 +942,8 @@ class Model:
         # axes and the rotations' phase grids
         PA = X[:, self._axis_cols]                                               # (B,K,4)
         l_k = normalised(self._axis_ref + np.einsum("bkj,kjc->bkc", PA[..., :2], self._axis_basis))
-        alpha_k, e_k = PA[..., 2], PA[..., 3]
+        alpha_k = PA[..., 2]
+        e_k, across_k = self._earth_along_across(PA[..., 3])
         kappa_k = g * np.cos(alpha_k)
         l, kappa, e = l_k[:, self._rot_group], kappa_k[:, self._rot_group], e_k[:, self._rot_group]   # (B,R,..)
         g_across = g * np.sin(alpha_k[:, self._rot_group])
@@ -933,8 +952,7 @@ class Model:
         phase = Xe[:, self._rot_phase_cols]                                      # (B,R,2)
         psi, chi = phase[..., 0:1], phase[..., 1:2]
         v = g_across[..., None] * (np.cos(psi) * e1 + np.sin(psi) * e2)
-        earth_perp = (np.sqrt(positive_part(self.omega_dps**2 - e**2))[..., None]
-                      * (np.cos(chi) * e1 + np.sin(chi) * e2))
+        earth_perp = across_k[:, self._rot_group, None] * (np.cos(chi) * e1 + np.sin(chi) * e2)
         earth_integral = self._rot_earth[:, :1] * earth_perp - self._rot_earth[:, 1:] * cross(l, earth_perp)
         offset = (np.einsum("brk,rkc->brc", Xe[:, self._offset_cols], self._offset_basis)
                   if self._offset is None else self._offset)
@@ -1001,6 +1019,25 @@ class Model:
         # the table's elevation of each axis: alpha, its angle from up, is 90 deg - elevation
         blocks.append(((X[:, self._level_cols] - self._level_alpha) / (self.geometry.level_sigma_rad or 1.0))[..., None])
         return blocks
+
+    def _earth_along_across(self, column):
+        """The Earth rate along each axis and across it (B, K each) from the axes' fourth column.
+
+        About an axis with an Earth-rate phase the column is beta, the angle from the table axis
+        to the Earth's: Omega cos beta along, Omega sin beta across (a negative one is chi + pi).
+        It was e, with sqrt(Omega^2 - e^2) across, cut at 0: over short part turns the encoder's
+        angle error alone leaves e uncertain by a large part of Omega (2" over 0.4 s: 0.33 Omega)
+        and the solver could step past |e| = Omega, where nothing is left across the axis and
+        neither e nor chi has a gradient there from the integrals across it, which are then made
+        up by tilting the axis (300 deg/s, 120 degree turns about axes 26 deg from the Earth's:
+        reduced chi2 40; turns one way only: e at 8 Omega, 31).  Elsewhere the column is e
+        itself, unbounded (a capture of whole turns with a slipped encoder reads its error as e
+        and fails its chi2 rather than stall at a bound)."""
+        mask = self.earth_angle
+        free = np.where(mask, 0.0, column)
+        along = np.where(mask, self.omega_dps * np.cos(column), column)
+        across = np.where(mask, self.omega_dps * np.sin(column), np.sqrt(positive_part(self.omega_dps**2 - free**2)))
+        return along, across
 
     def _add_effects(self, X, a, w, f_p, w_p, Ma, Mg, l, w_k, wdot_k):
         """a and w with every effect's terms added (the Effect interface: one parameter vector,
