@@ -5,7 +5,7 @@ the gravity along an axis is g cos(alpha), across it g sin(alpha), alpha the axi
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from station.estimate.lsq import PHASES, UP, WEAK_PRIOR_RAD, Model, _earth_angle_group, _earth_rate_visible
+from station.estimate.lsq import PHASES, UP, WEAK_PRIOR_RAD, Model, _earth_rate_visible
 from station.model.effect import SampleContext
 from station.model.geometry import cross, tangent_basis
 
@@ -65,7 +65,7 @@ class PerSegmentModel(Model):
         # the axis' angle from up (alpha): gravity along it and across it; the Earth rate along it
         # (e, or from the Earth's axis' angle beta from it: Omega cos beta, Omega sin beta across)
         g, alpha = self.s.gravity_mps2, p[2]
-        if _earth_angle_group(self.s, k):
+        if self.earth_angle[k]:
             e, across = self.omega_dps * np.cos(p[3]), self.omega_dps * np.sin(p[3])
         else:
             e, across = p[3], np.sqrt(max(self.omega_dps**2 - p[3] * p[3], 0.0))
