@@ -6,7 +6,9 @@ where chi and the tilt made up the gyro integrals together and left the accelero
 which see the true axis, with a misfit (optimal9 at 10 deg/s over 120 degrees: reduced chi2 3.5
 with noise, 3.0 without any).  Gravity and the Earth rate along an axis at the edge of their
 square roots (an axis near the vertical or the Earth's axis) trapped the fit the same way.
-docs/method-lsq.md, "Part turns"."""
+Then: short fast turns stepping past |e| = Omega, the Earth rate modelled across axes turned one
+way only where it cannot be told from their tilt, and the two solutions of the gyro integrals
+about an axis near the vertical.  docs/method-lsq.md, "Part turns"."""
 import numpy as np
 import pytest
 from scipy import stats
@@ -172,13 +174,13 @@ def test_short_fast_turns_one_way_monte_carlo(angle_deg):
     assert 0.6 < np.sqrt(np.mean(z**2)) < 1.4, np.sqrt(np.mean(z**2))
 
 
-@pytest.mark.parametrize("elevation_deg, angle_deg, seed", [(90, 120, 3), (90, 270, 1), (80, 200, 2), (80, 200, 3)])
+@pytest.mark.parametrize("elevation_deg, angle_deg, seed", [(90, 120, 3), (90, 200, 3), (90, 270, 4), (80, 200, 2)])
 def test_noise_free_part_turns_about_vertical_axes(elevation_deg, angle_deg, seed):
     """Part turns both ways about axes near the vertical at 10 deg/s: gravity along the axis
     leaves each turn's start unseen, and the gyro integrals of a turn each way fit exactly at two
     tilts of the axis; from the wrong one the solver stayed there (before, noise-free reduced
-    chi2: 0.33 (90 deg up, 120 degrees, seed 3), 0.26 (270, seed 1), 1.30 and 1.75 (80 deg up,
-    200 degrees)).  lsq._other_crossing starts the fit at the other one too."""
+    chi2 0.33 (vertical axes, 120 degrees, seed 3), 0.50 (200, seed 3), 0.55 (270, seed 4); axes
+    80 deg up passed and still do).  lsq._other_crossing starts the fit at the other one too."""
     text = (f"name: t\ndefaults: {{dwell_s: 5, rate_dps: 10, rotation_s: {angle_deg / 10}}}\n"
             f"segments:\n{NINE_STATICS}{TURNS.format(extra=f'axis_elevation_deg: {elevation_deg}')}")
     result, truth = noise_free_fit(scheme_from_text(text, "test scheme"), seed)

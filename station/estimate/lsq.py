@@ -1053,16 +1053,16 @@ class Model:
     def _earth_along_across(self, column):
         """The Earth rate along each axis and across it (B, K each) from the axes' fourth column.
 
-        About an axis with an Earth-rate phase the column is beta, the angle from the table axis
-        to the Earth's: Omega cos beta along, Omega sin beta across (a negative one is chi + pi).
-        It was e, with sqrt(Omega^2 - e^2) across, cut at 0: over short part turns the encoder's
+        About the axes of earth_angle the column is beta, the angle from the table axis to the
+        Earth's: Omega cos beta along, Omega sin beta across (a negative one is chi + pi).  It
+        was e, with sqrt(Omega^2 - e^2) across, cut at 0: over short part turns the encoder's
         angle error alone leaves e uncertain by a large part of Omega (2" over 0.4 s: 0.33 Omega)
         and the solver could step past |e| = Omega, where nothing is left across the axis and
         neither e nor chi has a gradient there from the integrals across it, which are then made
         up by tilting the axis (300 deg/s, 120 degree turns about axes 26 deg from the Earth's:
-        reduced chi2 40; turns one way only: e at 8 Omega, 31).  Elsewhere the column is e
-        itself, unbounded (a capture of whole turns with a slipped encoder reads its error as e
-        and fails its chi2 rather than stall at a bound)."""
+        reduced chi2 40).  Elsewhere the column is e itself, unbounded (a capture of whole turns
+        with a slipped encoder reads its error as e and fails its chi2 rather than stall at a
+        bound)."""
         mask = self.earth_angle
         free = np.where(mask, 0.0, column)
         along = np.where(mask, self.omega_dps * np.cos(column), column)
@@ -1297,7 +1297,7 @@ def _other_crossing(model: Model, x: np.ndarray, k: int):
     circles crossing at two points, each fitting the integrals exactly.  The accelerometers see
     the axis (gravity along it) and tell them apart, but only through a misfit the calibration
     and the mounting offset can partly take: from the other point the solver stays there
-    (noise-free, axes within 12 deg of the vertical at 10 deg/s: reduced chi2 0.26-1.6 where it
+    (noise-free, axes within 12 deg of the vertical at 10 deg/s: reduced chi2 0.12-1.6 where it
     is 0).  So the fit is also started at the other point, d reflected across the line of the
     circles' centres, and its chi from there."""
     s, L = model.s, model.layout
