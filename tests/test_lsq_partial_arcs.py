@@ -113,7 +113,7 @@ def tilted_turns(elevation_deg, rate_dps, angle_deg):
                             "test scheme")
 
 
-@pytest.mark.parametrize("elevation_deg, angle_deg", [(30, 120), (60, 120), (30, 200)])
+@pytest.mark.parametrize("elevation_deg, angle_deg", [(30, 120), (60, 120)])
 def test_short_fast_turns_about_tilted_axes_monte_carlo(elevation_deg, angle_deg):
     """0.4-0.7 s turns (300 deg/s) about table axes tilted up, with noise: the Earth rate along
     an axis, e, was free and the solver could step past |e| = Omega, where nothing is left of it
