@@ -63,8 +63,13 @@ class PerSegmentModel(Model):
         t1, t2 = self.axis_basis[k]
         l = l0 + p[0] * t1 + p[1] * t2
         # the axis' angle from up (alpha): gravity along it and across it; the Earth rate along it
-        g, alpha, e = self.s.gravity_mps2, p[2], p[3]
-        return l / np.linalg.norm(l), (g * np.cos(alpha), g * np.sin(alpha)), e
+        # (e, or from the Earth's axis' angle beta from it: Omega cos beta, Omega sin beta across)
+        g, alpha = self.s.gravity_mps2, p[2]
+        if self.earth_angle[k]:
+            e, across = self.omega_dps * np.cos(p[3]), self.omega_dps * np.sin(p[3])
+        else:
+            e, across = p[3], np.sqrt(max(self.omega_dps**2 - p[3] * p[3], 0.0))
+        return l / np.linalg.norm(l), (g * np.cos(alpha), g * np.sin(alpha)), (e, across)
 
     def _hand_residuals(self, x, Mg, ups, attitudes) -> np.ndarray:
         """(H, 2) whitened residuals: the up after each turn against the up before carried through it."""
@@ -169,7 +174,7 @@ class PerSegmentModel(Model):
                 axis_body = next(r.axis_body for r in s.rotations if r.group == k)
                 put(("axis", k), cross(l, C_mount.apply(axis_body)) / self.prior_sigma, "axis_prior")
         g = s.gravity_mps2
-        for k, (_, (kappa, _), e) in enumerate(axes):
+        for k, (_, (kappa, _), (e, _)) in enumerate(axes):
             # the Earth rate along an axis lies within +/- Omega_E (uniform: sigma Omega_E/sqrt(3));
             # without this a single-direction turn could trade it against the scale factor
             put(("weak_axis", k), np.atleast_1d(e * np.sqrt(3.0) / self.omega_dps), "earth_prior")
@@ -177,7 +182,7 @@ class PerSegmentModel(Model):
                 # only unsteady turns about this axis: nothing sees the gravity along it
                 put(("weak_axis", k), np.atleast_1d(kappa / g / WEAK_PRIOR_RAD), "weak_prior")
         for i, r in enumerate(s.rotations):
-            l, (kappa, g_across), e = axes[r.group]
+            l, (kappa, g_across), (e, across) = axes[r.group]
             e1 = self.axis_basis[r.group][0]
             e1 = e1 - (e1 @ l) * l
             e1 /= np.linalg.norm(e1)
@@ -186,8 +191,7 @@ class PerSegmentModel(Model):
             v = g_across * (np.cos(psi) * e1 + np.sin(psi) * e2)
             # Earth rate across the axis turns with the body: over a whole number of turns it
             # integrates to zero, over the rest of a turn it does not
-            earth_perp = (np.sqrt(max(self.omega_dps**2 - e * e, 0.0))
-                          * (np.cos(chi) * e1 + np.sin(chi) * e2))
+            earth_perp = across * (np.cos(chi) * e1 + np.sin(chi) * e2)
             A = np.radians(r.angle_deg)
             earth_integral = np.zeros(3) if not _earth_rate_visible(r, s) else (r.duration_s / A) * (
                 np.sin(A) * earth_perp - (1.0 - np.cos(A)) * cross(l, earth_perp))

@@ -179,14 +179,46 @@ def _earth_rate_visible(r, s: Summaries) -> bool:
     """Whether the Earth rate across the axis leaves a trace in this rotation's gyro integral:
     it integrates to zero over whole turns, and to at most 2 Omega T / A over the rest of one;
     below three times the integral's noise it is not modelled (its start angle would be an
-    unobservable nuisance)."""
+    unobservable nuisance).
+
+    About an axis turned one way only it must also stand out from a tilt of the axis: the
+    integral across the axis is (rate + e) T times the tilt plus the Earth rate's, and with no
+    turn the other way (whose rate T has the other sign) only the accelerometers see the tilt,
+    to about sqrt 2 sigma_a / (g sqrt n).  Over a short fast turn the Earth rate's part, at most
+    2 Omega T / A / A as a tilt, is a small fraction of that (300 deg/s over 120 degrees: 0.08):
+    modelled, its start angle chi and the Earth rate along the axis were set by the noise of the
+    tilt, with |e| <= Omega binding or passed (errors of the calibration up to 40 sigma, reduced
+    chi2 up to 31).  Not modelled, the tilt takes it: a misfit of the accelerometers below the
+    tilt's 1-sigma."""
     turns = abs(r.angle_deg) / 360.0
     if abs(turns - round(turns)) < 1e-3:
         return False
-    largest = 2.0 * np.degrees(EARTH_RATE_RAD) * r.duration_s / np.radians(abs(r.angle_deg))
+    A = np.radians(abs(r.angle_deg))
+    largest = 2.0 * np.degrees(EARTH_RATE_RAD) * r.duration_s / A
     noise = np.max(s.gyro_sigma) * np.sqrt(r.duration_s / s.sample_rate_hz)
-    return largest > 3.0 * noise
+    if not largest > 3.0 * noise:
+        return False
+    if _turned_one_way(r, s):
+        tilt_sigma = np.sqrt(2.0) * np.max(s.accel_sigma) / (s.gravity_mps2 * np.sqrt(r.samples))
+        return np.radians(largest) / A > tilt_sigma
+    return True
 
+
+def _turned_one_way(r, s: Summaries) -> bool:
+    """Whether every steady turn about r's axis turns the same way as r."""
+    return all(q.angle_deg * r.angle_deg > 0 for q in s.rotations if q.group == r.group and q.steady)
+
+
+def _earth_angle_group(s: Summaries, k: int) -> bool:
+    """Whether axis k's Earth rate may be parametrised by its angle beta from the axis (Model.
+    _earth_along_across; Model._earth_phase_start chooses): turns about it both ways have an
+    Earth-rate phase (the gyro integrals of the two directions then fix the axis' tilt, so the
+    Earth rate across it is measured and |e| <= Omega matters).  Elsewhere e stays free: a turn
+    whose encoder slipped by 0.5 % among whole ones reads it as e, beyond Omega, and the fit
+    fails its chi2 (with beta it stalled at beta = 0, where e has no gradient: "not
+    converged")."""
+    visible = [r for r in s.rotations if r.group == k and r.steady and _earth_rate_visible(r, s)]
+    return any(r.angle_deg > 0 for r in visible) and any(r.angle_deg < 0 for r in visible)
 
 
 class Model:
@@ -252,6 +284,11 @@ class Model:
             # where gravity is at the start; and the Earth rate, unless the turns are whole
             r = self.s.rotations[i]
             L.add(f"phase{i}", 0 if not r.steady else 2 if _earth_rate_visible(r, s) else 1)
+        # the axes whose fourth column is the Earth's axis' angle from the table axis, beta (the
+        # Earth rate along the axis Omega cos beta, across it Omega sin beta) rather than e, the
+        # rate along the axis, itself (_earth_along_across): of those turned both ways by part
+        # turns, the ones whose e the start finds within reach of |e| = Omega (_earth_phase_start)
+        self.earth_angle = np.zeros(s.groups, bool)
         # the mounting offset(s) from the table's rotation centre: one vector for every rotation
         # unless the capture's table geometry says otherwise (table_geometry.py)
         self.geometry = s.geometry if s.geometry is not None else table_geometry.unstated()
@@ -298,6 +335,7 @@ class Model:
                     x[sl] = like.x0[like.layout[name]]
             self.static_ref, self.axis_ref = like.static_ref, like.axis_ref
             self.axis_basis, self.gyro_whiten = like.axis_basis, like.gyro_whiten
+            self.earth_angle = like.earth_angle.copy()
             self._rotation_axes_raw = like._rotation_axes_raw
             if self.hands:
                 self._initialise_hands(st)
@@ -341,7 +379,9 @@ class Model:
             v = La @ r.accel_cos
             x[L[f"phase{i}"].start] = np.arctan2(v @ e2, v @ e1)
         self.x0_plain = x.copy()        # the start before the Earth-rate phases are started
-        self._earth_phase_start(x)
+        self._earth_phase_start(x, choose=True)
+        for k in np.flatnonzero(self.earth_angle):
+            self.x0_plain[L[f"axis{k}"].start + 3] = np.pi / 2      # beta: no Earth rate along the axis
         self._rotation_axes_raw = [Mg @ self.axis_ref[r.group] for r in s.rotations]
         self._gyro_integral_whitening()
         if self.hands:
@@ -367,7 +407,7 @@ class Model:
         self._prepare()
         self.refresh()
 
-    def _earth_phase_start(self, x):
+    def _earth_phase_start(self, x, choose: bool = False):
         """Start the Earth-rate phases chi of the rotations that end elsewhere than they start
         (their second phase nuisance), with the axis tilt and the Earth rate e along it, from
         the gyro integrals at the calibration, axes and psi of x (changed in place).
@@ -387,7 +427,11 @@ class Model:
         linear in d and w = exp(i delta), solved by least squares (a ridge keeps d small where
         the segments cannot tell them apart, e.g. one turn about an axis).  Where gravity barely
         has a part across the axis (psi then unknown) each chi is taken from its own integral
-        with the axis as it is.  Only the start: the model keeps a chi per segment."""
+        with the axis as it is.  Only the start: the model keeps a chi per segment.
+
+        ``choose``: also choose the axes whose Earth rate is parametrised by beta (earth_angle):
+        those turned both ways by part turns where e, as the gyro integrals along the axis put
+        it, is within three of its 1-sigma of |e| = Omega (the edge the solver could step past)."""
         s, L = self.s, self.layout
         _, Mg = self._matrices(x)
         Lg, bg = np.linalg.inv(Mg), x[L["gyro_bias"]]
@@ -415,6 +459,10 @@ class Model:
             design = np.vstack([np.column_stack([rate, np.ones(len(segs))]) / noise[:, None],
                                 [[1.0 / 1e-2, 0.0], [0.0, np.sqrt(3.0) / self.omega_dps]]])
             e = float(np.linalg.lstsq(design, np.append((y @ l / T - rate) / noise, [0.0, 0.0]), rcond=None)[0][1])
+            if choose and _earth_angle_group(s, k):
+                e_sigma = float(np.sqrt(np.linalg.pinv(design.T @ design)[1, 1]))
+                self.earth_angle[k] = self.omega_dps - abs(e) < 3.0 * e_sigma
+                x[axis.start + 3] = np.pi / 2 if self.earth_angle[k] else 0.0
             e = float(np.clip(e, -0.9 * self.omega_dps, 0.9 * self.omega_dps))
             across = np.sqrt(self.omega_dps**2 - e * e)
             A = np.radians([r.angle_deg for r in rots])
@@ -437,7 +485,7 @@ class Model:
                 x[axis.start:axis.start + 2] = [tilted @ t1 / (tilted @ ref), tilted @ t2 / (tilted @ ref)]
             else:
                 chi = np.angle(z) - np.angle(f)
-            x[axis.start + 3] = e
+            x[axis.start + 3] = np.arccos(e / self.omega_dps) if self.earth_angle[k] else e
             for i, value in zip(segs, chi):
                 x[L[f"phase{i}"].start + 1] = np.angle(np.exp(1j * value))
         return x
@@ -924,7 +972,8 @@ class Model:
         # axes and the rotations' phase grids
         PA = X[:, self._axis_cols]                                               # (B,K,4)
         l_k = normalised(self._axis_ref + np.einsum("bkj,kjc->bkc", PA[..., :2], self._axis_basis))
-        alpha_k, e_k = PA[..., 2], PA[..., 3]
+        alpha_k = PA[..., 2]
+        e_k, across_k = self._earth_along_across(PA[..., 3])
         kappa_k = g * np.cos(alpha_k)
         l, kappa, e = l_k[:, self._rot_group], kappa_k[:, self._rot_group], e_k[:, self._rot_group]   # (B,R,..)
         g_across = g * np.sin(alpha_k[:, self._rot_group])
@@ -933,8 +982,7 @@ class Model:
         phase = Xe[:, self._rot_phase_cols]                                      # (B,R,2)
         psi, chi = phase[..., 0:1], phase[..., 1:2]
         v = g_across[..., None] * (np.cos(psi) * e1 + np.sin(psi) * e2)
-        earth_perp = (np.sqrt(positive_part(self.omega_dps**2 - e**2))[..., None]
-                      * (np.cos(chi) * e1 + np.sin(chi) * e2))
+        earth_perp = across_k[:, self._rot_group, None] * (np.cos(chi) * e1 + np.sin(chi) * e2)
         earth_integral = self._rot_earth[:, :1] * earth_perp - self._rot_earth[:, 1:] * cross(l, earth_perp)
         offset = (np.einsum("brk,rkc->brc", Xe[:, self._offset_cols], self._offset_basis)
                   if self._offset is None else self._offset)
@@ -1001,6 +1049,25 @@ class Model:
         # the table's elevation of each axis: alpha, its angle from up, is 90 deg - elevation
         blocks.append(((X[:, self._level_cols] - self._level_alpha) / (self.geometry.level_sigma_rad or 1.0))[..., None])
         return blocks
+
+    def _earth_along_across(self, column):
+        """The Earth rate along each axis and across it (B, K each) from the axes' fourth column.
+
+        About the axes of earth_angle the column is beta, the angle from the table axis to the
+        Earth's: Omega cos beta along, Omega sin beta across (a negative one is chi + pi).  It
+        was e, with sqrt(Omega^2 - e^2) across, cut at 0: over short part turns the encoder's
+        angle error alone leaves e uncertain by a large part of Omega (2" over 0.4 s: 0.33 Omega)
+        and the solver could step past |e| = Omega, where nothing is left across the axis and
+        neither e nor chi has a gradient there from the integrals across it, which are then made
+        up by tilting the axis (300 deg/s, 120 degree turns about axes 26 deg from the Earth's:
+        reduced chi2 40).  Elsewhere the column is e itself, unbounded (a capture of whole turns
+        with a slipped encoder reads its error as e and fails its chi2 rather than stall at a
+        bound)."""
+        mask = self.earth_angle
+        free = np.where(mask, 0.0, column)
+        along = np.where(mask, self.omega_dps * np.cos(column), column)
+        across = np.where(mask, self.omega_dps * np.sin(column), np.sqrt(positive_part(self.omega_dps**2 - free**2)))
+        return along, across
 
     def _add_effects(self, X, a, w, f_p, w_p, Ma, Mg, l, w_k, wdot_k):
         """a and w with every effect's terms added (the Effect interface: one parameter vector,
@@ -1211,7 +1278,60 @@ def _minimise(model: Model, x0: np.ndarray, solve):
     for start in (_axes_first(model, x0, solve), model.x0_plain):
         other = solve(start)
         res = other if other.cost < res.cost else res
+    for k in range(model.s.groups):
+        start = _other_crossing(model, res.x, k)
+        if start is not None:
+            other = solve(start)
+            res = other if other.cost < res.cost else res
     return res
+
+
+def _other_crossing(model: Model, x: np.ndarray, k: int):
+    """About an axis near the vertical turned both ways by part turns, the start at the other
+    solution of its gyro integrals (None elsewhere).
+
+    With gravity along the axis the accelerometers do not see where each turn starts (psi), so
+    nothing ties the Earth rate's phases chi to them.  Across the axis a segment's integral is
+    c_i d + f_i |u| exp(i chi_i) (Model._earth_phase_start), |u| known from e: each integral puts
+    the tilt d on a circle of radius |f_i| |u| / |c_i| about z_i / c_i, and a turn each way two
+    circles crossing at two points, each fitting the integrals exactly.  The accelerometers see
+    the axis (gravity along it) and tell them apart, but only through a misfit the calibration
+    and the mounting offset can partly take: from the other point the solver stays there
+    (noise-free, axes within 12 deg of the vertical at 10 deg/s: reduced chi2 0.12-1.6 where it
+    is 0).  So the fit is also started at the other point, d reflected across the line of the
+    circles' centres, and its chi from there."""
+    s, L = model.s, model.layout
+    axis = L[f"axis{k}"]
+    segs = [i for i, r in enumerate(s.rotations)
+            if r.group == k and L[f"phase{i}"].stop - L[f"phase{i}"].start == 2]
+    if not _earth_angle_group(s, k) or not segs or np.sin(x[axis.start + 2])**2 > 0.04:
+        return None
+    x = x.copy()
+    _, Mg = model._matrices(x)
+    Lg, bg = np.linalg.inv(Mg), x[L["gyro_bias"]]
+    ref, (t1, t2) = model.axis_ref[k], model.axis_basis[k]
+    l = normalised(ref + x[axis.start] * t1 + x[axis.start + 1] * t2)
+    e1 = normalised(t1 - (t1 @ l) * l)
+    e2 = cross(l, e1)
+    rots = [s.rotations[i] for i in segs]
+    T = np.array([r.duration_s for r in rots])
+    A = np.radians([r.angle_deg for r in rots])
+    e, across = (float(v[0, k]) for v in model._earth_along_across(x[model._axis_cols][None, :, 3]))
+    c = (np.array([r.rate_dps for r in rots]) + e) * T
+    f = T / A * (np.sin(A) - 1j * (1.0 - np.cos(A)))
+    y = np.array([Lg @ (r.gyro_integral - bg * r.duration_s) for r in rots]) - c[:, None] * l
+    z = y @ e1 + 1j * (y @ e2)
+    a, b = int(np.argmax(c)), int(np.argmin(c))
+    p1, p2 = z[a] / c[a], z[b] / c[b]
+    if c[a] <= 0 or c[b] >= 0 or p1 == p2 or across == 0.0:
+        return None
+    u = (p2 - p1) / abs(p2 - p1)
+    d = p1 + u * np.conj(-p1 / u)          # d = 0 (the axis now) reflected across the centres' line
+    tilted = l + d.real * e1 + d.imag * e2
+    x[axis.start:axis.start + 2] = [tilted @ t1 / (tilted @ ref), tilted @ t2 / (tilted @ ref)]
+    for i, chi in zip(segs, np.angle(z - c * d) - np.angle(f)):
+        x[L[f"phase{i}"].start + 1] = chi
+    return x
 
 
 def _axes_first(model: Model, x0: np.ndarray, solve) -> np.ndarray:
