@@ -382,3 +382,15 @@ def test_a_gyro_at_its_rail_throughout_a_turn_is_one_value_the_statics_say_is_st
     assert "rotx_p: rotation left out: gyro stuck in 3600 of 3600 samples" in words
     assert {"rotx_p", "rotx_m", "roty_p", "roty_m", "rotz_p", "rotz_m"}.isdisjoint(r.name for r in s.rotations)
     assert len(s.rotations) == 6                                    # the diagonal turns (71 deg/s per axis)
+
+
+def test_an_axis_constant_to_rounding_is_not_a_rail():
+    """A noise-free axis along the turn's axis is constant to its 15th digit; its extreme value
+    repeats because the rounding takes few values, not because a converter clipped (it made a
+    noise-free fit of part turns about vertical axes leave out a whole rotation)."""
+    from station.estimate.data_faults import rail_mask
+
+    rng = np.random.default_rng(0)
+    column = -0.008123008784178168 + rng.integers(-2, 3, 2000) * 1e-18
+    mask, rails = rail_mask(column)
+    assert not mask.any() and rails == []

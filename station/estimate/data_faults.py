@@ -271,7 +271,10 @@ def rail_mask(column: np.ndarray, full_scale: float | None = None, stats: "_Colu
     rails = []
     if n < 8:
         return mask, rails
-    constant = column.min() == column.max()     # one value throughout: a dead or stuck axis, unless
+    # one value throughout (to floating-point rounding: a noise-free simulation's axis along the
+    # turn's axis varies in its 15th digit): a dead or stuck axis, not a rail, unless
+    lo, hi = float(column.min()), float(column.max())
+    constant = hi - lo <= 1e-12 * max(1.0, abs(hi), abs(lo))
     step = (stats.step if stats is not None else _Column(column).step) if full_scale else 0.0   # declared
     for side, top in (("above", True), ("below", False)):
         value, count, inner = _extreme(column, top)
