@@ -1678,8 +1678,10 @@ def _noise_groups(result: FitResult) -> list:
     return variance_components(labels, r, np.asarray(J), parameters=model.layout.size)
 
 
-def _noise_model_block(model: Model, x: np.ndarray, tested: dict | None) -> dict:
-    """fit.noise_model (station/estimate/noise_model.py) in µg, °/h and degrees."""
+def _to_reported(model: Model, x: np.ndarray):
+    """(accel (3,), gyro (3,) or None): factors from the summaries' units to µg and °/h, raw
+    counts through the fitted scale factors, or the gyro's nominal scale when the capture cannot
+    calibrate it; the gyro None where neither exists."""
     s, L = model.s, model.layout
     accel = np.full(3, 1.0 / units.UG_MPS2)
     if getattr(s, "accel_raw", False):
@@ -1692,6 +1694,13 @@ def _noise_model_block(model: Model, x: np.ndarray, tested: dict | None) -> dict
             gyro = gyro / s.gyro_nominal
         else:
             gyro = None
+    return accel, gyro
+
+
+def _noise_model_block(model: Model, x: np.ndarray, tested: dict | None) -> dict:
+    """fit.noise_model (station/estimate/noise_model.py) in µg, °/h and degrees."""
+    s = model.s
+    accel, gyro = _to_reported(model, x)
     turn = None
     if model.hands and getattr(model, "turn_source", None) is not None:
         turn = {"sigma": model.turn_sigma_deg, "source": model.turn_source,
@@ -1710,20 +1719,9 @@ def _noise_per_sample(model: Model, x: np.ndarray) -> dict:
     """The white noise per sample the fit was weighted with, in micro-g and deg/h whatever the
     capture's units: raw counts through the fitted scale factors (counts per m/s^2, per deg/s),
     or the nominal scale of a gyro the capture cannot calibrate; None where neither exists."""
-    s, L = model.s, model.layout
-    accel = s.accel_sigma.astype(float)
-    if getattr(s, "accel_raw", False):
-        accel = accel / np.abs(x[L["accel_scale"]])
-    gyro = s.gyro_sigma.astype(float)
-    if getattr(s, "gyro_raw", False):
-        if s.rotations or model.hands:
-            gyro = gyro / np.abs(x[L["gyro_scale"]])
-        elif getattr(s, "gyro_nominal", None):
-            gyro = gyro / s.gyro_nominal
-        else:
-            gyro = None
-    return {"accel_ug": (accel / units.UG_MPS2).tolist(),
-            "gyro_dph": None if gyro is None else (gyro * 3600).tolist()}
+    accel, gyro = _to_reported(model, x)
+    return {"accel_ug": (model.s.accel_sigma.astype(float) * accel).tolist(),
+            "gyro_dph": None if gyro is None else (model.s.gyro_sigma.astype(float) * gyro).tolist()}
 
 
 def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=()) -> Calibration:

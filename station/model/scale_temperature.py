@@ -1,12 +1,12 @@
 """scale_temperature: scale factors linear in temperature (accelerometers and gyros)."""
 from __future__ import annotations
 
-import numpy as np
 
-from station.model.effect import Effect, Param
+from station.model.effect import Param
+from station.model.temperature import TemperatureReferenced
 
 
-class ScaleTemperature(Effect):
+class ScaleTemperature(TemperatureReferenced):
     id = "scale_temperature"
     title = "Accelerometer and gyro scale factors linear in temperature (per axis)"
     physics = ("The scale factor drifts with the sensor's temperature (spring stiffness, magnet "
@@ -29,26 +29,10 @@ class ScaleTemperature(Effect):
                  "temperature_bias")
     signature_variable = "temperature"
     complex_step = True
-    needs = ("temperature",)
-    state_fields = ("reference_c", "available")
-
-    def __init__(self):
-        self.reference_c = 0.0
-        self.available = True
-
-    def setup(self, summaries) -> None:
-        temps = [st.temp_c for st in summaries.statics if st.temp_c is not None]
-        self.available = bool(temps)
-        self.reference_c = float(np.mean(temps)) if temps else 0.0
-
     @property
     def params(self):
         return (tuple(Param(f"accel_scale_tempco_{a}", "ppm/degC", 1.0, 30.0, 5000.0) for a in "xyz")
                 + tuple(Param(f"gyro_scale_tempco_{a}", "ppm/degC", 1.0, 30.0, 5000.0) for a in "xyz"))
-
-    def _dt(self, ctx):
-        dt = ctx.temp_c - self.reference_c
-        return np.where(np.isfinite(dt), dt, 0.0)[:, None]
 
     def accel(self, x, ctx):
         return 1e-6 * x[:3] * self._dt(ctx) * (ctx.f_p @ ctx.accel_matrix.T)

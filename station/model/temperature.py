@@ -7,7 +7,30 @@ from station.core import units
 from station.model.effect import Effect, Param
 
 
-class TemperatureBias(Effect):
+class TemperatureReferenced(Effect):
+    """An effect in the temperature's difference from a reference, the mean temperature of the
+    static segments (shared by temperature_bias, scale_temperature and
+    temperature_bias_quadratic, so that their terms are about the same point).  Not an effect of
+    its own: no id."""
+    needs = ("temperature",)
+    state_fields = ("reference_c", "available")
+
+    def __init__(self):
+        self.reference_c = 0.0
+        self.available = True
+
+    def setup(self, summaries) -> None:
+        temps = [st.temp_c for st in summaries.statics if st.temp_c is not None]
+        self.available = bool(temps)
+        self.reference_c = float(np.mean(temps)) if temps else 0.0
+
+    def _dt(self, ctx):
+        """(points, 1): T - T_ref (0 where the temperature is not known)."""
+        dt = ctx.temp_c - self.reference_c
+        return np.where(np.isfinite(dt), dt, 0.0)[:, None]
+
+
+class TemperatureBias(TemperatureReferenced):
     id = "temperature_bias"
     title = "Accelerometer and gyro biases linear in temperature"
     physics = ("Bias drifts with the sensor's temperature (mechanical stress, electronics offsets), "
@@ -21,28 +44,20 @@ class TemperatureBias(Effect):
                  "attitudes recorded at different temperatures; both sensors")
     signature_variable = "temperature"
     complex_step = True
-    needs = ("temperature",)
     state_fields = ("reference_c", "available", "factors")
 
     def __init__(self):
-        self.reference_c = 0.0
-        self.available = True
+        super().__init__()
         self.factors = (1.0, 1.0)
 
     def setup(self, summaries) -> None:
-        temps = [st.temp_c for st in summaries.statics if st.temp_c is not None]
-        self.available = bool(temps)
-        self.reference_c = float(np.mean(temps)) if temps else 0.0
+        super().setup(summaries)
         self.factors = (summaries.accel_factor, summaries.gyro_factor)
 
     @property
     def params(self):
         return (tuple(Param(f"accel_bias_tempco_{a}", "ug/degC", 1.0, 30.0, 1000.0) for a in "xyz")
                 + tuple(Param(f"gyro_bias_tempco_{a}", "deg/h/degC", 1.0, 3.0, 300.0) for a in "xyz"))
-
-    def _dt(self, ctx):
-        dt = ctx.temp_c - self.reference_c
-        return np.where(np.isfinite(dt), dt, 0.0)[:, None]
 
     def accel(self, x, ctx):
         return self._dt(ctx) * x[:3] * units.UG_MPS2

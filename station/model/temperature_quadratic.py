@@ -1,13 +1,13 @@
 """temperature_bias_quadratic: the second-order term of the biases' temperature dependence."""
 from __future__ import annotations
 
-import numpy as np
 
 from station.core import units
-from station.model.effect import Effect, Param
+from station.model.effect import Param
+from station.model.temperature import TemperatureReferenced
 
 
-class TemperatureBiasQuadratic(Effect):
+class TemperatureBiasQuadratic(TemperatureReferenced):
     id = "temperature_bias_quadratic"
     title = "Accelerometer and gyro biases quadratic in temperature (the T² term)"
     physics = ("Over a wider temperature range the bias curve bends: the second-order term of its "
@@ -26,26 +26,13 @@ class TemperatureBiasQuadratic(Effect):
                  "is aliased with any smooth drift in time")
     signature_variable = "temperature"
     complex_step = True
-    needs = ("temperature",)
-    state_fields = ("reference_c", "available")
-
-    def __init__(self):
-        self.reference_c = 0.0
-        self.available = True
-
-    def setup(self, summaries) -> None:
-        temps = [st.temp_c for st in summaries.statics if st.temp_c is not None]
-        self.available = bool(temps)
-        self.reference_c = float(np.mean(temps)) if temps else 0.0
-
     @property
     def params(self):
         return (tuple(Param(f"accel_bias_tempco2_{a}", "ug/degC^2", 1.0, 5.0, 500.0) for a in "xyz")
                 + tuple(Param(f"gyro_bias_tempco2_{a}", "deg/h/degC^2", 1.0, 0.5, 100.0) for a in "xyz"))
 
     def _dt2(self, ctx):
-        dt = ctx.temp_c - self.reference_c
-        return np.where(np.isfinite(dt), dt * dt, 0.0)[:, None]
+        return self._dt(ctx) ** 2
 
     def accel(self, x, ctx):
         return self._dt2(ctx) * x[:3] * units.UG_MPS2
