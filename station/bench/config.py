@@ -17,6 +17,7 @@ import yaml
 from drivers.transport import SerialSettings
 
 from station.core.errors import UserError
+from station.core import yaml_text
 
 DEFAULT_FILE = "station.yaml"
 ENV_FILE = "STATION_CONFIG"
@@ -180,12 +181,12 @@ def load_config(path: str | None = None, *, env: dict | None = None) -> Config:
     config = Config()
     if file is not None:
         try:
-            doc = yaml.safe_load(file.read_text())
+            doc = yaml_text.safe_load(file.read_text())
         except OSError as e:
             raise UserError(f"{file}: cannot read the configuration: {e.strerror}") from None
         except yaml.YAMLError as e:
             mark = getattr(e, "problem_mark", None)
-            where = f" (line {mark.line + 1})" if mark is not None else ""
+            where = f" (line {mark.line + 1})" if mark is not None and not isinstance(e, yaml_text.TooDeep) else ""
             raise UserError(f"{file}: not valid YAML{where}: {getattr(e, 'problem', e)}") from None
         config = parse_config(doc, str(file))
     env = os.environ if env is None else env

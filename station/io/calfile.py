@@ -16,7 +16,7 @@ import numpy as np
 import yaml
 
 import station
-from station.io import yaml_text
+from station.core import yaml_text
 from station.model.calibration import Calibration
 from station.core.errors import UserError
 from station.core.units import ACCEL_UNITS, GYRO_UNITS, gyro_to_dps_factor

@@ -23,7 +23,7 @@ from pathlib import Path, PurePosixPath, PureWindowsPath
 import numpy as np
 import yaml
 
-from station.io import yaml_text
+from station.core import yaml_text
 from station.core.errors import CaptureError, UserError
 from station.core.units import ACCEL_UNITS, GYRO_UNITS
 

@@ -29,6 +29,7 @@ import yaml
 
 from station.core import units
 from station.core.errors import UserError
+from station.core import yaml_text
 from station.io.capture import CaptureWriter, ImuInfo, Site
 from station.io.segment_detect import Detection, Interval, detect
 from station.model.geometry import ATTITUDE_TOLERANCE_DEG, distinct_directions
@@ -149,7 +150,7 @@ def read_sections(path, rec: Recording) -> list[Section]:
     except (OSError, UnicodeDecodeError) as e:
         raise UserError(f"{path}: cannot read the sections: {e}") from None
     try:
-        data = yaml.safe_load(text)
+        data = yaml_text.safe_load(text)
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         raise UserError(f"{path}: line {mark.line + 1 if mark else '?'}: not YAML/JSON") from None
