@@ -29,3 +29,13 @@ def test_deeply_nested_yaml_is_one_line_naming_the_file(capture_dir, tmp_path, c
     deep.write_text(text)
     argv = [a.format(f=deep, cal=capture_dir / "calibration.yaml", out=tmp_path / "k.yaml") for a in argv]
     one_line_exit_2(argv, capsys, str(deep), "deeper than")
+
+
+# ------------------------------------------------------------------ schemes
+
+@pytest.mark.parametrize("defaults", ["[1, 2]", "5", "abc"])
+def test_scheme_defaults_not_a_mapping(tmp_path, capsys, defaults):
+    scheme = tmp_path / "s.yaml"
+    scheme.write_text(f"name: s\ndefaults: {defaults}\nsegments:\n  - static: a\n    up_body: [0, 0, 1]\n"
+                      "    dwell_s: 1\n")
+    one_line_exit_2(["plan", "--scheme", scheme], capsys, str(scheme), "defaults", "mapping")

@@ -131,7 +131,11 @@ def parse_scheme(doc, source: str, overrides: dict) -> Scheme:
     for key in ("name", "segments"):
         if key not in doc:
             raise UserError(f"{source}: missing field '{key}'")
-    defaults = dict(doc.get("defaults") or {})
+    defaults = doc.get("defaults") or {}
+    if not isinstance(defaults, dict):
+        raise UserError(f"{source}: defaults: must be a mapping (dwell_s, rate_dps, rotation_s), "
+                        f"got {type(defaults).__name__}")
+    defaults = dict(defaults)
     for key, value in overrides.items():
         if key not in DEFAULT_KEYS:
             raise UserError(f"{source}: unknown default '{key}' (known: {', '.join(DEFAULT_KEYS)})")
