@@ -39,3 +39,60 @@ def test_scheme_defaults_not_a_mapping(tmp_path, capsys, defaults):
     scheme.write_text(f"name: s\ndefaults: {defaults}\nsegments:\n  - static: a\n    up_body: [0, 0, 1]\n"
                       "    dwell_s: 1\n")
     one_line_exit_2(["plan", "--scheme", scheme], capsys, str(scheme), "defaults", "mapping")
+
+
+# ------------------------------------------------------------------ import csv / rosbag
+
+@pytest.fixture(scope="module")
+def hand_log(tmp_path_factory):
+    """A short hand session: (the log as t,ax..gz in s, m/s^2, deg/s; its samples)."""
+    from test_import_recordings import session, write_csv
+    _, hs = session(poses=4, dwell_s=(2.5, 3.0))
+    path = tmp_path_factory.mktemp("log") / "log.csv"
+    return write_csv(path, hs), hs
+
+
+@pytest.mark.parametrize("options, words", [
+    (["--time-unit", "ns"], ["--time-unit", "samples per second"]),
+    (["--rate-hz", "1e300", "--columns", "ax=1,ay=2,az=3,gx=4,gy=5,gz=6"], ["--rate-hz", "samples per second"]),
+    (["--rate-hz", "1e-300", "--columns", "ax=1,ay=2,az=3,gx=4,gy=5,gz=6"], ["--rate-hz", "samples per second"]),
+    (["--window-s", "1e300"], ["--window-s"]),
+    (["--init-rest-s", "1e300"], ["--init-rest-s"]),
+])
+def test_import_csv_time_base_far_off_is_refused_before_allocating(hand_log, tmp_path, capsys, options, words):
+    log, _ = hand_log
+    one_line_exit_2(["import", "csv", log, "-o", tmp_path / "cap", *options], capsys, str(log), *words)
+    assert not (tmp_path / "cap").exists()
+
+
+@pytest.mark.parametrize("kind", ["csv", "rosbag"])
+def test_import_of_a_fifo_does_not_hang(tmp_path, kind):
+    fifo = tmp_path / "log.bag"
+    os.mkfifo(fifo)
+    done = run_child(["import", kind, fifo, "-o", tmp_path / "cap"], timeout=60)
+    assert done.returncode == 2 and "not a regular file" in done.stderr and str(fifo) in done.stderr, done.stderr
+    assert done.stderr.count("\n") == 1
+
+
+def test_ros1_bag_with_flipped_bytes_is_one_line(hand_log, tmp_path, capsys):
+    import numpy as np
+    from station.io.importers.rosbag import write_imu_bag
+    _, hs = hand_log
+    bag = write_imu_bag(tmp_path / "good.bag", hs.t, hs.accel, np.radians(hs.gyro), fmt="rosbag1")
+    data = bytearray(bag.read_bytes())
+    rng = np.random.default_rng(3)
+    failures = 0
+    for trial in range(60):       # (before the guard, some of these were tracebacks: AssertionError, UnicodeDecodeError, KeyError)
+        bad = bytearray(data)
+        for i in rng.integers(0, len(bad), int(rng.integers(1, 4))):
+            bad[i] ^= int(rng.integers(1, 256))
+        path = tmp_path / f"bad{trial}.bag"
+        path.write_bytes(bad)
+        capsys.readouterr()
+        code = main(["import", "rosbag", str(path), "-o", str(tmp_path / f"cap{trial}")])
+        err = capsys.readouterr().err
+        assert code in (0, 2) and "Traceback" not in err, err
+        if code == 2:
+            assert err.count("\n") == 1 and str(path) in err, err
+            failures += 1
+    assert failures

@@ -197,6 +197,7 @@ def read_delimited(path, *, preset: str | None = None, columns: dict | None = No
         raise UserError(f"--rate-hz must be a positive number, got {rate_hz!r}")
     table = _Table(path, delimiter, header)
     t, time_from = _times(table, cols, time_unit, rate_hz)
+    time_option = "--time-unit" if "t" in cols else "--rate-hz"
     accel_roles = ("ax", "ay", "az")
     gyro_roles = ("gx", "gy", "gz")
     missing = [r for r in accel_roles if r not in cols]
@@ -220,7 +221,7 @@ def read_delimited(path, *, preset: str | None = None, columns: dict | None = No
         gyro = np.column_stack([table.column(r, cols[r]) for r in gyro_roles])
     return Recording(source=str(path), t=t, accel=accel, gyro=gyro, accel_unit=accel_unit, gyro_unit=gyro_unit,
                      accel_nominal=accel_nominal, gyro_nominal=gyro_nominal, lines=table.numbers, where="line",
-                     time_from=time_from, info=info)
+                     time_from=time_from, time_option=time_option, info=info)
 
 
 def _align(path, gpath, table, gtable, cols, gcols, time_unit, gyro, rate_hz):
