@@ -96,3 +96,11 @@ def test_ros1_bag_with_flipped_bytes_is_one_line(hand_log, tmp_path, capsys):
             assert err.count("\n") == 1 and str(path) in err, err
             failures += 1
     assert failures
+
+
+@pytest.mark.parametrize("columns", ["t=0,ax=1,ay=1,az=1,gx=4,gy=5,gz=6", "t=t,ax=ax,ay=1,az=3,gx=4,gy=5,gz=6",
+                                     "t=0,ax=0,ay=2,az=3,gx=4,gy=5,gz=6"])
+def test_import_csv_one_column_for_two_roles_is_refused(hand_log, tmp_path, capsys, columns):
+    log, _ = hand_log
+    one_line_exit_2(["import", "csv", log, "-o", tmp_path / "cap", "--columns", columns], capsys,
+                    "--columns", str(log), "own column")
