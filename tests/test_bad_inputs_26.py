@@ -104,3 +104,20 @@ def test_import_csv_one_column_for_two_roles_is_refused(hand_log, tmp_path, caps
     log, _ = hand_log
     one_line_exit_2(["import", "csv", log, "-o", tmp_path / "cap", "--columns", columns], capsys,
                     "--columns", str(log), "own column")
+
+
+# ------------------------------------------------------------------ files written
+
+@pytest.mark.parametrize("target", ["dangling", "file"])
+def test_output_directory_on_a_dangling_symlink_or_a_file(hand_log, tmp_path, capsys, target):
+    from test_bad_inputs import SCHEME
+    out = tmp_path / "out"
+    if target == "dangling":
+        out.symlink_to(tmp_path / "nowhere" / "x")
+    else:
+        out.write_text("precious\n")
+    scheme = tmp_path / "small.yaml"
+    scheme.write_text(SCHEME)
+    one_line_exit_2(["run", "--sim", "--scheme", scheme, "--out", out], capsys, str(out), "capture directory")
+    assert not (tmp_path / "nowhere").exists()
+    assert out.is_symlink() if target == "dangling" else out.read_text() == "precious\n"

@@ -1202,7 +1202,14 @@ class CaptureWriter:
             manifest[key] = value
         manifest = _without_none(_plain(manifest))
         _check(manifest, directory)
-        directory.mkdir(parents=True, exist_ok=True)
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+        except FileExistsError:         # a file, or a symbolic link to nothing (never followed)
+            kind = "a symbolic link to nothing" if directory.is_symlink() else "not a directory"
+            raise UserError(f"{directory}: {kind}: cannot create the capture directory there; "
+                            "choose a new directory") from None
+        except OSError as e:
+            raise UserError(f"{directory}: cannot create the capture directory: {e.strerror}") from None
         remove_stray_temporaries(directory)     # a writer killed before its first manifest
         self._dir = directory
         self._keep(manifest)
