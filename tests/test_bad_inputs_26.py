@@ -121,3 +121,72 @@ def test_output_directory_on_a_dangling_symlink_or_a_file(hand_log, tmp_path, ca
     one_line_exit_2(["run", "--sim", "--scheme", scheme, "--out", out], capsys, str(out), "capture directory")
     assert not (tmp_path / "nowhere").exists()
     assert out.is_symlink() if target == "dangling" else out.read_text() == "precious\n"
+
+
+# ------------------------------------------------------------------ the calibration history
+
+@pytest.fixture
+def filed(capture_dir, tmp_path):
+    """A store with the capture's calibration filed as #1 and a copy as #2."""
+    import sqlite3
+    store = tmp_path / "store"
+    cal = capture_dir / "calibration.yaml"
+    other = tmp_path / "other.yaml"
+    doc = yaml.safe_load(cal.read_text())
+    doc["provenance"]["date_utc"] = "2030-01-01T00:00:00Z"
+    other.write_text(yaml.safe_dump(doc, sort_keys=False))
+    assert main(["history", "--store", str(store), "--add", str(cal), "--add", str(other)]) == 0
+    serial = sqlite3.connect(store / "index.sqlite").execute("SELECT serial FROM calibrations").fetchone()[0]
+    return store, serial
+
+
+def _commands(store, serial, cal):
+    s = ["--store", store]
+    return [["history", *s], ["history", serial, *s], ["diff", "#1", "#2", *s], ["history", *s, "--add", cal]]
+
+
+@pytest.mark.parametrize("damage", ["garbage", "truncated", "foreign", "types"])
+def test_damaged_or_foreign_history_index_is_one_line(filed, capture_dir, tmp_path, capsys, damage):
+    import sqlite3
+    store, serial = filed
+    index = store / "index.sqlite"
+    if damage == "garbage":
+        index.write_bytes(os.urandom(8192))
+    elif damage == "truncated":
+        index.write_bytes(index.read_bytes()[:1500])
+    elif damage == "foreign":
+        index.unlink()
+        db = sqlite3.connect(index)
+        db.execute("CREATE TABLE calibrations (id INTEGER PRIMARY KEY, name TEXT)")
+        db.execute("INSERT INTO calibrations (name) VALUES ('x')")
+        db.commit()
+        db.close()
+    else:
+        db = sqlite3.connect(index)
+        db.execute("UPDATE calibrations SET file = 7, date_utc = x'00ff'")
+        db.commit()
+        db.close()
+    capsys.readouterr()
+    for argv in _commands(store, serial, capture_dir / "calibration.yaml"):
+        code = main([str(a) for a in argv])
+        err = capsys.readouterr().err
+        assert "Traceback" not in err and err.count("\n") <= 1, err
+        if code != 0:
+            assert code == 2 and str(index) in err, (argv, err)
+    # estimate files quietly: a warning, never a failure
+    assert main(["estimate", str(capture_dir), "-o", str(tmp_path / "again.yaml")]) == 0
+
+
+@pytest.mark.parametrize("file", ["/etc/passwd", "../outside.yaml", "{outside}", "link/out.yaml"])
+def test_a_tampered_history_row_cannot_open_a_file_outside_the_store(filed, tmp_path, capsys, file):
+    import sqlite3
+    store, serial = filed
+    outside = tmp_path / "outside.yaml"
+    outside.write_text((store.parent / "other.yaml").read_text())
+    (store / "link").symlink_to(tmp_path)
+    db = sqlite3.connect(store / "index.sqlite")
+    db.execute("UPDATE calibrations SET file = ? WHERE id = 2", (file.format(outside=outside),))
+    db.commit()
+    db.close()
+    for argv in (["diff", "#1", "#2", "--store", store], ["history", serial, "--store", store, "--drift", tmp_path / "d.png"]):
+        one_line_exit_2(argv, capsys, str(store / "index.sqlite"), "row #2", "field 'file'", "inside the store")

@@ -7,6 +7,11 @@ the user's data directory (``$XDG_DATA_HOME/station/calibrations``, default
 ``~/.local/share/station/calibrations``; ``~/Library/Application Support/station/calibrations``
 on macOS, ``%LOCALAPPDATA%\\station\\calibrations`` on Windows).  Filing the same file twice
 files it once (by its sha256).
+
+The index is data from outside like any file: a damaged one, one of another schema, or a row
+with other types is a UserError naming the index (never an sqlite3 traceback), and the path a
+row gives must be a relative one inside the store (a tampered row cannot make ``diff`` or
+``history --drift`` open a file elsewhere).
 """
 from __future__ import annotations
 
@@ -35,6 +40,7 @@ SCHEMA = """CREATE TABLE IF NOT EXISTS calibrations (
     sha256 TEXT NOT NULL UNIQUE,
     filed_utc TEXT NOT NULL)"""
 UNKNOWN_SERIAL = "unknown"
+COLUMNS = ("id", "serial", "date_utc", "scheme", "method", "verdict", "file", "source", "sha256", "filed_utc")
 
 
 @dataclass
@@ -92,6 +98,10 @@ def serial_folder(serial: str) -> str:
     return name or "_"
 
 
+def _one_line(e: Exception) -> str:
+    return " ".join(str(e).split()) or type(e).__name__
+
+
 class Store:
     def __init__(self, root=None):
         self.root = Path(root) if root else default_store()
@@ -100,14 +110,39 @@ class Store:
         index = self.root / INDEX
         if not create and not index.exists():
             return None
+        db = None
         try:
             if create:
                 self.root.mkdir(parents=True, exist_ok=True)
+            if index.exists() and not index.is_file():
+                raise UserError(f"{index}: not a regular file: cannot open the calibration history")
             db = sqlite3.connect(index)
             db.execute(SCHEMA)
+            columns = tuple(row[1] for row in db.execute("PRAGMA table_info(calibrations)"))
+            if columns != COLUMNS:
+                raise UserError(f"{index}: not station's calibration history: its table 'calibrations' has "
+                                f"the columns {', '.join(map(str, columns))[:200]}")
             return db
-        except (OSError, sqlite3.Error) as e:
-            raise UserError(f"{index}: cannot open the calibration history: {e}") from None
+        except (OSError, sqlite3.Error, UserError) as e:
+            if db is not None:
+                db.close()
+            if isinstance(e, UserError):
+                raise
+            raise UserError(f"{index}: cannot open the calibration history: {_one_line(e)}") from None
+
+    def _rows(self, sql: str, params=(), *, create: bool = False) -> list:
+        """The rows of a query (none when there is no index and ``create`` is false); an sqlite3
+        error is a UserError naming the index."""
+        db = self._connect(create)
+        if db is None:
+            return []
+        try:
+            with db:
+                return db.execute(sql, params).fetchall()
+        except sqlite3.Error as e:
+            raise UserError(f"{self.root / INDEX}: the calibration history cannot be read: {_one_line(e)}") from None
+        finally:
+            db.close()
 
     def file(self, cal_path) -> tuple[Entry, bool]:
         """File a calibration; (its entry, True if new)."""
@@ -121,6 +156,14 @@ class Store:
         serial = _text(prov.get("imu_serial")) or UNKNOWN_SERIAL
         date = _text(prov.get("date_utc")) or _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
         db = self._connect(create=True)
+        try:
+            return self._file(db, doc, data, digest, cal_path, prov, serial, date)
+        except sqlite3.Error as e:
+            raise UserError(f"{self.root / INDEX}: cannot file the calibration: {_one_line(e)}") from None
+        finally:
+            db.close()
+
+    def _file(self, db, doc, data, digest, cal_path, prov, serial, date) -> tuple[Entry, bool]:
         with db:
             row = db.execute("SELECT id FROM calibrations WHERE sha256 = ?", (digest,)).fetchone()
             if row:
@@ -142,38 +185,46 @@ class Store:
                  rel.as_posix(), str(cal_path.resolve()), digest,
                  _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")))
             new_id = cur.lastrowid
-        db.close()
         return self.get(new_id), True
 
     def _entry(self, row) -> Entry:
         id_, serial, date, scheme, method, verdict, file, source, digest = row
-        return Entry(id_, serial, date, scheme, method, verdict, self.root / file, source, digest)
+        where = f"{self.root / INDEX}: row #{id_}"
+        if not isinstance(id_, int) or not all(isinstance(v, str) for v in (serial, date, verdict, file, digest)) \
+                or not all(v is None or isinstance(v, str) for v in (scheme, method, source)):
+            raise UserError(f"{where}: not station's calibration history (a field of another type)")
+        return Entry(id_, serial, date, scheme, method, verdict, self._inside(file, where), source, digest)
+
+    def _inside(self, file: str, where: str) -> Path:
+        """The store's file a row names: a relative path that stays inside the store (a row
+        naming /etc/passwd, ../x or a link out of the store is refused)."""
+        rel = Path(file)
+        bad = rel.is_absolute() or rel.drive or ".." in rel.parts or not rel.parts or "\0" in file
+        path = self.root / rel
+        if not bad:
+            try:
+                bad = not path.resolve().is_relative_to(self.root.resolve())
+            except (OSError, RuntimeError, ValueError):
+                bad = True
+        if bad:
+            raise UserError(f"{where}: field 'file': {file[:200]!r} is not a file inside the store {self.root}")
+        return path
 
     _COLUMNS = "id, serial, date_utc, scheme, method, verdict, file, source, sha256"
 
     def get(self, id_: int) -> Entry:
-        db = self._connect(create=False)
-        row = db.execute(f"SELECT {self._COLUMNS} FROM calibrations WHERE id = ?", (id_,)).fetchone() if db else None
-        if row is None:
+        rows = self._rows(f"SELECT {self._COLUMNS} FROM calibrations WHERE id = ?", (id_,))
+        if not rows:
             raise UserError(f"{self.root / INDEX}: no calibration #{id_} in the history")
-        return self._entry(row)
+        return self._entry(rows[0])
 
     def list(self, serial: str) -> list[Entry]:
-        db = self._connect(create=False)
-        if db is None:
-            return []
-        rows = db.execute(f"SELECT {self._COLUMNS} FROM calibrations WHERE serial = ? "
-                          "ORDER BY date_utc, id", (serial,)).fetchall()
-        db.close()
+        rows = self._rows(f"SELECT {self._COLUMNS} FROM calibrations WHERE serial = ? ORDER BY date_utc, id", (serial,))
         return [self._entry(r) for r in rows]
 
     def serials(self) -> list[tuple[str, int]]:
-        db = self._connect(create=False)
-        if db is None:
-            return []
-        rows = db.execute("SELECT serial, COUNT(*) FROM calibrations GROUP BY serial ORDER BY serial").fetchall()
-        db.close()
-        return rows
+        rows = self._rows("SELECT serial, COUNT(*) FROM calibrations GROUP BY serial ORDER BY serial")
+        return [(str(serial), int(n)) for serial, n in rows]
 
     def resolve(self, ref: str) -> Path:
         """A calibration named by a file path or by its id in the history (``#12`` or ``12``)."""
