@@ -190,3 +190,34 @@ def test_a_tampered_history_row_cannot_open_a_file_outside_the_store(filed, tmp_
     db.close()
     for argv in (["diff", "#1", "#2", "--store", store], ["history", serial, "--store", store, "--drift", tmp_path / "d.png"]):
         one_line_exit_2(argv, capsys, str(store / "index.sqlite"), "row #2", "field 'file'", "inside the store")
+
+
+# ------------------------------------------------------------------ calibration files
+
+def _edited_calibration(capture_dir, tmp_path, change):
+    doc = yaml.safe_load((capture_dir / "calibration.yaml").read_text())
+    change(doc)
+    path = tmp_path / "edited.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+def _without_gyro_parameters(doc):
+    doc["parameters"] = {k: v for k, v in doc["parameters"].items() if not k.startswith("gyro_")}
+
+
+@pytest.mark.parametrize("change, words", [
+    (lambda d: d["compensation"].update(accel_matrix=[[0, 0, 0] for _ in range(3)]), ["compensation.accel_matrix", "singular"]),
+    (lambda d: d["compensation"].update(gyro_matrix=[[1, 2, 3], [2, 4, 6], [0, 0, 1]]),
+     ["compensation.gyro_matrix", "singular"]),
+    (lambda d: d["parameters"]["accel_bias_x"].update(sigma=float("nan")), ["parameters.accel_bias_x", "sigma"]),
+    (lambda d: d["parameters"]["accel_bias_x"].update(sigma=-1.0), ["parameters.accel_bias_x", "sigma"]),
+    (lambda d: d["parameters"]["gyro_scale_x"].update(sigma=float("inf")), ["parameters.gyro_scale_x", "sigma"]),
+    (_without_gyro_parameters, ["field 'parameters'", "gyro_scale_x", "compensation.gyro_matrix"]),
+], ids=["zero-accel-matrix", "singular-gyro-matrix", "nan-sigma", "negative-sigma", "inf-sigma", "gyro-params-removed"])
+def test_calibration_file_inconsistent_is_refused_by_every_reader(capture_dir, tmp_path, capsys, change, words):
+    cal = _edited_calibration(capture_dir, tmp_path, change)
+    for argv in (["show", cal], ["apply", cal, capture_dir / "pos01.csv", "-o", tmp_path / "o.csv"],
+                 ["export", cal, "--to", "imu_tk", "-o", tmp_path / "x"], ["diff", cal, capture_dir / "calibration.yaml"]):
+        one_line_exit_2(argv, capsys, str(cal), *words)
+    assert not list(tmp_path.glob("o.csv*")) and not list(tmp_path.glob("x*"))

@@ -67,6 +67,8 @@ def _parameter(value: float, unit: str, sigma: float | None) -> dict:
 MAX_BYTES = 16 * 2**20          # a calibration file is a few kB; refuse anything above 16 MB
 MAX_VALUE = 1e12                # no compensation coefficient is anywhere near this
 GYRO_PASS_THROUGH = "not calibrated: passed through (unit conversion only)"
+GYRO_PARAMETERS = tuple(f"gyro_{kind}_{a}" for kind in ("scale", "bias") for a in "xyz")
+MAX_CONDITION = 1e12            # a compensation matrix less well conditioned is singular
 
 
 def gyro_calibrated(cal: Calibration) -> bool:
@@ -264,6 +266,11 @@ def read_calfile(path) -> dict:
                                     "gyro_bias": _matrix(comp, "gyro_bias", (3,), path)}),
         **extra,
     }
+    for key in ("accel_matrix", "gyro_matrix"):     # apply inverts them (the forward model)
+        m = doc["compensation"][key]
+        if not np.linalg.cond(m) < MAX_CONDITION:
+            raise UserError(f"{path}: field 'compensation.{key}': singular (an all-zero row or column, "
+                            "or rows that depend on each other): no sensor's compensation")
     if "effects" in comp:
         doc["compensation"]["effects"] = _effect_entries(comp["effects"], path)
     doc["gyro_pass_through"] = pass_through
@@ -275,10 +282,18 @@ def read_calfile(path) -> dict:
                 and not isinstance(p.get("value"), bool) and math.isfinite(p["value"])
                 and isinstance(p.get("unit"), str)
                 and (p.get("sigma") is None or (isinstance(p["sigma"], (int, float))
-                                                and not isinstance(p["sigma"], bool)))):
+                                                and not isinstance(p["sigma"], bool)
+                                                and math.isfinite(p["sigma"]) and p["sigma"] >= 0))):
             shown = name[:60] if name[:60].isprintable() else repr(name[:60])[1:-1]   # one line
             raise UserError(f"{path}: field 'parameters.{shown}': needs a finite 'value', a 'unit' "
-                            "and, if given, a numeric 'sigma'")
+                            "and, if given, a finite 'sigma' >= 0")
+    if not pass_through:            # a gyro compensation stands on the gyro parameters it came from
+        missing = [n for n in GYRO_PARAMETERS if n not in params]
+        if missing:
+            raise UserError(f"{path}: field 'parameters': no {', '.join(missing)}, yet "
+                            "'compensation.gyro_matrix' is given: the gyro parameters were removed, the gyro "
+                            f"compensation cannot be trusted (an accelerometer-only file has compensation.gyro: "
+                            f"{GYRO_PASS_THROUGH!r})")
     return doc
 
 
