@@ -221,3 +221,57 @@ def test_calibration_file_inconsistent_is_refused_by_every_reader(capture_dir, t
                  ["export", cal, "--to", "imu_tk", "-o", tmp_path / "x"], ["diff", cal, capture_dir / "calibration.yaml"]):
         one_line_exit_2(argv, capsys, str(cal), *words)
     assert not list(tmp_path.glob("o.csv*")) and not list(tmp_path.glob("x*"))
+
+
+# ------------------------------------------------------------------ plugins only from where the user named them
+
+EVIL = """import pathlib
+pathlib.Path({marker!r}).write_text("ran")
+from station.model.effect import Effect
+"""
+
+
+def _bundle_with_station_yaml(capture_dir, tmp_path):
+    """A downloaded capture bundle that ships a station.yaml listing a plugin of its own."""
+    import shutil
+    cap = Path(shutil.copytree(capture_dir, tmp_path / "download"))
+    marker = tmp_path / "ran.txt"
+    (cap / "evil.py").write_text(EVIL.format(marker=str(marker)))
+    (cap / "station.yaml").write_text("effects:\n  plugins: [evil.py]\n")
+    return cap, marker
+
+
+@pytest.mark.parametrize("command", ["estimate", "diagnose", "apply", "effects"])
+def test_a_station_yaml_in_the_working_directory_runs_no_code(capture_dir, tmp_path, monkeypatch, capsys, command):
+    cap, marker = _bundle_with_station_yaml(capture_dir, tmp_path)
+    monkeypatch.chdir(cap)
+    argv = {"estimate": ["estimate", ".", "-o", str(tmp_path / "c.yaml")], "diagnose": ["diagnose", "."],
+            "apply": ["apply", "calibration.yaml", "pos01.csv", "-o", str(tmp_path / "o.csv")],
+            "effects": ["effects"]}[command]
+    capsys.readouterr()
+    assert main(argv) == 0
+    assert not marker.exists()
+    assert "./station.yaml names effect plugins: not loaded" in capsys.readouterr().err
+    # named, it is the user's choice: loaded (this one defines no effect: exit 2 after running it)
+    assert main(argv + ["--config", "station.yaml"]) == 2 and marker.exists()
+
+
+@pytest.mark.parametrize("how", ["env", "user-config-dir"])
+def test_plugins_of_a_configuration_the_user_named_or_owns_are_loaded(capture_dir, tmp_path, monkeypatch, capsys, how):
+    cap, marker = _bundle_with_station_yaml(capture_dir, tmp_path)
+    if how == "env":
+        monkeypatch.setenv("STATION_CONFIG", str(cap / "station.yaml"))
+    else:
+        monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
+        (tmp_path / "config" / "station").mkdir(parents=True)
+        (tmp_path / "config" / "station" / "station.yaml").write_text(f"effects:\n  plugins: [{cap / 'evil.py'}]\n")
+    monkeypatch.chdir(tmp_path)
+    one_line_exit_2(["effects"], capsys, "evil.py", "no subclass")
+    assert marker.exists()
+
+
+def test_station_run_still_reads_the_bench_from_an_implicit_station_yaml(tmp_path, monkeypatch):
+    from station.bench.config import load_config
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "station.yaml").write_text("table:\n  axes: 2\neffects:\n  plugins: [evil.py]\n")
+    assert load_config(None).table.axes == 2
