@@ -275,3 +275,34 @@ def test_station_run_still_reads_the_bench_from_an_implicit_station_yaml(tmp_pat
     monkeypatch.chdir(tmp_path)
     (tmp_path / "station.yaml").write_text("table:\n  axes: 2\neffects:\n  plugins: [evil.py]\n")
     assert load_config(None).table.axes == 2
+
+
+# ------------------------------------------------------------------ temporaries left by a kill
+
+def test_stale_temporary_calibration_files_are_removed_safely(capture_dir, tmp_path):
+    import subprocess
+    out = tmp_path / "out"
+    out.mkdir()
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    hexes = iter(f"{i:016x}" for i in range(1, 100))
+    stale = [f".cal.yaml.{dead.pid}_{next(hexes)}.tmp",            # its writer is gone
+             f".cal.yaml.{os.getpid()}_{next(hexes)}.tmp",          # a live pid, but two hours old
+             f".cal.yaml.{next(hexes)}.tmp"]                         # an older version's, two hours old
+    kept = [f".cal.yaml.{os.getpid()}_{next(hexes)}.tmp",           # a live writer's, fresh
+            f".cal.yaml.{next(hexes)}.tmp",                          # an older version's, fresh
+            f".other.yaml.{dead.pid}_{next(hexes)}.tmp",            # another file's
+            ".cal.yaml.notes.tmp", "cal.yaml.tmp"]                  # not our pattern
+    for name in stale + kept:
+        (out / name).write_text("half a calibration")
+    for name in stale[1:]:
+        os.utime(out / name, (os.path.getmtime(out / name) - 7200,) * 2)
+    precious = tmp_path / "precious.txt"
+    precious.write_text("precious\n")
+    link = out / f".cal.yaml.{dead.pid}_{next(hexes)}.tmp"           # a link of our pattern: never followed
+    link.symlink_to(precious)
+    os.utime(link, (0, 0), follow_symlinks=False)
+    assert main(["estimate", str(capture_dir), "-o", str(out / "cal.yaml")]) == 0
+    left = sorted(p.name for p in out.iterdir())
+    assert left == sorted(kept + [link.name, "cal.yaml"]), left
+    assert precious.read_text() == "precious\n"

@@ -8,8 +8,10 @@ from __future__ import annotations
 import datetime as _dt
 import math
 import os
+import re
 import secrets
 import stat
+import time
 from pathlib import Path
 
 import numpy as np
@@ -134,8 +136,11 @@ def write_calfile(path, cal: Calibration, provenance: dict) -> Path:
 
 def write_new_file(path: Path, data: bytes, *, what: str = "file") -> None:
     """Replace ``path`` with ``data`` atomically through a random-named temporary file in the
-    same folder (O_EXCL|O_NOFOLLOW), removed on every path out (also KeyboardInterrupt)."""
-    tmp = path.with_name(f".{path.name}.{secrets.token_hex(8)}.tmp")
+    same folder (O_EXCL|O_NOFOLLOW), removed on every path out (also KeyboardInterrupt).  The
+    temporary's name carries the writer's pid (``.NAME.PID_RANDOM.tmp``): one left by a writer
+    killed mid-write is removed by the next write of ``path`` (remove_stale_temporaries)."""
+    remove_stale_temporaries(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}_{secrets.token_hex(8)}.tmp")
     flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
     created = False
     try:
@@ -155,6 +160,55 @@ def write_new_file(path: Path, data: bytes, *, what: str = "file") -> None:
                 os.unlink(tmp)
             except OSError:
                 pass
+
+
+STALE_TEMPORARY_S = 3600.0      # a temporary of a live writer older than this is stale too (pid reused)
+
+
+def remove_stale_temporaries(path: Path) -> list[str]:
+    """Remove the temporaries of ``path`` that killed writers left (write_new_file's
+    ``.NAME.PID_RANDOM.tmp``, and an older version's ``.NAME.RANDOM.tmp``), only when they are
+    ours (that name exactly, a regular file, never a link, of this user) and stale: their pid is
+    no running process, or older than STALE_TEMPORARY_S.  Returns the names removed; a failure
+    to remove one is no error (the write goes on)."""
+    path = Path(path)
+    pattern = re.compile(re.escape(f".{path.name}.") + r"(?:(?P<pid>[0-9]{1,10})_)?[0-9a-f]{16}\.tmp")
+    removed = []
+    try:
+        entries = list(os.scandir(path.parent if str(path.parent) else "."))
+    except OSError:
+        return removed
+    now = time.time()
+    for entry in entries:
+        m = pattern.fullmatch(entry.name)
+        if not m:
+            continue
+        try:
+            info = entry.stat(follow_symlinks=False)
+            if not stat.S_ISREG(info.st_mode) or (hasattr(os, "getuid") and info.st_uid != os.getuid()):
+                continue
+            old = now - info.st_mtime > STALE_TEMPORARY_S
+            if old or (m.group("pid") is not None and not _running(int(m.group("pid")))):
+                os.unlink(entry.path)
+                removed.append(entry.name)
+        except OSError:
+            continue
+    return removed
+
+
+def _running(pid: int) -> bool:
+    """Whether a process ``pid`` exists (True when that cannot be told: the file is then kept)."""
+    if pid == os.getpid():
+        return True
+    if os.name == "nt" or pid <= 0:         # (os.kill(pid, 0) would end a process on Windows)
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:                         # EPERM: another user's process: it exists
+        return True
+    return True
 
 
 def _matrix(doc: dict, key: str, shape, path) -> np.ndarray:
