@@ -108,17 +108,24 @@ def test_import_csv_one_column_for_two_roles_is_refused(hand_log, tmp_path, caps
 
 # ------------------------------------------------------------------ files written
 
+@pytest.mark.parametrize("command", ["run", "import"])
 @pytest.mark.parametrize("target", ["dangling", "file"])
-def test_output_directory_on_a_dangling_symlink_or_a_file(hand_log, tmp_path, capsys, target):
+def test_output_directory_on_a_dangling_symlink_or_a_file(tmp_path, capsys, target, command):
     from test_bad_inputs import SCHEME
     out = tmp_path / "out"
     if target == "dangling":
         out.symlink_to(tmp_path / "nowhere" / "x")
     else:
         out.write_text("precious\n")
-    scheme = tmp_path / "small.yaml"
-    scheme.write_text(SCHEME)
-    one_line_exit_2(["run", "--sim", "--scheme", scheme, "--out", out], capsys, str(out), "capture directory")
+    if command == "run":
+        scheme = tmp_path / "small.yaml"
+        scheme.write_text(SCHEME)
+        argv = ["run", "--sim", "--scheme", scheme, "--out", out]
+    else:
+        from test_import_recordings import session, write_csv
+        _, hs = session(poses=12)
+        argv = ["import", "csv", write_csv(tmp_path / "log.csv", hs), "-o", out]
+    one_line_exit_2(argv, capsys, str(out), "capture directory")
     assert not (tmp_path / "nowhere").exists()
     assert out.is_symlink() if target == "dangling" else out.read_text() == "precious\n"
 
