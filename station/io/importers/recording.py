@@ -30,7 +30,7 @@ import yaml
 from station.core import units
 from station.core.errors import UserError
 from station.core import yaml_text
-from station.io.capture import CaptureWriter, ImuInfo, Site
+from station.io.capture import MAX_CSV_VALUE, CaptureWriter, ImuInfo, Site
 from station.io.segment_detect import Detection, Interval, detect
 from station.model.geometry import ATTITUDE_TOLERANCE_DEG, distinct_directions
 
@@ -386,6 +386,10 @@ def write_capture(rec: Recording, out_dir, *, gravity_mps2: float, latitude_deg:
         if len(bad):
             raise UserError(f"{rec.source}: {rec.at(int(bad[0]))}: {name} value not finite (NaN or inf); "
                             f"{len(bad)} sample(s) in all")
+        bad = np.flatnonzero((np.abs(a) > MAX_CSV_VALUE).any(axis=1))     # (a flipped byte of a double)
+        if len(bad):
+            raise UserError(f"{rec.source}: {rec.at(int(bad[0]))}: {name} value out of range "
+                            f"(|value| > {MAX_CSV_VALUE:g}); {len(bad)} sample(s) in all")
     rate = check_time(rec)
     det = None
     if sections_path is not None:
