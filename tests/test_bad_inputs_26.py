@@ -313,3 +313,23 @@ def test_stale_temporary_calibration_files_are_removed_safely(capture_dir, tmp_p
     left = sorted(p.name for p in out.iterdir())
     assert left == sorted(kept + [link.name, "cal.yaml"]), left
     assert precious.read_text() == "precious\n"
+
+
+@pytest.mark.parametrize("what", ["deep", "fifo", "month-13"])
+def test_import_sections_file_deep_fifo_or_bad_date(hand_log, tmp_path, what):
+    log, _ = hand_log
+    sections = tmp_path / "sections.yaml"
+    if what == "fifo":
+        os.mkfifo(sections)
+    else:
+        sections.write_text(DEEP if what == "deep" else "- {name: a, kind: static, start: 2026-13-01}\n")
+    done = run_child(["import", "csv", log, "--segments", sections, "-o", tmp_path / "cap"], timeout=60)
+    assert done.returncode == 2 and str(sections) in done.stderr and done.stderr.count("\n") == 1, done.stderr
+
+
+@pytest.mark.parametrize("argv", [["plan", "--scheme", "{f}"], ["plan", "--config", "{f}"],
+                                  ["sim", "serve", "--faults", "{f}"]], ids=["scheme", "config", "faults"])
+def test_a_timestamp_in_month_13_is_one_line(tmp_path, capsys, argv):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: 2026-13-01\n")
+    one_line_exit_2([a.format(f=bad) for a in argv], capsys, str(bad), "not valid YAML")

@@ -231,9 +231,9 @@ def load_config(path: str | None = None, *, env: dict | None = None) -> Config:
             doc = yaml_text.safe_load(file.read_text())
         except OSError as e:
             raise UserError(f"{file}: cannot read the configuration: {e.strerror}") from None
-        except yaml.YAMLError as e:
+        except (yaml.YAMLError, ValueError) as e:      # ValueError: a timestamp in month 13
             mark = getattr(e, "problem_mark", None)
-            where = f" (line {mark.line + 1})" if mark is not None and not isinstance(e, yaml_text.TooDeep) else ""
+            where = f" (line {mark.line + 1})" if mark is not None else ""
             raise UserError(f"{file}: not valid YAML{where}: {getattr(e, 'problem', e)}") from None
         config = parse_config(doc, str(file))
     env = os.environ if env is None else env

@@ -469,8 +469,8 @@ def _resumed(directory: Path, current, args):
         text = (directory / SCHEME_FILE).read_text()
     except OSError as e:
         raise UserError(f"{directory}: not a capture of station run (no {e.filename}): cannot resume") from None
-    except yaml.YAMLError as e:
-        raise UserError(f"{run_file}: not valid YAML: {e}".splitlines()[0]) from None
+    except (yaml.YAMLError, ValueError) as e:
+        raise UserError(f"{run_file}: not valid YAML: {yaml_text.error_line(e)}") from None
     if not isinstance(doc, dict) or doc.get("format") != RUN_FORMAT:
         raise UserError(f"{run_file}: field 'format': must be {RUN_FORMAT}")
     if _overrides(args):

@@ -47,8 +47,7 @@ class TooDeep(yaml.MarkedYAMLError):
     """A document nested deeper than MAX_DEPTH collections."""
 
     def __init__(self, mark):
-        where = f" (line {mark.line + 1})" if mark is not None else ""
-        super().__init__(problem=f"nested deeper than {MAX_DEPTH} levels{where}", problem_mark=mark)
+        super().__init__(problem=f"nested deeper than {MAX_DEPTH} levels", problem_mark=mark)
 
 
 class DepthLimitedLoader(yaml.SafeLoader):
@@ -178,16 +177,16 @@ def load_text(text: str | bytes, source, *, allow_aliases: bool = True):
 
     try:
         return safe_load(text, allow_aliases)
-    except yaml.YAMLError as e:
+    except (yaml.YAMLError, ValueError) as e:       # ValueError: a timestamp in month 13
         raise UserError(f"{source}: not valid YAML: {error_line(e)}") from None
 
 
-def error_line(e: yaml.YAMLError) -> str:
-    """A YAML error in one line: its problem and line."""
+def error_line(e: Exception) -> str:
+    """A YAML error (or a loader's ValueError) in one line: its problem and line."""
     mark = getattr(e, "problem_mark", None)
     problem = getattr(e, "problem", None)
     if problem is None:
-        return " ".join(str(e).split())
+        return " ".join(str(e).split())[:200] or type(e).__name__
     if mark is not None and f"line {mark.line + 1}" not in problem:
         problem = f"line {mark.line + 1}: {problem}"
     return " ".join(problem.split())

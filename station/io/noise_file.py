@@ -22,8 +22,8 @@ def _load(path: Path) -> dict:
         raise UserError(f"{path}: cannot read: {e.strerror}") from None
     except UnicodeDecodeError:
         raise UserError(f"{path}: not UTF-8 text") from None
-    except yaml.YAMLError as e:
-        raise UserError(f"{path}: not valid YAML: {str(e).splitlines()[0]}") from None
+    except (yaml.YAMLError, ValueError) as e:
+        raise UserError(f"{path}: not valid YAML: {yaml_text.error_line(e)}") from None
     if not isinstance(doc, dict):
         raise UserError(f"{path}: not a mapping")
     return doc

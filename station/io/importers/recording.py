@@ -154,15 +154,15 @@ def read_sections(path, rec: Recording) -> list[Section]:
     exclusive; or start_s/end_s in the recording's time), optional up_body / axis_body; or
     imucal's mapping {label: {start, end}} with its labels (x_p ... z_a, x_rot ...)."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as e:
-        raise UserError(f"{path}: cannot read the sections: {e}") from None
+    from station.io.importers.text import read_text
+
+    text = read_text(path)          # (a FIFO is refused, not read)
     try:
         data = yaml_text.safe_load(text)
-    except yaml.YAMLError as e:
+    except (yaml.YAMLError, ValueError) as e:
         mark = getattr(e, "problem_mark", None)
-        raise UserError(f"{path}: line {mark.line + 1 if mark else '?'}: not YAML/JSON") from None
+        raise UserError(f"{path}: line {mark.line + 1 if mark else '?'}: not YAML/JSON: "
+                        f"{yaml_text.error_line(e)}") from None
     if isinstance(data, dict):
         data = [{"name": k, **v} if isinstance(v, dict) else {"name": k, "bad": v} for k, v in data.items()]
     if not isinstance(data, list) or not data:
