@@ -28,13 +28,12 @@ Both loaders construct the same Python objects (yaml.SafeConstructor).
 
 Depth: a document nested deeper than MAX_DEPTH collections is refused with ``TooDeep`` (a
 yaml.MarkedYAMLError naming the line), by either loader, before anything is constructed; it was
-a RecursionError traceback in every input read through PyYAML (issue 26).  ``load_file`` reads
-a file from outside and turns every failure into one UserError line naming the file.
+a RecursionError traceback in every input read through PyYAML (issue 26).  ``load_text`` turns
+a loader's failure into one UserError line naming the source (file) and the line.
 """
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 import yaml
 
@@ -155,20 +154,6 @@ def safe_load(text: str | bytes, allow_aliases: bool = True):
         return yaml.load(text, Loader=DepthLimitedLoader if allow_aliases else NoAliasLoader)
     except RecursionError:                              # (not expected below MAX_DEPTH): one line too
         raise TooDeep(None) from None
-
-
-def load_file(path, what: str = "file", *, allow_aliases: bool = True):
-    """The YAML document in the file ``path`` (from outside); UserError, one line naming the file
-    (and the line, when known), for a file that cannot be read, is not UTF-8 or not valid YAML."""
-    from station.core.errors import UserError
-
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise UserError(f"{path}: not UTF-8 text") from None
-    except OSError as e:
-        raise UserError(f"{path}: cannot read the {what}: {e.strerror or e}") from None
-    return load_text(text, path, allow_aliases=allow_aliases)
 
 
 def load_text(text: str | bytes, source, *, allow_aliases: bool = True):
