@@ -33,6 +33,7 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from station.core.errors import UserError
+from station.core import yaml_text
 
 from .world import ARCSEC, DEG_PER_HOUR, G_STANDARD, MICRO_G
 
@@ -687,10 +688,7 @@ class Truth:
             text = path.read_text()
         except OSError as exc:
             raise UserError(f"{path}: cannot read truth file: {exc}") from exc
-        try:
-            data = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            raise UserError(f"{path}: not valid YAML: {exc}") from exc
+        data = yaml_text.load_text(text, path)
         return cls.from_dict(data, source=str(path))
 
     @classmethod

@@ -11,6 +11,8 @@ SHORT = ["--dwell-s", "20", "--rotation-s", "36"]   # one revolution at 10 deg/s
 def _history_store(tmp_path_factory):
     mp = pytest.MonkeyPatch()
     mp.setenv("STATION_HISTORY_DIR", str(tmp_path_factory.mktemp("history-store")))
+    mp.setenv("XDG_CONFIG_HOME", str(tmp_path_factory.mktemp("user-config")))   # not the user's own
+    mp.delenv("STATION_CONFIG", raising=False)
     yield
     mp.undo()
 

@@ -1,4 +1,4 @@
-"""station.io.yaml_text: libyaml's speed with the pure-Python loader's results, errors and safety."""
+"""station.core.yaml_text: libyaml's speed with the pure-Python loader's results, errors and safety."""
 import subprocess
 import sys
 
@@ -6,7 +6,7 @@ import pytest
 import yaml
 from hypothesis import example, given, settings, strategies as st
 
-from station.io import yaml_text
+from station.core import yaml_text
 
 DOCS = [
     "a: 1\nb: [1, 2.5, -3e-4]\nc: {d: x, e: null}\n",
@@ -40,12 +40,23 @@ def test_aliases_refused_with_their_line():
 
 
 def test_deep_nesting_is_an_error_not_a_crash():
-    """The C loader segfaults on 100,000 nested brackets: such text never reaches it."""
-    code = ("import sys; from station.io import yaml_text\n"
+    """The C loader segfaults on 100,000 nested brackets: such text never reaches it; and the
+    pure-Python loader's refusal is TooDeep (a yaml.YAMLError naming the line), not a RecursionError."""
+    code = ("import sys; from station.core import yaml_text\n"
             "try:\n    yaml_text.safe_load('[' * 100000 + ']' * 100000)\n"
-            "except RecursionError:\n    print('refused')\n")
+            "except yaml_text.TooDeep as e:\n    print('refused', e.problem_mark.line)\n")
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    assert run.returncode == 0 and run.stdout.strip() == "refused", run.stderr[-500:]
+    assert run.returncode == 0 and run.stdout.strip() == "refused 0", run.stderr[-500:]
+
+
+@pytest.mark.parametrize("text", ["[" * 101 + "]" * 101, "a:\n" + "".join(" " * i + "-\n" for i in range(1, 120)),
+                                  "x: " + "{a: " * 150 + "1" + "}" * 150 + "\n"])
+def test_nesting_deeper_than_the_limit_is_refused_by_both_loaders(text):
+    for allow_aliases in (True, False):
+        with pytest.raises(yaml_text.TooDeep) as e:
+            yaml_text.safe_load(text, allow_aliases)
+        assert f"deeper than {yaml_text.MAX_DEPTH}" in e.value.problem
+    assert yaml_text.safe_load("[" * 100 + "]" * 100) is not None       # the limit itself: read
 
 
 def test_the_c_loader_is_used_when_present():

@@ -1,6 +1,6 @@
 """Fault injection: the ``--faults`` YAML file and the faults applied to the IMU stream.
 
-File (``yaml.safe_load``; every key optional; times are device seconds since the twins
+File (``station.core.yaml_text``; every key optional; times are device seconds since the twins
 started; unknown keys and bad values raise UserError naming the file and the field)::
 
     version: 1
@@ -23,9 +23,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from station.core.errors import UserError
+from station.core import yaml_text
 
 from .table import TableFaults
 
@@ -155,10 +155,7 @@ def load_faults(path, n_axes: int = 3) -> Faults:
         text = path.read_text()
     except (OSError, UnicodeDecodeError) as e:
         raise UserError(f"{path}: cannot read faults file: {e}") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as e:
-        raise UserError(f"{path}: not valid YAML: {str(e).splitlines()[0]}") from None
+    data = yaml_text.load_text(text, path)
     return faults_from_dict(data, str(path), n_axes)
 
 

@@ -17,6 +17,7 @@ import yaml
 from drivers.transport import SerialSettings
 
 from station.core.errors import UserError
+from station.core import yaml_text
 
 DEFAULT_FILE = "station.yaml"
 ENV_FILE = "STATION_CONFIG"
@@ -166,12 +167,59 @@ def normal_gravity(latitude_deg: float, height_m: float = 0.0) -> float:
 # ------------------------------------------------------------------------------------ loading
 
 def find_config(path: str | None) -> Path | None:
-    """The file to read: ``path``, else $STATION_CONFIG, else ./station.yaml if it exists."""
+    """The file to read for the bench: ``path``, else $STATION_CONFIG, else ./station.yaml if it
+    exists.  (Not for plugins: see plugin_config.)"""
     if path:
         return Path(path)
     if os.environ.get(ENV_FILE):
         return Path(os.environ[ENV_FILE])
     return Path(DEFAULT_FILE) if Path(DEFAULT_FILE).is_file() else None
+
+
+def user_config_dir() -> Path:
+    """The user's own configuration folder for station (platformdirs' user_config_dir when it is
+    installed; the same places otherwise: $XDG_CONFIG_HOME/station or ~/.config/station,
+    ~/Library/Application Support/station on macOS, %LOCALAPPDATA%\\station on Windows)."""
+    try:
+        import platformdirs
+    except ImportError:
+        pass
+    else:
+        return Path(platformdirs.user_config_dir("station", appauthor=False))
+    import sys
+
+    home = Path.home()
+    if sys.platform == "darwin":
+        return home / "Library" / "Application Support" / "station"
+    if os.name == "nt":
+        return Path(os.environ.get("LOCALAPPDATA") or home / "AppData" / "Local") / "station"
+    return Path(os.environ.get("XDG_CONFIG_HOME") or home / ".config") / "station"
+
+
+def plugin_config(path: str | None) -> Path | None:
+    """The configuration whose ``effects`` section may load plugins (run their code): one the user
+    named, ``path`` (--config) or $STATION_CONFIG, else station.yaml in the user's own
+    configuration folder (user_config_dir) if it exists.  Never a ./station.yaml found in the
+    working directory: a capture or a download can ship one (issue 26)."""
+    if path:
+        return Path(path)
+    if os.environ.get(ENV_FILE):
+        return Path(os.environ[ENV_FILE])
+    own = user_config_dir() / DEFAULT_FILE
+    return own if own.is_file() else None
+
+
+def implicit_plugins(path: str | None) -> bool:
+    """Whether a ./station.yaml that plugin_config passes over (found, not named) lists plugins."""
+    if path or os.environ.get(ENV_FILE) or not Path(DEFAULT_FILE).is_file():
+        return False
+    try:
+        from station.io.capture import read_regular_file
+
+        doc = yaml_text.safe_load(read_regular_file(DEFAULT_FILE, limit=2**20))
+    except Exception:       # noqa: BLE001 - only to say it is passed over; never read for more
+        return False
+    return isinstance(doc, dict) and isinstance(doc.get("effects"), dict) and any(doc["effects"].values())
 
 
 def load_config(path: str | None = None, *, env: dict | None = None) -> Config:
@@ -180,10 +228,10 @@ def load_config(path: str | None = None, *, env: dict | None = None) -> Config:
     config = Config()
     if file is not None:
         try:
-            doc = yaml.safe_load(file.read_text())
+            doc = yaml_text.safe_load(file.read_text())
         except OSError as e:
             raise UserError(f"{file}: cannot read the configuration: {e.strerror}") from None
-        except yaml.YAMLError as e:
+        except (yaml.YAMLError, ValueError) as e:      # ValueError: a timestamp in month 13
             mark = getattr(e, "problem_mark", None)
             where = f" (line {mark.line + 1})" if mark is not None else ""
             raise UserError(f"{file}: not valid YAML{where}: {getattr(e, 'problem', e)}") from None

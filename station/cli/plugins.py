@@ -15,16 +15,23 @@ def add_arguments(p) -> None:
 
 
 def registry(args) -> EffectRegistry:
-    """Library + installed entry points + $STATION_EFFECTS_PATH + station.yaml's effects section
-    (when a configuration file is found) + --effects-dir + --plugin."""
-    from station.bench.config import find_config, load_config
+    """Library + installed entry points + $STATION_EFFECTS_PATH + the effects section of a
+    configuration the user named (--config, $STATION_CONFIG) or of their own (the user's
+    configuration folder) + --effects-dir + --plugin.  A ./station.yaml found in the working
+    directory is not read for plugins: loading one runs its code (a note says so)."""
+    from station.bench.config import implicit_plugins, load_config, plugin_config
+    from station.cli.output import err
     from station.model.registry import EffectRegistry
 
     reg = EffectRegistry()
-    config_path = getattr(args, "config", None)
-    if find_config(config_path) is not None:
-        config = load_config(config_path)
+    config_path = plugin_config(getattr(args, "config", None))
+    if config_path is not None:
+        config = load_config(str(config_path))
         reg.add_all(config.effects.plugins, config.effects.folders)
+    elif implicit_plugins(getattr(args, "config", None)):
+        err.print("note: ./station.yaml names effect plugins: not loaded (a configuration found in the "
+                  "working directory runs no code; give --config station.yaml to load them)",
+                  markup=False, soft_wrap=True)
     reg.add_all(getattr(args, "plugin", []), getattr(args, "effects_dir", []))
     return reg
 

@@ -16,6 +16,7 @@ from station.cli import argtypes
 from station.cli.calibration import add_accept_poor_fit, report_calibration
 from station.cli.output import err, out
 from station.core.errors import UserError
+from station.core import yaml_text
 
 RUN_FILE = "run.yaml"
 SCHEME_FILE = "scheme.yaml"
@@ -476,12 +477,12 @@ def _resumed(directory: Path, current, args):
 
     run_file = directory / RUN_FILE
     try:
-        doc = yaml.safe_load(run_file.read_text())
+        doc = yaml_text.safe_load(run_file.read_text())
         text = (directory / SCHEME_FILE).read_text()
     except OSError as e:
         raise UserError(f"{directory}: not a capture of station run (no {e.filename}): cannot resume") from None
-    except yaml.YAMLError as e:
-        raise UserError(f"{run_file}: not valid YAML: {e}".splitlines()[0]) from None
+    except (yaml.YAMLError, ValueError) as e:
+        raise UserError(f"{run_file}: not valid YAML: {yaml_text.error_line(e)}") from None
     if not isinstance(doc, dict) or doc.get("format") != RUN_FORMAT:
         raise UserError(f"{run_file}: field 'format': must be {RUN_FORMAT}")
     if _overrides(args):

@@ -8,15 +8,17 @@ from __future__ import annotations
 import datetime as _dt
 import math
 import os
+import re
 import secrets
 import stat
+import time
 from pathlib import Path
 
 import numpy as np
 import yaml
 
 import station
-from station.io import yaml_text
+from station.core import yaml_text
 from station.model.calibration import Calibration
 from station.core.errors import UserError
 from station.core.units import ACCEL_UNITS, GYRO_UNITS, gyro_to_dps_factor
@@ -67,6 +69,8 @@ def _parameter(value: float, unit: str, sigma: float | None) -> dict:
 MAX_BYTES = 16 * 2**20          # a calibration file is a few kB; refuse anything above 16 MB
 MAX_VALUE = 1e12                # no compensation coefficient is anywhere near this
 GYRO_PASS_THROUGH = "not calibrated: passed through (unit conversion only)"
+GYRO_PARAMETERS = tuple(f"gyro_{kind}_{a}" for kind in ("scale", "bias") for a in "xyz")
+MAX_CONDITION = 1e12            # a compensation matrix less well conditioned is singular
 
 
 def gyro_calibrated(cal: Calibration) -> bool:
@@ -132,8 +136,11 @@ def write_calfile(path, cal: Calibration, provenance: dict) -> Path:
 
 def write_new_file(path: Path, data: bytes, *, what: str = "file") -> None:
     """Replace ``path`` with ``data`` atomically through a random-named temporary file in the
-    same folder (O_EXCL|O_NOFOLLOW), removed on every path out (also KeyboardInterrupt)."""
-    tmp = path.with_name(f".{path.name}.{secrets.token_hex(8)}.tmp")
+    same folder (O_EXCL|O_NOFOLLOW), removed on every path out (also KeyboardInterrupt).  The
+    temporary's name carries the writer's pid (``.NAME.PID_RANDOM.tmp``): one left by a writer
+    killed mid-write is removed by the next write of ``path`` (remove_stale_temporaries)."""
+    remove_stale_temporaries(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}_{secrets.token_hex(8)}.tmp")
     flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
     created = False
     try:
@@ -153,6 +160,55 @@ def write_new_file(path: Path, data: bytes, *, what: str = "file") -> None:
                 os.unlink(tmp)
             except OSError:
                 pass
+
+
+STALE_TEMPORARY_S = 3600.0      # a temporary of a live writer older than this is stale too (pid reused)
+
+
+def remove_stale_temporaries(path: Path) -> list[str]:
+    """Remove the temporaries of ``path`` that killed writers left (write_new_file's
+    ``.NAME.PID_RANDOM.tmp``, and an older version's ``.NAME.RANDOM.tmp``), only when they are
+    ours (that name exactly, a regular file, never a link, of this user) and stale: their pid is
+    no running process, or older than STALE_TEMPORARY_S.  Returns the names removed; a failure
+    to remove one is no error (the write goes on)."""
+    path = Path(path)
+    pattern = re.compile(re.escape(f".{path.name}.") + r"(?:(?P<pid>[0-9]{1,10})_)?[0-9a-f]{16}\.tmp")
+    removed = []
+    try:
+        entries = list(os.scandir(path.parent if str(path.parent) else "."))
+    except OSError:
+        return removed
+    now = time.time()
+    for entry in entries:
+        m = pattern.fullmatch(entry.name)
+        if not m:
+            continue
+        try:
+            info = entry.stat(follow_symlinks=False)
+            if not stat.S_ISREG(info.st_mode) or (hasattr(os, "getuid") and info.st_uid != os.getuid()):
+                continue
+            old = now - info.st_mtime > STALE_TEMPORARY_S
+            if old or (m.group("pid") is not None and not _running(int(m.group("pid")))):
+                os.unlink(entry.path)
+                removed.append(entry.name)
+        except OSError:
+            continue
+    return removed
+
+
+def _running(pid: int) -> bool:
+    """Whether a process ``pid`` exists (True when that cannot be told: the file is then kept)."""
+    if pid == os.getpid():
+        return True
+    if os.name == "nt" or pid <= 0:         # (os.kill(pid, 0) would end a process on Windows)
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:                         # EPERM: another user's process: it exists
+        return True
+    return True
 
 
 def _matrix(doc: dict, key: str, shape, path) -> np.ndarray:
@@ -264,6 +320,11 @@ def read_calfile(path) -> dict:
                                     "gyro_bias": _matrix(comp, "gyro_bias", (3,), path)}),
         **extra,
     }
+    for key in ("accel_matrix", "gyro_matrix"):     # apply inverts them (the forward model)
+        m = doc["compensation"][key]
+        if not np.linalg.cond(m) < MAX_CONDITION:
+            raise UserError(f"{path}: field 'compensation.{key}': singular (an all-zero row or column, "
+                            "or rows that depend on each other): no sensor's compensation")
     if "effects" in comp:
         doc["compensation"]["effects"] = _effect_entries(comp["effects"], path)
     doc["gyro_pass_through"] = pass_through
@@ -275,10 +336,18 @@ def read_calfile(path) -> dict:
                 and not isinstance(p.get("value"), bool) and math.isfinite(p["value"])
                 and isinstance(p.get("unit"), str)
                 and (p.get("sigma") is None or (isinstance(p["sigma"], (int, float))
-                                                and not isinstance(p["sigma"], bool)))):
+                                                and not isinstance(p["sigma"], bool)
+                                                and math.isfinite(p["sigma"]) and p["sigma"] >= 0))):
             shown = name[:60] if name[:60].isprintable() else repr(name[:60])[1:-1]   # one line
             raise UserError(f"{path}: field 'parameters.{shown}': needs a finite 'value', a 'unit' "
-                            "and, if given, a numeric 'sigma'")
+                            "and, if given, a finite 'sigma' >= 0")
+    if not pass_through:            # a gyro compensation stands on the gyro parameters it came from
+        missing = [n for n in GYRO_PARAMETERS if n not in params]
+        if missing:
+            raise UserError(f"{path}: field 'parameters': no {', '.join(missing)}, yet "
+                            "'compensation.gyro_matrix' is given: the gyro parameters were removed, the gyro "
+                            f"compensation cannot be trusted (an accelerometer-only file has compensation.gyro: "
+                            f"{GYRO_PASS_THROUGH!r})")
     return doc
 
 

@@ -23,7 +23,7 @@ from pathlib import Path, PurePosixPath, PureWindowsPath
 import numpy as np
 import yaml
 
-from station.io import yaml_text
+from station.core import yaml_text
 from station.core.errors import CaptureError, UserError
 from station.core.units import ACCEL_UNITS, GYRO_UNITS
 
@@ -1202,7 +1202,14 @@ class CaptureWriter:
             manifest[key] = value
         manifest = _without_none(_plain(manifest))
         _check(manifest, directory)
-        directory.mkdir(parents=True, exist_ok=True)
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+        except FileExistsError:         # a file, or a symbolic link to nothing (never followed)
+            kind = "a symbolic link to nothing" if directory.is_symlink() else "not a directory"
+            raise UserError(f"{directory}: {kind}: cannot create the capture directory there; "
+                            "choose a new directory") from None
+        except OSError as e:
+            raise UserError(f"{directory}: cannot create the capture directory: {e.strerror}") from None
         remove_stray_temporaries(directory)     # a writer killed before its first manifest
         self._dir = directory
         self._keep(manifest)

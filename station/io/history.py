@@ -10,6 +10,11 @@ files it once (by its sha256), and a calibration of a capture and model already 
 capture's sha256, method and effects: a re-estimate) is not filed again.  What is filed at all is
 the CLI's policy (station/cli/history.py): real IMUs (a serial), simulations only when asked and
 then in their own store (:func:`simulation_store`).
+
+The index is data from outside like any file: a damaged one, one of another schema, or a row
+with other types is a UserError naming the index (never an sqlite3 traceback), and the path a
+row gives must be a relative one inside the store (a tampered row cannot make ``diff`` or
+``history --drift`` open a file elsewhere).
 """
 from __future__ import annotations
 
@@ -42,6 +47,7 @@ SCHEMA = """CREATE TABLE IF NOT EXISTS calibrations (
 ADDED_COLUMNS = (("capture_sha256", "TEXT"), ("model", "TEXT"))    # index files written before them
 UNKNOWN_SERIAL = "unknown"
 SIMULATED_PREFIX = "SIM-"           # the serial station's simulated IMUs carry (station.simulate.dryrun)
+COLUMNS = ("id", "serial", "date_utc", "scheme", "method", "verdict", "file", "source", "sha256", "filed_utc")
 
 
 @dataclass
@@ -122,6 +128,10 @@ def serial_folder(serial: str) -> str:
     return name or "_"
 
 
+def _one_line(e: Exception) -> str:
+    return " ".join(str(e).split()) or type(e).__name__
+
+
 class Store:
     def __init__(self, root=None):
         self.root = Path(root) if root else default_store()
@@ -130,18 +140,43 @@ class Store:
         index = self.root / INDEX
         if not create and not index.exists():
             return None
+        db = None
         try:
             if create:
                 self.root.mkdir(parents=True, exist_ok=True)
+            if index.exists() and not index.is_file():
+                raise UserError(f"{index}: not a regular file: cannot open the calibration history")
             db = sqlite3.connect(index)
             db.execute(SCHEMA)
-            have = {row[1] for row in db.execute("PRAGMA table_info(calibrations)")}
-            for name, kind in ADDED_COLUMNS:
-                if name not in have:
+            columns = tuple(row[1] for row in db.execute("PRAGMA table_info(calibrations)"))
+            added = tuple(name for name, _ in ADDED_COLUMNS)
+            if columns[:len(COLUMNS)] != COLUMNS or not set(columns[len(COLUMNS):]) <= set(added):
+                raise UserError(f"{index}: not station's calibration history: its table 'calibrations' has "
+                                f"the columns {', '.join(map(str, columns))[:200]}")
+            for name, kind in ADDED_COLUMNS:        # an index written before they existed
+                if name not in columns:
                     db.execute(f"ALTER TABLE calibrations ADD COLUMN {name} {kind}")
             return db
-        except (OSError, sqlite3.Error) as e:
-            raise UserError(f"{index}: cannot open the calibration history: {e}") from None
+        except (OSError, sqlite3.Error, UserError) as e:
+            if db is not None:
+                db.close()
+            if isinstance(e, UserError):
+                raise
+            raise UserError(f"{index}: cannot open the calibration history: {_one_line(e)}") from None
+
+    def _rows(self, sql: str, params=(), *, create: bool = False) -> list:
+        """The rows of a query (none when there is no index and ``create`` is false); an sqlite3
+        error is a UserError naming the index."""
+        db = self._connect(create)
+        if db is None:
+            return []
+        try:
+            with db:
+                return db.execute(sql, params).fetchall()
+        except sqlite3.Error as e:
+            raise UserError(f"{self.root / INDEX}: the calibration history cannot be read: {_one_line(e)}") from None
+        finally:
+            db.close()
 
     def file(self, cal_path) -> tuple[Entry, bool]:
         """File a calibration; (its entry, True if new)."""
@@ -157,6 +192,14 @@ class Store:
         capture_digest = _text(prov.get("capture_sha256"))
         model = model_key(doc)
         db = self._connect(create=True)
+        try:
+            return self._file(db, doc, data, digest, cal_path, prov, serial, date, capture_digest, model)
+        except sqlite3.Error as e:
+            raise UserError(f"{self.root / INDEX}: cannot file the calibration: {_one_line(e)}") from None
+        finally:
+            db.close()
+
+    def _file(self, db, doc, data, digest, cal_path, prov, serial, date, capture_digest, model) -> tuple[Entry, bool]:
         with db:
             row = db.execute("SELECT id FROM calibrations WHERE sha256 = ?", (digest,)).fetchone()
             if row is None and capture_digest:
@@ -181,38 +224,46 @@ class Store:
                  rel.as_posix(), str(cal_path.resolve()), digest,
                  _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"), capture_digest, model))
             new_id = cur.lastrowid
-        db.close()
         return self.get(new_id), True
 
     def _entry(self, row) -> Entry:
         id_, serial, date, scheme, method, verdict, file, source, digest = row
-        return Entry(id_, serial, date, scheme, method, verdict, self.root / file, source, digest)
+        where = f"{self.root / INDEX}: row #{id_}"
+        if not isinstance(id_, int) or not all(isinstance(v, str) for v in (serial, date, verdict, file, digest)) \
+                or not all(v is None or isinstance(v, str) for v in (scheme, method, source)):
+            raise UserError(f"{where}: not station's calibration history (a field of another type)")
+        return Entry(id_, serial, date, scheme, method, verdict, self._inside(file, where), source, digest)
+
+    def _inside(self, file: str, where: str) -> Path:
+        """The store's file a row names: a relative path that stays inside the store (a row
+        naming /etc/passwd, ../x or a link out of the store is refused)."""
+        rel = Path(file)
+        bad = rel.is_absolute() or rel.drive or ".." in rel.parts or not rel.parts or "\0" in file
+        path = self.root / rel
+        if not bad:
+            try:
+                bad = not path.resolve().is_relative_to(self.root.resolve())
+            except (OSError, RuntimeError, ValueError):
+                bad = True
+        if bad:
+            raise UserError(f"{where}: field 'file': {file[:200]!r} is not a file inside the store {self.root}")
+        return path
 
     _COLUMNS = "id, serial, date_utc, scheme, method, verdict, file, source, sha256"
 
     def get(self, id_: int) -> Entry:
-        db = self._connect(create=False)
-        row = db.execute(f"SELECT {self._COLUMNS} FROM calibrations WHERE id = ?", (id_,)).fetchone() if db else None
-        if row is None:
+        rows = self._rows(f"SELECT {self._COLUMNS} FROM calibrations WHERE id = ?", (id_,))
+        if not rows:
             raise UserError(f"{self.root / INDEX}: no calibration #{id_} in the history")
-        return self._entry(row)
+        return self._entry(rows[0])
 
     def list(self, serial: str) -> list[Entry]:
-        db = self._connect(create=False)
-        if db is None:
-            return []
-        rows = db.execute(f"SELECT {self._COLUMNS} FROM calibrations WHERE serial = ? "
-                          "ORDER BY date_utc, id", (serial,)).fetchall()
-        db.close()
+        rows = self._rows(f"SELECT {self._COLUMNS} FROM calibrations WHERE serial = ? ORDER BY date_utc, id", (serial,))
         return [self._entry(r) for r in rows]
 
     def serials(self) -> list[tuple[str, int]]:
-        db = self._connect(create=False)
-        if db is None:
-            return []
-        rows = db.execute("SELECT serial, COUNT(*) FROM calibrations GROUP BY serial ORDER BY serial").fetchall()
-        db.close()
-        return rows
+        rows = self._rows("SELECT serial, COUNT(*) FROM calibrations GROUP BY serial ORDER BY serial")
+        return [(str(serial), int(n)) for serial, n in rows]
 
     def resolve(self, ref: str) -> Path:
         """A calibration named by a file path or by its id in the history (``#12`` or ``12``)."""

@@ -8,6 +8,7 @@ from pathlib import Path
 import yaml
 
 from station.core.errors import UserError
+from station.core import yaml_text
 from station.io.calfile import write_new_file
 
 FORMAT = "station-noise/1"
@@ -16,13 +17,13 @@ CALIBRATION_FORMAT = "station-calibration/1"
 
 def _load(path: Path) -> dict:
     try:
-        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+        doc = yaml_text.safe_load(path.read_text(encoding="utf-8"))
     except OSError as e:
         raise UserError(f"{path}: cannot read: {e.strerror}") from None
     except UnicodeDecodeError:
         raise UserError(f"{path}: not UTF-8 text") from None
-    except yaml.YAMLError as e:
-        raise UserError(f"{path}: not valid YAML: {str(e).splitlines()[0]}") from None
+    except (yaml.YAMLError, ValueError) as e:
+        raise UserError(f"{path}: not valid YAML: {yaml_text.error_line(e)}") from None
     if not isinstance(doc, dict):
         raise UserError(f"{path}: not a mapping")
     return doc

@@ -18,9 +18,9 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from station.core.errors import UserError
+from station.core import yaml_text
 
 DEFAULT_KEYS = ("dwell_s", "rate_dps", "rotation_s")
 
@@ -101,10 +101,7 @@ def load_scheme(name_or_path: str, overrides: dict | None = None) -> Scheme:
 
 
 def scheme_from_text(text: str, source: str, overrides: dict | None = None) -> Scheme:
-    try:
-        doc = yaml.safe_load(text)
-    except yaml.YAMLError as e:
-        raise UserError(f"{source}: not valid YAML: {e}".splitlines()[0]) from None
+    doc = yaml_text.load_text(text, source)
     return parse_scheme(doc, source, overrides or {})
 
 
@@ -134,7 +131,11 @@ def parse_scheme(doc, source: str, overrides: dict) -> Scheme:
     for key in ("name", "segments"):
         if key not in doc:
             raise UserError(f"{source}: missing field '{key}'")
-    defaults = dict(doc.get("defaults") or {})
+    defaults = doc.get("defaults") or {}
+    if not isinstance(defaults, dict):
+        raise UserError(f"{source}: defaults: must be a mapping (dwell_s, rate_dps, rotation_s), "
+                        f"got {type(defaults).__name__}")
+    defaults = dict(defaults)
     for key, value in overrides.items():
         if key not in DEFAULT_KEYS:
             raise UserError(f"{source}: unknown default '{key}' (known: {', '.join(DEFAULT_KEYS)})")

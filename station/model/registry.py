@@ -10,8 +10,10 @@ library's (station/model/*.py), a user can bring their own:
 * an installed package's entry point in the group ``station.effects``
   (``[project.entry-points."station.effects"] my_effect = "my_pkg.effects:MyEffect"``).
 
-Loading a plugin runs its code: station loads only what the user names on the command line, in the
-configuration or in the environment, never a path written in a capture or calibration file.
+Loading a plugin runs its code: station loads only what the user names on the command line, in a
+configuration they named (--config, $STATION_CONFIG) or their own (the user's configuration folder)
+or in the environment, never a path written in a capture or calibration file, nor a ./station.yaml
+merely found in the working directory (station.cli.plugins, station.bench.config.plugin_config).
 """
 from __future__ import annotations
 

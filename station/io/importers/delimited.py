@@ -135,6 +135,17 @@ class _Table:
         return values
 
 
+def _distinct_columns(table: _Table, cols: dict) -> None:
+    """Every role its own column: one column read as two axes (or as time and an axis) is a mistake."""
+    seen: dict[int, str] = {}
+    for role, col in cols.items():
+        j = table.index_of(role, col)
+        if j in seen:
+            raise UserError(f"--columns: {role} and {seen[j]} are both column {_name(table, j)} of {table.path}: "
+                            "every role needs its own column")
+        seen[j] = role
+
+
 def _name(table, j) -> str:
     return repr(table.names[j]) if table.names else str(j)
 
@@ -196,7 +207,9 @@ def read_delimited(path, *, preset: str | None = None, columns: dict | None = No
     if rate_hz is not None and not (math.isfinite(rate_hz) and rate_hz > 0):
         raise UserError(f"--rate-hz must be a positive number, got {rate_hz!r}")
     table = _Table(path, delimiter, header)
+    _distinct_columns(table, cols)
     t, time_from = _times(table, cols, time_unit, rate_hz)
+    time_option = "--time-unit" if "t" in cols else "--rate-hz"
     accel_roles = ("ax", "ay", "az")
     gyro_roles = ("gx", "gy", "gz")
     missing = [r for r in accel_roles if r not in cols]
@@ -220,7 +233,7 @@ def read_delimited(path, *, preset: str | None = None, columns: dict | None = No
         gyro = np.column_stack([table.column(r, cols[r]) for r in gyro_roles])
     return Recording(source=str(path), t=t, accel=accel, gyro=gyro, accel_unit=accel_unit, gyro_unit=gyro_unit,
                      accel_nominal=accel_nominal, gyro_nominal=gyro_nominal, lines=table.numbers, where="line",
-                     time_from=time_from, info=info)
+                     time_from=time_from, time_option=time_option, info=info)
 
 
 def _align(path, gpath, table, gtable, cols, gcols, time_unit, gyro, rate_hz):

@@ -29,10 +29,13 @@ import yaml
 
 from station.core import units
 from station.core.errors import UserError
-from station.io.capture import CaptureWriter, ImuInfo, Site
+from station.core import yaml_text
+from station.io.capture import MAX_CSV_VALUE, CaptureWriter, ImuInfo, Site
 from station.io.segment_detect import Detection, Interval, detect
 from station.model.geometry import ATTITUDE_TOLERANCE_DEG, distinct_directions
 
+SAMPLE_RATE_RANGE_HZ = (0.01, 1e6)   # an implied rate outside this is a wrong time unit or rate:
+# refused before windows of window_s / step samples are allocated (a log in s read as ns: MemoryError)
 GAP_FACTOR = 1.5            # a time step above GAP_FACTOR times the median is lost samples
 MIN_POSES = 9               # accelerometer: 9 unknowns, 3 - 2 = 1 equation per pose of unknown attitude
 # ... and per distinct attitude: a pose held twice on the same face repeats its equation.  Below
@@ -81,6 +84,7 @@ class Recording:
     lines: np.ndarray | None = None      # (N,) where each sample is in the source ("line 12", ...)
     where: str = "line"                  # what ``lines`` counts
     time_from: str = ""
+    time_option: str = ""                # the option that set the time base (--time-unit, --rate-hz)
     info: dict = field(default_factory=dict)
 
     @property
@@ -129,6 +133,12 @@ def check_time(rec: Recording) -> float:
         raise UserError(f"{rec.source}: {rec.at(k)}: time does not increase ({rec.t[k - 1]:.9g} s, then "
                         f"{rec.t[k]:.9g} s; time from {rec.time_from})")
     step = float(np.median(dt))
+    low, high = SAMPLE_RATE_RANGE_HZ
+    if not low <= 1.0 / step <= high:
+        option = f"{rec.time_option}: " if rec.time_option else ""
+        raise UserError(f"{rec.source}: {option}the time ({rec.time_from}) gives a median step of {step:.3g} s, "
+                        f"{1.0 / step:.3g} samples per second: outside {low:g}-{high:g} Hz, the time unit or "
+                        "rate is wrong")
     gaps = np.flatnonzero(dt > GAP_FACTOR * step)
     if len(gaps):
         k = int(gaps[0]) + 1
@@ -144,15 +154,15 @@ def read_sections(path, rec: Recording) -> list[Section]:
     exclusive; or start_s/end_s in the recording's time), optional up_body / axis_body; or
     imucal's mapping {label: {start, end}} with its labels (x_p ... z_a, x_rot ...)."""
     path = Path(path)
+    from station.io.importers.text import read_text
+
+    text = read_text(path)          # (a FIFO is refused, not read)
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as e:
-        raise UserError(f"{path}: cannot read the sections: {e}") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as e:
+        data = yaml_text.safe_load(text)
+    except (yaml.YAMLError, ValueError) as e:
         mark = getattr(e, "problem_mark", None)
-        raise UserError(f"{path}: line {mark.line + 1 if mark else '?'}: not YAML/JSON") from None
+        raise UserError(f"{path}: line {mark.line + 1 if mark else '?'}: not YAML/JSON: "
+                        f"{yaml_text.error_line(e)}") from None
     if isinstance(data, dict):
         data = [{"name": k, **v} if isinstance(v, dict) else {"name": k, "bad": v} for k, v in data.items()]
     if not isinstance(data, list) or not data:
@@ -376,11 +386,20 @@ def write_capture(rec: Recording, out_dir, *, gravity_mps2: float, latitude_deg:
         if len(bad):
             raise UserError(f"{rec.source}: {rec.at(int(bad[0]))}: {name} value not finite (NaN or inf); "
                             f"{len(bad)} sample(s) in all")
+        bad = np.flatnonzero((np.abs(a) > MAX_CSV_VALUE).any(axis=1))     # (a flipped byte of a double)
+        if len(bad):
+            raise UserError(f"{rec.source}: {rec.at(int(bad[0]))}: {name} value out of range "
+                            f"(|value| > {MAX_CSV_VALUE:g}); {len(bad)} sample(s) in all")
     rate = check_time(rec)
     det = None
     if sections_path is not None:
         sections = read_sections(sections_path, rec)
     else:
+        span = float(rec.t[-1] - rec.t[0])      # (windows of these many samples are allocated)
+        for option, value in (("--window-s", window_s), ("--min-static-s", min_static_s),
+                              ("--init-rest-s", init_rest_s)):
+            if not (math.isfinite(value) and 0 < value <= span):
+                raise UserError(f"{option} {value:g}: not within the recording {rec.source} ({span:.6g} s)")
         sections, det = detect_sections(rec, window_s=window_s, min_static_s=min_static_s,
                                         rate_threshold_dps=rate_threshold_dps, init_rest_s=init_rest_s)
     statics = [s for s in sections if s.kind == "static"]

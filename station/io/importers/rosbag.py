@@ -37,6 +37,9 @@ def read_rosbag(path, *, topic: str | None = None, stamps: str = "header") -> Re
         raise UserError(f"--stamps: one of {', '.join(STAMPS)}, not {stamps!r}")
     if not path.exists():
         raise UserError(f"{path}: no such file or directory")
+    for file in [path] if not path.is_dir() else sorted(path.iterdir()):
+        if not (file.is_file() or file.is_dir()):        # a FIFO hung the reader
+            raise UserError(f"{file}: not a regular file (a FIFO, device or socket): cannot read it as a ROS bag")
     try:
         reader = AnyReader([path], default_typestore=_typestore())
         reader.open()
@@ -60,7 +63,7 @@ def read_rosbag(path, *, topic: str | None = None, stamps: str = "header") -> Re
         t_ns = np.empty(count, dtype=np.int64)
         data = np.empty((count, 6))
         k = 0
-        for conn, bag_ns, raw in reader.messages(connections=conns):
+        for conn, bag_ns, raw in _guarded(reader.messages(connections=conns), path, topic):
             if k >= count:
                 raise UserError(f"{path}: topic {topic}: more messages than the bag's index says ({count})")
             try:
@@ -86,6 +89,24 @@ def read_rosbag(path, *, topic: str | None = None, stamps: str = "header") -> Re
                      gyro_unit="rad/s", lines=np.arange(1, k + 1), where="message",
                      time_from=f"{'header.stamp' if stamps == 'header' else 'bag receive time'} of {topic}",
                      info=info)
+
+
+def _guarded(messages, path, topic):
+    """The messages, a damaged bag (rosbags' own errors, and AssertionError, struct.error, ... of
+    its readers on flipped bytes) a UserError naming the file."""
+    k = 0
+    while True:
+        try:
+            item = next(messages)
+        except StopIteration:
+            return
+        except UserError:
+            raise
+        except Exception as e:    # noqa: BLE001 - bytes from outside: any failure of the reader
+            raise UserError(f"{path}: topic {topic}: damaged after {k} message(s): "
+                            f"{str(e).splitlines()[0][:120] if str(e) else type(e).__name__}") from None
+        k += 1
+        yield item
 
 
 def write_imu_bag(path, t_s, accel_mps2, gyro_rads, *, fmt: str = "mcap", topic: str = "/imu/data",

@@ -9,13 +9,13 @@ MAX_BYTES = 2_000_000_000       # a text recording larger than this is refused b
 
 
 def read_text(path: Path) -> str:
-    """The file's text; a missing, unreadable, oversized or non-UTF-8 file is a UserError naming it
+    """The file's text; a missing, unreadable, oversized, non-regular (FIFO, device) or non-UTF-8
+    file is a UserError naming it
     (and the line of the first bad byte)."""
-    try:
-        size = path.stat().st_size
-        if size > MAX_BYTES:
-            raise UserError(f"{path}: {size} bytes: larger than {MAX_BYTES}")
-        raw = path.read_bytes()
+    from station.io.capture import read_regular_file
+
+    try:                    # (a FIFO or device in its place is refused, not read: it hung)
+        raw = read_regular_file(path, limit=MAX_BYTES)
     except OSError as e:
         raise UserError(f"{path}: cannot read: {e.strerror}") from None
     try:

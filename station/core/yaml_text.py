@@ -25,6 +25,11 @@ is one libyaml can take safely, through the pure-Python loader otherwise:
   goes to the pure-Python loader, which names the alias's line.
 
 Both loaders construct the same Python objects (yaml.SafeConstructor).
+
+Depth: a document nested deeper than MAX_DEPTH collections is refused with ``TooDeep`` (a
+yaml.MarkedYAMLError naming the line), by either loader, before anything is constructed; it was
+a RecursionError traceback in every input read through PyYAML (issue 26).  ``load_text`` turns
+a loader's failure into one UserError line naming the source (file) and the line.
 """
 from __future__ import annotations
 
@@ -32,12 +37,35 @@ import re
 
 import yaml
 
+MAX_DEPTH = 100        # collections nested in one another: station's files use fewer than 10
 MAX_C_DEPTH = 5000      # the C loader took 10,000 levels here; its recursion has no limit of its own
 _C_LOADER = getattr(yaml, "CSafeLoader", None)
 
 
-class NoAliasLoader(yaml.SafeLoader):
-    """yaml.SafeLoader that refuses aliases (``*name``), naming the line of the first."""
+class TooDeep(yaml.MarkedYAMLError):
+    """A document nested deeper than MAX_DEPTH collections."""
+
+    def __init__(self, mark):
+        super().__init__(problem=f"nested deeper than {MAX_DEPTH} levels", problem_mark=mark)
+
+
+class DepthLimitedLoader(yaml.SafeLoader):
+    """yaml.SafeLoader that refuses a document nested deeper than MAX_DEPTH (TooDeep)."""
+
+    _depth = 0
+
+    def compose_node(self, parent, index):
+        if self._depth >= MAX_DEPTH and not self.check_event(yaml.AliasEvent, yaml.ScalarEvent):
+            raise TooDeep(self.peek_event().start_mark)
+        self._depth += 1
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+
+class NoAliasLoader(DepthLimitedLoader):
+    """DepthLimitedLoader that refuses aliases (``*name``), naming the line of the first."""
 
     def compose_node(self, parent, index):
         if self.check_event(yaml.AliasEvent):
@@ -45,6 +73,33 @@ class NoAliasLoader(yaml.SafeLoader):
             raise yaml.MarkedYAMLError(problem="aliases (*name) are not allowed here",
                                        problem_mark=mark)
         return super().compose_node(parent, index)
+
+
+def check_depth(node) -> None:
+    """TooDeep when the node tree (as composed: an alias is not followed) is deeper than MAX_DEPTH."""
+    seen = set()
+    stack = [(node, 1)]
+    while stack:
+        node, depth = stack.pop()
+        if id(node) in seen or not isinstance(node, yaml.CollectionNode):
+            continue
+        seen.add(id(node))
+        if depth > MAX_DEPTH:
+            raise TooDeep(node.start_mark)
+        children = node.value if isinstance(node, yaml.SequenceNode) else [n for kv in node.value for n in kv]
+        stack.extend((child, depth + 1) for child in reversed(children))
+
+
+if _C_LOADER is not None:
+    class _CLoader(_C_LOADER):
+        """libyaml's loader, with the depth checked on the composed nodes (before constructing)."""
+
+        def get_single_data(self):
+            node = self.get_single_node()
+            if node is None:
+                return None
+            check_depth(node)
+            return self.construct_document(node)
 
 
 def _c_safe(text: str | bytes, allow_aliases: bool) -> bool:
@@ -85,11 +140,38 @@ def nesting_bound(text: str) -> int:
 
 
 def safe_load(text: str | bytes, allow_aliases: bool = True):
-    """The document in ``text`` (yaml.safe_load's result); yaml.YAMLError, ValueError or
-    RecursionError as the pure-Python loader raises them."""
+    """The document in ``text`` (yaml.safe_load's result); yaml.YAMLError or ValueError as the
+    pure-Python loader raises them, TooDeep (a yaml.YAMLError) for a document nested deeper
+    than MAX_DEPTH."""
     if _c_safe(text, allow_aliases):
         try:
-            return yaml.load(text, Loader=_C_LOADER)
+            return yaml.load(text, Loader=_CLoader)
+        except TooDeep:
+            raise
         except Exception:               # noqa: BLE001 - judged again below, with the usual message
             pass
-    return yaml.load(text, Loader=yaml.SafeLoader if allow_aliases else NoAliasLoader)
+    try:
+        return yaml.load(text, Loader=DepthLimitedLoader if allow_aliases else NoAliasLoader)
+    except RecursionError:                              # (not expected below MAX_DEPTH): one line too
+        raise TooDeep(None) from None
+
+
+def load_text(text: str | bytes, source, *, allow_aliases: bool = True):
+    """safe_load(text); UserError, one line naming ``source`` and the line, when it is not valid YAML."""
+    from station.core.errors import UserError
+
+    try:
+        return safe_load(text, allow_aliases)
+    except (yaml.YAMLError, ValueError) as e:       # ValueError: a timestamp in month 13
+        raise UserError(f"{source}: not valid YAML: {error_line(e)}") from None
+
+
+def error_line(e: Exception) -> str:
+    """A YAML error (or a loader's ValueError) in one line: its problem and line."""
+    mark = getattr(e, "problem_mark", None)
+    problem = getattr(e, "problem", None)
+    if problem is None:
+        return " ".join(str(e).split())[:200] or type(e).__name__
+    if mark is not None and f"line {mark.line + 1}" not in problem:
+        problem = f"line {mark.line + 1}: {problem}"
+    return " ".join(problem.split())
