@@ -134,13 +134,15 @@ def test_output_directory_on_a_dangling_symlink_or_a_file(tmp_path, capsys, targ
 
 @pytest.fixture
 def filed(capture_dir, tmp_path):
-    """A store with the capture's calibration filed as #1 and a copy as #2."""
+    """A store with the capture's calibration filed as #1 and a later one (of another capture:
+    a re-estimate of the same capture and model is not filed twice) as #2."""
     import sqlite3
     store = tmp_path / "store"
     cal = capture_dir / "calibration.yaml"
     other = tmp_path / "other.yaml"
     doc = yaml.safe_load(cal.read_text())
     doc["provenance"]["date_utc"] = "2030-01-01T00:00:00Z"
+    doc["provenance"]["capture_sha256"] = "d" * 64
     other.write_text(yaml.safe_dump(doc, sort_keys=False))
     assert main(["history", "--store", str(store), "--add", str(cal), "--add", str(other)]) == 0
     serial = sqlite3.connect(store / "index.sqlite").execute("SELECT serial FROM calibrations").fetchone()[0]
