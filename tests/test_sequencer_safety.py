@@ -55,7 +55,14 @@ class Hands:
             return
         up = self.gimbal.solve_static(step.spec.axis_body, now)       # the turn's axis up ...
         self.table.move_to(up)
-        time.sleep(3.0 / self.speed)                                  # ... still a moment ...
+        # ... still a moment: 3 s of device time (segment_detect needs 2 s of stillness between
+        # the move and the turn).  Not a wall-clock sleep: the twins' clock waits for a reader
+        # that falls behind, so on a loaded machine 3 / speed wall seconds were less than 2 s of
+        # device time, the move and the turn became one motion of the wrong angle and the run
+        # waited for ever for the turn to be done again
+        t0 = self.bench.clock.now()
+        while self.bench.clock.now() < t0 + 3.0:
+            time.sleep(0.002)
         turned, last = 0.0, float(up[0])
         for quarter, rate in enumerate((20.0, 60.0, 30.0, 50.0)):     # ... one whole turn, unevenly
             self.table.set_rate(1, math.copysign(rate, step.spec.rate_dps), wait=False)
@@ -237,3 +244,90 @@ def test_after_a_pause_the_operator_can_continue_in_place(bench3, tmp_path):
     assert [(s.name, s.status) for s in capture.segments] == [("zup", "complete"), ("xup", "complete")]
     assert len(capture.segment("xup").data.t) == 3000
     assert (tmp_path / "cap" / "xup.csv.incomplete").stat().st_size > 0
+
+
+
+class _ScriptedHands:
+    """A hand scheme's IMU without devices: still (noise only) except for the turns the operator
+    makes when asked (about z at 45 deg/s), the first ``first_delay_s`` of device time after
+    being asked, the others 5 s after."""
+
+    def __init__(self, angles, first_delay_s):
+        self.angles, self.first_delay_s = list(angles), first_delay_s
+        self.asked = 0
+        self.k = 0                          # samples made so far (100 Hz)
+        self.turns = []                     # (first sample, last sample + 1)
+        self.rng = np.random.default_rng(7)
+
+    def act(self, step):
+        angle = self.angles[min(self.asked, len(self.angles) - 1)]
+        first = self.k + int(round(100 * (self.first_delay_s if self.asked == 0 else 5.0)))
+        self.asked += 1
+        self.turns.append((first, first + int(round(angle / 45.0 * 100))))
+
+    def take(self, n):
+        from drivers.samples import ImuSamples
+
+        k = np.arange(self.k, self.k + n)
+        self.k += n
+        gyro = self.rng.normal(0.0, 0.01, (n, 3))
+        for a, b in self.turns:
+            gyro[(k >= a) & (k < b), 2] += 45.0
+        accel = np.array([0.0, 0.0, 9.81]) + self.rng.normal(0.0, 0.01, (n, 3))
+        return ImuSamples(k / 100.0, accel, gyro, np.full(n, 25.0))
+
+
+def test_a_hand_turn_is_waited_for_at_a_bounded_cost_and_asked_again_when_wrong(monkeypatch):
+    """The operator waits 10 minutes before turning, then turns 180 deg instead of 360: every
+    look of the sequencer covers a bounded stretch of data (before, all the data since the step
+    began: the cost of a look grew with the wait), the angle is said and the operator asked
+    again (before, the sequencer waited for ever for a turn nobody was asked to make again)."""
+    from station.bench import manual
+    from station.bench.plan import HandRotation
+
+    class Segment:
+        def write(self, *a):
+            pass
+
+    class Writer:
+        def begin_segment(self, *a, **k):
+            return Segment()
+
+    class Display:
+        def __init__(self):
+            self.notes, self.prompts = [], []
+
+        def prompt(self, text):
+            self.prompts.append(text)
+
+        def note(self, text):
+            self.notes.append(text)
+
+        def values_update(self, values):
+            pass
+
+    hands = _ScriptedHands([180.0, 360.0], first_delay_s=600.0)
+    looked = []
+    real_detect = manual.detect
+
+    def detect(t, accel, gyro, **kw):
+        looked.append(len(t))
+        return real_detect(t, accel, gyro, **kw)
+
+    monkeypatch.setattr(manual, "detect", detect)
+    monkeypatch.setattr(manual, "_segment_names", lambda writer: [])
+    seq = type("Seq", (), {})()
+    seq.rate_hz, seq.display, seq.operator = 100.0, Display(), hands
+    seq.stream = type("Stream", (), {"live": lambda self: {}, "counters": None})()
+    seq._take, seq._progress, seq._check_pause = hands.take, lambda n: None, lambda: None
+    seq._session = manual.Session(Writer(), 100.0)
+    manual._feed(seq, seq._session, 10.0)                       # still before the step
+    step = HandRotation("turn", "rotz", 10.0, spec=RotationSpec("rotz", (0.0, 0.0, 1.0), 45.0, 8.0,
+                                                                 encoder=False, turn_deg=360.0),
+                        instruction="turn the IMU one whole turn about z")
+    manual.hand_step(seq, step)
+    assert hands.asked == 2                                      # asked again after the 180 deg
+    assert any("turned 180 deg, not 360" in n for n in seq.display.notes)
+    assert seq.display.notes[-1] == "rotz: turned 360 deg"
+    assert seq.display.prompts == [step.instruction] * 2
+    assert seq._session.n > 60_000 and max(looked) < 2_000       # at most 20 s of 10 minutes

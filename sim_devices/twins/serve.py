@@ -72,6 +72,14 @@ LINE_BYTES = 16384
 #: n_tty's read buffer (a pty took 14-22 KiB in all on Linux 6.18, by the size of the writes)
 FLIP_MAX_BYTES = 65536
 TABLE_WAIT_S = 0.1                # lossless: longest (wall s) the table's commands wait for the IMU's reader
+#: lossless: a reader that takes nothing from the IMU line for this long (wall s) while device
+#: time is held for it and the table's client asks something is not reading (a program busy with
+#: the table that reads the IMU only now and then, not a starved reader): it is taken for absent
+#: until it reads again, so the world goes on and the frames it does not take are dropped, as a
+#: real IMU's UART drops them.  Before, the table was answered at the held time for up to
+#: READER_ACTIVE_S: a client that moved the table without reading the IMU saw the axis stand
+#: still and took it for stalled (docs/twins.md, "The twins' clock waits for the IMU's reader")
+READER_STALL_S = 0.25
 
 
 class BenchServer:
@@ -121,6 +129,9 @@ class BenchServer:
         self._bytes_per_frame = 44.0      # of the IMU stream (measured as frames go out)
         self._table_wait_since: float | None = None
         self.table_deferred_steps = 0     # loop steps in which the table's commands waited (lossless)
+        self._table_asked = False         # a table command came (or waited) in the last step
+        self._held_table_since: float | None = None   # the table asked while time was held since
+        self.readers_given_up = 0         # times a reader was judged not reading (READER_STALL_S)
 
     @property
     def table_path(self) -> str:
@@ -144,6 +155,7 @@ class BenchServer:
         reads what is waiting on the IMU line has every frame measured before that answer
         (``station.bench.imu_stream.ImuStream.sync``), at any speed."""
         wall = time.monotonic()
+        self._judge_reader(wall)
         defer_table = self._defer_table(wall - self._last_taken_wall < READER_ACTIVE_S)
         if defer_table:
             self.table_deferred_steps += 1
@@ -153,6 +165,8 @@ class BenchServer:
                  if not p.closed and not (p is self.table_port and defer_table)]
         writers = [p for p in (self.table_port, self.imu_port) if not p.closed and p.backlog]
         readable, _, _ = select.select(ports, writers, [], timeout_s) if ports or writers else ([], [], [])
+        self._table_asked = self.table_port in readable or (
+            defer_table and not self.table_port.closed and bool(select.select([self.table_port], [], [], 0)[0]))
         reader_active = time.monotonic() - self._last_taken_wall < READER_ACTIVE_S
         now = self.clock.now()
         self.step_clock.set(now)
@@ -237,6 +251,26 @@ class BenchServer:
         if self._table_wait_since is None:
             self._table_wait_since = now
         return now - self._table_wait_since < TABLE_WAIT_S
+
+    def _judge_reader(self, wall: float) -> None:
+        """Lossless: while device time is held for the IMU's reader (frames wait in the
+        transmit queue) and the table's client asks something, a reader that takes nothing for
+        READER_STALL_S is not reading: taken for absent until it reads again (the clock runs
+        free, the frames it does not take are dropped).  A reader that is merely slow takes
+        bytes and is waited for; with no table client asking, nobody sees the world wait and a
+        silent reader is waited for up to READER_ACTIVE_S, as before."""
+        held = (self.options.lossless and not self.imu_port.closed and self.imu_frontend.streaming
+                and self.imu_port.backlog > 0 and wall - self._last_taken_wall < READER_ACTIVE_S)
+        if not held:
+            self._held_table_since = None
+            return
+        if self._table_asked and self._held_table_since is None:
+            self._held_table_since = wall
+        if (self._held_table_since is not None
+                and wall - max(self._last_taken_wall, self._held_table_since) >= READER_STALL_S):
+            self._last_taken_wall = wall - READER_ACTIVE_S            # absent until it reads
+            self._held_table_since = None
+            self.readers_given_up += 1
 
     def _imu_behind(self, limit: int) -> bool:
         """The IMU's transmit queue holds more than ``limit`` bytes its line could not take."""

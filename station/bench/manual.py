@@ -19,8 +19,10 @@ SESSION = "session"
 CHECK_EVERY_S = 0.5          # device time between looks at the data
 STILL_ACCEL_STD_MPS2 = 0.05  # while waiting for stillness: spread of every channel over a window
 STILL_GYRO_STD_DPS = 0.5
+STILL_RATE_DPS = 1.0         # ... and of the mean rate from the rate at rest (segment_detect's)
 WINDOW_S = 0.5
 TURN_TOLERANCE = 0.25
+LOOK_BACK_S = 3.0            # stillness kept before a turn that has not begun (device time)
 
 
 class Session:
@@ -35,9 +37,12 @@ class Session:
             name = f"{SESSION}{n}"
         self.segment = writer.begin_segment(name, "session", note="continuous recording of a hand "
                                             "calibration; the segments are found in it (segment_detect)")
-        self.blocks: list[ImuSamples] = []
         self.n = 0
         self._with_temp = None
+        self._t = np.zeros(0)                 # every sample so far, in arrays grown by doubling:
+        self._accel = np.zeros((0, 3))        #   adding a block and looking at the data cost the
+        self._gyro = np.zeros((0, 3))         #   block and the part looked at, not the session
+        self._temp = np.zeros(0)
 
     def add(self, block: ImuSamples) -> None:
         finite = np.isfinite(block.temp_c)
@@ -45,14 +50,21 @@ class Session:
             self._with_temp = bool(finite.all())
         temp = np.where(finite, block.temp_c, 0.0) if self._with_temp else None
         self.segment.write(block.t_s, block.accel_mps2, block.gyro_dps, temp)
-        self.blocks.append(block)
-        self.n += len(block)
+        n, end = len(block), self.n + len(block)
+        if end > len(self._t):
+            size = max(end, 2 * len(self._t), 1024)
+            self._t, self._temp = (np.resize(a, size) for a in (self._t, self._temp))
+            self._accel, self._gyro = (np.resize(a, (size, 3)) for a in (self._accel, self._gyro))
+        self._t[self.n:end] = block.t_s
+        self._accel[self.n:end] = block.accel_mps2
+        self._gyro[self.n:end] = block.gyro_dps
+        self._temp[self.n:end] = block.temp_c
+        self.n = end
 
     def data(self, start: int = 0) -> ImuSamples:
-        whole = ImuSamples.concat(self.blocks)
-        self.blocks = [whole]
-        return ImuSamples(whole.t_s[start:], whole.accel_mps2[start:], whole.gyro_dps[start:],
-                          whole.temp_c[start:])
+        """The samples from ``start`` on (views: the session only grows)."""
+        sl = slice(max(0, start), self.n)
+        return ImuSamples(self._t[sl], self._accel[sl], self._gyro[sl], self._temp[sl])
 
 
 def hand_step(seq, step) -> None:
@@ -104,9 +116,17 @@ def _wait_still(seq, session, step: HandStatic) -> None:
 
 
 def _wait_turn(seq, session, step: HandRotation) -> None:
+    """Read until the data show the turn.  While the IMU has been still for LOOK_BACK_S with no
+    turn found, only that stillness is kept to look at: each look costs the stillness before the
+    turn and the turn, however long the operator takes.  A turn of the wrong angle is said, and
+    the operator is asked again (``operator.act``)."""
     spec = step.spec
     turn = spec.turn_deg or 360.0
-    start = max(0, session.n - int(round(3.0 * seq.rate_hz)))       # some stillness before
+    look_back = int(round(LOOK_BACK_S * seq.rate_hz))
+    window = max(3, int(round(WINDOW_S * seq.rate_hz)) | 1)
+    start = max(0, session.n - look_back)                           # some stillness before
+    before = session.data(start)
+    rest_rate = before.gyro_dps.mean(axis=0) if len(before) else None    # the gyro at rest before
     while True:
         _feed(seq, session, CHECK_EVERY_S)
         data = session.data(start)
@@ -114,17 +134,27 @@ def _wait_turn(seq, session, step: HandRotation) -> None:
             continue
         det = detect(data.t_s, data.accel_mps2, data.gyro_dps, window_s=WINDOW_S)
         motions = det.motions()
-        if not motions:
+        if motions and motions[-1].angle >= (1 - TURN_TOLERANCE) * turn * 0.5:
+            motion = motions[-1]
+            if abs(motion.angle - turn) <= TURN_TOLERANCE * turn:
+                seq.display.note(f"{spec.name}: turned {motion.angle:.0f} deg")
+                return
+            seq.display.note(f"{spec.name}: turned {motion.angle:.0f} deg, not {turn:g}: put the IMU "
+                             "back and turn it again")
+            start = session.n - int(round(2.0 * seq.rate_hz))
+            seq.display.prompt(step.instruction)
+            seq.operator.act(step)
             continue
-        motion = motions[-1]
-        if motion.angle < (1 - TURN_TOLERANCE) * turn * 0.5:     # a small move, not the turn: wait on
-            continue
-        if abs(motion.angle - turn) <= TURN_TOLERANCE * turn:
-            seq.display.note(f"{spec.name}: turned {motion.angle:.0f} deg")
-            return
-        seq.display.note(f"{spec.name}: turned {motion.angle:.0f} deg, not {turn:g}: put the IMU back "
-                         "and turn it again")
-        start = session.n - int(round(2.0 * seq.rate_hz))
+        # no turn yet (or a small move, not the turn): once still for LOOK_BACK_S, look at that
+        # stillness only (a turn not begun yet starts after it).  Still by absolute thresholds
+        # and the rate at rest before the step: detect's are relative to the data (a steady turn
+        # longer than the stillness around it looks still to them until enough stillness
+        # follows), so nothing is dropped while the data hold a motion detect has not judged
+        still = still_mask(data.accel_mps2, data.gyro_dps, window, accel_threshold=STILL_ACCEL_STD_MPS2,
+                           gyro_threshold=STILL_GYRO_STD_DPS, bias=rest_rate,
+                           rate_threshold_dps=STILL_RATE_DPS)
+        if len(data) > look_back and still[-look_back:].all() and (motions or still.all()):
+            start = session.n - look_back
 
 
 def finish_session(seq, steps) -> list[str]:
