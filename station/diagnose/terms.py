@@ -32,6 +32,9 @@ from station.model.raw_counts import counts_per_unit, in_capture_units
 MAX_TERMS = 6
 AX = "xyz"
 SENSORS = (("accel", "accelerometer", "m/s^2"), ("gyro", "gyro", "deg/s"))
+G0 = 9.80665
+MAX_STEPS = 40            # steps at segment boundaries in the dictionary (the first boundaries)
+ALIAS_COS = 0.95          # two terms whose columns (outside the model) are this alike: aliases
 
 
 @dataclass(frozen=True)
@@ -40,34 +43,152 @@ class Regressor:
     text: str         # in words
     unit: str         # its unit
     code: str         # a numpy expression of f, w, wd, T, Tr, t, seg (each (N,3) or (N,))
+    family: str = ""  # f, f2, ff, absf, f3, fT, w, w2, wabsw, w3, ww, wf, wT, wd, T, T2, Tr, t, step
+    j: int = -1       # the axis (or first axis) of the variable it is made of
+    k: int = -1       # the second axis of a product
 
 
-def dictionary() -> list[Regressor]:
-    out = []
-    for j in range(3):
-        out.append(Regressor(f"f{AX[j]}", f"f_{AX[j]}", "m/s^2", f"f[:, {j}]"))
+def _f(j):
+    return f"f_{AX[j]}"
+
+
+def _w(j):
+    return f"w_{AX[j]}"
+
+
+def _accel_regressors() -> list[Regressor]:
+    """The accelerometer's: functions of the specific force f (m/s^2) and the temperature."""
+    out = [Regressor(f"f{AX[j]}", _f(j), "m/s^2", f"f[:, {j}]", "f", j) for j in range(3)]
     for j in range(3):
         for k in range(j, 3):
-            out.append(Regressor(f"f{AX[j]}f{AX[k]}", f"f_{AX[j]}·f_{AX[k]}", "(m/s^2)^2", f"f[:, {j}] * f[:, {k}]"))
+            out.append(Regressor(f"f{AX[j]}f{AX[k]}", f"{_f(j)}·{_f(k)}", "(m/s^2)^2",
+                                 f"f[:, {j}] * f[:, {k}]", "f2" if j == k else "ff", j, k))
+    out += [Regressor(f"absf{AX[j]}", f"|{_f(j)}|", "m/s^2", f"np.abs(f[:, {j}])", "absf", j) for j in range(3)]
+    out += [Regressor(f"f{AX[j]}3", f"{_f(j)}³", "(m/s^2)^3", f"f[:, {j}] ** 3", "f3", j) for j in range(3)]
+    out += [Regressor(f"f{AX[j]}T", f"{_f(j)}·(T - T_ref)", "(m/s^2) degC", f"f[:, {j}] * T", "fT", j)
+            for j in range(3)]
+    return out
+
+
+def _gyro_regressors() -> list[Regressor]:
+    """The gyro's: functions of the rate w (deg/s), the specific force and the temperature."""
+    out = []
     for j in range(3):
-        out.append(Regressor(f"absf{AX[j]}", f"|f_{AX[j]}|", "m/s^2", f"np.abs(f[:, {j}])"))
-    for j in range(3):
-        out.append(Regressor(f"w{AX[j]}", f"w_{AX[j]}", "deg/s", f"w[:, {j}]"))
-        out.append(Regressor(f"w{AX[j]}2", f"w_{AX[j]}²", "(deg/s)^2", f"w[:, {j}] ** 2"))
-        out.append(Regressor(f"w{AX[j]}absw{AX[j]}", f"w_{AX[j]}·|w_{AX[j]}|", "(deg/s)^2",
-                             f"w[:, {j}] * np.abs(w[:, {j}])"))
-        out.append(Regressor(f"wd{AX[j]}", f"dw_{AX[j]}/dt", "deg/s^2", f"wd[:, {j}]"))
+        out += [Regressor(f"w{AX[j]}", _w(j), "deg/s", f"w[:, {j}]", "w", j),
+                Regressor(f"w{AX[j]}2", f"{_w(j)}²", "(deg/s)^2", f"w[:, {j}] ** 2", "w2", j),
+                Regressor(f"w{AX[j]}absw{AX[j]}", f"{_w(j)}·|{_w(j)}|", "(deg/s)^2",
+                          f"w[:, {j}] * np.abs(w[:, {j}])", "wabsw", j),
+                Regressor(f"w{AX[j]}3", f"{_w(j)}³", "(deg/s)^3", f"w[:, {j}] ** 3", "w3", j),
+                Regressor(f"wd{AX[j]}", f"d{_w(j)}/dt", "deg/s^2", f"wd[:, {j}]", "wd", j),
+                Regressor(f"w{AX[j]}T", f"{_w(j)}·(T - T_ref)", "(deg/s) degC", f"w[:, {j}] * T", "wT", j)]
     for j in range(3):
         for k in range(j + 1, 3):
-            out.append(Regressor(f"w{AX[j]}w{AX[k]}", f"w_{AX[j]}·w_{AX[k]}", "(deg/s)^2", f"w[:, {j}] * w[:, {k}]"))
+            out.append(Regressor(f"w{AX[j]}w{AX[k]}", f"{_w(j)}·{_w(k)}", "(deg/s)^2",
+                                 f"w[:, {j}] * w[:, {k}]", "ww", j, k))
     for j in range(3):
         for k in range(3):
-            out.append(Regressor(f"w{AX[j]}f{AX[k]}", f"w_{AX[j]}·f_{AX[k]}", "(deg/s)(m/s^2)", f"w[:, {j}] * f[:, {k}]"))
-    out += [Regressor("temp", "temperature (T - T_ref)", "degC", "T"),
-            Regressor("temprate", "temperature rate", "degC/s", "Tr"),
-            Regressor("time", "time within the run", "s", "t"),
-            Regressor("segment", "segment index", "1", "seg")]
+            out.append(Regressor(f"w{AX[j]}f{AX[k]}", f"{_w(j)}·{_f(k)}", "(deg/s)(m/s^2)",
+                                 f"w[:, {j}] * f[:, {k}]", "wf", j, k))
+    out += [Regressor(f"f{AX[j]}", _f(j), "m/s^2", f"f[:, {j}]", "f", j) for j in range(3)]
+    for j in range(3):
+        for k in range(j, 3):
+            out.append(Regressor(f"f{AX[j]}f{AX[k]}", f"{_f(j)}·{_f(k)}", "(m/s^2)^2",
+                                 f"f[:, {j}] * f[:, {k}]", "f2" if j == k else "ff", j, k))
     return out
+
+
+def _shared_regressors(n_segments: int = 0) -> list[Regressor]:
+    out = [Regressor("temp", "temperature (T - T_ref)", "degC", "T", "T"),
+           Regressor("T2", "(T - T_ref)²", "degC^2", "T ** 2", "T2"),
+           Regressor("temprate", "temperature rate dT/dt", "degC/s", "Tr", "Tr"),
+           Regressor("time", "time within the run", "s", "t", "t")]
+    out += [step_regressor(b) for b in range(1, min(n_segments, MAX_STEPS + 1))]
+    return out
+
+
+def step_regressor(b: int) -> Regressor:
+    """1 from the segment of index b on (a step at the boundary before it), 0 before."""
+    return Regressor(f"step{b}", f"a step at the start of segment {b}", "1", f"(seg >= {b}) * 1.0", "step", b)
+
+
+def dictionary(sensor: str | None = None, n_segments: int = 0) -> list[Regressor]:
+    """The regressors of ``sensor`` ("accel": functions of f and T; "gyro": of w, f and T; both
+    also of time and steps at the first ``n_segments`` - 1 segment boundaries); None: every
+    regressor either sensor has (for looking keys up)."""
+    if sensor == "accel":
+        return _accel_regressors() + _shared_regressors(n_segments)
+    if sensor == "gyro":
+        return _gyro_regressors() + _shared_regressors(n_segments)
+    seen = {}
+    for r in _accel_regressors() + _gyro_regressors() + _shared_regressors(n_segments):
+        seen.setdefault(r.key, r)
+    return list(seen.values())
+
+
+def regressor(key: str) -> Regressor:
+    if key.startswith("step"):
+        return step_regressor(int(key[4:]))
+    return {r.key: r for r in dictionary()}[key]
+
+
+# what a term means, per family: (words with {i} the output axis and {j}, {k} the variable's axes,
+# when the variable is the output's own axis; when it is another axis; natural unit; factor:
+# natural value = coefficient (output unit per regressor unit) * factor)
+_UG = 1e-6 * G0                      # m/s^2 per µg
+PHYSICS = {
+    ("accel", "f"): ("its scale factor (in the base model)", "its misalignment towards {j} (in the base model)", "ppm", 1e6),
+    ("accel", "f2"): ("a second-order nonlinearity (K2)", "a term in the square of the force along {j}", "ug/g^2", G0 * 1e6),
+    ("accel", "ff"): ("cross-axis coupling (K_{i}{o}, its input times the force along {o})",
+                      "a term in the product of the forces along {j} and {k}", "ug/g^2", G0 * 1e6),
+    ("accel", "absf"): ("a scale-factor asymmetry (|input|)", "a term in |f_{j}|", "ppm", 1e6),
+    ("accel", "f3"): ("a third-order nonlinearity (K3)", "a term in the cube of the force along {j}", "ug/g^3", G0**2 * 1e6),
+    ("accel", "fT"): ("its scale factor changes with temperature", "its misalignment towards {j} changes with temperature",
+                      "ppm/degC", 1e6),
+    ("gyro", "w"): ("its scale factor (in the base model)", "its misalignment towards {j} (in the base model)", "ppm", 1e6),
+    ("gyro", "w2"): ("its scale changes with the rate, even in its sign (w²)", "a term in the square of the rate about {j}",
+                     "ppm/(deg/s)", 1e6),
+    ("gyro", "wabsw"): ("its scale changes with the size of the rate, odd in its sign (w·|w|)",
+                        "a term in w_{j}·|w_{j}|", "ppm/(deg/s)", 1e6),
+    ("gyro", "w3"): ("a cubic rate nonlinearity (w³)", "a term in the cube of the rate about {j}", "ppm/(deg/s)^2", 1e6),
+    ("gyro", "ww"): ("a term in the product of the rates about {j} and {k}", "a term in the product of the rates about {j} and {k}",
+                     "ppm/(deg/s)", 1e6),
+    ("gyro", "wf"): ("its scale changes with the specific force along {k}", "a term in the rate about {j} times the force along {k}",
+                     "ppm/g", G0 * 1e6),
+    ("gyro", "wd"): ("it responds to the angular acceleration (a time lag)", "it responds to the angular acceleration about {j}",
+                     "ms", 1e3),
+    ("gyro", "wT"): ("its scale factor changes with temperature", "its misalignment towards {j} changes with temperature",
+                     "ppm/degC", 1e6),
+    ("gyro", "f"): ("its bias changes with the specific force along {j} (g-sensitivity)",
+                    "its bias changes with the specific force along {j} (g-sensitivity)", "deg/h/g", 3600 * G0),
+    ("gyro", "f2"): ("an anisoelastic term (the square of the force along {j})",
+                     "an anisoelastic term (the square of the force along {j})", "deg/h/g^2", 3600 * G0**2),
+    ("gyro", "ff"): ("an anisoelastic term (the forces along {j} and {k})", "an anisoelastic term (the forces along {j} and {k})",
+                     "deg/h/g^2", 3600 * G0**2),
+}
+_BIAS = {  # family: (words, accel unit, accel factor, gyro unit, gyro factor)
+    "T": ("its bias changes with temperature", "ug/degC", 1 / _UG, "deg/h/degC", 3600.0),
+    "T2": ("its bias changes with the square of the temperature", "ug/degC^2", 1 / _UG, "deg/h/degC^2", 3600.0),
+    "Tr": ("its bias follows the rate of change of the temperature", "ug per degC/min", 1 / _UG / 60, "deg/h per degC/min",
+           60.0),
+    "t": ("its bias drifts with time", "ug/h", 3600 / _UG, "deg/h per hour", 3600.0**2),
+    "step": ("its bias steps", "ug", 1 / _UG, "deg/h", 3600.0),
+}
+
+
+def meaning(sensor: str, axis: int, reg: Regressor) -> tuple[str, str, float]:
+    """(what the term is in words, its natural unit, factor: natural value = coefficient * factor)."""
+    if reg.family in _BIAS:
+        words, ua, fa, ug, fg = _BIAS[reg.family]
+        if reg.family == "step":
+            words = f"its bias steps at the start of segment {reg.j}"
+        return (words, ua, fa) if sensor == "accel" else (words, ug, fg)
+    own, other, unit, factor = PHYSICS[(sensor, reg.family)]
+    mine = reg.j == axis if reg.family not in ("ff",) else axis in (reg.j, reg.k)
+    if sensor == "gyro" and reg.family == "wf":
+        mine = reg.j == axis
+    words = own if mine else other
+    o = reg.k if reg.j == axis else reg.j
+    return words.format(i=AX[axis], j=AX[max(reg.j, 0)], k=AX[max(reg.k, 0)], o=AX[max(o, 0)]), unit, factor
 
 
 @dataclass(frozen=True)
@@ -88,11 +209,22 @@ class Term:
     def unit(self) -> str:
         return f"{self.out_unit} per {self.regressor.unit}"
 
+    def meaning(self) -> tuple[str, str, float]:
+        return meaning(self.sensor, self.axis, self.regressor)
+
+    def natural(self, value: float) -> float:
+        return value * self.meaning()[2]
+
     def words(self, value: float, sigma: float | None = None) -> str:
+        """In words and natural units: "x gyro: its scale factor changes with temperature:
+        +300 ± 8 ppm/degC (in w_x·(T - T_ref))"."""
         who = "accelerometer" if self.sensor == "accel" else "gyro"
-        spread = "" if sigma is None else f" ± {sigma:.2g}"
-        return (f"{AX[self.axis]} {who}: {value:+.3g}{spread} {self.out_unit} per {self.regressor.unit} "
-                f"in {self.regressor.text}")
+        what, unit, factor = self.meaning()
+        spread = "" if sigma is None else f" ± {abs(sigma * factor):.2g}"
+        return f"{AX[self.axis]} {who}: {what}: {value * factor:+.3g}{spread} {unit} (in {self.regressor.text})"
+
+
+TEMPERATURE_FAMILIES = ("T", "T2", "Tr", "fT", "wT")
 
 
 def _variables(ctx, reference_c: float) -> dict:
@@ -122,15 +254,14 @@ class TermsEffect(Effect):
 
     def restore(self, state):
         super().restore(state)
-        lookup = {r.key: r for r in dictionary()}
-        self.terms = [Term(s, int(a), lookup[k]) for s, a, k in self.spec]
+        self.terms = [Term(s, int(a), regressor(k)) for s, a, k in self.spec]
         self._compile()
 
     def _compile(self):
         self._code = {t.regressor.key: compile(t.regressor.code, "<term>", "eval") for t in self.terms}
         self.term = "; ".join(f"{t.sensor}_{AX[t.axis]} += c * {t.regressor.text}" for t in self.terms)
-        self.needs = tuple(sorted({"temperature" for t in self.terms if t.regressor.key in ("temp", "temprate")}
-                                  | {"time" for t in self.terms if t.regressor.key.startswith("wd")}))
+        self.needs = tuple(sorted({"temperature" for t in self.terms if t.regressor.family in TEMPERATURE_FAMILIES}
+                                  | {"time" for t in self.terms if t.regressor.family in ("wd", "Tr")}))
 
     @property
     def params(self):
@@ -156,15 +287,6 @@ class TermsEffect(Effect):
         return self._term(x, ctx, "gyro") if any(t.sensor == "gyro" for t in self.terms) else None
 
 
-@dataclass
-class Found:
-    term: Term
-    chi2_drop: float          # predicted, nominal noise, given the terms found before it
-    p_value: float            # Holm-corrected over the dictionary, over-dispersion-corrected
-    value: float              # one-step estimate, output unit per regressor unit
-    sigma: float
-
-
 def _reference_c(s) -> float:
     temps = [st.temp_c for st in s.statics if st.temp_c is not None]
     return float(np.mean(temps)) if temps else 0.0
@@ -181,13 +303,70 @@ def searchable(s) -> tuple:
     return tuple(x for x in SENSORS if x[0] != "gyro" or n_g is not None)
 
 
-def search(result, max_terms: int = MAX_TERMS) -> list[Found]:
+def failing_sensors(result) -> dict:
+    """Per sensor, whether its own data rows carry a misfit: their whitened sum of squares
+    against their share of the degrees of freedom (rows x dof / data rows), failing at the
+    fit's own level (p below ALPHA / 10).  A misfit of the accelerometers leaks into the gyro
+    rows only through the shared nuisances (attitudes, start phases), so the gyro terms are
+    searched only when the gyro rows themselves fail, and the accelerometer's likewise:
+    {"accel": (fails, rss, expected), "gyro": (...)}."""
+    from station.diagnose.core import PRIOR_QUANTITIES
+
+    labels = result.model.row_labels(result.x)
+    r = result.model.residuals(result.x)
+    data = np.array([q not in PRIOR_QUANTITIES for _, _, q, _ in labels])
+    share = result.dof / max(int(data.sum()), 1)
+    out = {}
+    for sensor in ("accel", "gyro"):
+        rows = np.array([q.startswith(sensor) for _, _, q, _ in labels]) & data
+        n = int(rows.sum())
+        rss = float(r[rows] @ r[rows])
+        expected = n * share
+        out[sensor] = (n > 0 and chi2_sf(rss, max(expected, 1.0)) < ALPHA / 10, rss, expected)
+    return out
+
+
+PREFERENCE = {  # within a group of aliases, the more physical term first (lower is preferred)
+    "f2": 0, "ff": 0, "f3": 0, "absf": 0, "fT": 0, "w2": 0, "wabsw": 0, "w3": 0, "wT": 0, "f": 0, "w": 0,
+    "wf": 1, "ww": 1, "wd": 1, "T": 1, "T2": 1, "Tr": 2, "t": 2, "step": 3}
+
+
+def _rank(term: "Term") -> tuple:
+    """Own-axis terms before terms in another axis' variable; temperature and its square before
+    its rate, time and steps (a step or a drift in time is an event of this capture, not a
+    property of the sensor that holds in the next one)."""
+    reg = term.regressor
+    own = term.axis in (reg.j, reg.k) or reg.family in _BIAS
+    return (PREFERENCE.get(reg.family, 2), 0 if own else 1)
+
+
+@dataclass
+class Found:
+    term: Term
+    chi2_drop: float          # predicted, nominal noise, given the terms found before it
+    p_value: float            # Holm-corrected over the dictionary, over-dispersion-corrected
+    value: float              # one-step estimate, output unit per regressor unit
+    sigma: float
+    aliases: list = field(default_factory=list)   # (Term, cosine, what would separate them)
+
+
+def search(result, max_terms: int = MAX_TERMS, sensors=None) -> list[Found]:
     """Forward selection over the dictionary at the current fit (linearised score tests), on
-    the sensors whose terms can be sized (``searchable``)."""
+    the sensors whose terms can be sized (``searchable``) and whose own rows fail
+    (``failing_sensors``; ``sensors`` overrides).  At each step the most significant term is
+    taken, unless a more physical term (``_rank``) is its alias — the two columns, outside the
+    model and the terms taken before, alike to ALIAS_COS, so that this capture cannot tell them
+    apart: then that one, and the others are listed as its aliases with what would separate
+    them."""
     model = result.model
     s = model.s
     reference = _reference_c(s)
-    candidates = [Term(sensor, axis, reg) for sensor, _, _ in searchable(s) for axis in range(3) for reg in dictionary()]
+    if sensors is None:
+        failing = failing_sensors(result)
+        sensors = [x for x, _, _ in searchable(s) if failing[x][0]]
+    n_seg = _segment_count(s)
+    candidates = [Term(sensor, axis, reg) for sensor in sensors for axis in range(3)
+                  for reg in dictionary(sensor, n_seg)]
     if not candidates:
         return []
     bank = in_capture_units(TermsEffect)(candidates, reference)      # counts on a raw capture
@@ -220,8 +399,18 @@ def search(result, max_terms: int = MAX_TERMS) -> list[Found]:
         p = min(1.0, chi2_sf(lm[k] / phi, 1) * (m - len(found)))
         if p >= ALPHA:
             break
+        # its aliases: columns alike to ALIAS_COS that explain nearly as much
+        unit = Jp / np.sqrt(np.where(usable, norms2, 1.0))
+        cos = np.where(usable, unit.T @ unit[:, k], 0.0)
+        group = [a for a in np.flatnonzero(np.abs(cos) >= ALIAS_COS) if a not in chosen and lm[a] > 0]
+        best = min(group, key=lambda a: (_rank(candidates[a]), -lm[a]))
+        if best != k:
+            cos = np.where(usable, unit.T @ unit[:, best], 0.0)
+            k = best
+        aliases = [(candidates[a], float(cos[a]), separates(candidates[k], candidates[a]))
+                   for a in sorted(group, key=lambda a: -abs(cos[a])) if a != k][:3]
         c = -g[k] / norms2[k]
-        found.append(Found(candidates[k], float(lm[k]), p, float(c), float(np.sqrt(phi / norms2[k]))))
+        found.append(Found(candidates[k], float(lm[k]), p, float(c), float(np.sqrt(phi / norms2[k])), aliases))
         chosen.append(k)
         q = Jp[:, k] / np.sqrt(norms2[k])
         r = r - q * (q @ r)
@@ -229,10 +418,61 @@ def search(result, max_terms: int = MAX_TERMS) -> list[Found]:
     return found
 
 
+def _segment_count(s) -> int:
+    idx = [q.index for q in [*s.statics, *s.rotations] if getattr(q, "index", None) is not None]
+    return int(max(idx)) + 1 if idx else 0
+
+
+_VARIABLE = {"f": "force", "f2": "force", "ff": "force", "absf": "force", "f3": "force", "fT": "force_temp",
+             "w": "rate", "w2": "rate", "wabsw": "rate", "w3": "rate", "ww": "rate", "wf": "rate_force",
+             "wd": "rate_change", "wT": "rate_temp", "T": "temp", "T2": "temp", "Tr": "temp_rate",
+             "t": "time", "step": "time"}
+
+
+def separates(a: Term, b: Term) -> str:
+    """The segments that would tell term a from term b (the capture could not)."""
+    fa, fb = a.regressor.family, b.regressor.family
+    pair = {fa, fb}
+    va, vb = _VARIABLE.get(fa, ""), _VARIABLE.get(fb, "")
+    if pair <= {"w", "w2", "wabsw", "w3", "ww"}:
+        if pair & {"w2"} and pair & {"wabsw", "w"}:
+            return "rotations in both directions (+ and -) about each axis"
+        return "rotations at three or more rates about each axis, in both directions"
+    if pair <= {"f", "f2", "ff", "absf", "f3"}:
+        return "statics with gravity at ±1 g and at 45° and 35° to each axis (inputs of other sizes)"
+    if "temp" in (va, vb) or "time" in (va, vb) or "temp_rate" in (va, vb):
+        if {va, vb} <= {"temp", "time", "temp_rate"}:
+            if pair == {"T", "T2"}:
+                return "the same attitudes at three or more temperatures"
+            return ("a temperature that does not follow the time (a cool-down after the warm-up, or the "
+                    "statics repeated at a steady temperature)")
+        return "the same attitudes and rotations repeated at another temperature, at a steady temperature"
+    if {va, vb} & {"rate_temp", "force_temp"}:
+        return ("the same rotations (or statics) repeated at another temperature, and rotations at two "
+                "rates at one temperature")
+    if {va, vb} & {"rate_force", "rate_change"}:
+        return "rotations about horizontal and vertical axes at several rates"
+    return "attitudes, rates or temperatures this capture does not have"
+
+
 def refit(summaries, result, found: list[Found]):
-    """The model with the found terms added as one effect, refitted (values with 1-sigma)."""
-    effect = in_capture_units(TermsEffect)([f.term for f in found], _reference_c(summaries))
-    return lsq.fit(summaries, [*result.model.effects, effect], result.model.attitudes, like=result.model), effect
+    """The model with the found terms added as one effect (merged with the terms already in it),
+    refitted (values with 1-sigma)."""
+    old = [t for e in result.model.effects if isinstance(e, TermsEffect) for t in e.terms]
+    effect = in_capture_units(TermsEffect)([*old, *(f.term for f in found)], _reference_c(summaries))
+    others = [e for e in result.model.effects if not isinstance(e, TermsEffect)]
+    return lsq.fit(summaries, [*others, effect], result.model.attitudes, like=result.model), effect
+
+
+def in_model(result):
+    """(TermsEffect, values, sigmas) of the terms in a fitted model, or None."""
+    effect = next((e for e in result.model.effects if isinstance(e, TermsEffect)), None)
+    if effect is None:
+        return None
+    names, values, _, cov = lsq.reported(result, "m/s^2", "deg/s")
+    at = {n: i for i, n in enumerate(names)}
+    idx = [at[t.name] for t in effect.terms]
+    return effect, [float(values[i]) for i in idx], [float(np.sqrt(cov[i, i])) for i in idx]
 
 
 def plugin_source(effect: TermsEffect, values, sigmas, class_name: str = "DiscoveredTerms") -> str:
@@ -298,13 +538,31 @@ class Proposal:
     kept: bool                # passes the checks an added effect must pass (auto.judge)
     reason: str
     redundant: list = field(default_factory=list)   # (effect, why): added before, not needed with the terms
+    after: object = None      # the Diagnosis with the terms (no library candidates ranked)
+    h_after: object = None    # its leave-one-segment-out Holdout
+    share: float | None = None
 
     def lines(self) -> list[str]:
-        return [t.words(v, sg) for t, v, sg in zip(self.effect.terms, self.values, self.sigmas)]
+        new = {f.term.name for f in self.found}
+        return [t.words(v, sg) for t, v, sg in zip(self.effect.terms, self.values, self.sigmas) if t.name in new]
+
+    def alias_lines(self) -> list[str]:
+        """What the capture cannot tell each chosen term from, and what would."""
+        out = []
+        for f in self.found:
+            if f.aliases:
+                names = ", ".join(f"{t.regressor.text} ({'accelerometer' if t.sensor == 'accel' else 'gyro'} "
+                                  f"{AX[t.axis]}, alike to {abs(c):.3f})" for t, c, _ in f.aliases)
+                out.append(f"{f.term.regressor.text} on the {AX[f.term.axis]} "
+                           f"{'accelerometer' if f.term.sensor == 'accel' else 'gyro'} cannot be told here from "
+                           f"{names}: {f.aliases[0][2]} would separate them")
+        return out
 
 
-def propose(diagnosis, summaries) -> Proposal | None:
-    """Search, refit, judge; None when no term of the dictionary is significant."""
+def propose(diagnosis, summaries, h_before=None) -> Proposal | None:
+    """Search, refit, judge (the stop rule of --auto: station.diagnose.holdout.judge); None when
+    no term of the dictionary is significant.  ``h_before``: the leave-one-segment-out Holdout
+    of the diagnosis' fit, when already computed."""
     from station.diagnose.core import diagnose
     from station.diagnose.holdout import judge, leave_one_segment_out
 
@@ -313,14 +571,12 @@ def propose(diagnosis, summaries) -> Proposal | None:
     if not found:
         return None
     after_result, effect = refit(summaries, result, found)
-    names, values, units_, cov = lsq.reported(after_result, "m/s^2", "deg/s")
-    own = {t.name for t in effect.terms}
-    idx = [i for i, n in enumerate(names) if n in own]
+    _, values, sigmas = in_model(after_result)
     after = diagnose(after_result, exclude=[e for e in _all_ids()])
-    ok, reason, _, cv_b, cv_a = judge(diagnosis, after, leave_one_segment_out(result),
-                                      leave_one_segment_out(after_result))
-    return Proposal(found, effect, [float(values[i]) for i in idx], [float(np.sqrt(cov[i, i])) for i in idx],
-                    diagnosis.chi2, after.chi2, after.reduced_chi2, cv_b, cv_a, ok, reason)
+    h_after = leave_one_segment_out(after_result)
+    ok, reason, share, cv_b, cv_a = judge(diagnosis, after, h_before or leave_one_segment_out(result), h_after)
+    return Proposal(found, effect, values, sigmas, diagnosis.chi2, after.chi2, after.reduced_chi2, cv_b, cv_a, ok,
+                    reason, after=after, h_after=h_after, share=share)
 
 
 def _all_ids():
