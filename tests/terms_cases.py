@@ -111,7 +111,7 @@ def run(case, seed=3, tmp=None):
     return steps, final, time.perf_counter() - t0
 
 
-if __name__ == "__main__":
+def _main():
     import tempfile
     from pathlib import Path
 
@@ -135,3 +135,145 @@ if __name__ == "__main__":
                     for t, c, sep in f.aliases:
                         print(f"      alias of {f.term.name}: {t.name} (cos {c:.3f}): {sep}")
             print("   verdict:", final.verdict[:300])
+
+
+# ---------------------------------------------------------------- held-out error, through the CLI
+
+def _bench():
+    import importlib
+    import os
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    if os.path.join(root, "benchmarks") not in sys.path:
+        sys.path.insert(0, os.path.join(root, "benchmarks"))
+    return importlib.import_module("diagnose_cases")
+
+
+def heldout(case, tmp, seed=3, library_patch=None):
+    """The loop as a user runs it: ``diagnose --auto --emit-effect``, ``estimate`` without and
+    with what it added (the emitted plugin by FILE.py:CLASS), ``apply --plugin`` on a held-out
+    capture (other attitudes, rates 30/70/120 deg/s, noise off) scored against an ideal-sensor
+    recording of the same motion.  ``library_patch(ids)``: a context taking the case's library
+    effects out of every registry the CLI makes.  Returns a dict of the numbers."""
+    import contextlib
+    import io
+    import json
+
+    import numpy as np
+    from sim_devices.truth import Truth
+
+    from station.cli import main
+    from station.simulate import dryrun
+
+    dc = _bench()
+    tmp.mkdir(parents=True, exist_ok=True)
+    truth, train = training(case, seed, tmp, out=tmp / "train")
+    doc = truth.to_yaml_dict()
+    test_doc = dc.noise_free(doc)
+    held = scheme_of(HELDOUT, tmp)
+    test = dryrun.record_scheme(held, Truth.from_dict(test_doc, "test"), seed + 1000, tmp / "test")
+    true = {s.name: (s.kind, s.data.t, s.data.accel, s.data.gyro, s.rate_dps)
+            for s in dryrun.simulate_capture(held, Truth.from_dict(dc.ideal_sensor(test_doc), "ideal"),
+                                             seed + 1000).segments}
+    C_pb = truth.paper_parameters()["C_pb"]
+    names = list(true)
+    frames = [dc.read_csv(test / f"{n}.csv") for n in names]
+    cols = list(frames[0])
+    both = tmp / "test_all.csv"
+    with open(both, "w") as fh:
+        fh.write(",".join(cols) + "\n")
+        np.savetxt(fh, np.column_stack([np.concatenate([fr[c] for fr in frames]) for c in cols]),
+                   delimiter=",", fmt="%.12g")
+
+    def cli(args):
+        o, e = io.StringIO(), io.StringIO()
+        with contextlib.redirect_stdout(o), contextlib.redirect_stderr(e):
+            rc = main(args)
+        return rc, o.getvalue(), e.getvalue()
+
+    def scored(cal, extra=()):
+        out = tmp / (cal.stem + "_test.csv")
+        rc, _, e = cli(["apply", str(cal), str(both), "-o", str(out), "--force", *extra])
+        assert rc == 0, e
+        comp = dc.read_csv(out)
+        outputs, k = {}, 0
+        for n, fr in zip(names, frames):
+            m = len(fr["t"])
+            outputs[n] = {c: v[k:k + m] for c, v in comp.items()}
+            k += m
+        return dc.score(outputs, true, C_pb, 100.0)
+
+    res = {"case": case.name if case else "clean"}
+    ids = case.library if case else ()
+    with (library_patch(ids) if library_patch else contextlib.nullcontext()):
+        plugin = tmp / "found.py"
+        t0 = time.perf_counter()
+        rc, out, err = cli(["diagnose", str(train), "--auto", "--json", "--emit-effect", str(plugin)])
+        res["diagnose_s"] = time.perf_counter() - t0
+        assert rc == 0, err
+        d = json.loads(out)
+        res["emit_line"] = err.strip().splitlines()[-1] if err.strip() else ""
+        steps = d["steps"]
+        res["added"] = [s["added"] for s in steps]
+        res["reduced_before"] = steps[0]["chi2_before"] / (d["dof"] + sum(0 for _ in steps)) if steps else d["reduced_chi2"]
+        res["reduced_after"] = d["reduced_chi2"]
+        res["verdict"] = d["verdict"]
+        rc, _, e = cli(["estimate", str(train), "-o", str(tmp / "base.yaml"), "--accept-poor-fit"])
+        assert rc == 0, e
+        res["before"] = scored(tmp / "base.yaml")
+        cmd = ["estimate", str(train), "-o", str(tmp / "auto.yaml"), "--accept-poor-fit"]
+        extra = []
+        for a in res["added"]:
+            if a == "discovered_terms":
+                cmd += ["--add", f"{plugin}:DiscoveredTerms"]
+                extra = ["--plugin", f"{plugin}:DiscoveredTerms"]
+            else:
+                cmd += ["--add", a]
+        if res["added"]:
+            rc, _, e = cli(cmd)
+            assert rc == 0, e
+            res["after"] = scored(tmp / "auto.yaml", extra)
+        else:
+            res["after"] = res["before"]
+        res["plugin"] = plugin.read_text() if plugin.exists() else None
+        res["loop_s"] = time.perf_counter() - t0
+    return res
+
+
+@__import__("contextlib").contextmanager
+def without_library(ids):
+    """Every EffectRegistry made meanwhile lacks ``ids`` (simhelpers.library_without, no pytest)."""
+    from station.model import LIBRARY, registry
+
+    old = registry._library
+    registry._library = lambda: {k: v for k, v in LIBRARY.items() if k not in ids}
+    try:
+        yield
+    finally:
+        registry._library = old
+
+
+def _heldout_main(names):
+    import tempfile
+    from pathlib import Path
+
+    with tempfile.TemporaryDirectory() as d:
+        floor = heldout(None, Path(d) / "clean", library_patch=without_library)
+        print(f"clean floor: accel {floor['before']['accel_mg']:.4f} mg, gyro {floor['before']['gyro_dph']:.3f} deg/h "
+              f"({floor['before'].get('gyro_ppm_of_rate', float('nan')):.1f} ppm); added {floor['added']}; "
+              f"{floor['emit_line']}")
+        for name in names:
+            r = heldout(BY_NAME[name], Path(d) / name, library_patch=without_library)
+            b, a = r["before"], r["after"]
+            print(f"{name}: added {r['added']}; reduced chi2 -> {r['reduced_after']:.3g}; accel {b['accel_mg']:.4f} -> "
+                  f"{a['accel_mg']:.4f} mg; gyro {b['gyro_dph']:.3f} -> {a['gyro_dph']:.3f} deg/h "
+                  f"({b.get('gyro_ppm_of_rate', 0):.1f} -> {a.get('gyro_ppm_of_rate', 0):.1f} ppm); diagnose "
+                  f"{r['diagnose_s']:.1f} s, loop {r['loop_s']:.1f} s")
+            print("   ", r["verdict"][:400])
+
+
+if __name__ == "__main__":
+    if sys.argv[1:2] == ["--heldout"]:
+        _heldout_main(sys.argv[2:] or list(BY_NAME))
+    else:
+        _main()

@@ -149,10 +149,9 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
                             caveats(summaries, cand.effect))
                 if discover and term_steps < MAX_TERM_STEPS and fit_fails(current.result):
                     alt = _terms_step(current, h_current, summaries, registry, (cand.effect, after, h_after))
-                    if alt is not None:
+                    if alt is not None:       # the effect stays a candidate for the next steps
                         kept, h_after = alt
                         term_steps += 1
-                        refused.add(cand.effect)
                 break
             refused.add(cand.effect)
             rejected.append(Rejection(cand.effect, reason, current.chi2 - after.chi2, cv_b, cv_a, share,

@@ -29,7 +29,7 @@ from station.estimate import lsq
 from station.model.effect import Effect, Param
 from station.model.raw_counts import counts_per_unit, in_capture_units
 
-MAX_TERMS = 6
+MAX_TERMS = 9
 AX = "xyz"
 SENSORS = (("accel", "accelerometer", "m/s^2"), ("gyro", "gyro", "deg/s"))
 G0 = 9.80665
@@ -475,51 +475,152 @@ def in_model(result):
     return effect, [float(values[i]) for i in idx], [float(np.sqrt(cov[i, i])) for i in idx]
 
 
-def plugin_source(effect: TermsEffect, values, sigmas, class_name: str = "DiscoveredTerms") -> str:
-    """A ready-to-edit effect plugin with these terms (their fitted values in comments)."""
+def _param_name(t: Term) -> str:
+    return f"{t.sensor}_{AX[t.axis]}_{t.regressor.key}"
+
+
+def plugin_source(effect: TermsEffect, values, sigmas, class_name: str = "DiscoveredTerms",
+                  aliases=(), discovered_by: str = "station diagnose --auto") -> str:
+    """A working effect plugin with these terms: each parameter in its natural unit (ppm/degC,
+    ug/g^3, deg/h/degC^2 ...), on the sensor it was found on, its compensation (``station apply``
+    subtracts the same terms, docs/effects.md), the temperature reference decided from the
+    capture like the library's temperature effects, and a self-test (``python FILE.py`` or
+    pytest) that the compensation removes the terms at typical inputs."""
+    terms = list(effect.terms)
+    uses_abs = any(t.regressor.family in ("absf", "wabsw") for t in terms)
+    uses_seg = any(t.regressor.family == "step" for t in terms)
+    who = {"accel": "accelerometer", "gyro": "gyro"}
+    what = []
+    for t in terms:
+        m = t.meaning()[0]
+        if m not in what:
+            what.append(m)
+    sensors = sorted({who[t.sensor] for t in terms})
+    title = f"{' and '.join(sensors)}: {'; '.join(what)} (found outside the library)"
     lines = [
-        f'"""Terms found by `station diagnose`: edit the id, the names and the physics, then',
-        f"add it with  station estimate CAPTURE --add THIS_FILE.py:{class_name}",
-        f"and compensate with  station apply CAL.yaml IN.csv -o OUT.csv --plugin THIS_FILE.py:{class_name}",
+        f'"""{title}.',
         "",
-        "Found (value ± 1σ at the fit that proposed them):",
+        f"Found by `{discovered_by}` (value ± 1σ at the fit that found them):",
     ]
-    for t, v, sg in zip(effect.terms, values, sigmas):
-        lines.append(f"  {t.words(v, sg)}")
-    lines += ['"""', "import numpy as np", "", "from station.model.effect import Effect, Param", "", "",
-              f"class {class_name}(Effect):",
-              '    id = "discovered_terms"          # an identifier of your choice',
-              '    title = "Terms found outside the library"',
-              '    physics = "Name the physics here."',
-              f"    term = {effect.term!r}",
-              '    excited_by = "the segments that revealed them"',
-              '    magnitudes = "see the values above"',
-              '    signature = "the residual pattern diagnose reported"',
-              f"    needs = {tuple(effect.needs)!r}",
-              f"    REFERENCE_C = {effect.reference_c!r}    # temperature reference, deg C", "",
-              "    @property", "    def params(self):",
-              "        # name, unit, reported = internal * scale, typical size, largest plausible size",
-              "        return ("]
-    for t, v in zip(effect.terms, values):
-        typical = max(abs(float(v)), 1e-300)
-        lines.append(f'            Param("{t.name}", "{t.unit}", 1.0, {typical:.3g}, {100 * typical:.3g}),')
-    lines += ["        )", ""]
+    lines += [f"  {t.words(v, sg)}" for t, v, sg in zip(terms, values, sigmas)]
+    if aliases:
+        lines += ["", "What that capture could not tell them from (and what would):"]
+        lines += [f"  {a}" for a in aliases]
+    if uses_seg:
+        lines += ["", "A step at a segment boundary is an event of that capture: `station apply` does not",
+                  "know the segments of the data it is given and compensates the level before the step."]
+    lines += [
+        "",
+        f"Add it:      station estimate CAPTURE --add THIS_FILE.py:{class_name} -o CAL.yaml",
+        f"Compensate:  station apply CAL.yaml IN.csv -o OUT.csv --plugin THIS_FILE.py:{class_name}",
+        "Check it:    python THIS_FILE.py   (or pytest THIS_FILE.py)",
+        "Rename the id, the parameters and the physics as you like (docs/effects.md).",
+        '"""',
+        "import numpy as np",
+        "",
+        "from station.model.effect import Effect, Param",
+        "",
+        "G0 = 9.80665                # m/s^2 per g",
+        "",
+        "",
+        f"class {class_name}(Effect):",
+        f'    id = "discovered_terms"',
+        f"    title = {title!r}",
+        f"    physics = {('; '.join(f'{AX[t.axis]} {who[t.sensor]}: {t.meaning()[0]}' for t in terms) + '.')!r}",
+        f"    term = {'; '.join(f'{t.sensor}_{AX[t.axis]} += {_param_name(t)} [{t.meaning()[1]}] / {t.meaning()[2]:.10g} * {t.regressor.text}' for t in terms)!r}",
+        f"    excited_by = {'the segments that revealed them (see the aliases above for what separates them)'!r}",
+        f"    magnitudes = {('found: ' + '; '.join(f'{_param_name(t)} {t.natural(v):+.3g} {t.meaning()[1]}' for t, v in zip(terms, values)))!r}",
+        f"    signature = {'the residual pattern station diagnose reported'!r}",
+        f"    needs = {tuple(effect.needs)!r}",
+        '    state_fields = ("reference_c",)',
+        f"    complex_step = {not uses_abs}",
+        "",
+        "    def __init__(self):",
+        f"        self.reference_c = {float(effect.reference_c)!r}     # T_ref, deg C",
+        "",
+        "    def setup(self, summaries):",
+        "        # T_ref: the mean temperature of the static segments (the library's temperature effects')",
+        "        temps = [st.temp_c for st in summaries.statics if st.temp_c is not None]",
+        "        self.reference_c = float(np.mean(temps)) if temps else 0.0",
+        "",
+        "    @property",
+        "    def params(self):",
+        "        # name, unit, reported = internal * scale, typical size, largest plausible size",
+        "        return (",
+    ]
+    for t, v in zip(terms, values):
+        typical = max(abs(t.natural(float(v))), 1e-300)
+        lines.append(f'            Param("{_param_name(t)}", "{t.meaning()[1]}", 1.0, {typical:.3g}, {100 * typical:.3g}),')
+    lines += [
+        "        )",
+        "",
+        "    def _variables(self, ctx):",
+        "        f, w = ctx.f_p, ctx.w_p                      # m/s^2 and deg/s, frame p",
+        "        wd = np.degrees(ctx.wdot_table)             # deg/s^2",
+        "        T = np.nan_to_num(ctx.temp_c - self.reference_c)   # deg C from T_ref",
+        '        Tr = np.nan_to_num(ctx.column("temp_rate_c_per_s"))',
+        '        t = np.nan_to_num(ctx.column("t_s"))',
+        '        seg = np.nan_to_num(ctx.column("segment_index"))',
+        "        return f, w, wd, T, Tr, t, seg",
+        "",
+    ]
     for sensor in ("accel", "gyro"):
-        idx = [k for k, t in enumerate(effect.terms) if t.sensor == sensor]
+        idx = [k for k, t in enumerate(terms) if t.sensor == sensor]
         if not idx:
             continue
         lines += [f"    def {sensor}(self, x, ctx):",
-                  "        f, w = ctx.f_p, ctx.w_p                    # m/s^2 and deg/s, frame p",
-                  "        wd = np.degrees(ctx.wdot_table)           # deg/s^2",
-                  "        T = np.nan_to_num(ctx.temp_c - self.REFERENCE_C)",
-                  '        Tr = np.nan_to_num(ctx.column("temp_rate_c_per_s"))',
-                  '        t = np.nan_to_num(ctx.column("t_s"))',
-                  '        seg = np.nan_to_num(ctx.column("segment_index"))',
-                  "        out = np.zeros_like(f)"]
+                  f"        # the {who[sensor]} outputs' terms, {'m/s^2' if sensor == 'accel' else 'deg/s'}",
+                  "        f, w, wd, T, Tr, t, seg = self._variables(ctx)",
+                  "        out = np.zeros(f.shape, dtype=np.result_type(x, f))"]
         for k in idx:
-            t = effect.terms[k]
-            lines.append(f"        out[:, {t.axis}] += x[{k}] * ({t.regressor.code})    # {t.regressor.text}")
+            t = terms[k]
+            unit, factor = t.meaning()[1], t.meaning()[2]
+            lines.append(f"        out[:, {t.axis}] += x[{k}] / {factor:.10g} * ({t.regressor.code})"
+                         f"    # {AX[t.axis]} {who[sensor]}: {t.meaning()[0]} [{unit}]")
         lines += ["        return out", ""]
+    found = ", ".join(f"{t.natural(float(v))!r}" for t, v in zip(terms, values))
+    lines += [
+        "",
+        f"FOUND = np.array([{found}])     # the values found, in the units of params",
+        "",
+        "",
+        "def test_compensation_removes_the_terms():",
+        '    """The terms at typical inputs (1 g along and across the axes, 100 deg/s, T_ref + 5 degC)',
+        '    are added to ideal outputs and station apply\'s compensation takes them out again."""',
+        "    from station.model.compensate import compensate_with_effects",
+        "",
+        "    e = DiscoveredTerms()",
+        "    e.reference_c = 25.0",
+        "    n = 400",
+        "    t = np.arange(n) * 0.01",
+        "    phase = np.radians(100.0) * t",
+        "    up = np.column_stack([np.cos(phase), np.sin(phase), np.ones(n)]) / np.sqrt(2.0)",
+        "    f = G0 * up                                   # gravity turning across x and y, half along z",
+        "    w = np.column_stack([100.0 * np.ones(n), -60.0 * np.ones(n), 30.0 * np.ones(n)])",
+        "    temp = 30.0 + 0.0 * t",
+        "    comp = {\"accel_matrix\": np.eye(3), \"gyro_matrix\": np.eye(3), \"accel_bias\": np.zeros(3),",
+        "            \"gyro_bias\": np.zeros(3)}",
+        "    from station.model.effect import SampleContext",
+        "",
+        "    w_rad = np.radians(w)",
+        "    ctx = SampleContext(f_p=f, w_p=w, w_table=w_rad, wdot_table=np.gradient(w_rad, t, axis=0), temp_c=temp,",
+        "                        accel_matrix=np.eye(3), gyro_matrix=np.eye(3), t_s=t, temp_rate_c_per_s=np.zeros(n))",
+        "    da = e.accel(FOUND, ctx) if hasattr(e, \"accel\") else None",
+        "    dw = e.gyro(FOUND, ctx) if hasattr(e, \"gyro\") else None",
+        "    raw_a = f + (0.0 if da is None else da)",
+        "    raw_w = w + (0.0 if dw is None else dw)",
+        "    _, f_c, w_c = compensate_with_effects(comp, [(e, FOUND)], t, raw_a, raw_w, temp)",
+        "    size_a = np.max(np.abs(raw_a - f)) + 1e-12",
+        "    size_w = np.max(np.abs(raw_w - w)) + 1e-12",
+        "    assert np.max(np.abs(f_c - f)) < 1e-3 * size_a + 1e-9, (np.max(np.abs(f_c - f)), size_a)",
+        "    assert np.max(np.abs(w_c - w)) < 1e-3 * size_w + 1e-9, (np.max(np.abs(w_c - w)), size_w)",
+        "    return size_a, size_w",
+        "",
+        "",
+        'if __name__ == "__main__":',
+        "    a, g = test_compensation_removes_the_terms()",
+        '    print(f"ok: terms of {a / G0 * 1e6:.3g} ug and {g * 3600:.3g} deg/h at typical inputs are compensated")',
+    ]
     return "\n".join(lines).rstrip() + "\n"
 
 
