@@ -382,7 +382,12 @@ def search(result, max_terms: int = MAX_TERMS, sensors=None) -> list[Found]:
     data = model.data_rows if hasattr(model, "data_rows") else np.ones(len(r), bool)
     found: list[Found] = []
     chosen = []
-    for _ in range(max_terms):
+    # a drift in time or a step at a segment boundary is an event of this capture, not a property
+    # of the sensor that holds in the next one: searched only once the physical terms are
+    # exhausted and the fit still fails
+    events = np.array([c.regressor.family in ("t", "step") for c in candidates])
+    events_too = False
+    while len(found) < max_terms:
         # over-dispersion of what is left (the misfit shrinks as terms are taken)
         dof = result.dof - len(found)
         rss = float(r[data] @ r[data]) if len(data) == len(r) else float(r @ r)
@@ -392,12 +397,15 @@ def search(result, max_terms: int = MAX_TERMS, sensors=None) -> list[Found]:
         g = Jp.T @ r
         lm = np.where(usable, g**2 / np.where(usable, norms2, 1.0), 0.0)
         lm[chosen] = 0.0
+        if not events_too:
+            lm[events] = 0.0
         k = int(np.argmax(lm))
-        if lm[k] <= 0:
-            break
         # Holm over the family: the step's rank among m - len(found) untested terms
-        p = min(1.0, chi2_sf(lm[k] / phi, 1) * (m - len(found)))
+        p = min(1.0, chi2_sf(lm[k] / phi, 1) * (m - len(found))) if lm[k] > 0 else 1.0
         if p >= ALPHA:
+            if not events_too and phi > 1.0:
+                events_too = True         # the physical terms leave the fit failing: events may
+                continue                  #   explain the rest
             break
         # its aliases: columns alike to ALIAS_COS that explain nearly as much
         unit = Jp / np.sqrt(np.where(usable, norms2, 1.0))
