@@ -86,12 +86,14 @@ def _terms_step(current: Diagnosis, h_current, summaries, registry, instead=None
     ``instead`` = (effect id, its diagnosis, its Holdout), only when they also beat that library
     effect out of sample (a lower leave-one-segment-out score on the same segments) and in chi2
     by more than the 1 % point of chi2 on one degree of freedom (a library effect and its
-    equivalent terms fit alike; only a clearly better fit displaces it)."""
+    equivalent terms fit alike; only a clearly better fit displaces it).  Only properties of the
+    sensor are carried into the model: a drift in time or a step at a segment boundary is an
+    event of this capture (the verdict says it in words; apply could not compensate it)."""
     from scipy import stats
 
     from station.diagnose import terms
 
-    prop = terms.propose(current, summaries, h_current)
+    prop = terms.propose(current, summaries, h_current, events=False)
     if prop is None or not prop.kept:
         return None
     if instead is not None:

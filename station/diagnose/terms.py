@@ -350,14 +350,15 @@ class Found:
     aliases: list = field(default_factory=list)   # (Term, cosine, what would separate them)
 
 
-def search(result, max_terms: int = MAX_TERMS, sensors=None) -> list[Found]:
+def search(result, max_terms: int = MAX_TERMS, sensors=None, events: bool = True) -> list[Found]:
     """Forward selection over the dictionary at the current fit (linearised score tests), on
     the sensors whose terms can be sized (``searchable``) and whose own rows fail
     (``failing_sensors``; ``sensors`` overrides).  At each step the most significant term is
     taken, unless a more physical term (``_rank``) is its alias — the two columns, outside the
     model and the terms taken before, alike to ALIAS_COS, so that this capture cannot tell them
     apart: then that one, and the others are listed as its aliases with what would separate
-    them."""
+    them.  ``events``: whether a drift in time or a step at a segment boundary may be taken
+    (after the physical terms, while the fit still fails)."""
     model = result.model
     s = model.s
     reference = _reference_c(s)
@@ -370,6 +371,7 @@ def search(result, max_terms: int = MAX_TERMS, sensors=None) -> list[Found]:
     if not candidates:
         return []
     bank = in_capture_units(TermsEffect)(candidates, reference)      # counts on a raw capture
+    bank.id = "term_search_bank"        # beside discovered terms already in the model
     extended = lsq.Model(s, [*model.effects, bank], model.attitudes, like=model)
     extended.priors = dict(model.priors)
     n = model.layout.size
@@ -385,7 +387,7 @@ def search(result, max_terms: int = MAX_TERMS, sensors=None) -> list[Found]:
     # a drift in time or a step at a segment boundary is an event of this capture, not a property
     # of the sensor that holds in the next one: searched only once the physical terms are
     # exhausted and the fit still fails
-    events = np.array([c.regressor.family in ("t", "step") for c in candidates])
+    is_event = np.array([c.regressor.family in ("t", "step") for c in candidates])
     events_too = False
     while len(found) < max_terms:
         # over-dispersion of what is left (the misfit shrinks as terms are taken)
@@ -398,12 +400,12 @@ def search(result, max_terms: int = MAX_TERMS, sensors=None) -> list[Found]:
         lm = np.where(usable, g**2 / np.where(usable, norms2, 1.0), 0.0)
         lm[chosen] = 0.0
         if not events_too:
-            lm[events] = 0.0
+            lm[is_event] = 0.0
         k = int(np.argmax(lm))
         # Holm over the family: the step's rank among m - len(found) untested terms
         p = min(1.0, chi2_sf(lm[k] / phi, 1) * (m - len(found))) if lm[k] > 0 else 1.0
         if p >= ALPHA:
-            if not events_too and phi > 1.0:
+            if events and not events_too and phi > 1.0:
                 events_too = True         # the physical terms leave the fit failing: events may
                 continue                  #   explain the rest
             break
@@ -668,7 +670,7 @@ class Proposal:
         return out
 
 
-def propose(diagnosis, summaries, h_before=None) -> Proposal | None:
+def propose(diagnosis, summaries, h_before=None, events: bool = True) -> Proposal | None:
     """Search, refit, judge (the stop rule of --auto: station.diagnose.holdout.judge); None when
     no term of the dictionary is significant.  ``h_before``: the leave-one-segment-out Holdout
     of the diagnosis' fit, when already computed."""
@@ -676,7 +678,7 @@ def propose(diagnosis, summaries, h_before=None) -> Proposal | None:
     from station.diagnose.holdout import judge, leave_one_segment_out
 
     result = diagnosis.result
-    found = search(result)
+    found = search(result, events=events)
     if not found:
         return None
     after_result, effect = refit(summaries, result, found)
