@@ -85,8 +85,11 @@ def _terms_step(current: Diagnosis, h_current, summaries, registry, instead=None
     """The terms of the dictionary as a step, when they pass the stop rule (judge): with
     ``instead`` = (effect id, its diagnosis, its Holdout), only when they also beat that library
     effect out of sample (a lower leave-one-segment-out score on the same segments) and in chi2
-    by more than the 1 % point of chi2 on one degree of freedom (a library effect and its
-    equivalent terms fit alike; only a clearly better fit displaces it).  Only properties of the
+    by more than the 1 % point of chi2 on as many degrees of freedom as the terms have
+    parameters beyond the effect's (at least one): a library effect and its equivalent terms fit
+    alike, and more terms always fit a little better; only a clearly better fit displaces it.
+    Nor when half the terms or more are the effect's own (their columns inside what its
+    parameters can do: terms.within): then they are that effect written as terms.  Only properties of the
     sensor are carried into the model: a drift in time or a step at a segment boundary is an
     event of this capture (the verdict says it in words; apply could not compensate it)."""
     from scipy import stats
@@ -98,8 +101,12 @@ def _terms_step(current: Diagnosis, h_current, summaries, registry, instead=None
         return None
     if instead is not None:
         eid, lib_after, h_lib = instead
+        own = terms.within(current.result, registry.create(eid), [f.term for f in prop.found])
+        if sum(c >= terms.OWN_COS for c in own) * 2 >= len(own):
+            return None          # the terms are mostly the effect's own physics: keep the effect
         cv_lib, cv_terms = h_lib.common_score(prop.h_after)
-        if not (cv_terms < cv_lib and prop.chi2_after < lib_after.chi2 - stats.chi2.ppf(0.99, 1)):
+        extra = max(lib_after.dof - prop.after.dof, 1)      # the terms' parameters beyond the effect's
+        if not (cv_terms < cv_lib and prop.chi2_after < lib_after.chi2 - stats.chi2.ppf(0.99, extra)):
             return None
     after = diagnose(prop.after.result, registry=registry)       # with the library's candidates
     effect, values, sigmas = terms.in_model(after.result)

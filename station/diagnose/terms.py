@@ -428,6 +428,30 @@ def search(result, max_terms: int = MAX_TERMS, sensors=None, events: bool = True
     return found
 
 
+OWN_COS = 0.999          # a term this alike to what an effect's parameters can do is that effect's own
+
+
+def within(result, effect, found_terms) -> list[float]:
+    """For each term, how much of its column (outside the fitted model) lies in what ``effect``'s
+    parameters can change: 1 when the effect contains the term (the same physics)."""
+    model = result.model
+    n = model.layout.size
+
+    def columns(extra):
+        ext = lsq.Model(model.s, [*model.effects, extra], model.attitudes, like=model)
+        ext.priors = dict(model.priors)
+        x = np.concatenate([result.x, np.zeros(ext.layout.size - n)])
+        return outside_model(result, ext.jacobian_columns(x, list(range(n, ext.layout.size))))
+
+    bank = in_capture_units(TermsEffect)(list(found_terms), _reference_c(model.s))
+    bank.id = "term_search_bank"
+    E, T = columns(effect), columns(bank)
+    u, sv, _ = np.linalg.svd(E, full_matrices=False)
+    u = u[:, sv > 1e-8 * sv[0]] if len(sv) and sv[0] > 0 else u[:, :0]
+    norms = np.maximum(np.linalg.norm(T, axis=0), 1e-300)
+    return [float(v) for v in np.linalg.norm(u.T @ T, axis=0) / norms]
+
+
 def _segment_count(s) -> int:
     idx = [q.index for q in [*s.statics, *s.rotations] if getattr(q, "index", None) is not None]
     return int(max(idx)) + 1 if idx else 0
