@@ -235,6 +235,13 @@ def heldout(case, tmp, seed=3, library_patch=None):
             res["after"] = scored(tmp / "auto.yaml", extra)
         else:
             res["after"] = res["before"]
+        if plugin.exists() and "discovered_terms" not in res["added"]:
+            # a plugin emitted but not added by --auto (the code before issue 25's items 3-4): as a
+            # user would, add it to what --auto added and score it too
+            cmd = ["estimate", str(train), "-o", str(tmp / "plugin.yaml"), "--accept-poor-fit",
+                   "--add", f"{plugin}:DiscoveredTerms", *(x for a in res["added"] for x in ("--add", a))]
+            rc, _, e = cli(cmd)
+            res["with_plugin"] = scored(tmp / "plugin.yaml", ["--plugin", f"{plugin}:DiscoveredTerms"]) if rc == 0 else e
         res["plugin"] = plugin.read_text() if plugin.exists() else None
         res["loop_s"] = time.perf_counter() - t0
     return res
@@ -269,6 +276,10 @@ def _heldout_main(names):
                   f"{a['accel_mg']:.4f} mg; gyro {b['gyro_dph']:.3f} -> {a['gyro_dph']:.3f} deg/h "
                   f"({b.get('gyro_ppm_of_rate', 0):.1f} -> {a.get('gyro_ppm_of_rate', 0):.1f} ppm); diagnose "
                   f"{r['diagnose_s']:.1f} s, loop {r['loop_s']:.1f} s")
+            if "with_plugin" in r:
+                w = r["with_plugin"]
+                print(f"    with the emitted plugin: " + (f"accel {w['accel_mg']:.4f} mg, gyro {w['gyro_dph']:.3f} deg/h "
+                      f"({w.get('gyro_ppm_of_rate', 0):.1f} ppm)" if isinstance(w, dict) else str(w)[-200:]))
             print("   ", r["verdict"][:400])
 
 
