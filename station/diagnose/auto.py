@@ -92,7 +92,7 @@ def _terms_step(current: Diagnosis, h_current, summaries, registry, instead=None
     parameters can do: terms.within): then they are that effect written as terms.  Only properties of the
     sensor are carried into the model: a drift in time or a step at a segment boundary is an
     event of this capture (the verdict says it in words; apply could not compensate it)."""
-    from scipy import stats
+    from scipy import special
 
     from station.diagnose import terms
 
@@ -106,7 +106,7 @@ def _terms_step(current: Diagnosis, h_current, summaries, registry, instead=None
             return None          # the terms are mostly the effect's own physics: keep the effect
         cv_lib, cv_terms = h_lib.common_score(prop.h_after)
         extra = max(lib_after.dof - prop.after.dof, 1)      # the terms' parameters beyond the effect's
-        if not (cv_terms < cv_lib and prop.chi2_after < lib_after.chi2 - stats.chi2.ppf(0.99, extra)):
+        if not (cv_terms < cv_lib and prop.chi2_after < lib_after.chi2 - special.chdtri(extra, ALPHA)):
             return None
     after = diagnose(prop.after.result, registry=registry)       # with the library's candidates
     effect, values, sigmas = terms.in_model(after.result)
