@@ -112,7 +112,7 @@ def _diagnose(args, job) -> tuple:
         auto.conclude(first, s)
         final = first
     if args.emit_effect:
-        _emit(args.emit_effect, final)
+        _emit(args.emit_effect, final, steps)
     summary = _summary_lines(final)
     page = None
     if job is not None:
@@ -130,17 +130,29 @@ def _diagnose(args, job) -> tuple:
     return first, steps, final, summary, page
 
 
-def _emit(path, d) -> None:
-    from station.diagnose.terms import plugin_source
+def _emit(path, d, steps=()) -> None:
+    """Write the discovered terms (in the final model, or proposed) as a working plugin; when
+    there are none, one line says so and nothing is written (exit 0)."""
+    from station.diagnose.terms import in_model, plugin_source
 
-    if d.proposal is None:
-        raise UserError(f"--emit-effect {path}: no term outside the library was found to write "
-                        "(the model explains the data, or a library effect is the better candidate)")
+    got = in_model(d.result)
+    aliases = [a for st in steps if st.discovered and st.proposal is not None for a in st.proposal.alias_lines()]
+    how = "station diagnose --auto (added: it passed the out-of-sample stop rule)"
+    if got is None and d.proposal is not None:
+        got = (d.proposal.effect, d.proposal.values, d.proposal.sigmas)
+        aliases = d.proposal.alias_lines()
+        how = ("station diagnose (proposed" + ("" if d.proposal.kept else f"; NOT kept: {d.proposal.reason}") + ")")
+    if got is None:
+        err.print(f"--emit-effect {path}: nothing to emit: no term outside the library was found "
+                  "(the model explains the data, or a library effect accounts for it); no file written",
+                  markup=False, soft_wrap=True)
+        return
     try:
-        Path(path).write_text(plugin_source(d.proposal.effect, d.proposal.values, d.proposal.sigmas))
+        Path(path).write_text(plugin_source(*got, aliases=aliases, discovered_by=how))
     except OSError as e:
         raise UserError(f"{path}: cannot write: {e.strerror}") from None
-    err.print(f"effect plugin written: {path} (add it with --add {path}:DiscoveredTerms)", markup=False)
+    err.print(f"effect plugin written: {path} (add it with --add {path}:DiscoveredTerms; check it with "
+              f"python {path})", markup=False, soft_wrap=True)
 
 
 def _summary_lines(d) -> list[str]:
@@ -185,7 +197,8 @@ def to_json(d, steps) -> dict:
             "smallest_detectable": [_num(v) for v in c.detectable], "aliased": c.aliased,
             "advice": c.advice, "source": c.source, "overdispersion": c.overdispersion}
             for c in d.candidates],
-        "steps": [{"added": st.added, "predicted_chi2_drop": st.predicted_drop,
+        "steps": [{"added": st.added, "discovered": st.discovered, "instead_of": st.instead_of or None,
+                   "predicted_chi2_drop": st.predicted_drop,
                    "actual_chi2_drop": st.actual_drop, "chi2_before": st.before.chi2,
                    "chi2_after": st.after.chi2, "reduced_chi2_after": st.after.reduced_chi2,
                    "holdout_before": st.holdout_before, "holdout_after": st.holdout_after,
@@ -226,7 +239,7 @@ def _print(out, first, steps, final) -> None:
     out.print("worst segments: " + ", ".join(f"{s.name} ({s.kind}) {s.rms:.2g}σ" for s in worst))
     out.print(_candidates_table(first))
     for k, st in enumerate(steps, 1):
-        t = Table(title=f"step {k}: added {st.added}")
+        t = Table(title=f"step {k}: added {st.added}" + (" (discovered outside the library)" if st.discovered else ""))
         for col in ("", "before", "after"):
             t.add_column(col, justify="left" if not col else "right")
         for what, b, a in comparison_rows(st.before, st.after):

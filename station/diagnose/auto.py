@@ -44,6 +44,9 @@ class Step:
     share: float | None = None               # of the excess chi2 explained (None: the fit passed)
     caveats: list = field(default_factory=list)  # what this capture cannot tell apart from it
     removed: list = field(default_factory=list)  # (effect, reason): earlier additions no longer needed
+    discovered: bool = False                 # terms found outside the library (terms.TermsEffect)
+    instead_of: str = ""                     # the library effect the terms beat out of sample
+    proposal: object = None                  # terms.Proposal of a discovered step
 
 
 @dataclass
@@ -66,9 +69,66 @@ def added_parameters(after: Diagnosis, effect_id: str) -> list:
             for i, (n, v, u) in enumerate(zip(names, values, units_)) if n in own]
 
 
+def _rebuild(effects, registry, extra=()) -> list:
+    """Fresh instances of the model's library effects (by id) and the same discovered terms
+    (they are not in the registry), then ``extra``."""
+    from station.diagnose.terms import TermsEffect
+
+    return [e if isinstance(e, TermsEffect) else registry.create(e.id) for e in effects] + list(extra)
+
+
+DISCOVERED = "discovered_terms"
+MAX_TERM_STEPS = 2       # searches of the dictionary whose terms are added by --auto
+
+
+def _terms_step(current: Diagnosis, h_current, summaries, registry, instead=None):
+    """The terms of the dictionary as a step, when they pass the stop rule (judge): with
+    ``instead`` = (effect id, its diagnosis, its Holdout), only when they also beat that library
+    effect out of sample (a lower leave-one-segment-out score on the same segments) and in chi2
+    by more than the 1 % point of chi2 on as many degrees of freedom as the terms have
+    parameters beyond the effect's (at least one): a library effect and its equivalent terms fit
+    alike, and more terms always fit a little better; only a clearly better fit displaces it.
+    Nor when half the terms or more are the effect's own (their columns inside what its
+    parameters can do: terms.within): then they are that effect written as terms.  Only properties of the
+    sensor are carried into the model: a drift in time or a step at a segment boundary is an
+    event of this capture (the verdict says it in words; apply could not compensate it)."""
+    from scipy import special
+
+    from station.diagnose import terms
+
+    prop = terms.propose(current, summaries, h_current, events=False)
+    if prop is None or not prop.kept:
+        return None
+    if instead is not None:
+        eid, lib_after, h_lib = instead
+        own = terms.within(current.result, registry.create(eid), [f.term for f in prop.found])
+        if sum(c >= terms.OWN_COS for c in own) * 2 >= len(own):
+            return None          # the terms are mostly the effect's own physics: keep the effect
+        cv_lib, cv_terms = h_lib.common_score(prop.h_after)
+        extra = max(lib_after.dof - prop.after.dof, 1)      # the terms' parameters beyond the effect's
+        if not (cv_terms < cv_lib and prop.chi2_after < lib_after.chi2 - special.chdtri(extra, ALPHA)):
+            return None
+    after = diagnose(prop.after.result, registry=registry)       # with the library's candidates
+    effect, values, sigmas = terms.in_model(after.result)
+    new = {f.term.name for f in prop.found}
+    estimate = [(t.name, t.natural(v), abs(t.natural(sg)), t.meaning()[1])
+                for t, v, sg in zip(effect.terms, values, sigmas) if t.name in new]
+    caveat = prop.alias_lines()
+    if instead is not None:
+        caveat.insert(0, f"the terms replace {instead[0]}, which fits this capture too but predicts the left-out "
+                         f"segments worse (leave-one-segment-out {cv_lib:.1f} against {cv_terms:.1f} with the "
+                         f"terms) and leaves chi2 {lib_after.chi2:.1f} against {prop.chi2_after:.1f}")
+    return Step(DISCOVERED, current, after, sum(f.chi2_drop for f in prop.found), current.chi2 - after.chi2,
+                estimate, prop.holdout_before, prop.holdout_after, prop.share, caveat, discovered=True,
+                instead_of=instead[0] if instead else "", proposal=prop), prop.h_after
+
+
 def run(summaries, effects=(), attitudes="auto", progress=None,
-        registry: EffectRegistry | None = None, on_first=None) -> tuple[list[Step], Diagnosis]:
+        registry: EffectRegistry | None = None, on_first=None, discover: bool = True) -> tuple[list[Step], Diagnosis]:
     """Diagnose; while a significant candidate passes the checks, add it, refit, diagnose again.
+    When no library effect is kept and the fit still fails, the terms found outside the library
+    (station.diagnose.terms) are added when they pass the same checks (``discover``), marked as
+    discovered; a library effect that passes is replaced by terms that beat it out of sample.
     ``on_first(diagnosis)``, when given, is called with the diagnosis of the model as fitted as
     soon as it is made (a report draws its candidates' figures meanwhile)."""
     registry = registry or EffectRegistry()
@@ -78,15 +138,16 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
     h_current = None          # the leave-one-segment-out check, only once a candidate is tried
     steps, rejected = [], []
     refused: set = set()
+    term_steps = 0
     while len(steps) < MAX_STEPS:
         tries = [c for c in current.candidates if c.significant and c.effect not in refused][:MAX_TRIES]
         kept = None
         for cand in tries:
             if progress:
                 progress(cand.effect)
-            ids = [e.id for e in current.result.model.effects] + [cand.effect]
-            after = diagnose(lsq.fit(summaries, [registry.create(e) for e in ids], attitudes,
-                                     like=current.result.model), registry=registry)
+            after = diagnose(lsq.fit(summaries, _rebuild(current.result.model.effects, registry,
+                                                         [registry.create(cand.effect)]),
+                                     attitudes, like=current.result.model), registry=registry)
             if h_current is None:
                 h_current = leave_one_segment_out(current.result)
             h_after = leave_one_segment_out(after.result)
@@ -95,10 +156,22 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
                 kept = Step(cand.effect, current, after, cand.predicted_chi2_drop, current.chi2 - after.chi2,
                             added_parameters(after, cand.effect), cv_b, cv_a, share,
                             caveats(summaries, cand.effect))
+                if discover and term_steps < MAX_TERM_STEPS and fit_fails(current.result):
+                    alt = _terms_step(current, h_current, summaries, registry, (cand.effect, after, h_after))
+                    if alt is not None:       # the effect stays a candidate for the next steps
+                        kept, h_after = alt
+                        term_steps += 1
                 break
             refused.add(cand.effect)
             rejected.append(Rejection(cand.effect, reason, current.chi2 - after.chi2, cv_b, cv_a, share,
                                       added_parameters(after, cand.effect)))
+        if kept is None and discover and term_steps < MAX_TERM_STEPS and fit_fails(current.result):
+            if h_current is None:
+                h_current = leave_one_segment_out(current.result)
+            alt = _terms_step(current, h_current, summaries, registry)
+            if alt is not None:
+                kept, h_after = alt
+                term_steps += 1
         if kept is None:
             break
         steps.append(kept)
@@ -106,7 +179,7 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
         current, h_current = eliminate(summaries, kept, [st.added for st in steps[:-1]], current, h_current,
                                        attitudes, registry, refused)
     current.rejected = rejected
-    conclude(current, summaries, steps)
+    conclude(current, summaries, steps, search_terms=not (discover and term_steps >= MAX_TERM_STEPS))
     return steps, current
 
 
@@ -139,8 +212,8 @@ def eliminate(summaries, step: Step, earlier: list, current: Diagnosis, h_curren
     while remaining:
         trials = []
         for eid in remaining:
-            ids = [e.id for e in current.result.model.effects if e.id != eid]
-            without = diagnose(lsq.fit(summaries, [registry.create(e) for e in ids], attitudes,
+            effects = [e for e in current.result.model.effects if e.id != eid]
+            without = diagnose(lsq.fit(summaries, _rebuild(effects, registry), attitudes,
                                        like=current.result.model), registry=registry)
             h_without = leave_one_segment_out(without.result)
             needed, why = still_needed(current, without, h_current, h_without)
@@ -151,7 +224,8 @@ def eliminate(summaries, step: Step, earlier: list, current: Diagnosis, h_curren
         _, eid, current, h_current, why = min(trials, key=lambda t: t[0])
         step.removed.append((eid, f"{eid}: no longer needed with {step.added} in the model: {why}"))
         step.after, step.holdout_after = current, h_current.score
-        step.estimate = added_parameters(current, step.added)
+        if not step.discovered:
+            step.estimate = added_parameters(current, step.added)
         refused.add(eid)
         remaining.remove(eid)
     return current, h_current
@@ -160,7 +234,10 @@ def eliminate(summaries, step: Step, earlier: list, current: Diagnosis, h_curren
 def redundant_with(d: Diagnosis, extra, added: set, summaries) -> list:
     """(effect, why) for every effect in ``added`` (added by the loop) that the data no longer
     need once ``extra`` (the terms found outside the library) is in the model (still_needed)."""
-    effects, attitudes = list(d.result.model.effects), d.result.model.attitudes
+    from station.diagnose.terms import TermsEffect
+
+    effects = [e for e in d.result.model.effects if not isinstance(e, TermsEffect)]
+    attitudes = d.result.model.attitudes
     every = EffectRegistry().ids()          # no candidates ranked: only the fits are compared
     with_all = diagnose(lsq.fit(summaries, [*effects, extra], attitudes, like=d.result.model), exclude=every)
     h_all = leave_one_segment_out(with_all.result)
@@ -179,7 +256,11 @@ def redundant_with(d: Diagnosis, extra, added: set, summaries) -> list:
 def conclude(d: Diagnosis, summaries, steps=(), search_terms: bool = True) -> Diagnosis:
     """The final verdict: when the model still fails and no significant library effect is left
     to add, search the dictionary of terms outside the library and say what it found."""
+    found = discovered_lines(d)
     if not fit_fails(d.result):
+        if found:
+            d.verdict += (f"; with terms found outside the library (discovered, in the model): {'; '.join(found)}; "
+                          "--emit-effect FILE writes them as a working effect plugin")
         return d
 
     def specific(failures):
@@ -217,6 +298,8 @@ def conclude(d: Diagnosis, summaries, steps=(), search_terms: bool = True) -> Di
         head += f"; first look at this (seen before any effect was added): {first[0]}"
     if d.rejected:
         head += f"; tried and not kept: {', '.join(r.effect for r in d.rejected)}"
+    if found:
+        head += f"; discovered outside the library and in the model: {'; '.join(found)}"
     prop = d.proposal
     if prop is not None:
         check = ("and predicts left-out segments better" if prop.kept
@@ -226,13 +309,25 @@ def conclude(d: Diagnosis, summaries, steps=(), search_terms: bool = True) -> Di
             instead = (f"; with these terms {', '.join(e for e, _ in prop.redundant)} "
                        f"{'is' if len(prop.redundant) == 1 else 'are'} no longer needed "
                        f"({'; '.join(why for _, why in prop.redundant)}): add the terms instead")
+        aliases = "".join(f"; {a}" for a in prop.alias_lines())
         d.verdict = (f"{head}; outside the library the residuals follow {'; '.join(prop.lines())} "
-                     f"(with these terms reduced chi2 {prop.reduced_after:.3g}, {check}){instead}; write them "
+                     f"(with these terms reduced chi2 {prop.reduced_after:.3g}, {check}){aliases}{instead}; write them "
                      "as an effect plugin with --emit-effect FILE, check the physics, add it with --add")
     else:
         d.verdict = (f"{head}; no effect of the library and no term of the dictionary accounts for it: "
                      "see where it fails")
     return d
+
+
+def discovered_lines(d: Diagnosis) -> list[str]:
+    """The discovered terms in the model of ``d``, in words and units (value ± 1σ)."""
+    from station.diagnose.terms import in_model
+
+    got = in_model(d.result)
+    if got is None:
+        return []
+    effect, values, sigmas = got
+    return [t.words(v, sg) for t, v, sg in zip(effect.terms, values, sigmas)]
 
 
 def comparison_rows(before: Diagnosis, after: Diagnosis) -> list[tuple[str, float, float]]:
