@@ -2,7 +2,7 @@
 samples and a temperature that changes, found in simulated captures with the fault hidden in the
 simulated IMU (sim_devices.truth: full_scale, stuck_at_s), left out and said; and no false alarm
 on clean captures (table and hand sessions, float and quantised outputs) nor on the real
-recordings in shared/data.
+recordings in tests/data/imucal.
 
 Tolerances: every estimated parameter against the truth at 4.5 times its reported 1-sigma (for 21
 Gaussian errors a chance of 1.4e-4 that any exceeds it: a failure means the estimate or its
@@ -24,7 +24,7 @@ from station.io.capture import read_capture
 from station.model.calibration import parameter_errors
 from station.simulate.dryrun import truth_calibration
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "imucal"
+DATA = Path(__file__).resolve().parent / "data" / "imucal"
 RAIL = 10.0                                     # m/s^2: the z accelerometer's full scale
 CLIPPING = dict(bench__lever_arm_m=[0.0, 0.0, -0.1], accel__full_scale=RAIL)
 # with the IMU 10 cm off the axes, the turns about x and y at 100 deg/s add w^2 r = 0.30 m/s^2 to
@@ -169,7 +169,7 @@ def test_clean_hand_sessions_raise_no_alarm(tmp_path, counts):
         assert report["faults"] == [] and report["segments_scanned"] == 31
 
 
-@pytest.mark.skipif(not DATA.exists(), reason="shared/data/imucal not present")
+@pytest.mark.skipif(not DATA.exists(), reason="tests/data/imucal not present")
 def test_the_real_recordings_raise_no_alarm(tmp_path):
     from station.io.importers import imucal
 
