@@ -222,3 +222,28 @@ def test_the_page_never_contradicts_the_calibration_it_describes(optimal9_run, t
     assert main(["diagnose", str(optimal9_run), "--report", str(out)]) == 0
     text = (out / "index.html").read_text(encoding="utf-8")
     assert "No calibration file" not in text and "fit verdict: passes" in text
+
+
+def test_the_loop_ends_in_a_calibration_file(hidden_effect_capture, tmp_path, capsys):
+    """`diagnose --auto -o CAL.yaml` writes the calibration of the model it ends with (the
+    effect it added, the estimate `station estimate --add` makes) and prints the commands that
+    reproduce and apply it; the command printed gives the same file (issue 26, item 2)."""
+    import shlex
+
+    import yaml
+
+    cal = tmp_path / "cal.yaml"
+    capsys.readouterr()
+    assert main(["diagnose", str(hidden_effect_capture), "--auto", "-o", str(cal)]) == 0
+    said = capsys.readouterr().err
+    doc = yaml.safe_load(cal.read_text())
+    assert "accel_nonlinearity" in doc["effects"] and doc["verdict"]["result"] == "passes"
+    line = next(x for x in said.splitlines() if x.startswith("to estimate it: "))
+    argv = shlex.split(line[len("to estimate it: "):])
+    assert argv[:2] == ["station", "estimate"] and "--add" in argv and "accel_nonlinearity" in argv
+    again = tmp_path / "again.yaml"
+    argv[argv.index("-o") + 1] = str(again)
+    assert main(argv[1:]) == 0
+    redo = yaml.safe_load(again.read_text())
+    assert {k: v["value"] for k, v in redo["parameters"].items()} == {k: v["value"] for k, v in doc["parameters"].items()}
+    assert any(x.startswith(f"to apply it: station apply {cal} ") for x in said.splitlines())

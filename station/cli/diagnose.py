@@ -25,6 +25,10 @@ def add_parsers(sub) -> None:
     d.add_argument("--report", metavar="DIR", help="write index.html and its figures (SVG) into DIR")
     d.add_argument("--emit-effect", metavar="FILE.py",
                    help="write the terms found outside the library as a ready-to-edit effect plugin")
+    d.add_argument("-o", "--output", metavar="CAL.yaml",
+                   help="write the calibration of the model the diagnosis ends with (its effects; terms it "
+                        "discovered as a plugin beside it, CAL-discovered.py) and print the commands that "
+                        "reproduce and apply it; exit 3 when that calibration's fit fails")
     d.add_argument("--config", metavar="FILE", help="station.yaml (its effects section names plugins)")
     plugins.add_arguments(d)
     d.set_defaults(func=cmd_diagnose)
@@ -66,7 +70,53 @@ def cmd_diagnose(args) -> int:
         print(json.dumps(to_json(final, steps), indent=1))
     elif not args.report:
         _print(out, first, steps, final)
-    return 0
+    return _in_a_file(args, final, steps)
+
+
+def _in_a_file(args, final, steps) -> int:
+    """The loop ends in a file: with -o, the calibration of the model the diagnosis ends with
+    (the same estimate `station estimate` makes: verdict, noise model, pose check), the
+    discovered terms written as a plugin beside it; with or without -o, when the diagnosis
+    changed the model, the commands that reproduce and apply it (on stderr)."""
+    from station.diagnose.terms import in_model
+
+    effects = [e for e in final.effects if e not in ("base_triads", "inter_triad", "discovered_terms")]
+    discovered = in_model(final.result) is not None
+    if not args.output and not steps:
+        return 0
+    plugin = None
+    if args.output:
+        from station.estimate import estimate_capture
+        from station.estimate.verdict import fit_fails
+        from station.io.calfile import write_calfile
+
+        target = Path(args.output)
+        reg = plugins.registry(args)
+        ids = plugins.effect_ids(reg, effects)
+        if discovered:
+            plugin = target.with_name(f"{target.stem}-discovered.py")
+            _emit(plugin, final, steps)
+            ids += reg.add(f"{plugin}:DiscoveredTerms")
+        cal, _, provenance = estimate_capture(args.capture, "lsq", ids, reg)
+        write_calfile(target, cal, provenance)
+        verdict = cal.fit.get("verdict", {})
+        err.print(f"calibration file: {target} (effects: {', '.join(ids) or 'none'}; fit {verdict.get('result')}: "
+                  f"{verdict.get('reason', '')})", markup=False, soft_wrap=True)
+        status = 3 if fit_fails(cal) else 0
+    else:
+        status = 0
+    given = " ".join(f"--plugin {p}" for p in getattr(args, "plugin", [])) + "".join(
+        f" --effects-dir {d}" for d in getattr(args, "effects_dir", []))
+    adds = " ".join([f"--add {e}" for e in effects]
+                    + ([f"--add {plugin}:DiscoveredTerms"] if plugin else
+                       ["--add FOUND.py:DiscoveredTerms (write it with --emit-effect FOUND.py)"] if discovered else []))
+    cal_name = args.output or "CAL.yaml"
+    err.print(f"to estimate it: station estimate {args.capture} {given} {adds} -o {cal_name}".replace("  ", " "),
+              markup=False, soft_wrap=True)
+    apply_plugin = f" --plugin {plugin}" if plugin else ""
+    err.print(f"to apply it: station apply {cal_name} RAW.csv -o COMPENSATED.csv{apply_plugin} {given}".rstrip(),
+              markup=False, soft_wrap=True)
+    return status
 
 
 def _diagnose(args, job) -> tuple:
