@@ -1,6 +1,7 @@
 """station noise: the Allan deviation's noise terms against the simulated bench's known white
 noise, and against a synthetic random walk (the simulated IMU has white noise only)."""
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -8,7 +9,7 @@ import yaml
 
 from station.cli import main
 from station.estimate.noise import characterise
-from station.io.capture import read_capture
+from station.io.capture import read_capture, read_segment_csv
 
 UG = 9.80665e-6
 
@@ -227,3 +228,24 @@ def test_a_stopped_noise_recording_is_characterised_from_the_rows_it_holds(noise
     assert main(["noise", str(cap)]) == 0
     again = yaml.safe_load((cap / "noise.yaml").read_text())["noise"]
     assert {k: v for k, v in again.items() if k != "source"} == {k: v for k, v in block.items() if k != "source"}
+
+
+@pytest.mark.parametrize("fmt", ["rosbag1", "mcap"])
+def test_noise_of_a_still_imu_in_a_ros_bag(noise_run, tmp_path, fmt):
+    """allan_variance_ros's use: a still IMU recorded as a bag goes to `station noise` as it is;
+    the figures are those of the same samples as a CSV (the bag's rad/s converted)."""
+    from station.io.importers.rosbag import write_imu_bag
+
+    seg = read_capture(noise_run).complete("static")[0]
+    d = read_segment_csv(noise_run / seg.file)
+    csv = tmp_path / "still.csv"
+    csv.write_text((noise_run / seg.file).read_text())
+    bag = write_imu_bag(tmp_path / ("still.bag" if fmt == "rosbag1" else "still"), d.t, d.accel, np.radians(d.gyro),
+                        fmt=fmt)
+    assert main(["noise", str(csv)]) == 0
+    assert main(["noise", str(bag)]) == 0
+    from_csv = yaml.safe_load((tmp_path / "still-noise.yaml").read_text())["noise"]
+    name = f"{Path(bag).stem}-noise.yaml"
+    from_bag = yaml.safe_load((tmp_path / name).read_text())["noise"]
+    for key in ("accelerometer_noise_density", "gyroscope_noise_density"):
+        assert from_bag["kalibr"][key] == pytest.approx(from_csv["kalibr"][key], rel=1e-5)

@@ -9,8 +9,10 @@ from station.cli.output import err, out
 def add_parsers(sub) -> None:
     n = sub.add_parser("noise", help="Allan deviation of a static recording: white noise, bias "
                        "instability, random walk, Kalibr's numbers")
-    n.add_argument("source", metavar="CAPTURE|FILE",
-                   help="a capture bundle (its longest static segment) or a CSV t,ax,ay,az,gx,gy,gz")
+    n.add_argument("source", metavar="CAPTURE|FILE|BAG",
+                   help="a capture bundle (its longest static segment), a CSV t,ax,ay,az,gx,gy,gz, or a "
+                        "ROS bag of a still IMU (sensor_msgs/Imu: ROS 1 .bag, ROS 2 folder, .mcap)")
+    n.add_argument("--topic", help="the bag's Imu topic (needed when it has several)")
     n.add_argument("--segment", help="the static segment of the capture to use")
     n.add_argument("--cal", metavar="CAL.yaml", help="write the figures into this calibration file "
                    "(default: CAPTURE/calibration.yaml when it exists; else CAPTURE/noise.yaml)")
@@ -62,7 +64,20 @@ def cmd_noise(args) -> int:
     src = Path(args.source)
     cal_doc = read_calfile(args.cal) if args.cal else None
     model = serial = None
-    if src.is_dir() or src.name == "manifest.yaml":
+    bag = (src.suffix in (".bag", ".mcap", ".db3")
+           or (src.is_dir() and (src / "metadata.yaml").is_file() and not (src / "manifest.yaml").exists()))
+    if bag:          # a still IMU recorded as a ROS bag (allan_variance_ros's use): its whole length
+        from types import SimpleNamespace
+
+        from station.io.importers.rosbag import read_rosbag
+
+        if args.segment:
+            raise UserError("--segment applies to a capture bundle, not to a bag")
+        rec = read_rosbag(src, topic=args.topic)
+        here = src.parent
+        result = noise.from_samples(src, SimpleNamespace(t=rec.t, accel=rec.accel, gyro=rec.gyro), args.rate_hz,
+                                    rec.accel_unit, rec.gyro_unit, cal_doc)
+    elif src.is_dir() or src.name == "manifest.yaml":
         capture = read_capture(src, load_data=False)     # from_capture reads the static segments
         here = capture.path
         default_cal = here / "calibration.yaml"
@@ -89,7 +104,7 @@ def cmd_noise(args) -> int:
     block = result.block()
     # a capture holds one noise file and plot; a CSV's are named after it (two recordings in one
     # folder do not overwrite each other's)
-    stem = "" if (src.is_dir() or src.name == "manifest.yaml") else f"{src.stem}-"
+    stem = f"{src.stem}-" if bag or not (src.is_dir() or src.name == "manifest.yaml") else ""
     if args.cal:
         target = write_into_calibration(args.cal, block)
     else:
