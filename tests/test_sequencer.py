@@ -341,7 +341,12 @@ def test_probe_finds_a_table_left_turning_and_stops_it(bench):
     found = {int(a): float(r) for a, r in re.findall(r"axis (\d) was turning at (\S+) deg/s", probe.stdout)}
     assert found == {2: pytest.approx(-25.0, abs=0.01)}, probe.stdout
     rest = float(re.search(r"held \(axis 2 at (\S+) deg\)", probe.stdout).group(1))
-    assert bench.table.read_rate(2) == 0.0 and bench.table.axes[1].mode == "position"
+    # at rest as the driver judges it (its rate tolerance): a position loop holding the axis reads
+    # a few resolution steps (1e-5 deg/s) while it settles, an exact 0 only by timing
+    from drivers.table import TableSettings
+
+    assert abs(bench.table.read_rate(2)) <= TableSettings().rate_tolerance_dps
+    assert bench.table.axes[1].mode == "position"
     assert abs((bench.table.read_position(2) - rest + 180) % 360 - 180) < 0.002
     assert all(ax.interlock_closed for ax in bench.table.axes)
 
