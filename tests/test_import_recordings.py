@@ -12,6 +12,8 @@ the session must reach to be worth anything (gyro scale better than 0.2 %).
 import json
 from pathlib import Path
 
+import re
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -341,3 +343,36 @@ def test_offset_binary_counts_with_too_few_poses_say_so_in_one_line(tmp_path, ca
                      "--gyro-nominal", str(COUNTS[1]), "--rate-hz", "100", "-o", str(tmp_path / "c")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "3 static pose(s) found" in err
+
+
+def test_a_bag_stamped_at_receive_time_is_re_timed_with_rate_hz(tmp_path, capsys):
+    """A driver that stamps at receive time: the stamps jitter by the transport (here uniform
+    ±4 ms at 100 Hz) and the import calls the wider steps lost samples; `--rate-hz 100` re-times
+    the messages evenly after checking that their stamps span the count at 100 Hz (to 1 %), and
+    refuses when a message was lost (it would shift every later sample), naming both spans."""
+    truth, hs = session()
+    rng = np.random.default_rng(4)
+    stamped = hs.t + rng.uniform(-0.004, 0.004, len(hs.t))
+    stamped[1:-1] = np.maximum.accumulate(stamped[1:-1])
+    order = np.argsort(stamped)
+    bag = write_imu_bag(tmp_path / "rx", stamped[order], hs.accel, np.radians(hs.gyro), fmt="mcap")
+    common = ["--gravity-mps2", str(hs.truth["gravity_mps2"])]
+    code = cli.main(["import", "rosbag", str(bag), "-o", str(tmp_path / "even"), "--rate-hz", "100", *common])
+    assert code == 0, capsys.readouterr().err
+    cal, _, _ = estimate_capture(tmp_path / "even")
+    check_against_truth(cal, truth_calibration(truth))
+    lost = write_imu_bag(tmp_path / "lost", np.delete(stamped, 3000), np.delete(hs.accel, 3000, axis=0),
+                         np.radians(np.delete(hs.gyro, 3000, axis=0)), fmt="mcap")
+    capsys.readouterr()
+    assert cli.main(["import", "rosbag", str(lost), "-o", str(tmp_path / "x"), "--rate-hz", "100", *common]) == 2
+    assert "a message was lost" in capsys.readouterr().err
+    with pytest.raises(UserError) as e:
+        read_rosbag(lost, rate_hz=100.0)
+    m = re.search(r"--rate-hz 100: the stamps step by \+(\S+) ms .* near message (\d+)", str(e.value))
+    # one period, 10 ms, measured by two medians of 51 jittered stamps (uniform +-4 ms: the
+    # difference's 1-sigma about 1 ms): within 3 sigma; the block next to the loss at message 3001
+    assert m and abs(float(m.group(1)) - 10.0) < 3.0 and abs(int(m.group(2)) - 3001) <= 2 * 51, str(e.value)
+    # a rate that is not the bag's: its stamps' span disagrees with the count
+    assert cli.main(["import", "rosbag", str(bag), "-o", str(tmp_path / "y"), "--rate-hz", "98", *common]) == 2
+    err = capsys.readouterr().err
+    assert "messages were lost or the rate is not 98 Hz" in err and "Traceback" not in err

@@ -60,7 +60,7 @@ def cmd_import_csv(args) -> int:
 def cmd_import_rosbag(args) -> int:
     from station.io.importers import recording, rosbag
 
-    rec = rosbag.read_rosbag(args.bag, topic=args.topic, stamps=args.stamps)
+    rec = rosbag.read_rosbag(args.bag, topic=args.topic, stamps=args.stamps, rate_hz=args.rate_hz)
     _print_report(recording.write_capture(rec, args.output, **_recording_options(args)))
     return 0
 
@@ -150,6 +150,9 @@ def add_parsers(sub) -> None:
     b.add_argument("--topic", help="the Imu topic (default: the bag's only one)")
     b.add_argument("--stamps", choices=ROSBAG_STAMPS, default="header",
                    help="time from each message's header.stamp (default) or the recorder's receive time")
+    b.add_argument("--rate-hz", type=argtypes.positive, metavar="HZ",
+                   help="re-time the messages evenly at HZ (stamps that jitter: a driver stamped at receive "
+                        "time); refused when the stamps' span disagrees with the count at HZ by more than 1 %%")
     _add_recording_options(b)
     b.set_defaults(func=cmd_import_rosbag)
 

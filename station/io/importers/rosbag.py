@@ -29,7 +29,35 @@ def _typestore():
     return get_typestore(Stores.ROS2_HUMBLE)
 
 
-def read_rosbag(path, *, topic: str | None = None, stamps: str = "header") -> Recording:
+RETIME_SPAN_TOLERANCE = 0.01    # --rate-hz: the stamps' span and the messages' count at R Hz agree to 1 %
+
+
+LOSS_BLOCK = 51                 # messages per block of the lost-message check (a median each)
+
+
+def _no_message_lost(path, topic, t: np.ndarray, rate_hz: float) -> None:
+    """Before re-timing by the count: the stamps less the count's even times, r_k = t_k - k / R,
+    jitter about a constant; a lost message steps them by 1 / R from there on.  The medians of
+    blocks of LOSS_BLOCK messages (the jitter averaged out) two blocks apart differing by more
+    than half a period is a lost message (or a step in the stamps): refused, naming where."""
+    n = len(t) // LOSS_BLOCK
+    if n < 3:
+        return
+    r = t[:n * LOSS_BLOCK] - np.arange(n * LOSS_BLOCK) / rate_hz
+    med = np.median(r.reshape(n, LOSS_BLOCK), axis=1)
+    jump = med[2:] - med[:-2]
+    j = int(np.argmax(np.abs(jump)))
+    if abs(jump[j]) > 0.5 / rate_hz:
+        raise UserError(f"{path}: topic {topic}: --rate-hz {rate_hz:g}: the stamps step by {jump[j] * 1e3:+.3g} ms "
+                        f"against the count at {rate_hz:g} Hz near message {(j + 1) * LOSS_BLOCK + 1}: a message "
+                        "was lost (or the stamps stepped); re-timing by the count would shift every later sample")
+
+
+def read_rosbag(path, *, topic: str | None = None, stamps: str = "header", rate_hz: float | None = None) -> Recording:
+    """sensor_msgs/Imu messages of ``topic``.  ``rate_hz``: re-time the messages evenly at that
+    rate (a driver stamped at receive time, whose stamps jitter by the transport's delays),
+    after checking that the stamps' span agrees with the messages' count at that rate (a lost
+    message would shift every later sample: refused, naming both)."""
     from rosbags.highlevel import AnyReader
 
     path = Path(path)
@@ -83,12 +111,23 @@ def read_rosbag(path, *, topic: str | None = None, stamps: str = "header") -> Re
         raise UserError(f"{path}: topic {topic}: every header stamp is {t_ns[0]} ns: the driver does not "
                         "stamp its messages; use --stamps bag (the recorder's time)")
     t = (t_ns - (t_ns[0] if k else 0)).astype(float) * 1e-9
-    info = {"format": "ROS bag", "topic": topic, "stamps": stamps,
+    time_from = f"{'header.stamp' if stamps == 'header' else 'bag receive time'} of {topic}"
+    if rate_hz is not None:
+        if not (np.isfinite(rate_hz) and 0.01 <= rate_hz <= 1e6):
+            raise UserError(f"--rate-hz {rate_hz}: must be a sample rate within 0.01 Hz - 1 MHz")
+        span, even = (float(t[-1]) if k else 0.0), (k - 1) / rate_hz
+        if k > 1 and abs(span - even) > RETIME_SPAN_TOLERANCE * even:
+            raise UserError(f"{path}: topic {topic}: --rate-hz {rate_hz:g}: {k} messages at {rate_hz:g} Hz span "
+                            f"{even:.3f} s, their stamps {span:.3f} s: messages were lost or the rate is not "
+                            f"{rate_hz:g} Hz (re-timing would shift every later sample)")
+        _no_message_lost(path, topic, t, rate_hz)
+        t = np.arange(k, dtype=float) / rate_hz
+        time_from = f"message count at {rate_hz:g} Hz (--rate-hz; the stamps agree with it)"
+    info = {"format": "ROS bag", "topic": topic, "stamps": stamps, "rate_hz": rate_hz,
             "ignored": "orientation and the covariance matrices", "first_stamp_ns": int(t_ns[0]) if k else None}
     return Recording(source=str(path), t=t, accel=data[:, :3], gyro=data[:, 3:], accel_unit="m/s^2",
                      gyro_unit="rad/s", lines=np.arange(1, k + 1), where="message",
-                     time_from=f"{'header.stamp' if stamps == 'header' else 'bag receive time'} of {topic}",
-                     info=info)
+                     time_from=time_from, time_option="--rate-hz" if rate_hz is not None else "", info=info)
 
 
 def _guarded(messages, path, topic):
