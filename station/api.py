@@ -85,24 +85,16 @@ class Estimate:
 
 
 def _registry(plugins=(), effects_dirs=()):
-    from station.model.registry import EffectRegistry
+    """The library, entry points, $STATION_EFFECTS_PATH and the plugins named (loaded, not added)."""
+    from station.model.registry import registry_for
 
-    registry = EffectRegistry()
-    registry.add_all(list(plugins), list(effects_dirs))
-    return registry
+    return registry_for(plugins, effects_dirs)[0]
 
 
 def _effect_ids(registry, add) -> list[str]:
-    from station.model.registry import is_spec
+    from station.model.registry import effect_ids
 
-    ids = []
-    for value in add:
-        if is_spec(value):
-            ids += registry.add(value)
-        else:
-            registry.create(value)              # UserError naming an unknown id
-            ids.append(value)
-    return list(dict.fromkeys(ids))
+    return effect_ids(registry, add)
 
 
 def _path(capture) -> Path:

@@ -38,13 +38,6 @@ def registry(args) -> EffectRegistry:
 
 def effect_ids(reg: EffectRegistry, values) -> list[str]:
     """--add values: effect ids, or plugin specs whose effects are loaded and added."""
-    from station.model.registry import is_spec
+    from station.model.registry import effect_ids as ids_of
 
-    ids = []
-    for value in values:
-        if is_spec(value):
-            ids += reg.add(value)
-        else:
-            reg.create(value)            # one line naming the unknown id
-            ids.append(value)
-    return list(dict.fromkeys(ids))
+    return ids_of(reg, values)

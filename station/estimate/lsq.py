@@ -1563,6 +1563,8 @@ def _reweight(model: Model, x, cov, r, reduced, turns: bool, statics: list):
     def components(x):
         J = None if model.is_large else np.asarray(model.jacobian(x))
         out = variance_components(model.row_labels(x), model.residuals(x), J, parameters=model.layout.size)
+        if J is not None:       # kept for to_calibration's fit.noise_groups at the same x
+            model.components_at = (np.array(x, copy=True), out)
         return {c["group"]: c for c in out}
 
     eligible = (["hand turn"] if model.hands and turns else []) + list(statics)
@@ -1668,6 +1670,9 @@ def _noise_groups(result: FitResult) -> list:
     model = result.model
     if model.is_large:
         return []
+    kept = getattr(model, "components_at", None)
+    if kept is not None and np.array_equal(kept[0], result.x):      # computed while reweighting
+        return kept[1]
     from station.estimate.noise_groups import variance_components
 
     labels = model.row_labels(result.x)

@@ -83,10 +83,6 @@ class NoiseModel:
             extra += self.instability.variance
         return extra
 
-    def gyro_rate_variance(self) -> np.ndarray:
-        """(3,) the gyro bias' instability (summary units^2 per axis): times T^2 over an integral."""
-        return np.zeros(3) if self.instability is None else self.instability.variance[3:]
-
 
 AXES = ("accel x", "accel y", "accel z", "gyro x", "gyro y", "gyro z")
 

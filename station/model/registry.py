@@ -204,18 +204,23 @@ def _env_paths() -> list[str]:
     return [p for p in os.environ.get(ENV_PATH, "").split(os.pathsep) if p]
 
 
+def effect_ids(reg: EffectRegistry, values) -> list[str]:
+    """Effect ids, or plugin specs whose effects are loaded into ``reg``: the ids they name, in
+    order, once each; an unknown id is the one-line "unknown effect" error."""
+    ids = []
+    for value in values:
+        if is_spec(value):
+            ids += reg.add(value)
+        else:
+            reg.create(value)          # raises the one-line "unknown effect" error
+            ids.append(value)
+    return list(dict.fromkeys(ids))
+
+
 def registry_for(specs=(), folders=()) -> tuple[EffectRegistry, list[str]]:
     """The registry with the library, entry points, the environment's and the given plugins;
     ``specs`` may mix effect ids and plugin specs: returns the registry and the ids they name."""
     reg = EffectRegistry()
     for folder in folders:
         reg.add(folder)
-    ids = []
-    for spec in specs:
-        if is_spec(spec):
-            ids += reg.add(spec)
-        elif spec in reg:
-            ids.append(spec)
-        else:
-            reg.create(spec)          # raises the one-line "unknown effect" error
-    return reg, list(dict.fromkeys(ids))
+    return reg, effect_ids(reg, specs)
