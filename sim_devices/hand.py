@@ -25,7 +25,7 @@ Physics (frames and conventions of :mod:`sim_devices.world`: ENU, C_bn takes ENU
   vibration rectification while shaken, bias instability over the turn, bandwidth), so that
   the turn integrated from the gyro misses the true one by e_k.  The statics are untouched.
 * ``bias_instability``: (accelerometer ug, gyro deg/h) 1-sigma of a bias that wanders while the
-  session runs, each axis a first-order Gauss-Markov process of correlation time
+  session runs (each a number for every axis or three, x y z), each axis a first-order Gauss-Markov process of correlation time
   ``bias_tau_s`` (exact discretisation b_k+1 = phi b_k + sqrt(1 - phi^2) sigma w_k, phi =
   exp(-dt / tau), started in its stationary distribution), added at the sensor's input (to the
   specific force and the rate it senses: an output bias to within the scale factor's error):
@@ -145,16 +145,17 @@ def hand_session(truth: Truth, seed: int, *, poses: int = 38, dwell_s=(2.5, 4.0)
     w_ib = w_eb + C_bn.apply(site.earth_rate_enu) + np.vstack(pieces_e)     # rad/s
     t = np.arange(n) * dt
     temp = truth.temperature.at(t)
-    if any(bias_instability):
+    if any(np.any(np.asarray(v) != 0) for v in bias_instability):
         walk_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(3)[2])
         phi = math.exp(-dt / bias_tau_s)
         start = walk_rng.standard_normal(6)                        # stationary at the first sample
         drive = walk_rng.standard_normal((n, 6)) * math.sqrt(1.0 - phi * phi)
         b, _ = signal.lfilter([1.0], [1.0, -phi], drive, axis=0, zi=(phi * start)[None, :])
-        f_b = f_b + b[:, :3] * bias_instability[0] * world.MICRO_G
-        w_ib = w_ib + b[:, 3:] * np.radians(bias_instability[1] / 3600.0)
+        size = np.concatenate([np.broadcast_to(np.asarray(v, float), (3,)) for v in bias_instability])
+        f_b = f_b + b[:, :3] * size[:3] * world.MICRO_G
+        w_ib = w_ib + b[:, 3:] * np.radians(size[3:] / 3600.0)
         still = np.concatenate([np.arange(i, j) for i, j in statics])
-        walk_mean = b[still].mean(axis=0) * np.repeat(bias_instability, 3)     # ug, deg/h
+        walk_mean = b[still].mean(axis=0) * size     # ug, deg/h
     else:
         walk_mean = np.zeros(6)
     accel, gyro = truth.measure(f_b, np.degrees(w_ib), temp, noise_rng)

@@ -133,6 +133,25 @@ def test_the_imu_twin_sees_centripetal_acceleration_and_the_table_rate():
     np.testing.assert_allclose(gyro, np.column_stack([ex, ey, 360 + earth[2] + 0 * theta]), atol=1e-12)
 
 
+def test_the_imu_twin_accelerometers_sense_at_their_own_positions():
+    """The size effect in the twin: each accelerometer senses the centripetal acceleration at its
+    own position (truth.accel.position_m, m, case axes), beyond the lever arm's (before, the twin
+    ignored the positions: a capture over the ports had no size effect whatever the truth said).
+    Reference: w x (w x p) at 1 rev/s about z, by hand."""
+    clock = ManualClock()
+    truth = _ideal_truth(lever_arm=(0.1, 0.0, 0.05))
+    truth.accel.position_m = np.array([[0.004, 0.0, 0.0], [0.0, 0.006, 0.0], [0.0, 0.0, 0.008]])
+    table = TableTwin(TableGeometry.default(1, truth.bench.lever_arm_m), clock, interlocks_closed=True)
+    imu = ImuTwin(table, truth)
+    table.set_mode(1, "rate")
+    table.demand_rate(1, 360.0)
+    clock.advance(10.0)
+    accel, _, _ = imu.measure(np.array([5.0, 7.25, 9.5]))
+    w2, g = (2 * math.pi) ** 2, world.Site(45.0).g
+    # x: lever arm and its own 4 mm; y: its own 6 mm; z: along the axis, nothing more
+    np.testing.assert_allclose(accel, [[-w2 * 0.104, -w2 * 0.006, g]] * 3, atol=1e-12)
+
+
 def test_same_seed_same_bytes_whatever_the_batching():
     """Noise depends on the sample index, not on how samples are batched: a twin at
     --speed 1 and one at --speed 50 send the same frames for a table at rest."""

@@ -118,5 +118,7 @@ class ImuTwin:
                                            self.noise.batch(k, 0, self.epoch))
         temp = self.truth.temperature.at(t)
         self.noise.batch(k, 1, self.epoch)         # streams 1 (accel) and 2 (gyro)
-        accel, gyro = self.truth.measure(f_b, np.degrees(w_ib), temp, self.noise, t=t)
+        # each accelerometer senses the specific force at its own position (the size effect,
+        # truth.accel.position_m): the platform's rate and its derivative relative to the Earth
+        accel, gyro = self.truth.measure(f_b, np.degrees(w_ib), temp, self.noise, w_eb_b=w_b, wdot_eb_b=wd_b, t=t)
         return accel, gyro, temp

@@ -71,13 +71,16 @@ def leverages(J: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", U[:, keep], U[:, keep])
 
 
-def variance_components(labels, residuals: np.ndarray, J: np.ndarray | None, parameters: int | None = None) -> list[dict]:
+def variance_components(labels, residuals: np.ndarray, J: np.ndarray | None, parameters: int | None = None,
+                        by_axis=()) -> list[dict]:
     """Per data group: rows, redundancy, chi2, the scatter factor s_g and its p-value.
 
     ``labels``: lsq.Model.row_labels of every row of ``J`` (and ``residuals``), priors included;
     the prior rows take their share of the leverage but belong to no group.  ``J`` None (a large
     model, whose Jacobian is not taken dense): every row takes the same share of the
-    ``parameters`` (an approximation, used only to reweight the hand turns)."""
+    ``parameters`` (an approximation, used only to reweight the hand turns).  ``by_axis``: groups
+    whose rows are also split by sensor axis, under the entry's "axes" ({axis: the same numbers}:
+    a bias that wanders on one axis of a triad only is its own component)."""
     h = leverages(J) if J is not None else np.full(len(residuals), (parameters or 0) / max(len(residuals), 1))
     groups: dict[str, list[int]] = {}
     for i, (_, kind, quantity, _) in enumerate(labels):
@@ -86,15 +89,24 @@ def variance_components(labels, residuals: np.ndarray, J: np.ndarray | None, par
             groups.setdefault(g, []).append(i)
     out = []
     for g, rows in groups.items():
-        rows = np.array(rows)
-        f = float(len(rows) - h[rows].sum())
-        chi2 = float(residuals[rows] @ residuals[rows])
-        entry = {"group": g, "rows": int(len(rows)), "redundancy": f, "chi2": chi2}
-        if f >= MIN_REDUNDANCY:
-            entry["scatter"] = math.sqrt(chi2 / f)
-            entry["p_value"] = float(special.chdtrc(f, chi2))
+        entry = {"group": g, **_component(np.array(rows), residuals, h)}
+        if g in by_axis:
+            axes: dict[str, list[int]] = {}
+            for i in rows:
+                axes.setdefault(labels[i][3], []).append(i)
+            entry["axes"] = {a: _component(np.array(r), residuals, h) for a, r in axes.items()}
         out.append(entry)
     return out
+
+
+def _component(rows: np.ndarray, residuals: np.ndarray, h: np.ndarray) -> dict:
+    f = float(len(rows) - h[rows].sum())
+    chi2 = float(residuals[rows] @ residuals[rows])
+    entry = {"rows": int(len(rows)), "redundancy": f, "chi2": chi2}
+    if f >= MIN_REDUNDANCY:
+        entry["scatter"] = math.sqrt(chi2 / f)
+        entry["p_value"] = float(special.chdtrc(f, chi2))
+    return entry
 
 
 def words(components: list[dict]) -> list[str]:
