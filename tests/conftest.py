@@ -23,3 +23,13 @@ def optimal9_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("optimal9") / "cap"
     assert main(["run", "--scheme", "optimal9", "--sim", "--seed", "13", "--out", str(out), *SHORT]) == 0
     return out
+
+
+# Hypothesis: derandomised unless asked otherwise, so that a run of the suite is repeatable on
+# any machine and a failure in CI is the same failure here (`pytest --hypothesis-profile explore`
+# searches with fresh random examples, and prints the seed of a failure to reproduce it).
+from hypothesis import settings as _hypothesis_settings  # noqa: E402
+
+_hypothesis_settings.register_profile("repeatable", derandomize=True, database=None, print_blob=True)
+_hypothesis_settings.register_profile("explore", derandomize=False, print_blob=True)
+_hypothesis_settings.load_profile("repeatable")

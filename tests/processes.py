@@ -46,3 +46,27 @@ def interrupt(p: subprocess.Popen, how=signal.SIGINT, group: bool = True) -> tup
     finally:
         if p.poll() is None:
             p.kill()
+
+
+def read_until(port, done, seconds: float = 10.0) -> bytes:
+    """Bytes read from ``port`` until ``done(bytes so far)`` (or ``seconds`` pass: the caller's
+    assertion then fails on what came): a wait on the condition, not a sleep that a loaded
+    machine can outlast."""
+    buf, deadline = bytearray(), time.monotonic() + seconds
+    while not done(bytes(buf)) and time.monotonic() < deadline:
+        buf += port.read(max(1, port.in_waiting))
+    return bytes(buf)
+
+
+def quiet_after(port, unwanted, quiet_s: float, seconds: float = 10.0) -> bool:
+    """Whether ``port`` went ``quiet_s`` seconds without ``unwanted(chunk)`` within ``seconds``:
+    what was already under way when a stream was stopped may still arrive (at any delay on a
+    loaded machine); the stream has stopped when nothing of it comes for a while after."""
+    deadline = time.monotonic() + seconds
+    since = time.monotonic()
+    while time.monotonic() < deadline:
+        if unwanted(port.read(max(1, port.in_waiting))):
+            since = time.monotonic()
+        elif time.monotonic() - since >= quiet_s:
+            return True
+    return False

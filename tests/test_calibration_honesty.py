@@ -173,7 +173,7 @@ def test_inverted_gyro_axes_are_named_in_words(with_rotations, tmp_path, capsys)
         rewrite_csv(cap, seg["name"], invert)
     main(["estimate", str(cap)])
     err = capsys.readouterr().err
-    assert "inverted" in err and "180" in err or "179" in err
+    assert "inverted" in err and ("180" in err or "179" in err), err
 
 
 # ------------------------------------------------------------------ IMU identity

@@ -203,8 +203,10 @@ def test_a_demand_refused_for_an_open_interlock_is_a_table_fault(bench):
         table.set_rate(1, 10.0)
         table.open_interlocks([1])
         assert table.status().mode[0] == "off"
-        time.sleep(0.05)
-        assert table.read_rates_dps()[0] == 0.0        # braked to rest
+        deadline = time.monotonic() + 10.0             # braked to rest: waited on, not slept for
+        while table.read_rates_dps()[0] != 0.0 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert table.read_rates_dps()[0] == 0.0
 
 
 def test_aerosmith_dialect_strings_are_data_and_9600_baud_is_the_default():

@@ -23,6 +23,8 @@ from sim_devices.twins.imu_vectornav import VectorNavFrontEnd
 from sim_devices.twins.serve import BenchOptions, BenchServer
 from sim_devices.twins.table import TableTwin
 
+from processes import quiet_after, read_until
+
 SPEED = 20.0
 
 
@@ -50,8 +52,7 @@ def _ask(port, body, crc=False, timeout=2.0):
 def test_a_sensor_sending_ascii_async_output_is_quietened_at_connect(server):
     server.imu_frontend.ador = V.ADOR_VNIMU           # as a sensor fresh from another program
     with serial.Serial(server.imu_path, 115200, timeout=0.05) as raw:     # the lines are there ...
-        time.sleep(0.2)
-        assert b"$VNIMU," in raw.read(65536)
+        assert b"$VNIMU," in read_until(raw, lambda b: b"$VNIMU," in b)
     with open_imu(server.imu_path, "vectornav") as imu:
         assert "hardware 2" in imu.identity
         s = imu.read(2000)
@@ -135,8 +136,7 @@ def test_the_twin_powers_up_as_a_factory_default_vn100(server):
     at 115200 baud; the fields as the manual's register 27 (UM001 7.2.3): yaw, pitch, roll (deg),
     mag (gauss), accel (m/s^2), gyro (rad/s), in its fixed widths."""
     with serial.Serial(server.imu_path, 115200, timeout=0.05) as port:
-        time.sleep(0.3)
-        raw = port.read(65536)
+        raw = read_until(port, lambda b: len(_lines(b, b"VNYMR,")) > 11)
         assert 0xFA not in raw                        # no binary frame
         ymr = _lines(bytes(raw), b"VNYMR,")
         assert len(ymr) > 10
@@ -165,8 +165,7 @@ def test_the_twin_powers_up_as_a_factory_default_vn100(server):
 def test_the_driver_starts_a_factory_default_sensor_cleanly(server):
     """pause, ASCII off, binary output 75, resume: after start, clean frames only."""
     with serial.Serial(server.imu_path, 115200, timeout=0.05) as raw:
-        time.sleep(0.2)
-        assert b"$VNYMR," in raw.read(65536)          # the factory stream is there
+        assert b"$VNYMR," in read_until(raw, lambda b: b"$VNYMR," in b)          # the factory stream is there
     with open_imu(server.imu_path, "vectornav") as imu:
         s = imu.read(3000)
         c = imu.counters
@@ -241,11 +240,9 @@ def test_binary_output_off_as_vectornavs_library_writes_it(server):
     with serial.Serial(server.imu_path, 115200, timeout=0.05) as port:
         assert _ask(port, "VNWRG,06,0")[0] == "VNWRG,06,0"
         assert _ask(port, "VNWRG,75,1,8,05,0001,001C")[0] == "VNWRG,75,1,8,05,0001,001C"
-        time.sleep(0.2)
-        assert 0xFA in port.read(65536)                         # binary frames flow
+        assert 0xFA in read_until(port, lambda b: 0xFA in b)    # binary frames flow
         assert _ask(port, "VNWRG,75,0,0,0")[0] == "VNWRG,75,0,0,0"
-        time.sleep(0.1)
-        port.reset_input_buffer()
-        time.sleep(0.3)
-        assert 0xFA not in port.read(65536)                     # and stop
+        # and stop: 0.3 s (6 s of the twin's time at SPEED 20) without a frame, once what was
+        # under way when the register was written has come
+        assert quiet_after(port, lambda chunk: 0xFA in chunk, 0.3)
         assert _ask(port, "VNRRG,75")[0] == "VNRRG,75,0,0,00"
