@@ -18,6 +18,8 @@ import subprocess
 import tempfile
 from pathlib import Path
 
+import pytest
+
 SUPERUSER = "station"
 
 
@@ -98,3 +100,21 @@ class Server:
             shutil.rmtree(self.dir, ignore_errors=True)
             self.dir = None
             self.started = False
+
+
+@pytest.fixture(scope="module")
+def pg():
+    """A running server for the module (import this fixture into a test module), or the test
+    skipped with the reason when none can be started here (failed instead with
+    STATION_REQUIRE_POSTGRES=1, as .ci/run sets)."""
+    why = unavailable()
+    if why:
+        if os.environ.get("STATION_REQUIRE_POSTGRES") == "1":
+            pytest.fail(f"STATION_REQUIRE_POSTGRES=1 but {why}")
+        pytest.skip(why)
+    server = Server()
+    try:
+        server.start()
+        yield server
+    finally:
+        server.stop()

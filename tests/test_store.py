@@ -16,28 +16,13 @@ from pathlib import Path
 import pytest
 import yaml
 
-from pg_server import Server, unavailable
+from pg_server import pg  # noqa: F401  (the module's server)
 from station.cli import main
 from station.io.history import Store
 
 WRITER = Path(__file__).with_name("_store_writer.py")
 WRITERS = 4          # processes filing at once (2 cores: more only queue)
 UNITS, CAPTURES = 6, 4
-
-
-@pytest.fixture(scope="module")
-def pg():
-    why = unavailable()
-    if why:
-        if os.environ.get("STATION_REQUIRE_POSTGRES") == "1":
-            pytest.fail(f"STATION_REQUIRE_POSTGRES=1 but {why}")
-        pytest.skip(why)
-    server = Server()
-    try:
-        server.start()
-        yield server
-    finally:
-        server.stop()
 
 
 @pytest.fixture(params=["sqlite", "postgresql"])

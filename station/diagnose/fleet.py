@@ -185,12 +185,7 @@ def fleet(filed: list, selection: dict | None = None) -> Fleet:
         for name, p in f.numbers.items():
             by_name.setdefault((name, p.unit), []).append(
                 UnitValue(serial, f.entry.id, f.entry.date_utc, p.value, p.sigma))
-    order = {}
-    for f in usable_latest.values():           # the calibration file's order of parameters
-        for name in f.numbers:
-            order.setdefault(name, len(order))
-    spreads = [_spread(name, unit, values) for (name, unit), values in
-               sorted(by_name.items(), key=lambda kv: (order.get(kv[0][0], 0), kv[0]))]
+    spreads = [_spread(name, unit, values) for (name, unit), values in sorted(by_name.items())]
     tests = sum(p.units for p in spreads if p.t_limit is not None)
     return Fleet(dict(selection or {}), len(filed), len(per_unit), verdicts, latest_verdicts, unusable,
                  spreads, drift, tests)
