@@ -257,15 +257,16 @@ class Store:
             if new:
                 tx.many("INSERT INTO parameters (calibration_id, name, value, sigma, unit) VALUES (?, ?, ?, ?, ?)",
                         [(new[0][0], *n) for n in _numbers(doc)])
-                id_ = new[0][0]
+                entry = self._entry((new[0][0], *row[:8], *row[11:]))
             else:            # filed before, or by another writer since the look above
-                id_, other = tx.rows(f"SELECT id, sha256 FROM calibrations WHERE {self._SAME} ORDER BY id", key)[0]
                 if lot is not None or imu_model is not None:
-                    tx.run("UPDATE calibrations SET lot = COALESCE(?, lot), imu_model = COALESCE(?, imu_model) "
-                           "WHERE id = ?", (lot, imu_model, id_))
-                if other != digest and not found:
+                    tx.run(f"UPDATE calibrations SET lot = COALESCE(?, lot), imu_model = COALESCE(?, imu_model) "
+                           f"WHERE {self._SAME}", (lot, imu_model, *key))
+                entry = self._entry(tx.rows(f"SELECT {self._COLUMNS} FROM calibrations WHERE {self._SAME} "
+                                            "ORDER BY id", key)[0])
+                if entry.sha256 != digest and not found:
                     target.unlink(missing_ok=True)     # our copy of a calibration not filed
-        return self.get(id_), bool(new)
+        return entry, bool(new)
 
     # the same calibration: the same file, or the same capture and model of the same serial
     _SAME = "sha256 = ? OR (capture_sha256 = ? AND model = ? AND serial = ?)"

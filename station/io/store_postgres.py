@@ -1,7 +1,8 @@
 """The calibration store's index in PostgreSQL (psycopg 3): one database shared by several
 benches and workers (``--store postgresql://USER@HOST/DB`` or ``$STATION_STORE``).
 
-One connection per Store, opened on first use.  Each filing is one transaction at READ COMMITTED:
+One connection per Store, opened on first use (autocommit: a read is one statement, a write an
+explicit transaction).  Each filing is one transaction at READ COMMITTED:
 the insert is ``INSERT ... ON CONFLICT DO NOTHING`` against the unique constraints (the file's
 sha256; the capture, model and serial), so two writers filing the same calibration at once wait
 for each other inside PostgreSQL and exactly one row results.  A writer killed mid-transaction is
@@ -41,7 +42,8 @@ class PostgresIndex:
         except ImportError:
             raise UserError(f"{self.where}: a PostgreSQL store needs psycopg: pip install 'station[postgres]'") from None
         try:
-            conn = psycopg.connect(self.url, connect_timeout=CONNECT_TIMEOUT_S, application_name="station")
+            conn = psycopg.connect(self.url, connect_timeout=CONNECT_TIMEOUT_S, application_name="station",
+                                   autocommit=True)
         except psycopg.Error as e:
             raise UserError(f"{self.where}: cannot connect to the calibration store: {one_line(e)}") from None
         except Exception as e:      # a malformed URL (psycopg.ProgrammingError is a psycopg.Error; others)
@@ -80,8 +82,12 @@ class PostgresIndex:
         try:
             if self._conn is None or self._conn.closed:
                 self._conn = self._connect(backfill)
-            with self._conn.transaction(), self._conn.cursor() as cur:
-                yield Tx(cur, postgres=True)
+            if write:
+                with self._conn.transaction(), self._conn.cursor() as cur:
+                    yield Tx(cur, postgres=True)
+            else:                   # a read is one statement: no BEGIN/COMMIT round trips
+                with self._conn.cursor() as cur:
+                    yield Tx(cur, postgres=True)
         except psycopg.Error as e:
             self.close()            # a broken connection is opened again by the next transaction
             raise UserError(f"{self.where}: the calibration store cannot be {'written' if write else 'read'}: "
