@@ -176,3 +176,20 @@ def test_chromium_renders_the_fleet_page_with_its_figure(sqlite_store, tmp_path,
     assert np.abs(img[20, 20] - HEADER_RGB).max() <= 3          # the stylesheet applied
     red = np.all(np.abs(img - RED) <= 6, axis=2).sum()            # the outside unit's dot drawn
     assert red > 20, red
+
+
+def test_a_lot_stated_when_filing_or_later(lot, tmp_path, capsys):
+    """history --add --lot files the lot where the file states none, and sets it on a calibration
+    filed before ("already filed"); --lot without --add is refused."""
+    store = str(tmp_path / "s")
+    (_, path), = [(n, p) for n, p in lot if n == "B"][:1]
+    assert main(["history", "--store", store, "--add", str(path)]) == 0
+    assert _fleet_json(capsys, "--store", store)["units"] == 1
+    assert main(["fleet", "--store", store, "--lot", "Q"]) == 2
+    capsys.readouterr()
+    assert main(["history", "--store", store, "--add", str(path), "--lot", "Q", "--imu-model", "VN-200"]) == 0
+    assert "already filed: #1" in capsys.readouterr().out
+    view = _fleet_json(capsys, "--store", store, "--lot", "Q", "--model", "VN-200")
+    assert view["units"] == 1 and view["calibrations"] == 1
+    assert main(["history", "--store", store, "--lot", "Q"]) == 2
+    assert "--lot and --imu-model go with --add" in capsys.readouterr().err
