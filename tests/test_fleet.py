@@ -1,6 +1,7 @@
 """station fleet: each parameter's spread across units, the units outside their lot's spread,
 drift per unit, pass/fail counts; the JSON, the page (checked in headless chromium when one is
 installed), the same view from a SQLite and a PostgreSQL store."""
+import copy
 import hashlib
 import json
 import os
@@ -14,6 +15,8 @@ import yaml
 
 from pg_server import pg  # noqa: F401  (the module's server)
 from station.cli import main
+
+DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)     # libyaml: the test files written fast
 from station.diagnose.fleet import TAIL, UnitValue, _spread
 
 BROWSER = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -25,7 +28,7 @@ PLANTED = ("SN-A07", "accel_bias_y", 8.0)     # a unit 8 σ of the lot away in o
 
 
 def _cal(base, serial, lot, capture, date, shift, verdict="passes"):
-    doc = yaml.safe_load(yaml.safe_dump(base))
+    doc = copy.deepcopy(base)
     doc["provenance"].update(imu_serial=serial, imu_lot=lot, imu_model="VN-100", date_utc=date,
                              capture_sha256=hashlib.sha256(capture.encode()).hexdigest())
     for name, p in doc["parameters"].items():
@@ -59,7 +62,7 @@ def lot(optimal9_run, tmp_path_factory):
     paths = []
     for k, (lot_name, doc) in enumerate(docs):
         path = out / f"{k:02d}.yaml"
-        path.write_text(yaml.safe_dump(doc, sort_keys=False))
+        path.write_text(yaml.dump(doc, Dumper=DUMPER, sort_keys=False))
         paths.append((lot_name, path))
     return paths
 

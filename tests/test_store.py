@@ -3,6 +3,7 @@ fixture from the system's binaries, stopped in its finalizer; skipped with the r
 is installed, unless STATION_REQUIRE_POSTGRES=1 as .ci/run sets): concurrent writers from
 several processes lose nothing and duplicate nothing, a writer killed inside its transaction
 leaves the store consistent, older indexes migrate."""
+import copy
 import hashlib
 import os
 import random
@@ -18,6 +19,8 @@ import yaml
 
 from pg_server import pg  # noqa: F401  (the module's server)
 from station.cli import main
+
+DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)     # libyaml: the test files written fast
 from station.io.history import Store
 
 WRITER = Path(__file__).with_name("_store_writer.py")
@@ -45,14 +48,14 @@ def calibrations(optimal9_run, tmp_path_factory):
     for u in range(UNITS):
         for c in range(CAPTURES):
             for again in (0, 1):
-                doc = yaml.safe_load(yaml.safe_dump(base))
+                doc = copy.deepcopy(base)
                 prov = doc["provenance"]
                 prov["imu_serial"] = f"SN-{u:03d}"
                 prov["capture_sha256"] = hashlib.sha256(f"{u}/{c}".encode()).hexdigest()
                 prov["date_utc"] = f"2031-0{c + 1}-01T00:00:0{again}Z"
                 doc["parameters"]["accel_bias_x"]["value"] += u + 0.1 * c
                 path = out / f"u{u}-c{c}-{again}.yaml"
-                path.write_text(yaml.safe_dump(doc, sort_keys=False))
+                path.write_text(yaml.dump(doc, Dumper=DUMPER, sort_keys=False))
                 paths.append(path)
             keys.add((prov["imu_serial"], prov["capture_sha256"]))
     return paths, keys
