@@ -120,6 +120,15 @@ def test_the_planted_unit_is_outside_and_the_lot_is_judged_by_its_own_spread(sql
 def test_selection_by_lot_and_date_and_the_text_output(sqlite_store, capsys):
     view = _fleet_json(capsys, "--store", sqlite_store, "--lot", "B")
     assert view["units"] == 4 and not view["drift"]
+    # every lot at once: each unit judged within its own lot (lot B's four identical units have
+    # no spread to be judged against: not judged), the distribution over all 16 usable units
+    every = _fleet_json(capsys, "--store", sqlite_store)
+    only_a = _fleet_json(capsys, "--store", sqlite_store, "--lot", "A")
+    assert every["units"] == UNITS + 5 and every["judgements"] == only_a["judgements"] == UNITS * 21
+    assert [(p["name"], v["serial"], v["z_lot"]) for p in every["parameters"] for v in p["values"] if v["outside"]] \
+        == [(p["name"], v["serial"], v["z_lot"]) for p in only_a["parameters"] for v in p["values"] if v["outside"]]
+    assert all(v["t"] is None for p in every["parameters"] for v in p["values"] if v["lot"] == "B")
+    assert all(p["units"] == UNITS + 4 and p["t_limit"] is None for p in every["parameters"])
     assert _fleet_json(capsys, "--store", sqlite_store, "--since", "2031-01-01")["units"] == UNITS + 1
     assert main(["fleet", "--store", sqlite_store, "--lot", "A"]) == 0
     text = " ".join(capsys.readouterr().out.split())

@@ -3,7 +3,9 @@ side, from the numbers the calibration store holds (station/io/history.py ``Stor
 
 Per parameter, the distribution across units: each unit counted once, by its latest usable
 calibration (verdict ``passes`` or ``noise overestimated``: a failing fit's numbers are not a
-calibration and are not mixed in; they are counted).  A unit is **outside the lot's spread** when
+calibration and are not mixed in; they are counted).  Each unit is judged within its own lot
+(the lot filed with it; the units of no stated lot are one group).  A unit is **outside the lot's
+spread** when
 its value is improbable for a unit drawn from the same lot as the others: leave-one-out, the
 others' mean m and standard deviation s (n - 1 units) predict a new unit as m ± s·√(1 + 1/(n-1)),
 and (x - m) / (s·√(1 + 1/(n-1))) follows Student's t with n - 2 degrees of freedom when the lot
@@ -48,9 +50,11 @@ class UnitValue:
     date_utc: str
     value: float
     sigma: float | None
+    lot: str | None = None
     z_lot: float | None = None  # (x - m) / s: in σ of the rest of the lot
     z_own: float | None = None  # (x - m) / σ_unit: in the unit's own 1σ
     t: float | None = None      # (x - m) / (s·sqrt(1 + 1/(n-1))): Student's t, n - 2 dof
+    t_limit: float | None = None    # of its lot (None: not judged)
     outside: bool = False
 
 
@@ -65,7 +69,8 @@ class Spread:
     min: float
     max: float
     median_sigma: float | None  # the units' own 1σ, median
-    t_limit: float | None       # |t| beyond this: outside the lot's spread (None: too few units)
+    t_limit: float | None       # |t| beyond this: outside the lot's spread (one lot; None: several
+                                #  lots, each unit's own in UnitValue.t_limit, or too few units)
     values: list = field(default_factory=list)        # UnitValue per unit
 
     @property
@@ -118,24 +123,42 @@ def _t_limit(dof: int) -> float:
     return float(stdtrit(dof, 1.0 - TAIL / 2))
 
 
+def _judge(values: list[UnitValue]) -> float | None:
+    """Each unit of one lot against the rest of that lot (sets z_lot, z_own, t, outside); the
+    |t| limit, or None for a lot of fewer than MIN_UNITS units."""
+    n = len(values)
+    if n < MIN_UNITS:
+        return None
+    limit = _t_limit(n - 2)
+    xs = [v.value for v in values]
+    for i, v in enumerate(values):
+        rest = xs[:i] + xs[i + 1:]
+        if max(rest) == min(rest):                  # no spread to judge against (not rounding's)
+            continue
+        m, s = _mean_std(rest)
+        d = v.value - m
+        v.z_lot = d / s
+        v.t = d / (s * math.sqrt(1.0 + 1.0 / (n - 1)))
+        v.z_own = d / v.sigma if v.sigma else None
+        v.t_limit = limit
+        v.outside = abs(v.t) > limit
+    return limit
+
+
 def _spread(name: str, unit: str, values: list[UnitValue]) -> Spread:
+    """The distribution across every selected unit; each unit judged within its own lot (units
+    of no stated lot: one group)."""
     xs = [v.value for v in values]
     n = len(xs)
     mean, std = _mean_std(xs)
     ordered = sorted(xs)
     median = ordered[n // 2] if n % 2 else 0.5 * (ordered[n // 2 - 1] + ordered[n // 2])
     sigmas = sorted(v.sigma for v in values if v.sigma is not None)
-    limit = _t_limit(n - 2) if n >= MIN_UNITS else None
-    if limit is not None:
-        for i, v in enumerate(values):
-            m, s = _mean_std(xs[:i] + xs[i + 1:])       # the rest of the lot
-            if s is None or not s > 0:
-                continue
-            d = v.value - m
-            v.z_lot = d / s
-            v.t = d / (s * math.sqrt(1.0 + 1.0 / (n - 1)))
-            v.z_own = d / v.sigma if v.sigma else None
-            v.outside = abs(v.t) > limit
+    lots: dict = {}
+    for v in values:
+        lots.setdefault(v.lot, []).append(v)
+    limits = {lot: _judge(group) for lot, group in lots.items()}
+    limit = next(iter(limits.values())) if len(limits) == 1 else None
     return Spread(name, unit, n, mean, std, median, ordered[0], ordered[-1],
                   sigmas[len(sigmas) // 2] if sigmas else None, limit, values)
 
@@ -184,9 +207,9 @@ def fleet(filed: list, selection: dict | None = None) -> Fleet:
     for serial, f in usable_latest.items():
         for name, p in f.numbers.items():
             by_name.setdefault((name, p.unit), []).append(
-                UnitValue(serial, f.entry.id, f.entry.date_utc, p.value, p.sigma))
+                UnitValue(serial, f.entry.id, f.entry.date_utc, p.value, p.sigma, f.entry.lot))
     spreads = [_spread(name, unit, values) for (name, unit), values in sorted(by_name.items())]
-    tests = sum(p.units for p in spreads if p.t_limit is not None)
+    tests = sum(1 for p in spreads for v in p.values if v.t is not None)
     return Fleet(dict(selection or {}), len(filed), len(per_unit), verdicts, latest_verdicts, unusable,
                  spreads, drift, tests)
 
@@ -212,9 +235,9 @@ def to_json(f: Fleet) -> dict:
             "name": p.name, "unit": p.unit, "units": p.units, "mean": p.mean, "std": _num(p.std),
             "median": p.median, "min": p.min, "max": p.max, "median_sigma": _num(p.median_sigma),
             "t_limit": _num(p.t_limit),
-            "values": [{"serial": v.serial, "calibration": v.calibration, "date_utc": v.date_utc,
+            "values": [{"serial": v.serial, "lot": v.lot, "calibration": v.calibration, "date_utc": v.date_utc,
                         "value": v.value, "sigma": _num(v.sigma), "z_lot": _num(v.z_lot), "z_own": _num(v.z_own),
-                        "t": _num(v.t), "outside": v.outside} for v in p.values],
+                        "t": _num(v.t), "t_limit": _num(v.t_limit), "outside": v.outside} for v in p.values],
         } for p in f.parameters],
         "drift": [{"serial": d.serial, "calibrations": d.calibrations, "first": d.first, "last": d.last,
                    "first_date": d.first_date, "last_date": d.last_date, "flag_sigma": FLAG_SIGMA,

@@ -77,7 +77,8 @@ def render(f: Fleet, figures: dict) -> str:
             f"<section><h2>Every parameter across units</h2><p class='note'>Each unit by its latest usable calibration "
             f"(passes or noise overestimated). A unit is outside the lot's spread when its distance from the rest of "
             f"the lot exceeds Student's t quantile of the 3σ tail (n − 2 degrees of freedom, the spread of the rest "
-            f"widened by √(1 + 1/(n − 1))): the grey bars. {chance}.</p>"
+            f"widened by √(1 + 1/(n − 1))): the grey bars when one lot is selected. Each unit is judged within its "
+            f"own lot. {chance}.</p>"
             + (_img(FIGURE, figures, "every unit's distance from the rest of the lot, per parameter")
                if FIGURE in figures else "") + spread + "</section>"
             f"<section><h2>Units outside the lot's spread</h2>{out_html}</section>"
@@ -89,7 +90,7 @@ def render(f: Fleet, figures: dict) -> str:
 def write_page(path, f: Fleet) -> Path:
     path = Path(path)
     figures = {}
-    if any(p.t_limit is not None for p in f.parameters):
+    if any(v.t is not None for p in f.parameters for v in p.values):
         figures[FIGURE] = fleet_figure(figure_rows(f), fmt="svg")
     try:
         path.write_text(render(f, figures), encoding="utf-8")
