@@ -6,7 +6,7 @@ DISTINCT calibrations of distinct captures (UNITS units) are split among WRITERS
 writer also files OVERLAP of another writer's calibrations (the same bytes, racing) and OVERLAP
 re-estimates (the same capture and model, other bytes: must not be filed).  Checked after: one
 row per capture (0 duplicated), every capture present (0 lost), every row's file whole (its
-sha256), 21 numbers per row.
+sha256), 21 numbers per row.  Then the time of ``station fleet --json`` over the whole store.
 
 Usage:  python benchmarks/store_filing.py [--calibrations 10000] [--writers 8] [--backend both|postgresql|sqlite]
 """
@@ -93,6 +93,18 @@ def run(location, files, lists) -> float:
     return wall
 
 
+def fleet_time(location, files) -> float:
+    """Wall time of ``station fleet --json`` over the whole store (a fresh process)."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(HERE.parent), *sys.path]), "STATION_HISTORY_DIR": str(files)}
+    t0 = time.perf_counter()
+    r = subprocess.run([sys.executable, "-m", "station.cli", "fleet", "--store", location, "--json"], env=env,
+                       capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    if r.returncode != 0:
+        raise SystemExit(f"station fleet failed: {r.stderr[-2000:]}")
+    return wall
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--calibrations", type=int, default=10_000)
@@ -133,12 +145,13 @@ def main():
             try:
                 wall = run(location, files, lists)
                 result = check(location, files, keys)
+                fleet_s = fleet_time(location, files)
             finally:
                 if server is not None:
                     server.stop()
             print(f"{backend}: {a.calibrations} calibrations from {a.writers} writers in {wall:.1f} s "
                   f"({attempts / wall:.0f} filings/s, {a.calibrations / wall:.0f} new/s); rows {result['rows']}, "
-                  f"lost {result['lost']}, duplicated {result['duplicated']}")
+                  f"lost {result['lost']}, duplicated {result['duplicated']}; station fleet --json on them: {fleet_s:.1f} s")
 
 
 if __name__ == "__main__":

@@ -125,20 +125,32 @@ def _t_limit(dof: int) -> float:
 
 def _judge(values: list[UnitValue]) -> float | None:
     """Each unit of one lot against the rest of that lot (sets z_lot, z_own, t, outside); the
-    |t| limit, or None for a lot of fewer than MIN_UNITS units."""
+    |t| limit, or None for a lot of fewer than MIN_UNITS units.  All units at once, O(n): the
+    values centred on the lot's mean first (a scale factor's spread of 1e-5 around 1 keeps its
+    digits), then the rest's mean and variance from the sums without unit i."""
+    import numpy as np
+
     n = len(values)
     if n < MIN_UNITS:
         return None
     limit = _t_limit(n - 2)
-    xs = [v.value for v in values]
+    x = np.array([v.value for v in values], dtype=float)
+    c = x - x.mean()
+    total, squares = c.sum(), (c * c).sum()
+    m = (total - c) / (n - 1)                                   # the rest's mean (centred)
+    var = np.maximum((squares - c * c - (n - 1) * m * m) / (n - 2), 0.0)
+    s = np.sqrt(var)
+    # a rest without any spread (every other unit the same value) judges nothing
+    uniq, counts = np.unique(x, return_counts=True)
+    flat = np.full(n, len(uniq) == 1)
+    if len(uniq) == 2:
+        flat = counts[np.searchsorted(uniq, x)] == 1
     for i, v in enumerate(values):
-        rest = xs[:i] + xs[i + 1:]
-        if max(rest) == min(rest):                  # no spread to judge against (not rounding's)
+        if flat[i] or not s[i] > 0:
             continue
-        m, s = _mean_std(rest)
-        d = v.value - m
-        v.z_lot = d / s
-        v.t = d / (s * math.sqrt(1.0 + 1.0 / (n - 1)))
+        d = float(c[i] - m[i])
+        v.z_lot = d / float(s[i])
+        v.t = d / (float(s[i]) * math.sqrt(1.0 + 1.0 / (n - 1)))
         v.z_own = d / v.sigma if v.sigma else None
         v.t_limit = limit
         v.outside = abs(v.t) > limit
