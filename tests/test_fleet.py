@@ -153,6 +153,21 @@ def test_the_leave_one_out_judgement_flags_a_normal_lot_at_its_stated_rate():
     assert abs(flags - expected) < 4 * (expected * (1 - TAIL)) ** 0.5, flags
 
 
+def test_each_unit_against_the_rest_exactly_also_for_scale_factors():
+    """The O(n) judgement gives what each unit's rest computed on its own gives, to 1e-9, also for
+    scale factors (1 +- 1e-5: centred before summing, no digits lost)."""
+    rng = np.random.default_rng(3)
+    x = 1.0 + 1e-5 * rng.standard_normal(40)
+    values = [UnitValue(f"u{i}", i, "", float(v), 1e-6) for i, v in enumerate(x)]
+    _spread("accel_scale_x", "1", values)
+    for i, v in enumerate(values):
+        rest = np.delete(x, i)
+        d = x[i] - rest.mean()
+        assert v.z_lot == pytest.approx(d / rest.std(ddof=1), rel=1e-9, abs=1e-12)
+        assert v.t == pytest.approx(v.z_lot / (1 + 1 / 39) ** 0.5, rel=1e-12)
+        assert v.z_own == pytest.approx(d / 1e-6, rel=1e-9, abs=1e-12)
+
+
 def test_the_same_view_from_postgresql(pg, lot, sqlite_store, tmp_path, capsys):
     url = pg.create_database("fleet")
     _file(lot, url)

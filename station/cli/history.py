@@ -66,7 +66,8 @@ def file_quietly(cal_path, store=None, *, asked: bool, simulated: bool = False) 
             return
         else:
             root = store
-        entry, new = Store(root).file(cal_path)
+        with Store(root) as store:
+            entry, new = store.file(cal_path)
     except UserError as e:
         err.print(f"warning: not filed in the calibration history: {e}", markup=False, soft_wrap=True)
         return
