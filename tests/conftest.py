@@ -13,6 +13,7 @@ def _history_store(tmp_path_factory):
     mp.setenv("STATION_HISTORY_DIR", str(tmp_path_factory.mktemp("history-store")))
     mp.setenv("XDG_CONFIG_HOME", str(tmp_path_factory.mktemp("user-config")))   # not the user's own
     mp.delenv("STATION_CONFIG", raising=False)
+    mp.delenv("STATION_STORE", raising=False)       # not a database of the user's
     yield
     mp.undo()
 

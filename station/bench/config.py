@@ -87,6 +87,7 @@ class ImuConfig:
     rate_hz: float = 100.0
     csv_units: str = ""
     frame_timeout_s: float = 2.0
+    lot: str | None = None          # the production lot, into the capture's imu.lot and the calibration's provenance
 
 
 @dataclass(frozen=True)
@@ -255,7 +256,7 @@ def parse_config(doc, source: str) -> Config:
     v.known(doc, "", ("version", "imu", "table", "site", "warmup", "run", "effects"))
     imu = v.section(doc, "imu", ImuConfig, {
         "port": v.text, "protocol": v.text, "serial": v.serial, "rate_hz": v.positive,
-        "csv_units": v.text_or_empty, "frame_timeout_s": v.positive})
+        "csv_units": v.text_or_empty, "frame_timeout_s": v.positive, "lot": v.text})
     doc, geometry = _geometry(doc, v)
     table = v.section(doc, "table", TableConfig, {
         "port": v.text, "protocol": v.text, "serial": v.serial, "axes": v.axes_count,
@@ -514,6 +515,7 @@ imu:
   rate_hz: 100                # vectornav: 800 / N
   # csv_units: t=ms,accel=g,gyro=rad/s   # csv only (default t=s,accel=m/s^2,gyro=deg/s)
   frame_timeout_s: 2.0
+  # lot: 2026-W48             # the production lot: filed with each calibration (station fleet --lot)
   serial: {baudrate: 115200, bytesize: 8, parity: N, stopbits: 1, rtscts: false, xonxoff: false, timeout_s: 1.0}
 
 table:

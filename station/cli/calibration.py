@@ -204,7 +204,7 @@ def cmd_show(args) -> int:
     out.print(f"effects: {', '.join(doc.get('effects', []))}", markup=False)
     if doc.get("gyro_pass_through"):
         out.print("gyro: not calibrated (accelerometer-only calibration; apply passes the gyro through)")
-    for key in ("method", "capture", "capture_sha256", "imu_model", "imu_serial", "imu_firmware",
+    for key in ("method", "capture", "capture_sha256", "imu_model", "imu_serial", "imu_firmware", "imu_lot",
                 "software", "date_utc"):
         if prov.get(key) is not None:
             out.print(f"{key}: {prov[key]}", markup=False)

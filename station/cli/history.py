@@ -8,21 +8,28 @@ from pathlib import Path
 from station.cli.output import err, out
 
 
+STORE_HELP = ("the calibration store: a folder (SQLite index) or postgresql://USER@HOST/DB (default: "
+              "$STATION_STORE, else the folder $STATION_HISTORY_DIR or the user's data directory)")
+
+
 def add_parsers(sub) -> None:
     h = sub.add_parser("history", help="calibrations filed per IMU serial: list, file, plot drift")
     h.add_argument("serial", nargs="?", help="the IMU serial (none: list the serials in the store)")
     h.add_argument("--add", action="append", default=[], metavar="CAL.yaml",
                    help="file a calibration into the history (repeatable); estimate and run file theirs")
     h.add_argument("--drift", metavar="PNG", help="plot every parameter of SERIAL against the date, ± 1σ")
-    h.add_argument("--store", metavar="DIR", help="the history store (default: $STATION_HISTORY_DIR "
-                   "or the user's data directory)")
+    h.add_argument("--lot", metavar="LOT", help="with --add: the IMUs' production lot, where the file does "
+                   "not state it (provenance imu_lot); also set on a calibration filed before")
+    h.add_argument("--imu-model", metavar="MODEL", help="with --add: the IMU model, where the file does not "
+                   "state it (provenance imu_model)")
+    h.add_argument("--store", metavar="DIR|URL", help=STORE_HELP)
     h.set_defaults(func=cmd_history)
 
     d = sub.add_parser("diff", help="compare two calibrations parameter by parameter, in units and in σ")
     d.add_argument("a", metavar="A", help="a calibration file or an id of the history (#N)")
     d.add_argument("b", metavar="B", help="a calibration file or an id of the history (#N)")
     d.add_argument("--all", action="store_true", help="list unchanged parameters too")
-    d.add_argument("--store", metavar="DIR", help="the history store for ids")
+    d.add_argument("--store", metavar="DIR|URL", help="the history store for ids (" + STORE_HELP + ")")
     d.add_argument("--drift", metavar="PNG", help="also plot the drift over time of A's IMU serial "
                    "(every calibration of it in the history)")
     d.set_defaults(func=cmd_diff)
@@ -59,7 +66,8 @@ def file_quietly(cal_path, store=None, *, asked: bool, simulated: bool = False) 
             return
         else:
             root = store
-        entry, new = Store(root).file(cal_path)
+        with Store(root) as store:
+            entry, new = store.file(cal_path)
     except UserError as e:
         err.print(f"warning: not filed in the calibration history: {e}", markup=False, soft_wrap=True)
         return
@@ -76,13 +84,15 @@ def cmd_history(args) -> int:
     from station.io.history import Store
 
     store = Store(args.store)
+    if (args.lot or args.imu_model) and not args.add:
+        raise UserError("--lot and --imu-model go with --add CAL.yaml (they are filed with a calibration)")
     for cal in args.add:
-        entry, new = store.file(cal)
+        entry, new = store.file(cal, lot=args.lot, imu_model=args.imu_model)
         out.print(f"{'filed' if new else 'already filed'}: #{entry.id} {entry.serial} {entry.date_utc} "
                   f"({entry.path})", markup=False)
     if args.serial is None:
         if not args.add:
-            t = Table(title=f"IMU serials in {store.root}")
+            t = Table(title=f"IMU serials in {store.where}")
             t.add_column("serial")
             t.add_column("calibrations", justify="right")
             for serial, n in store.serials():
@@ -91,7 +101,7 @@ def cmd_history(args) -> int:
         return 0
     entries = store.list(args.serial)
     if not entries:
-        raise UserError(f"no calibration of IMU {args.serial!r} in {store.root} (station history lists the serials)")
+        raise UserError(f"no calibration of IMU {args.serial!r} in {store.where} (station history lists the serials)")
     t = Table(title=f"calibrations of IMU {args.serial}")
     for col in ("id", "date (UTC)", "scheme", "method", "verdict", "file"):
         t.add_column(col)
@@ -178,6 +188,6 @@ def cmd_diff(args) -> int:
         serial = (da.get("provenance") or {}).get("imu_serial")
         entries = store.list(serial) if isinstance(serial, str) else []
         if not entries:
-            raise UserError(f"{pa}: its IMU serial {serial!r} has no calibration in the history {store.root}")
+            raise UserError(f"{pa}: its IMU serial {serial!r} has no calibration in the history {store.where}")
         _drift(entries, Path(args.drift), serial)
     return 0

@@ -455,7 +455,8 @@ def _new_capture(directory, scheme, scheme_text_, overrides, config, imu, rate_h
     ident = imu_identity(getattr(imu, "identity", None))
     writer = CaptureWriter(directory, ImuInfo(rate_hz, "m/s^2", "deg/s", model=ident.get("model"),
                                               serial=ident.get("serial"),
-                                              extra=({"firmware": ident["firmware"]} if "firmware" in ident else {})),
+                                              extra={**({"firmware": ident["firmware"]} if "firmware" in ident else {}),
+                                                     **({"lot": config.imu.lot} if config.imu.lot else {})}),
                            Site(config.site.gravity, latitude_deg=config.site.latitude_deg),
                            scheme.name, extra=extra)
     writer.write_file(SCHEME_FILE, scheme_text_)

@@ -307,3 +307,43 @@ def drift_figure(rows, path=None, title: str = "", fmt: str | None = None) -> by
         fig.suptitle(title, fontsize=10)
     fig.tight_layout(rect=(0, 0, 1, 0.97))
     return save(fig, path, fmt)
+
+
+@dataclass
+class FleetRow:
+    """One parameter of the fleet figure: each unit's distance from the rest of its lot in σ of
+    the lot, which units are outside the lot's spread, and the distance beyond which they are."""
+    name: str
+    z: list                  # per unit, (x - m) / s; None where not judged
+    outside: list            # per unit, bool
+    limit: float | None      # in the same σ: t_limit·sqrt(1 + 1/(n-1))
+
+
+FLEET_INSIDE, FLEET_OUTSIDE = "tab:blue", "tab:red"
+
+
+def fleet_figure(rows: list, path=None, title: str = "", fmt: str | None = None) -> bytes:
+    """Every parameter on one row, every unit a dot at its distance from the rest of the lot in σ
+    of the lot; units outside the lot's spread in red, the limit as grey bars."""
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(10, 0.32 * max(len(rows), 3) + 1.2))
+    for k, row in enumerate(rows):
+        y = len(rows) - 1 - k
+        for z, out in zip(row.z, row.outside):
+            if z is not None:
+                ax.plot([max(min(z, 12.0), -12.0)], [y], "o", ms=7 if out else 4,
+                        color=FLEET_OUTSIDE if out else FLEET_INSIDE, alpha=1.0 if out else 0.6)
+        if row.limit is not None:
+            for s in (-1, 1):
+                ax.plot([s * min(row.limit, 12.0)] * 2, [y - 0.35, y + 0.35], "-", color="0.55", lw=1.2)
+    ax.set_yticks(range(len(rows)), [r.name for r in reversed(rows)], fontsize=8)
+    ax.set_xlim(-12.5, 12.5)
+    ax.set_ylim(-0.7, len(rows) - 0.3)
+    ax.axvline(0.0, color="0.8", lw=0.8)
+    ax.set_xlabel("distance from the rest of the lot, in σ of the lot (clipped at ±12)", fontsize=8)
+    ax.tick_params(axis="x", labelsize=8)
+    if title:
+        ax.set_title(title, fontsize=9, y=TITLE_Y)
+    fig.subplots_adjust(left=0.24, right=0.98, top=1 - 0.45 / fig.get_figheight(),
+                        bottom=0.75 / fig.get_figheight())
+    return save(fig, path, fmt)

@@ -300,6 +300,7 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
         cal.fit["notes"].extend(data_faults.notes_of(fault_report))
     judge(cal)
     firmware = capture.imu.extra.get("firmware")
+    lot = capture.imu.extra.get("lot")
     provenance = {
         "capture": str(Path(capture.path).resolve()),
         "capture_sha256": capture_digest(capture),
@@ -307,6 +308,7 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
         "imu_model": capture.imu.model,
         "imu_serial": capture.imu.serial,
         "imu_firmware": firmware if isinstance(firmware, str) else None,
+        "imu_lot": str(lot) if isinstance(lot, (str, int)) and not isinstance(lot, bool) else None,
         "scheme": capture.scheme,
     }
     return cal, capture, provenance

@@ -1,11 +1,17 @@
 """The calibration history: every calibration filed per IMU serial in a store.
 
-The store is a folder: ``SERIAL/DATE-SHA8.yaml`` holds a copy of each calibration file, and
-``index.sqlite`` (stdlib sqlite3) indexes them by serial, date, scheme, method and verdict.  Its
-place, first found of: the ``--store`` option, the ``STATION_HISTORY_DIR`` environment variable,
-the user's data directory (``$XDG_DATA_HOME/station/calibrations``, default
-``~/.local/share/station/calibrations``; ``~/Library/Application Support/station/calibrations``
-on macOS, ``%LOCALAPPDATA%\\station\\calibrations`` on Windows).  Filing the same file twice
+The store is a folder of files and an index.  ``SERIAL/DATE-SHA8.yaml`` holds a copy of each
+calibration file (calibration files stay files); the index holds, per calibration, its serial,
+date, scheme, method, verdict, IMU model and lot, and every parameter's value, 1σ and unit (the
+numbers ``station fleet`` queries).  The index is ``index.sqlite`` in the folder
+(station/io/store_sqlite.py, the default) or a PostgreSQL database (station/io/store_postgres.py),
+the same schema and migrations (station/io/store_schema.py).  Its place, first found of: the
+``--store`` option, ``$STATION_STORE`` (a folder or a ``postgresql://`` URL), then the folder
+``$STATION_HISTORY_DIR``, then the user's data directory (``$XDG_DATA_HOME/station/calibrations``,
+default ``~/.local/share/station/calibrations``; ``~/Library/Application
+Support/station/calibrations`` on macOS, ``%LOCALAPPDATA%\\station\\calibrations`` on Windows).
+With a database URL the files go to that folder (``$STATION_HISTORY_DIR`` or the data directory:
+a shared filesystem when several machines file).  Filing the same file twice
 files it once (by its sha256), and a calibration of a capture and model already filed (the same
 capture's sha256, method and effects: a re-estimate) is not filed again.  What is filed at all is
 the CLI's policy (station/cli/history.py): real IMUs (a serial), simulations only when asked and
@@ -22,32 +28,19 @@ import datetime as _dt
 import hashlib
 import os
 import re
-import sqlite3
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 from station.core.errors import UserError
 
+from station.io.store_backend import is_database_url, one_line as _one_line
+from station.io.store_sqlite import INDEX, SqliteIndex
+
 ENV = "STATION_HISTORY_DIR"
-INDEX = "index.sqlite"
-SCHEMA = """CREATE TABLE IF NOT EXISTS calibrations (
-    id INTEGER PRIMARY KEY,
-    serial TEXT NOT NULL,
-    date_utc TEXT NOT NULL,
-    scheme TEXT,
-    method TEXT,
-    verdict TEXT,
-    file TEXT NOT NULL,
-    source TEXT,
-    sha256 TEXT NOT NULL UNIQUE,
-    filed_utc TEXT NOT NULL,
-    capture_sha256 TEXT,
-    model TEXT)"""
-ADDED_COLUMNS = (("capture_sha256", "TEXT"), ("model", "TEXT"))    # index files written before them
+STORE_ENV = "STATION_STORE"
 UNKNOWN_SERIAL = "unknown"
 SIMULATED_PREFIX = "SIM-"           # the serial station's simulated IMUs carry (station.simulate.dryrun)
-COLUMNS = ("id", "serial", "date_utc", "scheme", "method", "verdict", "file", "source", "sha256", "filed_utc")
 
 
 @dataclass
@@ -61,6 +54,8 @@ class Entry:
     path: Path                   # the copy in the store
     source: str | None           # where it was filed from
     sha256: str
+    imu_model: str | None = None
+    lot: str | None = None
 
 
 def default_store() -> Path:
@@ -77,8 +72,10 @@ def default_store() -> Path:
 
 
 def simulation_store(root=None) -> Path:
-    """Where simulated runs are filed when asked: beside the calibrations' store, never in it."""
-    base = Path(root) if root else default_store()
+    """Where simulated runs are filed when asked: beside the calibrations' store, never in it
+    (a folder with its own SQLite index, also when the calibrations' index is a database)."""
+    root = root or os.environ.get(STORE_ENV)
+    base = Path(root) if root and not is_database_url(root) else default_store()
     return base.with_name(base.name + "-simulations")
 
 
@@ -128,58 +125,104 @@ def serial_folder(serial: str) -> str:
     return name or "_"
 
 
-def _one_line(e: Exception) -> str:
-    return " ".join(str(e).split()) or type(e).__name__
+@dataclass
+class Number:
+    """One parameter of a filed calibration, as the index holds it."""
+    name: str
+    value: float
+    sigma: float | None
+    unit: str
+
+
+@dataclass
+class Filed:
+    """A filed calibration with its numbers (what ``station fleet`` reads)."""
+    entry: Entry
+    numbers: dict            # name -> Number
+
+
+def _numbers(doc: dict) -> list[tuple]:
+    """(name, value, sigma, unit) of every parameter of a calibration document."""
+    params = doc.get("parameters") if isinstance(doc.get("parameters"), dict) else {}
+    out = []
+    for name, p in params.items():
+        if not isinstance(p, dict):
+            continue
+        value, sigma, unit = p.get("value"), p.get("sigma"), p.get("unit")
+        if isinstance(value, (int, float)) and not isinstance(value, bool) and isinstance(unit, str):
+            sigma = float(sigma) if isinstance(sigma, (int, float)) and not isinstance(sigma, bool) else None
+            out.append((str(name), float(value), sigma, unit))
+    return out
+
+
+def _atomic_copy(data: bytes, target: Path) -> None:
+    """The bytes at ``target``, complete or not at all (written beside it, then renamed: a
+    writer killed while copying leaves no half file under the name the index gives)."""
+    if target.is_file() and target.stat().st_size == len(data) and target.read_bytes() == data:
+        return
+    tmp = target.with_name(f".{target.name}.{os.getpid()}-{os.urandom(4).hex()}.tmp")
+    try:
+        with open(tmp, "xb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, target)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 class Store:
-    def __init__(self, root=None):
-        self.root = Path(root) if root else default_store()
+    """The calibration store: files in a folder (``root``) and an index (``index``: SQLite in the
+    folder, or PostgreSQL given by URL)."""
 
-    def _connect(self, create: bool) -> sqlite3.Connection | None:
-        index = self.root / INDEX
-        if not create and not index.exists():
-            return None
-        db = None
-        try:
-            if create:
-                self.root.mkdir(parents=True, exist_ok=True)
-            if index.exists() and not index.is_file():
-                raise UserError(f"{index}: not a regular file: cannot open the calibration history")
-            db = sqlite3.connect(index)
-            db.execute(SCHEMA)
-            columns = tuple(row[1] for row in db.execute("PRAGMA table_info(calibrations)"))
-            added = tuple(name for name, _ in ADDED_COLUMNS)
-            if columns[:len(COLUMNS)] != COLUMNS or not set(columns[len(COLUMNS):]) <= set(added):
-                raise UserError(f"{index}: not station's calibration history: its table 'calibrations' has "
-                                f"the columns {', '.join(map(str, columns))[:200]}")
-            for name, kind in ADDED_COLUMNS:        # an index written before they existed
-                if name not in columns:
-                    db.execute(f"ALTER TABLE calibrations ADD COLUMN {name} {kind}")
-            return db
-        except (OSError, sqlite3.Error, UserError) as e:
-            if db is not None:
-                db.close()
-            if isinstance(e, UserError):
-                raise
-            raise UserError(f"{index}: cannot open the calibration history: {_one_line(e)}") from None
+    _COLUMNS = "id, serial, date_utc, scheme, method, verdict, file, source, sha256, imu_model, lot"
 
-    def _rows(self, sql: str, params=(), *, create: bool = False) -> list:
-        """The rows of a query (none when there is no index and ``create`` is false); an sqlite3
-        error is a UserError naming the index."""
-        db = self._connect(create)
-        if db is None:
-            return []
-        try:
-            with db:
-                return db.execute(sql, params).fetchall()
-        except sqlite3.Error as e:
-            raise UserError(f"{self.root / INDEX}: the calibration history cannot be read: {_one_line(e)}") from None
-        finally:
-            db.close()
+    def __init__(self, location=None, files=None):
+        location = location or os.environ.get(STORE_ENV) or None
+        if is_database_url(location):
+            from station.io.store_postgres import PostgresIndex
 
-    def file(self, cal_path) -> tuple[Entry, bool]:
-        """File a calibration; (its entry, True if new)."""
+            self.root = Path(files) if files else default_store()
+            self.index = PostgresIndex(location)
+        else:
+            self.root = Path(location) if location else (Path(files) if files else default_store())
+            self.index = SqliteIndex(self.root)
+        self.where = self.index.where
+
+    def close(self) -> None:
+        self.index.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def _rows(self, sql: str, params=()) -> list:
+        """The rows of a query (none when there is no index yet)."""
+        with self.index.transaction(write=False, backfill=self._backfill) as tx:
+            return [] if tx is None else tx.rows(sql, params)
+
+    def _backfill(self, tx) -> None:
+        """Migration step 4: the numbers, IMU model and lot of calibrations filed before the index
+        held them, read from their files (a file that is gone or damaged keeps its row without
+        numbers)."""
+        from station.io.calfile import read_calfile
+
+        for id_, file in tx.rows("SELECT id, file FROM calibrations"):
+            try:
+                doc = read_calfile(self._inside(str(file), f"{self.where}: row #{id_}"))
+            except (UserError, OSError):
+                continue
+            prov = doc.get("provenance") if isinstance(doc.get("provenance"), dict) else {}
+            tx.run("UPDATE calibrations SET imu_model = ?, lot = ? WHERE id = ?",
+                   (_text(prov.get("imu_model")), _text(prov.get("imu_lot")), id_))
+            tx.many("INSERT INTO parameters (calibration_id, name, value, sigma, unit) VALUES (?, ?, ?, ?, ?)",
+                    [(id_, *n) for n in _numbers(doc)])
+
+    def file(self, cal_path, *, lot: str | None = None, imu_model: str | None = None) -> tuple[Entry, bool]:
+        """File a calibration; (its entry, True if new).  ``lot``/``imu_model`` state the IMU's lot
+        and model where the file does not (``history --add --lot``), also on an entry filed before."""
         from station.io.calfile import read_calfile
 
         cal_path = Path(cal_path)
@@ -191,48 +234,51 @@ class Store:
         date = _text(prov.get("date_utc")) or _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
         capture_digest = _text(prov.get("capture_sha256"))
         model = model_key(doc)
-        db = self._connect(create=True)
-        try:
-            return self._file(db, doc, data, digest, cal_path, prov, serial, date, capture_digest, model)
-        except sqlite3.Error as e:
-            raise UserError(f"{self.root / INDEX}: cannot file the calibration: {_one_line(e)}") from None
-        finally:
-            db.close()
-
-    def _file(self, db, doc, data, digest, cal_path, prov, serial, date, capture_digest, model) -> tuple[Entry, bool]:
-        with db:
-            row = db.execute("SELECT id FROM calibrations WHERE sha256 = ?", (digest,)).fetchone()
-            if row is None and capture_digest:
-                row = db.execute("SELECT id FROM calibrations WHERE capture_sha256 = ? AND model = ? AND serial = ?",
-                                 (capture_digest, model, serial)).fetchone()
-            if row:
-                return self.get(row[0]), False
-            rel = Path(serial_folder(serial)) / f"{re.sub(r'[^0-9A-Za-z]', '', date)[:15]}-{digest[:8]}.yaml"
-            target = self.root / rel
+        key = (digest, capture_digest, model, serial)
+        found = self._rows(f"SELECT {self._COLUMNS} FROM calibrations WHERE {self._SAME}", key)
+        if found and lot is None and imu_model is None:
+            return self._entry(found[0]), False
+        rel = Path(serial_folder(serial)) / f"{re.sub(r'[^0-9A-Za-z]', '', date)[:15]}-{digest[:8]}.yaml"
+        target = self.root / rel
+        if not found:
             try:
                 target.parent.mkdir(parents=True, exist_ok=True)
-                with open(target, "xb") as f:
-                    f.write(data)
-            except FileExistsError:
-                pass   # a crash between copy and index: the same bytes, adopt them
+                _atomic_copy(data, target)
             except OSError as e:
                 raise UserError(f"{target}: cannot file the calibration: {e.strerror}") from None
-            cur = db.execute(
-                "INSERT INTO calibrations (serial, date_utc, scheme, method, verdict, file, source, "
-                "sha256, filed_utc, capture_sha256, model) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                (serial, date, _text(prov.get("scheme")), _text(prov.get("method")), verdict_of(doc),
-                 rel.as_posix(), str(cal_path.resolve()), digest,
-                 _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"), capture_digest, model))
-            new_id = cur.lastrowid
-        return self.get(new_id), True
+        row = (serial, date, _text(prov.get("scheme")), _text(prov.get("method")), verdict_of(doc), rel.as_posix(),
+               str(cal_path.resolve()), digest, _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+               capture_digest, model, imu_model or _text(prov.get("imu_model")), lot or _text(prov.get("imu_lot")))
+        with self.index.transaction(write=True, backfill=self._backfill) as tx:
+            new = tx.rows(
+                "INSERT INTO calibrations (serial, date_utc, scheme, method, verdict, file, source, sha256, filed_utc, "
+                "capture_sha256, model, imu_model, lot) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) "
+                "ON CONFLICT DO NOTHING RETURNING id", row)
+            if new:
+                tx.many("INSERT INTO parameters (calibration_id, name, value, sigma, unit) VALUES (?, ?, ?, ?, ?)",
+                        [(new[0][0], *n) for n in _numbers(doc)])
+                entry = self._entry((new[0][0], *row[:8], *row[11:]))
+            else:            # filed before, or by another writer since the look above
+                if lot is not None or imu_model is not None:
+                    tx.run(f"UPDATE calibrations SET lot = COALESCE(?, lot), imu_model = COALESCE(?, imu_model) "
+                           f"WHERE {self._SAME}", (lot, imu_model, *key))
+                entry = self._entry(tx.rows(f"SELECT {self._COLUMNS} FROM calibrations WHERE {self._SAME} "
+                                            "ORDER BY id", key)[0])
+                if entry.sha256 != digest and not found:
+                    target.unlink(missing_ok=True)     # our copy of a calibration not filed
+        return entry, bool(new)
+
+    # the same calibration: the same file, or the same capture and model of the same serial
+    _SAME = "sha256 = ? OR (capture_sha256 = ? AND model = ? AND serial = ?)"
 
     def _entry(self, row) -> Entry:
-        id_, serial, date, scheme, method, verdict, file, source, digest = row
-        where = f"{self.root / INDEX}: row #{id_}"
+        id_, serial, date, scheme, method, verdict, file, source, digest, imu_model, lot = row
+        where = f"{self.where}: row #{id_}"
         if not isinstance(id_, int) or not all(isinstance(v, str) for v in (serial, date, verdict, file, digest)) \
-                or not all(v is None or isinstance(v, str) for v in (scheme, method, source)):
+                or not all(v is None or isinstance(v, str) for v in (scheme, method, source, imu_model, lot)):
             raise UserError(f"{where}: not station's calibration history (a field of another type)")
-        return Entry(id_, serial, date, scheme, method, verdict, self._inside(file, where), source, digest)
+        return Entry(id_, serial, date, scheme, method, verdict, self._inside(file, where), source, digest,
+                     imu_model, lot)
 
     def _inside(self, file: str, where: str) -> Path:
         """The store's file a row names: a relative path that stays inside the store (a row
@@ -249,12 +295,10 @@ class Store:
             raise UserError(f"{where}: field 'file': {file[:200]!r} is not a file inside the store {self.root}")
         return path
 
-    _COLUMNS = "id, serial, date_utc, scheme, method, verdict, file, source, sha256"
-
     def get(self, id_: int) -> Entry:
         rows = self._rows(f"SELECT {self._COLUMNS} FROM calibrations WHERE id = ?", (id_,))
         if not rows:
-            raise UserError(f"{self.root / INDEX}: no calibration #{id_} in the history")
+            raise UserError(f"{self.where}: no calibration #{id_} in the history")
         return self._entry(rows[0])
 
     def list(self, serial: str) -> list[Entry]:
@@ -265,6 +309,36 @@ class Store:
         rows = self._rows("SELECT serial, COUNT(*) FROM calibrations GROUP BY serial ORDER BY serial")
         return [(str(serial), int(n)) for serial, n in rows]
 
+    def count(self) -> int:
+        rows = self._rows("SELECT COUNT(*) FROM calibrations")
+        return int(rows[0][0]) if rows else 0
+
+    def filed(self, *, imu_model: str | None = None, lot: str | None = None, since: str | None = None) -> list[Filed]:
+        """Every filed calibration (of an IMU model, a lot, dated on or after ``since``) with its
+        numbers, by serial and date."""
+        where, params = [], []
+        for column, value, op in (("imu_model", imu_model, "="), ("lot", lot, "="), ("date_utc", since, ">=")):
+            if value is not None:
+                where.append(f"c.{column} {op} ?")
+                params.append(value)
+        cols = ", ".join(f"c.{c.strip()}" for c in self._COLUMNS.split(","))
+        rows = self._rows(f"SELECT {cols}, p.name, p.value, p.sigma, p.unit FROM calibrations c "
+                          f"LEFT JOIN parameters p ON p.calibration_id = c.id"
+                          + (" WHERE " + " AND ".join(where) if where else "")
+                          + " ORDER BY c.serial, c.date_utc, c.id, p.name", tuple(params))
+        out: dict[int, Filed] = {}
+        for row in rows:
+            head, (name, value, sigma, unit) = row[:11], row[11:]
+            if head[0] not in out:
+                out[head[0]] = Filed(self._entry(head), {})
+            if name is not None:
+                if not isinstance(value, (int, float)) or not (sigma is None or isinstance(sigma, (int, float))) \
+                        or not isinstance(unit, str):
+                    raise UserError(f"{self.where}: row #{head[0]}: parameter {name!r}: not station's numbers")
+                out[head[0]].numbers[str(name)] = Number(str(name), float(value),
+                                                         None if sigma is None else float(sigma), unit)
+        return list(out.values())
+
     def resolve(self, ref: str) -> Path:
         """A calibration named by a file path or by its id in the history (``#12`` or ``12``)."""
         path = Path(ref)
@@ -273,4 +347,4 @@ class Store:
         m = re.fullmatch(r"#?([0-9]{1,12})", ref)
         if m:
             return self.get(int(m.group(1))).path
-        raise UserError(f"{ref}: neither a calibration file nor an id of the history ({self.root})")
+        raise UserError(f"{ref}: neither a calibration file nor an id of the history ({self.where})")
