@@ -7,7 +7,7 @@ from pathlib import Path
 from station.cli import plugins
 from station.cli.choices import ESTIMATE_METHODS
 from station.cli.output import EXIT_POOR_FIT, err, out, print_notes, print_parameters, print_verdict
-from station.core.errors import UserError
+from station.core.errors import UserError, cannot_write
 
 
 def add_parsers(sub) -> None:
@@ -189,7 +189,7 @@ def cmd_apply(args) -> int:
             fh.write("t,ax,ay,az,gx,gy,gz\n")
             np.savetxt(fh, table, delimiter=",", fmt=["%.9f"] + ["%.12g"] * 6)
     except OSError as e:
-        raise UserError(f"{args.output}: cannot write: {e.strerror}") from None
+        raise cannot_write(args.output, e) from None
     out.print(f"{len(table)} samples compensated into {args.output} (m/s^2, deg/s, frame p)")
     return 0
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from station.cli import plugins
 from station.cli.output import err, out
-from station.core.errors import UserError
+from station.core.errors import UserError, cannot_write
 
 
 def add_parsers(sub) -> None:
@@ -200,7 +200,7 @@ def _emit(path, d, steps=()) -> None:
     try:
         Path(path).write_text(plugin_source(*got, aliases=aliases, discovered_by=how))
     except OSError as e:
-        raise UserError(f"{path}: cannot write: {e.strerror}") from None
+        raise cannot_write(path, e) from None
     err.print(f"effect plugin written: {path} (add it with --add {path}:DiscoveredTerms; check it with "
               f"python {path})", markup=False, soft_wrap=True)
 

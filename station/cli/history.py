@@ -104,7 +104,7 @@ def cmd_history(args) -> int:
 
 
 def _drift(entries, png: Path, serial: str) -> None:
-    from station.core.errors import UserError
+    from station.core.errors import UserError, cannot_write
     from station.diagnose.figures import drift_figure, drift_status
     from station.io.calfile import read_calfile
 
@@ -122,7 +122,7 @@ def _drift(entries, png: Path, serial: str) -> None:
     try:
         drift_figure(rows, png, f"IMU {serial}: {len(entries)} calibrations, value ± 1σ")
     except OSError as e:
-        raise UserError(f"{png}: cannot write: {e.strerror}") from None
+        raise cannot_write(png, e) from None
     except ValueError as e:
         raise UserError(f"{png}: cannot plot the drift: {e}") from None
     out.print(f"drift plot: {png}", markup=False)

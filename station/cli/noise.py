@@ -54,7 +54,7 @@ def _table(result) -> Table:
 
 
 def cmd_noise(args) -> int:
-    from station.core.errors import UserError
+    from station.core.errors import UserError, cannot_write
     from station.diagnose.figures import allan_figure
     from station.estimate import noise
     from station.io.calfile import read_calfile
@@ -113,7 +113,7 @@ def cmd_noise(args) -> int:
     try:
         allan_figure(result, png)
     except OSError as e:
-        raise UserError(f"{png}: cannot write: {e.strerror}") from None
+        raise cannot_write(png, e) from None
     out.print(_table(result))
     kal = block["kalibr"]
     out.print("Kalibr imu.yaml: " + ", ".join(

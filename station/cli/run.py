@@ -15,7 +15,7 @@ import yaml
 from station.cli import argtypes
 from station.cli.calibration import add_accept_poor_fit, report_calibration
 from station.cli.output import err, out
-from station.core.errors import UserError
+from station.core.errors import UserError, cannot_write
 from station.core import yaml_text
 
 RUN_FILE = "run.yaml"
@@ -98,7 +98,7 @@ def cmd_init(args) -> int:
     try:
         path.write_text(EXAMPLE)
     except OSError as e:
-        raise UserError(f"{path}: cannot write: {e.strerror}") from None
+        raise cannot_write(path, e) from None
     out.print(f"wrote {path}: edit the ports, the table geometry and limits, and the site")
     return 0
 
