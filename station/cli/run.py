@@ -221,8 +221,6 @@ def cmd_run(args) -> int:
         return _run_on_bench(args)
     scheme = load_scheme(args.scheme, overrides)
     from station.simulate import dryrun
-    from station.io.calfile import write_calfile
-    from station.estimate import estimate_capture
 
     truth = dryrun.load_truth(args.sim_truth, args.seed)
     # the table's geometry as station.yaml states it, recorded as station run records it
@@ -240,12 +238,15 @@ def cmd_run(args) -> int:
 
     if is_noise_recording(scheme.segments):
         return characterise_run(capture)
-    cal, _, provenance = estimate_capture(capture)
-    cal_path = write_calfile(capture / "calibration.yaml", cal, provenance)
+    from station import api
+
+    est = api.estimate(capture)
+    cal_path = est.save(capture / "calibration.yaml")
     file_quietly(cal_path, asked=bool(args.history), simulated=True)
     out.print(f"capture:          {capture}", markup=False)
     out.print(f"simulated truth:  {capture / dryrun.TRUTH_FILE}", markup=False)
-    return report_calibration(cal, "", cal_path, args.accept_poor_fit, truth=dryrun.truth_calibration(truth))
+    return report_calibration(est.calibration, "", cal_path, args.accept_poor_fit,
+                              truth=dryrun.truth_calibration(truth))
 
 
 def _run_on_bench(args) -> int:
@@ -537,23 +538,21 @@ def _reopen(directory, rate_hz, serial=None):
 
 
 def _estimate(directory, accept_poor_fit: bool = False, config=None, history: bool | None = None) -> int:
-    from station.io.calfile import write_calfile
-    from station.estimate import estimate_capture
+    from station import api
     from station.cli.noise import characterise_run, is_noise_recording
-    from station.io.capture import read_capture
 
-    if is_noise_recording(read_capture(directory, load_data=False).segments):
+    if is_noise_recording(api.read_capture(directory, samples=False).segments):
         return characterise_run(directory)
     limits = {} if config is None else {"max_missing_fraction": config.run.max_missing_fraction,
                                         "max_gap_s": config.run.max_gap_s}
-    cal, capture, provenance = estimate_capture(directory, **limits)
-    for w in capture.warnings:
+    est = api.estimate(directory, **limits)
+    for w in est.capture.warnings:
         err.print(f"warning: {w}", markup=False, soft_wrap=True)
-    path = write_calfile(Path(directory) / "calibration.yaml", cal, provenance)
+    path = est.save(Path(directory) / "calibration.yaml")
     from station.cli.history import file_quietly
 
     file_quietly(path, asked=True if history is None else history)
-    return report_calibration(cal, f"calibration of {directory} ({provenance['method']})", path,
+    return report_calibration(est.calibration, f"calibration of {directory} ({est.provenance['method']})", path,
                               accept_poor_fit)
 
 
