@@ -24,10 +24,10 @@ import numpy as np
 
 from station.core.errors import UserError
 
-__all__ = ["Applied", "EffectInfo", "Estimate", "Exported", "NoiseFiles", "Parameter", "Report", "UserError", "apply",
-           "apply_file", "apply_frame", "characterise_noise", "diagnose", "effect", "effects", "estimate", "export",
-           "import_csv", "import_imucal", "import_rosbag", "load_calibration", "noise", "read_capture", "report",
-           "simulate"]
+__all__ = ["Applied", "EffectInfo", "Estimate", "Exported", "MonteCarlo", "NoiseFiles", "Parameter", "Report",
+           "UserError", "apply", "apply_file", "apply_frame", "characterise_noise", "diagnose", "effect", "effects",
+           "estimate", "export", "import_csv", "import_imucal", "import_rosbag", "load_calibration", "montecarlo",
+           "noise", "read_capture", "report", "simulate"]
 
 
 @dataclass(frozen=True)
@@ -607,3 +607,51 @@ def effect(name: str, *, plugins=(), effects_dirs=(), config=None) -> EffectInfo
     params = getattr(e, "all_params", None) or e.params
     return EffectInfo(e.id, e.title, reg.source(e.id), e.physics, e.term, e.excited_by, e.magnitudes, e.signature,
                       tuple((p.name, p.unit) for p in params or ()), tuple(e.needs))
+
+
+@dataclass
+class MonteCarlo:
+    """:func:`montecarlo`'s result: ``scheme`` (its name), ``runs``, ``method``, ``settings``
+    (the noise and table figures simulated, with their units in the names), ``workers`` (the
+    processes used), and ``parameters``: per parameter a dict with ``name``, ``unit``, ``std``
+    (of the error against the simulated truth), ``crlb`` (the Cramér-Rao bound), ``mean_sigma``
+    (the mean reported 1-sigma; None when the method reports none) and ``mean_error`` (scale
+    factors relative)."""
+    scheme: str
+    runs: int
+    method: str
+    settings: dict
+    workers: int
+    parameters: list
+
+
+def montecarlo(scheme: str = "optimal9", runs: int = 100, *, seed: int = 1000, accel_noise_ug: float = 100.0,
+               gyro_noise_dph: float = 0.03, table_angle_arcsec: float = 2.0, accel_disturbance_ug: float = 50.0,
+               method: str = "lsq", progress=None) -> MonteCarlo:
+    """``station montecarlo``: ``runs`` dry runs of ``scheme`` (seeds ``seed``, ``seed`` + 1, ...)
+    estimated with ``method`` (lsq or zhang2010) on every usable core, against the Cramér-Rao
+    bound.  Noise densities: accelerometer µg/√Hz, gyro °/h/√Hz; ``table_angle_arcsec``: 1-sigma
+    table angle error; ``accel_disturbance_ug``: 1-sigma white acceleration disturbance.
+    ``progress(done, total)`` is called as runs finish."""
+    from station.io.scheme import load_scheme
+    from station.simulate import montecarlo as _mc
+
+    if runs < 2:
+        raise UserError("--runs must be at least 2")
+    plan = load_scheme(scheme)
+    settings = _mc.Settings(accel_noise_ug=accel_noise_ug, gyro_noise_dph=gyro_noise_dph,
+                            table_angle_arcsec=table_angle_arcsec, accel_disturbance_ug=accel_disturbance_ug,
+                            method=method)
+    result = _mc.study(plan, settings, runs, first_seed=seed, bound=True, progress=progress)
+    errors, sigmas = result.errors, result.sigmas
+    std = errors.std(axis=0, ddof=1)
+    with np.errstate(all="ignore"):
+        mean_sigma = np.nanmean(sigmas, axis=0) if np.isfinite(sigmas).any() else np.full(len(std), np.nan)
+    rows = [{"name": n, "unit": u, "std": float(sd), "crlb": float(c),
+             "mean_sigma": None if not np.isfinite(ms) else float(ms), "mean_error": float(me)}
+            for (n, u), sd, c, ms, me in zip(result.names, std, result.crlb, mean_sigma, errors.mean(axis=0))]
+    return MonteCarlo(plan.name, runs, method, {"accel_noise_ug_rthz": accel_noise_ug,
+                                                "gyro_noise_dph_rthz": gyro_noise_dph,
+                                                "table_angle_arcsec": table_angle_arcsec,
+                                                "accel_disturbance_ug": accel_disturbance_ug},
+                      result.workers, rows)
