@@ -24,9 +24,10 @@ import numpy as np
 
 from station.core.errors import UserError
 
-__all__ = ["Applied", "EffectInfo", "Estimate", "Exported", "MonteCarlo", "NoiseFiles", "Parameter", "Report",
-           "UserError", "apply", "apply_file", "apply_frame", "characterise_noise", "diagnose", "effect", "effects",
-           "estimate", "export", "import_csv", "import_imucal", "import_rosbag", "load_calibration", "montecarlo",
+__all__ = ["Applied", "EffectInfo", "Estimate", "Exported", "Comparison", "History", "MonteCarlo", "NoiseFiles", "Parameter", "Report",
+           "UserError", "apply", "apply_file", "apply_frame", "characterise_noise", "diagnose", "diff", "drift", "effect",
+           "effects",
+           "estimate", "export", "history", "import_csv", "import_imucal", "import_rosbag", "load_calibration", "montecarlo",
            "noise", "read_capture", "report", "simulate"]
 
 
@@ -655,3 +656,95 @@ def montecarlo(scheme: str = "optimal9", runs: int = 100, *, seed: int = 1000, a
                                                 "table_angle_arcsec": table_angle_arcsec,
                                                 "accel_disturbance_ug": accel_disturbance_ug},
                       result.workers, rows)
+
+
+@dataclass
+class History:
+    """:func:`history`'s result: ``store`` (its folder), ``filed`` ((entry, new) for each file
+    given to ``add``: new False when it, or a calibration of the same capture and model, was
+    filed before), ``serials`` ((serial, count) of every IMU in the store), ``entries`` (the
+    calibrations of ``serial``, oldest first: each ``.id``, ``.serial``, ``.date_utc``,
+    ``.scheme``, ``.method``, ``.verdict``, ``.path``)."""
+    store: Path
+    filed: list
+    serials: list
+    entries: list
+
+
+def history(serial: str | None = None, *, store=None, add=()) -> History:
+    """``station history [SERIAL] [--add CAL]``: the calibration history (``store``: default
+    $STATION_HISTORY_DIR or the user's data directory), the calibrations ``add`` filed into it
+    first.  Filing runs no policy: what you give is filed (the commands file only real IMUs')."""
+    from station.io.history import Store
+
+    st = Store(store)
+    filed = [st.file(cal) for cal in add]
+    return History(st.root, filed, st.serials(), st.list(serial) if serial is not None else [])
+
+
+@dataclass
+class Comparison:
+    """:func:`diff`'s result: ``a``, ``b`` (the files compared), their documents ``doc_a``,
+    ``doc_b``, ``changes`` (per parameter in both: ``.name``, ``.before``, ``.after``,
+    ``.change`` in its unit, ``.change_ppm`` for scale factors, ``.unit``, ``.z`` = change over
+    sqrt(sigma_A^2 + sigma_B^2), None without both sigmas, ``.flagged`` over 3 sigma),
+    ``only_a``, ``only_b`` (parameter names), ``warnings`` (a fit that does not pass)."""
+    a: Path
+    b: Path
+    doc_a: dict
+    doc_b: dict
+    changes: list
+    only_a: list
+    only_b: list
+    warnings: list
+
+
+def diff(a, b, *, store=None) -> Comparison:
+    """``station diff A B``: two calibrations (files, or ids ``#N`` of the history in
+    ``store``) compared parameter by parameter, in their units and in combined sigma."""
+    from station.io.calcompare import changes
+    from station.io.calfile import read_calfile
+    from station.io.history import Store, verdict_of
+
+    st = Store(store)
+    pa, pb = st.resolve(str(a)), st.resolve(str(b))
+    da, db = read_calfile(pa), read_calfile(pb)
+    rows, only_a, only_b = changes(da, db)
+    warnings = []
+    for label, doc in (("A", da), ("B", db)):
+        verdict = verdict_of(doc)
+        if not verdict.startswith("passes"):
+            warnings.append(f"warning: {label}'s fit does not pass ({verdict.split(': ')[0]}): its numbers are not a "
+                            "calibration to compare against")
+    return Comparison(pa, pb, da, db, rows, only_a, only_b, warnings)
+
+
+def drift(serial: str, output, *, store=None) -> tuple[Path, list]:
+    """``station history SERIAL --drift PNG``: every parameter of the IMU's filed calibrations
+    against the date, +- 1 sigma, those whose fit does not pass drawn apart; returns (the plot,
+    the entries drawn apart as "#N verdict")."""
+    from station.core.errors import cannot_write
+    from station.diagnose.figures import drift_figure, drift_status
+    from station.io.calfile import read_calfile
+    from station.io.history import Store
+
+    st = Store(store)
+    entries = st.list(serial) if isinstance(serial, str) else []
+    if not entries:
+        raise UserError(f"no calibration of IMU {serial!r} in {st.root} (station history lists the serials)")
+    png = Path(output)
+    rows: dict = {}
+    for e in entries:
+        doc = read_calfile(e.path)
+        status = drift_status(e.verdict)
+        for name, p in doc["parameters"].items():
+            rows.setdefault(name, []).append((e.date_utc, p["value"], p.get("sigma"), p["unit"], status))
+    marked = [f"#{e.id} {e.verdict.split(':')[0]}" for e in entries if drift_status(e.verdict) != "passes"]
+    rows = {k: v for k, v in rows.items() if len(v) == len(entries)}
+    try:
+        drift_figure(rows, png, f"IMU {serial}: {len(entries)} calibrations, value ± 1σ")
+    except OSError as e:
+        raise cannot_write(png, e) from None
+    except ValueError as e:
+        raise UserError(f"{png}: cannot plot the drift: {e}") from None
+    return png, marked

@@ -97,6 +97,8 @@ class _Called(Exception):
     ("import_rosbag", ["import", "rosbag", "BAG", "-o", "CAP"], "BAG"),
     ("import_imucal", ["import", "imucal", "S.csv", "--rate-hz", "100", "-o", "CAP"], "S.csv"),
     ("montecarlo", ["montecarlo", "--scheme", "sizeeffect", "--runs", "3"], "sizeeffect"),
+    ("history", ["history", "SER-1", "--store", "STORE"], "SER-1"),
+    ("diff", ["diff", "A.yaml", "B.yaml"], "A.yaml"),
 ])
 def test_the_command_does_its_work_through_the_api(monkeypatch, tmp_path, function, argv, first):
     """The CLI is a thin layer over station.api (issue 26 item 1): each analysis command parses
