@@ -24,11 +24,11 @@ import numpy as np
 
 from station.core.errors import UserError
 
-__all__ = ["Applied", "EffectInfo", "Estimate", "Exported", "Comparison", "History", "MonteCarlo", "NoiseFiles", "Parameter", "Report",
+__all__ = ["Applied", "EffectInfo", "Estimate", "Exported", "Comparison", "Compiled", "History", "MonteCarlo", "NoiseFiles", "Parameter", "Report",
            "UserError", "apply", "apply_file", "apply_frame", "characterise_noise", "diagnose", "diff", "drift", "effect",
            "effects",
            "estimate", "export", "history", "import_csv", "import_imucal", "import_rosbag", "load_calibration", "montecarlo",
-           "noise", "read_capture", "report", "simulate"]
+           "noise", "plan", "read_capture", "report", "schemes", "simulate"]
 
 
 @dataclass(frozen=True)
@@ -748,3 +748,85 @@ def drift(serial: str, output, *, store=None) -> tuple[Path, list]:
     except ValueError as e:
         raise UserError(f"{png}: cannot plot the drift: {e}") from None
     return png, marked
+
+
+@dataclass
+class Compiled:
+    """:func:`plan`'s result: ``scheme`` (the scheme as loaded: ``.name``, ``.title``,
+    ``.segments``, ``.duration_s`` of recording), ``config`` (the configuration it was compiled
+    for: ``.table``, ``.run``, ``.source``), and ``plan`` (the table's steps: ``.steps``, each
+    with ``.describe()`` and ``.estimate_s``; ``.notes``; ``.duration_s`` of device time;
+    ``.manual`` for a scheme done by hand)."""
+    scheme: object
+    config: object
+    plan: object
+
+
+def _bench_config(config=None, *, port=None, imu_protocol=None, table_port=None, table_protocol=None,
+                  unattended: bool = False):
+    """station.yaml (``config``; default $STATION_CONFIG, ./station.yaml, the built-in) with the
+    commands' overrides."""
+    from station.bench.config import load_config
+
+    cfg = load_config(None if config is None else str(config))
+    cfg = cfg.with_overrides("imu", port=port, protocol=imu_protocol)
+    cfg = cfg.with_overrides("table", port=table_port, protocol=table_protocol)
+    if unattended:
+        cfg = cfg.with_overrides("run", operator=False)
+    return cfg
+
+
+def plan(scheme: str = "optimal9", *, config=None, unattended: bool = False, dwell_s: float | None = None,
+         rate_dps: float | None = None, rotation_s: float | None = None) -> Compiled:
+    """``station plan``: a scheme (a built-in name or a YAML file) compiled for the table of
+    ``config`` (a station.yaml; default $STATION_CONFIG, ./station.yaml, the built-in), without
+    hardware: the moves, dwells, rotations and operator steps, and their device time.
+    ``unattended``: no remount steps (run.operator false)."""
+    from station.bench.compile import compile_scheme
+    from station.io.scheme import load_scheme
+
+    cfg = _bench_config(config, unattended=unattended)
+    overrides = {k: v for k, v in (("dwell_s", dwell_s), ("rate_dps", rate_dps), ("rotation_s", rotation_s))
+                 if v is not None}
+    sch = load_scheme(scheme, overrides)
+    try:
+        compiled = compile_scheme(sch, cfg)
+    except UserError as e:
+        rotations = [seg for seg in sch.segments if getattr(seg, "kind", "") == "rotation"]
+        if rotations and all(not getattr(seg, "encoder", True) for seg in rotations):
+            raise UserError(f"scheme {sch.name} is not a table scheme: its rotations have no encoder (a "
+                            "shaft, a screwdriver or a hand turns the IMU; `station run --scheme "
+                            f"{sch.name} --sim` simulates it); on this table: {e}") from None
+        raise
+    return Compiled(sch, cfg, compiled)
+
+
+def schemes(*, config=None) -> list[dict]:
+    """``station schemes``: each built-in scheme with its statics and rotations, seconds of
+    recording, and compiled for the table of ``config``: seconds of device time (None when it
+    cannot run there: ``note`` says why) and operator steps.  Each is compiled in a forked child,
+    as many at once as there are cores."""
+    from station.bench.config import load_config
+    from station.core import forked
+    from station.io.scheme import builtin_names
+
+    cfg = load_config(None if config is None else str(config))
+    names = builtin_names()
+    return list(forked.map_in_children(lambda name: _scheme_row(name, cfg), names))
+
+
+def _scheme_row(name, cfg) -> dict:
+    from station.bench.compile import compile_scheme
+    from station.io.scheme import load_scheme
+
+    sch = load_scheme(name)
+    statics = sum(s.kind == "static" for s in sch.segments)
+    row = {"name": name, "title": sch.title, "statics": statics, "rotations": len(sch.segments) - statics,
+           "recording_s": sch.duration_s, "run_s": None, "operator_steps": None, "note": None}
+    try:
+        compiled = compile_scheme(sch, cfg)
+        row["run_s"] = compiled.duration_s
+        row["operator_steps"] = sum(type(s).__name__ in ("Operator", "HandStatic", "HandRotation") for s in compiled)
+    except UserError as e:
+        row["note"] = f"{name}: {e}"
+    return row

@@ -103,65 +103,35 @@ def cmd_init(args) -> int:
     return 0
 
 
-def _scheme_row(name, config) -> tuple:
-    """(statics, rotations, recording s, run s, operator steps, title, note or None) of a built-in
-    scheme compiled for the configured table."""
-    from station.bench.compile import compile_scheme
-    from station.io.scheme import load_scheme
-
-    scheme = load_scheme(name)
-    statics = sum(s.kind == "static" for s in scheme.segments)
-    run_s = ops = "-"
-    note = None
-    try:
-        plan = compile_scheme(scheme, config)
-        run_s = f"{plan.duration_s:.0f}"
-        ops = str(sum(type(s).__name__ in ("Operator", "HandStatic", "HandRotation") for s in plan))
-    except UserError as e:
-        note = f"note: {name}: {e}"
-    return (str(statics), str(len(scheme.segments) - statics), f"{scheme.duration_s:.0f}", run_s, ops,
-            scheme.title, note)
-
-
 def cmd_schemes(args) -> int:
     from rich.table import Table
 
+    from station import api
     from station.bench.config import load_config
-    from station.core import forked
-    from station.io.scheme import builtin_names
 
     config = load_config(args.config)
     table = Table(title=f"built-in schemes (run s: estimated for the {config.table.axes}-axis table of "
                         f"the configuration: {config.source})")
     for col in ("scheme", "statics", "rotations", "recording s", "run s", "operator steps", "title"):
         table.add_column(col, justify="left" if col in ("scheme", "title") else "right")
-    names = builtin_names()
     # each scheme compiled (the table's inverse kinematics: 0.15-0.3 s CPU each, 0.8 s in all) on its own core
-    for name, row in zip(names, forked.map_in_children(lambda name: _scheme_row(name, config), names)):
-        *cells, note = row
-        if note:
-            err.print(note, markup=False, soft_wrap=True)
-        table.add_row(name, *cells)
+    for row in api.schemes(config=args.config):
+        if row["note"]:
+            err.print(f"note: {row['note']}", markup=False, soft_wrap=True)
+        table.add_row(row["name"], str(row["statics"]), str(row["rotations"]), f"{row['recording_s']:.0f}",
+                      "-" if row["run_s"] is None else f"{row['run_s']:.0f}",
+                      "-" if row["operator_steps"] is None else str(row["operator_steps"]), row["title"])
     out.print(table)
     return 0
 
 
 def cmd_plan(args) -> int:
-    from station.bench.compile import compile_scheme
+    from station import api
     from station.bench.plan import Checkpoint, Settle
-    from station.io.scheme import load_scheme
 
-    config = _config(args)
-    scheme = load_scheme(args.scheme, _overrides(args))
-    try:
-        plan = compile_scheme(scheme, config)
-    except UserError as e:
-        rotations = [seg for seg in scheme.segments if getattr(seg, "kind", "") == "rotation"]
-        if rotations and all(not getattr(seg, "encoder", True) for seg in rotations):
-            raise UserError(f"scheme {scheme.name} is not a table scheme: its rotations have no encoder (a "
-                            "shaft, a screwdriver or a hand turns the IMU; `station run --scheme "
-                            f"{scheme.name} --sim` simulates it); on this table: {e}") from None
-        raise
+    c = api.plan(args.scheme, config=args.config, unattended=args.unattended, dwell_s=args.dwell_s,
+                 rate_dps=args.rate_dps, rotation_s=args.rotation_s)
+    scheme, config, plan = c.scheme, c.config, c.plan
     t = config.table
     where = "by hand (no table)" if plan.manual else (
         f"{t.axes}-axis table, axes at zero (east-north-up) {t.axis_list()}, IMU mounted "
