@@ -99,6 +99,8 @@ class _Called(Exception):
     ("montecarlo", ["montecarlo", "--scheme", "sizeeffect", "--runs", "3"], "sizeeffect"),
     ("history", ["history", "SER-1", "--store", "STORE"], "SER-1"),
     ("diff", ["diff", "A.yaml", "B.yaml"], "A.yaml"),
+    ("plan", ["plan", "--scheme", "sizeeffect"], "sizeeffect"),
+    ("schemes", ["schemes"], None),
 ])
 def test_the_command_does_its_work_through_the_api(monkeypatch, tmp_path, function, argv, first):
     """The CLI is a thin layer over station.api (issue 26 item 1): each analysis command parses
