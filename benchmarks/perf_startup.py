@@ -24,6 +24,7 @@ COMMANDS = {
     "station estimate --help": [STATION, "estimate", "--help"],
     "station effects": [STATION, "effects"],
     "station plan --scheme optimal9": [STATION, "plan", "--scheme", "optimal9"],
+    "station schemes": [STATION, "schemes"],       # every built-in scheme compiled (issue 26)
 }
 REFERENCE = [sys.executable, "-c", "import numpy"]
 

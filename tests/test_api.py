@@ -77,3 +77,43 @@ def test_bad_input_raises_the_clis_message(tmp_path):
         api.export(tmp_path / "cal.yaml", "nope", tmp_path / "x")
     with pytest.raises(api.UserError, match="unknown option"):
         api.import_csv(tmp_path / "log.csv", tmp_path / "imp", colour="red")
+
+
+class _Called(Exception):
+    """Raised by a stand-in for an API function: the command got that far through the API."""
+
+
+@pytest.mark.parametrize("function, argv, first", [
+    ("estimate", ["estimate", "CAP"], "CAP"),
+    ("load_calibration", ["show", "CAL.yaml"], "CAL.yaml"),
+    ("apply_file", ["apply", "CAL.yaml", "IN.csv", "-o", "OUT.csv"], "CAL.yaml"),
+    ("export", ["export", "CAL.yaml", "--to", "kalibr"], "CAL.yaml"),
+    ("characterise_noise", ["noise", "CAP"], "CAP"),
+    ("report", ["report", "CAP"], "CAP"),
+    ("diagnose", ["diagnose", "CAP", "--auto"], "CAP"),
+    ("effects", ["effects"], None),
+    ("effect", ["effects", "scale_temperature"], "scale_temperature"),
+    ("import_csv", ["import", "csv", "LOG.csv", "-o", "CAP"], "LOG.csv"),
+    ("import_rosbag", ["import", "rosbag", "BAG", "-o", "CAP"], "BAG"),
+    ("import_imucal", ["import", "imucal", "S.csv", "--rate-hz", "100", "-o", "CAP"], "S.csv"),
+    ("montecarlo", ["montecarlo", "--scheme", "sizeeffect", "--runs", "3"], "sizeeffect"),
+    ("history", ["history", "SER-1", "--store", "STORE"], "SER-1"),
+    ("diff", ["diff", "A.yaml", "B.yaml"], "A.yaml"),
+    ("plan", ["plan", "--scheme", "sizeeffect"], "sizeeffect"),
+    ("schemes", ["schemes"], None),
+])
+def test_the_command_does_its_work_through_the_api(monkeypatch, tmp_path, function, argv, first):
+    """The CLI is a thin layer over station.api (issue 26 item 1): each analysis command parses
+    its options and calls the documented function, which does the work (here a stand-in that
+    records its arguments and stops the command before anything is read)."""
+    seen = {}
+
+    def stand_in(*args, **kwargs):
+        seen.update(args=args, kwargs=kwargs)
+        raise _Called
+
+    monkeypatch.setattr(api, function, stand_in)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(_Called):
+        cli.main(argv)
+    assert (str(seen["args"][0]) if seen["args"] else None) == first

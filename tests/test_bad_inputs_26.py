@@ -130,6 +130,41 @@ def test_output_directory_on_a_dangling_symlink_or_a_file(tmp_path, capsys, targ
     assert out.is_symlink() if target == "dangling" else out.read_text() == "precious\n"
 
 
+@pytest.mark.parametrize("command", ["apply", "report"])
+@pytest.mark.parametrize("link", ["dangling", "folder", "loop"])
+def test_output_file_on_a_symbolic_link_that_cannot_be_written_says_what_the_link_is(
+        capture_dir, tmp_path, capsys, command, link):
+    """apply -o and report -o write through a symbolic link as the shell's > does; one that
+    cannot be written through is named with where it points and why (it was "cannot write: No
+    such file or directory" about a path that ls shows)."""
+    out = tmp_path / "out"
+    if link == "dangling":
+        out.symlink_to(tmp_path / "nowhere" / "x.csv")
+        why = f"whose folder {tmp_path / 'nowhere'} does not exist"
+    elif link == "folder":
+        out.symlink_to(tmp_path)
+        why = "which is a folder"
+    else:
+        out.symlink_to(tmp_path / "other")
+        (tmp_path / "other").symlink_to(out)
+        why = "loop of symbolic links"
+    argv = (["apply", capture_dir / "calibration.yaml", capture_dir / "pos01.csv", "-o", out] if command == "apply"
+            else ["report", capture_dir, "--no-auto", "-o", out])
+    one_line_exit_2(argv, capsys, f"{out}: cannot write", "symbolic link to", why)
+    assert out.is_symlink() and not (tmp_path / "nowhere").exists()
+
+
+@pytest.mark.parametrize("command", ["apply", "report"])
+def test_output_file_on_a_symbolic_link_is_written_through_it(capture_dir, tmp_path, capsys, command):
+    out, target = tmp_path / "out", tmp_path / "kept" / "result"
+    target.parent.mkdir()
+    out.symlink_to(target)
+    argv = (["apply", capture_dir / "calibration.yaml", capture_dir / "pos01.csv", "-o", out] if command == "apply"
+            else ["report", capture_dir, "--no-auto", "-o", out])
+    assert main([str(a) for a in argv]) == 0
+    assert out.is_symlink() and target.stat().st_size > 0
+
+
 # ------------------------------------------------------------------ the calibration history
 
 @pytest.fixture

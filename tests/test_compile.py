@@ -162,6 +162,86 @@ def test_least_travel():
     assert g.travel([0.0, 0.0, 250.0], sol) == pytest.approx(20.0, abs=1e-6)
 
 
+class _HalfStepGimbal(Gimbal):
+    """The inverse kinematics as it was before the solver was sped up (issue 26): every start
+    iterated until all converge, the solutions slid along their solution set by half steps (35
+    slides to 1e-9 deg), the first of the least travel kept.  The reference the faster solver
+    must agree with."""
+
+    def _least_travel(self, residual, theta, theta0, free):
+        continuous = np.array([lim is None for lim in self.angle_limits_deg])
+        for _ in range(40):
+            _, J = residual(theta)
+            Jf = J[:, :, free]
+            null = np.eye(len(free)) - np.linalg.pinv(Jf, rcond=1e-9) @ Jf
+            d = theta - theta0
+            d = np.where(continuous, (d + 180.0) % 360.0 - 180.0, d)[:, free]
+            step = -0.5 * np.einsum("sij,sj->si", null, d)
+            if np.all(np.abs(step) < 1e-9):
+                break
+            theta = theta.copy()
+            theta[:, free] += np.clip(step, -30.0, 30.0)
+            for _ in range(40):
+                r, J = residual(theta)
+                s = np.clip(np.degrees(-np.einsum("sij,sj->si", np.linalg.pinv(J[:, :, free], rcond=1e-9), r)),
+                            -30.0, 30.0)
+                theta = theta.copy()
+                theta[:, free] += s
+                if np.all(np.abs(s) < 1e-12):
+                    break
+        return theta
+
+
+@pytest.mark.parametrize("axes", [1, 2, 3])
+def test_the_faster_inverse_kinematics_finds_the_same_least_travel(axes):
+    """Whole slides instead of half steps and each start stopped when it converges: the same
+    reachability and the same travel as the reference (tolerance 1e-6 deg: both solve to 1e-9
+    deg, SOLVE_TOL is 2e-5 arcsec); where two attitudes tie (gimbal lock), either is right."""
+    rng = np.random.default_rng(axes)
+    all_axes = ((0, 0, 1), (1, 0, 0), (0, 1, 0))[:axes]
+    limits = (None,) * (axes - 1) + ((-100.0, 100.0),) if axes > 1 else ()
+    fast, slow = Gimbal(all_axes, np.eye(3), limits), _HalfStepGimbal(all_axes, np.eye(3), limits)
+    cases = 0
+    for k in range(12):
+        theta0 = rng.uniform(-90, 90, axes)
+        # mostly attitudes the table reaches (forward kinematics of random angles), some not
+        C, b = fast.frames(fast.unwrap(rng.uniform(-180, 180, axes)))
+        up = C[0].T @ [0.0, 0.0, 1.0] if k % 4 else rng.normal(size=3)
+        up = up / np.linalg.norm(up)
+        heading = None
+        if axes == 3 and k % 2:
+            heading = np.cross(up, rng.normal(size=3))
+            heading /= np.linalg.norm(heading)
+        args = (up, theta0) if heading is None else (up, theta0, heading, rng.uniform(0, 360))
+        a, b_ = fast.solve_static(*args), slow.solve_static(*args)
+        assert (a is None) == (b_ is None), args
+        if a is not None:
+            cases += 1
+            assert fast.travel(theta0, a) == pytest.approx(slow.travel(theta0, b_), abs=1e-6), args
+            np.testing.assert_allclose(fast.frames(a)[0][0] @ up, [0, 0, 1], atol=1e-9)
+        axis = 1 + k % axes
+        turning = C[0].T @ b[0, axis - 1]                        # that table axis, in case axes
+        elevation = float(np.degrees(np.arcsin(np.clip(b[0, axis - 1, 2], -1, 1))))
+        for sign in (1.0, -1.0):
+            a = fast.solve_rotation(sign * turning, sign * elevation, theta0, axis, sign)
+            b_ = slow.solve_rotation(sign * turning, sign * elevation, theta0, axis, sign)
+            assert (a is None) == (b_ is None), (turning, theta0, axis, sign)
+            if a is not None:
+                cases += 1
+                assert fast.travel(theta0, a) == pytest.approx(slow.travel(theta0, b_), abs=1e-6)
+    assert cases >= 20         # the comparison compared something
+
+
+def test_an_exact_tie_in_travel_has_one_answer():
+    """Gimbal lock (outer and inner axes aligned): a line of attitudes with the same travel; the
+    answer does not depend on the order the solutions were found in: the least squared travel,
+    then the smallest angles."""
+    g = Gimbal(((0, 0, 1), (1, 0, 0), (0, 1, 0)), np.eye(3))
+    sol = g.solve_static([0, -1, 0], [135.0, 90.0, 315.0], [0, 0, 1], 0.0)
+    np.testing.assert_allclose(sol, [45.0, 270.0, 45.0], atol=1e-6)
+    assert g.travel([135.0, 90.0, 315.0], sol) == pytest.approx(360.0, abs=1e-6)
+
+
 def test_a_one_axis_table_runs_optimal9_with_remounts_fixtures_and_vertical_turns():
     config = Config(table=TableConfig(axes=1), run=RunConfig(operator=True))
     plan = compile_scheme(load_scheme("optimal9"), config)

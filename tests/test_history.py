@@ -1,6 +1,8 @@
 """The calibration history: filing per IMU serial (SQLite index), listing, diff in units and in
 combined sigma with > 3 sigma flags, the drift plot."""
 import sqlite3
+import sys
+from pathlib import Path
 
 import pytest
 import yaml
@@ -153,3 +155,25 @@ def test_diff_and_drift_mark_what_is_not_a_calibration(optimal9_run, store, tmp_
     assert main(["history", "SIM-13", "--drift", str(png)]) == 0
     assert "drawn apart in the drift plot (not passing): #2 fails" in capsys.readouterr().err
     assert png.stat().st_size > 20_000
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the XDG variables are Linux's")
+def test_the_store_and_the_configuration_folder_are_platformdirs_own(tmp_path, monkeypatch):
+    """platformdirs (a dependency since issue 26) places them: the XDG base directories on Linux."""
+    import platformdirs
+
+    from station.bench.config import plugin_config, user_config_dir
+    from station.io.history import default_store
+
+    monkeypatch.delenv("STATION_HISTORY_DIR", raising=False)
+    monkeypatch.delenv("STATION_CONFIG", raising=False)
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
+    assert default_store() == tmp_path / "data" / "station" / "calibrations"
+    assert user_config_dir() == tmp_path / "config" / "station" == Path(platformdirs.user_config_dir("station"))
+    assert plugin_config(None) is None                      # no station.yaml of the user's own yet
+    (tmp_path / "config" / "station").mkdir(parents=True)
+    (tmp_path / "config" / "station" / "station.yaml").write_text("effects: {}\n")
+    assert plugin_config(None) == tmp_path / "config" / "station" / "station.yaml"
+    monkeypatch.setenv("STATION_HISTORY_DIR", str(tmp_path / "elsewhere"))
+    assert default_store() == tmp_path / "elsewhere"

@@ -5,6 +5,7 @@ import os
 import re
 import shutil
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -247,3 +248,22 @@ def test_the_loop_ends_in_a_calibration_file(hidden_effect_capture, tmp_path, ca
     redo = yaml.safe_load(again.read_text())
     assert {k: v["value"] for k, v in redo["parameters"].items()} == {k: v["value"] for k, v in doc["parameters"].items()}
     assert any(x.startswith(f"to apply it: station apply {cal} ") for x in said.splitlines())
+
+
+def test_markup_in_a_capture_is_shown_not_run(optimal9_run, tmp_path):
+    """A capture from elsewhere is data: markup in its manifest (the IMU model, the scheme's name)
+    is shown as text on the page, never made into elements (every value goes through one
+    html.escape; docs/architecture.md says why that and not a template engine)."""
+    import yaml
+
+    cap = Path(shutil.copytree(optimal9_run, tmp_path / "cap"))
+    doc = yaml.safe_load((cap / "manifest.yaml").read_text())
+    doc["imu"]["model"] = "<script>alert('model')</script>"
+    doc["scheme"] = "<img src=x onerror=alert(1)>"
+    (cap / "manifest.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    page = tmp_path / "page.html"
+    assert main(["report", str(cap), "-o", str(page), "--no-auto"]) == 0
+    text = page.read_text(encoding="utf-8")
+    assert "&lt;script&gt;alert(&#x27;model&#x27;)&lt;/script&gt;" in text
+    assert "&lt;img src=x onerror=alert(1)&gt;" in text
+    assert "<script" not in text and "<img src=x" not in text

@@ -107,6 +107,9 @@ class Compiler:
                 if travel < best_travel - 1e-9:
                     b_enu, _ = gimbal.axis_now(angles, axis)
                     elevation = math.degrees(math.asin(max(-1.0, min(1.0, sign * b_enu[2]))))
+                    # to 1e-9 deg (the solver's own precision), so that a level axis is 0, not
+                    # -0 or 7e-15 (which the plan and the manifest would print)
+                    elevation = round(elevation, 9) + 0.0
                     best, best_travel = (angles, axis, sign, elevation), travel
         return best
 

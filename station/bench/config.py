@@ -178,23 +178,13 @@ def find_config(path: str | None) -> Path | None:
 
 
 def user_config_dir() -> Path:
-    """The user's own configuration folder for station (platformdirs' user_config_dir when it is
-    installed; the same places otherwise: $XDG_CONFIG_HOME/station or ~/.config/station,
-    ~/Library/Application Support/station on macOS, %LOCALAPPDATA%\\station on Windows)."""
-    try:
-        import platformdirs
-    except ImportError:
-        pass
-    else:
-        return Path(platformdirs.user_config_dir("station", appauthor=False))
-    import sys
+    """The user's own configuration folder for station: platformdirs' user_config_dir
+    ($XDG_CONFIG_HOME/station or ~/.config/station on Linux, ~/Library/Application
+    Support/station on macOS, %LOCALAPPDATA%\\station on Windows; docs/architecture.md says
+    why platformdirs)."""
+    import platformdirs
 
-    home = Path.home()
-    if sys.platform == "darwin":
-        return home / "Library" / "Application Support" / "station"
-    if os.name == "nt":
-        return Path(os.environ.get("LOCALAPPDATA") or home / "AppData" / "Local") / "station"
-    return Path(os.environ.get("XDG_CONFIG_HOME") or home / ".config") / "station"
+    return Path(platformdirs.user_config_dir("station", appauthor=False))
 
 
 def plugin_config(path: str | None) -> Path | None:

@@ -435,7 +435,7 @@ class Sequencer:
             self.mounting = tuple(step.mounting)
 
     def _checkpoint(self, step: Checkpoint) -> None:
-        self.display.note(f"{step.segment}: saved")
+        self.display.saved(step.segment)
 
     # ------------------------------------------------------------------ hand schemes
     def _hand(self, step) -> None:

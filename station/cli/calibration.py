@@ -7,7 +7,6 @@ from pathlib import Path
 from station.cli import plugins
 from station.cli.choices import ESTIMATE_METHODS
 from station.cli.output import EXIT_POOR_FIT, err, out, print_notes, print_parameters, print_verdict
-from station.core.errors import UserError
 
 
 def add_parsers(sub) -> None:
@@ -90,114 +89,41 @@ def report_calibration(cal, title: str, target, accept_poor_fit: bool, truth=Non
 
 
 def cmd_estimate(args) -> int:
-    from station.estimate import estimate_capture   # scipy and the file writer: while the capture is read
+    from station import api
 
-    reg = plugins.registry(args)
-    if not (0 <= args.max_missing_fraction < 1 and args.max_gap_s > 0):
-        raise UserError("--max-missing-fraction must be within [0, 1) and --max-gap-s > 0")
-    if args.turn_sigma_deg is not None and not (0 <= args.turn_sigma_deg < 90):
-        raise UserError(f"--turn-sigma-deg {args.turn_sigma_deg}: must be within [0, 90) degrees")
-    cal, capture, provenance = estimate_capture(args.capture, args.method, plugins.effect_ids(reg, args.add), reg,
-                                                max_missing_fraction=args.max_missing_fraction,
-                                                max_gap_s=args.max_gap_s, turn_sigma_deg=args.turn_sigma_deg)
-    for w in capture.warnings:
+    est = api.estimate(args.capture, method=args.method, add=args.add, **plugins.options(args),
+                       turn_sigma_deg=args.turn_sigma_deg, max_missing_fraction=args.max_missing_fraction,
+                       max_gap_s=args.max_gap_s)
+    for w in est.capture.warnings:
         err.print(f"warning: {w}", markup=False, soft_wrap=True)
-    target = Path(args.output) if args.output else capture.path / "calibration.yaml"
-    from station.io.calfile import write_calfile
-
-    write_calfile(target, cal, provenance)
+    target = est.save(Path(args.output) if args.output else est.capture.path / "calibration.yaml")
     from station.cli.history import file_quietly
 
     file_quietly(target, asked=bool(args.history))
-    return report_calibration(cal, f"calibration of {capture.path} ({provenance['method']})", target,
-                              args.accept_poor_fit)
+    return report_calibration(est.calibration, f"calibration of {est.capture.path} ({est.provenance['method']})",
+                              target, args.accept_poor_fit)
 
 
-def check_serial(doc: dict, calibration, serial, force: bool, what: str) -> None:
-    """Refuse (UserError) a calibration made for another IMU than ``serial`` unless ``force``."""
-    made_for = (doc.get("provenance") or {}).get("imu_serial") or (doc.get("imu") or {}).get("serial")
-    if serial is None or made_for is None or str(made_for) == str(serial):
-        return
-    if force:
-        err.print(f"warning: {calibration} was made for IMU serial {made_for}, {what} comes from serial "
-                  f"{serial}: used anyway (--force)", markup=False, soft_wrap=True)
-        return
-    raise UserError(f"{calibration}: field 'provenance.imu_serial': made for IMU serial {made_for}, "
-                    f"but {what} comes from serial {serial}: refused (--force uses it anyway)")
-
-
-def _input_serial(args):
-    """The serial of the IMU that recorded the input: --serial, or the manifest of the capture
-    the input file lies in (if it lies in one)."""
-    from station.io.capture import MANIFEST, read_capture
-
-    if args.serial is not None:
-        return args.serial
-    folder = Path(args.input).parent
-    if (folder / MANIFEST).is_file():
-        return read_capture(folder, load_data=False).imu.serial
-    return None
+def print_messages(lines) -> None:
+    """The API's lines for stderr (warnings, notes, what was compensated), one each."""
+    for line in lines:
+        err.print(line, markup=False, soft_wrap=True)
 
 
 def cmd_apply(args) -> int:
-    from station.io.calfile import compensation_effects, read_calfile
-    from station.io.capture import read_segment_csv
-    from station.model.compensate import LEGACY_EFFECTS, compensate, compensate_with_effects
+    from station import api
 
-    doc = read_calfile(args.calibration)
-    check_serial(doc, args.calibration, _input_serial(args), args.force, args.input)
-    if doc.get("gyro_pass_through") and (doc.get("imu") or {}).get("gyro_unit") == "raw":
-        raise UserError(f"{args.calibration}: calibrates the accelerometers only, and the gyro output is in "
-                        "raw counts: apply has no scale to write the gyros in deg/s (calibrate the gyros: "
-                        "rotations with encoder angles, or hand turns between statics)")
-    data = read_segment_csv(Path(args.input))
-    comp = doc["compensation"]
-    if "effects" in comp:
-        effects = compensation_effects(doc, plugins.registry(args), args.calibration)
-        needs = {need: [e.id for e, _ in effects if need in e.needs] for need in ("temperature", "time")}
-        if needs["temperature"] and data.temp is None:
-            raise UserError(f"{args.input}: no temp column, which the compensation of "
-                            f"{', '.join(needs['temperature'])} needs (deg C)")
-        if needs["time"] and len(data.t) < 3:
-            raise UserError(f"{args.input}: {len(data.t)} samples; the compensation of "
-                            f"{', '.join(needs['time'])} needs rates of change (at least 3 samples)")
-        t, f, w = compensate_with_effects(comp, effects, data.t, data.accel, data.gyro, data.temp)
-        for e, _ in effects:
-            inputs = ", ".join(e.needs)
-            err.print(f"compensated: {e.id} ({getattr(e, '_station_source', 'library')})"
-                      + (f", using {inputs}" if inputs else ""), markup=False)
-    else:                               # a file written before compensation.effects
-        t = data.t
-        f, w = compensate(comp, data.t, data.accel, data.gyro, data.temp)
-        skipped = [e for e in doc.get("effects", []) if e not in LEGACY_EFFECTS]
-        if skipped:
-            err.print(f"note: this calibration file predates compensation.effects: not compensated: "
-                      f"{', '.join(skipped)} (estimate again to compensate them)", markup=False)
-    if doc.get("gyro_pass_through"):
-        err.print(f"note: {args.calibration} calibrates the accelerometers only: the gyro columns are "
-                  "passed through untouched (converted to deg/s only)", markup=False, soft_wrap=True)
-    verdict = doc.get("verdict") or {}
-    if verdict.get("result") in ("fails", "not converged"):
-        err.print(f"warning: {args.calibration}: its fit {verdict['result'].replace('not converged', 'did not converge')} "
-                  f"({verdict.get('reason', '')})",
-                  markup=False, soft_wrap=True)
-    import numpy as np
-
-    table = np.column_stack([t, f, w])
-    try:
-        with open(args.output, "w") as fh:
-            fh.write("t,ax,ay,az,gx,gy,gz\n")
-            np.savetxt(fh, table, delimiter=",", fmt=["%.9f"] + ["%.12g"] * 6)
-    except OSError as e:
-        raise UserError(f"{args.output}: cannot write: {e.strerror}") from None
-    out.print(f"{len(table)} samples compensated into {args.output} (m/s^2, deg/s, frame p)")
+    done = api.apply_file(args.calibration, args.input, args.output, serial=args.serial, force=args.force,
+                          **plugins.options(args))
+    print_messages(done.messages)
+    out.print(f"{done.samples} samples compensated into {args.output} (m/s^2, deg/s, frame p)")
     return 0
 
 
 def cmd_show(args) -> int:
-    from station.io.calfile import read_calfile
+    from station import api
 
-    doc = read_calfile(args.calibration)
+    doc = api.load_calibration(args.calibration)
     rows = [(n, p["value"], p["unit"], p.get("sigma")) for n, p in doc["parameters"].items()]
     print_parameters(rows, f"{args.calibration}")
     prov = doc.get("provenance") or {}

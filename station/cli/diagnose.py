@@ -1,14 +1,13 @@
 """``station diagnose``: compare the model with the measurements, find what is missing."""
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 from pathlib import Path
 
 from station.cli import plugins
 from station.cli.output import err, out
-from station.core.errors import UserError
+from station.core.errors import cannot_write
 
 
 def add_parsers(sub) -> None:
@@ -40,37 +39,40 @@ def add_parsers(sub) -> None:
     eff.set_defaults(func=cmd_effects)
 
 
-def _effects(args, capture, reg) -> list[str]:
-    from station.cli.calibration import check_serial
-    from station.io.calfile import read_calfile
-
-    effects = []
-    if args.calib:
-        doc = read_calfile(args.calib)
-        check_serial(doc, args.calib, capture.imu.serial, args.force, f"capture {capture.path}")
-        effects += [e for e in doc.get("effects", []) if e not in ("base_triads", "inter_triad")]
-    return plugins.effect_ids(reg, effects + args.add)
-
-
 def cmd_diagnose(args) -> int:
-    with contextlib.ExitStack() as stack:
-        job = None
-        if args.report:     # the figures' processes (started once the capture is about to be read)
-            from station.diagnose.figure_job import FigureJob
+    if args.report:
+        first, steps, final, summary, page = _diagnose_with_page(args)
+    else:
+        from station import api
 
-            job = stack.enter_context(FigureJob())
-        first, steps, final, summary, page = _diagnose(args, job)
-        if args.report:       # (while the figures' processes end)
-            from station.diagnose.report import write_report
-
-            index = write_report(args.report, first, steps, final, summary, page)
-            if not args.json:
-                out.print(f"report: {index}")
+        final = api.diagnose(args.capture, add=args.add, **plugins.options(args), calibration=args.calib,
+                             force=args.force, auto=args.auto)
+        for line in final.warnings:
+            err.print(line, markup=False, soft_wrap=True)
+        first, steps = final.first, final.steps
+        if args.emit_effect:
+            _emit(args.emit_effect, final, steps)
+        if not args.json:
+            _print(out, first, steps, final)
     if args.json:
         print(json.dumps(to_json(final, steps), indent=1))
-    elif not args.report:
-        _print(out, first, steps, final)
     return _in_a_file(args, final, steps)
+
+
+def _diagnose_with_page(args) -> tuple:
+    """diagnose --report: the diagnosis api.diagnose makes (the same library calls), with the
+    page's figures drawn in forked workers meanwhile (station.diagnose.figure_job) and the page
+    written: (first, steps, final, summary lines, the page's ReportInput)."""
+    from station.diagnose.figure_job import FigureJob
+
+    with FigureJob() as job:      # the figures' processes (started once the capture is about to be read)
+        first, steps, final, summary, page = _diagnose(args, job)
+        from station.diagnose.report import write_report
+
+        index = write_report(args.report, first, steps, final, summary, page)      # (while they end)
+        if not args.json:
+            out.print(f"report: {index}")
+    return first, steps, final, summary, page
 
 
 def _in_a_file(args, final, steps) -> int:
@@ -86,23 +88,21 @@ def _in_a_file(args, final, steps) -> int:
         return 0
     plugin = None
     if args.output:
-        from station.estimate import estimate_capture
-        from station.estimate.verdict import fit_fails
-        from station.io.calfile import write_calfile
+        from station import api
 
         target = Path(args.output)
-        reg = plugins.registry(args)
-        ids = plugins.effect_ids(reg, effects)
+        adds = list(effects)
         if discovered:
             plugin = target.with_name(f"{target.stem}-discovered.py")
             _emit(plugin, final, steps)
-            ids += reg.add(f"{plugin}:DiscoveredTerms")
-        cal, _, provenance = estimate_capture(args.capture, "lsq", ids, reg)
-        write_calfile(target, cal, provenance)
-        verdict = cal.fit.get("verdict", {})
+            adds.append(f"{plugin}:DiscoveredTerms")
+        est = api.estimate(args.capture, method="lsq", add=adds, **plugins.options(args))
+        est.save(target)
+        ids = [e for e in est.calibration.effects if e not in ("base_triads", "inter_triad")]
+        verdict = est.verdict
         err.print(f"calibration file: {target} (effects: {', '.join(ids) or 'none'}; fit {verdict.get('result')}: "
                   f"{verdict.get('reason', '')})", markup=False, soft_wrap=True)
-        status = 3 if fit_fails(cal) else 0
+        status = 0 if est.usable else 3
     else:
         status = 0
     given = " ".join(f"--plugin {p}" for p in getattr(args, "plugin", [])) + "".join(
@@ -120,42 +120,37 @@ def _in_a_file(args, final, steps) -> int:
 
 
 def _diagnose(args, job) -> tuple:
-    """(first, steps, final, summary lines, the page's ReportInput or None); with a FigureJob
-    (--report), its figures drawn and the diagnosis printed meanwhile."""
-    from station.diagnose import DIAGNOSIS_MODULES, segment_check
-    from station.estimate import summarise_while_importing
+    """(first, steps, final, summary lines, the page's ReportInput): api.diagnose's steps, with
+    the capture read where the figures' noise is taken, the candidates' figures drawn as soon as
+    the first diagnosis is known, and the diagnosis printed while the figures are drawn."""
+    from station.api import _model_effects, _registry
+    from station.diagnose import segment_check
+    from station.diagnose.figure_job import read_for_report
+    from station.io.calfile import read_calfile
     from station.io.capture import read_capture
 
     capture = read_capture(args.capture, load_data=False)      # the manifest: samples below
-    cal_doc = cal_path = None
-    if args.report:     # the page shows the calibration it describes: --calib, else the capture's own
-        from station.io.calfile import read_calfile
+    # the page shows the calibration it describes: --calib, else the capture's own
+    cal_path = args.calib or (capture.path / "calibration.yaml" if (capture.path / "calibration.yaml").is_file()
+                              else None)
+    cal_doc = read_calfile(cal_path) if cal_path else None
+    # each segment read, checked and summarised (in a child, while the fit is imported here),
+    # and the noise where the capture is read
+    noise, noise_note = read_for_report(capture, cal_doc, job, segment_check(capture))
+    from station.diagnose.report import DiagnosisFigures       # (imported while reading)
 
-        cal_path = args.calib or (capture.path / "calibration.yaml" if (capture.path / "calibration.yaml").is_file()
-                                  else None)
-        cal_doc = read_calfile(cal_path) if cal_path else None
-    check = segment_check(capture)
-    # each segment read, checked and summarised (in a child, while the fit is imported here);
-    # with --report, the noise where the capture is read
-    if job is not None:
-        from station.diagnose.figure_job import read_for_report
-
-        noise, noise_note = read_for_report(capture, cal_doc, job, check)
-        from station.diagnose.report import DiagnosisFigures       # (imported while reading)
-
-        figures = DiagnosisFigures(job)
-    else:
-        summarise_while_importing(capture, check, modules=DIAGNOSIS_MODULES)
+    figures = DiagnosisFigures(job)
     from station.diagnose import auto
     from station.diagnose.core import diagnose
     from station.estimate import lsq
 
     s = lsq.summarise(capture)
-    reg = plugins.registry(args)
-    effects = _effects(args, capture, reg)
+    reg = _registry(**plugins.options(args))
+    effects, warnings = _model_effects(capture, reg, args.add, args.calib, args.force)
+    for line in warnings:
+        err.print(line, markup=False, soft_wrap=True)
     if args.auto:
-        steps, final = auto.run(s, effects, progress=None, registry=reg,
-                                on_first=figures.first_known if job is not None else None)
+        steps, final = auto.run(s, effects, progress=None, registry=reg, on_first=figures.first_known)
         first = steps[0].before if steps else final
     else:
         steps, first = [], diagnose(lsq.fit(s, [reg.create(e) for e in effects]), registry=reg)
@@ -164,19 +159,17 @@ def _diagnose(args, job) -> tuple:
     if args.emit_effect:
         _emit(args.emit_effect, final, steps)
     summary = _summary_lines(final)
-    page = None
-    if job is not None:
-        from station.diagnose.report import ReportInput, capture_facts
-        from station.io.history import verdict_of
+    from station.diagnose.report import ReportInput, capture_facts
+    from station.io.history import verdict_of
 
-        figures.known(first, steps)
-        if not args.json:
-            _print(out, first, steps, final)        # while the figures are drawn
-        page = ReportInput(title=f"Diagnosis: {Path(str(capture.path)).name}",
-                           facts=capture_facts(capture, cal_doc) + [("summary", line) for line in summary],
-                           calibration=cal_doc, calibration_path=None if cal_path is None else str(cal_path),
-                           verdict=verdict_of(cal_doc) if cal_doc is not None else None,
-                           noise=noise, noise_note=noise_note, figures=job.result())
+    figures.known(first, steps)
+    if not args.json:
+        _print(out, first, steps, final)        # while the figures are drawn
+    page = ReportInput(title=f"Diagnosis: {Path(str(capture.path)).name}",
+                       facts=capture_facts(capture, cal_doc) + [("summary", line) for line in summary],
+                       calibration=cal_doc, calibration_path=None if cal_path is None else str(cal_path),
+                       verdict=verdict_of(cal_doc) if cal_doc is not None else None,
+                       noise=noise, noise_note=noise_note, figures=job.result())
     return first, steps, final, summary, page
 
 
@@ -200,7 +193,7 @@ def _emit(path, d, steps=()) -> None:
     try:
         Path(path).write_text(plugin_source(*got, aliases=aliases, discovered_by=how))
     except OSError as e:
-        raise UserError(f"{path}: cannot write: {e.strerror}") from None
+        raise cannot_write(path, e) from None
     err.print(f"effect plugin written: {path} (add it with --add {path}:DiscoveredTerms; check it with "
               f"python {path})", markup=False, soft_wrap=True)
 
@@ -313,34 +306,34 @@ def _print(out, first, steps, final) -> None:
 
 
 def cmd_effects(args) -> int:
-    from rich.table import Table
+    from station import api
 
-    reg = plugins.registry(args)
     if args.name is None:
+        from rich.table import Table
+
         table = Table(title="effects the model can add (station estimate --add ID; plugins: docs/effects.md)")
         table.add_column("id")
         table.add_column("what")
         table.add_column("source")
         plugins_seen = []
-        for eid in reg.ids():
-            source = reg.source(eid)
+        for e in api.effects(**plugins.options(args)):
+            source = e.source
             if source != "library":
-                plugins_seen.append((eid, source))
+                plugins_seen.append((e.id, source))
                 source = "plugin (below)"
-            table.add_row(eid, reg.classes[eid].title, source)
+            table.add_row(e.id, e.title, source)
         out.print(table)
         # a plugin's path is printed whole, never cut to the table's width
         for eid, source in plugins_seen:
             out.print(f"plugin {eid}: {source}", markup=False, highlight=False, soft_wrap=True)
         return 0
-    e = reg.create(args.name)
-    out.print(f"[bold]{e.id}[/]: {e.title}  ({reg.source(e.id)})\n")
+    e = api.effect(args.name, **plugins.options(args))
+    out.print(f"[bold]{e.id}[/]: {e.title}  ({e.source})\n")
     for label, text in (("physics", e.physics), ("term", e.term), ("excited by", e.excited_by),
                         ("typical size", e.magnitudes), ("when missing", e.signature)):
         out.print(f"[bold]{label}:[/] {text}")
-    params = getattr(e, "all_params", None) or e.params
-    if params:
-        out.print("[bold]parameters:[/] " + ", ".join(f"{p.name} ({p.unit})" for p in params))
+    if e.parameters:
+        out.print("[bold]parameters:[/] " + ", ".join(f"{name} ({unit})" for name, unit in e.parameters))
     if e.needs:
         out.print(f"[bold]compensation needs:[/] {', '.join(e.needs)}")
     return 0

@@ -1,8 +1,6 @@
 """``station export``: a calibration file in another tool's format (argument parsing and output)."""
 from __future__ import annotations
 
-from pathlib import Path
-
 from station.cli.choices import EXPORT_FORMATS
 from station.cli.output import err, out
 
@@ -22,28 +20,12 @@ def add_parsers(sub) -> None:
 
 
 def cmd_export(args) -> int:
-    from station.io.calfile import read_calfile
-    from station.io.exporters import FORMATS, source_from_document
-    from station.core.errors import UserError
-    from station.io.noise_file import noise_serial, read_noise_block
+    from station import api
 
-    fmt = FORMATS[args.to]
-    cal = Path(args.calibration)
-    source = source_from_document(read_calfile(cal), cal)
-    if args.noise:
-        source.noise = read_noise_block(args.noise)
-        other = noise_serial(args.noise)
-        if other and source.imu_serial and other != source.imu_serial and not args.force:
-            raise UserError(f"{args.noise}: noise of IMU {other!r}, calibration of IMU {source.imu_serial!r} "
-                            "(--force to combine them anyway)")
-    name = f"{cal.stem}-{args.to}{fmt.SUFFIX}"
-    target = Path(args.output) if args.output else cal.with_name(name)
-    if args.output and (target.is_dir() or args.output.endswith(("/", "\\"))):
-        target = target / name            # a directory: the default name inside it
-    written = fmt.write(source, target)
-    for line in source.header_lines()[1:]:
+    written = api.export(args.calibration, args.to, args.output, noise=args.noise, force=args.force)
+    for line in written.notes:
         err.print(f"note: {line}", markup=False, soft_wrap=True)
-    out.print(f"convention: {fmt.CONVENTION}", markup=False, soft_wrap=True)
+    out.print(f"convention: {written.convention}", markup=False, soft_wrap=True)
     for path in written:
         out.print(f"{args.to}: {path}", markup=False)
     return 0

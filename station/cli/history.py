@@ -3,7 +3,6 @@ and plotted over time (argument parsing and output only)."""
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from station.cli.output import err, out
 
@@ -80,76 +79,54 @@ def file_quietly(cal_path, store=None, *, asked: bool, simulated: bool = False) 
 def cmd_history(args) -> int:
     from rich.table import Table
 
+    from station import api
     from station.core.errors import UserError
-    from station.io.history import Store
 
-    store = Store(args.store)
-    if (args.lot or args.imu_model) and not args.add:
-        raise UserError("--lot and --imu-model go with --add CAL.yaml (they are filed with a calibration)")
-    for cal in args.add:
-        entry, new = store.file(cal, lot=args.lot, imu_model=args.imu_model)
+    h = api.history(args.serial, store=args.store, add=args.add, lot=args.lot, imu_model=args.imu_model)
+    for entry, new in h.filed:
         out.print(f"{'filed' if new else 'already filed'}: #{entry.id} {entry.serial} {entry.date_utc} "
                   f"({entry.path})", markup=False)
     if args.serial is None:
         if not args.add:
-            t = Table(title=f"IMU serials in {store.where}")
+            t = Table(title=f"IMU serials in {h.store}")
             t.add_column("serial")
             t.add_column("calibrations", justify="right")
-            for serial, n in store.serials():
+            for serial, n in h.serials:
                 t.add_row(serial, str(n))
             out.print(t)
         return 0
-    entries = store.list(args.serial)
-    if not entries:
-        raise UserError(f"no calibration of IMU {args.serial!r} in {store.where} (station history lists the serials)")
+    if not h.entries:
+        raise UserError(f"no calibration of IMU {args.serial!r} in {h.store} (station history lists the serials)")
     t = Table(title=f"calibrations of IMU {args.serial}")
     for col in ("id", "date (UTC)", "scheme", "method", "verdict", "file"):
         t.add_column(col)
-    for e in entries:
+    for e in h.entries:
         t.add_row(f"#{e.id}", e.date_utc, e.scheme or "", e.method or "", e.verdict, str(e.path))
     out.print(t)
     if args.drift:
-        _drift(entries, Path(args.drift), args.serial)
+        _drift(args.serial, args.drift, args.store)
     return 0
 
 
-def _drift(entries, png: Path, serial: str) -> None:
-    from station.core.errors import UserError
-    from station.diagnose.figures import drift_figure, drift_status
-    from station.io.calfile import read_calfile
+def _drift(serial: str, png, store) -> None:
+    from station import api
 
-    rows: dict = {}
-    for e in entries:
-        doc = read_calfile(e.path)
-        status = drift_status(e.verdict)
-        for name, p in doc["parameters"].items():
-            rows.setdefault(name, []).append((e.date_utc, p["value"], p.get("sigma"), p["unit"], status))
-    marked = [f"#{e.id} {e.verdict.split(':')[0]}" for e in entries if drift_status(e.verdict) != "passes"]
+    path, marked = api.drift(serial, png, store=store)
     if marked:
         err.print(f"note: drawn apart in the drift plot (not passing): {', '.join(marked)}", markup=False,
                   soft_wrap=True)
-    rows = {k: v for k, v in rows.items() if len(v) == len(entries)}
-    try:
-        drift_figure(rows, png, f"IMU {serial}: {len(entries)} calibrations, value ± 1σ")
-    except OSError as e:
-        raise UserError(f"{png}: cannot write: {e.strerror}") from None
-    except ValueError as e:
-        raise UserError(f"{png}: cannot plot the drift: {e}") from None
-    out.print(f"drift plot: {png}", markup=False)
+    out.print(f"drift plot: {path}", markup=False)
 
 
 def cmd_diff(args) -> int:
     from rich.table import Table
 
-    from station.io.calcompare import FLAG_SIGMA, changes
-    from station.io.calfile import read_calfile
-    from station.io.history import Store
+    from station import api
+    from station.io.calcompare import FLAG_SIGMA
 
-    store = Store(args.store)
-    pa, pb = store.resolve(args.a), store.resolve(args.b)
-    da, db = read_calfile(pa), read_calfile(pb)
-    rows, only_a, only_b = changes(da, db)
-    t = Table(title=f"{pa} → {pb}")
+    d = api.diff(args.a, args.b, store=args.store)
+    rows = d.changes
+    t = Table(title=f"{d.a} → {d.b}")
     for col in ("parameter", "A", "B", "change", "unit", "change / σ", ""):
         t.add_column(col, justify="left" if col in ("parameter", "unit", "") else "right")
     flagged = 0
@@ -162,8 +139,8 @@ def cmd_diff(args) -> int:
         t.add_row(c.name, value(c.before), value(c.after), change, c.unit,
                   "" if c.z is None else f"{c.z:+.2f}", f"> {FLAG_SIGMA:g}σ" if c.flagged else "")
     out.print(t)
-    da_date = (da.get("provenance") or {}).get("date_utc")
-    db_date = (db.get("provenance") or {}).get("date_utc")
+    da_date = (d.doc_a.get("provenance") or {}).get("date_utc")
+    db_date = (d.doc_b.get("provenance") or {}).get("date_utc")
     compared = [c for c in rows if c.z is not None]
     out.print(f"A: {da_date}, B: {db_date}; σ combined as sqrt(σA² + σB²); "
               f"{flagged} of {len(compared)} parameters with a 1σ on both sides changed by more than "
@@ -172,22 +149,17 @@ def cmd_diff(args) -> int:
     if len(compared) < len(rows):
         out.print(f"{len(rows) - len(compared)} of {len(rows)} parameters have no 1σ in A or B: their change is "
                   "not judged (" + ", ".join(c.name for c in rows if c.z is None) + ")", markup=False, soft_wrap=True)
-    from station.io.history import verdict_of
-
-    for label, doc in (("A", da), ("B", db)):
-        verdict = verdict_of(doc)
-        if not verdict.startswith("passes"):
-            err.print(f"warning: {label}'s fit does not pass ({verdict.split(': ')[0]}): its numbers are not a "
-                      "calibration to compare against", markup=False, soft_wrap=True)
-    for label, names in (("only in A", only_a), ("only in B", only_b)):
+    for line in d.warnings:
+        err.print(line, markup=False, soft_wrap=True)
+    for label, names in (("only in A", d.only_a), ("only in B", d.only_b)):
         if names:
             out.print(f"{label}: {', '.join(names)}", markup=False)
     if args.drift:
         from station.core.errors import UserError
 
-        serial = (da.get("provenance") or {}).get("imu_serial")
-        entries = store.list(serial) if isinstance(serial, str) else []
-        if not entries:
-            raise UserError(f"{pa}: its IMU serial {serial!r} has no calibration in the history {store.where}")
-        _drift(entries, Path(args.drift), serial)
+        serial = (d.doc_a.get("provenance") or {}).get("imu_serial")
+        h = api.history(serial if isinstance(serial, str) else None, store=args.store)
+        if not h.entries:
+            raise UserError(f"{d.a}: its IMU serial {serial!r} has no calibration in the history {h.store}")
+        _drift(serial, args.drift, args.store)
     return 0

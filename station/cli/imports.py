@@ -10,15 +10,14 @@ from station.core.errors import UserError
 
 
 def cmd_import_imucal(args) -> int:
-    from station.io.importers import imucal
+    from station import api
 
-    path = imucal.import_imucal(
+    path = api.import_imucal(
         args.csv, args.output, rate_hz=args.rate_hz, sections_path=args.sections, fmt=args.format,
         gravity_mps2=args.gravity_mps2, accel_unit=args.accel_unit, gyro_unit=args.gyro_unit,
         model=args.model, serial=args.serial, turn_deg=args.turn_deg, placement_deg=args.placement_deg)
-    from station.io.capture import read_capture
+    capture = api.read_capture(path)
 
-    capture = read_capture(path)
     def vec(v):
         return "(" + ", ".join(f"{x:g}" for x in v) + ")"
 
@@ -46,22 +45,23 @@ def _recording_options(args) -> dict:
 
 
 def cmd_import_csv(args) -> int:
-    from station.io.importers import delimited, recording
+    from station import api
+    from station.io.importers.delimited import parse_columns     # the --columns text, parsed
 
-    columns = delimited.parse_columns(args.columns) if args.columns else None
-    rec = delimited.read_delimited(
-        args.file, preset=args.preset, columns=columns, delimiter=args.delimiter, header=args.header,
+    columns = parse_columns(args.columns) if args.columns else None
+    _print_report(api.import_csv(
+        args.file, args.output, preset=args.preset, columns=columns, delimiter=args.delimiter, header=args.header,
         accel_unit=args.accel_unit, gyro_unit=args.gyro_unit, accel_nominal=args.accel_nominal,
-        gyro_nominal=args.gyro_nominal, time_unit=args.time_unit, rate_hz=args.rate_hz, gyro_path=args.gyro_file)
-    _print_report(recording.write_capture(rec, args.output, **_recording_options(args)))
+        gyro_nominal=args.gyro_nominal, time_unit=args.time_unit, rate_hz=args.rate_hz, gyro_path=args.gyro_file,
+        **_recording_options(args)))
     return 0
 
 
 def cmd_import_rosbag(args) -> int:
-    from station.io.importers import recording, rosbag
+    from station import api
 
-    rec = rosbag.read_rosbag(args.bag, topic=args.topic, stamps=args.stamps, rate_hz=args.rate_hz)
-    _print_report(recording.write_capture(rec, args.output, **_recording_options(args)))
+    _print_report(api.import_rosbag(args.bag, args.output, topic=args.topic, stamps=args.stamps, rate_hz=args.rate_hz,
+                                    **_recording_options(args)))
     return 0
 
 

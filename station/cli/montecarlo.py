@@ -5,7 +5,6 @@ import contextlib
 
 from station.cli import argtypes
 from station.cli.output import err, out
-from station.core.errors import UserError
 
 
 def add_parsers(sub) -> None:
@@ -47,45 +46,27 @@ def cmd_montecarlo(args) -> int:
     import json
     import time
 
-    import numpy as np
-    from rich.table import Table
+    from station import api
 
-    from station.simulate import montecarlo
-    from station.io.scheme import load_scheme
-
-    if args.runs < 2:
-        raise UserError("--runs must be at least 2")
-    scheme = load_scheme(args.scheme)
-    settings = montecarlo.Settings(accel_noise_ug=args.accel_noise_ug, gyro_noise_dph=args.gyro_noise_dph,
-                                   table_angle_arcsec=args.table_angle_arcsec,
-                                   accel_disturbance_ug=args.accel_disturbance_ug, method=args.method)
     started = time.perf_counter()
     with _progress_bar(args.runs) as progress:
-        result = montecarlo.study(scheme, settings, args.runs, first_seed=args.seed, bound=True,
-                                  progress=progress)
+        mc = api.montecarlo(args.scheme, args.runs, seed=args.seed, accel_noise_ug=args.accel_noise_ug,
+                            gyro_noise_dph=args.gyro_noise_dph, table_angle_arcsec=args.table_angle_arcsec,
+                            accel_disturbance_ug=args.accel_disturbance_ug, method=args.method, progress=progress)
     elapsed = time.perf_counter() - started
-    err.print(f"{args.runs} dry runs and the Cramér-Rao bound in {elapsed:.1f} s on {result.workers} "
+    err.print(f"{args.runs} dry runs and the Cramér-Rao bound in {elapsed:.1f} s on {mc.workers} "
               f"worker process(es): {args.runs / elapsed:.2f} runs/s", markup=False)
-    names, errors, sigmas, crlb = result.names, result.errors, result.sigmas, result.crlb
-    std = errors.std(axis=0, ddof=1)
-    with np.errstate(all="ignore"):
-        mean_sigma = np.nanmean(sigmas, axis=0) if np.isfinite(sigmas).any() else np.full(len(std), np.nan)
-    rows = [{"name": n, "unit": u, "std": float(sd), "crlb": float(c),
-             "mean_sigma": None if not np.isfinite(ms) else float(ms), "mean_error": float(me)}
-            for (n, u), sd, c, ms, me in zip(names, std, crlb, mean_sigma, errors.mean(axis=0))]
     if args.json:
-        print(json.dumps({"scheme": scheme.name, "runs": args.runs, "method": args.method,
-                          "settings": {"accel_noise_ug_rthz": args.accel_noise_ug,
-                                       "gyro_noise_dph_rthz": args.gyro_noise_dph,
-                                       "table_angle_arcsec": args.table_angle_arcsec,
-                                       "accel_disturbance_ug": args.accel_disturbance_ug},
-                          "parameters": rows}, indent=1))
+        print(json.dumps({"scheme": mc.scheme, "runs": mc.runs, "method": mc.method, "settings": mc.settings,
+                          "parameters": mc.parameters}, indent=1))
         return 0
-    table = Table(title=f"{scheme.name}: {args.runs} dry runs, {args.method}; errors against the "
+    from rich.table import Table
+
+    table = Table(title=f"{mc.scheme}: {args.runs} dry runs, {args.method}; errors against the "
                         "simulated truth (scale factors relative)")
     for col in ("parameter", "std", "CRLB", "std/CRLB", "mean 1σ", "1σ/std", "mean error", "unit"):
         table.add_column(col, justify="left" if col in ("parameter", "unit") else "right")
-    for r in rows:
+    for r in mc.parameters:
         ms = r["mean_sigma"]
         table.add_row(r["name"], f"{r['std']:.4g}", f"{r['crlb']:.4g}", f"{r['std'] / r['crlb']:.2f}",
                       "" if ms is None else f"{ms:.4g}", "" if ms is None else f"{ms / r['std']:.2f}",

@@ -1,9 +1,7 @@
 """``station noise``: the noise of a still IMU from the Allan deviation (argument parsing and output)."""
 from __future__ import annotations
 
-from pathlib import Path
-
-from station.cli.output import err, out
+from station.cli.output import out
 
 
 def add_parsers(sub) -> None:
@@ -54,75 +52,27 @@ def _table(result) -> Table:
 
 
 def cmd_noise(args) -> int:
-    from station.core.errors import UserError
-    from station.diagnose.figures import allan_figure
-    from station.estimate import noise
-    from station.io.calfile import read_calfile
-    from station.io.capture import read_capture, read_segment_csv
-    from station.io.noise_file import write_into_calibration, write_noise_file
+    from station import api
 
-    src = Path(args.source)
-    cal_doc = read_calfile(args.cal) if args.cal else None
-    model = serial = None
-    bag = (src.suffix in (".bag", ".mcap", ".db3")
-           or (src.is_dir() and (src / "metadata.yaml").is_file() and not (src / "manifest.yaml").exists()))
-    if bag:          # a still IMU recorded as a ROS bag (allan_variance_ros's use): its whole length
-        from types import SimpleNamespace
+    done = api.characterise_noise(args.source, calibration=args.cal, segment=args.segment, topic=args.topic,
+                                  rate_hz=args.rate_hz, accel_unit=args.accel_unit, gyro_unit=args.gyro_unit,
+                                  plot=args.plot, force=args.force)
+    return _print(done)
 
-        from station.io.importers.rosbag import read_rosbag
 
-        if args.segment:
-            raise UserError("--segment applies to a capture bundle, not to a bag")
-        rec = read_rosbag(src, topic=args.topic)
-        here = src.parent
-        result = noise.from_samples(src, SimpleNamespace(t=rec.t, accel=rec.accel, gyro=rec.gyro), args.rate_hz,
-                                    rec.accel_unit, rec.gyro_unit, cal_doc)
-    elif src.is_dir() or src.name == "manifest.yaml":
-        capture = read_capture(src, load_data=False)     # from_capture reads the static segments
-        here = capture.path
-        default_cal = here / "calibration.yaml"
-        if cal_doc is None and default_cal.exists():
-            args.cal, cal_doc = str(default_cal), read_calfile(default_cal)
-        result = noise.from_capture(capture, args.segment, cal_doc)
-        model, serial = capture.imu.model, capture.imu.serial
-        cal_serial = ((cal_doc or {}).get("provenance") or {}).get("imu_serial")
-        if serial and cal_serial and serial != cal_serial and not getattr(args, "force", False):
-            raise UserError(f"{args.cal}: calibration of IMU {cal_serial!r}, recording of IMU {serial!r}: "
-                            "the noise belongs to the IMU recorded (--force to write it anyway)")
-        used = capture.segment(result.segment)
-        if used.data.gaps:
-            err.print("warning: the recording has gaps; the Allan deviation assumes even sampling")
-        if used.status == "incomplete":
-            err.print(f"warning: segment {used.name} is incomplete (the recording stopped): its "
-                      f"{len(used.data.t)} samples before it stopped are characterised", markup=False, soft_wrap=True)
-    else:
-        if args.segment:
-            raise UserError("--segment applies to a capture bundle, not to a CSV file")
-        data = read_segment_csv(src, sample_rate_hz=args.rate_hz)
-        here = src.parent
-        result = noise.from_samples(src, data, args.rate_hz, args.accel_unit, args.gyro_unit, cal_doc)
-    block = result.block()
-    # a capture holds one noise file and plot; a CSV's are named after it (two recordings in one
-    # folder do not overwrite each other's)
-    stem = f"{src.stem}-" if bag or not (src.is_dir() or src.name == "manifest.yaml") else ""
-    if args.cal:
-        target = write_into_calibration(args.cal, block)
-    else:
-        target = write_noise_file(here / f"{stem}noise.yaml", block, model, serial)
-    png = Path(args.plot) if args.plot else Path(target).with_name(f"{stem}allan.png")
-    try:
-        allan_figure(result, png)
-    except OSError as e:
-        raise UserError(f"{png}: cannot write: {e.strerror}") from None
-    out.print(_table(result))
-    kal = block["kalibr"]
+def _print(done) -> int:
+    from station.cli.calibration import print_messages
+
+    print_messages(done.warnings)
+    out.print(_table(done.result))
+    kal = done.block["kalibr"]
     out.print("Kalibr imu.yaml: " + ", ".join(
         f"{k} {kal[k]:.4g}{' (upper bound)' if kal.get(k + '_is_upper_bound') else ''}"
         for k in ("accelerometer_noise_density", "accelerometer_random_walk",
                   "gyroscope_noise_density", "gyroscope_random_walk")) + f", update_rate {kal['update_rate']:g}",
               markup=False, soft_wrap=True)
-    out.print(f"noise figures: {target}", markup=False)
-    out.print(f"Allan deviation plot: {png}", markup=False)
+    out.print(f"noise figures: {done.figures}", markup=False)
+    out.print(f"Allan deviation plot: {done.plot}", markup=False)
     return 0
 
 
@@ -135,7 +85,6 @@ def is_noise_recording(segments) -> bool:
 
 def characterise_run(directory) -> int:
     """What ``station run`` does at the end of a noise recording."""
-    import argparse
+    from station import api
 
-    return cmd_noise(argparse.Namespace(source=str(directory), segment=None, cal=None, rate_hz=None,
-                                        accel_unit="m/s^2", gyro_unit="deg/s", plot=None, force=False))
+    return _print(api.characterise_noise(directory))

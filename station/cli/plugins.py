@@ -14,26 +14,29 @@ def add_arguments(p) -> None:
                    help="load every effect plugin in DIR/*.py; repeatable")
 
 
-def registry(args) -> EffectRegistry:
-    """Library + installed entry points + $STATION_EFFECTS_PATH + the effects section of a
-    configuration the user named (--config, $STATION_CONFIG) or of their own (the user's
-    configuration folder) + --effects-dir + --plugin.  A ./station.yaml found in the working
-    directory is not read for plugins: loading one runs its code (a note says so)."""
-    from station.bench.config import implicit_plugins, load_config, plugin_config
-    from station.cli.output import err
-    from station.model.registry import EffectRegistry
+def options(args) -> dict:
+    """The plugin options as the API takes them (station.api: plugins, effects_dirs, config); a
+    note when a ./station.yaml found in the working directory names plugins, which are not loaded
+    (loading one runs its code)."""
+    from station.bench.config import implicit_plugins
 
-    reg = EffectRegistry()
-    config_path = plugin_config(getattr(args, "config", None))
-    if config_path is not None:
-        config = load_config(str(config_path))
-        reg.add_all(config.effects.plugins, config.effects.folders)
-    elif implicit_plugins(getattr(args, "config", None)):
+    if implicit_plugins(getattr(args, "config", None)):
+        from station.cli.output import err
+
         err.print("note: ./station.yaml names effect plugins: not loaded (a configuration found in the "
                   "working directory runs no code; give --config station.yaml to load them)",
                   markup=False, soft_wrap=True)
-    reg.add_all(getattr(args, "plugin", []), getattr(args, "effects_dir", []))
-    return reg
+    return {"plugins": list(getattr(args, "plugin", [])), "effects_dirs": list(getattr(args, "effects_dir", [])),
+            "config": getattr(args, "config", None)}
+
+
+def registry(args) -> EffectRegistry:
+    """The registry the API builds from the same options (station.api._registry): library +
+    installed entry points + $STATION_EFFECTS_PATH + the effects section of a configuration the
+    user named (--config, $STATION_CONFIG) or of their own + --effects-dir + --plugin."""
+    from station.api import _registry
+
+    return _registry(**options(args))
 
 
 def effect_ids(reg: EffectRegistry, values) -> list[str]:

@@ -1,8 +1,6 @@
 """``station report``: one self-contained HTML page about a capture and its calibration."""
 from __future__ import annotations
 
-from pathlib import Path
-
 from station.cli.output import out
 
 
@@ -20,20 +18,10 @@ def add_parsers(sub) -> None:
 
 
 def cmd_report(args) -> int:
-    from station.diagnose.report import report_input, write_page
-    from station.io.calfile import read_calfile
-    from station.io.capture import read_capture
+    from station import api
+    from station.cli.calibration import print_messages
 
-    capture = read_capture(args.capture, load_data=False)     # the manifest: samples as needed
-    cal_path = Path(args.cal) if args.cal else capture.path / "calibration.yaml"
-    cal_doc = read_calfile(cal_path) if (args.cal or cal_path.exists()) else None
-    if cal_doc is not None:
-        from station.cli.calibration import check_serial
-
-        check_serial(cal_doc, cal_path, capture.imu.serial, args.force, f"capture {capture.path}")
-    effects = [e for e in (cal_doc or {}).get("effects", []) if e not in ("base_triads", "inter_triad")]
-    inp = report_input(capture, cal_doc, cal_path if cal_doc else None, effects=effects, auto=not args.no_auto)
-    target = Path(args.output) if args.output else capture.path / "report.html"
-    write_page(target, inp)
-    out.print(f"report: {target}", markup=False)
+    page = api.report(args.capture, calibration=args.cal, output=args.output, force=args.force, auto=not args.no_auto)
+    print_messages(page.warnings)
+    out.print(f"report: {page.path}", markup=False)
     return 0

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 import station
-from station.core.errors import UserError
+from station.core.errors import UserError, cannot_write
 from station.diagnose.core import PRIOR_QUANTITIES
 from station.diagnose.figures import (CandidateFigure, SegmentPanel, SegmentsFigure, allan_figure, draw,
                                       figure_format)
@@ -368,7 +368,7 @@ def write_page(path, inp: ReportInput, figure_dir=None) -> Path:
             for name, data in figures.items():
                 (Path(figure_dir) / name).write_bytes(data)
     except OSError as e:
-        raise UserError(f"{path}: cannot write the report: {e.strerror}") from None
+        raise cannot_write(path, e, "the report") from None
     return path
 
 

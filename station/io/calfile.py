@@ -20,7 +20,7 @@ import yaml
 import station
 from station.core import yaml_text
 from station.model.calibration import Calibration
-from station.core.errors import UserError
+from station.core.errors import UserError, cannot_write
 from station.core.units import ACCEL_UNITS, GYRO_UNITS, gyro_to_dps_factor
 
 FORMAT = "station-calibration/1"
@@ -153,7 +153,7 @@ def write_new_file(path: Path, data: bytes, *, what: str = "file") -> None:
         os.replace(tmp, path)
         created = False
     except OSError as e:
-        raise UserError(f"{path}: cannot write {what}: {e.strerror}") from None
+        raise cannot_write(path, e, what) from None
     finally:
         if created:
             try:

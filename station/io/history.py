@@ -28,7 +28,6 @@ import datetime as _dt
 import hashlib
 import os
 import re
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -59,16 +58,14 @@ class Entry:
 
 
 def default_store() -> Path:
+    """$STATION_HISTORY_DIR, else ``calibrations`` in the user's data directory for station
+    (platformdirs' user_data_dir: $XDG_DATA_HOME/station or ~/.local/share/station on Linux,
+    ~/Library/Application Support/station on macOS, %LOCALAPPDATA%\\station on Windows)."""
     if os.environ.get(ENV):
         return Path(os.environ[ENV])
-    home = Path.home()
-    if sys.platform == "darwin":
-        base = home / "Library" / "Application Support"
-    elif os.name == "nt":
-        base = Path(os.environ.get("LOCALAPPDATA") or home / "AppData" / "Local")
-    else:
-        base = Path(os.environ.get("XDG_DATA_HOME") or home / ".local" / "share")
-    return base / "station" / "calibrations"
+    import platformdirs
+
+    return Path(platformdirs.user_data_dir("station", appauthor=False)) / "calibrations"
 
 
 def simulation_store(root=None) -> Path:
