@@ -19,9 +19,11 @@ Criteria (lower is better):
 The search (Fedorov's exchange, with a budget): nine statics first (the estimator takes every
 static's attitude as unknown from nine on, as the information here does), chosen greedily; then
 greedily the candidate that lowers the criterion most per second of table time until the budget
-is spent; then exchanges: every chosen candidate against every one not chosen (a static's dwell
-against another dwell of it is such an exchange), the best improving exchange that keeps the
-time within the budget taken, until none improves or ``max_passes`` passes.
+is spent; then exchanges: each chosen candidate in turn against every one not chosen (a static's dwell
+against another dwell of it is such an exchange), its best exchange that improves the criterion
+and keeps the time within the budget applied at once, then additions the freed time allows;
+passes until one changes nothing, or ``max_passes``.  Only the axis groups a step touches are
+recomputed (State).
 """
 from __future__ import annotations
 
@@ -110,9 +112,13 @@ class Scorer:
         return F
 
     def covariance(self, chosen) -> np.ndarray:
-        """Covariance of every reported parameter, reported units (F scaled to a unit diagonal
-        first: its columns' information spans twenty decades in the model's internal units)."""
-        F = self.information(chosen)
+        """Covariance of every reported parameter, reported units."""
+        return self.covariance_of(self.information(chosen))
+
+    def covariance_of(self, F) -> np.ndarray:
+        """Covariance of every reported parameter from the information F of G, reported units
+        (F scaled to a unit diagonal first: its columns' information spans twenty decades in the
+        model's internal units)."""
         d = np.sqrt(np.diag(F))
         d[d == 0] = 1.0
         Fs = F / np.outer(d, d) + RIDGE * np.eye(self.G)
@@ -129,7 +135,10 @@ class Scorer:
         return np.sqrt(np.clip(np.diag(self.covariance(chosen)), 0.0, None))
 
     def value(self, chosen) -> float:
-        cov = self.covariance(chosen)
+        return self.value_of(self.information(chosen))
+
+    def value_of(self, F) -> float:
+        cov = self.covariance_of(F)
         w = self.which
         sub = cov[np.ix_(w, w)]
         if self.criterion.kind == "D":
@@ -138,6 +147,73 @@ class Scorer:
         if self.criterion.kind == "A":
             return float(np.trace(sub))
         return float(np.sqrt(np.max(np.diag(sub))))
+
+
+class State:
+    """A design's information kept by parts, so that adding or removing a candidate recomputes
+    only its axis group's Schur complement: F = statics + sum of the groups' complements."""
+
+    def __init__(self, scorer: Scorer, chosen=()):
+        self.sc = scorer
+        self.statics = np.zeros((scorer.G, scorer.G))
+        self.groups: dict = {}          # axis group -> [sum of M + prior, members, its complement]
+        self.chosen: set = set()
+        for i in chosen:
+            self.add(i)
+
+    def _group_after(self, g, remove=(), add=()):
+        sc = self.sc
+        S, members, _ = self.groups.get(g, (sc.info.group_prior[g], 0, None))
+        S = S.copy()
+        for i in remove:
+            S -= sc.M[i]
+        for i in add:
+            S += sc.M[i]
+        members += len(add) - len(remove)
+        return S, members, (_schur(S, sc.G) if members > 0 else np.zeros((sc.G, sc.G)))
+
+    def information(self, remove=(), add=()) -> np.ndarray:
+        """F of the design with ``remove`` taken out and ``add`` put in (not applied)."""
+        sc = self.sc
+        F = self.statics.copy()
+        touched: dict = {}
+        for i in remove:
+            if sc.cands[i].kind == "static":
+                F -= sc.M[i]
+            else:
+                touched.setdefault(sc.cands[i].axis, ([], []))[0].append(i)
+        for i in add:
+            if sc.cands[i].kind == "static":
+                F += sc.M[i]
+            else:
+                touched.setdefault(sc.cands[i].axis, ([], []))[1].append(i)
+        for g, (_, _, schur) in self.groups.items():
+            if g not in touched:
+                F += schur
+        for g, (rm, ad) in touched.items():
+            F += self._group_after(g, rm, ad)[2]
+        return F
+
+    def value(self, remove=(), add=()) -> float:
+        return self.sc.value_of(self.information(remove, add))
+
+    def add(self, i) -> None:
+        c = self.sc.cands[i]
+        if c.kind == "static":
+            self.statics += self.sc.M[i]
+        else:
+            self.groups[c.axis] = list(self._group_after(c.axis, add=(i,)))
+        self.chosen.add(i)
+
+    def remove(self, i) -> None:
+        c = self.sc.cands[i]
+        if c.kind == "static":
+            self.statics -= self.sc.M[i]
+        else:
+            self.groups[c.axis] = list(self._group_after(c.axis, remove=(i,)))
+            if self.groups[c.axis][1] == 0:
+                del self.groups[c.axis]
+        self.chosen.discard(i)
 
 
 def _schur(S: np.ndarray, G: int) -> np.ndarray:
@@ -160,9 +236,12 @@ class Result:
 
 
 def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: int = 20,
-             min_statics: int = MIN_STATICS) -> Result:
+             min_statics: int = MIN_STATICS, masks=None, remount_s: float = 0.0, start=None) -> Result:
     """The design within ``budget_s`` (``fixed_s`` of it spent on steps no candidate pays for:
-    the first mounting, a warm-up) minimising the criterion (module doc)."""
+    the first mounting, a warm-up) minimising the criterion (module doc).  ``masks``: each
+    candidate's reachable mountings (bits), a mounting beyond the first costing ``remount_s``;
+    ``start``: a design to start the exchanges from (its candidates kept while within budget)."""
+
     cands = scorer.cands
     n = len(cands)
     secs = np.array([c.seconds for c in cands])
@@ -181,14 +260,22 @@ def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: 
         return True
 
     def time_of(chosen) -> float:
-        return fixed_s + float(sum(secs[i] for i in chosen))
+        t = fixed_s + float(sum(secs[i] for i in chosen))
+        if masks is not None and remount_s:
+            t += remount_s * max(0, mountings_needed([masks[i] for i in chosen]) - 1)
+        return t
 
-    def score(chosen) -> float:
+    state = State(scorer)
+
+    def score(remove=(), add=()) -> float:
         nonlocal evaluations
         evaluations += 1
-        return scorer.value(chosen)
+        return state.value(remove, add)
 
-    chosen: set = set()
+    if start is not None:
+        for j in start:
+            if allowed(state.chosen, j) and time_of(state.chosen | {j}) <= budget_s:
+                state.add(j)
     statics = [j for j in range(n) if cands[j].kind == "static"]
     shortest = {}
     for j in statics:
@@ -196,66 +283,97 @@ def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: 
         if s not in shortest or cands[j].dwell_s < cands[shortest[s]].dwell_s:
             shortest[s] = j
     # 1. nine statics, greedily, at their shortest dwell
-    while sum(cands[i].kind == "static" for i in chosen) < min_statics:
+    while sum(cands[i].kind == "static" for i in state.chosen) < min_statics:
         best, best_v = None, math.inf
         for j in shortest.values():
-            if allowed(chosen, j) and time_of(chosen | {j}) <= budget_s:
-                v = score(chosen | {j})
-                if v < best_v:
+            if allowed(state.chosen, j) and time_of(state.chosen | {j}) <= budget_s:
+                v = score(add=(j,))
+                if best is None or v < best_v:
                     best, best_v = j, v
         if best is None:
+            least = fixed_s + float(np.sort(secs[list(shortest.values())])[:min_statics].sum())
             raise UserError(f"a budget of {budget_s:.0f} s holds fewer than {min_statics} static attitudes on "
-                            f"this table (the least: {fixed_s + sorted(secs[list(shortest.values())])[:min_statics].sum():.0f} s)")
-        chosen.add(best)
-    # 2. greedy: the largest fall of the criterion per second
-    current = score(chosen)
+                            f"this table (the least: {least:.0f} s)")
+        state.add(best)
+    # 2. greedy: the largest fall of the criterion per second of table time
+    current = score()
     while True:
         best, best_gain = None, 0.0
         for j in range(n):
-            if not allowed(chosen, j) or time_of(chosen | {j}) > budget_s:
+            if not allowed(state.chosen, j) or time_of(state.chosen | {j}) > budget_s:
                 continue
-            v = score(chosen | {j})
-            gain = (current - v) / secs[j] if math.isfinite(current) else (-v if math.isfinite(v) else 0.0)
-            if (not math.isfinite(current) and math.isfinite(v)) or gain > best_gain:
-                if best is None or gain > best_gain or not math.isfinite(current):
+            v = score(add=(j,))
+            if not math.isfinite(current):
+                gain = math.inf if math.isfinite(v) else 0.0
+                if best is None and gain > 0:
                     best, best_gain = j, gain
+                continue
+            gain = (current - v) / secs[j]
+            if gain > best_gain:
+                best, best_gain = j, gain
         if best is None:
             break
-        chosen.add(best)
-        current = score(chosen)
-    # 3. exchanges (and additions that the freed time allows)
+        state.add(best)
+        current = score()
+    # 3. exchanges: for each chosen candidate in turn its best exchange (or, with time left, an
+    # addition), applied at once when it improves; passes until one changes nothing
     passes = 0
     history = [current]
     for passes in range(1, max_passes + 1):
-        best_swap, best_v = None, current
-        for i in list(chosen):
-            rest = chosen - {i}
+        changed = False
+        for i in sorted(state.chosen):
+            if i not in state.chosen:
+                continue
+            rest = state.chosen - {i}
             if cands[i].kind == "static" and sum(cands[k].kind == "static" for k in rest) < min_statics:
-                swaps = [j for j in statics if cands[j].slot == cands[i].slot or True]
-                swaps = [j for j in swaps if cands[j].kind == "static"]
+                swaps = statics             # (the nine statics stay nine)
             else:
                 swaps = range(n)
             t_rest = time_of(rest)
+            best_j, best_v = None, current
             for j in swaps:
                 if j == i or not allowed(rest, j) or t_rest + secs[j] > budget_s:
                     continue
-                v = score(rest | {j})
-                if v < best_v - 1e-12 * max(1.0, abs(best_v)):
-                    best_swap, best_v = (i, j), v
-        if best_swap is None:
-            # room left for one more?
-            added = False
-            for j in range(n):
-                if allowed(chosen, j) and time_of(chosen | {j}) <= budget_s:
-                    v = score(chosen | {j})
-                    if v < best_v:
-                        best_swap, best_v, added = (None, j), v, True
-            if not added:
-                break
-        i, j = best_swap
-        if i is not None:
-            chosen.discard(i)
-        chosen.add(j)
-        current = best_v
-        history.append(current)
+                if time_of(rest | {j}) > budget_s:
+                    continue
+                v = score(remove=(i,), add=(j,))
+                if v < best_v - 1e-9 * max(1.0, abs(best_v)):
+                    best_j, best_v = j, v
+            if best_j is not None:
+                state.remove(i)
+                state.add(best_j)
+                current = best_v
+                history.append(current)
+                changed = True
+        for j in range(n):          # time freed by the exchanges
+            if allowed(state.chosen, j) and time_of(state.chosen | {j}) <= budget_s:
+                v = score(add=(j,))
+                if v < current - 1e-9 * max(1.0, abs(current)):
+                    state.add(j)
+                    current = v
+                    history.append(current)
+                    changed = True
+        if not changed:
+            break
+    chosen = state.chosen
     return Result(sorted(chosen), current, time_of(chosen), passes, evaluations, history)
+
+
+def mountings_needed(chosen_masks) -> int:
+    """The fewest mountings (greedy set cover) that reach every chosen candidate."""
+    left = list(chosen_masks)
+    if not left:
+        return 0
+    n = 0
+    while left:
+        best, best_count = 0, -1
+        bit = 1
+        while bit <= max(left):
+            if any(m & bit for m in left):
+                count = sum(1 for m in left if m & bit)
+                if count > best_count:
+                    best, best_count = bit, count
+            bit <<= 1
+        left = [m for m in left if not m & best]
+        n += 1
+    return n
