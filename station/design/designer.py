@@ -214,11 +214,13 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
     seconds["search"] = time.perf_counter() - t2
     search_sigma = scorer.sigma(result.chosen)
     t3 = time.perf_counter()
-    say("the designed scheme's 1σ by the estimator's fit")
-    prediction = predict(scheme, effects, noise, config, plan.duration_s, plan)
-    builtins = []
-    for other in compare:
-        say(f"{other} at the same duration")
+    say(f"the 1σ of the designed scheme and of {', '.join(compare) or 'no built-in scheme'} at the same duration "
+        "(the estimator's fit, one forked process per scheme)")
+    from station.core.forked import map_in_children
+
+    def job(other):
+        if other is None:
+            return predict(scheme, effects, noise, config, plan.duration_s, plan)
         try:
             base = load_scheme(other)
             stretched, total, p = scaled(base, config, plan.duration_s)
@@ -226,7 +228,9 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
             pr.note = f"x{stretched.duration_s / base.duration_s:.3g} of its recording time"
         except UserError as e:
             pr = Prediction(other, math.nan, [], [], np.zeros(0), np.zeros(0, bool), note=str(e))
-        builtins.append(pr)
+        return pr
+
+    prediction, *builtins = map_in_children(job, [None, *compare])
     seconds["predictions"] = time.perf_counter() - t3
     header = [f"{name}: designed by `station design` for the {config.table.axes}-axis table of {config.source}",
               f"criterion {crit.text}: {result.value:.6g}; compiled time {plan.duration_s:.0f} s "

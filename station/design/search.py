@@ -36,6 +36,7 @@ import numpy as np
 from station.core.errors import UserError
 
 RIDGE = 1e-10            # on the unit-diagonal information: a column nothing sees gets 1σ 1e5 of its size
+CRITERIA = ("D", "A", "worst")    # (station/cli/choices.py copies it)
 MIN_STATICS = 9           # lsq's attitudes="auto": every static's attitude unknown from nine on
 
 
