@@ -22,6 +22,10 @@ def add_parsers(sub) -> None:
                     help="1σ white acceleration disturbance (default 50, the 2010 paper's)")
     mc.add_argument("--method", choices=("lsq", "zhang2010"), default="lsq",
                     help="estimation method (default lsq)")
+    mc.add_argument("--add", action="append", default=[], metavar="EFFECT",
+                    help="a library effect the lsq fit adds (station effects lists them); repeatable: its "
+                         "parameters' spread, bound and 1σ are reported too (against zero: the simulated IMU "
+                         "has none of the effects)")
     mc.add_argument("--seed", type=argtypes.seed, default=1000, help="first seed (runs use seed, seed+1, ...)")
     mc.add_argument("--json", action="store_true",
                     help="print the per-parameter table as JSON on stdout (error std, Cramér–Rao bound, mean 1σ)")
@@ -56,9 +60,19 @@ def cmd_montecarlo(args) -> int:
     if args.runs < 2:
         raise UserError("--runs must be at least 2")
     scheme = load_scheme(args.scheme)
+    effects = tuple(dict.fromkeys(getattr(args, "add", []) or []))
+    if effects:
+        from station.model import LIBRARY
+
+        unknown = [e for e in effects if e not in LIBRARY]
+        if unknown:
+            raise UserError(f"--add: unknown effect {', '.join(unknown)} (library effects: {', '.join(LIBRARY)})")
+        if args.method != "lsq":
+            raise UserError("--add needs --method lsq (the 2010 method fits the base model only)")
     settings = montecarlo.Settings(accel_noise_ug=args.accel_noise_ug, gyro_noise_dph=args.gyro_noise_dph,
                                    table_angle_arcsec=args.table_angle_arcsec,
-                                   accel_disturbance_ug=args.accel_disturbance_ug, method=args.method)
+                                   accel_disturbance_ug=args.accel_disturbance_ug, method=args.method,
+                                   effects=effects)
     started = time.perf_counter()
     with _progress_bar(args.runs) as progress:
         result = montecarlo.study(scheme, settings, args.runs, first_seed=args.seed, bound=True,
@@ -74,7 +88,7 @@ def cmd_montecarlo(args) -> int:
              "mean_sigma": None if not np.isfinite(ms) else float(ms), "mean_error": float(me)}
             for (n, u), sd, c, ms, me in zip(names, std, crlb, mean_sigma, errors.mean(axis=0))]
     if args.json:
-        print(json.dumps({"scheme": scheme.name, "runs": args.runs, "method": args.method,
+        print(json.dumps({"scheme": scheme.name, "runs": args.runs, "method": args.method, "effects": list(effects),
                           "settings": {"accel_noise_ug_rthz": args.accel_noise_ug,
                                        "gyro_noise_dph_rthz": args.gyro_noise_dph,
                                        "table_angle_arcsec": args.table_angle_arcsec,
