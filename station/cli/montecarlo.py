@@ -82,11 +82,16 @@ def cmd_montecarlo(args) -> int:
               f"worker process(es): {args.runs / elapsed:.2f} runs/s", markup=False)
     names, errors, sigmas, crlb = result.names, result.errors, result.sigmas, result.crlb
     std = errors.std(axis=0, ddof=1)
-    with np.errstate(all="ignore"):
+    import warnings
+
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)        # (a column of NaN: left out below)
         mean_sigma = np.nanmean(sigmas, axis=0) if np.isfinite(sigmas).any() else np.full(len(std), np.nan)
+    # (an effect's parameter that its convention fixes is in no run's calibration: left out)
     rows = [{"name": n, "unit": u, "std": float(sd), "crlb": float(c),
              "mean_sigma": None if not np.isfinite(ms) else float(ms), "mean_error": float(me)}
-            for (n, u), sd, c, ms, me in zip(names, std, crlb, mean_sigma, errors.mean(axis=0))]
+            for (n, u), sd, c, ms, me in zip(names, std, crlb, mean_sigma, errors.mean(axis=0))
+            if np.isfinite(sd)]
     if args.json:
         print(json.dumps({"scheme": scheme.name, "runs": args.runs, "method": args.method, "effects": list(effects),
                           "settings": {"accel_noise_ug_rthz": args.accel_noise_ug,

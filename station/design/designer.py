@@ -54,6 +54,16 @@ class Design:
     notes: list = field(default_factory=list)
 
 
+def reported_names(effects) -> list:
+    """The reported parameters' names (lsq._reported_index's order) of the base model and effects."""
+    names = []
+    for block, suffixes in (("accel_scale", "xyz"), ("accel_misalignment", ("yz", "zy", "zx")),
+                            ("gyro_scale", "xyz"), ("gyro_misalignment", ("yz", "zy", "zx")),
+                            ("accel_bias", "xyz"), ("gyro_bias", "xyz"), ("inter_triad", "xyz")):
+        names += [f"{block}_{s}" for s in suffixes]
+    return names + [p.name for e in effects for p in e.params]
+
+
 def geometry_of(config) -> dict | None:
     t = config.table
     g = {"axes_intersect": bool(t.axes_intersect)}
@@ -172,8 +182,16 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
     say = progress or (lambda text: None)
     seconds = {}
     t0 = time.perf_counter()
-    say("candidates on the table (gimbal kinematics)")
+    fixed = (config.run.operator_s if config.run.operator else 0.0)
+    w = config.warmup
+    fixed += max(w.duration_s, w.max_s or 0.0) if w.temp_slope_c_per_h is not None else w.duration_s
+    parse_criterion(criterion, reported_names(effects))          # bad input before the work
     table = cand_mod.Table(config)
+    least = fixed + MIN_STATICS * table.static_s(min(dwells_s))
+    if least > budget_s:
+        raise UserError(f"a budget of {budget_s:.0f} s holds fewer than {MIN_STATICS} static attitudes on this "
+                        f"table (the least: {least:.0f} s with the shortest dwell, {min(dwells_s):g} s)")
+    say("candidates on the table (gimbal kinematics)")
     cands, chunks, notes, masks = cand_mod.candidate_set(table, rates_dps, revolutions, dwells_s)
     if sum(1 for c in cands if c.kind == "static" and c.dwell_s == min(dwells_s)) < MIN_STATICS:
         raise UserError(f"the table reaches fewer than {MIN_STATICS} static attitudes "
@@ -188,9 +206,6 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
     seconds["information"] = time.perf_counter() - t1
     crit, which = parse_criterion(criterion, info.parameters.names)
     scorer = Scorer(info, cands, crit, which)
-    fixed = (config.run.operator_s if config.run.operator else 0.0)
-    w = config.warmup
-    fixed += max(w.duration_s, w.max_s or 0.0) if w.temp_slope_c_per_h is not None else w.duration_s
     t2 = time.perf_counter()
     budget = budget_s
     result, start, plan, scheme, text = None, None, None, None, ""

@@ -72,8 +72,15 @@ def _error_sigmas(cal) -> np.ndarray:
     for name, value, _ in cal.parameters()[:BASE_PARAMETERS]:
         sigma = cal.sigma.get(name, np.nan)
         out.append(sigma / value * 1e6 if "_scale_" in name else sigma)
-    out += [cal.sigma.get(name, np.nan) for name, _, _ in effect_parameters(cal)]
     return np.array(out)
+
+
+def _effect_values(cal, settings: Settings, sigma: bool = False) -> list:
+    """The effects' parameters (or their 1σ) in the order of their full lists, NaN for one the
+    calibration does not carry (fixed by the effect's convention, e.g. the size effect's own-axis
+    positions when the mounting offset is unknown)."""
+    got = {name: (cal.sigma.get(name, np.nan) if sigma else value) for name, value, _ in effect_parameters(cal)}
+    return [got.get(p.name, np.nan) for e in _effects(settings) for p in e.params]
 
 
 def one_run(args) -> tuple[list[float], np.ndarray]:
@@ -85,8 +92,8 @@ def one_run(args) -> tuple[list[float], np.ndarray]:
     cal = _estimate(dryrun.simulate_capture(scheme, truth, seed), settings)
     errors = [e[3] for e in parameter_errors(cal, dryrun.truth_calibration(truth))]
     # an effect's parameters against zero: the simulator's default IMU has none of the effects
-    errors += [value for _, value, _ in effect_parameters(cal)]
-    return errors, _error_sigmas(cal)
+    errors += _effect_values(cal, settings)
+    return errors, np.concatenate([_error_sigmas(cal), _effect_values(cal, settings, sigma=True)])
 
 
 def cramer_rao(scheme: Scheme, settings: Settings, seed: int = 0) -> np.ndarray:
@@ -109,7 +116,7 @@ def cramer_rao(scheme: Scheme, settings: Settings, seed: int = 0) -> np.ndarray:
     s.gyro_sigma = np.full(3, settings.gyro_noise_dph * np.sqrt(fs) / 3600.0)
     result = lsq.fit(s, _effects(settings), attitudes="unknown")
     cal = lsq.to_calibration(result, capture.imu.accel_unit, capture.imu.gyro_unit)
-    return _error_sigmas(cal)
+    return np.concatenate([_error_sigmas(cal), _effect_values(cal, settings, sigma=True)])
 
 
 def _one_blas_thread() -> None:
