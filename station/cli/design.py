@@ -59,6 +59,9 @@ def add_parsers(sub) -> None:
                    help="at most this many exchange passes (default 20)")
     d.add_argument("--compare", default=",".join(("optimal9", "chatfield18", "traditional24", "sizeeffect")),
                    metavar="NAME,...", help="built-in schemes to compare at the same duration ('' for none)")
+    d.add_argument("--centred", action="store_true",
+                   help="the IMU mounted with its reference point on the table's axes (the scheme says "
+                        "centred: true, as sizeeffect does: no mounting offset to estimate)")
     d.add_argument("--name", default="designed", help="the scheme's name (default designed)")
     d.add_argument("-o", "--out", default="designed.yaml", metavar="FILE",
                    help="the scheme file to write (default designed.yaml)")
@@ -119,7 +122,7 @@ def cmd_design(args) -> int:
     d = design(config, effects, noise, args.duration, args.criterion,
                rates_dps=args.rates or cand_mod.DEFAULT_RATES_DPS, revolutions=revolutions,
                dwells_s=args.dwells or cand_mod.DEFAULT_DWELLS_S, max_passes=args.passes, name=args.name,
-               compare=compare, progress=lambda text: err.print(f"design: {text}", markup=False, soft_wrap=True))
+               compare=compare, centred=args.centred, progress=lambda text: err.print(f"design: {text}", markup=False, soft_wrap=True))
     try:
         write_new_file(out_path, d.text.encode("utf-8"), what="scheme file")
     except OSError as e:

@@ -20,7 +20,7 @@ from station.design.search import MIN_STATICS, Scorer, exchange, parse_criterion
 from station.io.scheme import RotationSpec, Scheme, StaticSpec, load_scheme
 
 BUILTIN_TABLE_SCHEMES = ("optimal9", "chatfield18", "traditional24", "sizeeffect")
-BUDGET_ROUNDS = 4          # search again with the budget less the compiled excess, at most this often
+BUDGET_ROUNDS = 6          # search again with the budget less the compiled excess, at most this often
 
 
 @dataclass
@@ -138,9 +138,11 @@ def _num(x):
     return int(x) if float(x).is_integer() else float(x)
 
 
-def scheme_text(name: str, entries: list, header: list) -> str:
-    doc = {"name": name, "title": "designed by station design", "reference": "docs/design.md",
-           "segments": entries}
+def scheme_text(name: str, entries: list, header: list, centred: bool = False) -> str:
+    doc = {"name": name, "title": "designed by station design", "reference": "docs/design.md"}
+    if centred:
+        doc["centred"] = True
+    doc["segments"] = entries
     body = yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120)
     return "".join(f"# {line}\n" if line else "#\n" for line in header) + body
 
@@ -170,6 +172,13 @@ def scaled(scheme: Scheme, config, target_s: float) -> tuple[Scheme, float, obje
         mid = math.sqrt(lo * hi)
         lo, hi = (mid, hi) if total(mid) < target_s else (lo, mid)
     out = stretched(lo)
+    # the rotations are whole revolutions (a step in the time): the statics take the rest
+    statics = sum(sp.duration_s for sp in out.segments if isinstance(sp, StaticSpec))
+    rest = target_s - overhead - (out.duration_s - statics)
+    if statics > 0 and rest > 0:
+        g = rest / statics
+        out = replace(out, segments=tuple(replace(sp, dwell_s=max(1.0, sp.dwell_s * g))
+                                          if isinstance(sp, StaticSpec) else sp for sp in out.segments))
     plan = compile_scheme(out, config)
     return out, plan.duration_s, plan
 
@@ -177,8 +186,10 @@ def scaled(scheme: Scheme, config, target_s: float) -> tuple[Scheme, float, obje
 def design(config, effects: list, noise: Noise, budget_s: float, criterion: str = "D", *,
            rates_dps=cand_mod.DEFAULT_RATES_DPS, revolutions=cand_mod.DEFAULT_REVOLUTIONS,
            dwells_s=cand_mod.DEFAULT_DWELLS_S, max_passes: int = 20, name: str = "designed",
-           compare=BUILTIN_TABLE_SCHEMES, progress=None) -> Design:
-    """The design (module doc).  ``progress(text)``: told what is being done."""
+           compare=BUILTIN_TABLE_SCHEMES, progress=None, centred: bool = False) -> Design:
+    """The design (module doc).  ``progress(text)``: told what is being done.  ``centred``: the
+    IMU is to be mounted with its reference point on the table's axes (the scheme says
+    ``centred: true``; the mounting offset is then known, as in the sizeeffect scheme)."""
     say = progress or (lambda text: None)
     seconds = {}
     t0 = time.perf_counter()
@@ -202,7 +213,7 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
     seconds["candidates"] = time.perf_counter() - t0
     t1 = time.perf_counter()
     say(f"the information of {len(cands)} candidates (one simulated capture of them, the estimator's Jacobian)")
-    info = information(chunks, effects, noise, config, geometry_of(config))
+    info = information(chunks, effects, noise, config, geometry_of(config), centred)
     seconds["information"] = time.perf_counter() - t1
     crit, which = parse_criterion(criterion, info.parameters.names)
     scorer = Scorer(info, cands, crit, which)
@@ -217,11 +228,11 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
         evaluations += result.evaluations
         passes += result.passes
         entries, specs = _segments_of(result.chosen, cands)
-        scheme = Scheme(name, "designed by station design", "docs/design.md", {}, tuple(specs))
+        scheme = Scheme(name, "designed by station design", "docs/design.md", {}, tuple(specs), centred=centred)
         plan = compile_scheme(scheme, config)
         if plan.duration_s <= budget_s * 1.0005:
             break
-        budget -= (plan.duration_s - budget_s) * 1.05
+        budget -= max(2.0 * (plan.duration_s - budget_s), 10.0)
         start = result.chosen
     else:
         raise UserError(f"no design within {budget_s:.0f} s found whose compiled time fits: the last one "
@@ -256,7 +267,7 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
               "predicted 1-sigma (the estimator's fit of this scheme's noiseless capture):"]
     for n, u, s, r in zip(prediction.names, prediction.units, prediction.sigma, prediction.revealed):
         header.append(f"  {n}: {s:.4g} {u}" + ("" if r else " (not revealed)"))
-    text = scheme_text(name, entries, header)
+    text = scheme_text(name, entries, header, centred)
     return Design(scheme, text, crit.text, result.value, plan.duration_s, budget_s, prediction, builtins,
                   search_sigma, len(cands), evaluations, passes, seconds, notes + list(plan.notes))
 

@@ -140,7 +140,7 @@ def _reduce(J_rows, keep_cols, drop_cols) -> np.ndarray:
 
 
 def information(chunks: list, effects: list, noise: Noise, config=None,
-                geometry: dict | None = None) -> Information:
+                geometry: dict | None = None, centred: bool = False) -> Information:
     """The information of every candidate.  ``chunks``: lists of (key, spec) where spec is a
     StaticSpec (dwell UNIT_DWELL_S) or a RotationSpec pair (``pair`` of two specs), each chunk
     a capture of its own (rotations about one body axis at two elevations go in different
@@ -154,7 +154,7 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
             for p in parts:
                 segments.append(p)
                 owner[p.name] = key
-        scheme = Scheme("candidates", "", "", {}, tuple(segments), centred=False, table=True)
+        scheme = Scheme("candidates", "", "", {}, tuple(segments), centred=centred, table=True)
         model, _ = model_of(scheme, effects, noise, truth, geometry)
         x = model.x0
         J = model.sparse_jacobian(x).tocsr()
