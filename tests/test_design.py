@@ -96,7 +96,7 @@ def test_design_is_a_scheme_that_plan_and_run_accept_and_montecarlo_confirms(tmp
     `station plan` and `station run --sim` accept it; `station montecarlo` on it gives the
     predicted 1σ as its Cramér-Rao bound, and the spread of its repeated estimates is that 1σ
     within the χ² spread of a sample std (_ratio_bounds)."""
-    budget = 1200
+    budget = 900
     out = tmp_path / "designed.yaml"
     done = station("design", "--duration", budget, "-o", out, "--compare", "optimal9", "--json", *SMALL)
     assert done.returncode == 0, done.stderr[-3000:]
@@ -111,7 +111,7 @@ def test_design_is_a_scheme_that_plan_and_run_accept_and_montecarlo_confirms(tmp
     assert (tmp_path / "cap" / "calibration.yaml").exists()
     # a design at optimal9's duration beats optimal9's criterion (D-efficiency above 1)
     assert report["builtins"][0]["efficiency"] > 1.0
-    runs = 24
+    runs = 16
     mc = station("montecarlo", "--scheme", out, "--runs", runs, "--json")
     assert mc.returncode == 0, mc.stderr[-2000:]
     rows = json.loads(mc.stdout)["parameters"]

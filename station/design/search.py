@@ -156,7 +156,7 @@ class State:
 
     def __init__(self, scorer: Scorer, chosen=()):
         self.sc = scorer
-        self.statics = np.zeros((scorer.G, scorer.G))
+        self.total = np.zeros((scorer.G, scorer.G))      # F: the statics' + every group's complement
         self.groups: dict = {}          # axis group -> [sum of M + prior, members, its complement]
         self.chosen: set = set()
         for i in chosen:
@@ -176,7 +176,7 @@ class State:
     def information(self, remove=(), add=()) -> np.ndarray:
         """F of the design with ``remove`` taken out and ``add`` put in (not applied)."""
         sc = self.sc
-        F = self.statics.copy()
+        F = self.total.copy()
         touched: dict = {}
         for i in remove:
             if sc.cands[i].kind == "static":
@@ -188,10 +188,9 @@ class State:
                 F += sc.M[i]
             else:
                 touched.setdefault(sc.cands[i].axis, ([], []))[1].append(i)
-        for g, (_, _, schur) in self.groups.items():
-            if g not in touched:
-                F += schur
         for g, (rm, ad) in touched.items():
+            if g in self.groups:
+                F -= self.groups[g][2]
             F += self._group_after(g, rm, ad)[2]
         return F
 
@@ -199,18 +198,16 @@ class State:
         return self.sc.value_of(self.information(remove, add))
 
     def add(self, i) -> None:
+        self.total = self.information(add=(i,))
         c = self.sc.cands[i]
-        if c.kind == "static":
-            self.statics += self.sc.M[i]
-        else:
+        if c.kind == "rotation":
             self.groups[c.axis] = list(self._group_after(c.axis, add=(i,)))
         self.chosen.add(i)
 
     def remove(self, i) -> None:
+        self.total = self.information(remove=(i,))
         c = self.sc.cands[i]
-        if c.kind == "static":
-            self.statics -= self.sc.M[i]
-        else:
+        if c.kind == "rotation":
             self.groups[c.axis] = list(self._group_after(c.axis, remove=(i,)))
             if self.groups[c.axis][1] == 0:
                 del self.groups[c.axis]
@@ -322,6 +319,7 @@ def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: 
     history = [current]
     for passes in range(1, max_passes + 1):
         changed = False
+        state.total = scorer.information(state.chosen)      # (no rounding carried from pass to pass)
         for i in sorted(state.chosen):
             if i not in state.chosen:
                 continue
