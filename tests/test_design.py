@@ -75,20 +75,26 @@ def test_information_is_the_estimators_cramer_rao_bound():
 
 
 def test_candidates_on_a_one_axis_table_need_remounts(tmp_path):
-    """A 1-axis table (vertical axis) reaches one "up" per right-angle mounting: the 6 faces, not
-    the 45 degree attitudes; it turns only about the vertical (elevation 90)."""
+    """A 1-axis table (vertical axis) reaches one "up" per right-angle mounting: the 6 faces; the
+    20 askew attitudes each on a fixture of their own (an operator step each); it turns only
+    about the vertical (elevation 90)."""
     from station.bench.config import load_config
+    from station.design.candidates import FIXTURE_BIT
 
     path = tmp_path / "one.yaml"
     path.write_text("table:\n  axes: 1\n")
     table = Table(load_config(str(path)))
     cands, chunks, notes, masks = candidate_set(table, rates_dps=(30.0,), revolutions=(1,), dwells_s=(10.0,))
-    ups = {c.slot for c in cands if c.kind == "static"}
-    assert len(ups) == 6 and all(sum(abs(x) > 0 for x in u) == 1 for u in ups)
+    statics = [(c, m) for c, m in zip(cands, masks) if c.kind == "static"]
+    faces = {c.slot for c, m in statics if m < 1 << FIXTURE_BIT}
+    assert len(faces) == 6 and all(sum(abs(x) > 0 for x in u) == 1 for u in faces)
+    assert len(statics) == 26 == len(directions())
     assert {c.axis[1] for c in cands if c.kind == "rotation"} == {90.0}
-    statics = [m for c, m in zip(cands, masks) if c.kind == "static"]
-    assert mountings_needed(statics) == 6
-    assert len(directions()) == 26
+    assert mountings_needed([m for _, m in statics]) == 26
+    # unattended: the configured mounting only, one up
+    path.write_text("table:\n  axes: 1\nrun:\n  operator: false\n")
+    cands, *_ = candidate_set(Table(load_config(str(path))), rates_dps=(30.0,), revolutions=(1,), dwells_s=(10.0,))
+    assert len([c for c in cands if c.kind == "static"]) == 1
 
 
 def test_design_is_a_scheme_that_plan_and_run_accept_and_montecarlo_confirms(tmp_path):

@@ -80,7 +80,22 @@ class Table:
                      if lim.angle_limits is None and rate_dps <= lim.max_rate_dps)
 
     def mask(self, spec) -> int:
-        """Bit m set: mounting m reaches ``spec`` exactly (statics; rotations at their elevation)."""
+        """Bit m set: mounting m reaches ``spec`` exactly (statics; rotations at their elevation).
+        With an operator, a requirement no face reaches gets the bit of a fixture holding the IMU
+        askew with it up (the compiler's fixture mounting, station/bench/compile.py): bit 24 + the
+        direction's index, shared by a turn about that direction with the table axis vertical."""
+        bits = self._faces(spec)
+        if bits or not self.operator:
+            return bits
+        if isinstance(spec, StaticSpec):
+            return 1 << (FIXTURE_BIT + _direction_index(spec.up_body))
+        if spec.axis_elevation_deg == 90.0 and any(
+                np.allclose(self.compiler.gimbal0.axes_enu[i - 1], (0.0, 0.0, 1.0), atol=1e-9)
+                for i in self.continuous(abs(spec.rate_dps))):
+            return 1 << (FIXTURE_BIT + _direction_index(spec.axis_body))
+        return 0
+
+    def _faces(self, spec) -> int:
         bits = 0
         for m, mounting in enumerate(self.mountings):
             if isinstance(spec, StaticSpec):
@@ -162,6 +177,14 @@ def candidate_set(table: Table, rates_dps=DEFAULT_RATES_DPS, revolutions=DEFAULT
         if chunk:
             chunks.append(chunk)
     return cands, chunks, notes, masks
+
+
+FIXTURE_BIT = 24          # bits 0-23: the right-angle mountings; then one fixture per cube direction
+
+
+def _direction_index(v) -> int:
+    d = np.asarray(v, float) / np.linalg.norm(v)
+    return int(np.argmin([np.linalg.norm(d - np.asarray(u)) for u in directions()]))
 
 
 def _key(v) -> tuple:
