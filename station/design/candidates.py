@@ -168,14 +168,17 @@ def candidate_set(table: Table, rates_dps=DEFAULT_RATES_DPS, revolutions=DEFAULT
     # rotations about one body axis at two elevations in one capture would share one axis group
     # (one gravity angle): one chunk per elevation, the statics with the first
     chunks = []
-    for i, e in enumerate(elevations):
+    for e in elevations:
         chunk = list(rot_chunks[e])
-        if i == 0:
+        if not chunk:
+            continue
+        if not chunks:
             chunk = statics_chunk + chunk
-        elif chunk:
+        else:
             chunk = [(("anchor",) + k, s) for k, s in statics_chunk] + chunk     # (the fit's start needs statics)
-        if chunk:
-            chunks.append(chunk)
+        chunks.append(chunk)
+    if not chunks:
+        chunks.append(statics_chunk)
     return cands, chunks, notes, masks
 
 
