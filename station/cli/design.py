@@ -144,7 +144,8 @@ def cmd_design(args) -> int:
             "designed": {"criterion": own, "parameters": [
                 {"name": n, "unit": u, "sigma": float(s), "revealed": bool(r)}
                 for n, u, s, r in zip(p.names, p.units, p.sigma, p.revealed)]},
-            "builtins": [{"scheme": b.scheme, "duration_s": b.duration_s, "note": b.note,
+            "builtins": [{"scheme": b.scheme, "duration_s": b.duration_s if b.duration_s == b.duration_s else None,
+                          "note": b.note,
                           "criterion": crit_vals.get(b.scheme),
                           "efficiency": (efficiency(own, crit_vals[b.scheme], kind, len(which))
                                          if b.scheme in crit_vals else None),
