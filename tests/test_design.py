@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SMALL = ["--rates", "30,100", "--revolutions", "1", "--dwells", "10,30", "--passes", "3"]
 
 
-def station(*args, cwd=None, timeout=300):
+def station(*args, cwd=None, timeout=1200):
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     return subprocess.run([sys.executable, "-m", "station.cli", *map(str, args)], capture_output=True,
                           text=True, cwd=cwd, env=env, timeout=timeout)
