@@ -101,20 +101,32 @@ def predict(scheme: Scheme, effects: list, noise: Noise, config=None, duration_s
     return Prediction(scheme.name, duration_s, names, units_, sigma, revealed, covariance=cov)
 
 
-def _segments_of(chosen, cands) -> list:
-    """The scheme's segment entries (YAML) and specs, statics first then rotations, in the
-    order of the mountings the time model covers them with (fewer remounts in the compiler)."""
+def _segments_of(chosen, cands, masks=None) -> list:
+    """The scheme's segment entries (YAML) and specs, mounting by mounting as the time model
+    covers them (search.cover: the compiler then remounts as often as the model counts), within
+    a mounting the statics first, then the rotations."""
+    from station.design.search import cover
+
+    chosen = list(chosen)
+    group = cover([masks[i] for i in chosen]) if masks is not None else [0] * len(chosen)
+    order = {}
+    for g in group:
+        order.setdefault(g, len(order))
+    of = dict(zip(chosen, group))
     statics = [cands[i] for i in chosen if cands[i].kind == "static"]
     rotations = [cands[i] for i in chosen if cands[i].kind == "rotation"]
-    statics.sort(key=lambda c: c.key[1], reverse=True)
-    rotations.sort(key=lambda c: (c.key[1], c.key[0], c.key[2], c.key[3]), reverse=True)
+    index = {id(cands[i]): i for i in chosen}
+    statics.sort(key=lambda c: (order[of[index[id(c)]]], tuple(-x for x in c.key[1])))
+    rotations.sort(key=lambda c: (order[of[index[id(c)]]], -c.key[1], tuple(-x for x in c.key[0]), -c.key[2], -c.key[3]))
+    sequence = sorted(statics + rotations, key=lambda c: order[of[index[id(c)]]])     # (a stable sort)
     entries, specs = [], []
-    for c in statics:
-        up = c.key[1]
-        name = f"up_{cand_mod.name_of(up)}"
-        entries.append({"static": name, "up_body": [_num(x) for x in _integer_vector(up)], "dwell_s": c.dwell_s})
-        specs.append(cand_mod.static_spec(up, c.dwell_s, name))
-    for c in rotations:
+    for c in sequence:
+        if c.kind == "static":
+            up = c.key[1]
+            name = f"up_{cand_mod.name_of(up)}"
+            entries.append({"static": name, "up_body": [_num(x) for x in _integer_vector(up)], "dwell_s": c.dwell_s})
+            specs.append(cand_mod.static_spec(up, c.dwell_s, name))
+            continue
         axis, e, rate, rev = c.key
         name = f"rot_{cand_mod.name_of(axis)}_e{e:g}_{rate:g}dps_{rev}rev"
         entry = {"rotation": name, "axis_body": [_num(x) for x in _integer_vector(axis)], "rate_dps": rate,
@@ -227,7 +239,7 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
                           remount_s=config.run.operator_s if config.run.operator else 0.0, start=start)
         evaluations += result.evaluations
         passes += result.passes
-        entries, specs = _segments_of(result.chosen, cands)
+        entries, specs = _segments_of(result.chosen, cands, masks)
         scheme = Scheme(name, "designed by station design", "docs/design.md", {}, tuple(specs), centred=centred)
         plan = compile_scheme(scheme, config)
         if plan.duration_s <= budget_s * 1.0005:
