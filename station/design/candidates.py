@@ -89,7 +89,12 @@ class Table:
             return bits
         if isinstance(spec, StaticSpec):
             return 1 << (FIXTURE_BIT + _direction_index(spec.up_body))
-        if spec.axis_elevation_deg == 90.0 and any(
+        # the compiler turns a rotation a face reaches at another elevation at that elevation
+        # (a note), not on a fixture: such a candidate is left to its other elevation
+        relaxed = ("relaxed", _key(np.asarray(spec.axis_body)), self.continuous(abs(spec.rate_dps)))
+        if relaxed not in self._cache:
+            self._cache[relaxed] = any(self.compiler._reachable(spec, m, exact=False) for m in self.mountings)
+        if not self._cache[relaxed] and spec.axis_elevation_deg == 90.0 and any(
                 np.allclose(self.compiler.gimbal0.axes_enu[i - 1], (0.0, 0.0, 1.0), atol=1e-9)
                 for i in self.continuous(abs(spec.rate_dps))):
             return 1 << (FIXTURE_BIT + _direction_index(spec.axis_body))
