@@ -15,7 +15,8 @@ from scipy.stats import chi2
 
 from station.cli import choices
 from station.design import search
-from station.design.candidates import Table, candidate_set, directions, mountings_needed
+from station.design.candidates import Table, candidate_set, directions
+from station.design.search import mountings_needed
 from station.design.information import UNIT_DWELL_S, Noise, information
 from station.io.scheme import StaticSpec, load_scheme
 from station.simulate import montecarlo

@@ -26,7 +26,7 @@ import numpy as np
 
 from station.bench.compile import MOVE_SETTLE_S, Compiler
 from station.bench.gimbal import right_angle_mountings
-from station.design.search import Candidate, mountings_needed  # noqa: F401 (the time model's)
+from station.design.search import Candidate
 from station.io.scheme import RotationSpec, Scheme, StaticSpec
 
 DEFAULT_RATES_DPS = (10.0, 30.0, 100.0, 200.0)

@@ -17,7 +17,7 @@ from station.core.errors import UserError
 from station.design import candidates as cand_mod
 from station.design.information import Noise, information, model_of, quiet_truth
 from station.design.search import MIN_STATICS, Scorer, exchange, parse_criterion
-from station.io.scheme import RotationSpec, Scheme, StaticSpec, load_scheme
+from station.io.scheme import Scheme, StaticSpec, load_scheme
 
 BUILTIN_TABLE_SCHEMES = ("optimal9", "chatfield18", "traditional24", "sizeeffect")
 BUDGET_ROUNDS = 6          # search again with the budget less the compiled excess, at most this often

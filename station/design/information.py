@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from station.io.scheme import RotationSpec, Scheme, StaticSpec
+from station.io.scheme import Scheme
 
 UNIT_DWELL_S = 10.0          # the dwell the statics are simulated with (information per second x this)
 
