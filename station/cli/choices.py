@@ -34,3 +34,6 @@ RECORDING_MIN_POSES = 9
 
 # station.io.importers.rosbag.STAMPS
 ROSBAG_STAMPS = ("header", "bag")
+
+# station.design.search.CRITERIA (station design --criterion; "worst" takes :PARAM,...)
+DESIGN_CRITERIA = ("D", "A", "worst")

@@ -21,6 +21,10 @@ def add_parsers(sub) -> None:
                     help="1σ white acceleration disturbance (default 50, the 2010 paper's)")
     mc.add_argument("--method", choices=("lsq", "zhang2010"), default="lsq",
                     help="estimation method (default lsq)")
+    mc.add_argument("--add", action="append", default=[], metavar="EFFECT",
+                    help="a library effect the lsq fit adds (station effects lists them); repeatable: its "
+                         "parameters' spread, bound and 1σ are reported too (against zero: the simulated IMU "
+                         "has none of the effects)")
     mc.add_argument("--seed", type=argtypes.seed, default=1000, help="first seed (runs use seed, seed+1, ...)")
     mc.add_argument("--json", action="store_true",
                     help="print the per-parameter table as JSON on stdout (error std, Cramér–Rao bound, mean 1σ)")
@@ -52,13 +56,14 @@ def cmd_montecarlo(args) -> int:
     with _progress_bar(args.runs) as progress:
         mc = api.montecarlo(args.scheme, args.runs, seed=args.seed, accel_noise_ug=args.accel_noise_ug,
                             gyro_noise_dph=args.gyro_noise_dph, table_angle_arcsec=args.table_angle_arcsec,
-                            accel_disturbance_ug=args.accel_disturbance_ug, method=args.method, progress=progress)
+                            accel_disturbance_ug=args.accel_disturbance_ug, method=args.method,
+                            effects=args.add, progress=progress)
     elapsed = time.perf_counter() - started
     err.print(f"{args.runs} dry runs and the Cramér-Rao bound in {elapsed:.1f} s on {mc.workers} "
               f"worker process(es): {args.runs / elapsed:.2f} runs/s", markup=False)
     if args.json:
-        print(json.dumps({"scheme": mc.scheme, "runs": mc.runs, "method": mc.method, "settings": mc.settings,
-                          "parameters": mc.parameters}, indent=1))
+        print(json.dumps({"scheme": mc.scheme, "runs": mc.runs, "method": mc.method, "effects": list(mc.effects),
+                          "settings": mc.settings, "parameters": mc.parameters}, indent=1))
         return 0
     from rich.table import Table
 

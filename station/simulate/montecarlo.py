@@ -24,6 +24,7 @@ class Settings:
     accel_disturbance_ug: float = 50.0    # the 2010 paper's "perturbed acceleration", 1σ
     truth_seed: int = 0                   # the true sensor errors, the same in every run
     method: str = "lsq"                   # lsq | zhang2010
+    effects: tuple = ()                   # library effect ids the lsq fit adds (station estimate --add)
 
 
 def make_truth(settings: Settings):
@@ -37,19 +38,49 @@ def make_truth(settings: Settings):
     return truth
 
 
-def _estimate(capture, method: str):
+def _effects(settings: Settings) -> list:
+    from station.model import LIBRARY
+
+    return [LIBRARY[e]() for e in settings.effects]
+
+
+def _estimate(capture, settings: Settings):
     from station.estimate import lsq, zhang2010
 
-    return lsq.estimate(capture) if method == "lsq" else zhang2010.estimate(capture)
+    if settings.method == "lsq":
+        return lsq.estimate(capture, _effects(settings))
+    return zhang2010.estimate(capture)
+
+
+def effect_parameters(cal) -> list:
+    """(name, value, unit) of the effects' parameters of a calibration, in their reported units."""
+    units_ = {}
+    for e in cal.effect_compensation or []:
+        from station.model import LIBRARY
+
+        cls = LIBRARY.get(e["id"])
+        if cls is not None:
+            units_.update({p.name: p.unit for p in cls().params})
+    return [(name, float(v), units_.get(name, "")) for e in cal.effect_compensation or []
+            for name, v in e["parameters"].items()]
 
 
 def _error_sigmas(cal) -> np.ndarray:
-    """Reported 1σ in the units of parameter_errors (scale factors relative, in ppm)."""
+    """Reported 1σ in the units of parameter_errors (scale factors relative, in ppm), then the
+    effects' parameters' in their units."""
     out = []
     for name, value, _ in cal.parameters()[:BASE_PARAMETERS]:
         sigma = cal.sigma.get(name, np.nan)
         out.append(sigma / value * 1e6 if "_scale_" in name else sigma)
     return np.array(out)
+
+
+def _effect_values(cal, settings: Settings, sigma: bool = False) -> list:
+    """The effects' parameters (or their 1σ) in the order of their full lists, NaN for one the
+    calibration does not carry (fixed by the effect's convention, e.g. the size effect's own-axis
+    positions when the mounting offset is unknown)."""
+    got = {name: (cal.sigma.get(name, np.nan) if sigma else value) for name, value, _ in effect_parameters(cal)}
+    return [got.get(p.name, np.nan) for e in _effects(settings) for p in e.params]
 
 
 def one_run(args) -> tuple[list[float], np.ndarray]:
@@ -58,9 +89,11 @@ def one_run(args) -> tuple[list[float], np.ndarray]:
     from station.model.calibration import parameter_errors
 
     truth = make_truth(settings)
-    cal = _estimate(dryrun.simulate_capture(scheme, truth, seed), settings.method)
+    cal = _estimate(dryrun.simulate_capture(scheme, truth, seed), settings)
     errors = [e[3] for e in parameter_errors(cal, dryrun.truth_calibration(truth))]
-    return errors, _error_sigmas(cal)
+    # an effect's parameters against zero: the simulator's default IMU has none of the effects
+    errors += _effect_values(cal, settings)
+    return errors, np.concatenate([_error_sigmas(cal), _effect_values(cal, settings, sigma=True)])
 
 
 def cramer_rao(scheme: Scheme, settings: Settings, seed: int = 0) -> np.ndarray:
@@ -81,9 +114,9 @@ def cramer_rao(scheme: Scheme, settings: Settings, seed: int = 0) -> np.ndarray:
     accel_sigma = np.hypot(settings.accel_noise_ug * np.sqrt(fs), settings.accel_disturbance_ug)
     s.accel_sigma = np.full(3, accel_sigma * 9.80665e-6)
     s.gyro_sigma = np.full(3, settings.gyro_noise_dph * np.sqrt(fs) / 3600.0)
-    result = lsq.fit(s, [], attitudes="unknown")
+    result = lsq.fit(s, _effects(settings), attitudes="unknown")
     cal = lsq.to_calibration(result, capture.imu.accel_unit, capture.imu.gyro_unit)
-    return _error_sigmas(cal)
+    return np.concatenate([_error_sigmas(cal), _effect_values(cal, settings, sigma=True)])
 
 
 def _one_blas_thread() -> None:
@@ -140,6 +173,7 @@ def study(scheme: Scheme, settings: Settings, runs: int, first_seed: int = 1000,
 
     truth_cal = dryrun.truth_calibration(make_truth(settings))
     names = [(e[0], e[4]) for e in parameter_errors(truth_cal, truth_cal)]
+    names += [(p.name, p.unit) for e in _effects(settings) for p in e.params]
     jobs = [(scheme, settings, first_seed + i) for i in range(runs)]
     workers = max(1, min(workers or usable_cores(), runs + bound))
     rows: list = [None] * runs

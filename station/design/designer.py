@@ -1,0 +1,304 @@
+"""A whole design: candidates on the table, their information, the search, the scheme file, the
+compiled time checked against the budget, each parameter's 1σ predicted by the estimator's own
+fit of the designed scheme, and the same for every built-in table scheme stretched or shrunk to
+the same compiled time."""
+from __future__ import annotations
+
+import copy
+import math
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import yaml
+
+from station.bench.compile import compile_scheme
+from station.core.errors import UserError
+from station.design import candidates as cand_mod
+from station.design.information import Noise, information, model_of, quiet_truth
+from station.design.search import MIN_STATICS, Scorer, exchange, parse_criterion
+from station.io.scheme import Scheme, StaticSpec, load_scheme
+
+BUILTIN_TABLE_SCHEMES = ("optimal9", "chatfield18", "traditional24", "sizeeffect")
+BUDGET_ROUNDS = 6          # search again with the budget less the compiled excess, at most this often
+
+
+@dataclass
+class Prediction:
+    """Each reported parameter's 1σ for a scheme, by the estimator's fit of its noiseless capture."""
+    scheme: str
+    duration_s: float              # compiled time on the table
+    names: list
+    units: list
+    sigma: np.ndarray
+    revealed: np.ndarray           # bool: determined by the fit (not aliased, effects below typical)
+    note: str = ""
+    covariance: np.ndarray | None = None     # reported units
+
+
+@dataclass
+class Design:
+    scheme: Scheme
+    text: str                      # the scheme file
+    criterion: str
+    value: float
+    duration_s: float              # compiled
+    budget_s: float
+    prediction: Prediction
+    builtins: list                 # Prediction per built-in scheme at the same duration
+    search_sigma: np.ndarray       # the search's own 1σ (the candidates' information summed)
+    candidates: int
+    evaluations: int
+    passes: int
+    seconds: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)
+
+
+def reported_names(effects) -> list:
+    """The reported parameters' names (lsq._reported_index's order) of the base model and effects."""
+    names = []
+    for block, suffixes in (("accel_scale", "xyz"), ("accel_misalignment", ("yz", "zy", "zx")),
+                            ("gyro_scale", "xyz"), ("gyro_misalignment", ("yz", "zy", "zx")),
+                            ("accel_bias", "xyz"), ("gyro_bias", "xyz"), ("inter_triad", "xyz")):
+        names += [f"{block}_{s}" for s in suffixes]
+    return names + [p.name for e in effects for p in e.params]
+
+
+def geometry_of(config) -> dict | None:
+    t = config.table
+    g = {"axes_intersect": bool(t.axes_intersect)}
+    if t.level_arcsec is not None:
+        g["level_arcsec"] = float(t.level_arcsec)
+    return g
+
+
+def predict(scheme: Scheme, effects: list, noise: Noise, config=None, duration_s: float = math.nan,
+            plan=None) -> Prediction:
+    """The estimator's 1σ of every reported parameter (scale factors in ppm) for ``scheme``: its
+    capture simulated without noise, summarised with the noise stated, fitted as ``station
+    estimate`` fits (attitudes as the estimator chooses them, blind effect parameters held by
+    their priors and said to be not revealed).  Its covariance is the Cramér-Rao bound that
+    station/simulate/montecarlo.py computes, for any model."""
+    from station.estimate import lsq
+
+    truth = quiet_truth(noise, config)
+    if plan is not None and not plan.manual:
+        elevation = {s.spec.name: float(s.elevation_deg) for s in plan.steps
+                     if type(s).__name__ == "Rotate" and getattr(s, "spec", None) is not None}
+        scheme = replace(scheme, segments=tuple(replace(sp, axis_elevation_deg=elevation[sp.name])
+                                                if sp.name in elevation else sp for sp in scheme.segments))
+    model, _ = model_of(scheme, effects, noise, truth, None)
+    result = lsq.fit(model.s, [copy.deepcopy(e) for e in effects])
+    names, index, factors, units_ = lsq._reported_index(result, "m/s^2", "deg/s")
+    factors, units_ = np.array(factors, float), list(units_)
+    for k, n in enumerate(names):
+        if "_scale_" in n and units_[k] == "1":
+            factors[k], units_[k] = 1e6, "ppm"
+    cov = result.covariance_of(index) * np.outer(factors, factors)
+    sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    blind = set(result.model.unobservable) | {n for n, c in zip(names, index) if int(c) in set(result.rank_deficient)}
+    revealed = np.array([n not in blind for n in names])
+    return Prediction(scheme.name, duration_s, names, units_, sigma, revealed, covariance=cov)
+
+
+def _segments_of(chosen, cands, masks=None) -> list:
+    """The scheme's segment entries (YAML) and specs, mounting by mounting as the time model
+    covers them (search.cover: the compiler then remounts as often as the model counts), within
+    a mounting the statics first, then the rotations."""
+    from station.design.search import cover
+
+    chosen = list(chosen)
+    group = cover([masks[i] for i in chosen]) if masks is not None else [0] * len(chosen)
+    order = {}
+    for g in group:
+        order.setdefault(g, len(order))
+    of = dict(zip(chosen, group))
+    statics = [cands[i] for i in chosen if cands[i].kind == "static"]
+    rotations = [cands[i] for i in chosen if cands[i].kind == "rotation"]
+    index = {id(cands[i]): i for i in chosen}
+    statics.sort(key=lambda c: (order[of[index[id(c)]]], tuple(-x for x in c.key[1])))
+    rotations.sort(key=lambda c: (order[of[index[id(c)]]], -c.key[1], tuple(-x for x in c.key[0]), -c.key[2], -c.key[3]))
+    sequence = sorted(statics + rotations, key=lambda c: order[of[index[id(c)]]])     # (a stable sort)
+    entries, specs = [], []
+    for c in sequence:
+        if c.kind == "static":
+            up = c.key[1]
+            name = f"up_{cand_mod.name_of(up)}"
+            entries.append({"static": name, "up_body": [_num(x) for x in _integer_vector(up)], "dwell_s": c.dwell_s})
+            specs.append(cand_mod.static_spec(up, c.dwell_s, name))
+            continue
+        axis, e, rate, rev = c.key
+        name = f"rot_{cand_mod.name_of(axis)}_e{e:g}_{rate:g}dps_{rev}rev"
+        entry = {"rotation": name, "axis_body": [_num(x) for x in _integer_vector(axis)], "rate_dps": rate,
+                 "rotation_s": rev * 360.0 / rate}
+        if e:
+            entry["axis_elevation_deg"] = e
+        entries.append(entry)
+        specs.extend(cand_mod.rotation_pair(axis, e, rate, rev, name))
+    return entries, specs
+
+
+def _integer_vector(v) -> tuple:
+    """A cube direction as small integers ((1, 1, 0) for (0.707, 0.707, 0)): the scheme reader
+    normalises it."""
+    v = np.asarray(v, float)
+    m = np.min(np.abs(v[np.abs(v) > 1e-9]))
+    return tuple(np.round(v / m).astype(int).tolist())
+
+
+def _num(x):
+    return int(x) if float(x).is_integer() else float(x)
+
+
+def scheme_text(name: str, entries: list, header: list, centred: bool = False) -> str:
+    doc = {"name": name, "title": "designed by station design", "reference": "docs/design.md"}
+    if centred:
+        doc["centred"] = True
+    doc["segments"] = entries
+    body = yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120)
+    return "".join(f"# {line}\n" if line else "#\n" for line in header) + body
+
+
+def scaled(scheme: Scheme, config, target_s: float) -> tuple[Scheme, float, object]:
+    """``scheme`` with its dwells and rotation lengths (whole revolutions, at least one) scaled so
+    that its compiled time on the table is as near ``target_s`` as it can be: (scheme, compiled
+    time, plan)."""
+    plan = compile_scheme(scheme, config)
+    overhead = plan.duration_s - sum(s.duration_s for s in scheme.segments)
+
+    def stretched(f):
+        segs = []
+        for s in scheme.segments:
+            if isinstance(s, StaticSpec):
+                segs.append(replace(s, dwell_s=max(1.0, s.dwell_s * f)))
+            else:
+                rev = max(1, round(abs(s.rate_dps) * s.duration_s * f / 360.0))
+                segs.append(replace(s, duration_s=rev * 360.0 / abs(s.rate_dps)))
+        return replace(scheme, segments=tuple(segs))
+
+    def total(f):
+        return overhead + stretched(f).duration_s
+
+    lo, hi = 1e-3, 1e3
+    for _ in range(60):
+        mid = math.sqrt(lo * hi)
+        lo, hi = (mid, hi) if total(mid) < target_s else (lo, mid)
+    out = stretched(lo)
+    # the rotations are whole revolutions (a step in the time): the statics take the rest
+    statics = sum(sp.duration_s for sp in out.segments if isinstance(sp, StaticSpec))
+    rest = target_s - overhead - (out.duration_s - statics)
+    if statics > 0 and rest > 0:
+        g = rest / statics
+        out = replace(out, segments=tuple(replace(sp, dwell_s=max(1.0, sp.dwell_s * g))
+                                          if isinstance(sp, StaticSpec) else sp for sp in out.segments))
+    plan = compile_scheme(out, config)
+    return out, plan.duration_s, plan
+
+
+def design(config, effects: list, noise: Noise, budget_s: float, criterion: str = "D", *,
+           rates_dps=cand_mod.DEFAULT_RATES_DPS, revolutions=cand_mod.DEFAULT_REVOLUTIONS,
+           dwells_s=cand_mod.DEFAULT_DWELLS_S, max_passes: int = 20, name: str = "designed",
+           compare=BUILTIN_TABLE_SCHEMES, progress=None, centred: bool = False) -> Design:
+    """The design (module doc).  ``progress(text)``: told what is being done.  ``centred``: the
+    IMU is to be mounted with its reference point on the table's axes (the scheme says
+    ``centred: true``; the mounting offset is then known, as in the sizeeffect scheme)."""
+    say = progress or (lambda text: None)
+    seconds = {}
+    t0 = time.perf_counter()
+    fixed = (config.run.operator_s if config.run.operator else 0.0)
+    w = config.warmup
+    fixed += max(w.duration_s, w.max_s or 0.0) if w.temp_slope_c_per_h is not None else w.duration_s
+    parse_criterion(criterion, reported_names(effects))          # bad input before the work
+    table = cand_mod.Table(config)
+    least = fixed + MIN_STATICS * table.static_s(min(dwells_s))
+    if least > budget_s:
+        raise UserError(f"a budget of {budget_s:.0f} s holds fewer than {MIN_STATICS} static attitudes on this "
+                        f"table (the least: {least:.0f} s with the shortest dwell, {min(dwells_s):g} s)")
+    say("candidates on the table (gimbal kinematics)")
+    cands, chunks, notes, masks = cand_mod.candidate_set(table, rates_dps, revolutions, dwells_s)
+    if sum(1 for c in cands if c.kind == "static" and c.dwell_s == min(dwells_s)) < MIN_STATICS:
+        raise UserError(f"the table reaches fewer than {MIN_STATICS} static attitudes "
+                        f"({'with' if config.run.operator else 'without'} an operator): no design with "
+                        "every attitude unknown (run.operator: true lets the IMU be remounted)")
+    if not any(c.kind == "rotation" for c in cands):
+        raise UserError("the table can turn about none of the candidate axes (a continuous axis is needed)")
+    seconds["candidates"] = time.perf_counter() - t0
+    t1 = time.perf_counter()
+    say(f"the information of {len(cands)} candidates (one simulated capture of them, the estimator's Jacobian)")
+    info = information(chunks, effects, noise, config, geometry_of(config), centred)
+    seconds["information"] = time.perf_counter() - t1
+    crit, which = parse_criterion(criterion, info.parameters.names)
+    scorer = Scorer(info, cands, crit, which)
+    t2 = time.perf_counter()
+    budget = budget_s
+    result, start, plan, scheme, text = None, None, None, None, ""
+    evaluations = passes = 0
+    for _ in range(BUDGET_ROUNDS):
+        say(f"exchange search within {budget:.0f} s")
+        result = exchange(scorer, budget, fixed, max_passes, masks=masks,
+                          remount_s=config.run.operator_s if config.run.operator else 0.0, start=start)
+        evaluations += result.evaluations
+        passes += result.passes
+        entries, specs = _segments_of(result.chosen, cands, masks)
+        scheme = Scheme(name, "designed by station design", "docs/design.md", {}, tuple(specs), centred=centred)
+        plan = compile_scheme(scheme, config)
+        if plan.duration_s <= budget_s * 1.0005:
+            break
+        budget -= max(2.0 * (plan.duration_s - budget_s), 10.0)
+        start = result.chosen
+    else:
+        raise UserError(f"no design within {budget_s:.0f} s found whose compiled time fits: the last one "
+                        f"compiles to {plan.duration_s:.0f} s")
+    seconds["search"] = time.perf_counter() - t2
+    search_sigma = scorer.sigma(result.chosen)
+    t3 = time.perf_counter()
+    say(f"the 1σ of the designed scheme and of {', '.join(compare) or 'no built-in scheme'} at the same duration "
+        "(the estimator's fit, one forked process per scheme)")
+    from station.core.forked import map_in_children
+
+    def job(other):
+        if other is None:
+            return predict(scheme, effects, noise, config, plan.duration_s, plan)
+        try:
+            base = load_scheme(other)
+            stretched, total, p = scaled(base, config, plan.duration_s)
+            pr = predict(stretched, effects, noise, config, total, p)
+            pr.note = f"x{stretched.duration_s / base.duration_s:.3g} of its recording time"
+        except UserError as e:
+            pr = Prediction(other, math.nan, [], [], np.zeros(0), np.zeros(0, bool), note=str(e))
+        return pr
+
+    prediction, *builtins = map_in_children(job, [None, *compare])
+    seconds["predictions"] = time.perf_counter() - t3
+    header = [f"{name}: designed by `station design` for the {config.table.axes}-axis table of {config.source}",
+              f"criterion {crit.text}: {result.value:.6g}; compiled time {plan.duration_s:.0f} s "
+              f"(budget {budget_s:.0f} s); effects: {', '.join(e.id for e in effects) or 'none'}",
+              f"noise: accel {noise.accel_noise_ug:g} ug/rtHz, gyro {noise.gyro_noise_dph:g} deg/h/rtHz, table "
+              f"angle {noise.table_angle_arcsec:g} arcsec, disturbance {noise.accel_disturbance_ug:g} ug "
+              f"({noise.source})",
+              "predicted 1-sigma (the estimator's fit of this scheme's noiseless capture):"]
+    for n, u, s, r in zip(prediction.names, prediction.units, prediction.sigma, prediction.revealed):
+        header.append(f"  {n}: {s:.4g} {u}" + ("" if r else " (not revealed)"))
+    text = scheme_text(name, entries, header, centred)
+    return Design(scheme, text, crit.text, result.value, plan.duration_s, budget_s, prediction, builtins,
+                  search_sigma, len(cands), evaluations, passes, seconds, notes + list(plan.notes))
+
+
+def criterion_of(prediction: Prediction, criterion: str) -> float:
+    """The criterion (search.Scorer.value_of's definition) of a prediction's covariance."""
+    crit, which = parse_criterion(criterion, prediction.names)
+    sub = prediction.covariance[np.ix_(which, which)]
+    if crit.kind == "A":
+        return float(np.trace(sub))
+    if crit.kind == "worst":
+        return float(np.sqrt(np.max(np.diag(sub))))
+    sign, logdet = np.linalg.slogdet(sub)
+    return float(logdet) if sign > 0 else math.inf
+
+
+def efficiency(design_value: float, other_value: float, criterion: str, parameters: int) -> float:
+    """How much better the design is than another scheme by the criterion, as a ratio > 1 when
+    better: D: (det C_other / det C_design)^(1/p) (D-efficiency); A: trace ratio; worst: 1σ ratio."""
+    if criterion == "D":
+        return float(np.exp((other_value - design_value) / parameters))
+    return float(other_value / design_value)

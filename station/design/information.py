@@ -1,0 +1,203 @@
+"""The Fisher information each candidate segment brings, from the estimator's own model.
+
+All candidates are recorded once on the simulated bench without noise (the truth of the
+Monte Carlo, station/simulate/montecarlo.py), summarised, and the least-squares model
+(station/estimate/lsq.py) is built on them with the noise stated (the white noise densities
+and the table's angle error): its whitened Jacobian J at the start point is the square root of
+the information.  The rows of one candidate (a static, or a +/- rotation pair) touch the base
+and effect parameters and the bench's mounting offset (the shared columns G), the candidate's
+own nuisances (a static's attitude, a rotation's phases: eliminated here, per candidate) and
+its rotation axis' nuisances (tangent, gravity along it, Earth rate: columns A of its axis
+group, shared by every rotation about that axis, eliminated when a design is scored).  So the
+information of a design is a sum over its candidates, each a small matrix:
+    static s with dwell T:      T * m_s              (G x G; information per second)
+    rotation pair c, group k:   M_c                  ((G+A_k) x (G+A_k))
+and the information of G is  sum_s T_s m_s + sum_k Schur_A(sum_{c in k} M_c + W_k), W_k the
+axis' own prior rows.  A static's information is linear in its dwell: white noise, its mean's
+variance sigma^2 / n (the noise model's pose terms are zero for white noise); a rotation's is
+not (its gyro integral carries the encoder's angle error, whatever its length), so each
+rotation length is a candidate of its own.
+"""
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from station.io.scheme import Scheme
+
+UNIT_DWELL_S = 10.0          # the dwell the statics are simulated with (information per second x this)
+
+
+@dataclass
+class Noise:
+    """The noise the design is for (white densities and the table's angle error)."""
+    accel_noise_ug: float = 100.0        # µg/√Hz
+    gyro_noise_dph: float = 0.03         # °/h/√Hz
+    table_angle_arcsec: float = 2.0      # 1σ, every encoder angle
+    accel_disturbance_ug: float = 50.0   # 1σ white acceleration disturbance per sample
+    source: str = "defaults (the Monte Carlo's)"
+
+    def settings(self):
+        from station.simulate.montecarlo import Settings
+
+        return Settings(accel_noise_ug=self.accel_noise_ug, gyro_noise_dph=self.gyro_noise_dph,
+                        table_angle_arcsec=self.table_angle_arcsec,
+                        accel_disturbance_ug=self.accel_disturbance_ug)
+
+
+@dataclass
+class Parameters:
+    """The reported parameters: names, units, their columns in the shared block G, the factor
+    from the model's internal unit to the reported one (scale factors: ppm)."""
+    names: list
+    units: list
+    columns: np.ndarray            # indices into G
+    factors: np.ndarray
+    typical: np.ndarray            # an effect parameter's typical size (reported unit), inf for base
+
+
+@dataclass
+class Information:
+    """Per candidate key its information block (module doc)."""
+    shared: int                                    # |G|
+    parameters: Parameters
+    static: dict = field(default_factory=dict)     # key -> (G x G) per second
+    rotation: dict = field(default_factory=dict)   # key -> (group key, ((G+4) x (G+4)))
+    group_prior: dict = field(default_factory=dict)  # group key -> ((G+4) x (G+4))
+
+
+def quiet_truth(noise: Noise, config=None):
+    """The simulated IMU of the Monte Carlo without noise, placed as the configured table
+    places it (table.imu_offset_m), for the Jacobian."""
+    from station.simulate.montecarlo import make_truth
+
+    truth = copy.deepcopy(make_truth(noise.settings()))
+    truth.accel.noise_density = truth.gyro.noise_density = 0.0
+    truth.bench.accel_disturbance_ug = truth.bench.table_angle_error_arcsec = 0.0
+    if config is not None and config.table.imu_offset_m is not None:
+        truth.bench.lever_arm_m = np.asarray(config.table.imu_offset_m, float)
+    return truth
+
+
+def model_of(scheme: Scheme, effects: list, noise: Noise, truth, geometry: dict | None = None):
+    """The least-squares model of the noiseless capture of ``scheme`` with the noise stated, as
+    station.simulate.montecarlo.cramer_rao weights it: (model, capture)."""
+    from station.estimate import lsq
+    from station.estimate.summaries import summarise
+    from station.simulate import dryrun
+
+    capture = dryrun.simulate_capture(scheme, truth, 0, geometry)
+    s = summarise(capture, table_angle_arcsec=noise.table_angle_arcsec)
+    fs = s.sample_rate_hz
+    accel_sigma = np.hypot(noise.accel_noise_ug * np.sqrt(fs), noise.accel_disturbance_ug)
+    s.accel_sigma = np.full(3, accel_sigma * 9.80665e-6)
+    s.gyro_sigma = np.full(3, noise.gyro_noise_dph * np.sqrt(fs) / 3600.0)
+    return lsq.Model(s, [copy.deepcopy(e) for e in effects], attitudes="unknown"), capture
+
+
+def _shared_columns(model) -> np.ndarray:
+    local = set(model.local_columns().tolist())
+    return np.array([c for c in range(model.layout.size) if c not in local], dtype=int)
+
+
+def parameters_of(model, shared: np.ndarray) -> Parameters:
+    """The reported parameters (lsq._reported_index's order and units; scale factors in ppm)."""
+    from station.estimate import lsq
+
+    class _R:               # _reported_index reads only .model
+        pass
+
+    r = _R()
+    r.model = model
+    names, index, factors, units_ = lsq._reported_index(r, "m/s^2", "deg/s")
+    where = {int(c): k for k, c in enumerate(shared)}
+    factors = np.array(factors, float)
+    units_ = list(units_)
+    typical = np.full(len(names), np.inf)
+    for k, n in enumerate(names):
+        if "_scale_" in n and units_[k] == "1":
+            factors[k], units_[k] = 1e6, "ppm"          # relative (the scale is ~1)
+    at = 21
+    for e in model.effects:
+        for p in e.params:
+            typical[at] = p.typical
+            at += 1
+    return Parameters(names, units_, np.array([where[int(c)] for c in index]), factors, typical)
+
+
+def _reduce(J_rows, keep_cols, drop_cols) -> np.ndarray:
+    """The rows' information about keep_cols with drop_cols eliminated (Schur complement)."""
+    A = J_rows[:, keep_cols]
+    if len(drop_cols):
+        B = J_rows[:, drop_cols]
+        q, rr = np.linalg.qr(B)
+        keep = np.abs(np.diag(rr)) > 1e-12 * max(1e-300, np.max(np.abs(np.diag(rr)), initial=0.0))
+        q = q[:, keep]
+        A = A - q @ (q.T @ A)
+    return A.T @ A
+
+
+def information(chunks: list, effects: list, noise: Noise, config=None,
+                geometry: dict | None = None, centred: bool = False) -> Information:
+    """The information of every candidate.  ``chunks``: lists of (key, spec) where spec is a
+    StaticSpec (dwell UNIT_DWELL_S) or a RotationSpec pair (``pair`` of two specs), each chunk
+    a capture of its own (rotations about one body axis at two elevations go in different
+    chunks: the estimator gives one axis group one gravity angle)."""
+    truth = quiet_truth(noise, config)
+    info = None
+    for chunk in chunks:
+        segments, owner = [], {}
+        for key, spec in chunk:
+            parts = spec if isinstance(spec, tuple) else (spec,)
+            for p in parts:
+                segments.append(p)
+                owner[p.name] = key
+        scheme = Scheme("candidates", "", "", {}, tuple(segments), centred=centred, table=True)
+        model, _ = model_of(scheme, effects, noise, truth, geometry)
+        x = model.x0
+        J = model.sparse_jacobian(x).tocsr()
+        labels = model.row_labels(x)
+        shared = _shared_columns(model)
+        G = len(shared)
+        if info is None:
+            info = Information(G, parameters_of(model, shared))
+        elif G != info.shared:
+            raise RuntimeError("candidate chunks with different shared columns")
+        L = model.layout
+        rows_of: dict = {}
+        for r, lab in enumerate(labels):
+            rows_of.setdefault(lab[0], []).append(r)
+        s = model.s
+        static_index = {st.name: j for j, st in enumerate(s.statics)}
+        rot_index = {r.name: i for i, r in enumerate(s.rotations)}
+        by_key: dict = {}
+        for name, key in owner.items():
+            by_key.setdefault(key, []).append(name)
+        groups_used = {}
+        for key, names in by_key.items():
+            rows = sorted(r for n in names for r in rows_of.get(n, []))
+            if not rows:
+                continue
+            Jr = J[rows].toarray()
+            if names[0] in static_index:
+                sl = L[f"static{static_index[names[0]]}"]
+                M = _reduce(Jr, shared, np.arange(sl.start, sl.stop))
+                info.static[key] = M / UNIT_DWELL_S
+            else:
+                group = s.rotations[rot_index[names[0]]].group
+                axis = L[f"axis{group}"]
+                drop = [c for n in names for c in range(L[f"phase{rot_index[n]}"].start,
+                                                         L[f"phase{rot_index[n]}"].stop)]
+                keep = np.concatenate([shared, np.arange(axis.start, axis.stop)])
+                gkey = (key[0], key[1])           # (axis, elevation)
+                info.rotation[key] = (gkey, _reduce(Jr, keep, np.array(drop, int)))
+                groups_used[group] = gkey
+        for group, gkey in groups_used.items():
+            rows = rows_of.get(f"axis{group}", [])
+            axis = L[f"axis{group}"]
+            keep = np.concatenate([shared, np.arange(axis.start, axis.stop)])
+            info.group_prior[gkey] = (_reduce(J[rows].toarray(), keep, np.zeros(0, int)) if rows
+                                      else np.zeros((len(keep), len(keep))))
+    return info

@@ -1,0 +1,398 @@
+"""The criterion of a design and the exchange algorithm that minimises it within a time budget.
+
+A design is a set of candidates: statics (one attitude each, with a dwell from a grid) and
+rotation pairs (an axis, its elevation, a rate, whole revolutions).  Its information about the
+shared columns G (station/design/information.py) is
+
+    F = sum_statics T_s m_s + sum_axis_groups Schur_A(sum_{pairs in group} M_c + W_group) + eps
+
+(eps: a ridge of 1e-10 on F scaled to a unit diagonal, which only matters for a column no
+candidate sees, e.g. the mounting offset with no rotation), and the covariance of the reported parameters is
+the block of F^-1 in their columns, scaled to their reported units (scale factors in ppm).
+
+Criteria (lower is better):
+    D        -log det of the reported parameters' information (their covariance's log det)
+    A        the sum of their variances in reported units (ppm, arc-seconds, µg, °/h, mm, ...)
+    worst:P  the largest 1σ of the parameters named by the patterns P (fnmatch), each in its
+             reported unit (so name parameters of one kind: worst:accel_position_*)
+
+The search (Fedorov's exchange, with a budget): nine statics first (the estimator takes every
+static's attitude as unknown from nine on, as the information here does), chosen greedily; then
+greedily the candidate that lowers the criterion most per second of table time until the budget
+is spent; then exchanges: each chosen candidate in turn against every one not chosen (a static's dwell
+against another dwell of it is such an exchange), its best exchange that improves the criterion
+and keeps the time within the budget applied at once, then additions the freed time allows;
+passes until one changes nothing, or ``max_passes``.  Only the axis groups a step touches are
+recomputed (State).
+"""
+from __future__ import annotations
+
+import fnmatch
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from station.core.errors import UserError
+
+RIDGE = 1e-10            # on the unit-diagonal information: a column nothing sees gets 1σ 1e5 of its size
+CRITERIA = ("D", "A", "worst")    # (station/cli/choices.py copies it)
+MIN_STATICS = 9           # lsq's attitudes="auto": every static's attitude unknown from nine on
+
+
+@dataclass
+class Criterion:
+    kind: str                     # "D" | "A" | "worst"
+    patterns: tuple = ()
+
+    @property
+    def text(self) -> str:
+        return self.kind if self.kind != "worst" else "worst:" + ",".join(self.patterns)
+
+
+def parse_criterion(text: str, names: list) -> tuple[Criterion, np.ndarray]:
+    """The criterion and the indices of the parameters it is over (UserError naming what is wrong)."""
+    text = text.strip()
+    if text in ("D", "A"):
+        return Criterion(text), np.arange(len(names))
+    if text.startswith("worst:"):
+        patterns = tuple(p.strip() for p in text[6:].split(",") if p.strip())
+        if not patterns:
+            raise UserError("--criterion worst: name the parameters, e.g. worst:accel_position_*")
+        chosen = sorted({i for p in patterns for i, n in enumerate(names) if fnmatch.fnmatchcase(n, p)})
+        missing = [p for p in patterns if not any(fnmatch.fnmatchcase(n, p) for n in names)]
+        if missing:
+            raise UserError(f"--criterion: no parameter of this model matches {', '.join(missing)} "
+                            f"(the model's parameters: {', '.join(names)})")
+        return Criterion("worst", patterns), np.array(chosen, int)
+    raise UserError(f"--criterion must be D, A or worst:PARAM[,PARAM...], got {text!r}")
+
+
+@dataclass
+class Candidate:
+    key: tuple
+    kind: str                     # "static" | "rotation"
+    seconds: float                # table time: recording, moves, settling, ramps (candidates.py)
+    dwell_s: float = 0.0          # statics
+    slot: tuple = ()              # at most one candidate per slot: a static's attitude
+    axis: tuple = ()              # rotations: (axis, elevation) group; one elevation per axis
+
+
+class Scorer:
+    """Scores designs (sets of candidate indices) under a criterion."""
+
+    def __init__(self, info, candidates: list, criterion: Criterion, which: np.ndarray):
+        self.info, self.cands, self.criterion = info, candidates, criterion
+        p = info.parameters
+        self.cols = p.columns
+        self.factors = p.factors
+        self.which = which
+        G = info.shared
+        self.G = G
+        self.M = []
+        for c in candidates:
+            if c.kind == "static":
+                self.M.append(info.static[c.key[:-1]] * c.dwell_s)
+            else:
+                self.M.append(info.rotation[c.key][1])
+
+    # ---------------------------------------------------------------- information
+    def information(self, chosen) -> np.ndarray:
+        G = self.G
+        F = np.zeros((G, G))
+        groups: dict = {}
+        for i in chosen:
+            c = self.cands[i]
+            if c.kind == "static":
+                F += self.M[i]
+            else:
+                g = c.axis
+                groups[g] = groups.get(g, self.info.group_prior[g]) + self.M[i]
+        for S in groups.values():
+            F += _schur(S, G)
+        return F
+
+    def covariance(self, chosen) -> np.ndarray:
+        """Covariance of every reported parameter, reported units."""
+        return self.covariance_of(self.information(chosen))
+
+    def covariance_of(self, F) -> np.ndarray:
+        """Covariance of every reported parameter from the information F of G, reported units
+        (F scaled to a unit diagonal first: its columns' information spans twenty decades in the
+        model's internal units)."""
+        d = np.sqrt(np.diag(F))
+        d[d == 0] = 1.0
+        Fs = F / np.outer(d, d) + RIDGE * np.eye(self.G)
+        try:
+            c = np.linalg.cholesky(Fs)
+            inv = np.linalg.inv(c)
+            cov = inv.T @ inv
+        except np.linalg.LinAlgError:
+            cov = np.linalg.pinv(Fs, hermitian=True)
+        cov = (cov / np.outer(d, d))[np.ix_(self.cols, self.cols)]
+        return cov * np.outer(self.factors, self.factors)
+
+    def sigma(self, chosen) -> np.ndarray:
+        return np.sqrt(np.clip(np.diag(self.covariance(chosen)), 0.0, None))
+
+    def value(self, chosen) -> float:
+        return self.value_of(self.information(chosen))
+
+    def value_of(self, F) -> float:
+        cov = self.covariance_of(F)
+        w = self.which
+        sub = cov[np.ix_(w, w)]
+        if self.criterion.kind == "D":
+            sign, logdet = np.linalg.slogdet(sub)
+            return float(logdet) if sign > 0 else math.inf
+        if self.criterion.kind == "A":
+            return float(np.trace(sub))
+        return float(np.sqrt(np.max(np.diag(sub))))
+
+
+class State:
+    """A design's information kept by parts, so that adding or removing a candidate recomputes
+    only its axis group's Schur complement: F = statics + sum of the groups' complements."""
+
+    def __init__(self, scorer: Scorer, chosen=()):
+        self.sc = scorer
+        self.total = np.zeros((scorer.G, scorer.G))      # F: the statics' + every group's complement
+        self.groups: dict = {}          # axis group -> [sum of M + prior, members, its complement]
+        self.chosen: set = set()
+        for i in chosen:
+            self.add(i)
+
+    def _group_after(self, g, remove=(), add=()):
+        sc = self.sc
+        S, members, _ = self.groups.get(g, (sc.info.group_prior[g], 0, None))
+        S = S.copy()
+        for i in remove:
+            S -= sc.M[i]
+        for i in add:
+            S += sc.M[i]
+        members += len(add) - len(remove)
+        return S, members, (_schur(S, sc.G) if members > 0 else np.zeros((sc.G, sc.G)))
+
+    def information(self, remove=(), add=()) -> np.ndarray:
+        """F of the design with ``remove`` taken out and ``add`` put in (not applied)."""
+        sc = self.sc
+        F = self.total.copy()
+        touched: dict = {}
+        for i in remove:
+            if sc.cands[i].kind == "static":
+                F -= sc.M[i]
+            else:
+                touched.setdefault(sc.cands[i].axis, ([], []))[0].append(i)
+        for i in add:
+            if sc.cands[i].kind == "static":
+                F += sc.M[i]
+            else:
+                touched.setdefault(sc.cands[i].axis, ([], []))[1].append(i)
+        for g, (rm, ad) in touched.items():
+            if g in self.groups:
+                F -= self.groups[g][2]
+            F += self._group_after(g, rm, ad)[2]
+        return F
+
+    def value(self, remove=(), add=()) -> float:
+        return self.sc.value_of(self.information(remove, add))
+
+    def add(self, i) -> None:
+        self.total = self.information(add=(i,))
+        c = self.sc.cands[i]
+        if c.kind == "rotation":
+            self.groups[c.axis] = list(self._group_after(c.axis, add=(i,)))
+        self.chosen.add(i)
+
+    def remove(self, i) -> None:
+        self.total = self.information(remove=(i,))
+        c = self.sc.cands[i]
+        if c.kind == "rotation":
+            self.groups[c.axis] = list(self._group_after(c.axis, remove=(i,)))
+            if self.groups[c.axis][1] == 0:
+                del self.groups[c.axis]
+        self.chosen.discard(i)
+
+
+def _schur(S: np.ndarray, G: int) -> np.ndarray:
+    A = S[G:, G:]
+    B = S[:G, G:]
+    d = np.sqrt(np.diag(A))
+    d[d == 0] = 1.0         # (scaled to unit diagonal: a nuisance held only by its prior is kept)
+    Bs = B / d
+    return S[:G, :G] - Bs @ np.linalg.pinv(A / np.outer(d, d), rcond=1e-13, hermitian=True) @ Bs.T
+
+
+@dataclass
+class Result:
+    chosen: list
+    value: float
+    seconds: float
+    passes: int
+    evaluations: int
+    history: list = field(default_factory=list)
+
+
+def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: int = 20,
+             min_statics: int = MIN_STATICS, masks=None, remount_s: float = 0.0, start=None) -> Result:
+    """The design within ``budget_s`` (``fixed_s`` of it spent on steps no candidate pays for:
+    the first mounting, a warm-up) minimising the criterion (module doc).  ``masks``: each
+    candidate's reachable mountings (bits), a mounting beyond the first costing ``remount_s``;
+    ``start``: a design to start the exchanges from (its candidates kept while within budget)."""
+
+    cands = scorer.cands
+    n = len(cands)
+    secs = np.array([c.seconds for c in cands])
+    evaluations = 0
+
+    def allowed(chosen: set, j: int) -> bool:
+        c = cands[j]
+        if j in chosen:
+            return False
+        for i in chosen:
+            o = cands[i]
+            if c.slot and o.slot == c.slot:
+                return False
+            if c.kind == "rotation" and o.kind == "rotation" and o.axis[0] == c.axis[0] and o.axis != c.axis:
+                return False
+        return True
+
+    def time_of(chosen) -> float:
+        t = fixed_s + float(sum(secs[i] for i in chosen))
+        if masks is not None and remount_s:
+            t += remount_s * max(0, mountings_needed([masks[i] for i in chosen]) - 1)
+        return t
+
+    state = State(scorer)
+
+    def score(remove=(), add=()) -> float:
+        nonlocal evaluations
+        evaluations += 1
+        return state.value(remove, add)
+
+    if start is not None:
+        for j in start:
+            if allowed(state.chosen, j) and time_of(state.chosen | {j}) <= budget_s:
+                state.add(j)
+    statics = [j for j in range(n) if cands[j].kind == "static"]
+    shortest = {}
+    for j in statics:
+        s = cands[j].slot
+        if s not in shortest or cands[j].dwell_s < cands[shortest[s]].dwell_s:
+            shortest[s] = j
+    # 1. nine statics, greedily, at their shortest dwell
+    while sum(cands[i].kind == "static" for i in state.chosen) < min_statics:
+        best, best_v = None, math.inf
+        for j in shortest.values():
+            if allowed(state.chosen, j) and time_of(state.chosen | {j}) <= budget_s:
+                v = score(add=(j,))
+                if best is None or v < best_v:
+                    best, best_v = j, v
+        if best is None:
+            least = fixed_s + float(np.sort(secs[list(shortest.values())])[:min_statics].sum())
+            raise UserError(f"a budget of {budget_s:.0f} s holds fewer than {min_statics} static attitudes on "
+                            f"this table (the least: {least:.0f} s)")
+        state.add(best)
+    # 2. greedy: the largest fall of the criterion per second of table time
+    current = score()
+    while True:
+        best, best_gain = None, 0.0
+        for j in range(n):
+            if not allowed(state.chosen, j) or time_of(state.chosen | {j}) > budget_s:
+                continue
+            v = score(add=(j,))
+            if not math.isfinite(current):
+                gain = math.inf if math.isfinite(v) else 0.0
+                if best is None and gain > 0:
+                    best, best_gain = j, gain
+                continue
+            gain = (current - v) / secs[j]
+            if gain > best_gain:
+                best, best_gain = j, gain
+        if best is None:
+            break
+        state.add(best)
+        current = score()
+    # 3. exchanges: for each chosen candidate in turn its best exchange (or, with time left, an
+    # addition), applied at once when it improves; passes until one changes nothing
+    passes = 0
+    history = [current]
+    for passes in range(1, max_passes + 1):
+        changed = False
+        state.total = scorer.information(state.chosen)      # (no rounding carried from pass to pass)
+        for i in sorted(state.chosen):
+            if i not in state.chosen:
+                continue
+            rest = state.chosen - {i}
+            if cands[i].kind == "static" and sum(cands[k].kind == "static" for k in rest) < min_statics:
+                swaps = statics             # (the nine statics stay nine)
+            else:
+                swaps = range(n)
+            t_rest = time_of(rest)
+            best_j, best_v = None, current
+            for j in swaps:
+                if j == i or not allowed(rest, j) or t_rest + secs[j] > budget_s:
+                    continue
+                if time_of(rest | {j}) > budget_s:
+                    continue
+                v = score(remove=(i,), add=(j,))
+                if v < best_v - 1e-9 * max(1.0, abs(best_v)):
+                    best_j, best_v = j, v
+            if best_j is not None:
+                state.remove(i)
+                state.add(best_j)
+                current = best_v
+                history.append(current)
+                changed = True
+        for j in range(n):          # time freed by the exchanges
+            if allowed(state.chosen, j) and time_of(state.chosen | {j}) <= budget_s:
+                v = score(add=(j,))
+                if v < current - 1e-9 * max(1.0, abs(current)):
+                    state.add(j)
+                    current = v
+                    history.append(current)
+                    changed = True
+        if not changed:
+            break
+    chosen = state.chosen
+    return Result(sorted(chosen), current, time_of(chosen), passes, evaluations, history)
+
+
+def mountings_needed(chosen_masks) -> int:
+    """The fewest mountings (greedy set cover) that reach every chosen candidate."""
+    left = list(chosen_masks)
+    if not left:
+        return 0
+    n = 0
+    while left:
+        best, best_count = 0, -1
+        bit = 1
+        while bit <= max(left):
+            if any(m & bit for m in left):
+                count = sum(1 for m in left if m & bit)
+                if count > best_count:
+                    best, best_count = bit, count
+            bit <<= 1
+        left = [m for m in left if not m & best]
+        n += 1
+    return n
+
+
+def cover(chosen_masks) -> list:
+    """For each chosen candidate the mounting (bit) of the greedy cover mountings_needed counts:
+    the scheme is written mounting by mounting, so that the compiler remounts as often as the
+    time model says."""
+    left = dict(enumerate(chosen_masks))
+    out = [0] * len(chosen_masks)
+    while left:
+        best, best_count = 0, -1
+        bit = 1
+        while bit <= max(left.values()):
+            count = sum(1 for m in left.values() if m & bit)
+            if count > best_count:
+                best, best_count = bit, count
+            bit <<= 1
+        for k in [k for k, m in left.items() if m & best]:
+            out[k] = best
+            del left[k]
+    return out
