@@ -39,6 +39,19 @@ def format_values(v: dict) -> str:
     return "; ".join(parts)
 
 
+def imu_lines(v: dict) -> list:
+    """Several IMUs in one run: one line per IMU (its |f|, |w|, temperature and counters, or
+    that it was lost); [] for a one-IMU run."""
+    lines = []
+    for imu in v.get("imus") or []:
+        if imu.get("lost"):
+            lines.append(f"IMU {imu['label']}: LOST ({imu['lost']})")
+        else:
+            values = {k: x for k, x in imu.items() if k not in ("label", "lost")}
+            lines.append(f"IMU {imu['label']}: {format_values(values) or 'no data yet'}")
+    return lines
+
+
 class PlainDisplay:
     """Lines for logs: no cursor movement, no colour."""
 
@@ -73,9 +86,13 @@ class PlainDisplay:
         while self._marks and done_s >= self._marks[0] * total_s:
             self._marks.pop(0)
         run = min(1.0, (self.done_before + done_s) / self.total_s) if self.total_s else 1.0
+        shown = ({k: x for k, x in self.values.items() if k in ("positions_deg", "rates_dps")}
+                 if self.values.get("imus") else self.values)
         self.console.print(f"      {done_s:.0f}/{total_s:.0f} s (run {run:.0%}, "
-                           f"{time.monotonic() - self._t0:.0f} s wall); {format_values(self.values)}",
+                           f"{time.monotonic() - self._t0:.0f} s wall); {format_values(shown)}",
                            markup=False, highlight=False)
+        for line in imu_lines(self.values):
+            self.console.print(f"        {line}", markup=False, highlight=False)
 
     def values_update(self, values: dict) -> None:
         self.values.update(values)
@@ -106,7 +123,14 @@ class RichDisplay(PlainDisplay):
         step = self._step
         table.add_row("step", "" if step is None else step.describe())
         table.add_row("purpose", "" if step is None else step.purpose)
-        table.add_row("live", format_values(self.values))
+        lines = imu_lines(self.values)
+        if lines:
+            shown = {k: x for k, x in self.values.items() if k in ("positions_deg", "rates_dps")}
+            table.add_row("table", format_values(shown))
+            for i, line in enumerate(lines):
+                table.add_row("IMUs" if i == 0 else "", line)
+        else:
+            table.add_row("live", format_values(self.values))
         return Group(self.progress, table)
 
     def __enter__(self):

@@ -224,9 +224,14 @@ def cmd_run(args) -> int:
     from station.io.calfile import write_calfile
     from station.estimate import estimate_capture
 
+    config = _config(args)
+    if config.imus:                    # several IMUs: each its own simulated sensor
+        from station.cli.run_multi import run_multi_sim
+
+        return run_multi_sim(args, config, scheme)
     truth = dryrun.load_truth(args.sim_truth, args.seed)
     # the table's geometry as station.yaml states it, recorded as station run records it
-    geometry = table_geometry(_config(args).table) if scheme.table else None
+    geometry = table_geometry(config.table) if scheme.table else None
     stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
     out_dir = Path(args.out) if args.out else Path("captures") / f"{scheme.name}-sim-{stamp}"
     out.print(f"dry run: scheme [bold]{scheme.name}[/] ({len(scheme.segments)} segments, "
@@ -254,6 +259,10 @@ def _run_on_bench(args) -> int:
     from station.io.scheme import load_scheme, scheme_text
 
     config = _config(args)
+    from station.cli.run_multi import is_multi_run, run_multi
+
+    if (args.resume and is_multi_run(Path(args.resume))) or (not args.resume and config.imus):
+        return run_multi(args, config)
     done: set = set()
     if args.resume:
         directory = Path(args.resume)
@@ -378,6 +387,10 @@ def _config(args):
     from station.bench.config import load_config
 
     config = load_config(getattr(args, "config", None))
+    if config.imus and (getattr(args, "port", None) or getattr(args, "imu_protocol", None)):
+        raise UserError(f"{config.source}: field 'imus': the configuration lists {len(config.imus)} IMU(s), "
+                        "each with its port and protocol: leave out --port and --imu-protocol (or use imu: "
+                        "for one IMU)")
     config = config.with_overrides("imu", port=getattr(args, "port", None),
                                    protocol=getattr(args, "imu_protocol", None))
     config = config.with_overrides("table", port=getattr(args, "table_port", None),
@@ -388,36 +401,46 @@ def _config(args):
 
 
 def _open_devices(config, scheme):
-    from drivers.base import AxisLimits, ImuSettings, TableSettings
-    from drivers.protocols.csvlines import CsvFormat
-    from drivers.registry import imu_driver, open_imu, open_table, table_driver
-
-    imu_driver(config.imu.protocol)
+    table = _open_table(config) if scheme.table else None
     try:
-        csv_format = CsvFormat.parse(config.imu.csv_units)
-    except ValueError as e:
-        raise UserError(f"{config.source}: field 'imu.csv_units': {e}") from None
-    table = None
-    if scheme.table:
-        table_driver(config.table.protocol)
-        t = config.table
-        limits = tuple(AxisLimits(max_rate_dps=lim.max_rate_dps, max_accel_dps2=lim.max_accel_dps2,
-                                  move_rate_dps=lim.move_rate_dps, move_accel_dps2=lim.move_accel_dps2)
-                       for lim in t.axis_limits())
-        # the driver's waits assume ramps at max_accel_dps2; ours are at rate_accel_dps2: allow for them
-        ramp_s = max(lim.max_rate_dps / lim.rate_accel_dps2 for lim in t.axis_limits())
-        table = open_table(t.port, t.protocol, TableSettings(
-            serial=t.serial, axes=t.axes, limits=limits, wait_margin_s=10.0 + ramp_s,
-            position_tolerance_deg=t.position_tolerance_deg, rate_tolerance_dps=t.rate_tolerance_dps))
-    try:
-        imu = open_imu(config.imu.port, config.imu.protocol, ImuSettings(
-            serial=config.imu.serial, rate_hz=config.imu.rate_hz,
-            frame_timeout_s=config.imu.frame_timeout_s, csv_format=csv_format))
+        imu = _open_imu(config)
     except BaseException:
         if table is not None:
             table.close()
         raise
     return imu, table
+
+
+def _open_table(config):
+    from drivers.base import AxisLimits, TableSettings
+    from drivers.registry import open_table, table_driver
+
+    table_driver(config.table.protocol)
+    t = config.table
+    limits = tuple(AxisLimits(max_rate_dps=lim.max_rate_dps, max_accel_dps2=lim.max_accel_dps2,
+                              move_rate_dps=lim.move_rate_dps, move_accel_dps2=lim.move_accel_dps2)
+                   for lim in t.axis_limits())
+    # the driver's waits assume ramps at max_accel_dps2; ours are at rate_accel_dps2: allow for them
+    ramp_s = max(lim.max_rate_dps / lim.rate_accel_dps2 for lim in t.axis_limits())
+    return open_table(t.port, t.protocol, TableSettings(
+        serial=t.serial, axes=t.axes, limits=limits, wait_margin_s=10.0 + ramp_s,
+        position_tolerance_deg=t.position_tolerance_deg, rate_tolerance_dps=t.rate_tolerance_dps))
+
+
+def _open_imu(config, field: str = "imu"):
+    """The IMU of ``config.imu`` (``field``: how a bad csv_units is named)."""
+    from drivers.base import ImuSettings
+    from drivers.protocols.csvlines import CsvFormat
+    from drivers.registry import imu_driver, open_imu
+
+    imu_driver(config.imu.protocol)
+    try:
+        csv_format = CsvFormat.parse(config.imu.csv_units)
+    except ValueError as e:
+        raise UserError(f"{config.source}: field '{field}.csv_units': {e}") from None
+    return open_imu(config.imu.port, config.imu.protocol, ImuSettings(
+        serial=config.imu.serial, rate_hz=config.imu.rate_hz,
+        frame_timeout_s=config.imu.frame_timeout_s, csv_format=csv_format))
 
 
 def table_geometry(t) -> dict:
