@@ -126,6 +126,7 @@ class BenchServer:
         self._table_wait_since: float | None = None
         self.table_deferred_steps = 0     # loop steps in which the table's commands waited (lossless)
         self._table_asked = False         # a table command came (or waited) in the last step
+        self._requests: list = []         # (function, done event): run by the loop between steps
 
     # the first IMU (the only one of a one-IMU bench) by its old names
     imu = property(lambda self: self.lines[0].imu, lambda self, v: setattr(self.lines[0], "imu", v))
@@ -165,6 +166,10 @@ class BenchServer:
         is taking the frames).  So a reader that has received the table's answer and then
         reads what is waiting on the IMU line has every frame measured before that answer
         (``station.bench.imu_stream.ImuStream.sync``), at any speed."""
+        while self._requests:
+            fn, done = self._requests.pop(0)
+            fn()
+            done.set()
         wall = time.monotonic()
         for line in self.lines:
             self._judge_reader(wall, line)
@@ -330,6 +335,28 @@ class BenchServer:
         finally:
             self.close_ports()
 
+    # ------------------------------------------------------------------ cables (tests)
+    def _between_steps(self, fn) -> None:
+        """``fn()`` run by the loop between two steps (at once when no loop runs)."""
+        if self._thread is None:
+            fn()
+            return
+        done = threading.Event()
+        self._requests.append((fn, done))
+        if not done.wait(10.0):
+            raise RuntimeError("the twins' loop did not take the request")
+
+    def unplug_imu(self, k: int) -> None:
+        """IMU ``k``'s line hangs up (its pseudo-terminal closed): its reader gets end of file
+        or EIO, as when a USB serial adapter is pulled out.  The twin stays powered."""
+        self._between_steps(lambda: self.lines[k].port.close())
+
+    def replug_imu(self, k: int) -> str:
+        """IMU ``k`` on a fresh pseudo-terminal (the adapter plugged in again; a new device
+        path, returned); the twin kept its state (rate, output settings) meanwhile."""
+        self._between_steps(self.lines[k].replug)
+        return self.lines[k].port.path
+
     # ------------------------------------------------------------------ in a thread (tests)
     def start(self) -> "BenchServer":
         def run():
@@ -391,6 +418,9 @@ class ImuLine:
         else:
             self.frontend = CsvFrontEnd(self.imu, self.faulter, o.csv_format)
             self.serial_number = None          # a csv line says no identity
+        self._open_port()
+
+    def _open_port(self) -> None:
         self.port = PtyEndpoint()
         # a driver at another baud rate than the IMU's reads garbage, as on a serial line
         self.port.emulate_baud(lambda: self.frontend.line_baud)
@@ -399,4 +429,9 @@ class ImuLine:
         self.reader_seen = False          # a reader has taken bytes from the line
         self.bytes_per_frame = 44.0       # of the stream (measured as frames go out)
         self.held_table_since: float | None = None   # the table asked while time was held since
-        self.readers_given_up = 0         # times its reader was judged not reading (READER_STALL_S)
+        self.readers_given_up = getattr(self, "readers_given_up", 0)   # its reader judged not reading (READER_STALL_S)
+
+    def replug(self) -> None:
+        """A fresh pseudo-terminal (the old one closed); the twin keeps its state."""
+        self.port.close()
+        self._open_port()
