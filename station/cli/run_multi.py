@@ -132,11 +132,17 @@ def _record(args, config, reference, scheme, plan, steps, directory, text, folde
 def _estimate_all(directory, folders, config, scheme, args, lost: dict) -> int:
     """Estimate every IMU whose bundle has every segment; say which do not, and why."""
     from station.bench.multi import imu_config
-    from station.cli.run import _estimate
+    from station.cli.calibration import report_calibration
+    from station.cli.history import file_quietly
+    from station.core import forked
     from station.io.capture import read_capture
 
+    from station.cli.noise import characterise_run, is_noise_recording
+
+    noise = is_noise_recording(scheme.segments)        # characterised, not calibrated
+
     names = [seg.name for seg in scheme.segments]
-    statuses, results = [], []
+    statuses, results, ready = [], [], []
     for k, folder in enumerate(folders):
         bundle = directory / folder
         complete = {s.name for s in read_capture(bundle, load_data=False).complete()}
@@ -147,9 +153,22 @@ def _estimate_all(directory, folders, config, scheme, args, lost: dict) -> int:
                       f"{missing[0]}): station run --resume {directory} records them", markup=False, soft_wrap=True)
             results.append((folder, f"{len(names) - len(missing)}/{len(names)} segments ({why})", None))
             statuses.append(EXIT_IMU_LOST)
-            continue
+        else:
+            ready.append((k, folder))
+    # the fits on every core (a forked child each), printed here in the IMUs' order
+    if noise:
+        for k, folder in ready:
+            out.print(f"--- IMU {folder} ---", markup=False)
+            statuses.append(characterise_run(directory / folder))
+            results.append((folder, "noise characterised", statuses[-1]))
+        ready = []
+    fitted = forked.map_in_children(lambda item: _fit(directory / item[1], imu_config(config, item[0])), ready)
+    for (k, folder), (cal, warnings, path, method) in zip(ready, fitted):
         out.print(f"--- IMU {folder} ---", markup=False)
-        code = _estimate(bundle, args.accept_poor_fit, imu_config(config, k), history=args.history)
+        for w in warnings:
+            err.print(f"warning: {w}", markup=False, soft_wrap=True)
+        file_quietly(path, asked=True if args.history is None else args.history)
+        code = report_calibration(cal, f"calibration of {directory / folder} ({method})", path, args.accept_poor_fit)
         statuses.append(code)
         results.append((folder, "estimated", code))
     out.print("IMUs of the run:", markup=False)
@@ -161,6 +180,18 @@ def _estimate_all(directory, folders, config, scheme, args, lost: dict) -> int:
                   f"{EXIT_IMU_LOST}); the others' calibrations are written", markup=False, soft_wrap=True)
         return EXIT_IMU_LOST
     return max(statuses, default=0)
+
+
+def _fit(bundle: Path, config) -> tuple:
+    """(calibration, capture warnings, calibration file, method) of one IMU's bundle, with the
+    data-loss limits of the run (as station run estimates one IMU: station/cli/run.py _estimate)."""
+    from station.estimate import estimate_capture
+    from station.io.calfile import write_calfile
+
+    cal, capture, provenance = estimate_capture(bundle, max_missing_fraction=config.run.max_missing_fraction,
+                                                max_gap_s=config.run.max_gap_s)
+    path = write_calfile(bundle / "calibration.yaml", cal, provenance)
+    return cal, list(capture.warnings), path, provenance["method"]
 
 
 def _write_run(directory: Path, scheme, text, overrides, config, folders) -> None:
