@@ -18,7 +18,7 @@ EXIT_IMU_LOST = 4
 
 def is_multi_run(directory: Path) -> bool:
     """Whether ``directory`` is the folder of a several-IMU run (its run.yaml lists ``imus``)."""
-    from station.cli.run import RUN_FILE
+    from station.cli.run_bench import RUN_FILE
 
     try:
         doc = yaml_text.safe_load((directory / RUN_FILE).read_text())
@@ -30,7 +30,7 @@ def is_multi_run(directory: Path) -> bool:
 def run_multi(args, config) -> int:
     from station.bench.compile import compile_scheme
     from station.bench.multi import done_segments, imu_config
-    from station.cli.run import DEVICE_ERRORS, _out_dir, _overrides, _resume_steps
+    from station.cli.run_bench import DEVICE_ERRORS, _out_dir, _overrides, _resume_steps
     from station.io.scheme import load_scheme, scheme_text
 
     if args.resume:
@@ -73,7 +73,7 @@ def _record(args, config, reference, scheme, plan, steps, directory, text, folde
     from station.bench.live import make_display
     from station.bench.multi import folder_names, imu_config
     from station.bench.sequencer import Interrupts, RunAborted, RunPaused, Sequencer
-    from station.cli.run import (ConsoleOperator, _new_capture, _open_imu, _open_table, _overrides, _reopen,
+    from station.cli.run_bench import (ConsoleOperator, _new_capture, _open_imu, _open_table, _overrides, _reopen,
                                  imu_identity)
 
     table = _open_table(config)
@@ -196,7 +196,7 @@ def _fit(bundle: Path, config) -> tuple:
 
 def _write_run(directory: Path, scheme, text, overrides, config, folders) -> None:
     """The run's own run.yaml and scheme.yaml (the bundles are written by CaptureWriter)."""
-    from station.cli.run import RUN_FILE, RUN_FORMAT, SCHEME_FILE
+    from station.cli.run_bench import RUN_FILE, RUN_FORMAT, SCHEME_FILE
 
     if directory.exists() and any(directory.iterdir()):
         raise UserError(f"{directory}: exists and is not empty: choose another --out")
@@ -221,7 +221,7 @@ def _resumed(directory: Path, current, args):
     from dataclasses import replace
 
     from station.bench.config import from_dict
-    from station.cli.run import CONNECTION, RUN_FILE, SCHEME_FILE, _overrides
+    from station.cli.run_bench import CONNECTION, RUN_FILE, SCHEME_FILE, _overrides
     from station.io.capture import read_capture
     from station.io.scheme import scheme_from_text
 
@@ -272,7 +272,7 @@ def run_multi_sim(args, config, scheme) -> int:
     ``--seed + k``), the scheme recorded for each into its own bundle, each estimated."""
     from station.cli.calibration import report_calibration
     from station.cli.history import file_quietly
-    from station.cli.run import table_geometry
+    from station.cli.run_bench import table_geometry
     from station.estimate import estimate_capture
     from station.io.calfile import write_calfile
     from station.bench.multi import folder_names, imu_config
