@@ -4,7 +4,7 @@ the frames lost.  Whole processes: ``station sim serve --imus N`` and ``station 
 own process, as a user runs them; 1-IMU and 4-IMU runs alternate (``--repeats`` pairs) so that a
 change of the machine's load falls on both.
 
-    python benchmarks/multi_imu.py [--imus 4] [--speed 20] [--repeats 3] [--dwell-s 10]
+    python benchmarks/multi_imu.py [--imus 4] [--speed 20] [--repeats 3] [--dwell-s 10] [--rate-dps 30]
 
 Printed per run: wall time of the recording (from the start of ``station run`` to its first
 estimate), of the whole command (with the estimates: one per IMU), CPU time (user + system) of
@@ -66,8 +66,9 @@ def one_run(n: int, args, work: Path, index: int) -> dict:
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.monotonic()
         proc = subprocess.Popen([sys.executable, "-m", "station.cli", "run", "--config", str(config),
-                                 "--scheme", "optimal9", "--dwell-s", str(args.dwell_s), "--rate-dps", "30",
-                                 "--rotation-s", "12", "--out", str(out), "--no-history"],
+                                 "--scheme", "optimal9", "--dwell-s", str(args.dwell_s), "--rate-dps",
+                                 str(args.rate_dps), "--rotation-s", str(360.0 / args.rate_dps), "--out", str(out),
+                                 "--no-history"],
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=work)
         recorded = [None]
         lines = []
@@ -117,10 +118,11 @@ def main() -> None:
     p.add_argument("--speed", type=float, default=20.0)
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--dwell-s", type=float, default=10.0)
+    p.add_argument("--rate-dps", type=float, default=30.0, help="rotation rate (one revolution each way)")
     p.add_argument("--seed", type=int, default=7)
     args = p.parse_args()
     os.environ["PYTHONPATH"] = str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")
-    print(f"optimal9 (dwell {args.dwell_s:g} s, 1 revolution at 30 deg/s per rotation) against the twins at "
+    print(f"optimal9 (dwell {args.dwell_s:g} s, 1 revolution at {args.rate_dps:g} deg/s per rotation) against the twins at "
           f"--speed {args.speed:g}; {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at start")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

@@ -241,3 +241,69 @@ def test_an_imu_whose_line_dies_is_lost_the_others_complete_and_resume_redoes_it
         assert len(bench.table.axes[0].motion.history) > moves_before     # the table moved for IMU 2
         # IMU 1 had everything: nothing of its bundle was recorded again
         assert {s["name"]: s["sha256"] for s in segments(run / serial1)} == first
+
+
+# ------------------------------------------------------------------ the pieces, without devices
+
+def test_imus_configuration_round_trips_and_bad_entries_name_their_field(tmp_path):
+    from station.bench.config import from_dict, parse_config
+
+    config = parse_config({"imus": [{"port": "/dev/a", "name": "left"},
+                                    {"port": "/dev/b", "mounting": ["-x", "-y", "+z"], "offset_m": [0.1, 0, 0]}]},
+                          "station.yaml")
+    assert config.imu == config.imus[0] and len(config.imu_list) == 2
+    assert from_dict(config.to_dict(), "run.yaml").imus == config.imus
+    single = parse_config({"imu": {"port": "/dev/a"}}, "station.yaml")       # the one-IMU form unchanged
+    assert single.imu_list == (single.imu,) and "imus" not in single.to_dict()
+    assert "name" not in single.to_dict()["imu"]
+    for doc, field in (({"imus": []}, "'imus'"),
+                       ({"imus": [{"port": "/dev/a"}, {"port": "/dev/a"}]}, "'imus[1].port'"),
+                       ({"imu": {"port": "/dev/a"}, "imus": [{"port": "/dev/b"}]}, "'imus'"),
+                       ({"imus": [{"port": "/dev/a", "name": "../up"}]}, "'imus[0].name'"),
+                       ({"imus": [{"port": "/dev/a", "mounting": ["+x", "+x", "+z"]}]}, "'imus[0].mounting'"),
+                       ({"imus": [{"port": "/dev/a", "baud": 9600}]}, "'imus[0].baud'")):
+        path = tmp_path / "bad.yaml"
+        path.write_text(yaml.safe_dump({"version": 1, **doc}))
+        proc = subprocess.run([sys.executable, "-m", "station.cli", "run", "--config", str(path), "--table-port",
+                               "/dev/null"], capture_output=True, text=True, timeout=60)
+        assert proc.returncode == 2, proc.stderr
+        lines = proc.stderr.strip().splitlines()
+        assert len(lines) == 1 and field in lines[0] and "Traceback" not in proc.stderr, proc.stderr
+
+
+def test_an_imu_mounted_otherwise_records_the_same_platform_directions_in_its_own_axes():
+    from station.bench.channels import relative_mounting, segment_meta
+    from station.bench.config import AXIS_NAMES
+
+    def matrix(names):
+        return np.column_stack([AXIS_NAMES[n] for n in names]).astype(float)
+    m0, mk = matrix(("+x", "+y", "+z")), matrix(("+y", "+z", "+x"))        # IMU k: x along platform y ...
+    r = relative_mounting(m0, mk)
+    meta = {"up_body": [1, 0, 0], "axis_body": [0, 0, 1], "heading_body": [0, 1, 0], "rate_dps": 10.0,
+            "mounting": ["+x", "+y", "+z"], "table_deg": [0, 90, 0]}
+    out = segment_meta(meta, r)
+    for key in ("up_body", "axis_body", "heading_body"):
+        # the same platform direction: M_k v_k == M_0 v_0
+        np.testing.assert_allclose(mk @ out[key], m0 @ np.array(meta[key], dtype=float))
+    assert out["mounting"] == ["+y", "+z", "+x"] and out["table_deg"] == meta["table_deg"]
+    assert segment_meta(meta, relative_mounting(m0, m0)) == meta
+
+
+def test_bundles_are_named_by_serial_then_name_then_index_and_never_twice():
+    from station.bench.multi import folder_names
+
+    assert folder_names(["0100000029", None, None, "0100000029"], [None, "left", None, None]) == \
+        ["0100000029", "left", "imu3", "0100000029-4"]
+    assert folder_names(["a/../b"], [None]) == ["a_.._b"]
+
+
+def test_the_live_display_shows_a_line_per_imu():
+    from station.bench.live import imu_lines
+
+    class Counters:
+        frames, checksum_errors, resyncs, gaps = 100, 0, 0, 0
+    lines = imu_lines({"imus": [{"label": "A", "lost": None, "f_mps2": 9.8, "w_dps": 0.01, "counters": Counters()},
+                                {"label": "B", "lost": "OSError: hang-up"}]})
+    assert lines[0].startswith("IMU A: |f| 9.80000 m/s^2") and "frames 100" in lines[0]
+    assert lines[1] == "IMU B: LOST (OSError: hang-up)"
+    assert imu_lines({"f_mps2": 9.8}) == []
