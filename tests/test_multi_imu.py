@@ -307,3 +307,19 @@ def test_the_live_display_shows_a_line_per_imu():
     assert lines[0].startswith("IMU A: |f| 9.80000 m/s^2") and "frames 100" in lines[0]
     assert lines[1] == "IMU B: LOST (OSError: hang-up)"
     assert imu_lines({"f_mps2": 9.8}) == []
+
+
+def test_a_dry_run_of_several_imus_simulates_each_as_its_own_sensor(tmp_path):
+    config = tmp_path / "station.yaml"
+    config.write_text("version: 1\nimus:\n  - {name: left}\n  - {}\n")
+    proc = subprocess.run([sys.executable, "-m", "station.cli", "run", "--sim", "--config", str(config), "--seed", "5",
+                           *SHORT, "--out", "run"], capture_output=True, text=True, cwd=tmp_path, timeout=240)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    truths = {}
+    for folder, seed in (("left", 5), ("sim-6", 6)):
+        bundle = tmp_path / "run" / folder
+        assert verdict(bundle) == "passes"
+        truths[folder] = yaml.safe_load((bundle / dryrun.TRUTH_FILE).read_text())
+        z = z_scores(bundle, default_truth(seed))
+        assert np.abs(z).max() < Z_MAX and np.sqrt(np.mean(z**2)) < Z_RMS
+    assert truths["left"] != truths["sim-6"]
