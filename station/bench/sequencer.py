@@ -380,6 +380,7 @@ class Sequencer:
                     problem = self._data_loss(rec, ch.rate_hz)
                     if problem is None:
                         r.seg.close("complete", **completed(rec))
+                        ch.done = ch.done | {name}
                     else:
                         r.seg.close("incomplete", note=f"bad recording: {problem}")
                         problems[id(ch)] = problem
