@@ -302,6 +302,10 @@ def parse_config(doc, source: str) -> Config:
         "plugins": lambda value, where: v.paths(value, where, source),
         "folders": lambda value, where: v.paths(value, where, source)})
     table = _check_table(replace(table, **geometry), v)
+    for i, entry in enumerate(imus):
+        if entry.offset_m is not None and not table.axes_intersect:
+            raise v.fail(f"imus[{i}].offset_m", "is the IMU's offset from the axes' intersection: with "
+                                                "geometry.axes_intersect false there is none (leave it out)")
     if warmup.temp_slope_c_per_h is not None and warmup.max_s is None:
         raise v.fail("warmup.max_s", "needed with temp_slope_c_per_h (the longest warm-up)")
     return Config(imu=imu, table=table, site=site, warmup=warmup, run=run, effects=effects, source=source,
@@ -587,6 +591,11 @@ imu:
   # csv_units: t=ms,accel=g,gyro=rad/s   # csv only (default t=s,accel=m/s^2,gyro=deg/s)
   frame_timeout_s: 2.0
   serial: {baudrate: 115200, bytesize: 8, parity: N, stopbits: 1, rtscts: false, xonxoff: false, timeout_s: 1.0}
+
+# Several IMUs on the table in one run (docs/fleet.md): instead of imu:, a list
+# imus:
+#   - {port: /dev/ttyUSB0, protocol: vectornav}
+#   - {port: /dev/ttyUSB2, protocol: vectornav, name: left, mounting: [-x, -y, +z], offset_m: [0.1, 0, 0]}
 
 table:
   port: /dev/ttyUSB1
