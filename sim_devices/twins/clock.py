@@ -26,6 +26,15 @@ class SimClock:
             v = self._free()
             return v if self._cap is None or v < self._cap else self._cap
 
+    def set_speed(self, speed: float) -> None:
+        """From now on device time runs ``speed`` x wall time; it stays continuous (tests slow
+        the world down around a moment they must hit)."""
+        if not speed > 0:
+            raise ValueError(f"speed must be > 0, got {speed!r}")
+        with self._lock:
+            v = self._free()
+            self._start, self._wall0, self.speed = v, time.monotonic(), float(speed)
+
     def wall_until(self, device_t: float) -> float:
         """Wall seconds until device time ``device_t`` (<= 0 if past)."""
         return (device_t - self.now()) / self.speed

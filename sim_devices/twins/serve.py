@@ -1,9 +1,13 @@
-"""Both twins on pseudo-terminals, served by one loop (``station sim serve``).
+"""The table twin and one or several IMU twins on pseudo-terminals, served by one loop
+(``station sim serve [--imus N]``).
 
-One thread runs everything: it waits (select) for commands on either port or for the next
+One thread runs everything: it waits (select) for commands on any port or for the next
 IMU frame to fall due, answers the commands, fires the faults due, and writes the frames
 due by the present device time.  Device time comes from one :class:`SimClock`, so
-``speed`` changes how fast frames come, never a byte of them.
+``speed`` changes how fast frames come, never a byte of them.  Several IMUs (``imus``) sit
+on the one table: each is its own sensor (its own truth: errors, noise seed, lever arm, and
+its own serial number) on its own pseudo-terminal (:class:`ImuLine`), all measuring the
+same platform motion; the lossless clock waits for the slowest reading reader.
 """
 from __future__ import annotations
 
@@ -15,9 +19,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from drivers.protocols.csvlines import CsvFormat
+from sim_devices.truth import default_truth
 
 from .clock import SimClock, StepClock
-from .faults import Faults, StreamFaulter
+from .faults import Faults, ImuFaults, StreamFaulter
 from .geometry import TableGeometry
 from .imu import ImuTwin
 from .imu_csv import CsvFrontEnd
@@ -56,6 +61,7 @@ class BenchOptions:
     imu_startup: str = "factory"  # vectornav power-up: "factory" ($VNYMR at 40 Hz, binary off, as a
                                   #   VN-100 leaves the factory) or "binary" (station's binary output on)
     record: bool = False          # keep the times of the frames sent intact (tests)
+    imus: int = 1                 # IMU twins on the table, each on its own pseudo-terminal
     lossless: bool = True         # the twins' clock is throttled to the IMU's reader: while a reader
                                   #   that is reading has not taken the frames its line could hold,
                                   #   device time stands still (and the table's commands wait), so no
@@ -92,46 +98,48 @@ class BenchServer:
         if o.imu_protocol not in IMU_PROTOCOLS:
             raise ValueError(f"IMU protocol must be one of {IMU_PROTOCOLS}")
         self.options = o
-        self.truth = truth
+        truth0 = truth[0] if isinstance(truth, (list, tuple)) else truth
+        self.truth = truth0
         self.clock = SimClock(o.speed)
         self.step_clock = StepClock(self.clock)     # the table's: commands at the step's time
         geo_rng, fault_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(o.seed).spawn(2))
-        geometry = TableGeometry.default(o.axes, truth.bench.lever_arm_m)
+        geometry = TableGeometry.default(o.axes, truth0.bench.lever_arm_m)
         self.table = TableTwin(geometry, self.step_clock, config=o.table_config,
-                               ripple_fraction=truth.bench.rate_ripple_fraction,
-                               ripple_hz=truth.bench.rate_ripple_hz, rng=geo_rng,
+                               ripple_fraction=truth0.bench.rate_ripple_fraction,
+                               ripple_hz=truth0.bench.rate_ripple_hz, rng=geo_rng,
                                faults=o.faults.table,
                                interlocks_closed=o.table_protocol == "aerosmith")
-        self.imu = ImuTwin(self.table, truth, seed=o.seed)
-        self.faulter = StreamFaulter(o.faults.imu, fault_rng,
-                                     line_protocol=o.imu_protocol == "csv", record=o.record)
+        truths = list(truth) if isinstance(truth, (list, tuple)) else [truth]
+        if o.imus < 1 or len(truths) not in (1, o.imus):
+            raise ValueError(f"{o.imus} IMUs need one truth or one per IMU, got {len(truths)}")
+        self.truths = truths if len(truths) == o.imus else truths + [None] * (o.imus - 1)
+        self.lines = [ImuLine(self.table, t, o, k, fault_rng if k == 0 else None)
+                      for k, t in enumerate(self.truths)]
         if o.table_protocol == "acutrol":
             self.table_frontend = AcutrolFrontEnd(self.table, o.table_framing)
         else:
             self.table_frontend = AerosmithFrontEnd(self.table, silent_motion=o.table_silent_motion)
-        if o.imu_protocol == "vectornav":
-            self.imu_frontend = VectorNavFrontEnd(self.imu, self.faulter, startup=o.imu_startup,
-                                                  serial_number=f"01{o.seed:08d}"[-10:])
-        elif o.imu_protocol == "xsens":
-            self.imu_frontend = XsensFrontEnd(self.imu, self.faulter)
-        else:
-            self.imu_frontend = CsvFrontEnd(self.imu, self.faulter, o.csv_format)
         self.table_port = PtyEndpoint() if o.table_tcp_port is None else TcpEndpoint(o.table_tcp_port)
-        self.imu_port = PtyEndpoint()
-        # a driver at another baud rate than the IMU's reads garbage, as on a serial line
-        self.imu_port.emulate_baud(lambda: self.imu_frontend.line_baud)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
-        self._last_taken_wall = time.monotonic() - READER_ACTIVE_S   # no reader yet
-        self._unread = 0                  # bytes on the IMU line not read by its reader, last step
-        self._reader_seen = False         # a reader has taken bytes from the IMU line
-        self._bytes_per_frame = 44.0      # of the IMU stream (measured as frames go out)
         self._table_wait_since: float | None = None
         self.table_deferred_steps = 0     # loop steps in which the table's commands waited (lossless)
         self._table_asked = False         # a table command came (or waited) in the last step
-        self._held_table_since: float | None = None   # the table asked while time was held since
-        self.readers_given_up = 0         # times a reader was judged not reading (READER_STALL_S)
+        self._requests: list = []         # (function, done event): run by the loop between steps
+
+    # the first IMU (the only one of a one-IMU bench) by its old names
+    imu = property(lambda self: self.lines[0].imu, lambda self, v: setattr(self.lines[0], "imu", v))
+    faulter = property(lambda self: self.lines[0].faulter, lambda self, v: setattr(self.lines[0], "faulter", v))
+    imu_frontend = property(lambda self: self.lines[0].frontend,
+                            lambda self, v: setattr(self.lines[0], "frontend", v))
+    imu_port = property(lambda self: self.lines[0].port, lambda self, v: setattr(self.lines[0], "port", v))
+    _reader_seen = property(lambda self: self.lines[0].reader_seen)
+
+    @property
+    def readers_given_up(self) -> int:
+        """Times a reader was judged not reading (READER_STALL_S), all IMUs."""
+        return sum(line.readers_given_up for line in self.lines)
 
     @property
     def table_path(self) -> str:
@@ -139,7 +147,11 @@ class BenchServer:
 
     @property
     def imu_path(self) -> str:
-        return self.imu_port.path
+        return self.lines[0].port.path
+
+    @property
+    def imu_paths(self) -> list:
+        return [line.port.path for line in self.lines]
 
     # ------------------------------------------------------------------ the loop
     def step(self, timeout_s: float) -> None:
@@ -154,41 +166,50 @@ class BenchServer:
         is taking the frames).  So a reader that has received the table's answer and then
         reads what is waiting on the IMU line has every frame measured before that answer
         (``station.bench.imu_stream.ImuStream.sync``), at any speed."""
+        while self._requests:
+            fn, done = self._requests.pop(0)
+            fn()
+            done.set()
         wall = time.monotonic()
-        self._judge_reader(wall)
-        defer_table = self._defer_table(wall - self._last_taken_wall < READER_ACTIVE_S)
+        for line in self.lines:
+            self._judge_reader(wall, line)
+        defer_table = self._defer_table([wall - line.last_taken_wall < READER_ACTIVE_S for line in self.lines])
         if defer_table:
             self.table_deferred_steps += 1
         if self.clock.capped:
             timeout_s = min(timeout_s, 0.001)        # waiting for the reader
-        ports = [p for p in (self.imu_port, self.table_port)
+        imu_ports = [line.port for line in self.lines]
+        ports = [p for p in (*imu_ports, self.table_port)
                  if not p.closed and not (p is self.table_port and defer_table)]
-        writers = [p for p in (self.table_port, self.imu_port) if not p.closed and p.backlog]
+        writers = [p for p in (self.table_port, *imu_ports) if not p.closed and p.backlog]
         readable, _, _ = select.select(ports, writers, [], timeout_s) if ports or writers else ([], [], [])
         self._table_asked = self.table_port in readable or (
             defer_table and not self.table_port.closed and bool(select.select([self.table_port], [], [], 0)[0]))
-        reader_active = time.monotonic() - self._last_taken_wall < READER_ACTIVE_S
+        wall = time.monotonic()
+        active = [wall - line.last_taken_wall < READER_ACTIVE_S for line in self.lines]
         now = self.clock.now()
         self.step_clock.set(now)
         self.table.update(now)
-        tf, imf = self.options.faults.table, self.options.faults.imu
+        tf = self.options.faults.table
         if tf.disconnect_at_s is not None and now >= tf.disconnect_at_s:
             self.table_port.close()
-        if imf.disconnect_at_s is not None and now >= imf.disconnect_at_s:
-            self.imu_port.close()
-        table_first = not reader_active
+        for line in self.lines:
+            if line.faults.disconnect_at_s is not None and now >= line.faults.disconnect_at_s:
+                line.port.close()
+        table_first = not any(active)
         if table_first:
             self._serve_table(readable, now, defer_table)
-        reader_active = self._serve_imu(readable, now, reader_active)
+        active = [self._serve_imu(readable, now, a, line) for a, line in zip(active, self.lines)]
         if not table_first:
-            self._serve_table(readable, now, self._defer_table(reader_active))
-        if self.options.lossless and reader_active and self.imu_frontend.streaming:
-            # the world waits for the reader: device time runs at most as far as the frames
-            # the line holds (none while frames are still queued)
-            lead = 0.0 if self.imu_port.backlog else LINE_BYTES / (self._bytes_per_frame * self.imu.rate_hz)
-            self.clock.limit(now + lead)
-        else:
-            self.clock.limit(None)
+            self._serve_table(readable, now, self._defer_table(active))
+        cap = None
+        for a, line in zip(active, self.lines):
+            if self.options.lossless and a and not line.port.closed and line.frontend.streaming:
+                # the world waits for the reader: device time runs at most as far as the frames
+                # the line holds (none while frames are still queued); several IMUs: the slowest
+                lead = 0.0 if line.port.backlog else LINE_BYTES / (line.bytes_per_frame * line.imu.rate_hz)
+                cap = now + lead if cap is None else min(cap, now + lead)
+        self.clock.limit(cap)
 
     def _serve_table(self, readable, now: float, defer: bool) -> None:
         if self.table_port in readable and not defer:
@@ -197,30 +218,32 @@ class BenchServer:
                 self.table_port.write(self.table_frontend.receive(data))
         self.table_port.flush()
 
-    def _serve_imu(self, readable, now: float, reader_active: bool) -> bool:
-        """IMU commands and the frames due by ``now``; returns whether the reader is active."""
-        sent = self.imu_port.sent_bytes
-        if self.imu_port in readable:
-            data = self.imu_port.read()
+    def _serve_imu(self, readable, now: float, reader_active: bool, line=None) -> bool:
+        """One IMU's commands and the frames due by ``now``; returns whether its reader is active."""
+        line = self.lines[0] if line is None else line
+        port, frontend, faulter = line.port, line.frontend, line.faulter
+        sent = port.sent_bytes
+        if port in readable:
+            data = port.read()
             if data:
                 # the replies go out at the rate in effect when the commands came (a new baud
                 # rate, register 05, applies after its reply)
-                baud = self.imu_frontend.line_baud
-                self.imu_port.write(self.imu_frontend.receive(data, now), baud=baud)
-        if not self.imu_port.closed:
-            if self._imu_behind(self.imu_port.max_backlog // 2) and not (self.options.lossless and reader_active):
+                baud = frontend.line_baud
+                port.write(frontend.receive(data, now), baud=baud)
+        if not port.closed:
+            if self._imu_behind(port.max_backlog // 2, line) and not (self.options.lossless and reader_active):
                 # nobody reads: the frames due are lost anyway, do not compute them
-                self.faulter.overflowed(self.imu.sample_times_until(now).size, recorded=False)
+                faulter.overflowed(line.imu.sample_times_until(now).size, recorded=False)
             else:
-                before = self.faulter.frames_sent
-                frames = self.imu_frontend.produce(now)
-                if frames and self.faulter.frames_sent > before:
-                    self._size_stream_buffer(len(frames) / (self.faulter.frames_sent - before))
+                before = faulter.frames_sent
+                frames = frontend.produce(now)
+                if frames and faulter.frames_sent > before:
+                    self._size_stream_buffer(len(frames) / (faulter.frames_sent - before), line)
                 # lossless: a batch larger than the backlog (this loop itself was descheduled) is kept
-                if frames and not self.imu_port.write(frames, droppable=not self.options.lossless):
-                    self.faulter.overflowed(self.faulter.frames_sent - before)
-        unread = self.imu_port.unread()
-        self.imu_port.flush()
+                if frames and not port.write(frames, droppable=not self.options.lossless):
+                    faulter.overflowed(faulter.frames_sent - before)
+        unread = port.unread()
+        port.flush()
         # the reader took bytes: fewer wait on the line (only a reader takes them), or, once a
         # reader was seen, the line took bytes in this step (when writing the frames or
         # flushing: without a reader the line fills once, ~20 KiB, and takes nothing more).  A
@@ -228,22 +251,25 @@ class BenchServer:
         # it can hold without one: while the queue keeps the line full, the kernel refills the
         # read buffer from its flip buffers as soon as the reader has read, so the unread count
         # may never be seen to fall (the reader was then taken for absent and frames dropped)
-        took = self.imu_port.sent_bytes > sent
-        self._reader_seen = (self._reader_seen or unread < self._unread
-                             or self.imu_port.sent_bytes - unread > FLIP_MAX_BYTES)
-        if unread < self._unread or (self._reader_seen and took):
-            self._last_taken_wall = time.monotonic()
+        took = port.sent_bytes > sent
+        line.reader_seen = (line.reader_seen or unread < line.unread
+                            or port.sent_bytes - unread > FLIP_MAX_BYTES)
+        if unread < line.unread or (line.reader_seen and took):
+            line.last_taken_wall = time.monotonic()
             reader_active = True
-        self._unread = self.imu_port.unread()
+        line.unread = port.unread()
         return reader_active
 
-    def _defer_table(self, reader_active: bool) -> bool:
-        """Lossless: the table's commands wait while frames already measured are still in the
+    def _defer_table(self, readers_active) -> bool:
+        """Lossless: the table's commands wait while frames already measured are still in an
         IMU's transmit queue and its reader is taking them (at most TABLE_WAIT_S: a reader
         that has just died does not hold up the table long).  What the kernel holds reaches
         the reader when it reads what is waiting (``drivers.transport.Port.read_waiting``)."""
-        wait = (self.options.lossless and reader_active and not self.imu_port.closed
-                and self.imu_frontend.streaming and self.imu_port.backlog > 0)
+        if isinstance(readers_active, bool):
+            readers_active = [readers_active] + [False] * (len(self.lines) - 1)
+        wait = self.options.lossless and any(
+            a and not line.port.closed and line.frontend.streaming and line.port.backlog > 0
+            for a, line in zip(readers_active, self.lines))
         if not wait:
             self._table_wait_since = None
             return False
@@ -252,46 +278,54 @@ class BenchServer:
             self._table_wait_since = now
         return now - self._table_wait_since < TABLE_WAIT_S
 
-    def _judge_reader(self, wall: float) -> None:
-        """Lossless: while device time is held for the IMU's reader (frames wait in the
+    def _judge_reader(self, wall: float, line=None) -> None:
+        """Lossless: while device time is held for an IMU's reader (frames wait in the
         transmit queue) and the table's client asks something, a reader that takes nothing for
         READER_STALL_S is not reading: taken for absent until it reads again (the clock runs
         free, the frames it does not take are dropped).  A reader that is merely slow takes
         bytes and is waited for; with no table client asking, nobody sees the world wait and a
         silent reader is waited for up to READER_ACTIVE_S, as before."""
-        held = (self.options.lossless and not self.imu_port.closed and self.imu_frontend.streaming
-                and self.imu_port.backlog > 0 and wall - self._last_taken_wall < READER_ACTIVE_S)
+        line = self.lines[0] if line is None else line
+        held = (self.options.lossless and not line.port.closed and line.frontend.streaming
+                and line.port.backlog > 0 and wall - line.last_taken_wall < READER_ACTIVE_S)
         if not held:
-            self._held_table_since = None
+            line.held_table_since = None
             return
-        if self._table_asked and self._held_table_since is None:
-            self._held_table_since = wall
-        if (self._held_table_since is not None
-                and wall - max(self._last_taken_wall, self._held_table_since) >= READER_STALL_S):
-            self._last_taken_wall = wall - READER_ACTIVE_S            # absent until it reads
-            self._held_table_since = None
-            self.readers_given_up += 1
+        if self._table_asked and line.held_table_since is None:
+            line.held_table_since = wall
+        if (line.held_table_since is not None
+                and wall - max(line.last_taken_wall, line.held_table_since) >= READER_STALL_S):
+            line.last_taken_wall = wall - READER_ACTIVE_S            # absent until it reads
+            line.held_table_since = None
+            line.readers_given_up += 1
 
-    def _imu_behind(self, limit: int) -> bool:
+    def _imu_behind(self, limit: int, line=None) -> bool:
         """The IMU's transmit queue holds more than ``limit`` bytes its line could not take."""
-        return (not self.imu_port.closed and self.imu_frontend.streaming
-                and self.imu_port.backlog > limit)
+        line = self.lines[0] if line is None else line
+        return (not line.port.closed and line.frontend.streaming
+                and line.port.backlog > limit)
 
-    def _size_stream_buffer(self, bytes_per_frame: float) -> None:
+    def _size_stream_buffer(self, bytes_per_frame: float, line=None) -> None:
         """Transmit buffer for ``STREAM_BUFFER_WALL_S`` of the stream at the present speed."""
-        self._bytes_per_frame = bytes_per_frame
-        wanted = STREAM_BUFFER_WALL_S * self.clock.speed * self.imu.rate_hz * bytes_per_frame
-        self.imu_port.max_backlog = max(MIN_STREAM_BUFFER, int(wanted))
+        line = self.lines[0] if line is None else line
+        line.bytes_per_frame = bytes_per_frame
+        wanted = STREAM_BUFFER_WALL_S * self.clock.speed * line.imu.rate_hz * bytes_per_frame
+        line.port.max_backlog = max(MIN_STREAM_BUFFER, int(wanted))
 
     def _timeout(self) -> float:
-        """Until the next frame is due (wall s), within [5 ms, 20 ms]: frames go out in
-        batches of at most 5 ms of wall time; commands are answered at once."""
-        if not self.imu_frontend.streaming or self.imu.next_k is None:
+        """Until the next frame of any IMU is due (wall s), within [5 ms, 20 ms]: frames go out
+        in batches of at most 5 ms of wall time; commands are answered at once."""
+        waits = []
+        for line in self.lines:
+            if not line.frontend.streaming or line.imu.next_k is None or line.port.closed:
+                continue
+            if line.imu.rate_hz * self.clock.speed >= FAST_STREAM_HZ:
+                waits.append(0.02)    # large batches: the cost of a batch is mostly per call
+            else:
+                waits.append(self.clock.wall_until(line.imu.next_k / line.imu.rate_hz))
+        if not waits:
             return 0.02
-        if self.imu.rate_hz * self.clock.speed >= FAST_STREAM_HZ:
-            return 0.02            # large batches: the cost of a batch is mostly per call
-        wall = self.clock.wall_until(self.imu.next_k / self.imu.rate_hz)
-        return min(0.02, max(0.005, wall))
+        return min(0.02, max(0.005, min(waits)))
 
     def serve_forever(self, stop: threading.Event | None = None) -> None:
         stop = stop or self._stop
@@ -300,6 +334,28 @@ class BenchServer:
                 self.step(self._timeout())
         finally:
             self.close_ports()
+
+    # ------------------------------------------------------------------ cables (tests)
+    def _between_steps(self, fn) -> None:
+        """``fn()`` run by the loop between two steps (at once when no loop runs)."""
+        if self._thread is None:
+            fn()
+            return
+        done = threading.Event()
+        self._requests.append((fn, done))
+        if not done.wait(10.0):
+            raise RuntimeError("the twins' loop did not take the request")
+
+    def unplug_imu(self, k: int) -> None:
+        """IMU ``k``'s line hangs up (its pseudo-terminal closed): its reader gets end of file
+        or EIO, as when a USB serial adapter is pulled out.  The twin stays powered."""
+        self._between_steps(lambda: self.lines[k].port.close())
+
+    def replug_imu(self, k: int) -> str:
+        """IMU ``k`` on a fresh pseudo-terminal (the adapter plugged in again; a new device
+        path, returned); the twin kept its state (rate, output settings) meanwhile."""
+        self._between_steps(self.lines[k].replug)
+        return self.lines[k].port.path
 
     # ------------------------------------------------------------------ in a thread (tests)
     def start(self) -> "BenchServer":
@@ -323,10 +379,59 @@ class BenchServer:
 
     def close_ports(self) -> None:
         self.table_port.close()
-        self.imu_port.close()
+        for line in self.lines:
+            line.port.close()
 
     def __enter__(self):
         return self.start()
 
     def __exit__(self, *exc):
         self.stop()
+
+
+class ImuLine:
+    """One IMU twin on its own pseudo-terminal, and what the loop knows of its reader.
+
+    IMU ``index`` 0 is the bench's first IMU (seed ``options.seed``, the faults of the
+    ``--faults`` file); IMU k is seeded ``seed + k`` (its noise; its truth, unless given:
+    ``default_truth(seed + k)``) and answers with its own serial number."""
+
+    def __init__(self, table, truth, o: BenchOptions, index: int, fault_rng=None):
+        seed = o.seed + index
+        if truth is None:
+            truth = default_truth(seed)
+        self.index = index
+        self.truth = truth
+        self.imu = ImuTwin(table, truth, seed=seed)
+        self.faults = o.faults.imu if index == 0 else ImuFaults()
+        if fault_rng is None:
+            fault_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[1])
+        self.faulter = StreamFaulter(self.faults, fault_rng,
+                                     line_protocol=o.imu_protocol == "csv", record=o.record)
+        if o.imu_protocol == "vectornav":
+            self.serial_number = f"01{seed:08d}"[-10:]
+            self.frontend = VectorNavFrontEnd(self.imu, self.faulter, startup=o.imu_startup,
+                                              serial_number=self.serial_number)
+        elif o.imu_protocol == "xsens":
+            self.frontend = XsensFrontEnd(self.imu, self.faulter, device_id=0x03700001 + index)
+            self.serial_number = f"{self.frontend.device_id:08X}"
+        else:
+            self.frontend = CsvFrontEnd(self.imu, self.faulter, o.csv_format)
+            self.serial_number = None          # a csv line says no identity
+        self._open_port()
+
+    def _open_port(self) -> None:
+        self.port = PtyEndpoint()
+        # a driver at another baud rate than the IMU's reads garbage, as on a serial line
+        self.port.emulate_baud(lambda: self.frontend.line_baud)
+        self.last_taken_wall = time.monotonic() - READER_ACTIVE_S   # no reader yet
+        self.unread = 0                   # bytes on the line not read by its reader, last step
+        self.reader_seen = False          # a reader has taken bytes from the line
+        self.bytes_per_frame = 44.0       # of the stream (measured as frames go out)
+        self.held_table_since: float | None = None   # the table asked while time was held since
+        self.readers_given_up = getattr(self, "readers_given_up", 0)   # its reader judged not reading (READER_STALL_S)
+
+    def replug(self) -> None:
+        """A fresh pseudo-terminal (the old one closed); the twin keeps its state."""
+        self.port.close()
+        self._open_port()

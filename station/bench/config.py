@@ -88,6 +88,16 @@ class ImuConfig:
     csv_units: str = ""
     frame_timeout_s: float = 2.0
     lot: str | None = None          # the production lot, into the capture's imu.lot and the calibration's provenance
+    # several IMUs in one run (``imus:``) only: a label (the output folder when the IMU tells no
+    # serial number), how it sits on the platform (None: table.mounting) and its reference
+    # point from the axes' intersection (None: table.imu_offset_m)
+    name: str | None = None
+    mounting: tuple | None = None
+    offset_m: tuple | None = None
+
+    def mounting_matrix(self, table: "TableConfig") -> np.ndarray:
+        """Case -> platform coordinates of this IMU (column j: the platform direction of case axis j)."""
+        return np.column_stack([AXIS_NAMES[m] for m in (self.mounting or table.mounting)]).astype(float)
 
 
 @dataclass(frozen=True)
@@ -137,6 +147,12 @@ class Config:
     run: RunConfig = field(default_factory=RunConfig)
     effects: EffectsConfig = field(default_factory=EffectsConfig)
     source: str = "defaults"
+    imus: tuple = ()                      # several IMUs in one run (``imus:``); then imu is imus[0]
+
+    @property
+    def imu_list(self) -> tuple:
+        """The IMUs of a run: the ``imus:`` list, or the one ``imu:``."""
+        return self.imus or (self.imu,)
 
     def with_overrides(self, section: str, **values) -> "Config":
         """A copy with ``values`` (None ones skipped) set in ``section``."""
@@ -151,6 +167,13 @@ class Config:
         doc["table"]["axes_enu"] = self.table.axis_list()
         doc["table"]["load_position_deg"] = list(self.table.load_position_deg or [0.0] * self.table.axes)
         doc["table"]["geometry"] = {k: doc["table"].pop(k) for k in GEOMETRY_KEYS}
+        if self.imus:
+            del doc["imu"]
+            doc["imus"] = [{k: v for k, v in item.items() if v is not None} for item in doc["imus"]]
+        else:
+            del doc["imus"]
+            for key in MULTI_IMU_KEYS:
+                doc["imu"].pop(key, None)
         return doc
 
 
@@ -243,10 +266,13 @@ def parse_config(doc, source: str) -> Config:
     version = doc.get("version", 1)
     if version != 1:
         raise v.fail("version", f"must be 1, got {version!r}")
-    v.known(doc, "", ("version", "imu", "table", "site", "warmup", "run", "effects"))
-    imu = v.section(doc, "imu", ImuConfig, {
-        "port": v.text, "protocol": v.text, "serial": v.serial, "rate_hz": v.positive,
-        "csv_units": v.text_or_empty, "frame_timeout_s": v.positive, "lot": v.text})
+    v.known(doc, "", ("version", "imu", "imus", "table", "site", "warmup", "run", "effects"))
+    imu_checks = {"port": v.text, "protocol": v.text, "serial": v.serial, "rate_hz": v.positive,
+                  "csv_units": v.text_or_empty, "frame_timeout_s": v.positive, "lot": v.text}
+    imu = v.section(doc, "imu", ImuConfig, imu_checks)
+    imus = _imus(doc, v, imu_checks)
+    if imus:
+        imu = imus[0]
     doc, geometry = _geometry(doc, v)
     table = v.section(doc, "table", TableConfig, {
         "port": v.text, "protocol": v.text, "serial": v.serial, "axes": v.axes_count,
@@ -267,12 +293,54 @@ def parse_config(doc, source: str) -> Config:
         "plugins": lambda value, where: v.paths(value, where, source),
         "folders": lambda value, where: v.paths(value, where, source)})
     table = _check_table(replace(table, **geometry), v)
+    for i, entry in enumerate(imus):
+        if entry.offset_m is not None and not table.axes_intersect:
+            raise v.fail(f"imus[{i}].offset_m", "is the IMU's offset from the axes' intersection: with "
+                                                "geometry.axes_intersect false there is none (leave it out)")
     if warmup.temp_slope_c_per_h is not None and warmup.max_s is None:
         raise v.fail("warmup.max_s", "needed with temp_slope_c_per_h (the longest warm-up)")
-    return Config(imu=imu, table=table, site=site, warmup=warmup, run=run, effects=effects, source=source)
+    return Config(imu=imu, table=table, site=site, warmup=warmup, run=run, effects=effects, source=source,
+                  imus=imus)
 
 
 GEOMETRY_KEYS = ("axes_intersect", "level_arcsec")
+
+
+MULTI_IMU_KEYS = ("name", "mounting", "offset_m")
+MAX_IMUS = 32
+
+
+def _imus(doc: dict, v: "_Validator", checks: dict) -> tuple:
+    """The ``imus:`` list (several IMUs in one run), each entry as ``imu:`` plus name, mounting
+    and offset_m; () without one."""
+    value = doc.get("imus")
+    if value is None:
+        return ()
+    if doc.get("imu") is not None:
+        raise v.fail("imus", "give either imu: (one IMU) or imus: (a list of IMUs), not both")
+    if not isinstance(value, list) or not value:
+        raise v.fail("imus", "must be a list of IMUs (each a mapping: port, protocol, serial, mounting, ...)")
+    if len(value) > MAX_IMUS:
+        raise v.fail("imus", f"at most {MAX_IMUS} IMUs in one run, got {len(value)}")
+    checks = {**checks, "name": v.name, "mounting": v.mounting, "offset_m": v.vector}
+    out = []
+    for i, item in enumerate(value):
+        if not isinstance(item, dict):
+            raise v.fail(f"imus[{i}]", f"must be a mapping, got {type(item).__name__}")
+        out.append(_imu_entry(item, f"imus[{i}]", v, checks))
+    for key in ("port", "name"):
+        seen = {}
+        for i, imu in enumerate(out):
+            x = getattr(imu, key)
+            if x is not None and x in seen:
+                raise v.fail(f"imus[{i}].{key}", f"{x!r} is also imus[{seen[x]}].{key}: each IMU has its own")
+            seen.setdefault(x, i)
+    return tuple(out)
+
+
+def _imu_entry(item: dict, where: str, v: "_Validator", checks: dict) -> ImuConfig:
+    v.known(item, f"{where}.", tuple(checks))
+    return ImuConfig(**{k: checks[k](val, f"{where}.{k}") for k, val in item.items() if val is not None})
 
 
 def _geometry(doc: dict, v: "_Validator") -> tuple[dict, dict]:
@@ -402,6 +470,14 @@ class _Validator:
             raise self.fail(where, f"must be text, got {value!r}")
         return str(value)
 
+    def name(self, value, where):
+        """A label that names a folder: letters, digits, '-', '_' and '.' (not only dots)."""
+        text = self.text(value, where)
+        if len(text) > 64 or not all(c.isalnum() or c in "-_." for c in text) or set(text) == {"."}:
+            raise self.fail(where, f"must be 1-64 letters, digits, '-', '_' or '.' (it names a folder), "
+                                   f"got {value!r}")
+        return text
+
     def text_or_empty(self, value, where):
         if not isinstance(value, str):
             raise self.fail(where, f"must be text, got {value!r}")
@@ -507,6 +583,11 @@ imu:
   frame_timeout_s: 2.0
   # lot: 2026-W48             # the production lot: filed with each calibration (station fleet --lot)
   serial: {baudrate: 115200, bytesize: 8, parity: N, stopbits: 1, rtscts: false, xonxoff: false, timeout_s: 1.0}
+
+# Several IMUs on the table in one run (docs/fleet.md): instead of imu:, a list
+# imus:
+#   - {port: /dev/ttyUSB0, protocol: vectornav}
+#   - {port: /dev/ttyUSB2, protocol: vectornav, name: left, mounting: [-x, -y, +z], offset_m: [0.1, 0, 0]}
 
 table:
   port: /dev/ttyUSB1

@@ -41,6 +41,19 @@ def format_values(v: dict) -> str:
     return "; ".join(parts)
 
 
+def imu_lines(v: dict) -> list:
+    """Several IMUs in one run: one line per IMU (its |f|, |w|, temperature and counters, or
+    that it was lost); [] for a one-IMU run."""
+    lines = []
+    for imu in v.get("imus") or []:
+        if imu.get("lost"):
+            lines.append(f"IMU {imu['label']}: LOST ({imu['lost']})")
+        else:
+            values = {k: x for k, x in imu.items() if k not in ("label", "lost")}
+            lines.append(f"IMU {imu['label']}: {format_values(values) or 'no data yet'}")
+    return lines
+
+
 class PlainDisplay:
     """Lines for logs: no cursor movement, no colour, and a few of them for a whole run (a log
     of a pipe or CI is read afterwards): the title; a progress line as the run passes each tenth
@@ -90,11 +103,15 @@ class PlainDisplay:
             return
         while self._marks and run >= self._marks[0]:
             self._marks.pop(0)
-        values = format_values(self.values)
+        shown = ({k: x for k, x in self.values.items() if k in ("positions_deg", "rates_dps")}
+                 if self.values.get("imus") else self.values)
+        values = format_values(shown)
         self._print(f"run {run:.0%} ({self.done_before + done_s:.0f}/{self.total_s:.0f} s, "
                     f"{time.monotonic() - self._t0:.0f} s wall): step [{self._index + 1}/{self._count}] "
                     f"{self._step.describe() if self._step is not None else ''}; {len(self._saved)} segments "
                     f"saved" + (f"; {values}" if values else ""))
+        for line in imu_lines(self.values):
+            self._print(f"  {line}")
 
     def values_update(self, values: dict) -> None:
         self.values.update(values)
@@ -129,7 +146,14 @@ class RichDisplay(PlainDisplay):
         step = self._step
         table.add_row("step", "" if step is None else step.describe())
         table.add_row("purpose", "" if step is None else step.purpose)
-        table.add_row("live", format_values(self.values))
+        lines = imu_lines(self.values)
+        if lines:
+            shown = {k: x for k, x in self.values.items() if k in ("positions_deg", "rates_dps")}
+            table.add_row("table", format_values(shown))
+            for i, line in enumerate(lines):
+                table.add_row("IMUs" if i == 0 else "", line)
+        else:
+            table.add_row("live", format_values(self.values))
         return Group(self.progress, table)
 
     def __enter__(self):

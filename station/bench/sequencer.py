@@ -16,6 +16,7 @@ session and split into segments by station/io/segment_detect.py.
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import signal
 import threading
@@ -25,6 +26,7 @@ import numpy as np
 
 from station.io.capture import CaptureWriter
 from station.core.errors import UserError
+from station.bench.channels import ImuChannel, Recording, segment_meta
 from station.bench.imu_stream import ImuStream, lost_frames_note
 from station.bench.plan import (Checkpoint, Dwell, HandRotation, HandStatic, MoveTo, Operator, Rotate, Settle,
                           WarmUp)
@@ -91,24 +93,70 @@ class Interrupts:
 
 class Sequencer:
     """Runs plan steps on ``table`` (a connected RateTable, or None for schemes done by hand)
-    and ``imu`` (a connected Imu), recording into ``writer`` (a CaptureWriter)."""
+    and ``imu`` (a connected Imu), recording into ``writer`` (a CaptureWriter); or, several IMUs
+    on one table, on ``channels`` (station/bench/channels.py: each IMU's stream and bundle).
 
-    def __init__(self, *, table, imu, writer: CaptureWriter, config, display, operator,
-                 interrupts: Interrupts | None = None, rate_hz: float, reset_faults: bool = False):
+    Several IMUs: the table moves once; each IMU records every segment into its own bundle with
+    its own data-loss checks.  An IMU whose stream fails (its port dies, it stops streaming) or
+    whose every recording of a segment lost too much data is *lost*: said on the display, its
+    segment being recorded closed as incomplete with the reason, and the others go on (its
+    segments are recorded on ``station run --resume``).  The last IMU left failing stops the
+    run as a single IMU's failure does."""
+
+    def __init__(self, *, table, imu=None, writer: CaptureWriter | None = None, config, display, operator,
+                 interrupts: Interrupts | None = None, rate_hz: float | None = None,
+                 reset_faults: bool = False, channels: list | None = None):
         self.table = table
-        self.writer = writer
+        if channels is None:
+            channels = [ImuChannel("imu", ImuStream(imu, float(rate_hz)), writer, float(rate_hz))]
+        self.channels = list(channels)
+        self.multi = len(self.channels) > 1
         self.config = config
         self.display = display
         self.operator = operator
         self.interrupts = interrupts or Interrupts()
-        self.rate_hz = float(rate_hz)
-        self.stream = ImuStream(imu, self.rate_hz)
+        self.rate_hz = float(self.channels[0].rate_hz)      # the rate segment lengths are compiled at
         self.limits = config.table.axis_limits() if table is not None else ()
         self.reset_faults = reset_faults
         self.mounting = tuple(config.table.mounting)
         self._last_poll = 0.0
         self._elapsed_s = self._estimate_s = 0.0     # device time into the present step
         self._session = None          # hand schemes: the continuous recording
+
+    # the first IMU's (the only one of a one-IMU run; hand schemes use these)
+    stream = property(lambda self: self.channels[0].stream)
+    writer = property(lambda self: self.channels[0].writer,
+                      lambda self, w: setattr(self.channels[0], "writer", w))
+
+    def _alive(self) -> list:
+        return [ch for ch in self.channels if ch.alive]
+
+    def _reference(self):
+        """The IMU whose samples measure the steps' progress: the first one still recording."""
+        return self._alive()[0]
+
+    def _lose(self, ch, error: BaseException) -> None:
+        """IMU ``ch`` failed: the last one left raises ``error`` (the run stops as a one-IMU run
+        does); otherwise it is marked lost, said, and the others go on."""
+        if not self.multi or len(self._alive()) <= 1:
+            raise error
+        ch.lost = f"{type(error).__name__}: {str(error)[:200]}"
+        self.display.note(f"IMU {ch.label} lost ({ch.lost}): the other IMUs go on; its segments from "
+                          "here are recorded by station run --resume")
+        try:
+            ch.stream.stop()
+        except Exception:      # noqa: BLE001 - its port is gone; nothing more to do with it
+            pass
+
+    def _each(self, fn) -> None:
+        """``fn(ch)`` for every IMU still recording; a failing IMU is lost (``_lose``)."""
+        for ch in self._alive():
+            try:
+                fn(ch)
+            except PauseRequested:
+                raise
+            except Exception as e:          # the IMU's stream: timeouts, a port gone
+                self._lose(ch, e)
 
     # ------------------------------------------------------------------ the run
     def run(self, steps: list) -> None:
@@ -151,8 +199,9 @@ class Sequencer:
         if not self.operator.resume_after_pause(self.interrupts):
             raise RunPaused(str(self.writer.path))
         self.interrupts.clear()
-        self.writer = CaptureWriter.reopen(self.writer.path)
-        self.stream.drain()
+        for ch in self._alive():
+            ch.writer = CaptureWriter.reopen(ch.writer.path)
+        self._each(lambda ch: ch.stream.drain())
         segment = steps[i].segment
         while i > 0 and segment is not None and steps[i - 1].segment == segment:
             i -= 1
@@ -179,14 +228,16 @@ class Sequencer:
                     t.set_rate_limits(axis, "rate", lim.max_rate_dps, lim.rate_accel_dps2)
                 except UserError as e:        # NotSupported: the controller's own limits apply
                     self.display.note(f"axis {axis}: rate-mode limits not set ({e}); the controller's apply")
-        self.stream.start()
+        self._each(lambda ch: ch.stream.start())
 
     def _shutdown(self) -> None:
         try:
             if self.table is not None:
                 self._stop_table()
         finally:
-            self.stream.stop()
+            for ch in self.channels:
+                if ch.alive:
+                    ch.stream.stop()
 
     def _stop_table(self) -> None:
         """Bring every axis to rest; one retry after clearing a half-read reply."""
@@ -197,8 +248,8 @@ class Sequencer:
             self.table.port.discard_input()
             self.table.stop()
 
-    def _progress(self, samples: int) -> None:
-        self._elapsed_s += samples / self.rate_hz
+    def _progress(self, samples: int, rate_hz: float | None = None) -> None:
+        self._elapsed_s += samples / (rate_hz or self.rate_hz)
         self.display.advance(self._elapsed_s, max(self._estimate_s, self._elapsed_s))
 
     # ------------------------------------------------------------------ IMU samples
@@ -216,71 +267,84 @@ class Sequencer:
         device time after it, by the samples' own time stamps.  So the settle is ``seconds`` of
         device time however fast device time runs against wall time (a twin at --speed 500:
         3 s are 6 ms of wall time, less than the pipeline's latency)."""
-        while True:
-            t_sync = self.stream.sync()
-            if t_sync is not None:
-                break
-            self._check_pause()
-        self.stream.drain()                                  # all at or before t_sync
-        t_end = t_sync + seconds - 0.5 / self.rate_hz        # the sample `seconds` after t_sync is kept
-        while True:
-            dropped, reached = self.stream.discard_before(t_end)
-            self._progress(dropped)
-            if reached:
-                return
-            self._check_pause()
+        t_end = {}
 
-    def _record(self, seg, n: int, poll) -> dict:
-        """Write ``n`` samples into segment ``seg``, calling ``poll()`` now and then.  Returns
-        the window the samples stand for, from the frame count (``window_s``: received plus
-        lost frames times one period; never from wall-clock time), the frames lost in it
-        (``gaps``, from the device's sample times), the longest step between two frames
-        (``longest_step_s``) and the mean temperature."""
-        block_n = max(1, int(round(BLOCK_S * self.rate_hz)))
-        period = 1.0 / self.rate_hz
-        done, temp_sum, temp_n = 0, 0.0, 0
-        with_temp = None
-        first_t = last_t = None
+        def synced(ch):
+            while True:
+                t_sync = ch.stream.sync()
+                if t_sync is not None:
+                    break
+                self._check_pause()
+            ch.stream.drain()                                # all at or before t_sync
+            t_end[id(ch)] = t_sync + seconds - 0.5 / ch.rate_hz   # the sample `seconds` after t_sync is kept
+        self._each(synced)
+        pending = self._alive()
+        wait_s = 0.05 if self.multi else 0.25
+        while pending:
+            ref = self._reference()
+            for ch in list(pending):
+                try:
+                    dropped, reached = ch.stream.discard_before(t_end[id(ch)], wait_s=wait_s)
+                except Exception as e:       # noqa: BLE001 - the IMU's stream failed: lost
+                    self._lose(ch, e)
+                    reached, dropped = True, 0
+                if ch is ref:
+                    self._progress(dropped, ch.rate_hz)
+                if reached:
+                    pending.remove(ch)
+            pending = [ch for ch in pending if ch.alive]
+            if pending:
+                self._check_pause()
+
+    def _record(self, recs: dict, poll) -> None:
+        """Write each IMU's samples into its segment (``recs``: channel -> Recording) until every
+        IMU still recording has its count, calling ``poll()`` now and then.  An IMU that fails
+        meanwhile is lost: its segment is closed as incomplete with the reason."""
         wall0 = time.monotonic()
-        lost, longest = 0, period
-        while done < n:
-            b = self._take(min(block_n, n - done))
-            if first_t is None and len(b):
-                first_t = b.t_s[0]
-            t = b.t_s if last_t is None else np.concatenate([[last_t], b.t_s])
-            steps = np.diff(t)
-            if len(steps):
-                longest = max(longest, float(steps.max()))
-                big = steps > 1.5 * period
-                lost += int(np.round(steps[big] / period - 1.0).sum())
-            last_t = b.t_s[-1]
-            finite = np.isfinite(b.temp_c)
-            if with_temp is None:
-                with_temp = bool(finite.all())
-            temp = None
-            if with_temp:
-                temp = np.where(finite, b.temp_c, np.nanmean(b.temp_c) if finite.any() else 0.0)
-                temp_sum += float(temp.sum())
-                temp_n += len(temp)
-            seg.write(b.t_s, b.accel_mps2, b.gyro_dps, temp)
-            done += len(b)
-            self.display.values_update({**self.stream.live(), "counters": self.stream.counters})
-            self._progress(len(b))
+        wait_s = 0.02 if self.multi else 0.25
+        while True:
+            todo = [(ch, r) for ch, r in recs.items() if ch.alive and r.needed > 0]
+            if not todo:
+                break
+            ref = self._reference()
+            for ch, r in todo:
+                block_n = max(1, int(round(BLOCK_S * ch.rate_hz)))
+                try:
+                    b = ch.stream.take(min(block_n, r.needed), wait_s=wait_s)
+                except Exception as e:      # noqa: BLE001 - the IMU's stream failed: lost
+                    self._lose(ch, e)
+                    r.seg.close("incomplete", note=f"IMU lost while recording: {ch.lost}")
+                    continue
+                r.add(b)
+                if ch is ref:
+                    self._progress(len(b), ch.rate_hz)
+            self._show_values()
             if time.monotonic() - self._last_poll >= POLL_WALL_S:
                 poll()
             self._check_pause()
         poll()
-        if lost:
-            self.display.note(lost_frames_note(seg.name, lost, float(last_t - first_t), time.monotonic() - wall0))
-        return {"window_s": (done + lost) * period, "gaps": lost, "samples": done,
-                "longest_step_s": longest, "temp": temp_sum / temp_n if temp_n else None}
+        for ch, r in recs.items():
+            if ch.alive and r.lost:
+                name = r.seg.name if not self.multi else f"{r.seg.name} (IMU {ch.label})"
+                self.display.note(lost_frames_note(name, r.lost, float(r.last_t - r.first_t),
+                                                   time.monotonic() - wall0))
 
-    def _data_loss(self, rec) -> str | None:
+    def _show_values(self) -> None:
+        """The live values: the first IMU's, and with several a line per IMU."""
+        ref = self._reference()
+        values = {**ref.stream.live(), "counters": ref.stream.counters}
+        if self.multi:
+            values["imus"] = [{"label": ch.label, "lost": ch.lost,
+                               **({} if not ch.alive else {**ch.stream.live(), "counters": ch.stream.counters})}
+                              for ch in self.channels]
+        self.display.values_update(values)
+
+    def _data_loss(self, rec, rate_hz: float | None = None) -> str | None:
         """Why a recording lost too much data (station.yaml run.max_missing_fraction and
         run.max_gap_s), or None."""
         run = self.config.run
         share = rec["gaps"] / (rec["samples"] + rec["gaps"]) if rec["samples"] else 1.0
-        gap = rec["longest_step_s"] - 1.0 / self.rate_hz
+        gap = rec["longest_step_s"] - 1.0 / (rate_hz or self.rate_hz)
         problems = []
         if share > run.max_missing_fraction:
             problems.append(f"{rec['gaps']} frames lost ({100 * share:.2f} %, limit "
@@ -295,26 +359,51 @@ class Sequencer:
         most ``run.rerecord_attempts`` times.  ``completed(rec)`` gives the manifest keys of a
         good recording."""
         attempts = 1 + self.config.run.rerecord_attempts
+        pending = [ch for ch in self._alive() if name not in ch.done]
+        problems: dict = {}
         for attempt in range(1, attempts + 1):
-            with self.writer.begin_segment(name, kind, **meta) as seg:
+            if not pending:
+                return
+            with contextlib.ExitStack() as stack:
+                recs = {}
+                for ch in pending:
+                    seg = stack.enter_context(ch.writer.begin_segment(name, kind, **segment_meta(meta, ch.to_case)))
+                    recs[ch] = Recording(seg, int(round(n * ch.rate_hz / self.rate_hz)), ch.rate_hz)
                 if start is not None:
                     start()
-                rec = self._record(seg, n, poll)
-                problem = self._data_loss(rec)
-                if problem is None:
-                    seg.close("complete", **completed(rec))
-                    return
-                seg.close("incomplete", note=f"bad recording: {problem}")
-            self.writer = CaptureWriter.reopen(self.writer.path)
-            if attempt < attempts:
-                self.display.note(f"{name}: bad recording ({problem}): kept aside, recording it again "
-                                  f"({attempt}/{attempts - 1})")
-        raise SequencerError(f"{name}: every recording lost too much data ({problem}; {attempts} attempts): "
-                             "check the IMU's connection and the computer's load, then resume")
+                self._record(recs, poll)
+                problems = {}
+                for ch, r in recs.items():
+                    if not ch.alive:
+                        continue              # closed as incomplete when it was lost
+                    rec = r.result()
+                    problem = self._data_loss(rec, ch.rate_hz)
+                    if problem is None:
+                        r.seg.close("complete", **completed(rec))
+                        ch.done = ch.done | {name}
+                    else:
+                        r.seg.close("incomplete", note=f"bad recording: {problem}")
+                        problems[id(ch)] = problem
+            for ch in pending:
+                if id(ch) in problems:
+                    ch.writer = CaptureWriter.reopen(ch.writer.path)
+            pending = [ch for ch in pending if id(ch) in problems]
+            if pending and attempt < attempts:
+                for ch in pending:
+                    who = f" (IMU {ch.label})" if self.multi else ""
+                    self.display.note(f"{name}{who}: bad recording ({problems[id(ch)]}): kept aside, recording "
+                                      f"it again ({attempt}/{attempts - 1})")
+        for ch in pending:
+            problem = problems[id(ch)]
+            error = SequencerError(f"{name}: every recording lost too much data ({problem}; {attempts} "
+                                   "attempts): check the IMU's connection and the computer's load, then resume")
+            self._lose(ch, error)
 
     # ------------------------------------------------------------------ steps
     def _warmup(self, step: WarmUp) -> None:
-        self.stream.drain()
+        """Until the first IMU's temperature settles (the others warm up beside it; their
+        samples are dropped)."""
+        self._each(lambda ch: ch.stream.drain())
         t_first = None
         times, temps, rows = [], [], ["t_s,temp_c"]
         while True:
@@ -327,7 +416,8 @@ class Sequencer:
                 temps.append(float(b.temp_c[finite].mean()))
                 rows.append(f"{times[-1]:.3f},{temps[-1]:.4f}")
             total = step.max_s if step.slope_c_per_h is not None else step.min_s
-            self.display.values_update({**self.stream.live(), "counters": self.stream.counters})
+            self._each(lambda ch: ch is self.channels[0] or ch.stream.drain())
+            self._show_values()
             self.display.advance(min(elapsed, total), total)
             if elapsed >= step.min_s:
                 if step.slope_c_per_h is None:
@@ -341,7 +431,8 @@ class Sequencer:
                                       f"(slope {slope if slope is not None else float('nan'):+.3f} C/h)")
                     break
             self._check_pause()
-        self.writer.write_file("warmup.csv", "\n".join(rows) + "\n")
+        for ch in self._alive():
+            ch.writer.write_file("warmup.csv", "\n".join(rows) + "\n")
 
     def _move(self, step: MoveTo) -> None:
         targets = list(step.positions_deg)

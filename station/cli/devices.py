@@ -12,17 +12,25 @@ import threading
 from station.cli import argtypes
 from station.core.errors import UserError
 
+MAX_IMUS = 32            # IMU twins one `sim serve` loop serves
+
 
 def add_parsers(sub) -> None:
     """Add ``sim`` (with ``serve``) and ``probe`` to the station sub-command parsers."""
     sim = sub.add_parser("sim", help="simulated devices")
     sim_sub = sim.add_subparsers(dest="sim_command", required=True, metavar="SIM_COMMAND",
                                  parser_class=type(sim))
-    serve = sim_sub.add_parser("serve", help="serve a table twin and an IMU twin on pseudo-terminals")
+    serve = sim_sub.add_parser("serve", help="serve a table twin and IMU twins on pseudo-terminals")
     serve.add_argument("--speed", type=argtypes.positive, default=1.0,
                        help="device time per wall time (default 1; 50 = fifty times faster)")
-    serve.add_argument("--sim-truth", metavar="FILE", help="true sensor errors and bench (YAML)")
-    serve.add_argument("--seed", type=argtypes.seed, default=1, help="seed of the default truth and the noise")
+    serve.add_argument("--sim-truth", metavar="FILE", action="append",
+                       help="true sensor errors and bench (YAML); with --imus N once for all or N times, "
+                            "one per IMU")
+    serve.add_argument("--seed", type=argtypes.seed, default=1,
+                       help="seed of the default truth and the noise (IMU k: seed + k - 1)")
+    serve.add_argument("--imus", type=argtypes.whole(1), default=1, metavar="N",
+                       help="N independent IMU twins on the one table, each on its own pseudo-terminal "
+                            "(own truth, noise seed and serial number; default 1)")
     serve.add_argument("--faults", metavar="FILE", help="faults to inject (YAML, docs/twins.md)")
     serve.add_argument("--axes", type=int, choices=(1, 2, 3),
                        help="table axes (default 3 for acutrol, 1 for aerosmith)")
@@ -76,7 +84,17 @@ def cmd_sim_serve(args) -> int:
     from sim_devices.truth import Truth, default_truth
     from sim_devices.twins.faults import Faults, load_faults
 
-    truth = Truth.from_yaml(args.sim_truth) if args.sim_truth else default_truth(args.seed)
+    n = int(args.imus)
+    if n > MAX_IMUS:
+        raise UserError(f"--imus {n}: at most {MAX_IMUS} IMU twins on one table")
+    files = args.sim_truth or []
+    if len(files) not in (0, 1, n):
+        raise UserError(f"--sim-truth: give it once (every IMU) or once per IMU ({n}), got {len(files)}")
+    if not files:
+        truth = [default_truth(args.seed + k) for k in range(n)]
+    else:
+        loaded = [Truth.from_yaml(f) for f in files]
+        truth = loaded * n if len(loaded) == 1 else loaded
     faults = load_faults(args.faults, axes) if args.faults else Faults()
     try:
         server = _bench_server(truth, args, axes, faults, csv_format)
@@ -87,9 +105,15 @@ def cmd_sim_serve(args) -> int:
                 for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
     try:
         print(f"table: {server.table_path}", flush=True)
-        print(f"imu: {server.imu_path}", flush=True)
-        print(f"station sim serve: {axes}-axis {args.table_protocol} table, {args.imu_protocol} IMU "
-              f"at {truth.sample_rate_hz:g} Hz, speed {args.speed:g}; stop with Ctrl-C",
+        if n == 1:
+            print(f"imu: {server.imu_path}", flush=True)
+        else:
+            for k, line in enumerate(server.lines, 1):
+                print(f"imu{k}: {line.port.path}" + (f" serial {line.serial_number}" if line.serial_number else ""),
+                      flush=True)
+        what = f"{args.imu_protocol} IMU" if n == 1 else f"{n} {args.imu_protocol} IMUs"
+        print(f"station sim serve: {axes}-axis {args.table_protocol} table, {what} "
+              f"at {truth[0].sample_rate_hz:g} Hz, speed {args.speed:g}; stop with Ctrl-C",
               file=sys.stderr, flush=True)
         server.serve_forever(stop)
     finally:
@@ -190,7 +214,7 @@ def _bench_server(truth, args, axes, faults, csv_format):
                                            table_protocol=args.table_protocol,
                                            imu_protocol=args.imu_protocol, faults=faults,
                                            csv_format=csv_format, table_framing=args.table_framing,
-                                           table_tcp_port=args.table_tcp_port))
+                                           table_tcp_port=args.table_tcp_port, imus=int(args.imus)))
 
 
 def _csv_format(spec: str):

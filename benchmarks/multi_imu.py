@@ -1,0 +1,152 @@
+"""Several IMUs in one run (issue 29; docs/fleet.md, "Several IMUs in one run"): the wall time of a
+``station run`` recording 4 IMUs against the device twins, against the same run with 1 IMU, and
+the frames lost.  Whole processes: ``station sim serve --imus N`` and ``station run`` each in its
+own process, as a user runs them; 1-IMU and 4-IMU runs alternate (``--repeats`` pairs) so that a
+change of the machine's load falls on both.
+
+    python benchmarks/multi_imu.py [--imus 4] [--speed 20] [--repeats 3] [--dwell-s 10] [--rate-dps 30]
+
+Printed per run: wall time of the recording (from the start of ``station run`` to its first
+estimate), of the whole command (with the estimates: one per IMU), CPU time (user + system) of
+the run and of the twins' process, frames lost (gaps in every bundle, from the frames' own time
+stamps), and the verdicts; then the medians and the ratios N-IMU / 1-IMU.  Both runs use
+``imus:`` (a list of 1 for the reference), so that they share the code path.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+LIMITS = "[{max_rate_dps: 300, max_accel_dps2: 300, move_rate_dps: 90, move_accel_dps2: 180, rate_accel_dps2: 150}]"
+
+
+def serve(n: int, speed: float, seed: int):
+    """``station sim serve --imus n``: (process, table path, IMU paths)."""
+    proc = subprocess.Popen([sys.executable, "-m", "station.cli", "sim", "serve", "--imus", str(n),
+                             "--speed", str(speed), "--seed", str(seed)],
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=ROOT)
+    table, imus = None, []
+    while table is None or len(imus) < n:
+        line = proc.stdout.readline()
+        if not line:
+            raise RuntimeError("station sim serve ended before printing its ports")
+        key, _, rest = line.partition(": ")
+        if key == "table":
+            table = rest.split()[0]
+        elif key.startswith("imu"):
+            imus.append(rest.split()[0])
+    return proc, table, imus
+
+
+def cpu_of(pid: int) -> float:
+    """User + system CPU seconds of a running process (Linux /proc)."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def one_run(n: int, args, work: Path, index: int) -> dict:
+    server, table, imus = serve(n, args.speed, args.seed)
+    try:
+        config = work / f"station-{n}-{index}.yaml"
+        ports = "\n".join(f"  - {{port: {p}}}" for p in imus)
+        config.write_text(f"version: 1\nimus:\n{ports}\ntable:\n  port: {table}\n  axes: 3\n  limits: {LIMITS}\n"
+                          "run:\n  operator: false\n  settle_s: 2\n")
+        out = work / f"run-{n}-{index}"
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        t0 = time.monotonic()
+        proc = subprocess.Popen([sys.executable, "-m", "station.cli", "run", "--config", str(config),
+                                 "--scheme", "optimal9", "--dwell-s", str(args.dwell_s), "--rate-dps",
+                                 str(args.rate_dps), "--rotation-s", str(360.0 / args.rate_dps), "--out", str(out),
+                                 "--no-history"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=work)
+        recorded = [None]
+        lines = []
+
+        def read():
+            for line in proc.stdout:
+                lines.append(line)
+                if recorded[0] is None and line.startswith("--- IMU"):
+                    recorded[0] = time.monotonic() - t0
+        reader = threading.Thread(target=read)
+        reader.start()
+        err = proc.stderr.read()
+        proc.wait()
+        reader.join()
+        total = time.monotonic() - t0
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        run_cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+        serve_cpu = cpu_of(server.pid)
+    finally:
+        server.send_signal(signal.SIGINT)
+        try:
+            server.wait(10)
+        except subprocess.TimeoutExpired:
+            server.kill()
+            server.wait()
+    sys.path.insert(0, str(ROOT))
+    from station.io.calfile import read_calfile
+    from station.io.capture import read_capture
+
+    gaps, verdicts = 0, []
+    for bundle in sorted(p for p in out.iterdir() if p.is_dir()):
+        capture = read_capture(bundle)
+        gaps += sum(seg.data.gaps for seg in capture.complete())
+        try:
+            verdicts.append(read_calfile(bundle / "calibration.yaml")["fit"]["verdict"]["result"])
+        except Exception:      # noqa: BLE001 - a run that failed: said below
+            verdicts.append("none")
+    lost_notes = sum("frames lost" in line for line in lines) + err.count("frames lost")
+    return {"n": n, "status": proc.returncode, "record_s": recorded[0] or float("nan"), "total_s": total,
+            "run_cpu_s": run_cpu, "serve_cpu_s": serve_cpu, "gaps": gaps, "lost_notes": lost_notes,
+            "verdicts": verdicts, "bundles": len(verdicts)}
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--imus", type=int, default=4)
+    p.add_argument("--speed", type=float, default=20.0)
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--dwell-s", type=float, default=10.0)
+    p.add_argument("--rate-dps", type=float, default=30.0, help="rotation rate (one revolution each way)")
+    p.add_argument("--seed", type=int, default=7)
+    args = p.parse_args()
+    os.environ["PYTHONPATH"] = str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")
+    print(f"optimal9 (dwell {args.dwell_s:g} s, 1 revolution at {args.rate_dps:g} deg/s per rotation) against the twins at "
+          f"--speed {args.speed:g}; {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at start")
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for i in range(args.repeats):
+            for n in (1, args.imus):
+                r = one_run(n, args, Path(tmp), i)
+                rows.append(r)
+                print(f"{n} IMU(s): exit {r['status']}, recording {r['record_s']:.1f} s, whole command "
+                      f"{r['total_s']:.1f} s wall; CPU run {r['run_cpu_s']:.1f} s, twins {r['serve_cpu_s']:.1f} s; "
+                      f"frames lost {r['gaps']} (notes {r['lost_notes']}); verdicts {', '.join(r['verdicts'])}; "
+                      f"load {os.getloadavg()[0]:.1f}", flush=True)
+    one = [r for r in rows if r["n"] == 1]
+    many = [r for r in rows if r["n"] == args.imus]
+
+    def med(rs, key):
+        return statistics.median(r[key] for r in rs)
+    for key, what in (("record_s", "recording wall"), ("total_s", "whole command wall"),
+                      ("run_cpu_s", "run CPU"), ("serve_cpu_s", "twins CPU")):
+        print(f"median {what}: 1 IMU {med(one, key):.1f} s, {args.imus} IMUs {med(many, key):.1f} s, "
+              f"ratio {med(many, key) / med(one, key):.2f}")
+    print(f"frames lost in all {args.imus}-IMU runs: {sum(r['gaps'] for r in many)}; in all 1-IMU runs: "
+          f"{sum(r['gaps'] for r in one)}; bundles that pass: "
+          f"{sum(v == 'passes' for r in rows for v in r['verdicts'])}/{sum(r['bundles'] for r in rows)}")
+
+
+if __name__ == "__main__":
+    main()
