@@ -210,6 +210,7 @@ def _summary_lines(d) -> list[str]:
              f"chi2 {d.chi2:.1f} for {d.dof} degrees of freedom (reduced {d.reduced_chi2:.3f}, p = {d.p_value:.3g})"]
     lines += [f"where it fails: {f}" for f in d.failures]
     lines += [f"not kept: {r.effect}: {r.reason}" for r in d.rejected]
+    lines += [f"why it still fails: {line}" for line in getattr(d, "account", None) or []]
     return lines + [f"note: {n}" for n in d.notes]
 
 
@@ -223,6 +224,8 @@ def to_json(d, steps) -> dict:
         "verdict": d.verdict,
         "effects": d.effects,
         "failures": d.failures,
+        # a fit that still fails: what was tried, what each explained, what the residuals follow
+        "failure_account": list(getattr(d, "account", None) or []),
         "notes": d.notes,
         # what the scan before the fit found and left out (station/estimate/data_faults.py)
         "data_faults": getattr(getattr(getattr(d.result, "model", None), "s", None), "data_faults", None),

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 from station.diagnose.core import ALPHA, Diagnosis, chi2_sf, diagnose, fit_fails, overdispersion, rms_by_kind
 from station.diagnose.holdout import Holdout, judge, leave_one_segment_out
-from station.diagnose.words import caveats
+from station.diagnose.words import caveats, failure_account
 from station.estimate import lsq
 from station.model.registry import EffectRegistry
 
@@ -276,6 +276,7 @@ def conclude(d: Diagnosis, summaries, steps=(), search_terms: bool = True) -> Di
         # axis in the words comes first all the same
         if now:
             d.verdict += f"; but first look at this: {now[0]}"
+        d.account = failure_account(d, steps)
         return d
     if search_terms:
         from station.diagnose import terms
@@ -313,9 +314,11 @@ def conclude(d: Diagnosis, summaries, steps=(), search_terms: bool = True) -> Di
         d.verdict = (f"{head}; outside the library the residuals follow {'; '.join(prop.lines())} "
                      f"(with these terms reduced chi2 {prop.reduced_after:.3g}, {check}){aliases}{instead}; write them "
                      "as an effect plugin with --emit-effect FILE, check the physics, add it with --add")
-    else:
-        d.verdict = (f"{head}; no effect of the library and no term of the dictionary accounts for it: "
-                     "see where it fails")
+    d.account = failure_account(d, steps)
+    if prop is None:
+        patterns = [line for line in d.account if line.startswith("the residual of ")]
+        d.verdict = (f"{head}; no effect of the library and no term of the dictionary accounts for it"
+                     + (f"; {patterns[0]}" if patterns else "; see what was tried and where it fails"))
     return d
 
 

@@ -96,6 +96,8 @@ class Diagnosis:
     notes: list = field(default_factory=list)   # how the statistics were taken (over-dispersion)
     rejected: list = field(default_factory=list)  # auto.Rejection: tried by --auto and not kept
     proposal: object = None                  # terms.Proposal: terms found outside the library
+    account: list = field(default_factory=list)  # a fit that still fails: what was tried, what each
+                                             #   explained, what the residuals follow (words.failure_account)
 
 
 def _data_mask(labels) -> np.ndarray:

@@ -279,6 +279,10 @@ def _diagnosis_section(inp: ReportInput, figures: dict) -> str:
         parts.append("<p>" + "; ".join(_e(f"{n} = {v:.4g} ± {s:.2g} {u}") for n, v, s, u in st.estimate) + "</p>")
     if inp.steps:
         parts.append(_verdict_box(final.verdict, inp, "after the added effects: "))
+    account = getattr(final, "account", None) or []
+    if account:
+        parts.append("<h3>Why it still fails: what was tried, what each explained, what the residuals follow</h3>"
+                     "<ul>" + "".join(f"<li>{_e(line)}</li>" for line in account) + "</ul>")
     parts.append("<h3>Candidate effects (score test at the fit as it was first made)</h3>")
     parts.append(_candidates_table(first))
     for name in figures:
