@@ -158,7 +158,9 @@ def _diagnose(args, job) -> tuple:
                                 on_first=figures.first_known if job is not None else None)
         first = steps[0].before if steps else final
     else:
-        steps, first = [], diagnose(lsq.fit(s, [reg.create(e) for e in effects]), registry=reg)
+        from station.estimate.profile import fit_located
+
+        steps, first = [], diagnose(fit_located(s, [reg.create(e) for e in effects]), registry=reg)
         auto.conclude(first, s)
         final = first
     if args.emit_effect:

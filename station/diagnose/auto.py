@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from station.diagnose.core import ALPHA, Diagnosis, chi2_sf, diagnose, fit_fails, overdispersion, rms_by_kind
 from station.diagnose.holdout import Holdout, judge, leave_one_segment_out
 from station.diagnose.words import caveats, failure_account
-from station.estimate import lsq
+from station.estimate import lsq, profile
 from station.model.registry import EffectRegistry
 
 MAX_STEPS = 6
@@ -74,7 +74,28 @@ def _rebuild(effects, registry, extra=()) -> list:
     (they are not in the registry), then ``extra``."""
     from station.diagnose.terms import TermsEffect
 
-    return [e if isinstance(e, TermsEffect) else registry.create(e.id) for e in effects] + list(extra)
+    return [e if isinstance(e, TermsEffect) else _created(registry, e.id, e.state()) for e in effects] + list(extra)
+
+
+def _created(registry, effect_id: str, state: dict | None = None):
+    """A fresh instance of a library effect with what an earlier instance or the candidate's
+    score test decided restored (a bias step's located time); setup() decides the rest again."""
+    e = registry.create(effect_id)
+    if state:
+        e.restore(state)
+    return e
+
+
+def _said(after: Diagnosis, effect_id: str) -> list[str]:
+    """An added effect's own words at the refit (a bias step: "gyro z bias steps by ... at t = ...")
+    and its notes (where its time was located)."""
+    import numpy as np
+
+    effect = next((e for e in after.result.model.effects if e.id == effect_id), None)
+    if effect is None or not callable(getattr(effect, "words", None)):
+        return []
+    est = added_parameters(after, effect_id)
+    return effect.words(np.array([v for _, v, _, _ in est]), np.array([s for _, _, s, _ in est])) + list(effect.notes())
 
 
 DISCOVERED = "discovered_terms"
@@ -132,7 +153,8 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
     ``on_first(diagnosis)``, when given, is called with the diagnosis of the model as fitted as
     soon as it is made (a report draws its candidates' figures meanwhile)."""
     registry = registry or EffectRegistry()
-    current = diagnose(lsq.fit(summaries, [registry.create(e) for e in effects], attitudes), registry=registry)
+    current = diagnose(profile.fit_located(summaries, [registry.create(e) for e in effects], attitudes),
+                       registry=registry)
     if on_first is not None:
         on_first(current)
     h_current = None          # the leave-one-segment-out check, only once a candidate is tried
@@ -146,7 +168,7 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
             if progress:
                 progress(cand.effect)
             after = diagnose(lsq.fit(summaries, _rebuild(current.result.model.effects, registry,
-                                                         [registry.create(cand.effect)]),
+                                                         [_created(registry, cand.effect, cand.state)]),
                                      attitudes, like=current.result.model), registry=registry)
             if h_current is None:
                 h_current = leave_one_segment_out(current.result)
@@ -155,7 +177,7 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
             if ok:
                 kept = Step(cand.effect, current, after, cand.predicted_chi2_drop, current.chi2 - after.chi2,
                             added_parameters(after, cand.effect), cv_b, cv_a, share,
-                            caveats(summaries, cand.effect))
+                            _said(after, cand.effect) + caveats(summaries, cand.effect))
                 if discover and term_steps < MAX_TERM_STEPS and fit_fails(current.result):
                     alt = _terms_step(current, h_current, summaries, registry, (cand.effect, after, h_after))
                     if alt is not None:       # the effect stays a candidate for the next steps

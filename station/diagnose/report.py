@@ -466,7 +466,9 @@ def _diagnosis(capture, effects, auto: bool, on_first=None) -> tuple:
         steps, final = auto_loop.run(s, list(effects), on_first=on_first)
         return (steps[0].before if steps else final), steps, final
     registry = EffectRegistry()
-    first = diagnose(lsq.fit(s, [registry.create(e) for e in effects]), registry=registry)
+    from station.estimate.profile import fit_located
+
+    first = diagnose(fit_located(s, [registry.create(e) for e in effects]), registry=registry)
     return first, [], first
 
 

@@ -8,6 +8,7 @@ the library's ids to classes; station.model.registry adds the user's own (plugin
 from station.model.accel_cross_axis import AccelCrossAxis
 from station.model.accel_cubic import AccelCubic
 from station.model.bias_drift import BiasDrift
+from station.model.bias_step import BiasStep
 from station.model.effect import Effect, Param, SampleContext
 from station.model.g_sensitivity import GyroGSensitivity
 from station.model.gyro_anisoelastic import GyroAnisoelastic
@@ -24,7 +25,7 @@ LIBRARY = {cls.id: cls for cls in (AccelLeverArm, AccelNonlinearity, GyroGSensit
                                    GyroScaleAsymmetry, TemperatureBias, TimeOffset,
                                    AccelCubic, ScaleTemperature, TemperatureBiasQuadratic,
                                    GyroAnisoelastic, AccelCrossAxis, GyroRateNonlinearity,
-                                   BiasDrift)}
+                                   BiasDrift, BiasStep)}
 EFFECTS = LIBRARY
 
 __all__ = ["EFFECTS", "LIBRARY", "Effect", "Param", "SampleContext"]
