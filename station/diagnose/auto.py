@@ -167,8 +167,10 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
         for cand in tries:
             if progress:
                 progress(cand.effect)
-            after = diagnose(lsq.fit(summaries, _rebuild(current.result.model.effects, registry,
-                                                         [_created(registry, cand.effect, cand.state)]),
+            effect = registry.create(cand.effect)
+            if profile.is_profiled(effect):     # a bias step: its time from fits of the best candidates
+                profile.locate(current.result, effect)
+            after = diagnose(lsq.fit(summaries, _rebuild(current.result.model.effects, registry, [effect]),
                                      attitudes, like=current.result.model), registry=registry)
             if h_current is None:
                 h_current = leave_one_segment_out(current.result)

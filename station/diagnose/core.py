@@ -144,7 +144,7 @@ def score_test(result, effect_id, registry: EffectRegistry | None = None, overdi
         effect, effect_id = effect_id, effect_id.id
     located = 1
     if profile.is_profiled(effect) and getattr(effect, "step_time_s", 0.0) is None:
-        located = max(len(profile.locate(result, effect)), 1)      # the best of this many candidates
+        located = max(len(profile.locate(result, effect, refine=0)), 1)   # the best of this many candidates
     extended = lsq.Model(model.s, [*model.effects, effect], model.attitudes, like=model)
     extended.priors = dict(model.priors)
     n = model.layout.size

@@ -81,22 +81,23 @@ ALIKE_CHI2 = 6.63    # the 1 % point of chi2 on one degree of freedom
 REFINE = 3         # the candidates of largest score fitted in full, the best chi2 kept
 
 
-def locate(result, effect) -> list:
+def locate(result, effect, refine: int = REFINE) -> list:
     """Set ``effect`` at its best candidate for the fit ``result``: the REFINE candidates of
     largest score are fitted in full and the one of lowest chi2 kept (the score is a one-step
     prediction at the fit without the effect: two neighbouring boundaries that a parameter of the
     model can partly trade, a gyro's scale between a rotation's two directions, score alike).
-    The profile is kept on it (``effect.profile``) and returned."""
+    ``refine`` 0: the largest score only (a candidate's score test: no fit).  The profile is kept
+    on it (``effect.profile``) and returned."""
     prof = profile(result, effect)
     if prof:
-        top = sorted(prof, key=lambda p: -p[3])[:REFINE]
+        top = sorted(prof, key=lambda p: -p[3])[:max(refine, 1)]
         fitted = []
-        for cand in top:
+        for cand in top if len(top) > 1 else ():
             trial = copy.deepcopy(effect)
             trial.locate(cand[0], "")
             fitted.append((lsq.fit(result.model.s, [*result.model.effects, trial], result.model.attitudes,
                                    like=result.model).chi2, cand))
-        best, (t, before, after, drop) = min(fitted, key=lambda f: f[0])
+        best, (t, before, after, drop) = min(fitted, key=lambda f: f[0]) if fitted else (0.0, top[0])
         # the others whose chi2 is within the 1 % point of chi2 on one degree of freedom (scaled by
         # the over-dispersion of the best fit when it fails): the capture cannot tell them from the best
         dof = result.dof - len(effect.params)
@@ -104,7 +105,8 @@ def locate(result, effect) -> list:
         alike = [f"{c[1]} -> {c[2]} (chi2 +{chi2 - best:.1f})" for chi2, c in fitted
                  if c[0] != t and chi2 - best < ALIKE_CHI2 * phi]
         effect.locate(t, f"located between {before} and {after} by a profile of the score test over {len(prof)} "
-                         f"boundaries between segments (the best {len(top)} fitted)"
+                         f"boundaries between segments"
+                         + (f" (the best {len(top)} fitted)" if fitted else "")
                       + (f"; as likely: {', '.join(alike)}" if alike else ""))
     effect.profile = prof
     return prof

@@ -17,6 +17,7 @@ from station.model.lever_arm import AccelLeverArm
 from station.model.nonlinearity import AccelNonlinearity
 from station.model.scale_asymmetry import GyroScaleAsymmetry
 from station.model.scale_temperature import ScaleTemperature
+from station.model.table_encoder_scale import TableEncoderScale
 from station.model.temperature import TemperatureBias
 from station.model.temperature_quadratic import TemperatureBiasQuadratic
 from station.model.time_offset import TimeOffset
@@ -25,7 +26,7 @@ LIBRARY = {cls.id: cls for cls in (AccelLeverArm, AccelNonlinearity, GyroGSensit
                                    GyroScaleAsymmetry, TemperatureBias, TimeOffset,
                                    AccelCubic, ScaleTemperature, TemperatureBiasQuadratic,
                                    GyroAnisoelastic, AccelCrossAxis, GyroRateNonlinearity,
-                                   BiasDrift, BiasStep)}
+                                   BiasDrift, BiasStep, TableEncoderScale)}
 EFFECTS = LIBRARY
 
 __all__ = ["EFFECTS", "LIBRARY", "Effect", "Param", "SampleContext"]
