@@ -105,7 +105,7 @@ def test_compensation_inverts_every_library_effect_and_a_plugin():
         if eid in ("temperature_bias", "scale_temperature", "temperature_bias_quadratic"):
             e.reference_c = 26.0
         if eid == "bias_step":
-            e.locate(2.0, "set by the test")      # halfway through the 4 s of samples
+            e.locate(2.005, "set by the test")    # mid-run, between two samples (0.01 s apart)
         effects.append((e, size * rng.uniform(-1, 1, len(e.params))))      # internal units
     # forward: what the sensors output at the true (table-clock) times
     w_rad = np.radians(w_p)

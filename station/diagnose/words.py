@@ -34,7 +34,8 @@ def describe_failures(result, labels, segs, fails: bool = False) -> list[str]:
         pattern = _pattern(sensor, kind, rows, s)
         out.append(f"{sensor}, {kind} segments {only}: residuals {rms:.1f} times the noise"
                    f"{'; ' + pattern if pattern else ''}; worst: {where}")
-    out = _moved_axes(result) + _time_patterns(result, segs) + _bench_patterns(result, segs) + out   # specific causes first
+    out = (_moved_axes(result) + _time_patterns(result, segs) + _bench_patterns(result, segs)
+           + _once_per_revolution(result, segs) + out)   # specific causes first
     if fails and not out:
         out.append(_spread_everywhere(groups))
     return out
@@ -212,6 +213,52 @@ def _bench_patterns(result, segs) -> list[str]:
     return out
 
 
+ONCE_RMS = 3.0           # the rotations' first harmonic along their own axis stands out: RMS above
+                         #   this (whitened; 1 expected) in at least ONCE_SHARE of the rotations
+ONCE_SHARE = 0.75
+
+
+def _once_per_revolution(result, segs) -> list[str]:
+    """An acceleration at the rotation frequency along the rotation's own axis: gravity has no
+    part there that turns (its component along the axis is constant), nor has any error of the
+    accelerometers' scale or misalignment the model does not already take (those mix gravity's
+    turning part, across the axis, into the axis' harmonic only through parameters the fit
+    has).  What is left there is a vibration or an imbalance of the table fixed to its rotation
+    (or a platter whose axis wobbles once per turn)."""
+    s = result.model.s
+    steady = {r.name: r for r in s.rotations if r.steady}
+    along, names = [], []
+    for seg in segs:
+        r = steady.get(seg.name)
+        if r is None or seg.kind != "rotation":
+            continue
+        c = [seg.values.get(("accel_cos", a)) for a in "xyz"]
+        sn = [seg.values.get(("accel_sin", a)) for a in "xyz"]
+        if None in c or None in sn:
+            continue
+        axis = np.asarray(r.axis_body, float)
+        axis = axis / np.linalg.norm(axis)
+        along.append(float(np.hypot(axis @ np.array(c), axis @ np.array(sn)) / np.sqrt(2.0)))
+        names.append((seg.name, r))
+    if len(along) < 2:
+        return []
+    along = np.array(along)
+    share = float(np.mean(along > ONCE_RMS))
+    if share < ONCE_SHARE:
+        return []
+    # whitened first-harmonic component -> m/s^2: its noise is sigma sqrt(2 / N) over whole revolutions
+    n = np.array([r.samples for _, r in names], float)
+    amp = along * np.sqrt(2.0) * float(np.mean(s.accel_sigma)) * np.sqrt(2.0 / n)
+    size = (f"{np.median(amp) / 9.80665e-6:.3g} µg" if not getattr(s, "accel_raw", False)
+            else f"{np.median(amp):.3g} output units")
+    return [f"accelerometer, rotation segments: once per revolution along the rotation's own axis in {share:.0%} of "
+            f"the rotations (first harmonic along the axis {np.sqrt(np.mean(along ** 2)):.1f} times the noise; about "
+            f"{size}): gravity has no turning part along the axis, so this is an acceleration of the table at the "
+            "rotation frequency, a vibration or imbalance of the table fixed to its rotation (a rotor out of balance, "
+            "a bearing, a belt); not an error of the IMU, and not compensated: balance the platter or load it "
+            "symmetrically, or check the table's vibration at the rotation rate"]
+
+
 def _rms(values) -> float:
     return float(np.sqrt(np.mean(np.square(values)))) if len(values) else 0.0
 
@@ -270,6 +317,10 @@ def caveats(summaries, effect_id: str) -> list[str]:
         out.append(f"every rotation is at one rate ({rates[0]:g} °/s): the size effect and any other "
                    "term in the square of the rate act alike; turn at two rates to confirm it grows "
                    "with the square of the rate")
+    if effect_id in ("rotation_axis_offsets", "accel_lever_arm") and len(rates) == 1:
+        out.append(f"every rotation is at one rate ({rates[0]:g} °/s): an offset of the rotations' accelerometer "
+                   "mean is also what a table vibrating once per revolution leaves (its part across the axis); "
+                   "turn at two rates to confirm it grows with the square of the rate")
     if effect_id == "accel_nonlinearity" and summaries.rotations and len(rates) == 1:
         out.append("a second harmonic in the rotations can also come from a wobbling table axis; "
                    "statics at ±1 g and 45° separate the two")

@@ -7,6 +7,7 @@ the library's ids to classes; station.model.registry adds the user's own (plugin
 """
 from station.model.accel_cross_axis import AccelCrossAxis
 from station.model.accel_cubic import AccelCubic
+from station.model.axis_offsets import RotationAxisOffsets
 from station.model.bias_drift import BiasDrift
 from station.model.bias_step import BiasStep
 from station.model.effect import Effect, Param, SampleContext
@@ -26,7 +27,8 @@ LIBRARY = {cls.id: cls for cls in (AccelLeverArm, AccelNonlinearity, GyroGSensit
                                    GyroScaleAsymmetry, TemperatureBias, TimeOffset,
                                    AccelCubic, ScaleTemperature, TemperatureBiasQuadratic,
                                    GyroAnisoelastic, AccelCrossAxis, GyroRateNonlinearity,
-                                   BiasDrift, BiasStep, TableEncoderScale)}
+                                   BiasDrift, BiasStep, TableEncoderScale,
+                                   RotationAxisOffsets)}
 EFFECTS = LIBRARY
 
 __all__ = ["EFFECTS", "LIBRARY", "Effect", "Param", "SampleContext"]

@@ -25,8 +25,8 @@ class BiasStep(Effect):
             "capture started); the base biases are the ones before the step")
     excited_by = ("segments on both sides of the step in time, the same attitude (or any attitude, for the "
                   "gyro, which sees the step directly) before and after it; a step between the statics and the "
-                  "rotations is aliased with an offset every rotation shares: a static after the rotations "
-                  "separates them")
+                  "rotations (all statics first, then all rotations) is aliased with an offset every rotation "
+                  "shares and is not a candidate: a static after the rotations separates them")
     magnitudes = ("10-1000 µg and 1-100 °/h (MEMS after a knock or a mode change); a navigation-grade IMU "
                   "that steps is faulty")
     signature = ("every segment in time order: residuals that are about constant, jump at one boundary and stay "
@@ -53,8 +53,14 @@ class BiasStep(Effect):
             return []
         t0 = min(x.t_mid_s for x in segs)
         segs.sort(key=lambda x: x.t_mid_s)
+        static = [any(x is st for st in summaries.statics) for x in segs]
         out = []
         for k in range(MIN_SIDE, len(segs) - MIN_SIDE + 1):
+            if len(set(static[:k])) == 1 and len(set(static[k:])) == 1 and static[0] != static[-1]:
+                # statics before, rotations after (or the reverse): a step there is any offset every
+                # rotation shares (a scale asymmetry, g-sensitivity at one rate); not a candidate
+                # (the words say so: station.diagnose.words._time_patterns)
+                continue
             a, b = segs[k - 1], segs[k]
             end_a = a.t_mid_s + 0.5 * a.duration_s
             start_b = b.t_mid_s - 0.5 * b.duration_s

@@ -81,6 +81,13 @@ class TableEncoderScale(Effect):
     def params(self):
         return (Param("table_encoder_scale_error", "ppm", 1.0, 10.0, 20000.0),)
 
+    def words(self, x, sigma) -> list[str]:
+        if abs(x[0]) <= 3 * sigma[0]:
+            return []
+        return [f"the table turns {x[0]:+.3g} ± {sigma[0]:.2g} ppm {'more' if x[0] > 0 else 'less'} than its "
+                "encoder reads (its gearing or encoder scale): the gyro scale factors in this calibration are of the "
+                "true angle; check the table's angle against a reference (a polygon and autocollimator)"]
+
     def accel(self, x, ctx):
         turned = getattr(ctx, "turned_s", None)
         if turned is None:           # station apply: the bench's error is not the IMU's
