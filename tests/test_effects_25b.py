@@ -33,20 +33,21 @@ def estimate_of(result, name):
 # --- bias step -----------------------------------------------------------------------------
 
 def test_a_gyro_bias_step_is_added_with_its_time_and_said_in_words():
-    """The gyro z bias steps by +50 °/h at t = 400 s (between roty_m, which ends at 393 s, and rotz_p,
-    which starts at 408 s).  --auto adds bias_step at a time the profile over the 18 boundaries
-    locates, the fit then passes, and the step is said in words with its size and time.  Its
-    size is checked against its own 1σ (4σ); the time to one segment (51 s apart): the boundary
-    after rotz_p is nearly aliased with the true one, a gyro scale error trading between rotz's two
-    directions (their chi2 differ by 6-9 from seed to seed)."""
-    _, s = summaries(seed=4, gyro__bias_step=[0.0, 0.0, 50.0], gyro__bias_step_time_s=400.0)
+    """The gyro z bias steps by +50 °/h at t = 300 s (between rotx_m, which ends at 291 s, and roty_p,
+    which starts at 306 s).  --auto adds bias_step at the time the profile over the 17 boundaries
+    locates, the fit then passes, and the step is said in words with its size and time.  Its size
+    is checked against its own 1σ (4σ; ~2 °/h: the gyro's ~100 °/h per-sample noise over the
+    ~30,000 samples on each side), the time to the boundary's gap (15 s).  (A step of the gyro about
+    the axis of the rotations it falls beside, z before rotz, is aliased: that axis' Earth-rate
+    component is a free parameter of the model; the profile lists the other boundary as likely.)"""
+    _, s = summaries(seed=4, gyro__bias_step=[0.0, 0.0, 50.0], gyro__bias_step_time_s=300.0)
     steps, final = auto.run(s, discover=False)
     assert [st.added for st in steps] == ["bias_step"], [st.added for st in steps]
     assert not fit_fails(final.result), final.verdict
     value, sigma = estimate_of(final.result, "gyro_bias_step_z")
     assert abs(value - 50.0) < 4 * sigma and sigma < 5.0, (value, sigma)
     effect = next(e for e in final.result.model.effects if e.id == "bias_step")
-    assert abs(effect.step_time_s + effect.origin_s - 400.0) < 60.0, effect.located_by
+    assert abs(effect.step_time_s + effect.origin_s - 300.0) < 15.0, effect.located_by
     said = [c for c in steps[0].caveats if c.startswith("gyro z bias steps by +")]
     assert said and f"at t = {effect.step_time_s + effect.origin_s:.0f} s" in said[0], steps[0].caveats
     # no other axis' step is said (the accelerometers' and the other gyros' are within 3 sigma)
@@ -64,11 +65,11 @@ def test_a_step_between_the_statics_and_the_rotations_is_not_a_candidate():
 
 def test_bias_step_in_estimate_is_located_by_the_profile():
     """estimate --add bias_step (no diagnosis): the time is located before the fit (profile.fit_located)."""
-    _, s = summaries(seed=5, gyro__bias_step=[0.0, 0.0, 50.0], gyro__bias_step_time_s=400.0)
+    _, s = summaries(seed=5, gyro__bias_step=[0.0, 0.0, 50.0], gyro__bias_step_time_s=300.0)
     effect = BiasStep()
     result = profile.fit_located(s, [effect])
     assert effect.located_by.startswith("located between"), effect.located_by
-    assert abs(effect.step_time_s + effect.origin_s - 400.0) < 60.0
+    assert abs(effect.step_time_s + effect.origin_s - 300.0) < 15.0
     value, sigma = estimate_of(result, "gyro_bias_step_z")
     assert abs(value - 50.0) < 4 * sigma
 
@@ -183,7 +184,9 @@ def test_a_failure_that_auto_cannot_mend_is_told_in_words(encoder):
     assert kinds.startswith("the misfit per segment kind: rotation segments")     # 97 % in the rotations
     assert any(line.startswith("per revolution, the rotations' accelerometer misfit is") for line in account)
     assert sum(line.startswith("the residual of accelerometer") for line in account) >= 2
-    assert "the residual of accelerometer" in final.verdict
+    # the verdict names a pattern or the terms that would explain part of it, never "no candidate" alone
+    assert ("outside the library the residuals follow" in final.verdict if final.proposal is not None
+            else "the residual of accelerometer" in final.verdict), final.verdict
     assert to_json(final, steps)["failure_account"] == account
     assert any(line.startswith("why it still fails: tried ") for line in _summary_lines(final))
     page = render(ReportInput(title="t", first=steps[0].before if steps else final, steps=steps, final=final), {})

@@ -34,8 +34,11 @@ def describe_failures(result, labels, segs, fails: bool = False) -> list[str]:
         pattern = _pattern(sensor, kind, rows, s)
         out.append(f"{sensor}, {kind} segments {only}: residuals {rms:.1f} times the noise"
                    f"{'; ' + pattern if pattern else ''}; worst: {where}")
-    out = (_moved_axes(result) + _time_patterns(result, segs) + _bench_patterns(result, segs)
-           + _once_per_revolution(result, segs) + out)   # specific causes first
+    moved = _moved_axes(result)
+    # a rotation axis that moved between a ± pair also leaves gravity turning along the shared axis
+    # the model fits (a first harmonic there): the vibration is named only when the axes agree
+    out = (moved + _time_patterns(result, segs) + _bench_patterns(result, segs)
+           + ([] if moved else _once_per_revolution(result, segs)) + out)   # specific causes first
     if fails and not out:
         out.append(_spread_everywhere(groups))
     return out
@@ -253,7 +256,8 @@ def _once_per_revolution(result, segs) -> list[str]:
             else f"{np.median(amp):.3g} output units")
     return [f"accelerometer, rotation segments: once per revolution along the rotation's own axis in {share:.0%} of "
             f"the rotations (first harmonic along the axis {np.sqrt(np.mean(along ** 2)):.1f} times the noise; about "
-            f"{size}): gravity has no turning part along the axis, so this is an acceleration of the table at the "
+            f"{size}; the ± pairs' axes agree): gravity has no turning part along the axis, so this is an acceleration "
+            "of the table at the "
             "rotation frequency, a vibration or imbalance of the table fixed to its rotation (a rotor out of balance, "
             "a bearing, a belt); not an error of the IMU, and not compensated: balance the platter or load it "
             "symmetrically, or check the table's vibration at the rotation rate"]
