@@ -67,8 +67,32 @@ def score(result, effect) -> float:
     return float(g @ (np.linalg.pinv(Jp.T @ Jp, rcond=1e-10) @ g))
 
 
+def _bias_like_profile(result, effect) -> list[tuple[float, str, str, float]]:
+    """The profile of an effect that is the model's biases changing from a time on (a bias step):
+    its columns at each candidate time are the Jacobian's bias columns on the rows of the segments
+    after that time (the score is unchanged by each column's scale), so no model is built."""
+    model = result.model
+    s = model.s
+    J = fit_jacobian(result)
+    L = model.layout
+    cols = list(range(L["accel_bias"].start, L["accel_bias"].stop)) + list(range(L["gyro_bias"].start,
+                                                                                   L["gyro_bias"].stop))
+    Jb = J[:, cols]
+    r = model.residuals(result.x)
+    t_of = {x.name: x.t_mid_s - model.t0 for x in (*s.statics, *s.rotations) if np.isfinite(x.t_mid_s)}
+    seg_t = np.array([t_of.get(name, np.nan) for name, _, _, _ in model.row_labels(result.x)])
+    out = []
+    for t, before, after in effect.candidate_times(s):
+        Jp = outside_model(result, Jb * (seg_t >= t)[:, None])
+        g = Jp.T @ r
+        out.append((t, before, after, float(g @ (np.linalg.pinv(Jp.T @ Jp, rcond=1e-10) @ g))))
+    return out
+
+
 def profile(result, effect) -> list[tuple[float, str, str, float]]:
     """(value, before, after, score) at every candidate of ``effect`` (a copy is tried at each)."""
+    if getattr(effect, "bias_like", False):
+        return _bias_like_profile(result, effect)
     out = []
     for t, before, after in effect.candidate_times(result.model.s):
         trial = copy.deepcopy(effect)

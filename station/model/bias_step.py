@@ -33,6 +33,8 @@ class BiasStep(Effect):
                  "at the new level; the same jump on statics and rotations, on both sides of a repeated attitude")
     signature_variable = "time"
     complex_step = True
+    bias_like = True          # its term is the biases changing from a time on: its profile's columns are
+                              #   the model's bias columns after that time (station.estimate.profile)
     needs = ("time",)
     state_fields = ("step_time_s", "located_by", "origin_s")
 
