@@ -320,7 +320,10 @@ def conclude(d: Diagnosis, summaries, steps=(), search_terms: bool = True) -> Di
             d.verdict += f"; but first look at this: {now[0]}"
         d.account = failure_account(d, steps)
         return d
-    if search_terms:
+    if search_terms and bench_fault(d):
+        d.notes.append("no term outside the library searched: the failure names a fault of the bench, which no "
+                       "term of the IMU's model should take")
+    elif search_terms:
         from station.diagnose import terms
 
         searched = [sensor for sensor, _, _ in terms.searchable(summaries)]
