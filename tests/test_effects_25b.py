@@ -189,7 +189,9 @@ def test_a_failure_that_auto_cannot_mend_is_told_in_words(encoder):
             else "the residual of accelerometer" in final.verdict), final.verdict
     assert to_json(final, steps)["failure_account"] == account
     assert any(line.startswith("why it still fails: tried ") for line in _summary_lines(final))
-    page = render(ReportInput(title="t", first=steps[0].before if steps else final, steps=steps, final=final), {})
+    figures = {"residuals_per_segment.svg": b"<svg xmlns='http://www.w3.org/2000/svg'/>"}
+    page = render(ReportInput(title="t", first=steps[0].before if steps else final, steps=steps, final=final),
+                  figures)
     assert "Why it still fails" in page and "of the excess chi2" in page
 
 

@@ -112,4 +112,4 @@ class TableEncoderScale(Effect):
     def gyro(self, x, ctx):
         if getattr(ctx, "turned_s", None) is None:
             return None
-        return x[0] * 1e-6 * np.degrees(ctx.w_table) @ ctx.gyro_matrix.T
+        return x[0] * 1e-6 * (180.0 / np.pi) * ctx.w_table @ ctx.gyro_matrix.T    # (np.degrees: no complex step)
