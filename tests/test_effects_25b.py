@@ -116,12 +116,13 @@ def test_apply_compensates_nothing_for_the_table():
 def test_a_mounting_offset_of_its_own_per_axis_is_found_and_named():
     """The IMU is 20 mm further (along z) from the axis that turns it about y than from the others:
     at 100 °/s that is 1.75² · 0.02 = 61 mm/s² = 6.2 mg of centripetal acceleration in roty's mean,
-    against ~260 µg noise of a 36 s rotation's mean.  diagnose names rotation_axis_offsets; fitted,
+    against ~260 µg noise of a 36 s rotation's mean.  rotation_axis_offsets is significant; fitted,
     the offset comes back within 4σ and the fit passes; its words name the rotations."""
     _, s = summaries(bench__axis_offsets_m=[[0.0, 0.0, 0.0], [0.0, 0.0, 0.02], [0.0, 0.0, 0.0]])
     base = lsq.fit(s)
     d = diagnose(base)
-    assert d.candidates[0].effect == "rotation_axis_offsets" and d.candidates[0].significant
+    # (a bench nuisance is ranked after the IMU's significant effects: it can hold the size effect too)
+    assert "rotation_axis_offsets" in [c.effect for c in d.candidates if c.significant]
     registry = simhelpers.registry_without()
     effect = registry.create("rotation_axis_offsets")
     result = lsq.fit(s, [effect], like=base.model)

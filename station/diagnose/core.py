@@ -68,6 +68,8 @@ class Candidate:
     signature_rows: np.ndarray | None = None        # predicted whitened change, one step
     signature_variable: str = ""
     source: str = "library"
+    bench: bool = False                             # a nuisance of the bench that can stand in for an
+                                                   #   effect of the IMU: ranked after the IMU's
     state: dict = field(default_factory=dict)      # what the effect's setup or profile chose (its
                                                    #   state(): a bias step's time), for the refit
 
@@ -171,7 +173,7 @@ def score_test(result, effect_id, registry: EffectRegistry | None = None, overdi
     aliased = [p.name for p, reach in zip(params, revealable) if reach < 1e-3]
     cand = Candidate(effect=effect_id, title=effect.title, predicted_chi2_drop=lm, dof=k,
                      p_value=min(1.0, located * chi2_sf(lm / overdispersion, k)) if k else 1.0,
-                     overdispersion=overdispersion, state=effect.state(),
+                     overdispersion=overdispersion, state=effect.state(), bench=bool(getattr(effect, "bench", False)),
                      names=[p.name for p in params], units=[p.unit for p in params],
                      estimate=[float(v * p.scale) for v, p in zip(step, params)],
                      sigma=[float(s * p.scale) for s, p in zip(sigma, params)],
@@ -237,7 +239,9 @@ def rank_candidates(result, exclude=(), registry: EffectRegistry | None = None) 
         c.significant = c.dof > 0 and c.p_value_corrected < ALPHA and c.plausible
         c.detectable = [threshold * s if name not in c.aliased else float("inf")
                         for name, s in zip(c.names, c.sigma)]
-    return sorted(cands, key=lambda c: (not c.significant, -c.predicted_chi2_drop))
+    # a bench nuisance general enough to take an IMU effect's place (an offset per rotation axis holds
+    # the accelerometers' size effect) comes after the significant effects of the IMU
+    return sorted(cands, key=lambda c: (not c.significant, c.bench, -c.predicted_chi2_drop))
 
 
 def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diagnosis:

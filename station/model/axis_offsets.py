@@ -27,6 +27,8 @@ class RotationAxisOffsets(Effect):
                  "about one axis; the statics fit")
     signature_variable = "rate_squared"
     complex_step = True
+    bench = True              # ranked after the IMU's effects (station.diagnose.core.rank_candidates): its
+                              #   offsets per axis hold the accelerometers' size effect (accel_lever_arm) too
     state_fields = ("group_of", "groups", "group_names")
 
     def __init__(self):
