@@ -174,7 +174,9 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
     refused: set = set()
     term_steps = 0
     while len(steps) < MAX_STEPS:
-        tries = [c for c in current.candidates if c.significant and c.effect not in refused][:MAX_TRIES]
+        open_ = [c for c in current.candidates if c.significant and c.effect not in refused]
+        # the IMU's effects first, then the bench's and the events' (ranked after them: core.Candidate.bench)
+        tries = [c for c in open_ if not c.bench][:MAX_TRIES] + [c for c in open_ if c.bench][:MAX_TRIES]
         kept = None
         for cand in tries:
             if progress:

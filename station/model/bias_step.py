@@ -33,6 +33,9 @@ class BiasStep(Effect):
                  "at the new level; the same jump on statics and rotations, on both sides of a repeated attitude")
     signature_variable = "time"
     complex_step = True
+    bench = True              # ranked after the IMU's significant effects (station.diagnose.core): an
+                              #   event of this capture, and the best of many boundaries can stand in for
+                              #   a drift (bias_drift) or another effect in time
     bias_like = True          # its term is the biases changing from a time on: its profile's columns are
                               #   the model's bias columns after that time (station.estimate.profile)
     needs = ("time",)
