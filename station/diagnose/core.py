@@ -241,7 +241,7 @@ def rank_candidates(result, exclude=(), registry: EffectRegistry | None = None) 
                         for name, s in zip(c.names, c.sigma)]
     # a bench nuisance general enough to take an IMU effect's place (an offset per rotation axis holds
     # the accelerometers' size effect) comes after the significant effects of the IMU
-    return sorted(cands, key=lambda c: (not c.significant, c.bench, -c.predicted_chi2_drop))
+    return sorted(cands, key=lambda c: (not c.significant, c.bench and c.significant, -c.predicted_chi2_drop))
 
 
 def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diagnosis:

@@ -222,18 +222,18 @@ ONCE_SHARE = 0.75
 
 
 def _once_per_revolution(result, segs) -> list[str]:
-    """An acceleration at the rotation frequency along the rotation's own axis: gravity has no
-    part there that turns (its component along the axis is constant), nor has any error of the
-    accelerometers' scale or misalignment the model does not already take (those mix gravity's
-    turning part, across the axis, into the axis' harmonic only through parameters the fit
-    has).  What is left there is a vibration or an imbalance of the table fixed to its rotation
+    """An acceleration at the rotation frequency along the rotation's own axis, about axes near
+    horizontal: gravity has no part there that turns (its component along the axis is constant),
+    nor has any error of the accelerometers' scale or misalignment the model does not already take
+    (those mix gravity's turning part, across the axis, into the axis' harmonic only through
+    parameters the fit has), nor, with no gravity along the axis, a product of gravity's parts.  What is left there is a vibration or an imbalance of the table fixed to its rotation
     (or a platter whose axis wobbles once per turn)."""
     s = result.model.s
     steady = {r.name: r for r in s.rotations if r.steady}
     along, names = [], []
     for seg in segs:
         r = steady.get(seg.name)
-        if r is None or seg.kind != "rotation":
+        if r is None or seg.kind != "rotation" or not _horizontal(result, r.group):
             continue
         c = [seg.values.get(("accel_cos", a)) for a in "xyz"]
         sn = [seg.values.get(("accel_sin", a)) for a in "xyz"]
@@ -247,7 +247,10 @@ def _once_per_revolution(result, segs) -> list[str]:
         return []
     along = np.array(along)
     share = float(np.mean(along > ONCE_RMS))
-    if share < ONCE_SHARE:
+    # the statics must fit: an error of the accelerometers themselves (cubic, cross-axis) that the
+    # fit shares out between statics and rotations leaves the statics failing too
+    stat = _rms([v for seg in segs if seg.kind == "static" for (q, _), v in seg.values.items() if q == "accel"])
+    if share < ONCE_SHARE or stat >= FAIL_RMS:
         return []
     # whitened first-harmonic component -> m/s^2: its noise is sigma sqrt(2 / N) over whole revolutions
     n = np.array([r.samples for _, r in names], float)
@@ -256,11 +259,25 @@ def _once_per_revolution(result, segs) -> list[str]:
             else f"{np.median(amp):.3g} output units")
     return [f"accelerometer, rotation segments: once per revolution along the rotation's own axis in {share:.0%} of "
             f"the rotations (first harmonic along the axis {np.sqrt(np.mean(along ** 2)):.1f} times the noise; about "
-            f"{size}; the ± pairs' axes agree): gravity has no turning part along the axis, so this is an acceleration "
+            f"{size}; the ± pairs' axes agree, the statics fit: {stat:.2f}): gravity has no turning part along the axis, so this is an acceleration "
             "of the table at the "
             "rotation frequency, a vibration or imbalance of the table fixed to its rotation (a rotor out of balance, "
             "a bearing, a belt); not an error of the IMU, and not compensated: balance the platter or load it "
             "symmetrically, or check the table's vibration at the rotation rate"]
+
+
+HORIZONTAL_COS = 0.5     # an axis within 30° of horizontal: gravity along it below g/2
+
+
+def _horizontal(result, group: int) -> bool:
+    """Whether the fitted axis of ``group`` is near horizontal.  Only there is the first harmonic
+    along the axis free of the accelerometers' own nonlinear errors: about a tilted axis gravity's
+    constant part along it times its turning part across it (a cross-axis or cubic term) has one."""
+    try:
+        alpha = result.x[result.model.layout[f"axis{group}"].start + 2]
+    except (KeyError, AttributeError, IndexError, TypeError):
+        return False
+    return abs(np.cos(alpha)) < HORIZONTAL_COS
 
 
 def _rms(values) -> float:
