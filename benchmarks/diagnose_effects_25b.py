@@ -13,7 +13,6 @@ Scheme: optimal9, 6 s statics, 36 s rotations at 100 deg/s (ten revolutions each
 import sys
 import time
 
-import numpy as np
 
 import simhelpers
 from effect_recovery import held_out_error
