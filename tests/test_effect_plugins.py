@@ -98,12 +98,14 @@ def test_compensation_inverts_every_library_effect_and_a_plugin():
              "gyro_rate_squared": 50.0, "accel_cross_coupling": 3000.0, "accel_cubic": 3000.0,
              "scale_temperature": 3000.0, "temperature_bias_quadratic": 100.0,
              "gyro_anisoelastic": 300.0, "accel_cross_axis": 3000.0,
-             "gyro_rate_nonlinearity": 50.0, "bias_drift": 1000.0}
+             "gyro_rate_nonlinearity": 50.0, "bias_drift": 1000.0, "bias_step": 300.0}
     effects = []
     for eid, size in sizes.items():
         e = reg.create(eid)
         if eid in ("temperature_bias", "scale_temperature", "temperature_bias_quadratic"):
             e.reference_c = 26.0
+        if eid == "bias_step":
+            e.locate(2.005, "set by the test")    # mid-run, between two samples (0.01 s apart)
         effects.append((e, size * rng.uniform(-1, 1, len(e.params))))      # internal units
     # forward: what the sensors output at the true (table-clock) times
     w_rad = np.radians(w_p)

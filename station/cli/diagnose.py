@@ -153,7 +153,9 @@ def _diagnose(args, job) -> tuple:
         steps, final = auto.run(s, effects, progress=None, registry=reg, on_first=figures.first_known)
         first = steps[0].before if steps else final
     else:
-        steps, first = [], diagnose(lsq.fit(s, [reg.create(e) for e in effects]), registry=reg)
+        from station.estimate.profile import fit_located
+
+        steps, first = [], diagnose(fit_located(s, [reg.create(e) for e in effects]), registry=reg)
         auto.conclude(first, s)
         final = first
     if args.emit_effect:
@@ -203,6 +205,7 @@ def _summary_lines(d) -> list[str]:
              f"chi2 {d.chi2:.1f} for {d.dof} degrees of freedom (reduced {d.reduced_chi2:.3f}, p = {d.p_value:.3g})"]
     lines += [f"where it fails: {f}" for f in d.failures]
     lines += [f"not kept: {r.effect}: {r.reason}" for r in d.rejected]
+    lines += [f"why it still fails: {line}" for line in getattr(d, "account", None) or []]
     return lines + [f"note: {n}" for n in d.notes]
 
 
@@ -216,6 +219,8 @@ def to_json(d, steps) -> dict:
         "verdict": d.verdict,
         "effects": d.effects,
         "failures": d.failures,
+        # a fit that still fails: what was tried, what each explained, what the residuals follow
+        "failure_account": list(getattr(d, "account", None) or []),
         "notes": d.notes,
         # what the scan before the fit found and left out (station/estimate/data_faults.py)
         "data_faults": getattr(getattr(getattr(d.result, "model", None), "s", None), "data_faults", None),

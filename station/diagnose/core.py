@@ -18,7 +18,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import special
 
-from station.estimate import lsq
+from station.estimate import lsq, profile
+from station.estimate.profile import fit_jacobian, model_basis, outside_model  # noqa: F401 (shared)
 from station.model.registry import EffectRegistry
 
 def chi2_sf(x: float, k: int) -> float:
@@ -67,6 +68,10 @@ class Candidate:
     signature_rows: np.ndarray | None = None        # predicted whitened change, one step
     signature_variable: str = ""
     source: str = "library"
+    bench: bool = False                             # a nuisance of the bench that can stand in for an
+                                                   #   effect of the IMU: ranked after the IMU's
+    state: dict = field(default_factory=dict)      # what the effect's setup or profile chose (its
+                                                   #   state(): a bias step's time), for the refit
 
     def largest_estimate(self) -> str:
         """The one-step estimate largest against its 1-sigma, in words ("" without parameters)."""
@@ -96,6 +101,8 @@ class Diagnosis:
     notes: list = field(default_factory=list)   # how the statistics were taken (over-dispersion)
     rejected: list = field(default_factory=list)  # auto.Rejection: tried by --auto and not kept
     proposal: object = None                  # terms.Proposal: terms found outside the library
+    account: list = field(default_factory=list)  # a fit that still fails: what was tried, what each
+                                             #   explained, what the residuals follow (words.failure_account)
 
 
 def _data_mask(labels) -> np.ndarray:
@@ -127,39 +134,6 @@ def segment_residuals(result, labels) -> list[SegmentResidual]:
     return segs
 
 
-def fit_jacobian(result) -> np.ndarray:
-    """The model's Jacobian at the fitted parameters, computed once per fit and shared by the
-    candidates' basis and the leave-one-segment-out check (callers must not modify it)."""
-    J = getattr(result, "_jacobian", None)
-    if J is None:
-        J = result.model.jacobian(result.x)
-        result._jacobian = J
-    return J
-
-
-def outside_model(result, M: np.ndarray) -> np.ndarray:
-    """M (rows x k) less its projection on what the fitted model's parameters can change in the
-    residuals (its Jacobian's column space): a large model's with its segments' nuisances
-    eliminated (lsq._Reduced.outside: linear in the segments; the whole Jacobian's SVD took 51 s
-    and 2.8 GB at 1,000 segments), a small one's through model_basis."""
-    if result.model.is_large:
-        return lsq.reduced_at_solution(result).outside(M)
-    basis = model_basis(result)
-    return M - basis @ (basis.T @ M)
-
-
-def model_basis(result) -> np.ndarray:
-    """Orthonormal basis of what the fitted model's parameters can change in the residuals
-    (its Jacobian's column space), computed once per fit (a small model's: outside_model)."""
-    cached = getattr(result, "_basis", None)
-    if cached is None:
-        J = fit_jacobian(result)
-        u, sv, _ = np.linalg.svd(J, full_matrices=False)
-        cached = u[:, sv > 1e-10 * sv[0]]
-        result._basis = cached
-    return cached
-
-
 def score_test(result, effect_id, registry: EffectRegistry | None = None, overdispersion: float = 1.0) -> Candidate:
     """The Lagrange-multiplier test of adding ``effect_id`` (an id, or an Effect instance) to the
     fitted model.  With ``overdispersion`` phi > 1 (a fit that fails: phi is its reduced chi2) the
@@ -170,6 +144,9 @@ def score_test(result, effect_id, registry: EffectRegistry | None = None, overdi
         effect = (registry or EffectRegistry()).create(effect_id)
     else:
         effect, effect_id = effect_id, effect_id.id
+    located = 1
+    if profile.is_profiled(effect) and getattr(effect, "step_time_s", 0.0) is None:
+        located = max(len(profile.locate(result, effect, refine=0)), 1)   # the best of this many candidates
     extended = lsq.Model(model.s, [*model.effects, effect], model.attitudes, like=model)
     extended.priors = dict(model.priors)
     n = model.layout.size
@@ -195,7 +172,8 @@ def score_test(result, effect_id, registry: EffectRegistry | None = None, overdi
     params = effect.params
     aliased = [p.name for p, reach in zip(params, revealable) if reach < 1e-3]
     cand = Candidate(effect=effect_id, title=effect.title, predicted_chi2_drop=lm, dof=k,
-                     p_value=chi2_sf(lm / overdispersion, k) if k else 1.0, overdispersion=overdispersion,
+                     p_value=min(1.0, located * chi2_sf(lm / overdispersion, k)) if k else 1.0,
+                     overdispersion=overdispersion, state=effect.state(), bench=bool(getattr(effect, "bench", False)),
                      names=[p.name for p in params], units=[p.unit for p in params],
                      estimate=[float(v * p.scale) for v, p in zip(step, params)],
                      sigma=[float(s * p.scale) for s, p in zip(sigma, params)],
@@ -205,6 +183,10 @@ def score_test(result, effect_id, registry: EffectRegistry | None = None, overdi
     too_large = [abs(v) > p.plausible and abs(v) > 3 * s
                  for v, s, p in zip(cand.estimate, cand.sigma, params)]
     cand.plausible = not any(too_large)
+    if callable(getattr(effect, "words", None)) and k:      # e.g. a bias step: its size and time in words
+        said = effect.words(np.array(cand.estimate), np.array(cand.sigma))
+        if said:
+            cand.advice = "; ".join(said) + (f" ({effect.located_by})" if getattr(effect, "located_by", "") else "")
     if not k:
         cand.advice = f"this capture cannot reveal {effect_id}: it needs {effect.excited_by}"
     elif aliased:
@@ -257,7 +239,9 @@ def rank_candidates(result, exclude=(), registry: EffectRegistry | None = None) 
         c.significant = c.dof > 0 and c.p_value_corrected < ALPHA and c.plausible
         c.detectable = [threshold * s if name not in c.aliased else float("inf")
                         for name, s in zip(c.names, c.sigma)]
-    return sorted(cands, key=lambda c: (not c.significant, -c.predicted_chi2_drop))
+    # a bench nuisance general enough to take an IMU effect's place (an offset per rotation axis holds
+    # the accelerometers' size effect) comes after the significant effects of the IMU
+    return sorted(cands, key=lambda c: (not c.significant, c.bench and c.significant, -c.predicted_chi2_drop))
 
 
 def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diagnosis:

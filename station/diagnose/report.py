@@ -279,6 +279,10 @@ def _diagnosis_section(inp: ReportInput, figures: dict) -> str:
         parts.append("<p>" + "; ".join(_e(f"{n} = {v:.4g} ± {s:.2g} {u}") for n, v, s, u in st.estimate) + "</p>")
     if inp.steps:
         parts.append(_verdict_box(final.verdict, inp, "after the added effects: "))
+    account = getattr(final, "account", None) or []
+    if account:
+        parts.append("<h3>Why it still fails: what was tried, what each explained, what the residuals follow</h3>"
+                     "<ul>" + "".join(f"<li>{_e(line)}</li>" for line in account) + "</ul>")
     parts.append("<h3>Candidate effects (score test at the fit as it was first made)</h3>")
     parts.append(_candidates_table(first))
     for name in figures:
@@ -462,7 +466,9 @@ def _diagnosis(capture, effects, auto: bool, on_first=None) -> tuple:
         steps, final = auto_loop.run(s, list(effects), on_first=on_first)
         return (steps[0].before if steps else final), steps, final
     registry = EffectRegistry()
-    first = diagnose(lsq.fit(s, [registry.create(e) for e in effects]), registry=registry)
+    from station.estimate.profile import fit_located
+
+    first = diagnose(fit_located(s, [registry.create(e) for e in effects]), registry=registry)
     return first, [], first
 
 

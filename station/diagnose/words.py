@@ -34,7 +34,11 @@ def describe_failures(result, labels, segs, fails: bool = False) -> list[str]:
         pattern = _pattern(sensor, kind, rows, s)
         out.append(f"{sensor}, {kind} segments {only}: residuals {rms:.1f} times the noise"
                    f"{'; ' + pattern if pattern else ''}; worst: {where}")
-    out = _moved_axes(result) + _time_patterns(result, segs) + _bench_patterns(result, segs) + out   # specific causes first
+    moved = _moved_axes(result)
+    # a rotation axis that moved between a ± pair also leaves gravity turning along the shared axis
+    # the model fits (a first harmonic there): the vibration is named only when the axes agree
+    out = (moved + _time_patterns(result, segs) + _bench_patterns(result, segs)
+           + ([] if moved else _once_per_revolution(result, segs)) + out)   # specific causes first
     if fails and not out:
         out.append(_spread_everywhere(groups))
     return out
@@ -212,6 +216,70 @@ def _bench_patterns(result, segs) -> list[str]:
     return out
 
 
+ONCE_RMS = 3.0           # the rotations' first harmonic along their own axis stands out: RMS above
+                         #   this (whitened; 1 expected) in at least ONCE_SHARE of the rotations
+ONCE_SHARE = 0.75
+
+
+def _once_per_revolution(result, segs) -> list[str]:
+    """An acceleration at the rotation frequency along the rotation's own axis, about axes near
+    horizontal: gravity has no part there that turns (its component along the axis is constant),
+    nor has any error of the accelerometers' scale or misalignment the model does not already take
+    (those mix gravity's turning part, across the axis, into the axis' harmonic only through
+    parameters the fit has), nor, with no gravity along the axis, a product of gravity's parts.  What is left there is a vibration or an imbalance of the table fixed to its rotation
+    (or a platter whose axis wobbles once per turn)."""
+    s = result.model.s
+    steady = {r.name: r for r in s.rotations if r.steady}
+    along, names = [], []
+    for seg in segs:
+        r = steady.get(seg.name)
+        if r is None or seg.kind != "rotation" or not _horizontal(result, r.group):
+            continue
+        c = [seg.values.get(("accel_cos", a)) for a in "xyz"]
+        sn = [seg.values.get(("accel_sin", a)) for a in "xyz"]
+        if None in c or None in sn:
+            continue
+        axis = np.asarray(r.axis_body, float)
+        axis = axis / np.linalg.norm(axis)
+        along.append(float(np.hypot(axis @ np.array(c), axis @ np.array(sn)) / np.sqrt(2.0)))
+        names.append((seg.name, r))
+    if len(along) < 2:
+        return []
+    along = np.array(along)
+    share = float(np.mean(along > ONCE_RMS))
+    # the statics must fit: an error of the accelerometers themselves (cubic, cross-axis) that the
+    # fit shares out between statics and rotations leaves the statics failing too
+    stat = _rms([v for seg in segs if seg.kind == "static" for (q, _), v in seg.values.items() if q == "accel"])
+    if share < ONCE_SHARE or stat >= FAIL_RMS:
+        return []
+    # whitened first-harmonic component -> m/s^2: its noise is sigma sqrt(2 / N) over whole revolutions
+    n = np.array([r.samples for _, r in names], float)
+    amp = along * np.sqrt(2.0) * float(np.mean(s.accel_sigma)) * np.sqrt(2.0 / n)
+    size = (f"{np.median(amp) / 9.80665e-6:.3g} µg" if not getattr(s, "accel_raw", False)
+            else f"{np.median(amp):.3g} output units")
+    return [f"accelerometer, rotation segments: once per revolution along the rotation's own axis in {share:.0%} of "
+            f"the rotations (first harmonic along the axis {np.sqrt(np.mean(along ** 2)):.1f} times the noise; about "
+            f"{size}; the ± pairs' axes agree, the statics fit: {stat:.2f}): gravity has no turning part along the axis, so this is an acceleration "
+            "of the table at the "
+            "rotation frequency, a vibration or imbalance of the table fixed to its rotation (a rotor out of balance, "
+            "a bearing, a belt); not an error of the IMU, and not compensated: balance the platter or load it "
+            "symmetrically, or check the table's vibration at the rotation rate"]
+
+
+HORIZONTAL_COS = 0.5     # an axis within 30° of horizontal: gravity along it below g/2
+
+
+def _horizontal(result, group: int) -> bool:
+    """Whether the fitted axis of ``group`` is near horizontal.  Only there is the first harmonic
+    along the axis free of the accelerometers' own nonlinear errors: about a tilted axis gravity's
+    constant part along it times its turning part across it (a cross-axis or cubic term) has one."""
+    try:
+        alpha = result.x[result.model.layout[f"axis{group}"].start + 2]
+    except (KeyError, AttributeError, IndexError, TypeError):
+        return False
+    return abs(np.cos(alpha)) < HORIZONTAL_COS
+
+
 def _rms(values) -> float:
     return float(np.sqrt(np.mean(np.square(values)))) if len(values) else 0.0
 
@@ -270,6 +338,10 @@ def caveats(summaries, effect_id: str) -> list[str]:
         out.append(f"every rotation is at one rate ({rates[0]:g} °/s): the size effect and any other "
                    "term in the square of the rate act alike; turn at two rates to confirm it grows "
                    "with the square of the rate")
+    if effect_id in ("rotation_axis_offsets", "accel_lever_arm") and len(rates) == 1:
+        out.append(f"every rotation is at one rate ({rates[0]:g} °/s): an offset of the rotations' accelerometer "
+                   "mean is also what a table vibrating once per revolution leaves (its part across the axis); "
+                   "turn at two rates to confirm it grows with the square of the rate")
     if effect_id == "accel_nonlinearity" and summaries.rotations and len(rates) == 1:
         out.append("a second harmonic in the rotations can also come from a wobbling table axis; "
                    "statics at ±1 g and 45° separate the two")
@@ -337,3 +409,210 @@ def _pattern(sensor, kind, rows, s) -> str:
             elif c < -0.6:
                 words.append("largest on the axes across gravity")
     return ", ".join(words)
+
+
+# ---------------------------------------------------------------------------------------------
+# words for a failure that --auto could not mend (issue 25 item 5): what was tried, what each
+# candidate explained, and what the residuals look like
+
+PATTERN_SHARE = 0.5      # a variable is named when a straight line in it explains this share of
+                         #   an axis' misfit in the segment means ...
+PATTERN_GAIN = 0.25      # ... and this much more than a constant offset over the same segments
+AXIS_SHARE = 0.1         # an axis (or segment kind) is named when it holds this share of the misfit
+
+_VARIABLES = (   # name, words, unit of the variable, per-unit words for the slope
+    ("rate", "grows with rate", "°/s", "per °/s"),
+    ("abs_rate", "grows with the size of the rate, the same sign both ways", "°/s", "per °/s of |rate|"),
+    ("temp", "follows temperature", "°C", "per °C"),
+    ("time", "drifts with time", "h", "per hour"),
+)
+
+
+def _share(ss0: float, ss1: float) -> float:
+    return 0.0 if ss0 <= 0 else max(0.0, (ss0 - ss1) / ss0)
+
+
+def _wls(u, w, columns) -> float:
+    """Weighted sum of squares left after fitting u (weights w) with the given columns."""
+    A = np.column_stack(columns) * np.sqrt(w)[:, None]
+    b = u * np.sqrt(w)
+    coef, *_ = np.linalg.lstsq(A, b, rcond=None)
+    r = b - A @ coef
+    return float(r @ r), coef
+
+
+def segment_means(result, segs) -> list[dict]:
+    """The bias-like residual of every static and steady rotation, per sensor and axis: the
+    whitened residual r and the same in the summaries' units u (m/s², deg/s: a static's mean less
+    the model's, a rotation's accelerometer mean and mean gyro rate error), u = r sigma / sqrt(N)
+    (the per-sample noise over the segment's samples; the noise model's pose terms left out),
+    with the variables a missing term could follow: time, temperature, the signed rate."""
+    s = result.model.s
+    info = {st.name: ("static", st, 0.0) for st in s.statics}
+    info.update({r.name: ("rotation", r, r.rate_dps) for r in s.rotations if r.steady})
+    t0 = min([x.t_mid_s for _, x, _ in info.values() if np.isfinite(x.t_mid_s)], default=0.0)
+    rows = []
+    for seg in segs:
+        kind, summ, rate = info.get(seg.name, (None, None, 0.0))
+        if kind is None or summ.samples <= 0:
+            continue
+        for sensor, quantities in BIAS_QUANTITIES.items():
+            sigma = s.accel_sigma if sensor == "accelerometer" else s.gyro_sigma
+            for i, a in enumerate("xyz"):
+                r = next((seg.values[(q, a)] for q in quantities if (q, a) in seg.values), None)
+                if r is None:
+                    continue
+                rows.append({"segment": seg.name, "kind": kind, "sensor": sensor, "axis": a, "r": float(r),
+                             "u": float(r) * float(sigma[i]) / np.sqrt(summ.samples),
+                             "w": summ.samples / float(sigma[i]) ** 2,
+                             "time": (summ.t_mid_s - t0) / 3600.0 if np.isfinite(summ.t_mid_s) else np.nan,
+                             "temp": np.nan if summ.temp_c is None else float(summ.temp_c),
+                             "rate": float(rate), "abs_rate": abs(float(rate))})
+    return rows
+
+
+def _slope_words(sensor: str, slope: float, raw: bool, per: str) -> str:
+    if raw:
+        return f"{slope:+.3g} output units {per}"
+    if sensor == "accelerometer":
+        return f"{slope / 9.80665e-6:+.3g} µg {per}"
+    return f"{slope * 3600:+.3g} °/h {per}"
+
+
+def axis_patterns(result, segs) -> list[dict]:
+    """Per sensor and axis whose segment means misfit (sum of r² above twice their count): the
+    variable a straight line in which explains most of it, its slope in units, and its share."""
+    s = result.model.s
+    raw = {"accelerometer": getattr(s, "accel_raw", False), "gyro": getattr(s, "gyro_raw", False)}
+    rows = segment_means(result, segs)
+    out = []
+    for sensor in BIAS_QUANTITIES:
+        for a in "xyz":
+            sel = [x for x in rows if x["sensor"] == sensor and x["axis"] == a]
+            if len(sel) < 4:
+                continue
+            u = np.array([x["u"] for x in sel])
+            w = np.array([x["w"] for x in sel])
+            ss0 = float(np.sum(w * u * u))
+            if ss0 < FAIL_RMS**2 * len(sel):
+                continue
+            ss_c, _ = _wls(u, w, [np.ones(len(u))])
+            best = None
+            for name, words, unit, per in _VARIABLES:
+                v = np.array([x[name] for x in sel])
+                if not np.all(np.isfinite(v)) or np.ptp(v) == 0:
+                    continue
+                ss1, coef = _wls(u, w, [np.ones(len(u)), v])
+                gain = _share(ss0, ss1) - _share(ss0, ss_c)
+                if best is None or gain > best[0]:
+                    best = (gain, name, words, unit, per, float(coef[1]), _share(ss0, ss1))
+            item = {"sensor": sensor, "axis": a, "misfit": ss0, "segments": len(sel),
+                    "constant_share": _share(ss0, ss_c), "variable": None}
+            if best is not None and best[0] >= PATTERN_GAIN and best[6] >= PATTERN_SHARE:
+                gain, name, words, unit, per, slope, share = best
+                item.update(variable=name, slope=slope, share=share,
+                            words=f"the residual of {sensor} {a} {words}: "
+                                  f"{_slope_words(sensor, slope, raw[sensor], per)}, {100 * share:.0f} % of its "
+                                  f"misfit in the segment means")
+            elif item["constant_share"] >= PATTERN_SHARE:
+                kinds = sorted({x["kind"] for x in sel if abs(x["r"]) > FAIL_RMS})
+                item["words"] = (f"the residual of {sensor} {a} is about the same offset on every segment "
+                                 f"({100 * item['constant_share']:.0f} % of its misfit in the segment means, largest on "
+                                 f"the {' and '.join(kinds) or 'segments'}): not a straight line in rate, "
+                                 "temperature or time; an offset the segments share that the model's bias does not take "
+                                 "(statics against rotations: a bias that changed when the table turned)")
+            else:
+                worst = sorted(sel, key=lambda x: -abs(x["r"]))[:3]
+                item["words"] = (f"the residual of {sensor} {a} follows neither rate, temperature nor time "
+                                 f"(a straight line in any explains < {100 * PATTERN_SHARE:.0f} % of its misfit): "
+                                 "largest on " + ", ".join(f"{x['segment']} ({x['r']:+.1f} sigma)" for x in worst)
+                                 + "; a function of the attitude or of the segment, not of a variable that is recorded")
+            out.append(item)
+    return out
+
+
+def where_misfit(segs) -> list[str]:
+    """How the misfit (sum of the squared whitened residuals) is shared between the sensors' axes,
+    the segment kinds and, in the rotations, the mean and the harmonics of the revolution."""
+    total = 0.0
+    per_axis, per_kind, per_harmonic = {}, {}, {}
+    for seg in segs:
+        for (q, a), v in seg.values.items():
+            sensor = "accelerometer" if q.startswith("accel") else "gyro"
+            total += v * v
+            per_axis[(sensor, a)] = per_axis.get((sensor, a), 0.0) + v * v
+            per_kind[seg.kind] = per_kind.get(seg.kind, 0.0) + v * v
+            if seg.kind == "rotation" and q.startswith("accel"):
+                h = {"accel_dc": "the mean", "accel_cos": "once per revolution", "accel_sin": "once per revolution",
+                     "accel_cos2": "twice per revolution", "accel_sin2": "twice per revolution"}.get(q)
+                if h:
+                    per_harmonic[h] = per_harmonic.get(h, 0.0) + v * v
+    if total <= 0:
+        return []
+    out = []
+    axes = sorted(per_axis.items(), key=lambda kv: -kv[1])
+    named = [f"{s} {a} {100 * v / total:.0f} %" for (s, a), v in axes if v / total >= AXIS_SHARE]
+    out.append("the misfit per axis: " + ", ".join(named or [f"{s} {a} {100 * v / total:.0f} %"
+                                                           for (s, a), v in axes[:3]])
+               + (" (the rest spread over the other axes)" if len(named) < len(axes) else ""))
+    kinds = ", ".join(f"{k} segments {100 * v / total:.0f} %" for k, v in sorted(per_kind.items(), key=lambda kv: -kv[1]))
+    out.append(f"the misfit per segment kind: {kinds}")
+    rot = sum(per_harmonic.values())
+    if rot > 0.1 * total:
+        parts = ", ".join(f"{h} {100 * v / rot:.0f} %" for h, v in sorted(per_harmonic.items(), key=lambda kv: -kv[1]))
+        top = max(per_harmonic, key=per_harmonic.get)
+        meaning = {"once per revolution": "a vibration or imbalance fixed to the table's rotation, or gravity turning "
+                                          "in the body seen with a wrong scale, misalignment or angle (a table that "
+                                          "turns more than its encoder says)",
+                   "twice per revolution": "a wobbling or tilted platter, or an accelerometer error even in its "
+                                           "input (nonlinearity)",
+                   "the mean": "an offset of the accelerometers while turning (centripetal: size effect, "
+                               "mounting offset; or a bias that changed)"}[top]
+        out.append(f"per revolution, the rotations' accelerometer misfit is {parts}: mostly {top}, the signature "
+                   f"of {meaning}")
+    return out
+
+
+def tried_lines(d, steps=()) -> list[str]:
+    """What --auto tried and what each explained, as a share of the excess chi2 (chi2 - dof) of
+    the fit it was tried on; the library candidates left untried with the share their score test
+    predicts; the terms of the dictionary."""
+    out = []
+    for st in steps:
+        excess = max(st.before.chi2 - st.before.dof, 1e-300)
+        kind = "terms found outside the library" if st.discovered else st.added
+        out.append(f"added {kind}: it explained {100 * st.actual_drop / excess:.0f} % of the excess chi2 "
+                   f"({st.before.chi2:.1f} -> {st.after.chi2:.1f})")
+    excess_now = max(d.chi2 - d.dof, 1e-300)
+    for r in d.rejected:
+        share = r.share if r.share is not None else r.actual_drop / excess_now
+        out.append(f"tried {r.effect} and did not keep it: it explained {100 * share:.0f} % of the excess chi2 "
+                   f"({r.reason})")
+    rejected = {r.effect for r in d.rejected}
+    untried = [c for c in d.candidates if c.effect not in rejected and c.dof > 0]
+    top = sorted(untried, key=lambda c: -c.predicted_chi2_drop)[:3]
+    if top:
+        out.append("the library's other candidates would explain at most: " + ", ".join(
+            f"{c.effect} {100 * min(c.predicted_chi2_drop / excess_now, 1.0):.0f} %"
+            f"{'' if c.significant else ' (not significant)'}" for c in top)
+            + f" of the excess chi2 left ({d.chi2 - d.dof:.1f}; score test)")
+    untestable = [c.effect for c in d.candidates if c.dof == 0]
+    if untestable:
+        out.append(f"not testable on this capture: {', '.join(untestable)}")
+    prop = getattr(d, "proposal", None)
+    if prop is not None:
+        share = (d.chi2 - prop.chi2_after) / excess_now
+        out.append(f"terms outside the library ({'; '.join(prop.lines())}) would explain {100 * share:.0f} % of it "
+                   f"(reduced chi2 {prop.reduced_after:.3g}); {'kept' if prop.kept else 'not kept: ' + prop.reason}")
+    return out
+
+
+def failure_account(d, steps=()) -> list[str]:
+    """Words for a fit that still fails: what was tried and explained what, where the misfit is
+    (per axis, per segment kind, per revolution) and what the residuals follow (rate,
+    temperature, time), so that no failure ends with "no significant candidate" alone."""
+    result = d.result
+    lines = tried_lines(d, steps)
+    lines += where_misfit(d.segments)
+    lines += [p["words"] for p in axis_patterns(result, d.segments)]
+    return lines

@@ -179,7 +179,16 @@ def _estimate_with(capture: Capture, method: str, effects, registry, turn_sigma_
     if effects and method != "lsq":
         raise UserError(f"--add needs the least-squares method (lsq); this capture uses {method}")
     if method == "lsq":
-        from station.estimate import poses
+        from station.estimate import poses, profile
+
+        pending = [e for e in instances if profile.is_profiled(e) and getattr(e, "step_time_s", 0.0) is None]
+        if pending:     # a bias step's time: located at the fit without it (station/estimate/profile.py)
+            from station.estimate import lsq
+
+            s = lsq.summarise(capture)
+            base = lsq.fit(s, [e for e in instances if e not in pending])
+            for e in pending:
+                profile.locate(base, e)
 
         # the joint fit, checked against the poses' own accelerometer fit (station/estimate/poses.py)
         return poses.estimate(capture, instances, turn_sigma_deg=turn_sigma_deg), method

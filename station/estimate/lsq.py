@@ -48,6 +48,7 @@ from station.estimate.summaries import Summaries, summarise
 from station.model.geometry import cross, normalised, positive_part, tangent_basis
 from station.model.effect import Effect, SampleContext
 from station.model.rotation import matrix_from_rotvec
+from station.model.table_encoder_scale import turned_time
 
 EARTH_RATE_RAD = 7.292115e-5
 WEAK_PRIOR_RAD = 3.0             # a prior on nuisance angles that only matters when nothing else does
@@ -843,6 +844,11 @@ class Model:
         self._ctx_t = np.array([q.t_mid_s - self.t0 for q in segs], float)
         self._ctx_index = np.array([float(q.index) for q in segs], float)
         self._ctx_temp_rate = np.array([q.temp_rate_c_per_s for q in segs], float)
+        # time since each rotation's start at its phase points (effects of the table's angle)
+        self._ctx_turned = np.concatenate([np.zeros(S)] + [turned_time(r.angle_deg, r.duration_s, PHASES)
+                                                           for r in rots])
+        self._ctx_turned_sq = np.concatenate([np.zeros(S)] + [turned_time(r.angle_deg, r.duration_s, PHASES, 2)
+                                                              for r in rots])
         self._last_jacobian = None
         self._unsafe = None         # ids of the effects that are not complex-step safe (None: not asked yet)
         self.evaluations = 0        # residual evaluations (the Jacobian's included), for benchmarks
@@ -1082,7 +1088,8 @@ class Model:
                 w_table=np.concatenate([zeros, (w_k * l[n][:, None, :]).reshape(-1, 3)]),
                 wdot_table=np.concatenate([zeros, (wdot_k * l[n][:, None, :]).reshape(-1, 3)]),
                 temp_c=self._ctx_temp, accel_matrix=Ma[n], gyro_matrix=Mg[n], t_s=self._ctx_t,
-                segment_index=self._ctx_index, temp_rate_c_per_s=self._ctx_temp_rate)
+                segment_index=self._ctx_index, temp_rate_c_per_s=self._ctx_temp_rate, turned_s=self._ctx_turned,
+                turned_sq_s2=self._ctx_turned_sq)
             for eff in self.effects:
                 px = X[n, L[f"effect:{eff.id}"]]
                 for term, out in ((_checked(eff, eff.accel, px, ctx), a), (_checked(eff, eff.gyro, px, ctx), w)):

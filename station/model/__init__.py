@@ -7,7 +7,9 @@ the library's ids to classes; station.model.registry adds the user's own (plugin
 """
 from station.model.accel_cross_axis import AccelCrossAxis
 from station.model.accel_cubic import AccelCubic
+from station.model.axis_offsets import RotationAxisOffsets
 from station.model.bias_drift import BiasDrift
+from station.model.bias_step import BiasStep
 from station.model.effect import Effect, Param, SampleContext
 from station.model.g_sensitivity import GyroGSensitivity
 from station.model.gyro_anisoelastic import GyroAnisoelastic
@@ -16,6 +18,7 @@ from station.model.lever_arm import AccelLeverArm
 from station.model.nonlinearity import AccelNonlinearity
 from station.model.scale_asymmetry import GyroScaleAsymmetry
 from station.model.scale_temperature import ScaleTemperature
+from station.model.table_encoder_scale import TableEncoderScale
 from station.model.temperature import TemperatureBias
 from station.model.temperature_quadratic import TemperatureBiasQuadratic
 from station.model.time_offset import TimeOffset
@@ -24,7 +27,8 @@ LIBRARY = {cls.id: cls for cls in (AccelLeverArm, AccelNonlinearity, GyroGSensit
                                    GyroScaleAsymmetry, TemperatureBias, TimeOffset,
                                    AccelCubic, ScaleTemperature, TemperatureBiasQuadratic,
                                    GyroAnisoelastic, AccelCrossAxis, GyroRateNonlinearity,
-                                   BiasDrift)}
+                                   BiasDrift, BiasStep, TableEncoderScale,
+                                   RotationAxisOffsets)}
 EFFECTS = LIBRARY
 
 __all__ = ["EFFECTS", "LIBRARY", "Effect", "Param", "SampleContext"]

@@ -44,6 +44,10 @@ class SampleContext:
     t_s: np.ndarray | None = None          # time since the start of the run, s (None: unknown)
     segment_index: np.ndarray | None = None  # index of the segment in the capture (None: unknown)
     temp_rate_c_per_s: np.ndarray | None = None  # rate of change of the temperature, deg C/s
+    turned_s: np.ndarray | None = None     # the fit only: time since a rotation's start at its phase
+                                           #   point (mean over the revolutions it stands for; 0 at
+                                           #   statics), for effects of the table's angle; None in apply
+    turned_sq_s2: np.ndarray | None = None  # the fit only: the mean of that time's square, s^2
 
     def __len__(self) -> int:
         return len(self.f_p)

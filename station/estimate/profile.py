@@ -1,0 +1,149 @@
+"""Effects with a discrete parameter (the time of a bias step): located by a profile of the score
+test over their candidate values at a fit without them, then fitted at the best one.
+
+The score (Lagrange-multiplier) statistic of adding an effect at a fit is the chi2 drop a first
+Gauss-Newton step with it would give: g' A^+ g, g = Jp' r and A = Jp' Jp, Jp its Jacobian columns
+less what the fitted model can already produce.  One model per candidate value shares the fit's
+start and nuisances (lsq.Model's like), so a profile over 30 boundaries costs 30 Jacobians of six
+columns, not 30 fits.  The maximum over candidates is optimistic: the caller corrects its p-value
+for the number of candidates (Bonferroni).
+"""
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+
+from station.estimate import lsq
+
+
+def fit_jacobian(result) -> np.ndarray:
+    """The model's Jacobian at the fitted parameters, computed once per fit and shared by the
+    candidates' basis and the leave-one-segment-out check (callers must not modify it)."""
+    J = getattr(result, "_jacobian", None)
+    if J is None:
+        J = result.model.jacobian(result.x)
+        result._jacobian = J
+    return J
+
+
+def model_basis(result) -> np.ndarray:
+    """Orthonormal basis of what the fitted model's parameters can change in the residuals
+    (its Jacobian's column space), computed once per fit (a small model's: outside_model)."""
+    cached = getattr(result, "_basis", None)
+    if cached is None:
+        J = fit_jacobian(result)
+        u, sv, _ = np.linalg.svd(J, full_matrices=False)
+        cached = u[:, sv > 1e-10 * sv[0]]
+        result._basis = cached
+    return cached
+
+
+def outside_model(result, M: np.ndarray) -> np.ndarray:
+    """M (rows x k) less its projection on what the fitted model's parameters can change in the
+    residuals (its Jacobian's column space): a large model's with its segments' nuisances
+    eliminated (lsq._Reduced.outside: linear in the segments; the whole Jacobian's SVD took 51 s
+    and 2.8 GB at 1,000 segments), a small one's through model_basis."""
+    if result.model.is_large:
+        return lsq.reduced_at_solution(result).outside(M)
+    basis = model_basis(result)
+    return M - basis @ (basis.T @ M)
+
+
+def is_profiled(effect) -> bool:
+    return callable(getattr(effect, "candidate_times", None)) and callable(getattr(effect, "locate", None))
+
+
+def score(result, effect) -> float:
+    """The score statistic (predicted chi2 drop, nominal noise) of adding ``effect`` to the fit."""
+    model = result.model
+    extended = lsq.Model(model.s, [*model.effects, effect], model.attitudes, like=model)
+    extended.priors = dict(model.priors)
+    n = model.layout.size
+    x = np.concatenate([result.x, np.zeros(extended.layout.size - n)])
+    r = extended.residuals(x)
+    Jp = outside_model(result, extended.jacobian_columns(x, list(range(n, extended.layout.size))))
+    g = Jp.T @ r
+    return float(g @ (np.linalg.pinv(Jp.T @ Jp, rcond=1e-10) @ g))
+
+
+def _bias_like_profile(result, effect) -> list[tuple[float, str, str, float]]:
+    """The profile of an effect that is the model's biases changing from a time on (a bias step):
+    its columns at each candidate time are the Jacobian's bias columns on the rows of the segments
+    after that time (the score is unchanged by each column's scale), so no model is built."""
+    model = result.model
+    s = model.s
+    J = fit_jacobian(result)
+    L = model.layout
+    cols = list(range(L["accel_bias"].start, L["accel_bias"].stop)) + list(range(L["gyro_bias"].start,
+                                                                                   L["gyro_bias"].stop))
+    Jb = J[:, cols]
+    r = model.residuals(result.x)
+    t_of = {x.name: x.t_mid_s - model.t0 for x in (*s.statics, *s.rotations) if np.isfinite(x.t_mid_s)}
+    seg_t = np.array([t_of.get(name, np.nan) for name, _, _, _ in model.row_labels(result.x)])
+    out = []
+    for t, before, after in effect.candidate_times(s):
+        Jp = outside_model(result, Jb * (seg_t >= t)[:, None])
+        g = Jp.T @ r
+        out.append((t, before, after, float(g @ (np.linalg.pinv(Jp.T @ Jp, rcond=1e-10) @ g))))
+    return out
+
+
+def profile(result, effect) -> list[tuple[float, str, str, float]]:
+    """(value, before, after, score) at every candidate of ``effect`` (a copy is tried at each)."""
+    if getattr(effect, "bias_like", False):
+        return _bias_like_profile(result, effect)
+    out = []
+    for t, before, after in effect.candidate_times(result.model.s):
+        trial = copy.deepcopy(effect)
+        trial.locate(t, "")
+        out.append((t, before, after, score(result, trial)))
+    return out
+
+
+ALIKE_CHI2 = 6.63    # the 1 % point of chi2 on one degree of freedom
+REFINE = 3         # the candidates of largest score fitted in full, the best chi2 kept
+
+
+def locate(result, effect, refine: int = REFINE) -> list:
+    """Set ``effect`` at its best candidate for the fit ``result``: the REFINE candidates of
+    largest score are fitted in full and the one of lowest chi2 kept (the score is a one-step
+    prediction at the fit without the effect: two neighbouring boundaries that a parameter of the
+    model can partly trade, a gyro's scale between a rotation's two directions, score alike).
+    ``refine`` 0: the largest score only (a candidate's score test: no fit).  The profile is kept
+    on it (``effect.profile``) and returned."""
+    prof = profile(result, effect)
+    if prof:
+        top = sorted(prof, key=lambda p: -p[3])[:max(refine, 1)]
+        fitted = []
+        for cand in top if len(top) > 1 else ():
+            trial = copy.deepcopy(effect)
+            trial.locate(cand[0], "")
+            fitted.append((lsq.fit(result.model.s, [*result.model.effects, trial], result.model.attitudes,
+                                   like=result.model).chi2, cand))
+        best, (t, before, after, drop) = min(fitted, key=lambda f: f[0]) if fitted else (0.0, top[0])
+        # the others whose chi2 is within the 1 % point of chi2 on one degree of freedom (scaled by
+        # the over-dispersion of the best fit when it fails): the capture cannot tell them from the best
+        dof = result.dof - len(effect.params)
+        phi = max(best / dof, 1.0) if dof > 0 else 1.0
+        alike = [f"{c[1]} -> {c[2]} (chi2 +{chi2 - best:.1f})" for chi2, c in fitted
+                 if c[0] != t and chi2 - best < ALIKE_CHI2 * phi]
+        effect.locate(t, f"located between {before} and {after} by a profile of the score test over {len(prof)} "
+                         f"boundaries between segments"
+                         + (f" (the best {len(top)} fitted)" if fitted else "")
+                      + (f"; as likely: {', '.join(alike)}" if alike else ""))
+    effect.profile = prof
+    return prof
+
+
+def fit_located(s, effects, attitudes: str = "auto", like=None):
+    """lsq.fit, with every effect of a discrete parameter that is not located yet located first
+    at the fit without it (one more fit)."""
+    effects = list(effects)
+    pending = [e for e in effects if is_profiled(e) and getattr(e, "step_time_s", 0.0) is None]
+    if pending:
+        base = lsq.fit(s, [e for e in effects if e not in pending], attitudes, like=like)
+        for e in pending:
+            locate(base, e)
+        like = base.model
+    return lsq.fit(s, effects, attitudes, like=like)

@@ -1,0 +1,72 @@
+"""rotation_axis_offsets: the IMU sits at a different distance from each rotation axis (remounted
+between the axes, or a table whose axes do not meet)."""
+from __future__ import annotations
+
+import numpy as np
+
+from station.model.effect import Effect, Param
+from station.model.geometry import cross
+
+
+class RotationAxisOffsets(Effect):
+    id = "rotation_axis_offsets"
+    title = "A mounting offset of its own for each rotation axis (IMU remounted between axes; axes that do not meet)"
+    physics = ("Turning about an axis that does not pass through the IMU adds a centripetal acceleration w x (w x d) "
+               "and a tangential one dw/dt x d, d the offset from the axis.  The model has one offset for every "
+               "rotation; when the IMU was taken off and put back for each axis (a fixture turned by hand, "
+               "a cube remounted on its faces) or the table's axes do not meet, each axis has its own.  A bench "
+               "nuisance, not a property of the IMU: station apply compensates nothing for it.")
+    term = ("rotation segments about axis group k >= 1: accel_raw += M_a (w x (w x d_k) + dw/dt x d_k), d_k (m, "
+            "frame p) the offset about that axis less the common one (the model's mounting offset, which group "
+            "0 takes); d_k's part along its axis is not seen (its prior holds it)")
+    excited_by = ("rotations about two or more axes at rates whose centripetal acceleration w^2 d exceeds the "
+                  "accelerometer noise of a rotation's mean (at 100 °/s = 1.75 rad/s, 1 mm gives 3.0 mm/s² = 310 µg)")
+    magnitudes = "0 (one mounting, axes that meet to < 1 mm), 1-50 mm (remounted by hand, axes that do not meet)"
+    signature = ("accelerometer, rotation segments: a constant offset (the mean) that grows with the square of the "
+                 "rate, of a different direction and size for each rotation axis, the same for both directions "
+                 "about one axis; the statics fit")
+    signature_variable = "rate_squared"
+    complex_step = True
+    bench = True              # ranked after the IMU's effects (station.diagnose.core.rank_candidates): its
+                              #   offsets per axis hold the accelerometers' size effect (accel_lever_arm) too
+    state_fields = ("group_of", "groups", "group_names")
+
+    def __init__(self):
+        self.group_of = {}           # segment index -> axis group of its rotation
+        self.groups = [1, 2]         # the groups with an offset of their own (all but the first)
+        self.group_names = {}        # group -> its rotations' names
+
+    def setup(self, summaries) -> None:
+        steady = [r for r in summaries.rotations if r.steady]
+        self.group_of = {int(r.index): int(r.group) for r in steady}
+        order = sorted({r.group for r in steady})
+        self.groups = [int(g) for g in order[1:]]
+        self.group_names = {int(g): [r.name for r in steady if r.group == g] for g in order}
+
+    def words(self, x, sigma) -> list[str]:
+        """Each axis' offset that differs from the first's by more than 3 sigma, in words (mm)."""
+        first = ", ".join(self.group_names.get(min(self.group_names, default=0), []))
+        out = []
+        for n, g in enumerate(self.groups):
+            v, s = np.asarray(x[3 * n:3 * n + 3], float), np.asarray(sigma[3 * n:3 * n + 3], float)
+            big = [f"{v[i]:+.3g} ± {s[i]:.2g} mm along {a}" for i, a in enumerate("xyz") if abs(v[i]) > 3 * s[i]]
+            if big:
+                out.append(f"the IMU sits {', '.join(big)} further from the axis of "
+                           f"{', '.join(self.group_names.get(g, []))} than from that of {first}: it was moved or "
+                           "remounted between those rotations, or the table's axes do not meet")
+        return out
+
+    @property
+    def params(self):
+        return tuple(Param(f"axis{g}_offset_{a}", "mm", 1e3, 5.0, 1000.0) for g in self.groups for a in "xyz")
+
+    def accel(self, x, ctx):
+        if getattr(ctx, "turned_s", None) is None:      # station apply: the bench's, not the IMU's
+            return None
+        index = ctx.column("segment_index")
+        group = np.array([self.group_of.get(int(i), -1) if np.isfinite(i) else -1 for i in index])
+        d = np.zeros((len(index), 3), dtype=np.result_type(x, ctx.f_p))
+        for n, g in enumerate(self.groups):
+            d = d + (group == g).astype(float)[:, None] * x[3 * n:3 * n + 3][None, :]
+        w, wdot = ctx.w_table, ctx.wdot_table
+        return (cross(w, cross(w, d)) + cross(wdot, d)) @ ctx.accel_matrix.T
