@@ -28,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: module -> the tests that guard it (kept in the scratch copy; helpers and data always kept)
 MODULES = {
-    "station/estimate/verdict.py": ["tests/test_verdicts.py"],
+    "station/estimate/verdict.py": ["tests/test_verdicts.py", "tests/test_verdict_rules.py"],
     "station/model/compensate.py": ["tests/test_effects_raw_counts.py", "tests/test_effect_plugins.py",
                                     "tests/test_cli.py"],
     "drivers/vectornav.py": ["tests/test_drivers_decoders.py", "tests/test_decoders_long_reads.py",
@@ -36,6 +36,40 @@ MODULES = {
     "station/io/capture.py": ["tests/test_capture.py", "tests/test_capture_kill.py",
                               "tests/test_capture_streaming.py"],
 }
+
+
+# mutmut's own timeout is 4 x (the mutant's tests' time in the statistics run + 1 s); on a shared
+# machine whose load swings by 10x between that run and a mutant's, sound mutants were killed as
+# timeouts (32 of the first 55 of verdict.py at a load average of 25 on 2 cores).  The same check,
+# with the factor given (--timeout-factor, default 20).
+RUNNER = """
+import os, signal, sys
+from datetime import datetime
+from time import sleep
+import mutmut.__main__ as m
+
+FACTOR = float(os.environ["MUTATION_TIMEOUT_FACTOR"])
+
+
+def timeout_checker(mutants):
+    def inner():
+        while True:
+            sleep(1)
+            now = datetime.now()
+            for mm, name, _ in mutants:
+                for pid, start in list(mm.start_time_by_pid.items()):
+                    if (now - start).total_seconds() > (mm.estimated_time_of_tests_by_mutant[name] + 1) * FACTOR:
+                        try:
+                            os.kill(pid, signal.SIGXCPU)
+                        except ProcessLookupError:
+                            pass
+    return inner
+
+
+m.timeout_checker = timeout_checker
+sys.argv = ["mutmut"] + sys.argv[1:]
+m.cli()
+"""
 
 
 def tracked_files() -> list:
@@ -67,7 +101,7 @@ def scratch_copy(module: str, dest: Path) -> None:
     (dest / "pyproject.toml").write_text(text)
 
 
-def run_module(module: str, children: int, keep: Path | None) -> dict:
+def run_module(module: str, children: int, keep: Path | None, timeout_factor: float = 20.0) -> dict:
     work = Path(tempfile.mkdtemp(prefix="station-mutation-")) if keep is None else keep
     if keep is not None and keep.exists():
         shutil.rmtree(keep)
@@ -78,8 +112,9 @@ def run_module(module: str, children: int, keep: Path | None) -> dict:
     (work / "mutants").mkdir(exist_ok=True)
     env = {**os.environ, "PYTHONPATH": str(work / "mutants"), "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
     env.pop("PYTEST_ADDOPTS", None)
+    env["MUTATION_TIMEOUT_FACTOR"] = str(timeout_factor)
     t0 = time.perf_counter()
-    run = subprocess.run([sys.executable, "-m", "mutmut", "run", "--max-children", str(children)], cwd=work, env=env,
+    run = subprocess.run([sys.executable, "-c", RUNNER, "run", "--max-children", str(children)], cwd=work, env=env,
                          capture_output=True, text=True)
     elapsed = time.perf_counter() - t0
     results = subprocess.run([sys.executable, "-m", "mutmut", "results", "--all", "true"], cwd=work, env=env,
@@ -111,6 +146,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("modules", nargs="*", help=f"default: all of {', '.join(MODULES)}")
     ap.add_argument("--children", type=int, default=1, help="mutmut's worker processes (default 1: a shared machine)")
+    ap.add_argument("--timeout-factor", type=float, default=20.0,
+                    help="a mutant's tests may take this many times their time in mutmut's statistics run (+1 s)")
     ap.add_argument("--keep", type=Path, help="work in this directory and keep it (mutmut browse there)")
     ap.add_argument("--list", action="store_true", help="the modules and their tests")
     args = ap.parse_args(argv)
@@ -122,7 +159,7 @@ def main(argv=None):
     if unknown:
         ap.error(f"unknown module {', '.join(unknown)}: one of {', '.join(MODULES)}")
     for module in args.modules or list(MODULES):
-        run_module(module, args.children, args.keep)
+        run_module(module, args.children, args.keep, args.timeout_factor)
     return 0
 
 

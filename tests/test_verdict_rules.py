@@ -1,0 +1,106 @@
+"""The verdict's rules on small calibrations made by hand (issue 30 item 6: survivors of mutation
+testing in station/estimate/verdict.py killed here, fast enough for the mutation run to afford):
+a stopped fit judged on the parameters written, the words for rotations and axes, the verdicts
+that exit 3."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from sim_devices.truth import default_truth
+from station.estimate.verdict import (ACCEL_BLOCK, GYRO_BLOCK, INTER_TRIAD, fit_fails, judge, not_determined)
+from station.simulate import dryrun
+
+DOF = 400
+
+
+def calibration(*, chi2=1.0 * DOF, converged=True, steps=None, rotations=6, R_po=None, scale_sign=1.0):
+    """The truth's calibration with a 1-sigma for every base parameter (well determined), a fit
+    of DOF degrees of freedom, ``rotations`` rotation segments and, for a stopped fit, the step
+    the solver would still take per parameter in 1-sigma (``steps``)."""
+    cal = dryrun.truth_calibration(default_truth(1))
+    if R_po is not None:
+        cal.R_po = R_po
+    cal.gyro_scale = cal.gyro_scale * np.array([1.0, scale_sign, 1.0])
+    cal.sigma = {n: 1e-6 if "_scale_" in n else 1.0 for n in ACCEL_BLOCK + GYRO_BLOCK + INTER_TRIAD}
+    cal.fit = {"method": "lsq", "chi2": chi2, "dof": DOF, "converged": converged, "rotation_segments": rotations}
+    if steps is not None:
+        cal.fit["remaining_step_sigma"] = steps
+    return cal
+
+
+def test_a_stopped_fit_is_judged_on_what_is_written():
+    """Statics only (the gyro block not determined, not written): the solver stopped with a large
+    step left in the gyro block and in a nuisance that is no parameter (a pose's heading), and
+    0.005 sigma in the accelerometers: at the minimum for everything written.  Judged "not
+    converged" before the dropping, then again after it: passes, with the note."""
+    steps = {**{n: 0.005 for n in ACCEL_BLOCK}, **{n: 7.0 for n in GYRO_BLOCK + INTER_TRIAD},
+             "pose_heading_3": 5.0}
+    cal = judge(calibration(converged=False, steps=steps, rotations=0))
+    v = cal.fit["verdict"]
+    assert v["result"] == "passes" and "agree with the noise" in v["reason"]
+    assert cal.fit["converged"] is False                      # said, not rewritten
+    assert set(not_determined(cal)) == set(GYRO_BLOCK + INTER_TRIAD)
+    assert any("every parameter written is at the minimum: the step it would still take is at most 0.005 "
+               "of a 1-sigma" in n for n in cal.fit["notes"])
+    assert not fit_fails(cal)
+
+
+@pytest.mark.parametrize("moving", ["accel_scale_x", "accel_bias_z"])
+def test_a_written_parameter_still_moving_is_not_converged(moving):
+    steps = {**{n: 0.005 for n in ACCEL_BLOCK}, **{n: 7.0 for n in GYRO_BLOCK + INTER_TRIAD}}
+    steps[moving] = 0.0101
+    cal = judge(calibration(converged=False, steps=steps, rotations=0))
+    assert cal.fit["verdict"]["result"] == "not converged"
+    assert fit_fails(cal)
+    assert not any("every parameter written is at the minimum" in n for n in cal.fit["notes"])
+
+
+def test_a_stopped_fit_without_steps_is_not_converged():
+    cal = judge(calibration(converged=False, steps=None))
+    assert cal.fit["verdict"]["result"] == "not converged" and fit_fails(cal)
+
+
+def test_a_converged_fit_gets_no_convergence_note():
+    cal = judge(calibration(steps={n: 5.0 for n in ACCEL_BLOCK}))
+    assert cal.fit["verdict"]["result"] == "passes"
+    assert not any("evaluation limit" in n for n in cal.fit["notes"])
+
+
+def test_not_determined_lists_what_is_left_out():
+    cal = judge(calibration(rotations=0))
+    assert not_determined(cal) == GYRO_BLOCK + INTER_TRIAD
+    assert cal.fit["gyro_calibrated"] is False
+    assert not_determined(judge(calibration())) == []
+
+
+@pytest.mark.parametrize("result, unusable", [("passes", False), ("fails", True), ("not converged", True),
+                                              ("noise overestimated", False), ("untested", False)])
+def test_the_verdicts_that_exit_3(result, unusable):
+    cal = calibration()
+    cal.fit["verdict"] = {"result": result}
+    assert fit_fails(cal) is unusable
+
+
+def test_a_large_inter_triad_rotation_is_named_with_its_axis():
+    R = Rotation.from_rotvec(math.radians(2.0) * np.array([0.0, 0.6, 0.8])).as_matrix()
+    cal = judge(calibration(R_po=R))
+    assert ("warning: a large rotation between the triads: 2.00 deg about [+0.000, +0.600, +0.800] (a mounting "
+            "or axis-order problem; the usual size is arcseconds to arcminutes)") in cal.fit["notes"]
+
+
+def test_inverted_gyro_axes_are_named():
+    R = Rotation.from_rotvec(math.radians(180.0) * np.array([0.0, 0.0, 1.0])).as_matrix()
+    cal = judge(calibration(R_po=R))
+    note = next(n for n in cal.fit["notes"] if "inverted against" in n)
+    assert note.startswith("warning: the gyro axes are inverted against the accelerometers': a rotation of 180.0 deg "
+                           "about [+0.000, +0.000, +1.000] between the triads (gyro x, y pointing opposite")
+
+
+def test_a_negative_scale_factor_is_named():
+    cal = judge(calibration(scale_sign=-1.0))
+    assert any(n.startswith("warning: the gyro y axis is inverted (scale factor -") for n in cal.fit["notes"])
+    assert not any("accelerometer" in n and "inverted" in n for n in cal.fit["notes"])
