@@ -104,3 +104,95 @@ def test_a_negative_scale_factor_is_named():
     cal = judge(calibration(scale_sign=-1.0))
     assert any(n.startswith("warning: the gyro y axis is inverted (scale factor -") for n in cal.fit["notes"])
     assert not any("accelerometer" in n and "inverted" in n for n in cal.fit["notes"])
+
+
+# ------------------------------------------------------------------------ identifiability bounds
+# The bounds as documented (docs/calibration-file.md), not read from verdict.BOUNDS: scale factor
+# 1 % of its value, misalignment and inter-triad angle 3600 arcsec, accelerometer bias 10,000 ug,
+# gyro bias 360 deg/h; raw units converted through the scale factor.  Each checked 1 % inside and
+# 1 % outside.
+
+def values_of(cal):
+    return {n: v for n, v, _ in cal.parameters()}
+
+
+def raw(cal, factor=1000.0):
+    """The same calibration in raw counts: factor counts per m/s^2 and per deg/s."""
+    cal.accel_unit = cal.gyro_unit = "raw"
+    cal.accel_scale = cal.accel_scale * factor
+    cal.gyro_scale = cal.gyro_scale * factor
+    cal.accel_bias = cal.accel_bias * factor
+    cal.gyro_bias = cal.gyro_bias * factor
+    return cal
+
+
+@pytest.mark.parametrize("units", ["physical", "raw"])
+@pytest.mark.parametrize("name, bound", [("gyro_scale_y", 0.01), ("gyro_misalignment_zx", 3600.0),
+                                         ("gyro_bias_z", 360.0)])
+def test_the_gyro_block_is_written_inside_its_bounds_only(units, name, bound):
+    for inside in (True, False):
+        cal = calibration()
+        if units == "raw":
+            cal = raw(cal)
+        value = values_of(cal)[name]
+        s = bound * (0.99 if inside else 1.01)
+        if "_scale_" in name:
+            s *= abs(value)                     # relative: raw/(deg/s) when raw
+        elif "_bias_" in name and units == "raw":
+            s *= abs(values_of(cal)["gyro_scale_z"]) / 3600.0      # deg/h -> deg/s -> counts
+        cal.sigma[name] = s
+        judge(cal)
+        assert (not_determined(cal) == []) is inside, (units, name, inside)
+        if not inside:
+            assert set(not_determined(cal)) == set(GYRO_BLOCK + INTER_TRIAD) and name not in cal.sigma
+            assert any(f"{name}: 1-sigma infinite or above its bound" in n for n in cal.fit["notes"])
+
+
+def test_the_inter_triad_rotation_alone_is_left_out_above_its_bound():
+    for inside in (True, False):
+        cal = calibration()
+        cal.sigma["inter_triad_y"] = 3600.0 * (0.99 if inside else 1.01)
+        judge(cal)
+        assert not_determined(cal) == ([] if inside else INTER_TRIAD)
+        assert ("inter_triad" in cal.effects) is inside
+        if not inside:
+            np.testing.assert_array_equal(cal.R_po, np.eye(3))
+            assert "gyro_bias_x" in cal.sigma
+
+
+@pytest.mark.parametrize("units", ["physical", "raw"])
+def test_accelerometers_above_their_bound_are_refused(units):
+    from station.core.errors import UserError
+
+    for inside in (True, False):
+        cal = calibration()
+        if units == "raw":
+            cal = raw(cal)
+        s = 1e4 * (0.99 if inside else 1.01)                        # ug
+        if units == "raw":
+            s *= 9.80665e-6 * abs(values_of(cal)["accel_scale_y"])  # ug -> m/s^2 -> counts
+        cal.sigma["accel_bias_y"] = s
+        if inside:
+            judge(cal)
+            assert not_determined(cal) == []
+        else:
+            with pytest.raises(UserError, match="does not determine the accelerometers \\(accel_bias_y"):
+                judge(cal)
+
+
+@pytest.mark.parametrize("sigma", [None, math.nan, math.inf])
+def test_a_sigma_that_is_no_number_is_not_determined(sigma):
+    cal = calibration()
+    if sigma is None:
+        del cal.sigma["gyro_misalignment_yz"]
+    else:
+        cal.sigma["gyro_misalignment_yz"] = sigma
+    judge(cal)
+    assert set(not_determined(cal)) == set(GYRO_BLOCK + INTER_TRIAD)
+
+
+def test_a_zero_scale_factor_is_not_determined():
+    cal = calibration()
+    cal.gyro_scale = cal.gyro_scale * np.array([1.0, 0.0, 1.0])
+    judge(cal)
+    assert set(not_determined(cal)) == set(GYRO_BLOCK + INTER_TRIAD)
