@@ -196,3 +196,76 @@ def test_a_zero_scale_factor_is_not_determined():
     cal.gyro_scale = cal.gyro_scale * np.array([1.0, 0.0, 1.0])
     judge(cal)
     assert set(not_determined(cal)) == set(GYRO_BLOCK + INTER_TRIAD)
+
+
+# ------------------------------------------------------------------------ the verdict's branches
+
+def judged(**fit):
+    cal = calibration()
+    cal.fit.update(fit)
+    return judge(cal)
+
+
+@pytest.mark.parametrize("fit, words", [
+    ({"dof": 0}, "no redundant data (0 degrees of freedom for method lsq): the model cannot be checked against "
+                 "the measurements"),
+    ({"dof": None}, "no redundant data (no degrees of freedom for method lsq)"),
+    ({"chi2": math.nan}, "no redundant data (400 degrees of freedom"),
+    ({"data_redundancy": 0.49}, "the data have no redundancy of their own (0.49; the 400 degrees of freedom counted "
+                                "are the priors'): the model cannot be checked against the measurements"),
+    ({"noise_model": {"tested": {"chi2": 0.3, "redundancy": 0.49, "left_out": ["hand turns", "static gyro means"]}}},
+     "no redundancy is left to test the model (0.49) once the noise of hand turns, static gyro means is estimated "
+     "from its own scatter"),
+    ({"noise_model": {"tested": {"chi2": 0.3, "redundancy": 0.49}}},
+     "once the noise of the data is estimated from its own scatter"),
+])
+def test_untested_fits_say_why(fit, words):
+    v = judged(**fit).fit["verdict"]
+    assert v["result"] == "untested" and words in v["reason"], v
+
+
+def test_a_redundancy_just_enough_is_tested():
+    v = judged(data_redundancy=0.51).fit["verdict"]
+    assert v["result"] == "passes" and v["dof"] == DOF and isinstance(v["dof"], int)
+
+
+def test_the_tested_part_of_a_noise_model_decides():
+    """The data's own chi2 on their redundancy, the estimated groups named."""
+    tested = {"chi2": 150.0, "redundancy": 123.456, "left_out": ["hand turns"]}
+    cal = judged(chi2=10 * DOF, noise_model={"tested": tested, "terms": ["white", "quantisation"]})
+    v = cal.fit["verdict"]
+    assert v["result"] == "passes" and v["dof"] == 123.46
+    assert v["reduced_chi2"] == pytest.approx(150.0 / 123.456, rel=1e-12)
+    assert v["left_out"] == ["hand turns"] and v["noise_model"] == "white, quantisation"
+    assert v["reason"].endswith("the residuals agree with the noise model (white, quantisation); hand turns not "
+                                "tested (their noise estimated from their scatter)")
+    white = judged(noise_model={"terms": ["white"]}).fit["verdict"]
+    assert white["reason"].endswith("the residuals agree with the noise") and "left_out" not in white
+
+
+def test_a_failing_fit_widens_every_sigma_but_a_pose_only_accelerometer_block():
+    reduced = 4.0
+    for pose_only in (False, True):
+        cal = calibration(chi2=reduced * DOF)
+        before = dict(cal.sigma)
+        if pose_only:
+            cal.fit["pose_check"] = {"written": "pose-only accelerometers", "sigma_scale": 1.25}
+        judge(cal)
+        v = cal.fit["verdict"]
+        assert v["result"] == "fails" and cal.fit["sigma_scale"] == pytest.approx(2.0)
+        assert v["reason"].startswith("reduced chi2 4 (p = ") and "station diagnose shows where" in v["reason"]
+        for name, s in cal.sigma.items():
+            own = pose_only and name in ACCEL_BLOCK
+            assert s == pytest.approx(before[name] * (1.0 if own else 2.0), rel=1e-12), name
+        note = next(n for n in cal.fit["notes"] if n.startswith("the fit fails"))
+        assert note.startswith("the fit fails (reduced chi2 4): every 1-sigma is multiplied by sqrt(reduced chi2) = 2")
+        assert note.endswith(", except the accelerometers', which are the poses' own fit's (scaled by its own "
+                             "sqrt(reduced chi2) = 1.25)") if pose_only else note.endswith("= 2")
+
+
+def test_noise_overestimated_says_by_how_much():
+    cal = judged(chi2=0.25 * DOF)
+    v = cal.fit["verdict"]
+    assert v["result"] == "noise overestimated" and 0 < v["p_below"] < 1e-3
+    assert "every 1-sigma is too large, by up to 2 times (kept as they are: conservative)" in v["reason"]
+    assert "a noise figure from a datasheet, or samples averaged before recording" in v["reason"]
