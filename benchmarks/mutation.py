@@ -126,10 +126,9 @@ def run_module(module: str, children: int, keep: Path | None, timeout_factor: fl
             status.setdefault(m.group(2).strip(), []).append(m.group(1))
     counts = {k: len(v) for k, v in status.items()}
     survivors = status.get("survived", [])
+    # names only: `mutmut show NAME` costs seconds each (run it in --keep's directory)
     for name in survivors:
-        shown = subprocess.run([sys.executable, "-m", "mutmut", "show", name], cwd=work, env=env,
-                               capture_output=True, text=True)
-        print(f"--- survivor {name}\n{shown.stdout}")
+        print(f"survived: {name}")
     killed = counts.get("killed", 0)
     judged = sum(v for k, v in counts.items() if k not in ("skipped", "not checked"))
     summary = {"module": module, "seconds": round(elapsed, 1), "counts": counts,
