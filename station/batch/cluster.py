@@ -15,7 +15,6 @@ import os
 
 from station.core.errors import UserError
 
-CONNECT_TIMEOUT_S = 20.0       # a scheduler that does not answer by then is an error (exit 2)
 
 
 def _quiet() -> None:
@@ -47,7 +46,8 @@ def open_client(scheduler: str | None = None, workers: int | None = None):
     if scheduler:
         address = _check_address(scheduler)
         try:
-            client = Client(address, timeout=CONNECT_TIMEOUT_S)
+            # how long it tries: Dask's distributed.comm.timeouts.connect (30 s unless configured)
+            client = Client(address)
         except (OSError, TimeoutError) as e:
             raise UserError(f"--scheduler {address}: cannot connect to the Dask scheduler "
                             f"({' '.join(str(e).split())[:160]})") from None
@@ -59,8 +59,7 @@ def open_client(scheduler: str | None = None, workers: int | None = None):
     from station.core.forked import usable_cores
 
     n = max(1, workers or usable_cores())
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                           silence_logs=logging.ERROR)
+    cluster = _start_local(LocalCluster, n)
     try:
         client = Client(cluster)
         try:
@@ -69,6 +68,27 @@ def open_client(scheduler: str | None = None, workers: int | None = None):
             client.close()
     finally:
         cluster.close()
+
+
+def _start_local(LocalCluster, n: int):
+    """A LocalCluster whose worker processes ignore Ctrl-C: a terminal sends it to the whole
+    foreground process group, and each worker would print its own traceback; this process gets
+    it too, and ends them by closing the cluster.  (SIGINT ignored while the workers are spawned:
+    a disposition a child keeps through exec, and Python then installs no handler of its own.
+    A Ctrl-C in the second or two the cluster takes to start is not seen: press it again.)"""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                            silence_logs=logging.ERROR)
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.ERROR)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    return cluster
 
 
 def worker_count(client) -> int:

@@ -154,7 +154,9 @@ def _print_summary(command, summary, where, filer, state_path) -> None:
 
     n = len(summary.outcomes)
     computed = summary.computed
-    t = Table(title=f"station batch {command}: {n} capture(s) on {where} ({summary.workers} worker thread(s))")
+    out.print(f"station batch {command}: {n} capture(s) on {where} ({summary.workers} worker thread(s))",
+              markup=False, soft_wrap=True)
+    t = Table()
     t.add_column("")
     t.add_column("captures", justify="right")
     for status in ("done", "poor fit", "failed", "skipped"):

@@ -23,6 +23,9 @@ def add_parsers(sub) -> None:
     mc.add_argument("--method", choices=("lsq", "zhang2010"), default="lsq",
                     help="estimation method (default lsq)")
     mc.add_argument("--seed", type=argtypes.seed, default=1000, help="first seed (runs use seed, seed+1, ...)")
+    mc.add_argument("--scheduler", metavar="tcp://HOST:8786",
+                    help="run the repetitions on this Dask scheduler's workers (default: a pool of "
+                         "worker processes on this machine's cores)")
     mc.add_argument("--json", action="store_true",
                     help="print the per-parameter table as JSON on stdout (error std, Cramér–Rao bound, mean 1σ)")
     mc.set_defaults(func=cmd_montecarlo)
@@ -59,13 +62,21 @@ def cmd_montecarlo(args) -> int:
     settings = montecarlo.Settings(accel_noise_ug=args.accel_noise_ug, gyro_noise_dph=args.gyro_noise_dph,
                                    table_angle_arcsec=args.table_angle_arcsec,
                                    accel_disturbance_ug=args.accel_disturbance_ug, method=args.method)
-    started = time.perf_counter()
-    with _progress_bar(args.runs) as progress:
-        result = montecarlo.study(scheme, settings, args.runs, first_seed=args.seed, bound=True,
-                                  progress=progress)
-    elapsed = time.perf_counter() - started
+    with contextlib.ExitStack() as stack:
+        executor, workers = None, None
+        if args.scheduler:
+            from station.batch.cluster import open_client, worker_count
+
+            client = stack.enter_context(open_client(args.scheduler))
+            executor, workers = client.get_executor(pure=False), worker_count(client)
+        started = time.perf_counter()
+        with _progress_bar(args.runs) as progress:
+            result = montecarlo.study(scheme, settings, args.runs, first_seed=args.seed, bound=True,
+                                      progress=progress, executor=executor, workers=workers)
+        elapsed = time.perf_counter() - started
     err.print(f"{args.runs} dry runs and the Cramér-Rao bound in {elapsed:.1f} s on {result.workers} "
-              f"worker process(es): {args.runs / elapsed:.2f} runs/s", markup=False)
+              f"{'Dask worker thread(s) at ' + args.scheduler if args.scheduler else 'worker process(es)'}: "
+              f"{args.runs / elapsed:.2f} runs/s", markup=False, soft_wrap=True)
     names, errors, sigmas, crlb = result.names, result.errors, result.sigmas, result.crlb
     std = errors.std(axis=0, ddof=1)
     with np.errstate(all="ignore"):
