@@ -46,3 +46,148 @@ if __name__ == "__main__" and len(sys.argv) > 1 and sys.argv[1] == "make":
     a = p.parse_args()
     make(a.directory, a.n)
     sys.exit(0)
+
+
+def load() -> str:
+    one, five, fifteen = os.getloadavg()
+    return f"load average {one:.1f} / {five:.1f} / {fifteen:.1f} (1/5/15 min) on {os.cpu_count()} cores"
+
+
+def single(captures: list[Path]) -> dict:
+    """The single-process estimate rate: station.estimate.estimate_capture and the calibration
+    file written, one capture after the other in this process (warmed up on one first), reading
+    in process, one BLAS thread -- what one worker does per capture, without the cluster."""
+    os.environ["STATION_READ_IN_PROCESS"] = "1"
+    from threadpoolctl import threadpool_limits
+
+    from station.estimate import estimate_capture
+    from station.io.calfile import write_calfile
+
+    out = Path(os.environ.get("TMPDIR", "/tmp")) / f"batch-single-{os.getpid()}"
+    out.mkdir(exist_ok=True)
+    with threadpool_limits(limits=1, user_api="blas"):
+        estimate_capture(captures[0])
+        cpu, wall = time.process_time(), time.perf_counter()
+        for i, c in enumerate(captures):
+            cal, _, prov = estimate_capture(c)
+            write_calfile(out / f"{i}.yaml", cal, prov)
+        cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+    shutil.rmtree(out)
+    return {"captures": len(captures), "wall_s": wall, "cpu_s": cpu, "rate_per_s": len(captures) / wall,
+            "cpu_per_capture_s": cpu / len(captures), "load": load()}
+
+
+def _batch(args, env) -> tuple[float, float, str]:
+    """(wall s, CPU s of the command and every process it started and waited for, stdout)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    started = time.perf_counter()
+    r = subprocess.run([sys.executable, "-m", "station.cli", "batch", *map(str, args)], env=env,
+                       capture_output=True, text=True)
+    wall = time.perf_counter() - started
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if r.returncode != 0:
+        raise SystemExit(f"batch failed ({r.returncode}): {r.stderr[-2000:]}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, cpu, r.stdout
+
+
+def _tree_cpu(procs) -> float:
+    import psutil
+
+    total = 0.0
+    for p in procs:
+        try:
+            ps = psutil.Process(p.pid)
+            for q in [ps, *ps.children(recursive=True)]:
+                t = q.cpu_times()
+                total += t.user + t.system
+        except psutil.NoSuchProcess:
+            pass
+    return total
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def run(directory: Path, n_single: int, workers: int) -> dict:
+    captures = sorted(p for p in directory.iterdir() if (p / "manifest.yaml").exists())
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    results = {"captures": len(captures), "workers": workers, "single_before": single(captures[:n_single])}
+    print(json.dumps(results["single_before"]), flush=True)
+    out = directory.parent / "batch-out"
+    shutil.rmtree(out, ignore_errors=True)
+
+    # a local cluster, started and stopped by the command
+    load_before = load()
+    wall, cpu, _ = _batch(["estimate", directory, "-o", out / "local", "--workers", workers, "--restart",
+                           "--no-history"], env)
+    results["local"] = {"wall_s": wall, "cpu_s": cpu, "rate_per_s": len(captures) / wall,
+                        "cpu_per_capture_s": cpu / len(captures), "load_before": load_before, "load_after": load()}
+    print(json.dumps(results["local"]), flush=True)
+
+    # a scheduler and workers started as separate processes (as on a cluster), on loopback
+    port = _free_port()
+    logs = open(directory.parent / "dask-bench.log", "w")
+    procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                               "--port", str(port), "--no-dashboard"], env=env, stdout=logs, stderr=logs)]
+    address = f"tcp://127.0.0.1:{port}"
+    try:
+        for k in range(workers):
+            procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address,
+                                           "--nthreads", "1", "--nworkers", "1", "--no-dashboard"],
+                                          env=env, stdout=logs, stderr=logs))
+        from distributed import Client
+
+        with Client(address, timeout=120) as client:
+            client.wait_for_workers(workers, timeout=300)
+        load_before = load()
+        cluster_cpu = _tree_cpu(procs)
+        wall, cpu, _ = _batch(["estimate", directory, "-o", out / "scheduler", "--scheduler", address,
+                               "--restart", "--no-history"], env)
+        cluster_cpu = _tree_cpu(procs) - cluster_cpu
+        results["scheduler"] = {"wall_s": wall, "cpu_s": cpu + cluster_cpu, "command_cpu_s": cpu,
+                                "cluster_cpu_s": cluster_cpu, "rate_per_s": len(captures) / wall,
+                                "cpu_per_capture_s": (cpu + cluster_cpu) / len(captures),
+                                "load_before": load_before, "load_after": load()}
+        print(json.dumps(results["scheduler"]), flush=True)
+    finally:
+        for p in reversed(procs):
+            p.terminate()
+        for p in procs:
+            try:
+                p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                p.kill()
+        logs.close()
+    results["single_after"] = single(captures[:n_single])
+    print(json.dumps(results["single_after"]), flush=True)
+    rate = (results["single_before"]["rate_per_s"] + results["single_after"]["rate_per_s"]) / 2
+    cpu_each = (results["single_before"]["cpu_per_capture_s"] + results["single_after"]["cpu_per_capture_s"]) / 2
+    for name in ("local", "scheduler"):
+        r = results[name]
+        r["of_ceiling_wall"] = r["rate_per_s"] / (rate * workers)
+        r["of_ceiling_cpu"] = cpu_each / r["cpu_per_capture_s"]
+    shutil.rmtree(out, ignore_errors=True)
+    return results
+
+
+if __name__ == "__main__":
+    p = argparse.ArgumentParser()
+    p.add_argument("what", choices=("make", "run"))
+    p.add_argument("directory", type=Path)
+    p.add_argument("--single", type=int, default=100, help="captures timed in one process (the ceiling)")
+    p.add_argument("--workers", type=int, default=len(os.sched_getaffinity(0)))
+    p.add_argument("--json", type=Path, help="write the results here too")
+    a = p.parse_args()
+    res = run(a.directory, a.single, a.workers)
+    print(json.dumps(res, indent=1))
+    if a.json:
+        a.json.write_text(json.dumps(res, indent=1))
+    for name in ("local", "scheduler"):
+        r = res[name]
+        print(f"{name}: {res['captures']} captures in {r['wall_s']:.0f} s wall ({r['rate_per_s']:.2f}/s), "
+              f"{r['cpu_per_capture_s']:.3f} s CPU per capture; {r['of_ceiling_wall']:.2f} of the wall-time "
+              f"ceiling, {r['of_ceiling_cpu']:.2f} of the CPU ceiling")

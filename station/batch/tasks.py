@@ -84,26 +84,37 @@ def _one_line(e: BaseException) -> str:
     return text or type(e).__name__
 
 
+_BLAS_LIMIT = None
+
+
+def _worker_setup() -> None:
+    """Once per worker process: read captures in process, one BLAS thread (the other captures
+    fill the other cores; a Dask nanny also sets OPENBLAS_NUM_THREADS=1 before the worker starts)."""
+    global _BLAS_LIMIT
+    if _BLAS_LIMIT is None:
+        os.environ.setdefault("STATION_READ_IN_PROCESS", "1")
+        from threadpoolctl import threadpool_limits
+
+        _BLAS_LIMIT = threadpool_limits(limits=1, user_api="blas")
+
+
 def run(job: Job) -> Outcome:
     """The task: one capture, never raising (an error is the outcome's message)."""
-    os.environ.setdefault("STATION_READ_IN_PROCESS", "1")
-    from threadpoolctl import threadpool_limits
-
     from station.core.errors import UserError
 
     started_cpu, started = time.process_time(), time.perf_counter()
     out = Outcome(job.source, FAILED, worker=f"{socket.gethostname()}:{os.getpid()}")
     try:
-        with threadpool_limits(limits=1, user_api="blas"):
-            out.fingerprint = fingerprint(job.source)
-            prev = job.previous
-            if prev and prev.get("fingerprint") == out.fingerprint and prev.get("outputs") \
-                    and outputs_digest(prev["outputs"]) == prev.get("output_sha256"):
-                out.status, out.outputs, out.output_sha256 = SKIPPED, prev["outputs"], prev["output_sha256"]
-                out.verdict, out.message = prev.get("verdict"), "done by an earlier batch"
-            else:
-                COMMANDS[job.command](job, out)
-                out.output_sha256 = outputs_digest(out.outputs)
+        _worker_setup()
+        out.fingerprint = fingerprint(job.source)
+        prev = job.previous
+        if prev and prev.get("fingerprint") == out.fingerprint and prev.get("outputs") \
+                and outputs_digest(prev["outputs"]) == prev.get("output_sha256"):
+            out.status, out.outputs, out.output_sha256 = SKIPPED, prev["outputs"], prev["output_sha256"]
+            out.verdict, out.message = prev.get("verdict"), "done by an earlier batch"
+        else:
+            COMMANDS[job.command](job, out)
+            out.output_sha256 = outputs_digest(out.outputs)
     except UserError as e:
         out.status, out.message = FAILED, _one_line(e)
     except FileNotFoundError as e:
@@ -124,21 +135,18 @@ def _registry(options):
 
 
 def _estimate(job: Job, out: Outcome) -> None:
-    """As ``station estimate CAPTURE -o OUTPUT`` (and station.api.estimate)."""
-    from station.estimate import estimate_capture
-    from station.estimate.verdict import fit_fails
-    from station.io.calfile import write_calfile
+    """As ``station estimate CAPTURE -o OUTPUT``: station.api.estimate, the file written."""
+    from station import api
 
     o = job.options
-    reg, ids = _registry(o)
-    cal, capture, provenance = estimate_capture(
-        job.source, o.get("method", "auto"), ids, reg, max_missing_fraction=o.get("max_missing_fraction", 0.01),
-        max_gap_s=o.get("max_gap_s", 1.0), turn_sigma_deg=o.get("turn_sigma_deg"))
-    write_calfile(Path(job.output), cal, provenance)
-    verdict = cal.fit.get("verdict", {})
+    est = api.estimate(job.source, method=o.get("method", "auto"), add=o.get("add", ()),
+                       plugins=o.get("plugins", ()), turn_sigma_deg=o.get("turn_sigma_deg"),
+                       max_missing_fraction=o.get("max_missing_fraction", 0.01), max_gap_s=o.get("max_gap_s", 1.0))
+    est.save(job.output)
+    verdict = est.verdict
     out.outputs, out.calibration = [job.output], job.output
     out.verdict = verdict.get("result", "untested")
-    out.status = POOR_FIT if fit_fails(cal) else DONE
+    out.status = DONE if est.usable else POOR_FIT
     out.message = f"fit {out.verdict}: {verdict.get('reason', '')}".strip()
 
 
@@ -198,15 +206,12 @@ def _report(job: Job, out: Outcome) -> None:
 
 
 def _export(job: Job, out: Outcome) -> None:
-    """As ``station export CAL --to FORMAT -o OUTPUT`` (station.api.export)."""
-    from station.io.calfile import read_calfile
-    from station.io.exporters import FORMATS, source_from_document
+    """As ``station export CAL --to FORMAT -o OUTPUT``: station.api.export."""
+    from station import api
 
     cal = _calibration(job, required=True)
-    fmt = FORMATS[job.options["to"]]
-    written = fmt.write(source_from_document(read_calfile(cal), cal), Path(job.output))
-    out.outputs, out.status = [str(p) for p in written], DONE
-    out.message = f"{job.options['to']} from {cal}"
+    out.outputs = [str(p) for p in api.export(cal, job.options["to"], job.output)]
+    out.status, out.message = DONE, f"{job.options['to']} from {cal}"
 
 
 COMMANDS = {"estimate": _estimate, "diagnose": _diagnose, "report": _report, "export": _export}
