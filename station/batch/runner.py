@@ -38,26 +38,28 @@ def run_batch(client, command: str, items: list[Item], options: dict, state: Sta
     key_of_options = options_key(command, options)
     summary = Summary(workers=worker_count(client))
     started = time.perf_counter()
-    futures = {}
-    for i, item in enumerate(items):
+    jobs, keys = [], []
+    for item in items:
         key = item_key(key_of_options, item.source, item.output)
-        job = Job(command, item.source, item.output, options, item.calibrations, state.previous(key))
-        fut = client.submit(run, job, key=f"station-batch-{command}-{key_of_options}-{i}-{time.time_ns()}",
-                            pure=False, retries=0)
-        futures[fut] = (i, key)
+        keys.append(key)
+        jobs.append(Job(command, item.source, item.output, options, item.calibrations, state.previous(key)))
+    stamp = time.time_ns()
+    futures = client.map(run, jobs, key=[f"station-batch-{command}-{key_of_options}-{stamp}-{i}"
+                                         for i in range(len(jobs))], pure=False, retries=0)
+    index = {f.key: i for i, f in enumerate(futures)}
     results: list = [None] * len(items)
     try:
-        for fut in as_completed(list(futures)):
-            i, key = futures[fut]
-            if fut.status == "finished":
-                outcome = fut.result()
+        # results fetched in groups as they finish (not one round trip each)
+        for fut, value in as_completed(futures, with_results=True, raise_errors=False):
+            i = index[fut.key]
+            if isinstance(value, Outcome):
+                outcome = value
             else:                              # the worker died with it (KilledWorker) or was lost
-                exc = fut.exception()
                 outcome = Outcome(items[i].source, FAILED,
-                                  f"the worker running it was lost ({type(exc).__name__}: "
-                                  f"{' '.join(str(exc).split())[:160]})")
+                                  f"the worker running it was lost ({type(value).__name__}: "
+                                  f"{' '.join(str(value).split())[:160]})")
             results[i] = outcome
-            state.record(key, outcome)
+            state.record(keys[i], outcome)
             if on_result is not None:
                 on_result(outcome)
             fut.release()
