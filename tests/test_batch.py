@@ -299,3 +299,74 @@ def test_ctrl_c_ends_the_batch_and_its_cluster(captures, tmp_path, started):
     assert p.returncode == 130, stderr
     assert "interrupted" in stderr and "Traceback" not in stderr
     assert _wait_session_empty(p.pid) == []
+
+
+# --------------------------------------------------------------------------- inputs and state (no cluster)
+
+
+def test_inputs_globs_folders_and_names(captures, tmp_path):
+    from station.batch import inputs
+    from station.core.errors import UserError
+
+    caps = _copy(captures, tmp_path)
+    both = inputs.expand([str(caps / "cap*"), str(caps / "cap0"), str(caps)])
+    assert both == [str(caps / f"cap{i}") for i in range(GOOD)] + [str(caps / "bad")]   # each once
+    with pytest.raises(UserError, match="no capture matches"):
+        inputs.expand([str(caps / "nothing*")])
+    with pytest.raises(UserError, match="neither a capture"):
+        inputs.expand([str(tmp_path)])
+    (tmp_path / "other").mkdir()
+    shutil.copytree(caps / "cap0", tmp_path / "other" / "cap0")
+    items = inputs.plan("estimate", [str(caps / "cap0"), str(tmp_path / "other" / "cap0"), str(caps / "cap1")],
+                        tmp_path / "o")
+    names = [Path(i.output).name for i in items]
+    assert len(set(names)) == 3 and names[2] == "cap1.calibration.yaml"       # same names told apart
+    assert [Path(i.output).name for i in inputs.plan("diagnose", [str(caps / "cap1")])] == ["diagnosis.json"]
+    exp = inputs.plan("export", [str(caps / "cap1")], tmp_path / "o", "imu_tk")[0]
+    assert exp.calibrations == (str(tmp_path / "o" / "cap1.calibration.yaml"), str(caps / "cap1" / "calibration.yaml"))
+
+
+def test_history_query_finds_the_captures_of_stored_calibrations(captures, tmp_path):
+    from station.batch import inputs
+    from station.core.errors import UserError
+    from station.io.history import Store
+
+    est = api.estimate(captures / "cap1")
+    cal = est.save(tmp_path / "cal.yaml")
+    Store(tmp_path / "store").file(cal)
+    serial = est.provenance["imu_serial"]
+    assert inputs.from_history([serial], tmp_path / "store") == [str((captures / "cap1").resolve())]
+    assert inputs.from_history(["all"], tmp_path / "store") == [str((captures / "cap1").resolve())]
+    with pytest.raises(UserError, match="no calibration of this IMU serial"):
+        inputs.from_history(["NOPE"], tmp_path / "store")
+
+
+def test_state_file_skips_only_what_is_done_and_survives_a_cut_line(tmp_path):
+    from station.batch.state import State, item_key, options_key
+    from station.batch.tasks import DONE, FAILED, Outcome
+
+    path = tmp_path / "s.jsonl"
+    k = options_key("estimate", {"method": "auto"})
+    assert k != options_key("estimate", {"method": "lsq"})         # other options: other records
+    with State(path) as st:
+        st.record(item_key(k, "a", "a/out"), Outcome("a", DONE, outputs=["a/out"], output_sha256="x"))
+        st.record(item_key(k, "b", "b/out"), Outcome("b", FAILED, "bad"))
+    with open(path, "a") as f:
+        f.write('{"key": "cut sh')                                  # a kill in the middle of a line
+    st = State(path)
+    assert st.previous(item_key(k, "a", "a/out"))["output_sha256"] == "x"
+    assert st.previous(item_key(k, "b", "b/out")) is None           # failed: run again
+    assert State(path, fresh=True).previous(item_key(k, "a", "a/out")) is None
+
+
+def test_a_worker_task_never_raises(tmp_path):
+    """The task itself (as a worker runs it): a missing capture, a bad one and a good one."""
+    from station.batch.tasks import FAILED, Job, run
+
+    missing = run(Job("estimate", str(tmp_path / "none"), str(tmp_path / "o.yaml"), {}))
+    assert missing.status == FAILED and "none" in missing.message and "\n" not in missing.message
+    (tmp_path / "bad").mkdir()
+    (tmp_path / "bad" / "manifest.yaml").write_text("[unclosed\n")
+    bad = run(Job("diagnose", str(tmp_path / "bad"), str(tmp_path / "d.json"), {}))
+    assert bad.status == FAILED and "manifest.yaml" in bad.message
+    assert not (tmp_path / "d.json").exists()

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import glob
 import hashlib
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -109,7 +110,8 @@ def stems(sources) -> dict:
 def plan(command: str, sources, out_dir=None, export_format: str | None = None) -> list[Item]:
     """The items of a batch: each source with its output path and, for report and export, where
     its calibration is looked for (the batch estimate's output in the same -o DIR, then the
-    capture's own calibration.yaml)."""
+    capture's own calibration.yaml); every path absolute (a path relative to the working folder
+    means this machine's: a worker elsewhere has another working folder)."""
     names = stems(sources)
     out = Path(out_dir) if out_dir else None
     if out is not None:
@@ -136,5 +138,6 @@ def plan(command: str, sources, out_dir=None, export_format: str | None = None) 
         else:
             beside, ending = OUTPUT_NAMES[command]
             target = (out / f"{stem}{ending}") if out else p / beside
-        items.append(Item(s, str(target), cals))
+        # absolute: a worker elsewhere has another working folder (the paths must be the same there)
+        items.append(Item(os.path.abspath(s), os.path.abspath(target), tuple(os.path.abspath(c) for c in cals)))
     return items
