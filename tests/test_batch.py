@@ -237,12 +237,6 @@ def test_local_cluster_by_default_nothing_left_running(captures, tmp_path, start
     # filed as the single commands file: the simulated IMUs into the simulations' own store
     sim_store = tmp_path / "store-simulations"
     assert len(list(sim_store.glob("SIM-*/*.yaml"))) == GOOD
-    # the same batch again: everything done is skipped, the bad capture tried again
-    r = subprocess.run([sys.executable, "-m", "station.cli", "batch", "estimate", caps, "-o", out, "--workers", "1"],
-                       cwd=tmp_path, env=_env(tmp_path), capture_output=True, text=True, timeout=240)
-    assert r.returncode == 2 and len(_failed_lines(r.stderr)) == 1
-    counts = {rec["source"]: rec["status"] for rec in _records(out / ".station-batch-estimate.jsonl")[-(GOOD + 1):]}
-    assert sorted(counts.values()) == ["failed"] + ["skipped"] * GOOD
 
 
 def _run_until_records(args, tmp_path, state: Path, n: int, started) -> subprocess.Popen:
@@ -256,36 +250,37 @@ def _run_until_records(args, tmp_path, state: Path, n: int, started) -> subproce
     return p
 
 
-def test_a_killed_batch_resumes_where_it_stopped(captures, tmp_path, started):
+def test_a_killed_batch_resumes_where_it_stopped(dask_cluster, captures, tmp_path, started):
+    """Killed with SIGKILL after its first result, on the running cluster (whose workers are
+    warm: no cluster to start twice), then run again."""
+    address, _ = dask_cluster
+    n = 8
     caps = _copy(captures, tmp_path, names={f"cap{i}" for i in range(GOOD)})
-    for i in range(GOOD, 8):                     # eight captures on one worker: it is killed midway
+    for i in range(GOOD, n):                     # eight captures on two workers: killed midway
         shutil.copytree(caps / f"cap{i % GOOD}", caps / f"cap{i}")
     out = tmp_path / "out"
     state = out / ".station-batch-estimate.jsonl"
-    p = _run_until_records(["batch", "estimate", caps, "-o", out, "--workers", "1", "--no-history"],
-                           tmp_path, state, 1, started)
-    os.killpg(p.pid, signal.SIGKILL)             # the command and its cluster, at once
+    args = ["batch", "estimate", caps, "-o", out, "--scheduler", address, "--no-history"]
+    p = _run_until_records(args, tmp_path, state, 1, started)
+    os.killpg(p.pid, signal.SIGKILL)
     p.wait(timeout=30)
-    assert _wait_session_empty(p.pid) == []
     done_before = {r["source"] for r in _records(state) if r["status"] == "done"}
-    assert 1 <= len(done_before) < 8
-    sha_before = {s: (out / f"{Path(s).name}.calibration.yaml").read_bytes() for s in done_before}
-    r = subprocess.run([sys.executable, "-m", "station.cli", "batch", "estimate", caps, "-o", out, "--workers", "1",
-                        "--no-history"], cwd=tmp_path, env=_env(tmp_path), capture_output=True, text=True, timeout=240)
-    assert r.returncode == 0, r.stderr
-    last = {rec["source"]: rec["status"] for rec in _records(state)[-8:]}
-    assert {s for s, st in last.items() if st == "skipped"} == done_before
-    assert {s for s, st in last.items() if st == "done"} == {str(caps / f"cap{i}") for i in range(8)} - done_before
-    for s, data in sha_before.items():            # not computed again
-        assert (out / f"{Path(s).name}.calibration.yaml").read_bytes() == data
-    # a capture changed since: computed again, not skipped
-    seg = next((caps / "cap0").glob("pos01.csv"))
+    assert 1 <= len(done_before) < n
+    # one capture finished before the kill is changed since (a segment file touched): done again
+    changed = sorted(done_before)[0]
+    seg = Path(changed) / "pos01.csv"
     os.utime(seg, ns=(seg.stat().st_atime_ns, seg.stat().st_mtime_ns + 10**9))
-    r = subprocess.run([sys.executable, "-m", "station.cli", "batch", "estimate", caps, "-o", out, "--workers", "1",
-                        "--no-history"], cwd=tmp_path, env=_env(tmp_path), capture_output=True, text=True, timeout=240)
+    kept = {s: (out / f"{Path(s).name}.calibration.yaml").read_bytes() for s in done_before - {changed}}
+    r = subprocess.run([sys.executable, "-m", "station.cli", *map(str, args)], cwd=tmp_path, env=_env(tmp_path),
+                       capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
-    last = {rec["source"]: rec["status"] for rec in _records(state)[-8:]}
-    assert last[str(caps / "cap0")] == "done" and sorted(last.values()).count("skipped") == 7
+    last = {rec["source"]: rec["status"] for rec in _records(state)[-n:]}
+    assert set(last) == {str(caps / f"cap{i}") for i in range(n)}
+    assert {s for s, st in last.items() if st == "skipped"} == done_before - {changed}
+    assert {s for s, st in last.items() if st == "done"} == set(last) - done_before | {changed}
+    for s, data in kept.items():                  # not computed again: the same bytes
+        assert (out / f"{Path(s).name}.calibration.yaml").read_bytes() == data
+    assert "skipped (by an earlier batch)" in r.stdout
 
 
 def test_ctrl_c_ends_the_batch_and_its_cluster(captures, tmp_path, started):
