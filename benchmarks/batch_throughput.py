@@ -112,25 +112,55 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def run(directory: Path, n_single: int, workers: int) -> dict:
+PHASES = ("single", "local", "scheduler")
+
+
+def run(directory: Path, n_single: int, workers: int, phases=PHASES) -> dict:
+    """The phases in order: single (before), local, scheduler, single (after); ``phases``
+    leaves some out (on a loaded machine the two cluster runs may be run at once, in two
+    invocations: their CPU time per capture stays comparable, their wall time does not)."""
     captures = sorted(p for p in directory.iterdir() if (p / "manifest.yaml").exists())
     env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
-    results = {"captures": len(captures), "workers": workers, "single_before": single(captures[:n_single])}
-    print(json.dumps(results["single_before"]), flush=True)
-    out = directory.parent / "batch-out"
+    results = {"captures": len(captures), "workers": workers}
+    if "single" in phases:
+        results["single_before"] = single(captures[:n_single])
+        print(json.dumps(results["single_before"]), flush=True)
+    out = directory.parent / f"batch-out-{os.getpid()}"
     shutil.rmtree(out, ignore_errors=True)
+    if "local" in phases:
+        results["local"] = _local(directory, captures, out, workers, env)
+    if "scheduler" in phases:
+        results["scheduler"] = _scheduler(directory, captures, out, workers, env)
+    if "single" in phases:
+        results["single_after"] = single(captures[:n_single])
+        print(json.dumps(results["single_after"]), flush=True)
+        rate = (results["single_before"]["rate_per_s"] + results["single_after"]["rate_per_s"]) / 2
+        cpu_each = (results["single_before"]["cpu_per_capture_s"] + results["single_after"]["cpu_per_capture_s"]) / 2
+        for name in ("local", "scheduler"):
+            if name in results:
+                r = results[name]
+                r["of_ceiling_wall"] = r["rate_per_s"] / (rate * workers)
+                r["of_ceiling_cpu"] = cpu_each / r["cpu_per_capture_s"]
+    shutil.rmtree(out, ignore_errors=True)
+    return results
 
-    # a local cluster, started and stopped by the command
+
+def _local(directory, captures, out, workers, env) -> dict:
+    """A local cluster, started and stopped by the command."""
     load_before = load()
     wall, cpu, _ = _batch(["estimate", directory, "-o", out / "local", "--workers", workers, "--restart",
                            "--no-history"], env)
-    results["local"] = {"wall_s": wall, "cpu_s": cpu, "rate_per_s": len(captures) / wall,
-                        "cpu_per_capture_s": cpu / len(captures), "load_before": load_before, "load_after": load()}
-    print(json.dumps(results["local"]), flush=True)
+    r = {"wall_s": wall, "cpu_s": cpu, "rate_per_s": len(captures) / wall,
+         "cpu_per_capture_s": cpu / len(captures), "load_before": load_before, "load_after": load()}
+    print(json.dumps({"local": r}), flush=True)
+    return r
 
-    # a scheduler and workers started as separate processes (as on a cluster), on loopback
+
+def _scheduler(directory, captures, out, workers, env) -> dict:
+    """A scheduler and workers started as separate processes (as on a cluster), on loopback;
+    their CPU time counted from /proc (psutil) before and after the batch."""
     port = _free_port()
-    logs = open(directory.parent / "dask-bench.log", "w")
+    logs = open(directory.parent / f"dask-bench-{os.getpid()}.log", "w")
     procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
                                "--port", str(port), "--no-dashboard"], env=env, stdout=logs, stderr=logs)]
     address = f"tcp://127.0.0.1:{port}"
@@ -148,11 +178,10 @@ def run(directory: Path, n_single: int, workers: int) -> dict:
         wall, cpu, _ = _batch(["estimate", directory, "-o", out / "scheduler", "--scheduler", address,
                                "--restart", "--no-history"], env)
         cluster_cpu = _tree_cpu(procs) - cluster_cpu
-        results["scheduler"] = {"wall_s": wall, "cpu_s": cpu + cluster_cpu, "command_cpu_s": cpu,
-                                "cluster_cpu_s": cluster_cpu, "rate_per_s": len(captures) / wall,
-                                "cpu_per_capture_s": (cpu + cluster_cpu) / len(captures),
-                                "load_before": load_before, "load_after": load()}
-        print(json.dumps(results["scheduler"]), flush=True)
+        r = {"wall_s": wall, "cpu_s": cpu + cluster_cpu, "command_cpu_s": cpu, "cluster_cpu_s": cluster_cpu,
+             "rate_per_s": len(captures) / wall, "cpu_per_capture_s": (cpu + cluster_cpu) / len(captures),
+             "load_before": load_before, "load_after": load()}
+        print(json.dumps({"scheduler": r}), flush=True)
     finally:
         for p in reversed(procs):
             p.terminate()
@@ -162,16 +191,7 @@ def run(directory: Path, n_single: int, workers: int) -> dict:
             except subprocess.TimeoutExpired:
                 p.kill()
         logs.close()
-    results["single_after"] = single(captures[:n_single])
-    print(json.dumps(results["single_after"]), flush=True)
-    rate = (results["single_before"]["rate_per_s"] + results["single_after"]["rate_per_s"]) / 2
-    cpu_each = (results["single_before"]["cpu_per_capture_s"] + results["single_after"]["cpu_per_capture_s"]) / 2
-    for name in ("local", "scheduler"):
-        r = results[name]
-        r["of_ceiling_wall"] = r["rate_per_s"] / (rate * workers)
-        r["of_ceiling_cpu"] = cpu_each / r["cpu_per_capture_s"]
-    shutil.rmtree(out, ignore_errors=True)
-    return results
+    return r
 
 
 if __name__ == "__main__":
@@ -181,13 +201,16 @@ if __name__ == "__main__":
     p.add_argument("--single", type=int, default=100, help="captures timed in one process (the ceiling)")
     p.add_argument("--workers", type=int, default=len(os.sched_getaffinity(0)))
     p.add_argument("--json", type=Path, help="write the results here too")
+    p.add_argument("--only", action="append", choices=PHASES, help="run only these phases (repeatable)")
     a = p.parse_args()
-    res = run(a.directory, a.single, a.workers)
+    res = run(a.directory, a.single, a.workers, tuple(a.only or PHASES))
     print(json.dumps(res, indent=1))
     if a.json:
         a.json.write_text(json.dumps(res, indent=1))
     for name in ("local", "scheduler"):
-        r = res[name]
+        r = res.get(name)
+        if not r or "of_ceiling_cpu" not in r:
+            continue
         print(f"{name}: {res['captures']} captures in {r['wall_s']:.0f} s wall ({r['rate_per_s']:.2f}/s), "
               f"{r['cpu_per_capture_s']:.3f} s CPU per capture; {r['of_ceiling_wall']:.2f} of the wall-time "
               f"ceiling, {r['of_ceiling_cpu']:.2f} of the CPU ceiling")
