@@ -194,6 +194,66 @@ def _scheduler(directory, captures, out, workers, env) -> dict:
     return r
 
 
+def sample(pid: int, state: Path, extra_pids=()) -> dict:
+    """A batch still running (a machine too loaded for 1,000 captures to finish in the time one
+    has): the captures it has finished (its state file), the CPU time of the command and every
+    process under it (and of ``extra_pids``: a scheduler and workers started apart), and the
+    wall time since the command started."""
+    import psutil
+
+    class P:
+        def __init__(self, pid):
+            self.pid = pid
+
+    done = len([line for line in state.read_text().splitlines() if '"status": "done"' in line])
+    cpu = _tree_cpu([P(pid), *map(P, extra_pids)])
+    wall = time.time() - psutil.Process(pid).create_time()
+    return {"captures_done": done, "wall_s": wall, "cpu_s": cpu, "rate_per_s": done / wall,
+            "cpu_per_capture_s": cpu / done, "load": load()}
+
+
+def single_stream(directory: Path, n: int) -> None:
+    """single() one capture at a time, a JSON line (captures, wall, CPU so far) after each ten:
+    run beside a batch on a loaded machine, both see the same load, and it can be read at any
+    moment."""
+    os.environ["STATION_READ_IN_PROCESS"] = "1"
+    from threadpoolctl import threadpool_limits
+
+    from station.estimate import estimate_capture
+    from station.io.calfile import write_calfile
+
+    captures = sorted(p for p in directory.iterdir() if (p / "manifest.yaml").exists())[-n:]
+    out = Path(os.environ.get("TMPDIR", "/tmp")) / f"batch-single-{os.getpid()}"
+    out.mkdir(exist_ok=True)
+    with threadpool_limits(limits=1, user_api="blas"):
+        estimate_capture(captures[0])
+        cpu, wall = time.process_time(), time.perf_counter()
+        for i, c in enumerate(captures, 1):
+            cal, _, prov = estimate_capture(c)
+            write_calfile(out / f"{i}.yaml", cal, prov)
+            if i % 10 == 0:
+                w, u = time.perf_counter() - wall, time.process_time() - cpu
+                print(json.dumps({"captures": i, "wall_s": w, "cpu_s": u, "rate_per_s": i / w,
+                                  "cpu_per_capture_s": u / i, "load": load()}), flush=True)
+    shutil.rmtree(out)
+
+
+if __name__ == "__main__" and len(sys.argv) > 1 and sys.argv[1] == "single-stream":
+    single_stream(Path(sys.argv[2]), int(sys.argv[3]) if len(sys.argv) > 3 else 200)
+    sys.exit(0)
+
+
+if __name__ == "__main__" and len(sys.argv) > 1 and sys.argv[1] == "sample":
+    p = argparse.ArgumentParser()
+    p.add_argument("what")
+    p.add_argument("pid", type=int, help="the station batch command's process")
+    p.add_argument("state", type=Path, help="its state file")
+    p.add_argument("--also", type=int, action="append", default=[], help="scheduler and worker processes")
+    a = p.parse_args()
+    print(json.dumps(sample(a.pid, a.state, a.also)))
+    sys.exit(0)
+
+
 if __name__ == "__main__":
     p = argparse.ArgumentParser()
     p.add_argument("what", choices=("make", "run"))

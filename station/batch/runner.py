@@ -22,6 +22,13 @@ class Summary:
         return sum(o.status == status for o in self.outcomes)
 
     @property
+    def poor_fits(self) -> int:
+        """Fits that fail or did not converge: computed now, or skipped as done by an earlier
+        batch (a batch resumed says them again: its exit status is 3 as the first one's was)."""
+        return sum(o.status == "poor fit" or (o.status == "skipped" and o.verdict in ("fails", "not converged"))
+                   for o in self.outcomes)
+
+    @property
     def computed(self) -> list:
         return [o for o in self.outcomes if o.status != "skipped"]
 

@@ -140,8 +140,8 @@ def cmd_batch(args) -> int:
     _print_summary(command, summary, where, filer, state.path)
     if summary.count("failed"):
         return 2
-    if summary.count("poor fit") and not getattr(args, "accept_poor_fit", False):
-        err.print(f"station batch: {summary.count('poor fit')} fit(s) fail (exit status {EXIT_POOR_FIT}); "
+    if summary.poor_fits and not getattr(args, "accept_poor_fit", False):
+        err.print(f"station batch: {summary.poor_fits} fit(s) fail (exit status {EXIT_POOR_FIT}); "
                   "their files say so; --accept-poor-fit accepts them", markup=False, soft_wrap=True)
         return EXIT_POOR_FIT
     return 0
