@@ -629,14 +629,16 @@ class MonteCarlo:
 
 def montecarlo(scheme: str = "optimal9", runs: int = 100, *, seed: int = 1000, accel_noise_ug: float = 100.0,
                gyro_noise_dph: float = 0.03, table_angle_arcsec: float = 2.0, accel_disturbance_ug: float = 50.0,
-               method: str = "lsq", effects=(), progress=None) -> MonteCarlo:
+               method: str = "lsq", effects=(), progress=None, executor=None, workers=None) -> MonteCarlo:
     """``station montecarlo``: ``runs`` dry runs of ``scheme`` (seeds ``seed``, ``seed`` + 1, ...)
     estimated with ``method`` (lsq or zhang2010) on every usable core, against the Cramér-Rao
     bound.  Noise densities: accelerometer µg/√Hz, gyro °/h/√Hz; ``table_angle_arcsec``: 1-sigma
     table angle error; ``accel_disturbance_ug``: 1-sigma white acceleration disturbance.
     ``effects``: library effects fitted too (lsq only; the simulated IMU has none of them, so
     their parameters' errors are against zero; one that its convention fixes is in no run's
-    calibration and left out).  ``progress(done, total)`` is called as runs finish."""
+    calibration and left out).  ``progress(done, total)`` is called as runs finish.  ``executor``:
+    a concurrent.futures executor to run them on (a Dask client's: ``station montecarlo
+    --scheduler``) with ``workers`` its workers (default: a process pool on every usable core)."""
     import warnings
 
     from station.io.scheme import load_scheme
@@ -657,7 +659,8 @@ def montecarlo(scheme: str = "optimal9", runs: int = 100, *, seed: int = 1000, a
     settings = _mc.Settings(accel_noise_ug=accel_noise_ug, gyro_noise_dph=gyro_noise_dph,
                             table_angle_arcsec=table_angle_arcsec, accel_disturbance_ug=accel_disturbance_ug,
                             method=method, effects=effects)
-    result = _mc.study(plan, settings, runs, first_seed=seed, bound=True, progress=progress)
+    result = _mc.study(plan, settings, runs, first_seed=seed, bound=True, progress=progress, executor=executor,
+                       workers=workers)
     errors, sigmas = result.errors, result.sigmas
     std = errors.std(axis=0, ddof=1)
     with np.errstate(all="ignore"), warnings.catch_warnings():

@@ -17,7 +17,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 # what building the parser must never import: the estimators' and the figures' libraries
 HEAVY = ("scipy", "matplotlib", "allantools", "rich.table", "rich.progress", "sim_devices",
-         "station.estimate", "station.diagnose", "station.simulate", "station.model", "numpy")
+         "station.estimate", "station.diagnose", "station.simulate", "station.model", "numpy",
+         "dask", "distributed", "station.batch.cluster")
 # what the light commands (schemes, plan, effects) may import (numpy, yaml, rich.table to print
 # their table) but not: the fit, the rotations, sparse matrices, statistics, figures
 HEAVY_FOR_LIGHT = ("scipy.optimize", "scipy.spatial", "scipy.sparse", "scipy.stats", "scipy.ndimage",
@@ -28,7 +29,8 @@ COMMANDS_HELP = [[c, "--help"] for c in ("run", "schemes", "plan", "init", "esti
                                          "diagnose", "effects", "report", "export", "noise", "history",
                                          "diff", "montecarlo", "probe", "import", "sim")]
 COMMANDS_HELP += [["import", "csv", "--help"], ["import", "imucal", "--help"],
-                  ["import", "rosbag", "--help"], ["sim", "serve", "--help"]]
+                  ["import", "rosbag", "--help"], ["sim", "serve", "--help"], ["batch", "--help"],
+                  ["batch", "estimate", "--help"], ["batch", "export", "--help"]]
 
 RUNNER = """
 import contextlib, io, json, sys

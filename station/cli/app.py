@@ -19,14 +19,14 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from station.cli import (calibration, design, devices, diagnose, export, fleet, history, imports,
+    from station.cli import (batch, calibration, design, devices, diagnose, export, fleet, history, imports,
                              montecarlo, noise, report, run)
 
     p = _Parser(prog="station", description="IMU calibration with a rate table.")
     p.add_argument("--version", action="version", version=f"station {station.__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
     for group in (run, calibration, montecarlo, design, diagnose, imports, devices, export, noise, history,
-                  fleet, report):
+                  fleet, report, batch):
         group.add_parsers(sub)
     return p
 

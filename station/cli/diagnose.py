@@ -55,6 +55,8 @@ def cmd_diagnose(args) -> int:
         if not args.json:
             _print(out, first, steps, final)
     if args.json:
+        from station.diagnose.as_json import to_json
+
         print(json.dumps(to_json(final, steps), indent=1))
     return _in_a_file(args, final, steps)
 
@@ -207,54 +209,6 @@ def _summary_lines(d) -> list[str]:
     lines += [f"not kept: {r.effect}: {r.reason}" for r in d.rejected]
     lines += [f"why it still fails: {line}" for line in getattr(d, "account", None) or []]
     return lines + [f"note: {n}" for n in d.notes]
-
-
-def _num(v):
-    return None if v is None or (isinstance(v, float) and not math.isfinite(v)) else v
-
-
-def to_json(d, steps) -> dict:
-    return {
-        "chi2": d.chi2, "dof": d.dof, "reduced_chi2": d.reduced_chi2, "p_value": _num(d.p_value),
-        "verdict": d.verdict,
-        "effects": d.effects,
-        "failures": d.failures,
-        # a fit that still fails: what was tried, what each explained, what the residuals follow
-        "failure_account": list(getattr(d, "account", None) or []),
-        "notes": d.notes,
-        # what the scan before the fit found and left out (station/estimate/data_faults.py)
-        "data_faults": getattr(getattr(getattr(d.result, "model", None), "s", None), "data_faults", None),
-        "terms_outside_library": None if d.proposal is None else {
-            "terms": [{"sensor": t.sensor, "axis": "xyz"[t.axis], "regressor": t.regressor.text,
-                       "parameter": t.name, "unit": t.unit, "value": v, "sigma": sg, "words": t.words(v, sg)}
-                      for t, v, sg in zip(d.proposal.effect.terms, d.proposal.values, d.proposal.sigmas)],
-            "chi2_after": d.proposal.chi2_after, "reduced_chi2_after": d.proposal.reduced_after,
-            "holdout_before": d.proposal.holdout_before, "holdout_after": d.proposal.holdout_after,
-            "kept": d.proposal.kept, "reason": d.proposal.reason,
-            "redundant": [{"effect": e, "reason": why} for e, why in d.proposal.redundant]},
-        "rejected": [{"effect": r.effect, "reason": r.reason, "actual_chi2_drop": r.actual_drop,
-                      "holdout_before": r.holdout_before, "holdout_after": r.holdout_after,
-                      "share_of_excess": _num(r.share)} for r in d.rejected],
-        "segments": [{"name": s.name, "kind": s.kind, "rms": s.rms, "rms_by_quantity": s.by_quantity}
-                     for s in d.segments],
-        "candidates": [{
-            "effect": c.effect, "significant": c.significant,
-            "predicted_chi2_drop": c.predicted_chi2_drop, "dof": c.dof,
-            "p_value": c.p_value, "p_value_corrected": c.p_value_corrected, "plausible": c.plausible,
-            "parameters": c.names, "units": c.units, "estimate": c.estimate, "sigma": c.sigma,
-            "smallest_detectable": [_num(v) for v in c.detectable], "aliased": c.aliased,
-            "advice": c.advice, "source": c.source, "overdispersion": c.overdispersion}
-            for c in d.candidates],
-        "steps": [{"added": st.added, "discovered": st.discovered, "instead_of": st.instead_of or None,
-                   "predicted_chi2_drop": st.predicted_drop,
-                   "actual_chi2_drop": st.actual_drop, "chi2_before": st.before.chi2,
-                   "chi2_after": st.after.chi2, "reduced_chi2_after": st.after.reduced_chi2,
-                   "holdout_before": st.holdout_before, "holdout_after": st.holdout_after,
-                   "share_of_excess": _num(st.share), "caveats": st.caveats,
-                   "removed": [{"effect": e, "reason": why} for e, why in st.removed],
-                   "estimate": [{"name": n, "value": v, "sigma": sg, "unit": u}
-                                for n, v, sg, u in st.estimate]} for st in steps],
-    }
 
 
 def _candidates_table(d) -> Table:

@@ -26,6 +26,9 @@ def add_parsers(sub) -> None:
                          "parameters' spread, bound and 1σ are reported too (against zero: the simulated IMU "
                          "has none of the effects)")
     mc.add_argument("--seed", type=argtypes.seed, default=1000, help="first seed (runs use seed, seed+1, ...)")
+    mc.add_argument("--scheduler", metavar="tcp://HOST:8786",
+                    help="run the repetitions on this Dask scheduler's workers (default: a pool of "
+                         "worker processes on this machine's cores)")
     mc.add_argument("--json", action="store_true",
                     help="print the per-parameter table as JSON on stdout (error std, Cramér–Rao bound, mean 1σ)")
     mc.set_defaults(func=cmd_montecarlo)
@@ -52,15 +55,23 @@ def cmd_montecarlo(args) -> int:
 
     from station import api
 
-    started = time.perf_counter()
-    with _progress_bar(args.runs) as progress:
-        mc = api.montecarlo(args.scheme, args.runs, seed=args.seed, accel_noise_ug=args.accel_noise_ug,
-                            gyro_noise_dph=args.gyro_noise_dph, table_angle_arcsec=args.table_angle_arcsec,
-                            accel_disturbance_ug=args.accel_disturbance_ug, method=args.method,
-                            effects=args.add, progress=progress)
-    elapsed = time.perf_counter() - started
+    with contextlib.ExitStack() as stack:
+        executor, workers = None, None
+        if args.scheduler:
+            from station.batch.cluster import open_client, worker_count
+
+            client = stack.enter_context(open_client(args.scheduler))
+            executor, workers = client.get_executor(pure=False), worker_count(client)
+        started = time.perf_counter()
+        with _progress_bar(args.runs) as progress:
+            mc = api.montecarlo(args.scheme, args.runs, seed=args.seed, accel_noise_ug=args.accel_noise_ug,
+                                gyro_noise_dph=args.gyro_noise_dph, table_angle_arcsec=args.table_angle_arcsec,
+                                accel_disturbance_ug=args.accel_disturbance_ug, method=args.method,
+                                effects=args.add, progress=progress, executor=executor, workers=workers)
+        elapsed = time.perf_counter() - started
     err.print(f"{args.runs} dry runs and the Cramér-Rao bound in {elapsed:.1f} s on {mc.workers} "
-              f"worker process(es): {args.runs / elapsed:.2f} runs/s", markup=False)
+              f"{'Dask worker thread(s) at ' + args.scheduler if args.scheduler else 'worker process(es)'}: "
+              f"{args.runs / elapsed:.2f} runs/s", markup=False, soft_wrap=True)
     if args.json:
         print(json.dumps({"scheme": mc.scheme, "runs": mc.runs, "method": mc.method, "effects": list(mc.effects),
                           "settings": mc.settings, "parameters": mc.parameters}, indent=1))

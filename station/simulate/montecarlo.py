@@ -162,12 +162,14 @@ def _bound_job(args) -> np.ndarray:
 
 def study(scheme: Scheme, settings: Settings, runs: int, first_seed: int = 1000,
           workers: int | None = None, bound: bool = False,
-          progress: Callable[[int, int], None] | None = None) -> Study:
+          progress: Callable[[int, int], None] | None = None, executor=None) -> Study:
     """``runs`` dry runs (seeds first_seed, first_seed + 1, ...) on ``workers`` processes (default:
     every usable core), one BLAS thread each; with ``bound`` the Cramér-Rao bound is computed in
     the same pool, submitted first so that it never runs alone at the end.  ``progress(done,
     runs)`` is called in this process as runs finish (in any order; the results keep the seeds'
-    order)."""
+    order).  ``executor``: a concurrent.futures.Executor to run them on instead of the local pool
+    (a Dask cluster's: ``station montecarlo --scheduler``); ``workers`` then only says how many
+    it computes with."""
     from station.simulate import dryrun
     from station.model.calibration import parameter_errors
 
@@ -180,7 +182,9 @@ def study(scheme: Scheme, settings: Settings, runs: int, first_seed: int = 1000,
     crlb = None
     if progress:
         progress(0, runs)
-    if workers == 1:
+    if executor is not None:
+        rows, crlb = _on_executor(executor, jobs, scheme, settings, bound, progress)
+    elif workers == 1:
         from threadpoolctl import threadpool_limits
 
         with threadpool_limits(limits=1, user_api="blas"):
@@ -204,6 +208,26 @@ def study(scheme: Scheme, settings: Settings, runs: int, first_seed: int = 1000,
             pool.terminate()
             pool.join()
     return Study(names, np.array([r[0] for r in rows]), np.array([r[1] for r in rows]), crlb, workers)
+
+
+def _on_executor(executor, jobs, scheme, settings, bound, progress) -> tuple[list, np.ndarray | None]:
+    """The runs (and the bound, submitted first) on ``executor``; what is not finished is
+    cancelled on the way out (a failed run, Ctrl-C)."""
+    from concurrent.futures import as_completed
+
+    rows: list = [None] * len(jobs)
+    pending_bound = executor.submit(_bound_job, (scheme, settings)) if bound else None
+    futures = [executor.submit(_numbered_run, (i, job)) for i, job in enumerate(jobs)]
+    try:
+        for done, fut in enumerate(as_completed(futures), 1):
+            i, row = fut.result()
+            rows[i] = row
+            if progress:
+                progress(done, len(jobs))
+        return rows, pending_bound.result() if pending_bound is not None else None
+    finally:
+        for fut in futures + ([pending_bound] if pending_bound is not None else []):
+            fut.cancel()
 
 
 def run(scheme: Scheme, settings: Settings, runs: int, first_seed: int = 1000,

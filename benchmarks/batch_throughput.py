@@ -1,0 +1,276 @@
+"""Batch throughput (docs/fleet.md, "Batches"): `station batch estimate` over N simulated
+captures on a local Dask cluster and on a scheduler + workers started as separate processes,
+against the ceiling "single-process estimate rate x cores".
+
+    python benchmarks/batch_throughput.py make DIR [--n 1000]      # the captures (simulator)
+    python benchmarks/batch_throughput.py run DIR [--single 100]   # the measurements
+
+Every figure is given as wall time and as CPU time (user + sys of every process of the run,
+from /proc of the workers, or RUSAGE_CHILDREN for the command), with the load average: the
+machine is shared.  The captures: optimal9 with 5 s dwells and 5 s rotations (21 segments,
+~0.65 MB each), each its own seed, made by station.api.simulate (the simulated bench)."""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+DWELL_S = ROTATION_S = 5.0
+
+
+def make(directory: Path, n: int) -> None:
+    from station import api
+
+    directory.mkdir(parents=True, exist_ok=True)
+    started = time.perf_counter()
+    for i in range(n):
+        out = directory / f"cap{i:04d}"
+        if (out / "manifest.yaml").exists():
+            continue
+        api.simulate("optimal9", out, seed=1 + i, dwell_s=DWELL_S, rotation_s=ROTATION_S)
+    print(f"{n} captures in {directory} ({time.perf_counter() - started:.0f} s)")
+
+
+if __name__ == "__main__" and len(sys.argv) > 1 and sys.argv[1] == "make":
+    p = argparse.ArgumentParser()
+    p.add_argument("what")
+    p.add_argument("directory", type=Path)
+    p.add_argument("--n", type=int, default=1000)
+    a = p.parse_args()
+    make(a.directory, a.n)
+    sys.exit(0)
+
+
+def load() -> str:
+    one, five, fifteen = os.getloadavg()
+    return f"load average {one:.1f} / {five:.1f} / {fifteen:.1f} (1/5/15 min) on {os.cpu_count()} cores"
+
+
+def single(captures: list[Path]) -> dict:
+    """The single-process estimate rate: station.estimate.estimate_capture and the calibration
+    file written, one capture after the other in this process (warmed up on one first), reading
+    in process, one BLAS thread -- what one worker does per capture, without the cluster."""
+    os.environ["STATION_READ_IN_PROCESS"] = "1"
+    from threadpoolctl import threadpool_limits
+
+    from station.estimate import estimate_capture
+    from station.io.calfile import write_calfile
+
+    out = Path(os.environ.get("TMPDIR", "/tmp")) / f"batch-single-{os.getpid()}"
+    out.mkdir(exist_ok=True)
+    with threadpool_limits(limits=1, user_api="blas"):
+        estimate_capture(captures[0])
+        cpu, wall = time.process_time(), time.perf_counter()
+        for i, c in enumerate(captures):
+            cal, _, prov = estimate_capture(c)
+            write_calfile(out / f"{i}.yaml", cal, prov)
+        cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+    shutil.rmtree(out)
+    return {"captures": len(captures), "wall_s": wall, "cpu_s": cpu, "rate_per_s": len(captures) / wall,
+            "cpu_per_capture_s": cpu / len(captures), "load": load()}
+
+
+def _batch(args, env) -> tuple[float, float, str]:
+    """(wall s, CPU s of the command and every process it started and waited for, stdout)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    started = time.perf_counter()
+    r = subprocess.run([sys.executable, "-m", "station.cli", "batch", *map(str, args)], env=env,
+                       capture_output=True, text=True)
+    wall = time.perf_counter() - started
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if r.returncode != 0:
+        raise SystemExit(f"batch failed ({r.returncode}): {r.stderr[-2000:]}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, cpu, r.stdout
+
+
+def _tree_cpu(procs) -> float:
+    import psutil
+
+    total = 0.0
+    for p in procs:
+        try:
+            ps = psutil.Process(p.pid)
+            for q in [ps, *ps.children(recursive=True)]:
+                t = q.cpu_times()
+                total += t.user + t.system
+        except psutil.NoSuchProcess:
+            pass
+    return total
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+PHASES = ("single", "local", "scheduler")
+
+
+def run(directory: Path, n_single: int, workers: int, phases=PHASES) -> dict:
+    """The phases in order: single (before), local, scheduler, single (after); ``phases``
+    leaves some out (on a loaded machine the two cluster runs may be run at once, in two
+    invocations: their CPU time per capture stays comparable, their wall time does not)."""
+    captures = sorted(p for p in directory.iterdir() if (p / "manifest.yaml").exists())
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    results = {"captures": len(captures), "workers": workers}
+    if "single" in phases:
+        results["single_before"] = single(captures[:n_single])
+        print(json.dumps(results["single_before"]), flush=True)
+    out = directory.parent / f"batch-out-{os.getpid()}"
+    shutil.rmtree(out, ignore_errors=True)
+    if "local" in phases:
+        results["local"] = _local(directory, captures, out, workers, env)
+    if "scheduler" in phases:
+        results["scheduler"] = _scheduler(directory, captures, out, workers, env)
+    if "single" in phases:
+        results["single_after"] = single(captures[:n_single])
+        print(json.dumps(results["single_after"]), flush=True)
+        rate = (results["single_before"]["rate_per_s"] + results["single_after"]["rate_per_s"]) / 2
+        cpu_each = (results["single_before"]["cpu_per_capture_s"] + results["single_after"]["cpu_per_capture_s"]) / 2
+        for name in ("local", "scheduler"):
+            if name in results:
+                r = results[name]
+                r["of_ceiling_wall"] = r["rate_per_s"] / (rate * workers)
+                r["of_ceiling_cpu"] = cpu_each / r["cpu_per_capture_s"]
+    shutil.rmtree(out, ignore_errors=True)
+    return results
+
+
+def _local(directory, captures, out, workers, env) -> dict:
+    """A local cluster, started and stopped by the command."""
+    load_before = load()
+    wall, cpu, _ = _batch(["estimate", directory, "-o", out / "local", "--workers", workers, "--restart",
+                           "--no-history"], env)
+    r = {"wall_s": wall, "cpu_s": cpu, "rate_per_s": len(captures) / wall,
+         "cpu_per_capture_s": cpu / len(captures), "load_before": load_before, "load_after": load()}
+    print(json.dumps({"local": r}), flush=True)
+    return r
+
+
+def _scheduler(directory, captures, out, workers, env) -> dict:
+    """A scheduler and workers started as separate processes (as on a cluster), on loopback;
+    their CPU time counted from /proc (psutil) before and after the batch."""
+    port = _free_port()
+    logs = open(directory.parent / f"dask-bench-{os.getpid()}.log", "w")
+    procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                               "--port", str(port), "--no-dashboard"], env=env, stdout=logs, stderr=logs)]
+    address = f"tcp://127.0.0.1:{port}"
+    try:
+        for k in range(workers):
+            procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address,
+                                           "--nthreads", "1", "--nworkers", "1", "--no-dashboard"],
+                                          env=env, stdout=logs, stderr=logs))
+        from distributed import Client
+
+        with Client(address, timeout=120) as client:
+            client.wait_for_workers(workers, timeout=300)
+        load_before = load()
+        cluster_cpu = _tree_cpu(procs)
+        wall, cpu, _ = _batch(["estimate", directory, "-o", out / "scheduler", "--scheduler", address,
+                               "--restart", "--no-history"], env)
+        cluster_cpu = _tree_cpu(procs) - cluster_cpu
+        r = {"wall_s": wall, "cpu_s": cpu + cluster_cpu, "command_cpu_s": cpu, "cluster_cpu_s": cluster_cpu,
+             "rate_per_s": len(captures) / wall, "cpu_per_capture_s": (cpu + cluster_cpu) / len(captures),
+             "load_before": load_before, "load_after": load()}
+        print(json.dumps({"scheduler": r}), flush=True)
+    finally:
+        for p in reversed(procs):
+            p.terminate()
+        for p in procs:
+            try:
+                p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                p.kill()
+        logs.close()
+    return r
+
+
+def sample(pid: int, state: Path, extra_pids=()) -> dict:
+    """A batch still running (a machine too loaded for 1,000 captures to finish in the time one
+    has): the captures it has finished (its state file), the CPU time of the command and every
+    process under it (and of ``extra_pids``: a scheduler and workers started apart), and the
+    wall time since the command started."""
+    import psutil
+
+    class P:
+        def __init__(self, pid):
+            self.pid = pid
+
+    done = len([line for line in state.read_text().splitlines() if '"status": "done"' in line])
+    cpu = _tree_cpu([P(pid), *map(P, extra_pids)])
+    wall = time.time() - psutil.Process(pid).create_time()
+    return {"captures_done": done, "wall_s": wall, "cpu_s": cpu, "rate_per_s": done / wall,
+            "cpu_per_capture_s": cpu / done, "load": load()}
+
+
+def single_stream(directory: Path, n: int) -> None:
+    """single() one capture at a time, a JSON line (captures, wall, CPU so far) after each ten:
+    run beside a batch on a loaded machine, both see the same load, and it can be read at any
+    moment."""
+    os.environ["STATION_READ_IN_PROCESS"] = "1"
+    from threadpoolctl import threadpool_limits
+
+    from station.estimate import estimate_capture
+    from station.io.calfile import write_calfile
+
+    captures = sorted(p for p in directory.iterdir() if (p / "manifest.yaml").exists())[-n:]
+    out = Path(os.environ.get("TMPDIR", "/tmp")) / f"batch-single-{os.getpid()}"
+    out.mkdir(exist_ok=True)
+    with threadpool_limits(limits=1, user_api="blas"):
+        estimate_capture(captures[0])
+        cpu, wall = time.process_time(), time.perf_counter()
+        for i, c in enumerate(captures, 1):
+            cal, _, prov = estimate_capture(c)
+            write_calfile(out / f"{i}.yaml", cal, prov)
+            if i % 10 == 0:
+                w, u = time.perf_counter() - wall, time.process_time() - cpu
+                print(json.dumps({"captures": i, "wall_s": w, "cpu_s": u, "rate_per_s": i / w,
+                                  "cpu_per_capture_s": u / i, "load": load()}), flush=True)
+    shutil.rmtree(out)
+
+
+if __name__ == "__main__" and len(sys.argv) > 1 and sys.argv[1] == "single-stream":
+    single_stream(Path(sys.argv[2]), int(sys.argv[3]) if len(sys.argv) > 3 else 200)
+    sys.exit(0)
+
+
+if __name__ == "__main__" and len(sys.argv) > 1 and sys.argv[1] == "sample":
+    p = argparse.ArgumentParser()
+    p.add_argument("what")
+    p.add_argument("pid", type=int, help="the station batch command's process")
+    p.add_argument("state", type=Path, help="its state file")
+    p.add_argument("--also", type=int, action="append", default=[], help="scheduler and worker processes")
+    a = p.parse_args()
+    print(json.dumps(sample(a.pid, a.state, a.also)))
+    sys.exit(0)
+
+
+if __name__ == "__main__":
+    p = argparse.ArgumentParser()
+    p.add_argument("what", choices=("make", "run"))
+    p.add_argument("directory", type=Path)
+    p.add_argument("--single", type=int, default=100, help="captures timed in one process (the ceiling)")
+    p.add_argument("--workers", type=int, default=len(os.sched_getaffinity(0)))
+    p.add_argument("--json", type=Path, help="write the results here too")
+    p.add_argument("--only", action="append", choices=PHASES, help="run only these phases (repeatable)")
+    a = p.parse_args()
+    res = run(a.directory, a.single, a.workers, tuple(a.only or PHASES))
+    print(json.dumps(res, indent=1))
+    if a.json:
+        a.json.write_text(json.dumps(res, indent=1))
+    for name in ("local", "scheduler"):
+        r = res.get(name)
+        if not r or "of_ceiling_cpu" not in r:
+            continue
+        print(f"{name}: {res['captures']} captures in {r['wall_s']:.0f} s wall ({r['rate_per_s']:.2f}/s), "
+              f"{r['cpu_per_capture_s']:.3f} s CPU per capture; {r['of_ceiling_wall']:.2f} of the wall-time "
+              f"ceiling, {r['of_ceiling_cpu']:.2f} of the CPU ceiling")

@@ -1,0 +1,40 @@
+"""Calibrations a batch wrote, filed into the history store by the single commands' policy
+(station.cli.history.file_quietly; docs/calibration-file.md, "History"): a real IMU's (a
+serial) into the store, a simulated IMU's (serial SIM-...) into the simulations' own store,
+one without a serial not at all; the same capture and model filed once.  Filing happens in the
+process that started the batch, as each result arrives (one writer for the store), through the
+store's public functions (station.io.history)."""
+from __future__ import annotations
+
+from collections import Counter
+
+
+class Filer:
+    def __init__(self, store=None):
+        self.store = store
+        self.counts: Counter = Counter()      # filed, already filed, no serial, not filed (error)
+        self.warnings: list[str] = []
+
+    def file(self, cal_path) -> str:
+        """File one calibration; returns what happened in a few words."""
+        from station.core.errors import UserError
+        from station.io.calfile import read_calfile
+        from station.io.history import SIMULATED_PREFIX, Store, real_serial, simulation_store
+
+        try:
+            doc = read_calfile(cal_path)
+            serial = (doc.get("provenance") or {}).get("imu_serial") or ""
+            if isinstance(serial, str) and serial.startswith(SIMULATED_PREFIX):
+                root = simulation_store(self.store)
+            elif real_serial(doc) is None:
+                self.counts["no serial"] += 1
+                return "not filed: no IMU serial"
+            else:
+                root = self.store
+            entry, new = Store(root).file(cal_path)
+        except UserError as e:
+            self.counts["not filed (error)"] += 1
+            self.warnings.append(f"{cal_path}: not filed in the calibration history: {e}")
+            return "not filed"
+        self.counts["filed" if new else "already filed"] += 1
+        return f"filed as #{entry.id}" if new else f"already filed as #{entry.id}"
