@@ -18,7 +18,7 @@ from station.model import LIBRARY
 from station.model.rotation import align_vectors, rotvec_from_matrix
 
 
-def scipy_lm(fun, x0, jac, *, xtol, ftol, gtol, max_nfev):
+def scipy_lm(fun, x0, jac, *, xtol, ftol, gtol, max_nfev=None):
     return optimize.least_squares(fun, x0, jac=jac, method="lm", x_scale="jac", xtol=xtol, ftol=ftol,
                                   gtol=gtol, max_nfev=max_nfev)
 
