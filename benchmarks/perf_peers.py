@@ -54,7 +54,7 @@ def run(cmd, env) -> tuple[float, float]:
     """(wall s, CPU s of the process tree it waited for)."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    r = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
+    r = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env, cwd=tempfile.gettempdir())
     elapsed = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if r.returncode not in (0, 3):
@@ -72,7 +72,8 @@ def env_for(tree: Path | None) -> dict:
 def station(*argv) -> list:
     # the console script as installed (console_main: gc.freeze before the exit), importing the
     # tree on PYTHONPATH
-    return [sys.executable, "-c", "import sys; from station.cli import console_main; sys.argv[0] = 'station'; "
+    # (-P: the working directory is not put on sys.path, where it would shadow PYTHONPATH's tree)
+    return [sys.executable, "-P", "-c", "import sys; from station.cli import console_main; sys.argv[0] = 'station'; "
             "sys.exit(console_main())", *map(str, argv)]
 
 
@@ -116,7 +117,7 @@ def main() -> int:
         shutil.rmtree(out, ignore_errors=True)
         out.mkdir()
         if name == "numpy":
-            return run([sys.executable, "-c", "import numpy"], env)
+            return run([sys.executable, "-P", "-c", "import numpy"], env)
         if name == "estimate":
             return run(station("estimate", data["optimal9"], "-o", out / "c.yaml"), env)
         if name == "imu_tk log":
@@ -131,7 +132,7 @@ def main() -> int:
             b = run(station("estimate", out / "cap", "-o", out / "c.yaml"), env)
             return a[0] + b[0], a[1] + b[1]
         if name == "imucal 2.6":
-            return run([sys.executable, "-c", IMUCAL_SCRIPT, DATA / "example_ferraris_session.csv",
+            return run([sys.executable, "-P", "-c", IMUCAL_SCRIPT, DATA / "example_ferraris_session.csv",
                         DATA / "example_ferraris_session_list.json", out / "imucal.json"], env)
         if name == "imu_tk test_imu_calib":
             return run([str(args.imu_tk), data["pair"] / "acc.txt", data["pair"] / "gyr.txt"], env)
