@@ -36,15 +36,17 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
 
 from station.core import units
 from station.model.calibration import Calibration, misalignment_angles
 from station.core.errors import UserError
-from station.estimate import hand_rotation, noise_model, solver, table_geometry, zhang2010
+from station.estimate import hand_rotation, noise_model, table_geometry, zhang2010
 from station.estimate.summaries import Summaries, summarise
 from station.model.geometry import cross, normalised, positive_part, tangent_basis
 from station.model.effect import Effect, SampleContext
-from station.model.rotation import align_vectors, matrix_from_rotvec, rotvec_from_matrix
+from station.model.rotation import matrix_from_rotvec
 
 EARTH_RATE_RAD = 7.292115e-5
 WEAK_PRIOR_RAD = 3.0             # a prior on nuisance angles that only matters when nothing else does
@@ -101,11 +103,12 @@ class Start:
     notes: list = field(default_factory=list)
 
 
-def _align_vectors(a, b, weights=None) -> np.ndarray:
-    """Rotation.align_vectors(a, b)'s rotation matrix (station.model.rotation: no scipy import),
-    with no warning when it is not uniquely defined (degenerate vectors: the fit's
-    identifiability then says so, in words)."""
-    return align_vectors(a, b, weights)
+def _align_vectors(a, b, weights=None) -> Rotation:
+    """Rotation.align_vectors(a, b)'s rotation, without scipy's warning when it is not uniquely
+    defined (degenerate vectors: the fit's identifiability then says so, in words)."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "Optimal rotation is not uniquely or poorly defined", UserWarning)
+        return Rotation.align_vectors(a, b, weights)[0]
 
 
 def _start(s: Summaries) -> Start:
@@ -141,14 +144,14 @@ def _start(s: Summaries) -> Start:
             axes_o.append(l_o / np.linalg.norm(l_o))
             axes_p.append(l_p / np.linalg.norm(l_p))
     if len(axes_o) >= 2:
-        R_po = _align_vectors(np.array(axes_o), np.array(axes_p))
+        R_po = _align_vectors(np.array(axes_o), np.array(axes_p)).as_matrix()
     else:
         R_po = np.eye(3)
         notes.append("no algebraic start for the inter-triad rotation: started from zero")
     ka, Ta = zhang2010.scale_and_T(L_a)
     kg, Tg = zhang2010.scale_and_T(L_g)
     return Start(ka, misalignment_angles(Ta), b_a, kg, misalignment_angles(Tg), b_g,
-                 rotvec_from_matrix(R_po), notes)
+                 Rotation.from_matrix(R_po).as_rotvec(), notes)
 
 
 def _start_gyro_matrix(st: Start) -> np.ndarray:
@@ -492,7 +495,7 @@ class Model:
         noise of the matched direction (module doc of hand_rotation)."""
         s = self.s
         self.integrator = hand_rotation.Integrator(self.hands)
-        ups = [ref @ UP if self.with_latitude else ref for ref in self.static_ref]
+        ups = [ref.apply(UP) if self.with_latitude else ref for ref in self.static_ref]
         self.hand_basis = np.array([tangent_basis(ups[h.after]) for h in self.hands])     # (H,2,3)
         self._hand_kg = np.abs(st.kg)
         omega = np.degrees(EARTH_RATE_RAD)
@@ -767,7 +770,7 @@ class Model:
         self._st_cols = np.array([np.arange(L[f"static{j}"].start, L[f"static{j}"].stop) for j in range(S)],
                                  int).reshape(S, width)
         if self.with_latitude:      # C0 f_n, C0 Omega_n, C0 up per static: the attitude's reference
-            C0 = np.array(self.static_ref, float).reshape(S, 3, 3)
+            C0 = np.array([r.as_matrix() for r in self.static_ref]).reshape(S, 3, 3)
             self._st_ref_vectors = np.einsum("sij,kj->ski", C0, np.array([self.f_n, self.omega_n, UP]))
         else:
             self._st_ref = np.array(self.static_ref, float).reshape(S, 3)
@@ -1360,8 +1363,6 @@ def _solve(model: Model, x0: np.ndarray):
         # each step solved to rounding (LSMR's default, as many iterations as parameters, stops
         # short on ill-conditioned models such as hand-pose logs: 100 steps and twice the chi2)
         def solve(start, evaluations=MAX_EVALUATIONS):
-            from scipy.optimize import least_squares     # (large models only)
-
             return least_squares(model.residuals, start, jac=model.sparse_jacobian, method="trf", tr_solver="lsmr",
                                  tr_options={"atol": 1e-14, "btol": 1e-14, "maxiter": 10 * model.layout.size},
                                  x_scale="jac", xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=evaluations)
@@ -1369,9 +1370,8 @@ def _solve(model: Model, x0: np.ndarray):
         reduced = _Reduced(model, model.sparse_jacobian(res.x))
     else:
         def solve(start, evaluations=MAX_EVALUATIONS):
-            # MINPACK's Levenberg-Marquardt in numpy (station/estimate/solver.py: no scipy import)
-            return solver.least_squares(model.residuals, start, model.jacobian,
-                                        xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=evaluations)
+            return least_squares(model.residuals, start, jac=model.jacobian, method="lm", x_scale="jac",
+                                 xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=evaluations)
         res = _minimise(model, x0, solve)
         reduced = _Reduced(model, model.jacobian(res.x))
     model.converged = res.status != 0

@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from station.estimate.distributions import chi2_sf
+from scipy import special
 
 P_NAMED = 1e-3          # a group is named when its scatter is this improbable under its stated noise
 MIN_REDUNDANCY = 2.0    # below this a group's scatter says too little to be reported
@@ -92,7 +92,7 @@ def variance_components(labels, residuals: np.ndarray, J: np.ndarray | None, par
         entry = {"group": g, "rows": int(len(rows)), "redundancy": f, "chi2": chi2}
         if f >= MIN_REDUNDANCY:
             entry["scatter"] = math.sqrt(chi2 / f)
-            entry["p_value"] = chi2_sf(f, chi2)
+            entry["p_value"] = float(special.chdtrc(f, chi2))
         out.append(entry)
     return out
 

@@ -74,9 +74,9 @@ class Calibration:
 
     @property
     def inter_triad_rad(self) -> np.ndarray:
-        from station.model.rotation import rotvec_from_matrix     # (scipy's Rotation: 0.2 s to import)
+        from scipy.spatial.transform import Rotation   # not at import: reading a capture needs no scipy
 
-        return rotvec_from_matrix(self.R_po)
+        return Rotation.from_matrix(self.R_po).as_rotvec()
 
     @property
     def accel_matrix(self) -> np.ndarray:
