@@ -2,6 +2,8 @@
 read and used (argument parsing and output only)."""
 from __future__ import annotations
 
+import argparse
+import sys
 from pathlib import Path
 
 from station.cli import plugins
@@ -28,6 +30,9 @@ def add_parsers(sub) -> None:
                      help="hand turns: their 1-sigma per turn, degrees (default: estimated from their "
                           "scatter when it exceeds their white noise; stated, the turns are tested)")
     add_accept_poor_fit(est)
+    est.add_argument("--table", action=argparse.BooleanOptionalAction, default=None,
+                     help="print the parameters as a table (default: only when the output is a terminal; "
+                          "the file holds them all, station show prints them)")
     from station.cli.history import add_history_option
 
     add_history_option(est, "default: not filed")
@@ -59,15 +64,21 @@ def add_accept_poor_fit(parser) -> None:
                              "the file says so either way)")
 
 
-def report_calibration(cal, title: str, target, accept_poor_fit: bool, truth=None) -> int:
+def report_calibration(cal, title: str, target, accept_poor_fit: bool, truth=None, table: bool = True) -> int:
     """Print a written calibration (parameters, chi-square, verdict, notes, file) and return the
-    exit status: 0, or EXIT_POOR_FIT when the fit fails and the user did not accept it."""
+    exit status: 0, or EXIT_POOR_FIT when the fit fails and the user did not accept it.  Without
+    ``table`` the parameters are counted in one line instead of a table (a pipe or a log: the
+    file holds them, and rich's table machinery is not imported)."""
     from station.cli.output import print_errors
     from station.estimate.verdict import fit_fails
 
     dropped = set(cal.fit.get("not_determined", []))
     if truth is not None:
         print_errors(cal, truth)
+    elif not table:
+        written = [n for n, _, _ in cal.parameters() if n not in dropped]
+        out.print(f"{title}: {len(written)} parameters written (station show {target} prints them)",
+                  markup=False, soft_wrap=True)
     else:
         print_parameters([(n, v, u, cal.sigma.get(n)) for n, v, u in cal.parameters() if n not in dropped],
                          title)
@@ -100,8 +111,9 @@ def cmd_estimate(args) -> int:
     from station.cli.history import file_quietly
 
     file_quietly(target, asked=bool(args.history))
+    table = sys.stdout.isatty() if args.table is None else args.table
     return report_calibration(est.calibration, f"calibration of {est.capture.path} ({est.provenance['method']})",
-                              target, args.accept_poor_fit)
+                              target, args.accept_poor_fit, table=table)
 
 
 def print_messages(lines) -> None:

@@ -26,8 +26,10 @@ Where fork is not used (station.core.forked.available: Linux), or drawing fails 
 figures are drawn here, with the same bytes.  The worker and the processes it forks end when
 this process ends, however it ends (killed, the worker first removing the temporary directory),
 and ignore Ctrl-C (this process is interrupted, ends them on leaving the ``with`` block and
-exits 130 without a traceback from them).  Once every figure is here, the worker is killed so
-that it ends while the page is written.  A directory whose processes were all killed at once
+exits 130 without a traceback from them).  Once every figure is here, the worker is asked to
+end (SIGTERM: it kills its drawing processes and waits for them) so that it ends while the page
+is written, and it is awaited before the ``with`` block is left: nothing of the job runs after
+the command returns (tests/test_no_work_after_return.py).  A directory whose processes were all killed at once
 (SIGKILL to the process group: nothing is left to remove it) is removed by the next worker
 (``remove_orphaned_directories``: the directory's name holds its process's number).
 """
@@ -192,20 +194,35 @@ def _drawing(index: int, tasks: int, done: int, permits: tuple, directory: str) 
         os.write(permits[1], PERMIT)
 
 
-def _end(worker: int, grace_s: float = 2.0) -> None:
-    """End the worker: SIGTERM (it ends its drawing processes and removes the directory, within
-    the figure it may be drawing), SIGKILL if it has not ended within ``grace_s``; reaped."""
+def _end(worker: int, grace_s: float = 2.0, *, asked: bool = False) -> None:
+    """End the worker: SIGTERM (it ends its drawing processes, waits for them and removes the
+    directory, within the figure it may be drawing; unless ``asked`` already), SIGKILL if it has
+    not ended within ``grace_s``; reaped.  When this returns, no process of the job is left to
+    run (its drawing processes were awaited by the worker), but after a SIGKILL."""
     import time
 
     try:
-        os.kill(worker, signal.SIGTERM)
+        if not asked:
+            os.kill(worker, signal.SIGTERM)
         deadline = time.monotonic() + grace_s
-        while os.waitpid(worker, os.WNOHANG) == (0, 0):
-            if time.monotonic() > deadline:
-                os.kill(worker, signal.SIGKILL)
-                os.waitpid(worker, 0)
-                break
-            time.sleep(0.002)
+        try:
+            pidfd = os.pidfd_open(worker)       # Linux 5.3: readable when the worker has ended
+        except (AttributeError, OSError):
+            pidfd = None
+        try:
+            while os.waitpid(worker, os.WNOHANG) == (0, 0):
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    os.kill(worker, signal.SIGKILL)
+                    os.waitpid(worker, 0)
+                    break
+                if pidfd is not None:
+                    select.select([pidfd], [], [], left)
+                else:
+                    time.sleep(0.002)
+        finally:
+            if pidfd is not None:
+                os.close(pidfd)
     except (ProcessLookupError, ChildProcessError):
         pass
 
@@ -332,12 +349,14 @@ class FigureJob:
             drawn = _draw_here({self._names[n]: self._specs[n] for n in numbers})
             self._drawn.update({n: drawn[self._names[n]] for n in numbers})
             self._here = []
-        if self._worker is not None:
-            # every figure is here: the worker killed now (its drawing processes die with it,
-            # idle), so that it ends while this process writes the page; reaped and its directory
-            # removed on leaving the ``with`` block (a SIGTERM would have it wait for each)
+        if self._worker is not None and not self._killed:
+            # every figure is here: the worker asked to end now (it kills its idle drawing
+            # processes and waits for them, so that they end while this process writes the page;
+            # killed with SIGKILL instead, they would be left to end after the command returns,
+            # their CPU outside its time: issue 27, item 3); the worker is awaited on leaving the
+            # ``with`` block
             try:
-                os.kill(self._worker, signal.SIGKILL)
+                os.kill(self._worker, signal.SIGTERM)
                 self._killed = True
             except ProcessLookupError:
                 pass
@@ -385,10 +404,7 @@ class FigureJob:
         """End the worker now (it may be drawing: Ctrl-C, or an error here; the processes it forked
         die with it), close the pipes, remove the directory."""
         if self._worker is not None:
-            if self._killed:
-                os.waitpid(self._worker, 0)
-            else:
-                _end(self._worker)
+            _end(self._worker, asked=self._killed)
             self._worker = None
         for fd in (self._tasks, self._done, self._permits, *self._alive):
             if fd is not None:

@@ -128,8 +128,7 @@ def write_calfile(path, cal: Calibration, provenance: dict) -> Path:
     renamed over ``path`` (a symbolic link at ``path`` is replaced, its target never written);
     the temporary file is removed on every path out."""
     path = Path(path)
-    text = yaml.dump(to_document(cal, provenance), Dumper=_Dumper, sort_keys=False, width=100,
-                     allow_unicode=True)
+    text = dump_text(to_document(cal, provenance))
     write_new_file(path, text.encode("utf-8"), what="calibration file")
     return path
 
@@ -230,6 +229,49 @@ class _Dumper(yaml.SafeDumper):
 
     def ignore_aliases(self, data):
         return True
+
+
+_CDumper = None
+if getattr(yaml, "__with_libyaml__", False):
+    class _CDumper(yaml.CSafeDumper):
+        """The same through libyaml's C emitter (4x faster: 2 ms against 8.5 ms for a calibration
+        file)."""
+
+        def ignore_aliases(self, data):
+            return True
+
+
+def _plain_text(s: str) -> bool:
+    """A string both emitters write alike: not empty, printable characters of the Basic
+    Multilingual Plane and newlines only.  Fuzzed (tests/test_calfile_emitter.py): the two
+    emitters differ on empty keys, control characters, U+0085/U+2028/U+2029/U+FEFF and
+    characters beyond U+FFFF, which the pure-Python emitter writes unescaped and libyaml escapes."""
+    return bool(s) and all(" " <= c < "\x7f" or "\xa0" <= c < "\ud800" or "\ue000" <= c < "\ufeff"
+                           or "\uff00" <= c < "\ufffe" or c == "\n" for c in s)
+
+
+def _c_safe(node) -> bool:
+    """Whether every string in the document (keys and values) is one both emitters write alike."""
+    stack = [node]
+    while stack:
+        x = stack.pop()
+        if isinstance(x, str):
+            if not _plain_text(x):
+                return False
+        elif isinstance(x, dict):
+            stack.extend(x.keys())
+            stack.extend(x.values())
+        elif isinstance(x, (list, tuple)):
+            stack.extend(x)
+    return True
+
+
+def dump_text(doc: dict) -> str:
+    """The calibration file's text: libyaml's C emitter when it is installed and gives what the
+    pure-Python emitter gives (a mapping whose strings are all plain text), the pure-Python
+    emitter otherwise; the same bytes either way."""
+    dumper = _CDumper if _CDumper is not None and isinstance(doc, dict) and _c_safe(doc) else _Dumper
+    return yaml.dump(doc, Dumper=dumper, sort_keys=False, width=100, allow_unicode=True)
 
 
 def _read_bytes(path: Path) -> bytes:

@@ -1348,6 +1348,30 @@ class CaptureWriter:
         _atomic_write(self._dir / MANIFEST, (self._head + body + self._tail).encode("utf-8"))
 
 
+class FormattedRows:
+    """Samples formatted once as segment CSV rows (SegmentWriter.write's format), any run of
+    which SegmentWriter.write_rows writes.  ValueError as write() for bad arrays."""
+
+    def __init__(self, t, accel, gyro, temp=None):
+        columns = [np.asarray(a, dtype=np.float64)
+                   for a in ((t, accel, gyro) if temp is None else (t, accel, gyro, temp))]
+        n = len(columns[0]) if columns[0].ndim == 1 else -1
+        expected = [(n,), (n, 3), (n, 3), (n,)][:len(columns)]
+        if n < 0 or [c.shape for c in columns] != expected:
+            raise ValueError("FormattedRows needs t (N,), accel (N, 3), gyro (N, 3) and temp (N,) or None")
+        block = np.column_stack(columns)
+        if not np.isfinite(block).all():
+            raise ValueError("non-finite values cannot be recorded")
+        if n > 1 and not (np.diff(columns[0]) > 0).all():
+            raise ValueError("time must strictly increase")
+        self.t, self.count, self.with_temp = columns[0], n, temp is not None
+        row_format = ",".join([_T_FORMAT] + [_VALUE_FORMAT] * (block.shape[1] - 1)) + "\n"
+        text = (row_format * n) % tuple(block.ravel().tolist())
+        self.data = text.encode("ascii")
+        self.offsets = np.zeros(n + 1, dtype=np.int64)       # byte offset of each row (ASCII)
+        np.cumsum(np.fromiter(map(len, text.split("\n")[:n]), np.int64, n) + 1, out=self.offsets[1:])
+
+
 class SegmentWriter:
     """Appends IMU samples to one segment's CSV; every write is on disk when it returns."""
 
@@ -1394,18 +1418,36 @@ class SegmentWriter:
         if t[0] <= self._last_t or (n > 1 and not (np.diff(t) > 0).all()):
             raise ValueError(f"segment {self.name!r}: time must strictly increase")
 
-        header = ""
-        if self._with_temp is None:
-            self._with_temp = temp is not None
-            header = ",".join(REQUIRED_COLUMNS) + (",temp" if self._with_temp else "") + "\n"
         row_format = ",".join([_T_FORMAT] + [_VALUE_FORMAT] * (block.shape[1] - 1)) + "\n"
-        data = (header + (row_format * n) % tuple(block.ravel().tolist())).encode("ascii")
+        self._append(((row_format * n) % tuple(block.ravel().tolist())).encode("ascii"), n, t[-1], temp is not None)
+
+    def write_rows(self, rows: "FormattedRows", start: int, stop: int) -> None:
+        """Append rows start..stop-1 of samples formatted once (FormattedRows): the same bytes as
+        write() of those samples, without formatting them again (an import writes the session and
+        then its parts: issue 27, item 2)."""
+        if self.closed:
+            raise ValueError(f"segment {self.name!r} is closed")
+        if not 0 <= start <= stop <= rows.count:
+            raise ValueError(f"rows {start}..{stop}: outside the {rows.count} formatted")
+        if self._with_temp is not None and rows.with_temp != self._with_temp:
+            raise ValueError(f"segment {self.name!r}: temp must be given in every write or in none")
+        if stop == start:
+            return
+        if rows.t[start] <= self._last_t:
+            raise ValueError(f"segment {self.name!r}: time must strictly increase")
+        self._append(rows.data[rows.offsets[start]:rows.offsets[stop]], stop - start, rows.t[stop - 1],
+                     rows.with_temp)
+
+    def _append(self, data: bytes, n: int, last_t: float, with_temp: bool) -> None:
+        if self._with_temp is None:
+            self._with_temp = with_temp
+            data = (",".join(REQUIRED_COLUMNS) + (",temp" if with_temp else "") + "\n").encode("ascii") + data
         self._file.write(data)
         self._file.flush()
         os.fsync(self._file.fileno())
         self._sha.update(data)
         self._samples += n
-        self._last_t = t[-1]
+        self._last_t = last_t
 
     def close(self, status="complete", **meta):
         """Finish the segment: record status, samples, sha256 and `meta` (e.g. the encoder's

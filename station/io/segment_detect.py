@@ -32,7 +32,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import uniform_filter1d
+from station.io.moving_average import moving_mean, moving_std
 
 QUIET_PERCENTILE = 20.0
 NOISE_FACTOR = 4.0
@@ -91,7 +91,7 @@ def still_mask(accel, gyro, window: int, *, accel_threshold: float, gyro_thresho
     sg = _moving_std(gyro, window).max(axis=1)
     still = (sa <= accel_threshold) & (sg <= gyro_threshold)
     if bias is not None:
-        mean = uniform_filter1d(np.asarray(gyro, float), window, axis=0, mode="nearest")
+        mean = moving_mean(gyro, window, mode="nearest")
         still &= np.linalg.norm(mean - bias, axis=1) <= rate_threshold_dps
     return still
 
@@ -141,7 +141,7 @@ def detect(t, accel, gyro, *, window_s: float = 0.5, min_static_s: float = 2.0,
     thresholds["gyro_std_threshold" + ("_raw" if gyro_dps_per_unit is None else "_dps")] = NOISE_FACTOR * noise_g
     candidate = (sa <= NOISE_FACTOR * noise_a) & (sg <= NOISE_FACTOR * noise_g)
     bias = np.median(g[candidate], axis=0) if candidate.any() else np.zeros(3)
-    mean = uniform_filter1d(g, window, axis=0, mode="nearest")
+    mean = moving_mean(g, window, mode="nearest")
     still = candidate & (np.linalg.norm(mean - bias, axis=1) <= rate_threshold)
 
     runs = [(a0, b0) for a0, b0 in _runs(still) if t[b0 - 1] - t[a0] + dt >= min_static_s]
@@ -196,9 +196,7 @@ def _interval(kind, a, b, dt, accel, gyro, bias) -> Interval:
 
 
 def _moving_std(x, window: int) -> np.ndarray:
-    m = uniform_filter1d(x, window, axis=0, mode="nearest")
-    m2 = uniform_filter1d(x * x, window, axis=0, mode="nearest")
-    return np.sqrt(np.maximum(m2 - m * m, 0.0))
+    return moving_std(x, window, mode="nearest")
 
 
 def _runs(mask) -> list:

@@ -287,14 +287,14 @@ def kinematic_consistency(t, accel, gyro, window_s: float = 0.1) -> float:
     sense agree with the accelerometer axes; -1: the gyro sense is inverted.  Units do not
     matter (a positive scale factor is assumed for raw units).
     """
-    from scipy.ndimage import uniform_filter1d
+    from station.io.moving_average import moving_mean
 
     t = np.asarray(t, float)
     if len(t) < 8:
         return 0.0
     win = max(1, int(round(window_s / np.median(np.diff(t)))))
-    f = uniform_filter1d(np.asarray(accel, float), win, axis=0)
-    w = uniform_filter1d(np.asarray(gyro, float), win, axis=0)
+    f = moving_mean(accel, win)          # (scipy.ndimage's default mode: reflect)
+    w = moving_mean(gyro, win)
     df = np.gradient(f, t, axis=0)
     pred = -np.cross(w, f)
     size = np.linalg.norm(pred, axis=1)

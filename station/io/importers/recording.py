@@ -30,7 +30,7 @@ import yaml
 from station.core import units
 from station.core.errors import UserError
 from station.core import yaml_text
-from station.io.capture import MAX_CSV_VALUE, CaptureWriter, ImuInfo, Site
+from station.io.capture import MAX_CSV_VALUE, CaptureWriter, FormattedRows, ImuInfo, Site
 from station.io.segment_detect import Detection, Interval, detect
 from station.model.geometry import ATTITUDE_TOLERANCE_DEG, distinct_directions
 
@@ -262,7 +262,7 @@ ACCEL_AT_REST_STD_MPS2 = 0.05   # at rest for that check: every accelerometer's 
 def _gyro_unit_at_rest(rec: Recording, det: Detection, min_static_s: float) -> None:
     """When no pose was found: if the accelerometers alone are still long enough and the gyro
     reads more than GYRO_AT_REST_DPS there in the declared unit, the gyro unit is wrong."""
-    from scipy.ndimage import uniform_filter1d
+    from station.io.moving_average import moving_std
 
     fg = rec.gyro_factor
     if fg is None or rec.gyro_unit == "raw":     # raw counts: the zero (offset) is unknown
@@ -270,10 +270,8 @@ def _gyro_unit_at_rest(rec: Recording, det: Detection, min_static_s: float) -> N
     fa = rec.accel_factor or 1.0
     window = max(3, int(round(det.thresholds["window_s"] * len(rec.t) / max(rec.t[-1] - rec.t[0], 1e-9))) | 1)
     a = rec.accel * fa
-    m = uniform_filter1d(a, window, axis=0, mode="nearest")
-    m2 = uniform_filter1d(a * a, window, axis=0, mode="nearest")
     limit = min(det.thresholds["accel_std_threshold_mps2"], ACCEL_AT_REST_STD_MPS2)
-    still = np.sqrt(np.maximum(m2 - m * m, 0.0)).max(axis=1) <= limit
+    still = moving_std(a, window, mode="nearest").max(axis=1) <= limit
     if still.sum() < min_static_s * len(rec.t) / max(rec.t[-1] - rec.t[0], 1e-9):
         return
     rate = float(np.median(np.linalg.norm(rec.gyro[still], axis=1))) * fg
@@ -442,9 +440,10 @@ def write_capture(rec: Recording, out_dir, *, gravity_mps2: float, latitude_deg:
     writer = _ImportWriter(out_dir, ImuInfo(float(rate), rec.accel_unit, rec.gyro_unit, model=model,
                                             serial=serial, extra=imu_extra),
                            Site(float(gravity_mps2), latitude_deg), scheme=scheme, extra=extra)
+    rows = FormattedRows(rec.t, rec.accel, rec.gyro)     # formatted once: the session, then its parts
     with writer.begin_segment("session", "session", note=f"the whole recording as read from {rec.source}; "
                               "the segments below are copies of parts of it") as seg:
-        seg.write(rec.t, rec.accel, rec.gyro)
+        seg.write_rows(rows, 0, rows.count)
         seg.close()
     for s in sections:
         sl = slice(s.start, s.stop)
@@ -464,7 +463,7 @@ def write_capture(rec: Recording, out_dir, *, gravity_mps2: float, latitude_deg:
             meta = {"axis_body": [float(v) for v in axis], "motion": "hand",
                     "note": f"{s.note}; {span}; axis_body is {how}; no encoder: angle and rate unknown"}
         with writer.begin_segment(s.name, s.kind, **meta) as seg:
-            seg.write(rec.t[sl], rec.accel[sl], rec.gyro[sl])
+            seg.write_rows(rows, s.start, s.stop)
             seg.close()
     writer.finish()
     lines = _report_lines(rec, sections, det, rate, notes, distinct)

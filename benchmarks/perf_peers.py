@@ -1,0 +1,180 @@
+"""station against the tools users would pick instead, and against its own earlier code, whole
+processes on the same data (issue 27): CPU seconds (user + sys of the process and of every
+process it started and waited for: getrusage(RUSAGE_CHILDREN)), wall seconds, medians of
+interleaved runs, and the median of the per-round ratios; the load average is printed before
+and after (the machine is shared: CPU is the firmer figure).
+
+Work measured, each a fresh process (two for an import and its estimate):
+  numpy       python -c "import numpy" (the floor of any Python tool)
+  estimate    station estimate of a 100 Hz optimal9 capture (simulated, 306,000 samples)
+  imu_tk log  station import csv --preset imu_tk of a 50,062-row Xsens-style pair (raw counts,
+              `t x y z`, 38 hand poses, simulated) + station estimate (accelerometers and gyros)
+  imucal      station import imucal + estimate of imucal's own example session (102.4 Hz,
+              --turn-deg 360, as imucal assumes), against imucal 2.6's FerrarisCalibration in a
+              process of its own (pandas reads the CSV, the sections, compute, the result saved)
+  imu_tk      imu_tk's compiled `test_imu_calib ACC GYR` on the same pair, when --imu-tk BIN names
+              one (it is not built here: imu_tk needs Ceres; see docs/performance.md)
+
+--before SRC times the same station commands with SRC first on PYTHONPATH (a tree holding the
+earlier `station` package, e.g. `git archive main station drivers sim_devices | tar -x -C SRC`),
+alternating with this tree in every round.
+
+Usage: python benchmarks/perf_peers.py [--repeat 7] [--before SRC] [--imu-tk BIN] [--keep DIR]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT.parent / "shared" / "data" / "imucal"
+COUNTS = (8 * 9.80665 / 32768, 1000.0 / 32768)      # +-8 g, +-1000 deg/s in 16 bits
+
+IMUCAL_SCRIPT = r"""
+import json, sys
+import pandas as pd
+from imucal import FerrarisCalibration, ferraris_regions_from_section_list
+data = pd.read_csv(sys.argv[1], header=0, index_col=0)
+sections = pd.read_json(sys.argv[2]).T
+regions = ferraris_regions_from_section_list(data, sections)
+cal = FerrarisCalibration().compute(regions, sampling_rate_hz=102.4, from_acc_unit="m/s^2", from_gyr_unit="deg/s")
+cal.to_json_file(sys.argv[3])
+"""
+
+
+def run(cmd, env) -> tuple[float, float]:
+    """(wall s, CPU s of the process tree it waited for)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    r = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env, cwd=tempfile.gettempdir())
+    elapsed = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if r.returncode not in (0, 3):
+        raise SystemExit(f"{' '.join(map(str, cmd))}: exit {r.returncode}: {r.stderr[-2000:]}")
+    return elapsed, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def env_for(tree: Path | None) -> dict:
+    env = dict(os.environ)
+    env.pop("PYTHONPATH", None)
+    env["PYTHONPATH"] = str(tree or ROOT)
+    return env
+
+
+def station(*argv) -> list:
+    # the console script as installed (console_main: gc.freeze before the exit), importing the
+    # tree on PYTHONPATH
+    # (-P: the working directory is not put on sys.path, where it would shadow PYTHONPATH's tree)
+    return [sys.executable, "-P", "-c", "import sys; from station.cli import console_main; sys.argv[0] = 'station'; "
+            "sys.exit(console_main())", *map(str, argv)]
+
+
+def make_data(tmp: Path) -> dict:
+    env = env_for(None)
+    cap = tmp / "optimal9"
+    if not cap.exists():
+        run(station("run", "--scheme", "optimal9", "--sim", "--seed", "1", "--out", cap), env)
+    pair = tmp / "imu_tk"
+    if not (pair / "gyr.txt").exists():
+        pair.mkdir(exist_ok=True)
+        code = ("import numpy as np, sys\n"
+                "from sim_devices.hand import hand_session\nfrom sim_devices.truth import mems_truth\n"
+                f"hs = hand_session(mems_truth(3), 3, poses=38, dwell_s=(10, 14), counts={COUNTS!r})\n"
+                "np.savetxt(sys.argv[1] + '/acc.txt', np.column_stack([hs.t, hs.accel + 32768]), fmt='%.7f %d %d %d')\n"
+                "np.savetxt(sys.argv[1] + '/gyr.txt', np.column_stack([hs.t, hs.gyro + 32768]), fmt='%.7f %d %d %d')\n")
+        subprocess.run([sys.executable, "-c", code, str(pair)], check=True, env=env)
+    return {"optimal9": cap, "pair": pair}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=7)
+    ap.add_argument("--before", type=Path, help="a tree with the earlier station package, timed alternately")
+    ap.add_argument("--imu-tk", type=Path, help="imu_tk's compiled test_imu_calib")
+    ap.add_argument("--keep", type=Path, help="keep the data here (made once)")
+    args = ap.parse_args()
+    tmp = args.keep or Path(tempfile.mkdtemp(prefix="perf-peers-"))
+    tmp.mkdir(parents=True, exist_ok=True)
+    data = make_data(tmp)
+    out = tmp / "out"
+    trees = {"now": None} | ({"before": args.before.resolve()} if args.before else {})
+    try:
+        import imucal  # noqa: F401
+        have_imucal = (DATA / "example_ferraris_session.csv").exists()
+    except ImportError:
+        have_imucal = False
+
+    def work(name, tree):
+        env = env_for(tree)
+        shutil.rmtree(out, ignore_errors=True)
+        out.mkdir()
+        if name == "numpy":
+            return run([sys.executable, "-P", "-c", "import numpy"], env)
+        if name == "estimate":
+            return run(station("estimate", data["optimal9"], "-o", out / "c.yaml"), env)
+        if name == "imu_tk log":
+            a = run(station("import", "csv", data["pair"] / "acc.txt", "--preset", "imu_tk", "--gyro-file",
+                            data["pair"] / "gyr.txt", "-o", out / "cap"), env)
+            b = run(station("estimate", out / "cap", "-o", out / "c.yaml"), env)
+            return a[0] + b[0], a[1] + b[1]
+        if name == "imucal session":
+            a = run(station("import", "imucal", DATA / "example_ferraris_session.csv", "--sections",
+                            DATA / "example_ferraris_session_list.json", "--rate-hz", "102.4", "--turn-deg", "360",
+                            "-o", out / "cap"), env)
+            b = run(station("estimate", out / "cap", "-o", out / "c.yaml"), env)
+            return a[0] + b[0], a[1] + b[1]
+        if name == "imucal 2.6":
+            return run([sys.executable, "-P", "-c", IMUCAL_SCRIPT, DATA / "example_ferraris_session.csv",
+                        DATA / "example_ferraris_session_list.json", out / "imucal.json"], env)
+        if name == "imu_tk test_imu_calib":
+            return run([str(args.imu_tk), data["pair"] / "acc.txt", data["pair"] / "gyr.txt"], env)
+        raise ValueError(name)
+
+    jobs = [("numpy", "now"), *[(w, t) for w in ("estimate", "imu_tk log") for t in trees]]
+    if have_imucal:
+        jobs += [(("imucal session"), t) for t in trees] + [("imucal 2.6", "now")]
+    if args.imu_tk:
+        jobs.append(("imu_tk test_imu_calib", "now"))
+    print(f"load average before: {os.getloadavg()}; {args.repeat} rounds of {len(jobs)} processes, interleaved")
+    times = {j: [] for j in jobs}
+    for k in range(args.repeat):
+        for j in (jobs if k % 2 == 0 else jobs[::-1]):
+            times[j].append(work(j[0], trees[j[1]]))
+    print(f"load average after: {os.getloadavg()}")
+    print(f"\n{'work':24s} {'tree':7s} {'wall s':>8s} {'CPU s':>8s}")
+    for (name, tree), vals in times.items():
+        print(f"{name:24s} {tree:7s} {statistics.median(v[0] for v in vals):8.3f} "
+              f"{statistics.median(v[1] for v in vals):8.3f}")
+
+    def ratio(a, b, i):
+        return statistics.median(x[i] / y[i] for x, y in zip(times[a], times[b]))
+
+    print("\nratios (median of the per-round ratios), CPU; wall")
+    pairs = [(("estimate", "now"), ("numpy", "now"), "100 Hz optimal9 estimate / import numpy")]
+    if "before" in trees:
+        pairs += [((w, "now"), (w, "before"), f"{w}: now / before") for w in ("estimate", "imu_tk log")]
+    if have_imucal:
+        pairs.append((("imucal session", "now"), ("imucal 2.6", "now"), "imucal session: station / imucal 2.6"))
+        if "before" in trees:
+            pairs.append((("imucal session", "now"), ("imucal session", "before"), "imucal session: now / before"))
+    if args.imu_tk:
+        pairs.append((("imu_tk log", "now"), ("imu_tk test_imu_calib", "now"), "imu_tk log: station / imu_tk"))
+    for a, b, label in pairs:
+        print(f"  {label:48s} {ratio(a, b, 1):6.2f} x; {ratio(a, b, 0):6.2f} x")
+    if not args.imu_tk:
+        print("  (imu_tk's test_imu_calib not given: --imu-tk BIN)")
+    if not args.keep:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
