@@ -169,7 +169,8 @@ def test_a_failure_that_auto_cannot_mend_is_told_in_words(encoder):
     The account says what was tried and the share of the excess chi2 each explained, where the
     misfit is (per axis, per segment kind, per revolution) and what each axis' residual follows; it
     is in the JSON and on the report page, and the verdict names a pattern, not only "no candidate"."""
-    from station.cli.diagnose import _summary_lines, to_json
+    from station.cli.diagnose import _summary_lines
+    from station.diagnose.as_json import to_json
     from station.diagnose.report import ReportInput, render
 
     _, s, _ = encoder

@@ -153,6 +153,10 @@ def score_test(result, effect_id, registry: EffectRegistry | None = None, overdi
     x = np.concatenate([result.x, np.zeros(extended.layout.size - n)])
     r = extended.residuals(x)
     cols = list(range(n, extended.layout.size))
+    if not cols:        # nothing of it on this capture (a bench effect with no rotation about a table axis)
+        from station.core.errors import UserError
+
+        raise UserError(f"{effect.title}: it has no parameter on this capture (nothing it acts on was recorded)")
     Jc = extended.jacobian_columns(x, cols)
     # the part of the candidate's columns the current model cannot already produce
     Jp = outside_model(result, Jc)
