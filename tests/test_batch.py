@@ -354,9 +354,14 @@ def test_state_file_skips_only_what_is_done_and_survives_a_cut_line(tmp_path):
     assert State(path, fresh=True).previous(item_key(k, "a", "a/out")) is None
 
 
-def test_a_worker_task_never_raises(tmp_path):
-    """The task itself (as a worker runs it): a missing capture, a bad one and a good one."""
+def test_a_worker_task_never_raises(tmp_path, monkeypatch):
+    """The task itself (as a worker runs it): a missing capture, a bad one and a good one.  Run
+    here, its once-per-worker setup sets $STATION_READ_IN_PROCESS in this process: set through
+    monkeypatch, so that it is undone for the tests after it (it made the forked reader's test,
+    in the same pytest worker, read in process)."""
     from station.batch.tasks import FAILED, Job, run
+
+    monkeypatch.setenv("STATION_READ_IN_PROCESS", "1")
 
     missing = run(Job("estimate", str(tmp_path / "none"), str(tmp_path / "o.yaml"), {}))
     assert missing.status == FAILED and "none" in missing.message and "\n" not in missing.message
