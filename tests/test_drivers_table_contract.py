@@ -19,9 +19,17 @@ from station.core.errors import UserError
 # on 127.0.0.1 (TM-9384C)
 TABLES = [("acutrol", 1, "pty"), ("acutrol", 2, "gpib"), ("acutrol", 3, "tcp"), ("aerosmith", 1, "pty")]
 SPEED = 50.0
+# the tables a test applies to, by what it needs (parametrised indirectly: no test is generated
+# for a table it does not apply to, instead of one that skips)
+MULTI_AXIS = [t for t in TABLES if t[1] > 1]
+WITH_LIMIT_COMMANDS = [t for t in TABLES if t[0] != "aerosmith"]     # the three-letter dialect has none
 
 
-@pytest.fixture(params=TABLES, ids=[f"{p}-{n}ax-{t}" for p, n, t in TABLES])
+def _ids(tables):
+    return [f"{p}-{n}ax-{t}" for p, n, t in tables]
+
+
+@pytest.fixture(params=TABLES, ids=_ids(TABLES))
 def bench(request):
     protocol, axes, transport = request.param
     server = BenchServer(default_truth(3), BenchOptions(
@@ -76,10 +84,9 @@ def test_move_to_reaches_every_axis_and_the_twin_agrees(bench):
         assert table.status().mode == ("position",) * axes
 
 
+@pytest.mark.parametrize("bench", MULTI_AXIS, ids=_ids(MULTI_AXIS), indirect=True)
 def test_move_to_leaves_axes_given_none_alone(bench):
     server, protocol, axes = bench
-    if axes == 1:
-        pytest.skip("needs two axes")
     with _open(server, protocol) as table:
         table.close_interlocks()
         table.move_to([10.0] + [None] * (axes - 1))
@@ -153,12 +160,11 @@ def test_rate_limits_of_a_mode(bench):
             table.set_rate_limits(1, "rate", 0.0, 40.0)
 
 
+@pytest.mark.parametrize("bench", WITH_LIMIT_COMMANDS, ids=_ids(WITH_LIMIT_COMMANDS), indirect=True)
 def test_rate_waits_follow_a_lower_rate_mode_acceleration(bench):
     """With the rate-mode ramp lowered by set_rate_limits, reaching a rate and braking take
     longer than the axis' maximum acceleration says: the waits must expect that, not time out."""
     server, protocol, axes = bench
-    if protocol == "aerosmith":
-        pytest.skip("the three-letter dialect has no limit commands")
     # 40 deg/s at 1 deg/s^2: 40 s of device time, 0.8 s of wall time at speed 50; the margin
     # and the axis' maximum acceleration (300 deg/s^2) would allow 0.47 s
     with _open(server, protocol, wait_margin_s=0.2) as table:
@@ -169,10 +175,9 @@ def test_rate_waits_follow_a_lower_rate_mode_acceleration(bench):
         assert abs(table.read_rates_dps()[0]) <= table.settings.rate_tolerance_dps
 
 
+@pytest.mark.parametrize("bench", WITH_LIMIT_COMMANDS, ids=_ids(WITH_LIMIT_COMMANDS), indirect=True)
 def test_connect_sets_the_position_mode_limits(bench):
     server, protocol, axes = bench
-    if protocol == "aerosmith":
-        pytest.skip("the three-letter dialect has no limit commands")
     lim = AxisLimits(move_rate_dps=12.5, move_accel_dps2=25.0)
     with _open(server, protocol, limits=(lim,)):
         assert [ax.limits["P"] for ax in server.table.axes] == [[12.5, 25.0]] * axes
