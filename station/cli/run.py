@@ -18,7 +18,7 @@ from station.core import yaml_text
 from station.cli.run_bench import (  # noqa: F401
     CONNECTION, DEVICE_ERRORS, RUN_FILE, RUN_FORMAT, SCHEME_FILE, ConsoleOperator, _estimate, _new_capture,
     _open_devices, _open_imu, _open_table, _out_dir, _overrides, _reopen, _resume_steps, imu_identity,
-    table_geometry)
+    sequence, table_geometry)
 
 # ------------------------------------------------------------------------------------ parsers
 
@@ -253,7 +253,6 @@ def _run_on_bench(args) -> int:
 
 
 def _record_and_estimate(args, config, scheme, plan, steps, directory, text) -> int:
-    from station.bench.sequencer import Interrupts, RunAborted, RunPaused, Sequencer
 
     from station.bench.guardian import start_guardian
 
@@ -276,19 +275,10 @@ def _record_and_estimate(args, config, scheme, plan, steps, directory, text) -> 
 
         display = make_display(out, sum(s.estimate_s for s in steps),
                                f"{scheme.name} on {config.table.axes if scheme.table else 'no'}-axis table")
-        try:
-            with Interrupts() as interrupts, display:
-                Sequencer(table=table, imu=imu, writer=writer, config=config, display=display,
-                          operator=ConsoleOperator(display), interrupts=interrupts, rate_hz=rate_hz,
-                          reset_faults=args.reset_faults).run(steps)
-        except UserError as e:           # a device fault, a table that did not hold: the run stops
-            raise UserError(f"{e}; the table was brought to rest where it answered, what was recorded is "
-                            f"kept: continue with station run --resume {directory}") from None
-        except (RunPaused, RunAborted) as e:
-            what = "paused" if isinstance(e, RunPaused) else "aborted"
-            err.print(f"station run: {what}; the table is at rest and everything recorded is kept; "
-                      f"continue with: station run --resume {directory}", markup=False, soft_wrap=True)
-            return 130
+        status = sequence(steps, display, directory, table=table, imu=imu, writer=writer, config=config,
+                          rate_hz=rate_hz, reset_faults=args.reset_faults)
+        if status is not None:
+            return status
     finally:
         for device in (table, imu):
             if device is not None:

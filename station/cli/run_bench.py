@@ -230,3 +230,25 @@ def imu_identity(identity: str | None) -> dict:
     if m is None:
         return {"model": text[:200]}
     return {k: v.strip()[:200] for k, v in m.groupdict().items() if v.strip()}
+
+
+def sequence(steps, display, directory, **devices) -> int | None:
+    """The steps run by the sequencer on the devices (station.bench.sequencer.Sequencer's
+    arguments: table, imu and writer, or channels; config; rate_hz; reset_faults), with the
+    operator at this console and Ctrl-C as a pause: None when they ran to the end, 130 when the
+    run was paused or aborted (said, with the command that continues it); a device fault is a
+    UserError that says the same.  Shared by one- and several-IMU runs."""
+    from station.bench.sequencer import Interrupts, RunAborted, RunPaused, Sequencer
+
+    try:
+        with Interrupts() as interrupts, display:
+            Sequencer(display=display, operator=ConsoleOperator(display), interrupts=interrupts, **devices).run(steps)
+    except UserError as e:           # a device fault, a table that did not hold: the run stops
+        raise UserError(f"{e}; the table was brought to rest where it answered, what was recorded is "
+                        f"kept: continue with station run --resume {directory}") from None
+    except (RunPaused, RunAborted) as e:
+        what = "paused" if isinstance(e, RunPaused) else "aborted"
+        err.print(f"station run: {what}; the table is at rest and everything recorded is kept; "
+                  f"continue with: station run --resume {directory}", markup=False, soft_wrap=True)
+        return 130
+    return None

@@ -72,9 +72,8 @@ def _record(args, config, reference, scheme, plan, steps, directory, text, folde
     from station.bench.imu_stream import ImuStream
     from station.bench.live import make_display
     from station.bench.multi import folder_names, imu_config
-    from station.bench.sequencer import Interrupts, RunAborted, RunPaused, Sequencer
-    from station.cli.run_bench import (ConsoleOperator, _new_capture, _open_imu, _open_table, _overrides, _reopen,
-                                 imu_identity)
+    from station.cli.run_bench import (_new_capture, _open_imu, _open_table, _overrides, _reopen, imu_identity,
+                                       sequence)
 
     table = _open_table(config)
     imus, guardian = [], None
@@ -105,18 +104,10 @@ def _record(args, config, reference, scheme, plan, steps, directory, text, folde
                   markup=False, soft_wrap=True)
         display = make_display(out, sum(s.estimate_s for s in steps),
                                f"{scheme.name} on {config.table.axes}-axis table, {len(channels)} IMUs")
-        try:
-            with Interrupts() as interrupts, display:
-                Sequencer(table=table, config=reference, display=display, operator=ConsoleOperator(display),
-                          interrupts=interrupts, reset_faults=args.reset_faults, channels=channels).run(steps)
-        except UserError as e:
-            raise UserError(f"{e}; the table was brought to rest where it answered, what was recorded is "
-                            f"kept: continue with station run --resume {directory}") from None
-        except (RunPaused, RunAborted) as e:
-            what = "paused" if isinstance(e, RunPaused) else "aborted"
-            err.print(f"station run: {what}; the table is at rest and everything recorded is kept; "
-                      f"continue with: station run --resume {directory}", markup=False, soft_wrap=True)
-            return 130
+        status = sequence(steps, display, directory, table=table, config=reference,
+                          reset_faults=args.reset_faults, channels=channels)
+        if status is not None:
+            return status
     finally:
         for device in (table, *imus):
             try:
