@@ -401,6 +401,8 @@ class _Validator:
         self.source = source
 
     def fail(self, where: str, message: str) -> UserError:
+        # a key from the file may hold anything: control characters escaped, the message one line
+        where = where if where.isprintable() else repr(where)[1:-1]
         return UserError(f"{self.source}: field '{where}': {message}")
 
     def known(self, mapping: dict, prefix: str, keys) -> None:

@@ -141,6 +141,8 @@ def parse_scheme(doc, source: str, overrides: dict) -> Scheme:
             raise UserError(f"{source}: unknown default '{key}' (known: {', '.join(DEFAULT_KEYS)})")
         defaults[key] = value
     for key, value in defaults.items():
+        if key not in DEFAULT_KEYS:         # (a key from a file: shown as written, control characters escaped)
+            raise UserError(f"{source}: defaults: unknown field {key!r} (known: {', '.join(DEFAULT_KEYS)})")
         _number(value, f"{source}: defaults.{key}", positive=True)
 
     uses_table = _table_key(doc.get("table", True), source)
