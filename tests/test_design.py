@@ -118,7 +118,7 @@ def test_design_is_a_scheme_that_plan_and_run_accept_and_montecarlo_confirms(tmp
     assert (tmp_path / "cap" / "calibration.yaml").exists()
     # a design at optimal9's duration beats optimal9's criterion (D-efficiency above 1)
     assert report["builtins"][0]["efficiency"] > 1.0
-    runs = 16
+    runs = 10       # (the bounds widen with fewer runs: _ratio_bounds)
     mc = station("montecarlo", "--scheme", out, "--runs", runs, "--json")
     assert mc.returncode == 0, mc.stderr[-2000:]
     rows = json.loads(mc.stdout)["parameters"]
