@@ -4,13 +4,12 @@ installed), the same view from a SQLite and a PostgreSQL store."""
 import copy
 import hashlib
 import json
-import os
 import random
-import shutil
-import subprocess
 
 import numpy as np
 import pytest
+
+from browser import needs_browser, screenshot
 import yaml
 
 from pg_server import pg  # noqa: F401  (the module's server)
@@ -19,7 +18,6 @@ from station.cli import main
 DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)     # libyaml: the test files written fast
 from station.diagnose.fleet import TAIL, UnitValue, _spread
 
-BROWSER = shutil.which("chromium") or shutil.which("chromium-browser")
 HEADER_RGB = (0x1d, 0x2a, 0x44)
 RED = (214, 39, 40)                 # matplotlib tab:red: a unit outside the lot's spread
 UNITS = 12
@@ -183,23 +181,13 @@ def test_the_same_view_from_postgresql(pg, lot, sqlite_store, tmp_path, capsys):
     assert a == b
 
 
-@pytest.mark.skipif(BROWSER is None and os.environ.get("STATION_REQUIRE_BROWSER") != "1",
-                    reason="no chromium (CI installs it)")
+@needs_browser
 def test_chromium_renders_the_fleet_page_with_its_figure(sqlite_store, tmp_path, capsys):
-    assert BROWSER is not None, "STATION_REQUIRE_BROWSER=1 but no chromium on PATH"
-    from PIL import Image
-
     page = tmp_path / "fleet.html"
     assert main(["fleet", "--store", sqlite_store, "--lot", "A", "-o", str(page)]) == 0
     text = page.read_text(encoding="utf-8")
     assert "<script" not in text and "data:image/svg+xml;base64," in text and PLANTED[0] in text
-    shot = tmp_path / "page.png"
-    subprocess.run([BROWSER, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
-                    "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                    f"--user-data-dir={tmp_path / 'profile'}", "--hide-scrollbars",
-                    "--window-size=1200,4000", f"--screenshot={shot}", page.as_uri()],
-                   check=True, capture_output=True, timeout=120)
-    img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+    img = screenshot(page, tmp_path, 4000)
     assert np.abs(img[20, 20] - HEADER_RGB).max() <= 3          # the stylesheet applied
     red = np.all(np.abs(img - RED) <= 6, axis=2).sum()            # the outside unit's dot drawn
     assert red > 20, red

@@ -1,18 +1,17 @@
 """The report page: one self-contained HTML file, checked in a real headless browser (Debian's
 chromium; .ci/run installs it and sets STATION_REQUIRE_BROWSER=1 so that CI cannot skip this)."""
 import base64
-import os
 import re
 import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from browser import needs_browser, screenshot
+
 from station.cli import main
 
-BROWSER = shutil.which("chromium") or shutil.which("chromium-browser")
 HEADER_RGB = (0x1d, 0x2a, 0x44)
 BAR_ORANGE = (255, 127, 14)          # matplotlib tab:orange: the rotation bars of the residual plot
 
@@ -98,19 +97,9 @@ def test_a_noise_recording_gets_a_page_without_a_diagnosis(tmp_path):
     assert "nothing to diagnose" in text and "Allan deviation" in text
 
 
-@pytest.mark.skipif(BROWSER is None and os.environ.get("STATION_REQUIRE_BROWSER") != "1",
-                    reason="no chromium (CI installs it)")
+@needs_browser
 def test_chromium_renders_the_page_styled_with_its_figures(page, tmp_path):
-    assert BROWSER is not None, "STATION_REQUIRE_BROWSER=1 but no chromium on PATH"
-    from PIL import Image
-
-    shot = tmp_path / "page.png"
-    subprocess.run([BROWSER, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
-                    "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                    f"--user-data-dir={tmp_path / 'profile'}", "--hide-scrollbars",
-                    "--window-size=1200,9000", f"--screenshot={shot}", page.as_uri()],
-                   check=True, capture_output=True, timeout=120)
-    img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+    img = screenshot(page, tmp_path, 9000)
     assert img.shape[:2] == (9000, 1200)
     # the stylesheet applied: the header band is the page's dark blue
     assert np.abs(img[20, 20] - HEADER_RGB).max() <= 3
