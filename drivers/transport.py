@@ -24,6 +24,13 @@ READ_SLICE_S = 0.05
 WAITING_RECHECK_S = 0.002
 
 
+try:    # a port that hangs up mid-call: tcdrain (a write's flush) raises termios.error, not OSError
+    import termios
+    PORT_ERRORS: tuple = (serial.SerialException, OSError, termios.error)
+except ImportError:     # not on Windows
+    PORT_ERRORS = (serial.SerialException, OSError)
+
+
 @dataclass(frozen=True)
 class SerialSettings:
     """Serial line settings (ignored by pyserial for socket:// URLs).
@@ -74,7 +81,7 @@ class Port:
             ser.timeout = READ_SLICE_S
             ser.write_timeout = settings.write_timeout_s
             ser.open()
-        except (serial.SerialException, OSError, ValueError) as e:
+        except (*PORT_ERRORS, ValueError) as e:
             raise DeviceError(name, f"cannot open {url}: {e}") from None
         self._ser = ser
         self.bytes_received = 0           # every byte read from the port (line diagnostics)
@@ -83,7 +90,7 @@ class Port:
     def close(self) -> None:
         try:
             self._ser.close()
-        except (serial.SerialException, OSError):
+        except PORT_ERRORS:
             pass
 
     @property
@@ -94,7 +101,7 @@ class Port:
         """Switch the line to ``baudrate`` (after the device was told to)."""
         try:
             self._ser.baudrate = int(baudrate)
-        except (serial.SerialException, OSError, ValueError) as e:
+        except (*PORT_ERRORS, ValueError) as e:
             raise DeviceDisconnected(self.name, f"cannot switch to {baudrate} baud ({e})") from None
 
     def write(self, data: bytes) -> None:
@@ -104,7 +111,7 @@ class Port:
             self._ser.flush()
         except serial.SerialTimeoutException:
             raise DeviceTimeout(self.name, f"write blocked for {self.settings.write_timeout_s} s") from None
-        except (serial.SerialException, OSError) as e:
+        except PORT_ERRORS as e:
             raise DeviceDisconnected(self.name, f"disconnected while writing ({e})") from None
 
     def read_waiting(self, max_bytes: int = 1 << 22) -> bytes:
@@ -122,7 +129,7 @@ class Port:
                     quiet += 1      #   read, asynchronously: look once more, a moment later
                     if quiet < 2:
                         time.sleep(WAITING_RECHECK_S)
-        except (serial.SerialException, OSError) as e:
+        except PORT_ERRORS as e:
             raise DeviceDisconnected(self.name, f"disconnected ({e})") from None
         if out:
             self.bytes_received += len(out)
@@ -134,7 +141,7 @@ class Port:
         try:
             n = self._ser.in_waiting
             data = self._ser.read(min(max(n, 1), max_bytes))
-        except (serial.SerialException, OSError) as e:
+        except PORT_ERRORS as e:
             raise DeviceDisconnected(self.name, f"disconnected ({e})") from None
         if data:
             self.bytes_received += len(data)
@@ -145,7 +152,7 @@ class Port:
         """Drop everything received so far (stale replies, old frames)."""
         try:
             self._ser.reset_input_buffer()
-        except (serial.SerialException, OSError) as e:
+        except PORT_ERRORS as e:
             raise DeviceDisconnected(self.name, f"disconnected ({e})") from None
 
     # ----------------------------------------------------------- terminated reads
