@@ -412,8 +412,10 @@ class Sequencer:
             elapsed = float(b.t_s[-1] - t_first)
             finite = np.isfinite(b.temp_c)
             if finite.any():
-                times.append(float(b.t_s[-1]))
-                temps.append(float(b.temp_c[finite].mean()))
+                # the decision is taken on the values written to warmup.csv (ms, 0.1 mK), so
+                # that the record reproduces it exactly
+                times.append(round(float(b.t_s[-1]), 3))
+                temps.append(round(float(b.temp_c[finite].mean()), 4))
                 rows.append(f"{times[-1]:.3f},{temps[-1]:.4f}")
             total = step.max_s if step.slope_c_per_h is not None else step.min_s
             self._each(lambda ch: ch is self.channels[0] or ch.stream.drain())
