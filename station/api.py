@@ -13,7 +13,9 @@ Stable from version 0.1 (names and arguments below; new keyword arguments may be
 functions in ``__all__`` and the attributes of :class:`Estimate` and :class:`Parameter`.  Bad
 input raises :class:`station.UserError` with the one-line message the CLI prints (exit 2 there).
 Units: accelerometer m/s^2, gyro deg/s, time s, temperature deg C; compensated outputs are in
-frame p (the accelerometers' orthogonalised frame, docs/calibration-file.md).
+frame p (the accelerometers' orthogonalised frame, docs/calibration-file.md).  The fitting
+functions run with one BLAS thread (STATION_BLAS_THREADS for more) and restore the caller's
+setting when they return (station/core/blas.py).
 """
 from __future__ import annotations
 
@@ -22,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from station.core.blas import limited
 from station.core.errors import UserError
 
 __all__ = ["Applied", "EffectInfo", "Estimate", "Exported", "Comparison", "Compiled", "History", "MonteCarlo", "NoiseFiles", "Parameter", "Report",
@@ -140,6 +143,7 @@ def read_capture(path, *, samples: bool = True):
     return _read(Path(path), load_data=samples)
 
 
+@limited
 def estimate(capture, *, method: str = "auto", add=(), plugins=(), effects_dirs=(),
              turn_sigma_deg: float | None = None, max_missing_fraction: float = 0.01,
              max_gap_s: float = 1.0, config=None) -> Estimate:
@@ -164,6 +168,7 @@ def estimate(capture, *, method: str = "auto", add=(), plugins=(), effects_dirs=
     return Estimate(cal, provenance, capture_read)
 
 
+@limited
 def diagnose(capture, *, add=(), plugins=(), effects_dirs=(), config=None, calibration=None, force: bool = False,
              auto: bool = False):
     """``station diagnose`` (without the page): the least-squares fit of the capture with the
@@ -445,6 +450,7 @@ def export(calibration, to: str, output=None, *, noise=None, force: bool = False
     return written
 
 
+@limited
 def noise(capture, *, segment: str | None = None, calibration=None):
     """``station noise`` on a capture: the Allan deviation of its longest static (or ``segment``)
     and the noise terms read from it (station.estimate.noise.NoiseResult: per axis the white
@@ -470,6 +476,7 @@ class NoiseFiles:
     warnings: list
 
 
+@limited
 def characterise_noise(source, *, calibration=None, segment: str | None = None, topic: str | None = None,
                        rate_hz: float | None = None, accel_unit: str = "m/s^2", gyro_unit: str = "deg/s",
                        plot=None, force: bool = False) -> NoiseFiles:
@@ -552,6 +559,7 @@ class Report:
     warnings: list
 
 
+@limited
 def report(capture, *, calibration=None, output=None, force: bool = False, auto: bool = True) -> Report:
     """``station report``: one self-contained HTML page about a capture and its calibration
     (``calibration``, default the capture's calibration.yaml if it exists; of another IMU serial

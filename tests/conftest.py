@@ -1,8 +1,21 @@
 """Shared fixtures: every test files calibrations into a temporary history store, never into the
 user's data directory; one short optimal9 dry run for the export, history and report tests."""
-import pytest
+import os
 
-from station.cli import main
+# One BLAS thread per test process, as `station` itself runs (station/core/blas.py):
+# the fits' matrices are small, and two test workers each spinning two OpenBLAS threads on two
+# cores took 3-4x the CPU (tests/test_effects_recovered.py: 41-50 s of CPU against 12.5 s, at a
+# load of 12).  Set before numpy is loaded (OpenBLAS reads it then), inherited by the commands
+# the tests start; threadpool_limits below for a library some plugin loaded first.
+for _name in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_name, "1")
+
+import pytest  # noqa: E402
+from threadpoolctl import threadpool_limits as _threadpool_limits  # noqa: E402
+
+from station.cli import main  # noqa: E402
+
+_BLAS_LIMIT = _threadpool_limits(limits=1, user_api="blas")
 
 SHORT = ["--dwell-s", "20", "--rotation-s", "36"]   # one revolution at 10 deg/s: a quick run
 

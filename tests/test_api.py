@@ -117,3 +117,33 @@ def test_the_command_does_its_work_through_the_api(monkeypatch, tmp_path, functi
     with pytest.raises(_Called):
         cli.main(argv)
     assert (str(seen["args"][0]) if seen["args"] else None) == first
+
+
+def test_the_fitting_functions_run_with_one_blas_thread_and_give_the_callers_back(monkeypatch):
+    """station/core/blas.py: inside api.estimate BLAS runs with one thread (STATION_BLAS_THREADS
+    for more); the caller's own setting is back when it returns."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    import station.estimate
+
+    def blas_threads_now():
+        return {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}
+
+    seen = []
+
+    def fake_estimate_capture(*args, **kwargs):
+        seen.append(blas_threads_now())
+        raise api.UserError("stop here")
+
+    monkeypatch.setattr(station.estimate, "estimate_capture", fake_estimate_capture)
+    with threadpool_limits(limits=2, user_api="blas"):
+        assert blas_threads_now() == {2}
+        for variable, expected in ((None, {1}), ("2", {2})):
+            if variable is None:
+                monkeypatch.delenv("STATION_BLAS_THREADS", raising=False)
+            else:
+                monkeypatch.setenv("STATION_BLAS_THREADS", variable)
+            with pytest.raises(api.UserError, match="stop here"):
+                api.estimate("no-such-capture")
+            assert seen[-1] == expected
+            assert blas_threads_now() == {2}

@@ -8,6 +8,7 @@ import sys
 
 import station
 from station.cli.output import err
+from station.core.blas import blas_threads
 from station.core.errors import UserError
 
 
@@ -29,16 +30,6 @@ def build_parser() -> argparse.ArgumentParser:
                   fleet, report, batch):
         group.add_parsers(sub)
     return p
-
-
-def _blas_threads() -> int:
-    """BLAS threads for the estimation's small matrices (a few hundred rows): more threads only
-    contend, badly so on a loaded machine (diagnose --auto: 4.8 s CPU with one, 14.8 s with two
-    on two busy cores).  STATION_BLAS_THREADS overrides."""
-    try:
-        return max(1, int(os.environ.get("STATION_BLAS_THREADS", "1")))
-    except ValueError:
-        return 1
 
 
 # BLAS libraries read their thread count when they are loaded: numpy's and scipy's OpenBLAS (MKL
@@ -64,7 +55,7 @@ def main(argv=None) -> int:
     try:
         args = build_parser().parse_args(argv)
         command = args.command
-        threads = _blas_threads()
+        threads = blas_threads()
         _limit_blas_before_loading(threads)
         from threadpoolctl import threadpool_limits
 
