@@ -79,10 +79,10 @@ def test_noise_free_part_turns_about_any_axis(extra, rate_dps, angle_deg):
 
 @pytest.mark.parametrize("rate_dps, angle_deg", [(10, 120), (10, 200), (100, 540), (300, 120)])
 def test_part_turns_monte_carlo(rate_dps, angle_deg):
-    """Six noisy optimal9 runs: each reduced chi2 within its distribution, their sum too, and the
+    """Four noisy optimal9 runs: each reduced chi2 within its distribution, their sum too, and the
     errors against the truth consistent with the 1-sigma the fit reports (before, at 10 deg/s:
     reduced chi2 3.6 on average, every run failed)."""
-    scheme, runs = optimal9(rate_dps, angle_deg), range(1, 7)
+    scheme, runs = optimal9(rate_dps, angle_deg), range(1, 5)
     chi2, dof, z = 0.0, 0, []
     for seed in runs:
         truth = default_truth(seed)
@@ -94,7 +94,7 @@ def test_part_turns_monte_carlo(rate_dps, angle_deg):
         for name, value, _, err, unit in parameter_errors(cal, dryrun.truth_calibration(truth)):
             z.append(err / (cal.sigma[name] / value * 1e6 if unit == "ppm" else cal.sigma[name]))
     assert stats.chi2.ppf(0.0005, dof) < chi2 < stats.chi2.ppf(0.9995, dof), (chi2, dof)
-    z = np.array(z)         # 6 runs x 21 parameters
+    z = np.array(z)         # 4 runs x 21 parameters
     assert np.max(np.abs(z)) < 4.5, np.max(np.abs(z))
     lo, hi = (np.sqrt(stats.chi2.ppf(q, len(z)) / len(z)) for q in (0.0005, 0.9995))
     assert lo < np.sqrt(np.mean(z**2)) < hi, (np.sqrt(np.mean(z**2)), lo, hi)
@@ -113,18 +113,18 @@ def tilted_turns(elevation_deg, rate_dps, angle_deg):
                             "test scheme")
 
 
-@pytest.mark.parametrize("elevation_deg, angle_deg", [(30, 120), (60, 120)])
-def test_short_fast_turns_about_tilted_axes_monte_carlo(elevation_deg, angle_deg):
+def test_short_fast_turns_about_tilted_axes_monte_carlo():
     """0.4-0.7 s turns (300 deg/s) about table axes tilted up, with noise: the Earth rate along
     an axis, e, was free and the solver could step past |e| = Omega, where nothing is left of it
     across the axis (sqrt(Omega^2 - e^2) cut at 0) and the integrals across are made up by a tilt
     (seeds 1 and 4, axes some 25 deg from the Earth's: reduced chi2 40 and 50 at 120 degrees, 3.3
-    and 4.3 at 200).  Now e = Omega cos beta about axes turned both ways.  Four seeds, those
-    two among them: each reduced chi2 within its distribution and the 21 parameters' errors
-    against the truth consistent with the reported 1-sigma."""
-    scheme, z = tilted_turns(elevation_deg, 300, angle_deg), []
-    for seed in range(1, 5):
-        truth = default_truth(seed)
+    and 4.3 at 200).  Now e = Omega cos beta about axes turned both ways.  Those two seeds at
+    elevations 30 and 60 deg: each reduced chi2 within its distribution and the 4 x 21
+    parameters' errors against the truth consistent with the reported 1-sigma (their rms within
+    0.6-1.4: its spread for 84 honest z is 1/sqrt(2 x 84) = 0.08)."""
+    z = []
+    for elevation_deg, seed in ((30, 1), (30, 4), (60, 1), (60, 4)):
+        scheme, truth = tilted_turns(elevation_deg, 300, 120), default_truth(seed)
         result = lsq.fit(lsq.summarise(dryrun.simulate_capture(scheme, truth, seed)))
         assert stats.chi2.ppf(0.0005, result.dof) < result.chi2 < stats.chi2.ppf(0.9995, result.dof), \
             (seed, result.chi2, result.dof)

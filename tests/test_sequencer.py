@@ -31,7 +31,7 @@ from station.io.scheme import load_scheme
 
 SPEED = 100.0
 SEED = 11
-SHORT = ["--dwell-s", "20", "--rotation-s", "36"]     # 1 revolution at 10 deg/s
+SHORT = ["--dwell-s", "10", "--rate-dps", "30", "--rotation-s", "12"]     # 1 revolution at 30 deg/s
 CONFIG = """\
 version: 1
 table:
@@ -145,17 +145,17 @@ def test_optimal9_through_the_drivers_matches_the_truth_like_the_dry_run(full_ru
         assert t0 - steady >= 3.0 - 0.01, seg.name
     assert (out / "calibration.yaml").exists() and "calibration file" in stdout
     for seg in capture.complete("static"):
-        assert len(seg.data.t) == 20 * 100 and seg.data.gaps == 0
+        assert len(seg.data.t) == 10 * 100 and seg.data.gaps == 0
     for seg in capture.complete("rotation"):
-        # one revolution at the table's measured rate; the twin holds exactly 10 deg/s
-        assert len(seg.data.t) == 3600
+        # one revolution at the table's measured rate; the twin holds exactly 30 deg/s
+        assert len(seg.data.t) == 1200
         assert seg.angle_deg == pytest.approx(np.sign(seg.rate_dps) * 360.0, abs=1e-6)
         assert seg.extra["revolutions"] == 1
     truth = default_truth(SEED)
     assert read_calfile(out / "calibration.yaml")["provenance"]["method"] == "lsq"
     z_twin = file_z_scores(out, truth)
     assert len(z_twin) == 21
-    scheme = load_scheme("optimal9", {"dwell_s": 20, "rotation_s": 36})
+    scheme = load_scheme("optimal9", {"dwell_s": 10, "rate_dps": 30, "rotation_s": 12})
     dry, _ = estimate_with(dryrun.simulate_capture(scheme, truth, SEED), "lsq")
     z_dry = z_scores(dry, truth)
     print(f"\ntwins ({wall_s:.1f} s wall): max |z| {np.abs(z_twin).max():.2f}, rms z "
