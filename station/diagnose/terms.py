@@ -5,8 +5,14 @@ in a simple function of what the IMU experienced.  The dictionary, per output ax
 accelerometers in m/s^2 and the three gyros in deg/s; f the specific force in m/s^2 and w the
 rate in deg/s, both in frame p; wd the table's angular acceleration in deg/s^2):
 
-  f_j, f_j f_k, |f_j|,  w_j, w_j^2, w_j |w_j|, w_j w_k, w_j f_k,  wd_j,
-  temperature (T - T_ref, deg C) and its rate (deg C/s), time within the run (s), segment index.
+  accelerometers: f_j, f_j f_k, |f_j|, f_j^3, f_j T, f_j T^2;
+  gyros: w_j, w_j^2, w_j |w_j|, w_j^3, w_j w_k, w_j f_k, wd_j, w_j T, w_j T^2, f_j, f_j f_k;
+  both: T, T^2 (T = T - T_ref, deg C), dT/dt (deg C/s), time within the run (s), a step at each
+  of the first segment boundaries.
+
+A column is tested when part of it lies outside the fitted model, judged against its own length
+(the regressors' units span twenty orders of magnitude).  Terms that leave the fit failing are
+proposed but not carried into the calibration (they may stand in for what is still missing).
 
 Every term enters the model as one coefficient (output unit per regressor unit).  All the score
 tests are taken at once from the Jacobian columns of one bank of terms (they are linear in their
