@@ -133,6 +133,8 @@ def test_words_in_arcseconds_and_the_second_order_in_temperature():
     assert {"fT2"} <= {r.family for r in terms.dictionary("accel", 2)}
     assert {"wT2"} <= {r.family for r in terms.dictionary("gyro", 2)}
     assert "three or more steady temperatures" in terms.separates(own, terms.Term("gyro", 2, terms.regressor("wzT")))
+    rate, level = terms.Term("gyro", 0, terms.regressor("temprate")), terms.Term("gyro", 0, terms.regressor("temp"))
+    assert "peaks and cools" in terms.separates(rate, level) and "dT/dt = (T_end - T)/tau" in terms.separates(level, rate)
 
 
 def test_the_emitted_self_test_exercises_temperature_and_its_rate():

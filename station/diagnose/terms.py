@@ -509,6 +509,9 @@ def separates(a: Term, b: Term) -> str:
         if {va, vb} <= {"temp", "time", "temp_rate"}:
             if pair == {"T", "T2"}:
                 return "the same attitudes at three or more temperatures"
+            if pair == {"T", "Tr"}:
+                return ("a temperature that peaks and cools (on one exponential warm-up dT/dt = (T_end - T)/tau "
+                        "exactly): a cool-down after the warm-up, or a change of the ambient")
             return ("a temperature that does not follow the time (a cool-down after the warm-up, or the "
                     "statics repeated at a steady temperature)")
         return "the same attitudes and rotations repeated at another temperature, at a steady temperature"
