@@ -211,6 +211,27 @@ class TriadTruth:
     stuck_at_s: list = field(default_factory=list)
     stuck_duration_s: float = 0.0
     stuck_axes: list = field(default_factory=lambda: [0, 1, 2])
+    # --- effects the station's library has no model for (issue 25: the term search and the
+    # emitted plugin are measured on them, benchmarks/emit_cases.py)
+    # second-order temperature coefficient of the scale factor s2_i (ppm/degC^2):
+    # scale k_i (1 + s_i 1e-6 dT + s2_i 1e-6 dT^2)
+    scale_tempco2_ppm_per_c2: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    # the sensing axes tilt with temperature (thermal stress on the mounting): the tilt angles
+    # are axis_tilt_arcsec + axis_tilt_tempco_arcsec_per_c dT (arcsec/degC, the same 3x2 layout)
+    axis_tilt_tempco_arcsec_per_c: np.ndarray = field(default_factory=lambda: np.zeros((3, 2)))
+    # bias proportional to the rate of change of the temperature (a thermal gradient across the
+    # element): b += r_i dT/dt, r_i in bias units per (degC/min)
+    bias_temprate_per_c_per_min: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    # accelerometers only: a general second-order response in the case-axis specific force
+    # (ug per g^2), row i: accel i, columns F_x^2, F_y^2, F_z^2, F_x F_y, F_x F_z, F_y F_z
+    # (ANISOELASTIC_PRODUCTS; F at the element, case axes, g): the products of the OTHER axes'
+    # forces that a pendulous element with a flexure off its axis feels
+    force_products_ug_per_g2: np.ndarray = field(default_factory=lambda: np.zeros((3, 6)))
+    # gyros only: cubic rate nonlinearity c_i (ppm per (deg/s)^2): gyro i adds k_i c_i 1e-6 r_i^3
+    rate_cubic_ppm_per_dps2: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    # gyros only: the scale factor changes with the specific force (ppm per g), row i: gyro i,
+    # column j: the force along case axis j: gyro i adds k_i r_i 1e-6 sum_j S_ij F_j
+    scale_g_ppm_per_g: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
 
     def __post_init__(self):
         self.scale = np.asarray(self.scale, dtype=float).reshape(3)
@@ -238,6 +259,14 @@ class TriadTruth:
         self.bias_drift_per_h = np.asarray(self.bias_drift_per_h, dtype=float).reshape(3)
         self.rate_odd_squared_ppm_per_dps = np.asarray(self.rate_odd_squared_ppm_per_dps,
                                                        dtype=float).reshape(3)
+        self.scale_tempco2_ppm_per_c2 = np.asarray(self.scale_tempco2_ppm_per_c2, dtype=float).reshape(3)
+        self.axis_tilt_tempco_arcsec_per_c = np.asarray(self.axis_tilt_tempco_arcsec_per_c,
+                                                        dtype=float).reshape(3, 2)
+        self.bias_temprate_per_c_per_min = np.asarray(self.bias_temprate_per_c_per_min,
+                                                      dtype=float).reshape(3)
+        self.force_products_ug_per_g2 = np.asarray(self.force_products_ug_per_g2, dtype=float).reshape(3, 6)
+        self.rate_cubic_ppm_per_dps2 = np.asarray(self.rate_cubic_ppm_per_dps2, dtype=float).reshape(3)
+        self.scale_g_ppm_per_g = np.asarray(self.scale_g_ppm_per_g, dtype=float).reshape(3, 3)
         self.full_scale = float(self.full_scale)
         self.stuck_at_s = [float(x) for x in np.asarray(self.stuck_at_s, dtype=float).reshape(-1)]
         self.stuck_duration_s = float(self.stuck_duration_s)
@@ -247,6 +276,12 @@ class TriadTruth:
         if np.any(np.diag(self.cross_coupling_ug_per_g2) != 0.0):
             raise ValueError("cross_coupling_ug_per_g2 must have a zero diagonal "
                              "(the a_i^2 term is nonlinearity_ug_per_g2)")
+
+    def outside_library(self) -> bool:
+        """Whether any effect the station's library has no model for is set."""
+        return bool(np.any(self.scale_tempco2_ppm_per_c2) or np.any(self.axis_tilt_tempco_arcsec_per_c)
+                    or np.any(self.bias_temprate_per_c_per_min) or np.any(self.force_products_ug_per_g2)
+                    or np.any(self.rate_cubic_ppm_per_dps2) or np.any(self.scale_g_ppm_per_g))
 
     @property
     def axes(self) -> np.ndarray:
@@ -276,6 +311,12 @@ class TemperatureTruth:
         t = np.asarray(t, dtype=float)
         return (self.start_c + self.drift_c_per_h * t / 3600.0
                 + self.warmup_delta_c * -np.expm1(-t / self.warmup_time_constant_s))
+
+    def rate(self, t) -> np.ndarray:
+        """dT/dt (degC/s) at bench time t: the derivative of :meth:`at`."""
+        t = np.asarray(t, dtype=float)
+        return (self.drift_c_per_h / 3600.0
+                + self.warmup_delta_c / self.warmup_time_constant_s * np.exp(-t / self.warmup_time_constant_s))
 
 
 @dataclass
@@ -361,6 +402,57 @@ def _hours(t) -> np.ndarray:
     return np.asarray(t, dtype=float).reshape(-1, 1) / 3600.0
 
 
+def _outside_library(triad: "TriadTruth", inputs, dT, temperature, t, bias_unit: float,
+                     f_case=None) -> np.ndarray:
+    """What the effects outside the station's library add to a triad's raw output (N,3).
+
+    ``inputs``: per element i the input vector it senses (N,3), case axes (accelerometer: the
+    specific force at the element, m/s^2; gyro: the rate, deg/s); ``dT`` (N,1) T - T_ref;
+    ``bias_unit``: raw units per bias unit (ug or deg/h); ``f_case`` (gyros): the specific force
+    in case axes, g.  Per element i, with u_i its sensing direction, x_i = u_i . input_i:
+
+        k_i s2_i 1e-6 dT^2 x_i                              (scale, second order in temperature)
+        k_i (u_i(T) - u_i) . input_i                       (the axis tilted by tc_i dT)
+        [r_i dT/dt (degC/min)] bias units                   (a thermal gradient)
+        [sum_c P_i,c F_j F_k] ug, F = input / g0            (accelerometers: second-order products)
+        k_i c_i 1e-6 x_i^3                                  (gyros: cubic rate)
+        k_i x_i 1e-6 sum_j S_ij f_j                         (gyros: scale with the specific force)
+    """
+    n = max(len(x) for x in inputs)
+    out = np.zeros((n, 3))
+    S, k = triad.axes, triad.scale
+    dT = np.broadcast_to(dT, (n, 1))
+    x = np.column_stack([inputs[i] @ S[i] for i in range(3)])            # along each sensing axis
+    if np.any(triad.scale_tempco2_ppm_per_c2):
+        out += x * (k * triad.scale_tempco2_ppm_per_c2 * 1e-6) * dT * dT
+    tc = triad.axis_tilt_tempco_arcsec_per_c
+    if np.any(tc):
+        tilt = (triad.axis_tilt_arcsec[None, :, :] + tc[None, :, :] * dT[:, :, None]) * ARCSEC   # (N,3,2)
+        for i, (j, m) in enumerate(OTHER_AXES):
+            u = np.zeros((n, 3))
+            u[:, i] = 1.0
+            u[:, j] = np.tan(tilt[:, i, 0])
+            u[:, m] = np.tan(tilt[:, i, 1])
+            u /= np.linalg.norm(u, axis=1, keepdims=True)
+            out[:, i] += k[i] * np.einsum("nj,nj->n", u - S[i], inputs[i])
+    if np.any(triad.bias_temprate_per_c_per_min):
+        if t is None:
+            raise ValueError("a bias that follows dT/dt needs the sample times: pass t= to Truth.measure")
+        rate_c_per_min = 60.0 * temperature.rate(np.asarray(t, dtype=float)).reshape(-1, 1)
+        out += rate_c_per_min * triad.bias_temprate_per_c_per_min * bias_unit
+    P = triad.force_products_ug_per_g2
+    if np.any(P):
+        for i in range(3):
+            F = inputs[i] / G_STANDARD
+            prods = np.column_stack([F[:, j] * F[:, m] for j, m in ANISOELASTIC_PRODUCTS])
+            out[:, i] += prods @ P[i] * bias_unit
+    if np.any(triad.rate_cubic_ppm_per_dps2):
+        out += x ** 3 * (k * triad.rate_cubic_ppm_per_dps2 * 1e-6)
+    if np.any(triad.scale_g_ppm_per_g):
+        out += x * k * 1e-6 * (f_case @ triad.scale_g_ppm_per_g.T)
+    return out
+
+
 def _quantise(x: np.ndarray, lsb: float) -> np.ndarray:
     if lsb <= 0.0:
         return x
@@ -388,6 +480,39 @@ def _converted(x: np.ndarray, triad: "TriadTruth", t) -> np.ndarray:
     return x
 
 
+_OUTSIDE_KEYS = {  # truth-file key: (attribute, shape, bound); written only when set
+    "scale_tempco2_ppm_per_c2": ("scale_tempco2_ppm_per_c2", (3,), MAX_SCALE_TEMPCO_PPM_PER_C),
+    "axis_tilt_tempco_arcsec_per_c": ("axis_tilt_tempco_arcsec_per_c", (3, 2), MAX_TILT_ARCSEC),
+}
+_OUTSIDE_ACC = {**_OUTSIDE_KEYS,
+                "bias_temprate_ug_per_c_per_min": ("bias_temprate_per_c_per_min", (3,), None),
+                "force_products_ug_per_g2": ("force_products_ug_per_g2", (3, 6), MAX_SECOND_ORDER_UG_PER_G2)}
+_OUTSIDE_GYR = {**_OUTSIDE_KEYS,
+                "bias_temprate_dph_per_c_per_min": ("bias_temprate_per_c_per_min", (3,), None),
+                "rate_cubic_ppm_per_dps2": ("rate_cubic_ppm_per_dps2", (3,), MAX_RATE_SQUARED_PPM_PER_DPS),
+                "scale_g_ppm_per_g": ("scale_g_ppm_per_g", (3, 3), MAX_SCALE_ASYMMETRY_PPM)}
+
+
+def _outside_keys(triad: "TriadTruth", keys: dict) -> dict:
+    """The effects outside the station's library in the truth file, only when set."""
+    out = {}
+    for key, (attr, shape, _) in keys.items():
+        v = np.asarray(getattr(triad, attr), dtype=float)
+        if np.any(v):
+            out[key] = [float(x) for x in v] if len(shape) == 1 else [[float(x) for x in r] for r in v]
+    return out
+
+
+def _read_outside(c: "_Checker", d: dict, sec: str, t: "TriadTruth", keys: dict) -> None:
+    for key, (attr, shape, bound) in keys.items():
+        if key not in d:
+            continue
+        b = {} if bound is None else {"lo": -bound, "hi": bound}
+        v = (c.vector(d[key], f"{sec}.{key}", **b) if len(shape) == 1
+             else c.matrix(d[key], f"{sec}.{key}", shape[0], shape[1], **b))
+        setattr(t, attr, v)
+
+
 def _converter_keys(triad: "TriadTruth", fs_key: str) -> dict:
     """The converter's faults in the truth file, only when set (older files stay as they were)."""
     out = {}
@@ -409,13 +534,13 @@ _ACC_KEYS = {"scale", "axis_tilt_arcsec", "bias_ug", "bias_tempco_ug_per_c",
              "cross_coupling_ug_per_g2", "scale_asymmetry_ppm", "scale_tempco_ppm_per_c",
              "bias_step_ug", "bias_step_time_s", "cubic_ug_per_g3", "bias_tempco2_ug_per_c2",
              "bias_drift_ug_per_h", "full_scale_mps2", "stuck_at_s", "stuck_duration_s",
-             "stuck_axes"}
+             "stuck_axes", *_OUTSIDE_ACC}
 _GYR_KEYS = {"scale", "axis_tilt_arcsec", "bias_dph", "bias_tempco_dph_per_c",
              "noise_density_dph_rthz", "lsb_dps", "g_sensitivity_dph_per_g", "scale_asymmetry_ppm",
              "scale_tempco_ppm_per_c", "bias_step_dph", "bias_step_time_s",
              "rate_squared_ppm_per_dps", "anisoelastic_dph_per_g2", "bias_tempco2_dph_per_c2",
              "bias_drift_dph_per_h", "rate_odd_squared_ppm_per_dps", "full_scale_dps", "stuck_at_s",
-             "stuck_duration_s", "stuck_axes"}
+             "stuck_duration_s", "stuck_axes", *_OUTSIDE_GYR}
 _TEMP_KEYS = {"start_c", "reference_c", "drift_c_per_h", "warmup_delta_c",
               "warmup_time_constant_s"}
 _BENCH_KEYS = {"latitude_deg", "height_m", "lever_arm_m", "axis_offsets_m", "table_angle_error_arcsec",
@@ -533,6 +658,11 @@ class Truth:
             F = f_b / G_STANDARD
             products = np.column_stack([F[:, j] * F[:, k] for j, k in ANISOELASTIC_PRODUCTS])
             gyro += products @ N.T * DEG_PER_HOUR
+        if self.accel.outside_library() or self.gyro.outside_library():
+            F_el = [f_b if extras is None else f_b + extras[i] for i in range(3)]   # m/s^2, at each element
+            accel += _outside_library(self.accel, F_el, dT, self.temperature, t, MICRO_G)
+            gyro += _outside_library(self.gyro, [w_b] * 3, dT, self.temperature, t, DEG_PER_HOUR,
+                                     f_case=f_b / G_STANDARD)
         if rng is not None:
             if self.accel.noise_density > 0.0:
                 accel += self.accel_noise_sigma * rng.standard_normal(accel.shape)
@@ -627,6 +757,7 @@ class Truth:
                 "bias_tempco2_ug_per_c2": fl(self.accel.bias_tempco2),
                 "bias_drift_ug_per_h": fl(self.accel.bias_drift_per_h),
                 **_converter_keys(self.accel, "full_scale_mps2"),
+                **_outside_keys(self.accel, _OUTSIDE_ACC),
             },
             "gyroscope": {
                 "scale": fl(self.gyro.scale),
@@ -646,6 +777,7 @@ class Truth:
                 "bias_drift_dph_per_h": fl(self.gyro.bias_drift_per_h),
                 "rate_odd_squared_ppm_per_dps": fl(self.gyro.rate_odd_squared_ppm_per_dps),
                 **_converter_keys(self.gyro, "full_scale_dps"),
+                **_outside_keys(self.gyro, _OUTSIDE_GYR),
             },
             "temperature": {
                 "start_c": float(self.temperature.start_c),
@@ -780,6 +912,7 @@ class Truth:
                 t.rate_odd_squared_ppm_per_dps = c.vector(
                     d["rate_odd_squared_ppm_per_dps"], f"{sec}.rate_odd_squared_ppm_per_dps",
                     lo=-MAX_RATE_SQUARED_PPM_PER_DPS, hi=MAX_RATE_SQUARED_PPM_PER_DPS)
+            _read_outside(c, d, sec, t, _OUTSIDE_ACC if sec == "accelerometer" else _OUTSIDE_GYR)
             return t
 
         accel = triad("accelerometer", _ACC_KEYS, "bias_ug", "bias_tempco_ug_per_c",

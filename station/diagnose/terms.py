@@ -5,8 +5,14 @@ in a simple function of what the IMU experienced.  The dictionary, per output ax
 accelerometers in m/s^2 and the three gyros in deg/s; f the specific force in m/s^2 and w the
 rate in deg/s, both in frame p; wd the table's angular acceleration in deg/s^2):
 
-  f_j, f_j f_k, |f_j|,  w_j, w_j^2, w_j |w_j|, w_j w_k, w_j f_k,  wd_j,
-  temperature (T - T_ref, deg C) and its rate (deg C/s), time within the run (s), segment index.
+  accelerometers: f_j, f_j f_k, |f_j|, f_j^3, f_j T, f_j T^2;
+  gyros: w_j, w_j^2, w_j |w_j|, w_j^3, w_j w_k, w_j f_k, wd_j, w_j T, w_j T^2, f_j, f_j f_k;
+  both: T, T^2 (T = T - T_ref, deg C), dT/dt (deg C/s), time within the run (s), a step at each
+  of the first segment boundaries.
+
+A column is tested when part of it lies outside the fitted model, judged against its own length
+(the regressors' units span twenty orders of magnitude).  Terms that leave the fit failing are
+proposed but not carried into the calibration (they may stand in for what is still missing).
 
 Every term enters the model as one coefficient (output unit per regressor unit).  All the score
 tests are taken at once from the Jacobian columns of one bank of terms (they are linear in their
@@ -24,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from station.core.errors import UserError
-from station.diagnose.core import ALPHA, chi2_sf, outside_model
+from station.diagnose.core import ALPHA, chi2_sf, fit_fails, outside_model
 from station.estimate import lsq
 from station.model.effect import Effect, Param
 from station.model.raw_counts import counts_per_unit, in_capture_units
@@ -35,6 +41,8 @@ SENSORS = (("accel", "accelerometer", "m/s^2"), ("gyro", "gyro", "deg/s"))
 G0 = 9.80665
 MAX_STEPS = 40            # steps at segment boundaries in the dictionary (the first boundaries)
 ALIAS_COS = 0.95          # two terms whose columns (outside the model) are this alike: aliases
+OUTSIDE_SHARE2 = 1e-8     # a column whose part outside the model is below 1e-4 of its length (squared: 1e-8)
+                          # is the model's own (rounding of the projection is ~1e-8 of it at worst)
 
 
 @dataclass(frozen=True)
@@ -67,6 +75,8 @@ def _accel_regressors() -> list[Regressor]:
     out += [Regressor(f"f{AX[j]}3", f"{_f(j)}³", "(m/s^2)^3", f"f[:, {j}] ** 3", "f3", j) for j in range(3)]
     out += [Regressor(f"f{AX[j]}T", f"{_f(j)}·(T - T_ref)", "(m/s^2) degC", f"f[:, {j}] * T", "fT", j)
             for j in range(3)]
+    out += [Regressor(f"f{AX[j]}T2", f"{_f(j)}·(T - T_ref)²", "(m/s^2) degC^2", f"f[:, {j}] * T ** 2", "fT2", j)
+            for j in range(3)]
     return out
 
 
@@ -80,7 +90,8 @@ def _gyro_regressors() -> list[Regressor]:
                           f"w[:, {j}] * np.abs(w[:, {j}])", "wabsw", j),
                 Regressor(f"w{AX[j]}3", f"{_w(j)}³", "(deg/s)^3", f"w[:, {j}] ** 3", "w3", j),
                 Regressor(f"wd{AX[j]}", f"d{_w(j)}/dt", "deg/s^2", f"wd[:, {j}]", "wd", j),
-                Regressor(f"w{AX[j]}T", f"{_w(j)}·(T - T_ref)", "(deg/s) degC", f"w[:, {j}] * T", "wT", j)]
+                Regressor(f"w{AX[j]}T", f"{_w(j)}·(T - T_ref)", "(deg/s) degC", f"w[:, {j}] * T", "wT", j),
+                Regressor(f"w{AX[j]}T2", f"{_w(j)}·(T - T_ref)²", "(deg/s) degC^2", f"w[:, {j}] * T ** 2", "wT2", j)]
     for j in range(3):
         for k in range(j + 1, 3):
             out.append(Regressor(f"w{AX[j]}w{AX[k]}", f"{_w(j)}·{_w(k)}", "(deg/s)^2",
@@ -144,6 +155,8 @@ PHYSICS = {
     ("accel", "f3"): ("a third-order nonlinearity (K3)", "a term in the cube of the force along {j}", "ug/g^3", G0**2 * 1e6),
     ("accel", "fT"): ("its scale factor changes with temperature", "its misalignment towards {j} changes with temperature",
                       "ppm/degC", 1e6),
+    ("accel", "fT2"): ("its scale factor changes with the square of the temperature",
+                       "its misalignment towards {j} changes with the square of the temperature", "ppm/degC^2", 1e6),
     ("gyro", "w"): ("its scale factor (in the base model)", "its misalignment towards {j} (in the base model)", "ppm", 1e6),
     ("gyro", "w2"): ("its scale changes with the rate, even in its sign (w²)", "a term in the square of the rate about {j}",
                      "ppm/(deg/s)", 1e6),
@@ -158,6 +171,8 @@ PHYSICS = {
                      "ms", 1e3),
     ("gyro", "wT"): ("its scale factor changes with temperature", "its misalignment towards {j} changes with temperature",
                      "ppm/degC", 1e6),
+    ("gyro", "wT2"): ("its scale factor changes with the square of the temperature",
+                      "its misalignment towards {j} changes with the square of the temperature", "ppm/degC^2", 1e6),
     ("gyro", "f"): ("its bias changes with the specific force along {j} (g-sensitivity)",
                     "its bias changes with the specific force along {j} (g-sensitivity)", "deg/h/g", 3600 * G0),
     ("gyro", "f2"): ("an anisoelastic term (the square of the force along {j})",
@@ -175,6 +190,13 @@ _BIAS = {  # family: (words, accel unit, accel factor, gyro unit, gyro factor)
 }
 
 
+ARCSEC_PER_RAD = 648000.0 / np.pi
+# a term in ANOTHER axis' input times the temperature is a misalignment (rad, for small angles:
+# output unit per input unit) that changes with temperature: said in arc-seconds
+OTHER_AXIS_UNIT = {"fT": ("arcsec/degC", ARCSEC_PER_RAD), "wT": ("arcsec/degC", ARCSEC_PER_RAD),
+                   "fT2": ("arcsec/degC^2", ARCSEC_PER_RAD), "wT2": ("arcsec/degC^2", ARCSEC_PER_RAD)}
+
+
 def meaning(sensor: str, axis: int, reg: Regressor) -> tuple[str, str, float]:
     """(what the term is in words, its natural unit, factor: natural value = coefficient * factor)."""
     if reg.family in _BIAS:
@@ -187,6 +209,8 @@ def meaning(sensor: str, axis: int, reg: Regressor) -> tuple[str, str, float]:
     if sensor == "gyro" and reg.family == "wf":
         mine = reg.j == axis
     words = own if mine else other
+    if not mine and reg.family in OTHER_AXIS_UNIT:
+        unit, factor = OTHER_AXIS_UNIT[reg.family]
     o = reg.k if reg.j == axis else reg.j
     return words.format(i=AX[axis], j=AX[max(reg.j, 0)], k=AX[max(reg.k, 0)], o=AX[max(o, 0)]), unit, factor
 
@@ -224,7 +248,7 @@ class Term:
         return f"{AX[self.axis]} {who}: {what}: {value * factor:+.3g}{spread} {unit} (in {self.regressor.text})"
 
 
-TEMPERATURE_FAMILIES = ("T", "T2", "Tr", "fT", "wT")
+TEMPERATURE_FAMILIES = ("T", "T2", "Tr", "fT", "wT", "fT2", "wT2")
 
 
 def _variables(ctx, reference_c: float) -> dict:
@@ -328,6 +352,7 @@ def failing_sensors(result) -> dict:
 
 PREFERENCE = {  # within a group of aliases, the more physical term first (lower is preferred)
     "f2": 0, "ff": 0, "f3": 0, "absf": 0, "fT": 0, "w2": 0, "wabsw": 0, "w3": 0, "wT": 0, "f": 0, "w": 0,
+    "fT2": 1, "wT2": 1,
     "wf": 1, "ww": 1, "wd": 1, "T": 1, "T2": 1, "Tr": 2, "t": 2, "step": 3}
 
 
@@ -380,6 +405,11 @@ def search(result, max_terms: int = MAX_TERMS, sensors=None, events: bool = True
     cols = list(range(n, n + len(candidates)))
     Jc = extended.jacobian_columns(x, cols)             # d(residual)/d(coefficient)
     Jp = outside_model(result, Jc)
+    # a column is usable when a part of it lies outside the fitted model, judged against its OWN
+    # length: the regressors' units differ by twenty orders of magnitude (w³ in (deg/s)^3 against
+    # dT/dt in degC/s), so a threshold relative to the largest column of the dictionary threw
+    # away every small-unit regressor (a gyro bias in dT/dt was never tested)
+    own2 = np.einsum("ij,ij->j", Jc, Jc)
     m = len(candidates)
     data = model.data_rows if hasattr(model, "data_rows") else np.ones(len(r), bool)
     found: list[Found] = []
@@ -395,7 +425,7 @@ def search(result, max_terms: int = MAX_TERMS, sensors=None, events: bool = True
         rss = float(r[data] @ r[data]) if len(data) == len(r) else float(r @ r)
         phi = max(rss / dof, 1.0) if dof > 0 and chi2_sf(rss, dof) < ALPHA / 10 else 1.0
         norms2 = np.einsum("ij,ij->j", Jp, Jp)
-        usable = norms2 > 1e-12 * max(norms2.max(initial=0.0), 1e-300)
+        usable = (norms2 > OUTSIDE_SHARE2 * own2) & (own2 > 0.0)
         g = Jp.T @ r
         lm = np.where(usable, g**2 / np.where(usable, norms2, 1.0), 0.0)
         lm[chosen] = 0.0
@@ -458,6 +488,7 @@ def _segment_count(s) -> int:
 
 
 _VARIABLE = {"f": "force", "f2": "force", "ff": "force", "absf": "force", "f3": "force", "fT": "force_temp",
+             "fT2": "force_temp", "wT2": "rate_temp",
              "w": "rate", "w2": "rate", "wabsw": "rate", "w3": "rate", "ww": "rate", "wf": "rate_force",
              "wd": "rate_change", "wT": "rate_temp", "T": "temp", "T2": "temp", "Tr": "temp_rate",
              "t": "time", "step": "time"}
@@ -478,9 +509,15 @@ def separates(a: Term, b: Term) -> str:
         if {va, vb} <= {"temp", "time", "temp_rate"}:
             if pair == {"T", "T2"}:
                 return "the same attitudes at three or more temperatures"
+            if pair == {"T", "Tr"}:
+                return ("a temperature that peaks and cools (on one exponential warm-up dT/dt = (T_end - T)/tau "
+                        "exactly): a cool-down after the warm-up, or a change of the ambient")
             return ("a temperature that does not follow the time (a cool-down after the warm-up, or the "
                     "statics repeated at a steady temperature)")
         return "the same attitudes and rotations repeated at another temperature, at a steady temperature"
+    if pair <= {"fT", "fT2", "T", "T2"} or pair <= {"wT", "wT2", "T", "T2"}:
+        if len(pair & {"fT", "fT2", "wT", "wT2"}) == 2:
+            return "the same attitudes and rotations at three or more steady temperatures"
     if {va, vb} & {"rate_temp", "force_temp"}:
         return ("the same rotations (or statics) repeated at another temperature, and rotations at two "
                 "rates at one temperature")
@@ -619,11 +656,12 @@ def plugin_source(effect: TermsEffect, values, sigmas, class_name: str = "Discov
         "",
         "",
         "def test_compensation_removes_the_terms():",
-        '    """The terms at typical inputs (1 g along and across the axes, 100 deg/s, T_ref + 5 degC)',
+        '    """The terms at typical inputs (1 g along and across the axes, 100 deg/s, T_ref + 3 to 9 degC',
+        '    warming at 1.5 degC/s: every term is exercised, temperature and its rate too)',
         '    are added to ideal outputs and station apply\'s compensation takes them out again."""',
         "    from station.model.compensate import compensate_with_effects",
         "",
-        "    e = DiscoveredTerms()",
+        f"    e = {class_name}()",
         "    e.reference_c = 25.0",
         "    n = 400",
         "    t = np.arange(n) * 0.01",
@@ -631,14 +669,15 @@ def plugin_source(effect: TermsEffect, values, sigmas, class_name: str = "Discov
         "    up = np.column_stack([np.cos(phase), np.sin(phase), np.ones(n)]) / np.sqrt(2.0)",
         "    f = G0 * up                                   # gravity turning across x and y, half along z",
         "    w = np.column_stack([100.0 * np.ones(n), -60.0 * np.ones(n), 30.0 * np.ones(n)])",
-        "    temp = 30.0 + 0.0 * t",
+        "    temp = 28.0 + 1.5 * t                         # warming at 1.5 degC/s: T_ref + 3 to + 9 degC",
         "    comp = {\"accel_matrix\": np.eye(3), \"gyro_matrix\": np.eye(3), \"accel_bias\": np.zeros(3),",
         "            \"gyro_bias\": np.zeros(3)}",
         "    from station.model.effect import SampleContext",
         "",
         "    w_rad = np.radians(w)",
         "    ctx = SampleContext(f_p=f, w_p=w, w_table=w_rad, wdot_table=np.gradient(w_rad, t, axis=0), temp_c=temp,",
-        "                        accel_matrix=np.eye(3), gyro_matrix=np.eye(3), t_s=t, temp_rate_c_per_s=np.zeros(n))",
+        "                        accel_matrix=np.eye(3), gyro_matrix=np.eye(3), t_s=t,",
+        "                        temp_rate_c_per_s=np.gradient(temp, t))     # as station apply computes it",
         "    da = e.accel(FOUND, ctx) if hasattr(e, \"accel\") else None",
         "    dw = e.gyro(FOUND, ctx) if hasattr(e, \"gyro\") else None",
         "    raw_a = f + (0.0 if da is None else da)",
@@ -710,6 +749,17 @@ def propose(diagnosis, summaries, h_before=None, events: bool = True) -> Proposa
     after = diagnose(after_result, exclude=[e for e in _all_ids()])
     h_after = leave_one_segment_out(after_result)
     ok, reason, share, cv_b, cv_a = judge(diagnosis, after, h_before or leave_one_segment_out(result), h_after)
+    if ok and fit_fails(after.result):
+        # terms chosen from some hundred columns that leave the fit failing are likely stand-ins
+        # for what is still missing: a gyro scale that follows the specific force (invisible to
+        # the gyro rows of whole turns) failed the accelerometer rows through the shared
+        # attitudes, and accelerometer terms that took 62 % of the excess raised the held-out
+        # accelerometer error 0.017 -> 0.106 mg.  Proposed and emitted (marked), not carried.
+        ok = False
+        reason = (f"the terms explain {100 * (share or 0.0):.0f} % of the excess chi2 but leave the fit failing "
+                  f"(reduced chi2 {after.reduced_chi2:.3g}): they may stand in for what is still missing (a "
+                  "misfit of one sensor reaches the other's rows through the shared attitudes), so they are not "
+                  "carried into the calibration")
     return Proposal(found, effect, values, sigmas, diagnosis.chi2, after.chi2, after.reduced_chi2, cv_b, cv_a, ok,
                     reason, after=after, h_after=h_after, share=share)
 
