@@ -3,6 +3,7 @@ proposes the fewest extra segments for what the capture left not revealed, `stat
 --append CAPTURE --scheme EXT.yaml` records them into the same capture on the device twins, and
 `station estimate` then reveals it, at the simulated truth.  `--separate` and the bad inputs."""
 import json
+import shlex
 
 import numpy as np
 import pytest
@@ -64,22 +65,24 @@ def test_reveal_designs_the_fewest_segments_and_the_appended_run_reveals_them(tm
         ports = ["--config", "station.yaml", "--port", bench.imu_path, "--table-port", bench.table_path]
         assert main(["run", "--scheme", "s.yaml", *ports, "--out", "cap", "--no-history"]) == 0
         recorded = [s.name for s in read_capture(tmp_path / "cap", load_data=False).complete()]
-        before = api.estimate("cap", add=["accel_lever_arm"]).calibration
-        hidden = [n for n in before.fit["notes"] if n.startswith("not revealed")]
-        assert hidden and all(f"accel_position_{a}" in hidden[0] for a in ("x_y", "x_z", "y_x", "y_z", "z_x", "z_y"))
         capsys.readouterr()
-        assert main(["design", "--from", "cap", "--reveal", "accel_position_*", "--add", "accel_lever_arm",
-                     "-o", "ext.yaml", "--json", *SMALL]) == 0
+        # diagnose says what the capture left not revealed, and the command that designs the rest
+        assert main(["diagnose", "cap", "--add", "accel_lever_arm", "--json"]) == 0
+        said = json.loads(capsys.readouterr().out)["design_suggestions"]
+        assert len(said) == 1 and all(f"accel_position_{a}" in said[0] for a in ("x_y", "x_z", "y_x", "y_z", "z_x", "z_y"))
+        command = shlex.split(said[0].split("reveal them: ")[1])
+        assert command[:4] == ["station", "design", "--from", "cap"] and command[-2:] == ["-o", "extension.yaml"]
+        assert main([*command[1:], "--json", *SMALL]) == 0
         report = json.loads(capsys.readouterr().out)
         # the fewest: each rotation pair about a tilted axis at 100 deg/s reveals the positions
         # across it; three axes are needed for the six (one pair leaves its axis' own blind)
         assert 1 <= len(report["segments"]) <= 3, report["segments"]
-        assert report["duration_s"] < 120 and report["record"] == "station run --append cap --scheme ext.yaml"
+        assert report["duration_s"] < 120 and report["record"] == "station run --append cap --scheme extension.yaml"
         for p in report["parameters"]:
             assert not p["revealed_before"] and p["revealed_after"], p
         # the run's own estimate is the base model's, which the fast turns show to be short of
         # the size effect: the fit fails (exit 3) and says so; estimated below with the effect
-        assert main(["run", "--append", "cap", "--scheme", "ext.yaml", *ports, "--no-history"]) == 3
+        assert main(["run", "--append", "cap", "--scheme", "extension.yaml", *ports, "--no-history"]) == 3
     capture = read_capture(tmp_path / "cap", load_data=False)
     names = [s.name for s in capture.complete()]
     assert len(recorded) == 15 and names[:15] == recorded        # the run's own, kept as they were

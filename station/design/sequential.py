@@ -315,8 +315,17 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
                      {names[i]: bool(before.revealed[i]) for i in targets},
                      {names[i]: bool(after.revealed[i]) for i in targets},
                      {names[i]: units[i] for i in targets}, ext_entries, text, plan.duration_s,
-                     [float(secs[j]) for j in added], corr_after, corr_before, noise,
+                     [_entry_s(table, e) for e in ext_entries], corr_after, corr_before, noise,
                      notes + list(plan.notes))
+
+
+def _entry_s(table, entry) -> float:
+    """An entry's table time by the time model (candidates.Table): dwell or both directions with
+    their ramps, settling and moves."""
+    if "static" in entry:
+        return float(table.static_s(entry["dwell_s"]))
+    rate = float(entry["rate_dps"])
+    return float(table.rotation_pair_s(rate, max(1, round(rate * entry["rotation_s"] / 360.0))))
 
 
 def _cross_correlation(cov, a, b) -> float:
