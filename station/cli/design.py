@@ -73,6 +73,10 @@ def add_parsers(sub) -> None:
     d.add_argument("--centred", action="store_true",
                    help="the IMU mounted with its reference point on the table's axes (the scheme says "
                         "centred: true, as sizeeffect does: no mounting offset to estimate)")
+    d.add_argument("--verify-runs", type=argtypes.whole(0), default=4, metavar="N",
+                   help="noisy dry runs of the design estimated as station montecarlo does, each criterion "
+                        "parameter's error checked against its predicted 1σ (default 4; 0: none). A design the "
+                        "estimator does not deliver is not written (exit 3)")
     d.add_argument("--name", default="designed", help="the scheme's name (default designed)")
     d.add_argument("-o", "--out", default="designed.yaml", metavar="FILE",
                    help="the scheme file to write (default designed.yaml)")
@@ -212,7 +216,16 @@ def _cmd_design(args) -> int:
     d = design(config, effects, noise, args.duration, args.criterion,
                rates_dps=args.rates or cand_mod.DEFAULT_RATES_DPS, revolutions=revolutions,
                dwells_s=args.dwells or cand_mod.DEFAULT_DWELLS_S, max_passes=args.passes, name=args.name,
-               compare=compare, centred=args.centred, progress=lambda text: err.print(f"design: {text}", markup=False, soft_wrap=True))
+               compare=compare, centred=args.centred, verify_runs=args.verify_runs,
+               progress=lambda text: err.print(f"design: {text}", markup=False, soft_wrap=True))
+    v = d.verification
+    if v is not None and not v.ok:
+        for line in v.problems:
+            err.print(f"design: not delivered: {line}", markup=False, soft_wrap=True)
+        err.print(f"station design: the estimator does not deliver this design's predicted 1σ in {v.runs} noisy dry "
+                  f"runs ({len(v.problems)} problem(s) above); no scheme file written (try other --rates, "
+                  "--revolutions or a longer --duration)", markup=False, soft_wrap=True)
+        return 3
     try:
         write_new_file(out_path, d.text.encode("utf-8"), what="scheme file")
     except OSError as e:
@@ -230,6 +243,7 @@ def _cmd_design(args) -> int:
     if args.json:
         print(json.dumps({
             "scheme_file": str(out_path), "criterion": d.criterion, "duration_s": d.duration_s, "budget_s": d.budget_s,
+            "verification": None if v is None else {"runs": v.runs, "worst_z": v.worst_z, "worst": v.worst},
             "noise": vars(noise), "effects": [e.id for e in effects],
             "designed": {"criterion": own, "parameters": [
                 {"name": n, "unit": u, "sigma": float(s), "revealed": bool(r)}
@@ -272,8 +286,12 @@ def _cmd_design(args) -> int:
     sec = d.seconds
     err.print(f"designed in {sum(sec.values()):.1f} s: candidates {sec['candidates']:.1f} s, information of "
               f"{d.candidates} candidates {sec['information']:.1f} s, search {sec['search']:.1f} s "
-              f"({d.evaluations} evaluations, {d.passes} passes), predictions {sec['predictions']:.1f} s",
+              f"({d.evaluations} evaluations, {d.passes} passes), predictions {sec['predictions']:.1f} s"
+              + (f", verification {sec['verification']:.1f} s" if "verification" in sec else ""),
               markup=False, soft_wrap=True)
+    if v is not None:
+        out.print(f"verified: {v.runs} noisy dry runs estimated as station montecarlo does: the largest error "
+                  f"{v.worst_z:.2f} x the predicted 1σ ({v.worst})", markup=False, soft_wrap=True)
     out.print(f"wrote {out_path} ({len(d.scheme.segments)} segments, {d.scheme.duration_s:.0f} s of recording, "
               f"{d.duration_s:.0f} s compiled): station plan --scheme {out_path}"
               f"{' --config ' + args.config if args.config else ''}; station run --scheme {out_path} --sim",
