@@ -360,7 +360,7 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
         verification = verify(scheme, effects, noise, prediction, which, verify_runs)
         seconds["verification"] = time.perf_counter() - t4
     header = [f"{name}: designed by `station design` for the {config.table.axes}-axis table of {config.source}",
-              f"criterion {crit.text}: {result.value:.6g}; compiled time {plan.duration_s:.0f} s "
+              f"criterion {crit.text}: {criterion_of(prediction, crit.text):.6g}; compiled time {plan.duration_s:.0f} s "
               f"(budget {budget_s:.0f} s); effects: {', '.join(e.id for e in effects) or 'none'}",
               f"noise: accel {noise.accel_noise_ug:g} ug/rtHz, gyro {noise.gyro_noise_dph:g} deg/h/rtHz, table "
               f"angle {noise.table_angle_arcsec:g} arcsec, disturbance {noise.accel_disturbance_ug:g} ug "
@@ -373,7 +373,7 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
         header.append(f"verified: {verification.runs} noisy dry runs estimated as station montecarlo does: "
                       f"the largest error {verification.worst_z:.2f} x the predicted 1-sigma ({verification.worst})")
         text = scheme_text(name, entries, header, centred)
-    return Design(scheme, text, crit.text, result.value, plan.duration_s, budget_s, prediction, builtins,
+    return Design(scheme, text, crit.text, criterion_of(prediction, crit.text), plan.duration_s, budget_s, prediction, builtins,
                   search_sigma, len(cands), evaluations, passes, seconds, notes + list(plan.notes), verification)
 
 
