@@ -60,3 +60,21 @@ def test_an_honest_prediction_is_delivered():
     v = verify(scheme, effects, Noise(), p, which, runs=2)
     assert v.ok, v.problems
     assert 0.0 < v.worst_z < designer.VERIFY_Z
+
+
+def test_the_noise_free_prediction_keeps_every_turn_the_noisy_estimate_keeps():
+    """A noise-free turn repeats its extreme value once a revolution, the flat top of a rail to the
+    data-fault scan: the predictions (station design, montecarlo's Cramér-Rao bound) left
+    sizeeffect's 200 deg/s turns about y and z out as "x gyro at its rail" while a noisy run of
+    the same scheme keeps them.  The noise-free capture is not scanned (its extra says
+    noise_free), so the prediction is of every segment the estimator will use."""
+    from station.design.information import model_of, quiet_truth
+    from station.estimate.summaries import summarise
+    from station.simulate import dryrun, montecarlo
+
+    scheme = load_scheme("sizeeffect")
+    turns = [s.name for s in scheme.segments if s.kind == "rotation"]
+    model, _ = model_of(scheme, [], Noise(), quiet_truth(Noise()))
+    assert [r.name for r in model.s.rotations] == turns
+    noisy = summarise(dryrun.simulate_capture(scheme, montecarlo.make_truth(montecarlo.Settings()), 1000))
+    assert [r.name for r in noisy.rotations] == turns
