@@ -74,7 +74,7 @@ def capture_scheme(capture):
         samples = float(seg.extra.get("samples") or 0)
         if seg.kind == "static" and seg.up_body is not None:
             specs.append(StaticSpec(seg.name, tuple(float(x) for x in seg.up_body), max(samples / rate_hz, 1.0)))
-        elif seg.kind == "rotation" and seg.axis_body is not None and seg.rate_dps:
+        elif seg.kind == "rotation" and seg.axis_body is not None and seg.rate_dps and seg.angle_deg:
             angle = abs(seg.angle_deg) if seg.angle_deg else samples / rate_hz * abs(seg.rate_dps)
             specs.append(RotationSpec(seg.name, tuple(float(x) for x in seg.axis_body), float(seg.rate_dps),
                                       angle / abs(seg.rate_dps),
@@ -135,6 +135,10 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     capture = read_capture(path, load_data=False)
     if bool(reveal) == bool(separate):
         raise UserError("--from: give --reveal PARAMS or --separate A,B (one of them)")
+    table_doc = capture.extra.get("table") if isinstance(capture.extra.get("table"), dict) else {}
+    if "axes" not in table_doc and "no table" in str(table_doc.get("note", "")):
+        raise UserError(f"{path}: recorded by hand, without a rate table: station design --from designs segments "
+                        "for a table (record the extra attitudes by hand with a hand scheme)")
     config, table_source = capture_config(path, config_path)
     base = capture_scheme(capture)
     noise = noise_mod.from_capture(path)
