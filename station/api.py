@@ -201,6 +201,10 @@ def diagnose(capture, *, add=(), plugins=(), effects_dirs=(), config=None, calib
         steps, first = [], _diagnose(lsq.fit(s, [registry.create(e) for e in ids]), registry=registry)
         _auto.conclude(first, s)
         final = first
+    from station.diagnose.suggest import suggest
+
+    for d in {id(first): first, id(final): final}.values():
+        suggest(d, cap.path)
     final.steps, final.first, final.warnings = steps, first, warnings
     return final
 

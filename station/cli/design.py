@@ -23,9 +23,20 @@ def _numbers(text: str) -> tuple:
 def add_parsers(sub) -> None:
     d = sub.add_parser("design", help="design the scheme that calibrates your model best on your table "
                                       "within a time budget (docs/design.md)")
-    d.add_argument("--duration", type=argtypes.between(60, 1e6), required=True, metavar="S",
+    d.add_argument("--duration", type=argtypes.between(60, 1e6), metavar="S",
                    help="time budget in seconds of table time (the compiled plan's: moves, settling, ramps, "
-                        "operator steps included)")
+                        "operator steps included); required unless --from")
+    d.add_argument("--from", dest="from_capture", metavar="CAPTURE",
+                   help="sequential design: the fewest extra segments for this capture (its table, its fitted "
+                        "noise) that --reveal or --separate; written as a scheme extension to record with "
+                        "station run --append CAPTURE --scheme EXT.yaml")
+    d.add_argument("--reveal", metavar="PARAM,...",
+                   help="with --from: effect parameters (fnmatch patterns) the capture left not revealed")
+    d.add_argument("--separate", metavar="A,B",
+                   help="with --from: two effects (ids) the capture cannot tell apart; both are added to the model")
+    d.add_argument("--fraction", type=argtypes.between(0.01, 1.0), default=0.5,
+                   help="with --from: the target 1σ as a fraction of each parameter's typical size (default 0.5; "
+                        "the estimator reveals a parameter below 1)")
     d.add_argument("--config", metavar="FILE",
                    help="station.yaml: the table (axes, limits, operator, geometry) (default: $STATION_CONFIG, "
                         "./station.yaml, else the built-in simulated bench's 3-axis table)")
@@ -62,6 +73,10 @@ def add_parsers(sub) -> None:
     d.add_argument("--centred", action="store_true",
                    help="the IMU mounted with its reference point on the table's axes (the scheme says "
                         "centred: true, as sizeeffect does: no mounting offset to estimate)")
+    d.add_argument("--verify-runs", type=argtypes.whole(0), default=4, metavar="N",
+                   help="noisy dry runs of the design estimated as station montecarlo does, each criterion "
+                        "parameter's error checked against its predicted 1σ (default 4; 0: none). A design the "
+                        "estimator does not deliver is not written (exit 3)")
     d.add_argument("--name", default="designed", help="the scheme's name (default designed)")
     d.add_argument("-o", "--out", default="designed.yaml", metavar="FILE",
                    help="the scheme file to write (default designed.yaml)")
@@ -96,6 +111,85 @@ def _noise(args):
 
 
 def cmd_design(args) -> int:
+    if args.from_capture or args.reveal or args.separate:
+        return _cmd_from(args)
+    if args.duration is None:
+        raise UserError("--duration S is required (or --from CAPTURE with --reveal or --separate)")
+    return _cmd_design(args)
+
+
+def _cmd_from(args) -> int:
+    """station design --from CAPTURE --reveal P | --separate A,B: station/design/sequential.py."""
+    import json
+    import shlex
+    import sys
+    from pathlib import Path
+
+    from station.design.sequential import extend
+    from station.io.calfile import write_new_file
+
+    if not args.from_capture:
+        raise UserError("--reveal and --separate design extra segments for a capture: give --from CAPTURE")
+    if bool(args.reveal) == bool(args.separate):
+        raise UserError("--from: give --reveal PARAMS or --separate A,B (one of them)")
+    if args.duration is not None:
+        raise UserError("--from proposes the fewest segments whatever their time: leave out --duration")
+    if not Path(args.from_capture).is_dir():
+        raise UserError(f"--from {args.from_capture}: not a capture directory")
+    separate = ()
+    adds = list(args.add)
+    if args.separate:
+        separate = tuple(x.strip() for x in args.separate.split(",") if x.strip())
+        if len(separate) != 2 or separate[0] == separate[1]:
+            raise UserError(f"--separate: name two different effects, A,B; got {args.separate!r}")
+        adds += [x for x in separate if x not in adds]
+    reg = plugins.registry(args)
+    effects = [reg.create(e) for e in plugins.effect_ids(reg, adds)]
+    reveal = tuple(x.strip() for x in (args.reveal or "").split(",") if x.strip())
+    out_path = Path(args.out if args.out != "designed.yaml" else "extension.yaml")
+    if out_path.suffix not in (".yaml", ".yml"):
+        raise UserError(f"-o {out_path}: a scheme file ends in .yaml")
+    revolutions = tuple(int(round(r)) for r in args.revolutions) if args.revolutions else None
+    command = "station " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["design"] else ""
+    e = extend(args.from_capture, effects, reveal=reveal, separate=separate, config_path=args.config,
+               fraction=args.fraction, rates_dps=args.rates, revolutions=revolutions, dwells_s=args.dwells,
+               name=args.name if args.name != "designed" else "extension", command=command,
+               progress=lambda text: err.print(f"design: {text}", markup=False, soft_wrap=True))
+    try:
+        write_new_file(out_path, e.text.encode("utf-8"), what="scheme file")
+    except OSError as x:
+        raise UserError(f"{out_path}: cannot write the scheme file: {x.strerror}") from None
+    record = f"station run --append {args.from_capture} --scheme {out_path}"
+    if args.json:
+        print(json.dumps({"scheme_file": str(out_path), "capture": e.capture, "goal": e.goal,
+                          "duration_s": e.duration_s, "segments": e.entries, "segment_s": e.segment_s,
+                          "parameters": [{"name": n, "unit": e.units[n], "sigma_before": e.before[n],
+                                          "sigma_after": e.after[n], "revealed_before": e.revealed_before[n],
+                                          "revealed_after": e.revealed_after[n]} for n in e.names],
+                          "correlation_before": e.correlation_before, "correlation_after": e.correlation_after,
+                          "noise": vars(e.noise), "record": record, "notes": e.notes}, indent=1))
+        return 0
+    out.print(f"goal: {e.goal}", markup=False, soft_wrap=True)
+    for entry, secs in zip(e.entries, e.segment_s):
+        what = (f"static {entry['static']}: up {entry['up_body']} for {entry['dwell_s']:g} s" if "static" in entry else
+                f"rotation {entry['rotation']}: about {entry['axis_body']} at +/-{entry['rate_dps']:g} deg/s, "
+                f"{entry['rotation_s']:g} s each way, axis elevation {entry.get('axis_elevation_deg', 0):g} deg")
+        out.print(f"  {what} ({secs:.0f} s with moves, settling and ramps)", markup=False, soft_wrap=True)
+    out.print(f"{len(e.entries)} extra segment(s), {e.duration_s:.0f} s of table time as compiled", markup=False)
+    for n in e.names:
+        out.print(f"  {n}: 1σ {e.before[n]:.4g} -> {e.after[n]:.4g} {e.units[n]}"
+                  f"{'' if e.revealed_before[n] else ' (not revealed by the capture)'}"
+                  f"{'' if e.revealed_after[n] else ' (still not revealed)'}", markup=False, soft_wrap=True)
+    if e.correlation_after is not None:
+        out.print(f"  largest |correlation| between the two effects: {e.correlation_before:.3f} -> "
+                  f"{e.correlation_after:.3f}", markup=False)
+    for note in e.notes:
+        err.print(f"note: {note}", markup=False, soft_wrap=True)
+    out.print(f"wrote {out_path}: record it into the same capture with: {record}", markup=False, soft_wrap=True)
+    return 0
+
+
+def _cmd_design(args) -> int:
     import json
     from pathlib import Path
 
@@ -122,7 +216,16 @@ def cmd_design(args) -> int:
     d = design(config, effects, noise, args.duration, args.criterion,
                rates_dps=args.rates or cand_mod.DEFAULT_RATES_DPS, revolutions=revolutions,
                dwells_s=args.dwells or cand_mod.DEFAULT_DWELLS_S, max_passes=args.passes, name=args.name,
-               compare=compare, centred=args.centred, progress=lambda text: err.print(f"design: {text}", markup=False, soft_wrap=True))
+               compare=compare, centred=args.centred, verify_runs=args.verify_runs,
+               progress=lambda text: err.print(f"design: {text}", markup=False, soft_wrap=True))
+    v = d.verification
+    if v is not None and not v.ok:
+        for line in v.problems:
+            err.print(f"design: not delivered: {line}", markup=False, soft_wrap=True)
+        err.print(f"station design: the estimator does not deliver this design's predicted 1σ in {v.runs} noisy dry "
+                  f"runs ({len(v.problems)} problem(s) above); no scheme file written (try other --rates, "
+                  "--revolutions or a longer --duration)", markup=False, soft_wrap=True)
+        return 3
     try:
         write_new_file(out_path, d.text.encode("utf-8"), what="scheme file")
     except OSError as e:
@@ -140,6 +243,7 @@ def cmd_design(args) -> int:
     if args.json:
         print(json.dumps({
             "scheme_file": str(out_path), "criterion": d.criterion, "duration_s": d.duration_s, "budget_s": d.budget_s,
+            "verification": None if v is None else {"runs": v.runs, "worst_z": v.worst_z, "worst": v.worst},
             "noise": vars(noise), "effects": [e.id for e in effects],
             "designed": {"criterion": own, "parameters": [
                 {"name": n, "unit": u, "sigma": float(s), "revealed": bool(r)}
@@ -182,8 +286,12 @@ def cmd_design(args) -> int:
     sec = d.seconds
     err.print(f"designed in {sum(sec.values()):.1f} s: candidates {sec['candidates']:.1f} s, information of "
               f"{d.candidates} candidates {sec['information']:.1f} s, search {sec['search']:.1f} s "
-              f"({d.evaluations} evaluations, {d.passes} passes), predictions {sec['predictions']:.1f} s",
+              f"({d.evaluations} evaluations, {d.passes} passes), predictions {sec['predictions']:.1f} s"
+              + (f", verification {sec['verification']:.1f} s" if "verification" in sec else ""),
               markup=False, soft_wrap=True)
+    if v is not None:
+        out.print(f"verified: {v.runs} noisy dry runs estimated as station montecarlo does: the largest error "
+                  f"{v.worst_z:.2f} x the predicted 1σ ({v.worst})", markup=False, soft_wrap=True)
     out.print(f"wrote {out_path} ({len(d.scheme.segments)} segments, {d.scheme.duration_s:.0f} s of recording, "
               f"{d.duration_s:.0f} s compiled): station plan --scheme {out_path}"
               f"{' --config ' + args.config if args.config else ''}; station run --scheme {out_path} --sim",

@@ -166,6 +166,10 @@ def _diagnose(args, job) -> tuple:
     from station.diagnose.report import ReportInput, capture_facts
     from station.io.history import verdict_of
 
+    from station.diagnose.suggest import suggest
+
+    for d in {id(first): first, id(final): final}.values():
+        suggest(d, capture.path)
     figures.known(first, steps)
     if not args.json:
         _print(out, first, steps, final)        # while the figures are drawn
@@ -208,6 +212,7 @@ def _summary_lines(d) -> list[str]:
     lines += [f"where it fails: {f}" for f in d.failures]
     lines += [f"not kept: {r.effect}: {r.reason}" for r in d.rejected]
     lines += [f"why it still fails: {line}" for line in getattr(d, "account", None) or []]
+    lines += [f"design: {line}" for line in getattr(d, "design_suggestions", None) or []]
     return lines + [f"note: {n}" for n in d.notes]
 
 
@@ -230,16 +235,27 @@ def _candidates_table(d) -> Table:
     return t
 
 
+def _print_suggestions(out, d) -> None:
+    """Beside each candidate the capture cannot reveal, the command that designs the segments
+    that would (station design --from: docs/design.md)."""
+    for c in d.candidates:
+        if getattr(c, "suggestion", ""):
+            out.print(f"{c.effect}: the fewest segments that reveal it: {c.suggestion}", markup=False,
+                      soft_wrap=True, highlight=False)
+
+
 def _print(out, first, steps, final) -> None:
     from rich.table import Table
 
     from station.diagnose.auto import comparison_rows
 
     for line in _summary_lines(first):
-        out.print(line)
+        # a command is printed whole (soft_wrap): it is copied into a shell
+        out.print(line, **({"soft_wrap": True, "markup": False, "highlight": False} if line.startswith("design:") else {}))
     worst = sorted(first.segments, key=lambda s: -s.rms)[:5]
     out.print("worst segments: " + ", ".join(f"{s.name} ({s.kind}) {s.rms:.2g}σ" for s in worst))
     out.print(_candidates_table(first))
+    _print_suggestions(out, first)
     for k, st in enumerate(steps, 1):
         t = Table(title=f"step {k}: added {st.added}" + (" (discovered outside the library)" if st.discovered else ""))
         for col in ("", "before", "after"):

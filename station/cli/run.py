@@ -24,7 +24,8 @@ from station.cli.run_bench import (  # noqa: F401
 
 def add_parsers(sub) -> None:
     run = sub.add_parser("run", help="run a calibration scheme and estimate")
-    run.add_argument("--scheme", default="optimal9", help="built-in scheme name or a scheme YAML file")
+    run.add_argument("--scheme", default=None,
+                     help="built-in scheme name or a scheme YAML file (default optimal9; with --append: the extension)")
     run.add_argument("--sim", action="store_true", help="dry run against the simulated bench")
     run.add_argument("--sim-truth", metavar="FILE", help="true sensor errors for --sim (YAML)")
     run.add_argument("--seed", type=argtypes.seed, default=1, help="seed of the simulated truth and noise")
@@ -36,6 +37,10 @@ def add_parsers(sub) -> None:
     run.add_argument("--table-protocol", help="acutrol (default) or aerosmith")
     run.add_argument("--config", metavar="FILE", help="station.yaml (default: $STATION_CONFIG, ./station.yaml)")
     run.add_argument("--resume", metavar="CAPTURE", help="continue a stopped run from its first missing segment")
+    run.add_argument("--append", metavar="CAPTURE",
+                     help="record the segments of --scheme (an extension, e.g. station design --from CAPTURE) "
+                          "into this capture of station run, after its own, on the same bench; then estimate "
+                          "from all of it")
     run.add_argument("--unattended", action="store_true",
                      help="no operator: never ask for a remount (run.operator: false)")
     run.add_argument("--reset-faults", action="store_true", help="clear a fault latched on the table first")
@@ -173,6 +178,17 @@ def cmd_run(args) -> int:
 
     overrides = {k: v for k, v in (("dwell_s", args.dwell_s), ("rate_dps", args.rate_dps),
                                    ("rotation_s", args.rotation_s)) if v is not None}
+    if args.append:
+        if args.resume:
+            raise UserError("give --append CAPTURE or --resume CAPTURE, not both (an interrupted append is "
+                            "continued with --resume)")
+        if args.sim:
+            raise UserError(f"--append {args.append} records into a capture of a bench run (the device twins "
+                            "or hardware, with --port/--table-port); a --sim dry run cannot be appended to")
+        if args.scheme is None:
+            raise UserError("--append: give the extension with --scheme EXT.yaml (station design --from writes one)")
+    if args.scheme is None:
+        args.scheme = "optimal9"
     if args.resume and args.sim:
         raise UserError(f"--resume {args.resume} continues a run on a bench; a --sim dry run is recorded "
                         "in one go and cannot be resumed: leave out --sim (with --port/--table-port) "
@@ -222,10 +238,18 @@ def _run_on_bench(args) -> int:
     config = _config(args)
     from station.cli.run_multi import is_multi_run, run_multi
 
+    if args.append and (is_multi_run(Path(args.append)) or config.imus):
+        raise UserError(f"--append {args.append}: appending to a run of several IMUs is not supported; "
+                        "record the extension as a run of its own")
     if (args.resume and is_multi_run(Path(args.resume))) or (not args.resume and config.imus):
         return run_multi(args, config)
     done: set = set()
-    if args.resume:
+    if args.append:
+        directory = Path(args.append)
+        scheme, config, done = _resumed(directory, config, args)
+        scheme, args.keep_extension = _appended(directory, scheme, args.scheme)
+        args.resume = str(directory)          # from here on: a resume of the extended run
+    elif args.resume:
         directory = Path(args.resume)
         scheme, config, done = _resumed(directory, config, args)
     else:
@@ -270,6 +294,8 @@ def _record_and_estimate(args, config, scheme, plan, steps, directory, text) -> 
             writer = _new_capture(directory, scheme, text, _overrides(args), config, imu, rate_hz)
         else:
             writer = _reopen(directory, rate_hz, imu_identity(getattr(imu, "identity", None)).get("serial"))
+            if getattr(args, "keep_extension", None) is not None:     # --append: the same IMU is connected
+                args.keep_extension()
         out.print(f"capture: {directory}", markup=False)
         from station.bench.live import make_display
 
@@ -336,7 +362,63 @@ def _resumed(directory: Path, current, args):
     if getattr(args, "unattended", False) and config.run.operator:
         raise UserError(f"{directory} was recorded with an operator (remounts may have happened): "
                         "resume it with one (leave out --unattended)")
+    for k, name in enumerate(doc.get("appended") or [], 1):        # extensions recorded by --append
+        if not isinstance(name, str) or "/" in name or not name.startswith("scheme-append-"):
+            raise UserError(f"{run_file}: field 'appended[{k}]': must name a scheme-append-N.yaml of the capture")
+        try:
+            more = scheme_from_text((directory / name).read_text(), str(directory / name))
+        except OSError as e:
+            raise UserError(f"{directory / name}: cannot read the appended scheme: {e.strerror}") from None
+        scheme = replace(scheme, segments=scheme.segments + more.segments)
     capture = read_capture(directory, load_data=False)
     done = {s.name for s in capture.complete()}
     return scheme, config, done
+
+
+def _atomic_text(path: Path, text: str) -> None:
+    import os
+
+    tmp = path.with_name(f".{path.name}.append.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def _appended(directory: Path, scheme, extension: str):
+    """The run's scheme with the extension's segments after its own; the extension kept in the
+    capture (scheme-append-N.yaml, listed in run.yaml's ``appended``) so that an interrupted
+    append is continued by --resume and the capture says what was recorded after the run."""
+    from dataclasses import replace
+
+    from station.io.scheme import load_scheme, scheme_text
+
+    text, source = scheme_text(extension)
+    ext = load_scheme(extension)
+    if ext.table != scheme.table:
+        raise UserError(f"{source}: {'a hand scheme' if not ext.table else 'a table scheme'} cannot extend "
+                        f"{'a table run' if scheme.table else 'a run by hand'}")
+    if ext.centred != scheme.centred:
+        raise UserError(f"{source}: field 'centred': {ext.centred}, the run's scheme says {scheme.centred}: the "
+                        "extension must be mounted as the run was")
+    taken = {s.name for s in scheme.segments} & {s.name for s in ext.segments}
+    if taken:
+        raise UserError(f"{source}: segment names already in {directory}: {', '.join(sorted(taken))} (rename them; "
+                        "station design --from prefixes its segments x1_, x2_, ...)")
+    run_file = directory / RUN_FILE
+
+    def keep() -> None:
+        """Write the extension into the capture (once the same IMU is found connected)."""
+        doc = yaml_text.safe_load(run_file.read_text())
+        listed = list(doc.get("appended") or [])
+        name = f"scheme-append-{len(listed) + 1}.yaml"
+        try:
+            _atomic_text(directory / name, text)
+            doc["appended"] = listed + [name]
+            _atomic_text(run_file, yaml.safe_dump(doc, sort_keys=False))
+        except OSError as e:
+            raise cannot_write(e.filename or directory, e) from None
+        out.print(f"appending {len(ext.segments)} segment(s) of {source} to {directory} (kept as {name}; "
+                  f"an interrupted append continues with station run --resume {directory})", markup=False,
+                  soft_wrap=True)
+
+    return replace(scheme, segments=scheme.segments + ext.segments), keep
 

@@ -21,6 +21,16 @@ from station.io.scheme import Scheme, StaticSpec, load_scheme
 
 BUILTIN_TABLE_SCHEMES = ("optimal9", "chatfield18", "traditional24", "sizeeffect")
 BUDGET_ROUNDS = 6          # search again with the budget less the compiled excess, at most this often
+VERIFY_RUNS = 4            # noisy dry runs of the designed scheme through the estimator (verify)
+# an error beyond this many predicted 1σ in a verification run: the estimator does not deliver
+# the prediction.  For an honest 1σ the error is normal: P(|z| > 6) = 2e-9 per parameter, so
+# 4 runs x 40 parameters raise a false alarm once in 3 million designs
+VERIFY_Z = 6.0
+# the estimator's own 1σ in a verification run against the predicted: beyond this factor either
+# way the fit is not the one predicted (a parameter it held by its prior, a solver stopped
+# short, a noise model that widened everything: the noise's own scatter of a 1σ estimated from
+# a few hundred degrees of freedom is a few per cent)
+VERIFY_SIGMA_FACTOR = 2.0
 
 
 @dataclass
@@ -52,6 +62,7 @@ class Design:
     passes: int
     seconds: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
+    verification: Verification | None = None   # noisy dry runs through the estimator (verify)
 
 
 def reported_names(effects) -> list:
@@ -99,6 +110,77 @@ def predict(scheme: Scheme, effects: list, noise: Noise, config=None, duration_s
     blind = set(result.model.unobservable) | {n for n, c in zip(names, index) if int(c) in set(result.rank_deficient)}
     revealed = np.array([n not in blind for n in names])
     return Prediction(scheme.name, duration_s, names, units_, sigma, revealed, covariance=cov)
+
+
+@dataclass
+class Verification:
+    runs: int
+    worst_z: float                 # the largest |error| / predicted 1σ over the runs and parameters
+    worst: str                     # where: "name (seed N)"
+    problems: list                 # sentences: what the estimator did not deliver
+
+    @property
+    def ok(self) -> bool:
+        return not self.problems
+
+
+def verify_one(scheme: Scheme, effect_ids: tuple, noise: Noise, seed: int) -> tuple:
+    """One noisy dry run of ``scheme`` estimated as ``station montecarlo`` estimates it (the same
+    function, station.simulate.montecarlo.one_run): (names, errors, the fit's own 1σ, the fit's
+    notes), errors and 1σ in the prediction's units (scale factors in ppm)."""
+    from station.model.calibration import parameter_errors
+    from station.simulate import dryrun, montecarlo
+
+    settings = replace(noise.settings(), effects=tuple(effect_ids))
+    truth = montecarlo.make_truth(settings)
+    cal = montecarlo._estimate(dryrun.simulate_capture(scheme, truth, seed), settings)
+    names = [e[0] for e in parameter_errors(cal, dryrun.truth_calibration(truth))]
+    names += [p.name for e in montecarlo._effects(settings) for p in e.params]
+    errors = [e[3] for e in parameter_errors(cal, dryrun.truth_calibration(truth))]
+    errors += montecarlo._effect_values(cal, settings)
+    sigmas = np.concatenate([montecarlo._error_sigmas(cal), montecarlo._effect_values(cal, settings, sigma=True)])
+    return names, np.array(errors, float), np.asarray(sigmas, float), list(cal.fit.get("notes", []))
+
+
+def verify(scheme: Scheme, effects: list, noise: Noise, prediction: Prediction, which,
+           runs: int = VERIFY_RUNS, first_seed: int = 1000) -> Verification:
+    """Does the estimator deliver the prediction?  ``runs`` noisy dry runs of the designed scheme
+    (seeds first_seed, ...: the first runs `station montecarlo` makes) estimated as it does;
+    for every criterion parameter ``which`` (the prediction's indices) the error must be within
+    VERIFY_Z predicted 1σ and the fit's own 1σ within VERIFY_SIGMA_FACTOR of the predicted, and
+    a parameter predicted revealed must not be held by its prior.  The prediction is the
+    estimator's covariance at the noiseless capture; what it leaves out is what the estimator
+    does with noise: a start the solver does not converge from, a direction the noiseless fit
+    sees and a noisy one does not, a noise model or reweighting the designed segments set off."""
+    from station.core.forked import map_in_children
+
+    ids = tuple(e.id for e in effects)
+    results = map_in_children(lambda seed: verify_one(scheme, ids, noise, seed),
+                              [first_seed + k for k in range(runs)])
+    problems, worst_z, worst = [], 0.0, ""
+    for k, (names, errors, sigmas, notes) in enumerate(results):
+        seed = first_seed + k
+        at = {n: i for i, n in enumerate(names)}
+        blind = " ".join(n for n in notes if n.startswith("not revealed"))
+        for i in which:
+            n = prediction.names[i]
+            if n not in at or not prediction.revealed[i]:
+                continue
+            err, sig, pred = errors[at[n]], sigmas[at[n]], prediction.sigma[i]
+            if not (np.isfinite(err) and np.isfinite(sig)) or n in blind:
+                problems.append(f"{n} not estimated in the noisy run of seed {seed} (predicted 1σ {pred:.3g} "
+                                f"{prediction.units[i]})")
+                continue
+            z = abs(err) / pred
+            if z > worst_z:
+                worst_z, worst = z, f"{n} (seed {seed})"
+            if z > VERIFY_Z:
+                problems.append(f"{n}: error {err:.3g} {prediction.units[i]} in the noisy run of seed {seed}, "
+                                f"{z:.3g} x the predicted 1σ {pred:.3g}")
+            elif not (1.0 / VERIFY_SIGMA_FACTOR <= sig / pred <= VERIFY_SIGMA_FACTOR):
+                problems.append(f"{n}: the fit's own 1σ {sig:.3g} {prediction.units[i]} in the noisy run of seed "
+                                f"{seed}, {sig / pred:.3g} x the predicted {pred:.3g}")
+    return Verification(runs, worst_z, worst, problems)
 
 
 def _segments_of(chosen, cands, masks=None) -> list:
@@ -198,7 +280,8 @@ def scaled(scheme: Scheme, config, target_s: float) -> tuple[Scheme, float, obje
 def design(config, effects: list, noise: Noise, budget_s: float, criterion: str = "D", *,
            rates_dps=cand_mod.DEFAULT_RATES_DPS, revolutions=cand_mod.DEFAULT_REVOLUTIONS,
            dwells_s=cand_mod.DEFAULT_DWELLS_S, max_passes: int = 20, name: str = "designed",
-           compare=BUILTIN_TABLE_SCHEMES, progress=None, centred: bool = False) -> Design:
+           compare=BUILTIN_TABLE_SCHEMES, progress=None, centred: bool = False,
+           verify_runs: int = VERIFY_RUNS) -> Design:
     """The design (module doc).  ``progress(text)``: told what is being done.  ``centred``: the
     IMU is to be mounted with its reference point on the table's axes (the scheme says
     ``centred: true``; the mounting offset is then known, as in the sizeeffect scheme)."""
@@ -270,8 +353,14 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
 
     prediction, *builtins = map_in_children(job, [None, *compare])
     seconds["predictions"] = time.perf_counter() - t3
+    verification = None
+    if verify_runs:
+        t4 = time.perf_counter()
+        say(f"{verify_runs} noisy dry runs of the design through the estimator (does it deliver the prediction?)")
+        verification = verify(scheme, effects, noise, prediction, which, verify_runs)
+        seconds["verification"] = time.perf_counter() - t4
     header = [f"{name}: designed by `station design` for the {config.table.axes}-axis table of {config.source}",
-              f"criterion {crit.text}: {result.value:.6g}; compiled time {plan.duration_s:.0f} s "
+              f"criterion {crit.text}: {criterion_of(prediction, crit.text):.6g}; compiled time {plan.duration_s:.0f} s "
               f"(budget {budget_s:.0f} s); effects: {', '.join(e.id for e in effects) or 'none'}",
               f"noise: accel {noise.accel_noise_ug:g} ug/rtHz, gyro {noise.gyro_noise_dph:g} deg/h/rtHz, table "
               f"angle {noise.table_angle_arcsec:g} arcsec, disturbance {noise.accel_disturbance_ug:g} ug "
@@ -280,8 +369,12 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
     for n, u, s, r in zip(prediction.names, prediction.units, prediction.sigma, prediction.revealed):
         header.append(f"  {n}: {s:.4g} {u}" + ("" if r else " (not revealed)"))
     text = scheme_text(name, entries, header, centred)
-    return Design(scheme, text, crit.text, result.value, plan.duration_s, budget_s, prediction, builtins,
-                  search_sigma, len(cands), evaluations, passes, seconds, notes + list(plan.notes))
+    if verification is not None:
+        header.append(f"verified: {verification.runs} noisy dry runs estimated as station montecarlo does: "
+                      f"the largest error {verification.worst_z:.2f} x the predicted 1-sigma ({verification.worst})")
+        text = scheme_text(name, entries, header, centred)
+    return Design(scheme, text, crit.text, criterion_of(prediction, crit.text), plan.duration_s, budget_s, prediction, builtins,
+                  search_sigma, len(cands), evaluations, passes, seconds, notes + list(plan.notes), verification)
 
 
 def criterion_of(prediction: Prediction, criterion: str) -> float:

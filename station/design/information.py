@@ -89,6 +89,7 @@ def model_of(scheme: Scheme, effects: list, noise: Noise, truth, geometry: dict 
     from station.simulate import dryrun
 
     capture = dryrun.simulate_capture(scheme, truth, 0, geometry)
+    capture.extra["noise_free"] = True          # (no data-fault scan: station/estimate/data_faults.py)
     s = summarise(capture, table_angle_arcsec=noise.table_angle_arcsec)
     fs = s.sample_rate_hz
     accel_sigma = np.hypot(noise.accel_noise_ug * np.sqrt(fs), noise.accel_disturbance_ug)

@@ -38,6 +38,7 @@ from station.core.errors import UserError
 RIDGE = 1e-10            # on the unit-diagonal information: a column nothing sees gets 1σ 1e5 of its size
 CRITERIA = ("D", "A", "worst")    # (station/cli/choices.py copies it)
 MIN_STATICS = 9           # lsq's attitudes="auto": every static's attitude unknown from nine on
+WORST_POWER = 20          # the worst criterion searched as this power mean of the 1σ (Scorer.value_of)
 
 
 @dataclass
@@ -147,7 +148,13 @@ class Scorer:
             return float(logdet) if sign > 0 else math.inf
         if self.criterion.kind == "A":
             return float(np.trace(sub))
-        return float(np.sqrt(np.max(np.diag(sub))))
+        sig = np.sqrt(np.clip(np.diag(sub), 0.0, None))
+        if WORST_POWER and len(sig) > 1:
+            # a power mean near the max (within n^(1/p): 12 % for 9 parameters): smooth, so that a
+            # step lowering every 1σ near the worst counts, not only one that lowers the max itself
+            top = float(np.max(sig))
+            return top * float(np.mean((sig / top) ** WORST_POWER)) ** (1.0 / WORST_POWER) if top > 0 else 0.0
+        return float(np.max(sig))
 
 
 class State:

@@ -18,6 +18,8 @@ def to_json(d, steps) -> dict:
         # a fit that still fails: what was tried, what each explained, what the residuals follow
         "failure_account": list(getattr(d, "account", None) or []),
         "notes": d.notes,
+        # the model's parameters the capture left not revealed, with the station design --from command
+        "design_suggestions": list(getattr(d, "design_suggestions", None) or []),
         # what the scan before the fit found and left out (station/estimate/data_faults.py)
         "data_faults": getattr(getattr(getattr(d.result, "model", None), "s", None), "data_faults", None),
         "terms_outside_library": None if d.proposal is None else {
@@ -39,7 +41,8 @@ def to_json(d, steps) -> dict:
             "p_value": c.p_value, "p_value_corrected": c.p_value_corrected, "plausible": c.plausible,
             "parameters": c.names, "units": c.units, "estimate": c.estimate, "sigma": c.sigma,
             "smallest_detectable": [_num(v) for v in c.detectable], "aliased": c.aliased,
-            "advice": c.advice, "source": c.source, "overdispersion": c.overdispersion}
+            "advice": c.advice, "source": c.source, "overdispersion": c.overdispersion,
+            "design_command": getattr(c, "suggestion", "") or None}
             for c in d.candidates],
         "steps": [{"added": st.added, "discovered": st.discovered, "instead_of": st.instead_of or None,
                    "predicted_chi2_drop": st.predicted_drop,

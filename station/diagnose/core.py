@@ -72,6 +72,8 @@ class Candidate:
                                                    #   effect of the IMU: ranked after the IMU's
     state: dict = field(default_factory=dict)      # what the effect's setup or profile chose (its
                                                    #   state(): a bias step's time), for the refit
+    suggestion: str = ""                           # the station design --from command that would reveal
+                                                   #   what the capture cannot (station/diagnose/suggest.py)
 
     def largest_estimate(self) -> str:
         """The one-step estimate largest against its 1-sigma, in words ("" without parameters)."""
@@ -103,6 +105,8 @@ class Diagnosis:
     proposal: object = None                  # terms.Proposal: terms found outside the library
     account: list = field(default_factory=list)  # a fit that still fails: what was tried, what each
                                              #   explained, what the residuals follow (words.failure_account)
+    design_suggestions: list = field(default_factory=list)  # lines: the model's parameters not revealed
+                                             #   and the station design --from command (suggest.py)
 
 
 def _data_mask(labels) -> np.ndarray:

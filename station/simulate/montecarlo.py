@@ -109,6 +109,7 @@ def cramer_rao(scheme: Scheme, settings: Settings, seed: int = 0) -> np.ndarray:
     quiet.accel.noise_density = quiet.gyro.noise_density = 0.0
     quiet.bench.accel_disturbance_ug = quiet.bench.table_angle_error_arcsec = 0.0
     capture = dryrun.simulate_capture(scheme, quiet, seed)
+    capture.extra["noise_free"] = True          # (no data-fault scan: station/estimate/data_faults.py)
     s = summarise(capture, table_angle_arcsec=settings.table_angle_arcsec)
     fs = s.sample_rate_hz
     accel_sigma = np.hypot(settings.accel_noise_ug * np.sqrt(fs), settings.accel_disturbance_ug)

@@ -1,0 +1,369 @@
+"""Sequential design (issue 28 item 3): the fewest extra segments that reveal what a capture
+left undetermined, or separate two effects it could not tell apart, on the capture's own table
+and with the capture's own fitted noise.
+
+The capture's segments (its manifest: attitudes, rotation axes, rates, lengths, elevations) are
+candidates already chosen; the table's candidates (station/design/candidates.py, the table of
+the run's own configuration, run.yaml) are the ones that may be added.  The information of
+both comes from one computation (station/design/information.py: the estimator's Jacobian of
+their noiseless captures, weighted with the capture's noise), so a proposal is scored exactly
+as `station design` scores a design:
+
+- ``--reveal P``: every named effect parameter's predicted 1σ at most ``fraction`` (default
+  0.5) of its typical size.  The estimator calls a parameter revealed when its 1σ is below its
+  typical size (lsq._blind_effect_parameters); the factor 2 of margin covers what this
+  prediction leaves out (the capture's own rotations get axis nuisances of their own here, the
+  information is taken at the simulator's truth, not the capture's fit);
+- ``--separate A,B``: both effects in the model, every parameter of each revealed as above, and
+  no correlation between a parameter of A and one of B above ALIAS_COS (0.95, diagnose's alias
+  threshold, station/diagnose/terms.py).
+
+The search: the single candidate that meets the goal in the least table time, if there is one;
+else greedily the candidate that brings the worst ratio (1σ over its target; a correlation
+over ALIAS_COS) down the most per second, until met; then each chosen one is dropped when the
+goal holds without it (fewest), and each is exchanged for a shorter one that keeps it (least
+time).  Then the estimator's own fit of the capture's segments plus the extension (designer.
+predict) checks the proposal: a named parameter it still calls not revealed makes the search
+go on (the next best candidate added), so what is written is what `station estimate` will say.
+"""
+from __future__ import annotations
+
+import fnmatch
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from station.core.errors import UserError
+
+ALIAS_COS = 0.95          # diagnose's (station/diagnose/terms.py): this alike are aliases
+DEFAULT_FRACTION = 0.5    # target 1σ as a fraction of the parameter's typical size (module doc)
+MAX_SEGMENTS = 12         # the most rotation pairs / statics an extension proposes
+CHECK_ROUNDS = 4          # the estimator's check sends the search on at most this often
+
+
+@dataclass
+class Extension:
+    capture: str
+    goal: str                       # in words
+    names: list                     # the targeted parameters
+    before: dict                    # name -> 1σ (reported unit) by the estimator on the capture alone
+    after: dict                     # name -> 1σ with the extension
+    revealed_before: dict
+    revealed_after: dict
+    units: dict
+    entries: list                   # the scheme file's segments
+    text: str                       # the scheme file
+    duration_s: float               # the extension's compiled time (moves, settling, ramps included)
+    segment_s: list                 # each entry's table time (time model)
+    correlation_after: float | None = None   # --separate: the largest |corr| between A's and B's, after
+    correlation_before: float | None = None
+    noise: object = None
+    notes: list = field(default_factory=list)
+
+
+def capture_scheme(capture):
+    """The capture's complete segments as a Scheme (attitudes, axes, rates, lengths,
+    elevations from its manifest)."""
+    from station.io.scheme import RotationSpec, Scheme, StaticSpec
+
+    rate_hz = float(capture.imu.sample_rate_hz)
+    specs = []
+    for seg in capture.complete():
+        samples = float(seg.extra.get("samples") or 0)
+        if seg.kind == "static" and seg.up_body is not None:
+            specs.append(StaticSpec(seg.name, tuple(float(x) for x in seg.up_body), max(samples / rate_hz, 1.0)))
+        elif seg.kind == "rotation" and seg.axis_body is not None and seg.rate_dps and seg.angle_deg:
+            angle = abs(seg.angle_deg) if seg.angle_deg else samples / rate_hz * abs(seg.rate_dps)
+            specs.append(RotationSpec(seg.name, tuple(float(x) for x in seg.axis_body), float(seg.rate_dps),
+                                      angle / abs(seg.rate_dps),
+                                      axis_elevation_deg=float(seg.extra.get("axis_elevation_deg", 0.0) or 0.0)))
+    if not any(s.kind == "static" for s in specs):
+        raise UserError(f"{capture.path}: no complete static segment with an attitude (up_body): nothing "
+                        "to design from")
+    centred = isinstance(capture.extra.get("mounting"), dict) and "offset_m" in capture.extra["mounting"]
+    return Scheme(capture.scheme or "capture", "the capture's segments", "", {}, tuple(specs), centred=centred)
+
+
+def capture_config(path: Path, config_path: str | None):
+    """The table the capture was recorded on: --config if given, else the run's own
+    configuration (run.yaml), else the built-in simulated bench's (a dry run's capture)."""
+    from station.bench.config import from_dict, load_config
+    from station.core import yaml_text
+
+    if config_path:
+        return load_config(config_path), f"the table of {config_path}"
+    run_file = path / "run.yaml"
+    if run_file.is_file():
+        try:
+            doc = yaml_text.safe_load(run_file.read_text())
+        except (OSError, ValueError) as e:
+            raise UserError(f"{run_file}: cannot read it: {e}") from None
+        if isinstance(doc, dict) and isinstance(doc.get("config"), dict):
+            return from_dict(doc["config"], str(run_file)), f"the run's table ({run_file})"
+    return load_config(None), "the built-in simulated bench's table (no run.yaml in the capture)"
+
+
+def _blind_names(result) -> set:
+    from station.estimate import lsq
+
+    names, index, _, _ = lsq._reported_index(result, "m/s^2", "deg/s")
+    rank = set(int(c) for c in result.rank_deficient)
+    return set(result.model.unobservable) | {n for n, c in zip(names, index) if int(c) in rank}
+
+
+def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=None,
+           fraction: float = DEFAULT_FRACTION, rates_dps=None, revolutions=None, dwells_s=None,
+           name: str = "extension", command: str = "", progress=None) -> Extension:
+    """The extension (module doc).  ``effects``: the model (Effect instances), with the two to
+    separate among them; ``reveal``: fnmatch patterns of effect parameters; ``separate``: two
+    effect ids."""
+    from dataclasses import replace
+
+    from station.bench.compile import compile_scheme
+    from station.design import candidates as cand_mod
+    from station.design import noise as noise_mod
+    from station.design.designer import _segments_of, geometry_of, predict, scheme_text
+    from station.design.information import UNIT_DWELL_S, information
+    from station.design.search import Candidate, Criterion, Scorer, State
+    from station.io.capture import read_capture
+    from station.io.scheme import RotationSpec, Scheme
+
+    say = progress or (lambda text: None)
+    path = Path(capture_path)
+    capture = read_capture(path, load_data=False)
+    if bool(reveal) == bool(separate):
+        raise UserError("--from: give --reveal PARAMS or --separate A,B (one of them)")
+    table_doc = capture.extra.get("table") if isinstance(capture.extra.get("table"), dict) else {}
+    if "axes" not in table_doc and "no table" in str(table_doc.get("note", "")):
+        raise UserError(f"{path}: recorded by hand, without a rate table: station design --from designs segments "
+                        "for a table (record the extra attitudes by hand with a hand scheme)")
+    config, table_source = capture_config(path, config_path)
+    base = capture_scheme(capture)
+    noise = noise_mod.from_capture(path)
+    names_all = None
+    # --- the candidates: the capture's own segments first (chosen), then the table's
+    table = cand_mod.Table(config)
+    cands, chunks, notes, masks = cand_mod.candidate_set(
+        table, rates_dps or cand_mod.DEFAULT_RATES_DPS, revolutions or cand_mod.DEFAULT_REVOLUTIONS,
+        dwells_s or cand_mod.DEFAULT_DWELLS_S)
+    own_chunk, own = [], []
+    for spec in base.segments:
+        if spec.kind == "static":
+            own_chunk.append((("capture", spec.name), replace(spec, dwell_s=UNIT_DWELL_S)))
+            own.append(Candidate(("capture", spec.name, spec.dwell_s), "static", 0.0, dwell_s=spec.dwell_s,
+                                 slot=("capture", spec.name)))
+        else:
+            # its own axis group (conservative: the estimator may merge it with a new rotation's)
+            key = (("capture",) + tuple(spec.axis_body), spec.axis_elevation_deg, spec.name)
+            own_chunk.append((key, (spec,)))
+            own.append(Candidate(key, "rotation", 0.0, axis=key[:2]))
+    say(f"the information of the capture's {len(own)} segments and of {len(cands)} candidates on "
+        f"{table_source}")
+    info = information([own_chunk] + chunks, effects, noise, config, geometry_of(config), base.centred)
+    all_cands = own + cands
+    names = info.parameters.names
+    units = info.parameters.units
+    typical = info.parameters.typical
+    # --- the goal
+    if reveal:
+        targets = sorted({i for p in reveal for i, n in enumerate(names) if fnmatch.fnmatchcase(n, p)})
+        missing = [p for p in reveal if not any(fnmatch.fnmatchcase(n, p) for n in names)]
+        if missing:
+            raise UserError(f"--reveal: no parameter of this model matches {', '.join(missing)} (its effect "
+                            f"parameters: {', '.join(names[21:]) or 'none: add the effect with --add'})")
+        base_named = [names[i] for i in targets if not math.isfinite(typical[i])]
+        if base_named:
+            raise UserError(f"--reveal: {', '.join(base_named)} belong to the base model, which every capture "
+                            "with rotations determines: name effect parameters (e.g. accel_position_*)")
+        group_a = group_b = np.zeros(0, int)
+        goal = f"reveal {', '.join(names[i] for i in targets)} (1σ at most {fraction:g} x their typical size)"
+    else:
+        ids = [e.id for e in effects]
+        a, b = separate
+        where = {}
+        at = 21
+        for e in effects:
+            where[e.id] = np.arange(at, at + len(e.params))
+            at += len(e.params)
+        for x in (a, b):
+            if x not in where:
+                raise UserError(f"--separate: {x} is not in the model ({', '.join(ids)})")
+        group_a, group_b = where[a], where[b]
+        targets = sorted(set(group_a.tolist()) | set(group_b.tolist()))
+        goal = (f"separate {a} from {b} (every parameter of each with 1σ at most {fraction:g} x its typical "
+                f"size, no correlation between them above {ALIAS_COS})")
+    targets = np.array(targets, int)
+    limit = fraction * typical[targets]
+    scorer = Scorer(info, all_cands, Criterion("worst"), targets)
+    n_own = len(own)
+
+    def badness(F) -> float:
+        """Above 1 while the goal is not met: the worst 1σ over its target, or a correlation
+        between the two effects over ALIAS_COS (as a ratio)."""
+        cov = scorer.covariance_of(F)
+        sig = np.sqrt(np.clip(np.diag(cov)[targets], 0.0, None))
+        worst = float(np.max(sig / limit))
+        if len(group_a):
+            corr = _cross_correlation(cov, group_a, group_b)
+            worst = max(worst, corr / ALIAS_COS)
+        return worst
+
+    secs = np.array([c.seconds for c in all_cands])
+
+    def allowed(chosen, j) -> bool:
+        c = all_cands[j]
+        for i in chosen:
+            o = all_cands[i]
+            if c.slot and o.slot == c.slot:
+                return False
+            if c.kind == "rotation" and o.kind == "rotation" and o.axis[0] == c.axis[0] and o.axis != c.axis:
+                return False
+        return j not in chosen
+
+    pool = range(n_own, len(all_cands))
+    say(f"searching for the fewest segments ({goal})")
+
+    def search(forced=()) -> list:
+        st = State(scorer, list(range(n_own)) + list(forced))
+        added = list(forced)
+        if not forced:          # one candidate alone, the shortest that does it
+            ok = [j for j in pool if allowed(st.chosen, j) and badness(st.information(add=(j,))) <= 1.0]
+            if ok:
+                return [min(ok, key=lambda j: secs[j])]
+        current = badness(st.information())
+        while current > 1.0 and len(added) < MAX_SEGMENTS:
+            best, best_gain, best_v = None, 0.0, current
+            for j in pool:
+                if not allowed(st.chosen, j):
+                    continue
+                v = badness(st.information(add=(j,)))
+                gain = (math.log(current) - math.log(max(v, 1e-300))) / secs[j]
+                if v < current and gain > best_gain:
+                    best, best_gain, best_v = j, gain, v
+            if best is None:
+                break
+            st.add(best)
+            added.append(best)
+            current = best_v
+        if current > 1.0:
+            return added
+        for i in list(reversed(added)):          # fewest: drop what is not needed
+            if len(added) > 1 and badness(st.information(remove=(i,))) <= 1.0:
+                st.remove(i)
+                added.remove(i)
+        for k, i in enumerate(list(added)):      # least time: a shorter one that keeps the goal
+            rest = st.chosen - {i}
+            better = [j for j in pool if secs[j] < secs[i] and allowed(rest, j)
+                      and badness(st.information(remove=(i,), add=(j,))) <= 1.0]
+            if better:
+                j = min(better, key=lambda j: secs[j])
+                st.remove(i)
+                st.add(j)
+                added[k] = j
+        return added
+
+    added = search()
+    before = predict(base, effects, noise, config)
+    for _ in range(CHECK_ROUNDS):
+        if not added:
+            raise UserError(f"{path}: no candidate segment on this table can {goal.split(' (')[0]}")
+        reached = badness(State(scorer, list(range(n_own)) + added).information())
+        entries, specs = _segments_of(added, all_cands, [0] * n_own + list(masks))
+        ext = Scheme(name, "extension designed by station design --from", "docs/design.md", {}, tuple(specs),
+                     centred=base.centred)
+        whole = Scheme(base.name, "", "", {}, base.segments + _renamed(ext.segments, base), centred=base.centred)
+        after = predict(whole, effects, noise, config)
+        blind = [names[i] for i in targets if not after.revealed[i]]
+        if reached <= 1.0 and not blind:
+            break
+        if reached > 1.0:
+            raise UserError(f"{path}: no {MAX_SEGMENTS} segments this table can do {goal.split(' (')[0]} "
+                            f"(the closest: the worst 1σ {reached:.2g} x its target)")
+        notes.append(f"the estimator still called {', '.join(blind)} not revealed with {len(added)} "
+                     "segment(s): one more added")
+        extra = [j for j in pool if allowed(set(range(n_own)) | set(added), j)]
+        st = State(scorer, list(range(n_own)) + added)
+        best = min(extra, key=lambda j: badness(st.information(add=(j,))))
+        added = search(forced=added + [best])
+    else:
+        raise UserError(f"{path}: the estimator does not confirm the proposal for {goal.split(' (')[0]}")
+    plan = compile_scheme(ext, config)
+    cov_after = after.covariance
+    corr_after = corr_before = None
+    if len(group_a):
+        corr_after = _cross_correlation(cov_after, group_a, group_b)
+        corr_before = _cross_correlation(before.covariance, group_a, group_b)
+    tnames = [names[i] for i in targets]
+    ext_entries = _renamed_entries(entries, base)
+    header = [f"{name}: extra segments for the capture {path} designed by `station design --from`",
+              f"goal: {goal}",
+              f"compiled time of the extension: {plan.duration_s:.0f} s on {table_source}",
+              f"noise: the capture's fitted noise: accel {noise.accel_noise_ug:.4g} ug/rtHz, gyro "
+              f"{noise.gyro_noise_dph:.4g} deg/h/rtHz, table angle {noise.table_angle_arcsec:.3g} arcsec",
+              f"record into the same capture: station run --append {path} --scheme THIS_FILE",
+              "predicted 1-sigma (the estimator's fit of the capture's segments, then with these):"]
+    for i in targets:
+        header.append(f"  {names[i]}: {before.sigma[i]:.4g} -> {after.sigma[i]:.4g} {units[i]}"
+                      + ("" if before.revealed[i] else " (not revealed before)"))
+    if corr_after is not None:
+        header.append(f"  largest |correlation| between {separate[0]} and {separate[1]}: "
+                      f"{corr_before:.3f} -> {corr_after:.3f}")
+    if command:
+        header.append(f"made by: {command}")
+    text = scheme_text(name, ext_entries, header, base.centred)
+    return Extension(str(path), goal, tnames,
+                     {names[i]: float(before.sigma[i]) for i in targets},
+                     {names[i]: float(after.sigma[i]) for i in targets},
+                     {names[i]: bool(before.revealed[i]) for i in targets},
+                     {names[i]: bool(after.revealed[i]) for i in targets},
+                     {names[i]: units[i] for i in targets}, ext_entries, text, plan.duration_s,
+                     [_entry_s(table, e) for e in ext_entries], corr_after, corr_before, noise,
+                     notes + list(plan.notes))
+
+
+def _entry_s(table, entry) -> float:
+    """An entry's table time by the time model (candidates.Table): dwell or both directions with
+    their ramps, settling and moves."""
+    if "static" in entry:
+        return float(table.static_s(entry["dwell_s"]))
+    rate = float(entry["rate_dps"])
+    return float(table.rotation_pair_s(rate, max(1, round(rate * entry["rotation_s"] / 360.0))))
+
+
+def _cross_correlation(cov, a, b) -> float:
+    d = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
+    corr = cov / np.outer(d, d)
+    return float(np.max(np.abs(corr[np.ix_(a, b)]))) if len(a) and len(b) else 0.0
+
+
+PREFIX = "x"
+
+
+def _prefix(base) -> str:
+    """A prefix no segment name of the capture starts with (x1_, x2_, ...): appended segments
+    never take a recorded one's name."""
+    names = {s.name for s in base.segments}
+    k = 1
+    while any(n.startswith(f"{PREFIX}{k}_") for n in names):
+        k += 1
+    return f"{PREFIX}{k}_"
+
+
+def _renamed(specs, base) -> tuple:
+    from dataclasses import replace
+
+    p = _prefix(base)
+    return tuple(replace(s, name=p + s.name) for s in specs)
+
+
+def _renamed_entries(entries, base) -> list:
+    p = _prefix(base)
+    out = []
+    for e in entries:
+        e = dict(e)
+        key = "static" if "static" in e else "rotation"
+        e[key] = p + e[key]
+        out.append(e)
+    return out
