@@ -19,6 +19,7 @@ from station.io.importers.recording import Recording
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 MAX_MESSAGES = 20_000_000
+INITIAL_CAPACITY = 1 << 16       # messages the arrays hold before they first grow
 STAMPS = ("header", "bag")
 FORMATS = ("rosbag1", "sqlite3", "mcap")
 
@@ -85,15 +86,19 @@ def read_rosbag(path, *, topic: str | None = None, stamps: str = "header", rate_
         elif topic not in topics:
             raise UserError(f"{path}: no {IMU_TYPE} topic {topic!r} (Imu topics: {', '.join(topics) or 'none'})")
         conns = [c for c in imu if c.topic == topic]
-        count = sum(c.msgcount for c in conns)
-        if count > MAX_MESSAGES:
-            raise UserError(f"{path}: topic {topic}: {count} messages, more than {MAX_MESSAGES}")
-        t_ns = np.empty(count, dtype=np.int64)
-        data = np.empty((count, 6))
+        count = _stated_count(path, topic, conns)
+        # the arrays grow as messages come: the count the bag states (its index, a ROS 2 bag's
+        # metadata.yaml) is bytes from outside, a hint for the first size only
+        t_ns = np.empty(min(count, INITIAL_CAPACITY), dtype=np.int64)
+        data = np.empty((len(t_ns), 6))
         k = 0
         for conn, bag_ns, raw in _guarded(reader.messages(connections=conns), path, topic):
-            if k >= count:
-                raise UserError(f"{path}: topic {topic}: more messages than the bag's index says ({count})")
+            if k >= MAX_MESSAGES:
+                raise UserError(f"{path}: topic {topic}: more than {MAX_MESSAGES} messages")
+            if k >= len(t_ns):
+                grow = max(2 * len(t_ns), 1024)
+                t_ns = np.resize(t_ns, grow)
+                data = np.resize(data, (grow, 6))
             try:
                 msg = reader.deserialize(raw, conn.msgtype)
                 a, w = msg.linear_acceleration, msg.angular_velocity
@@ -105,7 +110,10 @@ def read_rosbag(path, *, topic: str | None = None, stamps: str = "header", rate_
                                 f"{str(e)[:120] or type(e).__name__}") from None
             k += 1
     finally:
-        reader.close()
+        try:
+            reader.close()
+        except Exception:     # noqa: BLE001 - closing a damaged bag: what was read (or refused) stands
+            pass
     t_ns, data = t_ns[:k], data[:k]
     if k and stamps == "header" and np.all(t_ns == t_ns[0]):
         raise UserError(f"{path}: topic {topic}: every header stamp is {t_ns[0]} ns: the driver does not "
@@ -128,6 +136,21 @@ def read_rosbag(path, *, topic: str | None = None, stamps: str = "header", rate_
     return Recording(source=str(path), t=t, accel=data[:, :3], gyro=data[:, 3:], accel_unit="m/s^2",
                      gyro_unit="rad/s", lines=np.arange(1, k + 1), where="message",
                      time_from=time_from, time_option="--rate-hz" if rate_hz is not None else "", info=info)
+
+
+def _stated_count(path, topic, conns) -> int:
+    """The messages of ``conns`` the bag states (its index; a ROS 2 bag's metadata.yaml): a whole
+    number >= 0 each, at most MAX_MESSAGES in all, else the bag is refused naming the field."""
+    total = 0
+    for c in conns:
+        n = c.msgcount
+        if not isinstance(n, int) or isinstance(n, bool) or n < 0:
+            raise UserError(f"{path}: topic {topic}: the bag's message count is {str(n)[:40]!r}, not a whole "
+                            "number >= 0 (a damaged index or metadata.yaml)")
+        total += n
+    if total > MAX_MESSAGES:
+        raise UserError(f"{path}: topic {topic}: {total} messages, more than {MAX_MESSAGES}")
+    return total
 
 
 def _guarded(messages, path, topic):
