@@ -59,8 +59,11 @@ def bags(tmp_path_factory):
     t = np.arange(MESSAGES) / 100.0
     accel = np.tile([0.1, -0.2, 9.8], (MESSAGES, 1))
     gyro = np.tile([0.001, 0.002, -0.003], (MESSAGES, 1))
-    return {fmt: write_imu_bag(d / (f"{fmt}.bag" if fmt == "rosbag1" else fmt), t, accel, gyro, fmt=fmt)
+    bags = {fmt: write_imu_bag(d / (f"{fmt}.bag" if fmt == "rosbag1" else fmt), t, accel, gyro, fmt=fmt)
             for fmt in ("rosbag1", "mcap", "sqlite3")}
+    for how in ("bz2", "lz4"):       # chunks compressed, as rosbag record -j / --lz4 writes them
+        bags[f"rosbag1-{how}"] = write_imu_bag(d / f"{how}.bag", t, accel, gyro, fmt="rosbag1", compression=how)
+    return bags
 
 
 def imports_or_refuses(bag, out):
@@ -97,10 +100,10 @@ def test_the_valid_bags_are_read(bags, tmp_path):
 
 
 @FUZZ
-@given(data=st.data())
-def test_fuzzed_ros1_bag_structure(bags, tmp_path_factory, data):
-    spans = ros1_spans(bags["rosbag1"].read_bytes())
-    assert len(spans) > 50          # parsed into records and fields, not one blob
+@given(data=st.data(), which=st.sampled_from(["rosbag1", "rosbag1", "rosbag1-bz2", "rosbag1-lz4"]))
+def test_fuzzed_ros1_bag_structure(bags, tmp_path_factory, data, which):
+    spans = ros1_spans(bags[which].read_bytes())
+    assert len(spans) > 30          # parsed into records and fields, not one blob
     d = tmp_path_factory.mktemp("r1")
     (d / "in.bag").write_bytes(data.draw(mutated_spans(spans)))
     imports_or_refuses(d / "in.bag", d / "cap")

@@ -172,10 +172,12 @@ def _guarded(messages, path, topic):
 
 
 def write_imu_bag(path, t_s, accel_mps2, gyro_rads, *, fmt: str = "mcap", topic: str = "/imu/data",
-                  frame_id: str = "imu_link", start_ns: int = 1_700_000_000_000_000_000) -> Path:
+                  frame_id: str = "imu_link", start_ns: int = 1_700_000_000_000_000_000,
+                  compression: str | None = None) -> Path:
     """Write samples as sensor_msgs/Imu messages into a new bag (``rosbag1``: a .bag file;
     ``sqlite3``/``mcap``: a ROS 2 bag directory), header stamps and bag times from ``t_s``; no
-    orientation (its covariance[0] = -1, as the message definition asks), covariances 0."""
+    orientation (its covariance[0] = -1, as the message definition asks), covariances 0;
+    ``compression`` ("bz2" or "lz4") compresses a ROS 1 bag's chunks, as ``rosbag record -j``/``--lz4``."""
     from rosbags.typesys.stores.ros2_humble import (builtin_interfaces__msg__Time as Time,
                                                     geometry_msgs__msg__Quaternion as Quaternion,
                                                     geometry_msgs__msg__Vector3 as Vector3,
@@ -203,7 +205,10 @@ def write_imu_bag(path, t_s, accel_mps2, gyro_rads, *, fmt: str = "mcap", topic:
     if fmt == "rosbag1":
         from rosbags.rosbag1 import Writer as Writer1
 
-        with Writer1(path) as writer:
+        writer = Writer1(path)
+        if compression:
+            writer.set_compression(Writer1.CompressionFormat[compression.upper()])
+        with writer:
             conn = writer.add_connection(topic, IMU_TYPE, typestore=store)
             for ns, msg in messages():
                 writer.write(conn, ns, store.serialize_ros1(msg, IMU_TYPE))
