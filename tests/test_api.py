@@ -26,6 +26,8 @@ def test_the_worked_example_runs_as_written(tmp_path, monkeypatch, capsys):
         exec(compile(block, str(DOC), "exec"), scope)
     printed = capsys.readouterr().out
     assert "passes" in printed and "accel_scale_x = " in printed and "refused: " in printed
+    # every number printed with its unit (the Monte Carlo line printed bare numbers: issue 26 goal)
+    assert re.search(r"error std \S+ ppm, Cramér-Rao bound \S+ ppm", printed), printed
     assert (tmp_path / "run1" / "cal.yaml").is_file() and (tmp_path / "run1" / "imucal.json").exists()
 
 

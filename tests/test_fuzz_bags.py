@@ -181,3 +181,23 @@ def test_a_message_count_the_bag_does_not_hold_neither_drops_nor_allocates(bags,
     # 20 M messages x 7 numbers x 8 bytes = 1.1 GB had the stated count been allocated; the
     # first block of the arrays is 65,536 x 56 bytes = 3.7 MB, the reader's own a few MB
     assert peak < 50e6, peak
+
+
+@pytest.mark.parametrize("name", [[], 7, None, "/imu\ndata", "/a\n", "\x1b[31m/imu"])
+def test_a_topic_name_that_is_not_one_line_of_text_is_refused_or_shown_quoted(bags, tmp_path, name):
+    """metadata.yaml's topic name as a list (TypeError: unhashable, the fuzz's find), a number or
+    none: refused naming the bag; a name with a newline or an escape is shown quoted, the message
+    stays one line."""
+    bag = _copy(bags["mcap"], tmp_path / "bag")
+    doc = yaml.safe_load((bag / "metadata.yaml").read_text())
+    doc["rosbag2_bagfile_information"]["topics_with_message_count"][0]["topic_metadata"]["name"] = name
+    (bag / "metadata.yaml").write_text(yaml.safe_dump(doc))
+    try:
+        api.import_rosbag(bag, tmp_path / "cap")
+    except UserError as e:
+        msg = str(e)
+        assert str(bag) in msg and "\n" not in msg and "\x1b" not in msg, msg
+        if not isinstance(name, str):
+            assert "a connection's topic is" in msg, msg
+    else:
+        raise AssertionError("a 40-message bag was imported as a session")
