@@ -201,3 +201,13 @@ def test_a_topic_name_that_is_not_one_line_of_text_is_refused_or_shown_quoted(ba
             assert "a connection's topic is" in msg, msg
     else:
         raise AssertionError("a 40-message bag was imported as a session")
+
+
+@pytest.mark.parametrize("command", ["import", "noise"])
+def test_the_commands_say_one_line_and_exit_2_on_what_the_fuzz_found(bags, tmp_path, capsys, command):
+    """The fuzz calls the library (station.api, the commands' code); the commands themselves on
+    its finds: `station import rosbag` and `station noise BAG` exit 2 with one line naming the bag."""
+    from test_bad_inputs import one_line_exit_2
+    bag = _with_metadata_count(bags, tmp_path, "mcap", "0.0")
+    argv = ["import", "rosbag", bag, "-o", tmp_path / "cap"] if command == "import" else ["noise", bag]
+    one_line_exit_2(argv, capsys, str(bag), "message count")
