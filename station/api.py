@@ -347,17 +347,26 @@ def apply_file(calibration, input, output, *, serial: str | None = None, force: 
 COLUMNS = ("t", "ax", "ay", "az", "gx", "gy", "gz")
 
 
-def apply_frame(calibration, frame, *, plugins=(), effects_dirs=()):
+def apply_frame(calibration, frame, *, plugins=(), effects_dirs=(), config=None):
     """:func:`apply` on a pandas DataFrame with columns t, ax, ay, az, gx, gy, gz (and temp when
-    an effect needs it): a new DataFrame with the same columns, compensated (m/s^2, deg/s)."""
+    an effect needs it): a new DataFrame with the same columns, compensated (m/s^2, deg/s).  A
+    column that is not numbers is a UserError naming it."""
     import pandas as pd
 
     missing = [c for c in COLUMNS if c not in frame.columns]
     if missing:
         raise UserError(f"apply_frame: the frame has no column {', '.join(missing)} (needs {', '.join(COLUMNS)})")
-    temp = frame["temp"].to_numpy(float) if "temp" in frame.columns else None
-    t, f, w = apply(calibration, frame["t"].to_numpy(float), frame[["ax", "ay", "az"]].to_numpy(float),
-                    frame[["gx", "gy", "gz"]].to_numpy(float), temp, plugins=plugins, effects_dirs=effects_dirs)
+
+    def numbers(*names):
+        try:
+            return frame[list(names)].to_numpy(float)
+        except (ValueError, TypeError) as e:
+            bad = next((n for n in names if not pd.api.types.is_numeric_dtype(frame[n])), names[0])
+            raise UserError(f"apply_frame: column {bad!r} is not numbers ({str(e).splitlines()[0][:80]})") from None
+
+    temp = numbers("temp")[:, 0] if "temp" in frame.columns else None
+    t, f, w = apply(calibration, numbers("t")[:, 0], numbers("ax", "ay", "az"), numbers("gx", "gy", "gz"), temp,
+                    plugins=plugins, effects_dirs=effects_dirs, config=config)
     return pd.DataFrame(np.column_stack([t, f, w]), columns=list(COLUMNS), index=frame.index[:len(t)])
 
 

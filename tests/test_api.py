@@ -79,6 +79,14 @@ def test_bad_input_raises_the_clis_message(tmp_path):
         api.export(tmp_path / "cal.yaml", "nope", tmp_path / "x")
     with pytest.raises(api.UserError, match="unknown option"):
         api.import_csv(tmp_path / "log.csv", tmp_path / "imp", colour="red")
+    # a DataFrame with a column of text (a CSV read without its header): ValueError from numpy
+    # escaped; apply_frame takes config= as apply does (it raised TypeError) (issue 26 goal)
+    import pandas as pd         # the dev extra (docs/api.md)
+    frame = pd.DataFrame({c: np.zeros(3) for c in ("t", "ax", "ay", "az", "gx", "gy", "gz")})
+    assert len(api.apply_frame(tmp_path / "cal.yaml", frame, config=None)) == 3
+    frame["gy"] = ["gy", "0.1", "0.2"]
+    with pytest.raises(api.UserError, match="column 'gy' is not numbers"):
+        api.apply_frame(tmp_path / "cal.yaml", frame)
 
 
 class _Called(Exception):
