@@ -116,6 +116,20 @@ def _path(capture) -> Path:
     return Path(getattr(capture, "path", capture))
 
 
+def _whole(name: str, value, least: int) -> None:
+    """An argument that must be a whole number >= ``least`` (the CLI's option checks it so)."""
+    if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < least:
+        raise UserError(f"{name}: a whole number >= {least}, not {value!r}")
+
+
+def _floats(name: str, value) -> np.ndarray:
+    """An array argument as floats; text or objects that are not numbers a UserError naming it."""
+    try:
+        return np.asarray(value, float)
+    except (ValueError, TypeError) as e:
+        raise UserError(f"apply: {name}: not numbers ({str(e).splitlines()[0][:80]})") from None
+
+
 def simulate(scheme: str = "optimal9", output=None, *, seed: int = 1, truth=None, dwell_s: float | None = None,
              rate_dps: float | None = None, rotation_s: float | None = None) -> Path:
     """``station run --sim`` without the estimate: record ``scheme`` (a built-in name or a YAML
@@ -125,6 +139,7 @@ def simulate(scheme: str = "optimal9", output=None, *, seed: int = 1, truth=None
     from station.io.scheme import load_scheme
     from station.simulate import dryrun
 
+    _whole("seed", seed, 0)            # numpy's SeedSequence takes a whole number from 0 (as --seed)
     overrides = {k: v for k, v in (("dwell_s", dwell_s), ("rate_dps", rate_dps), ("rotation_s", rotation_s))
                  if v is not None}
     plan = load_scheme(scheme, overrides)
@@ -230,11 +245,11 @@ def apply(calibration, t, accel, gyro, temp=None, *, plugins=(), effects_dirs=()
 
     doc = calibration if isinstance(calibration, dict) else read_calfile(Path(calibration))
     where = "calibration" if isinstance(calibration, dict) else str(calibration)
-    t = np.asarray(t, float).reshape(-1)
-    accel, gyro = np.asarray(accel, float), np.asarray(gyro, float)
+    t = _floats("t", t).reshape(-1)
+    accel, gyro = _floats("accel", accel), _floats("gyro", gyro)
     if accel.shape != (len(t), 3) or gyro.shape != (len(t), 3):
         raise UserError(f"apply: accel and gyro must be ({len(t)}, 3) like t, got {accel.shape} and {gyro.shape}")
-    temp = None if temp is None else np.asarray(temp, float).reshape(-1)
+    temp = None if temp is None else _floats("temp", temp).reshape(-1)
     return _compensate(doc, where, None, t, accel, gyro, temp, (plugins, effects_dirs, config), [])
 
 
@@ -653,8 +668,8 @@ def montecarlo(scheme: str = "optimal9", runs: int = 100, *, seed: int = 1000, a
     from station.io.scheme import load_scheme
     from station.simulate import montecarlo as _mc
 
-    if runs < 2:
-        raise UserError("--runs must be at least 2")
+    _whole("runs", runs, 2)
+    _whole("seed", seed, 0)
     effects = tuple(dict.fromkeys(effects or ()))
     if effects:
         from station.model import LIBRARY

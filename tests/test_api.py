@@ -79,6 +79,13 @@ def test_bad_input_raises_the_clis_message(tmp_path):
         api.export(tmp_path / "cal.yaml", "nope", tmp_path / "x")
     with pytest.raises(api.UserError, match="unknown option"):
         api.import_csv(tmp_path / "log.csv", tmp_path / "imp", colour="red")
+    # arguments the CLI's options check, checked by the API too (ValueError/TypeError escaped)
+    with pytest.raises(api.UserError, match="apply: t: not numbers"):
+        api.apply(tmp_path / "cal.yaml", np.array(["a", "b"]), np.zeros((2, 3)), np.zeros((2, 3)))
+    with pytest.raises(api.UserError, match="seed: a whole number >= 0, not -1"):
+        api.simulate("optimal9", tmp_path / "neg", seed=-1)
+    with pytest.raises(api.UserError, match="runs: a whole number >= 2, not '3'"):
+        api.montecarlo("sizeeffect", runs="3")
     # a DataFrame with a column of text (a CSV read without its header): ValueError from numpy
     # escaped; apply_frame takes config= as apply does (it raised TypeError) (issue 26 goal)
     import pandas as pd         # the dev extra (docs/api.md)
