@@ -7,7 +7,9 @@ column (a step back, a repeat, a gap), line ends — up to three at a time, and 
 options drawn as a user gives them (preset, units, time unit or rate, column map, delimiter,
 header).  station.api.import_csv (the command's code) writes a capture or raises UserError:
 one line; never another exception, never a hang (an alarm of HANG_S)."""
+import json
 import os
+from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, event, given, settings
@@ -16,8 +18,10 @@ from hypothesis import strategies as st
 from station import api
 from station.core.errors import UserError
 from test_fuzz_bags import time_limit
+from test_fuzz_configs import mutated, paths
+from test_fuzz_readers import values
 
-EXAMPLES = int(os.environ.get("STATION_FUZZ_EXAMPLES", "8"))
+EXAMPLES = int(os.environ.get("STATION_FUZZ_EXAMPLES", "6"))
 FUZZ = settings(max_examples=EXAMPLES, deadline=None, suppress_health_check=list(HealthCheck))
 # the import of this 4,259-line log takes ~70 ms of CPU; 20 s is a hang on any machine
 HANG_S = 20.0
@@ -110,3 +114,56 @@ def test_the_valid_log_imports(log_lines, tmp_path):
     (tmp_path / "log.csv").write_text("\n".join(log_lines) + "\n")
     report = api.import_csv(tmp_path / "log.csv", tmp_path / "cap")
     assert (tmp_path / "cap" / "manifest.yaml").is_file() and report.lines
+
+
+# ------------------------------------------------------------------ imucal sessions (station import imucal)
+
+IMUCAL = Path(__file__).parent / "data" / "imucal"
+
+
+@pytest.fixture(scope="module")
+def imucal_session():
+    """imucal's own Ferraris example session (tests/data/imucal, MIT): its CSV lines and its
+    sections list (JSON)."""
+    return ((IMUCAL / "example_ferraris_session.csv").read_text().splitlines(),
+            json.loads((IMUCAL / "example_ferraris_session_list.json").read_text()))
+
+
+section_values = st.one_of(values, st.sampled_from([-1, 0, 9511, 9512, 10 ** 9, 2 ** 63, 1.5, "540", None]))
+
+imucal_options = st.fixed_dictionaries({"rate_hz": st.sampled_from([102.4] * 6 + [0.5, 1e7, 0.0, float("inf"), -1.0])},
+                                       optional={"turn_deg": st.sampled_from([360.0, -360.0, 0.0, 1e300, float("nan")]),
+                                                 "fmt": st.sampled_from(["auto", "auto", "session", "annotated", "x"]),
+                                                 "accel_unit": st.sampled_from(["m/s^2", "g", "x"]),
+                                                 "gyro_unit": st.sampled_from(["deg/s", "rad/s", "x"])})
+
+
+@FUZZ
+@given(data=st.data(), opts=imucal_options, csv_too=st.booleans())
+def test_fuzzed_imucal_session(imucal_session, tmp_path_factory, data, opts, csv_too):
+    """The sections list's fields (every section's start and end, the names; set to another type,
+    an absurd index, or deleted, up to three) and/or the session CSV's structure, with the
+    options drawn (mostly the session's own rate)."""
+    lines, sections = imucal_session
+    d = tmp_path_factory.mktemp("imucal")
+    changes = data.draw(st.lists(st.tuples(st.sampled_from(paths(sections)), section_values, st.booleans()),
+                                 min_size=0, max_size=3))
+    csv_too = csv_too or not changes
+    (d / "sections.json").write_text(json.dumps(mutated(sections, changes)))
+    text = data.draw(mutated_log(lines)) if csv_too else "\n".join(lines) + "\n"
+    (d / "session.csv").write_text(text, errors="surrogateescape")
+    try:
+        with time_limit(HANG_S):
+            api.import_imucal(d / "session.csv", d / "cap", sections_path=d / "sections.json", **opts)
+        event("imported")
+    except UserError as e:
+        assert "\n" not in str(e).strip() and len(str(e)) < 2000, str(e)
+        event("refused")
+
+
+def test_the_valid_imucal_session_imports(imucal_session, tmp_path):
+    lines, sections = imucal_session
+    (tmp_path / "s.json").write_text(json.dumps(sections))
+    (tmp_path / "s.csv").write_text("\n".join(lines) + "\n")
+    assert (api.import_imucal(tmp_path / "s.csv", tmp_path / "cap", rate_hz=102.4, sections_path=tmp_path / "s.json")
+            / "manifest.yaml").is_file()
