@@ -454,7 +454,7 @@ def export(calibration, to: str, output=None, *, noise=None, force: bool = False
     path = Path(calibration)
     source = source_from_document(read_calfile(path), path)
     if noise is not None:
-        source.noise = read_noise_block(noise)
+        source.noise, source.noise_origin = read_noise_block(noise), str(noise)
         other = noise_serial(noise)
         if other and source.imu_serial and other != source.imu_serial and not force:
             raise UserError(f"{noise}: noise of IMU {other!r}, calibration of IMU {source.imu_serial!r} "
