@@ -26,7 +26,7 @@ from station.core.errors import UserError
 from test_fuzz_configs import mutated, paths
 from test_fuzz_readers import values
 
-EXAMPLES = int(os.environ.get("STATION_FUZZ_EXAMPLES", "15"))
+EXAMPLES = int(os.environ.get("STATION_FUZZ_EXAMPLES", "10"))
 FUZZ = settings(max_examples=EXAMPLES, deadline=None, suppress_health_check=list(HealthCheck))
 # a bag of 40 messages reads in ~10 ms; a reader that loops or waits on a damaged length takes
 # forever: 20 s is far beyond any honest read even on a machine loaded 10x, and is a hang

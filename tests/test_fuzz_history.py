@@ -24,7 +24,7 @@ from station.io.history import Store
 
 from test_fuzz_readers import VALID_CAL
 
-EXAMPLES = int(os.environ.get("STATION_FUZZ_EXAMPLES", "15"))
+EXAMPLES = int(os.environ.get("STATION_FUZZ_EXAMPLES", "10"))
 FUZZ = settings(max_examples=EXAMPLES, deadline=None, suppress_health_check=list(HealthCheck))
 # reading a three-row index takes ~5 ms; an index that makes a reader loop or wait takes forever:
 # 20 s is far beyond an honest read on a machine loaded 10x, and is a hang

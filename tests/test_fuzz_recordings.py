@@ -21,7 +21,7 @@ from test_fuzz_bags import time_limit
 from test_fuzz_configs import mutated, paths
 from test_fuzz_readers import values
 
-EXAMPLES = int(os.environ.get("STATION_FUZZ_EXAMPLES", "6"))
+EXAMPLES = int(os.environ.get("STATION_FUZZ_EXAMPLES", "5"))
 FUZZ = settings(max_examples=EXAMPLES, deadline=None, suppress_health_check=list(HealthCheck))
 # the import of this 4,259-line log takes ~70 ms of CPU; 20 s is a hang on any machine
 HANG_S = 20.0
