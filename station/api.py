@@ -119,6 +119,20 @@ def _path(capture) -> Path:
     return Path(getattr(capture, "path", capture))
 
 
+def _whole(name: str, value, least: int) -> None:
+    """An argument that must be a whole number >= ``least`` (the CLI's option checks it so)."""
+    if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < least:
+        raise UserError(f"{name}: a whole number >= {least}, not {value!r}")
+
+
+def _floats(name: str, value) -> np.ndarray:
+    """An array argument as floats; text or objects that are not numbers a UserError naming it."""
+    try:
+        return np.asarray(value, float)
+    except (ValueError, TypeError) as e:
+        raise UserError(f"apply: {name}: not numbers ({str(e).splitlines()[0][:80]})") from None
+
+
 def simulate(scheme: str = "optimal9", output=None, *, seed: int = 1, truth=None, dwell_s: float | None = None,
              rate_dps: float | None = None, rotation_s: float | None = None) -> Path:
     """``station run --sim`` without the estimate: record ``scheme`` (a built-in name or a YAML
@@ -128,6 +142,7 @@ def simulate(scheme: str = "optimal9", output=None, *, seed: int = 1, truth=None
     from station.io.scheme import load_scheme
     from station.simulate import dryrun
 
+    _whole("seed", seed, 0)            # numpy's SeedSequence takes a whole number from 0 (as --seed)
     overrides = {k: v for k, v in (("dwell_s", dwell_s), ("rate_dps", rate_dps), ("rotation_s", rotation_s))
                  if v is not None}
     plan = load_scheme(scheme, overrides)
@@ -239,11 +254,11 @@ def apply(calibration, t, accel, gyro, temp=None, *, plugins=(), effects_dirs=()
 
     doc = calibration if isinstance(calibration, dict) else read_calfile(Path(calibration))
     where = "calibration" if isinstance(calibration, dict) else str(calibration)
-    t = np.asarray(t, float).reshape(-1)
-    accel, gyro = np.asarray(accel, float), np.asarray(gyro, float)
+    t = _floats("t", t).reshape(-1)
+    accel, gyro = _floats("accel", accel), _floats("gyro", gyro)
     if accel.shape != (len(t), 3) or gyro.shape != (len(t), 3):
         raise UserError(f"apply: accel and gyro must be ({len(t)}, 3) like t, got {accel.shape} and {gyro.shape}")
-    temp = None if temp is None else np.asarray(temp, float).reshape(-1)
+    temp = None if temp is None else _floats("temp", temp).reshape(-1)
     return _compensate(doc, where, None, t, accel, gyro, temp, (plugins, effects_dirs, config), [])
 
 
@@ -356,17 +371,26 @@ def apply_file(calibration, input, output, *, serial: str | None = None, force: 
 COLUMNS = ("t", "ax", "ay", "az", "gx", "gy", "gz")
 
 
-def apply_frame(calibration, frame, *, plugins=(), effects_dirs=()):
+def apply_frame(calibration, frame, *, plugins=(), effects_dirs=(), config=None):
     """:func:`apply` on a pandas DataFrame with columns t, ax, ay, az, gx, gy, gz (and temp when
-    an effect needs it): a new DataFrame with the same columns, compensated (m/s^2, deg/s)."""
+    an effect needs it): a new DataFrame with the same columns, compensated (m/s^2, deg/s).  A
+    column that is not numbers is a UserError naming it."""
     import pandas as pd
 
     missing = [c for c in COLUMNS if c not in frame.columns]
     if missing:
         raise UserError(f"apply_frame: the frame has no column {', '.join(missing)} (needs {', '.join(COLUMNS)})")
-    temp = frame["temp"].to_numpy(float) if "temp" in frame.columns else None
-    t, f, w = apply(calibration, frame["t"].to_numpy(float), frame[["ax", "ay", "az"]].to_numpy(float),
-                    frame[["gx", "gy", "gz"]].to_numpy(float), temp, plugins=plugins, effects_dirs=effects_dirs)
+
+    def numbers(*names):
+        try:
+            return frame[list(names)].to_numpy(float)
+        except (ValueError, TypeError) as e:
+            bad = next((n for n in names if not pd.api.types.is_numeric_dtype(frame[n])), names[0])
+            raise UserError(f"apply_frame: column {bad!r} is not numbers ({str(e).splitlines()[0][:80]})") from None
+
+    temp = numbers("temp")[:, 0] if "temp" in frame.columns else None
+    t, f, w = apply(calibration, numbers("t")[:, 0], numbers("ax", "ay", "az"), numbers("gx", "gy", "gz"), temp,
+                    plugins=plugins, effects_dirs=effects_dirs, config=config)
     return pd.DataFrame(np.column_stack([t, f, w]), columns=list(COLUMNS), index=frame.index[:len(t)])
 
 
@@ -439,7 +463,7 @@ def export(calibration, to: str, output=None, *, noise=None, force: bool = False
     path = Path(calibration)
     source = source_from_document(read_calfile(path), path)
     if noise is not None:
-        source.noise = read_noise_block(noise)
+        source.noise, source.noise_origin = read_noise_block(noise), str(noise)
         other = noise_serial(noise)
         if other and source.imu_serial and other != source.imu_serial and not force:
             raise UserError(f"{noise}: noise of IMU {other!r}, calibration of IMU {source.imu_serial!r} "
@@ -656,8 +680,8 @@ def montecarlo(scheme: str = "optimal9", runs: int = 100, *, seed: int = 1000, a
     from station.io.scheme import load_scheme
     from station.simulate import montecarlo as _mc
 
-    if runs < 2:
-        raise UserError("--runs must be at least 2")
+    _whole("runs", runs, 2)
+    _whole("seed", seed, 0)
     effects = tuple(dict.fromkeys(effects or ()))
     if effects:
         from station.model import LIBRARY

@@ -26,6 +26,8 @@ def test_the_worked_example_runs_as_written(tmp_path, monkeypatch, capsys):
         exec(compile(block, str(DOC), "exec"), scope)
     printed = capsys.readouterr().out
     assert "passes" in printed and "accel_scale_x = " in printed and "refused: " in printed
+    # every number printed with its unit (the Monte Carlo line printed bare numbers: issue 26 goal)
+    assert re.search(r"error std \S+ ppm, Cramér-Rao bound \S+ ppm", printed), printed
     assert (tmp_path / "run1" / "cal.yaml").is_file() and (tmp_path / "run1" / "imucal.json").exists()
 
 
@@ -77,6 +79,21 @@ def test_bad_input_raises_the_clis_message(tmp_path):
         api.export(tmp_path / "cal.yaml", "nope", tmp_path / "x")
     with pytest.raises(api.UserError, match="unknown option"):
         api.import_csv(tmp_path / "log.csv", tmp_path / "imp", colour="red")
+    # arguments the CLI's options check, checked by the API too (ValueError/TypeError escaped)
+    with pytest.raises(api.UserError, match="apply: t: not numbers"):
+        api.apply(tmp_path / "cal.yaml", np.array(["a", "b"]), np.zeros((2, 3)), np.zeros((2, 3)))
+    with pytest.raises(api.UserError, match="seed: a whole number >= 0, not -1"):
+        api.simulate("optimal9", tmp_path / "neg", seed=-1)
+    with pytest.raises(api.UserError, match="runs: a whole number >= 2, not '3'"):
+        api.montecarlo("sizeeffect", runs="3")
+    # a DataFrame with a column of text (a CSV read without its header): ValueError from numpy
+    # escaped; apply_frame takes config= as apply does (it raised TypeError) (issue 26 goal)
+    import pandas as pd         # the dev extra (docs/api.md)
+    frame = pd.DataFrame({c: np.zeros(3) for c in ("t", "ax", "ay", "az", "gx", "gy", "gz")})
+    assert len(api.apply_frame(tmp_path / "cal.yaml", frame, config=None)) == 3
+    frame["gy"] = ["gy", "0.1", "0.2"]
+    with pytest.raises(api.UserError, match="column 'gy' is not numbers"):
+        api.apply_frame(tmp_path / "cal.yaml", frame)
 
 
 class _Called(Exception):

@@ -9,7 +9,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from station.core.errors import UserError
-from station.io.calfile import read_calfile
+from station.io.calfile import GYRO_PASS_THROUGH, read_calfile
 from station.io.capture import read_capture, read_segment_csv
 
 EXAMPLES = int(os.environ.get("STATION_FUZZ_EXAMPLES", "100"))      # per test; more for docs/reliability.md
@@ -109,8 +109,10 @@ VALID_CAL = {
     "format": "station-calibration/1", "imu": {"accel_unit": "m/s^2", "gyro_unit": "deg/s"},
     "effects": ["base_triads"], "verdict": {"result": "passes"},
     "parameters": {"accel_scale_x": {"value": 1.0, "unit": "1", "sigma": 1e-5}},
+    # an accelerometer-only file (its gyro passed through): a gyro matrix without the gyro
+    # parameters is refused (issue 26), and the fuzz must start from a file that reads
     "compensation": {"accel_matrix": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "accel_bias": [0, 0, 0],
-                     "gyro_matrix": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "gyro_bias": [0, 0, 0]},
+                     "gyro": GYRO_PASS_THROUGH},
     "provenance": {"imu_serial": "A1"},
 }
 
@@ -135,3 +137,13 @@ def test_fuzzed_calibration_bytes(tmp_path_factory, data):
     p = tmp_path_factory.mktemp("kb") / "cal.yaml"
     p.write_bytes(b"format: station-calibration/1\n" + data)
     _accepts_or_refuses(lambda: read_calfile(p))
+
+
+def test_the_valid_documents_are_read(tmp_path):
+    """The fuzz starts from a manifest and a calibration file that read (else it would test
+    refusals only)."""
+    (tmp_path / "pos01.csv").write_text(CSV)
+    (tmp_path / "manifest.yaml").write_text(yaml.safe_dump(VALID_MANIFEST))
+    assert _accepts_or_refuses(lambda: read_capture(tmp_path)) == "read"
+    (tmp_path / "cal.yaml").write_text(yaml.safe_dump(VALID_CAL))
+    assert _accepts_or_refuses(lambda: read_calfile(tmp_path / "cal.yaml")) == "read"

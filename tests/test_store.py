@@ -17,10 +17,14 @@ from pathlib import Path
 import pytest
 import yaml
 
+from hypothesis import given
+
+import test_fuzz_history as fuzz_history
 from pg_server import pg  # noqa: F401  (the module's server)
 from station.cli import main
 
 DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)     # libyaml: the test files written fast
+from station.core.errors import UserError
 from station.io.history import Store
 
 WRITER = Path(__file__).with_name("_store_writer.py")
@@ -187,3 +191,49 @@ def test_a_foreign_or_unreachable_database_is_one_line(pg, tmp_path, capsys):
         assert main(["history", "--store", store]) == 2
         err = capsys.readouterr().err
         assert words in err and "Traceback" not in err and err.count("\n") == 1, err
+
+
+# ------------------------------------------------------------------ fuzz of a database's rows (issue 26)
+
+_FUZZ_DB = {}
+
+
+@fuzz_history.FUZZ
+@given(changes=fuzz_history.index_changes())
+def test_fuzzed_postgres_rows(pg, tmp_path_factory, changes):  # noqa: F811
+    """tests/test_fuzz_history.py's mutations of the index (rows, types, schema, version) in a
+    PostgreSQL store: every reader answers or says one line naming the database."""
+    import psycopg
+    if "url" not in _FUZZ_DB:
+        _FUZZ_DB["url"] = pg.create_database("fuzz_rows")
+        _FUZZ_DB["cals"] = fuzz_history.calibrations(tmp_path_factory.mktemp("fuzzcals"))
+    url, cals = _FUZZ_DB["url"], _FUZZ_DB["cals"]
+    mp = pytest.MonkeyPatch()
+    mp.setenv("STATION_HISTORY_DIR", str(tmp_path_factory.mktemp("pgfiles")))    # this example's files
+    try:
+        with psycopg.connect(url, autocommit=True) as conn:       # a new store each example
+            conn.execute("DROP SCHEMA public CASCADE")
+            conn.execute("CREATE SCHEMA public")
+        from station import api
+        api.history(store=url, add=cals[:3])
+        with psycopg.connect(url, autocommit=True) as conn:
+            for sql, params in changes:
+                try:
+                    conn.execute(sql.replace("?", "%s"), params)
+                except (psycopg.Error, ValueError, OverflowError):
+                    pass         # refused by PostgreSQL or its driver: not a row the store can meet
+        fuzz_history.read_everything(url, cals[3])
+    finally:
+        mp.undo()
+
+
+def test_a_schema_version_of_another_type_in_the_database_is_one_line(pg, tmp_path):  # noqa: F811
+    """A PostgreSQL store whose schema_version holds text: TypeError comparing it (the fuzz's find)."""
+    import psycopg
+    url = pg.create_database("text_version")
+    with psycopg.connect(url, autocommit=True) as conn:
+        conn.execute("CREATE TABLE schema_version (version TEXT NOT NULL)")
+        conn.execute("INSERT INTO schema_version VALUES ('4')")
+    with pytest.raises(UserError, match="schema version is '4', not a whole number"):
+        with Store(url, files=tmp_path) as st:
+            st.serials()

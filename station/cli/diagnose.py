@@ -107,18 +107,27 @@ def _in_a_file(args, final, steps) -> int:
         status = 0 if est.usable else 3
     else:
         status = 0
-    given = " ".join(f"--plugin {p}" for p in getattr(args, "plugin", [])) + "".join(
-        f" --effects-dir {d}" for d in getattr(args, "effects_dir", []))
-    adds = " ".join([f"--add {e}" for e in effects]
-                    + ([f"--add {plugin}:DiscoveredTerms"] if plugin else
-                       ["--add FOUND.py:DiscoveredTerms (write it with --emit-effect FOUND.py)"] if discovered else []))
-    cal_name = args.output or "CAL.yaml"
-    err.print(f"to estimate it: station estimate {args.capture} {given} {adds} -o {cal_name}".replace("  ", " "),
-              markup=False, soft_wrap=True)
-    apply_plugin = f" --plugin {plugin}" if plugin else ""
-    err.print(f"to apply it: station apply {cal_name} RAW.csv -o COMPENSATED.csv{apply_plugin} {given}".rstrip(),
-              markup=False, soft_wrap=True)
+    for line in commands(args, effects, plugin, discovered):
+        err.print(line, markup=False, soft_wrap=True)
     return status
+
+
+def commands(args, effects, plugin, discovered) -> list[str]:
+    """The two lines that reproduce and apply the diagnosis's calibration: `station estimate` with
+    the effects kept (and the discovered terms' plugin) and `station apply`, each a command the
+    shell runs as printed (every argument quoted as the shell needs: a path with a space)."""
+    import shlex
+
+    given = [x for p in getattr(args, "plugin", None) or [] for x in ("--plugin", str(p))] + \
+            [x for d in getattr(args, "effects_dir", None) or [] for x in ("--effects-dir", str(d))]
+    adds = [x for e in effects for x in ("--add", str(e))] + (["--add", f"{plugin}:DiscoveredTerms"] if plugin else [])
+    cal_name = str(args.output or "CAL.yaml")
+    estimate = shlex.join(["station", "estimate", str(args.capture), *given, *adds, "-o", cal_name])
+    if discovered and not plugin:
+        estimate += " --add FOUND.py:DiscoveredTerms (write it with --emit-effect FOUND.py)"
+    apply = shlex.join(["station", "apply", cal_name, "RAW.csv", "-o", "COMPENSATED.csv",
+                        *(["--plugin", str(plugin)] if plugin else []), *given])
+    return [f"to estimate it: {estimate}", f"to apply it: {apply}"]
 
 
 def _diagnose(args, job) -> tuple:

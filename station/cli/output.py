@@ -40,6 +40,9 @@ def print_parameters(rows, title: str) -> None:
 
 
 def print_errors(cal, truth) -> None:
+    """The estimate against the simulated truth, shown as ``station show`` shows a calibration: a
+    scale factor's value dimensionless (unit 1) with 9 decimals, its error and 1σ in ppm beside
+    their numbers; a parameter without a 1σ "—", explained under the table."""
     from rich.table import Table
 
     from station.model.calibration import parameter_errors
@@ -48,16 +51,25 @@ def print_errors(cal, truth) -> None:
     for col in ("parameter", "estimate", "truth", "error", "± 1σ", "unit"):
         table.add_column(col, justify="left" if col in ("parameter", "unit") else "right")
     dropped = set(cal.fit.get("not_determined", []))
+    blank = []
     for name, value, true, error, unit in parameter_errors(cal, truth):
         if name in dropped:
             continue
-        fmt = "{:.9f}" if "_scale_" in name else "{:.4f}"
+        is_scale = "_scale_" in name
+        fmt = "{:.9f}" if is_scale else "{:.4f}"
         sigma = cal.sigma.get(name)
-        if sigma is not None and "_scale_" in name:
-            sigma = sigma / value * 1e6
-        table.add_row(name, fmt.format(value), fmt.format(true), f"{error:+.4f}",
-                      "" if sigma is None else f"{sigma:.4f}", unit)
+        if sigma is None or not math.isfinite(sigma):
+            spread = "—"
+            blank.append(name)
+        elif is_scale:
+            spread = f"{sigma / value * 1e6:.4f} ppm"
+        else:
+            spread = f"{sigma:.4f}"
+        table.add_row(name, fmt.format(value), fmt.format(true), f"{error:+.4f}" + (" ppm" if is_scale else ""),
+                      spread, "1" if is_scale else unit)
     out.print(table)
+    if blank:
+        out.print(f"—: no 1σ for {', '.join(blank)} (the method gives none for it)", markup=False, soft_wrap=True)
 
 
 def print_verdict(verdict: dict) -> None:

@@ -33,7 +33,7 @@ from pathlib import Path
 
 from station.core.errors import UserError
 
-from station.io.store_backend import is_database_url, one_line as _one_line
+from station.io.store_backend import is_database_url, one_line as _one_line, shown
 from station.io.store_sqlite import INDEX, SqliteIndex
 
 ENV = "STATION_HISTORY_DIR"
@@ -208,7 +208,7 @@ class Store:
 
         for id_, file in tx.rows("SELECT id, file FROM calibrations"):
             try:
-                doc = read_calfile(self._inside(str(file), f"{self.where}: row #{id_}"))
+                doc = read_calfile(self._inside(str(file), f"{self.where}: row #{shown(id_)}"))
             except (UserError, OSError):
                 continue
             prov = doc.get("provenance") if isinstance(doc.get("provenance"), dict) else {}
@@ -270,7 +270,7 @@ class Store:
 
     def _entry(self, row) -> Entry:
         id_, serial, date, scheme, method, verdict, file, source, digest, imu_model, lot = row
-        where = f"{self.where}: row #{id_}"
+        where = f"{self.where}: row #{shown(id_)}"
         if not isinstance(id_, int) or not all(isinstance(v, str) for v in (serial, date, verdict, file, digest)) \
                 or not all(v is None or isinstance(v, str) for v in (scheme, method, source, imu_model, lot)):
             raise UserError(f"{where}: not station's calibration history (a field of another type)")
@@ -331,7 +331,7 @@ class Store:
             if name is not None:
                 if not isinstance(value, (int, float)) or not (sigma is None or isinstance(sigma, (int, float))) \
                         or not isinstance(unit, str):
-                    raise UserError(f"{self.where}: row #{head[0]}: parameter {name!r}: not station's numbers")
+                    raise UserError(f"{self.where}: row #{shown(head[0])}: parameter {shown(name)}: not station's numbers")
                 out[head[0]].numbers[str(name)] = Number(str(name), float(value),
                                                          None if sigma is None else float(sigma), unit)
         return list(out.values())

@@ -3,6 +3,7 @@ files for recordings that have no calibration (a ``noise`` scheme run).  docs/ca
 describes the block."""
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import yaml
@@ -13,6 +14,24 @@ from station.io.calfile import write_new_file
 
 FORMAT = "station-noise/1"
 CALIBRATION_FORMAT = "station-calibration/1"
+# Kalibr's four numbers and the rate (the block ``kalibr``): a density and the rate are > 0, a
+# random walk >= 0 (0: none seen); each a finite number, else another tool is handed nonsense
+KALIBR_POSITIVE = ("accelerometer_noise_density", "gyroscope_noise_density", "update_rate")
+KALIBR_NON_NEGATIVE = ("accelerometer_random_walk", "gyroscope_random_walk")
+
+
+def check_kalibr(kal: dict, where) -> None:
+    """UserError naming ``where`` and the field when a number of the ``kalibr`` block that is
+    present is not a finite number in its range (a density or rate <= 0, a random walk < 0)."""
+    for key in KALIBR_POSITIVE + KALIBR_NON_NEGATIVE:
+        if key not in kal:
+            continue
+        v = kal[key]
+        positive = key in KALIBR_POSITIVE
+        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                and (v > 0 if positive else v >= 0)):
+            raise UserError(f"{where}: field 'noise.kalibr.{key}': {str(v)[:40]!r} is not a finite number "
+                            f"{'> 0' if positive else '>= 0'}")
 
 
 def _load(path: Path) -> dict:
@@ -71,4 +90,5 @@ def read_noise_block(path) -> dict:
     kal = block.get("kalibr")
     if not isinstance(kal, dict):
         raise UserError(f"{path}: field 'noise.kalibr': missing or not a mapping")
+    check_kalibr(kal, path)
     return block

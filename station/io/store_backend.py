@@ -26,6 +26,12 @@ def one_line(e: Exception) -> str:
     return " ".join(str(e).split()) or type(e).__name__
 
 
+def shown(value) -> str:
+    """A value read from an index, for a one-line message (its repr, at most 40 characters)."""
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
 class Tx:
     """An open transaction: ``run`` a statement, ``rows`` of a query, ``many`` rows inserted."""
 

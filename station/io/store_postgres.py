@@ -17,7 +17,7 @@ from contextlib import contextmanager
 
 from station.core.errors import UserError
 from station.io import store_schema as schema
-from station.io.store_backend import Tx, one_line, redacted
+from station.io.store_backend import Tx, one_line, redacted, shown
 
 MIGRATION_LOCK = 0x5354_4154_494F_4E          # "STATION": the advisory lock key of migrations
 CONNECT_TIMEOUT_S = 10
@@ -67,6 +67,9 @@ class PostgresIndex:
             "SELECT column_name FROM information_schema.columns WHERE table_schema = current_schema() "
             "AND table_name = 'calibrations' ORDER BY ordinal_position"))
         version = rows[0][0] if rows else schema.legacy_version(columns)
+        if rows and (not isinstance(version, int) or isinstance(version, bool)):
+            raise UserError(f"{self.where}: not station's calibration store: its schema version is "
+                            f"{shown(version)}, not a whole number")
         if rows and version > schema.LATEST:
             raise UserError(f"{self.where}: a calibration store of schema version {version}, newer than this "
                             f"station knows ({schema.LATEST}): update station")

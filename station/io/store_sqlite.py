@@ -15,7 +15,7 @@ from pathlib import Path
 
 from station.core.errors import UserError
 from station.io import store_schema as schema
-from station.io.store_backend import Tx, one_line
+from station.io.store_backend import Tx, one_line, shown
 
 INDEX = "index.sqlite"
 # a writer waits this long for the others: 8 processes filing at once each hold the lock for a
@@ -55,8 +55,10 @@ class SqliteIndex:
         if rows:
             version = rows[0][0]
             if not isinstance(version, int) or version > schema.LATEST:
-                raise UserError(f"{self.path}: a calibration history of schema version {version!r}, newer than "
-                                f"this station knows ({schema.LATEST}): update station")
+                raise UserError(f"{self.path}: a calibration history of schema version {shown(version)}, "
+                                + ("newer than this station knows" if isinstance(version, int) else "not a version")
+                                + f" ({schema.LATEST}): " + ("update station" if isinstance(version, int)
+                                                             else "not station's calibration history"))
             if schema.legacy_version(columns) is None:
                 raise UserError(self._foreign(columns))
             return version

@@ -29,10 +29,14 @@ ROSTOPIC = "/imu0"
 
 
 def write(source: ExportSource, path) -> list[Path]:
+    from station.io.noise_file import check_kalibr
+
     kal = (source.noise or {}).get("kalibr")
-    if not isinstance(kal, dict) or any(not isinstance(kal.get(k), (int, float)) for k in (*KEYS, "update_rate")):
-        raise UserError(f"{source.origin}: no noise figures: Kalibr's imu.yaml needs the noise "
+    missing = not isinstance(kal, dict) or any(k not in kal for k in (*KEYS, "update_rate"))
+    if missing:
+        raise UserError(f"{source.noise_origin or source.origin}: no noise figures: Kalibr's imu.yaml needs the noise "
                         "densities and random walks; run `station noise CAPTURE --cal CAL.yaml` first")
+    check_kalibr(kal, source.noise_origin or source.origin)
     lines = [f"# {safe_comment(line)}" for line in [*source.header_lines(), "convention: " + CONVENTION]]
     for key in KEYS:
         note = " (upper bound)" if key.endswith("random_walk") and kal.get(f"{key}_is_upper_bound") else ""

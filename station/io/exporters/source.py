@@ -36,6 +36,7 @@ class ExportSource:
     effects: list = field(default_factory=list)
     parameters: dict = field(default_factory=dict)
     noise: dict | None = None       # the calibration file's noise block (station noise)
+    noise_origin: str | None = None  # the noise file the block came from (export --noise), else the calibration
 
     @property
     def dropped_effects(self) -> list[str]:
@@ -112,6 +113,10 @@ def source_from_document(doc: dict, origin) -> ExportSource:
     text = lambda v: v if isinstance(v, str) else None  # noqa: E731 - untrusted: strings only
     effects = [e for e in doc.get("effects") or [] if isinstance(e, str)]
     noise = doc.get("noise") if isinstance(doc.get("noise"), dict) else None
+    if noise is not None and isinstance(noise.get("kalibr"), dict):
+        from station.io.noise_file import check_kalibr
+
+        check_kalibr(noise["kalibr"], origin)
     return ExportSource(accel_matrix, accel_bias, gyro_matrix, gyro_bias, accel_unit, gyro_unit,
                         origin, text(prov.get("imu_model")), text(prov.get("imu_serial")),
                         text(prov.get("date_utc")), effects, doc.get("parameters") or {}, noise)
