@@ -324,6 +324,30 @@ def test_faults_files_per_imu(tmp_path):
         assert field in str(e.value)
 
 
+def test_sim_serve_takes_a_faults_file_per_imu(tmp_path, monkeypatch):
+    """``station sim serve --imus 2 --faults A --faults B``: the twins get B's IMU faults for IMU 2
+    (the server's construction intercepted: the command would serve until Ctrl-C)."""
+    from station.cli import app, devices
+
+    none = tmp_path / "none.yaml"
+    none.write_text("version: 1\n")
+    mute = tmp_path / "mute.yaml"
+    mute.write_text("version: 1\nimu: {mute: {at_s: 0}}\n")
+    seen = {}
+
+    class Built(Exception):
+        pass
+
+    def server(truth, args, axes, faults, csv_format, imu_faults=()):
+        seen["imu_faults"] = imu_faults
+        raise Built()
+    monkeypatch.setattr(devices, "_bench_server", server)
+    with pytest.raises(Built):
+        app.main(["sim", "serve", "--imus", "2", "--faults", str(none), "--faults", str(mute)])
+    assert [f.muted(0.0) for f in seen["imu_faults"]] == [False, True]
+    assert app.main(["sim", "serve", "--imus", "3", "--faults", str(none), "--faults", str(mute)]) == 2
+
+
 # ------------------------------------------------------------------ the pieces, without devices
 
 def test_imus_configuration_round_trips_and_bad_entries_name_their_field(tmp_path):
