@@ -145,13 +145,42 @@ def run(directory: Path, n_single: int, workers: int, phases=PHASES) -> dict:
     return results
 
 
+def _tasks_cpu(state: Path) -> float:
+    """CPU time the tasks themselves took in the workers (each Outcome's cpu_s: the worker
+    process's CPU from the task's start to its end), from the batch's state file."""
+    total = 0.0
+    for line in state.read_text().splitlines():
+        total += json.loads(line).get("cpu_s", 0.0)
+    return total
+
+
+def _breakdown(r: dict, tasks_cpu: float, startup: dict | None, n: int) -> dict:
+    """Where the CPU beyond the tasks' own went: the cluster's start-up and shutdown (a batch of
+    one capture, less its task), and the rest per task (scheduler, client, nannies, transfer)."""
+    r["tasks_cpu_s"] = tasks_cpu
+    r["tasks_cpu_per_capture_s"] = tasks_cpu / n
+    if startup is not None:
+        r["startup_cpu_s"] = startup["cpu_s"] - startup["tasks_cpu_s"]
+        r["per_task_overhead_cpu_s"] = (r["cpu_s"] - tasks_cpu - r["startup_cpu_s"]) / n
+    return r
+
+
 def _local(directory, captures, out, workers, env) -> dict:
-    """A local cluster, started and stopped by the command."""
+    """A local cluster, started and stopped by the command; and the same on one capture (what
+    starting and stopping the cluster costs)."""
+    one = out / "one"
+    one.mkdir(parents=True, exist_ok=True)
+    (one / captures[0].name).symlink_to(captures[0].resolve())
+    wall1, cpu1, _ = _batch(["estimate", one, "-o", out / "local-one", "--workers", workers, "--restart",
+                             "--no-history"], env)
+    startup = {"wall_s": wall1, "cpu_s": cpu1, "tasks_cpu_s": _tasks_cpu(out / "local-one" / ".station-batch-estimate.jsonl")}
+    print(json.dumps({"local_one_capture": startup}), flush=True)
     load_before = load()
     wall, cpu, _ = _batch(["estimate", directory, "-o", out / "local", "--workers", workers, "--restart",
                            "--no-history"], env)
     r = {"wall_s": wall, "cpu_s": cpu, "rate_per_s": len(captures) / wall,
          "cpu_per_capture_s": cpu / len(captures), "load_before": load_before, "load_after": load()}
+    _breakdown(r, _tasks_cpu(out / "local" / ".station-batch-estimate.jsonl"), startup, len(captures))
     print(json.dumps({"local": r}), flush=True)
     return r
 
@@ -181,6 +210,7 @@ def _scheduler(directory, captures, out, workers, env) -> dict:
         r = {"wall_s": wall, "cpu_s": cpu + cluster_cpu, "command_cpu_s": cpu, "cluster_cpu_s": cluster_cpu,
              "rate_per_s": len(captures) / wall, "cpu_per_capture_s": (cpu + cluster_cpu) / len(captures),
              "load_before": load_before, "load_after": load()}
+        _breakdown(r, _tasks_cpu(out / "scheduler" / ".station-batch-estimate.jsonl"), None, len(captures))
         print(json.dumps({"scheduler": r}), flush=True)
     finally:
         for p in reversed(procs):

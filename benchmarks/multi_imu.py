@@ -59,8 +59,12 @@ def one_run(n: int, args, work: Path, index: int) -> dict:
     server, table, imus = serve(n, args.speed, args.seed)
     try:
         config = work / f"station-{n}-{index}.yaml"
-        ports = "\n".join(f"  - {{port: {p}}}" for p in imus)
-        config.write_text(f"version: 1\nimus:\n{ports}\ntable:\n  port: {table}\n  axes: 3\n  limits: {LIMITS}\n"
+        # replies waited for up to TIMEOUT_S (a real device's 1 s by default): on a machine at a load
+        # of 20-30 on 2 cores the twins' process was once not run for over 1 s and the table's
+        # reply came late (a 4-IMU run stopped with exit status 2 on 27 Nov 2026, 15:10 UTC)
+        ports = "\n".join(f"  - {{port: {p}, serial: {{timeout_s: {args.timeout_s}}}}}" for p in imus)
+        config.write_text(f"version: 1\nimus:\n{ports}\ntable:\n  port: {table}\n"
+                          f"  serial: {{timeout_s: {args.timeout_s}}}\n  axes: 3\n  limits: {LIMITS}\n"
                           "run:\n  operator: false\n  settle_s: 2\n")
         out = work / f"run-{n}-{index}"
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -107,6 +111,8 @@ def one_run(n: int, args, work: Path, index: int) -> dict:
         except Exception:      # noqa: BLE001 - a run that failed: said below
             verdicts.append("none")
     lost_notes = sum("frames lost" in line for line in lines) + err.count("frames lost")
+    if proc.returncode not in (0, 3):
+        print(f"  run of {n} IMU(s) ended with {proc.returncode}: {err.strip()[-600:]}", flush=True)
     return {"n": n, "status": proc.returncode, "record_s": recorded[0] or float("nan"), "total_s": total,
             "run_cpu_s": run_cpu, "serve_cpu_s": serve_cpu, "gaps": gaps, "lost_notes": lost_notes,
             "verdicts": verdicts, "bundles": len(verdicts)}
@@ -120,6 +126,7 @@ def main() -> None:
     p.add_argument("--dwell-s", type=float, default=10.0)
     p.add_argument("--rate-dps", type=float, default=30.0, help="rotation rate (one revolution each way)")
     p.add_argument("--seed", type=int, default=7)
+    p.add_argument("--timeout-s", type=float, default=1.0, help="the devices' reply timeout (station.yaml serial.timeout_s)")
     args = p.parse_args()
     os.environ["PYTHONPATH"] = str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")
     print(f"optimal9 (dwell {args.dwell_s:g} s, 1 revolution at {args.rate_dps:g} deg/s per rotation) against the twins at "

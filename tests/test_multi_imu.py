@@ -1,19 +1,26 @@
 """Several IMUs in one run (issue 29), end to end over real pseudo-terminals: one table twin and
-three or two IMU twins (``BenchServer(imus=N)``, as ``station sim serve --imus N``: each its own
-truth, noise seed and serial number), ``station run`` with station.yaml ``imus:``.
+three IMU twins (``BenchServer(imus=N)``, as ``station sim serve --imus N``: each its own truth,
+noise seed and serial number), ``station run`` with station.yaml ``imus:``.  Two runs, each
+checked for several properties (a ``station run`` and its resume cost a process start-up, the
+twins' frames and the fits: the file's time is theirs):
 
-- every IMU's bundle estimates and passes, each against its own twin's truth, the table moving
-  once for all (the same table angles in every bundle), no frame lost;
-- a run killed (SIGKILL) mid-way, then ``--resume``: every IMU complete, what was complete before
-  kept byte for byte;
-- one IMU's line hung up mid-run: the others complete and estimate, the run says which IMU was
-  lost (exit status 4), its segment being recorded is marked; plugged in again, ``--resume``
-  records only its missing segments and it estimates too.
+- three IMUs, one mute from power-up (the twins' per-IMU faults: no reply to its start-up) and one
+  whose line hangs up mid-run: the run says both, marks the first's bundle and the second's
+  segment being recorded, the third completes, estimates and passes against its own truth, exit
+  status 4; the line plugged in again and the sensor speaking, ``--resume`` records only what
+  each lacks (the complete IMU's bundle untouched): all three estimate and pass against their own
+  truths, at the same table angles, no frame lost;
+- two IMUs and a third whose port does not exist, killed (SIGKILL) mid-way, then ``--resume``: the
+  two complete with what was complete before kept byte for byte; the third lost at the start of
+  both (exit status 4).
 
-Errors are judged against the 1-sigma the estimator reports (z = error / sigma): with 21
-parameters per IMU, max |z| < 4.5 fails by chance with probability ~1e-4 per IMU (two-sided
-normal tail 6.8e-6 x 21 parameters) and the rms of z exceeds 1.6 with probability < 1e-3
-(chi-square with 21 degrees of freedom above 21 x 1.6^2 = 53.8).
+The scheme is a small one written here (six attitudes, three +/- rotations about the case axes,
+2 s each: every parameter of the model determined, as with optimal9, with larger sigmas which the
+z-scores take into account), at 50 frames/s.  Errors are judged against the 1-sigma the estimator
+reports (z = error / sigma): with 21 parameters per IMU, max |z| < 4.5 fails by chance with
+probability ~1e-4 per IMU (two-sided normal tail 6.8e-6 x 21 parameters) and the rms of z
+exceeds 1.6 with probability < 1e-3 (chi-square with 21 degrees of freedom above 21 x 1.6^2 =
+53.8).
 """
 import hashlib
 import os
@@ -28,6 +35,7 @@ import pytest
 import yaml
 
 from sim_devices.truth import default_truth
+from sim_devices.twins.faults import ImuFaults
 from sim_devices.twins.serve import BenchOptions, BenchServer
 from station.io.calfile import read_calfile
 from station.io.capture import read_capture
@@ -35,32 +43,50 @@ from station.simulate import dryrun
 
 pytestmark = pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs SIGKILL and pseudo-terminals")
 
-SPEED = 200.0
+SPEED = 400.0
 SEED = 29
-# optimal9 shortened: 4 s per attitude, one revolution at 90 deg/s per rotation: 183 s of device
-# time, under 1 s at --speed 200 (every parameter determined: the same as in full, with larger
-# sigmas, which the z-scores below take into account)
-SHORT = ["--scheme", "optimal9", "--dwell-s", "4", "--rate-dps", "90", "--rotation-s", "4"]
+RATE_HZ = 50
+TINY = """\
+name: tiny12
+title: six attitudes and three +/- rotations about the case axes (tests/test_multi_imu.py)
+defaults: {dwell_s: 2.0, rate_dps: 180.0, rotation_s: 2.0}
+segments:
+  - {static: pos01, up_body: [1, 0, 0]}
+  - {static: pos02, up_body: [-1, 0, 0]}
+  - {static: pos03, up_body: [0, 1, 0]}
+  - {static: pos04, up_body: [0, -1, 0]}
+  - {static: pos05, up_body: [0, 0, 1]}
+  - {static: pos06, up_body: [0, 0, -1]}
+  - {rotation: rotx, axis_body: [1, 0, 0]}
+  - {rotation: roty, axis_body: [0, 1, 0]}
+  - {rotation: rotz, axis_body: [0, 0, 1]}
+"""
+SEGMENTS = 12                 # six statics, three rotations each way
 Z_MAX, Z_RMS = 4.5, 1.6
 LIMITS = "[{max_rate_dps: 300, max_accel_dps2: 300, move_rate_dps: 90, move_accel_dps2: 180, rate_accel_dps2: 150}]"
 
 
-def config_text(bench, n) -> str:
-    # replies waited for 10 s, not a real sensor's 1 s: the twins stream at 200 times a sensor's
+def config_text(bench, n, missing: int = 0, mute: int | None = None) -> str:
+    # replies waited for 10 s, not a real sensor's 1 s: the twins stream at 400 times a sensor's
     # rate from this process, and on a loaded machine a reply at the start of a resume came later
-    # than 1 s among those frames ("no reply to $VNASY,0 within 1 s": once in CI, once in 4 loaded runs)
-    imus = "\n".join(f"  - {{port: {line.port.path}, serial: {{timeout_s: 10}}}}" for line in bench.lines[:n])
+    # than 1 s among those frames ("no reply to $VNASY,0 within 1 s": once in CI, once in 4 loaded
+    # runs); the IMU ``mute`` (which never replies) for a real sensor's 1 s
+    entries = [f"  - {{port: {line.port.path}, rate_hz: {RATE_HZ}, serial: {{timeout_s: {1 if k == mute else 10}}}}}"
+               for k, line in enumerate(bench.lines[:n])]
+    entries += [f"  - {{port: /nonexistent/imu{k}, name: gone{k}, rate_hz: {RATE_HZ}}}" for k in range(missing)]
+    imus = "\n".join(entries)
     return f"""\
 version: 1
 imus:
 {imus}
 table:
   port: {bench.table_path}
+  serial: {{timeout_s: 10}}       # as the IMUs': a resume at a load of 32 on 2 cores waited 1 s once
   axes: 3
   limits: {LIMITS}
 run:
   operator: false
-  settle_s: 2
+  settle_s: 1
   # the twins' clock waits for a reader that falls behind (no frame is lost); should one be lost
   # all the same, a recording that lost more than this is recorded again
   max_missing_fraction: 0.02
@@ -69,8 +95,9 @@ run:
 """
 
 
-def make_bench(n):
-    return BenchServer(default_truth(SEED), BenchOptions(speed=SPEED, seed=SEED, axes=3, lossless=True, imus=n))
+def make_bench(n, imu_faults=()):
+    return BenchServer(default_truth(SEED), BenchOptions(speed=SPEED, seed=SEED, axes=3, lossless=True, imus=n,
+                                                         imu_faults=tuple(imu_faults)))
 
 
 def station(config: Path, *args):
@@ -87,10 +114,14 @@ def finish(proc, timeout=240):
             proc.communicate()
 
 
-def write_config(tmp_path, bench, n) -> Path:
+def write_config(tmp_path, bench, n, missing: int = 0, mute: int | None = None) -> Path:
     path = tmp_path / "station.yaml"
-    path.write_text(config_text(bench, n))
+    path.write_text(config_text(bench, n, missing, mute))
+    (tmp_path / "tiny.yaml").write_text(TINY)
     return path
+
+
+SCHEME = ["--scheme", "tiny.yaml"]
 
 
 def z_scores(bundle: Path, truth) -> np.ndarray:
@@ -129,7 +160,7 @@ def recording_after(bundle: Path, after: int):
     done = sum(s.get("status") == "complete" for s in segs)
     if done >= after and segs and segs[-1].get("status") == "incomplete" and "note" not in segs[-1]:
         csv = bundle / segs[-1]["file"]
-        if csv.exists() and csv.stat().st_size > 2000:
+        if csv.exists() and csv.stat().st_size > 1000:
             return segs[-1]["name"]
     return None
 
@@ -138,15 +169,17 @@ def sha(path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
-def check_estimates(run: Path, bench, n):
-    """Every IMU's bundle: named by its serial number, complete, estimated, passes, within its
-    own twin's truth; every bundle recorded at the same table angles."""
+def check_estimates(run: Path, bench, n, folders: dict | None = None):
+    """Every IMU's bundle: named by its serial number (or as ``folders`` says: an IMU lost at the
+    start of the run, which said no serial then), complete, estimated, passes, within its own
+    twin's truth, no frame lost; every bundle recorded at the same table angles."""
     angles = None
-    for line in bench.lines[:n]:
-        bundle = run / line.serial_number
-        capture = read_capture(bundle, load_data=False)
+    for k, line in enumerate(bench.lines[:n]):
+        bundle = run / (folders or {}).get(k, line.serial_number)
+        capture = read_capture(bundle)
         assert str(capture.imu.serial) == line.serial_number
-        assert len(capture.complete()) == 21
+        assert len(capture.complete()) == SEGMENTS
+        assert sum(seg.data.gaps for seg in capture.complete()) == 0          # lossless twins: none lost
         assert verdict(bundle) == "passes", bundle
         z = z_scores(bundle, line.truth)
         print(f"IMU {line.serial_number}: max |z| {np.abs(z).max():.2f}, rms z {np.sqrt(np.mean(z**2)):.2f}")
@@ -156,31 +189,76 @@ def check_estimates(run: Path, bench, n):
         assert table == angles           # the table moved once for all: the same angles for every IMU
 
 
-def test_three_imus_in_one_run_each_estimates_and_passes_against_its_own_truth(tmp_path):
-    with make_bench(3) as bench:
-        config = write_config(tmp_path, bench, 3)
-        out, err = finish(station(config, *SHORT, "--out", "run"))
+def test_an_imu_mute_at_start_and_one_lost_mid_run_do_not_stop_the_third_and_resume_records_both(tmp_path):
+    # IMU 3 mute from power-up: the twins' per-IMU faults (station sim serve --imus 3 --faults
+    # none.yaml --faults none.yaml --faults mute.yaml gives the same)
+    with make_bench(3, imu_faults=[ImuFaults(), ImuFaults(), ImuFaults(mute_at_s=0.0)]) as bench:
+        config = write_config(tmp_path, bench, 3, mute=2)
+        run = tmp_path / "run"
+        serial1, serial2, serial3 = (line.serial_number for line in bench.lines)
+        first, second, third = run / serial1, run / serial2, run / "imu3"     # IMU 3 said no serial
+        proc = station(config, *SCHEME, "--out", "run")
+        try:
+            # the world slowed down to 2 x wall time once IMU 2 has three segments: its fourth (2 s
+            # of device time) lasts 1 s of wall time, for the unplug to land in it
+            wait_for(lambda: sum(s.get("status") == "complete" for s in segments(second)) >= 3,
+                     "IMU 2 with three segments")
+            bench.clock.set_speed(2.0)
+            wait_for(lambda: recording_after(second, 3), "IMU 2 recording its fourth segment")
+            bench.unplug_imu(1)                                       # its USB adapter pulled out
+            bench.clock.set_speed(SPEED)
+            out, err = finish(proc)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+        assert proc.returncode == 4, err[-3000:]
+        assert "Traceback" not in err
+        # IMU 3 did not answer its start-up: said, its bundle marked, nothing recorded
+        assert f"IMU imu3 (imus[2], {bench.lines[2].port.path}) lost at the start (DeviceTimeout" in err
+        mark = yaml.safe_load((third / "manifest.yaml").read_text())
+        assert "DeviceTimeout" in mark["lost_at_start"]["why"] and mark["segments"] == []
+        assert "IMU imu3: lost: at the start" in err
+        # IMU 2 lost mid-run: said while running, the segment it was recording marked
+        assert f"IMU {serial2} lost" in out
+        assert f"IMU {serial2}: lost" in err and f"--resume {Path('run')}" in err
+        segs = segments(second)
+        marked = [s for s in segs if s.get("status") == "incomplete" and "IMU lost" in s.get("note", "")]
+        assert len(marked) == 1
+        done_before = {s["name"]: s["sha256"] for s in segs if s.get("status") == "complete"}
+        assert 3 <= len(done_before) < SEGMENTS
+        # IMU 1 went on to the end and estimated; the others did not
+        assert len(read_capture(first, load_data=False).complete()) == SEGMENTS
+        assert verdict(first) == "passes"
+        assert not (second / "calibration.yaml").exists() and not (third / "calibration.yaml").exists()
+        kept1 = {s["name"]: s["sha256"] for s in segments(first)}
+
+        # IMU 2 plugged in again (a new device path), IMU 3 speaking: resume records what each lacks
+        bench.replug_imu(1)
+        bench._between_steps(lambda: setattr(bench.lines[2].faults, "mute_at_s", None))
+        config.write_text(config_text(bench, 3))
+        moves_before = len(bench.table.axes[0].motion.history)
+        resume = station(config, "--resume", "run")
+        out, err = finish(resume)
+    assert resume.returncode == 0, err[-3000:]
     assert "Traceback" not in err
-    run = tmp_path / "run"
-    check_estimates(run, bench, 3)
-    assert len({line.serial_number for line in bench.lines}) == 3
-    assert "frames lost" not in out + err                                  # lossless twins: none lost
-    for line in bench.lines:
-        capture = read_capture(run / line.serial_number)
-        assert sum(seg.data.gaps for seg in capture.complete()) == 0
+    assert len(bench.table.axes[0].motion.history) > moves_before       # the table moved for IMUs 2, 3
+    check_estimates(run, bench, 3, folders={2: "imu3"})       # its bundle now says its serial
+    capture = read_capture(second, load_data=False)
+    assert {s.name: s.extra["sha256"] for s in capture.complete() if s.name in done_before} == done_before
+    assert {s["name"]: s["sha256"] for s in segments(first)} == kept1    # IMU 1 had everything: untouched
+    assert "lost_at_start" not in yaml.safe_load((third / "manifest.yaml").read_text())
     truths = [line.truth.accel.bias for line in bench.lines]
     assert not np.allclose(truths[0], truths[1])                           # different sensors
-    assert "IMU 0100000029:" in out and "IMU 0100000031:" in out          # the live lines, one per IMU
 
 
-def test_a_run_killed_mid_way_resumes_every_imu(tmp_path):
+def test_a_run_killed_mid_way_resumes_every_imu_and_a_missing_port_is_lost_at_both_starts(tmp_path):
     with make_bench(2) as bench:
-        config = write_config(tmp_path, bench, 2)
+        config = write_config(tmp_path, bench, 2, missing=1)
         run = tmp_path / "run"
-        proc = station(config, *SHORT, "--out", "run")
+        proc = station(config, *SCHEME, "--out", "run")
         try:
             first = run / bench.lines[0].serial_number
-            recording = wait_for(lambda: recording_after(first, 8), "IMU 1 recording its ninth segment")
+            recording = wait_for(lambda: recording_after(first, 5), "IMU 1 recording its sixth segment")
             assert proc.poll() is None
             os.kill(proc.pid, signal.SIGKILL)                 # no finally, no flush: the guardian stops the table
             proc.wait(10)
@@ -191,11 +269,15 @@ def test_a_run_killed_mid_way_resumes_every_imu(tmp_path):
         for line in bench.lines:
             bundle = run / line.serial_number
             kept = {s["name"]: s["sha256"] for s in segments(bundle) if s.get("status") == "complete"}
-            assert 7 <= len(kept) < 21, (line.serial_number, len(kept))
+            assert 4 <= len(kept) < SEGMENTS, (line.serial_number, len(kept))
             before[line.serial_number] = kept
+        assert "DeviceError" in yaml.safe_load((run / "gone0" / "manifest.yaml").read_text())["lost_at_start"]["why"]
         resume = station(config, "--resume", "run")
         out, err = finish(resume)
     assert "Traceback" not in err
+    assert resume.returncode == 4, err[-3000:]                # the missing port: lost again, the others done
+    assert "IMU gone0 (imus[2], /nonexistent/imu0) lost at the start (DeviceError" in err
+    assert "IMU gone0: lost: at the start" in err
     try:
         check_estimates(run, bench, 2)
     except AssertionError as e:      # what the resume said, with the failure
@@ -208,53 +290,62 @@ def test_a_run_killed_mid_way_resumes_every_imu(tmp_path):
     print(f"killed while recording {recording}; resumed: {out.count('--- IMU')} IMUs estimated")
 
 
-def test_an_imu_whose_line_dies_is_lost_the_others_complete_and_resume_redoes_its_segments(tmp_path):
-    with make_bench(2) as bench:
-        config = write_config(tmp_path, bench, 2)
-        run = tmp_path / "run"
-        proc = station(config, *SHORT, "--out", "run")
-        second = run / bench.lines[1].serial_number
-        try:
-            # the world slowed down to 2 x wall time once IMU 2 has five segments: its sixth (4 s
-            # of device time) lasts 2 s of wall time, for the unplug to land in it
-            wait_for(lambda: sum(s.get("status") == "complete" for s in segments(second)) >= 5,
-                     "IMU 2 with five segments")
-            bench.clock.set_speed(2.0)
-            wait_for(lambda: recording_after(second, 5), "IMU 2 recording its sixth segment")
-            bench.unplug_imu(1)                                       # its USB adapter pulled out
-            bench.clock.set_speed(SPEED)
-            out, err = finish(proc)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-        assert proc.returncode == 4, err[-3000:]
-        assert "Traceback" not in err
-        serial1, serial2 = (line.serial_number for line in bench.lines)
-        assert f"IMU {serial2} lost" in out                               # said while running
-        assert f"IMU {serial2}: lost" in err and f"--resume {Path('run')}" in err
-        # the other IMU went on to the end and estimated
-        assert len(read_capture(run / serial1, load_data=False).complete()) == 21
-        assert verdict(run / serial1) == "passes"
-        assert not (second / "calibration.yaml").exists()
-        segs = segments(second)
-        marked = [s for s in segs if s.get("status") == "incomplete" and "IMU lost" in s.get("note", "")]
-        assert len(marked) == 1                                         # the segment it was recording
-        done_before = {s["name"]: s["sha256"] for s in segs if s.get("status") == "complete"}
-        assert 5 <= len(done_before) < 21
-        first = {s["name"]: s["sha256"] for s in segments(run / serial1)}
+def test_a_run_whose_every_imu_fails_to_start_stops_saying_each(tmp_path):
+    with make_bench(1) as bench:
+        config = tmp_path / "station.yaml"
+        config.write_text(config_text(bench, 0, missing=2))
+        (tmp_path / "tiny.yaml").write_text(TINY)
+        proc = subprocess.run([sys.executable, "-m", "station.cli", "run", "--config", str(config), *SCHEME,
+                               "--out", "run"], capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "no IMU started" in lines[0], proc.stderr
+    assert "imus[0] (/nonexistent/imu0)" in lines[0] and "imus[1] (/nonexistent/imu1)" in lines[0]
+    assert not (tmp_path / "run").exists()
 
-        # plugged in again (a new device path): resume records only what IMU 2 lacks
-        bench.replug_imu(1)
-        config.write_text(config_text(bench, 2))
-        moves_before = len(bench.table.axes[0].motion.history)
-        out, err = finish(station(config, "--resume", "run"))
-        assert "Traceback" not in err
-        check_estimates(run, bench, 2)
-        capture = read_capture(second, load_data=False)
-        assert {s.name: s.extra["sha256"] for s in capture.complete() if s.name in done_before} == done_before
-        assert len(bench.table.axes[0].motion.history) > moves_before     # the table moved for IMU 2
-        # IMU 1 had everything: nothing of its bundle was recorded again
-        assert {s["name"]: s["sha256"] for s in segments(run / serial1)} == first
+
+def test_faults_files_per_imu(tmp_path):
+    from sim_devices.twins.faults import load_faults_per_imu
+    from station.core.errors import UserError
+
+    table = tmp_path / "table.yaml"
+    table.write_text("version: 1\ntable: {stall: {at_s: 5}}\nimu: {drop: {probability: 0.1}}\n")
+    mute = tmp_path / "mute.yaml"
+    mute.write_text("version: 1\nimu: {mute: {at_s: 3, duration_s: 2}}\n")
+    faults, per_imu = load_faults_per_imu([table, mute], 2)
+    assert faults.table.stall_at_s == 5 and per_imu[0].drop_probability == 0.1
+    m = per_imu[1]
+    assert (m.muted(2.9), m.muted(3.0), m.muted(4.9), m.muted(5.0)) == (False, True, True, False)
+    one, none = load_faults_per_imu([table], 3)                      # once: the table's and the first IMU's
+    assert one.imu.drop_probability == 0.1 and none == ()
+    for paths, field in (([mute, table], "table"), ([table, mute, mute], "--faults")):
+        with pytest.raises(UserError) as e:
+            load_faults_per_imu(paths, 2)
+        assert field in str(e.value)
+
+
+def test_sim_serve_takes_a_faults_file_per_imu(tmp_path, monkeypatch):
+    """``station sim serve --imus 2 --faults A --faults B``: the twins get B's IMU faults for IMU 2
+    (the server's construction intercepted: the command would serve until Ctrl-C)."""
+    from station.cli import app, devices
+
+    none = tmp_path / "none.yaml"
+    none.write_text("version: 1\n")
+    mute = tmp_path / "mute.yaml"
+    mute.write_text("version: 1\nimu: {mute: {at_s: 0}}\n")
+    seen = {}
+
+    class Built(Exception):
+        pass
+
+    def server(truth, args, axes, faults, csv_format, imu_faults=()):
+        seen["imu_faults"] = imu_faults
+        raise Built()
+    monkeypatch.setattr(devices, "_bench_server", server)
+    with pytest.raises(Built):
+        app.main(["sim", "serve", "--imus", "2", "--faults", str(none), "--faults", str(mute)])
+    assert [f.muted(0.0) for f in seen["imu_faults"]] == [False, True]
+    assert app.main(["sim", "serve", "--imus", "3", "--faults", str(none), "--faults", str(mute)]) == 2
 
 
 # ------------------------------------------------------------------ the pieces, without devices
@@ -270,19 +361,19 @@ def test_imus_configuration_round_trips_and_bad_entries_name_their_field(tmp_pat
     single = parse_config({"imu": {"port": "/dev/a"}}, "station.yaml")       # the one-IMU form unchanged
     assert single.imu_list == (single.imu,) and "imus" not in single.to_dict()
     assert "name" not in single.to_dict()["imu"]
+    from station.core.errors import UserError
+
     for doc, field in (({"imus": []}, "'imus'"),
                        ({"imus": [{"port": "/dev/a"}, {"port": "/dev/a"}]}, "'imus[1].port'"),
                        ({"imu": {"port": "/dev/a"}, "imus": [{"port": "/dev/b"}]}, "'imus'"),
                        ({"imus": [{"port": "/dev/a", "name": "../up"}]}, "'imus[0].name'"),
                        ({"imus": [{"port": "/dev/a", "mounting": ["+x", "+x", "+z"]}]}, "'imus[0].mounting'"),
                        ({"imus": [{"port": "/dev/a", "baud": 9600}]}, "'imus[0].baud'")):
-        path = tmp_path / "bad.yaml"
-        path.write_text(yaml.safe_dump({"version": 1, **doc}))
-        proc = subprocess.run([sys.executable, "-m", "station.cli", "run", "--config", str(path), "--table-port",
-                               "/dev/null"], capture_output=True, text=True, timeout=60)
-        assert proc.returncode == 2, proc.stderr
-        lines = proc.stderr.strip().splitlines()
-        assert len(lines) == 1 and field in lines[0] and "Traceback" not in proc.stderr, proc.stderr
+        with pytest.raises(UserError) as e:
+            parse_config({"version": 1, **doc}, "bad.yaml")
+        # one line: the command prints a UserError as one line with exit status 2 (through the
+        # command in test_a_run_whose_every_imu_fails_to_start_stops_saying_each)
+        assert field in str(e.value) and "\n" not in str(e.value)
 
 
 def test_an_imu_mounted_otherwise_records_the_same_platform_directions_in_its_own_axes():
@@ -323,12 +414,14 @@ def test_the_live_display_shows_a_line_per_imu():
     assert imu_lines({"f_mps2": 9.8}) == []
 
 
-def test_a_dry_run_of_several_imus_simulates_each_as_its_own_sensor(tmp_path):
+def test_a_dry_run_of_several_imus_simulates_each_as_its_own_sensor(tmp_path, monkeypatch):
     config = tmp_path / "station.yaml"
     config.write_text("version: 1\nimus:\n  - {name: left}\n  - {}\n")
-    proc = subprocess.run([sys.executable, "-m", "station.cli", "run", "--sim", "--config", str(config), "--seed", "5",
-                           *SHORT, "--out", "run"], capture_output=True, text=True, cwd=tmp_path, timeout=240)
-    assert proc.returncode == 0, proc.stderr[-3000:]
+    (tmp_path / "tiny.yaml").write_text(TINY)
+    from station.cli.app import main
+
+    monkeypatch.chdir(tmp_path)              # in this process: no start-up of its own (the runs above have theirs)
+    assert main(["run", "--sim", "--config", str(config), "--seed", "5", *SCHEME, "--out", "run"]) == 0
     truths = {}
     for folder, seed in (("left", 5), ("sim-6", 6)):
         bundle = tmp_path / "run" / folder

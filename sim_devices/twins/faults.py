@@ -10,6 +10,9 @@ started; unknown keys and bad values raise UserError naming the file and the fie
       drop: {probability: 0.01}               # per frame: not sent
       stall: {at_s: 20.0, duration_s: 5.0}    # no frames (duration_s omitted: for ever)
       disconnect: {at_s: 30.0}                # the pseudo-terminal hangs up
+      mute: {at_s: 0.0, duration_s: 60.0}     # commands unanswered, no frames (a sensor without
+                                              #   power behind a live adapter; duration_s omitted:
+                                              #   for ever); at_s 0: no reply to its start-up
     table:
       interlock_trip: {axis: 1, at_s: 10.0}   # interlock opens, fault latched, axis brakes
       stuck_axis: {axis: 2, shortfall_deg: 0.5}   # every position move ends short
@@ -39,6 +42,14 @@ class ImuFaults:
     stall_at_s: float | None = None
     stall_duration_s: float | None = None
     disconnect_at_s: float | None = None
+    mute_at_s: float | None = None
+    mute_duration_s: float | None = None
+
+    def muted(self, t: float) -> bool:
+        """Whether the sensor is mute at device time ``t`` (its commands unanswered, no frames)."""
+        if self.mute_at_s is None or t < self.mute_at_s:
+            return False
+        return self.mute_duration_s is None or t < self.mute_at_s + self.mute_duration_s
 
     @property
     def active(self) -> bool:
@@ -108,7 +119,7 @@ def faults_from_dict(data, source: str = "<faults>", n_axes: int = 3) -> Faults:
     if top.get("version", 1) != 1:
         c.fail("version", f"unsupported version {top['version']!r} (expected 1)")
     out = Faults()
-    imu = c.mapping(top.get("imu"), "imu", {"garbage", "corrupt", "drop", "stall", "disconnect"})
+    imu = c.mapping(top.get("imu"), "imu", {"garbage", "corrupt", "drop", "stall", "disconnect", "mute"})
     f = out.imu
     if "garbage" in imu:
         d = c.mapping(imu["garbage"], "imu.garbage", {"every_s", "bytes"})
@@ -128,6 +139,10 @@ def faults_from_dict(data, source: str = "<faults>", n_axes: int = 3) -> Faults:
     if "disconnect" in imu:
         d = c.mapping(imu["disconnect"], "imu.disconnect", {"at_s"})
         f.disconnect_at_s = c.number(d, "at_s", "imu.disconnect", lo=0.0)
+    if "mute" in imu:
+        d = c.mapping(imu["mute"], "imu.mute", {"at_s", "duration_s"})
+        f.mute_at_s = c.number(d, "at_s", "imu.mute", lo=0.0, required=False, default=0.0)
+        f.mute_duration_s = c.number(d, "duration_s", "imu.mute", lo=0.0, required=False)
 
     table = c.mapping(top.get("table"), "table", {"interlock_trip", "stuck_axis", "stall", "disconnect"})
     t = out.table
@@ -157,6 +172,24 @@ def load_faults(path, n_axes: int = 3) -> Faults:
         raise UserError(f"{path}: cannot read faults file: {e}") from None
     data = yaml_text.load_text(text, path)
     return faults_from_dict(data, str(path), n_axes)
+
+
+def load_faults_per_imu(paths, n_imus: int, n_axes: int = 3) -> tuple[Faults, tuple]:
+    """``sim serve --imus N --faults F ...``: one file (the table's faults and the first IMU's,
+    as with one IMU), or N files, file k for IMU k (its ``imu:``; the table's from the first
+    file: a ``table:`` in another is refused, naming it).  Returns (faults, per-IMU faults)."""
+    paths = list(paths or ())
+    if not paths:
+        return Faults(), ()
+    if len(paths) not in (1, n_imus):
+        raise UserError(f"--faults: give it once (the table and the first IMU) or once per IMU ({n_imus}), "
+                        f"got {len(paths)}")
+    loaded = [load_faults(p, n_axes) for p in paths]
+    for k, (path, f) in enumerate(zip(paths, loaded)):
+        if k and f.table != type(f.table)():
+            raise UserError(f"{path}: field 'table': the table's faults belong in the first --faults file "
+                            f"({paths[0]}); this one is IMU {k + 1}'s")
+    return loaded[0], tuple(f.imu for f in loaded) if len(loaded) > 1 else ()
 
 
 # ------------------------------------------------------------------------------ the stream

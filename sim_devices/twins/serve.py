@@ -62,6 +62,8 @@ class BenchOptions:
                                   #   VN-100 leaves the factory) or "binary" (station's binary output on)
     record: bool = False          # keep the times of the frames sent intact (tests)
     imus: int = 1                 # IMU twins on the table, each on its own pseudo-terminal
+    imu_faults: tuple = ()        # per IMU (ImuFaults, IMU k the k-th): its stream faults; empty:
+                                  #   the first IMU has faults.imu, the others none
     lossless: bool = True         # the twins' clock is throttled to the IMU's reader: while a reader
                                   #   that is reading has not taken the frames its line could hold,
                                   #   device time stands still (and the table's commands wait), so no
@@ -204,7 +206,8 @@ class BenchServer:
             self._serve_table(readable, now, self._defer_table(active))
         cap = None
         for a, line in zip(active, self.lines):
-            if self.options.lossless and a and not line.port.closed and line.frontend.streaming:
+            if (self.options.lossless and a and not line.port.closed and line.frontend.streaming
+                    and not line.faults.muted(now)):
                 # the world waits for the reader: device time runs at most as far as the frames
                 # the line holds (none while frames are still queued); several IMUs: the slowest
                 lead = 0.0 if line.port.backlog else LINE_BYTES / (line.bytes_per_frame * line.imu.rate_hz)
@@ -222,6 +225,16 @@ class BenchServer:
         """One IMU's commands and the frames due by ``now``; returns whether its reader is active."""
         line = self.lines[0] if line is None else line
         port, frontend, faulter = line.port, line.frontend, line.faulter
+        if line.faults.muted(now):
+            # a mute sensor (faults imu.mute): its commands heard and not answered, no frames (the
+            # frames due are consumed unmade: the stream goes on from the present when it speaks)
+            if port in readable:
+                port.read()
+            if not port.closed and frontend.streaming:
+                faulter.overflowed(line.imu.sample_times_until(now).size, recorded=False)
+            port.flush()
+            line.unread = port.unread()
+            return False
         sent = port.sent_bytes
         if port in readable:
             data = port.read()
@@ -403,7 +416,10 @@ class ImuLine:
         self.index = index
         self.truth = truth
         self.imu = ImuTwin(table, truth, seed=seed)
-        self.faults = o.faults.imu if index == 0 else ImuFaults()
+        if o.imu_faults:
+            self.faults = o.imu_faults[index] if index < len(o.imu_faults) else ImuFaults()
+        else:
+            self.faults = o.faults.imu if index == 0 else ImuFaults()
         if fault_rng is None:
             fault_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[1])
         self.faulter = StreamFaulter(self.faults, fault_rng,

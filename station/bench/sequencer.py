@@ -256,7 +256,7 @@ class Sequencer:
     def _take(self, n: int):
         """Up to ``n`` samples; checks for a pause while waiting."""
         while True:
-            block = self.stream.take(n)
+            block = self._reference().stream.take(n)
             if len(block):
                 return block
             self._check_pause()
@@ -418,7 +418,8 @@ class Sequencer:
                 temps.append(round(float(b.temp_c[finite].mean()), 4))
                 rows.append(f"{times[-1]:.3f},{temps[-1]:.4f}")
             total = step.max_s if step.slope_c_per_h is not None else step.min_s
-            self._each(lambda ch: ch is self.channels[0] or ch.stream.drain())
+            reference = self._reference()
+            self._each(lambda ch: ch is reference or ch.stream.drain())
             self._show_values()
             self.display.advance(min(elapsed, total), total)
             if elapsed >= step.min_s:

@@ -31,7 +31,9 @@ def add_parsers(sub) -> None:
     serve.add_argument("--imus", type=argtypes.whole(1), default=1, metavar="N",
                        help="N independent IMU twins on the one table, each on its own pseudo-terminal "
                             "(own truth, noise seed and serial number; default 1)")
-    serve.add_argument("--faults", metavar="FILE", help="faults to inject (YAML, docs/twins.md)")
+    serve.add_argument("--faults", metavar="FILE", action="append",
+                       help="faults to inject (YAML, docs/twins.md): once (the table and the first IMU) or, "
+                            "with --imus N, N times (file k: IMU k; the table's in the first)")
     serve.add_argument("--axes", type=int, choices=(1, 2, 3),
                        help="table axes (default 3 for acutrol, 1 for aerosmith)")
     serve.add_argument("--table-protocol", choices=("acutrol", "aerosmith"), default="acutrol")
@@ -82,7 +84,7 @@ def cmd_sim_serve(args) -> int:
     if args.table_tcp_port is not None and not 0 <= args.table_tcp_port <= 65535:
         raise UserError(f"--table-tcp-port must be 0..65535, got {args.table_tcp_port}")
     from sim_devices.truth import Truth, default_truth
-    from sim_devices.twins.faults import Faults, load_faults
+    from sim_devices.twins.faults import load_faults_per_imu
 
     n = int(args.imus)
     if n > MAX_IMUS:
@@ -95,9 +97,9 @@ def cmd_sim_serve(args) -> int:
     else:
         loaded = [Truth.from_yaml(f) for f in files]
         truth = loaded * n if len(loaded) == 1 else loaded
-    faults = load_faults(args.faults, axes) if args.faults else Faults()
+    faults, imu_faults = load_faults_per_imu(args.faults, n, axes)
     try:
-        server = _bench_server(truth, args, axes, faults, csv_format)
+        server = _bench_server(truth, args, axes, faults, csv_format, imu_faults)
     except OSError as e:
         raise UserError(f"--table-tcp-port {args.table_tcp_port}: {e}") from None
     stop = threading.Event()
@@ -207,14 +209,15 @@ def _scan_baud(args) -> int:
     return 0
 
 
-def _bench_server(truth, args, axes, faults, csv_format):
+def _bench_server(truth, args, axes, faults, csv_format, imu_faults=()):
     from sim_devices.twins.serve import BenchOptions, BenchServer
 
     return BenchServer(truth, BenchOptions(speed=args.speed, seed=args.seed, axes=axes,
                                            table_protocol=args.table_protocol,
                                            imu_protocol=args.imu_protocol, faults=faults,
                                            csv_format=csv_format, table_framing=args.table_framing,
-                                           table_tcp_port=args.table_tcp_port, imus=int(args.imus)))
+                                           table_tcp_port=args.table_tcp_port, imus=int(args.imus),
+                                           imu_faults=tuple(imu_faults)))
 
 
 def _csv_format(spec: str):

@@ -133,11 +133,18 @@ def _out_dir(args, config, scheme) -> Path:
     return Path(config.run.output_dir) / f"{scheme.name}-{stamp}"
 
 
-def _new_capture(directory, scheme, scheme_text_, overrides, config, imu, rate_hz):
+def _new_capture(directory, scheme, scheme_text_, overrides, config, imu, rate_hz, lost_at_start: str | None = None):
+    """A new capture bundle for ``imu`` (None: an IMU of a several-IMU run lost at the start, its
+    bundle marked ``lost_at_start`` with the reason and begun again when a resume reaches it)."""
     from station.io.capture import CaptureWriter, ImuInfo, Site
 
     t = config.table
     extra = {"run": {"file": RUN_FILE, "scheme_file": SCHEME_FILE}}
+    if lost_at_start is not None:
+        extra["lost_at_start"] = {"why": lost_at_start,
+                                  "utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+                                  "note": "the IMU did not start: nothing recorded; station run --resume on "
+                                          "the run records it"}
     if scheme.table:
         extra["table"] = {"protocol": t.protocol, "axes": t.axes, "axes_enu": t.axis_list(),
                           "mounting": list(t.mounting), "angle_error_arcsec": t.angle_error_arcsec,

@@ -4,6 +4,7 @@ every IMU into its own bundle: station/bench/multi.py, station/bench/sequencer.p
 from __future__ import annotations
 
 import datetime as _dt
+import shutil
 from pathlib import Path
 
 import yaml
@@ -72,33 +73,48 @@ def _record(args, config, reference, scheme, plan, steps, directory, text, folde
     from station.bench.imu_stream import ImuStream
     from station.bench.live import make_display
     from station.bench.multi import folder_names, imu_config
-    from station.cli.run_bench import (_new_capture, _open_imu, _open_table, _overrides, _reopen, imu_identity,
+    from station.cli.run_bench import (SCHEME_FILE, _new_capture, _open_table, _overrides, _reopen, imu_identity,
                                        sequence)
 
     table = _open_table(config)
     imus, guardian = [], None
     try:
-        for k in range(len(config.imus)):
-            imus.append(_open_imu(imu_config(config, k), field=f"imus[{k}]"))
+        # an IMU that fails to start (its port missing, no reply to its start-up) is lost at the
+        # start: said, its bundle marked, the others go on (exit status 4); none left: the run stops
+        imus, rates, failed = _start_imus(config)
         if table.found_moving:      # left turning by an earlier run: stopped
             err.print(f"warning: {table.describe_leftover()}", markup=False, soft_wrap=True)
         guardian = start_guardian(table.url, table.protocol, table.settings, directory)
         for note in plan.notes:
             err.print(f"note: {note}", markup=False, soft_wrap=True)
-        rates = [imu.configure(cfg.rate_hz) for imu, cfg in zip(imus, config.imus)]
         serials = [imu_identity(getattr(imu, "identity", None)).get("serial") for imu in imus]
         if folders is None:
             folders = folder_names(serials, [cfg.name for cfg in config.imus])
             _write_run(directory, scheme, text, _overrides(args), config, folders)
-            writers = [_new_capture(directory / f, scheme, text, _overrides(args), imu_config(config, k), imu, rate)
+            writers = [_new_capture(directory / f, scheme, text, _overrides(args), imu_config(config, k), imu, rate,
+                                    lost_at_start=failed.get(k))
                        for k, (f, imu, rate) in enumerate(zip(folders, imus, rates))]
         else:
-            writers = [_reopen(directory / f, rate, serial) for f, rate, serial in zip(folders, rates, serials)]
+            writers = []
+            for k, (f, imu, rate, serial) in enumerate(zip(folders, imus, rates, serials)):
+                if k in failed:                   # lost again: its bundle as it is
+                    writers.append(None)
+                elif _lost_at_start(directory / f):   # lost at the start before: its bundle begun now
+                    shutil.rmtree(directory / f)
+                    writers.append(_new_capture(directory / f, scheme, (directory / SCHEME_FILE).read_text(),
+                                                _overrides_of(directory), imu_config(config, k), imu, rate))
+                else:
+                    writers.append(_reopen(directory / f, rate, serial))
+        for k, why in failed.items():
+            err.print(f"IMU {folders[k]} (imus[{k}], {config.imus[k].port}) lost at the start ({why}): the other "
+                      f"IMUs go on; station run --resume {directory} records it", markup=False, soft_wrap=True)
         m0 = config.imus[0].mounting_matrix(config.table)
-        channels = [ImuChannel(label=serial or folder, stream=ImuStream(imu, rate), writer=writer, rate_hz=rate,
-                               to_case=relative_mounting(m0, cfg.mounting_matrix(config.table)), done=frozenset(d))
-                    for serial, folder, imu, rate, writer, cfg, d
-                    in zip(serials, folders, imus, rates, writers, config.imus, done)]
+        channels = [ImuChannel(label=serial or folder, stream=None if imu is None else ImuStream(imu, rate),
+                               writer=writer, rate_hz=rate,
+                               to_case=relative_mounting(m0, cfg.mounting_matrix(config.table)), done=frozenset(d),
+                               lost=None if k not in failed else f"at the start: {failed[k]}")
+                    for k, (serial, folder, imu, rate, writer, cfg, d)
+                    in enumerate(zip(serials, folders, imus, rates, writers, config.imus, done))]
         out.print(f"run: {directory} ({len(channels)} IMUs: " +
                   ", ".join(f"{ch.label} -> {directory / f}" for ch, f in zip(channels, folders)) + ")",
                   markup=False, soft_wrap=True)
@@ -109,7 +125,7 @@ def _record(args, config, reference, scheme, plan, steps, directory, text, folde
         if status is not None:
             return status
     finally:
-        for device in (table, *imus):
+        for device in (table, *(imu for imu in imus if imu is not None)):
             try:
                 device.close()
             except Exception:         # noqa: BLE001 - a lost IMU's port may be gone already
@@ -118,6 +134,63 @@ def _record(args, config, reference, scheme, plan, steps, directory, text, folde
             guardian.release()
     lost = {f: ch.lost for f, ch in zip(folders, channels) if ch.lost}
     return _estimate_all(directory, folders, config, scheme, args, lost)
+
+
+def _start_imus(config) -> tuple:
+    """(drivers, rates, {k: why}) of the IMUs of ``config.imus``, each opened and configured;
+    one that fails to (its port missing or refusing, no reply to its start-up, its line hung
+    up) is None with the reason, at its configured rate.  Every one failing: the run stops as a
+    one-IMU run does (the first one's error, naming each).  A bad configuration (csv_units) is
+    not a device failure: it stops the run (exit status 2) whatever the others do."""
+    from drivers.errors import DeviceError
+    from station.bench.multi import imu_config
+    from station.cli.run_bench import DEVICE_ERRORS, _open_imu
+
+    imus, rates, failed = [], [], {}
+    for k, cfg in enumerate(config.imus):
+        imu = None
+        try:
+            imu = _open_imu(imu_config(config, k), field=f"imus[{k}]")
+            rates.append(imu.configure(cfg.rate_hz))
+        except (DeviceError, *DEVICE_ERRORS) as e:
+            failed[k] = f"{type(e).__name__}: {' '.join(str(e).split())[:200]}"
+            if imu is not None:
+                try:
+                    imu.close()
+                except Exception:       # noqa: BLE001 - its port may be gone
+                    pass
+            imu = None
+            rates.append(float(cfg.rate_hz))
+        except BaseException:
+            for opened in imus:
+                if opened is not None:
+                    opened.close()
+            raise
+        imus.append(imu)
+    if len(failed) == len(config.imus):
+        raise UserError("no IMU started: " + "; ".join(f"imus[{k}] ({config.imus[k].port}): {why}"
+                                                        for k, why in failed.items()))
+    return imus, rates, failed
+
+
+#: the manifest key of the bundle of an IMU lost at the start of a run (no segment recorded)
+LOST_AT_START = "lost_at_start"
+
+
+def _lost_at_start(bundle: Path) -> bool:
+    """Whether ``bundle`` is the mark of an IMU lost at the start: no segment, the key set."""
+    try:
+        doc = yaml_text.safe_load((bundle / "manifest.yaml").read_text())
+    except (OSError, yaml.YAMLError, ValueError):
+        return False
+    return isinstance(doc, dict) and LOST_AT_START in doc and not doc.get("segments")
+
+
+def _overrides_of(directory: Path) -> dict:
+    from station.cli.run_bench import RUN_FILE
+
+    doc = yaml_text.safe_load((directory / RUN_FILE).read_text())
+    return dict(doc.get("overrides") or {})
 
 
 def _estimate_all(directory, folders, config, scheme, args, lost: dict) -> int:
