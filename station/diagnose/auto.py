@@ -309,7 +309,8 @@ def conclude(d: Diagnosis, summaries, steps=(), search_terms: bool = True) -> Di
     def specific(failures):
         return [f for f in failures if "a step in time" in f or "was moved or remounted" in f
                 or "drift steadily with time" in f or "time stamps jitter" in f
-                or "once per revolution along the rotation's own axis" in f]
+                or "once per revolution along the rotation's own axis" in f
+                or "a wobbling or tilted table platter" in f]
 
     now = specific(d.failures)
     first = specific(steps[0].before.failures) if steps else []
