@@ -93,7 +93,7 @@ class Training:
                 "defaults": {"dwell_s": self.dwell_s}, "segments": segs}
 
 
-STD = Training("100dps-whole")                                       # 10 revolutions at 100 deg/s
+STD = Training("100dps-whole", dwell_s=20.0)                         # 10 revolutions at 100 deg/s
 MULTIRATE = Training("25-60-100dps", rates=(25.0, 60.0, 100.0), revolutions=4.0)
 SLOW = Training("10dps-whole", rates=(10.0,), revolutions=1.0)
 SLOW_PART = Training("10dps-partial", rates=(10.0,), seconds=20.0)    # 200 deg
@@ -188,6 +188,9 @@ CASES = [
     Case("gyro_scale_tempco_2C", "gyro scale 300, -200, 250 ppm/degC over the default 2 degC warm-up",
          {"gyroscope.scale_tempco_ppm_per_c": [300.0, -200.0, 250.0]}, kind="combination",
          cause=("temperature",)),
+    Case("encoder_per_axis", "a three-axis table whose encoders read 300, -150 and 0 ppm short (axes 1-3)",
+         {"bench.table_axes": 3, "bench.encoder_scale_error_per_axis_ppm": [300.0, -150.0, 0.0]},
+         kind="combination", cause=("encoder",)),
     Case("wobble+g_sens", "30 arcsec wobble and gyro g-sensitivity 10-40 deg/h/g",
          {"bench.wobble_arcsec": 30.0, "gyroscope.g_sensitivity_dph_per_g": GSENS}, kind="combination",
          cause=("wobbl|twice per revolution", "g.sensitiv")),
@@ -358,7 +361,9 @@ def grew(res, floor) -> list[str]:
 
 
 def words_of(res) -> str:
-    return " ".join([str(res.get("diagnosis") or "")] + [str(x) for x in res.get("failures", [])]
+    """Everything the loop said: the verdict, the failures, the account, the caveats of its steps
+    and the effects it added (an effect added by name names its cause)."""
+    return " ".join([str(res.get("diagnosis") or "")] + [str(a[0]) for a in res.get("added", [])] + [str(x) for x in res.get("failures", [])]
                     + [str(x) for x in res.get("account", [])] + [str(x) for x in res.get("caveats", [])])
 
 
