@@ -242,12 +242,17 @@ class SimulatedBench:
         swept_deg = math.degrees(edges[1] - edges[0])
         enc_err_arcsec = float(self._enc_rng.normal(0.0, bench.table_angle_error_arcsec))
         # an encoder scale error: the table turned (1 + e) times what the encoder reads
-        angle_deg = swept_deg / (1.0 + 1e-6 * bench.encoder_scale_error_ppm) + enc_err_arcsec / 3600.0
+        k_axis = int(np.argmax(np.abs(a_cmd)))          # the table axis that turns it (table_axes 3)
+        e_ppm = bench.encoder_scale_error_ppm + (bench.encoder_scale_error_per_axis_ppm[k_axis]
+                                                 if bench.table_axes == 3 else 0.0)
+        angle_deg = swept_deg / (1.0 + 1e-6 * e_ppm) + enc_err_arcsec / 3600.0
 
         accel, gyro, temp = self._measure(tau, f_b, w_ib, w_b, wdot_b)
         meta = {"axis_body": [float(x) for x in a_cmd], "rate_dps": r}
         if encoder:
             meta["angle_deg"] = angle_deg
+        if bench.table_axes == 3:
+            meta["table_axis"] = k_axis + 1
         return SimSegment(
             kind="rotation", t=stamps, accel=accel, gyro=gyro, temp=temp, meta=meta,
             truth={

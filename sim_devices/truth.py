@@ -360,11 +360,20 @@ class BenchSettings:
     # the table turns (1 + e 1e-6) times the angle its encoder reads (a scale error of the
     # encoder or of its gearing): the encoder reports the swept angle / (1 + e 1e-6)
     encoder_scale_error_ppm: float = 0.0
+    # a table of several axes, each with its own encoder: table_axes 3 turns the IMU about case
+    # axis k (the nearest to axis_body, as axis_offsets_m) with table axis k + 1, records that axis
+    # with each rotation (``table_axis``, as a bench run does), and its encoder reads with
+    # encoder_scale_error_ppm + encoder_scale_error_per_axis_ppm[k]; 1: one axis (no table_axis)
+    table_axes: int = 1
+    encoder_scale_error_per_axis_ppm: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     def __post_init__(self):
         self.lever_arm_m = np.asarray(self.lever_arm_m, dtype=float).reshape(3)
         self.axis_offsets_m = np.asarray(self.axis_offsets_m, dtype=float).reshape(3, 3)
         self.vibration_mg = np.asarray(self.vibration_mg, dtype=float).reshape(3)
+        self.encoder_scale_error_per_axis_ppm = np.asarray(self.encoder_scale_error_per_axis_ppm,
+                                                           dtype=float).reshape(3)
+        self.table_axes = int(self.table_axes)
 
 
 def _cross_coupling(c: "_Checker", value, field_name: str) -> np.ndarray:
@@ -547,7 +556,8 @@ _BENCH_KEYS = {"latitude_deg", "height_m", "lever_arm_m", "axis_offsets_m", "tab
                "rate_ripple_fraction", "rate_ripple_hz", "rate_drift_fraction", "accel_disturbance_ug",
                "move_s", "settle_s", "time_offset_s", "wobble_arcsec", "wobble_phase_deg",
                "vibration_mg", "vibration_phase_deg", "remount_error_arcsec", "remount_rotations",
-               "time_stamp_jitter_ms", "encoder_scale_error_ppm"}
+               "time_stamp_jitter_ms", "encoder_scale_error_ppm", "table_axes",
+               "encoder_scale_error_per_axis_ppm"}
 
 
 @dataclass
@@ -807,6 +817,8 @@ class Truth:
                 "remount_rotations": bool(self.bench.remount_rotations),
                 "time_stamp_jitter_ms": float(self.bench.time_stamp_jitter_ms),
                 "encoder_scale_error_ppm": float(self.bench.encoder_scale_error_ppm),
+                "table_axes": int(self.bench.table_axes),
+                "encoder_scale_error_per_axis_ppm": fl(self.bench.encoder_scale_error_per_axis_ppm),
             },
         }
 
@@ -997,6 +1009,15 @@ class Truth:
         if "encoder_scale_error_ppm" in d:
             bench.encoder_scale_error_ppm = c.number(d["encoder_scale_error_ppm"], "bench.encoder_scale_error_ppm",
                                                      lo=-MAX_ENCODER_SCALE_PPM, hi=MAX_ENCODER_SCALE_PPM)
+        if "encoder_scale_error_per_axis_ppm" in d:
+            bench.encoder_scale_error_per_axis_ppm = c.vector(
+                d["encoder_scale_error_per_axis_ppm"], "bench.encoder_scale_error_per_axis_ppm",
+                lo=-MAX_ENCODER_SCALE_PPM, hi=MAX_ENCODER_SCALE_PPM)
+        if "table_axes" in d:
+            axes = c.number(d["table_axes"], "bench.table_axes", lo=1.0, hi=3.0)
+            if axes not in (1.0, 3.0):
+                c.fail("bench.table_axes", f"must be 1 or 3, got {d['table_axes']!r}")
+            bench.table_axes = int(axes)
         return cls(accel=accel, gyro=gyro, sample_rate_hz=rate, temperature=temp, bench=bench)
 
 

@@ -126,8 +126,16 @@ def locate(result, effect, refine: int = REFINE) -> list:
         # the over-dispersion of the best fit when it fails): the capture cannot tell them from the best
         dof = result.dof - len(effect.params)
         phi = max(best / dof, 1.0) if dof > 0 else 1.0
-        alike = [f"{c[1]} -> {c[2]} (chi2 +{chi2 - best:.1f})" for chi2, c in fitted
-                 if c[0] != t and chi2 - best < ALIKE_CHI2 * phi]
+        close = [(chi2, c) for chi2, c in fitted if c[0] != t and chi2 - best < ALIKE_CHI2 * phi]
+        alike = [f"{c[1]} -> {c[2]} (chi2 +{chi2 - best:.1f})" for chi2, c in close]
+        # what lies between the best boundary and each as likely one: the segments whose own free
+        # parameters (a rotation pair's Earth-rate component along its axis, a static's attitude)
+        # take a step that falls just before them as well as one just after (the words name them)
+        s = result.model.s
+        mids = [(x.t_mid_s - result.model.t0, x.name) for x in (*s.statics, *s.rotations) if np.isfinite(x.t_mid_s)]
+        effect.alike = [{"before": c[1], "after": c[2], "chi2_more": float(chi2 - best),
+                         "between": [n for tm, n in sorted(mids) if min(t, c[0]) < tm < max(t, c[0])]}
+                        for chi2, c in close]
         effect.locate(t, f"located between {before} and {after} by a profile of the score test over {len(prof)} "
                          f"boundaries between segments"
                          + (f" (the best {len(top)} fitted)" if fitted else "")

@@ -67,6 +67,7 @@ class RotationSummary:
     gyro_start: np.ndarray          # (3,) rate at the window's start and end (mean of the
     gyro_end: np.ndarray            #   first and last EDGE_SAMPLES samples)
     steady: bool = True             # the rate held within STEADY_SPREAD (a table, not a hand)
+    table_axis: int | None = None   # the table axis that turned it, as a bench run records it (None: not said)
     rate_sq_factor: float = 1.0     # mean of the squared rate over the square of the mean rate
                                     #   (from the gyro's magnitude: > 1 when the rate ripples)
     t_mid_s: float = float("nan")   # mean sample time (the capture's clock), s
@@ -534,6 +535,9 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
                 summary.steady = False
             summary.t_mid_s, summary.index = float(np.mean(d.t)), order[seg.name]
             summary.temp_rate_c_per_s = _slope(d.t, d.temp)
+            axis_no = seg.extra.get("table_axis")
+            if isinstance(axis_no, int) and not isinstance(axis_no, bool):
+                summary.table_axis = axis_no
             rotations.append(summary)
             del d
     # incomplete segments (a run stopped or killed) are read for what reading them says (the rows

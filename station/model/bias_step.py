@@ -126,4 +126,28 @@ class BiasStep(Effect):
                 if abs(x[j]) > 3 * sigma[j]:
                     out.append(f"{sensor} {a} bias steps by {x[j]:+.3g} ± {sigma[j]:.2g} {unit} at t = "
                                f"{self.step_time_s + self.origin_s:.0f} s")
+        if out:
+            out += self.alias_words()
+        return out
+
+    def alias_words(self) -> list[str]:
+        """The boundaries the profile found as likely as the chosen one (station.estimate.profile
+        sets ``alike``), with the segments between them and what would separate them: a step just
+        before those segments and one just after differ only on them, and when their own free
+        parameters (a rotation pair's Earth-rate component along its axis, which takes any offset
+        the gyro about that axis has in both directions; a static's attitude) absorb an offset,
+        the capture cannot say on which side of them the bias jumped."""
+        out = []
+        for alt in getattr(self, "alike", None) or []:
+            between = alt.get("between") or []
+            if not between:
+                continue
+            names = ", ".join(between)
+            out.append(f"the step is as likely at the boundary {alt['before']} -> {alt['after']} (chi2 only "
+                       f"+{alt['chi2_more']:.1f}): the two times differ only on {names}, whose own free parameters "
+                       f"(a rotation pair's Earth-rate component along its axis takes an offset the gyro about that "
+                       f"axis has in both directions; a static's attitude takes part of an accelerometer's) absorb "
+                       f"the step; this capture cannot say whether the bias jumped before or after {names}: record "
+                       f"{between[0]} again later in the run (or a static with that axis vertical before and after "
+                       f"it) to separate them")
         return out

@@ -76,17 +76,50 @@ class TableEncoderScale(Effect):
                  "do not)")
     signature_variable = "signed_rate"
     complex_step = True
+    state_fields = ("table_axes", "position_of")
+
+    def __init__(self):
+        # one error per table axis when the capture records which axis turned each rotation
+        # (``table_axis``, as a bench run writes it) and names more than one: each axis has its own
+        # encoder and gearing; otherwise one error for the table (the axes are not told apart)
+        self.table_axes = []          # the table axes with an error of their own ([]: one for the table)
+        self.position_of = {}         # segment index -> position of its axis in table_axes
+
+    def setup(self, summaries) -> None:
+        steady = [r for r in summaries.rotations if r.steady]
+        known = sorted({r.table_axis for r in steady if getattr(r, "table_axis", None) is not None})
+        if len(known) > 1 and all(getattr(r, "table_axis", None) is not None for r in steady):
+            self.table_axes = [int(k) for k in known]
+            self.position_of = {int(r.index): known.index(r.table_axis) for r in steady}
+        else:
+            self.table_axes, self.position_of = [], {}
 
     @property
     def params(self):
+        if self.table_axes:
+            return tuple(Param(f"table_encoder_scale_error_axis{k}", "ppm", 1.0, 10.0, 20000.0)
+                         for k in self.table_axes)
         return (Param("table_encoder_scale_error", "ppm", 1.0, 10.0, 20000.0),)
 
     def words(self, x, sigma) -> list[str]:
-        if abs(x[0]) <= 3 * sigma[0]:
-            return []
-        return [f"the table turns {x[0]:+.3g} ± {sigma[0]:.2g} ppm {'more' if x[0] > 0 else 'less'} than its "
-                "encoder reads (its gearing or encoder scale): the gyro scale factors in this calibration are of the "
-                "true angle; check the table's angle against a reference (a polygon and autocollimator)"]
+        out = []
+        for n in range(len(x)):
+            if abs(x[n]) <= 3 * sigma[n]:
+                continue
+            which = f"table axis {self.table_axes[n]}" if self.table_axes else "the table"
+            out.append(f"{which} turns {x[n]:+.3g} ± {sigma[n]:.2g} ppm {'more' if x[n] > 0 else 'less'} than its "
+                       "encoder reads (its gearing or encoder scale): the gyro scale factors in this calibration are "
+                       "of the true angle; check the axis' angle against a reference (a polygon and autocollimator)")
+        return out
+
+    def _per_row(self, x, ctx):
+        """The error (ppm) of every row: its rotation's table axis' (one error for the table when
+        the axes are not told apart)."""
+        if not self.table_axes:
+            return x[0]
+        index = ctx.column("segment_index")
+        pos = np.array([self.position_of.get(int(i), 0) if np.isfinite(i) else 0 for i in index])
+        return x[pos]
 
     def accel(self, x, ctx):
         turned = getattr(ctx, "turned_s", None)
@@ -99,7 +132,8 @@ class TableEncoderScale(Effect):
         # tangential acceleration of the mounting offset, and gravity along the axis) is each
         # rotation's mean over its phase points, taken out first (a rotation's points share its
         # segment index)
-        e = x[0] * 1e-6
+        e = self._per_row(x, ctx) * 1e-6
+        e = e[:, None] if np.ndim(e) else e
         sq = getattr(ctx, "turned_sq_s2", None)
         sq = np.asarray(turned, float) ** 2 if sq is None else np.asarray(sq, float)
         index = ctx.column("segment_index")
@@ -112,4 +146,6 @@ class TableEncoderScale(Effect):
     def gyro(self, x, ctx):
         if getattr(ctx, "turned_s", None) is None:
             return None
-        return x[0] * 1e-6 * (180.0 / np.pi) * ctx.w_table @ ctx.gyro_matrix.T    # (np.degrees: no complex step)
+        e = self._per_row(x, ctx) * 1e-6
+        e = e[:, None] if np.ndim(e) else e
+        return e * (180.0 / np.pi) * ctx.w_table @ ctx.gyro_matrix.T    # (np.degrees: no complex step)

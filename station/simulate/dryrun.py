@@ -119,7 +119,7 @@ def record_scheme(scheme: Scheme, truth, seed: int, out_dir: Path,
             for k in range(0, len(seg.t), block):
                 sl = slice(k, k + block)
                 out.write(seg.t[sl], seg.accel[sl], seg.gyro[sl], seg.temp[sl])
-            out.close("complete", **{k: v for k, v in seg.meta.items() if k == "angle_deg"})
+            out.close("complete", **{k: v for k, v in seg.meta.items() if k in ("angle_deg", "table_axis")})
     return writer.path
 
 
@@ -134,7 +134,8 @@ def simulate_capture(scheme: Scheme, truth, seed: int, geometry: dict | None = N
             up_body=np.array(meta["up_body"]) if "up_body" in meta else None,
             axis_body=np.array(meta["axis_body"]) if "axis_body" in meta else None,
             rate_dps=meta.get("rate_dps"), angle_deg=seg.meta.get("angle_deg", meta.get("angle_deg")),
-            note=meta.get("note"), extra={k: meta[k] for k in ("motion", "axis_elevation_deg") if k in meta},
+            note=meta.get("note"), extra={**{k: meta[k] for k in ("motion", "axis_elevation_deg") if k in meta},
+                                          **{k: v for k, v in seg.meta.items() if k == "table_axis"}},
             data=SegmentData(t=seg.t, accel=seg.accel, gyro=seg.gyro, temp=seg.temp, gaps=0)))
     return Capture(path=Path(f"<simulated seed {seed}>"), imu=imu, site=site, scheme=scheme.name,
                    segments=segments, extra=_bench_keys(truth, scheme, geometry), warnings=[])
