@@ -179,7 +179,7 @@ def test_ros_bags_ros1_db3_mcap(tmp_path, capsys):
     check_against_truth(cal, truth_calibration(truth))
     # two Imu topics: the user must choose
     write_imu_bag(tmp_path / "two.bag", hs.t[:50], hs.accel[:50], hs.gyro[:50], fmt="rosbag1")
-    with pytest.raises(UserError, match="no sensor_msgs/msg/Imu topic '/other'"):
+    with pytest.raises(UserError, match=r"no sensor_msgs/msg/Imu topic /other \(Imu topics: /imu/data\)"):
         read_rosbag(tmp_path / "two.bag", topic="/other")
 
 
