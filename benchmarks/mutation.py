@@ -75,7 +75,7 @@ TARGETS = {
         + _functions("drivers.protocols.crc", ["crc16_rows", "_table"])
         + _functions("drivers.protocols.xbus", ["XbusParser.*", "XsensDecoder.*", "parse_mtdata2"])
         + _functions("drivers.protocols.csvlines", ["CsvDecoder.*", "_skippable"]),
-        ["tests/test_decoders_long_reads.py", "tests/test_drivers_damage_counts.py",
+        ["tests/test_decoders_long_reads.py", "tests/test_drivers_damage_counts.py", "tests/test_drivers_decoders.py",
          "tests/test_decoder_units.py"]),
     "table-stop": (
         ["drivers/table.py", "drivers/acutrol.py", "drivers/aerosmith.py"],
@@ -88,7 +88,7 @@ TARGETS = {
         ["station/io/capture.py"],
         _functions("station.io.capture", ["CaptureWriter.*", "SegmentWriter.*", "FormattedRows.*",
                                           "_atomic_write", "_aside_name", "remove_stray_temporaries"]),
-        ["tests/test_capture_writer_units.py"]),
+        ["tests/test_capture.py", "tests/test_capture_formatted_rows.py", "tests/test_capture_writer_units.py"]),
 }
 
 
