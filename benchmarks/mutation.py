@@ -100,9 +100,11 @@ from datetime import datetime
 from time import sleep
 import mutmut.__main__ as m
 
+import time
 FACTOR = float(os.environ["MUTATION_TIMEOUT_FACTOR"])
 MINIMUM = float(os.environ["MUTATION_TIMEOUT_MIN"])
 timed_out = set()
+clean = [0.0]       # the wall time of mutmut's clean run of the target's tests (all of them)
 
 
 def timeout_checker(mutants):
@@ -114,7 +116,10 @@ def timeout_checker(mutants):
             now = datetime.now()
             for mm in files:
                 for pid, start in list(mm.start_time_by_pid.items()):
-                    limit = max(MINIMUM, (mm.estimated_time_of_tests_by_pid.get(pid, 0.0) + 1) * FACTOR)
+                    # mutmut's estimate is the tests' last phase (teardown, ~0 s: pytest's
+                    # report hook overwrites call with teardown), so the floor is the clean run
+                    # of all the target's tests, three times over: a mutant runs a subset of them
+                    limit = max(MINIMUM, 3.0 * clean[0], (mm.estimated_time_of_tests_by_pid.get(pid, 0.0) + 1) * FACTOR)
                     if (now - start).total_seconds() > limit and pid not in timed_out:
                         timed_out.add(pid)
                         try:
@@ -146,7 +151,12 @@ def run_tests(self, *, mutant_name, tests):
             os.setpgid(0, 0)
         except OSError:
             pass
-    return _run_tests(self, mutant_name=mutant_name, tests=tests)
+        return _run_tests(self, mutant_name=mutant_name, tests=tests)
+    start = time.monotonic()
+    try:
+        return _run_tests(self, mutant_name=mutant_name, tests=tests)
+    finally:
+        clean[0] = time.monotonic() - start
 
 
 m.timeout_checker = timeout_checker
@@ -180,7 +190,10 @@ def scratch_copy(target: str, dest: Path) -> None:
                     if str(p.relative_to(dest)) not in files)
     copied = [d for d in ("station/", "drivers/", "sim_devices/", "schemes/") if d != package]
     text = (dest / "pyproject.toml").read_text()
-    text = re.sub(r'addopts = "[^"]*"', 'addopts = "-q -p no:xdist -p no:cacheprovider"', text)
+    # --tb=line: a mutant that raises deep in a command (estimate -> judge) had pytest render the
+    # source of every frame (an AST parse of each file: the mutants' files are large), which on a
+    # loaded machine took longer than the timeout: such mutants were counted as timeouts
+    text = re.sub(r'addopts = "[^"]*"', 'addopts = "-q -p no:xdist -p no:cacheprovider --tb=line"', text)
     text += ("\n[tool.mutmut]\n"
              f"paths_to_mutate = [{json.dumps(package)}]\n"
              f"do_not_mutate = {json.dumps(others)}\n"
@@ -193,8 +206,10 @@ def _selected(name: str, globs) -> bool:
 
 
 def run_target(target: str, children: int, keep: Path | None, timeout_factor: float = 20.0,
-               timeout_min: float = 30.0, diff: bool = False) -> dict:
+               timeout_min: float = 30.0, diff: bool = False, only=None) -> dict:
     files, globs, _ = TARGETS[target]
+    if only:
+        globs = list(only)
     work = Path(tempfile.mkdtemp(prefix="station-mutation-")) if keep is None else keep
     if keep is not None and keep.exists():
         shutil.rmtree(keep)
@@ -254,6 +269,8 @@ def main(argv=None):
     ap.add_argument("--timeout-min", type=float, default=30.0, help="and at least this many seconds")
     ap.add_argument("--keep", type=Path, help="work in this directory and keep it (mutmut browse there)")
     ap.add_argument("--diff", action="store_true", help="print each survivor's diff (mutmut show)")
+    ap.add_argument("--only", action="append", metavar="GLOB",
+                    help="only these mutants (mutmut's names, globs: station.estimate.verdict.x__bound__mutmut_6)")
     ap.add_argument("--list", action="store_true", help="the targets, their files and tests")
     args = ap.parse_args(argv)
     if args.list:
@@ -264,7 +281,7 @@ def main(argv=None):
     if unknown:
         ap.error(f"unknown target {', '.join(unknown)}: one of {', '.join(TARGETS)}")
     for target in args.targets or list(TARGETS):
-        run_target(target, args.children, args.keep, args.timeout_factor, args.timeout_min, args.diff)
+        run_target(target, args.children, args.keep, args.timeout_factor, args.timeout_min, args.diff, args.only)
     return 0
 
 
