@@ -59,7 +59,7 @@ def _functions(module: str, names: list) -> list:
 #: maps each function to the tests that call it)
 TARGETS = {
     "verdict": (["station/estimate/verdict.py"], None,
-                ["tests/test_verdict_rules.py", "tests/test_verdicts.py"]),
+                ["tests/test_verdict_rules.py", "tests/test_verdict_units.py", "tests/test_verdicts.py"]),
     "lsq-covariance": (
         ["station/estimate/lsq.py"],
         _functions("station.estimate.lsq", [

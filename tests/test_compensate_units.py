@@ -240,3 +240,63 @@ def test_legacy_lever_arm_moves_each_accelerometer_to_the_reference_point():
     f1, _ = C.compensate(comp, t[:1], ar[:1], gr[:1])
     assert f1.shape == (1, 3)
     np.testing.assert_allclose(f1, (ar[:1] - comp["accel_bias"]) @ comp["accel_matrix"].T, rtol=RTOL)
+
+
+# ------------------------------------------------------------------ survivors of the mutation run
+
+def test_time_comes_back_as_float_whatever_it_was_given_as():
+    rng, t, f, w, _ = _samples(n=5)
+    comp, fa, fg = _comp(rng, np.eye(3), np.eye(3))
+    ar, gr = _raw(comp, fa, fg, np.eye(3), np.eye(3), f, w)
+    t2, _, _ = C.compensate_with_effects(comp, [], [0, 1, 2, 3, 4], ar, gr)
+    assert t2.dtype == np.float64 and t2.tolist() == [0.0, 1.0, 2.0, 3.0, 4.0]
+
+
+def test_two_samples_have_derivatives():
+    """The derivatives (rate, temperature) and the lever arm are taken from two samples on."""
+    seen = {}
+
+    class Probe(_Constant):
+        def accel(self, x, ctx):
+            seen.update(wdot=ctx.wdot_table.copy(), rate=ctx.temp_rate_c_per_s)
+            return None
+    rng, t, f, w, temp = _samples(n=2)
+    comp, fa, fg = _comp(rng, np.eye(3), np.eye(3))
+    ar, gr = _raw(comp, fa, fg, np.eye(3), np.eye(3), f, w)
+    C.compensate_with_effects(comp, [(Probe(), None)], t, ar, gr, temp=temp)
+    np.testing.assert_allclose(seen["wdot"], np.radians(np.gradient(w, t, axis=0)), rtol=RTOL)
+    np.testing.assert_allclose(seen["rate"], np.gradient(temp, t), rtol=RTOL)
+    legacy = _legacy(rng, np.eye(3), np.eye(3))
+    legacy["accel_lever_arm_m"] = np.full((3, 3), 0.1)
+    f_with, _ = C.compensate(legacy, t, f, w)
+    del legacy["accel_lever_arm_m"]
+    f_without, _ = C.compensate(legacy, t, f, w)
+    assert np.max(np.abs(f_with - f_without)) > 1e-3        # (w ~ 90 deg/s: w^2 r ~ 0.25 m/s^2)
+
+
+class _Contraction(_Constant):
+    """A term of 1e-3 of the compensated value: each step shrinks the change 1000 times."""
+    def accel(self, x, ctx):
+        self.calls += 1
+        return 1e-3 * ctx.f_p
+
+    def gyro(self, x, ctx):
+        return 1e-3 * ctx.w_p
+
+
+@pytest.mark.parametrize("size", [1e-6, 1e6])
+def test_the_iteration_stops_on_the_relative_change_at_any_size(size):
+    """The same number of steps for values a million times smaller or larger: the change that
+    ends it is relative to the values (not absolute, not multiplied by them)."""
+    rng, t, f, w, _ = _samples()
+    comp, fa, fg = _comp(rng, np.eye(3), np.eye(3))
+    counts = []
+    for s in (1.0, size):
+        fs, ws = f * s, w * s
+        comp_s = dict(comp, accel_bias=comp["accel_bias"] * s, gyro_bias=comp["gyro_bias"] * s)
+        ar, gr = _raw(comp_s, fa, fg, np.eye(3), np.eye(3), fs, ws, da=1e-3 * fs, dw=1e-3 * ws)
+        effect = _Contraction()
+        _, f2, w2 = C.compensate_with_effects(comp_s, [(effect, None)], t, ar, gr)
+        np.testing.assert_allclose(f2, fs, rtol=1e-12)
+        counts.append(effect.calls)
+    assert counts[0] == counts[1] and 3 <= counts[0] <= 8, counts
