@@ -179,7 +179,7 @@ def scratch_copy(target: str, dest: Path) -> None:
         name = Path(rel).name
         if rel.startswith("tests/") and name.startswith("test_") and name.endswith(".py") and rel not in keep:
             continue
-        if rel.startswith(("benchmarks/", "docs/", "examples/")) or rel.endswith(".whl"):
+        if rel.startswith(("benchmarks/", "examples/")) or rel.endswith(".whl"):     # docs/: tests read them
             continue
         src, dst = ROOT / rel, dest / rel
         if src.is_file():
@@ -188,7 +188,7 @@ def scratch_copy(target: str, dest: Path) -> None:
     package = files[0].split("/")[0] + "/"
     others = sorted(str(p.relative_to(dest)) for p in (dest / package).rglob("*.py")
                     if str(p.relative_to(dest)) not in files)
-    copied = [d for d in ("station/", "drivers/", "sim_devices/", "schemes/") if d != package]
+    copied = [d for d in ("station/", "drivers/", "sim_devices/", "schemes/", "docs/") if d != package]
     text = (dest / "pyproject.toml").read_text()
     # --tb=line: a mutant that raises deep in a command (estimate -> judge) had pytest render the
     # source of every frame (an AST parse of each file: the mutants' files are large), which on a

@@ -222,10 +222,10 @@ def test_a_parameter_held_only_by_a_weak_prior_takes_no_degree_of_freedom():
 
 def test_a_large_model_counts_the_axes_without_a_steady_rotation():
     rot = lambda group, steady: types.SimpleNamespace(group=group, steady=steady)    # noqa: E731
-    s = types.SimpleNamespace(groups=4, rotations=[rot(0, True), rot(1, False), rot(1, False), rot(2, True),
+    s = types.SimpleNamespace(groups=5, rotations=[rot(0, True), rot(1, False), rot(1, False), rot(2, True),
                                                    rot(2, False)])
     model = types.SimpleNamespace(is_large=True, s=s)
-    assert lsq._held_by_weak_priors(model, None, None) == 2          # groups 1 and 3
+    assert lsq._held_by_weak_priors(model, None, None) == 3          # groups 1, 3 and 4
 
 
 # ----------------------------------------------------------------------- the step left
@@ -245,3 +245,36 @@ def test_the_step_left_is_the_least_squares_step():
     Js = _J(cols=4, seed=11) / np.logspace(-4, 4, 4) * np.logspace(-1, 1, 4)
     expected = np.linalg.lstsq(Js, -r, rcond=None)[0]
     np.testing.assert_allclose(lsq._gauss_newton_step(csr_matrix(Js), r), expected, rtol=1e-6)
+
+
+def test_the_scale_given_decides_what_is_kept_and_what_is_null():
+    """Measured against a scale of 1e-6 for the third column (its own size is 3), the nearly
+    aliased pair's small direction falls below 1e-13 and 1e-9 of the largest singular value:
+    dropped from the covariance and null."""
+    J = _nearly_aliased(4e-9)
+    assert lsq._null_columns(J) == [] and lsq._null_columns(J, np.array([1.0, 1.0, 1e-6])) == [0, 1]
+    J = _nearly_aliased(4e-13)
+    assert lsq.covariance(J)[0, 0] > 1e20 > 1.0 > lsq.covariance(J, np.array([1.0, 1.0, 1e-6]))[0, 0]
+
+
+@pytest.mark.parametrize("consistent", [True, False])
+def test_the_sparse_step_is_solved_to_rounding(consistent):
+    """LSMR to 1e-14 on both of its stopping rules (atol: the normal equations, for residuals
+    the model cannot reach; btol: the residual, for ones it can): at its defaults (1e-6) the step
+    is off by up to its own size on this Jacobian (columns 1e-3 to 1e3)."""
+    rng = np.random.default_rng(1)
+    J = rng.standard_normal((40, 4)) * np.logspace(-3, 3, 4)
+    x = rng.standard_normal(4)
+    r = -(J @ x) + (0.0 if consistent else 0.1 * rng.standard_normal(40))
+    expected = np.linalg.lstsq(J, -r, rcond=None)[0]
+    np.testing.assert_allclose(lsq._gauss_newton_step(csr_matrix(J), r), expected, rtol=1e-9)
+
+
+def test_the_dense_step_ignores_directions_below_1e_12():
+    """Two columns equal to 1e-13 (scaled): below rcond 1e-12 the pair is one direction and the
+    step is shared between them (minimum norm), not 1e13 times larger."""
+    J = _nearly_aliased(1e-13)
+    r = np.random.default_rng(2).standard_normal(J.shape[0])
+    d = lsq._gauss_newton_step(J, r)
+    assert np.max(np.abs(d)) < 10 * np.linalg.norm(r)
+    assert d[0] == pytest.approx(d[1], rel=1e-6)
