@@ -17,6 +17,7 @@ def test_a_file_put_aside_never_overwrites_an_earlier_one(tmp_path):
     (tmp_path / "rot1p.csv.incomplete").write_text("1")
     assert C._aside_name(p) == tmp_path / "rot1p.csv.incomplete2"
     (tmp_path / "rot1p.csv.incomplete2").write_text("2")
+    assert C._aside_name(p) == tmp_path / "rot1p.csv.incomplete3"
     (tmp_path / "rot1p.csv.incomplete3").write_text("3")
     assert C._aside_name(p) == tmp_path / "rot1p.csv.incomplete4"
     assert C._aside_name(p, ".unlisted") == tmp_path / "rot1p.csv.unlisted"
