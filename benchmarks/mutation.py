@@ -172,8 +172,9 @@ def tracked_files() -> list:
     return [p for p in out.splitlines() if p]
 
 
-def scratch_copy(target: str, dest: Path) -> None:
-    files, _, tests = TARGETS[target]
+def scratch_copy(target: str, dest: Path, tests=None) -> None:
+    files, _, default_tests = TARGETS[target]
+    tests = tests or default_tests
     keep = set(tests)
     for rel in tracked_files():
         name = Path(rel).name
@@ -206,7 +207,7 @@ def _selected(name: str, globs) -> bool:
 
 
 def run_target(target: str, children: int, keep: Path | None, timeout_factor: float = 20.0,
-               timeout_min: float = 30.0, diff: bool = False, only=None) -> dict:
+               timeout_min: float = 30.0, diff: bool = False, only=None, tests=None) -> dict:
     files, globs, _ = TARGETS[target]
     if only:
         globs = list(only)
@@ -214,7 +215,7 @@ def run_target(target: str, children: int, keep: Path | None, timeout_factor: fl
     if keep is not None and keep.exists():
         shutil.rmtree(keep)
     work.mkdir(parents=True, exist_ok=True)
-    scratch_copy(target, work)
+    scratch_copy(target, work, tests)
     # the mutants' directory exists before Python starts: a PYTHONPATH entry missing at start-up
     # is cached as absent, and the tests would import the unmutated copy beside it
     (work / "mutants").mkdir(exist_ok=True)
@@ -271,6 +272,7 @@ def main(argv=None):
     ap.add_argument("--diff", action="store_true", help="print each survivor's diff (mutmut show)")
     ap.add_argument("--only", action="append", metavar="GLOB",
                     help="only these mutants (mutmut's names, globs: station.estimate.verdict.x__bound__mutmut_6)")
+    ap.add_argument("--tests", nargs="+", metavar="FILE", help="these test files instead of the target's")
     ap.add_argument("--list", action="store_true", help="the targets, their files and tests")
     args = ap.parse_args(argv)
     if args.list:
@@ -281,7 +283,7 @@ def main(argv=None):
     if unknown:
         ap.error(f"unknown target {', '.join(unknown)}: one of {', '.join(TARGETS)}")
     for target in args.targets or list(TARGETS):
-        run_target(target, args.children, args.keep, args.timeout_factor, args.timeout_min, args.diff, args.only)
+        run_target(target, args.children, args.keep, args.timeout_factor, args.timeout_min, args.diff, args.only, args.tests)
     return 0
 
 
