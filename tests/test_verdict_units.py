@@ -197,3 +197,31 @@ def test_a_permutation_of_the_axes_is_named_with_no_axis_opposite():
     assert w == ["warning: the gyro axes are inverted against the accelerometers': a rotation of 120.0 deg about "
                  "[+0.577, +0.577, +0.577] between the triads (gyro axes pointing opposite to the accelerometer "
                  "ones): check the axis order and signs of the IMU's output"]
+
+
+# ------------------------------------------------------------------ the reasons' words
+
+def test_a_stopped_fit_far_from_its_minimum_is_not_converged_in_words():
+    cal = judge(calibration(converged=False, remaining_step_sigma={"accel_scale_x": 0.5}))
+    v = cal.fit["verdict"]
+    assert v["result"] == "not converged" and v["p_value"] == pytest.approx(float(special.chdtrc(DOF, DOF)))
+    assert v["reason"] == ("the fit stopped at its evaluation limit before it converged (reduced chi2 1 where it "
+                           "stopped): the values and 1-sigma are not those of a minimum; do not use this "
+                           "calibration (station diagnose shows which parameters the data barely see)")
+    near = judge(calibration(converged=False, remaining_step_sigma={"accel_scale_x": 0.001})).fit["verdict"]
+    assert near["result"] == "passes"
+
+
+def test_a_failing_fit_says_why_in_words_and_a_pose_only_scale_defaults_to_1():
+    cal = judge(calibration(chi2=4.0 * DOF, pose_check={"written": "pose-only accelerometers"}))
+    assert cal.fit["verdict"]["reason"].endswith(
+        "the residuals are larger than the noise explains (a missing effect, a bad segment, data lost or a table "
+        "that slipped); station diagnose shows where")
+    assert cal.fit["notes"][-1].endswith("which are the poses' own fit's (scaled by its own sqrt(reduced chi2) = 1)")
+
+
+def test_the_groups_left_out_of_the_test_are_named():
+    tested = {"chi2": 100.0, "redundancy": 100.0, "left_out": ["hand turns", "static gyro means"]}
+    v = judge(calibration(noise_model={"tested": tested})).fit["verdict"]
+    assert v["reason"].endswith("; hand turns, static gyro means not tested (their noise estimated from their "
+                                "scatter)")
