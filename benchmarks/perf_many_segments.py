@@ -23,7 +23,15 @@ its children: getrusage(RUSAGE_CHILDREN)) and wall; then the slope of each again
 (least squares of CPU on segments over the sizes given, and each size's CPU per segment), so
 that linearity is read from the per-segment figures staying flat.  The load average is printed.
 
+With --manifest N [N ...], the manifest alone up to sizes no simulation reaches here: a bundle
+of N segments (a run's manifest fields: name, kind, file, status, up_body or axis_body, samples,
+sha256, a quoted started_utc, temperature_c; each segment's file a two-row CSV, written without
+fsync), its manifest's text made from its parts as CaptureWriter makes it, then read_capture
+without the samples (libyaml's parser, the reader's checks of every field and file), each in a
+fresh process, CPU seconds, and the slope.
+
 Usage: python benchmarks/perf_many_segments.py [--statics 50 100 250 500 1000] [--dense-up-to 500] [--diagnosis]
+       python benchmarks/perf_many_segments.py --manifest 1000 10000 100000
        python benchmarks/perf_many_segments.py --commands 1000 3000 10000 30000 100000 [--keep DIR]
 """
 import os
@@ -118,6 +126,63 @@ MANIFEST = ("import sys, time; from station.io import capture as C\n"
 STATION = ("import sys; from station.cli import console_main; sys.argv[0] = 'station'; sys.exit(console_main())")
 
 
+MANIFEST_ONLY = """
+import hashlib, sys, time
+from pathlib import Path
+from station.io import capture as C
+n, d = int(sys.argv[1]), Path(sys.argv[2])
+d.mkdir()
+row = b"t,ax,ay,az,gx,gy,gz\\n0,0,0,9.8,0,0,0\\n0.01,0,0,9.8,0,0,0\\n"
+digest = hashlib.sha256(row).hexdigest()
+entries = []
+for i in range(n):
+    rot = i % 10 == 9
+    name = f"r{i:06d}" if rot else f"s{i:06d}"
+    (d / f"{name}.csv").write_bytes(row)
+    e = {"name": name, "kind": "rotation" if rot else "static", "file": f"{name}.csv", "status": "complete"}
+    e.update({"axis_body": [0.0, 0.0, 1.0], "rate_dps": 90.0} if rot else {"up_body": [0.1234, -0.5678, 0.8]})
+    e.update({"samples": 2, "sha256": digest, "started_utc": "2026-11-27T14:00:00+00:00", "temperature_c": 25.0})
+    entries.append(e)
+head = C._yaml({"format": C.FORMAT, "imu": {"sample_rate_hz": 100.0, "accel_unit": "m/s^2", "gyro_unit": "deg/s"},
+                "site": {"gravity_mps2": 9.80665}, "scheme": "many"})
+t0 = time.process_time()
+text = head + "segments:\\n" + "".join(C._yaml([e]) for e in entries)
+(d / C.MANIFEST).write_text(text)
+t1 = time.process_time()
+print(t1 - t0, len(text))
+"""
+READ_ONLY = ("import sys, time; from station.io import capture as C\n"
+             "t0 = time.process_time(); cap = C.read_capture(sys.argv[1], load_data=False); t1 = time.process_time()\n"
+             "assert len(cap.segments) == int(sys.argv[2]); print(t1 - t0)")
+
+
+def manifests(sizes) -> None:
+    import shutil
+    import subprocess
+    import sys
+
+    print(f"load average before: {os.getloadavg()}", flush=True)
+    x, write, read = [], [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in sizes:
+            d = Path(tmp) / f"m{n}"
+            w, size = subprocess.run([sys.executable, "-c", MANIFEST_ONLY, str(n), str(d)], capture_output=True,
+                                     text=True, check=True).stdout.split()
+            r = subprocess.run([sys.executable, "-c", READ_ONLY, str(d), str(n)], capture_output=True, text=True,
+                               check=True).stdout.split()[0]
+            x.append(n)
+            write.append(float(w))
+            read.append(float(r))
+            print(f"{n:7d} segments, manifest {int(size) / 1e6:6.1f} MB: made from its parts {float(w):6.2f} s, "
+                  f"read_capture (no samples) {float(r):7.2f} s CPU = {1e6 * float(r) / n:5.0f} us a segment; "
+                  f"load {os.getloadavg()[0]:.1f}", flush=True)
+            shutil.rmtree(d)
+    print(f"load average after: {os.getloadavg()}")
+    for name, y in (("made from its parts", write), ("read_capture", read)):
+        slope, icpt = np.polyfit(np.array(x, float), np.array(y), 1)
+        print(f"{name:20s} slope {1e6 * slope:6.1f} us CPU a segment, intercept {icpt:6.3f} s")
+
+
 def commands(sizes, keep: Path | None) -> None:
     import shutil
     import subprocess
@@ -172,7 +237,12 @@ def main() -> None:
     ap.add_argument("--commands", type=int, nargs="+", metavar="N",
                     help="whole processes on bundles of N statics + N/10 rotations (record, manifest, estimate, diagnose)")
     ap.add_argument("--keep", type=Path, help="with --commands: keep the bundles here (recorded once)")
+    ap.add_argument("--manifest", type=int, nargs="+", metavar="N",
+                    help="the manifest alone: made and read with N segments (read_capture without samples)")
     a = ap.parse_args()
+    if a.manifest:
+        manifests(a.manifest)
+        return
     if a.commands:
         commands(a.commands, a.keep)
         return

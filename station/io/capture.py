@@ -312,7 +312,8 @@ def read_capture(path, *, load_data=True):
     except RecursionError:
         raise CaptureError(manifest_file, "not valid YAML: nested too deeply") from None
 
-    imu, site, scheme, segments, extra = _parse_manifest(raw, directory, manifest_file)
+    with yaml_text.gc_paused():         # a Segment and its fields for every entry, no cycle
+        imu, site, scheme, segments, extra = _parse_manifest(raw, directory, manifest_file)
     capture = Capture(path=directory, imu=imu, site=site, scheme=scheme, segments=segments,
                       extra=extra, warnings=[])
     _warn_shared_files(capture)
