@@ -244,15 +244,45 @@ def rate_profile(t, t0: float, rate_rad_s: float, ripple_fraction: float = 0.0,
     return theta, theta_dot, theta_ddot
 
 
+def quat_product(p, q) -> np.ndarray:
+    """Hamilton product p (x) q of unit quaternions stored scalar last, (x, y, z, w), as arrays
+    (..., 4) broadcast against each other: the rotation q followed by p, i.e. scipy's
+    ``Rotation.from_quat(p) * Rotation.from_quat(q)``.
+
+        p (x) q = (p_w q_v + q_w p_v + p_v x q_v,  p_w q_w - p_v . q_v)
+
+    One product of arrays: composing a rotation with a stack of 10,000 through scipy 1.17's
+    ``Rotation.__mul__`` took 44 ms, this 1.5 ms (issue 27 item 5)."""
+    p = np.asarray(p, dtype=float)
+    q = np.asarray(q, dtype=float)
+    pv, pw, qv, qw = p[..., :3], p[..., 3:], q[..., :3], q[..., 3:]
+    out = np.empty(np.broadcast_shapes(p.shape, q.shape))
+    out[..., :3] = pw * qv + qw * pv + np.cross(pv, qv)
+    out[..., 3] = (pw * qw)[..., 0] - np.einsum("...i,...i->...", pv, qv)
+    return out
+
+
+def axis_angle_quats(axis, angle) -> np.ndarray:
+    """Quaternions (N, 4), scalar last, of the rotations by ``angle`` (rad, N) about the unit
+    ``axis``: (sin(angle/2) axis, cos(angle/2))."""
+    half = 0.5 * np.asarray(angle, dtype=float).reshape(-1)
+    q = np.empty((len(half), 4))
+    q[:, :3] = np.sin(half)[:, None] * np.asarray(axis, dtype=float)[None, :]
+    q[:, 3] = np.cos(half)
+    return q
+
+
 def table_attitude(C_bn0: Rotation, axis_enu, theta) -> Rotation:
     """Attitude of a body turned by ``theta`` (rad, array) about the Earth-fixed
     ``axis_enu`` from the start attitude ``C_bn0``.
 
     C_nb(t) = Rot(axis_enu, theta) C_nb0   <=>   C_bn(t) = C_bn0 Rot(axis_enu, -theta).
+
+    The stacked product as quaternion arrays (quat_product), not scipy's composition.
     """
     a_n = _unit(axis_enu, "axis_enu")
-    theta = np.asarray(theta, dtype=float).reshape(-1)
-    return C_bn0 * Rotation.from_rotvec(-theta[:, None] * a_n[None, :])
+    q = quat_product(C_bn0.as_quat(), axis_angle_quats(a_n, -np.asarray(theta, dtype=float)))
+    return Rotation.from_quat(q)
 
 
 def table_rates_body(C_bn0: Rotation, axis_enu, theta_dot, theta_ddot):
@@ -323,7 +353,7 @@ def wobbling_table(C_bn0: Rotation, axis_enu, theta, theta_dot, theta_ddot,
     q = np.empty((len(theta), 4))
     q[:, :3] = we * vt + wt * ve + np.cross(ve, vt)
     q[:, 3] = we * wt[:, 0] - np.einsum("ij,ij->i", ve, vt)
-    C_bn = C_bn0 * Rotation.from_quat(q)
+    C_bn = Rotation.from_quat(quat_product(C_bn0.as_quat(), q))         # C_bn0 (x) q
     along = math.cos(b) - m * (1.0 - math.cos(b))
     perp = (1.0 + m) * math.sin(b)
     c_n = along * a_n[None, :] + perp * a_x_e                           # w / theta_dot, platter frame

@@ -112,3 +112,23 @@ def test_ctrl_c_ends_the_workers_and_says_interrupted(tmp_path):
     assert p.returncode == 130 and err.strip() == "interrupted" and out == ""
     assert not any(os.path.exists(f"/proc/{w}") and open(f"/proc/{w}/stat").read().split()[2] != "Z"
                    for w in workers)
+
+
+def test_the_pool_forks_after_the_runs_modules_are_imported():
+    """montecarlo.preload imports what a run imports, so the workers forked after it inherit the
+    modules instead of each importing them (issue 27 item 5): a run after it imports nothing of
+    station, sim_devices or scipy.  In a fresh process (this one has imported them already)."""
+    import subprocess
+    import sys
+
+    code = ("import sys\n"
+            "from station.simulate import montecarlo as mc\n"
+            "from station.io.scheme import load_scheme\n"
+            "scheme, settings = load_scheme('optimal9'), mc.Settings()\n"
+            "mc.preload()\n"
+            "before = set(sys.modules)\n"
+            "mc.one_run((scheme, settings, 3))\n"
+            "print(sorted(m for m in set(sys.modules) - before if m.split('.')[0] in ('station', 'sim_devices', 'scipy')))\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr[-1000:]
+    assert run.stdout.strip() == "[]"

@@ -62,8 +62,9 @@ def test_nesting_deeper_than_the_limit_is_refused_by_both_loaders(text):
 def test_the_c_loader_is_used_when_present():
     if yaml_text._C_LOADER is None:
         pytest.skip("PyYAML without libyaml")
-    assert yaml_text._c_safe(DOCS[1], True) and not yaml_text._c_safe("[" * 6000, True)
-    assert not yaml_text._c_safe(DOCS[4], False)
+    assert yaml_text._c_safe(DOCS[1], True) is yaml_text._CLoader
+    assert yaml_text._c_safe("[" * 6000, True) is yaml_text._EventLoader     # its composer in Python
+    assert yaml_text._c_safe(DOCS[4], False) is None
 
 
 @settings(max_examples=1500, deadline=None)
@@ -101,7 +102,61 @@ def test_a_large_manifest_is_read_by_libyaml_and_deep_nesting_never_is():
                    "".join(" " * k + f"k{k}:\n" for k in range(deep)),     # block, by indentation
                    "- " * deep + "x\n"):                                  # block, compact
         assert yaml_text.nesting_bound(nested) > yaml_text.MAX_C_DEPTH
-        assert not yaml_text._c_safe(nested, True)
+        assert yaml_text._c_safe(nested, True) is not yaml_text._CLoader
+
+
+def test_a_100000_segment_manifest_is_read_by_libyaml_in_linear_time():
+    """A station manifest has one bracket per segment and a quoted time stamp (``started_utc:
+    '2026-...'``): the quote makes nesting_bound count every bracket, so above ~5,000 segments
+    such a manifest went to the pure-Python loader (8,000 segments: 5 s, 4 times the C loader).
+    It now takes libyaml's parser with the depth counted in Python (_EventLoader), with
+    safe_load's result, on 1,000 and 4,000 segments alike."""
+    if yaml_text._C_LOADER is None:
+        pytest.skip("PyYAML without libyaml")
+    for n in (1_000, 4_000):
+        doc = {"format": "station-capture/1",
+               "segments": [{"name": f"s{i:06d}", "kind": "static", "file": f"s{i:06d}.csv",
+                             "status": "complete", "up_body": [0.0, 0.1, 1.0],
+                             "started_utc": "2026-11-27T14:00:00+00:00"} for i in range(n)]}
+        text = yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
+        assert "'2026-11-27T14:00:00+00:00'" in text
+        loader = yaml_text._c_safe(text, True)
+        assert loader is (yaml_text._CLoader if n < yaml_text.MAX_C_DEPTH else yaml_text._EventLoader)
+        assert yaml.load(text, Loader=yaml_text._EventLoader) == doc == yaml_text.safe_load(text)
+
+
+def test_deep_nesting_that_hides_its_closers_is_an_error_not_a_crash():
+    """100,000 brackets whose closers are quoted reach libyaml's parser (_EventLoader), never
+    its recursive composer: refused with TooDeep at the 101st level's line, like the
+    pure-Python loader."""
+    code = ("from station.core import yaml_text\n"
+            "text = '[ \"]\",\\n' * 100000\n"
+            "assert yaml_text._c_safe(text, True) is yaml_text._EventLoader\n"
+            "try:\n    yaml_text.safe_load(text)\n"
+            "except yaml_text.TooDeep as e:\n    print('refused', e.problem_mark.line)\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0 and run.stdout.strip() == f"refused {yaml_text.MAX_DEPTH}", run.stderr[-500:]
+
+
+@settings(max_examples=1500, deadline=None)
+@given(st.text(alphabet="ab:-[]{},\n #&*!'\"0123456789.?|>%@`\t\\eE+_~", max_size=80))
+@example("{0?}")
+@example("[[[[1]]]]")
+def test_fuzz_the_event_loader_same_outcome_as_safe_load(text):
+    """Every text the libyaml loaders may take, through _EventLoader: safe_load's outcome."""
+    if yaml_text._c_safe(text, True) is None:
+        return
+    try:
+        expected = ("ok", yaml.safe_load(text))
+    except Exception as e:  # noqa: BLE001
+        expected = ("error", type(e).__name__)
+    try:
+        got = ("ok", yaml.load(text, Loader=yaml_text._EventLoader))
+    except yaml_text.TooDeep:
+        got = ("error", "TooDeep")
+    except Exception:  # noqa: BLE001 - safe_load judges these again with the pure-Python loader
+        got = expected if expected[0] == "error" else ("error", "event loader")
+    assert got == expected
 
 
 @pytest.mark.parametrize("brk", ["\n\r", "\r", "\n\x85", "\u2028", "\u2029"])

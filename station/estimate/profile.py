@@ -73,11 +73,12 @@ def _bias_like_profile(result, effect) -> list[tuple[float, str, str, float]]:
     after that time (the score is unchanged by each column's scale), so no model is built."""
     model = result.model
     s = model.s
-    J = fit_jacobian(result)
     L = model.layout
     cols = list(range(L["accel_bias"].start, L["accel_bias"].stop)) + list(range(L["gyro_bias"].start,
                                                                                    L["gyro_bias"].stop))
-    Jb = J[:, cols]
+    # a large model's bias columns alone: its whole Jacobian dense is rows x parameters (12,000
+    # segments: 126,006 x 32,048, 30 GiB, a MemoryError; issue 27 item 4)
+    Jb = model.jacobian_columns(result.x, cols) if model.is_large else fit_jacobian(result)[:, cols]
     r = model.residuals(result.x)
     t_of = {x.name: x.t_mid_s - model.t0 for x in (*s.statics, *s.rotations) if np.isfinite(x.t_mid_s)}
     seg_t = np.array([t_of.get(name, np.nan) for name, _, _, _ in model.row_labels(result.x)])

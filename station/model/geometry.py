@@ -56,13 +56,16 @@ def distinct_directions(vectors, tolerance_deg: float = ATTITUDE_TOLERANCE_DEG) 
     u = v / np.where(n > 0, n, 1.0)[:, None]
     cos_tol = np.cos(np.radians(tolerance_deg))
     labels = np.full(len(u), -1, int)
-    heads: list = []
+    heads = np.empty_like(u)            # the clusters' first members, in order: heads[:m]
+    m = 0
     for i, d in enumerate(u):
-        for k, h in enumerate(heads):
-            if d @ h >= cos_tol:
-                labels[i] = k
-                break
+        # every head at once (one pair at a time in Python was quadratic: 100,000 random
+        # attitudes make ~1,600 clusters at 5 degrees, 10^8 Python steps)
+        near = np.flatnonzero(heads[:m] @ d >= cos_tol)
+        if len(near):
+            labels[i] = near[0]
         else:
-            labels[i] = len(heads)
-            heads.append(d)
+            labels[i] = m
+            heads[m] = d
+            m += 1
     return labels

@@ -12,7 +12,7 @@ import numpy as np
 import yaml
 
 from station.core.errors import UserError
-from station.io.capture import Capture, CaptureWriter, ImuInfo, Segment, SegmentData, Site
+from station.io.capture import Capture, DeferredCaptureWriter, ImuInfo, Segment, SegmentData, Site
 from station.io.scheme import RotationSpec, Scheme
 
 BLOCK_SECONDS = 10.0     # samples are written and flushed in blocks of this length
@@ -107,19 +107,25 @@ def record_scheme(scheme: Scheme, truth, seed: int, out_dir: Path,
     (``geometry``: the table's as stated, _bench_keys)."""
     bench = _bench(scheme, truth, seed)
     imu, site = _headers(bench, seed)
-    writer = CaptureWriter(out_dir, imu, site, scheme.name,
-                           extra={**_bench_keys(truth, scheme, geometry),
-                                  "simulation": {"seed": seed, "truth_file": TRUTH_FILE}})
-    writer.write_file(TRUTH_FILE, yaml.safe_dump(truth.to_yaml_dict(), sort_keys=False))
-    block = max(1, int(round(BLOCK_SECONDS * bench.sample_rate_hz)))
-    for i, (spec, seg, meta) in enumerate(_simulate(scheme, bench)):
-        if progress:
-            progress(spec.name, i, len(scheme.segments))
-        with writer.begin_segment(spec.name, spec.kind, **meta) as out:
-            for k in range(0, len(seg.t), block):
-                sl = slice(k, k + block)
-                out.write(seg.t[sl], seg.accel[sl], seg.gyro[sl], seg.temp[sl])
-            out.close("complete", **{k: v for k, v in seg.meta.items() if k in ("angle_deg", "table_axis")})
+    # the manifest written at the start and the end (a dry run is redone, never resumed: a run's
+    # writer rewrites it at every segment's start and end, quadratic in the segments), and in the
+    # finally on an error or Ctrl-C: what was written is listed, the segment cut short incomplete
+    writer = DeferredCaptureWriter(out_dir, imu, site, scheme.name,
+                                   extra={**_bench_keys(truth, scheme, geometry),
+                                          "simulation": {"seed": seed, "truth_file": TRUTH_FILE}})
+    try:
+        writer.write_file(TRUTH_FILE, yaml.safe_dump(truth.to_yaml_dict(), sort_keys=False))
+        block = max(1, int(round(BLOCK_SECONDS * bench.sample_rate_hz)))
+        for i, (spec, seg, meta) in enumerate(_simulate(scheme, bench)):
+            if progress:
+                progress(spec.name, i, len(scheme.segments))
+            with writer.begin_segment(spec.name, spec.kind, **meta) as out:
+                for k in range(0, len(seg.t), block):
+                    sl = slice(k, k + block)
+                    out.write(seg.t[sl], seg.accel[sl], seg.gyro[sl], seg.temp[sl])
+                out.close("complete", **{k: v for k, v in seg.meta.items() if k in ("angle_deg", "table_axis")})
+    finally:
+        writer.finish()
     return writer.path
 
 

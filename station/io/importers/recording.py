@@ -30,7 +30,7 @@ import yaml
 from station.core import units
 from station.core.errors import UserError
 from station.core import yaml_text
-from station.io.capture import MAX_CSV_VALUE, CaptureWriter, FormattedRows, ImuInfo, Site
+from station.io.capture import MAX_CSV_VALUE, DeferredCaptureWriter, FormattedRows, ImuInfo, Site
 from station.io.segment_detect import Detection, Interval, detect
 from station.model.geometry import ATTITUDE_TOLERANCE_DEG, distinct_directions
 
@@ -52,22 +52,7 @@ IMUCAL_UP = {"x_p": (1, 0, 0), "x_a": (-1, 0, 0), "y_p": (0, 1, 0), "y_a": (0, -
 IMUCAL_AXIS = {"x_rot": (1, 0, 0), "y_rot": (0, 1, 0), "z_rot": (0, 0, 1)}
 
 
-class _ImportWriter(CaptureWriter):
-    """A CaptureWriter that writes the manifest when created and when ``finish`` is called, not
-    at every segment (each segment is checked as it begins and ends, as a run's): a run's writer
-    writes it at each segment so that a killed run can resume, two synced writes a segment
-    here (an import is redone, not resumed; its source file is untouched)."""
-
-    _deferred = False
-
-    def _save(self):
-        if not self._deferred:
-            super()._save()
-            self._deferred = True
-
-    def finish(self):
-        self._deferred = False
-        self._save()
+_ImportWriter = DeferredCaptureWriter      # an import is redone, not resumed: two manifest writes
 
 
 @dataclass
