@@ -118,12 +118,13 @@ def test_short_fast_turns_about_tilted_axes_monte_carlo():
     an axis, e, was free and the solver could step past |e| = Omega, where nothing is left of it
     across the axis (sqrt(Omega^2 - e^2) cut at 0) and the integrals across are made up by a tilt
     (seeds 1 and 4, axes some 25 deg from the Earth's: reduced chi2 40 and 50 at 120 degrees, 3.3
-    and 4.3 at 200).  Now e = Omega cos beta about axes turned both ways.  Those two seeds at
-    elevations 30 and 60 deg: each reduced chi2 within its distribution and the 4 x 21
-    parameters' errors against the truth consistent with the reported 1-sigma (their rms within
-    0.6-1.4: its spread for 84 honest z is 1/sqrt(2 x 84) = 0.08)."""
+    and 4.3 at 200).  Now e = Omega cos beta about axes turned both ways.  Those two seeds, one
+    at each of the elevations 30 and 60 deg (each fit some 4 s: the solver creeps along the
+    Earth rate's phase, which the data barely hold): each reduced chi2 within its distribution
+    and the 2 x 21 parameters' errors against the truth consistent with the reported 1-sigma
+    (their rms within 0.6-1.4: its spread for 42 honest z is 1/sqrt(2 x 42) = 0.11)."""
     z = []
-    for elevation_deg, seed in ((30, 1), (30, 4), (60, 1), (60, 4)):
+    for elevation_deg, seed in ((30, 4), (60, 1)):
         scheme, truth = tilted_turns(elevation_deg, 300, 120), default_truth(seed)
         result = lsq.fit(lsq.summarise(dryrun.simulate_capture(scheme, truth, seed)))
         assert stats.chi2.ppf(0.0005, result.dof) < result.chi2 < stats.chi2.ppf(0.9995, result.dof), \
@@ -131,7 +132,7 @@ def test_short_fast_turns_about_tilted_axes_monte_carlo():
         cal = lsq.to_calibration(result, "m/s^2", "deg/s")
         for name, value, _, err, unit in parameter_errors(cal, dryrun.truth_calibration(truth)):
             z.append(err / (cal.sigma[name] / value * 1e6 if unit == "ppm" else cal.sigma[name]))
-    z = np.array(z)         # 4 runs x 21 parameters
+    z = np.array(z)         # 2 runs x 21 parameters
     assert np.max(np.abs(z)) < 4.5, np.max(np.abs(z))
     assert 0.6 < np.sqrt(np.mean(z**2)) < 1.4, np.sqrt(np.mean(z**2))
 
