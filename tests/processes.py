@@ -7,6 +7,7 @@ import signal
 import subprocess
 import sys
 import time
+from contextlib import contextmanager
 
 
 def start_script(script: str, *args) -> subprocess.Popen:
@@ -70,3 +71,22 @@ def quiet_after(port, unwanted, quiet_s: float, seconds: float = 10.0) -> bool:
         elif time.monotonic() - since >= quiet_s:
             return True
     return False
+
+
+class Hang(BaseException):      # not an Exception: a reader's "except Exception" cannot swallow it
+    pass
+
+
+@contextmanager
+def time_limit(seconds):
+    """Raise Hang in this (main) thread if the block takes longer than ``seconds`` (SIGALRM):
+    the fuzz tests' guard against an input that makes a reader hang."""
+    def alarm(signum, frame):
+        raise Hang(f"no answer in {seconds} s: a hang")
+    old = signal.signal(signal.SIGALRM, alarm)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)

@@ -11,8 +11,6 @@ Cheap by design (the suite's budget): EXAMPLES per test (a few hundred ms each);
 (docs/reliability.md gives its count)."""
 import os
 import shutil
-import signal
-from contextlib import contextmanager
 
 import numpy as np
 import pytest
@@ -21,6 +19,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from bag_mutations import db3_changes, db3_mutate, db3_tables, mcap_spans, mutated_spans, ros1_spans
+from processes import time_limit
 from station import api
 from station.core.errors import UserError
 from test_fuzz_configs import mutated, paths
@@ -32,23 +31,6 @@ FUZZ = settings(max_examples=EXAMPLES, deadline=None, suppress_health_check=list
 # forever: 20 s is far beyond any honest read even on a machine loaded 10x, and is a hang
 HANG_S = 20.0
 MESSAGES = 40
-
-
-class Hang(BaseException):      # not an Exception: the readers' "except Exception" cannot swallow it
-    pass
-
-
-@contextmanager
-def time_limit(seconds):
-    def alarm(signum, frame):
-        raise Hang(f"no answer in {seconds} s: a hang")
-    old = signal.signal(signal.SIGALRM, alarm)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, old)
 
 
 @pytest.fixture(scope="module")

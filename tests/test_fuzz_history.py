@@ -9,15 +9,14 @@ history (history, history SERIAL, diff #A #B, fleet, filing a new calibration, t
 rows) either answers or raises UserError: one line naming the index; never another exception,
 never a hang (an alarm of HANG_S per example)."""
 import os
-import signal
 import sqlite3
-from contextlib import contextmanager
 
 import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from processes import time_limit
 from station import api
 from station.core.errors import UserError
 from station.io.history import Store
@@ -80,23 +79,6 @@ def index_changes(draw):
             out.append(("UPDATE schema_version SET version = ?",
                         (draw(st.sampled_from([0, 1, 2, 3, 5, -1, 2 ** 62, None, "4", 4.5, b"4"])),)))
     return out
-
-
-class Hang(BaseException):
-    pass
-
-
-@contextmanager
-def time_limit(seconds):
-    def alarm(signum, frame):
-        raise Hang(f"no answer in {seconds} s: a hang")
-    old = signal.signal(signal.SIGALRM, alarm)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, old)
 
 
 def calibrations(folder):
