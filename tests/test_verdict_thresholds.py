@@ -21,6 +21,7 @@ both sides -- the exit status of `station estimate`, the calibration file, the r
 from __future__ import annotations
 
 import hashlib
+import json
 import math
 
 import numpy as np
@@ -125,6 +126,13 @@ def test_fails_at_its_threshold(tmp_path, capsys, clean, k2_sizes, side):
         assert status == 0 and v["result"] == "passes"
         assert "sigma_scale" not in doc["fit"]
         assert "fit verdict: passes" in page
+    # diagnose's own test (p alone) calls both sides a misfit; just below, it says that a
+    # calibration from this fit passes, so that the two never seem to contradict
+    capsys.readouterr()
+    main(["diagnose", str(cap), "--json"])
+    words = json.loads(capsys.readouterr().out)["verdict"]
+    assert "does not explain the data" in words, words
+    assert ("a calibration from this fit passes" in words) == (side == -1), words
     # accepted anyway: the file still says what the fit is
     assert main(["estimate", str(cap), "--accept-poor-fit", "-o", str(tmp_path / "accepted.yaml")]) == 0
     assert read_doc(tmp_path / "accepted.yaml")["verdict"]["result"] == v["result"]

@@ -21,7 +21,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from station.diagnose.core import ALPHA, Diagnosis, chi2_sf, diagnose, fit_fails, overdispersion, rms_by_kind
+from station.diagnose.core import (ALPHA, Diagnosis, chi2_sf, diagnose, fit_fails, overdispersion, rms_by_kind,
+                                   within_calibration_threshold)
 from station.diagnose.holdout import Holdout, judge, leave_one_segment_out
 from station.diagnose.words import caveats, failure_account
 from station.estimate import lsq, profile
@@ -377,7 +378,8 @@ def conclude(d: Diagnosis, summaries, steps=(), search_terms: bool = True) -> Di
         d.proposal = terms.propose(d, summaries)
         if d.proposal is not None and d.proposal.kept and steps:
             d.proposal.redundant = redundant_with(d, d.proposal.effect, {st.added for st in steps}, summaries)
-    head = f"the model does not explain the data{added} (reduced chi2 {d.reduced_chi2:.3g})"
+    head = (f"the model does not explain the data{added} (reduced chi2 {d.reduced_chi2:.3g})"
+            + within_calibration_threshold(d.reduced_chi2))
     if now:
         head += f"; first look at this: {now[0]}"
     elif first:

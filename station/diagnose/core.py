@@ -252,6 +252,18 @@ def rank_candidates(result, exclude=(), registry: EffectRegistry | None = None) 
     return sorted(cands, key=lambda c: (not c.significant, c.bench and c.significant, -c.predicted_chi2_drop))
 
 
+def within_calibration_threshold(reduced: float) -> str:
+    """Words for a misfit that diagnose calls significant but a calibration's verdict lets pass
+    (station/estimate/verdict.py: a fit fails only when its p-value is below P_FAIL *and* its
+    reduced chi2 above REDUCED_CHI2_FAIL), so that the two never seem to contradict; '' above it."""
+    from station.estimate.verdict import REDUCED_CHI2_FAIL
+
+    if not reduced <= REDUCED_CHI2_FAIL:
+        return ""
+    return (f"; below the calibration's fail threshold (reduced chi2 {REDUCED_CHI2_FAIL:g}): a calibration "
+            "from this fit passes, what is missing being smaller than half the noise's variance")
+
+
 def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diagnosis:
     from station.diagnose.words import describe_failures
 
@@ -270,6 +282,8 @@ def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diag
     else:
         verdict = (f"the model does not explain the data (reduced chi2 {reduced:.3g}, p = {p:.2g}) "
                    "and no effect of the library accounts for it: see where it fails")
+    if not good:
+        verdict += within_calibration_threshold(reduced)
     notes = []
     phi = overdispersion(result)
     if phi > 1.0:
