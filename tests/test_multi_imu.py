@@ -287,6 +287,14 @@ def test_a_run_killed_mid_way_resumes_every_imu_and_a_missing_port_is_lost_at_bo
         assert "DeviceError" in yaml.safe_load((run / "gone0" / "manifest.yaml").read_text())["lost_at_start"]["why"]
         resume = station(config, "--resume", "run")
         out, err = finish(resume)
+        # resumed again with the port still missing: only that IMU lacks segments, nobody would
+        # record, and the table is not driven through the scheme
+        moves = [len(ax.motion.history) for ax in bench.table.axes]
+        again = station(config, "--resume", "run")
+        _, err_again = finish(again)
+        assert [len(ax.motion.history) for ax in bench.table.axes] == moves, err_again[-2000:]
+    assert again.returncode == 4, err_again[-3000:]
+    assert "nothing to record: every IMU that lacks segments is lost again at the start (gone0)" in err_again
     assert "Traceback" not in err
     assert resume.returncode == 4, err[-3000:]                # the missing port: lost again, the others done
     assert "IMU gone0 (imus[2], /nonexistent/imu0) lost at the start (DeviceError" in err

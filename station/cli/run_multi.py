@@ -78,6 +78,7 @@ def _record(args, config, reference, scheme, plan, steps, directory, text, folde
 
     table = _open_table(config)
     imus, guardian = [], None
+    resuming = folders is not None
     try:
         # an IMU that fails to start (its port missing, no reply to its start-up) is lost at the
         # start: said, its bundle marked, the others go on (exit status 4); none left: the run stops
@@ -108,6 +109,12 @@ def _record(args, config, reference, scheme, plan, steps, directory, text, folde
         for k, why in failed.items():
             err.print(f"IMU {folders[k]} (imus[{k}], {config.imus[k].port}) lost at the start ({why}): the other "
                       f"IMUs go on; station run --resume {directory} records it", markup=False, soft_wrap=True)
+        names = {seg.name for seg in scheme.segments}
+        idle = resuming and all(k in failed or names <= set(d) for k, d in enumerate(done))
+        if idle:      # only IMUs lost again lack segments: nobody would record, the table stays put
+            err.print(f"nothing to record: every IMU that lacks segments is lost again at the start "
+                      f"({', '.join(folders[k] for k in failed)}); the table is not moved", markup=False,
+                      soft_wrap=True)
         m0 = config.imus[0].mounting_matrix(config.table)
         channels = [ImuChannel(label=serial or folder, stream=None if imu is None else ImuStream(imu, rate),
                                writer=writer, rate_hz=rate,
@@ -120,8 +127,8 @@ def _record(args, config, reference, scheme, plan, steps, directory, text, folde
                   markup=False, soft_wrap=True)
         display = make_display(out, sum(s.estimate_s for s in steps),
                                f"{scheme.name} on {config.table.axes}-axis table, {len(channels)} IMUs")
-        status = sequence(steps, display, directory, table=table, config=reference,
-                          reset_faults=args.reset_faults, channels=channels)
+        status = None if idle else sequence(steps, display, directory, table=table, config=reference,
+                                            reset_faults=args.reset_faults, channels=channels)
         if status is not None:
             return status
     finally:
