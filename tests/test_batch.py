@@ -204,6 +204,23 @@ def test_montecarlo_on_the_scheduler(dask_cluster, tmp_path):
     assert all(row["crlb"] > 0 and row["std"] > 0 for row in doc["parameters"])
 
 
+def test_design_on_the_scheduler(dask_cluster, tmp_path):
+    """station design --scheduler: the predictions (the design's and a built-in scheme's) and the
+    verification's noisy dry runs are Dask tasks on the workers; the scheme file written as ever."""
+    address, worker_pids = dask_cluster
+    r = subprocess.run([sys.executable, "-m", "station.cli", "design", "--duration", "1200", "-o", "d.yaml",
+                        "--rates", "30,100", "--revolutions", "1", "--dwells", "10,30", "--passes", "3",
+                        "--compare", "optimal9", "--verify-runs", "2", "--scheduler", address, "--json"],
+                       cwd=tmp_path, env=_env(tmp_path), capture_output=True, text=True, timeout=240)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert f"design: on the Dask scheduler {address}" in r.stderr and "one Dask task per scheme" in r.stderr
+    assert "2 noisy dry runs of the design" in r.stderr
+    doc = json.loads(r.stdout)
+    assert doc["designed"]["parameters"] and doc["builtins"][0]["scheme"] == "optimal9"
+    assert (tmp_path / "d.yaml").exists()
+    assert all(running(pid) for pid in worker_pids)        # the cluster is the test's: left running
+
+
 def test_an_unreachable_scheduler_is_one_line(tmp_path, captures):
     import socket
 

@@ -2,6 +2,8 @@
 (station/design/, docs/design.md)."""
 from __future__ import annotations
 
+import contextlib
+
 from station.cli import argtypes, choices, plugins
 from station.cli.output import err, out
 from station.core.errors import UserError
@@ -77,6 +79,9 @@ def add_parsers(sub) -> None:
                    help="noisy dry runs of the design estimated as station montecarlo does, each criterion "
                         "parameter's error checked against its predicted 1σ (default 4; 0: none). A design the "
                         "estimator does not deliver is not written (exit 3)")
+    d.add_argument("--scheduler", metavar="tcp://HOST:8786",
+                   help="compute the predictions (the design's and the built-in schemes') and the verification's "
+                        "dry runs on this Dask scheduler's workers (default: forked processes on this machine's cores)")
     d.add_argument("--name", default="designed", help="the scheme's name (default designed)")
     d.add_argument("-o", "--out", default="designed.yaml", metavar="FILE",
                    help="the scheme file to write (default designed.yaml)")
@@ -213,11 +218,18 @@ def _cmd_design(args) -> int:
     if out_path.suffix not in (".yaml", ".yml"):
         raise UserError(f"-o {args.out}: a scheme file ends in .yaml")
     revolutions = tuple(int(round(r)) for r in args.revolutions) if args.revolutions else cand_mod.DEFAULT_REVOLUTIONS
-    d = design(config, effects, noise, args.duration, args.criterion,
-               rates_dps=args.rates or cand_mod.DEFAULT_RATES_DPS, revolutions=revolutions,
-               dwells_s=args.dwells or cand_mod.DEFAULT_DWELLS_S, max_passes=args.passes, name=args.name,
-               compare=compare, centred=args.centred, verify_runs=args.verify_runs,
-               progress=lambda text: err.print(f"design: {text}", markup=False, soft_wrap=True))
+    with contextlib.ExitStack() as stack:
+        executor = None
+        if args.scheduler:
+            from station.batch.cluster import open_client
+
+            executor = stack.enter_context(open_client(args.scheduler)).get_executor(pure=False)
+            err.print(f"design: on the Dask scheduler {args.scheduler}", markup=False, soft_wrap=True)
+        d = design(config, effects, noise, args.duration, args.criterion,
+                   rates_dps=args.rates or cand_mod.DEFAULT_RATES_DPS, revolutions=revolutions,
+                   dwells_s=args.dwells or cand_mod.DEFAULT_DWELLS_S, max_passes=args.passes, name=args.name,
+                   compare=compare, centred=args.centred, verify_runs=args.verify_runs, executor=executor,
+                   progress=lambda text: err.print(f"design: {text}", markup=False, soft_wrap=True))
     v = d.verification
     if v is not None and not v.ok:
         for line in v.problems:

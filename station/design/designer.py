@@ -142,8 +142,18 @@ def verify_one(scheme: Scheme, effect_ids: tuple, noise: Noise, seed: int) -> tu
     return names, np.array(errors, float), np.asarray(sigmas, float), list(cal.fit.get("notes", []))
 
 
+def _map(executor, fn, items) -> list:
+    """[fn(item) for item in items] on a Dask cluster's workers (``executor``: its client's
+    executor, `station design --scheduler`), else each in a forked child on this machine's cores."""
+    if executor is None:
+        from station.core.forked import map_in_children
+
+        return map_in_children(fn, items)
+    return list(executor.map(fn, list(items)))
+
+
 def verify(scheme: Scheme, effects: list, noise: Noise, prediction: Prediction, which,
-           runs: int = VERIFY_RUNS, first_seed: int = 1000) -> Verification:
+           runs: int = VERIFY_RUNS, first_seed: int = 1000, executor=None) -> Verification:
     """Does the estimator deliver the prediction?  ``runs`` noisy dry runs of the designed scheme
     (seeds first_seed, ...: the first runs `station montecarlo` makes) estimated as it does;
     for every criterion parameter ``which`` (the prediction's indices) the error must be within
@@ -152,11 +162,9 @@ def verify(scheme: Scheme, effects: list, noise: Noise, prediction: Prediction, 
     estimator's covariance at the noiseless capture; what it leaves out is what the estimator
     does with noise: a start the solver does not converge from, a direction the noiseless fit
     sees and a noisy one does not, a noise model or reweighting the designed segments set off."""
-    from station.core.forked import map_in_children
-
     ids = tuple(e.id for e in effects)
-    results = map_in_children(lambda seed: verify_one(scheme, ids, noise, seed),
-                              [first_seed + k for k in range(runs)])
+    results = _map(executor, lambda seed: verify_one(scheme, ids, noise, seed),
+                   [first_seed + k for k in range(runs)])
     problems, worst_z, worst = [], 0.0, ""
     for k, (names, errors, sigmas, notes) in enumerate(results):
         seed = first_seed + k
@@ -281,10 +289,12 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
            rates_dps=cand_mod.DEFAULT_RATES_DPS, revolutions=cand_mod.DEFAULT_REVOLUTIONS,
            dwells_s=cand_mod.DEFAULT_DWELLS_S, max_passes: int = 20, name: str = "designed",
            compare=BUILTIN_TABLE_SCHEMES, progress=None, centred: bool = False,
-           verify_runs: int = VERIFY_RUNS) -> Design:
+           verify_runs: int = VERIFY_RUNS, executor=None) -> Design:
     """The design (module doc).  ``progress(text)``: told what is being done.  ``centred``: the
     IMU is to be mounted with its reference point on the table's axes (the scheme says
-    ``centred: true``; the mounting offset is then known, as in the sizeeffect scheme)."""
+    ``centred: true``; the mounting offset is then known, as in the sizeeffect scheme).
+    ``executor``: a Dask client's executor (`station design --scheduler`): the predictions of the
+    design and of the built-in schemes, and the verification's dry runs, run on its workers."""
     say = progress or (lambda text: None)
     seconds = {}
     t0 = time.perf_counter()
@@ -336,8 +346,7 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
     search_sigma = scorer.sigma(result.chosen)
     t3 = time.perf_counter()
     say(f"the 1σ of the designed scheme and of {', '.join(compare) or 'no built-in scheme'} at the same duration "
-        "(the estimator's fit, one forked process per scheme)")
-    from station.core.forked import map_in_children
+        f"(the estimator's fit, {'one forked process' if executor is None else 'one Dask task'} per scheme)")
 
     def job(other):
         if other is None:
@@ -351,13 +360,13 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
             pr = Prediction(other, math.nan, [], [], np.zeros(0), np.zeros(0, bool), note=str(e))
         return pr
 
-    prediction, *builtins = map_in_children(job, [None, *compare])
+    prediction, *builtins = _map(executor, job, [None, *compare])
     seconds["predictions"] = time.perf_counter() - t3
     verification = None
     if verify_runs:
         t4 = time.perf_counter()
         say(f"{verify_runs} noisy dry runs of the design through the estimator (does it deliver the prediction?)")
-        verification = verify(scheme, effects, noise, prediction, which, verify_runs)
+        verification = verify(scheme, effects, noise, prediction, which, verify_runs, executor=executor)
         seconds["verification"] = time.perf_counter() - t4
     header = [f"{name}: designed by `station design` for the {config.table.axes}-axis table of {config.source}",
               f"criterion {crit.text}: {criterion_of(prediction, crit.text):.6g}; compiled time {plan.duration_s:.0f} s "
