@@ -110,7 +110,7 @@ def _record(args, config, reference, scheme, plan, steps, directory, text, folde
             err.print(f"IMU {folders[k]} (imus[{k}], {config.imus[k].port}) lost at the start ({why}): the other "
                       f"IMUs go on; station run --resume {directory} records it", markup=False, soft_wrap=True)
         names = {seg.name for seg in scheme.segments}
-        idle = resuming and all(k in failed or names <= set(d) for k, d in enumerate(done))
+        idle = resuming and bool(failed) and all(k in failed or names <= set(d) for k, d in enumerate(done))
         if idle:      # only IMUs lost again lack segments: nobody would record, the table stays put
             err.print(f"nothing to record: every IMU that lacks segments is lost again at the start "
                       f"({', '.join(folders[k] for k in failed)}); the table is not moved", markup=False,
