@@ -316,6 +316,28 @@ def at_compensated_stamps(t_comp, t_true, f_true, w_true):
     return CubicSpline(t_true, f_true, axis=0)(tq), CubicSpline(t_true, w_true, axis=0)(tq)
 
 
+
+def join_segments(frames: list, path: Path) -> Path:
+    """The segments' columns (read_csv's dicts) back to back in one CSV at ``path`` (time
+    increases across them): one `station apply` for a whole held-out capture."""
+    cols = list(frames[0])
+    with open(path, "w") as fh:
+        fh.write(",".join(cols) + "\n")
+        np.savetxt(fh, np.column_stack([np.concatenate([fr[c] for fr in frames]) for c in cols]),
+                   delimiter=",", fmt="%.12g")
+    return path
+
+
+def split_segments(comp: dict, names: list, frames: list) -> dict:
+    """join_segments' file after `station apply` (read_csv's dict), cut back into its segments."""
+    outputs, k = {}, 0
+    for n, fr in zip(names, frames):
+        m = len(fr["t"])
+        outputs[n] = {c: v[k:k + m] for c, v in comp.items()}
+        k += m
+    return outputs
+
+
 def score(outputs: dict, truth: dict, C_pb: np.ndarray, rate_hz: float) -> dict:
     """RMS of compensated minus true over the test samples, per triad and axis."""
     edge = int(round(EDGE_S * rate_hz))
@@ -365,23 +387,13 @@ def apply_and_score(cal: Path, test_dir: Path, names: list[str], truth: dict, C_
     if quick:
         # every test segment back to back in one file (time increases across them)
         frames = [read_csv(test_dir / f"{n}.csv") for n in names]
-        cols = list(frames[0])
-        both = work / f"test_all_{tag}_in.csv"
-        with open(both, "w") as fh:
-            fh.write(",".join(cols) + "\n")
-            np.savetxt(fh, np.column_stack([np.concatenate([fr[c] for fr in frames]) for c in cols]),
-                       delimiter=",", fmt="%.12g")
+        both = join_segments(frames, work / f"test_all_{tag}_in.csv")
         out = work / f"test_all_{tag}.csv"
         # --force: the test capture is the same simulated IMU under another seed (serial SIM-<seed>)
         rc, _, err, _ = run_cli(["apply", str(cal), str(both), "-o", str(out), "--force"], work, log)
         if rc != 0:
             raise RuntimeError(f"station apply failed: {err.strip()[-200:]}")
-        comp = read_csv(out)
-        k = 0
-        for n, fr in zip(names, frames):
-            m = len(fr["t"])
-            outputs[n] = {c: v[k:k + m] for c, v in comp.items()}
-            k += m
+        outputs.update(split_segments(read_csv(out), names, frames))
     else:
         for n in names:
             out = work / f"{n}_{tag}.csv"

@@ -239,24 +239,13 @@ def apply_score(cal: Path, plugin: str | None, test_dir: Path, names: list[str],
                 rate_hz: float, work: Path, tag: str, log: list) -> tuple[dict, float]:
     """``station apply`` on every held-out segment back to back (one file), scored; and its time."""
     frames = [dc.read_csv(test_dir / f"{n}.csv") for n in names]
-    cols = list(frames[0])
-    both = work / f"heldout_{tag}_in.csv"
-    with open(both, "w") as fh:
-        fh.write(",".join(cols) + "\n")
-        np.savetxt(fh, np.column_stack([np.concatenate([fr[c] for fr in frames]) for c in cols]),
-                   delimiter=",", fmt="%.12g")
+    both = dc.join_segments(frames, work / f"heldout_{tag}_in.csv")
     out = work / f"heldout_{tag}.csv"
     cmd = ["apply", str(cal), str(both), "-o", str(out), "--force"] + (["--plugin", plugin] if plugin else [])
     rc, _, err, dt = cli(cmd, work, log)
     if rc != 0:
         raise RuntimeError(f"station apply ({tag}) failed: {err.strip()[-300:]}")
-    comp = dc.read_csv(out)
-    outputs, k = {}, 0
-    for n, fr in zip(names, frames):
-        m = len(fr["t"])
-        outputs[n] = {c: v[k:k + m] for c, v in comp.items()}
-        k += m
-    s = dc.score(outputs, truth, C_pb, rate_hz)
+    s = dc.score(dc.split_segments(dc.read_csv(out), names, frames), truth, C_pb, rate_hz)
     return {"accel_ug": s["accel_mg"] * 1000.0, "gyro_ppm": s.get("gyro_ppm_of_rate", float("nan")),
             "gyro_dph": s["gyro_dph"]}, dt
 

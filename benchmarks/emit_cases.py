@@ -175,12 +175,7 @@ def _scored(cal, work, both, names, frames, true, C_pb, extra=()):
     if rc != 0:
         raise RuntimeError(f"station apply {' '.join(extra)}: exit {rc}: {err.strip()[-300:]}")
     comp = dc.read_csv(out)
-    outputs, k = {}, 0
-    for n, fr in zip(names, frames):
-        m = len(fr["t"])
-        outputs[n] = {c: v[k:k + m] for c, v in comp.items()}
-        k += m
-    return dc.score(outputs, true, C_pb, 100.0)
+    return dc.score(dc.split_segments(comp, names, frames), true, C_pb, 100.0)
 
 
 def _estimate_and_score(res, tag, train, adds, extra, work, both, names, frames, true, C_pb):
@@ -241,12 +236,7 @@ def run_case(case: Case | None, work: Path, seed: int = 3) -> dict:
         C_pb = truth.paper_parameters()["C_pb"]
         names = list(true)
         frames = [dc.read_csv(test / f"{n}.csv") for n in names]
-        cols = list(frames[0])
-        both = work / "test_all.csv"
-        with open(both, "w") as fh:
-            fh.write(",".join(cols) + "\n")
-            np.savetxt(fh, np.column_stack([np.concatenate([fr[c] for fr in frames]) for c in cols]),
-                       delimiter=",", fmt="%.12g")
+        both = dc.join_segments(frames, work / "test_all.csv")
 
         plugin = work / "found.py"
         t0 = time.perf_counter()

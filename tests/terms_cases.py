@@ -159,7 +159,6 @@ def heldout(case, tmp, seed=3, library_patch=None):
     import io
     import json
 
-    import numpy as np
     from sim_devices.truth import Truth
 
     from station.cli import main
@@ -178,12 +177,7 @@ def heldout(case, tmp, seed=3, library_patch=None):
     C_pb = truth.paper_parameters()["C_pb"]
     names = list(true)
     frames = [dc.read_csv(test / f"{n}.csv") for n in names]
-    cols = list(frames[0])
-    both = tmp / "test_all.csv"
-    with open(both, "w") as fh:
-        fh.write(",".join(cols) + "\n")
-        np.savetxt(fh, np.column_stack([np.concatenate([fr[c] for fr in frames]) for c in cols]),
-                   delimiter=",", fmt="%.12g")
+    both = dc.join_segments(frames, tmp / "test_all.csv")
 
     def cli(args):
         o, e = io.StringIO(), io.StringIO()
@@ -196,12 +190,7 @@ def heldout(case, tmp, seed=3, library_patch=None):
         rc, _, e = cli(["apply", str(cal), str(both), "-o", str(out), "--force", *extra])
         assert rc == 0, e
         comp = dc.read_csv(out)
-        outputs, k = {}, 0
-        for n, fr in zip(names, frames):
-            m = len(fr["t"])
-            outputs[n] = {c: v[k:k + m] for c, v in comp.items()}
-            k += m
-        return dc.score(outputs, true, C_pb, 100.0)
+        return dc.score(dc.split_segments(comp, names, frames), true, C_pb, 100.0)
 
     res = {"case": case.name if case else "clean"}
     ids = case.library if case else ()
