@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from station.core.errors import UserError
+from station.core.memory_cap import budget_for, memory_cap
 from station.io.importers.recording import Recording
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
@@ -69,9 +70,17 @@ def read_rosbag(path, *, topic: str | None = None, stamps: str = "header", rate_
     for file in [path] if not path.is_dir() else sorted(path.iterdir()):
         if not (file.is_file() or file.is_dir()):        # a FIFO hung the reader
             raise UserError(f"{file}: not a regular file (a FIFO, device or socket): cannot read it as a ROS bag")
+    size = sum(f.stat().st_size for f in ([path] if not path.is_dir() else path.iterdir()) if f.is_file())
+    with memory_cap(budget_for(size), str(path)):
+        return _read(path, AnyReader, topic, stamps, rate_hz)
+
+
+def _read(path, AnyReader, topic, stamps, rate_hz) -> Recording:
     try:
         reader = AnyReader([path], default_typestore=_typestore())
         reader.open()
+    except MemoryError:
+        raise
     except Exception as e:        # rosbags raises its own error types for every kind of bad bag
         raise UserError(f"{path}: not a readable ROS bag: {str(e).splitlines()[0] if str(e) else type(e).__name__}") from None
     try:
@@ -107,6 +116,8 @@ def read_rosbag(path, *, topic: str | None = None, stamps: str = "header", rate_
                 data[k] = (a.x, a.y, a.z, w.x, w.y, w.z)
                 t_ns[k] = (msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
                            if stamps == "header" else bag_ns)
+            except MemoryError:
+                raise
             except Exception as e:
                 raise UserError(f"{path}: topic {_shown(topic)}: message {k + 1}: cannot be decoded as {IMU_TYPE}: "
                                 f"{str(e)[:120] or type(e).__name__}") from None
@@ -186,7 +197,7 @@ def _guarded(messages, path, topic):
             item = next(messages)
         except StopIteration:
             return
-        except UserError:
+        except (UserError, MemoryError):      # MemoryError: the caller's memory_cap names it
             raise
         except Exception as e:    # noqa: BLE001 - bytes from outside: any failure of the reader
             raise UserError(f"{path}: topic {_shown(topic)}: damaged after {k} message(s): "
