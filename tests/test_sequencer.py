@@ -105,10 +105,13 @@ def complete_segments(capture_dir):
     return [s for s in (doc or {}).get("segments", []) if s.get("status") == "complete"]
 
 
-def wait_for_recording(out, after: int, timeout_s: float = 60.0) -> str:
+def wait_for_recording(out, after: int, timeout_s: float = 120.0, proc=None) -> str:
     """The name of the segment being recorded once ``after`` segments are complete and it has
-    rows on disk."""
+    rows on disk.  ``proc`` (the run): when it ends first, or the time runs out, the failure shows
+    its exit status and stderr and the manifest's segments (a flake seen once in CI said only "no
+    segment recording within 60 s")."""
     deadline = time.monotonic() + timeout_s
+    segs = []
     while time.monotonic() < deadline:
         try:
             doc = yaml.safe_load((Path(out) / "manifest.yaml").read_text()) or {}
@@ -120,8 +123,22 @@ def wait_for_recording(out, after: int, timeout_s: float = 60.0) -> str:
             csv = Path(out) / segs[-1]["file"]
             if csv.exists() and csv.stat().st_size > 2000:
                 return segs[-1]["name"]
+        if proc is not None and proc.poll() is not None:
+            break
         time.sleep(0.02)           # gently: the twins run in this process
-    raise AssertionError(f"no segment recording after {after} complete ones within {timeout_s} s")
+    state = [(s.get("name"), s.get("status")) for s in segs]
+    if proc is not None and proc.poll() is None:
+        proc.terminate()
+    err = ""
+    if proc is not None:
+        try:
+            _, err = proc.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            _, err = proc.communicate()
+    raise AssertionError(f"no segment recording after {after} complete ones within {timeout_s} s; segments "
+                         f"{state}; the run's exit status {None if proc is None else proc.returncode}, "
+                         f"stderr: {(err or '')[-3000:]}")
 
 
 @pytest.fixture(scope="module")
@@ -170,7 +187,7 @@ def test_a_run_killed_mid_way_resumes_without_rewriting_what_was_complete(bench,
     out = tmp_path / "cap"
     proc = station(bench, config, "--scheme", "optimal9", "--out", str(out), *SHORT)
     try:
-        recording = wait_for_recording(out, after=11)          # into the rotations
+        recording = wait_for_recording(out, after=11, proc=proc)          # into the rotations
         assert proc.poll() is None, proc.communicate()[1][-2000:]
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(10)
@@ -206,7 +223,7 @@ def test_ctrl_c_pauses_at_a_safe_point_with_the_table_at_rest(bench, config, tmp
     out = tmp_path / "cap"
     proc = station(bench, config, "--scheme", str(scheme), "--out", str(out))
     try:
-        assert wait_for_recording(out, after=1) == "rotx_p"
+        assert wait_for_recording(out, after=1, proc=proc) == "rotx_p"
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=30)
     finally:
@@ -248,7 +265,7 @@ def test_sigterm_and_sighup_abort_with_the_table_at_rest(bench, config, tmp_path
     out = tmp_path / "cap"
     proc = station(bench, config, "--scheme", str(_small_scheme(tmp_path)), "--out", str(out))
     try:
-        assert wait_for_recording(out, after=1) == "rotx_p"
+        assert wait_for_recording(out, after=1, proc=proc) == "rotx_p"
         assert any(abs(bench.table.read_rate(axis)) > 1.0 for axis in (1, 2, 3))     # turning
         proc.send_signal(sig)
         _, err = proc.communicate(timeout=30)
@@ -287,7 +304,7 @@ def test_a_run_killed_during_a_rotation_has_its_table_stopped_by_its_guardian(be
     out = tmp_path / "cap"
     proc = station(bench, config, "--scheme", str(_small_scheme(tmp_path)), "--out", str(out))
     try:
-        assert wait_for_recording(out, after=1) == "rotx_p"
+        assert wait_for_recording(out, after=1, proc=proc) == "rotx_p"
         guardians = _guardians(proc.pid)
         assert len(guardians) == 1 and running(guardians[0])
         rates = [bench.table.read_rate(axis) for axis in (1, 2, 3)]
@@ -312,7 +329,7 @@ def test_a_run_that_ends_leaves_no_guardian_and_the_table_untouched(bench, confi
     out = tmp_path / "cap"
     proc = station(bench, config, "--scheme", str(_small_scheme(tmp_path)), "--out", str(out))
     try:
-        assert wait_for_recording(out, after=1) == "rotx_p"
+        assert wait_for_recording(out, after=1, proc=proc) == "rotx_p"
         guardians = _guardians(proc.pid)
         assert len(guardians) == 1
         proc.send_signal(signal.SIGTERM)                    # aborted in its own hands
