@@ -387,3 +387,37 @@ def test_a_worker_task_never_raises(tmp_path, monkeypatch):
     bad = run(Job("diagnose", str(tmp_path / "bad"), str(tmp_path / "d.json"), {}))
     assert bad.status == FAILED and "manifest.yaml" in bad.message
     assert not (tmp_path / "d.json").exists()
+
+
+_PROFILER_PROBE = '''
+import os
+
+def probe():
+    import dask
+    return dask.config.get("distributed.worker.profile.enabled")
+
+if __name__ == "__main__":
+    from station.batch.cluster import open_client
+    with open_client(workers=1) as client:
+        print(sorted(set(client.run(probe).values())))
+'''
+
+
+@pytest.mark.parametrize("user_yaml, expected", [(None, "[False]"), ("true", "[True]")],
+                         ids=["off-by-default", "the-users-dask-yaml-wins"])
+def test_the_workers_profiler_is_off_unless_the_users_dask_configuration_turns_it_on(tmp_path, user_yaml, expected):
+    """The local cluster's workers run without Dask's statistical profiler (7 % of their CPU,
+    docs/fleet.md), unless the user's own Dask configuration turns it on: a setting in their
+    YAML (here $DASK_CONFIG) is theirs and is kept, in the workers too."""
+    script = tmp_path / "probe.py"
+    script.write_text(_PROFILER_PROBE)
+    env = _env(tmp_path)
+    env.pop("DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED", None)
+    env["DASK_CONFIG"] = str(tmp_path / "dask")
+    (tmp_path / "dask").mkdir()
+    if user_yaml is not None:
+        (tmp_path / "dask" / "mine.yaml").write_text(f"distributed:\n  worker:\n    profile:\n      enabled: {user_yaml}\n")
+    done = subprocess.run([sys.executable, str(script)], env=env, cwd=tmp_path, capture_output=True, text=True,
+                          timeout=180)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip().splitlines()[-1] == expected, done.stdout + done.stderr[-2000:]

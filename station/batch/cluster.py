@@ -27,6 +27,19 @@ def _quiet() -> None:
         logging.getLogger(name).setLevel(logging.ERROR)
 
 
+def _users_profile_setting(dask) -> bool | None:
+    """distributed.worker.profile.enabled as the user's Dask configuration sets it (its YAML files:
+    ~/.config/dask, $DASK_CONFIG, ...; or $DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED), None when
+    it does not (Dask's own default is not the user's)."""
+    user = dask.config.collect(paths=dask.config.paths, env=os.environ)
+    value = user.get("distributed", {}).get("worker", {}).get("profile", {}).get("enabled")
+    if value is None:
+        return None
+    if isinstance(value, str):
+        return value.strip().lower() not in ("false", "0", "no", "off", "")
+    return bool(value)
+
+
 def _check_address(scheduler: str) -> str:
     if "://" not in scheduler:
         scheduler = f"tcp://{scheduler}"
@@ -46,13 +59,17 @@ def open_client(scheduler: str | None = None, workers: int | None = None):
     # a worker's statistical profiler walks the running task's stack every 10 ms: 7 % of a
     # capture's CPU in the workers (0.554 s against 0.513 s per capture, two 40-capture batches
     # side by side; docs/fleet.md, Throughput); its profiles are only seen on a dashboard, which
-    # a batch does not serve.  Local workers inherit this; remote ones are started by the user
-    os.environ.setdefault(PROFILE_ENV, "False")
+    # a batch does not serve.  Off unless the user's own Dask configuration (its YAML files or
+    # the environment) says otherwise; local workers inherit it; remote ones are started by the user
     _quiet()
     import dask
     from distributed import Client, LocalCluster
 
-    dask.config.set({"distributed.worker.profile.enabled": os.environ[PROFILE_ENV].lower() not in ("false", "0")})
+    enabled = _users_profile_setting(dask)
+    if enabled is None:
+        enabled = False
+        os.environ.setdefault(PROFILE_ENV, "False")
+    dask.config.set({"distributed.worker.profile.enabled": enabled})
 
     if scheduler:
         address = _check_address(scheduler)
