@@ -55,7 +55,9 @@ class SimulatedBench:
     change the attitudes.
     """
 
-    def __init__(self, truth: Truth, seed: int):
+    def __init__(self, truth: Truth, seed: int, start_s: float = 0.0):
+        """``start_s``: device time (s) at which the bench's clock starts, the end of an earlier
+        run on it (a run continued later: the warm-up, drifts and steps go on from there)."""
         self.truth = truth
         self.seed = seed
         ss = np.random.SeedSequence(seed)
@@ -66,7 +68,7 @@ class SimulatedBench:
         self._remount_rng, self._jitter_rng = (np.random.default_rng(s) for s in ss.spawn(2))
         self.site = Site(truth.bench.latitude_deg, truth.bench.height_m)
         self._g = self.site.g
-        self._time_end = 0.0          # end of the last segment's window
+        self._time_end = float(start_s)   # end of the last segment's window
         self._rotation_starts: dict = {}
 
     # ------------------------------------------------------------ properties

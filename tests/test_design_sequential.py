@@ -109,7 +109,7 @@ def test_bad_input_of_design_from_is_one_line_and_status_2(tmp_path, capsys):
              (["design", "--from", str(tmp_path), "--reveal", "a", "--duration", "900"], "leave out --duration"),
              (["design", "--from", str(tmp_path / "none"), "--reveal", "a"], "not a capture directory"),
              (["design", "--from", str(tmp_path), "--separate", "a"], "name two different effects"),
-             (["run", "--append", str(tmp_path), "--sim", "--scheme", "x.yaml"], "cannot be appended to"),
+             (["run", "--append", str(tmp_path), "--sim", "--scheme", "x.yaml"], "no capture there"),
              (["run", "--append", str(tmp_path)], "give the extension with --scheme")]
     for argv, words in cases:
         assert main(argv) == 2, argv
@@ -141,3 +141,42 @@ def test_separate_two_effects_the_capture_cannot_tell_apart(tmp_path, capsys):
     assert plan == 0
     total = float(capsys.readouterr().out.split("total: ")[1].split(" s")[0])
     assert abs(total - report["duration_s"]) < 1.0
+    # recorded into the same dry-run capture (the same simulated IMU, its clock going on), the
+    # estimate with both effects reveals all their parameters, each at the truth (the simulated
+    # IMU has neither: 0) within 4.5 sigma, and the two no longer alias
+    before = {p.name: p.read_bytes() for p in cap.glob("*.csv")}
+    assert main(["run", "--sim", "--append", str(cap), "--scheme", str(out)]) in (0, 3)
+    capsys.readouterr()
+    capture = read_capture(cap, load_data=True)
+    assert all((cap / name).read_bytes() == data for name, data in before.items())      # untouched
+    new = [seg for seg in capture.segments if seg.extra.get("appended") == 1]
+    assert {seg.name for seg in new} == {seg.name for seg in capture.segments} - set(n[:-4] for n in before)
+    assert len(new) >= 2 and all(seg.status == "complete" for seg in new)
+    end = max(float(seg.data.t[-1]) for seg in capture.segments if seg.extra.get("appended") is None)
+    assert min(float(seg.data.t[0]) for seg in new) > end          # after the run, on the same clock
+    est = api.estimate(cap, add=["gyro_rate_nonlinearity", "gyro_scale_asymmetry"])
+    names = [n for n in est.parameters if n.startswith(("gyro_rate_sq_", "gyro_asym_"))]
+    assert len(names) == 9, names
+    for n in names:
+        p = est.parameters[n]
+        assert p.sigma is not None and abs(p.value) < 4.5 * p.sigma, (n, p)
+
+
+def test_a_dry_run_append_refuses_a_capture_that_is_no_dry_runs_and_names_already_recorded(tmp_path, capsys):
+    """--sim --append extends only what station run --sim wrote (its simulated IMU is in it); a
+    segment name the capture has is refused; both one line, exit 2, nothing written."""
+    cap = tmp_path / "cap"
+    (tmp_path / "s.yaml").write_text(SCHEME)
+    (tmp_path / "ext.yaml").write_text("name: ext\ndefaults: {dwell_s: 5}\nsegments:\n  - {static: zup, up_body: [0, 0, 1]}\n")
+    assert main(["run", "--scheme", str(tmp_path / "s.yaml"), "--sim", "--out", str(cap)]) in (0, 3)
+    capsys.readouterr()
+    manifest = (cap / "manifest.yaml").read_text()
+    assert main(["run", "--sim", "--append", str(cap), "--scheme", str(tmp_path / "ext.yaml")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "segment names already in" in lines[0] and "zup" in lines[0], lines
+    (cap / "manifest.yaml").write_text("\n".join(l for l in manifest.splitlines() if not l.startswith("simulation:")) + "\n")
+    (tmp_path / "ext.yaml").write_text("name: ext\ndefaults: {dwell_s: 5}\nsegments:\n  - {static: x1_up, up_body: [0, 0, 1]}\n")
+    assert main(["run", "--sim", "--append", str(cap), "--scheme", str(tmp_path / "ext.yaml")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "not the capture of a dry run" in lines[0], lines
+    assert not list(cap.glob("scheme-append-*")) and not (cap / "x1_up.csv").exists()

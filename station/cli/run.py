@@ -182,11 +182,10 @@ def cmd_run(args) -> int:
         if args.resume:
             raise UserError("give --append CAPTURE or --resume CAPTURE, not both (an interrupted append is "
                             "continued with --resume)")
-        if args.sim:
-            raise UserError(f"--append {args.append} records into a capture of a bench run (the device twins "
-                            "or hardware, with --port/--table-port); a --sim dry run cannot be appended to")
         if args.scheme is None:
             raise UserError("--append: give the extension with --scheme EXT.yaml (station design --from writes one)")
+        if args.sim:
+            return _append_dry_run(args, overrides)
     if args.scheme is None:
         args.scheme = "optimal9"
     if args.resume and args.sim:
@@ -230,6 +229,43 @@ def cmd_run(args) -> int:
                               truth=dryrun.truth_calibration(truth))
 
 
+def _append_dry_run(args, overrides) -> int:
+    """``station run --sim --append CAPTURE --scheme EXT.yaml``: the extension recorded into a dry
+    run's capture on the same simulated bench and IMU (station.simulate.dryrun.append_scheme), then
+    the estimate from all of it, as the bench's --append does."""
+    from station.io.scheme import load_scheme, scheme_text
+    from station.simulate import dryrun
+
+    directory = Path(args.append)
+    if not (directory / "manifest.yaml").is_file():
+        raise UserError(f"--append {directory}: no capture there (no manifest.yaml)")
+    from station.cli.run_multi import is_multi_run
+
+    if is_multi_run(directory):
+        raise UserError(f"--append {directory}: appending to a run of several IMUs is not supported; "
+                        "record the extension as a run of its own")
+    if args.out and Path(args.out) != directory:
+        raise UserError(f"--out {args.out}: --append records into {directory} itself; leave out --out")
+    text, source = scheme_text(args.scheme)
+    ext = load_scheme(args.scheme, overrides)
+    out.print(f"dry run: appending {len(ext.segments)} segment(s) of {source} ({ext.duration_s:.0f} s of data) "
+              f"to {directory}, on its simulated bench and IMU", markup=False, soft_wrap=True)
+    with out.status("recording") as status:
+        dryrun.append_scheme(ext, text, directory,
+                             progress=lambda name, i, n: status.update(f"recording {name} ({i + 1}/{n})"))
+    from station import api
+    from station.cli.history import file_quietly
+
+    est = api.estimate(directory)
+    cal_path = est.save(directory / "calibration.yaml")
+    file_quietly(cal_path, asked=bool(args.history), simulated=True)
+    truth = dryrun.load_truth(str(directory / dryrun.TRUTH_FILE), 0)
+    out.print(f"capture:          {directory} (estimated from all {len(est.capture.complete())} segments)", markup=False)
+    out.print(f"simulated truth:  {directory / dryrun.TRUTH_FILE}", markup=False)
+    return report_calibration(est.calibration, "", cal_path, args.accept_poor_fit,
+                              truth=dryrun.truth_calibration(truth))
+
+
 def _run_on_bench(args) -> int:
     """``station run`` without --sim: a run on the bench named by the flags and the configuration."""
     from station.bench.compile import compile_scheme
@@ -247,7 +283,8 @@ def _run_on_bench(args) -> int:
     if args.append:
         directory = Path(args.append)
         scheme, config, done = _resumed(directory, config, args)
-        scheme, args.keep_extension = _appended(directory, scheme, args.scheme)
+        scheme, args.keep_extension, extension_of = _appended(directory, scheme, args.scheme)
+        args.appended_of = {**getattr(args, "appended_of", {}), **extension_of}
         args.resume = str(directory)          # from here on: a resume of the extended run
     elif args.resume:
         directory = Path(args.resume)
@@ -296,6 +333,7 @@ def _record_and_estimate(args, config, scheme, plan, steps, directory, text) -> 
             writer = _reopen(directory, rate_hz, imu_identity(getattr(imu, "identity", None)).get("serial"))
             if getattr(args, "keep_extension", None) is not None:     # --append: the same IMU is connected
                 args.keep_extension()
+            writer.segment_extra = {name: {"appended": k} for name, k in getattr(args, "appended_of", {}).items()}
         out.print(f"capture: {directory}", markup=False)
         from station.bench.live import make_display
 
@@ -370,6 +408,9 @@ def _resumed(directory: Path, current, args):
         except OSError as e:
             raise UserError(f"{directory / name}: cannot read the appended scheme: {e.strerror}") from None
         scheme = replace(scheme, segments=scheme.segments + more.segments)
+        # its segments say so in the manifest (``appended: k``): the estimator does not take a
+        # rotation of an extension for the run's rotation about the same axis (summaries' groups)
+        args.appended_of = {**getattr(args, "appended_of", {}), **{s.name: k for s in more.segments}}
     capture = read_capture(directory, load_data=False)
     done = {s.name for s in capture.complete()}
     return scheme, config, done
@@ -404,6 +445,11 @@ def _appended(directory: Path, scheme, extension: str):
         raise UserError(f"{source}: segment names already in {directory}: {', '.join(sorted(taken))} (rename them; "
                         "station design --from prefixes its segments x1_, x2_, ...)")
     run_file = directory / RUN_FILE
+    try:
+        number = len(yaml_text.safe_load(run_file.read_text()).get("appended") or []) + 1
+    except (OSError, AttributeError, yaml.YAMLError, ValueError):
+        number = 1                      # _resumed read the file just before: not reached
+    appended_of = {s.name: number for s in ext.segments}
 
     def keep() -> None:
         """Write the extension into the capture (once the same IMU is found connected)."""
@@ -420,5 +466,5 @@ def _appended(directory: Path, scheme, extension: str):
                   f"an interrupted append continues with station run --resume {directory})", markup=False,
                   soft_wrap=True)
 
-    return replace(scheme, segments=scheme.segments + ext.segments), keep
+    return replace(scheme, segments=scheme.segments + ext.segments), keep, appended_of
 

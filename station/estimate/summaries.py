@@ -518,9 +518,16 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
                 skipped.append(f"{seg.name}: no encoder angle (angle_deg); not used by the least-squares fit")
                 continue
             axis = np.asarray(seg.axis_body, float) / np.linalg.norm(seg.axis_body)
-            group = next((i for i, a in enumerate(axes) if np.allclose(a, axis, atol=1e-6)), None)
+            # one group per physical axis: rotations about one body axis share its direction on the
+            # table (elevation, heading: the gravity angle and the Earth rate's phase the fit gives
+            # each group), but not across an extension recorded later (``appended: N``, run
+            # --append): the table may start that axis elsewhere
+            session = seg.extra.get("appended", 0)
+            session = session if isinstance(session, int) and not isinstance(session, bool) else 0
+            group = next((i for i, (a, s) in enumerate(axes) if s == session and np.allclose(a, axis, atol=1e-6)),
+                         None)
             if group is None:
-                axes.append(axis)
+                axes.append((axis, session))
                 group = len(axes) - 1
             try:
                 summary = rotation_summary(seg.name, axis, group, seg.angle_deg, d.t, _scaled(d.accel, ca),

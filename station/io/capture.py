@@ -1213,6 +1213,7 @@ class CaptureWriter:
             raise UserError(f"{directory}: cannot create the capture directory: {e.strerror}") from None
         remove_stray_temporaries(directory)     # a writer killed before its first manifest
         self._dir = directory
+        self.segment_extra: dict = {}           # segment name -> manifest keys its entry gets too
         self._keep(manifest)
 
     @classmethod
@@ -1238,6 +1239,7 @@ class CaptureWriter:
         remove_stray_temporaries(directory)
         writer = cls.__new__(cls)
         writer._dir = directory
+        writer.segment_extra = {}
         writer._keep(manifest, names)
         return writer
 
@@ -1268,6 +1270,7 @@ class CaptureWriter:
         meta: up_body, axis_body, rate_dps, angle_deg, note, started_utc (default: now), ...;
         numpy values become plain numbers and lists.
         """
+        meta = {**getattr(self, "segment_extra", {}).get(name, {}), **meta}
         _refuse_owned_keys(meta)
         entry = {"name": name, "kind": kind, "file": file or f"{name}.csv",
                  "status": "incomplete",

@@ -28,12 +28,13 @@ def load_truth(truth_path: str | None, seed: int):
 MAX_SIMULATED_SAMPLES = 5_000_000   # per segment: the simulator holds a segment whole (~1 GB at this)
 
 
-def _bench(scheme: Scheme, truth, seed: int):
-    """The simulated bench for ``scheme``; UserError naming the segment when one gives fewer than
-    2 samples, or more than the simulator holds at once, before anything is simulated or written."""
+def _bench(scheme: Scheme, truth, seed: int, start_s: float = 0.0):
+    """The simulated bench for ``scheme`` (its clock from ``start_s``); UserError naming the segment
+    when one gives fewer than 2 samples, or more than the simulator holds at once, before anything
+    is simulated or written."""
     from sim_devices.bench import SimulatedBench
 
-    bench = SimulatedBench(_mounted(truth, scheme), seed)
+    bench = SimulatedBench(_mounted(truth, scheme), seed, start_s=start_s)
     rate_hz = bench.sample_rate_hz
     for spec in scheme.segments:
         n = spec.duration_s * rate_hz
@@ -127,6 +128,66 @@ def record_scheme(scheme: Scheme, truth, seed: int, out_dir: Path,
     finally:
         writer.finish()
     return writer.path
+
+
+def append_scheme(extension: Scheme, text: str, directory: Path,
+                  progress: Callable[[str, int, int], None] | None = None) -> Path:
+    """Record ``extension``'s segments into the dry run's capture ``directory``, after its own, on
+    the same simulated bench: the IMU of the capture's ``sim_truth.yaml``, still mounted as it was,
+    the bench's clock going on from the end of the capture's last segment (a warm-up, a drift or a
+    step continues), new noise (the capture's seed and its count of segments make the extension's
+    seed: an extension never repeats the noise of the run).  The capture's complete segments are
+    left untouched; the extension's scheme file (``text``) is kept in it (``scheme-append-N.yaml``)."""
+    from station.io.capture import CaptureWriter, read_capture
+    from station.io.scheme import load_scheme
+
+    directory = Path(directory)
+    capture = read_capture(directory, load_data=True)
+    sim = capture.extra.get("simulation")
+    if not isinstance(sim, dict) or sim.get("truth_file") != TRUTH_FILE or not isinstance(sim.get("seed"), int):
+        raise UserError(f"{directory}: not the capture of a dry run (its manifest has no 'simulation' block "
+                        f"naming {TRUTH_FILE} and a seed): with --sim, --append extends a capture that "
+                        "station run --sim wrote; a bench run's capture is extended on the bench")
+    truth = load_truth(str(directory / TRUTH_FILE), 0)
+    names = {s.name for s in capture.segments}
+    taken = sorted(names & {s.name for s in extension.segments})
+    if taken:
+        raise UserError(f"scheme {extension.name}: segment names already in {directory}: {', '.join(taken)} "
+                        "(rename them; station design --from prefixes its segments x1_, x2_, ...)")
+    centred = capture.extra.get("mounting", {}).get("offset_m") == [0.0, 0.0, 0.0]
+    if extension.centred != centred:
+        raise UserError(f"scheme {extension.name}: field 'centred': {extension.centred}, the capture's IMU "
+                        f"{'is' if centred else 'is not'} on the table's axes: the extension must be mounted as "
+                        "the run was")
+    try:
+        run_table = load_scheme(capture.scheme).table if capture.scheme else extension.table
+    except UserError:                   # a scheme file of the user's, not at hand: not checked
+        run_table = extension.table
+    if extension.table != run_table:
+        raise UserError(f"scheme {extension.name}: {'a hand scheme' if not extension.table else 'a table scheme'} "
+                        f"cannot extend {'a table run' if run_table else 'a run by hand'}")
+    ends = [float(s.data.t[-1]) for s in capture.segments if s.data is not None and len(s.data.t)]
+    start_s = max(ends, default=0.0)
+    seed = int(np.random.SeedSequence([int(sim["seed"]), len(capture.segments)]).generate_state(1)[0])
+    bench = _bench(extension, truth, seed, start_s=start_s)
+    listed = sorted(directory.glob("scheme-append-*.yaml"))
+    number = len(listed) + 1
+    kept = directory / f"scheme-append-{number}.yaml"
+    try:
+        kept.write_text(text)
+    except OSError as e:
+        raise UserError(f"{kept}: cannot write: {e.strerror}") from None
+    writer = CaptureWriter.reopen(directory)
+    block = max(1, int(round(BLOCK_SECONDS * bench.sample_rate_hz)))
+    for i, (spec, seg, meta) in enumerate(_simulate(extension, bench)):
+        if progress:
+            progress(spec.name, i, len(extension.segments))
+        with writer.begin_segment(spec.name, spec.kind, **meta, appended=number) as out:
+            for k in range(0, len(seg.t), block):
+                sl = slice(k, k + block)
+                out.write(seg.t[sl], seg.accel[sl], seg.gyro[sl], seg.temp[sl])
+            out.close("complete", **{k: v for k, v in seg.meta.items() if k in ("angle_deg", "table_axis")})
+    return directory
 
 
 def simulate_capture(scheme: Scheme, truth, seed: int, geometry: dict | None = None) -> Capture:
