@@ -219,7 +219,7 @@ def diagnose(capture, *, add=(), plugins=(), effects_dirs=(), config=None, calib
     from station.diagnose.suggest import suggest
 
     for d in {id(first): first, id(final): final}.values():
-        suggest(d, cap.path)
+        suggest(d, cap.path, registry)
     final.steps, final.first, final.warnings = steps, first, warnings
     return final
 

@@ -87,6 +87,8 @@ def test_reveal_designs_the_fewest_segments_and_the_appended_run_reveals_them(tm
     names = [s.name for s in capture.complete()]
     assert len(recorded) == 15 and names[:15] == recorded        # the run's own, kept as they were
     assert sum(n.startswith("x1_") for n in names) == 2 * len(report["segments"])
+    # the extension's segments say they were appended (the estimator's axis groups, docs/capture.md)
+    assert {s.name for s in capture.complete() if s.extra.get("appended") == 1} == {n for n in names if n.startswith("x1_")}
     after = api.estimate("cap", add=["accel_lever_arm"]).calibration
     assert not [n for n in after.fit["notes"] if n.startswith("not revealed")], after.fit["notes"]
     found = _positions(after)
@@ -180,3 +182,32 @@ def test_a_dry_run_append_refuses_a_capture_that_is_no_dry_runs_and_names_alread
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and "not the capture of a dry run" in lines[0], lines
     assert not list(cap.glob("scheme-append-*")) and not (cap / "x1_up.csv").exists()
+
+
+PLUGIN = """\
+from station.model.lever_arm import AccelLeverArm
+
+
+class MySizeEffect(AccelLeverArm):
+    id = "my_size_effect"
+"""
+
+
+def test_a_plugins_design_command_names_its_file_and_runs_as_printed(tmp_path, capsys, monkeypatch):
+    """An effect of the user's own file, not revealed by the capture: the design command diagnose
+    prints adds it by its file (an id alone would be unknown to the new command), and it runs."""
+    cap = tmp_path / "cap"
+    (tmp_path / "s.yaml").write_text(SCHEME)
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "effects.py").write_text(PLUGIN)
+    assert main(["run", "--scheme", str(tmp_path / "s.yaml"), "--sim", "--out", str(cap)]) in (0, 3)
+    capsys.readouterr()
+    monkeypatch.chdir(tmp_path / "mine")             # relative to here: the command must not depend on it
+    assert main(["diagnose", str(cap), "--add", "effects.py:MySizeEffect", "--json"]) == 0
+    said = json.loads(capsys.readouterr().out)["design_suggestions"]
+    assert len(said) == 1 and "my_size_effect" not in said[0].split("reveal them: ")[1].split("--reveal")[0], said
+    command = shlex.split(said[0].split("reveal them: ")[1])
+    assert f"{(tmp_path / 'mine' / 'effects.py').resolve()}:MySizeEffect" in command, command
+    monkeypatch.chdir(tmp_path)
+    assert main([*command[1:], "--json", *SMALL]) == 0
+    assert json.loads(capsys.readouterr().out)["segments"]

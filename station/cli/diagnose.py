@@ -178,7 +178,7 @@ def _diagnose(args, job) -> tuple:
     from station.diagnose.suggest import suggest
 
     for d in {id(first): first, id(final): final}.values():
-        suggest(d, capture.path)
+        suggest(d, capture.path, reg)
     figures.known(first, steps)
     if not args.json:
         _print(out, first, steps, final)        # while the figures are drawn

@@ -4,29 +4,50 @@ sequential.py, docs/design.md "Sequential design")."""
 from __future__ import annotations
 
 import shlex
+from pathlib import Path
 
 BASE = ("base_triads", "inter_triad")
 
 
-def command(capture, effects, reveal) -> str:
+def added(effect_id: str, registry=None) -> str:
+    """What ``--add`` needs to find ``effect_id`` in a new command: its id for the library's and
+    an installed package's effects, the plugin's own spec (``/abs/path/file.py:Class``,
+    ``module:Class``) for one loaded from a file or module, which a new command would not know."""
+    if registry is None:
+        return effect_id
+    try:
+        source = registry.source(effect_id)
+    except KeyError:
+        return effect_id
+    if source == "library" or source.startswith("entry point"):
+        return effect_id
+    where, _, cls = source.rpartition(":")
+    path = Path(where)
+    if path.suffix == ".py" and path.is_file():
+        return f"{path.resolve()}:{cls}"
+    return source
+
+
+def command(capture, effects, reveal, registry=None) -> str:
     """station design --from CAPTURE --add E ... --reveal P1,P2,... -o extension.yaml"""
-    adds = "".join(f" --add {shlex.quote(e)}" for e in effects)
+    adds = "".join(f" --add {shlex.quote(added(e, registry))}" for e in effects)
     return (f"station design --from {shlex.quote(str(capture))}{adds} --reveal {','.join(reveal)} "
             "-o extension.yaml")
 
 
-def suggest(diagnosis, capture) -> None:
+def suggest(diagnosis, capture, registry=None) -> None:
     """Set ``suggestion`` on every candidate the capture cannot reveal (no parameter it can
     size, or parameters aliased with the model's) and ``design_suggestions`` on the diagnosis
-    for the model's own parameters it left not revealed (held by their priors)."""
+    for the model's own parameters it left not revealed (held by their priors); ``registry``:
+    where the effects came from, so that a plugin's is named by its file (added())."""
     model_effects = [e for e in diagnosis.effects if e not in BASE and e != "discovered_terms"]
     for c in diagnosis.candidates:
         blind = list(c.aliased) if c.dof else list(c.names)
         if blind and c.names and not c.advice.startswith("cannot be tested"):
-            c.suggestion = command(capture, model_effects + [c.effect], blind)
+            c.suggestion = command(capture, model_effects + [c.effect], blind, registry)
     lines = []
     hidden = list(getattr(diagnosis.result.model, "unobservable", None) or [])
     if hidden:
         lines.append(f"not revealed by this capture: {', '.join(hidden)}; the fewest segments that reveal them: "
-                     f"{command(capture, model_effects, hidden)}")
+                     f"{command(capture, model_effects, hidden, registry)}")
     diagnosis.design_suggestions = lines
