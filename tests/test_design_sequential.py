@@ -208,6 +208,19 @@ def test_a_plugins_design_command_names_its_file_and_runs_as_printed(tmp_path, c
     assert len(said) == 1 and "my_size_effect" not in said[0].split("reveal them: ")[1].split("--reveal")[0], said
     command = shlex.split(said[0].split("reveal them: ")[1])
     assert f"{(tmp_path / 'mine' / 'effects.py').resolve()}:MySizeEffect" in command, command
+    # and the estimate and apply commands it prints with -o (its effect in the file): both run
+    assert main(["diagnose", str(cap), "--add", "effects.py:MySizeEffect", "-o", str(tmp_path / "c.yaml")]) == 0
+    printed = {line.split(": ", 1)[0]: shlex.split(line.split(": ", 1)[1])
+               for line in capsys.readouterr().err.splitlines() if line.startswith("to ")}
     monkeypatch.chdir(tmp_path)
+    mine = f"{(tmp_path / 'mine' / 'effects.py').resolve()}:MySizeEffect"
+    assert mine in printed["to estimate it"] and mine in printed["to apply it"], printed
+    assert main(printed["to estimate it"][1:]) == 0
+    raw = tmp_path / "raw.csv"
+    raw.write_text("t,ax,ay,az,gx,gy,gz\n" + "".join(f"{k / 100},0,0,9.8,0,0,1\n" for k in range(5)))
+    apply = [str(raw) if a == "RAW.csv" else str(tmp_path / "out.csv") if a == "COMPENSATED.csv" else a
+             for a in printed["to apply it"][1:]]
+    assert main(apply) == 0, apply
+    capsys.readouterr()
     assert main([*command[1:], "--json", *SMALL]) == 0
     assert json.loads(capsys.readouterr().out)["segments"]

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from station.cli import plugins
 from station.cli.output import err, out
-from station.core.errors import cannot_write
+from station.core.errors import UserError, cannot_write
 
 
 def add_parsers(sub) -> None:
@@ -88,12 +88,13 @@ def _in_a_file(args, final, steps) -> int:
     discovered = in_model(final.result) is not None
     if not args.output and not steps:
         return 0
+    specs = _specs(args, effects)
     plugin = None
     if args.output:
         from station import api
 
         target = Path(args.output)
-        adds = list(effects)
+        adds = [specs[e] for e in effects]       # a plugin given to --add by its file: by its file again
         if discovered:
             plugin = target.with_name(f"{target.stem}-discovered.py")
             _emit(plugin, final, steps)
@@ -107,12 +108,12 @@ def _in_a_file(args, final, steps) -> int:
         status = 0 if est.usable else 3
     else:
         status = 0
-    for line in commands(args, effects, plugin, discovered):
+    for line in commands(args, effects, plugin, discovered, specs):
         err.print(line, markup=False, soft_wrap=True)
     return status
 
 
-def commands(args, effects, plugin, discovered) -> list[str]:
+def commands(args, effects, plugin, discovered, specs=None) -> list[str]:
     """The two lines that reproduce and apply the diagnosis's calibration: `station estimate` with
     the effects kept (and the discovered terms' plugin) and `station apply`, each a command the
     shell runs as printed (every argument quoted as the shell needs: a path with a space)."""
@@ -120,14 +121,34 @@ def commands(args, effects, plugin, discovered) -> list[str]:
 
     given = [x for p in getattr(args, "plugin", None) or [] for x in ("--plugin", str(p))] + \
             [x for d in getattr(args, "effects_dir", None) or [] for x in ("--effects-dir", str(d))]
-    adds = [x for e in effects for x in ("--add", str(e))] + (["--add", f"{plugin}:DiscoveredTerms"] if plugin else [])
+    specs = specs if specs is not None else _specs(args, effects)
+    adds = [x for e in effects for x in ("--add", specs[e])] + (["--add", f"{plugin}:DiscoveredTerms"] if plugin else [])
+    # an effect of a file given to --add (not --plugin): apply needs that file too
+    given_apply = given + [x for e in effects if specs[e] != e for x in ("--plugin", specs[e])]
     cal_name = str(args.output or "CAL.yaml")
     estimate = shlex.join(["station", "estimate", str(args.capture), *given, *adds, "-o", cal_name])
     if discovered and not plugin:
         estimate += " --add FOUND.py:DiscoveredTerms (write it with --emit-effect FOUND.py)"
     apply = shlex.join(["station", "apply", cal_name, "RAW.csv", "-o", "COMPENSATED.csv",
-                        *(["--plugin", str(plugin)] if plugin else []), *given])
+                        *(["--plugin", str(plugin)] if plugin else []), *given_apply])
     return [f"to estimate it: {estimate}", f"to apply it: {apply}"]
+
+
+def _specs(args, effects) -> dict:
+    """Each effect id as a new command's --add must name it: its id, or for an effect of a
+    plugin file or module its spec (station.diagnose.suggest.added), the effects' sources as this
+    command loaded them (the same files: loaded once per process)."""
+    from station.api import _registry
+    from station.diagnose.suggest import added
+    from station.model.registry import effect_ids
+
+    try:
+        reg = _registry(plugins=list(getattr(args, "plugin", None) or []),
+                        effects_dirs=list(getattr(args, "effects_dir", None) or []), config=getattr(args, "config", None))
+        effect_ids(reg, [a for a in getattr(args, "add", None) or [] if a])
+    except UserError:               # loaded once already by this command: not reached
+        return {e: str(e) for e in effects}
+    return {e: added(e, reg) for e in effects}
 
 
 def _diagnose(args, job) -> tuple:
