@@ -116,18 +116,24 @@ def record_scheme(scheme: Scheme, truth, seed: int, out_dir: Path,
                                           "simulation": {"seed": seed, "truth_file": TRUTH_FILE}})
     try:
         writer.write_file(TRUTH_FILE, yaml.safe_dump(truth.to_yaml_dict(), sort_keys=False))
-        block = max(1, int(round(BLOCK_SECONDS * bench.sample_rate_hz)))
-        for i, (spec, seg, meta) in enumerate(_simulate(scheme, bench)):
-            if progress:
-                progress(spec.name, i, len(scheme.segments))
-            with writer.begin_segment(spec.name, spec.kind, **meta) as out:
-                for k in range(0, len(seg.t), block):
-                    sl = slice(k, k + block)
-                    out.write(seg.t[sl], seg.accel[sl], seg.gyro[sl], seg.temp[sl])
-                out.close("complete", **{k: v for k, v in seg.meta.items() if k in ("angle_deg", "table_axis")})
+        _write_segments(writer, scheme, bench, progress)
     finally:
         writer.finish()
     return writer.path
+
+
+def _write_segments(writer, scheme: Scheme, bench, progress, **extra) -> None:
+    """Simulate ``scheme``'s segments on ``bench`` into ``writer``, in blocks (``extra``: manifest
+    keys every segment gets)."""
+    block = max(1, int(round(BLOCK_SECONDS * bench.sample_rate_hz)))
+    for i, (spec, seg, meta) in enumerate(_simulate(scheme, bench)):
+        if progress:
+            progress(spec.name, i, len(scheme.segments))
+        with writer.begin_segment(spec.name, spec.kind, **meta, **extra) as out:
+            for k in range(0, len(seg.t), block):
+                sl = slice(k, k + block)
+                out.write(seg.t[sl], seg.accel[sl], seg.gyro[sl], seg.temp[sl])
+            out.close("complete", **{k: v for k, v in seg.meta.items() if k in ("angle_deg", "table_axis")})
 
 
 def append_scheme(extension: Scheme, text: str, directory: Path,
@@ -177,16 +183,7 @@ def append_scheme(extension: Scheme, text: str, directory: Path,
         kept.write_text(text)
     except OSError as e:
         raise UserError(f"{kept}: cannot write: {e.strerror}") from None
-    writer = CaptureWriter.reopen(directory)
-    block = max(1, int(round(BLOCK_SECONDS * bench.sample_rate_hz)))
-    for i, (spec, seg, meta) in enumerate(_simulate(extension, bench)):
-        if progress:
-            progress(spec.name, i, len(extension.segments))
-        with writer.begin_segment(spec.name, spec.kind, **meta, appended=number) as out:
-            for k in range(0, len(seg.t), block):
-                sl = slice(k, k + block)
-                out.write(seg.t[sl], seg.accel[sl], seg.gyro[sl], seg.temp[sl])
-            out.close("complete", **{k: v for k, v in seg.meta.items() if k in ("angle_deg", "table_axis")})
+    _write_segments(CaptureWriter.reopen(directory), extension, bench, progress, appended=number)
     return directory
 
 
