@@ -4,7 +4,7 @@ the frames lost.  Whole processes: ``station sim serve --imus N`` and ``station 
 own process, as a user runs them; 1-IMU and 4-IMU runs alternate (``--repeats`` pairs) so that a
 change of the machine's load falls on both.
 
-    python benchmarks/multi_imu.py [--imus 4] [--speed 20] [--repeats 3] [--dwell-s 10] [--rate-dps 30]
+    python benchmarks/multi_imu.py [--imus 4] [--speed 20] [--repeats 3] [--dwell-s 10] [--rate-dps 30] [--rate-hz 100]
 
 Printed per run: wall time of the recording (from the start of ``station run`` to its first
 estimate), of the whole command (with the estimates: one per IMU), CPU time (user + system) of
@@ -62,7 +62,8 @@ def one_run(n: int, args, work: Path, index: int) -> dict:
         # replies waited for up to TIMEOUT_S (a real device's 1 s by default): on a machine at a load
         # of 20-30 on 2 cores the twins' process was once not run for over 1 s and the table's
         # reply came late (a 4-IMU run stopped with exit status 2 on 27 Nov 2026, 15:10 UTC)
-        ports = "\n".join(f"  - {{port: {p}, serial: {{timeout_s: {args.timeout_s}}}}}" for p in imus)
+        ports = "\n".join(f"  - {{port: {p}, rate_hz: {args.rate_hz:g}, serial: {{timeout_s: {args.timeout_s}}}}}"
+                          for p in imus)
         config.write_text(f"version: 1\nimus:\n{ports}\ntable:\n  port: {table}\n"
                           f"  serial: {{timeout_s: {args.timeout_s}}}\n  axes: 3\n  limits: {LIMITS}\n"
                           "run:\n  operator: false\n  settle_s: 2\n")
@@ -126,6 +127,8 @@ def main() -> None:
     p.add_argument("--dwell-s", type=float, default=10.0)
     p.add_argument("--rate-dps", type=float, default=30.0, help="rotation rate (one revolution each way)")
     p.add_argument("--seed", type=int, default=7)
+    p.add_argument("--rate-hz", type=float, default=100.0,
+                   help="each IMU's output rate (station.yaml imus[].rate_hz; the VectorNav twin: 800 / N Hz)")
     p.add_argument("--timeout-s", type=float, default=1.0, help="the devices' reply timeout (station.yaml serial.timeout_s)")
     args = p.parse_args()
     os.environ["PYTHONPATH"] = str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")
