@@ -62,11 +62,18 @@ def one_run(n: int, args, work: Path, index: int) -> dict:
         # replies waited for up to TIMEOUT_S (a real device's 1 s by default): on a machine at a load
         # of 20-30 on 2 cores the twins' process was once not run for over 1 s and the table's
         # reply came late (a 4-IMU run stopped with exit status 2 on 27 Nov 2026, 15:10 UTC)
-        ports = "\n".join(f"  - {{port: {p}, rate_hz: {args.rate_hz:g}, serial: {{timeout_s: {args.timeout_s}}}}}"
-                          for p in imus)
+        # the baud rate the output rate needs (a VectorNav frame is 44 bytes of 10 bits): 115200 up
+        # to ~260 Hz, the device's 921600 above
+        baud = 115200 if args.rate_hz * 440 <= 115200 else 921600
+        ports = "\n".join(f"  - {{port: {p}, rate_hz: {args.rate_hz:g}, serial: {{baudrate: {baud}, "
+                          f"timeout_s: {args.timeout_s}}}}}" for p in imus)
         config.write_text(f"version: 1\nimus:\n{ports}\ntable:\n  port: {table}\n"
                           f"  serial: {{timeout_s: {args.timeout_s}}}\n  axes: 3\n  limits: {LIMITS}\n"
                           "run:\n  operator: false\n  settle_s: 2\n")
+        if baud != 115200:                  # the sensor set to it first, as a user does (its register 05)
+            for p in imus:
+                subprocess.run([sys.executable, "-m", "station.cli", "probe", "--port", p, "--imu-baud", str(baud)],
+                               check=True, capture_output=True, cwd=work, timeout=60)
         out = work / f"run-{n}-{index}"
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.monotonic()
@@ -104,7 +111,9 @@ def one_run(n: int, args, work: Path, index: int) -> dict:
     from station.io.capture import read_capture
 
     gaps, verdicts = 0, []
-    for bundle in sorted(p for p in out.iterdir() if p.is_dir()):
+    if not out.is_dir():
+        print(f"  run of {n} IMU(s) ended with {proc.returncode} before recording: {err.strip()[-600:]}", flush=True)
+    for bundle in sorted(p for p in out.iterdir() if p.is_dir()) if out.is_dir() else []:
         capture = read_capture(bundle)
         gaps += sum(seg.data.gaps for seg in capture.complete())
         try:
