@@ -162,7 +162,7 @@ def test_design_for_the_size_effect_is_confirmed_by_montecarlo(tmp_path):
 @pytest.mark.parametrize("args, words", [
     (["--criterion", "worst:no_such_*"], "no parameter of this model matches no_such_*"),
     (["--criterion", "E"], "--criterion must be D, A or worst"),
-    (["--duration", "100"], "fewer than 9 static attitudes"),
+    (["--duration", "100"], "fewer than 6 static attitudes"),
     (["--add", "no_such_effect"], "unknown effect"),
     (["--compare", "nonesuch"], "not built-in schemes"),
 ])

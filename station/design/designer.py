@@ -16,7 +16,7 @@ from station.bench.compile import compile_scheme
 from station.core.errors import UserError
 from station.design import candidates as cand_mod
 from station.design.information import Noise, information, model_of, quiet_truth
-from station.design.search import MIN_STATICS, Scorer, exchange, parse_criterion
+from station.design.search import MIN_STATICS, MIN_STATICS_TABLE, MAX_STATICS_TABLE, Scorer, exchange, parse_criterion
 from station.io.scheme import Scheme, StaticSpec, load_scheme
 
 BUILTIN_TABLE_SCHEMES = ("optimal9", "chatfield18", "traditional24", "sizeeffect")
@@ -303,45 +303,60 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
     fixed += max(w.duration_s, w.max_s or 0.0) if w.temp_slope_c_per_h is not None else w.duration_s
     parse_criterion(criterion, reported_names(effects))          # bad input before the work
     table = cand_mod.Table(config)
-    least = fixed + MIN_STATICS * table.static_s(min(dwells_s))
+    least = fixed + MIN_STATICS_TABLE * table.static_s(min(dwells_s))
     if least > budget_s:
-        raise UserError(f"a budget of {budget_s:.0f} s holds fewer than {MIN_STATICS} static attitudes on this "
-                        f"table (the least: {least:.0f} s with the shortest dwell, {min(dwells_s):g} s)")
+        raise UserError(f"a budget of {budget_s:.0f} s holds fewer than {MIN_STATICS_TABLE} static attitudes on "
+                        f"this table (the least: {least:.0f} s with the shortest dwell, {min(dwells_s):g} s)")
     say("candidates on the table (gimbal kinematics)")
     cands, chunks, notes, masks = cand_mod.candidate_set(table, rates_dps, revolutions, dwells_s)
-    if sum(1 for c in cands if c.kind == "static" and c.dwell_s == min(dwells_s)) < MIN_STATICS:
-        raise UserError(f"the table reaches fewer than {MIN_STATICS} static attitudes "
-                        f"({'with' if config.run.operator else 'without'} an operator): no design with "
-                        "every attitude unknown (run.operator: true lets the IMU be remounted)")
     if not any(c.kind == "rotation" for c in cands):
         raise UserError("the table can turn about none of the candidate axes (a continuous axis is needed)")
+    remount_s = config.run.operator_s if config.run.operator else 0.0
+    # the two kinds of design the estimator fits: nine or more statics of unknown attitude, or
+    # six to eight of the table's attitudes (known to its angle error, one mounting: the
+    # estimator's one mounting rotation), each searched over its own information
+    kinds = []
+    unknown_ok = (sum(1 for c in cands if c.kind == "static" and c.dwell_s == min(dwells_s)) >= MIN_STATICS
+                  and fixed + MIN_STATICS * table.static_s(min(dwells_s)) <= budget_s)
+    if unknown_ok:
+        kinds.append(("unknown", list(range(len(cands))), masks, MIN_STATICS, None))
+    one = one_mounting(cands, masks)
+    if one is not None:
+        kinds.append(("table", one, [masks[i] for i in one], MIN_STATICS_TABLE, MAX_STATICS_TABLE))
+    if not kinds:
+        raise UserError(f"the table reaches fewer than {MIN_STATICS} static attitudes "
+                        f"({'with' if config.run.operator else 'without'} an operator) and fewer than "
+                        f"{MIN_STATICS_TABLE} in one mounting: no design (run.operator: true lets the IMU be remounted)")
     seconds["candidates"] = time.perf_counter() - t0
-    t1 = time.perf_counter()
-    say(f"the information of {len(cands)} candidates (one simulated capture of them, the estimator's Jacobian)")
-    info = information(chunks, effects, noise, config, geometry_of(config), centred)
-    seconds["information"] = time.perf_counter() - t1
-    crit, which = parse_criterion(criterion, info.parameters.names)
-    scorer = Scorer(info, cands, crit, which)
-    t2 = time.perf_counter()
-    budget = budget_s
-    result, start, plan, scheme, text = None, None, None, None, ""
-    evaluations = passes = 0
-    for _ in range(BUDGET_ROUNDS):
-        say(f"exchange search within {budget:.0f} s")
-        result = exchange(scorer, budget, fixed, max_passes, masks=masks,
-                          remount_s=config.run.operator_s if config.run.operator else 0.0, start=start)
-        evaluations += result.evaluations
-        passes += result.passes
-        entries, specs = _segments_of(result.chosen, cands, masks)
-        scheme = Scheme(name, "designed by station design", "docs/design.md", {}, tuple(specs), centred=centred)
-        plan = compile_scheme(scheme, config)
-        if plan.duration_s <= budget_s * 1.0005:
-            break
-        budget -= max(2.0 * (plan.duration_s - budget_s), 10.0)
-        start = result.chosen
-    else:
-        raise UserError(f"no design within {budget_s:.0f} s found whose compiled time fits: the last one "
-                        f"compiles to {plan.duration_s:.0f} s")
+    seconds["information"] = seconds["search"] = 0.0
+    best = None
+    for attitudes, subset, sub_masks, least_statics, most_statics in kinds:
+        t1 = time.perf_counter()
+        sub = [cands[i] for i in subset]
+        say(f"the information of {len(sub)} candidates, statics of {attitudes} attitude (one simulated capture "
+            "of them, the estimator's Jacobian)")
+        info = information(chunks, effects, noise, config, geometry_of(config), centred, attitudes=attitudes)
+        seconds["information"] += time.perf_counter() - t1
+        crit, which = parse_criterion(criterion, info.parameters.names)
+        scorer = Scorer(info, sub, crit, which)
+        t2 = time.perf_counter()
+        found = _search(scorer, sub, sub_masks, budget_s, fixed, max_passes, remount_s, least_statics,
+                        most_statics, name, centred, config, say)
+        seconds["search"] += time.perf_counter() - t2
+        if found is None:
+            continue
+        result = found[0]
+        if attitudes == "table" and len(set(found[4].mounting_of.values())) > 1:
+            continue            # (the compiler remounted: not one mounting rotation)
+        value = true_value(scorer, result.chosen)
+        say(f"  {attitudes} attitudes: {len(result.chosen)} candidates, criterion {value:.6g}")
+        if best is None or value < best[0]:
+            best = (value, scorer, found)
+    if best is None:
+        raise UserError(f"no design within {budget_s:.0f} s found whose compiled time fits")
+    _, scorer, (result, entries, specs, scheme, plan, evaluations, passes) = best
+    crit = scorer.criterion
+    which = scorer.which
     seconds["search"] = time.perf_counter() - t2
     search_sigma = scorer.sigma(result.chosen)
     t3 = time.perf_counter()
@@ -384,6 +399,55 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
         text = scheme_text(name, entries, header, centred)
     return Design(scheme, text, crit.text, criterion_of(prediction, crit.text), plan.duration_s, budget_s, prediction, builtins,
                   search_sigma, len(cands), evaluations, passes, seconds, notes + list(plan.notes), verification)
+
+
+def one_mounting(cands: list, masks: list) -> list | None:
+    """The candidates a design of known attitudes may use: those of the one right-angle mounting
+    (bits 0-23: not a fixture) that reaches the most of them, when it reaches at least
+    MIN_STATICS_TABLE static attitudes and a rotation; else None."""
+    counts = [sum(1 for m in masks if m >> b & 1) for b in range(cand_mod.FIXTURE_BIT)]
+    b = int(np.argmax(counts))
+    subset = [i for i, m in enumerate(masks) if m >> b & 1]
+    ups = {cands[i].slot for i in subset if cands[i].kind == "static"}
+    if len(ups) < MIN_STATICS_TABLE or not any(cands[i].kind == "rotation" for i in subset):
+        return None
+    return subset
+
+
+def true_value(scorer: Scorer, chosen) -> float:
+    """The criterion as reported (criterion_of's: the worst 1σ itself, not the search's power mean)."""
+    cov = scorer.covariance(chosen)
+    sub = cov[np.ix_(scorer.which, scorer.which)]
+    if scorer.criterion.kind == "worst":
+        return float(np.sqrt(np.max(np.diag(sub))))
+    return scorer.value_of(scorer.information(chosen))
+
+
+def _search(scorer, cands, masks, budget_s, fixed, max_passes, remount_s, min_statics, max_statics,
+            name, centred, config, say):
+    """The exchange search within the budget as the compiler counts it: searched again with the
+    budget less twice the compiled excess, from the last design, up to BUDGET_ROUNDS times.
+    (result, entries, specs, scheme, plan, evaluations, passes), or None when no design fits."""
+    budget = budget_s
+    start = None
+    evaluations = passes = 0
+    for _ in range(BUDGET_ROUNDS):
+        say(f"exchange search within {budget:.0f} s")
+        try:
+            result = exchange(scorer, budget, fixed, max_passes, min_statics=min_statics, masks=masks,
+                              remount_s=remount_s, start=start, max_statics=max_statics)
+        except UserError:
+            return None
+        evaluations += result.evaluations
+        passes += result.passes
+        entries, specs = _segments_of(result.chosen, cands, masks)
+        scheme = Scheme(name, "designed by station design", "docs/design.md", {}, tuple(specs), centred=centred)
+        plan = compile_scheme(scheme, config)
+        if plan.duration_s <= budget_s * 1.0005:
+            return result, entries, specs, scheme, plan, evaluations, passes
+        budget -= max(2.0 * (plan.duration_s - budget_s), 10.0)
+        start = result.chosen
+    return None
 
 
 def criterion_of(prediction: Prediction, criterion: str) -> float:

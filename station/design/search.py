@@ -34,10 +34,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from station.core.errors import UserError
+from station.design.information import static_information
 
 RIDGE = 1e-10            # on the unit-diagonal information: a column nothing sees gets 1σ 1e5 of its size
 CRITERIA = ("D", "A", "worst")    # (station/cli/choices.py copies it)
 MIN_STATICS = 9           # lsq's attitudes="auto": every static's attitude unknown from nine on
+# designs of known attitudes (lsq's attitudes="table" below nine statics: each static's attitude
+# the table's, to its angle error): six to eight statics (six: sizeeffect's, +/-1 g on each axis)
+MIN_STATICS_TABLE, MAX_STATICS_TABLE = 6, 8
 WORST_POWER = 20          # the worst criterion searched as this power mean of the 1σ (Scorer.value_of)
 
 
@@ -93,7 +97,7 @@ class Scorer:
         self.M = []
         for c in candidates:
             if c.kind == "static":
-                self.M.append(info.static[c.key[:-1]] * c.dwell_s)
+                self.M.append(static_information(info, c.key[:-1], c.dwell_s))
             else:
                 self.M.append(info.rotation[c.key][1])
 
@@ -241,11 +245,14 @@ class Result:
 
 
 def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: int = 20,
-             min_statics: int = MIN_STATICS, masks=None, remount_s: float = 0.0, start=None) -> Result:
+             min_statics: int = MIN_STATICS, masks=None, remount_s: float = 0.0, start=None,
+             max_statics: int | None = None) -> Result:
     """The design within ``budget_s`` (``fixed_s`` of it spent on steps no candidate pays for:
     the first mounting, a warm-up) minimising the criterion (module doc).  ``masks``: each
     candidate's reachable mountings (bits), a mounting beyond the first costing ``remount_s``;
-    ``start``: a design to start the exchanges from (its candidates kept while within budget)."""
+    ``start``: a design to start the exchanges from (its candidates kept while within budget);
+    ``max_statics``: at most this many statics (designs of known attitudes: fewer than nine,
+    MIN_STATICS_TABLE to MAX_STATICS_TABLE)."""
 
     cands = scorer.cands
     n = len(cands)
@@ -255,6 +262,9 @@ def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: 
     def allowed(chosen: set, j: int) -> bool:
         c = cands[j]
         if j in chosen:
+            return False
+        if (max_statics is not None and c.kind == "static"
+                and sum(cands[i].kind == "static" for i in chosen) >= max_statics):
             return False
         for i in chosen:
             o = cands[i]
