@@ -148,6 +148,17 @@ def _reduce(J_rows, keep_cols, drop_cols) -> np.ndarray:
     return A.T @ A
 
 
+def schur(S: np.ndarray, G: int) -> np.ndarray:
+    """The information about the first G columns of S with the rest eliminated (a nuisance held
+    only by its prior is kept: the pseudo-inverse on the unit-diagonal scaling)."""
+    A = S[G:, G:]
+    B = S[:G, G:]
+    d = np.sqrt(np.diag(A))
+    d[d == 0] = 1.0         # (scaled to unit diagonal: a nuisance held only by its prior is kept)
+    Bs = B / d
+    return S[:G, :G] - Bs @ np.linalg.pinv(A / np.outer(d, d), rcond=1e-13, hermitian=True) @ Bs.T
+
+
 def static_information(info: Information, key, dwell_s: float) -> np.ndarray:
     """A static's information about G with a dwell of ``dwell_s``: linear in the dwell for an
     attitude unknown; for an attitude known to the table's angle error (attitudes="table") its
@@ -156,9 +167,7 @@ def static_information(info: Information, key, dwell_s: float) -> np.ndarray:
     if info.attitudes != "table":
         return info.static[key] * dwell_s
     D, P = info.static_parts[key]
-    from station.design.search import _schur
-
-    return _schur(D * dwell_s + P, info.shared)
+    return schur(D * dwell_s + P, info.shared)
 
 
 def information(chunks: list, effects: list, noise: Noise, config=None,

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from station.core.errors import UserError
-from station.design.information import static_information
+from station.design.information import schur as _schur, static_information
 
 RIDGE = 1e-10            # on the unit-diagonal information: a column nothing sees gets 1σ 1e5 of its size
 CRITERIA = ("D", "A", "worst")    # (station/cli/choices.py copies it)
@@ -223,15 +223,6 @@ class State:
             if self.groups[c.axis][1] == 0:
                 del self.groups[c.axis]
         self.chosen.discard(i)
-
-
-def _schur(S: np.ndarray, G: int) -> np.ndarray:
-    A = S[G:, G:]
-    B = S[:G, G:]
-    d = np.sqrt(np.diag(A))
-    d[d == 0] = 1.0         # (scaled to unit diagonal: a nuisance held only by its prior is kept)
-    Bs = B / d
-    return S[:G, :G] - Bs @ np.linalg.pinv(A / np.outer(d, d), rcond=1e-13, hermitian=True) @ Bs.T
 
 
 @dataclass
