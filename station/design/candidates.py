@@ -31,7 +31,7 @@ from station.io.scheme import RotationSpec, Scheme, StaticSpec
 
 DEFAULT_RATES_DPS = (10.0, 30.0, 100.0, 200.0)
 DEFAULT_REVOLUTIONS = (1, 2, 5)
-DEFAULT_DWELLS_S = (10.0, 20.0, 50.0, 100.0, 200.0)
+DEFAULT_DWELLS_S = (10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0)
 ELEVATIONS_DEG = (0.0, 90.0)
 
 

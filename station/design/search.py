@@ -288,6 +288,8 @@ def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: 
         s = cands[j].slot
         if s not in shortest or cands[j].dwell_s < cands[shortest[s]].dwell_s:
             shortest[s] = j
+    longer_of = {i: [j for j in statics if cands[j].slot == cands[i].slot and cands[j].dwell_s > cands[i].dwell_s]
+                 for i in statics}
     # 1. nine statics, greedily, at their shortest dwell
     while sum(cands[i].kind == "static" for i in state.chosen) < min_statics:
         best, best_v = None, math.inf
@@ -349,6 +351,33 @@ def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: 
             if best_j is not None:
                 state.remove(i)
                 state.add(best_j)
+                current = best_v
+                history.append(current)
+                changed = True
+        # a static lengthened, paid for by dropping another chosen candidate: a move one exchange
+        # cannot make when the budget is spent (a longer dwell needs more time than it frees)
+        for i in sorted(state.chosen):
+            if i not in state.chosen or cands[i].kind != "static":
+                continue
+            longer = [j for j in longer_of[i] if j not in state.chosen]
+            best_move, best_v = None, current
+            for k in sorted(state.chosen):
+                if k == i:
+                    continue
+                rest = state.chosen - {i, k}
+                if cands[k].kind == "static" and sum(cands[m].kind == "static" for m in rest) + 1 < min_statics:
+                    continue
+                for j in longer:
+                    if not allowed(rest, j) or time_of(rest | {j}) > budget_s:
+                        continue
+                    v = score(remove=(i, k), add=(j,))
+                    if v < best_v - 1e-9 * max(1.0, abs(best_v)):
+                        best_move, best_v = (k, j), v
+            if best_move is not None:
+                k, j = best_move
+                state.remove(i)
+                state.remove(k)
+                state.add(j)
                 current = best_v
                 history.append(current)
                 changed = True
