@@ -163,8 +163,8 @@ def static_information(info: Information, key, dwell_s: float) -> np.ndarray:
     """A static's information about G with a dwell of ``dwell_s``: its data rows scale with the
     dwell and its attitude's prior rows do not (the table's angles, attitudes="table"; the weak
     prior on an unknown attitude's rotation), so the attitude is eliminated (Schur complement)
-    at that dwell: (dwell D + P) reduced to G.  (The weak prior scaled with the dwell, as it
-    once was, held a 1000 s static's heading 10x too well: g-sensitivity's worst 1σ 9 % too good.)"""
+    at that dwell: (dwell D + P) reduced to G (the table's prior scaled with the dwell, as an
+    earlier attempt did, was 10 % off the estimator's 1σ for sizeeffect's segments)."""
     D, P = info.static_parts[key]
     return schur(D * dwell_s + P, info.shared)
 
