@@ -115,6 +115,26 @@ def test_information_with_known_attitudes_is_the_estimators_covariance(effect_id
     assert np.max(np.abs(scorer.sigma(everything) / bound - 1.0)) > 2e-2
 
 
+def test_the_search_lengthens_a_static_paid_for_by_dropping_another():
+    """One parameter, information per second of each static (attitude a: 1 at any dwell, b: 2,
+    c: 0.8), a budget of 110 s.  Greedily per second: b 10 s, a 10 s, c 90 s (information
+    20 + 10 + 72 = 102), the budget spent; no single exchange helps (a 100 s needs 90 s more than
+    a 10 s frees), but a 100 s paid for by dropping c gives 20 + 100 = 120: the search finds it."""
+    from station.design.information import Information, Parameters
+
+    info = Information(1, Parameters(["p"], ["1"], np.array([0]), np.array([1.0]), np.array([np.inf])),
+                       attitudes="table")
+    rate = {"a": 1.0, "b": 2.0, "c": 0.8}
+    for slot, r in rate.items():       # one attitude column, decoupled (its prior holds it)
+        info.static_parts[("static", slot)] = (np.diag([r, 0.0]), np.diag([0.0, 1.0]))
+    cands = [search.Candidate(("static", s, d), "static", d, dwell_s=d, slot=s)
+             for s, d in (("a", 10.0), ("a", 100.0), ("b", 10.0), ("c", 90.0))]
+    scorer = search.Scorer(info, cands, search.Criterion("A"), np.arange(1))
+    result = search.exchange(scorer, 110.0, min_statics=1)
+    assert sorted(result.chosen) == [1, 2]             # a 100 s and b 10 s
+    assert result.value == pytest.approx(1.0 / 120.0)
+
+
 def test_candidates_on_a_one_axis_table_need_remounts(tmp_path):
     """A 1-axis table (vertical axis) reaches one "up" per right-angle mounting: the 6 faces; the
     20 askew attitudes each on a fixture of their own (an operator step each); it turns only
