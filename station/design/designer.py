@@ -324,6 +324,11 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
     one = one_mounting(cands, masks)
     if one is not None:
         kinds.append(("table", one, [masks[i] for i in one], MIN_STATICS_TABLE, MAX_STATICS_TABLE))
+    if not kinds and fixed + MIN_STATICS * table.static_s(min(dwells_s)) > budget_s:
+        raise UserError(f"a budget of {budget_s:.0f} s holds fewer than {MIN_STATICS} static attitudes on this "
+                        f"table and it reaches fewer than {MIN_STATICS_TABLE} in one mounting (the least for nine: "
+                        f"{fixed + MIN_STATICS * table.static_s(min(dwells_s)):.0f} s with the shortest dwell, "
+                        f"{min(dwells_s):g} s)")
     if not kinds:
         raise UserError(f"the table reaches fewer than {MIN_STATICS} static attitudes "
                         f"({'with' if config.run.operator else 'without'} an operator) and fewer than "
