@@ -67,7 +67,7 @@ def add_parsers(sub) -> None:
     d.add_argument("--revolutions", type=_numbers, default=None, metavar="N,N,...",
                    help="candidate whole revolutions per rotation direction (default 1,2,5)")
     d.add_argument("--dwells", type=_numbers, default=None, metavar="S,S,...",
-                   help="candidate static dwells, s (default 10,20,50,100,200)")
+                   help="candidate static dwells, s (default 10,20,50,100,200,500,1000)")
     d.add_argument("--passes", type=argtypes.whole(0), default=20,
                    help="at most this many exchange passes (default 20)")
     d.add_argument("--compare", default=",".join(("optimal9", "chatfield18", "traditional24", "sizeeffect")),
