@@ -67,7 +67,7 @@ def add_parsers(sub) -> None:
     d.add_argument("--revolutions", type=_numbers, default=None, metavar="N,N,...",
                    help="candidate whole revolutions per rotation direction (default 1,2,5)")
     d.add_argument("--dwells", type=_numbers, default=None, metavar="S,S,...",
-                   help="candidate static dwells, s (default 10,20,50,100,200)")
+                   help="candidate static dwells, s (default 10,20,50,100,200,500,1000)")
     d.add_argument("--passes", type=argtypes.whole(0), default=20,
                    help="at most this many exchange passes (default 20)")
     d.add_argument("--compare", default=",".join(("optimal9", "chatfield18", "traditional24", "sizeeffect")),
@@ -204,7 +204,7 @@ def _cmd_design(args) -> int:
     from station.design import candidates as cand_mod
     from station.design.designer import criterion_of, design, efficiency
     from station.io.calfile import write_new_file
-    from station.io.scheme import builtin_names
+    from station.io.scheme import StaticSpec, builtin_names
 
     config = load_config(args.config)
     reg = plugins.registry(args)
@@ -255,6 +255,7 @@ def _cmd_design(args) -> int:
     if args.json:
         print(json.dumps({
             "scheme_file": str(out_path), "criterion": d.criterion, "duration_s": d.duration_s, "budget_s": d.budget_s,
+            "static_attitudes": d.attitudes,
             "verification": None if v is None else {"runs": v.runs, "worst_z": v.worst_z, "worst": v.worst},
             "noise": vars(noise), "effects": [e.id for e in effects],
             "designed": {"criterion": own, "parameters": [
@@ -287,6 +288,9 @@ def _cmd_design(args) -> int:
         f"; {b}: {v:.6g} (x{efficiency(own, v, kind, len(which)):.3f})" for b, v in crit_vals.items()) +
         ("  (x: the design's D-efficiency against it, (det C_it / det C_design)^(1/p))" if kind == "D" else
          "  (x: its criterion / the design's)"), markup=False, soft_wrap=True)
+    out.print("statics: nine or more, each attitude unknown (fitted)" if d.attitudes == "unknown" else
+              f"statics: {sum(isinstance(s, StaticSpec) for s in d.scheme.segments)} of the table's attitudes, known "
+              "to its angle error (one mounting; the estimator's choice below nine statics)", markup=False, soft_wrap=True)
     for b, names in reveals.items():
         if names:
             out.print(f"the design reveals what {b} does not: {', '.join(names)}", markup=False, soft_wrap=True)

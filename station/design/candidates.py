@@ -31,7 +31,7 @@ from station.io.scheme import RotationSpec, Scheme, StaticSpec
 
 DEFAULT_RATES_DPS = (10.0, 30.0, 100.0, 200.0)
 DEFAULT_REVOLUTIONS = (1, 2, 5)
-DEFAULT_DWELLS_S = (10.0, 20.0, 50.0, 100.0, 200.0)
+DEFAULT_DWELLS_S = (10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0)
 ELEVATIONS_DEG = (0.0, 90.0)
 
 
@@ -155,11 +155,14 @@ def candidate_set(table: Table, rates_dps=DEFAULT_RATES_DPS, revolutions=DEFAULT
                                    dwell_s=float(dwell), slot=up))
             masks.append(m)
     allowed = [r for r in rates_dps if table.continuous(r)]
+    axes_ = set(axes())
     if len(allowed) < len(rates_dps):
         notes.append(f"rates above the table's max_rate_dps left out: "
                      f"{', '.join(f'{r:g}' for r in rates_dps if r not in allowed)} deg/s")
-    for axis in axes():
+    for axis in directions():
         for e in elevations:
+            if e != 90.0 and axis not in axes_:
+                continue        # (about a tilted axis, -a with rate r is a with -r: the pair)
             for rate in allowed:
                 m = table.mask(rotation_pair(axis, e, rate, 1)[0])
                 if not m:

@@ -16,7 +16,7 @@ from station.bench.compile import compile_scheme
 from station.core.errors import UserError
 from station.design import candidates as cand_mod
 from station.design.information import Noise, information, model_of, quiet_truth
-from station.design.search import MIN_STATICS, Scorer, exchange, parse_criterion
+from station.design.search import MIN_STATICS, MIN_STATICS_TABLE, MAX_STATICS_TABLE, Scorer, exchange, parse_criterion
 from station.io.scheme import Scheme, StaticSpec, load_scheme
 
 BUILTIN_TABLE_SCHEMES = ("optimal9", "chatfield18", "traditional24", "sizeeffect")
@@ -63,6 +63,7 @@ class Design:
     seconds: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
     verification: Verification | None = None   # noisy dry runs through the estimator (verify)
+    attitudes: str = "unknown"     # the statics' attitudes as the estimator takes them: "unknown" | "table"
 
 
 def reported_names(effects) -> list:
@@ -303,48 +304,77 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
     fixed += max(w.duration_s, w.max_s or 0.0) if w.temp_slope_c_per_h is not None else w.duration_s
     parse_criterion(criterion, reported_names(effects))          # bad input before the work
     table = cand_mod.Table(config)
-    least = fixed + MIN_STATICS * table.static_s(min(dwells_s))
+    least = fixed + MIN_STATICS_TABLE * table.static_s(min(dwells_s))
     if least > budget_s:
-        raise UserError(f"a budget of {budget_s:.0f} s holds fewer than {MIN_STATICS} static attitudes on this "
-                        f"table (the least: {least:.0f} s with the shortest dwell, {min(dwells_s):g} s)")
+        raise UserError(f"a budget of {budget_s:.0f} s holds fewer than {MIN_STATICS_TABLE} static attitudes on "
+                        f"this table (the least: {least:.0f} s with the shortest dwell, {min(dwells_s):g} s)")
     say("candidates on the table (gimbal kinematics)")
     cands, chunks, notes, masks = cand_mod.candidate_set(table, rates_dps, revolutions, dwells_s)
-    if sum(1 for c in cands if c.kind == "static" and c.dwell_s == min(dwells_s)) < MIN_STATICS:
-        raise UserError(f"the table reaches fewer than {MIN_STATICS} static attitudes "
-                        f"({'with' if config.run.operator else 'without'} an operator): no design with "
-                        "every attitude unknown (run.operator: true lets the IMU be remounted)")
     if not any(c.kind == "rotation" for c in cands):
         raise UserError("the table can turn about none of the candidate axes (a continuous axis is needed)")
+    remount_s = config.run.operator_s if config.run.operator else 0.0
+    # the two kinds of design the estimator fits: nine or more statics of unknown attitude, or
+    # six to eight of the table's attitudes (known to its angle error, one mounting: the
+    # estimator's one mounting rotation), each searched over its own information
+    kinds = []
+    unknown_ok = (sum(1 for c in cands if c.kind == "static" and c.dwell_s == min(dwells_s)) >= MIN_STATICS
+                  and fixed + MIN_STATICS * table.static_s(min(dwells_s)) <= budget_s)
+    if unknown_ok:
+        kinds.append(("unknown", list(range(len(cands))), masks, MIN_STATICS, None))
+    one = one_mounting(cands, masks)
+    if one is not None:
+        kinds.append(("table", one, [masks[i] for i in one], MIN_STATICS_TABLE, MAX_STATICS_TABLE))
+    if not kinds and fixed + MIN_STATICS * table.static_s(min(dwells_s)) > budget_s:
+        raise UserError(f"a budget of {budget_s:.0f} s holds fewer than {MIN_STATICS} static attitudes on this "
+                        f"table and it reaches fewer than {MIN_STATICS_TABLE} in one mounting (the least for nine: "
+                        f"{fixed + MIN_STATICS * table.static_s(min(dwells_s)):.0f} s with the shortest dwell, "
+                        f"{min(dwells_s):g} s)")
+    if not kinds:
+        raise UserError(f"the table reaches fewer than {MIN_STATICS} static attitudes "
+                        f"({'with' if config.run.operator else 'without'} an operator) and fewer than "
+                        f"{MIN_STATICS_TABLE} in one mounting: no design (run.operator: true lets the IMU be remounted)")
     seconds["candidates"] = time.perf_counter() - t0
-    t1 = time.perf_counter()
-    say(f"the information of {len(cands)} candidates (one simulated capture of them, the estimator's Jacobian)")
-    info = information(chunks, effects, noise, config, geometry_of(config), centred)
-    seconds["information"] = time.perf_counter() - t1
-    crit, which = parse_criterion(criterion, info.parameters.names)
-    scorer = Scorer(info, cands, crit, which)
-    t2 = time.perf_counter()
-    budget = budget_s
-    result, start, plan, scheme, text = None, None, None, None, ""
-    evaluations = passes = 0
-    for _ in range(BUDGET_ROUNDS):
-        say(f"exchange search within {budget:.0f} s")
-        result = exchange(scorer, budget, fixed, max_passes, masks=masks,
-                          remount_s=config.run.operator_s if config.run.operator else 0.0, start=start)
-        evaluations += result.evaluations
-        passes += result.passes
-        entries, specs = _segments_of(result.chosen, cands, masks)
-        scheme = Scheme(name, "designed by station design", "docs/design.md", {}, tuple(specs), centred=centred)
-        plan = compile_scheme(scheme, config)
-        if plan.duration_s <= budget_s * 1.0005:
-            break
-        budget -= max(2.0 * (plan.duration_s - budget_s), 10.0)
-        start = result.chosen
-    else:
-        raise UserError(f"no design within {budget_s:.0f} s found whose compiled time fits: the last one "
-                        f"compiles to {plan.duration_s:.0f} s")
-    seconds["search"] = time.perf_counter() - t2
-    search_sigma = scorer.sigma(result.chosen)
+    seconds["information"] = seconds["search"] = 0.0
+    found_all = []
+    for attitudes, subset, sub_masks, least_statics, most_statics in kinds:
+        t1 = time.perf_counter()
+        sub = [cands[i] for i in subset]
+        say(f"the information of {len(sub)} candidates, statics of {attitudes} attitude (one simulated capture "
+            "of them, the estimator's Jacobian)")
+        info = information(chunks, effects, noise, config, geometry_of(config), centred, attitudes=attitudes)
+        seconds["information"] += time.perf_counter() - t1
+        crit, which = parse_criterion(criterion, info.parameters.names)
+        scorer = Scorer(info, sub, crit, which)
+        t2 = time.perf_counter()
+        found = _search(scorer, sub, sub_masks, budget_s, fixed, max_passes, remount_s, least_statics,
+                        most_statics, name, centred, config, say)
+        seconds["search"] += time.perf_counter() - t2
+        if found is None:
+            continue
+        if attitudes == "table" and len(set(found[4].mounting_of.values())) > 1:
+            continue            # (the compiler remounted: not one mounting rotation)
+        value = true_value(scorer, found[0].chosen)
+        say(f"  statics of {attitudes} attitude: {len(found[0].chosen)} candidates, criterion {value:.6g} (search)")
+        found_all.append((attitudes, scorer, found))
+    if not found_all:
+        raise UserError(f"no design within {budget_s:.0f} s found whose compiled time fits")
     t3 = time.perf_counter()
+    chosen_prediction = None
+    if len(found_all) > 1:
+        # the better by the estimator's own fit of each (the search ranks time- and temperature-
+        # dependent effects on the candidates' timeline, not the designed order's: docs/design.md)
+        say("the estimator's fit of each kind's design, the better kept")
+        preds = _map(executor, lambda f: predict(f[2][3], effects, noise, config, f[2][4].duration_s, f[2][4]),
+                     found_all)
+        values = [criterion_of(pr, criterion) for pr in preds]
+        for f, v in zip(found_all, values):
+            say(f"  statics of {f[0]} attitude: criterion {v:.6g} (the estimator's)")
+        k = int(np.nanargmin(values))
+        found_all, chosen_prediction = [found_all[k]], preds[k]
+    attitudes, scorer, (result, entries, specs, scheme, plan, evaluations, passes) = found_all[0]
+    crit = scorer.criterion
+    which = scorer.which
+    search_sigma = scorer.sigma(result.chosen)
     say(f"the 1σ of the designed scheme and of {', '.join(compare) or 'no built-in scheme'} at the same duration "
         f"(the estimator's fit, {'one forked process' if executor is None else 'one Dask task'} per scheme)")
 
@@ -360,7 +390,10 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
             pr = Prediction(other, math.nan, [], [], np.zeros(0), np.zeros(0, bool), note=str(e))
         return pr
 
-    prediction, *builtins = _map(executor, job, [None, *compare])
+    if chosen_prediction is None:
+        prediction, *builtins = _map(executor, job, [None, *compare])
+    else:
+        prediction, builtins = chosen_prediction, _map(executor, job, list(compare))
     seconds["predictions"] = time.perf_counter() - t3
     verification = None
     if verify_runs:
@@ -374,6 +407,9 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
               f"noise: accel {noise.accel_noise_ug:g} ug/rtHz, gyro {noise.gyro_noise_dph:g} deg/h/rtHz, table "
               f"angle {noise.table_angle_arcsec:g} arcsec, disturbance {noise.accel_disturbance_ug:g} ug "
               f"({noise.source})",
+              ("statics: nine or more, each attitude unknown (fitted)" if attitudes == "unknown" else
+               f"statics: {sum(isinstance(s, StaticSpec) for s in specs)}, fewer than nine: the estimator takes the "
+               "table's attitudes, known to its angle error, in one mounting"),
               "predicted 1-sigma (the estimator's fit of this scheme's noiseless capture):"]
     for n, u, s, r in zip(prediction.names, prediction.units, prediction.sigma, prediction.revealed):
         header.append(f"  {n}: {s:.4g} {u}" + ("" if r else " (not revealed)"))
@@ -383,7 +419,57 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
                       f"the largest error {verification.worst_z:.2f} x the predicted 1-sigma ({verification.worst})")
         text = scheme_text(name, entries, header, centred)
     return Design(scheme, text, crit.text, criterion_of(prediction, crit.text), plan.duration_s, budget_s, prediction, builtins,
-                  search_sigma, len(cands), evaluations, passes, seconds, notes + list(plan.notes), verification)
+                  search_sigma, len(cands), evaluations, passes, seconds, notes + list(plan.notes), verification,
+                  attitudes)
+
+
+def one_mounting(cands: list, masks: list) -> list | None:
+    """The candidates a design of known attitudes may use: those of the one right-angle mounting
+    (bits 0-23: not a fixture) that reaches the most of them, when it reaches at least
+    MIN_STATICS_TABLE static attitudes and a rotation; else None."""
+    counts = [sum(1 for m in masks if m >> b & 1) for b in range(cand_mod.FIXTURE_BIT)]
+    b = int(np.argmax(counts))
+    subset = [i for i, m in enumerate(masks) if m >> b & 1]
+    ups = {cands[i].slot for i in subset if cands[i].kind == "static"}
+    if len(ups) < MIN_STATICS_TABLE or not any(cands[i].kind == "rotation" for i in subset):
+        return None
+    return subset
+
+
+def true_value(scorer: Scorer, chosen) -> float:
+    """The criterion as reported (criterion_of's: the worst 1σ itself, not the search's power mean)."""
+    cov = scorer.covariance(chosen)
+    sub = cov[np.ix_(scorer.which, scorer.which)]
+    if scorer.criterion.kind == "worst":
+        return float(np.sqrt(np.max(np.diag(sub))))
+    return scorer.value_of(scorer.information(chosen))
+
+
+def _search(scorer, cands, masks, budget_s, fixed, max_passes, remount_s, min_statics, max_statics,
+            name, centred, config, say):
+    """The exchange search within the budget as the compiler counts it: searched again with the
+    budget less twice the compiled excess, from the last design, up to BUDGET_ROUNDS times.
+    (result, entries, specs, scheme, plan, evaluations, passes), or None when no design fits."""
+    budget = budget_s
+    start = None
+    evaluations = passes = 0
+    for _ in range(BUDGET_ROUNDS):
+        say(f"exchange search within {budget:.0f} s")
+        try:
+            result = exchange(scorer, budget, fixed, max_passes, min_statics=min_statics, masks=masks,
+                              remount_s=remount_s, start=start, max_statics=max_statics)
+        except UserError:
+            return None
+        evaluations += result.evaluations
+        passes += result.passes
+        entries, specs = _segments_of(result.chosen, cands, masks)
+        scheme = Scheme(name, "designed by station design", "docs/design.md", {}, tuple(specs), centred=centred)
+        plan = compile_scheme(scheme, config)
+        if plan.duration_s <= budget_s * 1.0005:
+            return result, entries, specs, scheme, plan, evaluations, passes
+        budget -= max(2.0 * (plan.duration_s - budget_s), 10.0)
+        start = result.chosen
+    return None
 
 
 def criterion_of(prediction: Prediction, criterion: str) -> float:

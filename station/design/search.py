@@ -34,10 +34,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from station.core.errors import UserError
+from station.design.information import schur as _schur, static_information
 
 RIDGE = 1e-10            # on the unit-diagonal information: a column nothing sees gets 1σ 1e5 of its size
 CRITERIA = ("D", "A", "worst")    # (station/cli/choices.py copies it)
 MIN_STATICS = 9           # lsq's attitudes="auto": every static's attitude unknown from nine on
+# designs of known attitudes (lsq's attitudes="table" below nine statics: each static's attitude
+# the table's, to its angle error): six to eight statics (six: sizeeffect's, +/-1 g on each axis)
+MIN_STATICS_TABLE, MAX_STATICS_TABLE = 6, 8
 WORST_POWER = 20          # the worst criterion searched as this power mean of the 1σ (Scorer.value_of)
 
 
@@ -93,7 +97,7 @@ class Scorer:
         self.M = []
         for c in candidates:
             if c.kind == "static":
-                self.M.append(info.static[c.key[:-1]] * c.dwell_s)
+                self.M.append(static_information(info, c.key[:-1], c.dwell_s))
             else:
                 self.M.append(info.rotation[c.key][1])
 
@@ -221,15 +225,6 @@ class State:
         self.chosen.discard(i)
 
 
-def _schur(S: np.ndarray, G: int) -> np.ndarray:
-    A = S[G:, G:]
-    B = S[:G, G:]
-    d = np.sqrt(np.diag(A))
-    d[d == 0] = 1.0         # (scaled to unit diagonal: a nuisance held only by its prior is kept)
-    Bs = B / d
-    return S[:G, :G] - Bs @ np.linalg.pinv(A / np.outer(d, d), rcond=1e-13, hermitian=True) @ Bs.T
-
-
 @dataclass
 class Result:
     chosen: list
@@ -241,11 +236,14 @@ class Result:
 
 
 def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: int = 20,
-             min_statics: int = MIN_STATICS, masks=None, remount_s: float = 0.0, start=None) -> Result:
+             min_statics: int = MIN_STATICS, masks=None, remount_s: float = 0.0, start=None,
+             max_statics: int | None = None) -> Result:
     """The design within ``budget_s`` (``fixed_s`` of it spent on steps no candidate pays for:
     the first mounting, a warm-up) minimising the criterion (module doc).  ``masks``: each
     candidate's reachable mountings (bits), a mounting beyond the first costing ``remount_s``;
-    ``start``: a design to start the exchanges from (its candidates kept while within budget)."""
+    ``start``: a design to start the exchanges from (its candidates kept while within budget);
+    ``max_statics``: at most this many statics (designs of known attitudes: fewer than nine,
+    MIN_STATICS_TABLE to MAX_STATICS_TABLE)."""
 
     cands = scorer.cands
     n = len(cands)
@@ -255,6 +253,9 @@ def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: 
     def allowed(chosen: set, j: int) -> bool:
         c = cands[j]
         if j in chosen:
+            return False
+        if (max_statics is not None and c.kind == "static"
+                and sum(cands[i].kind == "static" for i in chosen) >= max_statics):
             return False
         for i in chosen:
             o = cands[i]
@@ -287,6 +288,8 @@ def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: 
         s = cands[j].slot
         if s not in shortest or cands[j].dwell_s < cands[shortest[s]].dwell_s:
             shortest[s] = j
+    longer_of = {i: [j for j in statics if cands[j].slot == cands[i].slot and cands[j].dwell_s > cands[i].dwell_s]
+                 for i in statics}
     # 1. nine statics, greedily, at their shortest dwell
     while sum(cands[i].kind == "static" for i in state.chosen) < min_statics:
         best, best_v = None, math.inf
@@ -348,6 +351,33 @@ def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: 
             if best_j is not None:
                 state.remove(i)
                 state.add(best_j)
+                current = best_v
+                history.append(current)
+                changed = True
+        # a static lengthened, paid for by dropping another chosen candidate: a move one exchange
+        # cannot make when the budget is spent (a longer dwell needs more time than it frees)
+        for i in sorted(state.chosen):
+            if i not in state.chosen or cands[i].kind != "static":
+                continue
+            longer = [j for j in longer_of[i] if j not in state.chosen]
+            best_move, best_v = None, current
+            for k in sorted(state.chosen):
+                if k == i:
+                    continue
+                rest = state.chosen - {i, k}
+                if cands[k].kind == "static" and sum(cands[m].kind == "static" for m in rest) + 1 < min_statics:
+                    continue
+                for j in longer:
+                    if not allowed(rest, j) or time_of(rest | {j}) > budget_s:
+                        continue
+                    v = score(remove=(i, k), add=(j,))
+                    if v < best_v - 1e-9 * max(1.0, abs(best_v)):
+                        best_move, best_v = (k, j), v
+            if best_move is not None:
+                k, j = best_move
+                state.remove(i)
+                state.remove(k)
+                state.add(j)
                 current = best_v
                 history.append(current)
                 changed = True

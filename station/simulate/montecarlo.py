@@ -98,8 +98,10 @@ def one_run(args) -> tuple[list[float], np.ndarray]:
 
 def cramer_rao(scheme: Scheme, settings: Settings, seed: int = 0) -> np.ndarray:
     """Cramér-Rao lower bound (1σ, units of parameter_errors) of every base parameter for this
-    scheme and noise, with the static attitudes and the bench nuisances unknown: the inverse
-    Fisher information of the summaries' model at the truth, noise from the densities."""
+    scheme and noise, with the bench nuisances unknown and the static attitudes as the estimator
+    takes them (lsq's attitudes="auto": unknown from nine statics on, else the table's, known to
+    its angle error -- sizeeffect's six): the inverse Fisher information of the summaries' model
+    at the truth, noise from the densities."""
     from station.simulate import dryrun
     from station.estimate import lsq
     from station.estimate.summaries import summarise
@@ -115,7 +117,7 @@ def cramer_rao(scheme: Scheme, settings: Settings, seed: int = 0) -> np.ndarray:
     accel_sigma = np.hypot(settings.accel_noise_ug * np.sqrt(fs), settings.accel_disturbance_ug)
     s.accel_sigma = np.full(3, accel_sigma * 9.80665e-6)
     s.gyro_sigma = np.full(3, settings.gyro_noise_dph * np.sqrt(fs) / 3600.0)
-    result = lsq.fit(s, _effects(settings), attitudes="unknown")
+    result = lsq.fit(s, _effects(settings))
     cal = lsq.to_calibration(result, capture.imu.accel_unit, capture.imu.gyro_unit)
     return np.concatenate([_error_sigmas(cal), _effect_values(cal, settings, sigma=True)])
 
