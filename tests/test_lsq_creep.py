@@ -44,7 +44,8 @@ def test_a_fit_that_does_not_creep_takes_the_path_it_always_did():
 def test_imucal_session_converges_at_its_minimum(tmp_path, monkeypatch):
     """imucal's example session (--turn-deg 360): the joint fit crept to LM's limit of 1,000
     evaluations (chi2 0.009 above its minimum, 'not converged'); now it converges, in far fewer
-    evaluations, and where it ends LM alone finds nothing left to gain."""
+    evaluations, and where it ends LM alone finds nothing left to gain.  (Counts of residual
+    evaluations, not times: the same on any machine.)"""
     path = imucal.import_imucal(SESSION, tmp_path / "c", rate_hz=102.4, sections_path=SECTIONS, turn_deg=360.0)
     calls = []
     residuals = lsq.Model.residuals
@@ -60,7 +61,9 @@ def test_imucal_session_converges_at_its_minimum(tmp_path, monkeypatch):
     cal, _, _ = estimate_capture(path)
     assert cal.fit["converged"] is True
     assert not any("limit" in str(n) for n in cal.fit.get("notes", []))
-    assert len(calls) < 500, len(calls)         # every fit of the estimate (was ~2,500)
+    # every fit of the estimate: 1,231 on main; 250 with the creep watch alone; 126 with the poses'
+    # own fit started from the joint one (poses.pose_only(start_from=...))
+    assert len(calls) < 200, len(calls)
     joint = max(solved, key=lambda m: m.layout.size)
     # at the minimum: LM started where the fit ended stops on its tolerances at once and gains
     # less chi2 than 1e-6 (a movement of 1e-3 sigma: chi2 - chi2_min = |delta / sigma|^2)
