@@ -15,6 +15,11 @@ Work measured, each a fresh process (two for an import and its estimate):
   imu_tk      imu_tk's compiled `test_imu_calib ACC GYR` on the same pair, when --imu-tk BIN names
               one (it is not built here: imu_tk needs Ceres; see docs/performance.md)
 
+Every tree's modules are compiled to bytecode first (compileall, as pip does when it installs a
+package; numpy, scipy and imucal in site-packages are): with PYTHONDONTWRITEBYTECODE set, as on
+this machine, a tree without __pycache__ was compiled again by every process (~0.15 s of an
+estimate's CPU, counted against station only).
+
 --before SRC times the same station commands with SRC first on PYTHONPATH (a tree holding the
 earlier `station` package, e.g. `git archive main station drivers sim_devices | tar -x -C SRC`),
 alternating with this tree in every round.
@@ -35,7 +40,9 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = ROOT.parent / "shared" / "data" / "imucal"
+DATA = ROOT / "tests" / "data" / "imucal"
+if not (DATA / "example_ferraris_session.csv").exists():
+    DATA = ROOT.parent / "shared" / "data" / "imucal"
 COUNTS = (8 * 9.80665 / 32768, 1000.0 / 32768)      # +-8 g, +-1000 deg/s in 16 bits
 
 IMUCAL_SCRIPT = r"""
@@ -60,6 +67,14 @@ def run(cmd, env) -> tuple[float, float]:
     if r.returncode not in (0, 3):
         raise SystemExit(f"{' '.join(map(str, cmd))}: exit {r.returncode}: {r.stderr[-2000:]}")
     return elapsed, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def compile_tree(tree: Path) -> None:
+    """Bytecode for the tree's packages (what an installed package has; see the module doc)."""
+    for package in ("station", "sim_devices", "drivers"):
+        if (tree / package).is_dir():
+            subprocess.run([sys.executable, "-m", "compileall", "-q", str(tree / package)], check=True,
+                           stdout=subprocess.DEVNULL, env=dict(os.environ, PYTHONDONTWRITEBYTECODE=""))
 
 
 def env_for(tree: Path | None) -> dict:
@@ -106,6 +121,8 @@ def main() -> int:
     data = make_data(tmp)
     out = tmp / "out"
     trees = {"now": None} | ({"before": args.before.resolve()} if args.before else {})
+    for tree in trees.values():
+        compile_tree(tree or ROOT)
     try:
         import imucal  # noqa: F401
         have_imucal = (DATA / "example_ferraris_session.csv").exists()

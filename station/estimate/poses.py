@@ -86,17 +86,22 @@ def attitudes(s, result: lsq.FitResult | None = None) -> tuple[int, int]:
 
 # ------------------------------------------------------------------------------------ fits
 
-def pose_only(s, attitudes_mode: str, hold_misalignment: bool = False, effects=(), pose_extra=None) -> lsq.FitResult:
+def pose_only(s, attitudes_mode: str, hold_misalignment: bool = False, effects=(), pose_extra=None,
+              start_from: lsq.FitResult | None = None) -> lsq.FitResult:
     """The fit of the static poses alone (rotations and turns left out), in the joint model's
     attitude mode and with its effects (copies: an effect is set up for the summaries it
     models) and its poses' weights (``pose_extra``: the joint model's, so that the two fits
     weight the shared static data alike, as the comparison's covariance assumes); the
-    misalignments held at 0 when asked (prior rows of HELD_PRIOR_RAD)."""
+    misalignments held at 0 when asked (prior rows of HELD_PRIOR_RAD).  ``start_from``: the
+    joint fit, whose values start the blocks both have (lsq.fit's start_from: fewer evaluations,
+    the same minimum)."""
     sp = dataclasses.replace(s, rotations=[], hand_rotations=[], skipped=[])
     effects = copy.deepcopy(list(effects))
     if not hold_misalignment:
-        return lsq.fit(sp, effects, attitudes_mode, pose_extra=pose_extra)
+        return lsq.fit(sp, effects, attitudes_mode, pose_extra=pose_extra, start_from=start_from)
     model = lsq.Model(sp, effects, attitudes_mode)
+    if start_from is not None:
+        lsq.start_blocks(model, start_from)
     if pose_extra is not None:
         model.set_pose_extra(pose_extra)
     model.unobservable = []
@@ -237,7 +242,8 @@ def check(s, joint: lsq.FitResult, accel_unit: str) -> tuple[dict, lsq.FitResult
     poses, distinct = attitudes(s, joint)
     mode = joint.model.attitudes
     few = mode == "unknown" and distinct < MIN_ATTITUDES
-    pose = pose_only(s, mode, hold_misalignment=few, effects=joint.model.effects, pose_extra=joint.model.pose_extra)
+    pose = pose_only(s, mode, hold_misalignment=few, effects=joint.model.effects, pose_extra=joint.model.pose_extra,
+                     start_from=joint)
     k2 = max(1.0, pose.chi2 / pose.dof) if pose.dof > 0 else 1.0
     cov_pose = pose.covariance_of(ACCEL_COLUMNS) * k2
     cov_joint = joint.covariance_of(ACCEL_COLUMNS) * k2

@@ -41,6 +41,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -116,6 +117,31 @@ def _rows(path: Path, lines: list[str], cols: dict[str, int], wanted: tuple[str,
         yield i, {c: fields[cols[c]] for c in wanted}
 
 
+def _parsed_fast(lines: list[str], cols: dict[str, int], wanted: tuple[str, ...]) -> np.ndarray | None:
+    """The data lines' wanted columns by numpy's C reader (np.loadtxt: correctly rounded, as
+    float()), or None whenever the line-by-line reader might say something else: a quote, a blank
+    line, a field count other than the header's, text that is not a number, a value that is not
+    finite (that reader then names the line and column).  ~10 ms for imucal's example session,
+    where splitting and converting every field in Python took ~60 ms."""
+    import io
+
+    body = lines[1:]
+    if not body or any('"' in line or not line.strip() for line in body):
+        return None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            data = np.loadtxt(io.StringIO("\n".join(body)), dtype=np.float64, delimiter=",", comments=None,
+                              usecols=[cols[c] for c in wanted], ndmin=2)
+    except (ValueError, Warning):
+        return None
+    width = len(cols)
+    if data.shape[0] != len(body) or not np.all(np.isfinite(data)) or any(line.count(",") != width - 1
+                                                                          for line in body):
+        return None
+    return data
+
+
 def _times(path: Path, lines_numbers, counter, rate_hz: float, column: str | None) -> np.ndarray:
     t = np.asarray(counter, float) / rate_hz
     bad = np.nonzero(np.diff(t) <= 0)[0]
@@ -133,13 +159,17 @@ def read_session(csv_path, sections_path, rate_hz: float) -> tuple[list[Section]
     cols = _header(csv_path, lines[0], ACC_COLS + GYR_COLS)
     counter_col = "n_samples" if "n_samples" in cols else None
     wanted = ACC_COLS + GYR_COLS + ((counter_col,) if counter_col else ())
-    numbers, values = [], []
-    for lineno, row in _rows(csv_path, lines, cols, wanted):
-        numbers.append(lineno)
-        values.append([_number(csv_path, lineno, c, row[c]) for c in wanted])
-    if not values:
-        raise UserError(f"{csv_path}: no data rows")
-    data = np.array(values)
+    data = _parsed_fast(lines, cols, wanted)
+    if data is not None:
+        numbers = list(range(2, len(lines) + 1))
+    else:           # line by line: the same values, or the message naming the line and column
+        numbers, values = [], []
+        for lineno, row in _rows(csv_path, lines, cols, wanted):
+            numbers.append(lineno)
+            values.append([_number(csv_path, lineno, c, row[c]) for c in wanted])
+        if not values:
+            raise UserError(f"{csv_path}: no data rows")
+        data = np.array(values)
     counter = data[:, 6] if counter_col else np.arange(len(data))
     t = _times(csv_path, numbers, counter, rate_hz, counter_col)
     spans = read_section_list(sections_path, len(data))
