@@ -50,7 +50,7 @@ class TableWobble(Effect):
     def setup(self, summaries) -> None:
         self.frame = rev.frames(summaries)
         steady = [r for r in summaries.rotations if int(r.index) in self.frame]
-        self.axes = sorted({rev.table_axis_of(r) for r in steady}) or [0]
+        self.axes = sorted({rev.table_axis_of(r) for r in steady})     # none: nothing to fix its frame
         self.group_of = {int(r.index): self.axes.index(rev.table_axis_of(r)) for r in steady}
         self.count = {g: sum(1 for v in self.group_of.values() if v == g) for g in range(len(self.axes))}
 
