@@ -259,7 +259,12 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
                         kept, h_after = alt
                         term_steps += 1
                 break
-            refused.add(cand.effect)
+            if cand not in named:
+                refused.add(cand.effect)
+            # else tried again after another effect is added: the fault the words name can explain only
+            # part of a failure that has a second cause (a 30" wobble beside gyro g-sensitivity: 23 % of
+            # the excess chi2 before g-sensitivity is in the model, all of it after)
+            rejected = [r for r in rejected if r.effect != cand.effect]
             rejected.append(Rejection(cand.effect, reason, current.chi2 - after.chi2, cv_b, cv_a, share,
                                       added_parameters(after, cand.effect)))
         if (kept is None and discover and term_steps < MAX_TERM_STEPS and fit_fails(current.result)
@@ -280,7 +285,7 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
         current, h_current = kept.after, h_after
         current, h_current = eliminate(summaries, kept, [st.added for st in steps[:-1]], current, h_current,
                                        attitudes, registry, refused)
-    current.rejected = rejected
+    current.rejected = [r for r in rejected if r.effect not in {st.added for st in steps}]
     conclude(current, summaries, steps, search_terms=not (discover and term_steps >= MAX_TERM_STEPS))
     return steps, current
 
