@@ -40,6 +40,24 @@ def bench_fault(d: Diagnosis) -> str:
     return next((f for f in d.failures if any(k in f for k in BENCH_FAULTS)), "")
 
 
+def named_in_words(cands, d: Diagnosis, registry) -> list:
+    """The candidates whose effect the failure's words name (the effect's ``named_by`` phrases, e.g.
+    table_vibration_once_per_rev for "once per revolution along the rotation's own axis"), in rank
+    order: the words point at a fault of the bench, so its own effect is tried before the IMU's
+    effects that could take part of it (a vibration once taken for gyro terms, above)."""
+    from station.core.errors import UserError
+
+    out = []
+    for c in cands:
+        try:
+            phrases = getattr(registry.create(c.effect), "named_by", ())
+        except UserError:
+            continue
+        if any(p in f for p in phrases for f in d.failures):
+            out.append(c)
+    return out
+
+
 MAX_STEPS = 6
 MAX_TRIES = 3          # significant candidates tried per step
 
@@ -213,8 +231,11 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
     term_steps = 0
     while len(steps) < MAX_STEPS:
         open_ = [c for c in current.candidates if c.significant and c.effect not in refused]
-        # the IMU's effects first, then the bench's and the events' (ranked after them: core.Candidate.bench)
-        tries = [c for c in open_ if not c.bench][:MAX_TRIES] + [c for c in open_ if c.bench][:MAX_TRIES]
+        # the effects the failure's words name first (a table wobble for "a wobbling or tilted table
+        # platter"), then the IMU's effects, then the bench's and the events' (core.Candidate.bench)
+        named = named_in_words(open_, current, registry)
+        rest = [c for c in open_ if c not in named]
+        tries = named + [c for c in rest if not c.bench][:MAX_TRIES] + [c for c in rest if c.bench][:MAX_TRIES]
         kept = None
         for cand in tries:
             if progress:
@@ -238,7 +259,12 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
                         kept, h_after = alt
                         term_steps += 1
                 break
-            refused.add(cand.effect)
+            if cand not in named:
+                refused.add(cand.effect)
+            # else tried again after another effect is added: the fault the words name can explain only
+            # part of a failure that has a second cause (a 30" wobble beside gyro g-sensitivity: 23 % of
+            # the excess chi2 before g-sensitivity is in the model, all of it after)
+            rejected = [r for r in rejected if r.effect != cand.effect]
             rejected.append(Rejection(cand.effect, reason, current.chi2 - after.chi2, cv_b, cv_a, share,
                                       added_parameters(after, cand.effect)))
         if (kept is None and discover and term_steps < MAX_TERM_STEPS and fit_fails(current.result)
@@ -259,7 +285,7 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
         current, h_current = kept.after, h_after
         current, h_current = eliminate(summaries, kept, [st.added for st in steps[:-1]], current, h_current,
                                        attitudes, registry, refused)
-    current.rejected = rejected
+    current.rejected = [r for r in rejected if r.effect not in {st.added for st in steps}]
     conclude(current, summaries, steps, search_terms=not (discover and term_steps >= MAX_TERM_STEPS))
     return steps, current
 

@@ -1969,6 +1969,10 @@ def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=())
             f"{', '.join(model.unobservable)}")
     for e in model.effects:       # what an effect's own convention fixes (not the capture's doing)
         fit_stats["notes"] += list(e.notes()) if hasattr(e, "notes") else []
+        if getattr(e, "bench", False) and callable(getattr(e, "words", None)):
+            # a fault of the bench found, with its size (a finding for the lab: apply compensates nothing)
+            own = [names.index(p.name) for p in e.params if p.name in names]
+            fit_stats["notes"] += list(e.words(np.asarray(values, float)[own], sigma[own]))
     if model.geometry.describe(s.rotations):
         fit_stats["notes"].append(model.geometry.describe(s.rotations))
     if "mounting_offset" in L.blocks:

@@ -19,6 +19,8 @@ from station.model.nonlinearity import AccelNonlinearity
 from station.model.scale_asymmetry import GyroScaleAsymmetry
 from station.model.scale_temperature import ScaleTemperature
 from station.model.table_encoder_scale import TableEncoderScale
+from station.model.table_vibration import TableVibration
+from station.model.table_wobble import TableWobble
 from station.model.temperature import TemperatureBias
 from station.model.temperature_quadratic import TemperatureBiasQuadratic
 from station.model.time_offset import TimeOffset
@@ -28,7 +30,7 @@ LIBRARY = {cls.id: cls for cls in (AccelLeverArm, AccelNonlinearity, GyroGSensit
                                    AccelCubic, ScaleTemperature, TemperatureBiasQuadratic,
                                    GyroAnisoelastic, AccelCrossAxis, GyroRateNonlinearity,
                                    BiasDrift, BiasStep, TableEncoderScale,
-                                   RotationAxisOffsets)}
+                                   RotationAxisOffsets, TableWobble, TableVibration)}
 EFFECTS = LIBRARY
 
 __all__ = ["EFFECTS", "LIBRARY", "Effect", "Param", "SampleContext"]

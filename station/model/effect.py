@@ -70,6 +70,8 @@ class Effect:
     signature = ""            # what its residuals look like when it is missing
     signature_variable = ""   # what to plot its residuals against: rate_squared, temperature,
                               #   gravity_along_axis, signed_rate, rate_change, time
+    named_by: tuple[str, ...] = ()   # phrases of diagnose's words that name it (station.diagnose.words):
+                              #   --auto tries it first when the failure says one of them
     needs: tuple[str, ...] = ()   # inputs its compensation needs beyond the samples:
                               #   "temperature" (a temp column), "time" (time stamps: rates of change)
     state_fields: tuple[str, ...] = ()   # attributes set by setup() that the compensation needs;
