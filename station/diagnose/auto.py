@@ -33,6 +33,7 @@ from station.model.registry import EffectRegistry
 # taken for gyro terms that raised the held-out gyro error from 417 to 210,574 ppm), so --auto
 # does not carry them while one is named
 BENCH_FAULTS = ("once per revolution along the rotation's own axis", "was moved or remounted")
+REMOUNT_FAULT, REMOUNT = BENCH_FAULTS[1], "remount_per_segment"    # tried first when the words say it
 
 
 def bench_fault(d: Diagnosis) -> str:
@@ -215,6 +216,8 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
         open_ = [c for c in current.candidates if c.significant and c.effect not in refused]
         # the IMU's effects first, then the bench's and the events' (ranked after them: core.Candidate.bench)
         tries = [c for c in open_ if not c.bench][:MAX_TRIES] + [c for c in open_ if c.bench][:MAX_TRIES]
+        if REMOUNT_FAULT in bench_fault(current):     # the words saw the IMU moved: its placements first
+            tries = [c for c in open_ if c.effect == REMOUNT] + [c for c in tries if c.effect != REMOUNT]
         kept = None
         for cand in tries:
             if progress:

@@ -295,6 +295,8 @@ def _moved_axes(result) -> list[str]:
     than the noise allows: the IMU moved between them (a remount or placement error)."""
     model, x = result.model, result.x
     s = model.s
+    if any(e.id == "remount_per_segment" for e in model.effects):
+        return []           # each rotation's placement is in the model (station/model/remount.py)
     try:
         _, Mg = model._matrices(x)
         Lg = np.linalg.inv(Mg)
@@ -312,8 +314,11 @@ def _moved_axes(result) -> list[str]:
                 v = Lg @ (r.gyro_integral - bias * r.duration_s) * np.sign(r.angle_deg)
                 axes.append(v / np.linalg.norm(v))
             angle = float(np.degrees(np.arccos(np.clip(axes[0] @ axes[1], -1.0, 1.0))))
+            # the integrals' white noise (deg) over the angle turned (deg): rad, in degrees (it was
+            # divided by the angle in radians, 57.3 times too large: 0.45° moves over two
+            # revolutions at 100 °/s went unsaid, and were taken for a vibration once per revolution)
             noise = float(np.degrees(np.max(s.gyro_sigma) * np.sqrt(
-                (p.duration_s + m.duration_s) / s.sample_rate_hz) / np.radians(min(abs(p.angle_deg), abs(m.angle_deg)))))
+                (p.duration_s + m.duration_s) / s.sample_rate_hz) / min(abs(p.angle_deg), abs(m.angle_deg))))
             noise = max(noise, 2 * s.table_angle_sigma_deg / min(abs(p.angle_deg), abs(m.angle_deg)) * 57.3)
             if angle > 5 * noise and angle > 0.005:
                 out.append(f"rotations {p.name} and {m.name}: the axis the gyros saw moved by {angle:.3g}° "
