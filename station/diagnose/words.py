@@ -290,6 +290,12 @@ def _counts_per_mps2(s) -> float:
     return counts_per_unit(s)[0]
 
 
+MOVED_AXIS_DEG = 0.05     # the least move of a ± pair's axis said as a remount: a gyro bias error b
+                          #   tilts the two directions' integrals apart by 2 b / rate (a bias step of
+                          #   100 °/h at 100 °/s: 0.0066°, taken for a remount at 0.005°); 0.05° is a
+                          #   bias error of 160 °/h at 100 °/s, 16 °/h at 10 °/s
+
+
 def _moved_axes(result) -> list[str]:
     """± rotations about one table axis whose axes, seen by the calibrated gyros, differ by more
     than the noise allows: the IMU moved between them (a remount or placement error)."""
@@ -320,7 +326,7 @@ def _moved_axes(result) -> list[str]:
             noise = float(np.degrees(np.max(s.gyro_sigma) * np.sqrt(
                 (p.duration_s + m.duration_s) / s.sample_rate_hz) / min(abs(p.angle_deg), abs(m.angle_deg))))
             noise = max(noise, 2 * s.table_angle_sigma_deg / min(abs(p.angle_deg), abs(m.angle_deg)) * 57.3)
-            if angle > 5 * noise and angle > 0.005:
+            if angle > 5 * noise and angle > MOVED_AXIS_DEG:
                 out.append(f"rotations {p.name} and {m.name}: the axis the gyros saw moved by {angle:.3g}° "
                            f"between them (noise {noise:.1g}°): the IMU was moved or remounted between the "
                            "two directions; record each ± pair without touching the IMU")
