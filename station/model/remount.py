@@ -59,7 +59,8 @@ class RemountPerSegment(Effect):
                "bench nuisance, not a property of the IMU: station apply compensates nothing for it.")
     term = ("rotation segment s about axis group k, not the first about k: accel_raw += M_a (R(delta_s) - I) f_p, "
             "gyro_raw += M_g (R(delta_s) - I) w_p, R(delta) the rotation by the vector delta (to 4th order in "
-            "|delta|), delta_s = a_s t1 + b_s t2 (rad; t1, t2 across the segment's "
+            "|delta|) and the mounting offset's centripetal part w' x (w' x d) + dw'/dt x d made with the turned rate w' = R w (d fixed "
+            "in the IMU's frame), delta_s = a_s t1 + b_s t2 (rad; t1, t2 across the segment's "
             "commanded axis); the first rotation about each axis has delta = 0 (the gauge: the axis l is "
             "its placement's)")
     excited_by = ("two or more rotations about one axis (a +/- pair) with the IMU put back between them: the "
