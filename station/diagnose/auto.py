@@ -215,9 +215,12 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
     while len(steps) < MAX_STEPS:
         open_ = [c for c in current.candidates if c.significant and c.effect not in refused]
         # the IMU's effects first, then the bench's and the events' (ranked after them: core.Candidate.bench)
-        tries = [c for c in open_ if not c.bench][:MAX_TRIES] + [c for c in open_ if c.bench][:MAX_TRIES]
-        if REMOUNT_FAULT in bench_fault(current):     # the words saw the IMU moved: its placements first
-            tries = [c for c in open_ if c.effect == REMOUNT] + [c for c in tries if c.effect != REMOUNT]
+        # a placement per rotation (two parameters each) bends any rotation's misfit across its axis
+        # away: tried only, and first, where the words saw a ± pair's axis move (the IMU moved)
+        others = [c for c in open_ if c.effect != REMOUNT]
+        tries = [c for c in others if not c.bench][:MAX_TRIES] + [c for c in others if c.bench][:MAX_TRIES]
+        if REMOUNT_FAULT in bench_fault(current):
+            tries = [c for c in open_ if c.effect == REMOUNT] + tries
         kept = None
         for cand in tries:
             if progress:
