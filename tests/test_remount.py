@@ -43,7 +43,7 @@ def remounted():
 def test_auto_adds_the_placements_and_the_fit_passes(remounted):
     """0.1° (1σ per axis) placement errors: the gyros see each rotation's axis moved by
     ~0.1-0.5° (at 100 °/s a cross-axis rate of 0.2-0.9 °/s against a noise of the two-revolution
-    integral's direction of ~10 arc-seconds): the fit fails by far and the words say the IMU was
+    integral's direction of ~6 arc-seconds): the fit fails by far and the words say the IMU was
     moved.  --auto adds remount_per_segment (first, as the words ask) and nothing else, and the fit
     then passes; the words name the rotations, largest first, in arc-seconds."""
     _, _, _, steps, final = remounted
@@ -62,7 +62,7 @@ def test_each_placement_is_the_simulators(remounted):
     """Each rotation's fitted placement relative to the first about its axis is the simulator's
     (its placement's rotation vector less the reference's, into frame p by the truth's C_pb),
     across the axis (the part along it is gravity's start phase, the base model's psi): within 4
-    times the fit's own 1σ (~10 arc-seconds per component over two revolutions; the second order of
+    times the fit's own 1σ (~6 arc-seconds per component over two revolutions; the second order of
     composing two 0.1° placements, |r1||r2|/2 ~ 0.1 arc-second, is far below it)."""
     truth, s, placements, _, final = remounted
     effect = next(e for e in final.result.model.effects if e.id == "remount_per_segment")
