@@ -134,3 +134,23 @@ def test_apply_compensates_nothing_and_the_state_round_trips():
     back.restore(e.state())
     assert back.free == e.free and back.placement_of == e.placement_of and back.names == e.names
     assert [p.name for p in back.params] == [p.name for p in e.params]
+
+
+def test_a_gyro_bias_step_before_the_rotations_is_not_a_remount(monkeypatch):
+    """The gyro bias steps by 300 °/h after the statics (which all come first), before rotx_p: the
+    rotations' bias is then off by 300 °/h = 0.083 °/s, which the sign-corrected integrals of a ±
+    pair carry in opposite directions: their axes differ by 2 b T / A = 2 · 0.083 · 7.2 / 720 rad =
+    0.095° (beyond 0.05° and 5σ), as a remount's would, but gravity's plane in the accelerometers
+    does not move: the words do not say the IMU was moved (they would without the accelerometers'
+    check), so --auto does not try remount_per_segment there."""
+    from station.diagnose import words
+
+    _, s0, _ = capture(seed=7)
+    p = next(r for r in s0.rotations if r.name == "rotx_p")
+    before = p.t_mid_s - 0.5 * p.duration_s - 2.0
+    assert all(st.t_mid_s < before for st in s0.statics)
+    _, s, _ = capture(seed=7, gyro__bias_step=[0.0, 300.0, 300.0], gyro__bias_step_time_s=before)
+    result = lsq.fit(s)
+    assert not any("rotx_p and rotx_m" in w for w in words._moved_axes(result))
+    monkeypatch.setattr(words, "_accelerometers_agree", lambda *a: True)
+    assert any("rotx_p and rotx_m" in w for w in words._moved_axes(result))
