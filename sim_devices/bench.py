@@ -191,6 +191,10 @@ class SimulatedBench:
             heading = self._geom_rng.uniform(0.0, 2.0 * np.pi)
             roll = self._geom_rng.uniform(0.0, 2.0 * np.pi)
             delta = self._mount_error()
+            if self.truth.bench.remount_axes:
+                # taken off and put back once for this axis: every rotation about it (both
+                # directions) shares the placement
+                delta = delta + self._remount_error()
             a_n = world.table_axis_enu(heading, math.radians(axis_elevation_deg))
             C_bn0 = world.small_rotation(delta) * world.attitude_axis(
                 a_cmd, a_n, up_body=up_hint, roll_rad=roll)

@@ -354,6 +354,8 @@ class BenchSettings:
     # per axis (arcsec), as when the IMU is taken off and put back for each attitude
     remount_error_arcsec: float = 0.0
     remount_rotations: bool = False     # True: every rotation segment is remounted too
+    remount_axes: bool = False          # True: the IMU remounted once for each rotation axis (the
+                                        #   rotations about one axis, both directions, share it)
     # the IMU's time stamps jitter: stamp = nominal sample time + N(0, sigma) (ms); the samples
     # themselves are taken on the regular grid
     time_stamp_jitter_ms: float = 0.0
@@ -555,7 +557,7 @@ _TEMP_KEYS = {"start_c", "reference_c", "drift_c_per_h", "warmup_delta_c",
 _BENCH_KEYS = {"latitude_deg", "height_m", "lever_arm_m", "axis_offsets_m", "table_angle_error_arcsec",
                "rate_ripple_fraction", "rate_ripple_hz", "rate_drift_fraction", "accel_disturbance_ug",
                "move_s", "settle_s", "time_offset_s", "wobble_arcsec", "wobble_phase_deg",
-               "vibration_mg", "vibration_phase_deg", "remount_error_arcsec", "remount_rotations",
+               "vibration_mg", "vibration_phase_deg", "remount_error_arcsec", "remount_rotations", "remount_axes",
                "time_stamp_jitter_ms", "encoder_scale_error_ppm", "table_axes",
                "encoder_scale_error_per_axis_ppm"}
 
@@ -815,6 +817,7 @@ class Truth:
                 "vibration_phase_deg": float(self.bench.vibration_phase_deg),
                 "remount_error_arcsec": float(self.bench.remount_error_arcsec),
                 "remount_rotations": bool(self.bench.remount_rotations),
+                "remount_axes": bool(self.bench.remount_axes),
                 "time_stamp_jitter_ms": float(self.bench.time_stamp_jitter_ms),
                 "encoder_scale_error_ppm": float(self.bench.encoder_scale_error_ppm),
                 "table_axes": int(self.bench.table_axes),
@@ -998,6 +1001,10 @@ class Truth:
             if not isinstance(d["remount_rotations"], bool):
                 c.fail("bench.remount_rotations", f"expected true or false, got {d['remount_rotations']!r}")
             bench.remount_rotations = d["remount_rotations"]
+        if "remount_axes" in d:
+            if not isinstance(d["remount_axes"], bool):
+                c.fail("bench.remount_axes", f"expected true or false, got {d['remount_axes']!r}")
+            bench.remount_axes = d["remount_axes"]
         if "time_stamp_jitter_ms" in d:
             jitter = c.number(d["time_stamp_jitter_ms"], "bench.time_stamp_jitter_ms", lo=0.0)
             bound = MAX_JITTER_FRACTION * 1000.0 / rate

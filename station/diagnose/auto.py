@@ -33,6 +33,7 @@ from station.model.registry import EffectRegistry
 # taken for gyro terms that raised the held-out gyro error from 417 to 210,574 ppm), so --auto
 # does not carry them while one is named
 BENCH_FAULTS = ("once per revolution along the rotation's own axis", "was moved or remounted")
+REMOUNT_FAULT, REMOUNT = BENCH_FAULTS[1], "remount_per_segment"    # tried first when the words say it
 
 
 def bench_fault(d: Diagnosis) -> str:
@@ -232,10 +233,14 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
     while len(steps) < MAX_STEPS:
         open_ = [c for c in current.candidates if c.significant and c.effect not in refused]
         # the effects the failure's words name first (a table wobble for "a wobbling or tilted table
-        # platter"), then the IMU's effects, then the bench's and the events' (core.Candidate.bench)
-        named = named_in_words(open_, current, registry)
-        rest = [c for c in open_ if c not in named]
+        # platter"), then the IMU's effects, then the bench's and the events' (core.Candidate.bench);
+        # a placement per rotation (two parameters each) bends any rotation's misfit across its axis
+        # away: tried only, and first, where the words saw a ± pair's axis move (the IMU moved)
+        named = [c for c in named_in_words(open_, current, registry) if c.effect != REMOUNT]
+        rest = [c for c in open_ if c not in named and c.effect != REMOUNT]
         tries = named + [c for c in rest if not c.bench][:MAX_TRIES] + [c for c in rest if c.bench][:MAX_TRIES]
+        if REMOUNT_FAULT in bench_fault(current):
+            tries = [c for c in open_ if c.effect == REMOUNT] + tries
         kept = None
         for cand in tries:
             if progress:

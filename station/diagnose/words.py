@@ -290,14 +290,42 @@ def _counts_per_mps2(s) -> float:
     return counts_per_unit(s)[0]
 
 
+MOVED_AXIS_DEG = 0.05     # the least move of a ± pair's axis said as a remount: a gyro bias error b
+                          #   tilts the two directions' integrals apart by 2 b / rate (a bias step of
+                          #   100 °/h at 100 °/s: 0.0066°, taken for a remount at 0.005°); 0.05° is a
+                          #   bias error of 160 °/h at 100 °/s, 16 °/h at 10 °/s
+
+
+ACCEL_AXIS_SHARE = 0.5    # of the gyros' move, the least the accelerometers' axis must move too
+
+
+def _accelerometers_agree(p, m, La, s, gyro_angle_deg: float) -> bool:
+    """Whether the accelerometers saw the axis move too (True where they cannot tell): a remount
+    turns the whole IMU, so the plane in which gravity turns (the first harmonic's cos and sin
+    parts, across the axis) tilts with the gyros' axis; a gyro bias that changed between the two
+    directions (a quadratic temperature bias over a warm-up: 160 °/h, 0.05° at 100 °/s) tilts the
+    gyros' axis alone.  Needs gravity across the axis (a third of g at least)."""
+    normals = []
+    for r in (p, m):
+        c, sn = La @ np.asarray(r.accel_cos, float), La @ np.asarray(r.accel_sin, float)
+        if min(np.linalg.norm(c), np.linalg.norm(sn)) < s.gravity_mps2 / 3.0:
+            return True
+        n = np.cross(c, sn)
+        normals.append(n / np.linalg.norm(n))
+    accel = float(np.degrees(np.arccos(np.clip(abs(normals[0] @ normals[1]), -1.0, 1.0))))
+    return accel > ACCEL_AXIS_SHARE * gyro_angle_deg
+
+
 def _moved_axes(result) -> list[str]:
     """± rotations about one table axis whose axes, seen by the calibrated gyros, differ by more
     than the noise allows: the IMU moved between them (a remount or placement error)."""
     model, x = result.model, result.x
     s = model.s
+    if any(e.id == "remount_per_segment" for e in model.effects):
+        return []           # each rotation's placement is in the model (station/model/remount.py)
     try:
-        _, Mg = model._matrices(x)
-        Lg = np.linalg.inv(Mg)
+        Ma, Mg = model._matrices(x)
+        La, Lg = np.linalg.inv(Ma), np.linalg.inv(Mg)
     except (np.linalg.LinAlgError, AttributeError):
         return []
     bias = x[model.layout["gyro_bias"]]
@@ -312,10 +340,13 @@ def _moved_axes(result) -> list[str]:
                 v = Lg @ (r.gyro_integral - bias * r.duration_s) * np.sign(r.angle_deg)
                 axes.append(v / np.linalg.norm(v))
             angle = float(np.degrees(np.arccos(np.clip(axes[0] @ axes[1], -1.0, 1.0))))
+            # the integrals' white noise (deg) over the angle turned (deg): rad, in degrees (it was
+            # divided by the angle in radians, 57.3 times too large: 0.45° moves over two
+            # revolutions at 100 °/s went unsaid, and were taken for a vibration once per revolution)
             noise = float(np.degrees(np.max(s.gyro_sigma) * np.sqrt(
-                (p.duration_s + m.duration_s) / s.sample_rate_hz) / np.radians(min(abs(p.angle_deg), abs(m.angle_deg)))))
+                (p.duration_s + m.duration_s) / s.sample_rate_hz) / min(abs(p.angle_deg), abs(m.angle_deg))))
             noise = max(noise, 2 * s.table_angle_sigma_deg / min(abs(p.angle_deg), abs(m.angle_deg)) * 57.3)
-            if angle > 5 * noise and angle > 0.005:
+            if angle > 5 * noise and angle > MOVED_AXIS_DEG and _accelerometers_agree(p, m, La, s, angle):
                 out.append(f"rotations {p.name} and {m.name}: the axis the gyros saw moved by {angle:.3g}° "
                            f"between them (noise {noise:.1g}°): the IMU was moved or remounted between the "
                            "two directions; record each ± pair without touching the IMU")

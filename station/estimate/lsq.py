@@ -1005,7 +1005,7 @@ class Model:
         a = f_p @ Ma.transpose(0, 2, 1) + b_a[:, None, :]     # matmul: ~10x einsum here
         w = w_p @ Mg.transpose(0, 2, 1) + b_g[:, None, :]
         if self.effects:
-            a, w = self._add_effects(X, a, w, f_p, w_p, Ma, Mg, l, w_k, wdot_k)
+            a, w = self._add_effects(X, a, w, f_p, w_p, Ma, Mg, l, w_k, wdot_k, offset)
         blocks = []
         # statics
         blocks.append((self._st_data[:, :3] - a[:, :S]) * self._st_weight[:, :3])
@@ -1076,12 +1076,16 @@ class Model:
         across = np.where(mask, self.omega_dps * np.sin(column), np.sqrt(positive_part(self.omega_dps**2 - free**2)))
         return along, across
 
-    def _add_effects(self, X, a, w, f_p, w_p, Ma, Mg, l, w_k, wdot_k):
+    def _add_effects(self, X, a, w, f_p, w_p, Ma, Mg, l, w_k, wdot_k, offset=None):
         """a and w with every effect's terms added (the Effect interface: one parameter vector,
         all sample points; _checked: under complex step an unsafe term raises _ComplexUnsafe)."""
         L, S, B = self.layout, len(self.s.statics), len(X)
         zeros = np.zeros((S, 3))
         a, w = a.copy(), w.copy()
+        R = len(self.s.rotations)
+        if offset is not None:      # the mounting offset at every point (statics: 0), (B, N, 3)
+            offset = np.concatenate([np.zeros((B, S, 3), dtype=np.result_type(offset)),
+                                     np.repeat(np.broadcast_to(offset, (B, R, 3)), PHASES, axis=1)], axis=1)
         for n in range(B):
             ctx = SampleContext(
                 f_p=f_p[n], w_p=w_p[n],
@@ -1089,7 +1093,7 @@ class Model:
                 wdot_table=np.concatenate([zeros, (wdot_k * l[n][:, None, :]).reshape(-1, 3)]),
                 temp_c=self._ctx_temp, accel_matrix=Ma[n], gyro_matrix=Mg[n], t_s=self._ctx_t,
                 segment_index=self._ctx_index, temp_rate_c_per_s=self._ctx_temp_rate, turned_s=self._ctx_turned,
-                turned_sq_s2=self._ctx_turned_sq)
+                turned_sq_s2=self._ctx_turned_sq, offset_m=None if offset is None else offset[n])
             for eff in self.effects:
                 px = X[n, L[f"effect:{eff.id}"]]
                 for term, out in ((_checked(eff, eff.accel, px, ctx), a), (_checked(eff, eff.gyro, px, ctx), w)):

@@ -16,6 +16,7 @@ from station.model.gyro_anisoelastic import GyroAnisoelastic
 from station.model.gyro_rate_nonlinearity import GyroRateNonlinearity
 from station.model.lever_arm import AccelLeverArm
 from station.model.nonlinearity import AccelNonlinearity
+from station.model.remount import RemountPerSegment
 from station.model.scale_asymmetry import GyroScaleAsymmetry
 from station.model.scale_temperature import ScaleTemperature
 from station.model.table_encoder_scale import TableEncoderScale
@@ -30,7 +31,7 @@ LIBRARY = {cls.id: cls for cls in (AccelLeverArm, AccelNonlinearity, GyroGSensit
                                    AccelCubic, ScaleTemperature, TemperatureBiasQuadratic,
                                    GyroAnisoelastic, AccelCrossAxis, GyroRateNonlinearity,
                                    BiasDrift, BiasStep, TableEncoderScale,
-                                   RotationAxisOffsets, TableWobble, TableVibration)}
+                                   RotationAxisOffsets, TableWobble, TableVibration, RemountPerSegment)}
 EFFECTS = LIBRARY
 
 __all__ = ["EFFECTS", "LIBRARY", "Effect", "Param", "SampleContext"]

@@ -48,6 +48,8 @@ class SampleContext:
                                            #   point (mean over the revolutions it stands for; 0 at
                                            #   statics), for effects of the table's angle; None in apply
     turned_sq_s2: np.ndarray | None = None  # the fit only: the mean of that time's square, s^2
+    offset_m: np.ndarray | None = None     # the fit only: (N, 3) the model's mounting offset from the
+                                           #   rotation axis at each point, m, frame p (0 at statics)
 
     def __len__(self) -> int:
         return len(self.f_p)
