@@ -19,10 +19,11 @@ class BiasStep(Effect):
     physics = ("A bias can jump rather than wander: a knock or a shift of the IMU in its fixture, a "
                "connector or solder joint that settles, a change of the sensor's operating mode or of its "
                "supply; after the jump the new bias stays.  The time of the jump is not a parameter of the "
-               "fit: it is located by a profile over the boundaries between segments (the score test's chi2 "
-               "drop at each candidate time, the largest kept; its p-value corrected for the candidates "
-               "tried), because a step inside a segment cannot be told from one at its edges by segment "
-               "means.")
+               "fit: it is located by a profile (the score test's chi2 drop at each candidate time, the best "
+               "fitted; its p-value corrected for the candidates tried) over the boundaries between segments "
+               "and every split of each segment's samples: a step inside a static moves its mean by the share "
+               "of its samples after the step, one inside a rotation the phase points' means by the share of "
+               "their revolutions after it.")
     term = ("accel_raw += s_a H(t - t_step) (µg); gyro_raw += s_g H(t - t_step) (°/h); H = 1 from the step on; "
             "t the time in the run (the fit counts it from the first segment's mean time, station apply from "
             "the first sample of the data it is given: apply compensates a recording that starts where the "
