@@ -198,6 +198,13 @@ def locate(result, effect, refine: int = REFINE) -> list:
             fitted.append((lsq.fit(result.model.s, [*result.model.effects, trial], result.model.attitudes,
                                    like=result.model).chi2, cand))
         best, (t, before, after, drop) = min(fitted, key=lambda f: f[0]) if fitted else (0.0, top[0])
+        if before == after and fitted:
+            # a step inside a segment takes one number more than one at a boundary (where in the
+            # segment): a boundary that fits within INSIDE_GAIN of it stands for it (a step in the
+            # gap between two segments, which the edge of either reaches as well)
+            edge = [f for f in fitted if f[1][1] != f[1][2] and f[0] - best < INSIDE_GAIN]
+            if edge:
+                best, (t, before, after, drop) = min(edge, key=lambda f: f[0])
         # the others whose chi2 is within the 1 % point of chi2 on one degree of freedom (scaled by
         # the over-dispersion of the best fit when it fails): the capture cannot tell them from the best
         dof = result.dof - len(effect.params)
