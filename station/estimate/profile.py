@@ -87,7 +87,78 @@ def _bias_like_profile(result, effect) -> list[tuple[float, str, str, float]]:
         Jp = outside_model(result, Jb * (seg_t >= t)[:, None])
         g = Jp.T @ r
         out.append((t, before, after, float(g @ (np.linalg.pinv(Jp.T @ Jp, rcond=1e-10) @ g))))
+    if callable(getattr(effect, "interior_segments", None)):
+        names = np.array([lab[0] for lab in model.row_labels(result.x)])
+        effect.time_ranges = {}
+        for seg in effect.interior_segments(s):
+            best = _interior_profile(result, Jb, r, seg_t, names, seg)
+            if best is not None:
+                t, score_, lo, hi = best
+                out.append((t, seg["name"], seg["name"], score_))
+                effect.time_ranges[seg["name"]] = (lo, hi)
     return out
+
+
+def _interior_profile(result, Jb, r, seg_t, names, seg):
+    """A step inside one segment (issue 25, run 3): at every split of its samples (m of its n
+    samples after the step, m/n between seg["w_min"] and seg["w_max"]) the step's columns are the
+    bias columns on the rows of the segments after it plus m/n times those on its own rows (exact
+    for a static's mean; for a rotation its mean and integral, the small part a step within a
+    revolution leaves in the harmonics neglected here, fitted in full by locate), so the score is a
+    ratio of quadratics in m/n, computed at every split from three 6x6 blocks.  Returns the best
+    split's (time, score) and the times where the score is within 1 of it (the profile's 1-sigma
+    range of the step's time), or None."""
+    n = seg["samples"]
+    mid = 0.5 * (seg["first"] + seg["last"])
+    later = (seg_t > mid + 1e-9) & (names != seg["name"])
+    own = names == seg["name"]
+    if not own.any():
+        return None
+    oA = outside_model(result, Jb * later[:, None])
+    oB = outside_model(result, Jb * own[:, None])
+    m = np.arange(1, n)
+    w = m / n
+    keep = (w >= seg["w_min"]) & (w <= seg["w_max"])
+    if not keep.any():
+        return None
+    m, w = m[keep], w[keep]
+    gA, gB = oA.T @ r, oB.T @ r
+    AA, AB, BB = oA.T @ oA, oA.T @ oB, oB.T @ oB
+
+    def scores(w):
+        M = AA[None] + w[:, None, None] * (AB + AB.T)[None] + (w * w)[:, None, None] * BB[None]
+        g = gA[None] + w[:, None] * gB[None]
+        return np.einsum("ki,kij,kj->k", g, np.linalg.pinv(M, rcond=1e-10), g)
+
+    # the segment's edges: the step just before it (all its samples after) and just after it
+    ends = scores(np.array([1.0, 0.0]))
+    # every split costs a 6x6 pseudo-inverse (1.6 s for a capture's 50,000 samples): a grid of at
+    # most COARSE splits, then every split within FINE grid steps of its best (the score is a
+    # smooth ratio of quadratics in m/n)
+    step_ = max(1, len(w) // COARSE)
+    sc = np.full(len(w), -np.inf)
+    sc[::step_] = scores(w[::step_])
+    j = int(np.argmax(sc))
+    near_ = slice(max(j - FINE * step_, 0), min(j + FINE * step_ + 1, len(w)))
+    sc[near_] = scores(w[near_])
+    j = int(np.argmax(sc))
+    h = (seg["last"] - seg["first"]) / max(n - 1, 1)
+    times = seg["first"] + (n - m - 0.5) * h          # between the last sample before and the first after
+    # the contiguous run of evaluated splits around the best within 1 of its score
+    done = np.flatnonzero(np.isfinite(sc))
+    at = int(np.searchsorted(done, j))
+    lo, hi = at, at
+    while lo > 0 and sc[done[lo - 1]] >= sc[j] - 1.0:
+        lo -= 1
+    while hi + 1 < len(done) and sc[done[hi + 1]] >= sc[j] - 1.0:
+        hi += 1
+    lo_i, hi_i = done[lo], done[hi]
+    if sc[j] < np.max(ends) + INSIDE_GAIN:
+        # no better inside than at its edges (a step in the gap before or after it, where nothing
+        # was measured): the boundary stands for it (it is a candidate unless it is the statics/
+        # rotations one; the segment's edge is then the same step within the noise)
+        return None
+    return float(times[j]), float(sc[j]), float(min(times[lo_i], times[hi_i])), float(max(times[lo_i], times[hi_i]))
 
 
 def profile(result, effect) -> list[tuple[float, str, str, float]]:
@@ -102,6 +173,10 @@ def profile(result, effect) -> list[tuple[float, str, str, float]]:
     return out
 
 
+COARSE = 200        # a step inside a segment: splits on the first grid (_interior_profile)
+FINE = 3            # and every split within this many of its steps around the best
+INSIDE_GAIN = 1.0   # a step inside a segment is offered when its score beats the segment's edges by
+                    #   this (chi2 on the one more number it takes, the time within the segment: 1 sigma)
 ALIKE_CHI2 = 6.63    # the 1 % point of chi2 on one degree of freedom
 REFINE = 3         # the candidates of largest score fitted in full, the best chi2 kept
 
@@ -123,12 +198,20 @@ def locate(result, effect, refine: int = REFINE) -> list:
             fitted.append((lsq.fit(result.model.s, [*result.model.effects, trial], result.model.attitudes,
                                    like=result.model).chi2, cand))
         best, (t, before, after, drop) = min(fitted, key=lambda f: f[0]) if fitted else (0.0, top[0])
+        if before == after and fitted:
+            # a step inside a segment takes one number more than one at a boundary (where in the
+            # segment): a boundary that fits within INSIDE_GAIN of it stands for it (a step in the
+            # gap between two segments, which the edge of either reaches as well)
+            edge = [f for f in fitted if f[1][1] != f[1][2] and f[0] - best < INSIDE_GAIN]
+            if edge:
+                best, (t, before, after, drop) = min(edge, key=lambda f: f[0])
         # the others whose chi2 is within the 1 % point of chi2 on one degree of freedom (scaled by
         # the over-dispersion of the best fit when it fails): the capture cannot tell them from the best
         dof = result.dof - len(effect.params)
         phi = max(best / dof, 1.0) if dof > 0 else 1.0
         close = [(chi2, c) for chi2, c in fitted if c[0] != t and chi2 - best < ALIKE_CHI2 * phi]
-        alike = [f"{c[1]} -> {c[2]} (chi2 +{chi2 - best:.1f})" for chi2, c in close]
+        alike = [(f"inside {c[1]}" if c[1] == c[2] else f"{c[1]} -> {c[2]}") + f" (chi2 +{chi2 - best:.1f})"
+                 for chi2, c in close]
         # what lies between the best boundary and each as likely one: the segments whose own free
         # parameters (a rotation pair's Earth-rate component along its axis, a static's attitude)
         # take a step that falls just before them as well as one just after (the words name them)
@@ -137,10 +220,14 @@ def locate(result, effect, refine: int = REFINE) -> list:
         effect.alike = [{"before": c[1], "after": c[2], "chi2_more": float(chi2 - best),
                          "between": [n for tm, n in sorted(mids) if min(t, c[0]) < tm < max(t, c[0])]}
                         for chi2, c in close]
-        effect.locate(t, f"located between {before} and {after} by a profile of the score test over {len(prof)} "
-                         f"boundaries between segments"
+        inside = before == after
+        where = (f"inside {before}" if inside else f"between {before} and {after}")
+        effect.locate(t, f"located {where} by a profile of the score test over {len(prof)} candidates (the "
+                         f"boundaries between segments and, inside each segment, every split of its samples)"
                          + (f" (the best {len(top)} fitted)" if fitted else "")
                       + (f"; as likely: {', '.join(alike)}" if alike else ""))
+        effect.segment = before if inside else ""
+        effect.time_range = (getattr(effect, "time_ranges", {}) or {}).get(before) if inside else None
     effect.profile = prof
     return prof
 

@@ -34,7 +34,7 @@ class GyroAnisoelastic(Effect):
 
     @property
     def params(self):
-        return tuple(Param(f"gyro_aniso_{'xyz'[i]}_{n}", "deg/h/g^2", 1.0, 2.0, 3000.0)
+        return tuple(Param(f"gyro_aniso_{'xyz'[i]}_{n}", "deg/h/g^2", 1.0, 10.0, 3000.0)
                      for i in range(3) for n in NAMES)
 
     def gyro(self, x, ctx):
