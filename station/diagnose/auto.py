@@ -214,7 +214,8 @@ def _trial(cand, current: Diagnosis, h_current, summaries, attitudes, registry):
 
 
 def _best_out_of_sample(cand, first, tries, refused, current, h_current, summaries, attitudes, registry):
-    """Of the first candidate that passes the checks and its near-tied rivals of the same kind (IMU or
+    """Of the first candidate that passes the checks, when the capture cannot tell it from another
+    (words.caveats), and its near-tied rivals of the same kind (IMU or
     bench) among this step's tries (a predicted chi2 drop at least NEAR_TIE of its own, a chi2 after not
     significantly above its own), the one
     whose model predicts the left-out segments best (the lowest leave-one-segment-out score over
@@ -226,6 +227,12 @@ def _best_out_of_sample(cand, first, tries, refused, current, h_current, summari
     gyro_scale_tempco_2C).  Returns (cand, after, h_after, ok, reason, share, cv_b, cv_a, words)."""
     after, h_after, ok, reason, share, cv_b, cv_a = first
     passing = [(cand, after, h_after, (ok, reason, share, cv_b, cv_a))]
+    if not caveats(summaries, cand.effect):
+        # only an effect this capture cannot tell from another (words.caveats: a rate term at one
+        # rate) is put against its rivals: over a warm-up that follows the time, a drift in time
+        # predicts the left-out segments better than the biases' temperature slope and was kept
+        # for a bias quadratic in temperature (held-out accelerometer 40 -> 65 ug, floor 29)
+        return (cand, after, h_after, ok, reason, share, cv_b, cv_a, [])
     rivals = [c for c in tries if c is not cand and c.effect not in refused and c.bench == cand.bench
               and c.predicted_chi2_drop >= NEAR_TIE * cand.predicted_chi2_drop
               and tries.index(c) > tries.index(cand)]
