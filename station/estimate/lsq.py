@@ -1590,6 +1590,34 @@ def _blind_effect_parameters(model: Model, reduced: _Reduced) -> list:
     return blind
 
 
+CONTRADICTED = 3.0      # a prior of 0 +/- typical that the fit ends beyond this many widths from
+
+
+def _contradicted_priors(model: Model, x) -> list:
+    """(column, Param) of the effect parameters held by the prior of _blind_effect_parameters that
+    the data pull beyond CONTRADICTED prior widths from zero all the same, of every effect but the
+    last (the one added to the others): the capture does
+    reveal them, at a size the typical one does not describe, and the prior would only bias them
+    (and what is correlated with them).  Judged at the start, an accelerometer K3_z beside a
+    scale that follows temperature over a warm-up (1-sigma 150 ug/g^3 against the typical 100)
+    was held and fitted at 1,599 for 3,500, the temperature slope of the z accelerometer took
+    the rest (-198 ppm/degC for 0) and the fit failed (reduced chi2 4.1 against 0.93 freed;
+    benchmarks/diagnose_goal.py, K3+gyro_scale_tempco)."""
+    out = []
+    # the last effect is the newcomer (--add's order, the loop's refit of its model and a candidate):
+    # its parameters stay held where the capture cannot resolve them; a bias drift over a warm-up
+    # fitted freely at 9,000 ug/h for a bias quadratic in temperature (typical 100: held, it is
+    # rejected and temperature_bias kept, tests/test_effects_recovered.py)
+    for e in model.effects[:-1]:
+        sl = model.layout[f"effect:{e.id}"]
+        for k, p in enumerate(e.params):
+            c = sl.start + k
+            if p.name in model.unobservable and c in model.priors and model.priors[c] == p.typical / p.scale \
+                    and abs(x[c]) > CONTRADICTED * model.priors[c]:
+                out.append((c, p))
+    return out
+
+
 def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "auto",
         like: Model | None = None, turn_sigma_deg: float | None = None, pose_extra=None,
         start_from: FitResult | None = None) -> FitResult:
@@ -1655,6 +1683,13 @@ def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "aut
         for c, p in blind:
             model.priors[c] = p.typical / p.scale
             model.unobservable.append(p.name)
+        model.refresh()
+        x, cov, r, reduced = _solve(model, model.x0)
+    released = _contradicted_priors(model, x)
+    if released:
+        for c, p in released:
+            del model.priors[c]
+            model.unobservable.remove(p.name)
         model.refresh()
         x, cov, r, reduced = _solve(model, model.x0)
     x, cov, r, reduced = _reweight(model, x, cov, r, reduced, turns=turn_sigma_deg is None, statics=statics)

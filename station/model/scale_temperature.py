@@ -32,7 +32,12 @@ class ScaleTemperature(TemperatureReferenced):
     @property
     def params(self):
         return (tuple(Param(f"accel_scale_tempco_{a}", "ppm/degC", 1.0, 30.0, 5000.0) for a in "xyz")
-                + tuple(Param(f"gyro_scale_tempco_{a}", "ppm/degC", 1.0, 30.0, 5000.0) for a in "xyz"))
+                # a MEMS gyro's typical size, the middle of its 50-500 ppm/degC (magnitudes): at 30
+                # (an accelerometer's) a 2 degC warm-up, which sizes it to ~30 ppm/degC, left the gyros
+                # held at 0 +/- 30 by the prior, a 300 ppm/degC scale slope was fitted as 85 and
+                # --auto took a rate-squared term at one rate for it (benchmarks/diagnose_goal.py,
+                # gyro_scale_tempco_2C and K3+gyro_scale_tempco)
+                + tuple(Param(f"gyro_scale_tempco_{a}", "ppm/degC", 1.0, 150.0, 5000.0) for a in "xyz"))
 
     def accel(self, x, ctx):
         return 1e-6 * x[:3] * self._dt(ctx) * (ctx.f_p @ ctx.accel_matrix.T)
