@@ -56,7 +56,7 @@ PHASES = 12                      # phase grid for the harmonics of a rotation (e
 UP = np.array([0.0, 0.0, 1.0])
 # zero-mean priors (internal units) on the gyro block when no rotation has a known angle
 NO_ROTATION_PRIORS = {"gyro_scale": 1e3, "gyro_misalignment": 1e3, "gyro_bias": 1e6, "inter_triad": 1e3}
-BATCH_VALUES = 4_000_000         # residuals (rows x perturbed vectors) evaluated in one batch for a Jacobian
+BATCH_VALUES = 1_000_000         # residuals (rows x perturbed vectors) in one batch of a Jacobian (~0.15 GB of temporaries)
 LARGE_MODEL = 300                # parameters above which the fit works on a sparse Jacobian (Model.is_large)
 COMPLEX_STEP = 1e-20             # the Jacobian's imaginary step, relative to each parameter's size
 FORWARD_STEP = 1e-7              # the forward-difference step (effects that are not complex-step safe)
