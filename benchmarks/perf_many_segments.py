@@ -19,7 +19,8 @@ scheme of N short statics (0.5 s) and N/10 rotations (90 deg/s, 4 s: one turn) r
 of its own), then `station estimate` and `station diagnose` of the bundle, and the manifest alone
 (read_capture without the samples: YAML and the reader's checks; and the manifest's text written
 again from its parts, as the writer does), each as CPU seconds (user + sys of the process and
-its children: getrusage(RUSAGE_CHILDREN)) and wall; then the slope of each against the segments
+its children: wait4's resource usage), wall and peak RSS (the largest resident set of the process
+and its children: a line per size, so that memory's linearity is read as time's); then the slope of each against the segments
 (least squares of CPU on segments over the sizes given, and each size's CPU per segment), so
 that linearity is read from the per-segment figures staying flat.  The load average is printed.
 
@@ -32,7 +33,7 @@ fresh process, CPU seconds, and the slope.
 
 Usage: python benchmarks/perf_many_segments.py [--statics 50 100 250 500 1000] [--dense-up-to 500] [--diagnosis]
        python benchmarks/perf_many_segments.py --manifest 1000 10000 100000
-       python benchmarks/perf_many_segments.py --commands 1000 3000 10000 30000 100000 [--keep DIR]
+       python benchmarks/perf_many_segments.py --commands 1000 4000 16000 100000 [--keep DIR] [--auto]
 """
 import os
 
@@ -100,20 +101,24 @@ def command_scheme(directory: Path, statics: int) -> Path:
     return path
 
 
-def _process(argv) -> tuple[float, float]:
-    """(wall s, CPU s of the process tree) of one command, run to its end."""
-    import resource
+def _process(argv) -> tuple[float, float, float]:
+    """(wall s, CPU s of the process tree, peak RSS in MB) of one command, run to its end: the
+    process waited for with wait4, whose resource usage is that process's own and its waited
+    children's (CPU summed, RSS the largest of them: a forked reader's or figure worker's too)."""
     import subprocess
     import sys
+    import tempfile as _tempfile
 
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    t0 = time.perf_counter()
-    r = subprocess.run([sys.executable, *argv], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    wall = time.perf_counter() - t0
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if r.returncode not in (0, 3):
-        raise SystemExit(f"{argv}: exit {r.returncode}: {r.stderr[-1500:]}")
-    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    with _tempfile.TemporaryFile() as errors:
+        t0 = time.perf_counter()
+        p = subprocess.Popen([sys.executable, *argv], stdout=subprocess.DEVNULL, stderr=errors)
+        _, status, usage = os.wait4(p.pid, 0)
+        wall = time.perf_counter() - t0
+        p.returncode = os.waitstatus_to_exitcode(status)
+        if p.returncode not in (0, 3):
+            errors.seek(0)
+            raise SystemExit(f"{argv}: exit {p.returncode}: {errors.read()[-1500:].decode(errors='replace')}")
+    return wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024.0
 
 
 RECORD = ("import sys; from station.io.scheme import load_scheme; from station.simulate import dryrun; "
@@ -183,7 +188,7 @@ def manifests(sizes) -> None:
         print(f"{name:20s} slope {1e6 * slope:6.1f} us CPU a segment, intercept {icpt:6.3f} s")
 
 
-def commands(sizes, keep: Path | None) -> None:
+def commands(sizes, keep: Path | None, auto: bool = False) -> None:
     import shutil
     import subprocess
     import sys
@@ -200,32 +205,45 @@ def commands(sizes, keep: Path | None) -> None:
                 shutil.rmtree(cap, ignore_errors=True)
                 rec = _process(["-c", RECORD, str(scheme), str(cap)])
             else:
-                rec = (float("nan"), float("nan"))
+                rec = (float("nan"), float("nan"), float("nan"))
             out = subprocess.run([sys.executable, "-c", MANIFEST, str(cap)], capture_output=True, text=True, check=True)
             read_s, write_s, segments = out.stdout.split()
             est = _process(["-c", STATION, "estimate", str(cap), "-o", str(base / "c.yaml"), "--no-table"])
             dia = _process(["-c", STATION, "diagnose", str(cap), "--json"])
             row = dict(segments=int(segments), record=rec, manifest_read=float(read_s),
                        manifest_write=float(write_s), estimate=est, diagnose=dia)
+            if auto:
+                row["auto"] = _process(["-c", STATION, "diagnose", str(cap), "--auto", "--json"])
             rows.append(row)
             print(f"{row['segments']:7d} segments: record {rec[1]:8.2f} s CPU ({rec[0]:8.2f} wall); "
                   f"manifest read {row['manifest_read']:7.2f} s, its parts written {row['manifest_write']:6.2f} s; "
-                  f"estimate {est[1]:8.2f} s CPU ({est[0]:8.2f} wall); diagnose {dia[1]:8.2f} s CPU "
-                  f"({dia[0]:8.2f} wall); load {os.getloadavg()[0]:.1f}", flush=True)
+                  f"estimate {est[1]:8.2f} s CPU ({est[0]:8.2f} wall, {est[2]:7.0f} MB peak); diagnose "
+                  f"{dia[1]:8.2f} s CPU ({dia[0]:8.2f} wall, {dia[2]:7.0f} MB peak)"
+                  + (f"; diagnose --auto {row['auto'][1]:8.2f} s CPU ({row['auto'][0]:8.2f} wall, "
+                     f"{row['auto'][2]:7.0f} MB peak)" if auto else "")
+                  + f"; load {os.getloadavg()[0]:.1f}", flush=True)
             if not keep:
                 shutil.rmtree(cap, ignore_errors=True)
     print(f"load average after: {os.getloadavg()}")
     x = np.array([r["segments"] for r in rows], dtype=float)
-    for name, get in (("record", lambda r: r["record"][1]), ("manifest read", lambda r: r["manifest_read"]),
-                      ("manifest parts written", lambda r: r["manifest_write"]),
-                      ("estimate", lambda r: r["estimate"][1]), ("diagnose", lambda r: r["diagnose"][1])):
-        y = np.array([get(r) for r in rows])
+    # (name, value of a row, its unit, the unit of its share a segment and that unit in the value's)
+    series = [("record", lambda r: r["record"][1], "s", "ms CPU", 1e-3),
+              ("manifest read", lambda r: r["manifest_read"], "s", "ms CPU", 1e-3),
+              ("manifest parts written", lambda r: r["manifest_write"], "s", "ms CPU", 1e-3),
+              ("estimate", lambda r: r["estimate"][1], "s", "ms CPU", 1e-3),
+              ("diagnose", lambda r: r["diagnose"][1], "s", "ms CPU", 1e-3)]
+    series += [(f"{c} peak RSS", lambda r, c=c: r[c][2], "MB", "kB", 1e-3) for c in ("estimate", "diagnose")]
+    if any("auto" in r for r in rows):
+        series += [("diagnose --auto", lambda r: r.get("auto", (np.nan,) * 3)[1], "s", "ms CPU", 1e-3),
+                   ("diagnose --auto peak RSS", lambda r: r.get("auto", (np.nan,) * 3)[2], "MB", "kB", 1e-3)]
+    for name, get, unit, per_unit, scale in series:
+        y = np.array([get(r) for r in rows], dtype=float)
         ok = np.isfinite(y)
         if ok.sum() >= 2:
             slope, icpt = np.polyfit(x[ok], y[ok], 1)
-            per = ", ".join(f"{1e3 * v / s:.2f}" for v, s in zip(y[ok], x[ok]))
-            print(f"{name:24s} slope {1e3 * slope:7.3f} ms CPU a segment, intercept {icpt:6.2f} s; "
-                  f"per segment at each size: {per} ms")
+            per = ", ".join(f"{v / s / scale:.2f}" for v, s in zip(y[ok], x[ok]))
+            print(f"{name:24s} slope {slope / scale:7.3f} {per_unit} a segment, intercept {icpt:7.2f} {unit}; "
+                  f"a segment at each size: {per} {per_unit}")
 
 
 def main() -> None:
@@ -237,6 +255,7 @@ def main() -> None:
     ap.add_argument("--commands", type=int, nargs="+", metavar="N",
                     help="whole processes on bundles of N statics + N/10 rotations (record, manifest, estimate, diagnose)")
     ap.add_argument("--keep", type=Path, help="with --commands: keep the bundles here (recorded once)")
+    ap.add_argument("--auto", action="store_true", help="with --commands: also time `station diagnose --auto`")
     ap.add_argument("--manifest", type=int, nargs="+", metavar="N",
                     help="the manifest alone: made and read with N segments (read_capture without samples)")
     a = ap.parse_args()
@@ -244,7 +263,7 @@ def main() -> None:
         manifests(a.manifest)
         return
     if a.commands:
-        commands(a.commands, a.keep)
+        commands(a.commands, a.keep, a.auto)
         return
     default = lsq.LARGE_MODEL
     with tempfile.TemporaryDirectory() as tmp:

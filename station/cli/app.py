@@ -48,9 +48,10 @@ def _limit_blas_before_loading(threads: int) -> None:
 
 
 def main(argv=None) -> int:
-    """Exit status: 0 done; 2 bad input (one line naming the file, line or field); 3 the
-    calibration was written but its fit fails (``--accept-poor-fit`` makes it 0); 130
-    interrupted (Ctrl-C) at any moment, without a traceback."""
+    """Exit status: 0 done; 2 bad input (one line naming the file, line or field), or data too
+    large for the memory (one line); 3 the calibration was written but its fit fails
+    (``--accept-poor-fit`` makes it 0); 130 interrupted (Ctrl-C) at any moment, without a
+    traceback."""
     command = "?"
     try:
         args = build_parser().parse_args(argv)
@@ -63,6 +64,12 @@ def main(argv=None) -> int:
             return args.func(args)
     except UserError as e:
         err.print(f"station {command}: {e}", markup=False, soft_wrap=True)
+        return 2
+    except MemoryError as e:
+        # a capture too large for this machine's memory (issue 27 item 4): one line, not a traceback
+        detail = str(e).strip() or "MemoryError"
+        err.print(f"station {command}: out of memory ({detail}): the data are too large for this machine's "
+                  "memory; use a machine with more memory, or fewer segments", markup=False, soft_wrap=True)
         return 2
     except KeyboardInterrupt:
         err.print("interrupted", markup=False)

@@ -56,6 +56,7 @@ PHASES = 12                      # phase grid for the harmonics of a rotation (e
 UP = np.array([0.0, 0.0, 1.0])
 # zero-mean priors (internal units) on the gyro block when no rotation has a known angle
 NO_ROTATION_PRIORS = {"gyro_scale": 1e3, "gyro_misalignment": 1e3, "gyro_bias": 1e6, "inter_triad": 1e3}
+BATCH_VALUES = 1_000_000         # residuals (rows x perturbed vectors) in one batch of a Jacobian (~0.15 GB of temporaries)
 LARGE_MODEL = 300                # parameters above which the fit works on a sparse Jacobian (Model.is_large)
 COMPLEX_STEP = 1e-20             # the Jacobian's imaginary step, relative to each parameter's size
 FORWARD_STEP = 1e-7              # the forward-difference step (effects that are not complex-step safe)
@@ -671,15 +672,22 @@ class Model:
         if not len(sets):
             return steps, np.zeros((0, self._rows))
         self._linearised_hands(x)
+        # in batches of at most BATCH_VALUES residuals (a large model: the batch's intermediate
+        # arrays, complex 3x3 per point, were 0.5 GB at 4,000 segments and grow with rows x sets)
+        per = max(1, BATCH_VALUES // max(self._rows or 1, 1))
         try:
-            R = self._residuals_batch(X)
+            parts = []
+            for at in range(0, len(X), per):
+                R = self._residuals_batch(X[at:at + per])
+                parts.append(R.imag if np.iscomplexobj(R) else R - r0)
+                del R
         except _ComplexUnsafe as unsafe:
             self._unsafe = [unsafe.effect_id]
             return self._derivatives(x, sets)
         finally:
             if self.hands:
                 self.integrator.exact()
-        return steps, (R.imag if np.iscomplexobj(R) else R - r0)
+        return steps, (parts[0] if len(parts) == 1 else np.concatenate(parts))
 
     def jacobian_columns(self, x, columns) -> np.ndarray:
         """The Jacobian's given columns only (one batched evaluation, _derivatives)."""
@@ -708,6 +716,10 @@ class Model:
         if self._last_jacobian is not None and self._last_jacobian[0] == key:
             return self._last_jacobian[1].copy()     # the solver's last one, at its solution
         steps, D = self._derivatives(x, [[c for c, _ in members] for members in self._groups])
+        if sparse:
+            J = self._sparse_from(D, steps, len(x))
+            self._last_jacobian = (key, J.copy())
+            return J
         every = np.arange(self._jacobian_rows)
         rows, cols, values = [], [], []
         for d, members in zip(D, self._groups):
@@ -717,15 +729,36 @@ class Model:
                 cols.append(np.full(len(at), c))
                 values.append(d[at] / steps[c])
         rows, cols, values = (np.concatenate(a) if a else np.zeros(0) for a in (rows, cols, values))
-        if sparse:
-            from scipy.sparse import csr_matrix
-
-            J = csr_matrix((values, (rows.astype(int), cols.astype(int))), shape=(self._jacobian_rows, len(x)))
-        else:
-            J = np.zeros((self._jacobian_rows, len(x)))
-            J[rows.astype(int), cols.astype(int)] = values
+        J = np.zeros((self._jacobian_rows, len(x)))
+        J[rows.astype(int), cols.astype(int)] = values
         self._last_jacobian = (key, J.copy())
         return J
+
+    def _sparse_from(self, D, steps, size: int):
+        """The sparse Jacobian (CSR) from _derivatives' D of the column groups: built column by
+        column as CSC (32-bit indices, each column's rows once), then CSR.  (From COO triplets
+        with 64-bit row and column arrays it took 4 copies of 24 bytes a value: 2 GB at 100,000
+        segments, where the values are 0.5 GB.)"""
+        from scipy.sparse import csc_matrix
+
+        n_rows = self._jacobian_rows
+        counts = np.zeros(size, np.int64)
+        for members in self._groups:
+            for c, owned in members:
+                counts[c] = n_rows if owned is None else len(owned)
+        indptr = np.concatenate([[0], np.cumsum(counts)])
+        index_type = np.int32 if indptr[-1] < 2**31 and n_rows < 2**31 else np.int64
+        indices = np.empty(indptr[-1], index_type)
+        data = np.empty(indptr[-1])
+        every = np.arange(n_rows, dtype=index_type)
+        for d, members in zip(D, self._groups):
+            for c, owned in members:
+                at = every if owned is None else np.asarray(owned, index_type)
+                indices[indptr[c]:indptr[c + 1]] = at
+                data[indptr[c]:indptr[c + 1]] = d[at] / steps[c]
+        J = csc_matrix((data, indices, indptr.astype(index_type)), shape=(n_rows, size))
+        J.sort_indices()
+        return J.tocsr()
 
     @property
     def is_large(self) -> bool:

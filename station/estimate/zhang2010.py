@@ -122,7 +122,8 @@ def fit_accelerometers(means: np.ndarray, gravity: float) -> tuple[np.ndarray, n
     x, y, z = u.T
     D = np.column_stack([x * x, y * y, z * z, 2 * x * y, 2 * x * z, 2 * y * z,
                          2 * x, 2 * y, 2 * z, np.ones_like(x)])
-    q = np.linalg.svd(D)[2][-1]
+    # thin: a full U is N x N (80 GB at 100,000 statics); full only below 10 statics, for the null row
+    q = np.linalg.svd(D, full_matrices=len(D) < D.shape[1])[2][-1]
     Q = np.array([[q[0], q[3], q[4], q[6]],
                   [q[3], q[1], q[5], q[7]],
                   [q[4], q[5], q[2], q[8]],

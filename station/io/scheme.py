@@ -12,6 +12,7 @@ records.  It knows nothing about tables or hardware.
 """
 from __future__ import annotations
 
+import collections
 import math
 from dataclasses import dataclass
 from importlib import resources
@@ -197,8 +198,8 @@ def parse_scheme(doc, source: str, overrides: dict) -> Scheme:
                 segments.append(RotationSpec(base, axis, rate, duration, **common))
         else:
             raise UserError(f"{where}: must have a 'static' or a 'rotation' key")
-    names = [s.name for s in segments]
-    duplicates = sorted({n for n in names if names.count(n) > 1})
+    # (counted once: names.count per name was quadratic, minutes for a scheme of 100,000 segments)
+    duplicates = sorted(n for n, k in collections.Counter(s.name for s in segments).items() if k > 1)
     if duplicates:
         raise UserError(f"{source}: duplicate segment names: {', '.join(duplicates)}")
     centred = doc.get("centred", False)

@@ -1,6 +1,8 @@
 """table_encoder_scale: the table turns (1 + e) times the angle its encoder reads."""
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from station.model.effect import Effect, Param
@@ -12,6 +14,13 @@ DENSE = 720              # points per revolution its harmonics are computed from
 
 
 def turned_time(angle_deg: float, duration_s: float, phases: int, power: int = 1) -> np.ndarray:
+    """_turned_time, remembered: a capture's rotations share a few angles and durations, and every
+    model of the capture (a diagnosis builds one per candidate) asks for each (a copy returned)."""
+    return _turned_time(float(angle_deg), float(duration_s), int(phases), int(power)).copy()
+
+
+@functools.lru_cache(maxsize=4096)
+def _turned_time(angle_deg: float, duration_s: float, phases: int, power: int = 1) -> np.ndarray:
     """(phases,): the time since a rotation's start at each point of the model's phase grid
     (phase 2 pi j / phases of the encoder's angle from the start, mod 2 pi), averaged over the
     revolutions that point stands for (_mean_visit), over the mean rate A / duration, as its
@@ -136,9 +145,7 @@ class TableEncoderScale(Effect):
         e = e[:, None] if np.ndim(e) else e
         sq = getattr(ctx, "turned_sq_s2", None)
         sq = np.asarray(turned, float) ** 2 if sq is None else np.asarray(sq, float)
-        index = ctx.column("segment_index")
-        same = (index[:, None] == index[None, :]).astype(float)
-        turning = ctx.f_p - (same / same.sum(axis=1, keepdims=True)) @ ctx.f_p
+        turning = ctx.f_p - _segment_means(ctx.column("segment_index"), ctx.f_p)
         wxf = cross(ctx.w_table, turning)
         df = -e * np.asarray(turned, float)[:, None] * wxf + 0.5 * e * e * sq[:, None] * cross(ctx.w_table, wxf)
         return df @ ctx.accel_matrix.T
@@ -149,3 +156,26 @@ class TableEncoderScale(Effect):
         e = self._per_row(x, ctx) * 1e-6
         e = e[:, None] if np.ndim(e) else e
         return e * (180.0 / np.pi) * ctx.w_table @ ctx.gyro_matrix.T    # (np.degrees: no complex step)
+
+
+def _segment_means(index: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Each row's mean of f over the rows of its segment (``index``; NaN where the segment is not
+    known), real or complex: sums by segment (bincount), in time and memory linear in the rows
+    (a rows x rows indicator matrix was 1.6 GB at 4,000 segments)."""
+    f = np.asarray(f)
+    finite = np.isfinite(index)
+    out = np.full(f.shape, np.nan, dtype=np.result_type(f, float))
+    if not finite.any():
+        return out
+    _, inv = np.unique(index[finite], return_inverse=True)
+    counts = np.bincount(inv).astype(float)
+    rows = f[finite]
+    means = np.empty((len(counts), f.shape[1]), dtype=out.dtype)
+    for k in range(f.shape[1]):
+        col = rows[:, k]
+        m = np.bincount(inv, weights=col.real, minlength=len(counts))
+        if np.iscomplexobj(col):
+            m = m + 1j * np.bincount(inv, weights=col.imag, minlength=len(counts))
+        means[:, k] = m / counts
+    out[finite] = means[inv]
+    return out
