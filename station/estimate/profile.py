@@ -91,9 +91,10 @@ def _bias_like_profile(result, effect) -> list[tuple[float, str, str, float]]:
             g = Jp.T @ r
             out.append((t, before, after, float(g @ (np.linalg.pinv(Jp.T @ Jp, rcond=1e-10) @ g))))
     effect.time_ranges = {}
-    # a step inside a segment: one projection of the rows per segment (quadratic in the segments:
-    # a large model is profiled at its boundaries only)
-    if callable(getattr(effect, "interior_segments", None)) and not model.is_large:
+    # a step inside a segment: one projection of every row per segment, quadratic in the segments:
+    # above INTERIOR_MAX_SEGMENTS the boundaries only (issue 27 item 4: linear to 100,000 segments)
+    if callable(getattr(effect, "interior_segments", None)) and \
+            len(s.statics) + len(s.rotations) <= INTERIOR_MAX_SEGMENTS:
         names = np.array([lab[0] for lab in model.row_labels(result.x)])
         for seg in effect.interior_segments(s):
             best = _interior_profile(result, Jb, r, seg_t, names, seg)
@@ -265,6 +266,7 @@ def profile(result, effect) -> list[tuple[float, str, str, float]]:
     return out
 
 
+INTERIOR_MAX_SEGMENTS = 2000   # above this many segments a bias step is looked for at boundaries only
 COARSE = 200        # a step inside a segment: splits on the first grid (_interior_profile)
 FINE = 3            # and every split within this many of its steps around the best
 INSIDE_GAIN = 1.0   # a step inside a segment is offered when its score beats the segment's edges by
