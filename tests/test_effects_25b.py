@@ -40,11 +40,17 @@ def test_a_gyro_bias_step_is_added_with_its_time_and_said_in_words():
     ~30,000 samples on each side), the time to the boundary's gap (15 s).  (A step of the gyro about
     the axis of the rotations it falls beside, z before rotz, is aliased: that axis' Earth-rate
     component is a free parameter of the model; the profile lists the other boundary as likely.)"""
+    from station.model.registry import EffectRegistry
+
     _, s = summaries(seed=4, gyro__bias_step=[0.0, 0.0, 50.0], gyro__bias_step_time_s=300.0)
-    steps, final = auto.run(s, discover=False)
-    # (an IMU effect is tried first: gyro_anisoelastic, whose means over the revolutions about the
-    # horizontal axes are gyro offsets per rotation axis, may be kept first and is then dropped by
-    # the backward elimination once the step is in: the model it ends with is the step alone)
+    # the library without gyro_anisoelastic: with it, an IMU effect tried first, its means over the
+    # revolutions about the horizontal axes (gyro offsets per rotation axis) are kept at step 1 and
+    # dropped by the backward elimination once the step is in (the same end), but each fit of its 15
+    # barely seen terms beside a time effect creeps to the solver's limit (LM gaining ~0.004 of chi2
+    # per 25 evaluations: 75 s of this test; issue 27); here the step's own loop
+    registry = EffectRegistry(entry_points=False, environment=False)
+    registry.classes.pop("gyro_anisoelastic")
+    steps, final = auto.run(s, discover=False, registry=registry)
     assert [e.id for e in final.result.model.effects] == ["bias_step"], [st.added for st in steps]
     step = next(st for st in steps if st.added == "bias_step")
     assert not fit_fails(final.result), final.verdict

@@ -75,6 +75,10 @@ def add_parsers(sub) -> None:
     d.add_argument("--centred", action="store_true",
                    help="the IMU mounted with its reference point on the table's axes (the scheme says "
                         "centred: true, as sizeeffect does: no mounting offset to estimate)")
+    d.add_argument("--statics", choices=("any", "unknown", "table"), default="any",
+                   help="the kinds of design searched: nine or more statics of unknown attitude, six to eight of "
+                        "the table's attitude (known to its angle error, one mounting), or both, the better kept "
+                        "by the estimator's fit (default any)")
     d.add_argument("--verify-runs", type=argtypes.whole(0), default=4, metavar="N",
                    help="noisy dry runs of the design estimated as station montecarlo does, each criterion "
                         "parameter's error checked against its predicted 1σ (default 4; 0: none). A design the "
@@ -229,6 +233,7 @@ def _cmd_design(args) -> int:
                    rates_dps=args.rates or cand_mod.DEFAULT_RATES_DPS, revolutions=revolutions,
                    dwells_s=args.dwells or cand_mod.DEFAULT_DWELLS_S, max_passes=args.passes, name=args.name,
                    compare=compare, centred=args.centred, verify_runs=args.verify_runs, executor=executor,
+                   statics=args.statics,
                    progress=lambda text: err.print(f"design: {text}", markup=False, soft_wrap=True))
     v = d.verification
     if v is not None and not v.ok:

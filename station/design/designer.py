@@ -290,12 +290,14 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
            rates_dps=cand_mod.DEFAULT_RATES_DPS, revolutions=cand_mod.DEFAULT_REVOLUTIONS,
            dwells_s=cand_mod.DEFAULT_DWELLS_S, max_passes: int = 20, name: str = "designed",
            compare=BUILTIN_TABLE_SCHEMES, progress=None, centred: bool = False,
-           verify_runs: int = VERIFY_RUNS, executor=None) -> Design:
+           verify_runs: int = VERIFY_RUNS, executor=None, statics: str = "any") -> Design:
     """The design (module doc).  ``progress(text)``: told what is being done.  ``centred``: the
     IMU is to be mounted with its reference point on the table's axes (the scheme says
     ``centred: true``; the mounting offset is then known, as in the sizeeffect scheme).
     ``executor``: a Dask client's executor (`station design --scheduler`): the predictions of the
-    design and of the built-in schemes, and the verification's dry runs, run on its workers."""
+    design and of the built-in schemes, and the verification's dry runs, run on its workers.
+    ``statics``: the kinds of design searched ("unknown": nine or more statics of unknown attitude;
+    "table": six to eight of the table's attitude; "any": both, the better kept)."""
     say = progress or (lambda text: None)
     seconds = {}
     t0 = time.perf_counter()
@@ -319,9 +321,9 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
     kinds = []
     unknown_ok = (sum(1 for c in cands if c.kind == "static" and c.dwell_s == min(dwells_s)) >= MIN_STATICS
                   and fixed + MIN_STATICS * table.static_s(min(dwells_s)) <= budget_s)
-    if unknown_ok:
+    if unknown_ok and statics in ("any", "unknown"):
         kinds.append(("unknown", list(range(len(cands))), masks, MIN_STATICS, None))
-    one = one_mounting(cands, masks)
+    one = one_mounting(cands, masks) if statics in ("any", "table") else None
     if one is not None:
         kinds.append(("table", one, [masks[i] for i in one], MIN_STATICS_TABLE, MAX_STATICS_TABLE))
     if not kinds and fixed + MIN_STATICS * table.static_s(min(dwells_s)) > budget_s:
