@@ -210,7 +210,8 @@ def test_design_on_the_scheduler(dask_cluster, tmp_path):
     address, worker_pids = dask_cluster
     r = subprocess.run([sys.executable, "-m", "station.cli", "design", "--duration", "1200", "-o", "d.yaml",
                         "--rates", "30,100", "--revolutions", "1", "--dwells", "10,30", "--passes", "3",
-                        "--compare", "optimal9", "--verify-runs", "2", "--scheduler", address, "--json"],
+                        "--compare", "optimal9", "--verify-runs", "2", "--statics", "unknown",
+                        "--scheduler", address, "--json"],
                        cwd=tmp_path, env=_env(tmp_path), capture_output=True, text=True, timeout=240)
     assert r.returncode == 0, r.stderr[-3000:]
     assert f"design: on the Dask scheduler {address}" in r.stderr and "one Dask task per scheme" in r.stderr
