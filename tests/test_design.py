@@ -169,6 +169,9 @@ def test_design_is_a_scheme_that_plan_and_run_accept_and_montecarlo_confirms(tmp
     assert done.returncode == 0, done.stderr[-3000:]
     report = json.loads(done.stdout)
     assert report["duration_s"] <= budget
+    # both kinds searched (the default --statics any), the better by the estimator's fit kept and said
+    assert "statics of unknown attitude: criterion" in done.stderr and "statics of table attitude: criterion" in done.stderr
+    assert report["static_attitudes"] in ("unknown", "table")
     plan = station("plan", "--scheme", out)
     assert plan.returncode == 0, plan.stderr
     total = float(plan.stdout.split("total: ")[1].split(" s")[0])
