@@ -15,9 +15,9 @@ class BiasDrift(Effect):
                "in time, whatever the temperature does.")
     term = ("accel_raw += d_a (t - t_ref) (µg/h); gyro_raw += d_g (t - t_ref) (°/h per hour); t the "
             "time in the run (the fit counts it from the first segment's mean time, station apply "
-            "from the first sample of the data it is given), t_ref the statics' mean time: apply "
-            "compensates a recording that starts where the capture started (the same time after "
-            "power-on)")
+            "from the first sample of the data it is given, t_ref moved by the difference, kept in "
+            "the file), t_ref the statics' mean time: apply compensates a recording that starts "
+            "where the capture started (the same time after power-on)")
     excited_by = ("static attitudes repeated at the start and the end of the run (the same attitude "
                   "at two times); a capture whose attitudes are each visited once spreads the drift "
                   "over the attitudes' own parameters")
@@ -30,17 +30,23 @@ class BiasDrift(Effect):
     signature_variable = "time"
     complex_step = True
     needs = ("time",)
-    state_fields = ("reference_s",)
+    state_fields = ("reference_s", "apply_offset_s")
 
     def __init__(self):
         self.reference_s = 0.0
+        self.apply_offset_s = 0.0      # the fit's clock's zero less the capture's first sample (s):
+                                       #   station apply counts t from the first sample (0: files before it)
 
     def setup(self, summaries) -> None:
         # time as the fit sees it: from the earliest segment's mean time (station.estimate.lsq)
-        mids = [x.t_mid_s for x in (*summaries.statics, *summaries.rotations) if np.isfinite(x.t_mid_s)]
-        t0 = min(mids) if mids else 0.0
+        segs = [x for x in (*summaries.statics, *summaries.rotations) if np.isfinite(x.t_mid_s)]
+        t0 = min(x.t_mid_s for x in segs) if segs else 0.0
         statics = [st.t_mid_s - t0 for st in summaries.statics if np.isfinite(st.t_mid_s)]
         self.reference_s = float(np.mean(statics)) if statics else 0.0
+        # apply's clock starts at the capture's first sample, half the first segment before t0 (10 s
+        # with 20 s statics: 0.08 deg/h at 30 deg/h per hour, the same offset bias_step had)
+        first = min((x.t_mid_s - 0.5 * x.duration_s for x in segs if np.isfinite(x.duration_s)), default=t0)
+        self.apply_offset_s = float(max(t0 - first, 0.0))
 
     @property
     def params(self):
@@ -48,7 +54,10 @@ class BiasDrift(Effect):
                 + tuple(Param(f"gyro_bias_drift_{a}", "deg/h/h", 1.0, 10.0, 1e4) for a in "xyz"))
 
     def _hours(self, ctx):
-        t = ctx.column("t_s") - self.reference_s
+        reference = self.reference_s
+        if getattr(ctx, "turned_s", None) is None:         # station apply: its clock, from the first sample
+            reference += float(getattr(self, "apply_offset_s", 0.0) or 0.0)
+        t = ctx.column("t_s") - reference
         return np.where(np.isfinite(t), t, 0.0)[:, None] / 3600.0
 
     def accel(self, x, ctx):
