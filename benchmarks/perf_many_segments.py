@@ -54,18 +54,27 @@ from station.simulate import dryrun  # noqa: E402
 AXES = ([1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [1, 0, 1], [0, 1, 1])
 
 
-def scheme_file(directory: Path, statics: int) -> Path:
+def _many(directory: Path, statics: int, *, dwell_s: float, rate_dps: float, rotation_s: float,
+          rotations: int, digits: int) -> Path:
+    """A scheme of ``statics`` statics at random attitudes and ``rotations`` ± pairs about the six
+    axes of AXES in turn (names zero-padded to ``digits``; the statics' attitudes from the seed
+    ``statics``)."""
     rng = random.Random(statics)
     lines = [f"name: many{statics}", "title: many short segments", "reference: benchmark",
-             "defaults:", "  dwell_s: 2.0", "  rate_dps: 30.0", "  rotation_s: 12.0", "segments:"]
+             "defaults:", f"  dwell_s: {dwell_s}", f"  rate_dps: {rate_dps}", f"  rotation_s: {rotation_s}", "segments:"]
     for i in range(statics):
         up = [rng.gauss(0, 1) for _ in range(3)]
-        lines.append(f"  - {{static: s{i:05d}, up_body: [{up[0]:.4f}, {up[1]:.4f}, {up[2]:.4f}]}}")
-    for i in range(max(6, statics // 5)):
-        lines.append(f"  - {{rotation: r{i:04d}, axis_body: {AXES[i % 6]}}}")
+        lines.append(f"  - {{static: s{i:0{digits}d}, up_body: [{up[0]:.4f}, {up[1]:.4f}, {up[2]:.4f}]}}")
+    for i in range(rotations):
+        lines.append(f"  - {{rotation: r{i:0{digits - 1}d}, axis_body: {AXES[i % 6]}}}")
     path = directory / f"many{statics}.yaml"
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+def scheme_file(directory: Path, statics: int) -> Path:
+    return _many(directory, statics, dwell_s=2.0, rate_dps=30.0, rotation_s=12.0,
+                 rotations=max(6, statics // 5), digits=5)
 
 
 def timed_fit(s, large: bool):
@@ -88,17 +97,8 @@ def timed_diagnosis(result) -> float:
 
 
 def command_scheme(directory: Path, statics: int) -> Path:
-    rng = random.Random(statics)
-    lines = [f"name: many{statics}", "title: many short segments", "reference: benchmark",
-             "defaults:", "  dwell_s: 0.5", "  rate_dps: 90.0", "  rotation_s: 4.0", "segments:"]
-    for i in range(statics):
-        up = [rng.gauss(0, 1) for _ in range(3)]
-        lines.append(f"  - {{static: s{i:06d}, up_body: [{up[0]:.4f}, {up[1]:.4f}, {up[2]:.4f}]}}")
-    for i in range(max(6, statics // 10)):
-        lines.append(f"  - {{rotation: r{i:05d}, axis_body: {AXES[i % 6]}}}")
-    path = directory / f"many{statics}.yaml"
-    path.write_text("\n".join(lines) + "\n")
-    return path
+    return _many(directory, statics, dwell_s=0.5, rate_dps=90.0, rotation_s=4.0,
+                 rotations=max(6, statics // 10), digits=6)
 
 
 def _process(argv) -> tuple[float, float, float]:
