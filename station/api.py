@@ -216,10 +216,11 @@ def diagnose(capture, *, add=(), plugins=(), effects_dirs=(), config=None, calib
         steps, first = [], _diagnose(lsq.fit(s, [registry.create(e) for e in ids]), registry=registry)
         _auto.conclude(first, s)
         final = first
-    from station.diagnose.suggest import suggest
+    from station.diagnose.suggest import suggest, suggest_steps
 
     for d in {id(first): first, id(final): final}.values():
-        suggest(d, cap.path, registry)
+        suggest(d, cap.path, registry, summaries=s)
+    suggest_steps(steps, cap.path, s, registry)
     final.steps, final.first, final.warnings = steps, first, warnings
     return final
 

@@ -78,6 +78,8 @@ class Step:
     holdout_after: float = float("nan")
     share: float | None = None               # of the excess chi2 explained (None: the fit passed)
     caveats: list = field(default_factory=list)  # what this capture cannot tell apart from it
+    separations: list = field(default_factory=list)  # the station design --separate commands for those
+                                             #   caveats that name a library effect (diagnose/suggest.py)
     removed: list = field(default_factory=list)  # (effect, reason): earlier additions no longer needed
     discovered: bool = False                 # terms found outside the library (terms.TermsEffect)
     instead_of: str = ""                     # the library effect the terms beat out of sample

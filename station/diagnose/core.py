@@ -74,6 +74,8 @@ class Candidate:
                                                    #   state(): a bias step's time), for the refit
     suggestion: str = ""                           # the station design --from command that would reveal
                                                    #   what the capture cannot (station/diagnose/suggest.py)
+    separations: list = field(default_factory=list)  # station design --from ... --separate commands: the
+                                                   #   effects this capture cannot tell it from (suggest.py)
 
     def largest_estimate(self) -> str:
         """The one-step estimate largest against its 1-sigma, in words ("" without parameters)."""

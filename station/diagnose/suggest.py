@@ -35,7 +35,37 @@ def command(capture, effects, reveal, registry=None) -> str:
             "-o extension.yaml")
 
 
-def suggest(diagnosis, capture, registry=None) -> None:
+def separate_command(capture, effects, a: str, b: str, registry=None) -> str:
+    """station design --from CAPTURE --add E ... --separate A,B -o extension.yaml: A and B named
+    as --add names them (a plugin by its file), so that the command works as printed."""
+    adds = "".join(f" --add {shlex.quote(added(e, registry))}" for e in effects)
+    pair = shlex.quote(f"{added(a, registry)},{added(b, registry)}")
+    return f"station design --from {shlex.quote(str(capture))}{adds} --separate {pair} -o extension.yaml"
+
+
+def separations(capture, model_effects, effect_id: str, summaries, registry=None) -> list[str]:
+    """For each library effect this capture cannot tell ``effect_id`` from (words.aliases), the
+    command that designs the segments that would: ``effect_id`` in the model (with the model's
+    own effects), the rival added by the designer."""
+    from station.diagnose.words import aliases
+
+    effects = [e for e in model_effects if e not in BASE and e != "discovered_terms"]
+    if effect_id not in effects:
+        effects.append(effect_id)
+    return [separate_command(capture, effects, effect_id, rival, registry)
+            for rival, _ in aliases(summaries, effect_id) if rival is not None and rival != effect_id]
+
+
+def suggest_steps(steps, capture, summaries, registry=None) -> None:
+    """Set ``separations`` on every step of --auto whose added effect this capture cannot tell
+    from a library effect (its caveats): the station design --from ... --separate commands."""
+    for st in steps:
+        if st.discovered:
+            continue
+        st.separations = separations(capture, st.after.effects, st.added, summaries, registry)
+
+
+def suggest(diagnosis, capture, registry=None, summaries=None) -> None:
     """Set ``suggestion`` on every candidate the capture cannot reveal (no parameter it can
     size, or parameters aliased with the model's) and ``design_suggestions`` on the diagnosis
     for the model's own parameters it left not revealed (held by their priors); ``registry``:
@@ -45,6 +75,8 @@ def suggest(diagnosis, capture, registry=None) -> None:
         blind = list(c.aliased) if c.dof else list(c.names)
         if blind and c.names and not c.advice.startswith("cannot be tested"):
             c.suggestion = command(capture, model_effects + [c.effect], blind, registry)
+        if summaries is not None and c.significant:
+            c.separations = separations(capture, model_effects, c.effect, summaries, registry)
     lines = []
     hidden = list(getattr(diagnosis.result.model, "unobservable", None) or [])
     if hidden:
