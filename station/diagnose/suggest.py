@@ -7,6 +7,9 @@ import shlex
 from pathlib import Path
 
 BASE = ("base_triads", "inter_triad")
+ALIAS_COS = 0.95      # two candidates whose one-step signatures are this alike: aliases (terms.py's threshold)
+# effects a scheme extension cannot be designed for: a placement per segment, a step's time (located)
+NOT_DESIGNED = ("remount_per_segment", "bias_step")
 
 
 def added(effect_id: str, registry=None) -> str:
@@ -71,15 +74,57 @@ def suggest(diagnosis, capture, registry=None, summaries=None) -> None:
     for the model's own parameters it left not revealed (held by their priors); ``registry``:
     where the effects came from, so that a plugin's is named by its file (added())."""
     model_effects = [e for e in diagnosis.effects if e not in BASE and e != "discovered_terms"]
+    alike = alike_candidates(diagnosis.candidates)
     for c in diagnosis.candidates:
         blind = list(c.aliased) if c.dof else list(c.names)
         if blind and c.names and not c.advice.startswith("cannot be tested"):
             c.suggestion = command(capture, model_effects + [c.effect], blind, registry)
-        if summaries is not None and c.significant:
-            c.separations = separations(capture, model_effects, c.effect, summaries, registry)
+        if c.significant:
+            said = separations(capture, model_effects, c.effect, summaries, registry) if summaries is not None else []
+            named = {_pair_of(x)[1] for x in said}
+            effects = model_effects + ([] if c.effect in model_effects else [c.effect])
+            said += [separate_command(capture, effects, c.effect, other, registry)
+                     for other in alike.get(c.effect, []) if other not in named]
+            c.separations = said
     lines = []
     hidden = list(getattr(diagnosis.result.model, "unobservable", None) or [])
     if hidden:
         lines.append(f"not revealed by this capture: {', '.join(hidden)}; the fewest segments that reveal them: "
                      f"{command(capture, model_effects, hidden, registry)}")
     diagnosis.design_suggestions = lines
+
+
+def _pair_of(cmd: str) -> tuple:
+    words = shlex.split(cmd)
+    a, _, b = words[words.index("--separate") + 1].rpartition(",")
+    return a, b
+
+
+def alike_candidates(candidates) -> dict:
+    """{effect: [other effects]} of the significant candidates that this capture cannot tell
+    apart, whoever wrote them (a plugin as the library): their one-step signatures (the change
+    each would make to the whitened residuals, outside the model: core.Candidate.signature_rows)
+    alike to ALIAS_COS, and their difference, the chi2 by which the data would prefer one, not
+    significant (below the 1 % point of chi2 with the smaller one's degrees of freedom, after the
+    over-dispersion the statistics are divided by).  Alike alone is not enough: with two rates a
+    scale asymmetry and a |w|^3 term are alike to 0.97 on a misfit of chi2 10^4, yet the 600 by
+    which one explains it better tells them apart."""
+    import numpy as np
+    from scipy.stats import chi2
+
+    sig = [c for c in candidates if c.significant and c.signature_rows is not None and c.dof
+           and c.effect not in NOT_DESIGNED]
+    out: dict = {}
+    for i, a in enumerate(sig):
+        for b in sig[i + 1:]:
+            u, v = np.ravel(a.signature_rows), np.ravel(b.signature_rows)
+            if u.shape != v.shape:
+                continue
+            den = float(np.linalg.norm(u) * np.linalg.norm(v))
+            if not den > 0 or abs(float(u @ v)) / den < ALIAS_COS:
+                continue
+            apart = float(np.sum((u - v) ** 2)) / max(a.overdispersion, b.overdispersion, 1.0)
+            if apart < chi2.isf(0.01, min(a.dof, b.dof)):
+                out.setdefault(a.effect, []).append(b.effect)
+                out.setdefault(b.effect, []).append(a.effect)
+    return out
