@@ -108,28 +108,36 @@ def test_a_plugins_alias_is_named_with_a_command_that_runs_as_printed_and_separa
         assert q.sigma < 0.01                                            # revealed: below its typical size
     # and diagnose no longer names the two as aliases
     assert main(["diagnose", "cap", "--json", "--plugin", "mine.py:GyroAbsCubed"]) == 0
-    after = json.loads(capsys.readouterr().out)["candidates"]
-    assert not [c for c in after for cmd in c.get("separate_commands") or [] if "GyroAbsCubed" in cmd]
+    after = {c["effect"]: c for c in json.loads(capsys.readouterr().out)["candidates"]}
+    assert after["gyro_scale_asymmetry"]["significant"]
+    pair = [cmd for e, o in (("gyro_scale_asymmetry", "GyroAbsCubed"), ("gyro_abs_cubed", "gyro_scale_asymmetry"))
+            for cmd in after[e]["separate_commands"] if o in cmd]
+    assert not pair, pair
 
 
 def test_a_library_alias_at_one_rate_is_named_with_its_separate_command(tmp_path, capsys, monkeypatch):
-    """A rate-squared term and a scale asymmetry at one rate (words.aliases): diagnose --auto
-    says so beside the added effect, with the command; the command runs as printed."""
+    """A rate-squared term and a scale asymmetry at one rate (words.aliases): diagnose names the
+    pair with the command, which runs as printed; a pair of bench effects whose parameters the
+    segments decide (one per table axis and rate) is refused in one line, exit 2."""
     (tmp_path / "s.yaml").write_text(_scheme(30.0, 12.0))
-    truth = _truth(tmp_path / "truth.yaml", mems_truth(0), gyroscope__rate_squared_ppm_per_dps=[20.0, -15.0, 25.0])
+    # 60 ppm/(deg/s) x 30 deg/s = 1800 ppm of the rate: significant for both with the MEMS noise
+    truth = _truth(tmp_path / "truth.yaml", mems_truth(0), gyroscope__rate_squared_ppm_per_dps=[60.0, -45.0, 75.0])
     monkeypatch.chdir(tmp_path)
     assert main(["run", "--scheme", "s.yaml", "--sim", "--sim-truth", str(truth), "--out", "cap",
                  "--no-history"]) in (0, 3)
     capsys.readouterr()
     assert main(["diagnose", "cap", "--json"]) == 0
     cands = {c["effect"]: c for c in json.loads(capsys.readouterr().out)["candidates"]}
-    said = cands["gyro_rate_nonlinearity"]["separate_commands"]
-    assert ("station design --from cap --add gyro_rate_nonlinearity --separate "
-            "gyro_rate_nonlinearity,gyro_scale_asymmetry -o extension.yaml") in said, said
+    said = cands["gyro_scale_asymmetry"]["separate_commands"]
+    assert ("station design --from cap --add gyro_scale_asymmetry --separate "
+            "gyro_scale_asymmetry,gyro_rate_nonlinearity -o extension.yaml") in said, said
     command = shlex.split(said[0])
-    assert main([*command[1:], "--json", "--rates", "30,100", "--revolutions", "1", "--dwells", "10"]) == 0
+    assert main([*command[1:], "--json"]) == 0                      # as printed
     report = json.loads(capsys.readouterr().out)
     assert report["correlation_after"] < 0.95 and all(p["revealed_after"] for p in report["parameters"])
+    assert main(["design", "--from", "cap", "--separate", "accel_nonlinearity,table_wobble"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "table_wobble has parameters of its own per table axis" in lines[0], lines
 
 
 # the accelerometers' positions (m; the diagonal 0, the estimator's convention for the reference point)

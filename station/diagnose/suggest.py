@@ -8,8 +8,10 @@ from pathlib import Path
 
 BASE = ("base_triads", "inter_triad")
 ALIAS_COS = 0.95      # two candidates whose one-step signatures are this alike: aliases (terms.py's threshold)
-# effects a scheme extension cannot be designed for: a placement per segment, a step's time (located)
-NOT_DESIGNED = ("remount_per_segment", "bias_step")
+# effects a scheme extension cannot be designed for: parameters per table axis, rate or segment, a
+# step's time (station.design.sequential.PER_SEGMENT_EFFECTS, copied: diagnose is below design)
+NOT_DESIGNED = ("table_wobble", "table_vibration_once_per_rev", "rotation_axis_offsets", "remount_per_segment",
+                "bias_step")
 
 
 def added(effect_id: str, registry=None) -> str:
@@ -52,11 +54,14 @@ def separations(capture, model_effects, effect_id: str, summaries, registry=None
     own effects), the rival added by the designer."""
     from station.diagnose.words import aliases
 
-    effects = [e for e in model_effects if e not in BASE and e != "discovered_terms"]
+    effects = [e for e in model_effects if e not in BASE and e != "discovered_terms" and e not in NOT_DESIGNED]
     if effect_id not in effects:
         effects.append(effect_id)
+    if effect_id in NOT_DESIGNED:
+        return []
     return [separate_command(capture, effects, effect_id, rival, registry)
-            for rival, _ in aliases(summaries, effect_id) if rival is not None and rival != effect_id]
+            for rival, _ in aliases(summaries, effect_id)
+            if rival is not None and rival != effect_id and rival not in NOT_DESIGNED]
 
 
 def suggest_steps(steps, capture, summaries, registry=None) -> None:
@@ -82,7 +87,8 @@ def suggest(diagnosis, capture, registry=None, summaries=None) -> None:
         if c.significant:
             said = separations(capture, model_effects, c.effect, summaries, registry) if summaries is not None else []
             named = {_pair_of(x)[1] for x in said}
-            effects = model_effects + ([] if c.effect in model_effects else [c.effect])
+            effects = [e for e in model_effects if e not in NOT_DESIGNED]
+            effects += [] if c.effect in effects else [c.effect]
             said += [separate_command(capture, effects, c.effect, other, registry)
                      for other in alike.get(c.effect, []) if other not in named]
             c.separations = said
