@@ -249,8 +249,9 @@ def run_case(arg) -> dict:
         rep = dc.parse_json(out)
         if rc != 0 or rep is None:
             res["design"] = False
-            res["design_error"] = (err.strip().splitlines() or [""])[-1]
-            raise RuntimeError(f"station design refused (exit {rc}): {res['design_error']}")
+            res["design_error"] = f"exit {rc}: " + (err.strip().splitlines() or [""])[-1]
+            res["separated"] = False
+            return _done(res, t0, work, opts)
         res["design"] = True
         res["design_s"] = round(t_design, 1)
         res["extension_s"] = rep["duration_s"]
@@ -293,6 +294,10 @@ def run_case(arg) -> dict:
         res["separated"] = bool(res["right_kept"] and res["rival_rejected"] and ok and not res["alias_left"])
     except Exception as exc:
         res["error"] = f"{type(exc).__name__}: {exc}"
+    return _done(res, t0, work, opts)
+
+
+def _done(res, t0, work, opts) -> dict:
     res["seconds"] = round(time.perf_counter() - t0, 1)
     if not opts["keep"]:
         shutil.rmtree(work, ignore_errors=True)
@@ -311,7 +316,7 @@ def table(results: list) -> str:
         named = f"{_yn(r.get('alias_named'))}" + (f" ({'; '.join(r.get('named_pairs', []))})" if r.get("named_pairs") else "")
         design = _yn(r.get("design")) + (f" ({r['design_s']} s)" if r.get("design_s") else "")
         if r.get("design_error"):
-            design += f": {r['design_error'][:140]}"
+            design += f" ({r['design_error'][:200]})"
         seg = (f"{len(r['segments'])}: {r['extension_s']:.0f} s" if "segments" in r else "—")
         kept = (f"{', '.join(r['effects_after']) or 'nothing'}" if "effects_after" in r else "—")
         held = (f"{r['after']['accel_ug']:.3g}, {r['after']['gyro_ppm']:.3g} ({r['floor']['accel_ug']:.3g}, "

@@ -273,9 +273,15 @@ def _print_suggestions(out, d) -> None:
         if getattr(c, "suggestion", ""):
             out.print(f"{c.effect}: the fewest segments that reveal it: {c.suggestion}", markup=False,
                       soft_wrap=True, highlight=False)
-        for cmd in getattr(c, "separations", None) or []:
+        cmds = getattr(c, "separations", None) or []
+        for cmd in cmds:
             out.print(f"{c.effect}: this capture cannot tell it from {_rival(cmd)}; the fewest segments that "
                       f"separate them: {cmd}", markup=False, soft_wrap=True, highlight=False)
+        others = list(getattr(c, "alike", None) or [])
+        if others:
+            out.print(f"{c.effect}: this capture cannot tell it from {', '.join(others)} (they explain the misfit "
+                      "alike); no segments of this table are designed to separate them", markup=False,
+                      soft_wrap=True, highlight=False)
 
 
 def _rival(cmd: str) -> str:

@@ -43,7 +43,8 @@ def to_json(d, steps) -> dict:
             "smallest_detectable": [_num(v) for v in c.detectable], "aliased": c.aliased,
             "advice": c.advice, "source": c.source, "overdispersion": c.overdispersion,
             "design_command": getattr(c, "suggestion", "") or None,
-            "separate_commands": list(getattr(c, "separations", None) or [])}
+            "separate_commands": list(getattr(c, "separations", None) or []),
+            "alike": list(getattr(c, "alike", None) or [])}
             for c in d.candidates],
         "steps": [{"added": st.added, "discovered": st.discovered, "instead_of": st.instead_of or None,
                    "predicted_chi2_drop": st.predicted_drop,

@@ -76,6 +76,8 @@ class Candidate:
                                                    #   what the capture cannot (station/diagnose/suggest.py)
     separations: list = field(default_factory=list)  # station design --from ... --separate commands: the
                                                    #   effects this capture cannot tell it from (suggest.py)
+    alike: list = field(default_factory=list)       # significant candidates this capture cannot tell it from
+                                                   #   and no --separate command can be designed for (suggest.py)
 
     def largest_estimate(self) -> str:
         """The one-step estimate largest against its 1-sigma, in words ("" without parameters)."""

@@ -10,6 +10,10 @@ BASE = ("base_triads", "inter_triad")
 ALIAS_COS = 0.95      # two candidates whose one-step signatures are this alike: aliases (terms.py's threshold)
 # effects a scheme extension cannot be designed for: parameters per table axis, rate or segment, a
 # step's time (station.design.sequential.PER_SEGMENT_EFFECTS, copied: diagnose is below design)
+# effects of the time and the temperature: the candidates' information is on their own timeline,
+# not the capture's clock going on, and the table has no chamber: two of them are not separated
+# by segments the designer can weigh (docs/design.md, Limits)
+TIMELINE = ("bias_drift", "temperature_bias", "temperature_bias_quadratic", "scale_temperature")
 NOT_DESIGNED = ("table_wobble", "table_vibration_once_per_rev", "rotation_axis_offsets", "remount_per_segment",
                 "bias_step")
 
@@ -90,8 +94,10 @@ def suggest(diagnosis, capture, registry=None, summaries=None) -> None:
             effects = [e for e in model_effects if e not in NOT_DESIGNED]
             effects += [] if c.effect in effects else [c.effect]
             said += [separate_command(capture, effects, c.effect, other, registry)
-                     for other in alike.get(c.effect, []) if other not in named]
+                     for other in alike.get(c.effect, []) if other not in named
+                     and not (c.effect in TIMELINE and other in TIMELINE)]
             c.separations = said
+            c.alike = [o for o in alike.get(c.effect, []) if c.effect in TIMELINE and o in TIMELINE]
     lines = []
     hidden = list(getattr(diagnosis.result.model, "unobservable", None) or [])
     if hidden:
