@@ -176,3 +176,31 @@ def test_reveal_what_one_rate_leaves_and_the_appended_dry_run_reveals_it(tmp_pat
         # the predicted within 30 % (the prediction: the segments simulated without noise)
         assert abs(value - POSITIONS_M[i, j] * 1e3) < 4.5 * sigma, (name, value, sigma)
         assert abs(sigma / predicted[name] - 1) < 0.3, (name, sigma, predicted[name])
+
+
+def test_alike_candidates_are_aliases_only_when_the_data_cannot_prefer_one():
+    """suggest.alike_candidates: signatures alike to 0.95 AND a difference below the 1 % point
+    of chi2 (dof of the smaller) after the over-dispersion."""
+    from station.diagnose.core import Candidate
+    from station.diagnose.suggest import alike_candidates
+
+    rng = np.random.default_rng(1)
+    r = rng.normal(size=400)
+    r *= 50.0 / np.linalg.norm(r)                   # a misfit of chi2 2500 that A explains whole
+
+    def cand(name, sig, dof=3, over=1.0, significant=True):
+        return Candidate(name, name, float(sig @ sig), dof, 0.0, significant=significant,
+                         signature_rows=sig, overdispersion=over)
+
+    tiny = rng.normal(size=400)
+    tiny *= 1.0 / np.linalg.norm(tiny)              # a difference of chi2 1: no preference
+    assert alike_candidates([cand("a", r), cand("b", r + tiny)]) == {"a": ["b"], "b": ["a"]}
+    # alike to 0.97 but the data prefer A by chi2 ~150 (> 11.3, the 1 % point for 3 dof)
+    off = r + 12.5 * tiny
+    assert float(r @ off) / (np.linalg.norm(r) * np.linalg.norm(off)) > 0.95
+    assert alike_candidates([cand("a", r), cand("b", off)]) == {}
+    # ... unless the fit fails by as much (over-dispersion 20: 150 / 20 = 7.5 < 11.3)
+    assert alike_candidates([cand("a", r, over=20.0), cand("b", off, over=20.0)]) == {"a": ["b"], "b": ["a"]}
+    # not significant, or an effect no extension is designed for: never named
+    assert alike_candidates([cand("a", r), cand("b", r, significant=False)]) == {}
+    assert alike_candidates([cand("a", r), cand("table_wobble", r)]) == {}
