@@ -16,8 +16,10 @@ from station.bench.compile import compile_scheme
 from station.core.errors import UserError
 from station.design import candidates as cand_mod
 from station.design.information import Noise, information, model_of, quiet_truth
-from station.design.search import MIN_STATICS, MIN_STATICS_TABLE, MAX_STATICS_TABLE, Scorer, exchange, parse_criterion
+from station.design.search import (MIN_STATICS, MIN_STATICS_TABLE, MAX_STATICS_TABLE, Scorer, parse_criterion,
+                                   timed_exchange)
 from station.io.scheme import Scheme, StaticSpec, load_scheme
+from station.simulate.montecarlo import GEOMETRY_SEEDS
 
 BUILTIN_TABLE_SCHEMES = ("optimal9", "chatfield18", "traditional24", "sizeeffect")
 BUDGET_ROUNDS = 6          # search again with the budget less the compiled excess, at most this often
@@ -31,6 +33,12 @@ VERIFY_Z = 6.0
 # short, a noise model that widened everything: the noise's own scatter of a 1σ estimated from
 # a few hundred degrees of freedom is a few per cent)
 VERIFY_SIGMA_FACTOR = 2.0
+# the simulated bench's geometries (headings of the statics, headings and rolls of the rotation
+# axes: random in every dry run, unknown to the estimator) each prediction is averaged over
+# (predict), the same as station montecarlo's bound: one geometry is one draw, off the mean
+# spread by up to 40 % for the gyro biases' bound (the temperature design of the twelfth
+# session: 1.28x for gyro x over the Monte Carlo's geometries)
+# (GEOMETRY_SEEDS, imported above from station.simulate.montecarlo)
 
 
 @dataclass
@@ -85,12 +93,21 @@ def geometry_of(config) -> dict | None:
 
 
 def predict(scheme: Scheme, effects: list, noise: Noise, config=None, duration_s: float = math.nan,
-            plan=None) -> Prediction:
+            plan=None, seeds=(0,)) -> Prediction:
     """The estimator's 1σ of every reported parameter (scale factors in ppm) for ``scheme``: its
     capture simulated without noise, summarised with the noise stated, fitted as ``station
     estimate`` fits (attitudes as the estimator chooses them, blind effect parameters held by
     their priors and said to be not revealed).  Its covariance is the Cramér-Rao bound that
-    station/simulate/montecarlo.py computes, for any model."""
+    station/simulate/montecarlo.py computes, for any model.
+
+    ``seeds``: the simulated bench's geometries it is computed at (each static's heading, each
+    rotation axis' heading and roll, drawn at random by the simulator for every run: unknown to
+    the estimator, as a real table's azimuths are), the covariance their mean -- the expected
+    spread of repeated runs, which draw a new geometry each (E over the geometry of the
+    estimator's covariance).  One geometry alone is one draw: a static's heading decides which
+    horizontal direction of the gyro bias its Earth rate hides, and the gyro biases' and their
+    temperature coefficients' bound moved by up to 40 % from draw to draw (docs/design.md,
+    thirteenth session)."""
     from station.estimate import lsq
 
     truth = quiet_truth(noise, config)
@@ -99,17 +116,22 @@ def predict(scheme: Scheme, effects: list, noise: Noise, config=None, duration_s
                      if type(s).__name__ == "Rotate" and getattr(s, "spec", None) is not None}
         scheme = replace(scheme, segments=tuple(replace(sp, axis_elevation_deg=elevation[sp.name])
                                                 if sp.name in elevation else sp for sp in scheme.segments))
-    model, _ = model_of(scheme, effects, noise, truth, None)
-    result = lsq.fit(model.s, [copy.deepcopy(e) for e in effects])
-    names, index, factors, units_ = lsq._reported_index(result, "m/s^2", "deg/s")
-    factors, units_ = np.array(factors, float), list(units_)
-    for k, n in enumerate(names):
-        if "_scale_" in n and units_[k] == "1":
-            factors[k], units_[k] = 1e6, "ppm"
-    cov = result.covariance_of(index) * np.outer(factors, factors)
+    covs, revealed = [], None
+    for seed in seeds:
+        model, _ = model_of(scheme, effects, noise, truth, None, seed=seed)
+        result = lsq.fit(model.s, [copy.deepcopy(e) for e in effects])
+        names, index, factors, units_ = lsq._reported_index(result, "m/s^2", "deg/s")
+        factors, units_ = np.array(factors, float), list(units_)
+        for k, n in enumerate(names):
+            if "_scale_" in n and units_[k] == "1":
+                factors[k], units_[k] = 1e6, "ppm"
+        covs.append(result.covariance_of(index) * np.outer(factors, factors))
+        blind = (set(result.model.unobservable)
+                 | {n for n, c in zip(names, index) if int(c) in set(result.rank_deficient)})
+        r = np.array([n not in blind for n in names])
+        revealed = r if revealed is None else revealed & r
+    cov = np.mean(covs, axis=0)
     sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    blind = set(result.model.unobservable) | {n for n, c in zip(names, index) if int(c) in set(result.rank_deficient)}
-    revealed = np.array([n not in blind for n in names])
     return Prediction(scheme.name, duration_s, names, units_, sigma, revealed, covariance=cov)
 
 
@@ -196,20 +218,9 @@ def _segments_of(chosen, cands, masks=None) -> list:
     """The scheme's segment entries (YAML) and specs, mounting by mounting as the time model
     covers them (search.cover: the compiler then remounts as often as the model counts), within
     a mounting the statics first, then the rotations."""
-    from station.design.search import cover
+    from station.design.timeline import written_order
 
-    chosen = list(chosen)
-    group = cover([masks[i] for i in chosen]) if masks is not None else [0] * len(chosen)
-    order = {}
-    for g in group:
-        order.setdefault(g, len(order))
-    of = dict(zip(chosen, group))
-    statics = [cands[i] for i in chosen if cands[i].kind == "static"]
-    rotations = [cands[i] for i in chosen if cands[i].kind == "rotation"]
-    index = {id(cands[i]): i for i in chosen}
-    statics.sort(key=lambda c: (order[of[index[id(c)]]], tuple(-x for x in c.key[1])))
-    rotations.sort(key=lambda c: (order[of[index[id(c)]]], -c.key[1], tuple(-x for x in c.key[0]), -c.key[2], -c.key[3]))
-    sequence = sorted(statics + rotations, key=lambda c: order[of[index[id(c)]]])     # (a stable sort)
+    sequence = [cands[i] for i in written_order(chosen, cands, masks)]
     entries, specs = [], []
     for c in sequence:
         if c.kind == "static":
@@ -343,7 +354,8 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
         sub = [cands[i] for i in subset]
         say(f"the information of {len(sub)} candidates, statics of {attitudes} attitude (one simulated capture "
             "of them, the estimator's Jacobian)")
-        info = information(chunks, effects, noise, config, geometry_of(config), centred, attitudes=attitudes)
+        info = information(chunks, effects, noise, config, geometry_of(config), centred, attitudes=attitudes,
+                           timeline=True)
         seconds["information"] += time.perf_counter() - t1
         crit, which = parse_criterion(criterion, info.parameters.names)
         scorer = Scorer(info, sub, crit, which)
@@ -366,7 +378,8 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
         # the better by the estimator's own fit of each (the search ranks time- and temperature-
         # dependent effects on the candidates' timeline, not the designed order's: docs/design.md)
         say("the estimator's fit of each kind's design, the better kept")
-        preds = _map(executor, lambda f: predict(f[2][3], effects, noise, config, f[2][4].duration_s, f[2][4]),
+        preds = _map(executor, lambda f: predict(f[2][3], effects, noise, config, f[2][4].duration_s, f[2][4],
+                                                  seeds=GEOMETRY_SEEDS),
                      found_all)
         values = [criterion_of(pr, criterion) for pr in preds]
         for f, v in zip(found_all, values):
@@ -382,11 +395,11 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
 
     def job(other):
         if other is None:
-            return predict(scheme, effects, noise, config, plan.duration_s, plan)
+            return predict(scheme, effects, noise, config, plan.duration_s, plan, seeds=GEOMETRY_SEEDS)
         try:
             base = load_scheme(other)
             stretched, total, p = scaled(base, config, plan.duration_s)
-            pr = predict(stretched, effects, noise, config, total, p)
+            pr = predict(stretched, effects, noise, config, total, p, seeds=GEOMETRY_SEEDS)
             pr.note = f"x{stretched.duration_s / base.duration_s:.3g} of its recording time"
         except UserError as e:
             pr = Prediction(other, math.nan, [], [], np.zeros(0), np.zeros(0, bool), note=str(e))
@@ -458,7 +471,7 @@ def _search(scorer, cands, masks, budget_s, fixed, max_passes, remount_s, min_st
     for _ in range(BUDGET_ROUNDS):
         say(f"exchange search within {budget:.0f} s")
         try:
-            result = exchange(scorer, budget, fixed, max_passes, min_statics=min_statics, masks=masks,
+            result = timed_exchange(scorer, budget, fixed, max_passes, min_statics=min_statics, masks=masks,
                               remount_s=remount_s, start=start, max_statics=max_statics)
         except UserError:
             return None
