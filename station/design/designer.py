@@ -373,7 +373,8 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
     if not found_all:
         raise UserError(f"no design within {budget_s:.0f} s found whose compiled time fits")
     t3 = time.perf_counter()
-    chosen_prediction = None
+    chosen_prediction = verification = None
+    verified: dict = {}
     if len(found_all) > 1:
         # the better by the estimator's own fit of each (the search ranks time- and temperature-
         # dependent effects on the candidates' timeline, not the designed order's: docs/design.md)
@@ -385,6 +386,24 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
         for f, v in zip(found_all, values):
             say(f"  statics of {f[0]} attitude: criterion {v:.6g} (the estimator's)")
         k = int(np.nanargmin(values))
+        if verify_runs:
+            # the better that the estimator delivers: a kind's design refused by the noisy dry
+            # runs gives way to the other's (the thirteenth session: the unknown-attitude size-effect
+            # design at 1500 s, every turn about a vertical axis, whose noisy fits end at a reduced
+            # chi-square of 1e7 while its information is sound: docs/design.md)
+            t4 = time.perf_counter()
+            order = [int(i) for i in np.argsort(np.where(np.isfinite(values), values, np.inf))]
+            for i in order:
+                f = found_all[i]
+                say(f"{verify_runs} noisy dry runs of the statics-of-{f[0]}-attitude design through the "
+                    "estimator (does it deliver the prediction?)")
+                v = verify(f[2][3], effects, noise, preds[i], f[1].which, verify_runs, executor=executor)
+                if v.ok or i == order[-1]:
+                    k, verification = (i, v) if v.ok else (k, verified.get(k, v))
+                    break
+                verified[i] = v
+                say(f"  refused ({len(v.problems)} problem(s), the first: {v.problems[0]}); the other kind's next")
+            seconds["verification"] = time.perf_counter() - t4
         found_all, chosen_prediction = [found_all[k]], preds[k]
     attitudes, scorer, (result, entries, specs, scheme, plan, evaluations, passes) = found_all[0]
     crit = scorer.criterion
@@ -410,8 +429,7 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
     else:
         prediction, builtins = chosen_prediction, _map(executor, job, list(compare))
     seconds["predictions"] = time.perf_counter() - t3
-    verification = None
-    if verify_runs:
+    if verify_runs and verification is None:
         t4 = time.perf_counter()
         say(f"{verify_runs} noisy dry runs of the design through the estimator (does it deliver the prediction?)")
         verification = verify(scheme, effects, noise, prediction, which, verify_runs, executor=executor)
