@@ -38,7 +38,8 @@ VERIFY_SIGMA_FACTOR = 2.0
 # (predict), the same as station montecarlo's bound: one geometry is one draw, off the mean
 # spread by up to 40 % for the gyro biases' bound (the temperature design of the twelfth
 # session: 1.28x for gyro x over the Monte Carlo's geometries)
-# (GEOMETRY_SEEDS, imported above from station.simulate.montecarlo)
+# (GEOMETRY_SEEDS, imported above from station.simulate.montecarlo: the designed scheme's own
+# prediction; the kinds' and the built-ins' comparison at one geometry, seed 0, for the CPU)
 
 
 @dataclass
@@ -379,8 +380,7 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
         # the better by the estimator's own fit of each (the search ranks time- and temperature-
         # dependent effects on the candidates' timeline, not the designed order's: docs/design.md)
         say("the estimator's fit of each kind's design, the better kept")
-        preds = _map(executor, lambda f: predict(f[2][3], effects, noise, config, f[2][4].duration_s, f[2][4],
-                                                  seeds=GEOMETRY_SEEDS),
+        preds = _map(executor, lambda f: predict(f[2][3], effects, noise, config, f[2][4].duration_s, f[2][4]),
                      found_all)
         values = [criterion_of(pr, criterion) for pr in preds]
         for f, v in zip(found_all, values):
@@ -418,16 +418,16 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
         try:
             base = load_scheme(other)
             stretched, total, p = scaled(base, config, plan.duration_s)
-            pr = predict(stretched, effects, noise, config, total, p, seeds=GEOMETRY_SEEDS)
+            pr = predict(stretched, effects, noise, config, total, p)
             pr.note = f"x{stretched.duration_s / base.duration_s:.3g} of its recording time"
         except UserError as e:
             pr = Prediction(other, math.nan, [], [], np.zeros(0), np.zeros(0, bool), note=str(e))
         return pr
 
-    if chosen_prediction is None:
-        prediction, *builtins = _map(executor, job, [None, *compare])
-    else:
-        prediction, builtins = chosen_prediction, _map(executor, job, list(compare))
+    # the design's own prediction over the bench's geometries (what station montecarlo's runs
+    # draw and its bound averages: GEOMETRY_SEEDS); the kinds and the built-ins compared at one
+    # (seed 0), as the search's candidates are: four fits for each would double a design's CPU
+    prediction, *builtins = _map(executor, job, [None, *compare])
     seconds["predictions"] = time.perf_counter() - t3
     if verify_runs and verification is None:
         t4 = time.perf_counter()

@@ -42,6 +42,9 @@ MIN_STATICS = 9           # lsq's attitudes="auto": every static's attitude unkn
 # designs of known attitudes (lsq's attitudes="table" below nine statics: each static's attitude
 # the table's, to its angle error): six to eight statics (six: sizeeffect's, +/-1 g on each axis)
 MIN_STATICS_TABLE, MAX_STATICS_TABLE = 6, 8
+# exchange passes of the second, timed stage (timed_exchange): each pass re-places every candidate
+# on the design's timeline (the first, untimed stage has brought the design near; docs/design.md)
+TIMED_PASSES = 3
 WORST_POWER = 20          # the worst criterion searched as this power mean of the 1σ (Scorer.value_of)
 
 
@@ -471,7 +474,8 @@ def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: 
     return Result(sorted(chosen), current, time_of(chosen), passes, evaluations, history)
 
 
-def timed_exchange(scorer: Scorer, budget_s: float, *args, start=None, **kw) -> Result:
+def timed_exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: int = 20, *,
+                   start=None, **kw) -> Result:
     """exchange() for a model with temperature effects in two stages: first every candidate at
     the temperature it had in the candidates' own capture (the search before the thirteenth
     session, whose landscape the exchanges move through well), then from that design with every
@@ -480,10 +484,11 @@ def timed_exchange(scorer: Scorer, budget_s: float, *args, start=None, **kw) -> 
     timeline alone from the start found a design of 8.40 µg/°C by the estimator's fit, the two
     stages (docs/design.md, thirteenth session).  Without temperature effects: exchange()."""
     if not scorer.timed:
-        return exchange(scorer, budget_s, *args, start=start, **kw)
+        return exchange(scorer, budget_s, fixed_s, max_passes, start=start, **kw)
     scorer.natural()
-    first = exchange(scorer, budget_s, *args, start=start, retime=False, **kw)
-    second = exchange(scorer, budget_s, *args, start=first.chosen, retime=True, **kw)
+    first = exchange(scorer, budget_s, fixed_s, max_passes, start=start, retime=False, **kw)
+    second = exchange(scorer, budget_s, fixed_s, min(max_passes, TIMED_PASSES), start=first.chosen,
+                      retime=True, **kw)
     second.evaluations += first.evaluations
     second.passes += first.passes
     return second
