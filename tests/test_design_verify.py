@@ -103,3 +103,23 @@ def test_a_kind_the_noisy_runs_refuse_gives_way_to_the_other(monkeypatch):
     assert len(shown) == 2 and d.verification.ok
     assert d.scheme is shown[1] and d.scheme is not shown[0]
     assert any("refused" in s and "the other kind's next" in s for s in said), said
+
+
+def test_a_design_of_unknown_attitudes_turns_about_two_level_axes():
+    """The 1,500 s size-effect design of unknown attitudes had all its 26 turn pairs about
+    vertical axes; its noisy fits ended at a reduced chi-square of 1e7 (seeds 1000, 1002) and the
+    same design with two pairs made level did not (docs/design.md, thirteenth session).  A design
+    of unknown attitudes now turns about at least MIN_LEVEL_AXES body axes with the table axis
+    level, whatever the criterion would choose (here: D of the base model, whose search alone
+    chose them too, and the size effect's positions, which it did not)."""
+    from station.bench.config import load_config
+    from station.design.search import MIN_LEVEL_AXES
+    from station.io.scheme import RotationSpec
+
+    for effects, criterion in (([], "D"), ([EffectRegistry().create("accel_lever_arm")], "worst:accel_position_*")):
+        d = designer.design(load_config(None, env={}), effects, Noise(), 900.0, criterion, rates_dps=(100.0, 200.0),
+                            revolutions=(1,), dwells_s=(10.0, 30.0), max_passes=1, compare=(), verify_runs=0,
+                            statics="unknown")
+        level = {tuple(np.round(s.axis_body, 6)) for s in d.scheme.segments
+                 if isinstance(s, RotationSpec) and s.axis_elevation_deg == 0.0}
+        assert d.attitudes == "unknown" and len(level) >= MIN_LEVEL_AXES, (criterion, level)

@@ -16,7 +16,8 @@ from station.bench.compile import compile_scheme
 from station.core.errors import UserError
 from station.design import candidates as cand_mod
 from station.design.information import Noise, information, model_of, quiet_truth
-from station.design.search import (MIN_STATICS, MIN_STATICS_TABLE, MAX_STATICS_TABLE, Scorer, parse_criterion,
+from station.design.search import (MIN_LEVEL_AXES, MIN_STATICS, MIN_STATICS_TABLE, MAX_STATICS_TABLE, Scorer,
+                                   parse_criterion,
                                    timed_exchange)
 from station.io.scheme import Scheme, StaticSpec, load_scheme
 from station.simulate.montecarlo import GEOMETRY_SEEDS
@@ -334,10 +335,10 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
     unknown_ok = (sum(1 for c in cands if c.kind == "static" and c.dwell_s == min(dwells_s)) >= MIN_STATICS
                   and fixed + MIN_STATICS * table.static_s(min(dwells_s)) <= budget_s)
     if unknown_ok and statics in ("any", "unknown"):
-        kinds.append(("unknown", list(range(len(cands))), masks, MIN_STATICS, None))
+        kinds.append(("unknown", list(range(len(cands))), masks, MIN_STATICS, None, MIN_LEVEL_AXES))
     one = one_mounting(cands, masks) if statics in ("any", "table") else None
     if one is not None:
-        kinds.append(("table", one, [masks[i] for i in one], MIN_STATICS_TABLE, MAX_STATICS_TABLE))
+        kinds.append(("table", one, [masks[i] for i in one], MIN_STATICS_TABLE, MAX_STATICS_TABLE, 0))
     if not kinds and fixed + MIN_STATICS * table.static_s(min(dwells_s)) > budget_s:
         raise UserError(f"a budget of {budget_s:.0f} s holds fewer than {MIN_STATICS} static attitudes on this "
                         f"table and it reaches fewer than {MIN_STATICS_TABLE} in one mounting (the least for nine: "
@@ -350,7 +351,7 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
     seconds["candidates"] = time.perf_counter() - t0
     seconds["information"] = seconds["search"] = 0.0
     found_all = []
-    for attitudes, subset, sub_masks, least_statics, most_statics in kinds:
+    for attitudes, subset, sub_masks, least_statics, most_statics, level in kinds:
         t1 = time.perf_counter()
         sub = [cands[i] for i in subset]
         say(f"the information of {len(sub)} candidates, statics of {attitudes} attitude (one simulated capture "
@@ -362,7 +363,7 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
         scorer = Scorer(info, sub, crit, which)
         t2 = time.perf_counter()
         found = _search(scorer, sub, sub_masks, budget_s, fixed, max_passes, remount_s, least_statics,
-                        most_statics, name, centred, config, say)
+                        most_statics, name, centred, config, say, level)
         seconds["search"] += time.perf_counter() - t2
         if found is None:
             continue
@@ -479,7 +480,7 @@ def true_value(scorer: Scorer, chosen) -> float:
 
 
 def _search(scorer, cands, masks, budget_s, fixed, max_passes, remount_s, min_statics, max_statics,
-            name, centred, config, say):
+            name, centred, config, say, min_level_axes=0):
     """The exchange search within the budget as the compiler counts it: searched again with the
     budget less twice the compiled excess, from the last design, up to BUDGET_ROUNDS times.
     (result, entries, specs, scheme, plan, evaluations, passes), or None when no design fits."""
@@ -490,7 +491,8 @@ def _search(scorer, cands, masks, budget_s, fixed, max_passes, remount_s, min_st
         say(f"exchange search within {budget:.0f} s")
         try:
             result = timed_exchange(scorer, budget, fixed, max_passes, min_statics=min_statics, masks=masks,
-                              remount_s=remount_s, start=start, max_statics=max_statics)
+                              remount_s=remount_s, start=start, max_statics=max_statics,
+                              min_level_axes=min_level_axes)
         except UserError:
             return None
         evaluations += result.evaluations

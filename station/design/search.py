@@ -42,6 +42,11 @@ MIN_STATICS = 9           # lsq's attitudes="auto": every static's attitude unkn
 # designs of known attitudes (lsq's attitudes="table" below nine statics: each static's attitude
 # the table's, to its angle error): six to eight statics (six: sizeeffect's, +/-1 g on each axis)
 MIN_STATICS_TABLE, MAX_STATICS_TABLE = 6, 8
+# designs of unknown attitudes turn about at least this many body axes with the table axis level
+# (elevation 0): the 1,500 s size-effect design with every turn about a vertical axis was refused
+# by the noisy dry runs (fits ending at a reduced chi-square of 1e7 from turns' phases started
+# from noise), the same with two of its 26 pairs made level was not (docs/design.md)
+MIN_LEVEL_AXES = 2
 # exchange passes of the second, timed stage (timed_exchange): each pass re-places every candidate
 # on the design's timeline (the first, untimed stage has brought the design near; docs/design.md)
 TIMED_PASSES = 3
@@ -302,7 +307,7 @@ class Result:
 
 def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: int = 20,
              min_statics: int = MIN_STATICS, masks=None, remount_s: float = 0.0, start=None,
-             max_statics: int | None = None, retime: bool = True) -> Result:
+             max_statics: int | None = None, retime: bool = True, min_level_axes: int = 0) -> Result:
     """The design within ``budget_s`` (``fixed_s`` of it spent on steps no candidate pays for:
     the first mounting, a warm-up) minimising the criterion (module doc).  ``masks``: each
     candidate's reachable mountings (bits), a mounting beyond the first costing ``remount_s``;
@@ -310,7 +315,10 @@ def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: 
     ``max_statics``: at most this many statics (designs of known attitudes: fewer than nine,
     MIN_STATICS_TABLE to MAX_STATICS_TABLE).  ``retime`` (a model with temperature effects,
     Scorer.timed): every candidate placed at its temperature on the design's own timeline at
-    the start and at each pass (Scorer.retime); False: at the temperatures the scorer has."""
+    the start and at each pass (Scorer.retime); False: at the temperatures the scorer has.
+    ``min_level_axes``: at least this many body axes turned about with the table axis horizontal
+    (elevation 0), chosen greedily after the statics and kept by every exchange (designs of
+    unknown attitude: MIN_LEVEL_AXES)."""
     timed = scorer.timed and retime
 
     cands = scorer.cands
@@ -333,6 +341,18 @@ def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: 
                 return False
         return True
 
+    def level_axes(chosen) -> int:
+        return len({cands[i].axis[0] for i in chosen if cands[i].kind == "rotation" and cands[i].axis[1] == 0.0})
+
+    def keeps_level(rest, j) -> bool:
+        """A design of ``rest`` plus j keeps min_level_axes (or adds to them when short)."""
+        have = level_axes(rest)
+        if have >= min_level_axes:
+            return True
+        c = cands[j]
+        return c.kind == "rotation" and c.axis[1] == 0.0 and c.axis[0] not in {
+            cands[i].axis[0] for i in rest if cands[i].kind == "rotation"}
+
     def time_of(chosen) -> float:
         t = fixed_s + float(sum(secs[i] for i in chosen))
         if masks is not None and remount_s:
@@ -349,7 +369,10 @@ def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: 
         return state.value(remove, add)
 
     if start is not None:
-        for j in start:
+        # the statics and the turns about level axes first: a budget shrunk by the compiler's
+        # count drops other turns, not those the rules keep
+        for j in sorted(start, key=lambda j: (cands[j].kind != "static",
+                                              not (cands[j].kind == "rotation" and cands[j].axis[1] == 0.0))):
             if allowed(state.chosen, j) and time_of(state.chosen | {j}) <= budget_s:
                 state.add(j)
     statics = [j for j in range(n) if cands[j].kind == "static"]
@@ -373,6 +396,20 @@ def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: 
             raise UserError(f"a budget of {budget_s:.0f} s holds fewer than {min_statics} static attitudes on "
                             f"this table (the least: {least:.0f} s)")
         state.add(best)
+    # 1b. turns about level axes (a design of unknown attitudes whose turns are all about vertical
+    # axes is one the estimator's noisy fits do not converge on: docs/design.md, thirteenth session)
+    while level_axes(state.chosen) < min_level_axes:
+        best, best_v = None, math.inf
+        for j in range(n):
+            if (cands[j].kind == "rotation" and cands[j].axis[1] == 0.0 and keeps_level(state.chosen, j)
+                    and allowed(state.chosen, j) and time_of(state.chosen | {j}) <= budget_s):
+                v = score(add=(j,))
+                if best is None or v < best_v:
+                    best, best_v = j, v
+        if best is None:
+            break           # (the table turns about no further level axis, or no time: as it is)
+        state.add(best)
+    must_level = min(min_level_axes, level_axes(state.chosen))
     # 2. greedy: the largest fall of the criterion per second of table time
     current = score()
     while True:
@@ -414,9 +451,12 @@ def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: 
             else:
                 swaps = range(n)
             t_rest = time_of(rest)
+            short = level_axes(rest) < must_level
             best_j, best_v = None, current
             for j in swaps:
                 if j == i or not allowed(rest, j) or t_rest + secs[j] > budget_s:
+                    continue
+                if short and not keeps_level(rest, j):
                     continue
                 if time_of(rest | {j}) > budget_s:
                     continue
@@ -441,6 +481,8 @@ def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: 
                     continue
                 rest = state.chosen - {i, k}
                 if cands[k].kind == "static" and sum(cands[m].kind == "static" for m in rest) + 1 < min_statics:
+                    continue
+                if level_axes(rest) < must_level:
                     continue
                 for j in longer:
                     if not allowed(rest, j) or time_of(rest | {j}) > budget_s:
