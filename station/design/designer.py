@@ -218,7 +218,7 @@ def verify(scheme: Scheme, effects: list, noise: Noise, prediction: Prediction, 
 
 def _segments_of(chosen, cands, masks=None) -> list:
     """The scheme's segment entries (YAML) and specs, mounting by mounting as the time model
-    covers them (search.cover: the compiler then remounts as often as the model counts), within
+    covers them (timeline.cover: the compiler then remounts as often as the model counts), within
     a mounting the statics first, then the rotations."""
     from station.design.timeline import written_order
 
@@ -375,7 +375,7 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
     if not found_all:
         raise UserError(f"no design within {budget_s:.0f} s found whose compiled time fits")
     t3 = time.perf_counter()
-    chosen_prediction = verification = None
+    verification = None
     verified: dict = {}
     if len(found_all) > 1:
         # the better by the estimator's own fit of each (the search ranks time- and temperature-
@@ -405,7 +405,7 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
                 verified[i] = v
                 say(f"  refused ({len(v.problems)} problem(s), the first: {v.problems[0]}); the other kind's next")
             seconds["verification"] = time.perf_counter() - t4
-        found_all, chosen_prediction = [found_all[k]], preds[k]
+        found_all = [found_all[k]]
     attitudes, scorer, (result, entries, specs, scheme, plan, evaluations, passes) = found_all[0]
     crit = scorer.criterion
     which = scorer.which

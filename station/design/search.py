@@ -554,23 +554,3 @@ def mountings_needed(chosen_masks) -> int:
         left = [m for m in left if not m & best]
         n += 1
     return n
-
-
-def cover(chosen_masks) -> list:
-    """For each chosen candidate the mounting (bit) of the greedy cover mountings_needed counts:
-    the scheme is written mounting by mounting, so that the compiler remounts as often as the
-    time model says."""
-    left = dict(enumerate(chosen_masks))
-    out = [0] * len(chosen_masks)
-    while left:
-        best, best_count = 0, -1
-        bit = 1
-        while bit <= max(left.values()):
-            count = sum(1 for m in left.values() if m & bit)
-            if count > best_count:
-                best, best_count = bit, count
-            bit <<= 1
-        for k in [k for k, m in left.items() if m & best]:
-            out[k] = best
-            del left[k]
-    return out

@@ -19,8 +19,6 @@ import numpy as np
 
 def written_order(chosen, cands, masks=None) -> list:
     """The chosen candidates' indices in the order the scheme file lists them."""
-    from station.design.search import cover
-
     chosen = list(chosen)
     group = cover([masks[i] for i in chosen]) if masks is not None else [0] * len(chosen)
     order: dict = {}
@@ -91,3 +89,23 @@ def notional(cands, temperature, clock, budget_s: float) -> dict:
     split = t <= budget_s / 3.0
     static_c, rotation_c = float(np.mean(T[split])), float(np.mean(T[~split]))
     return {i: (0.0 if c.kind == "static" else rotation_c - static_c) for i, c in enumerate(cands)}
+
+
+def cover(chosen_masks) -> list:
+    """For each chosen candidate the mounting (bit) of the greedy cover mountings_needed counts:
+    the scheme is written mounting by mounting, so that the compiler remounts as often as the
+    time model says."""
+    left = dict(enumerate(chosen_masks))
+    out = [0] * len(chosen_masks)
+    while left:
+        best, best_count = 0, -1
+        bit = 1
+        while bit <= max(left.values()):
+            count = sum(1 for m in left.values() if m & bit)
+            if count > best_count:
+                best, best_count = bit, count
+            bit <<= 1
+        for k in [k for k, m in left.items() if m & best]:
+            out[k] = best
+            del left[k]
+    return out
