@@ -201,9 +201,10 @@ def test_design_for_the_size_effect_is_confirmed_by_montecarlo(tmp_path):
     montecarlo --add accel_lever_arm` on it shows the predicted 1σ (_ratio_bounds)."""
     out = tmp_path / "size.yaml"
     # (--statics table: the kind the default `any` keeps here, by the estimator's fit, searched
-    # alone: half the time; the unknown-attitude kind's design at this budget is one the estimator
-    # refuses on some noisy runs, "does not determine the accelerometers", which --verify-runs
-    # catches: a finding of 2026-11-27)
+    # alone: half the time; the unknown-attitude kind's design at this budget, every turn about a
+    # vertical axis, was one the estimator refused on some noisy runs, "does not determine the
+    # accelerometers", which --verify-runs caught: a finding of 2026-11-27; since the thirteenth
+    # session such designs turn about two level axes too, and pass: docs/design.md)
     done = station("design", "--duration", 1500, "-o", out, "--add", "accel_lever_arm",
                    "--criterion", "worst:accel_position_*", "--compare", "optimal9", "--json",
                    "--rates", "100,200", "--revolutions", "1", "--dwells", "10,30", "--passes", "2",
