@@ -53,6 +53,17 @@ _NUMBER_TEXT = re.compile(r"[-+]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][-+]?[0-9]+)?")
 _SHA256_TEXT = re.compile(r"[0-9a-fA-F]{64}")
 _T_FORMAT = "%.15g"  # time: 1e-8 s resolution at 1e6 s
 _VALUE_FORMAT = "%.12g"  # IMU outputs: far beyond any IMU's resolution
+_WHOLE_LIMIT = 1e12      # below it "%.12g" writes a whole number as its digits, as "%d" does
+
+
+def _row_format(block: np.ndarray) -> str:
+    """The rows' %-format: t with _T_FORMAT, every other column with _VALUE_FORMAT, or with
+    "%d" where the column is whole numbers (raw counts) that "%.12g" writes as their digits
+    (|v| < 1e12, no -0.0): the same text, formatted in half the time (issue 27, item 2)."""
+    values = block[:, 1:]
+    whole = ((values == np.floor(values)) & (np.abs(values) < _WHOLE_LIMIT)
+             & ~((values == 0) & np.signbit(values))).all(axis=0)
+    return ",".join([_T_FORMAT] + ["%d" if w else _VALUE_FORMAT for w in whole]) + "\n"
 
 
 @dataclass
@@ -1391,7 +1402,7 @@ class FormattedRows:
         if n > 1 and not (np.diff(columns[0]) > 0).all():
             raise ValueError("time must strictly increase")
         self.t, self.count, self.with_temp = columns[0], n, temp is not None
-        row_format = ",".join([_T_FORMAT] + [_VALUE_FORMAT] * (block.shape[1] - 1)) + "\n"
+        row_format = _row_format(block)
         text = (row_format * n) % tuple(block.ravel().tolist())
         self.data = text.encode("ascii")
         self.offsets = np.zeros(n + 1, dtype=np.int64)       # byte offset of each row (ASCII)
@@ -1444,7 +1455,7 @@ class SegmentWriter:
         if t[0] <= self._last_t or (n > 1 and not (np.diff(t) > 0).all()):
             raise ValueError(f"segment {self.name!r}: time must strictly increase")
 
-        row_format = ",".join([_T_FORMAT] + [_VALUE_FORMAT] * (block.shape[1] - 1)) + "\n"
+        row_format = _row_format(block)
         self._append(((row_format * n) % tuple(block.ravel().tolist())).encode("ascii"), n, t[-1], temp is not None)
 
     def write_rows(self, rows: "FormattedRows", start: int, stop: int) -> None:
