@@ -13,16 +13,18 @@ Work measured, each a fresh process (two for an import and its estimate):
               --turn-deg 360, as imucal assumes), against imucal 2.6's FerrarisCalibration in a
               process of its own (pandas reads the CSV, the sections, compute, the result saved)
   imu_tk      imu_tk's own Xsens log (bin/test_data/xsens_acc.mat, xsens_gyro.mat, 51,175 rows,
-              raw counts): its compiled `test_imu_calib ACC GYRO` (what it does: read both files,
-              calibrate the accelerometers and the gyros, write two .calib files; its verbose
+              raw counts): its compiled `test_imu_calib ACC GYRO` (it reads both files,
+              calibrates the accelerometers and the gyros, writes two .calib files; its verbose
               output draws through gnuplot, a child process counted in its CPU, and waits for
-              Enter twice, given on its standard input) against `station import csv --preset
-              imu_tk --gyro-file GYRO --gravity-mps2 9.81744` + `station estimate` of the same
-              files, and `station estimate` alone of that capture (imported once).  Given by
-              --imu-tk BIN (or $STATION_IMU_TK) and --imu-tk-data DIR (or $STATION_IMU_TK_DATA;
-              default BIN's folder's test_data/, imu_tk's layout); skipped, and said, without
-              them.  imu_tk is not built by this repository (benchmarks/imu_tk_compare.py says
-              how, and compares the parameters the two write)
+              Enter twice, given on its standard input), and the same with its plots discarded
+              (`gnuplot` on its PATH a sink that reads and draws nothing: its calibration's own
+              time), against `station import csv --preset imu_tk --gyro-file GYRO
+              --gravity-mps2 9.81744` + `station estimate` of the same files, the import alone,
+              and `station estimate` alone of that capture (imported once).  Given by --imu-tk
+              BIN (or $STATION_IMU_TK) and --imu-tk-data DIR (or $STATION_IMU_TK_DATA; default
+              BIN's folder's test_data/, imu_tk's layout); skipped, and said, without them.
+              imu_tk is not built by this repository (benchmarks/imu_tk_compare.py says how, and
+              compares the parameters the two write)
 
 Every tree's modules are compiled to bytecode first (compileall, as pip does when it installs a
 package; numpy, scipy and imucal in site-packages are): with PYTHONDONTWRITEBYTECODE set, as on
@@ -128,7 +130,14 @@ def make_data(tmp: Path, xsens: Path | None = None, wanted=lambda work: True) ->
                 "np.savetxt(sys.argv[1] + '/gyr.txt', np.column_stack([hs.t, hs.gyro + 32768]), fmt='%.7f %d %d %d')\n")
         subprocess.run([sys.executable, "-c", code, str(pair)], check=True, env=env)
     data = {"optimal9": cap, "pair": pair}
-    if xsens is not None and wanted("imu_tk"):
+    if xsens is not None:
+        # imu_tk's `gnuplot` for "imu_tk, plots discarded": reads its commands and draws nothing
+        sink = tmp / "gnuplot-sink"
+        sink.mkdir(exist_ok=True)
+        (sink / "gnuplot").write_text("#!/bin/sh\nexec cat > /dev/null\n")
+        (sink / "gnuplot").chmod(0o755)
+        data["gnuplot sink"] = sink
+    if xsens is not None and (wanted("imu_tk") or wanted("xsens estimate")):
         data["xsens capture"] = tmp / "xsens"
         if not (tmp / "xsens" / "manifest.yaml").exists():
             run(import_xsens(xsens, tmp / "xsens"), env)
@@ -142,7 +151,8 @@ def main() -> int:
     ap.add_argument("--imu-tk", type=Path, help="imu_tk's compiled test_imu_calib (or $STATION_IMU_TK)")
     ap.add_argument("--imu-tk-data", type=Path, help="imu_tk's bin/test_data (or $STATION_IMU_TK_DATA)")
     ap.add_argument("--only", help="the work to time, comma-separated: numpy, estimate, imu_tk log, imucal, "
-                                   "imu_tk (the Xsens log: imu_tk and station's two)")
+                                   "imu_tk (the Xsens log: imu_tk and station's three), or one of those four: "
+                                   "imu_tk test_imu_calib, xsens import + estimate, xsens import, xsens estimate")
     ap.add_argument("--keep", type=Path, help="keep the data here (made once)")
     args = ap.parse_args()
     imu_tk, xsens, why_not = find_imu_tk(args.imu_tk, args.imu_tk_data)
@@ -185,14 +195,18 @@ def main() -> int:
         if name == "imucal 2.6":
             return run([sys.executable, "-P", "-c", IMUCAL_SCRIPT, DATA / "example_ferraris_session.csv",
                         DATA / "example_ferraris_session_list.json", out / "imucal.json"], env)
-        if name == "imu_tk test_imu_calib":
+        if name in ("imu_tk test_imu_calib", "imu_tk, plots discarded"):
             # waitForKey twice (getchar until a newline): the newlines on its standard input
+            if name == "imu_tk, plots discarded":   # its `gnuplot` a sink: the calibration without the plots
+                env = dict(env, PATH=f"{data['gnuplot sink']}{os.pathsep}{env.get('PATH', '')}")
             return run([str(imu_tk), xsens / "xsens_acc.mat", xsens / "xsens_gyro.mat"], env, stdin=b"\n" * 4,
                        cwd=out)
         if name == "xsens import + estimate":
             a = run(import_xsens(xsens, out / "cap"), env)
             b = run(station("estimate", out / "cap", "-o", out / "c.yaml"), env)
             return a[0] + b[0], a[1] + b[1]
+        if name == "xsens import":
+            return run(import_xsens(xsens, out / "cap"), env)
         if name == "xsens estimate":
             return run(station("estimate", data["xsens capture"], "-o", out / "c.yaml"), env)
         raise ValueError(name)
@@ -201,9 +215,11 @@ def main() -> int:
     jobs += [(w, t) for w in ("estimate", "imu_tk log") if wanted(w) for t in trees]
     if have_imucal and wanted("imucal"):
         jobs += [(("imucal session"), t) for t in trees] + [("imucal 2.6", "now")]
-    if imu_tk is not None and wanted("imu_tk"):
-        jobs += [("imu_tk test_imu_calib", "now")]
-        jobs += [(w, t) for w in ("xsens import + estimate", "xsens estimate") for t in trees]
+    if imu_tk is not None:
+        xsens_work = ("imu_tk test_imu_calib", "imu_tk, plots discarded", "xsens import + estimate", "xsens import",
+                      "xsens estimate")
+        jobs += [(w, t) for w in xsens_work if wanted("imu_tk") or wanted(w)
+                 for t in (("now",) if w.startswith("imu_tk") else trees)]
     print(f"load average before: {os.getloadavg()}; {args.repeat} rounds of {len(jobs)} processes, interleaved")
     times = {j: [] for j in jobs}
     for k in range(args.repeat):
@@ -226,8 +242,10 @@ def main() -> int:
         pairs.append((("imucal session", "now"), ("imucal 2.6", "now"), "imucal session: station / imucal 2.6"))
         if "before" in trees:
             pairs.append((("imucal session", "now"), ("imucal session", "before"), "imucal session: now / before"))
-    for w in ("xsens import + estimate", "xsens estimate"):
+    for w in ("xsens import + estimate", "xsens import", "xsens estimate"):
         pairs += [((w, t), ("imu_tk test_imu_calib", "now"), f"{w} ({t}) / imu_tk") for t in trees]
+        pairs += [((w, t), ("imu_tk, plots discarded", "now"), f"{w} ({t}) / imu_tk, plots discarded")
+                  for t in trees]
         if "before" in trees:
             pairs.append(((w, "now"), (w, "before"), f"{w}: now / before"))
     for a, b, label in pairs:
