@@ -36,7 +36,7 @@ earlier `station` package, e.g. `git archive main station drivers sim_devices | 
 alternating with this tree in every round.
 
 Usage: python benchmarks/perf_peers.py [--repeat 7] [--before SRC] [--imu-tk BIN [--imu-tk-data DIR]]
-       [--only WORK,...] [--keep DIR]
+       [--xsens-gravity G] [--only WORK,...] [--keep DIR]
 """
 from __future__ import annotations
 
@@ -109,10 +109,14 @@ def station(*argv) -> list:
             "sys.exit(console_main())", *map(str, argv)]
 
 
+XSENS_GRAVITY = [IMU_TK_GRAVITY]      # --xsens-gravity
+
+
 def import_xsens(xsens: Path, out: Path) -> list:
-    """station's import of imu_tk's Xsens log, with the gravity test_imu_calib uses."""
+    """station's import of imu_tk's Xsens log, with the gravity test_imu_calib uses (or
+    --xsens-gravity's)."""
     return station("import", "csv", xsens / "xsens_acc.mat", "--preset", "imu_tk", "--gyro-file",
-                   xsens / "xsens_gyro.mat", "--gravity-mps2", IMU_TK_GRAVITY, "-o", out)
+                   xsens / "xsens_gyro.mat", "--gravity-mps2", XSENS_GRAVITY[0], "-o", out)
 
 
 def make_data(tmp: Path, xsens: Path | None = None, wanted=lambda work: True) -> dict:
@@ -131,7 +135,7 @@ def make_data(tmp: Path, xsens: Path | None = None, wanted=lambda work: True) ->
         subprocess.run([sys.executable, "-c", code, str(pair)], check=True, env=env)
     data = {"optimal9": cap, "pair": pair}
     if xsens is not None:
-        # imu_tk's `gnuplot` for "imu_tk, plots discarded": reads its commands and draws nothing
+        # imu_tk's `gnuplot` for "imu_tk without plots": reads its commands and draws nothing
         sink = tmp / "gnuplot-sink"
         sink.mkdir(exist_ok=True)
         (sink / "gnuplot").write_text("#!/bin/sh\nexec cat > /dev/null\n")
@@ -153,8 +157,11 @@ def main() -> int:
     ap.add_argument("--only", help="the work to time, comma-separated: numpy, estimate, imu_tk log, imucal, "
                                    "imu_tk (the Xsens log: imu_tk and station's three), or one of those four: "
                                    "imu_tk test_imu_calib, xsens import + estimate, xsens import, xsens estimate")
+    ap.add_argument("--xsens-gravity", type=float, default=IMU_TK_GRAVITY,
+                    help=f"the gravity station imports the Xsens log with (default imu_tk's {IMU_TK_GRAVITY})")
     ap.add_argument("--keep", type=Path, help="keep the data here (made once)")
     args = ap.parse_args()
+    XSENS_GRAVITY[0] = args.xsens_gravity
     imu_tk, xsens, why_not = find_imu_tk(args.imu_tk, args.imu_tk_data)
     if imu_tk is None:
         print(f"imu_tk skipped: {why_not}")
@@ -195,9 +202,9 @@ def main() -> int:
         if name == "imucal 2.6":
             return run([sys.executable, "-P", "-c", IMUCAL_SCRIPT, DATA / "example_ferraris_session.csv",
                         DATA / "example_ferraris_session_list.json", out / "imucal.json"], env)
-        if name in ("imu_tk test_imu_calib", "imu_tk, plots discarded"):
+        if name in ("imu_tk test_imu_calib", "imu_tk without plots"):
             # waitForKey twice (getchar until a newline): the newlines on its standard input
-            if name == "imu_tk, plots discarded":   # its `gnuplot` a sink: the calibration without the plots
+            if name == "imu_tk without plots":   # its `gnuplot` a sink: the calibration without the plots
                 env = dict(env, PATH=f"{data['gnuplot sink']}{os.pathsep}{env.get('PATH', '')}")
             return run([str(imu_tk), xsens / "xsens_acc.mat", xsens / "xsens_gyro.mat"], env, stdin=b"\n" * 4,
                        cwd=out)
@@ -216,7 +223,7 @@ def main() -> int:
     if have_imucal and wanted("imucal"):
         jobs += [(("imucal session"), t) for t in trees] + [("imucal 2.6", "now")]
     if imu_tk is not None:
-        xsens_work = ("imu_tk test_imu_calib", "imu_tk, plots discarded", "xsens import + estimate", "xsens import",
+        xsens_work = ("imu_tk test_imu_calib", "imu_tk without plots", "xsens import + estimate", "xsens import",
                       "xsens estimate")
         jobs += [(w, t) for w in xsens_work if wanted("imu_tk") or wanted(w)
                  for t in (("now",) if w.startswith("imu_tk") else trees)]
@@ -244,7 +251,7 @@ def main() -> int:
             pairs.append((("imucal session", "now"), ("imucal session", "before"), "imucal session: now / before"))
     for w in ("xsens import + estimate", "xsens import", "xsens estimate"):
         pairs += [((w, t), ("imu_tk test_imu_calib", "now"), f"{w} ({t}) / imu_tk") for t in trees]
-        pairs += [((w, t), ("imu_tk, plots discarded", "now"), f"{w} ({t}) / imu_tk, plots discarded")
+        pairs += [((w, t), ("imu_tk without plots", "now"), f"{w} ({t}) / imu_tk without plots")
                   for t in trees]
         if "before" in trees:
             pairs.append(((w, "now"), (w, "before"), f"{w}: now / before"))
