@@ -22,9 +22,10 @@ The two conventions (imu_tk/calibration.h; station/model/calibration.py):
            x accelerometer, y in the x-y sensing plane), R_po the inter-triad rotation.
 The conversion: imu_tk's forward matrix A_b = (T K)^-1 maps f_b to raw - B.  Its LQ
 factorisation A_b = L Q (L lower triangular with a positive diagonal, Q orthogonal) is station's
-A_p = K_a T_a with Q = R_bp, the rotation from p to b: the scale factors are the row norms
-(frame-free), the misalignments T's below-diagonal angles.  The gyro's forward matrix in p is
-G_b Q (pi/180 per deg/s), whose LQ factorisation is K_g T_g R_po.  The biases are raw counts in
+A_p = K_a T_a with Q = R_bp^T, R_bp the rotation from p to b (f_b = R_bp f_p): the scale
+factors are the row norms (frame-free), the misalignments T's below-diagonal angles.  The gyro's
+forward matrix in p is G_b R_bp = G_b Q^T (pi/180 per deg/s), whose LQ factorisation is
+K_g T_g R_po.  The biases are raw counts in
 both.  So every station parameter has an imu_tk counterpart, none is dropped or invented.
 """
 from __future__ import annotations
@@ -95,7 +96,7 @@ def station_parameters(acc, gyro, *, gyro_unit_rad: bool = True) -> dict:
     gyro_unit_rad False) as station's parameters: name -> value in station's unit."""
     T, K, B = acc
     A_b = np.linalg.inv(T @ K)                   # raw - B = A_b f_b, raw per m/s^2
-    A_p, Q = lq(A_b)                             # A_p = K_a T_a; Q = R_bp (f_b = Q f_p)
+    A_p, Q = lq(A_b)                             # A_p = K_a T_a; Q = R_bp^T (f_b = R_bp f_p)
     scale = np.linalg.norm(A_p, axis=1)
     Ta = A_p / scale[:, None]
     out = {f"accel_scale_{a}": scale[i] for i, a in enumerate(AXES)}
@@ -103,7 +104,7 @@ def station_parameters(acc, gyro, *, gyro_unit_rad: bool = True) -> dict:
     out |= {f"accel_misalignment_{m}": angles[i] * ARCSEC for i, m in enumerate(MIS)}
     Tg, Kg, Bg = gyro
     per_unit = math.pi / 180 if gyro_unit_rad else 1.0          # rad/s (or deg/s) per deg/s
-    G_p = np.linalg.inv(Tg @ Kg) @ Q * per_unit  # raw - B_g = G_p w_p, raw per deg/s
+    G_p = np.linalg.inv(Tg @ Kg) @ Q.T * per_unit    # raw - B_g = G_p w_p, raw per deg/s
     L, R_po = lq(G_p)
     gscale = np.linalg.norm(L, axis=1)
     Tgs = L / gscale[:, None]
