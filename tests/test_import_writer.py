@@ -64,3 +64,23 @@ def test_a_segment_torn_after_an_import_is_refused_by_its_hash(tmp_path):
     cap = read_capture(tmp_path / "c", load_data=False)
     with pytest.raises(CaptureError, match="sha256"):
         cap.read_samples(cap.segments[1])
+
+
+def test_an_imports_manifest_is_read_by_libyaml(tmp_path):
+    """What an import writes into the manifest keeps it within what station.core.yaml_text gives
+    libyaml (no '|', '!', '>' or tab): a '|' in the detector's note sent the whole manifest of
+    imu_tk's Xsens log to the pure-Python loader, 4 times slower, at every read."""
+    from sim_devices.hand import hand_session
+    from sim_devices.truth import mems_truth
+    from station.core import yaml_text
+    from station.io.importers.recording import Recording, write_capture
+
+    counts = (8 * 9.80665 / 32768, 1000.0 / 32768)
+    hs = hand_session(mems_truth(7), 7, poses=12, dwell_s=(2.5, 3.0), turn_s=(1.0, 1.5), counts=counts)
+    rec = Recording(source="log.txt", t=hs.t, accel=hs.accel + 32768, gyro=hs.gyro + 32768,
+                    accel_unit="raw", gyro_unit="raw", time_from="column 0 in s", time_option="--time-unit")
+    report = write_capture(rec, tmp_path / "c", gravity_mps2=9.81744)
+    text = (tmp_path / "c" / "manifest.yaml").read_text()
+    assert "accel_scale_from" in text                 # the detector scaled raw counts from the rest
+    assert yaml_text._c_safe(text, True) is not None
+    assert len(read_capture(report.path, load_data=False).segments) == len(report.sections) + 1
