@@ -124,9 +124,8 @@ def cached_plan(scheme, config):
 
 def compile_cached(scheme, config, hit=None):
     """``compile_scheme(scheme, config)``, from the cache when this scheme and configuration were
-    compiled by this code before (``hit``: what ``cached_plan`` returned, when asked already)."""
-    from station.bench.compile import compile_scheme
-
+    compiled by this code before (``hit``: what ``cached_plan`` returned, when asked already).
+    The compiler (and with it the model package, ~60 ms) is imported on a miss only."""
     if hit is None:
         hit = cached_plan(scheme, config)
     if hit is not None:
@@ -141,6 +140,8 @@ def compile_cached(scheme, config, hit=None):
             path = folder / f"{key(scheme, config)}.plan"
         except Exception:               # noqa: BLE001 - an unpicklable scheme: compiled, not kept
             path = None
+    from station.bench.compile import compile_scheme
+
     try:
         outcome = ("plan", compile_scheme(scheme, config))
     except UserError as e:
