@@ -74,6 +74,39 @@ def test_import_of_a_fifo_does_not_hang(tmp_path, kind):
     assert done.stderr.count("\n") == 1
 
 
+@pytest.mark.parametrize("kind", ["fifo", "device"])
+@pytest.mark.parametrize("argv, what", [
+    (["plan", "--scheme", "{f}"], "scheme file"),
+    (["plan", "--config", "{f}"], "the configuration"),
+    (["export", "{cal}", "--to", "kalibr", "--noise", "{f}", "-o", "{out}"], "noise file"),
+    (["run", "--sim", "--scheme", "{scheme}", "--sim-truth", "{f}", "--out", "{out}"], "truth file"),
+    (["sim", "serve", "--faults", "{f}"], "faults file"),
+], ids=["scheme", "station.yaml", "noise", "sim-truth", "faults"])
+def test_a_fifo_or_device_given_as_a_yaml_input_is_refused_not_read(capture_dir, tmp_path, argv, what, kind):
+    """Found in the thirteenth session's walk (benchmarks/walk_issue26.py): these five hung on a
+    FIFO (open() waits for a writer) after the imports had been guarded."""
+    from test_bad_inputs import SCHEME
+    scheme = tmp_path / "small.yaml"
+    scheme.write_text(SCHEME)
+    f = tmp_path / "input.yaml"
+    if kind == "fifo":
+        os.mkfifo(f)
+    else:
+        f = Path("/dev/zero")
+    argv = [a.format(f=f, cal=capture_dir / "calibration.yaml", out=tmp_path / "out", scheme=scheme) for a in argv]
+    done = run_child(argv, timeout=60)          # (the timeout only guards: the refusal takes < 1 s of CPU)
+    assert done.returncode == 2 and "not a regular file" in done.stderr and str(f) in done.stderr, done.stderr
+    assert what in done.stderr and done.stderr.count("\n") == 1 and "Traceback" not in done.stderr
+
+
+def test_a_fifo_in_a_run_capture_is_refused_by_resume(capture_dir, tmp_path):
+    import shutil
+    cap = Path(shutil.copytree(capture_dir, tmp_path / "cap"))
+    os.mkfifo(cap / "run.yaml")
+    done = run_child(["run", "--resume", cap, "--port", "/dev/null", "--table-port", "/dev/null"], timeout=60)
+    assert done.returncode == 2 and "not a regular file" in done.stderr and "run.yaml" in done.stderr, done.stderr
+
+
 def test_ros1_bag_with_flipped_bytes_is_one_line(hand_log, tmp_path, capsys):
     import numpy as np
     from station.io.importers.rosbag import write_imu_bag

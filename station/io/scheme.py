@@ -87,10 +87,9 @@ def scheme_text(name_or_path: str) -> tuple[str, str]:
         return (resources.files("schemes").joinpath(f"{name_or_path}.yaml").read_text(),
                 f"scheme '{name_or_path}'")
     if path.suffix in (".yaml", ".yml") or path.exists():
-        try:
-            return path.read_text(), str(path)
-        except OSError as e:
-            raise UserError(f"{path}: cannot read scheme file: {e.strerror}") from None
+        from station.core.user_files import read_user_text
+
+        return read_user_text(path, "scheme file"), str(path)      # (a FIFO is refused, not read: it hung)
     raise UserError(f"unknown scheme '{name_or_path}': built-in schemes are "
                     f"{', '.join(builtin_names())}, or give a path to a .yaml file")
 
