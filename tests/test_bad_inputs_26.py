@@ -291,7 +291,11 @@ def _without_gyro_parameters(doc):
     (lambda d: d["parameters"]["accel_bias_x"].update(sigma=-1.0), ["parameters.accel_bias_x", "sigma"]),
     (lambda d: d["parameters"]["gyro_scale_x"].update(sigma=float("inf")), ["parameters.gyro_scale_x", "sigma"]),
     (_without_gyro_parameters, ["field 'parameters'", "gyro_scale_x", "compensation.gyro_matrix"]),
-], ids=["zero-accel-matrix", "singular-gyro-matrix", "nan-sigma", "negative-sigma", "inf-sigma", "gyro-params-removed"])
+    # found by tests/test_fuzz_consumers.py (thirteenth session): show divided by it (ZeroDivisionError)
+    (lambda d: d["parameters"]["gyro_scale_y"].update(value=0.0), ["parameters.gyro_scale_y.value", "scale factor of 0"]),
+    (lambda d: d["parameters"]["accel_scale_x"].update(value=0), ["parameters.accel_scale_x.value", "scale factor of 0"]),
+], ids=["zero-accel-matrix", "singular-gyro-matrix", "nan-sigma", "negative-sigma", "inf-sigma", "gyro-params-removed",
+        "zero-gyro-scale", "zero-accel-scale"])
 def test_calibration_file_inconsistent_is_refused_by_every_reader(capture_dir, tmp_path, capsys, change, words):
     cal = _edited_calibration(capture_dir, tmp_path, change)
     for argv in (["show", cal], ["apply", cal, capture_dir / "pos01.csv", "-o", tmp_path / "o.csv"],

@@ -70,6 +70,7 @@ MAX_BYTES = 16 * 2**20          # a calibration file is a few kB; refuse anythin
 MAX_VALUE = 1e12                # no compensation coefficient is anywhere near this
 GYRO_PASS_THROUGH = "not calibrated: passed through (unit conversion only)"
 GYRO_PARAMETERS = tuple(f"gyro_{kind}_{a}" for kind in ("scale", "bias") for a in "xyz")
+SCALE_UNITS = ("1", "raw/(m/s^2)", "raw/(deg/s)")     # the units a scale factor is written in
 MAX_CONDITION = 1e12            # a compensation matrix less well conditioned is singular
 
 
@@ -383,6 +384,10 @@ def read_calfile(path) -> dict:
             shown = name[:60] if name[:60].isprintable() else repr(name[:60])[1:-1]   # one line
             raise UserError(f"{path}: field 'parameters.{shown}': needs a finite 'value', a 'unit' "
                             "and, if given, a finite 'sigma' >= 0")
+        if "_scale_" in name and p["unit"] in SCALE_UNITS and p["value"] == 0:
+            shown = name[:60] if name[:60].isprintable() else repr(name[:60])[1:-1]
+            raise UserError(f"{path}: field 'parameters.{shown}.value': a scale factor of 0 (a sensor that reads "
+                            "nothing of what it senses): not a calibration")
     if not pass_through:            # a gyro compensation stands on the gyro parameters it came from
         missing = [n for n in GYRO_PARAMETERS if n not in params]
         if missing:
