@@ -269,6 +269,14 @@ def test_a_tampered_history_row_cannot_open_a_file_outside_the_store(filed, tmp_
         one_line_exit_2(argv, capsys, str(store / "index.sqlite"), "row #2", "field 'file'", "inside the store")
 
 
+def test_history_drift_without_a_serial_says_what_it_needs(filed, tmp_path, capsys):
+    """Found by the thirteenth session's walk: `history --drift PNG` without SERIAL exited 0 and
+    drew nothing."""
+    store, serial = filed
+    one_line_exit_2(["history", "--store", store, "--drift", tmp_path / "d.png"], capsys, "--drift", "SERIAL")
+    assert not (tmp_path / "d.png").exists()
+
+
 # ------------------------------------------------------------------ calibration files
 
 def _edited_calibration(capture_dir, tmp_path, change):
