@@ -302,8 +302,14 @@ def _without_gyro_parameters(doc):
     # found by tests/test_fuzz_consumers.py (thirteenth session): show divided by it (ZeroDivisionError)
     (lambda d: d["parameters"]["gyro_scale_y"].update(value=0.0), ["parameters.gyro_scale_y.value", "scale factor of 0"]),
     (lambda d: d["parameters"]["accel_scale_x"].update(value=0), ["parameters.accel_scale_x.value", "scale factor of 0"]),
+    # the walk (benchmarks/walk_issue26.py): a matrix of 1e-308s (well conditioned, compensating
+    # into nothing) beside scale factors near 1, and a scale factor edited beside its matrix
+    (lambda d: d["compensation"].update(accel_matrix=[[1e-308, 0, 0], [0, 1e-308, 0], [0, 0, 1e-308]]),
+     ["parameters.accel_scale_x.value", "disagrees with 'compensation.accel_matrix'"]),
+    (lambda d: d["parameters"]["gyro_scale_z"].update(value=d["parameters"]["gyro_scale_z"]["value"] * 1.0001),
+     ["parameters.gyro_scale_z.value", "disagrees with 'compensation.gyro_matrix'"]),
 ], ids=["zero-accel-matrix", "singular-gyro-matrix", "nan-sigma", "negative-sigma", "inf-sigma", "gyro-params-removed",
-        "zero-gyro-scale", "zero-accel-scale"])
+        "zero-gyro-scale", "zero-accel-scale", "tiny-accel-matrix", "gyro-scale-edited"])
 def test_calibration_file_inconsistent_is_refused_by_every_reader(capture_dir, tmp_path, capsys, change, words):
     cal = _edited_calibration(capture_dir, tmp_path, change)
     for argv in (["show", cal], ["apply", cal, capture_dir / "pos01.csv", "-o", tmp_path / "o.csv"],
