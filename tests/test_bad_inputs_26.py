@@ -41,6 +41,19 @@ def test_scheme_defaults_not_a_mapping(tmp_path, capsys, defaults):
     one_line_exit_2(["plan", "--scheme", scheme], capsys, str(scheme), "defaults", "mapping")
 
 
+@pytest.mark.parametrize("entry, key", [("{static: a, up_body: [0, 0, 1], duration_s: 31}", "duration_s"),
+                                        ("{rotation: r, axis_body: [0, 0, 1], rate_dps: 10, rotation_s: 36, dwell_s: 5}",
+                                         "dwell_s"),
+                                        ("{static: a, up_body: [0, 0, 1], dwell_s: 5, heading: 90}", "heading")])
+def test_a_segment_field_the_scheme_does_not_know_is_refused(tmp_path, capsys, entry, key):
+    """Found by the thirteenth session: a key a segment does not have (``duration_s`` on a
+    static: the dwell is ``dwell_s``) was ignored without a word, and the run was not the one
+    asked for."""
+    scheme = tmp_path / "s.yaml"
+    scheme.write_text(f"name: s\ndefaults: {{dwell_s: 20}}\nsegments:\n  - {entry}\n")
+    one_line_exit_2(["plan", "--scheme", scheme], capsys, str(scheme), "segments[0]", f"unknown field '{key}'")
+
+
 # ------------------------------------------------------------------ import csv / rosbag
 
 @pytest.fixture(scope="module")
