@@ -331,6 +331,34 @@ def test_calibration_file_inconsistent_is_refused_by_every_reader(capture_dir, t
     assert not list(tmp_path.glob("o.csv*")) and not list(tmp_path.glob("x*"))
 
 
+BIG = 10 ** 400         # an integer no float holds (YAML reads 400 digits as a Python int)
+
+
+@pytest.mark.parametrize("where", ["parameters.inter_triad_y.sigma", "parameters.accel_bias_x.value",
+                                   "compensation.accel_bias.0"])
+def test_an_integer_beyond_every_float_in_a_calibration_is_one_line(capture_dir, tmp_path, capsys, where):
+    """Found by tests/test_fuzz_consumers.py (thirteenth session): ``OverflowError: int too large
+    to convert to float`` from the readers' finite checks."""
+    def change(doc):
+        *path, last = where.split(".")
+        target = doc
+        for key in path:
+            target = target[key]
+        target[int(last) if last.isdigit() else last] = BIG
+    cal = _edited_calibration(capture_dir, tmp_path, change)
+    for argv in (["show", cal], ["export", cal, "--to", "json", "-o", tmp_path / "x.json"]):
+        one_line_exit_2(argv, capsys, str(cal))
+
+
+@pytest.mark.parametrize("field", ["gravity_mps2", "latitude_deg"])
+def test_an_integer_beyond_every_float_in_a_manifest_is_one_line(capture_dir, tmp_path, capsys, field):
+    import shutil
+    from test_bad_inputs import edit_manifest
+    cap = Path(shutil.copytree(capture_dir, tmp_path / "cap"))
+    edit_manifest(cap, lambda d: d["site"].update({field: -BIG}))
+    one_line_exit_2(["estimate", cap, "-o", tmp_path / "c.yaml"], capsys, "manifest.yaml", field)
+
+
 # ------------------------------------------------------------------ plugins only from where the user named them
 
 EVIL = """import pathlib
