@@ -324,6 +324,8 @@ def _without_gyro_parameters(doc):
 ], ids=["zero-accel-matrix", "singular-gyro-matrix", "nan-sigma", "negative-sigma", "inf-sigma", "gyro-params-removed",
         "zero-gyro-scale", "zero-accel-scale", "tiny-accel-matrix", "gyro-scale-edited"])
 def test_calibration_file_inconsistent_is_refused_by_every_reader(capture_dir, tmp_path, capsys, change, words):
+    import warnings
+    warnings.simplefilter("error", RuntimeWarning)      # (numpy's overflow warning was a second line)
     cal = _edited_calibration(capture_dir, tmp_path, change)
     for argv in (["show", cal], ["apply", cal, capture_dir / "pos01.csv", "-o", tmp_path / "o.csv"],
                  ["export", cal, "--to", "imu_tk", "-o", tmp_path / "x"], ["diff", cal, capture_dir / "calibration.yaml"]):

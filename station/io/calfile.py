@@ -420,7 +420,8 @@ def _scales_agree(doc, imu, params, pass_through, path) -> None:
             continue
         m = doc["compensation"][f"{sensor}_matrix"]
         factor = factor_of(imu.get(unit_key, "m/s^2" if sensor == "accel" else "deg/s")) or 1.0
-        rows = np.linalg.norm(np.linalg.inv(m), axis=1) * factor
+        with np.errstate(all="ignore"):         # (a matrix of 1e-308s inverts to 1e308s: inf, refused below)
+            rows = np.linalg.norm(np.linalg.inv(m), axis=1) * factor
         for i, n in enumerate(names):
             if n not in params or params[n].get("unit") not in SCALE_UNITS:
                 continue
