@@ -480,8 +480,10 @@ def walk(w: Walk, work: Path):
            expect=0, check=lambda c, o, e: "filed" if n_filed() != before else None)
     w.case("history pollution", "run --sim: not filed", ["run", "--sim", "--scheme", scheme, "--out", work / "h-run"],
            expect=0, check=lambda c, o, e: "filed" if n_filed() != before else None)
+    _, hs12 = session(poses=12)              # (a hand calibration needs 9 poses or more)
+    log12 = write_csv(work / "log12.csv", hs12)
     w.case("history pollution", "import csv without a serial then estimate: not filed",
-           ["import", "csv", log, "--faces", "-o", work / "h-imp"], expect=0)
+           ["import", "csv", log12, "-o", work / "h-imp"], expect=0)
     w.case("history pollution", "estimate of an import with unknown serial: not filed",
            ["estimate", work / "h-imp", "-o", work / "h2.yaml"], expect=0,
            check=lambda c, o, e: "filed" if n_filed() != before else None)
