@@ -310,6 +310,7 @@ def walk(w: Walk, work: Path):
 
     # ---------------------------------------------------------------- 7. history index
     store = work / "store"
+    w.run(["history", "--store", store, "--add", cal])         # (the store the cases damage, with --only too)
     w.case("history", "history --add a sim calibration (filed when asked)",
            ["history", "--store", store, "--add", cal], expect=0)
     index = store / "index.sqlite"
