@@ -182,12 +182,9 @@ def read_session(csv_path, sections_path, rate_hz: float) -> tuple[list[Section]
 
 def read_section_list(path: Path, rows: int) -> list[tuple[str, tuple[int, int]]]:
     """{label: {start, end}} -> [(label, (start, end))] in time order, checked."""
-    try:
-        text = Path(path).read_text(encoding="utf-8-sig")
-    except OSError as e:
-        raise UserError(f"{path}: cannot read: {e.strerror}") from None
-    except UnicodeDecodeError:
-        raise UserError(f"{path}: not UTF-8 text") from None
+    from station.core.user_files import read_user_text
+
+    text = read_user_text(path, "sections file")              # (a FIFO is refused, not read)
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as e:
