@@ -74,3 +74,38 @@ def test_imucal_session_converges_at_its_minimum(tmp_path, monkeypatch):
                           ftol=1e-10, gtol=1e-10, max_nfev=50)
     assert again.status > 0 and again.nfev < 20
     assert joint.converged and r @ r - 2 * again.cost < 1e-6
+
+
+def test_a_failing_fit_that_creeps_goes_on_to_its_minimum(monkeypatch):
+    """A gyro bias step (+50 deg/h at t = 300 s) fitted with gyro_anisoelastic and no step: the fit
+    fails (chi2 ~394 for ~207 degrees of freedom) and LM crept along a valley, gaining ~0.01 of
+    chi2 per 25 evaluations, far above the twelfth session's absolute 1e-6, to the limit of 1,000
+    evaluations (3,000 gain 0.9 and still go on: chi2 394.03, not converged).  The watch now scales
+    with the fit's chi2 unit (max(1, reduced chi2): the change of chi2 that moves a parameter by its
+    honest 1-sigma), so dogbox takes over and reaches the minimum, chi2 393.875.  Counts of
+    residual evaluations, not times."""
+    import simhelpers
+    from station.model.gyro_anisoelastic import GyroAnisoelastic
+
+    _, cap = simhelpers.mems_capture(4, "optimal9", {"rate_dps": 100.0, "rotation_s": 36.0, "dwell_s": 6.0},
+                                     gyro__bias_step=[0.0, 0.0, 50.0], gyro__bias_step_time_s=300.0)
+    s = lsq.summarise(cap)
+    base = lsq.fit(s)
+    calls = []
+    residuals = lsq.Model.residuals
+    monkeypatch.setattr(lsq.Model, "residuals", lambda self, x: calls.append(1) or residuals(self, x))
+    result = lsq.fit(s, [GyroAnisoelastic()], like=base.model)
+    model = result.model
+    assert model.converged
+    # 1,000 evaluations (the limit) on main; ~80 with the scaled watch (LM ~50, dogbox ~30)
+    assert len(calls) < 300, len(calls)
+    monkeypatch.setattr(lsq.Model, "residuals", residuals)
+    r = model.residuals(result.x)
+    # at the minimum: 0.6 of chi2 below where 1,000 evaluations of LM stopped (394.49; the margin 0.5
+    # is ~0.25 of a chi2 unit, reduced chi2 ~1.9: beyond the old end by more than a tenth of a 1-sigma
+    # movement), and LM from it gains almost nothing: 2e-6 of chi2 (the watch took it as the minimum
+    # where Gauss-Newton's step would gain < 1e-6; with chi2 units of ~1.9, a movement of ~1e-3 sigma)
+    assert r @ r < 394.49 - 0.5, r @ r
+    again = least_squares(model.residuals, result.x, jac=model.jacobian, method="lm", x_scale="jac", xtol=1e-10,
+                          ftol=1e-10, gtol=1e-10, max_nfev=50)
+    assert r @ r - 2 * again.cost < 1e-5, (r @ r, 2 * again.cost, again.nfev)
