@@ -122,7 +122,7 @@ def alike_candidates(candidates) -> dict:
     scale asymmetry and a |w|^3 term are alike to 0.97 on a misfit of chi2 10^4, yet the 600 by
     which one explains it better tells them apart."""
     import numpy as np
-    from scipy.stats import chi2
+    from scipy.special import chdtri     # chi2.isf, without scipy.stats' import (~0.5 s)
 
     sig = [c for c in candidates if c.significant and c.signature_rows is not None and c.dof
            and c.effect not in NOT_DESIGNED]
@@ -136,7 +136,7 @@ def alike_candidates(candidates) -> dict:
             if not den > 0 or abs(float(u @ v)) / den < ALIAS_COS:
                 continue
             apart = float(np.sum((u - v) ** 2)) / max(a.overdispersion, b.overdispersion, 1.0)
-            if apart < chi2.isf(0.01, min(a.dof, b.dof)):
+            if apart < chdtri(min(a.dof, b.dof), 0.01):
                 out.setdefault(a.effect, []).append(b.effect)
                 out.setdefault(b.effect, []).append(a.effect)
     return out
