@@ -145,6 +145,12 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
         raise UserError(f"--from: {', '.join(per_segment)} has parameters of its own per table axis, rate or "
                         "segment (set from the segments recorded), so segments to add cannot be weighed for it; "
                         "what separates it is said beside it in station diagnose")
+    hand = [seg.name for seg in capture.complete() if seg.kind == "rotation" and not (seg.rate_dps and seg.angle_deg)]
+    if hand:
+        raise UserError(f"{path}: {', '.join(hand)} turned without a table's angle and rate (by hand): station "
+                        "design --from weighs a table's segments against the capture's own, and a hand turn has "
+                        "none to weigh; design a table scheme with station design, or record more attitudes and "
+                        "turns by hand")
     table_doc = capture.extra.get("table") if isinstance(capture.extra.get("table"), dict) else {}
     if "axes" not in table_doc and "no table" in str(table_doc.get("note", "")):
         raise UserError(f"{path}: recorded by hand, without a rate table: station design --from designs segments "

@@ -37,6 +37,19 @@ def added(effect_id: str, registry=None) -> str:
     return source
 
 
+def hand_turns(capture) -> list[str]:
+    """The capture's complete rotations without a table's angle and rate (turned by hand, or an
+    encoder that did not report): ``station design --from`` weighs table segments against the
+    capture's own and refuses such a capture (sequential.extend), so no command is printed for it."""
+    from station.io.capture import read_capture
+
+    try:
+        cap = read_capture(Path(capture), load_data=False)
+    except Exception:           # the diagnosis read it already; a capture it cannot re-read gets no command
+        return ["(the capture could not be read again)"]
+    return [seg.name for seg in cap.complete() if seg.kind == "rotation" and not (seg.rate_dps and seg.angle_deg)]
+
+
 def command(capture, effects, reveal, registry=None) -> str:
     """station design --from CAPTURE --add E ... --reveal P1,P2,... -o extension.yaml"""
     adds = "".join(f" --add {shlex.quote(added(e, registry))}" for e in effects)
@@ -71,6 +84,8 @@ def separations(capture, model_effects, effect_id: str, summaries, registry=None
 def suggest_steps(steps, capture, summaries, registry=None) -> None:
     """Set ``separations`` on every step of --auto whose added effect this capture cannot tell
     from a library effect (its caveats): the station design --from ... --separate commands."""
+    if hand_turns(capture):
+        return
     for st in steps:
         if st.discovered:
             continue
@@ -83,6 +98,16 @@ def suggest(diagnosis, capture, registry=None, summaries=None) -> None:
     for the model's own parameters it left not revealed (held by their priors); ``registry``:
     where the effects came from, so that a plugin's is named by its file (added())."""
     model_effects = [e for e in diagnosis.effects if e not in BASE and e != "discovered_terms"]
+    hand = hand_turns(capture)
+    if hand:
+        hidden = list(getattr(diagnosis.result.model, "unobservable", None) or [])
+        diagnosis.design_suggestions = [
+            f"not revealed by this capture: {', '.join(hidden)}" if hidden else "",
+            f"no `station design --from` command: {', '.join(hand)} turned without a table's angle and rate "
+            "(by hand), and the designer weighs a table's segments against the capture's own; design a "
+            "table scheme with `station design`, or record more attitudes and turns by hand"]
+        diagnosis.design_suggestions = [line for line in diagnosis.design_suggestions if line]
+        return
     alike = alike_candidates(diagnosis.candidates)
     for c in diagnosis.candidates:
         blind = list(c.aliased) if c.dof else list(c.names)
