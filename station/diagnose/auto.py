@@ -25,7 +25,7 @@ import numpy as np
 from scipy import special
 
 from station.diagnose.core import (ALPHA, Diagnosis, chi2_sf, diagnose, fit_fails, overdispersion, rms_by_kind,
-                                   within_calibration_threshold)
+                                   within_calibration_threshold, not_converged)
 from station.diagnose.holdout import Holdout, judge, leave_one_segment_out
 from station.diagnose.words import caveats, failure_account
 from station.estimate import lsq, profile
@@ -480,7 +480,7 @@ def conclude(d: Diagnosis, summaries, steps=(), search_terms: bool = True) -> Di
         d.proposal = terms.propose(d, summaries)
         if d.proposal is not None and d.proposal.kept and steps:
             d.proposal.redundant = redundant_with(d, d.proposal.effect, {st.added for st in steps}, summaries)
-    head = (f"the model does not explain the data{added} (reduced chi2 {d.reduced_chi2:.3g})"
+    head = (not_converged(d.result) + f"the model does not explain the data{added} (reduced chi2 {d.reduced_chi2:.3g})"
             + within_calibration_threshold(d.reduced_chi2))
     if now:
         head += f"; first look at this: {now[0]}"

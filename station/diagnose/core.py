@@ -268,6 +268,16 @@ def within_calibration_threshold(reduced: float) -> str:
             "from this fit passes, what is missing being smaller than half the noise's variance")
 
 
+def not_converged(result) -> str:
+    """The verdict's first words when the fit stopped at its evaluation limit: its chi2, the
+    verdict and the candidates' scores are those where the solver stopped, not at the model's
+    minimum (lsq._solve's note; verdict.py's "not converged"); "" for a converged fit."""
+    if getattr(result.model, "converged", True):
+        return ""
+    return ("not converged: the fit stopped at its evaluation limit before its minimum, so the chi2 and what "
+            "follows are those where it stopped; ")
+
+
 def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diagnosis:
     from station.diagnose.words import describe_failures
 
@@ -288,6 +298,7 @@ def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diag
                    "and no effect of the library accounts for it: see where it fails")
     if not good:
         verdict += within_calibration_threshold(reduced)
+    verdict = not_converged(result) + verdict
     notes = []
     phi = overdispersion(result)
     if phi > 1.0:
@@ -296,6 +307,7 @@ def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diag
                      "the 1-sigma): only a drop large against the misfit counts")
     # the data faults found before the fit (station/estimate/data_faults.py): what was left out
     notes += list(getattr(result.model.s, "data_fault_notes", None) or [])
+    notes += [n for n in getattr(result.model, "notes", None) or [] if n.startswith("the fit stopped at its limit")]
     return Diagnosis(effects=["base_triads", "inter_triad"] + [e.id for e in result.model.effects],
                      chi2=result.chi2, dof=result.dof, reduced_chi2=reduced, p_value=p,
                      segments=segs, candidates=cands, failures=failures, verdict=verdict,
