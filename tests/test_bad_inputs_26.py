@@ -448,15 +448,22 @@ def test_stale_temporary_calibration_files_are_removed_safely(capture_dir, tmp_p
 
 
 @pytest.mark.parametrize("what", ["deep", "fifo", "month-13"])
-def test_import_sections_file_deep_fifo_or_bad_date(hand_log, tmp_path, what):
+def test_import_sections_file_deep_fifo_or_bad_date(hand_log, tmp_path, capsys, what):
+    """The FIFO in a real process (a hang there is the child's, ended by the timeout); the deep and
+    the bad-date files in this one (nothing of them can hang or take the process down: one line,
+    exit status 2, as test_deeply_nested_yaml_is_one_line_naming_the_file checks the others)."""
     log, _ = hand_log
     sections = tmp_path / "sections.yaml"
+    argv = ["import", "csv", log, "--segments", sections, "-o", tmp_path / "cap"]
     if what == "fifo":
         os.mkfifo(sections)
-    else:
-        sections.write_text(DEEP if what == "deep" else "- {name: a, kind: static, start: 2026-13-01}\n")
-    done = run_child(["import", "csv", log, "--segments", sections, "-o", tmp_path / "cap"], timeout=60)
-    assert done.returncode == 2 and str(sections) in done.stderr and done.stderr.count("\n") == 1, done.stderr
+        done = run_child(argv, timeout=60)
+        assert done.returncode == 2 and str(sections) in done.stderr and done.stderr.count("\n") == 1, done.stderr
+        return
+    from processes import time_limit
+    sections.write_text(DEEP if what == "deep" else "- {name: a, kind: static, start: 2026-13-01}\n")
+    with time_limit(30):            # (the refusal takes milliseconds; 30 s is a hang on a machine loaded 10x)
+        one_line_exit_2(argv, capsys, str(sections))
 
 
 @pytest.mark.parametrize("argv", [["plan", "--scheme", "{f}"], ["plan", "--config", "{f}"],
