@@ -3,7 +3,10 @@ the 4-IMU run's wall time): one block read by each reader answers all of them, w
 after the other needed each reader to finish a block begun after the previous one had answered.
 
 A fake driver whose every read blocks until the test releases it (no clock, no sleep): which
-reads an answer needs is then a fact of the code, not of timing."""
+reads an answer needs is then a fact of the code, not of timing.  At the end each fake is
+closed first (its pending read fails, as a real port's does when closed), so that
+``ImuStream.stop`` finds the reader thread ended instead of waiting out its join ceiling
+(3 x frame_timeout_s = 3 s per stream: 12 of this file's 15 s before)."""
 from __future__ import annotations
 
 import threading
@@ -23,15 +26,23 @@ class GatedImu:
         self.gate = threading.Semaphore(0)
         self.reads = 0
         self.t = 0.0
+        self.closed = False
 
     def start(self):
         pass
 
     def stop(self):
+        self.close()
+
+    def close(self):
+        """Close the port: the pending read (and every later one) fails at once."""
+        self.closed = True
         self.gate.release(100)
 
     def read(self, n):
         self.gate.acquire()
+        if self.closed:
+            raise ConnectionError("GatedImu closed")
         self.reads += 1
         t = self.t + np.arange(1, n + 1) * 0.01
         self.t = float(t[-1])
@@ -54,6 +65,8 @@ def test_every_reader_asked_first_is_answered_by_one_block_each():
         assert answers == [0.1] * 4                     # 10 samples of 0.01 s: the first block each
         assert [imu.reads for imu in imus] == [1] * 4
     finally:
+        for imu in imus:
+            imu.close()
         for s in streams:
             s.stop()
 
@@ -74,4 +87,5 @@ def test_a_sync_asked_after_the_block_began_waits_for_the_next_one():
         imu.gate.release()
         assert stream.sync(ticket=ticket, wait_s=10.0) == 0.2
     finally:
+        imu.close()
         stream.stop()
