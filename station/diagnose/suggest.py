@@ -45,8 +45,8 @@ def hand_turns(capture) -> list[str]:
 
     try:
         cap = read_capture(Path(capture), load_data=False)
-    except Exception:           # the diagnosis read it already; a capture it cannot re-read gets no command
-        return ["(the capture could not be read again)"]
+    except Exception:           # the diagnosis read it already; if it cannot be read again, design --from says why
+        return []
     return [seg.name for seg in cap.complete() if seg.kind == "rotation" and not (seg.rate_dps and seg.angle_deg)]
 
 
