@@ -216,11 +216,9 @@ def diagnose(capture, *, add=(), plugins=(), effects_dirs=(), config=None, calib
         steps, first = [], _diagnose(lsq.fit(s, [registry.create(e) for e in ids]), registry=registry)
         _auto.conclude(first, s)
         final = first
-    from station.diagnose.suggest import suggest, suggest_steps
+    from station.diagnose.suggest import suggest_all
 
-    for d in {id(first): first, id(final): final}.values():
-        suggest(d, cap.path, registry, summaries=s)
-    suggest_steps(steps, cap.path, s, registry)
+    suggest_all(first, final, steps, cap, s, registry)
     final.steps, final.first, final.warnings = steps, first, warnings
     return final
 

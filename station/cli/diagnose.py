@@ -196,11 +196,9 @@ def _diagnose(args, job) -> tuple:
     from station.diagnose.report import ReportInput, capture_facts
     from station.io.history import verdict_of
 
-    from station.diagnose.suggest import suggest, suggest_steps
+    from station.diagnose.suggest import suggest_all
 
-    for d in {id(first): first, id(final): final}.values():
-        suggest(d, capture.path, reg, summaries=s)
-    suggest_steps(steps, capture.path, s, reg)
+    suggest_all(first, final, steps, capture, s, reg)
     figures.known(first, steps)
     if not args.json:
         _print(out, first, steps, final)        # while the figures are drawn

@@ -145,7 +145,9 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
         raise UserError(f"--from: {', '.join(per_segment)} has parameters of its own per table axis, rate or "
                         "segment (set from the segments recorded), so segments to add cannot be weighed for it; "
                         "what separates it is said beside it in station diagnose")
-    hand = [seg.name for seg in capture.complete() if seg.kind == "rotation" and not (seg.rate_dps and seg.angle_deg)]
+    from station.diagnose.suggest import hand_turns       # the one rule: diagnose prints no command for these
+
+    hand = hand_turns(capture)
     if hand:
         raise UserError(f"{path}: {', '.join(hand)} turned without a table's angle and rate (by hand): station "
                         "design --from weighs a table's segments against the capture's own, and a hand turn has "

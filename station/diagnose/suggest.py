@@ -38,16 +38,22 @@ def added(effect_id: str, registry=None) -> str:
 
 
 def hand_turns(capture) -> list[str]:
-    """The capture's complete rotations without a table's angle and rate (turned by hand, or an
-    encoder that did not report): ``station design --from`` weighs table segments against the
-    capture's own and refuses such a capture (sequential.extend), so no command is printed for it."""
-    from station.io.capture import read_capture
+    """The complete rotations of ``capture`` (a Capture, as read) without a table's angle and rate
+    (turned by hand, or an encoder that did not report): ``station design --from`` weighs table
+    segments against the capture's own and refuses such a capture (sequential.extend, the same
+    rule), so no command is printed for it."""
+    return [seg.name for seg in capture.complete() if seg.kind == "rotation" and not (seg.rate_dps and seg.angle_deg)]
 
-    try:
-        cap = read_capture(Path(capture), load_data=False)
-    except Exception:           # the diagnosis read it already; if it cannot be read again, design --from says why
-        return []
-    return [seg.name for seg in cap.complete() if seg.kind == "rotation" and not (seg.rate_dps and seg.angle_deg)]
+
+def suggest_all(first, final, steps, capture, summaries, registry=None) -> None:
+    """What diagnose says beside its findings, set on the diagnoses it shows (the first and the
+    final, each once) and on --auto's steps; ``capture`` the Capture the diagnosis read (its
+    manifest is not read again)."""
+    hand = hand_turns(capture)
+    for d in {id(first): first, id(final): final}.values():
+        suggest(d, capture.path, registry, summaries=summaries, hand=hand)
+    if not hand:
+        suggest_steps(steps, capture.path, summaries, registry)
 
 
 def command(capture, effects, reveal, registry=None) -> str:
@@ -84,29 +90,24 @@ def separations(capture, model_effects, effect_id: str, summaries, registry=None
 def suggest_steps(steps, capture, summaries, registry=None) -> None:
     """Set ``separations`` on every step of --auto whose added effect this capture cannot tell
     from a library effect (its caveats): the station design --from ... --separate commands."""
-    if hand_turns(capture):
-        return
     for st in steps:
         if st.discovered:
             continue
         st.separations = separations(capture, st.after.effects, st.added, summaries, registry)
 
 
-def suggest(diagnosis, capture, registry=None, summaries=None) -> None:
+def suggest(diagnosis, capture, registry=None, summaries=None, hand=()) -> None:
     """Set ``suggestion`` on every candidate the capture cannot reveal (no parameter it can
     size, or parameters aliased with the model's) and ``design_suggestions`` on the diagnosis
     for the model's own parameters it left not revealed (held by their priors); ``registry``:
     where the effects came from, so that a plugin's is named by its file (added())."""
     model_effects = [e for e in diagnosis.effects if e not in BASE and e != "discovered_terms"]
-    hand = hand_turns(capture)
-    if hand:
+    if hand:        # turned by hand (hand_turns): no command, but why
         hidden = list(getattr(diagnosis.result.model, "unobservable", None) or [])
-        diagnosis.design_suggestions = [
-            f"not revealed by this capture: {', '.join(hidden)}" if hidden else "",
+        diagnosis.design_suggestions = ([f"not revealed by this capture: {', '.join(hidden)}"] if hidden else []) + [
             f"no `station design --from` command: {', '.join(hand)} turned without a table's angle and rate "
             "(by hand), and the designer weighs a table's segments against the capture's own; design a "
             "table scheme with `station design`, or record more attitudes and turns by hand"]
-        diagnosis.design_suggestions = [line for line in diagnosis.design_suggestions if line]
         return
     alike = alike_candidates(diagnosis.candidates)
     for c in diagnosis.candidates:
