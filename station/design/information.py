@@ -59,6 +59,7 @@ class Parameters:
     columns: np.ndarray            # indices into G
     factors: np.ndarray
     typical: np.ndarray            # an effect parameter's typical size (reported unit), inf for base
+    effects: list | None = None    # the effect id of each (None for the base model's)
 
 
 @dataclass
@@ -83,6 +84,10 @@ class Information:
     # per candidate key the temperature difference it had in the candidates' own capture (the
     # information before timeline=True: the search's first stage ranks on it, search.Scorer.natural)
     natural_dt: dict = field(default_factory=dict)
+    # the reported parameters each chunk's model has (the first: the capture's own segments in
+    # station design --from), and the union's shared columns by name (column_names)
+    chunk_parameters: list = field(default_factory=list)
+    column_names: list = field(default_factory=list)
 
 
 def temperature_powers(effects: list, parameters: "Parameters", shared: int) -> np.ndarray | None:
@@ -172,12 +177,96 @@ def parameters_of(model, shared: np.ndarray) -> Parameters:
     for k, n in enumerate(names):
         if "_scale_" in n and units_[k] == "1":
             factors[k], units_[k] = 1e6, "ppm"          # relative (the scale is ~1)
+    effect_of = [None] * len(names)
     at = 21
     for e in model.effects:
         for p in e.params:
             typical[at] = p.typical
+            effect_of[at] = e.id
             at += 1
-    return Parameters(names, units_, np.array([where[int(c)] for c in index]), factors, typical)
+    keep = [k for k, c in enumerate(index) if int(c) in where]     # (a candidate group's own offsets: nuisances)
+    return Parameters([names[k] for k in keep], [units_[k] for k in keep],
+                      np.array([where[int(index[k])] for k in keep], dtype=int), factors[keep], typical[keep],
+                      [effect_of[k] for k in keep])
+
+
+def column_names(model, shared: np.ndarray) -> list:
+    """A name for each shared column that means the same in every model of the same effects: a
+    block's name and place (the base model's, the mounting offset's), an effect parameter's own
+    name.  A bench effect's parameters are set from the segments recorded (table_wobble one pair
+    per table axis, table_vibration_once_per_rev six per table axis and rate): each chunk of
+    candidates has the columns of the table axes and rates it turns at, named alike where they
+    are the same parameter (information() takes their union)."""
+    out = {}
+    for block, sl in model.layout.blocks.items():
+        if block.startswith("effect:"):
+            e = next(x for x in model.effects if x.id == block[len("effect:"):])
+            for k, p in enumerate(e.params):
+                out[sl.start + k] = f"{e.id}:{p.name}"
+        else:
+            for k in range(sl.stop - sl.start):
+                out[sl.start + k] = f"{block}[{k}]"
+    return [out[int(c)] for c in shared]
+
+
+_NONE = np.zeros(0, dtype=int)
+
+
+def _is_capture_key(key) -> bool:
+    """A key of the capture's own segments (station design --from: ("capture", ...))."""
+    return isinstance(key[0], tuple) and bool(key[0]) and key[0][0] == "capture" or key[0] == "capture"
+
+
+def _anchored(segments: list, owner: dict, n: int) -> list:
+    """With an offset per axis group (rotation_axis_offsets) the first group takes the model's
+    common mounting offset and has none of its own: a chunk of candidates gets an anchor turn
+    (about an axis no candidate has, its rows not used) before its first rotation, so that every
+    candidate's group has its own, as an appended rotation has (information()).  A chunk whose
+    first rotation is the capture's keeps it (the capture's first group is the first group)."""
+    from station.io.scheme import RotationSpec
+
+    first = next((k for k, p in enumerate(segments) if isinstance(p, RotationSpec)), None)
+    if first is None or _is_capture_key(owner[segments[first].name]):
+        return segments
+    r = segments[first]
+    axis = tuple(float(x) for x in np.array([1.0, 2.0, 4.0]) / np.sqrt(21.0))
+    rate = abs(float(r.rate_dps))
+    anchor = [RotationSpec(f"anchor{n}_{d}", axis, sign * rate, 360.0 / rate,
+                           axis_elevation_deg=r.axis_elevation_deg) for d, sign in (("p", 1.0), ("m", -1.0))]
+    for a in anchor:
+        owner[a.name] = ("anchor", "rotation", n)
+    return segments[:first] + anchor + segments[first:]
+
+
+def _group_offsets(model, owner: dict) -> dict:
+    """{axis group: its offset's columns} of the groups of candidates (not the capture's own) with
+    an offset of their own (rotation_axis_offsets): nuisances of that group."""
+    e = next((x for x in model.effects if x.id == "rotation_axis_offsets"), None)
+    if e is None:
+        return {}
+    sl = model.layout["effect:rotation_axis_offsets"]
+    keys: dict = {}
+    for r in model.s.rotations:
+        keys.setdefault(int(r.group), []).append(owner.get(r.name, ("anchor",)))
+    out = {}
+    for n, g in enumerate(e.groups):
+        if not any(_is_capture_key(k) for k in keys.get(int(g), [])):
+            out[int(g)] = np.arange(sl.start + 3 * n, sl.start + 3 * n + 3)
+    return out
+
+
+def _embed(M: np.ndarray, idx: np.ndarray, G: int) -> np.ndarray:
+    """A block over (a chunk's shared columns + its own nuisances) placed over (the union's shared
+    columns + the same nuisances): the chunk's column j at idx[j]; a column the chunk has not (a
+    rate it does not turn at) gets no information from it."""
+    g = len(idx)
+    if g == G and np.array_equal(idx, np.arange(G)):
+        return M
+    n = M.shape[0] - g
+    where = np.concatenate([idx, G + np.arange(n)])
+    out = np.zeros((G + n, G + n))
+    out[np.ix_(where, where)] = M
+    return out
 
 
 def _reduce(J_rows, keep_cols, drop_cols) -> np.ndarray:
@@ -237,6 +326,13 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
         if any(isinstance(e, TemperatureReferenced) for e in effects):
             truth.temperature.warmup_delta_c = truth.temperature.drift_c_per_h = 0.0
     info = None
+    union: dict = {}                 # column name (column_names) -> its place in the union's G
+    merged = None                    # the union's reported parameters
+    placed: list = []                # (dict, key, the chunk's idx): the blocks to embed at the end
+    # an offset per axis group (rotation_axis_offsets): a candidate's axis group has an offset of its
+    # own (an appended rotation is a group of its own: docs/capture.md), eliminated with the group's
+    # nuisances; the capture's own groups' offsets (station design --from) stay parameters
+    offsets_of_groups = any(e.id == "rotation_axis_offsets" for e in effects)
     for chunk in chunks:
         segments, owner = [], {}
         for key, spec in chunk:
@@ -244,12 +340,33 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
             for p in parts:
                 segments.append(p)
                 owner[p.name] = key
+        if offsets_of_groups:
+            segments = _anchored(segments, owner, len(placed))
         scheme = Scheme("candidates", "", "", {}, tuple(segments), centred=centred, table=True)
         model, _ = model_of(scheme, effects, noise, truth, geometry, attitudes)
         shared = _shared_columns(model)
-        if info is None:
-            parameters = parameters_of(model, shared)
-            power = temperature_powers(model.effects, parameters, len(shared)) if timeline else None
+        group_own = _group_offsets(model, owner)
+        if group_own:
+            mine = set(c for cols in group_own.values() for c in cols.tolist())
+            shared = np.array([c for c in shared if int(c) not in mine], dtype=int)
+        names_c = column_names(model, shared)
+        for n in names_c:
+            union.setdefault(n, len(union))
+        idx = np.array([union[n] for n in names_c], dtype=int)
+        p_c = parameters_of(model, shared)
+        if merged is None:
+            merged = Parameters(list(p_c.names), list(p_c.units), idx[p_c.columns], np.array(p_c.factors, float),
+                                np.array(p_c.typical, float), list(p_c.effects))
+            power = temperature_powers(model.effects, p_c, len(shared)) if timeline else None
+        else:
+            known = set(merged.names)
+            new = [k for k, n in enumerate(p_c.names) if n not in known]
+            merged.names += [p_c.names[k] for k in new]
+            merged.units += [p_c.units[k] for k in new]
+            merged.columns = np.concatenate([merged.columns, idx[p_c.columns[new]]]).astype(int)
+            merged.factors = np.concatenate([merged.factors, np.asarray(p_c.factors, float)[new]])
+            merged.typical = np.concatenate([merged.typical, np.asarray(p_c.typical, float)[new]])
+            merged.effects += [p_c.effects[k] for k in new]
         if power is not None:
             for e in model.effects:            # dT = 1 degC at every segment
                 if hasattr(e, "reference_c"):
@@ -263,12 +380,12 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
             x = lsq._solve(model, x)[0]
         J = model.sparse_jacobian(x).tocsr()
         labels = model.row_labels(x)
-        G = len(shared)
         if info is None:
-            info = Information(G, parameters, attitudes=attitudes)
+            info = Information(len(shared), merged, attitudes=attitudes)
             if power is not None:
                 info.temp_power, info.temperature = power, warm
                 info.clock = (float(truth.bench.move_s + truth.bench.settle_s), float(truth.sample_rate_hz))
+        info.chunk_parameters.append(list(p_c.names))
         if power is not None:
             from station.design.timeline import seconds_temperatures
 
@@ -278,8 +395,6 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
             for (key, spec), t in zip(chunk, temps):
                 if key[0] != "anchor":
                     info.natural_dt[key] = float(t - ref)
-        elif G != info.shared:
-            raise RuntimeError("candidate chunks with different shared columns")
         L = model.layout
         rows_of: dict = {}
         for r, lab in enumerate(labels):
@@ -293,7 +408,7 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
         groups_used = {}
         for key, names in by_key.items():
             rows = sorted(r for n in names for r in rows_of.get(n, []))
-            if not rows:
+            if not rows or key[0] == "anchor":
                 continue
             Jr = J[rows].toarray()
             if names[0] in static_index:
@@ -303,19 +418,37 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
                 prior = np.array([labels[r][2] in PRIOR_QUANTITIES for r in rows])
                 Jd, Jp = Jr[~prior][:, keep], Jr[prior][:, keep]
                 info.static_parts[key] = (Jd.T @ Jd / UNIT_DWELL_S, Jp.T @ Jp)
+                placed.append(("static", info.static_parts, key, idx))
             else:
                 group = s.rotations[rot_index[names[0]]].group
                 axis = L[f"axis{group}"]
                 drop = [c for n in names for c in range(L[f"phase{rot_index[n]}"].start,
                                                          L[f"phase{rot_index[n]}"].stop)]
-                keep = np.concatenate([shared, np.arange(axis.start, axis.stop)])
+                keep = np.concatenate([shared, np.arange(axis.start, axis.stop), group_own.get(group, _NONE)])
                 gkey = (key[0], key[1])           # (axis, elevation)
                 info.rotation[key] = (gkey, _reduce(Jr, keep, np.array(drop, int)))
+                placed.append(("rotation", info.rotation, key, idx))
                 groups_used[group] = gkey
         for group, gkey in groups_used.items():
             rows = rows_of.get(f"axis{group}", [])
             axis = L[f"axis{group}"]
-            keep = np.concatenate([shared, np.arange(axis.start, axis.stop)])
+            keep = np.concatenate([shared, np.arange(axis.start, axis.stop), group_own.get(group, _NONE)])
             info.group_prior[gkey] = (_reduce(J[rows].toarray(), keep, np.zeros(0, int)) if rows
                                       else np.zeros((len(keep), len(keep))))
+            placed.append(("prior", info.group_prior, gkey, idx))
+    # every block over the union's shared columns (column_names: a bench effect's table axes and
+    # rates are those of the chunk's own turns; the base model's columns are the same in all)
+    G = len(union)
+    for kind, where, key, idx in placed:
+        v = where[key]
+        if kind == "rotation":
+            where[key] = (v[0], _embed(v[1], idx, G))             # (group key, block)
+        elif kind == "static":
+            where[key] = tuple(_embed(m, idx, G) for m in v)      # (data, prior)
+        else:
+            where[key] = _embed(v, idx, G)
+    info.shared = G
+    info.column_names = list(union)
+    if power is not None and len(power) != G:
+        info.temp_power = temperature_powers(model.effects, merged, G)
     return info

@@ -195,7 +195,7 @@ class Scorer:
         """Covariance of every reported parameter from the information F of G, reported units
         (F scaled to a unit diagonal first: its columns' information spans twenty decades in the
         model's internal units)."""
-        d = np.sqrt(np.diag(F))
+        d = np.sqrt(np.clip(np.diag(F), 0.0, None))       # (a column no candidate informs: 0, rounding -1e-8)
         d[d == 0] = 1.0
         Fs = F / np.outer(d, d) + RIDGE * np.eye(self.G)
         try:

@@ -41,11 +41,14 @@ ALIAS_COS = 0.95          # diagnose's (station/diagnose/terms.py): this alike a
 DEFAULT_FRACTION = 0.5    # target 1σ as a fraction of the parameter's typical size (module doc)
 MAX_SEGMENTS = 12         # the most rotation pairs / statics an extension proposes
 CHECK_ROUNDS = 4          # the estimator's check sends the search on at most this often
-# effects whose parameters the recorded segments decide (one set per table axis, per rate, per axis
-# group or segment, or a step's time): a candidate segment's information has other columns than
-# the capture's (station/design/information.py needs the same shared columns in every chunk)
-PER_SEGMENT_EFFECTS = ("table_wobble", "table_vibration_once_per_rev", "rotation_axis_offsets",
-                       "remount_per_segment", "bias_step")
+# effects whose parameters the recorded segments decide and that no candidate shares: a placement
+# per segment, a step's time.  An offset per axis group (rotation_axis_offsets) is designed: the
+# capture's groups keep theirs, a candidate's group (an appended rotation is a group of its own)
+# has its own, eliminated with the group's nuisances (information.py).  The bench's effects of a table axis
+# or a rate (table_wobble: one lean per table axis; table_vibration_once_per_rev: one per table axis
+# and rate) are designed: a candidate about the same table axis, or at the same rate, shares them
+# (information.column_names), one at a new rate brings its own
+PER_SEGMENT_EFFECTS = ("remount_per_segment", "bias_step")
 
 
 @dataclass
@@ -142,9 +145,9 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
         raise UserError("--from: give --reveal PARAMS or --separate A,B (one of them)")
     per_segment = [e.id for e in effects if e.id in PER_SEGMENT_EFFECTS]
     if per_segment:
-        raise UserError(f"--from: {', '.join(per_segment)} has parameters of its own per table axis, rate or "
-                        "segment (set from the segments recorded), so segments to add cannot be weighed for it; "
-                        "what separates it is said beside it in station diagnose")
+        raise UserError(f"--from: {', '.join(per_segment)} has parameters of its own per segment or a step's time "
+                        "(set from the segments recorded) that no added segment shares, so segments to add cannot "
+                        "be weighed for it; what separates it is said beside it in station diagnose")
     from station.diagnose.suggest import hand_turns       # the one rule: diagnose prints no command for these
 
     hand = hand_turns(capture)
@@ -184,10 +187,14 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     names = info.parameters.names
     units = info.parameters.units
     typical = info.parameters.typical
+    # the parameters the capture's own model has (a bench effect's table axes and rates: those it
+    # turned at); a candidate at a new rate brings parameters of its own, nuisances here
+    own_names = set(info.chunk_parameters[0])
     # --- the goal
     if reveal:
-        targets = sorted({i for p in reveal for i, n in enumerate(names) if fnmatch.fnmatchcase(n, p)})
-        missing = [p for p in reveal if not any(fnmatch.fnmatchcase(n, p) for n in names)]
+        targets = sorted({i for p in reveal for i, n in enumerate(names)
+                          if n in own_names and fnmatch.fnmatchcase(n, p)})
+        missing = [p for p in reveal if not any(fnmatch.fnmatchcase(n, p) for n in names if n in own_names)]
         if missing:
             raise UserError(f"--reveal: no parameter of this model matches {', '.join(missing)} (its effect "
                             f"parameters: {', '.join(names[21:]) or 'none: add the effect with --add'})")
@@ -200,15 +207,18 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     else:
         ids = [e.id for e in effects]
         a, b = separate
-        where = {}
-        at = 21
-        for e in effects:
-            where[e.id] = np.arange(at, at + len(e.params))
-            at += len(e.params)
+        of = info.parameters.effects
         for x in (a, b):
-            if x not in where:
+            if x not in ids:
                 raise UserError(f"--separate: {x} is not in the model ({', '.join(ids)})")
-        group_a, group_b = where[a], where[b]
+        # each effect's parameters as the capture's segments set them up (a bench effect's table
+        # axes and rates: those the capture turned at)
+        group_a, group_b = (np.array([i for i, n in enumerate(names) if of[i] == x and n in own_names], int)
+                            for x in (a, b))
+        for x, g in ((a, group_a), (b, group_b)):
+            if not len(g):
+                raise UserError(f"--separate: {x} has no parameter this capture's segments can show (e.g. a "
+                                "table effect of rotations about a vertical axis only)")
         targets = sorted(set(group_a.tolist()) | set(group_b.tolist()))
         goal = (f"separate {a} from {b} (every parameter of each with 1σ at most {fraction:g} x its typical "
                 f"size, no correlation between them above {ALIAS_COS})")
@@ -283,7 +293,7 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
         return added
 
     added = search()
-    before = predict(base, effects, noise, config)
+    before = _aligned(predict(base, effects, noise, config), names)
     for _ in range(CHECK_ROUNDS):
         if not added:
             raise UserError(f"{path}: no candidate segment on this table can {goal.split(' (')[0]}")
@@ -292,7 +302,7 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
         ext = Scheme(name, "extension designed by station design --from", "docs/design.md", {}, tuple(specs),
                      centred=base.centred)
         whole = Scheme(base.name, "", "", {}, base.segments + _renamed(ext.segments, base), centred=base.centred)
-        after = predict(whole, effects, noise, config)
+        after = _aligned(predict(whole, effects, noise, config), names)
         blind = [names[i] for i in targets if not after.revealed[i]]
         if reached <= 1.0 and not blind:
             break
@@ -350,10 +360,28 @@ def _entry_s(table, entry) -> float:
     return float(table.rotation_pair_s(rate, max(1, round(rate * entry["rotation_s"] / 360.0))))
 
 
+def _aligned(pred, names):
+    """The estimator's prediction (designer.predict: its own parameters' order) in the order of
+    ``names`` (the information's): a parameter that scheme has not (a rate it does not turn at)
+    NaN and not revealed."""
+    from types import SimpleNamespace
+
+    at = {n: k for k, n in enumerate(pred.names)}
+    k = np.array([at.get(n, -1) for n in names])
+    ok = k >= 0
+    sigma = np.full(len(names), np.nan)
+    sigma[ok] = np.asarray(pred.sigma)[k[ok]]
+    revealed = np.zeros(len(names), bool)
+    revealed[ok] = np.asarray(pred.revealed)[k[ok]]
+    cov = np.full((len(names), len(names)), np.nan)
+    cov[np.ix_(ok, ok)] = np.asarray(pred.covariance)[np.ix_(k[ok], k[ok])]
+    return SimpleNamespace(sigma=sigma, revealed=revealed, covariance=cov)
+
+
 def _cross_correlation(cov, a, b) -> float:
     d = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
     corr = cov / np.outer(d, d)
-    return float(np.max(np.abs(corr[np.ix_(a, b)]))) if len(a) and len(b) else 0.0
+    return float(np.nanmax(np.abs(corr[np.ix_(a, b)]))) if len(a) and len(b) else 0.0
 
 
 PREFIX = "x"

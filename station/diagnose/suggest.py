@@ -8,14 +8,14 @@ from pathlib import Path
 
 BASE = ("base_triads", "inter_triad")
 ALIAS_COS = 0.95      # two candidates whose one-step signatures are this alike: aliases (terms.py's threshold)
-# effects a scheme extension cannot be designed for: parameters per table axis, rate or segment, a
-# step's time (station.design.sequential.PER_SEGMENT_EFFECTS, copied: diagnose is below design)
+# effects a scheme extension cannot be designed for: parameters per segment that no added segment
+# shares, a step's time (a table axis' wobble, a vibration per table axis and rate and an offset per
+# axis group are designed: station/design/information.py) (station.design.sequential.PER_SEGMENT_EFFECTS, copied: diagnose is below design)
 # effects of the time and the temperature: the candidates' information is on their own timeline,
 # not the capture's clock going on, and the table has no chamber: two of them are not separated
 # by segments the designer can weigh (docs/design.md, Limits)
 TIMELINE = ("bias_drift", "temperature_bias", "temperature_bias_quadratic", "scale_temperature")
-NOT_DESIGNED = ("table_wobble", "table_vibration_once_per_rev", "rotation_axis_offsets", "remount_per_segment",
-                "bias_step")
+NOT_DESIGNED = ("remount_per_segment", "bias_step")
 
 
 def added(effect_id: str, registry=None) -> str:

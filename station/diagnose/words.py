@@ -388,6 +388,15 @@ def aliases(summaries, effect_id: str) -> list[tuple]:
     if effect_id == "accel_nonlinearity" and summaries.rotations and len(rates) == 1:
         out.append(("table_wobble", "a second harmonic in the rotations can also come from a wobbling table axis; "
                     "statics at ±1 g and 45° separate the two"))
+    if effect_id == "table_wobble" and len(rates) == 1:
+        out.append(("accel_nonlinearity", "a second harmonic along the rotation's axis can also come from an "
+                    "even accelerometer error (K2: gravity squared along the axis); statics at ±1 g and 45° "
+                    "and turns about other axes of the same table axis separate the two"))
+    if effect_id == "table_vibration_once_per_rev" and len(rates) == 1:
+        out.append(("accel_lever_arm", f"every rotation is at one rate ({rates[0]:g} °/s): the part of a "
+                    "vibration across the axis is a constant in the rotations' accelerometer mean, as the "
+                    "accelerometers' size effect is; turns at another rate, or about a vertical axis (no "
+                    "vibration modelled there), separate the two"))
     return out
 
 
