@@ -92,6 +92,7 @@ class Case:
     rate: float = 30.0
     diagnose_args: tuple = ()           # e.g. a plugin
     body_axes_only: bool = False        # turns about the body axes only (each gyro sees one rate)
+    faces_only: bool = False            # the six faces' statics only (no static at 45°)
 
 
 CASES = [
@@ -123,8 +124,10 @@ CASES = [
 BY_NAME = {c.name: c for c in CASES}
 
 
-def scheme_doc(rate: float, body_axes_only: bool = False) -> dict:
+def scheme_doc(rate: float, body_axes_only: bool = False, faces_only: bool = False) -> dict:
     ups = [[0, 0, 1], [0, 0, -1], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [1, 1, 0], [0, 1, 1], [1, 0, 1]]
+    if faces_only:           # no static at 45°: an even accelerometer error is seen in the turns only
+        ups = ups[:6]
     axes = [("rx", [1, 0, 0]), ("ry", [0, 1, 0]), ("rz", [0, 0, 1]), ("rxy", [1, 1, 0]), ("ryz", [0, 1, 1]),
             ("rxz", [1, 0, 1])]
     if body_axes_only:       # about a diagonal each gyro sees the rate / sqrt 2: a second rate
@@ -208,7 +211,7 @@ def run_case(arg) -> dict:
         rate_hz = float(doc["sample_rate_hz"])
         (work / "truth.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
         (work / "clean.yaml").write_text(yaml.safe_dump(truth_doc(None), sort_keys=False))
-        (work / "scheme.yaml").write_text(yaml.safe_dump(scheme_doc(case.rate, case.body_axes_only), sort_keys=False))
+        (work / "scheme.yaml").write_text(yaml.safe_dump(scheme_doc(case.rate, case.body_axes_only, case.faces_only), sort_keys=False))
         seed = opts["seed"]
         for cap, truth in (("cap", "truth.yaml"), ("clean", "clean.yaml")):
             rc, _, err, _ = cli(["run", "--scheme", "scheme.yaml", "--sim", "--sim-truth", truth, "--seed", str(seed),
@@ -257,8 +260,9 @@ def run_case(arg) -> dict:
         res["extension_s"] = rep["duration_s"]
         res["segments"] = [s.get("rotation") or s.get("static") for s in rep["segments"]]
         res["correlation"] = [rep["correlation_before"], rep["correlation_after"]]
-        # 4. appended, to the capture and to the clean one (the floor)
-        for cap in ("cap", "clean"):
+        # 4. appended, to the capture and to the clean one (the floor); none when the designer
+        # finds the capture's own segments separate the two already (no extension written)
+        for cap in (("cap", "clean") if res["segments"] else ()):
             rc, _, err, _ = cli(["run", "--sim", "--append", cap, "--scheme", "extension.yaml", "--no-history"],
                                 work, log)
             if rc not in (0, 3):
@@ -317,7 +321,8 @@ def table(results: list) -> str:
         design = _yn(r.get("design")) + (f" ({r['design_s']} s)" if r.get("design_s") else "")
         if r.get("design_error"):
             design += f" ({r['design_error'][:200]})"
-        seg = (f"{len(r['segments'])}: {r['extension_s']:.0f} s" if "segments" in r else "—")
+        seg = ((f"{len(r['segments'])}: {r['extension_s']:.0f} s" if r["segments"] else
+                f"none needed (the capture's own: corr {r['correlation'][0]:.2f})") if "segments" in r else "—")
         kept = (f"{', '.join(r['effects_after']) or 'nothing'}" if "effects_after" in r else "—")
         held = (f"{r['after']['accel_ug']:.3g}, {r['after']['gyro_ppm']:.3g} ({r['floor']['accel_ug']:.3g}, "
                 f"{r['floor']['gyro_ppm']:.3g})" if "floor" in r else "—")

@@ -117,8 +117,8 @@ def test_a_plugins_alias_is_named_with_a_command_that_runs_as_printed_and_separa
 
 def test_a_library_alias_at_one_rate_is_named_with_its_separate_command(tmp_path, capsys, monkeypatch):
     """A rate-squared term and a scale asymmetry at one rate (words.aliases): diagnose names the
-    pair with the command, which runs as printed; a pair of bench effects whose parameters the
-    segments decide (one per table axis and rate) is refused in one line, exit 2."""
+    pair with the command, which runs as printed; an effect whose parameters are per segment
+    (a placement per rotation) is refused in one line, exit 2."""
     (tmp_path / "s.yaml").write_text(_scheme(30.0, 12.0))
     # 60 ppm/(deg/s) x 30 deg/s = 1800 ppm of the rate: significant for both with the MEMS noise
     truth = _truth(tmp_path / "truth.yaml", mems_truth(0), gyroscope__rate_squared_ppm_per_dps=[60.0, -45.0, 75.0])
@@ -135,9 +135,9 @@ def test_a_library_alias_at_one_rate_is_named_with_its_separate_command(tmp_path
     assert main([*command[1:], "--json"]) == 0                      # as printed
     report = json.loads(capsys.readouterr().out)
     assert report["correlation_after"] < 0.95 and all(p["revealed_after"] for p in report["parameters"])
-    assert main(["design", "--from", "cap", "--separate", "accel_nonlinearity,table_wobble"]) == 2
+    assert main(["design", "--from", "cap", "--separate", "gyro_scale_asymmetry,remount_per_segment"]) == 2
     lines = capsys.readouterr().err.strip().splitlines()
-    assert len(lines) == 1 and "table_wobble has parameters of its own per table axis" in lines[0], lines
+    assert len(lines) == 1 and "remount_per_segment has parameters of its own per segment" in lines[0], lines
 
 
 # the accelerometers' positions (m; the diagonal 0, the estimator's convention for the reference point)
@@ -203,4 +203,4 @@ def test_alike_candidates_are_aliases_only_when_the_data_cannot_prefer_one():
     assert alike_candidates([cand("a", r, over=20.0), cand("b", off, over=20.0)]) == {"a": ["b"], "b": ["a"]}
     # not significant, or an effect no extension is designed for: never named
     assert alike_candidates([cand("a", r), cand("b", r, significant=False)]) == {}
-    assert alike_candidates([cand("a", r), cand("table_wobble", r)]) == {}
+    assert alike_candidates([cand("a", r), cand("remount_per_segment", r)]) == {}

@@ -176,6 +176,24 @@ def _cmd_from(args) -> int:
                fraction=args.fraction, rates_dps=args.rates, revolutions=revolutions, dwells_s=args.dwells,
                name=args.name if args.name != "designed" else "extension", command=command,
                progress=lambda text: err.print(f"design: {text}", markup=False, soft_wrap=True))
+    if not e.entries:        # the capture's own segments meet the goal: nothing to record, nothing written
+        if args.json:
+            print(json.dumps({"scheme_file": None, "capture": e.capture, "goal": e.goal, "duration_s": 0.0,
+                              "segments": [], "segment_s": [],
+                              "parameters": [{"name": n, "unit": e.units[n], "sigma_before": e.before[n],
+                                              "sigma_after": e.after[n], "revealed_before": True,
+                                              "revealed_after": True} for n in e.names],
+                              "correlation_before": e.correlation_before, "correlation_after": e.correlation_after,
+                              "noise": vars(e.noise), "record": None, "notes": e.notes}, indent=1))
+            return 0
+        out.print(f"goal: {e.goal}", markup=False, soft_wrap=True)
+        out.print(e.notes[-1], markup=False, soft_wrap=True)
+        for n in e.names:
+            out.print(f"  {n}: 1σ {e.before[n]:.4g} {e.units[n]}", markup=False, soft_wrap=True)
+        if e.correlation_before is not None:
+            out.print(f"  largest |correlation| between the two effects: {e.correlation_before:.3f}", markup=False)
+        out.print(f"nothing written ({out_path} not made)", markup=False)
+        return 0
     try:
         write_new_file(out_path, e.text.encode("utf-8"), what="scheme file")
     except OSError as x:

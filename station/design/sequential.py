@@ -49,6 +49,16 @@ CHECK_ROUNDS = 4          # the estimator's check sends the search on at most th
 # and rate) are designed: a candidate about the same table axis, or at the same rate, shares them
 # (information.column_names), one at a new rate brings its own
 PER_SEGMENT_EFFECTS = ("remount_per_segment", "bias_step")
+# a time offset is seen only where the rate changes within a segment's window (time_offset: the
+# gyro integral moves by dt (w_end - w_start)); every segment a scheme describes turns at one
+# steady rate (the compiler ramps before the window and brakes after it: station/bench/compile.py),
+# so no candidate informs it, at any rate, in either direction or one
+TIME_OFFSET = "time_offset"
+TIME_OFFSET_REASON = ("time_offset is seen only in a rate that changes within a segment (the gyro integral "
+                      "moves by the offset times the change), and every segment a scheme can describe turns at "
+                      "one steady rate after its ramp, so no segment this table can record separates it: its "
+                      "data are the rate ripple of the turns already recorded; vary the rate within a turn "
+                      "(a ramp recorded whole) or centre the IMU (docs/design.md, fourteenth session)")
 
 
 @dataclass
@@ -148,6 +158,9 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
         raise UserError(f"--from: {', '.join(per_segment)} has parameters of its own per segment or a step's time "
                         "(set from the segments recorded) that no added segment shares, so segments to add cannot "
                         "be weighed for it; what separates it is said beside it in station diagnose")
+    if any(e.id == TIME_OFFSET for e in effects) and (TIME_OFFSET in separate or any(
+            fnmatch.fnmatchcase("time_offset", p) for p in reveal)):
+        raise UserError(f"--from: {TIME_OFFSET_REASON}")
     from station.diagnose.suggest import hand_turns       # the one rule: diagnose prints no command for these
 
     hand = hand_turns(capture)
@@ -292,8 +305,21 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
                 added[k] = j
         return added
 
-    added = search()
     before = _aligned(predict(base, effects, noise, config), names)
+    if (badness(State(scorer, list(range(n_own))).information()) <= 1.0
+            and all(before.revealed[i] for i in targets)):
+        # the capture's own segments meet the goal already (by the information and by the
+        # estimator's own fit of them): the fewest segments are none, and none is proposed
+        corr = _cross_correlation(before.covariance, group_a, group_b) if len(group_a) else None
+        tnames = [names[i] for i in targets]
+        said = (f"the capture's own segments already {goal.split(' (')[0]}: no extra segment is needed "
+                "(the predicted 1-sigma below; station diagnose --auto on the capture decides between them)")
+        return Extension(str(path), goal, tnames, {n: float(before.sigma[i]) for n, i in zip(tnames, targets)},
+                         {n: float(before.sigma[i]) for n, i in zip(tnames, targets)},
+                         {n: True for n in tnames}, {n: True for n in tnames},
+                         {names[i]: units[i] for i in targets}, [], "", 0.0, [], corr, corr, noise,
+                         notes + [said])
+    added = search()
     for _ in range(CHECK_ROUNDS):
         if not added:
             raise UserError(f"{path}: no candidate segment on this table can {goal.split(' (')[0]}")
