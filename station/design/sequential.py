@@ -236,20 +236,36 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
         goal = (f"separate {a} from {b} (every parameter of each with 1σ at most {fraction:g} x its typical "
                 f"size, no correlation between them above {ALIAS_COS})")
     targets = np.array(targets, int)
-    limit = fraction * typical[targets]
     scorer = Scorer(info, all_cands, Criterion("worst"), targets)
     n_own = len(own)
+    # the goal as rows over the reported parameters: each target itself, but an offset per axis
+    # group (rotation_axis_offsets) by its two components across the group's axis -- the part
+    # along it is seen by no segment (w x (w x d) and dw/dt x d are across w) and held by the
+    # estimator's prior, so it is neither a target nor "not revealed" (along_axis_prior)
+    T, row_limit, side, prior, along = _goal_rows(names, targets, typical, fraction, info, base, group_a, group_b)
 
     def badness(F) -> float:
         """Above 1 while the goal is not met: the worst 1σ over its target, or a correlation
         between the two effects over ALIAS_COS (as a ratio)."""
-        cov = scorer.covariance_of(F)
-        sig = np.sqrt(np.clip(np.diag(cov)[targets], 0.0, None))
-        worst = float(np.max(sig / limit))
+        cov = T @ scorer.covariance_of(F + prior) @ T.T
+        sig = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        worst = float(np.max(sig / row_limit))
         if len(group_a):
-            corr = _cross_correlation(cov, group_a, group_b)
+            corr = _cross_correlation(cov, np.flatnonzero(side == 1), np.flatnonzero(side == 2))
             worst = max(worst, corr / ALIAS_COS)
         return worst
+
+    def worst_of(F) -> str:
+        """What stays furthest from the goal, in words (the refusal's)."""
+        cov = T @ scorer.covariance_of(F + prior) @ T.T
+        ratio = np.sqrt(np.clip(np.diag(cov), 0.0, None)) / row_limit
+        k = int(np.argmax(ratio))
+        what = " + ".join(names[j] for j in np.flatnonzero(T[k]))
+        text = f"{what}'s 1σ {ratio[k]:.2g} x its target"
+        if len(group_a):
+            corr = _cross_correlation(cov, np.flatnonzero(side == 1), np.flatnonzero(side == 2))
+            text += f", the largest correlation between the two {corr:.2f}"
+        return text
 
     secs = np.array([c.seconds for c in all_cands])
 
@@ -307,7 +323,7 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
 
     before = _aligned(predict(base, effects, noise, config), names)
     if (badness(State(scorer, list(range(n_own))).information()) <= 1.0
-            and all(before.revealed[i] for i in targets)):
+            and all(before.revealed[i] or i in along for i in targets)):
         # the capture's own segments meet the goal already (by the information and by the
         # estimator's own fit of them): the fewest segments are none, and none is proposed
         corr = _cross_correlation(before.covariance, group_a, group_b) if len(group_a) else None
@@ -329,12 +345,12 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
                      centred=base.centred)
         whole = Scheme(base.name, "", "", {}, base.segments + _renamed(ext.segments, base), centred=base.centred)
         after = _aligned(predict(whole, effects, noise, config), names)
-        blind = [names[i] for i in targets if not after.revealed[i]]
+        blind = [names[i] for i in targets if not after.revealed[i] and i not in along]
         if reached <= 1.0 and not blind:
             break
         if reached > 1.0:
             raise UserError(f"{path}: no {MAX_SEGMENTS} segments this table can do {goal.split(' (')[0]} "
-                            f"(the closest: the worst 1σ {reached:.2g} x its target)")
+                            f"(the closest: {worst_of(State(scorer, list(range(n_own)) + added).information())})")
         notes.append(f"the estimator still called {', '.join(blind)} not revealed with {len(added)} "
                      "segment(s): one more added")
         extra = [j for j in pool if allowed(set(range(n_own)) | set(added), j)]
@@ -384,6 +400,68 @@ def _entry_s(table, entry) -> float:
         return float(table.static_s(entry["dwell_s"]))
     rate = float(entry["rate_dps"])
     return float(table.rotation_pair_s(rate, max(1, round(rate * entry["rotation_s"] / 360.0))))
+
+
+def _goal_rows(names, targets, typical, fraction, info, base, group_a, group_b):
+    """(T, limits, side, prior, along): the goal's quantities as rows of T over the reported
+    parameters (reported units), each row's largest 1σ, its side (1: effect A, 2: B, 0: --reveal),
+    the prior information over G that holds each capture axis group's offset along its own axis
+    (its typical size, as the estimator's prior holds it: without it that direction has no
+    information and every other number is lost in it), and the targets that are such offsets
+    with a part along their axis (the estimator calls them not revealed, rightly)."""
+    import re
+
+    in_a, in_b = set(np.asarray(group_a).tolist()), set(np.asarray(group_b).tolist())
+    axes = []                      # the capture's axis groups in order (summaries: one per body axis)
+    for spec in base.segments:
+        if spec.kind == "rotation":
+            a = np.asarray(spec.axis_body, float) / np.linalg.norm(spec.axis_body)
+            if not any(np.allclose(a, b, atol=1e-6) for b in axes):
+                axes.append(a)
+    G = info.shared
+    prior = np.zeros((G, G))
+    rows, limits, side, along = [], [], [], set()
+    offsets: dict = {}
+    for i in targets:
+        m = re.fullmatch(r"axis(\d+)_offset_([xyz])", names[i])
+        if m and (info.parameters.effects or [None] * len(names))[i] == "rotation_axis_offsets" \
+                and int(m.group(1)) < len(axes):
+            offsets.setdefault(int(m.group(1)), {})["xyz".index(m.group(2))] = i
+            continue
+        r = np.zeros(len(names))
+        r[i] = 1.0
+        rows.append(r)
+        limits.append(fraction * typical[i])
+        side.append(1 if i in in_a else 2 if i in in_b else 0)
+    l0 = axes[0] if axes else None
+    for g, where in sorted(offsets.items()):
+        if len(where) != 3:
+            continue
+        l = axes[g]
+        idx = [where[k] for k in range(3)]
+        along |= set(idx)
+        # seen: d_g + c l0 across l (c the common offset's part along the first group's axis l0,
+        # which no turn sees): of d_g itself, only the direction across both l and l0
+        n = np.cross(l, l0)
+        if np.linalg.norm(n) > 1e-6:
+            r = np.zeros(len(names))
+            r[idx] = n / np.linalg.norm(n)
+            rows.append(r)
+            limits.append(fraction * typical[idx[0]])
+            side.append(1 if idx[0] in in_a else 2 if idx[0] in in_b else 0)
+        v = np.zeros(G)
+        cols = info.parameters.columns[idx]
+        v[cols] = l
+        sigma_internal = typical[idx[0]] / info.parameters.factors[idx[0]]
+        prior += np.outer(v, v) / sigma_internal ** 2
+    if offsets and l0 is not None:        # c: the common offset along l0, held as the estimator's prior holds it
+        cols = [k for k, n in enumerate(info.column_names) if n.startswith("mounting_offset[")]
+        if len(cols) == 3:
+            v = np.zeros(G)
+            v[cols] = l0
+            prior += np.outer(v, v) / (typical[next(iter(offsets[min(offsets)].values()))]
+                                       / info.parameters.factors[next(iter(offsets[min(offsets)].values()))]) ** 2
+    return np.array(rows), np.array(limits), np.array(side), prior, along
 
 
 def _aligned(pred, names):

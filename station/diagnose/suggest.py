@@ -16,6 +16,9 @@ ALIAS_COS = 0.95      # two candidates whose one-step signatures are this alike:
 # by segments the designer can weigh (docs/design.md, Limits)
 TIMELINE = ("bias_drift", "temperature_bias", "temperature_bias_quadratic", "scale_temperature")
 NOT_DESIGNED = ("remount_per_segment", "bias_step")
+# pairs no segments separate (measured: station design --from refuses them with what stays
+# furthest; words.aliases says why): no command is printed for them
+NOT_SEPARABLE = ({"rotation_axis_offsets", "table_vibration_once_per_rev"},)
 
 
 def added(effect_id: str, registry=None) -> str:
@@ -84,7 +87,8 @@ def separations(capture, model_effects, effect_id: str, summaries, registry=None
         return []
     return [separate_command(capture, effects, effect_id, rival, registry)
             for rival, _ in aliases(summaries, effect_id)
-            if rival is not None and rival != effect_id and rival not in NOT_DESIGNED]
+            if rival is not None and rival != effect_id and rival not in NOT_DESIGNED
+            and {effect_id, rival} not in NOT_SEPARABLE]
 
 
 def suggest_steps(steps, capture, summaries, registry=None) -> None:
@@ -121,7 +125,8 @@ def suggest(diagnosis, capture, registry=None, summaries=None, hand=()) -> None:
             effects += [] if c.effect in effects else [c.effect]
             said += [separate_command(capture, effects, c.effect, other, registry)
                      for other in alike.get(c.effect, []) if other not in named
-                     and not (c.effect in TIMELINE and other in TIMELINE)]
+                     and not (c.effect in TIMELINE and other in TIMELINE)
+                     and {c.effect, other} not in NOT_SEPARABLE]
             c.separations = said
             c.alike = [o for o in alike.get(c.effect, []) if c.effect in TIMELINE and o in TIMELINE]
     lines = []

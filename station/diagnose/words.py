@@ -381,14 +381,21 @@ def aliases(summaries, effect_id: str) -> list[tuple]:
                     "term in the square of the rate act alike; turn at two rates to confirm it grows "
                     "with the square of the rate"))
     vertical = _vertical_turns(summaries)
-    if effect_id in ("rotation_axis_offsets", "accel_lever_arm") and len(rates) == 1 and not (
-            effect_id == "accel_lever_arm" and vertical):
+    if effect_id == "accel_lever_arm" and len(rates) == 1 and not vertical:
         out.append(("table_vibration_once_per_rev",
                     f"every rotation is at one rate ({rates[0]:g} °/s): an offset of the rotations' accelerometer "
                     "mean is also what a table vibrating once per revolution leaves (its part across the axis); "
-                    "turn at two rates to confirm it grows with the square of the rate"
-                    + ("" if effect_id == "rotation_axis_offsets" else
-                       ", or about a vertical axis (no vibration is modelled there)")))
+                    "turn about a vertical axis (no vibration is modelled there) or at a second rate to tell "
+                    "them apart"))
+    if effect_id == "rotation_axis_offsets" and len(rates) == 1:
+        # (no command: measured on the simulated bench, the best 12 segments station design --from
+        # finds leave the vibration's part across the axis at 3.6 x its target: docs/design.md)
+        out.append((None, f"every rotation is at one rate ({rates[0]:g} °/s): an offset of the rotations' "
+                    "accelerometer mean is also what a table vibrating once per revolution leaves (its part "
+                    "across the axis); no segments separate the two: every added turn about a new axis brings "
+                    "an offset of its own and every new rate a vibration of its own, so the capture's offsets "
+                    "and its rate's vibration stay traded against each other; record the rotations again at "
+                    "a second rate about the same axes, without remounting, in one run"))
     if effect_id == "table_vibration_once_per_rev" and len(rates) == 1 and not vertical:
         out.append(("accel_lever_arm", f"every rotation is at one rate ({rates[0]:g} °/s): the part of a "
                     "vibration across the axis is a constant in the rotations' accelerometer mean, as the "
