@@ -376,6 +376,11 @@ def aliases(summaries, effect_id: str) -> list[tuple]:
         out.append((None, "a time offset and the tangential acceleration of a varying rate at an unknown "
                     "mounting offset both follow the rate's changes; centre the IMU on the axis, or vary "
                     "the rate with the IMU centred, to tell them apart"))
+    if effect_id == "time_offset" and summaries.rotations:
+        out.append((None, "a time offset is seen only where the rate changes within a segment (here: the "
+                    "turns' rate ripple); every segment a scheme describes turns at one steady rate after its "
+                    "ramp, so no added segment separates it from the gyro scale (no station design --from "
+                    "command): record a turn whose rate changes within it"))
     if effect_id == "accel_lever_arm" and len(rates) == 1:
         out.append((None, f"every rotation is at one rate ({rates[0]:g} °/s): the size effect and any other "
                     "term in the square of the rate act alike; turn at two rates to confirm it grows "
