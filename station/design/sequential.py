@@ -158,9 +158,6 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
         raise UserError(f"--from: {', '.join(per_segment)} has parameters of its own per segment or a step's time "
                         "(set from the segments recorded) that no added segment shares, so segments to add cannot "
                         "be weighed for it; what separates it is said beside it in station diagnose")
-    if any(e.id == TIME_OFFSET for e in effects) and (TIME_OFFSET in separate or any(
-            fnmatch.fnmatchcase("time_offset", p) for p in reveal)):
-        raise UserError(f"--from: {TIME_OFFSET_REASON}")
     from station.diagnose.suggest import hand_turns       # the one rule: diagnose prints no command for these
 
     hand = hand_turns(capture)
@@ -173,6 +170,9 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     if "axes" not in table_doc and "no table" in str(table_doc.get("note", "")):
         raise UserError(f"{path}: recorded by hand, without a rate table: station design --from designs segments "
                         "for a table (record the extra attitudes by hand with a hand scheme)")
+    if any(e.id == TIME_OFFSET for e in effects) and (TIME_OFFSET in separate or any(
+            fnmatch.fnmatchcase("time_offset", p) for p in reveal)):
+        raise UserError(f"--from: {TIME_OFFSET_REASON}")
     config, table_source = capture_config(path, config_path)
     base = capture_scheme(capture)
     noise = noise_mod.from_capture(path)
