@@ -239,9 +239,10 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     scorer = Scorer(info, all_cands, Criterion("worst"), targets)
     n_own = len(own)
     # the goal as rows over the reported parameters: each target itself, but an offset per axis
-    # group (rotation_axis_offsets) by its two components across the group's axis -- the part
-    # along it is seen by no segment (w x (w x d) and dw/dt x d are across w) and held by the
-    # estimator's prior, so it is neither a target nor "not revealed" (along_axis_prior)
+    # group (rotation_axis_offsets) by its component across both its axis and the first group's --
+    # the part along its axis is seen by no segment (w x (w x d) and dw/dt x d are across w), the
+    # part along the first group's trades with the common offset's, which no turn sees; both are
+    # held by the estimator's prior, so they are neither targets nor "not revealed" (_goal_rows)
     T, row_limit, side, prior, along = _goal_rows(names, targets, typical, fraction, info, base, group_a, group_b)
 
     def badness(F) -> float:
@@ -408,7 +409,10 @@ def _goal_rows(names, targets, typical, fraction, info, base, group_a, group_b):
     the prior information over G that holds each capture axis group's offset along its own axis
     (its typical size, as the estimator's prior holds it: without it that direction has no
     information and every other number is lost in it), and the targets that are such offsets
-    with a part along their axis (the estimator calls them not revealed, rightly)."""
+    with a part along their axis (the estimator calls them not revealed, rightly).  The capture's
+    axis groups are taken as the summaries number them for a capture of one session (one group per
+    body axis, in order); a capture already extended once numbers its appended turns' groups
+    after, which this does not follow (its offsets' rows are then of the wrong axes)."""
     import re
 
     in_a, in_b = set(np.asarray(group_a).tolist()), set(np.asarray(group_b).tolist())
@@ -454,13 +458,14 @@ def _goal_rows(names, targets, typical, fraction, info, base, group_a, group_b):
         v[cols] = l
         sigma_internal = typical[idx[0]] / info.parameters.factors[idx[0]]
         prior += np.outer(v, v) / sigma_internal ** 2
-    if offsets and l0 is not None:        # c: the common offset along l0, held as the estimator's prior holds it
-        cols = [k for k, n in enumerate(info.column_names) if n.startswith("mounting_offset[")]
-        if len(cols) == 3:
-            v = np.zeros(G)
-            v[cols] = l0
-            prior += np.outer(v, v) / (typical[next(iter(offsets[min(offsets)].values()))]
-                                       / info.parameters.factors[next(iter(offsets[min(offsets)].values()))]) ** 2
+    cols = [k for k, n in enumerate(info.column_names) if n.startswith("mounting_offset[")]
+    if offsets and l0 is not None and len(cols) == 3:
+        # c, the common offset's part along l0, held by a prior of the offsets' typical size (the
+        # directions no turn sees get the estimator's kind of prior, so that the rest is numbers)
+        i = next(iter(offsets[min(offsets)].values()))
+        v = np.zeros(G)
+        v[cols] = l0
+        prior += np.outer(v, v) / (typical[i] / info.parameters.factors[i]) ** 2
     return np.array(rows), np.array(limits), np.array(side), prior, along
 
 
