@@ -54,6 +54,11 @@ def suggest_all(first, final, steps, capture, summaries, registry=None) -> None:
         suggest(d, capture.path, registry, summaries=summaries, hand=hand)
     if not hand:
         suggest_steps(steps, capture.path, summaries, registry)
+    # what the capture cannot reveal of the gyro effects a warm-up scheme is blind to (unrevealed.py)
+    from station.diagnose import unrevealed
+
+    final.design_suggestions = [*final.design_suggestions,
+                                *unrevealed.lines(final, summaries, None if hand else capture.path)]
 
 
 def command(capture, effects, reveal, registry=None) -> str:
