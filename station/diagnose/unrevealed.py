@@ -20,6 +20,7 @@ rotation axis during them (an axis turned in one attitude cannot show a change w
 from __future__ import annotations
 
 import shlex
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -54,7 +55,7 @@ def _why_force(summaries) -> str:
     g0 = summaries.gravity_mps2 or 9.80665
     parts = []
     for i in range(3):
-        f = sorted({round(float(r.accel_dc[i]) * summaries.accel_factor / g0, 1) for r in _turning(summaries, i)})
+        f = sorted({round(float(r.accel_dc[i]) * summaries.accel_factor / g0, 1) + 0.0 for r in _turning(summaries, i)})
         parts.append(f"{AX[i]} {', '.join(f'{v:+.1f}' for v in f) or 'none'}")
     return ("each gyro axis is turned with only these mean forces along it, in g: " + "; ".join(parts)
             + " (a change of scale with the force needs the same axis turned with two or more)")
@@ -64,12 +65,18 @@ WHY = {"gyro_scale_temperature_squared": _why_temperature, "gyro_misalignment_te
        "gyro_scale_force": _why_force}
 
 
-def lines(diagnosis, summaries, capture=None) -> list[str]:
-    """One line per effect of station/model/unlisted.py that this capture leaves not revealed:
-    the parameters, their 1-sigma against their typical size, why (from the capture) and the
-    design command (``capture``: its path; None: no command)."""
-    from station.diagnose.suggest import command
+@dataclass
+class Unrevealed:
+    """An effect of station/model/unlisted.py this capture leaves not revealed."""
+    text: str                 # in words: the parameters, their 1-sigma against their typical size, why
+    spec: str                 # what --add takes: station.model.unlisted:CLASS
+    reveal: str               # the --reveal pattern of its parameters
 
+
+def find(diagnosis, summaries) -> list[Unrevealed]:
+    """The effects of station/model/unlisted.py not in the model that this capture leaves not
+    revealed (a parameter's 1-sigma above its typical size, or aliased) and does not find
+    significant; each with why, from the capture."""
     result = diagnosis.result
     if not summaries.rotations or getattr(result, "model", None) is None:
         return []
@@ -92,13 +99,9 @@ def lines(diagnosis, summaries, capture=None) -> list[str]:
         unit = blind[0][2]
         sizes = ", ".join(f"{n.rsplit('_', 1)[1]} {'aliased' if n in cand.aliased else f'{s:.2g}'}"
                           for n, s, _ in blind)
-        line = (f"not revealed by this capture: {cls.title[0].lower() + cls.title[1:]} (1-sigma {sizes} {unit}, "
+        text = (f"not revealed by this capture: {cls.title[0].lower() + cls.title[1:]} (1-sigma {sizes} {unit}, "
                 f"typical {typical[blind[0][0]]:g}): {WHY[eid](summaries)}")
-        if capture is not None:
-            pattern = shlex.quote(blind[0][0].rsplit("_", 1)[0] + "_*")
-            line += (f"; the segments that would reveal it: "
-                     f"{command(capture, [f'{SPEC}:{cls.__name__}'], [pattern])}")
-        out.append(line)
+        out.append(Unrevealed(text, f"{SPEC}:{cls.__name__}", shlex.quote(blind[0][0].rsplit("_", 1)[0] + "_*")))
     return out
 
 
