@@ -8,7 +8,7 @@ For each case: the final verdict, the words, what ``--auto`` kept, the held-out 
 the clean floor (the clean capture of the same training scheme, IMU and seed).
 
 Usage (from the repository root):
-    PYTHONPATH=$PWD python benchmarks/diagnose_triad.py [--jobs 2] [--cases NAME ...] [--json F]
+    PYTHONPATH=$PWD python benchmarks/diagnose_triad.py [--jobs 2] [--cases NAME ... | --all] [--json F]
     PYTHONPATH=$PWD python benchmarks/diagnose_triad.py --list
 """
 from __future__ import annotations
@@ -27,11 +27,11 @@ TRIAD_CASES = [
             kind="triad", cause=(r"gyro: its misalignment towards . changes with temperature|not revealed[^;]*gyro sensing axes that tilt",)),
     dg.Case("gyro_scale_tempco2", "gyro scale 20, -15, 25 ppm/degC^2; 8 degC warm-up",
             {"gyroscope.scale_tempco2_ppm_per_c2": [20.0, -15.0, 25.0], **WARM},
-            kind="triad", cause=(r"not revealed by this capture: gyro scale factors (second order in temperature|that change with the specific force)", "station design --from")),
+            kind="triad", cause=(r"not revealed by this capture: gyro scale factors second order in temperature", "station design --from")),
     dg.Case("gyro_scale_g", "gyro scale with the specific force: x 300 ppm/g along y, y 300 along z, "
             "z 300 along x",
             {"gyroscope.scale_g_ppm_per_g": [[0.0, 300.0, 0.0], [0.0, 0.0, 300.0], [300.0, 0.0, 0.0]]},
-            kind="triad", cause=(r"not revealed by this capture: gyro scale factors (second order in temperature|that change with the specific force)", "station design --from")),
+            kind="triad", cause=(r"not revealed by this capture: gyro scale factors that change with the specific force", "station design --from")),
     dg.Case("gyro_tilt_tempco_all", "every gyro axis tilts 20 arcsec/degC towards both others (signs mixed); 8 degC warm-up",
             {"gyroscope.axis_tilt_tempco_arcsec_per_c": [[20.0, -20.0], [20.0, 20.0], [-20.0, 20.0]], **WARM},
             kind="triad", cause=(r"gyro: its misalignment towards . changes with temperature|not revealed[^;]*gyro sensing axes that tilt",)),
@@ -60,8 +60,12 @@ for c in TRIAD_CASES:
 
 
 def main(argv=None) -> int:
+    """``--all``: the goal harness' 35 cases and these together (one run, one table)."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    if "--cases" not in argv and "--list" not in argv:
+    if "--all" in argv:
+        argv.remove("--all")
+        argv += ["--cases"] + [c.name for c in dg.CASES]
+    elif "--cases" not in argv and "--list" not in argv:
         argv += ["--cases"] + [c.name for c in TRIAD_CASES]
     return dg.main(argv)
 
