@@ -4,7 +4,6 @@ gyro effects a warm-up scheme cannot reveal are said with their 1-sigma and the 
 --from` command (station/diagnose/unrevealed.py), and those effects' forward model
 (station/model/unlisted.py) agrees with the simulator's physics, written without it."""
 import fnmatch
-import re
 
 import numpy as np
 import pytest
@@ -86,8 +85,7 @@ def test_what_a_warm_up_scheme_cannot_reveal_is_said_with_its_1_sigma_and_the_de
     said = {u.spec.rsplit(":", 1)[1]: u for u in unrevealed.find(diagnose(res, exclude=EffectRegistry().ids()), s)}
     assert {"GyroScaleTemperatureSquared", "GyroScaleForce"} <= set(said), sorted(said)
     t2 = said["GyroScaleTemperatureSquared"].text
-    listed = dict(part.split(" ") for part in re.search(r"\(1-sigma (.*?) ppm/degC\^2", t2).group(1).split(", "))
-    sigmas = [float(listed[a]) for a in "xyz"]
+    sigmas = [said["GyroScaleTemperatureSquared"].sigmas[f"gyro_scale_tempco2_{a}"] for a in "xyz"]
     assert all(abs(v) < 3 * sg for v, sg in zip(T2, sigmas)), (T2, sigmas)
     assert "the rotations that turn each gyro axis span" in t2 and "ppm/degC^2" in t2
     assert "mean forces along it" in said["GyroScaleForce"].text

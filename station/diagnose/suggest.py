@@ -57,9 +57,9 @@ def suggest_all(first, final, steps, capture, summaries, registry=None) -> None:
     # what the capture cannot reveal of the gyro effects a warm-up scheme is blind to (unrevealed.py)
     from station.diagnose import unrevealed
 
-    final.design_suggestions = [*final.design_suggestions, *(
+    final.not_revealed = [
         u.text + ("" if hand else f"; the segments that would reveal it: {command(capture.path, [u.spec], [u.reveal])}")
-        for u in unrevealed.find(final, summaries))]
+        for u in unrevealed.find(final, summaries)]
 
 
 def command(capture, effects, reveal, registry=None) -> str:

@@ -9,7 +9,8 @@ to a scheme that turns each axis at one temperature range and in one attitude (o
 say so honestly: for each such effect (station/model/unlisted.py) not in the model, the score
 test at the final fit gives each parameter's 1-sigma from this capture (its Jacobian column
 outside the fitted model, with the over-dispersion of a failing fit); a parameter whose 1-sigma
-is above its typical size is not revealed, the estimator's own rule (lsq._blind_effect_parameters).
+times the detection threshold (DETECT_Z) is above its typical size is not revealed: an effect of
+typical size would go undetected.
 This is a statement about the capture, not about the sensor: nothing is claimed present.  Where
 the score test finds an effect significant, the data do show it and the term search names it.
 
@@ -24,11 +25,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from station.diagnose.core import overdispersion, score_test
+from station.diagnose.core import ALPHA, POWER_Z, norm_isf, overdispersion, score_test
 from station.model.raw_counts import in_capture_units
 from station.model.unlisted import UNLISTED
 
 AX = "xyz"
+# the size a capture detects (80 % power at the family's level): z of ALPHA over the two tails of
+# the unlisted effects' 18 parameters (Bonferroni) plus POWER_Z, rank_candidates' "detectable";
+# a parameter is not revealed when an effect of its typical size would go undetected.  With the
+# estimator's rule alone (1-sigma above typical) a 20 arcsec/degC gyro tilt sized to +/-8 went
+# unsaid and undetected, and its held-out gyro error was 6x the clean floor
+DETECT_Z = norm_isf(ALPHA / (2 * 18)) + POWER_Z
 TURNS = 0.5          # a rotation turns a gyro axis when its axis is within 60 degrees of it
 SPEC = "station.model.unlisted"
 
@@ -71,6 +78,7 @@ class Unrevealed:
     text: str                 # in words: the parameters, their 1-sigma against their typical size, why
     spec: str                 # what --add takes: station.model.unlisted:CLASS
     reveal: str               # the --reveal pattern of its parameters
+    sigmas: dict              # parameter -> its 1-sigma from this capture (reported unit)
 
 
 def find(diagnosis, summaries) -> list[Unrevealed]:
@@ -93,15 +101,16 @@ def find(diagnosis, summaries) -> list[Unrevealed]:
             continue
         typical = {p.name: p.typical for p in effect.params}
         blind = [(n, s, u) for n, s, u in zip(cand.names, cand.sigma, cand.units)
-                 if n in cand.aliased or not s <= typical[n]]
+                 if n in cand.aliased or not DETECT_Z * s <= typical[n]]
         if not blind or cand.significant:
             continue
         unit = blind[0][2]
         sizes = ", ".join(f"{n.rsplit('_', 1)[1]} {'aliased' if n in cand.aliased else f'{s:.2g}'}"
                           for n, s, _ in blind)
-        text = (f"not revealed by this capture: {cls.title[0].lower() + cls.title[1:]} (1-sigma {sizes} {unit}, "
-                f"typical {typical[blind[0][0]]:g}): {WHY[eid](summaries)}")
-        out.append(Unrevealed(text, f"{SPEC}:{cls.__name__}", shlex.quote(blind[0][0].rsplit("_", 1)[0] + "_*")))
+        text = (f"not revealed by this capture: {cls.title[0].lower() + cls.title[1:]} (1-sigma {sizes} {unit}: "
+                f"detected only above {DETECT_Z:.2g}x that, typical {typical[blind[0][0]]:g}): {WHY[eid](summaries)}")
+        out.append(Unrevealed(text, f"{SPEC}:{cls.__name__}", shlex.quote(blind[0][0].rsplit("_", 1)[0] + "_*"),
+                              {n: s for n, s, _ in blind}))
     return out
 
 
