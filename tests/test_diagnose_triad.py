@@ -104,7 +104,8 @@ def test_the_unlisted_effects_follow_the_simulators_physics():
     8 degC = 7.8e-4 rad: 6e-7 x 300 deg/s = 1.8e-4 deg/s, allowed 1.5x that."""
     from sim_devices.truth import G_STANDARD, TriadTruth, _outside_library
     from station.model.effect import SampleContext
-    from station.model.unlisted import GyroMisalignmentTemperature, GyroScaleForce, GyroScaleTemperatureSquared
+    from station.model.unlisted import (AccelScaleTemperatureSquared, GyroMisalignmentTemperature, GyroScaleForce,
+                                        GyroScaleTemperatureSquared)
 
     rng = np.random.default_rng(1)
     n = 200
@@ -119,10 +120,13 @@ def test_the_unlisted_effects_follow_the_simulators_physics():
     for effect, x, truth in (
             (GyroScaleTemperatureSquared(), np.array(T2), TriadTruth(scale_tempco2_ppm_per_c2=T2)),
             (GyroMisalignmentTemperature(), np.ravel(TILT), TriadTruth(axis_tilt_tempco_arcsec_per_c=TILT)),
-            (GyroScaleForce(), S.ravel(), TriadTruth(scale_g_ppm_per_g=S))):
+            (GyroScaleForce(), S.ravel(), TriadTruth(scale_g_ppm_per_g=S)),
+            (AccelScaleTemperatureSquared(), np.array(T2), TriadTruth(scale_tempco2_ppm_per_c2=T2))):
         effect.reference_c = 25.0
         sim = _outside_library(truth, [w, w, w], dT, None, None, 1.0, f_case=f / G_STANDARD)
         model = effect.gyro(x, ctx)
+        if isinstance(effect, AccelScaleTemperatureSquared):
+            sim, model = _outside_library(truth, [f, f, f], dT, None, None, 1.0), effect.accel(x, ctx)
         size = np.max(np.abs(sim))
         assert size > 0.0
         tol = tilt_tol if isinstance(effect, GyroMisalignmentTemperature) else 1e-9 * size

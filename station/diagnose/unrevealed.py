@@ -1,4 +1,4 @@
-"""What the capture cannot reveal of the gyro effects a warm-up scheme is blind to, said in words
+"""What the capture cannot reveal of the effects a warm-up scheme is blind to, said in words
 with the `station design --from` command that would reveal them (issue 25's loop, issue 28's
 design link).
 
@@ -31,11 +31,11 @@ from station.model.unlisted import UNLISTED
 
 AX = "xyz"
 # the size a capture detects (80 % power at the family's level): z of ALPHA over the two tails of
-# the unlisted effects' 18 parameters (Bonferroni) plus POWER_Z, rank_candidates' "detectable";
+# the unlisted effects' 21 parameters (Bonferroni) plus POWER_Z, rank_candidates' "detectable";
 # a parameter is not revealed when an effect of its typical size would go undetected.  With the
 # estimator's rule alone (1-sigma above typical) a 20 arcsec/degC gyro tilt sized to +/-8 went
 # unsaid and undetected, and its held-out gyro error was 6x the clean floor
-DETECT_Z = norm_isf(ALPHA / (2 * 18)) + POWER_Z
+DETECT_Z = norm_isf(ALPHA / (2 * sum(len(cls().params) for cls in UNLISTED.values()))) + POWER_Z
 TURNS = 0.5          # a rotation turns a gyro axis when its axis is within 60 degrees of it
 SPEC = "station.model.unlisted"
 
@@ -68,8 +68,36 @@ def _why_force(summaries) -> str:
             + " (a change of scale with the force needs the same axis turned with two or more)")
 
 
+def _why_statics(summaries) -> str:
+    """The temperature spans of the statics that put each accelerometer axis near +-1 g."""
+    spans = []
+    for i in range(3):
+        t = [st.temp_c for st in summaries.statics if st.temp_c is not None and st.up_body is not None
+             and abs(float(np.asarray(st.up_body)[i])) >= TURNS * float(np.linalg.norm(st.up_body))]
+        spans.append(f"{AX[i]} {max(t) - min(t):.2g}" if t else f"{AX[i]} none")
+    return f"the statics with gravity along each accelerometer axis span ({', '.join(spans)}) degC"
+
+
 WHY = {"gyro_scale_temperature_squared": _why_temperature, "gyro_misalignment_temperature": _why_temperature,
-       "gyro_scale_force": _why_force}
+       "gyro_scale_force": _why_force, "accel_scale_temperature_squared": _why_statics}
+
+
+def _term_keys(eid: str) -> dict:
+    """Parameter -> (sensor, axis, regressor key) of the dictionary term that is the same physics
+    (station/diagnose/terms.py): a parameter already in the model as a discovered term is not
+    said again."""
+    out = {}
+    for i, a in enumerate(AX):
+        if eid == "gyro_scale_temperature_squared":
+            out[f"gyro_scale_tempco2_{a}"] = ("gyro", i, f"w{a}T2")
+        elif eid == "accel_scale_temperature_squared":
+            out[f"accel_scale_tempco2_{a}"] = ("accel", i, f"f{a}T2")
+        for j, b in enumerate(AX):
+            if eid == "gyro_misalignment_temperature" and j != i:
+                out[f"gyro_misalignment_tempco_{a}{b}"] = ("gyro", i, f"w{b}T")
+            elif eid == "gyro_scale_force":
+                out[f"gyro_scale_force_{a}{b}"] = ("gyro", i, f"w{a}f{b}")
+    return out
 
 
 @dataclass
@@ -89,6 +117,7 @@ def find(diagnosis, summaries) -> list[Unrevealed]:
     if not summaries.rotations or getattr(result, "model", None) is None:
         return []
     in_model = {e.id for e in result.model.effects}
+    discovered = {(t.sensor, t.axis, t.regressor.key) for e in result.model.effects for t in getattr(e, "terms", ())}
     phi = overdispersion(result)
     out = []
     for eid, cls in UNLISTED.items():
@@ -100,8 +129,9 @@ def find(diagnosis, summaries) -> list[Unrevealed]:
         except Exception:        # an effect with nothing to act on in this capture says nothing
             continue
         typical = {p.name: p.typical for p in effect.params}
+        known = _term_keys(eid)
         blind = [(n, s, u) for n, s, u in zip(cand.names, cand.sigma, cand.units)
-                 if n in cand.aliased or not DETECT_Z * s <= typical[n]]
+                 if (n in cand.aliased or not DETECT_Z * s <= typical[n]) and known.get(n) not in discovered]
         if not blind or cand.significant:
             continue
         unit = blind[0][2]

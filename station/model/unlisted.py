@@ -1,4 +1,4 @@
-"""Gyro effects kept out of the library's ranking: what a warm-up optimal9 capture cannot reveal.
+"""Effects kept out of the library's ranking: what a warm-up optimal9 capture cannot reveal.
 
 A gyro's scale that changes with the square of the temperature, its sensing axes that tilt with
 temperature, and its scale that changes with the specific force are real (thermal stress on the
@@ -17,10 +17,11 @@ G = K_g T_g R_po the gyro matrix and (G w_p)_i the raw output of axis i,
     scale in (T - T_ref)^2:  gyro_raw_i += s2_i 1e-6 (T - T_ref)^2 (G w_p)_i     (ppm/degC^2)
     axis tilt in T:          gyro_raw_i += m_ij (T - T_ref) (G w_p)_j, j != i     (arcsec/degC)
     scale in the force:      gyro_raw_i += S_ik 1e-6 (f_k / g0) (G w_p)_i         (ppm/g)
+    accelerometer scale in (T - T_ref)^2: accel_raw_i += s2_i 1e-6 (T - T_ref)^2 (K_a T_a f_p)_i
 
 T_ref is the mean temperature of the static segments (the library's temperature effects').
 The simulator's physics of the same effects (sim_devices/truth.py, ``_outside_library``:
-``scale_tempco2_ppm_per_c2``, ``axis_tilt_tempco_arcsec_per_c``, ``scale_g_ppm_per_g``) is
+``scale_tempco2_ppm_per_c2`` of both triads, ``axis_tilt_tempco_arcsec_per_c``, ``scale_g_ppm_per_g``) is
 written without this module.
 """
 from __future__ import annotations
@@ -57,6 +58,28 @@ class GyroScaleTemperatureSquared(TemperatureReferenced):
     def gyro(self, x, ctx):
         dt = self._dt(ctx)
         return 1e-6 * x * dt * dt * (ctx.w_p @ ctx.gyro_matrix.T)
+
+
+class AccelScaleTemperatureSquared(TemperatureReferenced):
+    id = "accel_scale_temperature_squared"
+    title = "Accelerometer scale factors second order in temperature (per axis)"
+    physics = ("The accelerometer's scale (proof-mass spring, reference voltage) bends away from a "
+               "straight line in temperature over a wide range: s2 dT^2 beyond the linear slope.")
+    term = "accel_raw_i += s2_i 1e-6 (T - T_ref)^2 (K_a T_a f_p)_i (s2 in ppm/°C²)"
+    excited_by = "statics at +1 g and -1 g along each axis at three or more temperatures"
+    magnitudes = "1-20 ppm/°C² (MEMS accelerometers)"
+    signature = "static segments: an error proportional to the gravity along the axis and to dT^2"
+    signature_variable = "temperature"
+    complex_step = True
+
+    @property
+    def params(self):
+        # typical 5 ppm/degC^2: the MEMS size of the benchmarks (5-6, benchmarks/emit_cases.py)
+        return tuple(Param(f"accel_scale_tempco2_{a}", "ppm/degC^2", 1.0, 5.0, 500.0) for a in AX)
+
+    def accel(self, x, ctx):
+        dt = self._dt(ctx)
+        return 1e-6 * x * dt * dt * (ctx.f_p @ ctx.accel_matrix.T)
 
 
 class GyroMisalignmentTemperature(TemperatureReferenced):
@@ -116,4 +139,5 @@ class GyroScaleForce(Effect):
         return 1e-6 * raw * ((ctx.f_p / G0) @ S.T)
 
 
-UNLISTED = {cls.id: cls for cls in (GyroScaleTemperatureSquared, GyroMisalignmentTemperature, GyroScaleForce)}
+UNLISTED = {cls.id: cls for cls in (GyroScaleTemperatureSquared, GyroMisalignmentTemperature, GyroScaleForce,
+                                     AccelScaleTemperatureSquared)}
