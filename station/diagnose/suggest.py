@@ -54,7 +54,7 @@ def suggest_all(first, final, steps, capture, summaries, registry=None) -> None:
         suggest(d, capture.path, registry, summaries=summaries, hand=hand)
     if not hand:
         suggest_steps(steps, capture.path, summaries, registry)
-    # what the capture cannot reveal of the gyro effects a warm-up scheme is blind to (unrevealed.py)
+    # the effects outside the library a warm-up scheme is blind to, when this capture is (unrevealed.py)
     from station.diagnose import unrevealed
 
     final.not_revealed = [

@@ -377,8 +377,10 @@ class Found:
 
 def search(result, max_terms: int = MAX_TERMS, sensors=None, events: bool = True) -> list[Found]:
     """Forward selection over the dictionary at the current fit (linearised score tests), on
-    the sensors whose terms can be sized (``searchable``) and whose own rows fail
-    (``failing_sensors``; ``sensors`` overrides).  At each step the most significant term is
+    the sensors whose terms can be sized (``searchable``), when a sensor's own rows fail
+    (``failing_sensors``) or the fit fails: both triads are scored, and a term of a sensor whose
+    rows pass is taken only when it is clearly the better account (``cross_triad``);
+    ``sensors`` overrides.  At each step the most significant term is
     taken, unless a more physical term (``_rank``) is its alias — the two columns, outside the
     model and the terms taken before, alike to ALIAS_COS, so that this capture cannot tell them
     apart: then that one, and the others are listed as its aliases with what would separate
@@ -476,8 +478,8 @@ def cross_triad(lm, candidates, blamed, phi: float) -> np.ndarray:
     kept only when the best of them explains more than the best term of the blamed sensors by
     the 1 % point of chi2 on one degree of freedom (after the over-dispersion): the misfit is
     the blamed sensor's unless the other triad's physics is clearly the better account of it.
-    An accelerometer K3 once took gyro w·|w| stand-ins that explained part of it; a gyro axis
-    tilting with temperature (x gyro towards y and z, 20 arcsec/degC) leaves its misfit in the
+    An accelerometer K3 once took gyro w·|w| stand-ins that explained part of it; gyro axes
+    tilting with temperature (each 20 arcsec/degC towards both others) leave their misfit in the
     accelerometer rows through the attitudes, and its w_x·T on the z gyro explains 70.7 where
     the best accelerometer term (f_z·T on x) explains 26.6."""
     from scipy.special import chdtri
