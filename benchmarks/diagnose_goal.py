@@ -306,6 +306,7 @@ def run_case(arg) -> dict:
         res.update(exit=rc, verdict_after=v1.get("result"), reduced_chi2_after=v1.get("reduced_chi2"),
                    diagnosis=dc.get(d, "verdict"), failures=dc.get(d, "failures") or [],
                    account=dc.get(d, "failure_account") or [],
+                   design=(dc.get(d, "design_suggestions") or []) + (dc.get(d, "not_revealed") or []),
                    added=[(dc.get(s, "added"), bool(dc.get(s, "discovered")), dc.get(s, "instead_of"))
                           for s in (dc.get(d, "steps") or [])],
                    removed=[dc.get(r, "effect") for s in (dc.get(d, "steps") or []) for r in (dc.get(s, "removed") or [])],
@@ -353,7 +354,8 @@ def words_of(res) -> str:
     """Everything the loop said: the verdict, the failures, the account, the caveats of its steps
     and the effects it added (an effect added by name names its cause)."""
     return " ".join([str(res.get("diagnosis") or "")] + [str(a[0]) for a in res.get("added", [])] + [str(x) for x in res.get("failures", [])]
-                    + [str(x) for x in res.get("account", [])] + [str(x) for x in res.get("caveats", [])])
+                    + [str(x) for x in res.get("account", [])] + [str(x) for x in res.get("caveats", [])]
+                    + [str(x) for x in res.get("design", [])])
 
 
 def named(res, case: Case) -> bool:

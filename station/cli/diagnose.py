@@ -242,6 +242,7 @@ def _summary_lines(d) -> list[str]:
     lines += [f"not kept: {r.effect}: {r.reason}" for r in d.rejected]
     lines += [f"why it still fails: {line}" for line in getattr(d, "account", None) or []]
     lines += [f"design: {line}" for line in getattr(d, "design_suggestions", None) or []]
+    lines += [f"design: {line}" for line in getattr(d, "not_revealed", None) or []]
     return lines + [f"note: {n}" for n in d.notes]
 
 

@@ -20,6 +20,8 @@ def to_json(d, steps) -> dict:
         "notes": d.notes,
         # the model's parameters the capture left not revealed, with the station design --from command
         "design_suggestions": list(getattr(d, "design_suggestions", None) or []),
+        # effects outside the library this capture could not detect at their typical size (unrevealed.py)
+        "not_revealed": list(getattr(d, "not_revealed", None) or []),
         # what the scan before the fit found and left out (station/estimate/data_faults.py)
         "data_faults": getattr(getattr(getattr(d.result, "model", None), "s", None), "data_faults", None),
         "terms_outside_library": None if d.proposal is None else {

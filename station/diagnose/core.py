@@ -111,6 +111,9 @@ class Diagnosis:
                                              #   explained, what the residuals follow (words.failure_account)
     design_suggestions: list = field(default_factory=list)  # lines: the model's parameters not revealed
                                              #   and the station design --from command (suggest.py)
+    not_revealed: list = field(default_factory=list)  # lines: effects outside the library and the model
+                                             #   this capture could not detect at their typical size, and the
+                                             #   station design --from command (unrevealed.py)
 
 
 def _data_mask(labels) -> np.ndarray:

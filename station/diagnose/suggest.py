@@ -57,6 +57,12 @@ def suggest_all(first, final, steps, capture, summaries, registry=None) -> None:
         suggest(d, capture.path, registry, summaries=summaries, hand=hand)
     if not hand:
         suggest_steps(steps, capture.path, summaries, registry)
+    # the effects outside the library a warm-up scheme is blind to, when this capture is (unrevealed.py)
+    from station.diagnose import unrevealed
+
+    final.not_revealed = [
+        u.text + ("" if hand else f"; the segments that would reveal it: {command(capture.path, [u.spec], [u.reveal])}")
+        for u in unrevealed.find(final, summaries)]
 
 
 def command(capture, effects, reveal, registry=None) -> str:

@@ -377,8 +377,10 @@ class Found:
 
 def search(result, max_terms: int = MAX_TERMS, sensors=None, events: bool = True) -> list[Found]:
     """Forward selection over the dictionary at the current fit (linearised score tests), on
-    the sensors whose terms can be sized (``searchable``) and whose own rows fail
-    (``failing_sensors``; ``sensors`` overrides).  At each step the most significant term is
+    the sensors whose terms can be sized (``searchable``), when a sensor's own rows fail
+    (``failing_sensors``) or the fit fails: both triads are scored, and a term of a sensor whose
+    rows pass is taken only when it is clearly the better account (``cross_triad``);
+    ``sensors`` overrides.  At each step the most significant term is
     taken, unless a more physical term (``_rank``) is its alias — the two columns, outside the
     model and the terms taken before, alike to ALIAS_COS, so that this capture cannot tell them
     apart: then that one, and the others are listed as its aliases with what would separate
@@ -387,9 +389,20 @@ def search(result, max_terms: int = MAX_TERMS, sensors=None, events: bool = True
     model = result.model
     s = model.s
     reference = _reference_c(s)
+    blamed = None                 # the sensors whose own rows fail (None: ``sensors`` given)
     if sensors is None:
         failing = failing_sensors(result)
-        sensors = [x for x, _, _ in searchable(s) if failing[x][0]]
+        blamed = [x for x, _, _ in searchable(s) if failing[x][0]]
+        # the other triad's terms are searched too when a sensor fails: a misfit of one sensor
+        # reaches the other's rows through the shared attitudes (a gyro axis that tilts with
+        # temperature failed the ACCELEROMETER rows, 250 against 141, its own 65 against 43,
+        # and was named an accelerometer misalignment changing with temperature); which triad
+        # carries it is decided by the score (cross_triad), not by where the misfit landed
+        sensors = [x for x, _, _ in searchable(s)] if blamed else []
+        if not blamed and fit_fails(result):
+            # the fit fails with no sensor's rows failing on their own (the misfit split between
+            # them: seed 3 of the tilting gyro axes, reduced chi2 1.37): both triads, on the score
+            sensors, blamed = [x for x, _, _ in searchable(s)], None
     n_seg = _segment_count(s)
     candidates = [Term(sensor, axis, reg) for sensor in sensors for axis in range(3)
                   for reg in dictionary(sensor, n_seg)]
@@ -431,6 +444,8 @@ def search(result, max_terms: int = MAX_TERMS, sensors=None, events: bool = True
         lm[chosen] = 0.0
         if not events_too:
             lm[is_event] = 0.0
+        if blamed is not None and len(blamed) < len(sensors):
+            lm = cross_triad(lm, candidates, blamed, phi)
         k = int(np.argmax(lm))
         # Holm over the family: the step's rank among m - len(found) untested terms
         p = min(1.0, chi2_sf(lm[k] / phi, 1) * (m - len(found))) if lm[k] > 0 else 1.0
@@ -456,6 +471,29 @@ def search(result, max_terms: int = MAX_TERMS, sensors=None, events: bool = True
         r = r - q * (q @ r)
         Jp = Jp - np.outer(q, q @ Jp)
     return found
+
+
+def cross_triad(lm, candidates, blamed, phi: float) -> np.ndarray:
+    """The score statistics with the terms of a sensor whose own rows pass (not ``blamed``)
+    kept only when the best of them explains more than the best term of the blamed sensors by
+    the 1 % point of chi2 on one degree of freedom (after the over-dispersion): the misfit is
+    the blamed sensor's unless the other triad's physics is clearly the better account of it.
+    An accelerometer K3 once took gyro w·|w| stand-ins that explained part of it; gyro axes
+    tilting with temperature (each 20 arcsec/degC towards both others) leave their misfit in the
+    accelerometer rows through the attitudes, and its w_x·T on the z gyro explains 70.7 where
+    the best accelerometer term (f_z·T on x) explains 26.6."""
+    from scipy.special import chdtri
+
+    lm = np.array(lm, dtype=float)
+    mine = np.array([c.sensor in blamed for c in candidates])
+    if not mine.any() or mine.all():
+        return lm
+    best_mine = float(lm[mine].max())
+    margin = chdtri(1, ALPHA) * max(phi, 1.0)
+    others = ~mine & (lm > 0)
+    if float(lm[others].max(initial=0.0)) <= best_mine + margin:
+        lm[~mine] = 0.0
+    return lm
 
 
 OWN_COS = 0.999          # a term this alike to what an effect's parameters can do is that effect's own
