@@ -358,6 +358,9 @@ def apply_file(calibration, input, output, *, serial: str | None = None, force: 
     t, f, w = _compensate(doc, str(calibration), str(input), data.t, data.accel, data.gyro, data.temp,
                           (plugins, effects_dirs, config), messages)
     table = np.column_stack([t, f, w])
+    from station.core.user_files import output_path
+
+    output_path(output, "the compensated samples")
     try:
         with open(output, "w") as fh:
             fh.write("t,ax,ay,az,gx,gy,gz\n")

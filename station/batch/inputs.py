@@ -115,6 +115,9 @@ def plan(command: str, sources, out_dir=None, export_format: str | None = None) 
     names = stems(sources)
     out = Path(out_dir) if out_dir else None
     if out is not None:
+        from station.core.user_files import output_path
+
+        output_path(out, "the output folder")
         try:
             out.mkdir(parents=True, exist_ok=True)
         except OSError as e:

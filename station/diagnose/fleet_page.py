@@ -88,7 +88,9 @@ def render(f: Fleet, figures: dict) -> str:
 
 
 def write_page(path, f: Fleet) -> Path:
-    path = Path(path)
+    from station.core.user_files import output_path
+
+    path = Path(output_path(path, "the fleet page"))
     figures = {}
     if any(v.t is not None for p in f.parameters for v in p.values):
         figures[FIGURE] = fleet_figure(figure_rows(f), fmt="svg")
