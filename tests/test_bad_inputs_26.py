@@ -289,8 +289,13 @@ def test_a_tampered_history_row_cannot_open_a_file_outside_the_store(filed, tmp_
     db.execute("UPDATE calibrations SET file = ? WHERE id = 2", (file.format(outside=outside),))
     db.commit()
     db.close()
-    for argv in (["diff", "#1", "#2", "--store", store], ["history", serial, "--store", store, "--drift", tmp_path / "d.png"]):
-        one_line_exit_2(argv, capsys, str(store / "index.sqlite"), "row #2", "field 'file'", "inside the store")
+    one_line_exit_2(["diff", "#1", "#2", "--store", store], capsys, str(store / "index.sqlite"), "row #2",
+                    "field 'file'", "inside the store")
+    # the listing and the drift plot mark the row and leave it out (fin26 item 3), never open it
+    assert main([str(a) for a in ["history", serial, "--store", store, "--drift", tmp_path / "d.png"]]) == 0
+    captured = capsys.readouterr()
+    assert "NOT THE FILE FILED" in captured.out and "#2 not drawn" in captured.err, captured
+    assert "not inside the store" in captured.err
 
 
 def test_history_drift_without_a_serial_says_what_it_needs(filed, tmp_path, capsys):
