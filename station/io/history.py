@@ -200,8 +200,9 @@ class Store:
             self.index = SqliteIndex(self.root)
         self.where = self.index.where
         self._rebuilding = False
-        self.index.on_new = self._refuse_lost_index
-        self.index.damaged_hint = self._damaged_hint
+        if isinstance(self.index, SqliteIndex):     # (a PostgreSQL database's folder may be shared)
+            self.index.on_new = self._refuse_lost_index
+            self.index.damaged_hint = self._damaged_hint
 
     # ------------------------------------------------------------- an index lost beside its files
 
@@ -355,7 +356,7 @@ class Store:
     def _rows(self, sql: str, params=()) -> list:
         """The rows of a query (none when there is no index yet)."""
         with self.index.transaction(write=False, backfill=self._backfill) as tx:
-            if tx is None:
+            if tx is None:                 # (SQLite only: a database always answers)
                 self._refuse_lost_index(f"{self.where}: the calibration history has no index")
                 return []
             return tx.rows(sql, params)

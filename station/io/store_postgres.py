@@ -30,7 +30,9 @@ class PostgresIndex:
         self.url = url
         self.where = redacted(url)
         self._conn = None
-        self.on_new = None           # as SqliteIndex.on_new: a new database beside a folder of calibrations
+        # a new database is a new store (its files' folder may be shared: the SQLite default's
+        # folder), so a new database is never refused for the files beside it (SqliteIndex.on_new)
+        self.on_new = None
         self.damaged_hint = lambda: ""
 
     def exists(self) -> bool:
@@ -58,8 +60,6 @@ class PostgresIndex:
                 tx = Tx(cur, postgres=True)
                 tx.run("SELECT pg_advisory_xact_lock(?)", (MIGRATION_LOCK,))
                 version = self._version(tx)
-                if version == 0 and self.on_new is not None:
-                    self.on_new(f"{self.where}: the calibration store's database has no table of calibrations")
                 if version < schema.LATEST:
                     schema.migrate(tx, self.dialect, version, backfill)
         except BaseException:
