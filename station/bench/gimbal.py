@@ -137,9 +137,22 @@ class Gimbal:
         return b[0, axis - 1], C[0].T @ b[0, axis - 1]
 
     # ------------------------------------------------------------------ inverse kinematics
+    def _key(self, *args) -> tuple:
+        """The exact inputs of a solve (every float by its bytes): the memo's key."""
+        return (type(self), self.axes_enu, self.mounting.tobytes(), self.angle_limits_deg,
+                tuple(None if a is None else np.asarray(a, dtype=float).tobytes() for a in args))
+
     def solve_static(self, up_body, theta0, heading_body=None, heading_deg=None):
         """Angles putting ``up_body`` up (and ``heading_body`` towards ``heading_deg``), the
         least travel from ``theta0``; None when no angles reach it."""
+        if not MEMO:
+            return self._solve_static(up_body, theta0, heading_body, heading_deg)
+        key = ("static", *self._key(up_body, theta0, heading_body, heading_deg))
+        if key not in _SOLVED:
+            _remember(key, self._solve_static(up_body, theta0, heading_body, heading_deg))
+        return _recall(key)
+
+    def _solve_static(self, up_body, theta0, heading_body=None, heading_deg=None):
         pairs = [(np.asarray(up_body, float), UP_ENU)]
         if heading_body is not None:
             pairs.append((np.asarray(heading_body, float), heading_enu(heading_deg)))
@@ -160,6 +173,14 @@ class Gimbal:
         (case axes) with that direction ``elevation_deg`` above the horizontal (None: any): the
         table axis points along ``sign`` x ``axis_body``.  The turning axis keeps its present
         angle."""
+        if not MEMO:
+            return self._solve_rotation(axis_body, elevation_deg, theta0, axis, sign)
+        key = ("rotation", axis, *self._key(axis_body, elevation_deg, theta0, sign))
+        if key not in _SOLVED:
+            _remember(key, self._solve_rotation(axis_body, elevation_deg, theta0, axis, sign))
+        return _recall(key)
+
+    def _solve_rotation(self, axis_body, elevation_deg, theta0, axis: int, sign: float):
         i = axis - 1
         a = np.asarray(axis_body, float)
         rows = 4 if elevation_deg is not None else 3            # None: any elevation
@@ -268,6 +289,29 @@ class Gimbal:
         for a, b, lim in zip(theta_from, theta_to, self.angle_limits_deg):
             total += abs(float(wrap180(b - a))) if lim is None else abs(float(b - a))
         return total
+
+
+# Solves already done in this process, by their exact inputs (Gimbal._key): a compilation asks
+# the same question several times (whether a static is reachable under each candidate mounting,
+# then the plan's own move to it: 513 solves for the seven built-in schemes, 297 distinct).  A
+# solve is a pure function of its inputs (the same floats in, the same floats out), so a
+# remembered answer is the very answer: the plans are bit for bit those computed without it
+# (tests/test_compile.py).  Bounded: the oldest half is dropped at MEMO_SIZE entries.
+MEMO = True
+MEMO_SIZE = 4096
+_SOLVED: dict = {}
+
+
+def _remember(key, theta) -> None:
+    if len(_SOLVED) >= MEMO_SIZE:
+        for old in list(_SOLVED)[:MEMO_SIZE // 2]:
+            del _SOLVED[old]
+    _SOLVED[key] = None if theta is None else np.array(theta, dtype=float)
+
+
+def _recall(key):
+    theta = _SOLVED[key]
+    return None if theta is None else theta.copy()      # the caller may change its copy
 
 
 def _newton(residual, theta, free):
