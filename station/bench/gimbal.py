@@ -22,7 +22,18 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from station.model.geometry import cross
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis, broadcast: the very arithmetic of
+    station.model.geometry.cross (each component a1 b2 - a2 b1, the same floats) written into one
+    array instead of stacking three (np.stack was 15 % of a compilation's time)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    np.subtract(a1 * b2, a2 * b1, out=out[..., 0])
+    np.subtract(a2 * b0, a0 * b2, out=out[..., 1])
+    np.subtract(a0 * b1, a1 * b0, out=out[..., 2])
+    return out
 
 if TYPE_CHECKING:       # scipy.spatial is imported only when a Rotation is asked for (not by plan)
     from scipy.spatial.transform import Rotation
@@ -320,11 +331,12 @@ def _newton(residual, theta, free):
     a start with no solution near it, no longer keeps every row iterating)."""
     theta = np.array(theta, dtype=float)
     active = np.arange(len(theta))
+    columns = np.asarray(free, dtype=np.intp)[None, :]
     for _ in range(ITERATIONS):
         r, J = residual(theta[active])
         step = -np.einsum("sij,sj->si", np.linalg.pinv(J[:, :, free], rcond=1e-9), r)
         step = np.clip(np.degrees(step), -30.0, 30.0)
-        theta[np.ix_(active, free)] += step
+        theta[active[:, None], columns] += step           # (np.ix_'s selection, without building it)
         active = active[np.any(np.abs(step) >= 1e-12, axis=1)]
         if not len(active):
             break
