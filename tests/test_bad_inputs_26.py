@@ -292,10 +292,12 @@ def test_a_tampered_history_row_cannot_open_a_file_outside_the_store(filed, tmp_
     one_line_exit_2(["diff", "#1", "#2", "--store", store], capsys, str(store / "index.sqlite"), "row #2",
                     "field 'file'", "inside the store")
     # the listing and the drift plot mark the row and leave it out (fin26 item 3), never open it
-    assert main([str(a) for a in ["history", serial, "--store", store, "--drift", tmp_path / "d.png"]]) == 0
+    # (the plot drawn for one of the four paths: 2 s of matplotlib each)
+    drift = ["--drift", tmp_path / "d.png"] if file == "link/out.yaml" else []
+    assert main([str(a) for a in ["history", serial, "--store", store, *drift]]) == 0
     captured = capsys.readouterr()
-    assert "NOT THE FILE FILED" in captured.out and "#2 not drawn" in captured.err, captured
-    assert "not inside the store" in captured.err
+    assert "NOT THE FILE FILED" in captured.out and "not inside the store" in captured.err, captured
+    assert ("#2 not drawn" in captured.err) == bool(drift), captured
 
 
 def test_history_drift_without_a_serial_says_what_it_needs(filed, tmp_path, capsys):
