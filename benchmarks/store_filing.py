@@ -9,6 +9,13 @@ row per capture (0 duplicated), every capture present (0 lost), every row's file
 sha256), 21 numbers per row.  Then the time of ``station fleet --json`` over the whole store.
 
 Usage:  python benchmarks/store_filing.py [--calibrations 10000] [--writers 8] [--backend both|postgresql|sqlite]
+        python benchmarks/store_filing.py --verify-cost [--calibrations 10000] [--pairs 5]
+
+``--verify-cost`` (issue 26): the cost of checking every row against its file's sha256, on a SQLite
+store of CALIBRATIONS files put in place and indexed by ``Store.rebuild`` (timed too, it reads
+every file): ``Store.filed()`` without and with the check in interleaved pairs (CPU time of this
+process; the ratio is what matters on a loaded machine), then ``station fleet --json`` (whole
+processes, wall and CPU of the child).
 """
 import argparse
 import hashlib
@@ -105,13 +112,63 @@ def fleet_time(location, files) -> float:
     return wall
 
 
+def verify_cost(n: int, units: int, pairs: int) -> None:
+    from station.io.history import Store, serial_folder
+
+    with tempfile.TemporaryDirectory(prefix="store-verify-") as tmp:
+        tmp = Path(tmp)
+        text = base_calibration(tmp)
+        root = tmp / "store"
+        rng = random.Random(1)
+        t0 = time.perf_counter()
+        for k in range(n):
+            serial = f"SN-{k % units:05d}"
+            body = variant(text, serial, hashlib.sha256(f"capture {k}".encode()).hexdigest(),
+                           f"20{30 + k // units % 60:02d}-01-01T00:00:00Z", 1600 + rng.gauss(0, 50))
+            folder = root / serial_folder(serial)
+            folder.mkdir(parents=True, exist_ok=True)
+            (folder / f"{k:05d}.yaml").write_text(body)
+        print(f"{n} calibration files ({sum(p.stat().st_size for p in root.rglob('*.yaml')) / n / 1024:.1f} kB each) "
+              f"written in {time.perf_counter() - t0:.1f} s; {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}")
+        with Store(root) as store:
+            c0, w0 = time.process_time(), time.perf_counter()
+            r = store.rebuild()
+            print(f"history --rebuild: {len(r.filed)} filed, {len(r.skipped)} skipped in {time.perf_counter() - w0:.1f} s "
+                  f"wall, {time.process_time() - c0:.1f} s CPU")
+            plain, checked = [], []
+            for _ in range(pairs):
+                for verify, into in ((False, plain), (True, checked)):
+                    c0 = time.process_time()
+                    filed = store.filed(verify=verify)
+                    into.append(time.process_time() - c0)
+                    assert len(filed) == n and not any(f.entry.problem for f in filed)
+        print(f"Store.filed() on {n} rows, CPU s (min of {pairs}, interleaved): without the check {min(plain):.2f}, "
+              f"with it {min(checked):.2f} (+{min(checked) - min(plain):.2f} s, {min(checked) / min(plain):.2f} x; "
+              f"{(min(checked) - min(plain)) / n * 1e3:.3f} ms a row)")
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(HERE.parent), *sys.path])}
+        for _ in range(2):
+            t0 = time.perf_counter()
+            before = os.times()
+            r = subprocess.run([sys.executable, "-m", "station.cli", "fleet", "--store", str(root), "--json"], env=env,
+                               capture_output=True, text=True)
+            after = os.times()
+            if r.returncode != 0:
+                raise SystemExit(f"station fleet failed: {r.stderr[-2000:]}")
+            print(f"station fleet --json on {n}: {time.perf_counter() - t0:.1f} s wall, "
+                  f"{after.children_user + after.children_system - before.children_user - before.children_system:.1f} s CPU")
+
+
 def main():
     ap = argparse.ArgumentParser()
+    ap.add_argument("--verify-cost", action="store_true")
+    ap.add_argument("--pairs", type=int, default=5)
     ap.add_argument("--calibrations", type=int, default=10_000)
     ap.add_argument("--writers", type=int, default=8)
     ap.add_argument("--units", type=int, default=500)
     ap.add_argument("--backend", choices=("both", "postgresql", "sqlite"), default="both")
     a = ap.parse_args()
+    if a.verify_cost:
+        return verify_cost(a.calibrations, a.units, a.pairs)
     with tempfile.TemporaryDirectory(prefix="store-bench-") as tmp:
         tmp = Path(tmp)
         t0 = time.perf_counter()

@@ -259,23 +259,27 @@ def walk(w: Walk, work: Path):
         p.symlink_to(work / "nowhere" / name)
         return p
 
+    # one rule for every output (fin26, docs/architecture.md "Outputs and symbolic links"): a
+    # dangling link is refused, one line naming it, exit 2, the link left as it was
     for what, argv, expect in (
             ("import csv -o", ["import", "csv", log, "-o", dangling("d-import")], 2),
             ("run --out", ["run", "--sim", "--scheme", scheme, "--out", dangling("d-run")], 2),
-            # files written atomically (a new file renamed over the path) replace a link, never
-            # write through it (station/io/calfile.py write_calfile): 0, the link now a file
-            ("export -o", ["export", cal, "--to", "json", "-o", dangling("d.json")], (0, 2)),
-            ("export imu_tk -o", ["export", cal, "--to", "imu_tk", "-o", dangling("d-imutk")], (0, 2)),
+            ("export -o", ["export", cal, "--to", "json", "-o", dangling("d.json")], 2),
+            ("export imu_tk -o", ["export", cal, "--to", "imu_tk", "-o", dangling("d-imutk")], 2),
             ("apply -o", ["apply", cal, cap / "pos01.csv", "-o", dangling("d.csv")], 2),
-            ("estimate -o", ["estimate", cap, "-o", dangling("d-est.yaml")], (0, 2)),
-            ("diagnose -o", ["diagnose", cap, "-o", dangling("d-diag.yaml")], (0, 2)),
+            ("estimate -o", ["estimate", cap, "-o", dangling("d-est.yaml")], 2),
+            ("diagnose -o", ["diagnose", cap, "-o", dangling("d-diag.yaml")], 2),
+            ("diagnose --emit-effect", ["diagnose", cap, "--emit-effect", dangling("d-eff.py")], 2),
             ("report -o", ["report", cap, "--no-auto", "-o", dangling("d.html")], 2),
             ("diagnose --report DIR", ["diagnose", cap, "--report", dangling("d-rep")], 2),
             ("noise --plot", ["noise", log, "--plot", dangling("d.svg")], 2),
             ("init PATH", ["init", dangling("d-station.yaml")], 2),
+            ("design -o", ["design", "--duration", "600", "-o", dangling("d-design.yaml")], 2),
+            ("fleet -o", ["fleet", "--store", work / "store-d", "-o", dangling("d-fleet.html")], 2),
+            ("batch estimate -o", ["batch", "estimate", cap, "-o", dangling("d-batch")], 2),
             ("history SERIAL --drift", ["history", "SIM-5", "--store", work / "store-d", "--add", cal, "--drift",
-                                        dangling("d.png")], (0, 2))):
-        w.case("dangling -o", what, argv, expect=expect,
+                                        dangling("d.png")], 2)):
+        w.case("dangling -o", what, argv, expect=expect, words=["symbolic link to"],
                check=lambda c, o, e: "wrote through to nowhere" if (work / "nowhere").exists() else None)
 
     # ---------------------------------------------------------------- 6. damaged bags
@@ -334,8 +338,14 @@ def walk(w: Walk, work: Path):
         damage()
         for cmd in (["history", "--store", store], ["diff", "#1", "#2", "--store", store],
                     ["fleet", "--store", store, "--json"], ["history", "--store", store, "--add", cal]):
+            # a zero-byte index beside the store's files: refused with the repair (fin26)
             w.case("history index", f"{what}: {cmd[0]}", cmd, words=["index.sqlite"],
-                   expect=(0, 2) if what in ("zero bytes", "NULL and blob fields", "wal garbage") else 2)
+                   expect=(0, 2) if what in ("NULL and blob fields", "wal garbage") else 2)
+        if what in ("zero bytes", "random bytes", "truncated"):
+            w.case("history index", f"{what}: history --rebuild", ["history", "--rebuild", "--store", store],
+                   expect=0, words=["history rebuilt: 1 calibration"])
+            w.case("history index", f"{what}: rebuilt, then history", ["history", "--store", store], expect=0,
+                   words=["SIM-5"])
     for extra in ("index.sqlite-wal", "index.sqlite-shm"):
         (store / extra).unlink(missing_ok=True)
     if index.is_dir():
@@ -355,12 +365,17 @@ def walk(w: Walk, work: Path):
         for cmd in (["diff", "#1", "#2", "--store", store], ["fleet", "--store", store, "--json"],
                     ["history", "SIM-5", "--store", store, "--drift", work / "drift.png"]):
             w.case("tampered history path", f"file={path[:20]!r}: {cmd[0]}", cmd, timeout=30,
-                   expect=(0, 2) if cmd[0] == "fleet" else 2,
+                   expect=2 if cmd[0] == "diff" else (0, 2),
                    check=lambda c, o, e: "printed /etc/passwd" if "root:" in o + e else None)
     db = sqlite3.connect(index)
     db.execute("UPDATE calibrations SET file = (SELECT file FROM calibrations WHERE id = 1) WHERE id = 2")
     db.commit()
     db.close()
+    # the path of #2 now names #1's file, inside the store: the index's numbers are not the file's
+    w.case("tampered history path", "#2 names #1's file: fleet", ["fleet", "--store", store, "--json"], expect=0,
+           words=["not counted: calibration #2"])
+    w.case("tampered history path", "#2 names #1's file: diff", ["diff", "#1", "#2", "--store", store],
+           words=["not the one filed"])
 
     # ---------------------------------------------------------------- 8. calibration files
     zero = [[0.0] * 3 for _ in range(3)]

@@ -358,6 +358,9 @@ def apply_file(calibration, input, output, *, serial: str | None = None, force: 
     t, f, w = _compensate(doc, str(calibration), str(input), data.t, data.accel, data.gyro, data.temp,
                           (plugins, effects_dirs, config), messages)
     table = np.column_stack([t, f, w])
+    from station.core.user_files import output_path
+
+    output_path(output, "the compensated samples")
     try:
         with open(output, "w") as fh:
             fh.write("t,ax,ay,az,gx,gy,gz\n")
@@ -742,6 +745,19 @@ def history(serial: str | None = None, *, store=None, add=(), lot: str | None = 
         return History(st.where, filed, st.serials(), st.list(serial) if serial is not None else [])
 
 
+def rebuild_history(*, store=None):
+    """``station history --rebuild``: a new index of the calibration store built from the
+    calibration files in its folder (after the index was lost or damaged: a zero-byte
+    ``index.sqlite`` is refused, not read as an empty history).  Returns a ``Rebuilt``:
+    ``.where`` (the index), ``.filed`` (the entries), ``.skipped`` ((file, why) pairs: links,
+    files outside the store, files that are not calibrations, duplicates) and ``.kept_aside``
+    (the old SQLite index, renamed ``index.sqlite.before-rebuild-UTC``)."""
+    from station.io.history import Store
+
+    with Store(store) as st:
+        return st.rebuild()
+
+
 @dataclass
 class Comparison:
     """:func:`diff`'s result: ``a``, ``b`` (the files compared), their documents ``doc_a``,
@@ -793,6 +809,10 @@ def drift(serial: str, output, *, store=None) -> tuple[Path, list]:
         where = st.where
     if not entries:
         raise UserError(f"no calibration of IMU {serial!r} in {where} (station history lists the serials)")
+    unverified = [f"#{e.id} not drawn: {e.problem}" for e in entries if e.problem]
+    entries = [e for e in entries if not e.problem]
+    if not entries:
+        raise UserError(f"IMU {serial!r} in {where}: no calibration whose file is the one filed ({'; '.join(unverified)})")
     png = Path(output)
     rows: dict = {}
     for e in entries:
@@ -800,7 +820,7 @@ def drift(serial: str, output, *, store=None) -> tuple[Path, list]:
         status = drift_status(e.verdict)
         for name, p in doc["parameters"].items():
             rows.setdefault(name, []).append((e.date_utc, p["value"], p.get("sigma"), p["unit"], status))
-    marked = [f"#{e.id} {e.verdict.split(':')[0]}" for e in entries if drift_status(e.verdict) != "passes"]
+    marked = [f"#{e.id} {e.verdict.split(':')[0]}" for e in entries if drift_status(e.verdict) != "passes"] + unverified
     rows = {k: v for k, v in rows.items() if len(v) == len(entries)}
     try:
         drift_figure(rows, png, f"IMU {serial}: {len(entries)} calibrations, value ± 1σ")

@@ -237,3 +237,124 @@ def test_a_schema_version_of_another_type_in_the_database_is_one_line(pg, tmp_pa
     with pytest.raises(UserError, match="schema version is '4', not a whole number"):
         with Store(url, files=tmp_path) as st:
             st.serials()
+
+
+# ------------------------------------------------------------------ an index lost or tampered with (fin26, issue 26)
+
+def _three(optimal9_run, tmp_path) -> list:
+    """Three calibrations of three IMUs (distinct bytes, captures and serials)."""
+    base = yaml.safe_load((optimal9_run / "calibration.yaml").read_text())
+    paths = []
+    for k in range(3):
+        doc = copy.deepcopy(base)
+        doc["provenance"].update(imu_serial=f"SN-L{k}", capture_sha256=f"{k:064x}", imu_lot="L1")
+        paths.append(tmp_path / f"c{k}.yaml")
+        paths[-1].write_text(yaml.dump(doc, Dumper=DUMPER, sort_keys=False))
+    return paths
+
+
+def _one_line(argv, capsys, code, *words) -> str:
+    capsys.readouterr()
+    assert main([str(a) for a in argv]) == code
+    out, err = capsys.readouterr()
+    assert "Traceback" not in err, err
+    for w in words:
+        assert w in err + out, (w, out, err)
+    return err
+
+
+def test_an_index_lost_beside_its_files_is_refused_and_rebuilt(location, optimal9_run, tmp_path, capsys,
+                                                              monkeypatch):
+    """A store whose SQLite index is gone while its folder holds calibration files is refused in
+    one line with the repair, for reading and for filing (before, it was read as an empty history
+    and new filings started a second one); `history --rebuild` files the store's files again.  A
+    PostgreSQL database emptied is a new store (its files' folder may be shared with others: not
+    refused), and `history --rebuild` fills it from the folder."""
+    where, files = location
+    monkeypatch.setenv("STATION_HISTORY_DIR", str(files))       # a database's files: this folder
+    paths = _three(optimal9_run, tmp_path)
+    assert main(["history", "--store", where, "--add", str(paths[0]), "--add", str(paths[1])]) == 0
+    if where == str(files):
+        (files / "index.sqlite").unlink()
+    else:
+        import psycopg
+        with psycopg.connect(where, autocommit=True) as conn:
+            conn.execute("DROP TABLE parameters; DROP TABLE calibrations; DROP TABLE schema_version")
+    for argv in (["history", "--store", where], ["fleet", "--store", where],
+                 ["history", "--store", where, "--add", paths[2]]):
+        if where != str(files):
+            break
+        err = _one_line(argv, capsys, 2, "holds 2 calibration file(s)", "station history --rebuild --store")
+        assert err.count("\n") == 1
+    _one_line(["history", "--rebuild", "--store", where], capsys, 0, "history rebuilt: 2 calibration(s) of 2 IMU(s)")
+    with Store(where, files=files) as store:
+        filed = store.filed()
+        assert sorted(f.entry.serial for f in filed) == ["SN-L0", "SN-L1"] and not any(f.entry.problem for f in filed)
+        assert all(len(f.numbers) == 21 and f.entry.lot == "L1" for f in filed)
+    assert main(["history", "--store", where, "--add", str(paths[2])]) == 0
+
+
+@pytest.mark.parametrize("damage", ["zero bytes", "garbage"])
+def test_a_damaged_sqlite_index_is_refused_and_rebuilt_with_the_old_kept_aside(optimal9_run, tmp_path, capsys, damage):
+    root = tmp_path / "store"
+    paths = _three(optimal9_run, tmp_path)
+    assert main(["history", "--store", str(root), "--add", str(paths[0]), "--lot", "kept"]) == 0
+    index = root / "index.sqlite"
+    index.write_bytes(b"" if damage == "zero bytes" else b"not a database " * 100)
+    _one_line(["history", "--store", root, "SN-L0"], capsys, 2, str(index), "--rebuild")
+    (root / "SN-L0" / "stray.txt").write_text("not a calibration")       # not *.yaml: not looked at
+    (root / "SN-L0" / "notes.yaml").write_text("just: notes\n")          # not a calibration file: skipped, said
+    (root / "SN-L1").mkdir()
+    (root / "SN-L1" / "link.yaml").symlink_to(paths[1])                  # a link out of the store: refused
+    err = _one_line(["history", "--rebuild", "--store", root], capsys, 0, "1 calibration(s) of 1 IMU(s)",
+                    "2 file(s) not filed")
+    assert "link.yaml: a symbolic link" in err and "notes.yaml" in err
+    aside = list(root.glob("index.sqlite.before-rebuild-*"))
+    assert len(aside) == 1 and aside[0].read_bytes() == (b"" if damage == "zero bytes" else b"not a database " * 100)
+    (f,) = Store(root).filed()
+    assert f.entry.serial == "SN-L0" and f.entry.lot == "L1"        # the file's own lot (the old index unreadable)
+    # a new store and an empty zero-byte index with no files beside it: simply empty
+    (tmp_path / "new").mkdir()
+    (tmp_path / "new" / "index.sqlite").write_bytes(b"")
+    assert Store(tmp_path / "new").filed() == []
+
+
+def test_fleet_history_and_diff_check_every_row_against_its_file(location, optimal9_run, tmp_path, capsys,
+                                                                monkeypatch):
+    """The index holds the numbers, the file is the record: a row whose file path was edited to
+    name another calibration of the store, whose file was edited or removed, is marked and not
+    counted (fleet: JSON "not_counted", one line each on stderr; history: the row marked; diff
+    of it: refused) — before, fleet counted the index's numbers without opening any file."""
+    import json
+
+    where, files = location
+    monkeypatch.setenv("STATION_HISTORY_DIR", str(files))
+    paths = _three(optimal9_run, tmp_path)
+    assert main(["history", "--store", where, *[a for p in paths for a in ("--add", str(p))]]) == 0
+    with Store(where, files=files) as store:
+        rows = {f.entry.serial: f.entry for f in store.filed()}
+    sql = "UPDATE calibrations SET file = ? WHERE id = ?"
+    if where == str(files):
+        db = sqlite3.connect(files / "index.sqlite")
+        db.execute(sql, (rows["SN-L1"].path.relative_to(files).as_posix(), rows["SN-L0"].id))
+        db.commit()
+        db.close()
+    else:
+        import psycopg
+        with psycopg.connect(where, autocommit=True) as conn:
+            conn.execute(sql.replace("?", "%s"), (rows["SN-L1"].path.relative_to(files).as_posix(), rows["SN-L0"].id))
+    rows["SN-L2"].path.write_text(rows["SN-L2"].path.read_text().replace("passes", "passes "))   # edited after filing
+    capsys.readouterr()
+    assert main(["fleet", "--store", where, "--json"]) == 0
+    out, err = capsys.readouterr()
+    view = json.loads(out)
+    assert view["calibrations"] == 1 and view["units"] == 1
+    assert sorted(r["serial"] for r in view["not_counted"]) == ["SN-L0", "SN-L2"]
+    assert all("not the one filed" in r["problem"] for r in view["not_counted"]) and err.count("not counted") == 2
+    _one_line(["history", "SN-L0", "--store", where], capsys, 0, "NOT THE FILE FILED")
+    _one_line(["diff", f"#{rows['SN-L0'].id}", f"#{rows['SN-L1'].id}", "--store", where], capsys, 2,
+              "not the one filed", "not read as that calibration")
+    rows["SN-L1"].path.unlink()
+    with Store(where, files=files) as store:
+        problems = {f.entry.serial: f.entry.problem for f in store.filed()}
+    assert "is missing" in problems["SN-L1"] and "is missing" in problems["SN-L0"] and "differs" in problems["SN-L2"]

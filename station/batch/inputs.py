@@ -82,6 +82,8 @@ def from_history(queries, store=None) -> list[str]:
         if not entries:
             raise UserError(f"--history-query {serial}: no calibration of this IMU serial in {st.root}")
         for entry in entries:
+            if entry.problem:           # its file is not the calibration filed: not read as it
+                raise UserError(f"--history-query {serial}: calibration #{entry.id}: {entry.problem}")
             capture = (read_calfile(entry.path).get("provenance") or {}).get("capture")
             if isinstance(capture, str) and capture not in captures:
                 captures.append(capture)
@@ -115,6 +117,9 @@ def plan(command: str, sources, out_dir=None, export_format: str | None = None) 
     names = stems(sources)
     out = Path(out_dir) if out_dir else None
     if out is not None:
+        from station.core.user_files import output_path
+
+        output_path(out, "the output folder")
         try:
             out.mkdir(parents=True, exist_ok=True)
         except OSError as e:

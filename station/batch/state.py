@@ -57,6 +57,9 @@ class State:
         return rec if rec and rec.get("status") in ("done", "poor fit", "skipped") else None
 
     def __enter__(self):
+        from station.core.user_files import output_path
+
+        output_path(self.path, "the batch state file")
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._file = open(self.path, "w" if not self.records else "a", encoding="utf-8")

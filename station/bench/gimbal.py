@@ -22,7 +22,18 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from station.model.geometry import cross
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis, broadcast: the very arithmetic of
+    station.model.geometry.cross (each component a1 b2 - a2 b1, the same floats) written into one
+    array instead of stacking three (np.stack was 15 % of a compilation's time)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    np.subtract(a1 * b2, a2 * b1, out=out[..., 0])
+    np.subtract(a2 * b0, a0 * b2, out=out[..., 1])
+    np.subtract(a0 * b1, a1 * b0, out=out[..., 2])
+    return out
 
 if TYPE_CHECKING:       # scipy.spatial is imported only when a Rotation is asked for (not by plan)
     from scipy.spatial.transform import Rotation
@@ -137,9 +148,22 @@ class Gimbal:
         return b[0, axis - 1], C[0].T @ b[0, axis - 1]
 
     # ------------------------------------------------------------------ inverse kinematics
+    def _key(self, *args) -> tuple:
+        """The exact inputs of a solve (every float by its bytes): the memo's key."""
+        return (type(self), self.axes_enu, self.mounting.tobytes(), self.angle_limits_deg,
+                tuple(None if a is None else np.asarray(a, dtype=float).tobytes() for a in args))
+
     def solve_static(self, up_body, theta0, heading_body=None, heading_deg=None):
         """Angles putting ``up_body`` up (and ``heading_body`` towards ``heading_deg``), the
         least travel from ``theta0``; None when no angles reach it."""
+        if not MEMO:
+            return self._solve_static(up_body, theta0, heading_body, heading_deg)
+        key = ("static", *self._key(up_body, theta0, heading_body, heading_deg))
+        if key not in _SOLVED:
+            _remember(key, self._solve_static(up_body, theta0, heading_body, heading_deg))
+        return _recall(key)
+
+    def _solve_static(self, up_body, theta0, heading_body=None, heading_deg=None):
         pairs = [(np.asarray(up_body, float), UP_ENU)]
         if heading_body is not None:
             pairs.append((np.asarray(heading_body, float), heading_enu(heading_deg)))
@@ -160,6 +184,14 @@ class Gimbal:
         (case axes) with that direction ``elevation_deg`` above the horizontal (None: any): the
         table axis points along ``sign`` x ``axis_body``.  The turning axis keeps its present
         angle."""
+        if not MEMO:
+            return self._solve_rotation(axis_body, elevation_deg, theta0, axis, sign)
+        key = ("rotation", axis, *self._key(axis_body, elevation_deg, theta0, sign))
+        if key not in _SOLVED:
+            _remember(key, self._solve_rotation(axis_body, elevation_deg, theta0, axis, sign))
+        return _recall(key)
+
+    def _solve_rotation(self, axis_body, elevation_deg, theta0, axis: int, sign: float):
         i = axis - 1
         a = np.asarray(axis_body, float)
         rows = 4 if elevation_deg is not None else 3            # None: any elevation
@@ -270,17 +302,41 @@ class Gimbal:
         return total
 
 
+# Solves already done in this process, by their exact inputs (Gimbal._key): a compilation asks
+# the same question several times (whether a static is reachable under each candidate mounting,
+# then the plan's own move to it: 513 solves for the seven built-in schemes, 297 distinct).  A
+# solve is a pure function of its inputs (the same floats in, the same floats out), so a
+# remembered answer is the very answer: the plans are bit for bit those computed without it
+# (tests/test_compile.py).  Bounded: the oldest half is dropped at MEMO_SIZE entries.
+MEMO = True
+MEMO_SIZE = 4096
+_SOLVED: dict = {}
+
+
+def _remember(key, theta) -> None:
+    if len(_SOLVED) >= MEMO_SIZE:
+        for old in list(_SOLVED)[:MEMO_SIZE // 2]:
+            del _SOLVED[old]
+    _SOLVED[key] = None if theta is None else np.array(theta, dtype=float)
+
+
+def _recall(key):
+    theta = _SOLVED[key]
+    return None if theta is None else theta.copy()      # the caller may change its copy
+
+
 def _newton(residual, theta, free):
     """Gauss-Newton (minimum-norm steps, at most 30 deg) on the ``free`` angles of every row; a
     row stops once its step is below 1e-12 deg (the others go on: one row that does not converge,
     a start with no solution near it, no longer keeps every row iterating)."""
     theta = np.array(theta, dtype=float)
     active = np.arange(len(theta))
+    columns = np.asarray(free, dtype=np.intp)[None, :]
     for _ in range(ITERATIONS):
         r, J = residual(theta[active])
         step = -np.einsum("sij,sj->si", np.linalg.pinv(J[:, :, free], rcond=1e-9), r)
         step = np.clip(np.degrees(step), -30.0, 30.0)
-        theta[np.ix_(active, free)] += step
+        theta[active[:, None], columns] += step           # (np.ix_'s selection, without building it)
         active = active[np.any(np.abs(step) >= 1e-12, axis=1)]
         if not len(active):
             break

@@ -47,6 +47,25 @@ def _limit_blas_before_loading(threads: int) -> None:
         os.environ.setdefault(name, str(threads))
 
 
+# every option that names a file or folder a command writes (``dest`` -> as the user types it):
+# checked by the one rule for outputs (station.core.user_files.output_path) before any work
+OUTPUT_OPTIONS = {"output": "-o", "out": "--out", "output_dir": "-o", "report": "--report", "drift": "--drift",
+                  "plot": "--plot", "emit_effect": "--emit-effect", "state": "--state"}
+
+
+def check_outputs(args) -> None:
+    """Refuse an output option on a dangling symbolic link before the command does any work (the
+    writers check again: the library's callers and the default paths)."""
+    from station.core.user_files import output_path
+
+    named = [(opt, getattr(args, dest, None)) for dest, opt in OUTPUT_OPTIONS.items()]
+    if getattr(args, "command", None) == "init":
+        named.append(("init", getattr(args, "path", None)))
+    for opt, value in named:
+        if isinstance(value, str):
+            output_path(value, f"the output of {opt}")
+
+
 def main(argv=None) -> int:
     """Exit status: 0 done; 2 bad input (one line naming the file, line or field), or data too
     large for the memory (one line); 3 the calibration was written but its fit fails
@@ -56,6 +75,7 @@ def main(argv=None) -> int:
     try:
         args = build_parser().parse_args(argv)
         command = args.command
+        check_outputs(args)
         threads = blas_threads()
         _limit_blas_before_loading(threads)
         from threadpoolctl import threadpool_limits

@@ -227,6 +227,9 @@ def _emit(path, d, steps=()) -> None:
                   "(the model explains the data, or a library effect accounts for it); no file written",
                   markup=False, soft_wrap=True)
         return
+    from station.core.user_files import output_path
+
+    output_path(path, "the effect plugin")
     try:
         Path(path).write_text(plugin_source(*got, aliases=aliases, discovered_by=how))
     except OSError as e:

@@ -51,6 +51,12 @@ def cmd_fleet(args) -> int:
         said = ", ".join(f"{k} {v}" for k, v in selection.items() if v and k != "store") or "any"
         raise UserError(f"no calibration in {where} matches ({said}); station history lists the serials")
     view = fleet(filed, selection)
+    for row in view.not_counted:
+        err.print(f"not counted: calibration #{row['calibration']} of {row['serial']}: {row['problem']} (the index "
+                  "is not the record of it; station history --rebuild re-reads the store's files)", markup=False,
+                  soft_wrap=True)
+    if not view.calibrations:
+        raise UserError(f"no calibration in {where} whose file is the one filed ({len(view.not_counted)} not counted)")
     if args.output:
         from station.diagnose.fleet_page import write_page
 

@@ -21,6 +21,8 @@ def add_parsers(sub) -> None:
                    "not state it (provenance imu_lot); also set on a calibration filed before")
     h.add_argument("--imu-model", metavar="MODEL", help="with --add: the IMU model, where the file does not "
                    "state it (provenance imu_model)")
+    h.add_argument("--rebuild", action="store_true", help="build a new index from the calibration files in "
+                   "the store's folder (after the index was lost or damaged; the old one is kept aside)")
     h.add_argument("--store", metavar="DIR|URL", help=STORE_HELP)
     h.set_defaults(func=cmd_history)
 
@@ -82,6 +84,17 @@ def cmd_history(args) -> int:
     from station import api
     from station.core.errors import UserError
 
+    if args.rebuild:
+        if args.add or args.serial or args.drift:
+            raise UserError("--rebuild goes alone (with --store): it re-reads the store's own files")
+        r = api.rebuild_history(store=args.store)
+        for path, why in r.skipped:
+            err.print(f"not filed: {path}: {why}", markup=False, soft_wrap=True)
+        if r.kept_aside:
+            out.print(f"the old index kept as {r.kept_aside}", markup=False)
+        out.print(f"history rebuilt: {len(r.filed)} calibration(s) of {len({e.serial for e in r.filed})} IMU(s) "
+                  f"filed from the files of the store into {r.where}; {len(r.skipped)} file(s) not filed", markup=False)
+        return 0
     if args.drift and args.serial is None:      # (it was ignored: exit 0 and no plot)
         raise UserError(f"--drift {args.drift}: give the SERIAL whose drift to plot: station history SERIAL "
                         "--drift PNG (station history lists the serials)")
@@ -104,8 +117,13 @@ def cmd_history(args) -> int:
     for col in ("id", "date (UTC)", "scheme", "method", "verdict", "file"):
         t.add_column(col)
     for e in h.entries:
-        t.add_row(f"#{e.id}", e.date_utc, e.scheme or "", e.method or "", e.verdict, str(e.path))
+        t.add_row(f"#{e.id}", e.date_utc, e.scheme or "", e.method or "", e.verdict,
+                  str(e.path) if not e.problem else f"NOT THE FILE FILED: {e.problem}")
     out.print(t)
+    for e in h.entries:
+        if e.problem:
+            err.print(f"warning: calibration #{e.id}: {e.problem} (the index is not the record of it; "
+                      "station history --rebuild re-reads the store's files)", markup=False, soft_wrap=True)
     if args.drift:
         _drift(args.serial, args.drift, args.store)
     return 0

@@ -87,7 +87,9 @@ def _add_scheme_overrides(p) -> None:
 def cmd_init(args) -> int:
     from station.bench.config import EXAMPLE
 
-    path = Path(args.path)
+    from station.core.user_files import output_path
+
+    path = Path(output_path(args.path, "the configuration"))
     if path.exists():
         raise UserError(f"{path}: already exists; will not overwrite it")
     try:

@@ -275,6 +275,9 @@ def _write_run(directory: Path, scheme, text, overrides, config, folders) -> Non
     """The run's own run.yaml and scheme.yaml (the bundles are written by CaptureWriter)."""
     from station.cli.run_bench import RUN_FILE, RUN_FORMAT, SCHEME_FILE
 
+    from station.core.user_files import output_path
+
+    output_path(directory, "the capture directory")
     if directory.exists() and any(directory.iterdir()):
         raise UserError(f"{directory}: exists and is not empty: choose another --out")
     try:

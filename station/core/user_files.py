@@ -53,3 +53,33 @@ def read_user_text(path, what: str, *, limit: int = MAX_BYTES) -> str:
     except UnicodeDecodeError as e:
         line = data[:e.start].count(b"\n") + 1
         raise UserError(f"{path}: line {line}: not UTF-8 text: cannot read {what}") from None
+
+
+def output_path(path, what: str = "output"):
+    """``path`` checked as a place to write ``what`` to (a file or a folder): the one rule for
+    every output station writes (docs/architecture.md, "Outputs and symbolic links").
+
+    A symbolic link whose target does not exist (a dangling link, or a loop of links) is refused
+    with one line naming the link and where it points: writing there would either create a file
+    at the link's target — somewhere the user never named, possibly outside the folder they
+    looked at — or replace the link they made, and a careful tool does neither on a guess.  A
+    link to something that exists is left to the writer (the calibration writers replace the
+    link with the file, never writing into the file it points at; the page and CSV writers write
+    through it as the shell's ``>`` does); a path that is not a link is returned as it is.
+    Returns ``path`` unchanged."""
+    p = os.fspath(path)
+    try:
+        if not os.path.islink(p) or os.path.exists(p):
+            return path
+        target = os.readlink(p)
+    except (OSError, ValueError):
+        return path
+    try:
+        os.stat(p)
+        why = "which does not exist"
+    except OSError as e:
+        import errno
+
+        why = "in a loop of symbolic links" if e.errno == errno.ELOOP else "which does not exist"
+    raise UserError(f"{p}: cannot write {what}: a symbolic link to {target}, {why} (station writes no output "
+                    "through or over a dangling link); give another path or remove the link")

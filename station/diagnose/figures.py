@@ -66,6 +66,10 @@ def figure_format(name) -> str:
 def save(fig, path=None, fmt: str | None = None) -> bytes:
     """The figure's bytes in ``fmt`` ("svg" or "png"; by default from ``path``'s suffix, PNG
     without one); also written to ``path`` when given."""
+    if path is not None:
+        from station.core.user_files import output_path
+
+        output_path(path, "the figure")
     plt = pyplot()
     buf = io.BytesIO()
     if (fmt or figure_format(path or "")) == "svg":

@@ -100,6 +100,9 @@ class Fleet:
     parameters: list            # Spread
     drift: list                 # Drift
     tests: int = 0              # unit x parameter judgements made
+    # rows not counted: their file is missing, outside the store or not the one filed
+    # ({"calibration", "serial", "date_utc", "problem"})
+    not_counted: list = field(default_factory=list)
 
     @property
     def expected_by_chance(self) -> float:
@@ -190,8 +193,12 @@ def _doc(filed) -> dict:
 
 
 def fleet(filed: list, selection: dict | None = None) -> Fleet:
-    """The fleet view of ``filed`` (history.Filed, any order)."""
+    """The fleet view of ``filed`` (history.Filed, any order); an entry whose file is not the one
+    filed (``entry.problem``, Store.verify) is listed as not counted, never counted."""
     filed = sorted(filed, key=lambda f: (f.entry.serial, f.entry.date_utc, f.entry.id))
+    not_counted = [{"calibration": f.entry.id, "serial": f.entry.serial, "date_utc": f.entry.date_utc,
+                    "problem": f.entry.problem} for f in filed if getattr(f.entry, "problem", None)]
+    filed = [f for f in filed if not getattr(f.entry, "problem", None)]
     verdicts: dict = {}
     per_unit: dict = {}
     for f in filed:
@@ -223,7 +230,7 @@ def fleet(filed: list, selection: dict | None = None) -> Fleet:
     spreads = [_spread(name, unit, values) for (name, unit), values in sorted(by_name.items())]
     tests = sum(1 for p in spreads for v in p.values if v.t is not None)
     return Fleet(dict(selection or {}), len(filed), len(per_unit), verdicts, latest_verdicts, unusable,
-                 spreads, drift, tests)
+                 spreads, drift, tests, not_counted)
 
 
 def _num(x):
@@ -240,6 +247,7 @@ def to_json(f: Fleet) -> dict:
         "verdicts": f.verdicts,
         "latest_verdicts": f.latest_verdicts,
         "units_without_usable_calibration": f.unusable_units,
+        "not_counted": f.not_counted,
         "outside_tail": TAIL,
         "judgements": f.tests,
         "expected_outside_by_chance": f.expected_by_chance,

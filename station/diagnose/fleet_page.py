@@ -44,6 +44,8 @@ def render(f: Fleet, figures: dict) -> str:
                      for k in sorted(set(f.verdicts) | set(f.latest_verdicts))])
     unusable = (f"<p class='flag'>Without a usable calibration (not in the spread): {_e(', '.join(f.unusable_units))}</p>"
                 if f.unusable_units else "")
+    unusable += "".join(f"<p class='flag'>Not counted: calibration #{r['calibration']} of {_e(r['serial'])}: "
+                        f"{_e(r['problem'])}</p>" for r in f.not_counted)
     spread = _table(["parameter", "unit", "units", "mean", "std across units", "median", "min", "max",
                      "median own 1σ", "outside"],
                     [(_e(p.name), _e(p.unit), str(p.units), _g(p.mean, 9), _g(p.std, 4), _g(p.median, 9),
@@ -88,7 +90,9 @@ def render(f: Fleet, figures: dict) -> str:
 
 
 def write_page(path, f: Fleet) -> Path:
-    path = Path(path)
+    from station.core.user_files import output_path
+
+    path = Path(output_path(path, "the fleet page"))
     figures = {}
     if any(v.t is not None for p in f.parameters for v in p.values):
         figures[FIGURE] = fleet_figure(figure_rows(f), fmt="svg")

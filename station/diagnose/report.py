@@ -363,7 +363,9 @@ def figures_of(inp: ReportInput) -> dict:
 
 def write_page(path, inp: ReportInput, figure_dir=None) -> Path:
     """Write the page (and, with ``figure_dir``, its figures as files there)."""
-    path = Path(path)
+    from station.core.user_files import output_path
+
+    path = Path(output_path(path, "the report"))
     figures = figures_of(inp)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -378,7 +380,9 @@ def write_page(path, inp: ReportInput, figure_dir=None) -> Path:
 
 def write_report(directory, first, steps, final, summary_lines, inp: ReportInput | None = None) -> Path:
     """``diagnose --report DIR``: DIR/index.html (self-contained) and the figures beside it."""
-    directory = Path(directory)
+    from station.core.user_files import output_path
+
+    directory = Path(output_path(directory, "the report directory"))
     try:
         directory.mkdir(parents=True, exist_ok=True)
     except OSError as e:

@@ -139,6 +139,9 @@ def write_new_file(path: Path, data: bytes, *, what: str = "file") -> None:
     same folder (O_EXCL|O_NOFOLLOW), removed on every path out (also KeyboardInterrupt).  The
     temporary's name carries the writer's pid (``.NAME.PID_RANDOM.tmp``): one left by a writer
     killed mid-write is removed by the next write of ``path`` (remove_stale_temporaries)."""
+    from station.core.user_files import output_path
+
+    output_path(path, f"the {what}")
     remove_stale_temporaries(path)
     tmp = path.with_name(f".{path.name}.{os.getpid()}_{secrets.token_hex(8)}.tmp")
     flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)

@@ -1196,7 +1196,9 @@ class CaptureWriter:
 
     def __init__(self, directory, imu: ImuInfo, site: Site, scheme: str | None = None,
                  extra: dict | None = None):
-        directory = Path(directory)
+        from station.core.user_files import output_path
+
+        directory = Path(output_path(directory, "the capture directory"))
         if (directory / MANIFEST).exists():
             raise UserError(f"{directory}: already holds a capture ({MANIFEST}); "
                             "reopen it to append segments, or choose a new directory")

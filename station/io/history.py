@@ -55,6 +55,9 @@ class Entry:
     sha256: str
     imu_model: str | None = None
     lot: str | None = None
+    # why the row is not the record of a calibration (None when its file is the one filed):
+    # its file missing, outside the store, or changed since filing (Store.verify)
+    problem: str | None = None
 
 
 def default_store() -> Path:
@@ -123,6 +126,17 @@ def serial_folder(serial: str) -> str:
 
 
 @dataclass
+class Rebuilt:
+    """:meth:`Store.rebuild`'s result: the index ``where``, the calibrations filed again
+    (``filed``), the files not filed with why (``skipped``: (path, reason)), and where the old
+    index was kept (``kept_aside``, None when there was none or for a database)."""
+    where: str
+    filed: list
+    skipped: list
+    kept_aside: Path | None
+
+
+@dataclass
 class Number:
     """One parameter of a filed calibration, as the index holds it."""
     name: str
@@ -185,6 +199,150 @@ class Store:
             self.root = Path(location) if location else (Path(files) if files else default_store())
             self.index = SqliteIndex(self.root)
         self.where = self.index.where
+        self._rebuilding = False
+        if isinstance(self.index, SqliteIndex):     # (a PostgreSQL database's folder may be shared)
+            self.index.on_new = self._refuse_lost_index
+            self.index.damaged_hint = self._damaged_hint
+
+    # ------------------------------------------------------------- an index lost beside its files
+
+    def calibration_files(self) -> list[Path]:
+        """The calibration files in the store's folder, where station files them
+        (``SERIAL/NAME.yaml``; no dot names: temporaries), sorted."""
+        try:
+            return sorted(p for p in self.root.glob("*/*.yaml")
+                          if not p.name.startswith(".") and not p.parent.name.startswith("."))
+        except OSError:
+            return []
+
+    def _refuse_lost_index(self, why: str) -> None:
+        """An index missing or empty (or a database without the tables) while the store's folder
+        holds calibration files: the index was lost (a zero-byte file after a full disk, a copy
+        of the folder without it); read as an empty history it would silently drop every entry
+        and file new ones beside the lost.  Refused, with the repair."""
+        if self._rebuilding:
+            return
+        files = self.calibration_files()
+        if files:
+            raise UserError(f"{why}, but the store {self.root} holds {len(files)} calibration file(s): the index "
+                            f"was lost; nothing is read from or filed into it until it is rebuilt from the files: "
+                            f"station history --rebuild --store {self._store_arg()}")
+
+    def _damaged_hint(self) -> str:
+        if self._rebuilding or not self.calibration_files():
+            return ""
+        return f" (station history --rebuild --store {self._store_arg()} builds a new index from the store's files)"
+
+    def _store_arg(self) -> str:
+        return self.where if is_database_url(getattr(self.index, "url", None)) else str(self.root)
+
+    def rebuild(self) -> "Rebuilt":
+        """A new index from the calibration files in the store's folder (``station history
+        --rebuild``): every ``SERIAL/NAME.yaml`` read again (a symbolic link, a file outside the
+        store or one that is not a calibration file is skipped and said); the IMU model and lot
+        ``history --add`` gave are kept where the old index can still be read.  SQLite: the new
+        index is written beside the old and renamed over it, the old kept as
+        ``index.sqlite.before-rebuild-UTC``; PostgreSQL: its rows replaced in one transaction."""
+        from station.io.calfile import read_calfile
+
+        root = self.root.resolve() if self.root.exists() else self.root
+        kept: dict = {}
+        try:
+            for digest, imu_model, lot in self._rows("SELECT sha256, imu_model, lot FROM calibrations"):
+                kept[digest] = (imu_model, lot)
+        except UserError:
+            pass                                     # a damaged or empty index: nothing to keep
+        rows, skipped = [], []
+        for path in self.calibration_files():
+            if path.is_symlink() or path.parent.is_symlink():
+                skipped.append((str(path), "a symbolic link: the store holds files, not links"))
+                continue
+            try:
+                inside = path.resolve().is_relative_to(root)
+            except (OSError, RuntimeError):
+                inside = False
+            if not inside:
+                skipped.append((str(path), f"outside the store {self.root}"))
+                continue
+            try:
+                doc = read_calfile(path)
+                data = path.read_bytes()
+            except (UserError, OSError) as e:
+                skipped.append((str(path), str(e)))
+                continue
+            digest = hashlib.sha256(data).hexdigest()
+            row = self._row(doc, digest, path.relative_to(self.root).as_posix(), "rebuilt from the store")
+            if digest in kept:
+                row = (*row[:11], kept[digest][0] or row[11], kept[digest][1] or row[12])
+            rows.append((row, _numbers(doc), str(path)))
+        self._rebuilding = True
+        try:
+            if isinstance(self.index, SqliteIndex):
+                return self._rebuild_sqlite(rows, skipped)
+            with self.index.transaction(write=True, backfill=self._backfill) as tx:
+                tx.run("DELETE FROM calibrations")
+                filed = self._insert_all(tx, rows, skipped)
+            return Rebuilt(self.where, filed, skipped, None)
+        finally:
+            self._rebuilding = False
+
+    def _rebuild_sqlite(self, rows, skipped) -> "Rebuilt":
+        stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+        try:
+            self.root.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise UserError(f"{self.root}: cannot create the calibration store: {e.strerror}") from None
+        tmp = self.root / f".{INDEX}.rebuild-{os.getpid()}.tmp"
+        tmp.unlink(missing_ok=True)
+        try:
+            new = SqliteIndex(self.root, path=tmp)
+            with new.transaction(write=True, backfill=self._backfill) as tx:
+                filed = self._insert_all(tx, rows, skipped)
+            aside = None
+            for suffix in ("", "-journal", "-wal", "-shm"):    # a hot journal would be played into the new one
+                old = self.root / (INDEX + suffix)
+                if os.path.lexists(old):
+                    moved = old.with_name(f"{old.name}.before-rebuild-{stamp}")
+                    os.replace(old, moved)
+                    aside = aside or moved
+            os.replace(tmp, self.index.path)
+        except OSError as e:
+            raise UserError(f"{self.index.path}: cannot rebuild the calibration history: {e.strerror}") from None
+        finally:
+            tmp.unlink(missing_ok=True)
+        return Rebuilt(self.where, filed, skipped, aside)
+
+    def _insert_all(self, tx, rows, skipped) -> list:
+        filed = []
+        for row, numbers, path in rows:
+            entry = self._insert(tx, row, numbers)
+            if entry is None:
+                skipped.append((path, "the same calibration as one filed already (its file, or the same capture "
+                                      "and model)"))
+            else:
+                filed.append(entry)
+        return filed
+
+    def _insert(self, tx, row, numbers) -> Entry | None:
+        new = tx.rows(
+            "INSERT INTO calibrations (serial, date_utc, scheme, method, verdict, file, source, sha256, filed_utc, "
+            "capture_sha256, model, imu_model, lot) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) "
+            "ON CONFLICT DO NOTHING RETURNING id", row)
+        if not new:
+            return None
+        tx.many("INSERT INTO parameters (calibration_id, name, value, sigma, unit) VALUES (?, ?, ?, ?, ?)",
+                [(new[0][0], *n) for n in numbers])
+        return self._entry((new[0][0], *row[:8], *row[11:]))
+
+    def _row(self, doc: dict, digest: str, rel: str, source: str, *, lot=None, imu_model=None) -> tuple:
+        """The calibrations row of a calibration document (the columns of the INSERT)."""
+        prov = doc.get("provenance") if isinstance(doc.get("provenance"), dict) else {}
+        serial = _text(prov.get("imu_serial")) or UNKNOWN_SERIAL
+        date = _text(prov.get("date_utc")) or _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+        return (serial, date, _text(prov.get("scheme")), _text(prov.get("method")), verdict_of(doc), rel, source,
+                digest, _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+                _text(prov.get("capture_sha256")), model_key(doc), imu_model or _text(prov.get("imu_model")),
+                lot or _text(prov.get("imu_lot")))
 
     def close(self) -> None:
         self.index.close()
@@ -198,7 +356,10 @@ class Store:
     def _rows(self, sql: str, params=()) -> list:
         """The rows of a query (none when there is no index yet)."""
         with self.index.transaction(write=False, backfill=self._backfill) as tx:
-            return [] if tx is None else tx.rows(sql, params)
+            if tx is None:                 # (SQLite only: a database always answers)
+                self._refuse_lost_index(f"{self.where}: the calibration history has no index")
+                return []
+            return tx.rows(sql, params)
 
     def _backfill(self, tx) -> None:
         """Migration step 4: the numbers, IMU model and lot of calibrations filed before the index
@@ -226,11 +387,14 @@ class Store:
         doc = read_calfile(cal_path)
         data = cal_path.read_bytes()
         digest = hashlib.sha256(data).hexdigest()
-        prov = doc.get("provenance") if isinstance(doc.get("provenance"), dict) else {}
-        serial = _text(prov.get("imu_serial")) or UNKNOWN_SERIAL
-        date = _text(prov.get("date_utc")) or _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
-        capture_digest = _text(prov.get("capture_sha256"))
-        model = model_key(doc)
+        if not self.index.exists():
+            # the index is made before the first file is copied into the store (in its own
+            # transaction): a store's folder then never holds a file while its index is missing
+            # or empty, unless the index was lost (_refuse_lost_index)
+            with self.index.transaction(write=True, backfill=self._backfill):
+                pass
+        row = self._row(doc, digest, "", str(cal_path.resolve()), lot=lot, imu_model=imu_model)
+        serial, date, capture_digest, model = row[0], row[1], row[9], row[10]
         key = (digest, capture_digest, model, serial)
         found = self._rows(f"SELECT {self._COLUMNS} FROM calibrations WHERE {self._SAME}", key)
         if found and lot is None and imu_model is None:
@@ -243,19 +407,11 @@ class Store:
                 _atomic_copy(data, target)
             except OSError as e:
                 raise UserError(f"{target}: cannot file the calibration: {e.strerror}") from None
-        row = (serial, date, _text(prov.get("scheme")), _text(prov.get("method")), verdict_of(doc), rel.as_posix(),
-               str(cal_path.resolve()), digest, _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
-               capture_digest, model, imu_model or _text(prov.get("imu_model")), lot or _text(prov.get("imu_lot")))
+        row = (*row[:5], rel.as_posix(), *row[6:])
         with self.index.transaction(write=True, backfill=self._backfill) as tx:
-            new = tx.rows(
-                "INSERT INTO calibrations (serial, date_utc, scheme, method, verdict, file, source, sha256, filed_utc, "
-                "capture_sha256, model, imu_model, lot) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) "
-                "ON CONFLICT DO NOTHING RETURNING id", row)
-            if new:
-                tx.many("INSERT INTO parameters (calibration_id, name, value, sigma, unit) VALUES (?, ?, ?, ?, ?)",
-                        [(new[0][0], *n) for n in _numbers(doc)])
-                entry = self._entry((new[0][0], *row[:8], *row[11:]))
-            else:            # filed before, or by another writer since the look above
+            entry = self._insert(tx, row, _numbers(doc))
+            new = entry is not None
+            if not new:      # filed before, or by another writer since the look above
                 if lot is not None or imu_model is not None:
                     tx.run(f"UPDATE calibrations SET lot = COALESCE(?, lot), imu_model = COALESCE(?, imu_model) "
                            f"WHERE {self._SAME}", (lot, imu_model, *key))
@@ -263,19 +419,64 @@ class Store:
                                             "ORDER BY id", key)[0])
                 if entry.sha256 != digest and not found:
                     target.unlink(missing_ok=True)     # our copy of a calibration not filed
-        return entry, bool(new)
+        return entry, new
 
     # the same calibration: the same file, or the same capture and model of the same serial
     _SAME = "sha256 = ? OR (capture_sha256 = ? AND model = ? AND serial = ?)"
 
-    def _entry(self, row) -> Entry:
+    def _entry(self, row, *, strict: bool = True) -> Entry:
+        """The entry of an index row.  ``strict``: a row whose file is not inside the store is a
+        UserError (a file about to be opened); otherwise the entry is returned marked with that
+        ``problem`` (a listing shows it, never opens it)."""
         id_, serial, date, scheme, method, verdict, file, source, digest, imu_model, lot = row
         where = f"{self.where}: row #{shown(id_)}"
         if not isinstance(id_, int) or not all(isinstance(v, str) for v in (serial, date, verdict, file, digest)) \
                 or not all(v is None or isinstance(v, str) for v in (scheme, method, source, imu_model, lot)):
             raise UserError(f"{where}: not station's calibration history (a field of another type)")
-        return Entry(id_, serial, date, scheme, method, verdict, self._inside(file, where), source, digest,
-                     imu_model, lot)
+        try:
+            path, problem = self._inside(file, where), None
+        except UserError:
+            if strict:
+                raise
+            path, problem = Path(file[:200].replace("\0", "")), f"its file {file[:200]!r} is not inside the store"
+        return Entry(id_, serial, date, scheme, method, verdict, path, source, digest, imu_model, lot, problem)
+
+    def verify(self, entries) -> list:
+        """Each entry checked against its file: the file must be there (a regular file inside the
+        store) and have the sha256 the row was filed with — the index holds the numbers, the
+        file is the record, and a row whose path was edited to name another calibration (or
+        whose file was edited or removed) is marked with its ``problem``, never counted as the
+        calibration it claims.  Every file is read and hashed (about 0.1 ms a file:
+        docs/fleet.md, "Verifying the index against its files"); returns ``entries``."""
+        from station.core.user_files import read_user_bytes
+
+        for e in entries:
+            if e.problem:
+                continue
+            rel = e.path.relative_to(self.root).as_posix() if e.path.is_relative_to(self.root) else str(e.path)
+            if not os.path.lexists(e.path):
+                e.problem = f"its file {rel} is missing"
+                continue
+            if os.path.islink(e.path):
+                e.problem = f"its file {rel} is a symbolic link, not the file filed"
+                continue
+            try:
+                data = read_user_bytes(e.path, "calibration file")
+            except UserError:
+                e.problem = f"its file {rel} cannot be read"
+                continue
+            if hashlib.sha256(data).hexdigest() != e.sha256:
+                e.problem = f"its file {rel} is not the one filed (its sha256 differs from the index's)"
+        return entries
+
+    def checked(self, entry: Entry) -> Entry:
+        """``entry`` verified; a UserError naming the row when its file is not the one filed
+        (``diff #N``, ``history --drift``: a file about to be read as that calibration)."""
+        self.verify([entry])
+        if entry.problem:
+            raise UserError(f"{self.where}: calibration #{entry.id} of IMU {entry.serial}: {entry.problem}; "
+                            "not read as that calibration")
+        return entry
 
     def _inside(self, file: str, where: str) -> Path:
         """The store's file a row names: a relative path that stays inside the store (a row
@@ -296,11 +497,14 @@ class Store:
         rows = self._rows(f"SELECT {self._COLUMNS} FROM calibrations WHERE id = ?", (id_,))
         if not rows:
             raise UserError(f"{self.where}: no calibration #{id_} in the history")
-        return self._entry(rows[0])
+        return self.checked(self._entry(rows[0]))
 
-    def list(self, serial: str) -> list[Entry]:
+    def list(self, serial: str, *, verify: bool = True) -> list[Entry]:
+        """The calibrations of ``serial``, oldest first, each verified against its file (a row
+        whose file is missing, outside the store or changed is listed with its ``problem``)."""
         rows = self._rows(f"SELECT {self._COLUMNS} FROM calibrations WHERE serial = ? ORDER BY date_utc, id", (serial,))
-        return [self._entry(r) for r in rows]
+        entries = [self._entry(r, strict=False) for r in rows]
+        return self.verify(entries) if verify else entries
 
     def serials(self) -> list[tuple[str, int]]:
         rows = self._rows("SELECT serial, COUNT(*) FROM calibrations GROUP BY serial ORDER BY serial")
@@ -310,9 +514,11 @@ class Store:
         rows = self._rows("SELECT COUNT(*) FROM calibrations")
         return int(rows[0][0]) if rows else 0
 
-    def filed(self, *, imu_model: str | None = None, lot: str | None = None, since: str | None = None) -> list[Filed]:
+    def filed(self, *, imu_model: str | None = None, lot: str | None = None, since: str | None = None,
+              verify: bool = True) -> list[Filed]:
         """Every filed calibration (of an IMU model, a lot, dated on or after ``since``) with its
-        numbers, by serial and date."""
+        numbers, by serial and date; ``verify``: each entry checked against its file (its
+        ``problem`` set when the file is not the one filed: ``station fleet`` does not count it)."""
         where, params = [], []
         for column, value, op in (("imu_model", imu_model, "="), ("lot", lot, "="), ("date_utc", since, ">=")):
             if value is not None:
@@ -327,13 +533,15 @@ class Store:
         for row in rows:
             head, (name, value, sigma, unit) = row[:11], row[11:]
             if head[0] not in out:
-                out[head[0]] = Filed(self._entry(head), {})
+                out[head[0]] = Filed(self._entry(head, strict=False), {})
             if name is not None:
                 if not isinstance(value, (int, float)) or not (sigma is None or isinstance(sigma, (int, float))) \
                         or not isinstance(unit, str):
                     raise UserError(f"{self.where}: row #{shown(head[0])}: parameter {shown(name)}: not station's numbers")
                 out[head[0]].numbers[str(name)] = Number(str(name), float(value),
                                                          None if sigma is None else float(sigma), unit)
+        if verify:
+            self.verify([f.entry for f in out.values()])
         return list(out.values())
 
     def resolve(self, ref: str) -> Path:

@@ -30,6 +30,13 @@ class PostgresIndex:
         self.url = url
         self.where = redacted(url)
         self._conn = None
+        # a new database is a new store (its files' folder may be shared: the SQLite default's
+        # folder), so a new database is never refused for the files beside it (SqliteIndex.on_new)
+        self.on_new = None
+        self.damaged_hint = lambda: ""
+
+    def exists(self) -> bool:
+        return True
 
     def close(self) -> None:
         if self._conn is not None:

@@ -26,10 +26,17 @@ BUSY_TIMEOUT_S = 60.0
 class SqliteIndex:
     dialect = schema.SQLITE
 
-    def __init__(self, root: Path):
+    def __init__(self, root: Path, path: Path | None = None):
         self.root = Path(root)
-        self.path = self.root / INDEX
+        self.path = Path(path) if path is not None else self.root / INDEX
         self.where = str(self.path)
+        # called with a reason before an index without station's tables is created (a missing
+        # or empty index of a store that holds calibration files: history.Store refuses it)
+        self.on_new = None
+        self.damaged_hint = lambda: ""
+
+    def exists(self) -> bool:
+        return self.path.exists()
 
     def close(self) -> None:
         pass
@@ -92,6 +99,10 @@ class SqliteIndex:
                         db.execute("ROLLBACK")
                         db.execute("BEGIN IMMEDIATE")
                         version = self._version(tx)
+                    if version == 0 and self.on_new is not None:
+                        size = self.path.stat().st_size
+                        self.on_new(f"{self.path}: the calibration history's index is empty"
+                                    + (" (0 bytes)" if size == 0 else " (no table of calibrations)"))
                     if version < schema.LATEST:
                         schema.migrate(tx, self.dialect, version, backfill)
                 yield tx
@@ -102,6 +113,6 @@ class SqliteIndex:
                 raise
         except sqlite3.Error as e:
             raise UserError(f"{self.path}: the calibration history cannot be {'written' if write else 'read'}: "
-                            f"{one_line(e)}") from None
+                            f"{one_line(e)}{self.damaged_hint()}") from None
         finally:
             db.close()

@@ -179,6 +179,9 @@ def append_scheme(extension: Scheme, text: str, directory: Path,
     listed = sorted(directory.glob("scheme-append-*.yaml"))
     number = len(listed) + 1
     kept = directory / f"scheme-append-{number}.yaml"
+    from station.core.user_files import output_path
+
+    output_path(kept, "the appended scheme")
     try:
         kept.write_text(text)
     except OSError as e:
