@@ -212,7 +212,8 @@ def cmd_run(args) -> int:
     with out.status("recording") as status:
         capture = dryrun.record_scheme(
             scheme, truth, args.seed, out_dir,
-            progress=lambda name, i, n: status.update(f"recording {name} ({i + 1}/{n})"), geometry=geometry)
+            progress=lambda name, i, n: status.update(f"recording {name} ({i + 1}/{n})"), geometry=geometry,
+            chamber=config.chamber)
     from station.cli.history import file_quietly
     from station.cli.noise import characterise_run, is_noise_recording
 
