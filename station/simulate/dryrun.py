@@ -67,6 +67,15 @@ def check_chamber(scheme: Scheme, chamber) -> None:
                             f"chamber's range {chamber.range_c[0]:g}..{chamber.range_c[1]:g} C (chamber.range_c)")
 
 
+def chamber_air(room_c: float):
+    """A simulated chamber's air at the room's temperature (sim_devices/chamber.py ChamberAir:
+    ``set(t, setpoint_c, ramp_c_per_min)``), for a timeline's temperatures
+    (``TemperatureTruth.at(t, air)``) outside a dry run (station/design/timeline.py)."""
+    from sim_devices.chamber import ChamberAir
+
+    return ChamberAir(room_c)
+
+
 CHAMBER_READ_S = 1.0      # the station reads the IMU's temperature this often while it waits
 
 
