@@ -19,6 +19,7 @@ Units: degrees Celsius (°C), seconds, °C/min.
 """
 from __future__ import annotations
 
+import collections
 import math
 from dataclasses import dataclass
 
@@ -92,25 +93,35 @@ def order_levels(levels, ambient_c: float) -> list:
 class SlopeSettle:
     """Feeds on the IMU's temperature readings (t s, T °C) and says when the settle rule holds:
     the least-squares slope over the last ``window_s`` below ``slope_c_per_min`` (a full window
-    needed)."""
+    needed).  The window's sums are kept as readings come and go (a reading a second for an
+    hour's settling: a fit over the window at every reading was most of a dry run's time)."""
 
     def __init__(self, slope_c_per_min: float, window_s: float):
         self.limit = float(slope_c_per_min)
         self.window_s = float(window_s)
-        self.t: list = []
-        self.temp: list = []
+        self._window: collections.deque = collections.deque()
+        self._sums = np.zeros(5)              # n, sum t, sum T, sum t^2, sum t T (t from the first reading)
+        self._t0 = self._last = None
 
     def feed(self, t: float, temp_c: float) -> None:
-        if math.isfinite(temp_c):
-            self.t.append(float(t))
-            self.temp.append(float(temp_c))
+        if not math.isfinite(temp_c):
+            return
+        if self._t0 is None:
+            self._t0 = float(t)
+        x, y = float(t) - self._t0, float(temp_c)
+        self._window.append((x, y))
+        self._sums += (1.0, x, y, x * x, x * y)
+        self._last = x
+        while self._window and self._window[0][0] < x - self.window_s:
+            a, b = self._window.popleft()
+            self._sums -= (1.0, a, b, a * a, a * b)
 
     def slope_c_per_min(self) -> float | None:
-        if len(self.t) < 3 or self.t[-1] - self.t[0] < self.window_s:
+        if self._last is None or self._last < self.window_s or self._sums[0] < 3:
             return None
-        t = np.asarray(self.t)
-        sel = t >= t[-1] - self.window_s
-        return float(np.polyfit(t[sel] - t[-1], np.asarray(self.temp)[sel], 1)[0] * 60.0)
+        n, st, sy, stt, sty = self._sums
+        d = n * stt - st * st
+        return float((n * sty - st * sy) / d * 60.0) if d > 0 else None
 
     @property
     def settled(self) -> bool:
