@@ -805,7 +805,9 @@ class Truth:
                 "drift_c_per_h": float(self.temperature.drift_c_per_h),
                 "warmup_delta_c": float(self.temperature.warmup_delta_c),
                 "warmup_time_constant_s": float(self.temperature.warmup_time_constant_s),
-                "chamber_time_constant_s": float(self.temperature.chamber_time_constant_s),
+                # (written when not the default: files as they were before the chamber)
+                **({"chamber_time_constant_s": float(self.temperature.chamber_time_constant_s)}
+                   if self.temperature.chamber_time_constant_s != TemperatureTruth.chamber_time_constant_s else {}),
             },
             "bench": {
                 "latitude_deg": float(self.bench.latitude_deg),
