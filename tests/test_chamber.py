@@ -277,3 +277,72 @@ def test_the_designs_timeline_through_the_chamber_is_the_estimators(tmp_path):
     plan = compile_scheme(scheme, config)
     step = [s for s in plan.steps if isinstance(s, Chamber)][0]
     assert chamber_cost(config)(frozenset({None, 60.0})) == pytest.approx(step.estimate_s)
+
+
+# ------------------------------------------------------------------ the sequencer on a bench
+
+def test_the_sequencer_asks_for_the_chamber_waits_and_records_the_cross_check(tmp_path):
+    """In process against the device twins (pseudo-terminals, --speed 100; the twins have no
+    chamber: their IMU stays at the room's 25 degC plus its warm-up).  A chamber step to 26 degC
+    (1 degC at 60 degC/min: 1 s of ramp, then a 2 s soak) agrees with the IMU (within 5 degC); a
+    second to 40 degC, on the slope rule (below 0.5 degC/min over 5 s: the twin's warm-up moves
+    it 0.13 degC/min), does not -- the IMU never followed (as when the chamber was not switched
+    on): a finding in the segment's manifest entry, the run going on.  The operator is asked
+    each time; each wait is the ramp and the soak, or the ramp and the window (device time, read
+    in 1 s blocks: within 1.5 s)."""
+    import dataclasses
+    import io
+
+    from rich.console import Console
+
+    from drivers.base import ImuSettings
+    from drivers.registry import open_imu, open_table
+    from sim_devices.truth import default_truth
+    from sim_devices.twins.serve import BenchOptions, BenchServer
+    from station.bench.config import TableConfig
+    from station.bench.live import PlainDisplay
+    from station.bench.sequencer import Sequencer
+    from station.io.capture import CaptureWriter, ImuInfo, Site, read_capture
+
+    class Operator:
+        def __init__(self):
+            self.asked = []
+
+        def confirm(self, step, interrupts):
+            self.asked.append(step.instruction)
+
+        def resume_after_pause(self, interrupts):
+            return False
+
+    chamber = ChamberConfig(range_c=(20.0, 60.0), ramp_c_per_min=60.0, soak_s=2.0)
+    config = Config(table=TableConfig(axes=1), chamber=chamber,
+                    run=RunConfig(operator=True, operator_s=0.0, settle_s=1, max_missing_fraction=0.5,
+                                  max_gap_s=100.0, rerecord_attempts=3))
+    scheme = scheme_from_text("name: c\ndefaults: {dwell_s: 2}\nsegments:\n"
+                              "  - {static: a, up_body: [0, 0, 1], chamber_c: 26}\n"
+                              "  - {static: b, up_body: [0, 0, 1], chamber_c: 40}\n"
+                              "  - {static: c, up_body: [0, 0, 1]}\n", "c.yaml")
+    steps = compile_scheme(scheme, config).steps
+    steps = [dataclasses.replace(s, soak_s=None, slope_c_per_min=0.5, window_s=5.0, max_s=60.0)
+             if isinstance(s, Chamber) and s.setpoint_c == 40.0 else s for s in steps]
+    operator = Operator()
+    with BenchServer(default_truth(5), BenchOptions(speed=100.0, seed=5, axes=1, lossless=True)) as bench:
+        table = open_table(bench.table_path)
+        imu = open_imu(bench.imu_path, settings=ImuSettings(frame_timeout_s=2.0))
+        rate = imu.configure(100.0)
+        writer = CaptureWriter(tmp_path / "cap", ImuInfo(rate, "m/s^2", "deg/s"), Site(9.80, 45.0), "c")
+        display = PlainDisplay(Console(file=io.StringIO(), width=200), 1.0, "test")
+        Sequencer(table=table, imu=imu, writer=writer, config=config, display=display, operator=operator,
+                  rate_hz=rate).run(steps)
+        table.close()
+        imu.close()
+    assert sum("set the temperature chamber to 26 C" in a for a in operator.asked) == 1
+    assert sum("set the temperature chamber to 40 C" in a for a in operator.asked) == 1
+    seg = {s.name: s for s in read_capture(tmp_path / "cap").segments}
+    first, second = seg["a"].extra["chamber"], seg["b"].extra["chamber"]
+    assert first["waited_s"] == pytest.approx(1.0 + 2.0, abs=1.5) and "finding" not in first, first
+    assert first["imu_c"] == pytest.approx(25.0, abs=1.0)
+    assert second["waited_s"] == pytest.approx(14.0 + 5.0, abs=1.5) and second["settled"], second
+    assert "from the chamber's setpoint 40 °C" in second["finding"], second
+    assert [seg[n].extra["chamber_c"] for n in "abc"] == [26.0, 40.0, 40.0]
+    assert "chamber" not in seg["c"].extra
