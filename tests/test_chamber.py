@@ -150,6 +150,11 @@ def test_a_dry_run_waits_as_the_station_does_and_records_the_cross_check(tmp_pat
     assert entry["waited_s"] == pytest.approx(1125.0) and entry["settled"]
     assert "finding" in entry and entry["imu_c"] < 55.0, entry
     assert seg["rz_p"].extra["chamber_c"] == 60.0 and "chamber_c" not in seg["zu"].extra
+    # the estimate says it again (the data-fault scan's notes: file and screen)
+    from station.estimate.data_faults import notes_of, scan_capture
+
+    assert any(n.startswith("the temperature chamber before zu_hot: the IMU's temperature")
+               for n in notes_of(scan_capture(capture)))
     # the slope rule
     slope = ChamberConfig(range_c=(20.0, 60.0), ramp_c_per_min=4.0, settle_slope_c_per_min=0.02)
     capture = dryrun.simulate_capture(scheme, default_truth(0), 1, chamber=slope)
