@@ -13,6 +13,7 @@ import numpy as np
 import yaml
 
 from station.bench.compile import compile_scheme
+from station.bench.plan import Chamber
 from station.core.errors import UserError
 from station.design import candidates as cand_mod
 from station.design.information import Noise, information, model_of, quiet_truth
@@ -502,6 +503,14 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
               "predicted 1-sigma (the estimator's fit of this scheme's noiseless capture):"]
     for n, u, s, r in zip(prediction.names, prediction.units, prediction.sigma, prediction.revealed):
         header.append(f"  {n}: {s:.4g} {u}" + ("" if r else " (not revealed)"))
+    if config.chamber is not None:
+        sets = [s.chamber_c for s in specs if s.chamber_c is not None]
+        c = config.chamber
+        notes.append(f"chamber ({c.describe()}): the design sets it to "
+                     + (", ".join(f"{x:g} C" for x in sets) if sets else "nothing (the room's temperature serves best)")
+                     + f", {sum(isinstance(st, Chamber) for st in plan.steps)} chamber step(s) of the compiled "
+                       f"{plan.duration_s:.0f} s; the built-in schemes set none: they run at the room's temperature "
+                       "and its warm-up")
     text = scheme_text(name, entries, header, centred)
     if verification is not None:
         header.append(f"verified: {verification.runs} noisy dry runs estimated as station montecarlo does: "
