@@ -322,12 +322,12 @@ def _chamber(doc: dict, v: "_Validator") -> ChamberConfig | None:
     def kind(value, where):
         if value not in CHAMBER_KINDS:
             raise v.fail(where, f"must be one of {', '.join(CHAMBER_KINDS)} (manual: the operator sets "
-                                f"the chamber when asked), got {value!r}")
+                                f"the chamber when asked), got {repr(value)[:40]}")
         return value
 
     def span(value, where):
         if not isinstance(value, list) or len(value) != 2:
-            raise v.fail(where, f"must be [min, max] in degrees C, got {value!r}")
+            raise v.fail(where, f"must be [min, max] in degrees C, got {repr(value)[:40]}")
         lo, hi = (v.number(x, f"{where}[{i}]") for i, x in enumerate(value))
         if not -100.0 <= lo < hi <= 200.0:
             raise v.fail(where, f"must be [min, max] with -100 <= min < max <= 200 degrees C, got {value!r}")
