@@ -4,7 +4,12 @@
 same time, then `station montecarlo --scheme` on the written file: the spread of N runs over the
 predicted 1σ per coefficient and pooled (√ of the mean of squares, its own 1σ √(1/(2k(N-1)))).
 
-    python benchmarks/design_temperature.py [--runs 24] [--out DIR]
+    python benchmarks/design_temperature.py [--runs 24] [--out DIR] [--config station.yaml]
+
+With ``--config`` a station.yaml with a temperature chamber (fourteenth session: ``chamber:``
+kind manual, range_c [20, 60], ramp_c_per_min 3, soak_s 300): the design places segments at the
+chamber's setpoint, the built-ins run at the room's temperature and its warm-up, and the Monte
+Carlo runs the chamber (``station montecarlo --config``).
 
 Heavy (a design and N dry runs: ~2 minutes of CPU); not a test."""
 from __future__ import annotations
@@ -41,12 +46,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=24)
     ap.add_argument("--out", default=None)
+    ap.add_argument("--config", default=None, help="station.yaml (a chamber: the fourteenth session's goal)")
     a = ap.parse_args()
+    config = ("--config", a.config) if a.config else ()
     out = Path(a.out or tempfile.mkdtemp(prefix="design-temperature-"))
     out.mkdir(parents=True, exist_ok=True)
     scheme = out / "temp.yaml"
     done, cpu, wall = run("design", "--duration", 3715, "--add", "temperature_bias", "--criterion",
-                          "worst:*_tempco_*", "--centred", "--verify-runs", 0, "-o", scheme, "--json")
+                          "worst:*_tempco_*", "--centred", "--verify-runs", 0, "-o", scheme, "--json", *config)
     if done.returncode != 0:
         sys.exit(done.stderr[-3000:])
     report = json.loads(done.stdout)
@@ -58,7 +65,8 @@ def main() -> None:
     best = min((b for b in report["builtins"] if b.get("criterion") is not None), key=lambda b: b["criterion"])
     print(f"worst 1σ {value:.4g} µg/°C ({report['duration_s']:.0f} s, statics of {report['static_attitudes']} "
           f"attitude); best built-in {best['scheme']} {best['criterion']:.4g}: {100 * (1 - value / best['criterion']):.1f} % lower")
-    done, cpu, wall = run("montecarlo", "--scheme", scheme, "--runs", a.runs, "--add", "temperature_bias", "--json")
+    done, cpu, wall = run("montecarlo", "--scheme", scheme, "--runs", a.runs, "--add", "temperature_bias", "--json",
+                          *config)
     if done.returncode != 0:
         sys.exit(done.stderr[-3000:])
     pred = {p["name"]: p["sigma"] for p in report["designed"]["parameters"]}

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import world
+from .chamber import ChamberAir
 from .truth import Truth
 from .world import ARCSEC, G_STANDARD, Site
 
@@ -70,6 +71,9 @@ class SimulatedBench:
         self._g = self.site.g
         self._time_end = float(start_s)   # end of the last segment's window
         self._rotation_starts: dict = {}
+        # the temperature chamber around the table (sim_devices/chamber.py): its air at the room's
+        # temperature until a setpoint is given (set_chamber)
+        self.chamber = ChamberAir(truth.temperature.start_c)
 
     # ------------------------------------------------------------ properties
     @property
@@ -93,6 +97,20 @@ class SimulatedBench:
     def time_s(self) -> float:
         """Device time at the end of the last segment."""
         return self._time_end
+
+    # -------------------------------------------------------------- chamber
+    def set_chamber(self, setpoint_c: float, ramp_c_per_min: float) -> None:
+        """The chamber is set to ``setpoint_c`` now (at the end of the last segment); its air
+        ramps there at ``ramp_c_per_min``."""
+        self.chamber.set(self._time_end, setpoint_c, ramp_c_per_min)
+
+    def wait(self, seconds: float) -> None:
+        """Let ``seconds`` of bench time pass with nothing recorded (a chamber's ramp and soak)."""
+        self._time_end += max(0.0, float(seconds))
+
+    def imu_temperature(self, t) -> np.ndarray:
+        """The IMU's temperature (degC) at table times ``t``, as its temperature channel reports it."""
+        return self.truth.temperature.at(t, self.chamber)
 
     # -------------------------------------------------------------- helpers
     def _n_samples(self, duration_s: float) -> int:
@@ -135,9 +153,9 @@ class SimulatedBench:
         """Raw outputs of samples taken at table times ``t`` (temperature evaluated there)."""
         f_b = world.perturb_specific_force(
             f_b, self.truth.bench.accel_disturbance_ug * world.MICRO_G, self._noise_rng)
-        temp = self.truth.temperature.at(t)
+        temp = self.truth.temperature.at(t, self.chamber)
         accel, gyro = self.truth.measure(f_b, np.degrees(w_ib_rad), temp, self._noise_rng,
-                                         w_eb_b=w_eb_b, wdot_eb_b=wdot_eb_b, t=t)
+                                         w_eb_b=w_eb_b, wdot_eb_b=wdot_eb_b, t=t, air=self.chamber)
         return accel, gyro, temp
 
     # -------------------------------------------------------------- segments

@@ -298,6 +298,11 @@ class TriadTruth:
 class TemperatureTruth:
     """T(t) = start + drift_c_per_h t/3600 + warmup_delta (1 - exp(-t/tau)), t = bench time.
 
+    In a temperature chamber (``air``: sim_devices/chamber.py ChamberAir, its air starting at
+    ``start_c``, the room) the constant ``start`` is replaced by the IMU's case following the
+    chamber's air as a first-order lag of ``chamber_time_constant_s``; the self-heating warm-up
+    and the drift add to it as before.
+
     Biases in the truth file are those at ``reference_c``.
     """
 
@@ -306,16 +311,19 @@ class TemperatureTruth:
     drift_c_per_h: float = 0.0
     warmup_delta_c: float = 2.0
     warmup_time_constant_s: float = 900.0
+    chamber_time_constant_s: float = 600.0    # the IMU's case behind the chamber's air (thermal mass)
 
-    def at(self, t) -> np.ndarray:
+    def at(self, t, air=None) -> np.ndarray:
         t = np.asarray(t, dtype=float)
-        return (self.start_c + self.drift_c_per_h * t / 3600.0
+        base = self.start_c if air is None or not air.commanded else air.lagged(t, self.chamber_time_constant_s)
+        return (base + self.drift_c_per_h * t / 3600.0
                 + self.warmup_delta_c * -np.expm1(-t / self.warmup_time_constant_s))
 
-    def rate(self, t) -> np.ndarray:
+    def rate(self, t, air=None) -> np.ndarray:
         """dT/dt (degC/s) at bench time t: the derivative of :meth:`at`."""
         t = np.asarray(t, dtype=float)
-        return (self.drift_c_per_h / 3600.0
+        base = 0.0 if air is None or not air.commanded else air.lagged_rate(t, self.chamber_time_constant_s)
+        return (base + self.drift_c_per_h / 3600.0
                 + self.warmup_delta_c / self.warmup_time_constant_s * np.exp(-t / self.warmup_time_constant_s))
 
 
@@ -414,7 +422,7 @@ def _hours(t) -> np.ndarray:
 
 
 def _outside_library(triad: "TriadTruth", inputs, dT, temperature, t, bias_unit: float,
-                     f_case=None) -> np.ndarray:
+                     f_case=None, air=None) -> np.ndarray:
     """What the effects outside the station's library add to a triad's raw output (N,3).
 
     ``inputs``: per element i the input vector it senses (N,3), case axes (accelerometer: the
@@ -449,7 +457,7 @@ def _outside_library(triad: "TriadTruth", inputs, dT, temperature, t, bias_unit:
     if np.any(triad.bias_temprate_per_c_per_min):
         if t is None:
             raise ValueError("a bias that follows dT/dt needs the sample times: pass t= to Truth.measure")
-        rate_c_per_min = 60.0 * temperature.rate(np.asarray(t, dtype=float)).reshape(-1, 1)
+        rate_c_per_min = 60.0 * temperature.rate(np.asarray(t, dtype=float), air).reshape(-1, 1)
         out += rate_c_per_min * triad.bias_temprate_per_c_per_min * bias_unit
     P = triad.force_products_ug_per_g2
     if np.any(P):
@@ -553,7 +561,7 @@ _GYR_KEYS = {"scale", "axis_tilt_arcsec", "bias_dph", "bias_tempco_dph_per_c",
              "bias_drift_dph_per_h", "rate_odd_squared_ppm_per_dps", "full_scale_dps", "stuck_at_s",
              "stuck_duration_s", "stuck_axes", *_OUTSIDE_GYR}
 _TEMP_KEYS = {"start_c", "reference_c", "drift_c_per_h", "warmup_delta_c",
-              "warmup_time_constant_s"}
+              "warmup_time_constant_s", "chamber_time_constant_s"}
 _BENCH_KEYS = {"latitude_deg", "height_m", "lever_arm_m", "axis_offsets_m", "table_angle_error_arcsec",
                "rate_ripple_fraction", "rate_ripple_hz", "rate_drift_fraction", "accel_disturbance_ug",
                "move_s", "settle_s", "time_offset_s", "wobble_arcsec", "wobble_phase_deg",
@@ -584,7 +592,7 @@ class Truth:
         return self.gyro.noise_density * DEG_PER_HOUR * math.sqrt(self.sample_rate_hz)
 
     # ------------------------------------------------------------- measuring
-    def measure(self, f_b, w_b_dps, temp, rng, w_eb_b=None, wdot_eb_b=None, t=None):
+    def measure(self, f_b, w_b_dps, temp, rng, w_eb_b=None, wdot_eb_b=None, t=None, air=None):
         """Body quantities -> raw outputs.
 
         f_b (N,3) m/s^2 (at the IMU reference point) and w_b_dps (N,3) deg/s in case axes,
@@ -672,9 +680,9 @@ class Truth:
             gyro += products @ N.T * DEG_PER_HOUR
         if self.accel.outside_library() or self.gyro.outside_library():
             F_el = [f_b if extras is None else f_b + extras[i] for i in range(3)]   # m/s^2, at each element
-            accel += _outside_library(self.accel, F_el, dT, self.temperature, t, MICRO_G)
+            accel += _outside_library(self.accel, F_el, dT, self.temperature, t, MICRO_G, air=air)
             gyro += _outside_library(self.gyro, [w_b] * 3, dT, self.temperature, t, DEG_PER_HOUR,
-                                     f_case=f_b / G_STANDARD)
+                                     f_case=f_b / G_STANDARD, air=air)
         if rng is not None:
             if self.accel.noise_density > 0.0:
                 accel += self.accel_noise_sigma * rng.standard_normal(accel.shape)
@@ -797,6 +805,9 @@ class Truth:
                 "drift_c_per_h": float(self.temperature.drift_c_per_h),
                 "warmup_delta_c": float(self.temperature.warmup_delta_c),
                 "warmup_time_constant_s": float(self.temperature.warmup_time_constant_s),
+                # (written when not the default: files as they were before the chamber)
+                **({"chamber_time_constant_s": float(self.temperature.chamber_time_constant_s)}
+                   if self.temperature.chamber_time_constant_s != TemperatureTruth.chamber_time_constant_s else {}),
             },
             "bench": {
                 "latitude_deg": float(self.bench.latitude_deg),
@@ -944,10 +955,9 @@ class Truth:
         if "drift_c_per_h" in d:
             temp.drift_c_per_h = c.number(d["drift_c_per_h"], "temperature.drift_c_per_h",
                                           lo=-100.0, hi=100.0)
-        if "warmup_time_constant_s" in d:
-            temp.warmup_time_constant_s = c.number(
-                d["warmup_time_constant_s"], "temperature.warmup_time_constant_s",
-                lo=0.0, lo_open=True)
+        for k in ("warmup_time_constant_s", "chamber_time_constant_s"):
+            if k in d:
+                setattr(temp, k, c.number(d[k], f"temperature.{k}", lo=0.0, lo_open=True))
 
         d = c.mapping(top.get("bench"), "bench", _BENCH_KEYS)
         bench = BenchSettings()

@@ -667,7 +667,8 @@ class MonteCarlo:
 
 def montecarlo(scheme: str = "optimal9", runs: int = 100, *, seed: int = 1000, accel_noise_ug: float = 100.0,
                gyro_noise_dph: float = 0.03, table_angle_arcsec: float = 2.0, accel_disturbance_ug: float = 50.0,
-               method: str = "lsq", effects=(), progress=None, executor=None, workers=None) -> MonteCarlo:
+               method: str = "lsq", effects=(), progress=None, executor=None, workers=None,
+               config=None) -> MonteCarlo:
     """``station montecarlo``: ``runs`` dry runs of ``scheme`` (seeds ``seed``, ``seed`` + 1, ...)
     estimated with ``method`` (lsq or zhang2010) on every usable core, against the Cramér-Rao
     bound.  Noise densities: accelerometer µg/√Hz, gyro °/h/√Hz; ``table_angle_arcsec``: 1-sigma
@@ -694,9 +695,14 @@ def montecarlo(scheme: str = "optimal9", runs: int = 100, *, seed: int = 1000, a
         if method != "lsq":
             raise UserError("--add needs --method lsq (the 2010 method fits the base model only)")
     plan = load_scheme(scheme)
+    chamber = None
+    if plan.chamber_steps:
+        from station.bench.config import load_config
+
+        chamber = load_config(config).chamber
     settings = _mc.Settings(accel_noise_ug=accel_noise_ug, gyro_noise_dph=gyro_noise_dph,
                             table_angle_arcsec=table_angle_arcsec, accel_disturbance_ug=accel_disturbance_ug,
-                            method=method, effects=effects)
+                            method=method, effects=effects, chamber=chamber)
     result = _mc.study(plan, settings, runs, first_seed=seed, bound=True, progress=progress, executor=executor,
                        workers=workers)
     errors, sigmas = result.errors, result.sigmas

@@ -21,7 +21,7 @@ import numpy as np
 from station.bench.config import Config
 from station.core.errors import UserError
 from station.bench.gimbal import Gimbal, right_angle_mountings
-from station.bench.plan import (Checkpoint, Dwell, HandRotation, HandStatic, MoveTo, Operator, Plan, Rotate,
+from station.bench.plan import (Chamber, Checkpoint, Dwell, HandRotation, HandStatic, MoveTo, Operator, Plan, Rotate,
                           Settle, WarmUp)
 from station.io.scheme import RotationSpec, Scheme, StaticSpec
 
@@ -63,7 +63,12 @@ class Compiler:
             plan.steps.append(self._mount_step(gimbal.mounting, None,
                                                check=gimbal is self.gimbal0))
         plan.steps.extend(self._warmup())
+        self._check_chamber()
+        chamber_c = self.config.chamber.ambient_c if self.config.chamber is not None else None
         for i, spec in enumerate(specs):
+            if spec.chamber_c is not None:
+                plan.steps.append(self._chamber_step(spec, chamber_c))
+                chamber_c = spec.chamber_c
             solution = self._solve(spec, gimbal, theta)
             relaxed = False
             if solution is None and isinstance(spec, RotationSpec) and not self._exact(spec):
@@ -266,6 +271,38 @@ class Compiler:
             text = f"remount the IMU {placement}{centred} ({where})"
         return Operator(text, segment, self.config.run.operator_s, instruction=text, remount=True,
                         mounting=mounting_names(mounting))
+
+    def _check_chamber(self) -> None:
+        """A scheme that sets the chamber needs one configured, an operator for a manual one, and
+        setpoints within its range (UserError, one line)."""
+        steps = self.scheme.chamber_steps
+        if not steps:
+            return
+        c = self.config.chamber
+        spec, setpoint = steps[0]
+        if c is None:
+            raise UserError(f"scheme {self.scheme.name}: segment {spec.name!r} sets the chamber (chamber_c: "
+                            f"{setpoint:g}) but the configuration ({self.config.source}) has no chamber (add a "
+                            "chamber: section to station.yaml: kind, range_c, ramp_c_per_min)")
+        for spec, setpoint in steps:
+            if not c.in_range(setpoint):
+                raise UserError(f"scheme {self.scheme.name}: segment {spec.name!r}: chamber_c {setpoint:g} C is "
+                                f"outside the chamber's range {c.range_c[0]:g}..{c.range_c[1]:g} C "
+                                f"({self.config.source}: chamber.range_c)")
+        if c.kind == "manual" and not self.operator:
+            raise UserError(f"scheme {self.scheme.name}: sets a manual chamber, which needs an operator "
+                            "(run.operator: true, not --unattended)")
+
+    def _chamber_step(self, spec, from_c: float) -> Chamber:
+        c = self.config.chamber
+        to = spec.chamber_c
+        text = (f"set the temperature chamber to {to:g} C and start it (it ramps at about "
+                f"{c.ramp_c_per_min:g} C/min); press Enter when it is set")
+        estimate = self.config.run.operator_s + c.step_s(from_c, to)
+        return Chamber(f"{spec.name}: chamber at {to:g} C", spec.name, estimate, setpoint_c=to, from_c=from_c,
+                       ramp_s=c.ramp_s(from_c, to), soak_s=c.soak_s,
+                       slope_c_per_min=None if c.soak_s is not None else c.settle_slope_c_per_min,
+                       window_s=c.settle_window_s, max_s=c.settle_max_s, agree_c=c.agree_c, instruction=text)
 
     def _warmup(self) -> list:
         w = self.config.warmup

@@ -39,8 +39,8 @@ KEEP = 256                      # entries kept (~10 KB each)
 _MAGIC = b"station-plan/1\n"
 # the modules whose code a compilation runs (relative to the station package)
 CODE = ("bench/compile.py", "bench/compile_cache.py", "bench/gimbal.py", "bench/plan.py", "bench/config.py",
-        "io/scheme.py", "model/geometry.py")
-_ALLOWED = {("station.bench.plan", n) for n in ("Plan", "Checkpoint", "Dwell", "HandRotation", "HandStatic",
+        "io/scheme.py", "model/geometry.py", "core/chamber.py")
+_ALLOWED = {("station.bench.plan", n) for n in ("Plan", "Chamber", "Checkpoint", "Dwell", "HandRotation", "HandStatic",
                                                "MoveTo", "Operator", "Rotate", "Settle", "WarmUp")} | {
     ("station.io.scheme", "RotationSpec"), ("station.io.scheme", "StaticSpec"),
     ("numpy", "dtype"), ("numpy", "ndarray"), ("numpy._core.multiarray", "scalar"),

@@ -16,6 +16,7 @@ import yaml
 
 from drivers.transport import SerialSettings
 
+from station.core.chamber import KINDS as CHAMBER_KINDS, ChamberConfig
 from station.core.errors import UserError
 from station.core import yaml_text
 
@@ -148,6 +149,7 @@ class Config:
     effects: EffectsConfig = field(default_factory=EffectsConfig)
     source: str = "defaults"
     imus: tuple = ()                      # several IMUs in one run (``imus:``); then imu is imus[0]
+    chamber: ChamberConfig | None = None  # a temperature chamber (``chamber:``), None: none
 
     @property
     def imu_list(self) -> tuple:
@@ -174,6 +176,10 @@ class Config:
             del doc["imus"]
             for key in MULTI_IMU_KEYS:
                 doc["imu"].pop(key, None)
+        if self.chamber is None:
+            del doc["chamber"]
+        else:                               # one settle rule, as the file gave it
+            doc["chamber"].pop("settle_slope_c_per_min" if self.chamber.soak_s is not None else "soak_s")
         return doc
 
 
@@ -267,7 +273,7 @@ def parse_config(doc, source: str) -> Config:
     version = doc.get("version", 1)
     if version != 1:
         raise v.fail("version", f"must be 1, got {version!r}")
-    v.known(doc, "", ("version", "imu", "imus", "table", "site", "warmup", "run", "effects"))
+    v.known(doc, "", ("version", "imu", "imus", "table", "site", "warmup", "run", "effects", "chamber"))
     imu_checks = {"port": v.text, "protocol": v.text, "serial": v.serial, "rate_hz": v.positive,
                   "csv_units": v.text_or_empty, "frame_timeout_s": v.positive, "lot": v.text}
     imu = v.section(doc, "imu", ImuConfig, imu_checks)
@@ -301,7 +307,49 @@ def parse_config(doc, source: str) -> Config:
     if warmup.temp_slope_c_per_h is not None and warmup.max_s is None:
         raise v.fail("warmup.max_s", "needed with temp_slope_c_per_h (the longest warm-up)")
     return Config(imu=imu, table=table, site=site, warmup=warmup, run=run, effects=effects, source=source,
-                  imus=imus)
+                  imus=imus, chamber=_chamber(doc, v))
+
+
+CHAMBER_KEYS = ("kind", "range_c", "ramp_c_per_min", "ambient_c", "soak_s", "settle_slope_c_per_min",
+                "settle_window_s", "settle_max_s", "imu_time_constant_s", "agree_c")
+
+
+def _chamber(doc: dict, v: "_Validator") -> ChamberConfig | None:
+    """The ``chamber:`` section (None without one), checked field by field in one line each."""
+    if doc.get("chamber") is None:
+        return None
+
+    def kind(value, where):
+        if value not in CHAMBER_KINDS:
+            raise v.fail(where, f"must be one of {', '.join(CHAMBER_KINDS)} (manual: the operator sets "
+                                f"the chamber when asked), got {repr(value)[:40]}")
+        return value
+
+    def span(value, where):
+        if not isinstance(value, list) or len(value) != 2:
+            raise v.fail(where, f"must be [min, max] in degrees C, got {repr(value)[:40]}")
+        lo, hi = (v.number(x, f"{where}[{i}]") for i, x in enumerate(value))
+        if not -100.0 <= lo < hi <= 200.0:
+            raise v.fail(where, f"must be [min, max] with -100 <= min < max <= 200 degrees C, got {value!r}")
+        return (lo, hi)
+
+    def celsius(value, where):
+        x = v.number(value, where)
+        if not -100.0 <= x <= 200.0:
+            raise v.fail(where, f"must be within -100..200 degrees C, got {value!r}")
+        return x
+
+    c = v.section(doc, "chamber", ChamberConfig, {
+        "kind": kind, "range_c": span, "ramp_c_per_min": v.positive, "ambient_c": celsius,
+        "soak_s": v.non_negative, "settle_slope_c_per_min": v.positive, "settle_window_s": v.positive,
+        "settle_max_s": v.positive, "imu_time_constant_s": v.positive, "agree_c": v.positive})
+    given = doc["chamber"] if isinstance(doc["chamber"], dict) else {}
+    if "soak_s" in given and "settle_slope_c_per_min" in given:
+        raise v.fail("chamber.soak_s", "give either soak_s (a fixed soak) or settle_slope_c_per_min "
+                                       "(until the IMU's temperature settles), not both")
+    if "range_c" not in given:
+        raise v.fail("chamber.range_c", "needed: the setpoints the chamber can hold, [min, max] in degrees C")
+    return c
 
 
 GEOMETRY_KEYS = ("axes_intersect", "level_arcsec")
@@ -631,6 +679,20 @@ warmup:
   # temp_slope_c_per_h: 0.5    # ...and until the IMU temperature changes less than this
   # max_s: 14400               # but never longer
   window_s: 300                # the temperature slope is fitted over this window
+
+# A temperature chamber around the table (docs/sequencer.md "chamber"): schemes may then set it
+# (chamber_c: 45 on a segment) and station design places segments at its setpoints.
+# chamber:
+#   kind: manual               # the operator sets the chamber when asked and presses Enter
+#   range_c: [20, 60]          # the setpoints it can hold, degC
+#   ramp_c_per_min: 2.0        # how fast its air follows a new setpoint
+#   ambient_c: 25              # the room: the chamber's air before the first setpoint
+#   soak_s: 600                # a fixed soak after the ramp; or, instead, until the IMU settles:
+#   # settle_slope_c_per_min: 0.02   # the IMU's own temperature slope below this
+#   # settle_window_s: 120           # ...over this window
+#   # settle_max_s: 3600             # ...but never longer after the ramp
+#   imu_time_constant_s: 600   # the IMU's lag behind the air, for the time estimates of plan and design
+#   agree_c: 5.0               # IMU temperature vs setpoint beyond this: a finding in the capture
 
 run:
   settle_s: 5.0                # discarded after every move and every ramp

@@ -110,6 +110,31 @@ class Operator(Step):
 
 
 @dataclass(frozen=True)
+class Chamber(Step):
+    """Set the temperature chamber to ``setpoint_c`` (a manual chamber: the operator sets it and
+    confirms), then wait for the ramp (``ramp_s``) and until the IMU's own temperature settles
+    (station.core.chamber: a fixed soak or the slope rule); then the IMU's temperature is checked
+    against the setpoint (beyond ``agree_c``: a finding in the capture)."""
+
+    setpoint_c: float = 0.0
+    from_c: float = 0.0                 # the setpoint before (the room's for the first)
+    ramp_s: float = 0.0
+    soak_s: float | None = None         # a fixed soak after the ramp, or the slope rule:
+    slope_c_per_min: float | None = None
+    window_s: float = 120.0
+    max_s: float = 3600.0               # the slope rule's longest wait after the ramp
+    agree_c: float = 5.0
+    instruction: str = ""
+
+    def describe(self) -> str:
+        rule = (f"soak {self.soak_s:g} s" if self.soak_s is not None else
+                f"until the IMU's temperature slope < {self.slope_c_per_min:g} C/min over {self.window_s:g} s "
+                f"(at most {self.max_s:g} s)")
+        return (f"CHAMBER {self.from_c:g} -> {self.setpoint_c:g} C: OPERATOR: {self.instruction}; "
+                f"ramp {self.ramp_s:.0f} s, {rule} (about {self.estimate_s:.0f} s in all)")
+
+
+@dataclass(frozen=True)
 class HandStatic(Step):
     """Without a table: the operator puts the IMU on a face and keeps it still; the recording
     continues until the data show ``spec.dwell_s`` of stillness."""

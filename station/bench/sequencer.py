@@ -28,7 +28,7 @@ from station.io.capture import CaptureWriter
 from station.core.errors import UserError
 from station.bench.channels import ImuChannel, Recording, segment_meta
 from station.bench.imu_stream import ImuStream, lost_frames_note
-from station.bench.plan import (Checkpoint, Dwell, HandRotation, HandStatic, MoveTo, Operator, Rotate, Settle,
+from station.bench.plan import (Chamber, Checkpoint, Dwell, HandRotation, HandStatic, MoveTo, Operator, Rotate, Settle,
                           WarmUp)
 
 BLOCK_S = 1.0                 # device seconds written to a segment per write
@@ -122,6 +122,8 @@ class Sequencer:
         self._last_poll = 0.0
         self._elapsed_s = self._estimate_s = 0.0     # device time into the present step
         self._session = None          # hand schemes: the continuous recording
+        self._chamber_c = None        # the temperature chamber's setpoint in force (Chamber steps)
+        self._chamber_entry: dict = {}    # segment -> the manifest's ``chamber`` entry of its step
 
     # the first IMU's (the only one of a one-IMU run; hand schemes use these)
     stream = property(lambda self: self.channels[0].stream)
@@ -183,7 +185,7 @@ class Sequencer:
 
     def _execute(self, step) -> None:
         handler = {WarmUp: self._warmup, MoveTo: self._move, Settle: self._settle, Dwell: self._dwell,
-                   Rotate: self._rotate, Operator: self._operator, Checkpoint: self._checkpoint,
+                   Rotate: self._rotate, Operator: self._operator, Checkpoint: self._checkpoint, Chamber: self._chamber,
                    HandStatic: self._hand, HandRotation: self._hand}[type(step)]
         handler(step)
 
@@ -365,6 +367,9 @@ class Sequencer:
         attempts = 1 + self.config.run.rerecord_attempts
         pending = [ch for ch in self._alive() if name not in ch.done]
         problems: dict = {}
+        if self._chamber_c is not None:     # the chamber's setpoint, and the step that set it
+            meta = {**meta, "chamber_c": self._chamber_c,
+                    **({"chamber": self._chamber_entry[name]} if name in self._chamber_entry else {})}
         for attempt in range(1, attempts + 1):
             if not pending:
                 return
@@ -531,6 +536,55 @@ class Sequencer:
             self.table.close_interlocks()
         if step.mounting is not None:
             self.mounting = tuple(step.mounting)
+
+    def _chamber(self, step: Chamber) -> None:
+        """Ask the operator to set the chamber, then wait: the ramp's time, then the fixed soak or
+        until the first IMU's own temperature settles (station.core.chamber.SlopeSettle, at most
+        ``max_s`` after the ramp); then check the IMU's temperature against the setpoint (a
+        disagreement beyond ``agree_c`` is a finding in the segment's manifest entry, said)."""
+        from station.core.chamber import SlopeSettle, finding
+
+        self.display.prompt(step.instruction)
+        self.operator.confirm(step, self.interrupts)
+        self._each(lambda ch: ch.stream.drain())
+        rule = SlopeSettle(step.slope_c_per_min, step.window_s) if step.soak_s is None else None
+        total = step.ramp_s + (step.soak_s if step.soak_s is not None else step.max_s)
+        t_first, last_c, settled = None, float("nan"), False
+        while True:
+            b = self._take(max(1, int(round(self.rate_hz))))
+            t_first = b.t_s[0] if t_first is None else t_first
+            elapsed = float(b.t_s[-1] - t_first)
+            finite = np.isfinite(b.temp_c)
+            if finite.any():
+                last_c = float(b.temp_c[finite].mean())
+                if rule is not None and elapsed >= step.ramp_s:
+                    rule.feed(float(b.t_s[-1]), last_c)
+            reference = self._reference()
+            self._each(lambda ch: ch is reference or ch.stream.drain())
+            self._show_values()
+            self.display.advance(min(elapsed, total), total)
+            if rule is None and elapsed >= total:
+                settled = True
+                break
+            if rule is not None and rule.settled:
+                settled = True
+                break
+            if elapsed >= total:
+                break
+            self._check_pause()
+        entry = {"setpoint_c": step.setpoint_c, "from_c": step.from_c, "waited_s": round(elapsed, 3),
+                 "imu_c": round(last_c, 4), "settled": settled}
+        problem = finding(step.setpoint_c, last_c, step.agree_c)
+        if not settled:
+            problem = "; ".join(filter(None, [problem, f"the IMU's temperature had not settled after "
+                                                       f"{step.max_s:g} s (chamber.settle_max_s)"]))
+        if problem:
+            entry["finding"] = problem
+            self.display.note(f"chamber finding: {problem}")
+        else:
+            self.display.note(f"chamber at {step.setpoint_c:g} C: the IMU at {last_c:.2f} C after {elapsed:.0f} s")
+        self._chamber_c = step.setpoint_c
+        self._chamber_entry[step.segment] = entry
 
     def _checkpoint(self, step: Checkpoint) -> None:
         self.display.saved(step.segment)

@@ -29,6 +29,9 @@ def add_parsers(sub) -> None:
     mc.add_argument("--scheduler", metavar="tcp://HOST:8786",
                     help="run the repetitions on this Dask scheduler's workers (default: a pool of "
                          "worker processes on this machine's cores)")
+    mc.add_argument("--config", metavar="FILE",
+                    help="station.yaml whose temperature chamber a scheme that sets one (chamber_c) runs with "
+                         "(default: $STATION_CONFIG, ./station.yaml)")
     mc.add_argument("--json", action="store_true",
                     help="print the per-parameter table as JSON on stdout (error std, Cramér–Rao bound, mean 1σ)")
     mc.set_defaults(func=cmd_montecarlo)
@@ -67,7 +70,8 @@ def cmd_montecarlo(args) -> int:
             mc = api.montecarlo(args.scheme, args.runs, seed=args.seed, accel_noise_ug=args.accel_noise_ug,
                                 gyro_noise_dph=args.gyro_noise_dph, table_angle_arcsec=args.table_angle_arcsec,
                                 accel_disturbance_ug=args.accel_disturbance_ug, method=args.method,
-                                effects=args.add, progress=progress, executor=executor, workers=workers)
+                                effects=args.add, progress=progress, executor=executor, workers=workers,
+                                config=args.config)
         elapsed = time.perf_counter() - started
     err.print(f"{args.runs} dry runs and the Cramér-Rao bound in {elapsed:.1f} s on {mc.workers} "
               f"{'Dask worker thread(s) at ' + args.scheduler if args.scheduler else 'worker process(es)'}: "

@@ -143,7 +143,9 @@ def cmd_plan(args) -> int:
     for note in plan.notes:
         err.print(f"note: {note}", markup=False, soft_wrap=True)
     out.print(f"total: {plan.duration_s:.0f} s ({plan.duration_s / 3600:.2f} h) of device time, "
-              f"{len(plan.steps)} steps, {sum(type(s).__name__ == 'Operator' for s in plan)} operator steps",
+              f"{len(plan.steps)} steps, {sum(type(s).__name__ == 'Operator' for s in plan)} operator steps"
+              + (f", {chambers} chamber step(s) (an operator sets the chamber)"
+                 if (chambers := sum(type(s).__name__ == 'Chamber' for s in plan)) else ""),
               markup=False)
     if getattr(args, "reveals", False):
         _print_reveals(scheme, config, plan, args)
@@ -214,7 +216,8 @@ def cmd_run(args) -> int:
     with out.status("recording") as status:
         capture = dryrun.record_scheme(
             scheme, truth, args.seed, out_dir,
-            progress=lambda name, i, n: status.update(f"recording {name} ({i + 1}/{n})"), geometry=geometry)
+            progress=lambda name, i, n: status.update(f"recording {name} ({i + 1}/{n})"), geometry=geometry,
+            chamber=config.chamber)
     from station.cli.history import file_quietly
     from station.cli.noise import characterise_run, is_noise_recording
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -138,9 +139,15 @@ def rotation_pair(axis, elevation: float, rate: float, revolutions: int, name: s
 
 
 def candidate_set(table: Table, rates_dps=DEFAULT_RATES_DPS, revolutions=DEFAULT_REVOLUTIONS,
-                  dwells_s=DEFAULT_DWELLS_S, elevations=ELEVATIONS_DEG):
+                  dwells_s=DEFAULT_DWELLS_S, elevations=ELEVATIONS_DEG, levels=(None,)):
     """(candidates for the search, the chunks to compute their information from, notes, masks):
-    masks[i] is the candidate's reachable-mounting bit mask (time model's remounts)."""
+    masks[i] is the candidate's reachable-mounting bit mask (time model's remounts).  ``levels``:
+    the temperature chamber's levels every candidate is offered at (None: the room's, no
+    setpoint; a number: the chamber's setpoint, degC) -- one information block serves a segment
+    at every level (the search places it at its temperature: information.at_temperature); a
+    static's slot stays its attitude, so that each attitude is held at one level (designs whose
+    attitudes were repeated at two levels left the accelerometers' scale factors undetermined
+    for the temperature coefficients' sake: docs/design.md, fourteenth session)."""
     from station.design.information import UNIT_DWELL_S
 
     cands, masks, notes = [], [], []
@@ -187,6 +194,9 @@ def candidate_set(table: Table, rates_dps=DEFAULT_RATES_DPS, revolutions=DEFAULT
         chunks.append(chunk)
     if not chunks:
         chunks.append(statics_chunk)
+    if tuple(levels) != (None,):
+        cands, masks = ([replace(c, level=level) for level in levels for c in cands],
+                        [m for level in levels for m in masks])
     return cands, chunks, notes, masks
 
 

@@ -13,6 +13,7 @@ import numpy as np
 import yaml
 
 from station.bench.compile import compile_scheme
+from station.bench.plan import Chamber
 from station.core.errors import UserError
 from station.design import candidates as cand_mod
 from station.design.information import Noise, information, model_of, quiet_truth
@@ -120,7 +121,8 @@ def predict(scheme: Scheme, effects: list, noise: Noise, config=None, duration_s
                                                 if sp.name in elevation else sp for sp in scheme.segments))
     covs, revealed = [], None
     for seed in seeds:
-        model, _ = model_of(scheme, effects, noise, truth, None, seed=seed)
+        model, _ = model_of(scheme, effects, noise, truth, None, seed=seed,
+                            chamber=config.chamber if config is not None else None)
         result = lsq.fit(model.s, [copy.deepcopy(e) for e in effects])
         names, index, factors, units_ = lsq._reported_index(result, "m/s^2", "deg/s")
         factors, units_ = np.array(factors, float), list(units_)
@@ -149,16 +151,16 @@ class Verification:
         return not self.problems
 
 
-def verify_one(scheme: Scheme, effect_ids: tuple, noise: Noise, seed: int) -> tuple:
+def verify_one(scheme: Scheme, effect_ids: tuple, noise: Noise, seed: int, chamber=None) -> tuple:
     """One noisy dry run of ``scheme`` estimated as ``station montecarlo`` estimates it (the same
     function, station.simulate.montecarlo.one_run): (names, errors, the fit's own 1σ, the fit's
     notes), errors and 1σ in the prediction's units (scale factors in ppm)."""
     from station.model.calibration import parameter_errors
     from station.simulate import dryrun, montecarlo
 
-    settings = replace(noise.settings(), effects=tuple(effect_ids))
+    settings = replace(noise.settings(), effects=tuple(effect_ids), chamber=chamber)
     truth = montecarlo.make_truth(settings)
-    cal = montecarlo._estimate(dryrun.simulate_capture(scheme, truth, seed), settings)
+    cal = montecarlo._estimate(dryrun.simulate_capture(scheme, truth, seed, chamber=chamber), settings)
     names = [e[0] for e in parameter_errors(cal, dryrun.truth_calibration(truth))]
     names += [p.name for e in montecarlo._effects(settings) for p in e.params]
     errors = [e[3] for e in parameter_errors(cal, dryrun.truth_calibration(truth))]
@@ -178,7 +180,7 @@ def _map(executor, fn, items) -> list:
 
 
 def verify(scheme: Scheme, effects: list, noise: Noise, prediction: Prediction, which,
-           runs: int = VERIFY_RUNS, first_seed: int = 1000, executor=None) -> Verification:
+           runs: int = VERIFY_RUNS, first_seed: int = 1000, executor=None, chamber=None) -> Verification:
     """Does the estimator deliver the prediction?  ``runs`` noisy dry runs of the designed scheme
     (seeds first_seed, ...: the first runs `station montecarlo` makes) estimated as it does;
     for every criterion parameter ``which`` (the prediction's indices) the error must be within
@@ -188,7 +190,7 @@ def verify(scheme: Scheme, effects: list, noise: Noise, prediction: Prediction, 
     does with noise: a start the solver does not converge from, a direction the noiseless fit
     sees and a noisy one does not, a noise model or reweighting the designed segments set off."""
     ids = tuple(e.id for e in effects)
-    results = _map(executor, lambda seed: verify_one(scheme, ids, noise, seed),
+    results = _map(executor, lambda seed: verify_one(scheme, ids, noise, seed, chamber),
                    [first_seed + k for k in range(runs)])
     problems, worst_z, worst = [], 0.0, ""
     for k, (names, errors, sigmas, notes) in enumerate(results):
@@ -216,30 +218,76 @@ def verify(scheme: Scheme, effects: list, noise: Noise, prediction: Prediction, 
     return Verification(runs, worst_z, worst, problems)
 
 
-def _segments_of(chosen, cands, masks=None) -> list:
-    """The scheme's segment entries (YAML) and specs, mounting by mounting as the time model
-    covers them (timeline.cover: the compiler then remounts as often as the model counts), within
-    a mounting the statics first, then the rotations."""
+def _segments_of(chosen, cands, masks=None, chamber=None) -> list:
+    """The scheme's segment entries (YAML) and specs, level by level of a chamber (the first
+    segment of each setpoint says ``chamber_c``), mounting by mounting as the time model covers
+    them (timeline.cover: the compiler then remounts as often as the model counts), within a
+    mounting the statics first, then the rotations."""
     from station.design.timeline import written_order
 
-    sequence = [cands[i] for i in written_order(chosen, cands, masks)]
+    sequence = [cands[i] for i in written_order(chosen, cands, masks, chamber)]
     entries, specs = [], []
+    setpoint = None
     for c in sequence:
+        level = getattr(c, "level", None)
+        tag = "" if level is None else f"_{_num(level)}C".replace("-", "m").replace(".", "p")
+        sets = level is not None and level != setpoint
+        setpoint = level if level is not None else setpoint
         if c.kind == "static":
             up = c.key[1]
-            name = f"up_{cand_mod.name_of(up)}"
-            entries.append({"static": name, "up_body": [_num(x) for x in _integer_vector(up)], "dwell_s": c.dwell_s})
-            specs.append(cand_mod.static_spec(up, c.dwell_s, name))
+            name = f"up_{cand_mod.name_of(up)}{tag}"
+            entry = {"static": name, "up_body": [_num(x) for x in _integer_vector(up)], "dwell_s": c.dwell_s}
+            spec = cand_mod.static_spec(up, c.dwell_s, name)
+            if sets:
+                entry["chamber_c"] = _num(level)
+                spec = replace(spec, chamber_c=float(level))
+            entries.append(entry)
+            specs.append(spec)
             continue
         axis, e, rate, rev = c.key
-        name = f"rot_{cand_mod.name_of(axis)}_e{e:g}_{rate:g}dps_{rev}rev"
+        name = f"rot_{cand_mod.name_of(axis)}_e{e:g}_{rate:g}dps_{rev}rev{tag}"
         entry = {"rotation": name, "axis_body": [_num(x) for x in _integer_vector(axis)], "rate_dps": rate,
                  "rotation_s": rev * 360.0 / rate}
         if e:
             entry["axis_elevation_deg"] = e
+        pair = cand_mod.rotation_pair(axis, e, rate, rev, name)
+        if sets:
+            entry["chamber_c"] = _num(level)
+            pair = (replace(pair[0], chamber_c=float(level)), pair[1])
         entries.append(entry)
-        specs.extend(cand_mod.rotation_pair(axis, e, rate, rev, name))
+        specs.extend(pair)
     return entries, specs
+
+
+def chamber_levels(config) -> tuple:
+    """The chamber levels a design's candidates are offered at: the room's (None) and the end of
+    the configured chamber's range farther from the room (the widest temperature span for one
+    ramp; both ends tripled the candidates and the search's CPU: docs/design.md, fourteenth
+    session); (None,) without a chamber."""
+    c = config.chamber
+    if c is None:
+        return (None,)
+    far = max(c.range_c, key=lambda x: abs(x - c.ambient_c))
+    return (None,) if abs(far - c.ambient_c) < 1e-9 else (None, float(far))
+
+
+def chamber_cost(config):
+    """levels -> the seconds their chamber steps cost on the table, as the compiler counts them
+    (station/bench/compile.py _chamber_step: the operator's time, the ramp, the settling), the
+    setpoints visited in the written order (timeline.level_rank); None without a chamber."""
+    c = config.chamber
+    if c is None:
+        return None
+    from station.core.chamber import order_levels
+
+    def cost(levels) -> float:
+        total, at = 0.0, c.ambient_c
+        for level in order_levels([x for x in levels if x is not None], c.ambient_c):
+            total += config.run.operator_s + c.step_s(at, level)
+            at = level
+        return total
+
+    return cost
 
 
 def _integer_vector(v) -> tuple:
@@ -324,7 +372,8 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
         raise UserError(f"a budget of {budget_s:.0f} s holds fewer than {MIN_STATICS_TABLE} static attitudes on "
                         f"this table (the least: {least:.0f} s with the shortest dwell, {min(dwells_s):g} s)")
     say("candidates on the table (gimbal kinematics)")
-    cands, chunks, notes, masks = cand_mod.candidate_set(table, rates_dps, revolutions, dwells_s)
+    cands, chunks, notes, masks = cand_mod.candidate_set(table, rates_dps, revolutions, dwells_s,
+                                                         levels=chamber_levels(config))
     if not any(c.kind == "rotation" for c in cands):
         raise UserError("the table can turn about none of the candidate axes (a continuous axis is needed)")
     remount_s = config.run.operator_s if config.run.operator else 0.0
@@ -336,7 +385,11 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
                   and fixed + MIN_STATICS * table.static_s(min(dwells_s)) <= budget_s)
     if unknown_ok and statics in ("any", "unknown"):
         kinds.append(("unknown", list(range(len(cands))), masks, MIN_STATICS, None, MIN_LEVEL_AXES))
-    one = one_mounting(cands, masks) if statics in ("any", "table") else None
+    # with a chamber, "any" searches the unknown-attitude kind only (the minute of CPU: the
+    # candidates are doubled; the known-attitude kind's design was the worse, 0.166 against
+    # 0.148 µg/°C: docs/design.md, fourteenth session)
+    table_kind = statics == "table" or (statics == "any" and (config.chamber is None or not kinds))
+    one = one_mounting(cands, masks) if table_kind else None
     if one is not None:
         kinds.append(("table", one, [masks[i] for i in one], MIN_STATICS_TABLE, MAX_STATICS_TABLE, 0))
     if not kinds and fixed + MIN_STATICS * table.static_s(min(dwells_s)) > budget_s:
@@ -361,6 +414,7 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
         seconds["information"] += time.perf_counter() - t1
         crit, which = parse_criterion(criterion, info.parameters.names)
         scorer = Scorer(info, sub, crit, which)
+        scorer.chamber = config.chamber
         t2 = time.perf_counter()
         found = _search(scorer, sub, sub_masks, budget_s, fixed, max_passes, remount_s, least_statics,
                         most_statics, name, centred, config, say, level)
@@ -398,7 +452,8 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
                 f = found_all[i]
                 say(f"{verify_runs} noisy dry runs of the statics-of-{f[0]}-attitude design through the "
                     "estimator (does it deliver the prediction?)")
-                v = verify(f[2][3], effects, noise, preds[i], f[1].which, verify_runs, executor=executor)
+                v = verify(f[2][3], effects, noise, preds[i], f[1].which, verify_runs, executor=executor,
+                           chamber=config.chamber)
                 if v.ok or i == order[-1]:
                     k, verification = (i, v) if v.ok else (k, verified.get(k, v))
                     break
@@ -433,7 +488,8 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
     if verify_runs and verification is None:
         t4 = time.perf_counter()
         say(f"{verify_runs} noisy dry runs of the design through the estimator (does it deliver the prediction?)")
-        verification = verify(scheme, effects, noise, prediction, which, verify_runs, executor=executor)
+        verification = verify(scheme, effects, noise, prediction, which, verify_runs, executor=executor,
+                              chamber=config.chamber)
         seconds["verification"] = time.perf_counter() - t4
     header = [f"{name}: designed by `station design` for the {config.table.axes}-axis table of {config.source}",
               f"criterion {crit.text}: {criterion_of(prediction, crit.text):.6g}; compiled time {plan.duration_s:.0f} s "
@@ -447,6 +503,14 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
               "predicted 1-sigma (the estimator's fit of this scheme's noiseless capture):"]
     for n, u, s, r in zip(prediction.names, prediction.units, prediction.sigma, prediction.revealed):
         header.append(f"  {n}: {s:.4g} {u}" + ("" if r else " (not revealed)"))
+    if config.chamber is not None:
+        sets = [s.chamber_c for s in specs if s.chamber_c is not None]
+        c = config.chamber
+        notes.append(f"chamber ({c.describe()}): the design sets it to "
+                     + (", ".join(f"{x:g} C" for x in sets) if sets else "nothing (the room's temperature serves best)")
+                     + f", {sum(isinstance(st, Chamber) for st in plan.steps)} chamber step(s) of the compiled "
+                       f"{plan.duration_s:.0f} s; the built-in schemes set none: they run at the room's temperature "
+                       "and its warm-up")
     text = scheme_text(name, entries, header, centred)
     if verification is not None:
         header.append(f"verified: {verification.runs} noisy dry runs estimated as station montecarlo does: "
@@ -492,12 +556,12 @@ def _search(scorer, cands, masks, budget_s, fixed, max_passes, remount_s, min_st
         try:
             result = timed_exchange(scorer, budget, fixed, max_passes, min_statics=min_statics, masks=masks,
                               remount_s=remount_s, start=start, max_statics=max_statics,
-                              min_level_axes=min_level_axes)
+                              min_level_axes=min_level_axes, level_cost=chamber_cost(config))
         except UserError:
             return None
         evaluations += result.evaluations
         passes += result.passes
-        entries, specs = _segments_of(result.chosen, cands, masks)
+        entries, specs = _segments_of(result.chosen, cands, masks, config.chamber)
         scheme = Scheme(name, "designed by station design", "docs/design.md", {}, tuple(specs), centred=centred)
         plan = compile_scheme(scheme, config)
         if plan.duration_s <= budget_s * 1.0005:

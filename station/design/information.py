@@ -136,7 +136,7 @@ def quiet_truth(noise: Noise, config=None):
 
 
 def model_of(scheme: Scheme, effects: list, noise: Noise, truth, geometry: dict | None = None,
-             attitudes: str = "unknown", seed: int = 0):
+             attitudes: str = "unknown", seed: int = 0, chamber=None):
     """The least-squares model of the noiseless capture of ``scheme`` with the noise stated, as
     station.simulate.montecarlo.cramer_rao weights it: (model, capture).  ``seed``: the simulated
     bench's geometry (each static's heading, each rotation axis' heading and roll: drawn at
@@ -145,7 +145,7 @@ def model_of(scheme: Scheme, effects: list, noise: Noise, truth, geometry: dict 
     from station.estimate.summaries import summarise
     from station.simulate import dryrun
 
-    capture = dryrun.simulate_capture(scheme, truth, seed, geometry)
+    capture = dryrun.simulate_capture(scheme, truth, seed, geometry, chamber=chamber)
     capture.extra["noise_free"] = True          # (no data-fault scan: station/estimate/data_faults.py)
     s = summarise(capture, table_angle_arcsec=noise.table_angle_arcsec)
     fs = s.sample_rate_hz

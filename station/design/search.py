@@ -87,8 +87,9 @@ class Candidate:
     kind: str                     # "static" | "rotation"
     seconds: float                # table time: recording, moves, settling, ramps (candidates.py)
     dwell_s: float = 0.0          # statics
-    slot: tuple = ()              # at most one candidate per slot: a static's attitude
+    slot: tuple = ()              # at most one candidate per slot: a static's attitude (and chamber level)
     axis: tuple = ()              # rotations: (axis, elevation) group; one elevation per axis
+    level: float | None = None    # the chamber's setpoint it is recorded at (degC), None: the room's
 
 
 class Scorer:
@@ -113,6 +114,7 @@ class Scorer:
         # timeline (retime)
         self.M1 = list(self.M)
         self.dt_c: dict = {}
+        self.chamber = None       # station.core.chamber.ChamberConfig when candidates have levels
 
     @property
     def timed(self) -> bool:
@@ -130,8 +132,19 @@ class Scorer:
         """Every candidate at the temperature it had in the candidates' own capture (the search's
         first stage: information.Information.natural_dt)."""
         nat = self.info.natural_dt
-        self.set_temperatures({i: nat.get(c.key[:-1] if c.kind == "static" else c.key, 0.0)
+        shift = self._level_shift()
+        self.set_temperatures({i: nat.get(c.key[:-1] if c.kind == "static" else c.key, 0.0) + shift(c)
                                for i, c in enumerate(self.cands)})
+
+    def _level_shift(self):
+        """A candidate's chamber level less the middle of the levels (degC; 0 without a chamber):
+        where the first stage places it before there is a timeline (the room's level at the
+        chamber's ambient_c)."""
+        if self.chamber is None:
+            return lambda c: 0.0
+        values = {self.chamber.ambient_c if c.level is None else c.level for c in self.cands}
+        mid = 0.5 * (min(values) + max(values))
+        return lambda c: (self.chamber.ambient_c if c.level is None else c.level) - mid
 
     def retime(self, chosen, masks=None, budget_s: float | None = None) -> bool:
         """Place every candidate at the temperature it has on the timeline of the design
@@ -146,28 +159,41 @@ class Scorer:
 
         info = self.info
         if not chosen:
-            self.set_temperatures(timeline.notional(self.cands, info.temperature, info.clock, budget_s or 3600.0))
+            shift = self._level_shift()
+            notional = timeline.notional(self.cands, info.temperature, info.clock, budget_s or 3600.0)
+            self.set_temperatures({i: d + shift(self.cands[i]) for i, d in notional.items()})
             return True
-        placed = timeline.differences(chosen, self.cands, info.temperature, info.clock, masks)
-        by_slot, by_axis, statics, rotations = {}, {}, [], []
+        placed, reference = timeline.differences(chosen, self.cands, info.temperature, info.clock, masks,
+                                                 self.chamber, with_reference=True)
+        by_slot, by_axis, statics, rotations = {}, {}, {}, {}
         for i, d in placed.items():
             c = self.cands[i]
             if c.kind == "static":
                 by_slot[c.slot] = d
-                statics.append(d)
+                statics.setdefault(c.level, []).append(d)
             else:
-                by_axis.setdefault(c.axis, []).append(d)
-                rotations.append(d)
-        mean_s = float(np.mean(statics)) if statics else 0.0
-        mean_r = float(np.mean(rotations)) if rotations else mean_s
+                by_axis.setdefault((c.axis, c.level), []).append(d)
+                rotations.setdefault(c.level, []).append(d)
+
+        def at_level(level, first, second):
+            # a level nothing is chosen at: its setpoint (the room: the statics' mean) less the reference
+            if level in first:
+                return float(np.mean(first[level]))
+            if level in second:
+                return float(np.mean(second[level]))
+            if level is None or self.chamber is None:
+                return 0.0
+            return float(level) - reference
+
         dt = {}
         for i, c in enumerate(self.cands):
             if i in placed:
                 dt[i] = placed[i]
             elif c.kind == "static":
-                dt[i] = by_slot.get(c.slot, mean_s)
+                dt[i] = by_slot[c.slot] if c.slot in by_slot else at_level(c.level, statics, rotations)
             else:
-                dt[i] = float(np.mean(by_axis[c.axis])) if c.axis in by_axis else mean_r
+                key = (c.axis, c.level)
+                dt[i] = float(np.mean(by_axis[key])) if key in by_axis else at_level(c.level, rotations, statics)
         self.set_temperatures(dt)
         return True
 
@@ -307,7 +333,8 @@ class Result:
 
 def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: int = 20,
              min_statics: int = MIN_STATICS, masks=None, remount_s: float = 0.0, start=None,
-             max_statics: int | None = None, retime: bool = True, min_level_axes: int = 0) -> Result:
+             max_statics: int | None = None, retime: bool = True, min_level_axes: int = 0,
+             level_cost=None) -> Result:
     """The design within ``budget_s`` (``fixed_s`` of it spent on steps no candidate pays for:
     the first mounting, a warm-up) minimising the criterion (module doc).  ``masks``: each
     candidate's reachable mountings (bits), a mounting beyond the first costing ``remount_s``;
@@ -318,7 +345,10 @@ def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: 
     the start and at each pass (Scorer.retime); False: at the temperatures the scorer has.
     ``min_level_axes``: at least this many body axes turned about with the table axis horizontal
     (elevation 0), chosen greedily after the statics and kept by every exchange (designs of
-    unknown attitude: MIN_LEVEL_AXES)."""
+    unknown attitude: MIN_LEVEL_AXES).  ``level_cost(levels)``: the time (s) the chamber's
+    setpoints of the candidates' levels cost (ramps, soaks, the operator), for a chamber's
+    candidates (Candidate.level); the remounts are then counted level by level (the scheme is
+    written so: timeline.written_order)."""
     timed = scorer.timed and retime
 
     cands = scorer.cands
@@ -353,8 +383,21 @@ def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: 
         return c.kind == "rotation" and c.axis[1] == 0.0 and c.axis[0] not in {
             cands[i].axis[0] for i in rest if cands[i].kind == "rotation"}
 
+    costs: dict = {}
+
     def time_of(chosen) -> float:
         t = fixed_s + float(sum(secs[i] for i in chosen))
+        if level_cost is not None:
+            levels = frozenset(cands[i].level for i in chosen)
+            if levels not in costs:
+                costs[levels] = float(level_cost(levels))
+            t += costs[levels]
+            if masks is not None and remount_s:
+                by_level: dict = {}
+                for i in chosen:
+                    by_level.setdefault(cands[i].level, []).append(masks[i])
+                t += remount_s * max(0, sum(mountings_needed(m) for m in by_level.values()) - 1)
+            return t
         if masks is not None and remount_s:
             t += remount_s * max(0, mountings_needed([masks[i] for i in chosen]) - 1)
         return t

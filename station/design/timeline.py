@@ -11,15 +11,53 @@ a rotation pair is two segments), and the temperature at a time is the simulated
 temperature (station/estimate/summaries.py), here Simpson's rule over its samples' span (the
 warm-up's curvature over a 1000 s dwell: < 1e-3 degC off the mean of its samples).  The effects'
 reference is the estimator's: the mean temperature of the statics.
+
+With a temperature chamber (station.yaml ``chamber:``; fourteenth session) a candidate has a
+chamber level (``Candidate.level``: None at the room's temperature, else a setpoint): the scheme
+is written level by level -- the room's first, then the setpoints in station.core.chamber.order_levels'
+order -- and on the timeline each new setpoint is set at the end of the segment before it (the
+simulated chamber's air ramps, sim_devices/chamber.py) and waited for as the station waits
+(ChamberConfig.ramp_s + settle_estimate_s: exactly the dry run's wait for a fixed soak) before
+its first segment's gap.
 """
 from __future__ import annotations
 
 import numpy as np
 
 
-def written_order(chosen, cands, masks=None) -> list:
-    """The chosen candidates' indices in the order the scheme file lists them."""
+def level_of(c):
+    """A candidate's chamber level: None (the room), or the chamber's setpoint, degC."""
+    return getattr(c, "level", None)
+
+
+def level_rank(levels, chamber) -> dict:
+    """{level: its place in the written order}: the room (None) first, then order_levels'."""
+    from station.core.chamber import order_levels
+
+    set_points = [x for x in levels if x is not None]
+    rank = {None: 0}
+    if set_points:
+        for k, x in enumerate(order_levels(set_points, chamber.ambient_c), 1):
+            rank[x] = k
+    return rank
+
+
+def written_order(chosen, cands, masks=None, chamber=None) -> list:
+    """The chosen candidates' indices in the order the scheme file lists them: level by level
+    (a chamber's), within a level mounting by mounting, within a mounting the statics first."""
     chosen = list(chosen)
+    levels = {level_of(cands[i]) for i in chosen}
+    if len(levels) > 1 or levels - {None}:
+        rank = level_rank(levels, chamber)
+        out = []
+        for level in sorted(levels, key=lambda x: rank[x]):
+            out += _mounting_order([i for i in chosen if level_of(cands[i]) == level], cands, masks)
+        return out
+    return _mounting_order(chosen, cands, masks)
+
+
+def _mounting_order(chosen, cands, masks=None) -> list:
+    """Mounting by mounting, within a mounting the statics first, then the rotation pairs."""
     group = cover([masks[i] for i in chosen]) if masks is not None else [0] * len(chosen)
     order: dict = {}
     for g in group:
@@ -42,41 +80,58 @@ def segment_seconds(c) -> list:
     return [rev * 360.0 / rate] * 2
 
 
-def mean_temperatures(sequence, cands, temperature, clock) -> np.ndarray:
+def mean_temperatures(sequence, cands, temperature, clock, chamber=None) -> np.ndarray:
     """Each candidate's mean temperature (degC) when ``sequence`` (candidate indices, in order)
     is recorded from the bench clock's start: ``clock`` = (the gap before each segment, s; the
-    sample rate, Hz); ``temperature.at(t)`` the IMU's temperature at bench time t."""
-    return seconds_temperatures([segment_seconds(cands[i]) for i in sequence], temperature, clock)
+    sample rate, Hz); ``temperature.at(t)`` the IMU's temperature at bench time t; ``chamber``
+    (station.core.chamber.ChamberConfig) the chamber the candidates' levels set."""
+    levels = [level_of(cands[i]) for i in sequence]
+    return seconds_temperatures([segment_seconds(cands[i]) for i in sequence], temperature, clock,
+                                levels if chamber is not None and any(x is not None for x in levels) else None,
+                                chamber)
 
 
-def seconds_temperatures(items, temperature, clock) -> np.ndarray:
-    """mean_temperatures of items given as the lengths of their segments, in order."""
+def seconds_temperatures(items, temperature, clock, levels=None, chamber=None) -> np.ndarray:
+    """mean_temperatures of items given as the lengths of their segments, in order (``levels``:
+    each item's chamber level, None: no chamber)."""
     gap, fs = clock
     dt = 1.0 / fs
     end = 0.0
     out = np.zeros(len(items))
+    air, setpoint = None, None
+    if levels is not None:
+        from station.simulate.dryrun import chamber_air
+
+        air, setpoint = chamber_air(temperature.start_c), chamber.ambient_c
     for k, lengths in enumerate(items):
+        if air is not None and levels[k] is not None and levels[k] != setpoint:
+            air.set(end, levels[k], chamber.ramp_c_per_min)          # as the dry run: chamber_step
+            end += chamber.ramp_s(setpoint, levels[k]) + chamber.settle_estimate_s(setpoint, levels[k])
+            setpoint = levels[k]
         temps, weights = [], []
         for seconds in lengths:
             n = max(1, int(round(seconds * fs)))
             a = end + gap + 0.5 * dt
             b = a + (n - 1) * dt
             end = b + 0.5 * dt
-            ta, tm, tb = temperature.at(np.array([a, 0.5 * (a + b), b]))
+            tt = np.array([a, 0.5 * (a + b), b])
+            ta, tm, tb = temperature.at(tt) if air is None else temperature.at(tt, air)
             temps.append((ta + 4.0 * tm + tb) / 6.0)
             weights.append(n)
         out[k] = float(np.average(temps, weights=weights))
     return out
 
 
-def differences(chosen, cands, temperature, clock, masks=None) -> dict:
+def differences(chosen, cands, temperature, clock, masks=None, chamber=None, with_reference: bool = False):
     """Per chosen candidate its temperature less the effects' reference (the mean over the chosen
-    statics), in the written order's timeline: {index: dT, degC}."""
-    sequence = written_order(chosen, cands, masks)
-    temps = mean_temperatures(sequence, cands, temperature, clock)
+    statics), in the written order's timeline: {index: dT, degC} (``with_reference``: and the
+    reference, degC)."""
+    sequence = written_order(chosen, cands, masks, chamber)
+    temps = mean_temperatures(sequence, cands, temperature, clock, chamber)
     statics = [t for i, t in zip(sequence, temps) if cands[i].kind == "static"]
     reference = float(np.mean(statics)) if statics else float(np.mean(temps)) if len(temps) else 0.0
-    return {i: float(t - reference) for i, t in zip(sequence, temps)}
+    out = {i: float(t - reference) for i, t in zip(sequence, temps)}
+    return (out, reference) if with_reference else out
 
 
 def notional(cands, temperature, clock, budget_s: float) -> dict:

@@ -315,6 +315,12 @@ class Scanner:
         # turn repeats its extreme value once a revolution, the flat top the rail test looks for
         # (sizeeffect's 200 deg/s turns lost their cross-axis gyro to it, and with them the turn)
         self.noise_free = bool(getattr(capture, "extra", {}).get("noise_free"))
+        # a temperature chamber's cross-checks that disagreed (station.core.chamber.finding: the
+        # IMU's temperature against the setpoint), written into the capture by the run: said again
+        self.chamber_findings = [{"segment": seg.name, "finding": str(seg.extra["chamber"]["finding"])}
+                                 for seg in getattr(capture, "segments", [])
+                                 if isinstance(getattr(seg, "extra", {}).get("chamber"), dict)
+                                 and seg.extra["chamber"].get("finding")]
         self.units = ("m/s^2" if units.accel_to_mps2_factor(capture.imu.accel_unit) else capture.imu.accel_unit,
                       "deg/s" if units.gyro_to_dps_factor(capture.imu.gyro_unit) else capture.imu.gyro_unit)
         self.factors = (accel_factor, gyro_factor)
@@ -544,6 +550,8 @@ class Scanner:
                "segments_left_out": list(self.left_out),
                "stuck_samples_left_out": dict(self.rows_left_out),
                "harmonics_left_out": list(self.harmonics_left_out)}
+        if self.chamber_findings:
+            out["chamber_findings"] = list(self.chamber_findings)
         tr = self.temp
         if tr["segments"]:
             out["temperature"] = {"min_c": tr["min"], "max_c": tr["max"], "range_c": tr["max"] - tr["min"],
@@ -620,6 +628,9 @@ def notes_of(report: dict) -> list[str]:
                          f"{f['shortest_run_called_stuck']} here) in {segs}: left out")
     for d in report.get("segments_left_out", []):
         notes.append(f"{d['segment']}: {d['reason']}")
+    for c in report.get("chamber_findings", []):
+        notes.append(f"the temperature chamber before {c['segment']}: {c['finding']} (the run's cross-check; "
+                     "the fit uses the IMU's own temperatures)")
     temp = report.get("temperature")
     if temp and temp["testable"]:
         effects = temperature_effects()

@@ -24,9 +24,9 @@ from station.core.errors import UserError
 from station.core import yaml_text
 
 DEFAULT_KEYS = ("dwell_s", "rate_dps", "rotation_s")
-SEGMENT_KEYS = {"static": ("static", "up_body", "dwell_s", "heading_body", "heading_deg"),
+SEGMENT_KEYS = {"static": ("static", "up_body", "dwell_s", "heading_body", "heading_deg", "chamber_c"),
                 "rotation": ("rotation", "axis_body", "rate_dps", "rotation_s", "axis_elevation_deg", "pair",
-                             "encoder", "turn_deg")}
+                             "encoder", "turn_deg", "chamber_c")}
 
 
 @dataclass(frozen=True)
@@ -39,6 +39,7 @@ class StaticSpec:
     kind: str = "static"
     heading_body: tuple[float, float, float] | None = None   # unit, perpendicular to up_body
     heading_deg: float | None = None                          # where heading_body points, from north
+    chamber_c: float | None = None    # set the chamber to this (degC) before the segment; None: as it is
 
     @property
     def duration_s(self) -> float:
@@ -57,6 +58,7 @@ class RotationSpec:
     encoder: bool = True              # False: hand or screwdriver, no angle measured
     kind: str = "rotation"
     turn_deg: float | None = None     # a hand turn's angle by protocol (e.g. 360: one whole turn)
+    chamber_c: float | None = None    # set the chamber to this (degC) before the segment; None: as it is
 
     @property
     def revolutions(self) -> float:
@@ -77,6 +79,11 @@ class Scheme:
     def duration_s(self) -> float:
         """Time spent recording (moves and settling excluded)."""
         return sum(s.duration_s for s in self.segments)
+
+    @property
+    def chamber_steps(self) -> list:
+        """(segment, setpoint degC) of every segment that sets the temperature chamber, in order."""
+        return [(s, s.chamber_c) for s in self.segments if s.chamber_c is not None]
 
 
 def builtin_names() -> list[str]:
@@ -170,7 +177,7 @@ def parse_scheme(doc, source: str, overrides: dict) -> Scheme:
             segments.append(StaticSpec(
                 name=str(entry["static"]), up_body=up,
                 dwell_s=_number(dwell, f"{where}.dwell_s", positive=True),
-                **_heading(entry, up, where)))
+                chamber_c=_chamber(entry, where, uses_table), **_heading(entry, up, where)))
         elif "rotation" in entry:
             rate = entry.get("rate_dps", defaults.get("rate_dps"))
             duration = entry.get("rotation_s", defaults.get("rotation_s"))
@@ -198,11 +205,12 @@ def parse_scheme(doc, source: str, overrides: dict) -> Scheme:
                                     "(encoder: false); the encoder measures a table's turns")
             base = str(entry["rotation"])
             common = dict(axis_elevation_deg=elevation, encoder=flags["encoder"], turn_deg=turn)
+            chamber = _chamber(entry, where, uses_table)
             if flags["pair"]:
-                segments.append(RotationSpec(f"{base}_p", axis, +rate, duration, **common))
+                segments.append(RotationSpec(f"{base}_p", axis, +rate, duration, **common, chamber_c=chamber))
                 segments.append(RotationSpec(f"{base}_m", axis, -rate, duration, **common))
             else:
-                segments.append(RotationSpec(base, axis, rate, duration, **common))
+                segments.append(RotationSpec(base, axis, rate, duration, **common, chamber_c=chamber))
         else:
             raise UserError(f"{where}: must have a 'static' or a 'rotation' key")
     # (counted once: names.count per name was quadratic, minutes for a scheme of 100,000 segments)
@@ -215,6 +223,19 @@ def parse_scheme(doc, source: str, overrides: dict) -> Scheme:
     return Scheme(name=str(doc["name"]), title=str(doc.get("title", "")),
                   reference=str(doc.get("reference", "")), defaults=defaults,
                   segments=tuple(segments), centred=centred, table=uses_table)
+
+
+def _chamber(entry: dict, where: str, uses_table: bool) -> float | None:
+    """A segment's ``chamber_c`` (the temperature chamber's setpoint from this segment on, degC),
+    None without one; whether the bench has a chamber that reaches it is the compiler's check."""
+    if "chamber_c" not in entry:
+        return None
+    x = _number(entry["chamber_c"], f"{where}.chamber_c")
+    if not -100.0 <= x <= 200.0:
+        raise UserError(f"{where}.chamber_c: must be within -100..200 degrees C, got {x:g}")
+    if not uses_table:
+        raise UserError(f"{where}.chamber_c: a scheme done by hand (table: none) has no chamber")
+    return x
 
 
 def _table_key(value, source: str) -> bool:

@@ -28,13 +28,16 @@ def load_truth(truth_path: str | None, seed: int):
 MAX_SIMULATED_SAMPLES = 5_000_000   # per segment: the simulator holds a segment whole (~1 GB at this)
 
 
-def _bench(scheme: Scheme, truth, seed: int, start_s: float = 0.0):
+def _bench(scheme: Scheme, truth, seed: int, start_s: float = 0.0, chamber=None):
     """The simulated bench for ``scheme`` (its clock from ``start_s``); UserError naming the segment
-    when one gives fewer than 2 samples, or more than the simulator holds at once, before anything
-    is simulated or written."""
+    when one gives fewer than 2 samples, or more than the simulator holds at once, or sets a
+    temperature chamber that ``chamber`` (station.core.chamber.ChamberConfig) does not provide,
+    before anything is simulated or written."""
     from sim_devices.bench import SimulatedBench
 
+    check_chamber(scheme, chamber)
     bench = SimulatedBench(_mounted(truth, scheme), seed, start_s=start_s)
+    bench.station_chamber = chamber
     rate_hz = bench.sample_rate_hz
     for spec in scheme.segments:
         n = spec.duration_s * rate_hz
@@ -49,30 +52,116 @@ def _bench(scheme: Scheme, truth, seed: int, start_s: float = 0.0):
     return bench
 
 
+def check_chamber(scheme: Scheme, chamber) -> None:
+    """UserError (one line) when ``scheme`` sets a chamber that is not configured or outside its range."""
+    steps = scheme.chamber_steps
+    if not steps:
+        return
+    spec, setpoint = steps[0]
+    if chamber is None:
+        raise UserError(f"scheme {scheme.name}: segment {spec.name!r} sets the chamber (chamber_c: {setpoint:g}) "
+                        "but no chamber is configured (station.yaml chamber:, given with --config)")
+    for spec, setpoint in steps:
+        if not chamber.in_range(setpoint):
+            raise UserError(f"scheme {scheme.name}: segment {spec.name!r}: chamber_c {setpoint:g} C is outside the "
+                            f"chamber's range {chamber.range_c[0]:g}..{chamber.range_c[1]:g} C (chamber.range_c)")
+
+
+def chamber_air(room_c: float):
+    """A simulated chamber's air at the room's temperature (sim_devices/chamber.py ChamberAir:
+    ``set(t, setpoint_c, ramp_c_per_min)``), for a timeline's temperatures
+    (``TemperatureTruth.at(t, air)``) outside a dry run (station/design/timeline.py)."""
+    from sim_devices.chamber import ChamberAir
+
+    return ChamberAir(room_c)
+
+
+CHAMBER_READ_S = 1.0      # the station reads the IMU's temperature this often while it waits
+
+
+def chamber_step(bench, spec, previous_c: float, chamber) -> dict:
+    """Set the simulated chamber to ``spec.chamber_c`` and wait as the station waits
+    (station.core.chamber: the ramp, then the fixed soak or until the IMU's temperature -- read
+    from the simulated IMU every second -- settles); the manifest's ``chamber`` entry: setpoint,
+    the wait, the IMU's temperature then, and the cross-check's finding, if any."""
+    from station.core.chamber import SlopeSettle, finding
+
+    to = float(spec.chamber_c)
+    bench.set_chamber(to, chamber.ramp_c_per_min)
+    start = bench.time_s
+    ramp = chamber.ramp_s(previous_c, to)
+    if chamber.soak_s is not None:
+        bench.wait(ramp + chamber.soak_s)
+        settled = True
+    else:
+        bench.wait(ramp)
+        rule = SlopeSettle(chamber.settle_slope_c_per_min, chamber.settle_window_s)
+        limit = bench.time_s + chamber.settle_max_s
+        settled = False
+        while bench.time_s < limit:
+            step = min(60.0, limit - bench.time_s)
+            t = bench.time_s + np.arange(CHAMBER_READ_S, step + 1e-9, CHAMBER_READ_S)
+            for ti, Ti in zip(t, bench.imu_temperature(t)):
+                rule.feed(ti, Ti)
+                if rule.settled:
+                    bench.wait(ti - bench.time_s)
+                    settled = True
+                    break
+            if settled:
+                break
+            bench.wait(step)
+    imu_c = float(bench.imu_temperature(bench.time_s))
+    entry = {"setpoint_c": to, "from_c": float(previous_c), "waited_s": round(bench.time_s - start, 3),
+             "imu_c": round(imu_c, 4), "settled": settled}
+    problem = finding(to, imu_c, chamber.agree_c)
+    if problem is not None:
+        entry["finding"] = problem
+    if not settled:
+        entry["finding"] = ((entry.get("finding", "") + "; ") if "finding" in entry else "") + (
+            f"the IMU's temperature had not settled after {chamber.settle_max_s:g} s (chamber.settle_max_s)")
+    return entry
+
+
 def _simulate(scheme: Scheme, bench) -> Iterator[tuple[object, object, dict]]:
-    """(spec, simulated segment, commanded manifest keys) for every segment, in order."""
+    """(spec, simulated segment, commanded manifest keys) for every segment, in order; a segment
+    that sets the chamber first sets the simulated one and waits (chamber_step), and while a
+    chamber is set every segment says its setpoint (``chamber_c``)."""
+    chamber = getattr(bench, "station_chamber", None)
+    setpoint = None
     for spec in scheme.segments:
-        if isinstance(spec, RotationSpec):
-            # a turn without an encoder: a screwdriver's (its rate drifts, its angle is unknown) or
-            # a hand's by protocol (turn_deg: back to the same edge; the hand's placement is the
-            # bench's angle error), written as the bench writes it (station/bench/manual.py)
-            protocol = not spec.encoder and spec.turn_deg is not None
-            drift = 0.0 if spec.encoder or protocol else bench.truth.bench.rate_drift_fraction
-            seg = bench.rotation(spec.axis_body, spec.rate_dps, spec.duration_s,
-                                 axis_elevation_deg=spec.axis_elevation_deg,
-                                 drift_fraction=drift, encoder=spec.encoder)
-            meta = {"axis_body": list(spec.axis_body), "rate_dps": spec.rate_dps}
-            if spec.encoder:        # on the table: the elevation it turned axis_body at (as station run records)
-                meta["axis_elevation_deg"] = float(spec.axis_elevation_deg)
-            if protocol:
-                meta.update(angle_deg=float(np.sign(spec.rate_dps)) * spec.turn_deg, motion="hand",
-                            note=f"angle_deg is the protocol's turn ({spec.turn_deg:g} deg by hand), not an "
-                                 "encoder reading")
-            elif not spec.encoder:
-                meta["note"] = "no encoder: rate_dps is the nominal rate and gives the direction only"
-            yield spec, seg, meta
-        else:
-            yield spec, bench.static(spec.up_body, spec.dwell_s), {"up_body": list(spec.up_body)}
+        keys = {}
+        if spec.chamber_c is not None:
+            keys["chamber"] = chamber_step(bench, spec, chamber.ambient_c if setpoint is None else setpoint, chamber)
+            setpoint = float(spec.chamber_c)
+        if setpoint is not None:
+            keys["chamber_c"] = setpoint
+        for spec_, seg, meta in _simulate_one(spec, bench):
+            yield spec_, seg, {**meta, **keys}
+
+
+def _simulate_one(spec, bench):
+    """(spec, simulated segment, commanded manifest keys) of one scheme segment."""
+    if isinstance(spec, RotationSpec):
+        # a turn without an encoder: a screwdriver's (its rate drifts, its angle is unknown) or
+        # a hand's by protocol (turn_deg: back to the same edge; the hand's placement is the
+        # bench's angle error), written as the bench writes it (station/bench/manual.py)
+        protocol = not spec.encoder and spec.turn_deg is not None
+        drift = 0.0 if spec.encoder or protocol else bench.truth.bench.rate_drift_fraction
+        seg = bench.rotation(spec.axis_body, spec.rate_dps, spec.duration_s,
+                             axis_elevation_deg=spec.axis_elevation_deg,
+                             drift_fraction=drift, encoder=spec.encoder)
+        meta = {"axis_body": list(spec.axis_body), "rate_dps": spec.rate_dps}
+        if spec.encoder:        # on the table: the elevation it turned axis_body at (as station run records)
+            meta["axis_elevation_deg"] = float(spec.axis_elevation_deg)
+        if protocol:
+            meta.update(angle_deg=float(np.sign(spec.rate_dps)) * spec.turn_deg, motion="hand",
+                        note=f"angle_deg is the protocol's turn ({spec.turn_deg:g} deg by hand), not an "
+                             "encoder reading")
+        elif not spec.encoder:
+            meta["note"] = "no encoder: rate_dps is the nominal rate and gives the direction only"
+        yield spec, seg, meta
+    else:
+        yield spec, bench.static(spec.up_body, spec.dwell_s), {"up_body": list(spec.up_body)}
 
 
 def _bench_keys(truth, scheme: Scheme, geometry: dict | None = None) -> dict:
@@ -103,10 +192,12 @@ def _headers(bench, seed: int) -> tuple[ImuInfo, Site]:
 
 
 def record_scheme(scheme: Scheme, truth, seed: int, out_dir: Path,
-                  progress: Callable[[str, int, int], None] | None = None, geometry: dict | None = None) -> Path:
+                  progress: Callable[[str, int, int], None] | None = None, geometry: dict | None = None,
+                  chamber=None) -> Path:
     """Simulate every segment of ``scheme`` and write the capture bundle to ``out_dir``
-    (``geometry``: the table's as stated, _bench_keys)."""
-    bench = _bench(scheme, truth, seed)
+    (``geometry``: the table's as stated, _bench_keys; ``chamber``: the configured temperature
+    chamber, station.core.chamber.ChamberConfig, needed by a scheme that sets one)."""
+    bench = _bench(scheme, truth, seed, chamber=chamber)
     imu, site = _headers(bench, seed)
     # the manifest written at the start and the end (a dry run is redone, never resumed: a run's
     # writer rewrites it at every segment's start and end, quadratic in the segments), and in the
@@ -190,9 +281,9 @@ def append_scheme(extension: Scheme, text: str, directory: Path,
     return directory
 
 
-def simulate_capture(scheme: Scheme, truth, seed: int, geometry: dict | None = None) -> Capture:
+def simulate_capture(scheme: Scheme, truth, seed: int, geometry: dict | None = None, chamber=None) -> Capture:
     """The capture a dry run would write, kept in memory (for Monte Carlo runs)."""
-    bench = _bench(scheme, truth, seed)
+    bench = _bench(scheme, truth, seed, chamber=chamber)
     imu, site = _headers(bench, seed)
     segments = []
     for spec, seg, meta in _simulate(scheme, bench):
@@ -201,7 +292,8 @@ def simulate_capture(scheme: Scheme, truth, seed: int, geometry: dict | None = N
             up_body=np.array(meta["up_body"]) if "up_body" in meta else None,
             axis_body=np.array(meta["axis_body"]) if "axis_body" in meta else None,
             rate_dps=meta.get("rate_dps"), angle_deg=seg.meta.get("angle_deg", meta.get("angle_deg")),
-            note=meta.get("note"), extra={**{k: meta[k] for k in ("motion", "axis_elevation_deg") if k in meta},
+            note=meta.get("note"), extra={**{k: meta[k] for k in ("motion", "axis_elevation_deg", "chamber_c",
+                                                                  "chamber") if k in meta},
                                           **{k: v for k, v in seg.meta.items() if k == "table_axis"}},
             data=SegmentData(t=seg.t, accel=seg.accel, gyro=seg.gyro, temp=seg.temp, gaps=0)))
     return Capture(path=Path(f"<simulated seed {seed}>"), imu=imu, site=site, scheme=scheme.name,

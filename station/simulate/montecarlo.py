@@ -25,6 +25,7 @@ class Settings:
     truth_seed: int = 0                   # the true sensor errors, the same in every run
     method: str = "lsq"                   # lsq | zhang2010
     effects: tuple = ()                   # library effect ids the lsq fit adds (station estimate --add)
+    chamber: object = None                # the configured temperature chamber (station.core.chamber.ChamberConfig)
 
 
 def make_truth(settings: Settings):
@@ -89,7 +90,7 @@ def one_run(args) -> tuple[list[float], np.ndarray]:
     from station.model.calibration import parameter_errors
 
     truth = make_truth(settings)
-    cal = _estimate(dryrun.simulate_capture(scheme, truth, seed), settings)
+    cal = _estimate(dryrun.simulate_capture(scheme, truth, seed, chamber=settings.chamber), settings)
     errors = [e[3] for e in parameter_errors(cal, dryrun.truth_calibration(truth))]
     # an effect's parameters against zero: the simulator's default IMU has none of the effects
     errors += _effect_values(cal, settings)
@@ -110,7 +111,7 @@ def cramer_rao(scheme: Scheme, settings: Settings, seed: int = 0) -> np.ndarray:
     quiet = copy.deepcopy(truth)
     quiet.accel.noise_density = quiet.gyro.noise_density = 0.0
     quiet.bench.accel_disturbance_ug = quiet.bench.table_angle_error_arcsec = 0.0
-    capture = dryrun.simulate_capture(scheme, quiet, seed)
+    capture = dryrun.simulate_capture(scheme, quiet, seed, chamber=settings.chamber)
     capture.extra["noise_free"] = True          # (no data-fault scan: station/estimate/data_faults.py)
     s = summarise(capture, table_angle_arcsec=settings.table_angle_arcsec)
     fs = s.sample_rate_hz
@@ -212,6 +213,7 @@ def study(scheme: Scheme, settings: Settings, runs: int, first_seed: int = 1000,
     from station.simulate import dryrun
     from station.model.calibration import parameter_errors
 
+    dryrun.check_chamber(scheme, settings.chamber)
     truth_cal = dryrun.truth_calibration(make_truth(settings))
     names = [(e[0], e[4]) for e in parameter_errors(truth_cal, truth_cal)]
     names += [(p.name, p.unit) for e in _effects(settings) for p in e.params]

@@ -48,7 +48,8 @@ def reveals(scheme, config, plan=None, effect_ids=("accel_lever_arm",), seed: in
                      if type(s).__name__ == "Rotate" and getattr(s, "spec", None) is not None}
         scheme = replace(scheme, segments=[replace(spec, axis_elevation_deg=elevation[spec.name])
                                            if spec.name in elevation else spec for spec in scheme.segments])
-    capture = dryrun.simulate_capture(scheme, truth, seed, geometry if scheme.table else None)
+    capture = dryrun.simulate_capture(scheme, truth, seed, geometry if scheme.table else None,
+                                      chamber=getattr(config, "chamber", None))
     if t.imu_offset_m is not None:
         capture.extra["mounting"] = {"offset_m": [float(x) for x in t.imu_offset_m]}
     for seg in capture.segments:
