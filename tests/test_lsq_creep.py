@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from station.estimate import estimate_capture, lsq
+from station.estimate import estimate_capture, lsq, solver
 from station.io.importers import imucal
 
 DATA = Path(__file__).resolve().parent / "data" / "imucal"
@@ -32,8 +32,8 @@ def test_a_fit_that_does_not_creep_takes_the_path_it_always_did():
 
     model = SimpleNamespace(residuals=residuals, jacobian=jacobian)
     start = np.array([0.02, 4000.0, 250.0])
-    plain = least_squares(residuals, start, jac=jacobian, method="lm", x_scale="jac", xtol=1e-10, ftol=1e-10,
-                          gtol=1e-10, max_nfev=lsq.MAX_EVALUATIONS)
+    plain = solver.least_squares(residuals, start, jacobian, xtol=1e-10, ftol=1e-10, gtol=1e-10,
+                                 max_nfev=lsq.MAX_EVALUATIONS)      # the numpy MINPACK LM, unwatched
     watched = lsq._lm(model, start)
     assert plain.status > 0 and plain.nfev > 4 * lsq.CREEP_WINDOW      # long enough to be watched
     assert np.array_equal(watched.x, plain.x) and watched.nfev == plain.nfev and watched.status == plain.status

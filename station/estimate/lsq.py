@@ -37,17 +37,15 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 from station.core import units
 from station.model.calibration import Calibration, misalignment_angles
 from station.core.errors import UserError
-from station.estimate import hand_rotation, noise_model, table_geometry, zhang2010
+from station.estimate import hand_rotation, noise_model, solver, table_geometry, zhang2010
 from station.estimate.summaries import Summaries, summarise
 from station.model.geometry import cross, normalised, positive_part, tangent_basis
 from station.model.effect import Effect, SampleContext
-from station.model.rotation import matrix_from_rotvec
+from station.model.rotation import align_vectors, matrix_from_rotvec, rotvec_from_matrix
 from station.model.table_encoder_scale import turned_time
 
 EARTH_RATE_RAD = 7.292115e-5
@@ -106,12 +104,11 @@ class Start:
     notes: list = field(default_factory=list)
 
 
-def _align_vectors(a, b, weights=None) -> Rotation:
-    """Rotation.align_vectors(a, b)'s rotation, without scipy's warning when it is not uniquely
-    defined (degenerate vectors: the fit's identifiability then says so, in words)."""
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", "Optimal rotation is not uniquely or poorly defined", UserWarning)
-        return Rotation.align_vectors(a, b, weights)[0]
+def _align_vectors(a, b, weights=None) -> np.ndarray:
+    """Rotation.align_vectors(a, b)'s rotation matrix (station.model.rotation: no scipy import),
+    with no warning when it is not uniquely defined (degenerate vectors: the fit's
+    identifiability then says so, in words)."""
+    return align_vectors(a, b, weights)
 
 
 def _start(s: Summaries) -> Start:
@@ -147,14 +144,14 @@ def _start(s: Summaries) -> Start:
             axes_o.append(l_o / np.linalg.norm(l_o))
             axes_p.append(l_p / np.linalg.norm(l_p))
     if len(axes_o) >= 2:
-        R_po = _align_vectors(np.array(axes_o), np.array(axes_p)).as_matrix()
+        R_po = _align_vectors(np.array(axes_o), np.array(axes_p))
     else:
         R_po = np.eye(3)
         notes.append("no algebraic start for the inter-triad rotation: started from zero")
     ka, Ta = zhang2010.scale_and_T(L_a)
     kg, Tg = zhang2010.scale_and_T(L_g)
     return Start(ka, misalignment_angles(Ta), b_a, kg, misalignment_angles(Tg), b_g,
-                 Rotation.from_matrix(R_po).as_rotvec(), notes)
+                 rotvec_from_matrix(R_po), notes)
 
 
 def _start_gyro_matrix(st: Start) -> np.ndarray:
@@ -498,7 +495,7 @@ class Model:
         noise of the matched direction (module doc of hand_rotation)."""
         s = self.s
         self.integrator = hand_rotation.Integrator(self.hands)
-        ups = [ref.apply(UP) if self.with_latitude else ref for ref in self.static_ref]
+        ups = [ref @ UP if self.with_latitude else ref for ref in self.static_ref]
         self.hand_basis = np.array([tangent_basis(ups[h.after]) for h in self.hands])     # (H,2,3)
         self._hand_kg = np.abs(st.kg)
         omega = np.degrees(EARTH_RATE_RAD)
@@ -805,7 +802,7 @@ class Model:
         self._st_cols = np.array([np.arange(L[f"static{j}"].start, L[f"static{j}"].stop) for j in range(S)],
                                  int).reshape(S, width)
         if self.with_latitude:      # C0 f_n, C0 Omega_n, C0 up per static: the attitude's reference
-            C0 = np.array([r.as_matrix() for r in self.static_ref]).reshape(S, 3, 3)
+            C0 = np.array(self.static_ref, float).reshape(S, 3, 3)
             self._st_ref_vectors = np.einsum("sij,kj->ski", C0, np.array([self.f_n, self.omega_n, UP]))
         else:
             self._st_ref = np.array(self.static_ref, float).reshape(S, 3)
@@ -1477,11 +1474,9 @@ class _CreepWatch:
 
 def _result(model: Model, x: np.ndarray, status: int, nfev: int):
     """A least_squares-like result at x (what _solve reads of it)."""
-    from scipy.optimize import OptimizeResult
-
     fun = model.residuals(x)
-    return OptimizeResult(x=x, fun=fun, jac=model.jacobian(x), cost=0.5 * float(fun @ fun), status=status,
-                          nfev=nfev)
+    return solver.Result(x=x, fun=fun, jac=model.jacobian(x), cost=0.5 * float(fun @ fun), nfev=nfev, njev=0,
+                         status=status, optimality=float("nan"))
 
 
 def _lm(model: Model, start: np.ndarray, evaluations: int = MAX_EVALUATIONS):
@@ -1503,10 +1498,10 @@ def _lm(model: Model, start: np.ndarray, evaluations: int = MAX_EVALUATIONS):
     on unwatched from the lowest point with the evaluations left (as before the watch: its
     tolerances, or the limit and status 0, not converged).  The lowest sum of squares is kept.
     A fit that converges without creeping takes exactly the path it always did."""
-    options = dict(x_scale="jac", xtol=1e-10, ftol=1e-10, gtol=1e-10)
+    options = dict(xtol=1e-10, ftol=1e-10, gtol=1e-10)      # (solver.least_squares scales by the columns)
     watch = _CreepWatch(model.residuals)
     try:
-        return least_squares(watch, start, jac=model.jacobian, method="lm", max_nfev=evaluations, **options)
+        return solver.least_squares(watch, start, model.jacobian, max_nfev=evaluations, **options)
     except _Creeping:
         pass
     used = watch.n
@@ -1521,7 +1516,8 @@ def _lm(model: Model, start: np.ndarray, evaluations: int = MAX_EVALUATIONS):
         return best
     dog = _CreepWatch(model.residuals)
     try:
-        alt = least_squares(dog, watch.best_x, jac=model.jacobian, method="dogbox",
+        from scipy.optimize import least_squares      # only where a fit creeps
+        alt = least_squares(dog, watch.best_x, jac=model.jacobian, method="dogbox", x_scale="jac",
                             max_nfev=max(evaluations - used, 1), **options)
     except _Creeping:
         # dogbox creeps too (diagnose --auto's fits beside a bias step at a wrong time, GN's step
@@ -1534,8 +1530,7 @@ def _lm(model: Model, start: np.ndarray, evaluations: int = MAX_EVALUATIONS):
         return best
     again = _CreepWatch(model.residuals)
     try:
-        res = least_squares(again, alt.x, jac=model.jacobian, method="lm", max_nfev=max(evaluations - used, 1),
-                            **options)
+        res = solver.least_squares(again, alt.x, model.jacobian, max_nfev=max(evaluations - used, 1), **options)
         res.nfev += used
         return res if res.cost <= alt.cost else _result(model, alt.x, 0, used)
     except _Creeping:
@@ -1551,8 +1546,8 @@ def _lm(model: Model, start: np.ndarray, evaluations: int = MAX_EVALUATIONS):
 def _unwatched(model: Model, x: np.ndarray, evaluations: int, used: int):
     """LM, unwatched, from x with the evaluations left of the solve's (at least one): the lower
     of where it ends and x (there status 0: not converged)."""
-    res = least_squares(model.residuals, x, jac=model.jacobian, method="lm", max_nfev=max(evaluations - used, 1),
-                        x_scale="jac", xtol=1e-10, ftol=1e-10, gtol=1e-10)
+    res = solver.least_squares(model.residuals, x, model.jacobian, max_nfev=max(evaluations - used, 1),
+                               xtol=1e-10, ftol=1e-10, gtol=1e-10)
     res.nfev += used
     here = _result(model, x, 0, res.nfev)
     return res if res.cost <= here.cost else here
@@ -1573,6 +1568,8 @@ def _solve(model: Model, x0: np.ndarray):
         # each step solved to rounding (LSMR's default, as many iterations as parameters, stops
         # short on ill-conditioned models such as hand-pose logs: 100 steps and twice the chi2)
         def solve(start, evaluations=MAX_EVALUATIONS):
+            from scipy.optimize import least_squares     # (large models only)
+
             return least_squares(model.residuals, start, jac=model.sparse_jacobian, method="trf", tr_solver="lsmr",
                                  tr_options={"atol": 1e-14, "btol": 1e-14, "maxiter": 10 * model.layout.size},
                                  x_scale="jac", xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=evaluations)
@@ -1600,10 +1597,9 @@ def _gauss_newton_step(J, r) -> np.ndarray:
     solution of J d = -r (minimum norm: a direction the data do not see takes no step).  Read
     against each parameter's 1-sigma it says whether the values written are at the minimum even
     though the solver stopped (verdict.py: the written parameters within 1 % of their 1-sigma)."""
-    from scipy.sparse import issparse
-    from scipy.sparse.linalg import lsmr
+    if not isinstance(J, np.ndarray):              # a large model's sparse Jacobian
+        from scipy.sparse.linalg import lsmr
 
-    if issparse(J):
         return lsmr(J, -r, atol=1e-14, btol=1e-14, maxiter=10 * J.shape[1])[0]
     J = np.asarray(J)
     norms = np.linalg.norm(J, axis=0)
