@@ -189,6 +189,11 @@ def _scheduler(directory, captures, out, workers, env) -> dict:
     """A scheduler and workers started as separate processes (as on a cluster), on loopback;
     their CPU time counted from /proc (psutil) before and after the batch."""
     port = _free_port()
+    # the workers started as docs/fleet.md tells a user to start their own ("start the workers
+    # with that variable set"): the statistical profiler off, as the local cluster's are
+    # (station/batch/cluster.py), unless the environment says otherwise
+    env = dict(env)
+    env.setdefault("DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED", "False")
     logs = open(directory.parent / f"dask-bench-{os.getpid()}.log", "w")
     procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
                                "--port", str(port), "--no-dashboard"], env=env, stdout=logs, stderr=logs)]

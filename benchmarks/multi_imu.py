@@ -4,7 +4,12 @@ the frames lost.  Whole processes: ``station sim serve --imus N`` and ``station 
 own process, as a user runs them; 1-IMU and 4-IMU runs alternate (``--repeats`` pairs) so that a
 change of the machine's load falls on both.
 
-    python benchmarks/multi_imu.py [--imus 4] [--speed 20] [--repeats 3] [--dwell-s 10] [--rate-dps 30] [--rate-hz 100]
+    python benchmarks/multi_imu.py [--imus 4] [--speed 20] [--repeats 3] [--dwell-s 10] [--rate-dps 30] [--rate-hz 100] [--held]
+
+``--held``: the twins (the same BenchServer ``station sim serve --imus N`` makes, in a process of
+their own) also say how long device time stood still waiting for the slowest IMU reader (the
+lossless twins' clock) and in how many loop steps the table's commands waited: the part of the
+wall time that is the readers' falling behind, not the device time.
 
 Printed per run: wall time of the recording (from the start of ``station run`` to its first
 estimate), of the whole command (with the estimates: one per IMU), CPU time (user + system) of
@@ -15,6 +20,7 @@ stamps), and the verdicts; then the medians and the ratios N-IMU / 1-IMU.  Both 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import resource
 import signal
@@ -30,11 +36,35 @@ ROOT = Path(__file__).resolve().parents[1]
 LIMITS = "[{max_rate_dps: 300, max_accel_dps2: 300, move_rate_dps: 90, move_accel_dps2: 180, rate_accel_dps2: 150}]"
 
 
-def serve(n: int, speed: float, seed: int):
-    """``station sim serve --imus n``: (process, table path, IMU paths)."""
-    proc = subprocess.Popen([sys.executable, "-m", "station.cli", "sim", "serve", "--imus", str(n),
-                             "--speed", str(speed), "--seed", str(seed)],
-                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=ROOT)
+# --held: the twins as ``station sim serve --imus n`` makes them (station/cli/devices.py: one
+# default truth per IMU, seed + k), in a process of their own, which says on SIGINT how long
+# device time stood still waiting for a reader (SimClock.held_wall_s: the lossless twins wait for
+# the slowest of the IMUs' readers) and in how many loop steps the table's commands waited
+HELD_SERVE = r"""
+import json, signal, sys, threading
+from sim_devices.truth import default_truth
+from sim_devices.twins.serve import BenchOptions, BenchServer
+n, speed, seed = int(sys.argv[1]), float(sys.argv[2]), int(sys.argv[3])
+server = BenchServer([default_truth(seed + k) for k in range(n)],
+                     BenchOptions(speed=speed, seed=seed, axes=3, imus=n))
+stop = threading.Event()
+signal.signal(signal.SIGINT, lambda *_: stop.set())
+print(f"table: {server.table_path}", flush=True)
+for k, line in enumerate(server.lines, 1):
+    print(f"imu{k}: {line.port.path}", flush=True)
+server.serve_forever(stop)
+print("held: " + json.dumps({"held_wall_s": server.clock.held_wall_s,
+                              "table_deferred_steps": server.table_deferred_steps}), flush=True)
+"""
+
+
+def serve(n: int, speed: float, seed: int, held: bool = False):
+    """``station sim serve --imus n`` (or, with ``held``, the same twins that report their
+    waiting): (process, table path, IMU paths)."""
+    cmd = ([sys.executable, "-c", HELD_SERVE, str(n), str(speed), str(seed)] if held else
+           [sys.executable, "-m", "station.cli", "sim", "serve", "--imus", str(n), "--speed", str(speed),
+            "--seed", str(seed)])
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=ROOT)
     table, imus = None, []
     while table is None or len(imus) < n:
         line = proc.stdout.readline()
@@ -56,7 +86,8 @@ def cpu_of(pid: int) -> float:
 
 
 def one_run(n: int, args, work: Path, index: int) -> dict:
-    server, table, imus = serve(n, args.speed, args.seed)
+    server, table, imus = serve(n, args.speed, args.seed, args.held)
+    held = {}
     try:
         config = work / f"station-{n}-{index}.yaml"
         # replies waited for up to TIMEOUT_S (a real device's 1 s by default): on a machine at a load
@@ -102,7 +133,10 @@ def one_run(n: int, args, work: Path, index: int) -> dict:
     finally:
         server.send_signal(signal.SIGINT)
         try:
-            server.wait(10)
+            rest, _ = server.communicate(timeout=10)
+            for line in rest.splitlines():
+                if line.startswith("held: "):
+                    held = json.loads(line[6:])
         except subprocess.TimeoutExpired:
             server.kill()
             server.wait()
@@ -125,7 +159,7 @@ def one_run(n: int, args, work: Path, index: int) -> dict:
         print(f"  run of {n} IMU(s) ended with {proc.returncode}: {err.strip()[-600:]}", flush=True)
     return {"n": n, "status": proc.returncode, "record_s": recorded[0] or float("nan"), "total_s": total,
             "run_cpu_s": run_cpu, "serve_cpu_s": serve_cpu, "gaps": gaps, "lost_notes": lost_notes,
-            "verdicts": verdicts, "bundles": len(verdicts)}
+            "verdicts": verdicts, "bundles": len(verdicts), **held}
 
 
 def main() -> None:
@@ -139,6 +173,8 @@ def main() -> None:
     p.add_argument("--rate-hz", type=float, default=100.0,
                    help="each IMU's output rate (station.yaml imus[].rate_hz; the VectorNav twin: 800 / N Hz)")
     p.add_argument("--timeout-s", type=float, default=1.0, help="the devices' reply timeout (station.yaml serial.timeout_s)")
+    p.add_argument("--held", action="store_true",
+                   help="the twins (as station sim serve makes them) report how long device time waited for a reader")
     args = p.parse_args()
     os.environ["PYTHONPATH"] = str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")
     print(f"optimal9 (dwell {args.dwell_s:g} s, 1 revolution at {args.rate_dps:g} deg/s per rotation) against the twins at "
@@ -152,7 +188,9 @@ def main() -> None:
                 print(f"{n} IMU(s): exit {r['status']}, recording {r['record_s']:.1f} s, whole command "
                       f"{r['total_s']:.1f} s wall; CPU run {r['run_cpu_s']:.1f} s, twins {r['serve_cpu_s']:.1f} s; "
                       f"frames lost {r['gaps']} (notes {r['lost_notes']}); verdicts {', '.join(r['verdicts'])}; "
-                      f"load {os.getloadavg()[0]:.1f}", flush=True)
+                      f"load {os.getloadavg()[0]:.1f}"
+                      + (f"; twins held {r['held_wall_s']:.1f} s waiting for a reader, table waited in "
+                         f"{r['table_deferred_steps']} steps" if "held_wall_s" in r else ""), flush=True)
     one = [r for r in rows if r["n"] == 1]
     many = [r for r in rows if r["n"] == args.imus]
 

@@ -831,10 +831,9 @@ class Truth:
     @classmethod
     def from_yaml(cls, path) -> "Truth":
         path = Path(path)
-        try:
-            text = path.read_text()
-        except OSError as exc:
-            raise UserError(f"{path}: cannot read truth file: {exc}") from exc
+        from station.core.user_files import read_user_text
+
+        text = read_user_text(path, "truth file")             # (a FIFO is refused, not read: it hung)
         data = yaml_text.load_text(text, path)
         return cls.from_dict(data, source=str(path))
 

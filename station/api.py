@@ -216,10 +216,9 @@ def diagnose(capture, *, add=(), plugins=(), effects_dirs=(), config=None, calib
         steps, first = [], _diagnose(lsq.fit(s, [registry.create(e) for e in ids]), registry=registry)
         _auto.conclude(first, s)
         final = first
-    from station.diagnose.suggest import suggest
+    from station.diagnose.suggest import suggest_all
 
-    for d in {id(first): first, id(final): final}.values():
-        suggest(d, cap.path, registry)
+    suggest_all(first, final, steps, cap, s, registry)
     final.steps, final.first, final.warnings = steps, first, warnings
     return final
 
@@ -844,7 +843,7 @@ def plan(scheme: str = "optimal9", *, config=None, unattended: bool = False, dwe
     ``config`` (a station.yaml; default $STATION_CONFIG, ./station.yaml, the built-in), without
     hardware: the moves, dwells, rotations and operator steps, and their device time.
     ``unattended``: no remount steps (run.operator false)."""
-    from station.bench.compile import compile_scheme
+    from station.bench.compile_cache import compile_cached
     from station.io.scheme import load_scheme
 
     cfg = _bench_config(config, unattended=unattended)
@@ -852,7 +851,7 @@ def plan(scheme: str = "optimal9", *, config=None, unattended: bool = False, dwe
                  if v is not None}
     sch = load_scheme(scheme, overrides)
     try:
-        compiled = compile_scheme(sch, cfg)
+        compiled = compile_cached(sch, cfg)     # kept in the user's cache folder (station/bench/compile_cache.py)
     except UserError as e:
         rotations = [seg for seg in sch.segments if getattr(seg, "kind", "") == "rotation"]
         if rotations and all(not getattr(seg, "encoder", True) for seg in rotations):
@@ -866,27 +865,37 @@ def plan(scheme: str = "optimal9", *, config=None, unattended: bool = False, dwe
 def schemes(*, config=None) -> list[dict]:
     """``station schemes``: each built-in scheme with its statics and rotations, seconds of
     recording, and compiled for the table of ``config``: seconds of device time (None when it
-    cannot run there: ``note`` says why) and operator steps.  Each is compiled in a forked child,
-    as many at once as there are cores."""
+    cannot run there: ``note`` says why) and operator steps.  A scheme compiled before for this
+    table (by this code) is read from the user's cache folder (station/bench/compile_cache.py);
+    the others are compiled each in a forked child, as many at once as there are cores."""
+    from station.bench.compile_cache import cached_plan
     from station.bench.config import load_config
     from station.core import forked
-    from station.io.scheme import builtin_names
+    from station.io.scheme import builtin_names, load_scheme
 
     cfg = load_config(None if config is None else str(config))
-    names = builtin_names()
-    return list(forked.map_in_children(lambda name: _scheme_row(name, cfg), names))
+    rows = {}
+    for name in builtin_names():
+        sch = load_scheme(name)
+        rows[name] = (sch, cached_plan(sch, cfg))
+    missing = [name for name, (_, hit) in rows.items() if hit is None]
+    computed = dict(zip(missing, forked.map_in_children(lambda name: _scheme_row(name, cfg, rows[name][0]),
+                                                          missing)))
+    return [computed[name] if name in computed else _scheme_row(name, cfg, sch, hit)
+            for name, (sch, hit) in rows.items()]
 
 
-def _scheme_row(name, cfg) -> dict:
-    from station.bench.compile import compile_scheme
+def _scheme_row(name, cfg, sch=None, hit=None) -> dict:
+    from station.bench.compile_cache import compile_cached
     from station.io.scheme import load_scheme
 
-    sch = load_scheme(name)
+    if sch is None:
+        sch = load_scheme(name)
     statics = sum(s.kind == "static" for s in sch.segments)
     row = {"name": name, "title": sch.title, "statics": statics, "rotations": len(sch.segments) - statics,
            "recording_s": sch.duration_s, "run_s": None, "operator_steps": None, "note": None}
     try:
-        compiled = compile_scheme(sch, cfg)
+        compiled = compile_cached(sch, cfg, hit)
         row["run_s"] = compiled.duration_s
         row["operator_steps"] = sum(type(s).__name__ in ("Operator", "HandStatic", "HandRotation") for s in compiled)
     except UserError as e:

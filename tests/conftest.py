@@ -25,6 +25,7 @@ def _history_store(tmp_path_factory):
     mp = pytest.MonkeyPatch()
     mp.setenv("STATION_HISTORY_DIR", str(tmp_path_factory.mktemp("history-store")))
     mp.setenv("XDG_CONFIG_HOME", str(tmp_path_factory.mktemp("user-config")))   # not the user's own
+    mp.setenv("STATION_CACHE_DIR", str(tmp_path_factory.mktemp("user-cache")))   # compiled plans: not the user's
     mp.delenv("STATION_CONFIG", raising=False)
     mp.delenv("STATION_STORE", raising=False)       # not a database of the user's
     yield

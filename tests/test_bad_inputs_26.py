@@ -41,6 +41,19 @@ def test_scheme_defaults_not_a_mapping(tmp_path, capsys, defaults):
     one_line_exit_2(["plan", "--scheme", scheme], capsys, str(scheme), "defaults", "mapping")
 
 
+@pytest.mark.parametrize("entry, key", [("{static: a, up_body: [0, 0, 1], duration_s: 31}", "duration_s"),
+                                        ("{rotation: r, axis_body: [0, 0, 1], rate_dps: 10, rotation_s: 36, dwell_s: 5}",
+                                         "dwell_s"),
+                                        ("{static: a, up_body: [0, 0, 1], dwell_s: 5, heading: 90}", "heading")])
+def test_a_segment_field_the_scheme_does_not_know_is_refused(tmp_path, capsys, entry, key):
+    """Found by the thirteenth session: a key a segment does not have (``duration_s`` on a
+    static: the dwell is ``dwell_s``) was ignored without a word, and the run was not the one
+    asked for."""
+    scheme = tmp_path / "s.yaml"
+    scheme.write_text(f"name: s\ndefaults: {{dwell_s: 20}}\nsegments:\n  - {entry}\n")
+    one_line_exit_2(["plan", "--scheme", scheme], capsys, str(scheme), "segments[0]", f"unknown field '{key}'")
+
+
 # ------------------------------------------------------------------ import csv / rosbag
 
 @pytest.fixture(scope="module")
@@ -66,12 +79,54 @@ def test_import_csv_time_base_far_off_is_refused_before_allocating(hand_log, tmp
 
 
 @pytest.mark.parametrize("kind", ["csv", "rosbag"])
-def test_import_of_a_fifo_does_not_hang(tmp_path, kind):
+def test_import_of_a_fifo_does_not_hang(tmp_path, capsys, kind):
+    """import csv in a real process (a hang is the child's, ended by the timeout); import rosbag
+    in this one, under an alarm that interrupts a blocked open() (as the YAML inputs' test)."""
     fifo = tmp_path / "log.bag"
     os.mkfifo(fifo)
-    done = run_child(["import", kind, fifo, "-o", tmp_path / "cap"], timeout=60)
-    assert done.returncode == 2 and "not a regular file" in done.stderr and str(fifo) in done.stderr, done.stderr
-    assert done.stderr.count("\n") == 1
+    argv = ["import", kind, fifo, "-o", tmp_path / "cap"]
+    if kind == "csv":
+        done = run_child(argv, timeout=60)
+        assert done.returncode == 2 and "not a regular file" in done.stderr and str(fifo) in done.stderr, done.stderr
+        assert done.stderr.count("\n") == 1
+        return
+    from processes import time_limit
+    with time_limit(30):            # (the refusal takes milliseconds; 30 s is a hang on a machine loaded 10x)
+        one_line_exit_2(argv, capsys, "not a regular file", str(fifo))
+
+
+@pytest.mark.parametrize("kind", ["fifo", "device"])
+@pytest.mark.parametrize("argv, what", [
+    (["plan", "--scheme", "{f}"], "scheme file"),
+    (["plan", "--config", "{f}"], "the configuration"),
+    (["export", "{cal}", "--to", "kalibr", "--noise", "{f}", "-o", "{out}"], "noise file"),
+    (["run", "--sim", "--scheme", "{scheme}", "--sim-truth", "{f}", "--out", "{out}"], "truth file"),
+    (["sim", "serve", "--faults", "{f}"], "faults file"),
+], ids=["scheme", "station.yaml", "noise", "sim-truth", "faults"])
+def test_a_fifo_or_device_given_as_a_yaml_input_is_refused_not_read(capture_dir, tmp_path, capsys, argv, what, kind):
+    """Found in the thirteenth session's walk (benchmarks/walk_issue26.py): these five hung on a
+    FIFO (open() waits for a writer) after the imports had been guarded.  In this process, an
+    alarm as the guard (it interrupts a blocked open(): the old code fails with Hang)."""
+    from processes import time_limit
+    from test_bad_inputs import SCHEME
+    scheme = tmp_path / "small.yaml"
+    scheme.write_text(SCHEME)
+    f = tmp_path / "input.yaml"
+    if kind == "fifo":
+        os.mkfifo(f)
+    else:
+        f = Path("/dev/zero")
+    argv = [a.format(f=f, cal=capture_dir / "calibration.yaml", out=tmp_path / "out", scheme=scheme) for a in argv]
+    with time_limit(30):            # (the refusal takes milliseconds; 30 s is a hang on a machine loaded 10x)
+        one_line_exit_2(argv, capsys, "not a regular file", str(f), what)
+
+
+def test_a_fifo_in_a_run_capture_is_refused_by_resume(capture_dir, tmp_path):
+    import shutil
+    cap = Path(shutil.copytree(capture_dir, tmp_path / "cap"))
+    os.mkfifo(cap / "run.yaml")
+    done = run_child(["run", "--resume", cap, "--port", "/dev/null", "--table-port", "/dev/null"], timeout=60)
+    assert done.returncode == 2 and "not a regular file" in done.stderr and "run.yaml" in done.stderr, done.stderr
 
 
 def test_ros1_bag_with_flipped_bytes_is_one_line(hand_log, tmp_path, capsys):
@@ -236,6 +291,14 @@ def test_a_tampered_history_row_cannot_open_a_file_outside_the_store(filed, tmp_
         one_line_exit_2(argv, capsys, str(store / "index.sqlite"), "row #2", "field 'file'", "inside the store")
 
 
+def test_history_drift_without_a_serial_says_what_it_needs(filed, tmp_path, capsys):
+    """Found by the thirteenth session's walk: `history --drift PNG` without SERIAL exited 0 and
+    drew nothing."""
+    store, serial = filed
+    one_line_exit_2(["history", "--store", store, "--drift", tmp_path / "d.png"], capsys, "--drift", "SERIAL")
+    assert not (tmp_path / "d.png").exists()
+
+
 # ------------------------------------------------------------------ calibration files
 
 def _edited_calibration(capture_dir, tmp_path, change):
@@ -258,13 +321,53 @@ def _without_gyro_parameters(doc):
     (lambda d: d["parameters"]["accel_bias_x"].update(sigma=-1.0), ["parameters.accel_bias_x", "sigma"]),
     (lambda d: d["parameters"]["gyro_scale_x"].update(sigma=float("inf")), ["parameters.gyro_scale_x", "sigma"]),
     (_without_gyro_parameters, ["field 'parameters'", "gyro_scale_x", "compensation.gyro_matrix"]),
-], ids=["zero-accel-matrix", "singular-gyro-matrix", "nan-sigma", "negative-sigma", "inf-sigma", "gyro-params-removed"])
+    # found by tests/test_fuzz_consumers.py (thirteenth session): show divided by it (ZeroDivisionError)
+    (lambda d: d["parameters"]["gyro_scale_y"].update(value=0.0), ["parameters.gyro_scale_y.value", "scale factor of 0"]),
+    (lambda d: d["parameters"]["accel_scale_x"].update(value=0), ["parameters.accel_scale_x.value", "scale factor of 0"]),
+    # the walk (benchmarks/walk_issue26.py): a matrix of 1e-308s (well conditioned, compensating
+    # into nothing) beside scale factors near 1, and a scale factor edited beside its matrix
+    (lambda d: d["compensation"].update(accel_matrix=[[1e-308, 0, 0], [0, 1e-308, 0], [0, 0, 1e-308]]),
+     ["parameters.accel_scale_x.value", "disagrees with 'compensation.accel_matrix'"]),
+    (lambda d: d["parameters"]["gyro_scale_z"].update(value=d["parameters"]["gyro_scale_z"]["value"] * 1.0001),
+     ["parameters.gyro_scale_z.value", "disagrees with 'compensation.gyro_matrix'"]),
+], ids=["zero-accel-matrix", "singular-gyro-matrix", "nan-sigma", "negative-sigma", "inf-sigma", "gyro-params-removed",
+        "zero-gyro-scale", "zero-accel-scale", "tiny-accel-matrix", "gyro-scale-edited"])
 def test_calibration_file_inconsistent_is_refused_by_every_reader(capture_dir, tmp_path, capsys, change, words):
+    import warnings
+    warnings.simplefilter("error", RuntimeWarning)      # (numpy's overflow warning was a second line)
     cal = _edited_calibration(capture_dir, tmp_path, change)
     for argv in (["show", cal], ["apply", cal, capture_dir / "pos01.csv", "-o", tmp_path / "o.csv"],
                  ["export", cal, "--to", "imu_tk", "-o", tmp_path / "x"], ["diff", cal, capture_dir / "calibration.yaml"]):
         one_line_exit_2(argv, capsys, str(cal), *words)
     assert not list(tmp_path.glob("o.csv*")) and not list(tmp_path.glob("x*"))
+
+
+BIG = 10 ** 400         # an integer no float holds (YAML reads 400 digits as a Python int)
+
+
+@pytest.mark.parametrize("where", ["parameters.inter_triad_y.sigma", "parameters.accel_bias_x.value",
+                                   "compensation.accel_bias.0"])
+def test_an_integer_beyond_every_float_in_a_calibration_is_one_line(capture_dir, tmp_path, capsys, where):
+    """Found by tests/test_fuzz_consumers.py (thirteenth session): ``OverflowError: int too large
+    to convert to float`` from the readers' finite checks."""
+    def change(doc):
+        *path, last = where.split(".")
+        target = doc
+        for key in path:
+            target = target[key]
+        target[int(last) if last.isdigit() else last] = BIG
+    cal = _edited_calibration(capture_dir, tmp_path, change)
+    for argv in (["show", cal], ["export", cal, "--to", "json", "-o", tmp_path / "x.json"]):
+        one_line_exit_2(argv, capsys, str(cal))
+
+
+@pytest.mark.parametrize("field", ["gravity_mps2", "latitude_deg"])
+def test_an_integer_beyond_every_float_in_a_manifest_is_one_line(capture_dir, tmp_path, capsys, field):
+    import shutil
+    from test_bad_inputs import edit_manifest
+    cap = Path(shutil.copytree(capture_dir, tmp_path / "cap"))
+    edit_manifest(cap, lambda d: d["site"].update({field: -BIG}))
+    one_line_exit_2(["estimate", cap, "-o", tmp_path / "c.yaml"], capsys, "manifest.yaml", field)
 
 
 # ------------------------------------------------------------------ plugins only from where the user named them
@@ -353,15 +456,22 @@ def test_stale_temporary_calibration_files_are_removed_safely(capture_dir, tmp_p
 
 
 @pytest.mark.parametrize("what", ["deep", "fifo", "month-13"])
-def test_import_sections_file_deep_fifo_or_bad_date(hand_log, tmp_path, what):
+def test_import_sections_file_deep_fifo_or_bad_date(hand_log, tmp_path, capsys, what):
+    """The FIFO in a real process (a hang there is the child's, ended by the timeout); the deep and
+    the bad-date files in this one (nothing of them can hang or take the process down: one line,
+    exit status 2, as test_deeply_nested_yaml_is_one_line_naming_the_file checks the others)."""
     log, _ = hand_log
     sections = tmp_path / "sections.yaml"
+    argv = ["import", "csv", log, "--segments", sections, "-o", tmp_path / "cap"]
     if what == "fifo":
         os.mkfifo(sections)
-    else:
-        sections.write_text(DEEP if what == "deep" else "- {name: a, kind: static, start: 2026-13-01}\n")
-    done = run_child(["import", "csv", log, "--segments", sections, "-o", tmp_path / "cap"], timeout=60)
-    assert done.returncode == 2 and str(sections) in done.stderr and done.stderr.count("\n") == 1, done.stderr
+        done = run_child(argv, timeout=60)
+        assert done.returncode == 2 and str(sections) in done.stderr and done.stderr.count("\n") == 1, done.stderr
+        return
+    from processes import time_limit
+    sections.write_text(DEEP if what == "deep" else "- {name: a, kind: static, start: 2026-13-01}\n")
+    with time_limit(30):            # (the refusal takes milliseconds; 30 s is a hang on a machine loaded 10x)
+        one_line_exit_2(argv, capsys, str(sections))
 
 
 @pytest.mark.parametrize("argv", [["plan", "--scheme", "{f}"], ["plan", "--config", "{f}"],

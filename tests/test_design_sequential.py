@@ -4,6 +4,7 @@ proposes the fewest extra segments for what the capture left not revealed, `stat
 `station estimate` then reveals it, at the simulated truth.  `--separate` and the bad inputs."""
 import json
 import shlex
+import shutil
 
 import numpy as np
 import pytest
@@ -49,6 +50,23 @@ run:
 # is the estimator's convention for the reference point)
 POSITIONS_M = np.array([[0.0, 0.005, -0.004], [0.003, 0.0, 0.006], [-0.005, 0.004, 0.0]])
 SMALL = ["--rates", "100,200", "--revolutions", "1", "--dwells", "10"]
+
+
+@pytest.fixture(scope="module")
+def dry_run(tmp_path_factory):
+    """One dry run of SCHEME (station run --sim), copied by each test that extends or reads it."""
+    root = tmp_path_factory.mktemp("sequential-dry-run")
+    (root / "s.yaml").write_text(SCHEME)
+    assert main(["run", "--scheme", str(root / "s.yaml"), "--sim", "--out", str(root / "cap")]) in (0, 3)
+    return root / "cap"
+
+
+def _copy_dry_run(dry_run, tmp_path, capsys):
+    cap = tmp_path / "cap"
+    shutil.copytree(dry_run, cap)
+    (tmp_path / "s.yaml").write_text(SCHEME)
+    capsys.readouterr()
+    return cap
 
 
 def _positions(cal) -> dict:
@@ -119,15 +137,12 @@ def test_bad_input_of_design_from_is_one_line_and_status_2(tmp_path, capsys):
         assert len(lines) == 1 and words in lines[0], (argv, lines)
 
 
-def test_separate_two_effects_the_capture_cannot_tell_apart(tmp_path, capsys):
+def test_separate_two_effects_the_capture_cannot_tell_apart(dry_run, tmp_path, capsys):
     """A rate-squared gyro error and a scale asymmetry: at one rate (10 deg/s both ways) the
     capture cannot tell them apart; --separate proposes rotations at other rates, after which the
     estimator's fit reveals every parameter of both and their correlation falls below
     diagnose's alias threshold (0.95)."""
-    cap = tmp_path / "cap"
-    (tmp_path / "s.yaml").write_text(SCHEME)
-    assert main(["run", "--scheme", str(tmp_path / "s.yaml"), "--sim", "--out", str(cap)]) in (0, 3)
-    capsys.readouterr()
+    cap = _copy_dry_run(dry_run, tmp_path, capsys)
     out = tmp_path / "sep.yaml"
     assert main(["design", "--from", str(cap), "--separate", "gyro_rate_nonlinearity,gyro_scale_asymmetry",
                  "-o", str(out), "--json", "--rates", "10,100,200", "--revolutions", "1", "--dwells", "10"]) == 0
@@ -164,14 +179,11 @@ def test_separate_two_effects_the_capture_cannot_tell_apart(tmp_path, capsys):
         assert p.sigma is not None and abs(p.value) < 4.5 * p.sigma, (n, p)
 
 
-def test_a_dry_run_append_refuses_a_capture_that_is_no_dry_runs_and_names_already_recorded(tmp_path, capsys):
+def test_a_dry_run_append_refuses_a_capture_that_is_no_dry_runs_and_names_already_recorded(dry_run, tmp_path, capsys):
     """--sim --append extends only what station run --sim wrote (its simulated IMU is in it); a
     segment name the capture has is refused; both one line, exit 2, nothing written."""
-    cap = tmp_path / "cap"
-    (tmp_path / "s.yaml").write_text(SCHEME)
+    cap = _copy_dry_run(dry_run, tmp_path, capsys)
     (tmp_path / "ext.yaml").write_text("name: ext\ndefaults: {dwell_s: 5}\nsegments:\n  - {static: zup, up_body: [0, 0, 1]}\n")
-    assert main(["run", "--scheme", str(tmp_path / "s.yaml"), "--sim", "--out", str(cap)]) in (0, 3)
-    capsys.readouterr()
     manifest = (cap / "manifest.yaml").read_text()
     assert main(["run", "--sim", "--append", str(cap), "--scheme", str(tmp_path / "ext.yaml")]) == 2
     lines = capsys.readouterr().err.strip().splitlines()
@@ -193,15 +205,12 @@ class MySizeEffect(AccelLeverArm):
 """
 
 
-def test_a_plugins_design_command_names_its_file_and_runs_as_printed(tmp_path, capsys, monkeypatch):
+def test_a_plugins_design_command_names_its_file_and_runs_as_printed(dry_run, tmp_path, capsys, monkeypatch):
     """An effect of the user's own file, not revealed by the capture: the design command diagnose
     prints adds it by its file (an id alone would be unknown to the new command), and it runs."""
-    cap = tmp_path / "cap"
-    (tmp_path / "s.yaml").write_text(SCHEME)
+    cap = _copy_dry_run(dry_run, tmp_path, capsys)
     (tmp_path / "mine").mkdir()
     (tmp_path / "mine" / "effects.py").write_text(PLUGIN)
-    assert main(["run", "--scheme", str(tmp_path / "s.yaml"), "--sim", "--out", str(cap)]) in (0, 3)
-    capsys.readouterr()
     monkeypatch.chdir(tmp_path / "mine")             # relative to here: the command must not depend on it
     assert main(["diagnose", str(cap), "--add", "effects.py:MySizeEffect", "--json"]) == 0
     said = json.loads(capsys.readouterr().out)["design_suggestions"]

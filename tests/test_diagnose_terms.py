@@ -34,12 +34,25 @@ TRUTH = {
 }
 
 
+@pytest.fixture(scope="module")
+def searched(tmp_path_factory):
+    """name -> tc.run of that case (seed 3): --auto on its training capture, done once per case
+    for the module (the accel_cubic and gyro_scale_temperature runs serve two tests each; the
+    tests only read the steps)."""
+    done = {}
+
+    def run(name):
+        if name not in done:
+            done[name] = tc.run(tc.BY_NAME[name], tmp=tmp_path_factory.mktemp(name))
+        return done[name]
+    return run
+
+
 @pytest.mark.parametrize("name", sorted(TRUTH))
-def test_the_search_finds_the_physical_term_on_the_right_sensor(name, tmp_path):
+def test_the_search_finds_the_physical_term_on_the_right_sensor(name, searched):
     """Every hidden term is found on its own sensor and axis, in its physical regressor, within
     4 sigma (the fit's, from the noise) of the truth; nothing else is added; the fit then passes."""
-    case = tc.BY_NAME[name]
-    steps, final, _ = tc.run(case, tmp=tmp_path)
+    steps, final, _ = searched(name)
     assert [s.added for s in steps] == [auto.DISCOVERED] and steps[0].discovered
     found, values, sigmas = _discovered(steps, final)
     got = {(t.sensor, t.axis, t.regressor.key): (t.natural(v), abs(t.natural(s)))
@@ -56,12 +69,12 @@ def test_the_search_finds_the_physical_term_on_the_right_sensor(name, tmp_path):
         assert "cannot be told here from w_" in said and "rotations at three or more rates" in said, said
 
 
-def test_an_accelerometer_misfit_gives_no_gyro_term(tmp_path):
+def test_an_accelerometer_misfit_gives_no_gyro_term(searched, tmp_path):
     """The issue's K3 came out as gyro w·|w| terms.  A K3 of 3000 ug/g^3 leaks into the gyro rows
     through the shared attitudes (they fail too), but the accelerometer terms explain both and no
     gyro term is taken; a K3 of 1000 ug/g^3 leaves the gyro rows at the noise, and the gyro
     terms are not searched at all."""
-    steps, final, _ = tc.run(tc.BY_NAME["accel_cubic"], tmp=tmp_path)
+    steps, final, _ = searched("accel_cubic")
     assert all(t.sensor == "accel" for t in _discovered(steps, final)[0])
     small = tc.Case("k3_small", {"accel__cubic_ug_per_g3": [1000.0, -800.0, 1200.0]}, ("accel_cubic",), "accel", ())
     _, capture = tc.training(small, 3, tmp_path)
@@ -69,10 +82,10 @@ def test_an_accelerometer_misfit_gives_no_gyro_term(tmp_path):
     assert fails["accel"][0] and not fails["gyro"][0], fails
 
 
-def test_a_scale_that_follows_temperature_beats_the_rate_term_that_also_fits(tmp_path):
+def test_a_scale_that_follows_temperature_beats_the_rate_term_that_also_fits(searched):
     """gyro_rate_nonlinearity (w|w|) fits this capture too (the issue's 610 ppm on the test set);
     the w·T terms predict the left-out segments better and replace it, and the step says so."""
-    steps, final, _ = tc.run(tc.BY_NAME["gyro_scale_temperature"], tmp=tmp_path)
+    steps, final, _ = searched("gyro_scale_temperature")
     assert steps[0].instead_of == "gyro_rate_nonlinearity", [(s.added, s.instead_of) for s in steps]
     assert "gyro_rate_nonlinearity" not in final.effects
     assert "predicts the left-out segments worse" in steps[0].caveats[0]

@@ -165,12 +165,13 @@ def test_rate_waits_follow_a_lower_rate_mode_acceleration(bench):
     """With the rate-mode ramp lowered by set_rate_limits, reaching a rate and braking take
     longer than the axis' maximum acceleration says: the waits must expect that, not time out."""
     server, protocol, axes = bench
-    # 40 deg/s at 1 deg/s^2: 40 s of device time, 0.8 s of wall time at speed 50; the margin
-    # and the axis' maximum acceleration (300 deg/s^2) would allow 0.47 s
-    with _open(server, protocol, wait_margin_s=0.2) as table:
+    # 20 deg/s at 1 deg/s^2: 20 s of device time, 0.4 s of wall time at speed 50 (each way); the
+    # margin and the axis' maximum acceleration (300 deg/s^2) would allow 2 x 20/300 + 0.05 =
+    # 0.18 s (40 deg/s with a 0.2 s margin before: 0.8 s against 0.47 s, twice the wall time)
+    with _open(server, protocol, wait_margin_s=0.05) as table:
         table.close_interlocks()
         table.set_rate_limits(1, "rate", 60.0, 1.0)
-        assert abs(table.set_rate(1, 40.0) - 40.0) <= table.settings.rate_tolerance_dps
+        assert abs(table.set_rate(1, 20.0) - 20.0) <= table.settings.rate_tolerance_dps
         table.stop()
         assert abs(table.read_rates_dps()[0]) <= table.settings.rate_tolerance_dps
 

@@ -30,6 +30,11 @@ def _cal(base, serial, lot, capture, date, shift, verdict="passes"):
     doc["provenance"].update(imu_serial=serial, imu_lot=lot, imu_model="VN-100", date_utc=date,
                              capture_sha256=hashlib.sha256(capture.encode()).hexdigest())
     for name, p in doc["parameters"].items():
+        if name in shift and "_scale_" in name:     # the compensation moved with it: one calibration
+            sensor, axis = name.split("_scale_")
+            column = "xyz".index(axis)
+            for row in doc["compensation"][f"{sensor}_matrix"]:
+                row[column] *= p["value"] / (p["value"] + shift[name])
         p["value"] += shift.get(name, 0.0)
     doc["verdict"]["result"] = verdict
     return doc

@@ -90,6 +90,7 @@ def calibrations(folder):
         doc["provenance"] = {"imu_serial": serial, "date_utc": f"{day}T00:00:00Z", "method": "lsq",
                              "scheme": "optimal9", "capture_sha256": f"{k:064x}", "imu_model": "M", "imu_lot": "L"}
         doc["parameters"]["accel_scale_x"]["value"] = 1.0 + 1e-5 * k
+        doc["compensation"]["accel_matrix"][0][0] = 1.0 / (1.0 + 1e-5 * k)     # the matrix with it
         path = folder / f"cal{k}.yaml"
         path.write_text(yaml.safe_dump(doc))
         out.append(path)

@@ -146,8 +146,11 @@ def test_the_table_is_unpowered_while_the_operator_remounts_the_imu(tmp_path):
 
 def test_warm_up_lasts_until_the_temperature_slope_is_below_the_threshold(tmp_path):
     truth = default_truth(4)
-    truth.temperature.warmup_delta_c = 2.0
-    truth.temperature.warmup_time_constant_s = 60.0      # dT/dt = 120 C/h exp(-t / 60 s)
+    # dT/dt = 120 C/h exp(-t / 30 s) (2 C over 60 s before: the same starting slope, the
+    # threshold crossed 90 s of device time sooner).  The slope changes by slope / 30 s there,
+    # 0.2 C/h per s (0.1 before): a given error of the fitted slope is half the time error it was
+    truth.temperature.warmup_delta_c = 1.0
+    truth.temperature.warmup_time_constant_s = 30.0
     config = Config(table=TableConfig(axes=1),
                     warmup=WarmupConfig(duration_s=30.0, max_s=2000.0, temp_slope_c_per_h=6.0, window_s=20.0),
                     run=RunConfig(**LOSS_AT_SPEED, operator=False, settle_s=1))
@@ -161,12 +164,13 @@ def test_warm_up_lasts_until_the_temperature_slope_is_below_the_threshold(tmp_pa
     rows = np.loadtxt(tmp_path / "cap" / "warmup.csv", delimiter=",", skiprows=1)
     t, temp = rows[:, 0], rows[:, 1]
     # device time t since the twins started: the slope fitted over the last 20 s is below 6 C/h
-    # once exp(-(t - 10 s)/60 s) < 1/20, at t = 190 s; the warm-up lasts at least 30 s
-    expected = max(10.0 + 60.0 * math.log(20.0), t[0] + 30.0)
+    # once exp(-(t - 10 s)/30 s) < 1/20, at t = 100 s (the 20 s straight-line fit of this
+    # exponential crosses 6 C/h at 100.2 s, computed noise-free); the warm-up lasts at least 30 s
+    expected = max(10.0 + 30.0 * math.log(20.0), t[0] + 30.0)
     assert t[-1] == pytest.approx(expected, abs=5.0)
     last = t >= t[-1] - 20.0
     assert abs(np.polyfit(t[last], temp[last], 1)[0] * 3600.0) < 6.0
-    if t[0] < 150.0:                       # it did wait for the temperature, not only 30 s
+    if t[0] < 60.0:                        # it did wait for the temperature, not only 30 s
         early = t <= t[0] + 20.0
         assert abs(np.polyfit(t[early], temp[early], 1)[0] * 3600.0) > 6.0
 
@@ -278,7 +282,7 @@ class _ScriptedHands:
 
 
 def test_a_hand_turn_is_waited_for_at_a_bounded_cost_and_asked_again_when_wrong(monkeypatch):
-    """The operator waits 10 minutes before turning, then turns 180 deg instead of 360: every
+    """The operator waits 3 minutes before turning, then turns 180 deg instead of 360: every
     look of the sequencer covers a bounded stretch of data (before, all the data since the step
     began: the cost of a look grew with the wait), the angle is said and the operator asked
     again (before, the sequencer waited for ever for a turn nobody was asked to make again)."""
@@ -306,7 +310,9 @@ def test_a_hand_turn_is_waited_for_at_a_bounded_cost_and_asked_again_when_wrong(
         def values_update(self, values):
             pass
 
-    hands = _ScriptedHands([180.0, 360.0], first_delay_s=600.0)
+    # 3 minutes (10 before: the scripted samples and the looks at them were the test's time);
+    # a look covering all the data since the step began would see 18 000 samples, 9 x the bound
+    hands = _ScriptedHands([180.0, 360.0], first_delay_s=180.0)
     looked = []
     real_detect = manual.detect
 
@@ -330,4 +336,4 @@ def test_a_hand_turn_is_waited_for_at_a_bounded_cost_and_asked_again_when_wrong(
     assert any("turned 180 deg, not 360" in n for n in seq.display.notes)
     assert seq.display.notes[-1] == "rotz: turned 360 deg"
     assert seq.display.prompts == [step.instruction] * 2
-    assert seq._session.n > 60_000 and max(looked) < 2_000       # at most 20 s of 10 minutes
+    assert seq._session.n > 18_000 and max(looked) < 2_000       # at most 20 s of 3 minutes

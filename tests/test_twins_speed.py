@@ -46,8 +46,12 @@ def test_a_reader_that_falls_behind_a_fast_twin_is_told_so():
         with open_imu(server.imu_path, "vectornav", ImuSettings(frame_timeout_s=2.0)) as imu:
             first = imu.read(100)
             wall0 = time.monotonic()
-            time.sleep(3.0)             # the reader pauses: 900 s of device time, more than the
-                                        #   twin's send buffer holds (2 s of wall time)
+            # the reader pauses until the twin's send buffer (STREAM_BUFFER_WALL_S = 2 s of wall
+            # time of the stream) has overflowed: waited for, not slept over (3 s before); the
+            # ceiling only bounds a twin that never overflows, which the assertion below names
+            deadline = time.monotonic() + 30.0
+            while server.faulter.frames_overflowed == 0 and time.monotonic() < deadline:
+                time.sleep(0.01)
             blocks = []
             while imu.counters.missing_frames == 0 and sum(map(len, blocks)) < 100000:
                 blocks.append(imu.read(5000))

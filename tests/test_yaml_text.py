@@ -166,3 +166,17 @@ def test_every_kind_of_line_break_counts_for_the_nesting_bound(brk):
     lines = [" " * (40 * j) + "- " * 30 for j in range(40)]
     text = brk.join(lines) + "x"
     assert yaml_text.nesting_bound(text) >= 40 * 39
+
+
+def test_an_integer_beyond_every_float_is_read_as_infinity_by_every_loader():
+    """(thirteenth session) so that the readers' finite checks refuse it in one line instead of
+    raising OverflowError; integers a float holds are read as before, exactly."""
+    big = "1" + "0" * 400
+    for text in (f"a: {big}", f"a: {big}  # a comment", f"a: [{big}, 1]\n#'", f"a: {big}\n\tb: 1"):
+        for aliases in (True, False):
+            doc = yaml_text.safe_load(text, allow_aliases=aliases) if "\t" not in text else None
+            if doc is not None:
+                assert doc["a"] in (float("inf"), [float("inf"), 1]), (text, doc)
+    assert yaml_text.safe_load(f"a: -{big}") == {"a": float("-inf")}
+    assert yaml_text.safe_load("a: 17976931348623157" + "0" * 292) == {"a": 17976931348623157 * 10 ** 292}   # <= max
+    assert yaml_text.safe_load(f"a: '{big}'") == {"a": big}

@@ -166,10 +166,9 @@ def faults_from_dict(data, source: str = "<faults>", n_axes: int = 3) -> Faults:
 
 def load_faults(path, n_axes: int = 3) -> Faults:
     path = Path(path)
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as e:
-        raise UserError(f"{path}: cannot read faults file: {e}") from None
+    from station.core.user_files import read_user_text
+
+    text = read_user_text(path, "faults file")                # (a FIFO is refused, not read: it hung)
     data = yaml_text.load_text(text, path)
     return faults_from_dict(data, str(path), n_axes)
 

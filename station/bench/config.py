@@ -241,10 +241,11 @@ def load_config(path: str | None = None, *, env: dict | None = None) -> Config:
     file = find_config(path)
     config = Config()
     if file is not None:
+        from station.core.user_files import read_user_text
+
+        text = read_user_text(file, "the configuration")         # (a FIFO is refused, not read: it hung)
         try:
-            doc = yaml_text.safe_load(file.read_text())
-        except OSError as e:
-            raise UserError(f"{file}: cannot read the configuration: {e.strerror}") from None
+            doc = yaml_text.safe_load(text)
         except (yaml.YAMLError, ValueError) as e:      # ValueError: a timestamp in month 13
             mark = getattr(e, "problem_mark", None)
             where = f" (line {mark.line + 1})" if mark is not None else ""

@@ -119,18 +119,28 @@ class ImuStream:
             self._queued -= have
         return ImuSamples.concat(blocks)
 
-    def sync(self, *, wait_s: float = 0.25) -> float | None:
-        """The device time of the newest sample that had reached this computer when called:
-        the reader thread reads everything waiting in the port before it answers.  Called once
+    def ask_sync(self) -> int:
+        """Ask the reader thread to read everything waiting in the port (the first half of
+        :meth:`sync`, which waits for it): returns the ticket :meth:`sync` waits for.  Several
+        IMUs are asked at once and then waited for, so that their readers finish their blocks
+        together rather than one after the other (with 4 IMUs, up to 4 reads of BLOCK_S each)."""
+        with self._cond:
+            if self._sync_asked <= self._sync_done:
+                self._sync_asked += 1
+            return self._sync_asked
+
+    def sync(self, *, wait_s: float = 0.25, ticket: int | None = None) -> float | None:
+        """The device time of the newest sample that had reached this computer when called
+        (or when ``ticket`` was asked: :meth:`ask_sync`): the reader thread reads everything
+        waiting in the port before it answers.  Called once
         the table has reported its state, every sample measured before that report is then at
         or before the returned time (the device twins write every frame measured before they
         answer the table; on hardware the line's latency is milliseconds).  None when the
         reader has not answered within ``wait_s`` wall seconds (ask again: the caller can check
         for a pause in between).  Raises the reader's error, if any."""
+        if ticket is None:
+            ticket = self.ask_sync()
         with self._cond:
-            if self._sync_asked <= self._sync_done:
-                self._sync_asked += 1
-            ticket = self._sync_asked
             deadline = time.monotonic() + wait_s
             while self._sync_done < ticket and self._error is None:
                 left = deadline - time.monotonic()

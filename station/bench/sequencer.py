@@ -267,13 +267,17 @@ class Sequencer:
         device time after it, by the samples' own time stamps.  So the settle is ``seconds`` of
         device time however fast device time runs against wall time (a twin at --speed 500:
         3 s are 6 ms of wall time, less than the pipeline's latency)."""
-        t_end = {}
+        t_end, tickets = {}, {}
+        # every IMU's reader asked first, then each waited for: their current blocks end together
+        self._each(lambda ch: tickets.__setitem__(id(ch), ch.stream.ask_sync()))
 
         def synced(ch):
+            ticket = tickets.get(id(ch))
             while True:
-                t_sync = ch.stream.sync()
+                t_sync = ch.stream.sync(ticket=ticket)
                 if t_sync is not None:
                     break
+                ticket = None               # asked again after a pause check, as before
                 self._check_pause()
             ch.stream.drain()                                # all at or before t_sync
             t_end[id(ch)] = t_sync + seconds - 0.5 / ch.rate_hz   # the sample `seconds` after t_sync is kept

@@ -35,7 +35,8 @@ def add_parsers(sub) -> None:
     d.add_argument("--reveal", metavar="PARAM,...",
                    help="with --from: effect parameters (fnmatch patterns) the capture left not revealed")
     d.add_argument("--separate", metavar="A,B",
-                   help="with --from: two effects (ids) the capture cannot tell apart; both are added to the model")
+                   help="with --from: two effects the capture cannot tell apart (ids, or plugins FILE.py:CLASS "
+                        "as --add takes them); both are added to the model")
     d.add_argument("--fraction", type=argtypes.between(0.01, 1.0), default=0.5,
                    help="with --from: the target 1σ as a fraction of each parameter's typical size (default 0.5; "
                         "the estimator reveals a parameter below 1)")
@@ -154,6 +155,17 @@ def _cmd_from(args) -> int:
         adds += [x for x in separate if x not in adds]
     reg = plugins.registry(args)
     effects = [reg.create(e) for e in plugins.effect_ids(reg, adds)]
+    if separate:
+        # each of A and B an effect id or a plugin spec (FILE.py:CLASS, module:CLASS), as --add
+        # takes them: the ids they name (a spec naming several effects is refused)
+        named = [plugins.effect_ids(reg, [x]) for x in separate]
+        for x, ids in zip(separate, named):
+            if len(ids) != 1:
+                raise UserError(f"--separate: {x} names {len(ids)} effects ({', '.join(ids)}): name one "
+                                "(FILE.py:CLASS)")
+        separate = (named[0][0], named[1][0])
+        if separate[0] == separate[1]:
+            raise UserError(f"--separate: {args.separate!r} names one effect twice ({separate[0]})")
     reveal = tuple(x.strip() for x in (args.reveal or "").split(",") if x.strip())
     out_path = Path(args.out if args.out != "designed.yaml" else "extension.yaml")
     if out_path.suffix not in (".yaml", ".yml"):

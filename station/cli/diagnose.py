@@ -196,10 +196,9 @@ def _diagnose(args, job) -> tuple:
     from station.diagnose.report import ReportInput, capture_facts
     from station.io.history import verdict_of
 
-    from station.diagnose.suggest import suggest
+    from station.diagnose.suggest import suggest_all
 
-    for d in {id(first): first, id(final): final}.values():
-        suggest(d, capture.path, reg)
+    suggest_all(first, final, steps, capture, s, reg)
     figures.known(first, steps)
     if not args.json:
         _print(out, first, steps, final)        # while the figures are drawn
@@ -272,6 +271,23 @@ def _print_suggestions(out, d) -> None:
         if getattr(c, "suggestion", ""):
             out.print(f"{c.effect}: the fewest segments that reveal it: {c.suggestion}", markup=False,
                       soft_wrap=True, highlight=False)
+        cmds = getattr(c, "separations", None) or []
+        for cmd in cmds:
+            out.print(f"{c.effect}: this capture cannot tell it from {_rival(cmd)}; the fewest segments that "
+                      f"separate them: {cmd}", markup=False, soft_wrap=True, highlight=False)
+        others = list(getattr(c, "alike", None) or [])
+        if others:
+            out.print(f"{c.effect}: this capture cannot tell it from {', '.join(others)} (they explain the misfit "
+                      "alike); no segments of this table are designed to separate them", markup=False,
+                      soft_wrap=True, highlight=False)
+
+
+def _rival(cmd: str) -> str:
+    """B of a printed ``--separate A,B`` command."""
+    import shlex
+
+    words = shlex.split(cmd)
+    return words[words.index("--separate") + 1].rsplit(",", 1)[1]
 
 
 def _print(out, first, steps, final) -> None:
@@ -301,6 +317,9 @@ def _print(out, first, steps, final) -> None:
         out.print("added: " + "; ".join(f"{n} = {v:.4g} ± {s:.2g} {u}" for n, v, s, u in st.estimate))
         for c in st.caveats:
             out.print(f"caveat: {c}")
+        for cmd in getattr(st, "separations", None) or []:
+            out.print(f"caveat: the fewest segments that separate {st.added} from {_rival(cmd)}: {cmd}",
+                      markup=False, soft_wrap=True, highlight=False)
         for _, why in st.removed:
             out.print(f"removed: {why}", markup=False)
     if steps:

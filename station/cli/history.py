@@ -82,6 +82,9 @@ def cmd_history(args) -> int:
     from station import api
     from station.core.errors import UserError
 
+    if args.drift and args.serial is None:      # (it was ignored: exit 0 and no plot)
+        raise UserError(f"--drift {args.drift}: give the SERIAL whose drift to plot: station history SERIAL "
+                        "--drift PNG (station history lists the serials)")
     h = api.history(args.serial, store=args.store, add=args.add, lot=args.lot, imu_model=args.imu_model)
     for entry, new in h.filed:
         out.print(f"{'filed' if new else 'already filed'}: #{entry.id} {entry.serial} {entry.date_utc} "

@@ -34,9 +34,8 @@ def cmd_import_imucal(args) -> int:
 
 
 def _print_report(report) -> None:
-    for line in report.lines:
-        out.print(line, markup=False)
-    out.print(f"capture: {report.path}", markup=False)
+    # one print of all the lines: the same text as a print a line (~1 ms each through rich)
+    out.print("\n".join([*report.lines, f"capture: {report.path}"]), markup=False)
 
 
 def _recording_options(args) -> dict:

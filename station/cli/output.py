@@ -27,8 +27,8 @@ def print_parameters(rows, title: str) -> None:
         if sigma is None or not math.isfinite(sigma):
             spread = "—"
             blank.append(name)
-        elif is_scale:
-            spread = f"{sigma / value * 1e6:.3g} ppm"
+        elif is_scale and value:
+            spread = f"{sigma / abs(value) * 1e6:.3g} ppm"
         else:
             spread = f"{sigma:.3g}"
         # scale factors as run and diff print them: 9 decimals, their 1-sigma (and changes) in ppm

@@ -18,7 +18,7 @@ from station.core import yaml_text
 from station.cli.run_bench import (  # noqa: F401
     CONNECTION, DEVICE_ERRORS, RUN_FILE, RUN_FORMAT, SCHEME_FILE, ConsoleOperator, _estimate, _new_capture,
     _open_devices, _open_imu, _open_table, _out_dir, _overrides, _reopen, _resume_steps, imu_identity,
-    sequence, table_geometry)
+    read_run_text, sequence, table_geometry)
 
 # ------------------------------------------------------------------------------------ parsers
 
@@ -380,8 +380,8 @@ def _resumed(directory: Path, current, args):
 
     run_file = directory / RUN_FILE
     try:
-        doc = yaml_text.safe_load(run_file.read_text())
-        text = (directory / SCHEME_FILE).read_text()
+        doc = yaml_text.safe_load(read_run_text(run_file))
+        text = read_run_text(directory / SCHEME_FILE)
     except OSError as e:
         raise UserError(f"{directory}: not a capture of station run (no {e.filename}): cannot resume") from None
     except (yaml.YAMLError, ValueError) as e:
@@ -404,7 +404,7 @@ def _resumed(directory: Path, current, args):
         if not isinstance(name, str) or "/" in name or not name.startswith("scheme-append-"):
             raise UserError(f"{run_file}: field 'appended[{k}]': must name a scheme-append-N.yaml of the capture")
         try:
-            more = scheme_from_text((directory / name).read_text(), str(directory / name))
+            more = scheme_from_text(read_run_text(directory / name), str(directory / name))
         except OSError as e:
             raise UserError(f"{directory / name}: cannot read the appended scheme: {e.strerror}") from None
         scheme = replace(scheme, segments=scheme.segments + more.segments)
@@ -446,14 +446,14 @@ def _appended(directory: Path, scheme, extension: str):
                         "station design --from prefixes its segments x1_, x2_, ...)")
     run_file = directory / RUN_FILE
     try:
-        number = len(yaml_text.safe_load(run_file.read_text()).get("appended") or []) + 1
+        number = len(yaml_text.safe_load(read_run_text(run_file)).get("appended") or []) + 1
     except (OSError, AttributeError, yaml.YAMLError, ValueError):
         number = 1                      # _resumed read the file just before: not reached
     appended_of = {s.name: number for s in ext.segments}
 
     def keep() -> None:
         """Write the extension into the capture (once the same IMU is found connected)."""
-        doc = yaml_text.safe_load(run_file.read_text())
+        doc = yaml_text.safe_load(read_run_text(run_file))
         listed = list(doc.get("appended") or [])
         name = f"scheme-append-{len(listed) + 1}.yaml"
         try:

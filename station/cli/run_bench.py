@@ -17,6 +17,19 @@ from station.cli.output import err, out
 from station.core.errors import UserError
 
 RUN_FILE = "run.yaml"
+
+
+def read_run_text(path: Path) -> str:
+    """The text of a file of a run's capture (run.yaml, the scheme, an appended scheme, an IMU's
+    manifest): OSError when it is absent, as ``Path.read_text``; a FIFO or device in its place
+    (a capture from elsewhere) is a UserError, never read (it hung ``--resume``)."""
+    import os
+
+    if os.path.lexists(path):
+        from station.core.user_files import read_user_text
+
+        return read_user_text(path, "file of the run")
+    return Path(path).read_text()
 SCHEME_FILE = "scheme.yaml"
 RUN_FORMAT = "station-run/1"
 try:                                     # a serial port that hangs up mid-call raises termios.error

@@ -17,12 +17,18 @@ from station.core.errors import UserError
 EXIT_IMU_LOST = 4
 
 
+def read_run_text(path: Path) -> str:
+    from station.cli.run_bench import read_run_text as read
+
+    return read(path)
+
+
 def is_multi_run(directory: Path) -> bool:
     """Whether ``directory`` is the folder of a several-IMU run (its run.yaml lists ``imus``)."""
     from station.cli.run_bench import RUN_FILE
 
     try:
-        doc = yaml_text.safe_load((directory / RUN_FILE).read_text())
+        doc = yaml_text.safe_load(read_run_text(directory / RUN_FILE))
     except (OSError, yaml.YAMLError, ValueError):
         return False
     return isinstance(doc, dict) and isinstance(doc.get("imus"), list)
@@ -102,7 +108,7 @@ def _record(args, config, reference, scheme, plan, steps, directory, text, folde
                     writers.append(None)
                 elif _lost_at_start(directory / f):   # lost at the start before: its bundle begun now
                     shutil.rmtree(directory / f)
-                    writers.append(_new_capture(directory / f, scheme, (directory / SCHEME_FILE).read_text(),
+                    writers.append(_new_capture(directory / f, scheme, read_run_text(directory / SCHEME_FILE),
                                                 _overrides_of(directory), imu_config(config, k), imu, rate))
                 else:
                     writers.append(_reopen(directory / f, rate, serial))
@@ -187,7 +193,7 @@ LOST_AT_START = "lost_at_start"
 def _lost_at_start(bundle: Path) -> bool:
     """Whether ``bundle`` is the mark of an IMU lost at the start: no segment, the key set."""
     try:
-        doc = yaml_text.safe_load((bundle / "manifest.yaml").read_text())
+        doc = yaml_text.safe_load(read_run_text(bundle / "manifest.yaml"))
     except (OSError, yaml.YAMLError, ValueError):
         return False
     return isinstance(doc, dict) and LOST_AT_START in doc and not doc.get("segments")
@@ -196,7 +202,7 @@ def _lost_at_start(bundle: Path) -> bool:
 def _overrides_of(directory: Path) -> dict:
     from station.cli.run_bench import RUN_FILE
 
-    doc = yaml_text.safe_load((directory / RUN_FILE).read_text())
+    doc = yaml_text.safe_load(read_run_text(directory / RUN_FILE))
     return dict(doc.get("overrides") or {})
 
 
@@ -297,9 +303,9 @@ def _resumed(directory: Path, current, args):
     from station.io.scheme import scheme_from_text
 
     run_file = directory / RUN_FILE
-    doc = yaml_text.safe_load(run_file.read_text())
+    doc = yaml_text.safe_load(read_run_text(run_file))
     try:
-        text = (directory / SCHEME_FILE).read_text()
+        text = read_run_text(directory / SCHEME_FILE)
     except OSError as e:
         raise UserError(f"{directory}: not a capture of station run (no {e.filename}): cannot resume") from None
     if _overrides(args):

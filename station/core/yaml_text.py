@@ -145,6 +145,24 @@ if _C_LOADER is not None:
                 self._depth -= 1
 
 
+def _construct_int(loader, node):
+    """An integer as yaml.safe_load reads it; one beyond every float (|n| > 1.8e308: 309 digits
+    or more) is read as +-inf.  Every number station reads from a file is used as a float, and
+    its checks ask for a finite one: such an integer then gets the one-line refusal ("must be a
+    finite number") instead of ``OverflowError: int too large to convert to float`` from the
+    first ``math.isfinite`` or ``float()`` (found by tests/test_fuzz_consumers.py in a
+    calibration's sigma and a manifest's gravity_mps2, thirteenth session)."""
+    value = yaml.constructor.SafeConstructor.construct_yaml_int(loader, node)
+    if -_FLOAT_MAX <= value <= _FLOAT_MAX:
+        return value
+    return float("inf") if value > 0 else float("-inf")
+
+
+_FLOAT_MAX = 1.7976931348623157e308
+for _loader in (DepthLimitedLoader, NoAliasLoader, *((_CLoader, _EventLoader) if _C_LOADER is not None else ())):
+    _loader.add_constructor("tag:yaml.org,2002:int", _construct_int)
+
+
 def _c_safe(text: str | bytes, allow_aliases: bool):
     """The libyaml loader ``text`` may take (module doc): _CLoader (its composer in C) when the
     text's nesting is bounded below MAX_C_DEPTH, _EventLoader (its parser in C, the composer in

@@ -73,6 +73,48 @@ class Information:
     attitudes: str = "unknown"
     rotation: dict = field(default_factory=dict)   # key -> (group key, ((G+4) x (G+4)))
     group_prior: dict = field(default_factory=dict)  # group key -> ((G+4) x (G+4))
+    # temperature_powers (timeline=True): per column of G the power of the temperature difference
+    # its Jacobian carries (0: none; 1: a linear coefficient; 2: a quadratic one).  The blocks
+    # above are then at a temperature difference of 1 degC everywhere; a candidate at dT has
+    # them scaled by dT^power on those rows and columns (at_temperature)
+    temp_power: np.ndarray | None = None
+    temperature: object = None                     # the temperature model T(t) (the simulated bench's)
+    clock: tuple = (0.0, 0.0)                      # the dry run's (gap before a segment, sample rate)
+    # per candidate key the temperature difference it had in the candidates' own capture (the
+    # information before timeline=True: the search's first stage ranks on it, search.Scorer.natural)
+    natural_dt: dict = field(default_factory=dict)
+
+
+def temperature_powers(effects: list, parameters: "Parameters", shared: int) -> np.ndarray | None:
+    """Per column of G the power of (T - T_ref) in its Jacobian: the parameters of the effects in
+    the temperature's difference from a reference (station.model.temperature.TemperatureReferenced:
+    temperature_bias, scale_temperature linear, temperature_bias_quadratic quadratic); None when
+    the model has none, or has another effect that needs the temperature (its columns could not be
+    scaled: such a model is informed on the candidates' own timeline, as before)."""
+    from station.model.temperature import TemperatureReferenced
+
+    if not any("temperature" in getattr(e, "needs", ()) for e in effects):
+        return None
+    if not all(isinstance(e, TemperatureReferenced) for e in effects if "temperature" in getattr(e, "needs", ())):
+        return None
+    power = np.zeros(shared, int)
+    at = {n: c for n, c in zip(parameters.names, parameters.columns)}
+    for e in effects:
+        if isinstance(e, TemperatureReferenced):
+            for p in e.params:
+                power[at[p.name]] = 2 if e.id == "temperature_bias_quadratic" else 1
+    return power
+
+
+def at_temperature(M: np.ndarray, power: np.ndarray, dt_c: float) -> np.ndarray:
+    """A candidate's information block computed at dT = 1 degC (Information.temp_power) moved to
+    dT = ``dt_c``: the temperature columns' Jacobian is dT^power times theirs at 1 (a segment's
+    summaries carry one temperature, its mean: station/estimate/summaries.py), and nothing else
+    depends on it (the simulated IMU's temperature coefficients are zero), so the block is
+    Lambda M Lambda, Lambda = diag(dT^power) on G and 1 on the block's own nuisance columns."""
+    lam = np.ones(M.shape[0])
+    lam[:len(power)] = np.where(power > 0, float(dt_c) ** power, 1.0)
+    return M * np.outer(lam, lam)
 
 
 def quiet_truth(noise: Noise, config=None):
@@ -89,14 +131,16 @@ def quiet_truth(noise: Noise, config=None):
 
 
 def model_of(scheme: Scheme, effects: list, noise: Noise, truth, geometry: dict | None = None,
-             attitudes: str = "unknown"):
+             attitudes: str = "unknown", seed: int = 0):
     """The least-squares model of the noiseless capture of ``scheme`` with the noise stated, as
-    station.simulate.montecarlo.cramer_rao weights it: (model, capture)."""
+    station.simulate.montecarlo.cramer_rao weights it: (model, capture).  ``seed``: the simulated
+    bench's geometry (each static's heading, each rotation axis' heading and roll: drawn at
+    random by the simulator, as a real table's azimuths are unknown to the estimator)."""
     from station.estimate import lsq
     from station.estimate.summaries import summarise
     from station.simulate import dryrun
 
-    capture = dryrun.simulate_capture(scheme, truth, 0, geometry)
+    capture = dryrun.simulate_capture(scheme, truth, seed, geometry)
     capture.extra["noise_free"] = True          # (no data-fault scan: station/estimate/data_faults.py)
     s = summarise(capture, table_angle_arcsec=noise.table_angle_arcsec)
     fs = s.sample_rate_hz
@@ -171,12 +215,27 @@ def static_information(info: Information, key, dwell_s: float) -> np.ndarray:
 
 def information(chunks: list, effects: list, noise: Noise, config=None,
                 geometry: dict | None = None, centred: bool = False,
-                attitudes: str = "unknown") -> Information:
+                attitudes: str = "unknown", timeline: bool = False) -> Information:
     """The information of every candidate.  ``chunks``: lists of (key, spec) where spec is a
     StaticSpec (dwell UNIT_DWELL_S) or a RotationSpec pair (``pair`` of two specs), each chunk
     a capture of its own (rotations about one body axis at two elevations go in different
-    chunks: the estimator gives one axis group one gravity angle)."""
+    chunks: the estimator gives one axis group one gravity angle).
+
+    ``timeline``: with effects in the temperature's difference from a reference
+    (temperature_powers), every candidate's information is computed at dT = 1 degC (the
+    candidates' capture recorded at one constant temperature, the effects' reference 1 degC
+    below it), so that the search can place it at the temperature it will have in the designed
+    scheme's own timeline (at_temperature; station/design/timeline.py) -- not at the one it had
+    in the candidates' capture, whose order is not the design's (the twelfth session's temperature
+    design: the search's worst 1σ 3.24 µg/°C, the estimator's fit of the written scheme 7.00)."""
     truth = quiet_truth(noise, config)
+    warm = copy.deepcopy(truth.temperature)
+    power = None
+    if timeline:
+        from station.model.temperature import TemperatureReferenced
+
+        if any(isinstance(e, TemperatureReferenced) for e in effects):
+            truth.temperature.warmup_delta_c = truth.temperature.drift_c_per_h = 0.0
     info = None
     for chunk in chunks:
         segments, owner = [], {}
@@ -187,6 +246,14 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
                 owner[p.name] = key
         scheme = Scheme("candidates", "", "", {}, tuple(segments), centred=centred, table=True)
         model, _ = model_of(scheme, effects, noise, truth, geometry, attitudes)
+        shared = _shared_columns(model)
+        if info is None:
+            parameters = parameters_of(model, shared)
+            power = temperature_powers(model.effects, parameters, len(shared)) if timeline else None
+        if power is not None:
+            for e in model.effects:            # dT = 1 degC at every segment
+                if hasattr(e, "reference_c"):
+                    e.reference_c = float(truth.temperature.start_c) - 1.0
         x = model.x0
         if attitudes == "table":
             # the Jacobian at the noiseless fit's solution: the start leaves the Earth-rate phases of
@@ -196,10 +263,21 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
             x = lsq._solve(model, x)[0]
         J = model.sparse_jacobian(x).tocsr()
         labels = model.row_labels(x)
-        shared = _shared_columns(model)
         G = len(shared)
         if info is None:
-            info = Information(G, parameters_of(model, shared), attitudes=attitudes)
+            info = Information(G, parameters, attitudes=attitudes)
+            if power is not None:
+                info.temp_power, info.temperature = power, warm
+                info.clock = (float(truth.bench.move_s + truth.bench.settle_s), float(truth.sample_rate_hz))
+        if power is not None:
+            from station.design.timeline import seconds_temperatures
+
+            temps = seconds_temperatures([[p.duration_s for p in (spec if isinstance(spec, tuple) else (spec,))]
+                                          for _, spec in chunk], info.temperature, info.clock)
+            ref = np.mean([t for (_, spec), t in zip(chunk, temps) if not isinstance(spec, tuple)])
+            for (key, spec), t in zip(chunk, temps):
+                if key[0] != "anchor":
+                    info.natural_dt[key] = float(t - ref)
         elif G != info.shared:
             raise RuntimeError("candidate chunks with different shared columns")
         L = model.layout

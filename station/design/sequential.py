@@ -41,6 +41,11 @@ ALIAS_COS = 0.95          # diagnose's (station/diagnose/terms.py): this alike a
 DEFAULT_FRACTION = 0.5    # target 1σ as a fraction of the parameter's typical size (module doc)
 MAX_SEGMENTS = 12         # the most rotation pairs / statics an extension proposes
 CHECK_ROUNDS = 4          # the estimator's check sends the search on at most this often
+# effects whose parameters the recorded segments decide (one set per table axis, per rate, per axis
+# group or segment, or a step's time): a candidate segment's information has other columns than
+# the capture's (station/design/information.py needs the same shared columns in every chunk)
+PER_SEGMENT_EFFECTS = ("table_wobble", "table_vibration_once_per_rev", "rotation_axis_offsets",
+                       "remount_per_segment", "bias_step")
 
 
 @dataclass
@@ -135,6 +140,19 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     capture = read_capture(path, load_data=False)
     if bool(reveal) == bool(separate):
         raise UserError("--from: give --reveal PARAMS or --separate A,B (one of them)")
+    per_segment = [e.id for e in effects if e.id in PER_SEGMENT_EFFECTS]
+    if per_segment:
+        raise UserError(f"--from: {', '.join(per_segment)} has parameters of its own per table axis, rate or "
+                        "segment (set from the segments recorded), so segments to add cannot be weighed for it; "
+                        "what separates it is said beside it in station diagnose")
+    from station.diagnose.suggest import hand_turns       # the one rule: diagnose prints no command for these
+
+    hand = hand_turns(capture)
+    if hand:
+        raise UserError(f"{path}: {', '.join(hand)} turned without a table's angle and rate (by hand): station "
+                        "design --from weighs a table's segments against the capture's own, and a hand turn has "
+                        "none to weigh; design a table scheme with station design, or record more attitudes and "
+                        "turns by hand")
     table_doc = capture.extra.get("table") if isinstance(capture.extra.get("table"), dict) else {}
     if "axes" not in table_doc and "no table" in str(table_doc.get("note", "")):
         raise UserError(f"{path}: recorded by hand, without a rate table: station design --from designs segments "

@@ -42,7 +42,9 @@ def to_json(d, steps) -> dict:
             "parameters": c.names, "units": c.units, "estimate": c.estimate, "sigma": c.sigma,
             "smallest_detectable": [_num(v) for v in c.detectable], "aliased": c.aliased,
             "advice": c.advice, "source": c.source, "overdispersion": c.overdispersion,
-            "design_command": getattr(c, "suggestion", "") or None}
+            "design_command": getattr(c, "suggestion", "") or None,
+            "separate_commands": list(getattr(c, "separations", None) or []),
+            "alike": list(getattr(c, "alike", None) or [])}
             for c in d.candidates],
         "steps": [{"added": st.added, "discovered": st.discovered, "instead_of": st.instead_of or None,
                    "predicted_chi2_drop": st.predicted_drop,
@@ -50,6 +52,7 @@ def to_json(d, steps) -> dict:
                    "chi2_after": st.after.chi2, "reduced_chi2_after": st.after.reduced_chi2,
                    "holdout_before": st.holdout_before, "holdout_after": st.holdout_after,
                    "share_of_excess": _num(st.share), "caveats": st.caveats,
+                   "separate_commands": list(getattr(st, "separations", None) or []),
                    "removed": [{"effect": e, "reason": why} for e, why in st.removed],
                    "estimate": [{"name": n, "value": v, "sigma": sg, "unit": u}
                                 for n, v, sg, u in st.estimate]} for st in steps],

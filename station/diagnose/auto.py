@@ -25,7 +25,7 @@ import numpy as np
 from scipy import special
 
 from station.diagnose.core import (ALPHA, Diagnosis, chi2_sf, diagnose, fit_fails, overdispersion, rms_by_kind,
-                                   within_calibration_threshold)
+                                   within_calibration_threshold, not_converged)
 from station.diagnose.holdout import Holdout, judge, leave_one_segment_out
 from station.diagnose.words import caveats, failure_account
 from station.estimate import lsq, profile
@@ -78,6 +78,8 @@ class Step:
     holdout_after: float = float("nan")
     share: float | None = None               # of the excess chi2 explained (None: the fit passed)
     caveats: list = field(default_factory=list)  # what this capture cannot tell apart from it
+    separations: list = field(default_factory=list)  # the station design --separate commands for those
+                                             #   caveats that name a library effect (diagnose/suggest.py)
     removed: list = field(default_factory=list)  # (effect, reason): earlier additions no longer needed
     discovered: bool = False                 # terms found outside the library (terms.TermsEffect)
     instead_of: str = ""                     # the library effect the terms beat out of sample
@@ -478,7 +480,7 @@ def conclude(d: Diagnosis, summaries, steps=(), search_terms: bool = True) -> Di
         d.proposal = terms.propose(d, summaries)
         if d.proposal is not None and d.proposal.kept and steps:
             d.proposal.redundant = redundant_with(d, d.proposal.effect, {st.added for st in steps}, summaries)
-    head = (f"the model does not explain the data{added} (reduced chi2 {d.reduced_chi2:.3g})"
+    head = (not_converged(d.result) + f"the model does not explain the data{added} (reduced chi2 {d.reduced_chi2:.3g})"
             + within_calibration_threshold(d.reduced_chi2))
     if now:
         head += f"; first look at this: {now[0]}"

@@ -74,6 +74,10 @@ class Candidate:
                                                    #   state(): a bias step's time), for the refit
     suggestion: str = ""                           # the station design --from command that would reveal
                                                    #   what the capture cannot (station/diagnose/suggest.py)
+    separations: list = field(default_factory=list)  # station design --from ... --separate commands: the
+                                                   #   effects this capture cannot tell it from (suggest.py)
+    alike: list = field(default_factory=list)       # significant candidates this capture cannot tell it from
+                                                   #   and no --separate command can be designed for (suggest.py)
 
     def largest_estimate(self) -> str:
         """The one-step estimate largest against its 1-sigma, in words ("" without parameters)."""
@@ -264,6 +268,16 @@ def within_calibration_threshold(reduced: float) -> str:
             "from this fit passes, what is missing being smaller than half the noise's variance")
 
 
+def not_converged(result) -> str:
+    """The verdict's first words when the fit stopped at its evaluation limit: its chi2, the
+    verdict and the candidates' scores are those where the solver stopped, not at the model's
+    minimum (lsq._solve's note; verdict.py's "not converged"); "" for a converged fit."""
+    if getattr(result.model, "converged", True):
+        return ""
+    return ("not converged: the fit stopped at its evaluation limit before its minimum, so the chi2 and what "
+            "follows are those where it stopped; ")
+
+
 def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diagnosis:
     from station.diagnose.words import describe_failures
 
@@ -284,6 +298,7 @@ def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diag
                    "and no effect of the library accounts for it: see where it fails")
     if not good:
         verdict += within_calibration_threshold(reduced)
+    verdict = not_converged(result) + verdict
     notes = []
     phi = overdispersion(result)
     if phi > 1.0:
@@ -292,6 +307,7 @@ def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diag
                      "the 1-sigma): only a drop large against the misfit counts")
     # the data faults found before the fit (station/estimate/data_faults.py): what was left out
     notes += list(getattr(result.model.s, "data_fault_notes", None) or [])
+    notes += [n for n in getattr(result.model, "notes", None) or [] if n.startswith("the fit stopped at its limit")]
     return Diagnosis(effects=["base_triads", "inter_triad"] + [e.id for e in result.model.effects],
                      chi2=result.chi2, dof=result.dof, reduced_chi2=reduced, p_value=p,
                      segments=segs, candidates=cands, failures=failures, verdict=verdict,

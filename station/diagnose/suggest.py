@@ -7,6 +7,15 @@ import shlex
 from pathlib import Path
 
 BASE = ("base_triads", "inter_triad")
+ALIAS_COS = 0.95      # two candidates whose one-step signatures are this alike: aliases (terms.py's threshold)
+# effects a scheme extension cannot be designed for: parameters per table axis, rate or segment, a
+# step's time (station.design.sequential.PER_SEGMENT_EFFECTS, copied: diagnose is below design)
+# effects of the time and the temperature: the candidates' information is on their own timeline,
+# not the capture's clock going on, and the table has no chamber: two of them are not separated
+# by segments the designer can weigh (docs/design.md, Limits)
+TIMELINE = ("bias_drift", "temperature_bias", "temperature_bias_quadratic", "scale_temperature")
+NOT_DESIGNED = ("table_wobble", "table_vibration_once_per_rev", "rotation_axis_offsets", "remount_per_segment",
+                "bias_step")
 
 
 def added(effect_id: str, registry=None) -> str:
@@ -28,6 +37,25 @@ def added(effect_id: str, registry=None) -> str:
     return source
 
 
+def hand_turns(capture) -> list[str]:
+    """The complete rotations of ``capture`` (a Capture, as read) without a table's angle and rate
+    (turned by hand, or an encoder that did not report): ``station design --from`` weighs table
+    segments against the capture's own and refuses such a capture (sequential.extend, the same
+    rule), so no command is printed for it."""
+    return [seg.name for seg in capture.complete() if seg.kind == "rotation" and not (seg.rate_dps and seg.angle_deg)]
+
+
+def suggest_all(first, final, steps, capture, summaries, registry=None) -> None:
+    """What diagnose says beside its findings, set on the diagnoses it shows (the first and the
+    final, each once) and on --auto's steps; ``capture`` the Capture the diagnosis read (its
+    manifest is not read again)."""
+    hand = hand_turns(capture)
+    for d in {id(first): first, id(final): final}.values():
+        suggest(d, capture.path, registry, summaries=summaries, hand=hand)
+    if not hand:
+        suggest_steps(steps, capture.path, summaries, registry)
+
+
 def command(capture, effects, reveal, registry=None) -> str:
     """station design --from CAPTURE --add E ... --reveal P1,P2,... -o extension.yaml"""
     adds = "".join(f" --add {shlex.quote(added(e, registry))}" for e in effects)
@@ -35,19 +63,106 @@ def command(capture, effects, reveal, registry=None) -> str:
             "-o extension.yaml")
 
 
-def suggest(diagnosis, capture, registry=None) -> None:
+def separate_command(capture, effects, a: str, b: str, registry=None) -> str:
+    """station design --from CAPTURE --add E ... --separate A,B -o extension.yaml: A and B named
+    as --add names them (a plugin by its file), so that the command works as printed."""
+    adds = "".join(f" --add {shlex.quote(added(e, registry))}" for e in effects)
+    pair = shlex.quote(f"{added(a, registry)},{added(b, registry)}")
+    return f"station design --from {shlex.quote(str(capture))}{adds} --separate {pair} -o extension.yaml"
+
+
+def separations(capture, model_effects, effect_id: str, summaries, registry=None) -> list[str]:
+    """For each library effect this capture cannot tell ``effect_id`` from (words.aliases), the
+    command that designs the segments that would: ``effect_id`` in the model (with the model's
+    own effects), the rival added by the designer."""
+    from station.diagnose.words import aliases
+
+    effects = [e for e in model_effects if e not in BASE and e != "discovered_terms" and e not in NOT_DESIGNED]
+    if effect_id not in effects:
+        effects.append(effect_id)
+    if effect_id in NOT_DESIGNED:
+        return []
+    return [separate_command(capture, effects, effect_id, rival, registry)
+            for rival, _ in aliases(summaries, effect_id)
+            if rival is not None and rival != effect_id and rival not in NOT_DESIGNED]
+
+
+def suggest_steps(steps, capture, summaries, registry=None) -> None:
+    """Set ``separations`` on every step of --auto whose added effect this capture cannot tell
+    from a library effect (its caveats): the station design --from ... --separate commands."""
+    for st in steps:
+        if st.discovered:
+            continue
+        st.separations = separations(capture, st.after.effects, st.added, summaries, registry)
+
+
+def suggest(diagnosis, capture, registry=None, summaries=None, hand=()) -> None:
     """Set ``suggestion`` on every candidate the capture cannot reveal (no parameter it can
     size, or parameters aliased with the model's) and ``design_suggestions`` on the diagnosis
     for the model's own parameters it left not revealed (held by their priors); ``registry``:
     where the effects came from, so that a plugin's is named by its file (added())."""
     model_effects = [e for e in diagnosis.effects if e not in BASE and e != "discovered_terms"]
+    if hand:        # turned by hand (hand_turns): no command, but why
+        hidden = list(getattr(diagnosis.result.model, "unobservable", None) or [])
+        diagnosis.design_suggestions = ([f"not revealed by this capture: {', '.join(hidden)}"] if hidden else []) + [
+            f"no `station design --from` command: {', '.join(hand)} turned without a table's angle and rate "
+            "(by hand), and the designer weighs a table's segments against the capture's own; design a "
+            "table scheme with `station design`, or record more attitudes and turns by hand"]
+        return
+    alike = alike_candidates(diagnosis.candidates)
     for c in diagnosis.candidates:
         blind = list(c.aliased) if c.dof else list(c.names)
         if blind and c.names and not c.advice.startswith("cannot be tested"):
             c.suggestion = command(capture, model_effects + [c.effect], blind, registry)
+        if c.significant:
+            said = separations(capture, model_effects, c.effect, summaries, registry) if summaries is not None else []
+            named = {_pair_of(x)[1] for x in said}
+            effects = [e for e in model_effects if e not in NOT_DESIGNED]
+            effects += [] if c.effect in effects else [c.effect]
+            said += [separate_command(capture, effects, c.effect, other, registry)
+                     for other in alike.get(c.effect, []) if other not in named
+                     and not (c.effect in TIMELINE and other in TIMELINE)]
+            c.separations = said
+            c.alike = [o for o in alike.get(c.effect, []) if c.effect in TIMELINE and o in TIMELINE]
     lines = []
     hidden = list(getattr(diagnosis.result.model, "unobservable", None) or [])
     if hidden:
         lines.append(f"not revealed by this capture: {', '.join(hidden)}; the fewest segments that reveal them: "
                      f"{command(capture, model_effects, hidden, registry)}")
     diagnosis.design_suggestions = lines
+
+
+def _pair_of(cmd: str) -> tuple:
+    words = shlex.split(cmd)
+    a, _, b = words[words.index("--separate") + 1].rpartition(",")
+    return a, b
+
+
+def alike_candidates(candidates) -> dict:
+    """{effect: [other effects]} of the significant candidates that this capture cannot tell
+    apart, whoever wrote them (a plugin as the library): their one-step signatures (the change
+    each would make to the whitened residuals, outside the model: core.Candidate.signature_rows)
+    alike to ALIAS_COS, and their difference, the chi2 by which the data would prefer one, not
+    significant (below the 1 % point of chi2 with the smaller one's degrees of freedom, after the
+    over-dispersion the statistics are divided by).  Alike alone is not enough: with two rates a
+    scale asymmetry and a |w|^3 term are alike to 0.97 on a misfit of chi2 10^4, yet the 600 by
+    which one explains it better tells them apart."""
+    import numpy as np
+    from scipy.special import chdtri     # chi2.isf, without scipy.stats' import (~0.5 s)
+
+    sig = [c for c in candidates if c.significant and c.signature_rows is not None and c.dof
+           and c.effect not in NOT_DESIGNED]
+    out: dict = {}
+    for i, a in enumerate(sig):
+        for b in sig[i + 1:]:
+            u, v = np.ravel(a.signature_rows), np.ravel(b.signature_rows)
+            if u.shape != v.shape:
+                continue
+            den = float(np.linalg.norm(u) * np.linalg.norm(v))
+            if not den > 0 or abs(float(u @ v)) / den < ALIAS_COS:
+                continue
+            apart = float(np.sum((u - v) ** 2)) / max(a.overdispersion, b.overdispersion, 1.0)
+            if apart < chdtri(min(a.dof, b.dof), 0.01):
+                out.setdefault(a.effect, []).append(b.effect)
+                out.setdefault(b.effect, []).append(a.effect)
+    return out

@@ -355,27 +355,39 @@ def _moved_axes(result) -> list[str]:
 
 def caveats(summaries, effect_id: str) -> list[str]:
     """What the capture cannot tell apart from ``effect_id``, and the segment that would."""
+    return [text for _, text in aliases(summaries, effect_id)]
+
+
+def aliases(summaries, effect_id: str) -> list[tuple]:
+    """(rival, words) for each thing the capture cannot tell apart from ``effect_id``: rival the
+    library effect it cannot be told from (station design --from CAPTURE --separate EFFECT,RIVAL
+    designs the segments that would: station/diagnose/suggest.py), or None where the rival is no
+    effect (the mounting offset the base model fits)."""
     rates = sorted({round(abs(r.rate_dps), 1) for r in summaries.rotations if r.steady})
     out = []
-    if effect_id in ("gyro_scale_asymmetry", "gyro_rate_squared", "gyro_rate_nonlinearity") and len(rates) == 1:
-        out.append(f"every rotation is at one rate ({rates[0]:g} °/s): a scale asymmetry (|w|) and a "
-                   "term in the square of the rate (w|w|) act alike there; turn at two rates to tell "
-                   "them apart")
+    asym_rival = {"gyro_scale_asymmetry": "gyro_rate_nonlinearity", "gyro_rate_nonlinearity": "gyro_scale_asymmetry",
+                  "gyro_rate_squared": "gyro_scale_asymmetry"}
+    if effect_id in asym_rival and len(rates) == 1:
+        out.append((asym_rival[effect_id],
+                    f"every rotation is at one rate ({rates[0]:g} °/s): a scale asymmetry (|w|) and a "
+                    "term in the square of the rate (w|w|) act alike there; turn at two rates to tell "
+                    "them apart"))
     if effect_id == "time_offset" and summaries.mounting_offset_m is None:
-        out.append("a time offset and the tangential acceleration of a varying rate at an unknown "
-                   "mounting offset both follow the rate's changes; centre the IMU on the axis, or vary "
-                   "the rate with the IMU centred, to tell them apart")
+        out.append((None, "a time offset and the tangential acceleration of a varying rate at an unknown "
+                    "mounting offset both follow the rate's changes; centre the IMU on the axis, or vary "
+                    "the rate with the IMU centred, to tell them apart"))
     if effect_id == "accel_lever_arm" and len(rates) == 1:
-        out.append(f"every rotation is at one rate ({rates[0]:g} °/s): the size effect and any other "
-                   "term in the square of the rate act alike; turn at two rates to confirm it grows "
-                   "with the square of the rate")
+        out.append((None, f"every rotation is at one rate ({rates[0]:g} °/s): the size effect and any other "
+                    "term in the square of the rate act alike; turn at two rates to confirm it grows "
+                    "with the square of the rate"))
     if effect_id in ("rotation_axis_offsets", "accel_lever_arm") and len(rates) == 1:
-        out.append(f"every rotation is at one rate ({rates[0]:g} °/s): an offset of the rotations' accelerometer "
-                   "mean is also what a table vibrating once per revolution leaves (its part across the axis); "
-                   "turn at two rates to confirm it grows with the square of the rate")
+        out.append(("table_vibration_once_per_rev",
+                    f"every rotation is at one rate ({rates[0]:g} °/s): an offset of the rotations' accelerometer "
+                    "mean is also what a table vibrating once per revolution leaves (its part across the axis); "
+                    "turn at two rates to confirm it grows with the square of the rate"))
     if effect_id == "accel_nonlinearity" and summaries.rotations and len(rates) == 1:
-        out.append("a second harmonic in the rotations can also come from a wobbling table axis; "
-                   "statics at ±1 g and 45° separate the two")
+        out.append(("table_wobble", "a second harmonic in the rotations can also come from a wobbling table axis; "
+                    "statics at ±1 g and 45° separate the two"))
     return out
 
 

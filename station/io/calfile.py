@@ -21,7 +21,7 @@ import station
 from station.core import yaml_text
 from station.model.calibration import Calibration
 from station.core.errors import UserError, cannot_write
-from station.core.units import ACCEL_UNITS, GYRO_UNITS, gyro_to_dps_factor
+from station.core.units import ACCEL_UNITS, GYRO_UNITS, accel_to_mps2_factor, gyro_to_dps_factor
 
 FORMAT = "station-calibration/1"
 
@@ -70,6 +70,7 @@ MAX_BYTES = 16 * 2**20          # a calibration file is a few kB; refuse anythin
 MAX_VALUE = 1e12                # no compensation coefficient is anywhere near this
 GYRO_PASS_THROUGH = "not calibrated: passed through (unit conversion only)"
 GYRO_PARAMETERS = tuple(f"gyro_{kind}_{a}" for kind in ("scale", "bias") for a in "xyz")
+SCALE_UNITS = ("1", "raw/(m/s^2)", "raw/(deg/s)")     # the units a scale factor is written in
 MAX_CONDITION = 1e12            # a compensation matrix less well conditioned is singular
 
 
@@ -383,6 +384,10 @@ def read_calfile(path) -> dict:
             shown = name[:60] if name[:60].isprintable() else repr(name[:60])[1:-1]   # one line
             raise UserError(f"{path}: field 'parameters.{shown}': needs a finite 'value', a 'unit' "
                             "and, if given, a finite 'sigma' >= 0")
+        if "_scale_" in name and p["unit"] in SCALE_UNITS and p["value"] == 0:
+            shown = name[:60] if name[:60].isprintable() else repr(name[:60])[1:-1]
+            raise UserError(f"{path}: field 'parameters.{shown}.value': a scale factor of 0 (a sensor that reads "
+                            "nothing of what it senses): not a calibration")
     if not pass_through:            # a gyro compensation stands on the gyro parameters it came from
         missing = [n for n in GYRO_PARAMETERS if n not in params]
         if missing:
@@ -390,7 +395,42 @@ def read_calfile(path) -> dict:
                             "'compensation.gyro_matrix' is given: the gyro parameters were removed, the gyro "
                             f"compensation cannot be trusted (an accelerometer-only file has compensation.gyro: "
                             f"{GYRO_PASS_THROUGH!r})")
+    _scales_agree(doc, imu, params, pass_through, path)
     return doc
+
+
+def _scales_agree(doc, imu, params, pass_through, path) -> None:
+    """The compensation matrices and the scale factors the file states are one calibration.
+
+    The model (station/model/calibration.py) writes accel_matrix = f inv(diag(s) T) and
+    gyro_matrix = f R_po^T inv(diag(s) T), T's rows unit sensing directions, R_po a rotation, f
+    the raw unit's factor to m/s^2 or deg/s (1 for raw): so row i of inv(matrix) / f has length
+    |s_i| for both.  A file edited by hand on one side only (a matrix of 1e-308s that compensates
+    into nothing, a scale changed, or set to 0, beside the matrix it came from) says two different
+    things about one sensor: refused, naming both.  Tolerance: 1 ppm of the scale (the estimator's
+    best 1σ is ~1 ppm for gyros; both sides are written from one float) plus what the matrices'
+    rounding to 15 decimals (``_floats``) can move a row's length: 1e-15 per entry, relative
+    1e-15 * sqrt(3) / |smallest entry's row| -- bounded here by 1e-13 / max|row|."""
+    for sensor, unit_key, factor_of in (("accel", "accel_unit", accel_to_mps2_factor),
+                                        ("gyro", "gyro_unit", gyro_to_dps_factor)):
+        if sensor == "gyro" and pass_through:
+            continue
+        names = [f"{sensor}_scale_{a}" for a in "xyz"]
+        if not any(n in params and params[n].get("unit") in SCALE_UNITS for n in names):
+            continue
+        m = doc["compensation"][f"{sensor}_matrix"]
+        factor = factor_of(imu.get(unit_key, "m/s^2" if sensor == "accel" else "deg/s")) or 1.0
+        with np.errstate(all="ignore"):         # (a matrix of 1e-308s inverts to 1e308s: inf, refused below)
+            rows = np.linalg.norm(np.linalg.inv(m), axis=1) * factor
+        for i, n in enumerate(names):
+            if n not in params or params[n].get("unit") not in SCALE_UNITS:
+                continue
+            stated = abs(params[n]["value"])
+            tol = 1e-6 + 1e-13 / max(float(np.max(np.abs(m[i]))), 1e-300)
+            if not (abs(rows[i] - stated) <= tol * stated):
+                raise UserError(f"{path}: field 'parameters.{n}.value': {params[n]['value']:.9g} disagrees with "
+                                f"'compensation.{sensor}_matrix' (its scale on that axis: {rows[i]:.9g}): the file "
+                                "was changed on one side only; not one calibration")
 
 
 def _effect_entries(entries, path) -> list:

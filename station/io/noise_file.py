@@ -35,12 +35,11 @@ def check_kalibr(kal: dict, where) -> None:
 
 
 def _load(path: Path) -> dict:
+    from station.core.user_files import read_user_text
+
+    text = read_user_text(path, "noise file")                 # (a FIFO is refused, not read: it hung)
     try:
-        doc = yaml_text.safe_load(path.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise UserError(f"{path}: cannot read: {e.strerror}") from None
-    except UnicodeDecodeError:
-        raise UserError(f"{path}: not UTF-8 text") from None
+        doc = yaml_text.safe_load(text)
     except (yaml.YAMLError, ValueError) as e:
         raise UserError(f"{path}: not valid YAML: {yaml_text.error_line(e)}") from None
     if not isinstance(doc, dict):

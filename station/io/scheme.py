@@ -24,6 +24,9 @@ from station.core.errors import UserError
 from station.core import yaml_text
 
 DEFAULT_KEYS = ("dwell_s", "rate_dps", "rotation_s")
+SEGMENT_KEYS = {"static": ("static", "up_body", "dwell_s", "heading_body", "heading_deg"),
+                "rotation": ("rotation", "axis_body", "rate_dps", "rotation_s", "axis_elevation_deg", "pair",
+                             "encoder", "turn_deg")}
 
 
 @dataclass(frozen=True)
@@ -87,10 +90,9 @@ def scheme_text(name_or_path: str) -> tuple[str, str]:
         return (resources.files("schemes").joinpath(f"{name_or_path}.yaml").read_text(),
                 f"scheme '{name_or_path}'")
     if path.suffix in (".yaml", ".yml") or path.exists():
-        try:
-            return path.read_text(), str(path)
-        except OSError as e:
-            raise UserError(f"{path}: cannot read scheme file: {e.strerror}") from None
+        from station.core.user_files import read_user_text
+
+        return read_user_text(path, "scheme file"), str(path)      # (a FIFO is refused, not read: it hung)
     raise UserError(f"unknown scheme '{name_or_path}': built-in schemes are "
                     f"{', '.join(builtin_names())}, or give a path to a .yaml file")
 
@@ -155,6 +157,11 @@ def parse_scheme(doc, source: str, overrides: dict) -> Scheme:
         where = f"{source}: segments[{i}]"
         if not isinstance(entry, dict):
             raise UserError(f"{where}: must be a mapping")
+        kind = "static" if "static" in entry else "rotation" if "rotation" in entry else None
+        unknown = [k for k in entry if kind is not None and k not in SEGMENT_KEYS[kind]]
+        if unknown:             # (a key ignored changed the run without a word: duration_s on a static)
+            raise UserError(f"{where}: unknown field {str(unknown[0])[:40]!r} for a {kind} "
+                            f"(known: {', '.join(SEGMENT_KEYS[kind])})")
         if "static" in entry:
             dwell = entry.get("dwell_s", defaults.get("dwell_s"))
             if dwell is None:

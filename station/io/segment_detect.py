@@ -117,7 +117,9 @@ def detect(t, accel, gyro, *, window_s: float = 0.5, min_static_s: float = 2.0,
             raise ValueError("the initial rest has a zero mean specific force: the accelerometer "
                              "scale cannot be found from it")
         accel_mps2_per_unit = STANDARD_GRAVITY_MPS2 / norm
-        thresholds["accel_scale_from"] = "initial rest (|f| = standard gravity)"
+        # (no '|' in what the manifest keeps: a '|' sends the whole manifest to the pure-Python
+        # YAML loader, station.core.yaml_text; issue 27)
+        thresholds["accel_scale_from"] = "initial rest (the norm of its mean = standard gravity)"
     a = accel * accel_mps2_per_unit
     if gyro_dps_per_unit is None:
         rest_sigma = float(np.max(np.std(gyro[rest], axis=0)))

@@ -47,7 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
-from station.io.capture import CaptureWriter, ImuInfo, Site
+from station.io.capture import ImportCaptureWriter, ImuInfo, Site
 from station.core.errors import UserError
 from station.core.units import ACCEL_UNITS, GYRO_UNITS
 from station.io.importers.text import read_text
@@ -182,12 +182,9 @@ def read_session(csv_path, sections_path, rate_hz: float) -> tuple[list[Section]
 
 def read_section_list(path: Path, rows: int) -> list[tuple[str, tuple[int, int]]]:
     """{label: {start, end}} -> [(label, (start, end))] in time order, checked."""
-    try:
-        text = Path(path).read_text(encoding="utf-8-sig")
-    except OSError as e:
-        raise UserError(f"{path}: cannot read: {e.strerror}") from None
-    except UnicodeDecodeError:
-        raise UserError(f"{path}: not UTF-8 text") from None
+    from station.core.user_files import read_user_text
+
+    text = read_user_text(path, "sections file")              # (a FIFO is refused, not read)
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as e:
@@ -379,9 +376,19 @@ def import_imucal(csv_path, out_dir, *, rate_hz: float, sections_path=None, fmt:
         raise UserError(f"--turn-deg must be a positive angle in degrees, got {turn_deg!r}")
     if not (math.isfinite(placement_deg) and placement_deg > 0):
         raise UserError(f"--placement-deg must be a positive angle in degrees, got {placement_deg!r}")
-    writer = CaptureWriter(out_dir, ImuInfo(float(rate_hz), accel_unit, gyro_unit, model=model, serial=serial),
-                           Site(float(gravity_mps2)), scheme="imucal-ferraris",
-                           extra={"import": source, "table": {"angle_error_arcsec": placement_deg * 3600.0}})
+    # an import is redone, not resumed: the manifest written at the start and at the end, no
+    # fsync of each file (ImportCaptureWriter)
+    writer = ImportCaptureWriter(out_dir, ImuInfo(float(rate_hz), accel_unit, gyro_unit, model=model, serial=serial),
+                                 Site(float(gravity_mps2)), scheme="imucal-ferraris",
+                                 extra={"import": source, "table": {"angle_error_arcsec": placement_deg * 3600.0}})
+    try:
+        _write_sections(writer, sections, bias, gyro_unit, kinematic, rate_hz, turn_deg)
+    finally:
+        writer.finish()         # (stopped by an error: the manifest of what was written)
+    return writer.path
+
+
+def _write_sections(writer, sections, bias, gyro_unit, kinematic, rate_hz, turn_deg) -> None:
     for s in sections:
         if s.label in STATIC_UP:
             meta = {"up_body": list(STATIC_UP[s.label]),
@@ -400,4 +407,3 @@ def import_imucal(csv_path, out_dir, *, rate_hz: float, sections_path=None, fmt:
         with writer.begin_segment(s.label, kind, **meta) as seg:
             seg.write(s.t, s.accel, s.gyro)
             seg.close()
-    return writer.path

@@ -30,7 +30,7 @@ import yaml
 from station.core import units
 from station.core.errors import UserError
 from station.core import yaml_text
-from station.io.capture import MAX_CSV_VALUE, DeferredCaptureWriter, FormattedRows, ImuInfo, Site
+from station.io.capture import MAX_CSV_VALUE, FormattedRows, ImportCaptureWriter, ImuInfo, Site
 from station.io.segment_detect import Detection, Interval, detect
 from station.model.geometry import ATTITUDE_TOLERANCE_DEG, distinct_directions
 
@@ -52,7 +52,7 @@ IMUCAL_UP = {"x_p": (1, 0, 0), "x_a": (-1, 0, 0), "y_p": (0, 1, 0), "y_a": (0, -
 IMUCAL_AXIS = {"x_rot": (1, 0, 0), "y_rot": (0, 1, 0), "z_rot": (0, 0, 1)}
 
 
-_ImportWriter = DeferredCaptureWriter      # an import is redone, not resumed: two manifest writes
+_ImportWriter = ImportCaptureWriter   # an import is redone, not resumed: two manifest writes, no fsync a file
 
 
 @dataclass

@@ -1,0 +1,111 @@
+"""The designed scheme's own timeline: the order its segments are written in, and the temperature
+each has when the scheme is run, so that the search informs temperature-dependent effects at the
+temperatures the design gives them (station/design/information.py, ``timeline=True``).
+
+The order is the scheme writer's (designer._segments_of): mounting by mounting as the time model
+covers them, within a mounting the statics first, then the rotation pairs.  The clock is the
+simulated bench's, on which the design's prediction and ``station montecarlo`` record the scheme
+(sim_devices/bench.py: before each segment the bench's move and settling gap, then its samples;
+a rotation pair is two segments), and the temperature at a time is the simulated IMU's
+(its warm-up, sim_devices/truth.py TemperatureTruth); a segment's summary carries its mean
+temperature (station/estimate/summaries.py), here Simpson's rule over its samples' span (the
+warm-up's curvature over a 1000 s dwell: < 1e-3 degC off the mean of its samples).  The effects'
+reference is the estimator's: the mean temperature of the statics.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def written_order(chosen, cands, masks=None) -> list:
+    """The chosen candidates' indices in the order the scheme file lists them."""
+    chosen = list(chosen)
+    group = cover([masks[i] for i in chosen]) if masks is not None else [0] * len(chosen)
+    order: dict = {}
+    for g in group:
+        order.setdefault(g, len(order))
+    of = dict(zip(chosen, group))
+    statics = [i for i in chosen if cands[i].kind == "static"]
+    rotations = [i for i in chosen if cands[i].kind == "rotation"]
+    statics.sort(key=lambda i: (order[of[i]], tuple(-x for x in cands[i].key[1])))
+    rotations.sort(key=lambda i: (order[of[i]], -cands[i].key[1], tuple(-x for x in cands[i].key[0]),
+                                  -cands[i].key[2], -cands[i].key[3]))
+    return sorted(statics + rotations, key=lambda i: order[of[i]])       # (a stable sort)
+
+
+def segment_seconds(c) -> list:
+    """The recorded lengths of a candidate's segments (a static: its dwell; a rotation pair: its
+    two directions, whole revolutions each)."""
+    if c.kind == "static":
+        return [float(c.dwell_s)]
+    axis, e, rate, rev = c.key
+    return [rev * 360.0 / rate] * 2
+
+
+def mean_temperatures(sequence, cands, temperature, clock) -> np.ndarray:
+    """Each candidate's mean temperature (degC) when ``sequence`` (candidate indices, in order)
+    is recorded from the bench clock's start: ``clock`` = (the gap before each segment, s; the
+    sample rate, Hz); ``temperature.at(t)`` the IMU's temperature at bench time t."""
+    return seconds_temperatures([segment_seconds(cands[i]) for i in sequence], temperature, clock)
+
+
+def seconds_temperatures(items, temperature, clock) -> np.ndarray:
+    """mean_temperatures of items given as the lengths of their segments, in order."""
+    gap, fs = clock
+    dt = 1.0 / fs
+    end = 0.0
+    out = np.zeros(len(items))
+    for k, lengths in enumerate(items):
+        temps, weights = [], []
+        for seconds in lengths:
+            n = max(1, int(round(seconds * fs)))
+            a = end + gap + 0.5 * dt
+            b = a + (n - 1) * dt
+            end = b + 0.5 * dt
+            ta, tm, tb = temperature.at(np.array([a, 0.5 * (a + b), b]))
+            temps.append((ta + 4.0 * tm + tb) / 6.0)
+            weights.append(n)
+        out[k] = float(np.average(temps, weights=weights))
+    return out
+
+
+def differences(chosen, cands, temperature, clock, masks=None) -> dict:
+    """Per chosen candidate its temperature less the effects' reference (the mean over the chosen
+    statics), in the written order's timeline: {index: dT, degC}."""
+    sequence = written_order(chosen, cands, masks)
+    temps = mean_temperatures(sequence, cands, temperature, clock)
+    statics = [t for i, t in zip(sequence, temps) if cands[i].kind == "static"]
+    reference = float(np.mean(statics)) if statics else float(np.mean(temps)) if len(temps) else 0.0
+    return {i: float(t - reference) for i, t in zip(sequence, temps)}
+
+
+def notional(cands, temperature, clock, budget_s: float) -> dict:
+    """Each candidate's temperature difference before there is a design to place it in: the
+    statics in the first third of the budget (the writer lists them first), the rotations in the
+    rest, the reference the statics' mean.  The search then places every candidate on the
+    design's own timeline at each exchange pass (search.Scorer.retime)."""
+    t = np.linspace(0.0, float(budget_s), 301)
+    T = temperature.at(t)
+    split = t <= budget_s / 3.0
+    static_c, rotation_c = float(np.mean(T[split])), float(np.mean(T[~split]))
+    return {i: (0.0 if c.kind == "static" else rotation_c - static_c) for i, c in enumerate(cands)}
+
+
+def cover(chosen_masks) -> list:
+    """For each chosen candidate the mounting (bit) of the greedy cover mountings_needed counts:
+    the scheme is written mounting by mounting, so that the compiler remounts as often as the
+    time model says."""
+    left = dict(enumerate(chosen_masks))
+    out = [0] * len(chosen_masks)
+    while left:
+        best, best_count = 0, -1
+        bit = 1
+        while bit <= max(left.values()):
+            count = sum(1 for m in left.values() if m & bit)
+            if count > best_count:
+                best, best_count = bit, count
+            bit <<= 1
+        for k in [k for k, m in left.items() if m & best]:
+            out[k] = best
+            del left[k]
+    return out
