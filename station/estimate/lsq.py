@@ -1315,6 +1315,13 @@ MAX_EVALUATIONS = 1000
 CREEP_WINDOW = 25
 CREEP_GAIN = 0.05
 CREEP_CHI2 = 1e-6
+#: where LM goes on after dogbox crept, a column whose scale (MINPACK keeps the largest norm the
+#: column has had) exceeds its norm there STALE_SCALE times is scaled afresh by that norm: imucal's
+#: annotated session (raw counts started at scale 1, 208 at the minimum) kept scales 1e5 times the
+#: norms at the minimum and crept to the limit of 1,000 evaluations (chi2 1.1495); renewed, it
+#: converges (chi2 1.068738) in 278, as LM restarted from scratch did.  The tilted Monte Carlo's
+#: fits (tests/test_lsq_partial_arcs.py) keep ratios of 2-65 there: LM goes on with its state
+STALE_SCALE = 100.0
 CROSSING_SEARCH_AXES = 8         # axes whose crossings are tried in every combination (2^8 short solves)
 CROSSING_SEARCH_EVALUATIONS = 3  # each combination's short solve, before the best two are solved in full
 AXES_FIRST_GYRO_WEIGHT = 1e-3     # the rotations' gyro integrals' weight while the axes are fitted first
@@ -1442,27 +1449,34 @@ def _axes_first(model: Model, x0: np.ndarray, solve) -> np.ndarray:
 
 
 class _Creeping(Exception):
-    """Raised by _CreepWatch inside MINPACK's loop: the Levenberg-Marquardt iterations creep."""
+    """Raised by _CreepWatch around scipy's dogbox: its iterations creep."""
 
 
 class _CreepWatch:
-    """The residual function, watched: the lowest chi2 seen and where; raises _Creeping when
-    CREEP_WINDOW evaluations in a row lowered the lowest chi2 by less than CREEP_GAIN chi2 units
-    (max(1, reduced chi2) at the lowest point: the change of chi2 that moves a parameter by 1 sigma)."""
+    """The lowest chi2 seen and where; creeping when CREEP_WINDOW evaluations in a row lowered it by
+    less than CREEP_GAIN chi2 units (max(1, reduced chi2) at the lowest point: the change of chi2
+    that moves a parameter by 1 sigma).  ``seen`` is the numpy LM's watch (it pauses the solve,
+    its state kept); called as the residual function it wraps ``fun`` and raises _Creeping (for
+    scipy's dogbox, which cannot be paused)."""
 
     def __init__(self, fun):
         self.fun, self.n = fun, 0
         self.best_chi2, self.best_x = np.inf, None
         self.history: list[float] = []          # the lowest chi2 after each evaluation
 
-    def __call__(self, x):
-        r = self.fun(x)
+    def seen(self, x, r, norm=None) -> bool:
+        """Record an evaluation (residuals r at x); whether the solve creeps."""
         self.n += 1
-        chi2 = float(r @ r)
+        chi2 = float(r @ r) if norm is None else norm * norm
         if chi2 < self.best_chi2:
             self.best_chi2, self.best_x = chi2, np.array(x, float)
         self.history.append(self.best_chi2)
-        if len(self.history) > CREEP_WINDOW and self.history[-1 - CREEP_WINDOW] - self.best_chi2 < CREEP_GAIN * self.unit(r, x):
+        return (len(self.history) > CREEP_WINDOW
+                and self.history[-1 - CREEP_WINDOW] - self.best_chi2 < CREEP_GAIN * self.unit(r, x))
+
+    def __call__(self, x):
+        r = self.fun(x)
+        if self.seen(x, r):
             raise _Creeping
         return r
 
@@ -1470,13 +1484,6 @@ class _CreepWatch:
         """The chi2 unit at the lowest point: max(1, chi2 / degrees of freedom)."""
         dof = len(r) - len(x)
         return max(1.0, self.best_chi2 / dof) if dof > 0 else 1.0
-
-
-def _result(model: Model, x: np.ndarray, status: int, nfev: int):
-    """A least_squares-like result at x (what _solve reads of it)."""
-    fun = model.residuals(x)
-    return solver.Result(x=x, fun=fun, jac=model.jacobian(x), cost=0.5 * float(fun @ fun), nfev=nfev, njev=0,
-                         status=status, optimality=float("nan"))
 
 
 def _lm(model: Model, start: np.ndarray, evaluations: int = MAX_EVALUATIONS):
@@ -1489,68 +1496,58 @@ def _lm(model: Model, start: np.ndarray, evaluations: int = MAX_EVALUATIONS):
     ~3e-8 of chi2 per evaluation, and it stopped at MAX_EVALUATIONS (imucal's session: 1,000
     evaluations, 1.5 s, 0.009 of chi2 above the minimum, 0.08 sigma short of it along the
     valley).  When CREEP_WINDOW evaluations in a row gain less than CREEP_GAIN chi2 units (the
-    constants, above) the best point is taken as the minimum if a Gauss-Newton step from it would
-    gain less than CREEP_CHI2 (the step is not taken); else the solve goes on from it by scipy's
-    dogleg ("dogbox": steps in the trust region's box, not damped along the valley's steep sides:
-    43 evaluations there to the minimum; 37 on a failing fit of diagnose --auto where LM gained
-    0.9 of chi2 in 3,000) and LM, watched again, confirms it (its own tolerances: 2 evaluations
-    there).  Where dogbox creeps too, or the confirming LM creeps short of the minimum, LM goes
-    on unwatched from the lowest point with the evaluations left (as before the watch: its
-    tolerances, or the limit and status 0, not converged).  The lowest sum of squares is kept.
-    A fit that converges without creeping takes exactly the path it always did."""
-    options = dict(xtol=1e-10, ftol=1e-10, gtol=1e-10)      # (solver.least_squares scales by the columns)
+    constants, above) LM pauses (solver.LevenbergMarquardt keeps its state) and its point is
+    taken as the minimum if a Gauss-Newton step from it would gain less than CREEP_CHI2 (the
+    step is not taken); else scipy's dogleg ("dogbox": steps in the trust region's box, not
+    damped along the valley's steep sides: 43 evaluations there to the minimum; 37 on a failing
+    fit of diagnose --auto where LM gained 0.9 of chi2 in 3,000) goes on from it, watched the
+    same way, and LM resumes from dogbox's lowest point with the scaling, radius and damping it
+    had (the fourteenth session: it restarted from scratch before, and relearnt them at the cost
+    of tens of evaluations per fit), watched again.  When it creeps again it is at the minimum
+    by the same test, or goes on unwatched with the evaluations left (as before the watch: its
+    tolerances, or the limit and status 0, not converged).  A fit that converges without
+    creeping takes exactly the path it always did."""
+    options = dict(xtol=1e-10, ftol=1e-10, gtol=1e-10)      # (solver scales by the columns)
+    lm = solver.LevenbergMarquardt(model.residuals, start, model.jacobian, **options)
     watch = _CreepWatch(model.residuals)
-    try:
-        return solver.least_squares(watch, start, model.jacobian, max_nfev=evaluations, **options)
-    except _Creeping:
-        pass
-    used = watch.n
-    best = _result(model, watch.best_x, 0, used)
-    if _at_minimum(best):
-        # at the minimum: a Gauss-Newton step would gain less than CREEP_CHI2 of chi2 (the
-        # parameters within ~1e-3 sigma of it); LM was only failing its relative tolerance on a
-        # small sum of squares (a poses-only fit whose gyro block rests on wide priors: chi2 0.18,
-        # ftol 1e-10 asks for 1e-11).  The step is not taken (along directions only wide priors
-        # hold it is not a small step)
-        best.status = 2
-        return best
-    dog = _CreepWatch(model.residuals)
-    try:
-        from scipy.optimize import least_squares      # only where a fit creeps
-        alt = least_squares(dog, watch.best_x, jac=model.jacobian, method="dogbox", x_scale="jac",
-                            max_nfev=max(evaluations - used, 1), **options)
-    except _Creeping:
-        # dogbox creeps too (diagnose --auto's fits beside a bias step at a wrong time, GN's step
-        # gaining ~17 of chi2 ~470): LM as it ran before it was watched, from the lowest point,
-        # with what is left of the evaluations (its own tolerances, or the limit: not converged)
-        used += dog.n
-        return _unwatched(model, dog.best_x if dog.best_chi2 < 2 * best.cost else watch.best_x, evaluations, used)
-    used += alt.nfev
-    if alt.cost >= best.cost:
-        return best
-    again = _CreepWatch(model.residuals)
-    try:
-        res = solver.least_squares(again, alt.x, model.jacobian, max_nfev=max(evaluations - used, 1), **options)
-        res.nfev += used
-        return res if res.cost <= alt.cost else _result(model, alt.x, 0, used)
-    except _Creeping:
-        # creeping again: converged if at the minimum by the same test, else on as before
-        used += again.n
-        end = _result(model, again.best_x, 0, used)
-        if _at_minimum(end):
-            end.status = 2
-            return end
-        return _unwatched(model, again.best_x, evaluations, used)
-
-
-def _unwatched(model: Model, x: np.ndarray, evaluations: int, used: int):
-    """LM, unwatched, from x with the evaluations left of the solve's (at least one): the lower
-    of where it ends and x (there status 0: not converged)."""
-    res = solver.least_squares(model.residuals, x, model.jacobian, max_nfev=max(evaluations - used, 1),
-                               xtol=1e-10, ftol=1e-10, gtol=1e-10)
-    res.nfev += used
-    here = _result(model, x, 0, res.nfev)
-    return res if res.cost <= here.cost else here
+    watch.seen(lm.x, lm.f, lm.fnorm)
+    if lm.run(evaluations, watch.seen) is not None:
+        return lm.result()
+    for detour in (False, True):
+        res = lm.result()             # LM's point: the lowest it accepted
+        if _at_minimum(res):
+            # at the minimum: a Gauss-Newton step would gain less than CREEP_CHI2 units of chi2
+            # (the parameters within ~1e-3 sigma of it); LM was only failing its relative
+            # tolerance on a small sum of squares (a poses-only fit whose gyro block rests on wide
+            # priors: chi2 0.18, ftol 1e-10 asks for 1e-11).  The step is not taken (along
+            # directions only wide priors hold it is not a small step)
+            res.status = 2
+            return res
+        if detour or lm.nfev >= evaluations:
+            break
+        dog = _CreepWatch(model.residuals)
+        try:
+            from scipy.optimize import least_squares      # only where a fit creeps
+            alt = least_squares(dog, lm.x, jac=model.jacobian, method="dogbox", x_scale="jac",
+                                max_nfev=max(evaluations - lm.nfev, 1), **options)
+        except _Creeping:
+            # dogbox creeps too (diagnose --auto's fits beside a bias step at a wrong time, GN's
+            # step gaining ~17 of chi2 ~470): LM goes on unwatched from the lowest point, with
+            # what is left of the evaluations (its own tolerances, or the limit: not converged),
+            # its scaling renewed where it is stale (STALE_SCALE)
+            lm.nfev += dog.n
+            if dog.best_chi2 < lm.fnorm**2:
+                lm.move_to(dog.best_x, rescale=STALE_SCALE)
+            break
+        lm.nfev += alt.nfev
+        if dog.best_chi2 < lm.fnorm**2:
+            lm.move_to(alt.x, alt.fun)        # LM resumes from dogbox's point with its state
+        again = _CreepWatch(model.residuals)
+        again.seen(lm.x, lm.f, lm.fnorm)
+        if lm.run(evaluations, again.seen) is not None:
+            return lm.result()
+    lm.run(evaluations)               # on, unwatched, as before the watch
+    return lm.result()
 
 
 def _at_minimum(res) -> bool:
@@ -1559,7 +1556,9 @@ def _at_minimum(res) -> bool:
     minimum (chi2 - chi2_min = |delta / sigma|^2 near it)."""
     fun, jac = res.fun, np.asarray(res.jac)
     left = fun + jac @ _gauss_newton_step(jac, fun)
-    return bool(fun @ fun - left @ left < CREEP_CHI2)
+    dof = len(fun) - jac.shape[1]
+    unit = max(1.0, float(fun @ fun) / dof) if dof > 0 else 1.0     # _CreepWatch.unit: sigma scaled by it
+    return bool(fun @ fun - left @ left < CREEP_CHI2 * unit)
 
 
 def _solve(model: Model, x0: np.ndarray):

@@ -90,99 +90,161 @@ def _step(s, Vt, uf, diag, delta, par):
     return -(Vt_k.T @ (a / (s_k * s_k + lam))), lam
 
 
+class LevenbergMarquardt:
+    """The solve as an object, so that it can be paused and resumed with its state: where it is
+    (x, the residuals, their norm), the column scaling ``diag``, the trust region's radius
+    ``delta`` and the Levenberg-Marquardt parameter ``par``.  ``run`` iterates until a convergence
+    test, the evaluation limit, or ``watch(x, f, fnorm)`` (called after every evaluation) says
+    stop; ``move_to`` continues from another point (a detour's: lsq._lm's dogbox) with the scaling,
+    radius and damping the iterations had found, not from a fresh start (whose first radius,
+    factor x ||D x||, is rejected and shrunk again step by step: lsq._lm's confirming LM took
+    tens of evaluations to relearn them)."""
+
+    def __init__(self, fun, x0, jac, *, xtol: float = 1e-8, ftol: float = 1e-8, gtol: float = 1e-8,
+                 factor: float = 100.0):
+        self.fun, self.jac = fun, jac
+        self.xtol, self.ftol, self.gtol, self.factor = xtol, ftol, gtol, factor
+        self.x = np.array(x0, dtype=float)
+        self.f = np.asarray(fun(self.x), dtype=float)
+        self.nfev, self.njev = 1, 0
+        self.fnorm = float(np.linalg.norm(self.f))
+        self.diag = None
+        self.delta = self.xnorm = self.par = 0.0
+        self.status = None
+        self.J = None
+        self.J_at_x = False
+        self.first = True           # lmder's first iteration: until a step is accepted
+        self.rescale = 0.0
+
+    def move_to(self, x, f=None, rescale: float = 0.0) -> None:
+        """Continue from x (residuals f, evaluated here when not given) with the state kept;
+        ``rescale`` > 0: a column whose scale exceeds ``rescale`` times its norm at x is scaled by
+        that norm (a scale kept from a start far off)."""
+        self.x = np.array(x, dtype=float)
+        if f is None:
+            f = self.fun(self.x)
+            self.nfev += 1
+        self.f = np.asarray(f, dtype=float)
+        self.fnorm = float(np.linalg.norm(self.f))
+        if self.diag is not None:
+            self.xnorm = float(np.linalg.norm(self.diag * self.x))
+            self.rescale = rescale
+        self.J_at_x = False
+        self.status = None
+
+    def run(self, max_nfev: int, watch=None):
+        """Iterate until a convergence test (status 1-4), ``max_nfev`` evaluations in all (status 0),
+        or ``watch`` returns True after an evaluation (the status stays None: paused; ``run`` goes
+        on from there).  Returns the status."""
+        fun, jac = self.fun, self.jac
+        xtol, ftol, gtol = self.xtol, self.ftol, self.gtol
+        self.status = None
+        while self.status is None:
+            if not self.J_at_x:
+                self.J = np.asarray(jac(self.x), dtype=float)
+                self.njev += 1
+                self.J_at_x = True
+            J, f, fnorm, x = self.J, self.f, self.fnorm, self.x
+            norms = np.linalg.norm(J, axis=0)
+            if self.rescale:
+                stale = (norms > 0) & (self.diag > self.rescale * norms)
+                self.diag = np.where(stale, norms, self.diag)
+                self.xnorm = float(np.linalg.norm(self.diag * x))
+                self.rescale = 0.0
+            elif self.diag is None:
+                self.diag = np.where(norms > 0, norms, 1.0)
+                self.xnorm = float(np.linalg.norm(self.diag * x))
+                self.delta = self.factor * self.xnorm if self.xnorm > 0 else self.factor
+            else:
+                self.diag = np.maximum(self.diag, norms)
+            diag = self.diag
+            # gtol: the largest cosine between f and a column of J
+            gnorm = 0.0
+            if fnorm > 0:
+                g = J.T @ f
+                nz = norms > 0
+                if nz.any():
+                    gnorm = float(np.max(np.abs(g[nz]) / (norms[nz] * fnorm)))
+            if fnorm == 0 or gnorm <= max(gtol, EPS):
+                self.status = 1
+                break
+            U, s, Vt = np.linalg.svd(J / diag, full_matrices=False)
+            uf = U.T @ f
+            while True:                                   # until a step reduces the sum of squares
+                p, self.par = _step(s, Vt, uf, diag, self.delta, self.par)
+                par = self.par
+                step = p / diag
+                pnorm = float(np.linalg.norm(p))
+                if self.first:
+                    self.delta = min(self.delta, pnorm)   # lmder: the first radius no longer than the first step
+                x_new = x + step
+                f_new = np.asarray(fun(x_new), dtype=float)
+                self.nfev += 1
+                with np.errstate(over="ignore", invalid="ignore"):      # a trial step too far: rejected
+                    fnorm1 = float(np.linalg.norm(f_new))
+                if not math.isfinite(fnorm1):
+                    fnorm1 = math.inf
+                actred = 1.0 - (fnorm1 / fnorm) ** 2 if 0.1 * fnorm1 < fnorm else -1.0
+                Jp = J @ step
+                temp1 = float(np.linalg.norm(Jp)) / fnorm
+                temp2 = math.sqrt(par) * pnorm / fnorm
+                prered = temp1 * temp1 + temp2 * temp2 / 0.5
+                dirder = -(temp1 * temp1 + temp2 * temp2)
+                ratio = actred / prered if prered != 0 else 0.0
+                if ratio <= 0.25:
+                    temp = 0.5 if actred >= 0 else 0.5 * dirder / (dirder + 0.5 * actred)
+                    if 0.1 * fnorm1 >= fnorm or temp < 0.1:
+                        temp = 0.1
+                    self.delta = temp * min(self.delta, pnorm / 0.1)
+                    self.par = par / temp
+                elif par == 0 or ratio >= 0.75:
+                    self.delta = pnorm / 0.5
+                    self.par = 0.5 * par
+                if ratio >= 1e-4:                         # accepted
+                    x, f, fnorm = x_new, f_new, fnorm1
+                    self.x, self.f, self.fnorm = x, f, fnorm
+                    self.xnorm = float(np.linalg.norm(diag * x))
+                    self.J_at_x = False
+                    self.first = False
+                # lmder's tests; a tolerance below the machine's precision is met at that precision
+                # (lmder's info 6 and 7: no further reduction, no further step possible)
+                f_ok = abs(actred) <= max(ftol, EPS) and prered <= max(ftol, EPS) and 0.5 * ratio <= 1
+                x_ok = self.delta <= max(xtol, EPS) * self.xnorm
+                if f_ok and x_ok:
+                    self.status = 4
+                elif f_ok:
+                    self.status = 2
+                elif x_ok:
+                    self.status = 3
+                elif self.nfev >= max_nfev:
+                    self.status = 0
+                if self.status is not None:
+                    break
+                if watch is not None and watch(x_new, f_new, fnorm1):
+                    return None                           # paused (the state is kept)
+                if ratio >= 1e-4:
+                    break
+        return self.status
+
+    def result(self) -> Result:
+        """The result where the iterations are (the Jacobian evaluated there if it is not yet)."""
+        if not self.J_at_x:
+            self.J = np.asarray(self.jac(self.x), dtype=float)
+            self.njev += 1
+            self.J_at_x = True
+        g = self.J.T @ self.f
+        return Result(x=self.x, fun=self.f, jac=self.J, cost=0.5 * float(self.f @ self.f), nfev=self.nfev,
+                      njev=self.njev, status=0 if self.status is None else self.status,
+                      optimality=float(np.max(np.abs(g))) if len(g) else 0.0)
+
+
 def least_squares(fun, x0, jac, *, xtol: float = 1e-8, ftol: float = 1e-8, gtol: float = 1e-8,
                   max_nfev: int | None = None, factor: float = 100.0) -> Result:
     """Minimise 0.5 ||fun(x)||^2 from x0 (Levenberg–Marquardt, MINPACK's updates, column-norm
     scaling); ``jac(x)`` the dense Jacobian (m x n, m >= n)."""
-    x = np.array(x0, dtype=float)
-    n = len(x)
-    max_nfev = 100 * n if max_nfev is None else int(max_nfev)
-    f = np.asarray(fun(x), dtype=float)
-    nfev, njev = 1, 0
-    fnorm = float(np.linalg.norm(f))
-    diag = None
-    delta = xnorm = par = 0.0
-    status = None
-    J = None
-    J_at_x = False
-    first = True                # lmder's first iteration: until a step is accepted
-    while status is None:
-        J = np.asarray(jac(x), dtype=float)
-        njev += 1
-        J_at_x = True
-        norms = np.linalg.norm(J, axis=0)
-        if diag is None:
-            diag = np.where(norms > 0, norms, 1.0)
-            xnorm = float(np.linalg.norm(diag * x))
-            delta = factor * xnorm if xnorm > 0 else factor
-        else:
-            diag = np.maximum(diag, norms)
-        # gtol: the largest cosine between f and a column of J
-        gnorm = 0.0
-        if fnorm > 0:
-            g = J.T @ f
-            nz = norms > 0
-            if nz.any():
-                gnorm = float(np.max(np.abs(g[nz]) / (norms[nz] * fnorm)))
-        if fnorm == 0 or gnorm <= max(gtol, EPS):
-            status = 1
-            break
-        U, s, Vt = np.linalg.svd(J / diag, full_matrices=False)
-        uf = U.T @ f
-        while True:                                   # until a step reduces the sum of squares
-            p, par = _step(s, Vt, uf, diag, delta, par)
-            step = p / diag
-            pnorm = float(np.linalg.norm(p))
-            if first:
-                delta = min(delta, pnorm)             # lmder: the first radius no longer than the first step
-            x_new = x + step
-            f_new = np.asarray(fun(x_new), dtype=float)
-            nfev += 1
-            with np.errstate(over="ignore", invalid="ignore"):      # a trial step too far: rejected
-                fnorm1 = float(np.linalg.norm(f_new))
-            if not math.isfinite(fnorm1):
-                fnorm1 = math.inf
-            actred = 1.0 - (fnorm1 / fnorm) ** 2 if 0.1 * fnorm1 < fnorm else -1.0
-            Jp = J @ step
-            temp1 = float(np.linalg.norm(Jp)) / fnorm
-            temp2 = math.sqrt(par) * pnorm / fnorm
-            prered = temp1 * temp1 + temp2 * temp2 / 0.5
-            dirder = -(temp1 * temp1 + temp2 * temp2)
-            ratio = actred / prered if prered != 0 else 0.0
-            if ratio <= 0.25:
-                temp = 0.5 if actred >= 0 else 0.5 * dirder / (dirder + 0.5 * actred)
-                if 0.1 * fnorm1 >= fnorm or temp < 0.1:
-                    temp = 0.1
-                delta = temp * min(delta, pnorm / 0.1)
-                par = par / temp
-            elif par == 0 or ratio >= 0.75:
-                delta = pnorm / 0.5
-                par = 0.5 * par
-            if ratio >= 1e-4:                         # accepted
-                x, f, fnorm = x_new, f_new, fnorm1
-                xnorm = float(np.linalg.norm(diag * x))
-                J_at_x = False
-                first = False
-            # lmder's tests; a tolerance below the machine's precision is met at that precision
-            # (lmder's info 6 and 7: no further reduction, no further step possible)
-            f_ok = abs(actred) <= max(ftol, EPS) and prered <= max(ftol, EPS) and 0.5 * ratio <= 1
-            x_ok = delta <= max(xtol, EPS) * xnorm
-            if f_ok and x_ok:
-                status = 4
-            elif f_ok:
-                status = 2
-            elif x_ok:
-                status = 3
-            elif nfev >= max_nfev:
-                status = 0
-            if status is not None or ratio >= 1e-4:
-                break
-    if not J_at_x:
-        J = np.asarray(jac(x), dtype=float)
-        njev += 1
-    g = J.T @ f
-    return Result(x=x, fun=f, jac=J, cost=0.5 * float(f @ f), nfev=nfev, njev=njev, status=status,
-                  optimality=float(np.max(np.abs(g))) if len(g) else 0.0)
+    lm = LevenbergMarquardt(fun, x0, jac, xtol=xtol, ftol=ftol, gtol=gtol, factor=factor)
+    lm.run(100 * len(lm.x) if max_nfev is None else int(max_nfev))
+    return lm.result()
 
 
 def huber_linear(A: np.ndarray, y: np.ndarray, f_scale: float, start=None, *, rtol: float = 1e-13,
