@@ -121,7 +121,9 @@ def _verdict(cal: Calibration) -> None:
         verdict["noise_model"] = ", ".join(terms)
     if fit.get("converged") is False and not _written_at_minimum(cal, fit.get("remaining_step_sigma")):
         verdict["result"] = "not converged"
-        verdict["reason"] = (f"the fit stopped at its evaluation limit before it converged (reduced chi2 "
+        how = ("on its tolerances short of its minimum (a Gauss-Newton step from there still lowers chi2)"
+               if fit.get("stopped_short") else "at its evaluation limit")
+        verdict["reason"] = (f"the fit stopped {how} before it converged (reduced chi2 "
                              f"{reduced:.3g} where it stopped): the values and 1-sigma are not those of a "
                              "minimum; do not use this calibration (station diagnose shows which "
                              "parameters the data barely see)")
