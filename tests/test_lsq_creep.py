@@ -156,3 +156,6 @@ def test_a_fit_stopped_short_of_its_minimum_by_its_tolerances_is_not_converged(o
     cal = verdict.judge(lsq.to_calibration(short, "m/s^2", "deg/s"))
     assert cal.fit["verdict"]["result"] == "not converged" and verdict.fit_fails(cal)
     assert "on its tolerances short of its minimum" in cal.fit["verdict"]["reason"]
+    from station.diagnose.core import not_converged       # diagnose's first words say the same
+    assert not_converged(short).startswith("not converged: the fit stopped on its tolerances short")
+    assert not_converged(good) == ""
