@@ -15,7 +15,10 @@ the SVD's exact derivative) where lmder uses a pivoted QR factorisation and lmpa
 step to rounding, and as cheap for the fit's sizes (200 × 90: 1 ms).  The solution is the same
 within the tolerances (tests/test_solver.py compares it with scipy's on the fit's models).
 
-The result has scipy's fields the callers use: x, fun, jac (at x), cost, nfev, njev, status
+``LevenbergMarquardt`` is the solve as an object whose ``run`` a watch can pause and that goes on
+with its state (scaling, radius, damping), also from another point (``move_to``): lsq._lm pauses
+it where it creeps and resumes it after a dogbox detour (docs/method-lsq.md, fourteenth session);
+``least_squares`` runs it once.  The result has scipy's fields the callers use: x, fun, jac (at x), cost, nfev, njev, status
 (0: the evaluation limit reached; 1: gtol; 2: ftol; 3: xtol; 4: ftol and xtol), success,
 message, optimality.
 """
