@@ -86,7 +86,7 @@ class PerSegmentModel(Model):
         p = x[self.layout[f"static{j}"]]
         ref = self.static_ref[j]
         if self.with_latitude:
-            return Rotation.from_rotvec(p) * ref
+            return Rotation.from_rotvec(p) * Rotation.from_matrix(ref)    # (the model keeps matrices)
         if not hasattr(self, "_static_basis"):      # fixed: computed once
             self._static_basis = [tangent_basis(r) for r in self.static_ref]
         t1, t2 = self._static_basis[j]

@@ -107,9 +107,10 @@ def _verdict_checks(ns):
     assert judged(200.0, 300).fit["verdict"]["result"] == "passes"           # 2/3 exactly
     p_fail = ns["P_FAIL"]
     try:
-        ns["P_FAIL"] = float(ns["special"].chdtrc(10, 40.0))     # reduced 4 at 10 dof: p exactly at P_FAIL
+        # (the verdict's own tails, station.estimate.distributions: scipy's to ~1e-15, not to the bit)
+        ns["P_FAIL"] = float(ns["chi2_sf"](10, 40.0))            # reduced 4 at 10 dof: p exactly at P_FAIL
         assert judged(40.0, 10).fit["verdict"]["result"] == "passes"
-        ns["P_FAIL"] = float(ns["special"].chdtr(10, 0.5))       # reduced 0.05: P(below) exactly at P_FAIL
+        ns["P_FAIL"] = float(ns["chi2_cdf"](10, 0.5))            # reduced 0.05: P(below) exactly at P_FAIL
         assert judged(0.5, 10).fit["verdict"]["result"] == "passes"
     finally:
         ns["P_FAIL"] = p_fail
@@ -123,7 +124,7 @@ def _verdict_checks(ns):
 
 def test_the_verdicts_thresholds_and_widening(monkeypatch):
     ns, names = _mutate(verdict, ["_verdict"],
-                        r"P_FAIL|REDUCED_CHI2_FAIL|chdtr|reduced = |scale = |fails = |overestimated = |cal.sigma = ")
+                        r"P_FAIL|REDUCED_CHI2_FAIL|chdtr|chi2_sf|chi2_cdf|reduced = |scale = |fails = |overestimated = |cal.sigma = ")
     assert len(names) >= 20, len(names)
     assert _survivors(monkeypatch, verdict, ns, names, _verdict_checks) == []
 

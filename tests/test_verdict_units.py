@@ -42,9 +42,14 @@ def test_the_chi2_thresholds_are_strict():
 
 
 def test_the_p_value_thresholds_are_strict(monkeypatch):
-    monkeypatch.setattr(verdict, "P_FAIL", float(special.chdtrc(10, 40.0)))     # p exactly at P_FAIL
+    # the verdict's own tails (station.estimate.distributions: scipy's chdtrc / chdtr to ~1e-15,
+    # not to the last bit, so "exactly at the threshold" is the value the verdict computes)
+    from station.estimate import distributions
+
+    assert distributions.chi2_sf(10, 40.0) == pytest.approx(float(special.chdtrc(10, 40.0)), rel=1e-12)
+    monkeypatch.setattr(verdict, "P_FAIL", distributions.chi2_sf(10, 40.0))     # p exactly at P_FAIL
     assert result(chi2=40.0, dof=10) == "passes"
-    monkeypatch.setattr(verdict, "P_FAIL", float(special.chdtr(10, 0.5)))       # P(below) exactly
+    monkeypatch.setattr(verdict, "P_FAIL", distributions.chi2_cdf(10, 0.5))     # P(below) exactly
     assert result(chi2=0.5, dof=10) == "passes"
 
 

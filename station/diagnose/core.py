@@ -277,8 +277,9 @@ def not_converged(result) -> str:
     minimum (lsq._solve's note; verdict.py's "not converged"); "" for a converged fit."""
     if getattr(result.model, "converged", True):
         return ""
-    return ("not converged: the fit stopped at its evaluation limit before its minimum, so the chi2 and what "
-            "follows are those where it stopped; ")
+    where = ("on its tolerances short of its minimum (a Gauss-Newton step still lowers chi2)"
+             if getattr(result.model, "stopped_short", False) else "at its evaluation limit before its minimum")
+    return f"not converged: the fit stopped {where}, so the chi2 and what follows are those where it stopped; "
 
 
 def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diagnosis:

@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import special
+from station.estimate.distributions import chi2_sf
 
 P_NAMED = 1e-3          # a group is named when its scatter is this improbable under its stated noise
 MIN_REDUNDANCY = 2.0    # below this a group's scatter says too little to be reported
@@ -105,7 +105,7 @@ def _component(rows: np.ndarray, residuals: np.ndarray, h: np.ndarray) -> dict:
     entry = {"rows": int(len(rows)), "redundancy": f, "chi2": chi2}
     if f >= MIN_REDUNDANCY:
         entry["scatter"] = math.sqrt(chi2 / f)
-        entry["p_value"] = float(special.chdtrc(f, chi2))
+        entry["p_value"] = chi2_sf(f, chi2)
     return entry
 
 

@@ -46,11 +46,10 @@ import dataclasses
 import math
 
 import numpy as np
-from scipy import special
-from scipy.optimize import least_squares
 
 from station.core import units
-from station.estimate import lsq
+from station.estimate import lsq, solver
+from station.estimate.distributions import norm_ppf
 from station.estimate.summaries import summarise
 from station.model.geometry import ATTITUDE_TOLERANCE_DEG, distinct_directions
 
@@ -67,7 +66,7 @@ MISALIGNMENT = [3, 4, 5]
 def threshold(m: int) -> float:
     """The |z| above which one of m Gaussian differences is called a disagreement (Bonferroni,
     two-sided, false alarm P_FALSE in all)."""
-    return float(special.ndtri(1.0 - P_FALSE / (2.0 * m)))
+    return float(norm_ppf(1.0 - P_FALSE / (2.0 * m)))
 
 
 def attitudes(s, result: lsq.FitResult | None = None) -> tuple[int, int]:
@@ -154,11 +153,13 @@ def held_refit(joint: lsq.FitResult, values: np.ndarray, cov_held: np.ndarray) -
         J = model.sparse_jacobian(full(z)) if model.is_large else model.jacobian(full(z))
         return J.tocsc()[:, free] if hasattr(J, "tocsc") else np.asarray(J)[:, free]
 
-    options = dict(x_scale="jac", xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=lsq.MAX_EVALUATIONS)
+    options = dict(xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=lsq.MAX_EVALUATIONS)
     if model.is_large:
-        res = least_squares(fun, x[free], jac=jac, method="trf", tr_solver="lsmr", **options)
-    else:
-        res = least_squares(fun, x[free], jac=jac, method="lm", **options)
+        from scipy.optimize import least_squares     # (large models only)
+
+        res = least_squares(fun, x[free], jac=jac, method="trf", tr_solver="lsmr", x_scale="jac", **options)
+    else:       # MINPACK's Levenberg-Marquardt in numpy (station/estimate/solver.py: no scipy import)
+        res = solver.least_squares(fun, x[free], jac, **options)
     x = full(res.x)
     model.converged = res.status != 0
     J = _dense_jacobian(model, x)

@@ -18,12 +18,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 from station.core import units
+from station.estimate import solver
 from station.model.calibration import Calibration
 from station.core.errors import UserError
+from station.model.rotation import align_vectors
 
 EARTH_RATE_DPS = units.EARTH_RATE_DPS
 
@@ -160,8 +160,13 @@ def fit_gyro_bias(L: np.ndarray, means: np.ndarray, earth_rate: float = EARTH_RA
     A = np.column_stack([2 * v, -np.ones(len(v))])
     sol, *_ = np.linalg.lstsq(A, np.sum(v * v, axis=1), rcond=None)
     c = sol[:3]
-    res = least_squares(lambda c: np.linalg.norm(v - c, axis=1) - earth_rate, c,
-                        x_scale=earth_rate, xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    def jac(c):             # d(|v - c| - earth rate)/dc
+        d = v - c
+        return -d / np.linalg.norm(d, axis=1)[:, None]
+
+    # (to the machine's precision; station/estimate/solver.py: no scipy import)
+    res = solver.least_squares(lambda c: np.linalg.norm(v - c, axis=1) - earth_rate, c, jac,
+                               xtol=1e-15, ftol=1e-15, gtol=1e-15)
     return np.linalg.solve(L, res.x)
 
 
@@ -193,8 +198,7 @@ def fit_inter_triad(pairs, L_a, b_a, L_g) -> tuple[np.ndarray | None, list]:
     if len(axes_o) < 2:
         return None, notes + ["inter-triad misalignment not estimated: fewer than two usable "
                               "rotation axes"]
-    rot, _ = Rotation.align_vectors(np.array(axes_o), np.array(axes_p))
-    return rot.as_matrix(), notes
+    return align_vectors(np.array(axes_o), np.array(axes_p)), notes
 
 
 def estimate(capture) -> Calibration:

@@ -74,9 +74,9 @@ class Calibration:
 
     @property
     def inter_triad_rad(self) -> np.ndarray:
-        from scipy.spatial.transform import Rotation   # not at import: reading a capture needs no scipy
+        from station.model.rotation import rotvec_from_matrix     # (scipy's Rotation: 0.2 s to import)
 
-        return Rotation.from_matrix(self.R_po).as_rotvec()
+        return rotvec_from_matrix(self.R_po)
 
     @property
     def accel_matrix(self) -> np.ndarray:

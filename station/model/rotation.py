@@ -100,3 +100,48 @@ def matrix_from_quat(q) -> np.ndarray:
         np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=-1),
         np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=-1),
         np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=-1)], axis=-2)
+
+
+def align_vectors(a, b, weights=None) -> np.ndarray:
+    """The rotation matrix C minimising sum_i w_i |a_i - C b_i|^2 (Wahba's problem, by the SVD
+    of the weighted attitude profile matrix, Markley 1988): what
+    ``Rotation.align_vectors(a, b, weights)[0].as_matrix()`` gives for finite weights, real
+    input only (the fit's starts: no scipy import, issue 27).  Degenerate vectors (fewer than
+    two independent directions) give one of the rotations that align them."""
+    a = np.atleast_2d(np.asarray(a, dtype=float))
+    b = np.atleast_2d(np.asarray(b, dtype=float))
+    w = np.ones(len(a)) if weights is None else np.asarray(weights, dtype=float)
+    B = (a * w[:, None]).T @ b
+    U, _, Vt = np.linalg.svd(B)
+    d = np.sign(np.linalg.det(U @ Vt)) or 1.0
+    return U @ np.diag([1.0, 1.0, d]) @ Vt
+
+
+def rotvec_from_matrix(R) -> np.ndarray:
+    """The rotation vector of a rotation matrix (angle in [0, pi], rad): what
+    ``Rotation.from_matrix(R).as_rotvec()`` gives (through the quaternion by Shepperd's method,
+    the largest of its four components first: no cancellation at any angle), real input only."""
+    R = np.asarray(R, dtype=float)
+    trace = R[0, 0] + R[1, 1] + R[2, 2]
+    diag = np.array([R[0, 0], R[1, 1], R[2, 2], trace])
+    k = int(np.argmax(diag))
+    q = np.empty(4)                                     # (x, y, z, w)
+    if k == 3:
+        q[3] = 1.0 + trace
+        q[0], q[1], q[2] = R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]
+    else:
+        i, j, m = k, (k + 1) % 3, (k + 2) % 3
+        q[i] = 1.0 - trace + 2.0 * R[i, i]
+        q[j] = R[j, i] + R[i, j]
+        q[m] = R[m, i] + R[i, m]
+        q[3] = R[m, j] - R[j, m]
+    q /= np.linalg.norm(q)
+    if q[3] < 0:
+        q = -q
+    s = float(np.linalg.norm(q[:3]))
+    angle = 2.0 * np.arctan2(s, q[3])
+    if s < 1e-3:        # small angle: angle / sin(angle / 2) by its series (no 0 / 0)
+        scale = 2.0 + angle * angle / 12.0 + 7.0 * angle**4 / 2880.0
+    else:
+        scale = angle / s
+    return scale * q[:3]

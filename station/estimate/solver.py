@@ -1,0 +1,272 @@
+"""Nonlinear least squares by Levenberg–Marquardt in numpy: what the fits of a small capture call
+instead of ``scipy.optimize.least_squares(method="lm")`` (MINPACK's lmder), so that estimating a
+small capture does not import scipy (its import was ~0.28 s of CPU of a 0.75 s `station
+estimate`, the fit itself ~3 %: issue 27, docs/performance.md).
+
+The algorithm is MINPACK's (Moré 1978, "The Levenberg–Marquardt algorithm: implementation and
+theory"): a trust region in the variables scaled by the Jacobian's column norms (``x_scale="jac"``,
+MINPACK's mode 1: each scale the largest norm its column has had), the region's radius and the
+Levenberg–Marquardt parameter updated by the ratio of the actual to the predicted reduction as
+lmder updates them, and lmder's three convergence tests (relative reduction ``ftol``, relative
+step ``xtol``, the cosine between the residuals and the Jacobian's columns ``gtol``).  One thing
+differs: the step of a given radius is computed from the SVD of the scaled Jacobian (the
+secular equation ||D p(λ)|| = Δ solved by Newton's method on 1/||D p||, Moré's iteration, with
+the SVD's exact derivative) where lmder uses a pivoted QR factorisation and lmpar; the same
+step to rounding, and as cheap for the fit's sizes (200 × 90: 1 ms).  The solution is the same
+within the tolerances (tests/test_solver.py compares it with scipy's on the fit's models).
+
+``LevenbergMarquardt`` is the solve as an object whose ``run`` a watch can pause and that goes on
+with its state (scaling, radius, damping), also from another point (``move_to``): lsq._lm pauses
+it where it creeps and resumes it after a dogbox detour (docs/method-lsq.md, fourteenth session);
+``least_squares`` runs it once.  The result has scipy's fields the callers use: x, fun, jac (at x), cost, nfev, njev, status
+(0: the evaluation limit reached; 1: gtol; 2: ftol; 3: xtol; 4: ftol and xtol), success,
+message, optimality.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+MESSAGES = {0: "The maximum number of function evaluations is exceeded.",
+            1: "`gtol` termination condition is satisfied.",
+            2: "`ftol` termination condition is satisfied.",
+            3: "`xtol` termination condition is satisfied.",
+            4: "Both `ftol` and `xtol` termination conditions are satisfied."}
+EPS = np.finfo(float).eps
+
+
+@dataclass
+class Result:
+    x: np.ndarray
+    fun: np.ndarray
+    jac: np.ndarray
+    cost: float
+    nfev: int
+    njev: int
+    status: int
+    optimality: float
+
+    @property
+    def success(self) -> bool:
+        return self.status > 0
+
+    @property
+    def message(self) -> str:
+        return MESSAGES[self.status]
+
+
+def _step(s, Vt, uf, diag, delta, par):
+    """The scaled step p (||p|| <= delta) minimising ||J x + f|| with J D^-1 = U S Vt, and its
+    Levenberg–Marquardt parameter (0 for the Gauss–Newton step inside the region)."""
+    keep = s > s[0] * EPS * max(len(diag), 1) if len(s) else s > 0
+    s_k, uf_k, Vt_k = s[keep], uf[keep], Vt[keep]
+
+    def p_of(lam):
+        return -(Vt_k.T @ (s_k * uf_k / (s_k * s_k + lam)))
+
+    gn = p_of(0.0)
+    gn_norm = float(np.linalg.norm(gn))
+    if gn_norm <= 1.1 * delta:          # lmpar: the Gauss-Newton step is accepted within 10 %
+        return gn, 0.0
+    # Moré's Newton iteration on phi(lam) = ||p(lam)|| - delta, from the bracket [lo, hi]
+    a = s_k * uf_k
+    hi = float(np.linalg.norm(a)) / delta           # ||J^T f|| / delta (scaled)
+    lo = 0.0
+    lam = min(max(par, lo), hi) if par > 0 else 0.0
+    for _ in range(30):
+        if not (lo < lam < hi):
+            lam = max(0.001 * hi, math.sqrt(lo * hi)) if lo > 0 else 0.001 * hi
+        den = s_k * s_k + lam
+        q = a / den
+        q_norm = float(np.linalg.norm(q))
+        phi = q_norm - delta
+        if abs(phi) <= 0.1 * delta:
+            break
+        if phi < 0:
+            hi = lam
+        else:
+            lo = lam
+        dphi = -float(np.sum(q * q / den)) / q_norm           # d||q|| / d lam
+        lam = lam - (q_norm / delta) * (phi / dphi) if dphi != 0 else 0.5 * (lo + hi)
+    return -(Vt_k.T @ (a / (s_k * s_k + lam))), lam
+
+
+class LevenbergMarquardt:
+    """The solve as an object, so that it can be paused and resumed with its state: where it is
+    (x, the residuals, their norm), the column scaling ``diag``, the trust region's radius
+    ``delta`` and the Levenberg-Marquardt parameter ``par``.  ``run`` iterates until a convergence
+    test, the evaluation limit, or ``watch(x, f, fnorm)`` (called after every evaluation) says
+    stop; ``move_to`` continues from another point (a detour's: lsq._lm's dogbox) with the scaling,
+    radius and damping the iterations had found, not from a fresh start (whose first radius,
+    factor x ||D x||, is rejected and shrunk again step by step: lsq._lm's confirming LM took
+    tens of evaluations to relearn them)."""
+
+    def __init__(self, fun, x0, jac, *, xtol: float = 1e-8, ftol: float = 1e-8, gtol: float = 1e-8,
+                 factor: float = 100.0):
+        self.fun, self.jac = fun, jac
+        self.xtol, self.ftol, self.gtol, self.factor = xtol, ftol, gtol, factor
+        self.x = np.array(x0, dtype=float)
+        self.f = np.asarray(fun(self.x), dtype=float)
+        self.nfev, self.njev = 1, 0
+        self.fnorm = float(np.linalg.norm(self.f))
+        self.diag = None
+        self.delta = self.xnorm = self.par = 0.0
+        self.status = None
+        self.J = None
+        self.J_at_x = False
+        self.first = True           # lmder's first iteration: until a step is accepted
+        self.rescale = 0.0
+
+    def move_to(self, x, f=None, rescale: float = 0.0) -> None:
+        """Continue from x (residuals f, evaluated here when not given) with the state kept;
+        ``rescale`` > 0: a column whose scale exceeds ``rescale`` times its norm at x is scaled by
+        that norm (a scale kept from a start far off)."""
+        self.x = np.array(x, dtype=float)
+        if f is None:
+            f = self.fun(self.x)
+            self.nfev += 1
+        self.f = np.asarray(f, dtype=float)
+        self.fnorm = float(np.linalg.norm(self.f))
+        if self.diag is not None:
+            self.xnorm = float(np.linalg.norm(self.diag * self.x))
+            self.rescale = rescale
+        self.J_at_x = False
+        self.status = None
+
+    def run(self, max_nfev: int, watch=None):
+        """Iterate until a convergence test (status 1-4), ``max_nfev`` evaluations in all (status 0),
+        or ``watch`` returns True after an evaluation (the status stays None: paused; ``run`` goes
+        on from there).  Returns the status."""
+        fun, jac = self.fun, self.jac
+        xtol, ftol, gtol = self.xtol, self.ftol, self.gtol
+        self.status = None
+        while self.status is None:
+            if not self.J_at_x:
+                self.J = np.asarray(jac(self.x), dtype=float)
+                self.njev += 1
+                self.J_at_x = True
+            J, f, fnorm, x = self.J, self.f, self.fnorm, self.x
+            norms = np.linalg.norm(J, axis=0)
+            if self.rescale:
+                stale = (norms > 0) & (self.diag > self.rescale * norms)
+                self.diag = np.where(stale, norms, self.diag)
+                self.xnorm = float(np.linalg.norm(self.diag * x))
+                self.rescale = 0.0
+            elif self.diag is None:
+                self.diag = np.where(norms > 0, norms, 1.0)
+                self.xnorm = float(np.linalg.norm(self.diag * x))
+                self.delta = self.factor * self.xnorm if self.xnorm > 0 else self.factor
+            else:
+                self.diag = np.maximum(self.diag, norms)
+            diag = self.diag
+            # gtol: the largest cosine between f and a column of J
+            gnorm = 0.0
+            if fnorm > 0:
+                g = J.T @ f
+                nz = norms > 0
+                if nz.any():
+                    gnorm = float(np.max(np.abs(g[nz]) / (norms[nz] * fnorm)))
+            if fnorm == 0 or gnorm <= max(gtol, EPS):
+                self.status = 1
+                break
+            U, s, Vt = np.linalg.svd(J / diag, full_matrices=False)
+            uf = U.T @ f
+            while True:                                   # until a step reduces the sum of squares
+                p, self.par = _step(s, Vt, uf, diag, self.delta, self.par)
+                par = self.par
+                step = p / diag
+                pnorm = float(np.linalg.norm(p))
+                if self.first:
+                    self.delta = min(self.delta, pnorm)   # lmder: the first radius no longer than the first step
+                x_new = x + step
+                f_new = np.asarray(fun(x_new), dtype=float)
+                self.nfev += 1
+                with np.errstate(over="ignore", invalid="ignore"):      # a trial step too far: rejected
+                    fnorm1 = float(np.linalg.norm(f_new))
+                if not math.isfinite(fnorm1):
+                    fnorm1 = math.inf
+                actred = 1.0 - (fnorm1 / fnorm) ** 2 if 0.1 * fnorm1 < fnorm else -1.0
+                Jp = J @ step
+                temp1 = float(np.linalg.norm(Jp)) / fnorm
+                temp2 = math.sqrt(par) * pnorm / fnorm
+                prered = temp1 * temp1 + temp2 * temp2 / 0.5
+                dirder = -(temp1 * temp1 + temp2 * temp2)
+                ratio = actred / prered if prered != 0 else 0.0
+                if ratio <= 0.25:
+                    temp = 0.5 if actred >= 0 else 0.5 * dirder / (dirder + 0.5 * actred)
+                    if 0.1 * fnorm1 >= fnorm or temp < 0.1:
+                        temp = 0.1
+                    self.delta = temp * min(self.delta, pnorm / 0.1)
+                    self.par = par / temp
+                elif par == 0 or ratio >= 0.75:
+                    self.delta = pnorm / 0.5
+                    self.par = 0.5 * par
+                if ratio >= 1e-4:                         # accepted
+                    x, f, fnorm = x_new, f_new, fnorm1
+                    self.x, self.f, self.fnorm = x, f, fnorm
+                    self.xnorm = float(np.linalg.norm(diag * x))
+                    self.J_at_x = False
+                    self.first = False
+                # lmder's tests; a tolerance below the machine's precision is met at that precision
+                # (lmder's info 6 and 7: no further reduction, no further step possible)
+                f_ok = abs(actred) <= max(ftol, EPS) and prered <= max(ftol, EPS) and 0.5 * ratio <= 1
+                x_ok = self.delta <= max(xtol, EPS) * self.xnorm
+                if f_ok and x_ok:
+                    self.status = 4
+                elif f_ok:
+                    self.status = 2
+                elif x_ok:
+                    self.status = 3
+                elif self.nfev >= max_nfev:
+                    self.status = 0
+                if self.status is not None:
+                    break
+                if watch is not None and watch(x_new, f_new, fnorm1):
+                    return None                           # paused (the state is kept)
+                if ratio >= 1e-4:
+                    break
+        return self.status
+
+    def result(self) -> Result:
+        """The result where the iterations are (the Jacobian evaluated there if it is not yet)."""
+        if not self.J_at_x:
+            self.J = np.asarray(self.jac(self.x), dtype=float)
+            self.njev += 1
+            self.J_at_x = True
+        g = self.J.T @ self.f
+        return Result(x=self.x, fun=self.f, jac=self.J, cost=0.5 * float(self.f @ self.f), nfev=self.nfev,
+                      njev=self.njev, status=0 if self.status is None else self.status,
+                      optimality=float(np.max(np.abs(g))) if len(g) else 0.0)
+
+
+def least_squares(fun, x0, jac, *, xtol: float = 1e-8, ftol: float = 1e-8, gtol: float = 1e-8,
+                  max_nfev: int | None = None, factor: float = 100.0) -> Result:
+    """Minimise 0.5 ||fun(x)||^2 from x0 (Levenberg–Marquardt, MINPACK's updates, column-norm
+    scaling); ``jac(x)`` the dense Jacobian (m x n, m >= n)."""
+    lm = LevenbergMarquardt(fun, x0, jac, xtol=xtol, ftol=ftol, gtol=gtol, factor=factor)
+    lm.run(100 * len(lm.x) if max_nfev is None else int(max_nfev))
+    return lm.result()
+
+
+def huber_linear(A: np.ndarray, y: np.ndarray, f_scale: float, start=None, *, rtol: float = 1e-13,
+                 max_iterations: int = 200) -> np.ndarray:
+    """The coefficients c minimising sum_i rho((A c - y)_i), Huber's loss at ``f_scale`` (r^2 within
+    it, 2 f_scale |r| - f_scale^2 beyond): what ``scipy.optimize.least_squares(lambda c: A @ c - y,
+    start, loss="huber", f_scale=f_scale)`` converges to, by iteratively reweighted least
+    squares (weights min(1, f_scale / |r|)) until the coefficients change by less than ``rtol``
+    of their size: the loss is convex, so this is its minimum, to rounding where scipy's
+    trust-region method stops at its 1e-8 tolerances."""
+    A = np.asarray(A, dtype=float)
+    y = np.asarray(y, dtype=float)
+    c = np.linalg.lstsq(A, y, rcond=None)[0] if start is None else np.array(start, dtype=float)
+    for _ in range(max_iterations):
+        r = np.abs(A @ c - y)
+        w = np.sqrt(np.minimum(1.0, f_scale / np.maximum(r, np.finfo(float).tiny)))
+        new = np.linalg.lstsq(A * w[:, None], y * w, rcond=None)[0]
+        done = np.all(np.abs(new - c) <= rtol * max(float(np.max(np.abs(new))), np.finfo(float).tiny))
+        c = new
+        if done:
+            break
+    return c
