@@ -8,7 +8,7 @@ import sys
 
 import station
 from station.cli.output import err
-from station.core.blas import blas_threads
+from station.core.blas import blas_threads, whole_process
 from station.core.errors import UserError
 
 
@@ -32,21 +32,6 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-# BLAS libraries read their thread count when they are loaded: numpy's and scipy's OpenBLAS (MKL
-# in some distributions).  Not OMP_NUM_THREADS: pyarrow's CSV engine sizes its pool by it.
-_BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-
-
-def _limit_blas_before_loading(threads: int) -> None:
-    """The commands import numpy and scipy only when they need them, after threadpool_limits has
-    run (which limits only libraries already loaded): the limit is also given to those not loaded
-    yet, through the variables they read at load time (left alone when the user set them).
-    Without it a 200 x 100 SVD in the fit span two OpenBLAS threads on a busy machine: 6 s of
-    CPU for one `station estimate` instead of 0.8 s."""
-    for name in _BLAS_THREAD_VARIABLES:
-        os.environ.setdefault(name, str(threads))
-
-
 def main(argv=None) -> int:
     """Exit status: 0 done; 2 bad input (one line naming the file, line or field), or data too
     large for the memory (one line); 3 the calibration was written but its fit fails
@@ -56,11 +41,7 @@ def main(argv=None) -> int:
     try:
         args = build_parser().parse_args(argv)
         command = args.command
-        threads = blas_threads()
-        _limit_blas_before_loading(threads)
-        from threadpoolctl import threadpool_limits
-
-        with threadpool_limits(limits=threads, user_api="blas"):     # the libraries already loaded
+        with whole_process(blas_threads()):       # station/core/blas.py
             return args.func(args)
     except UserError as e:
         err.print(f"station {command}: {e}", markup=False, soft_wrap=True)

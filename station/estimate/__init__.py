@@ -110,6 +110,7 @@ def check_resolution(capture: Capture) -> None:
 def check_static_resolution(capture: Capture, seg) -> None:
     """check_resolution for one static segment (samples in seg.data)."""
     from station.core.errors import UserError
+    from station.estimate.arrays import distinct
 
     if len(seg.data.t) >= 2:
         for k, name in enumerate(COLUMNS):
@@ -117,7 +118,7 @@ def check_static_resolution(capture: Capture, seg) -> None:
             spread = float(np.std(column))
             if _finer_than(column, 2.0 * spread):
                 continue
-            values = np.unique(column)
+            values = distinct(column)
             step = float(np.min(np.diff(values))) if len(values) > 1 else math.inf
             if len(values) == 1 and _at_declared_rail(capture, k, float(values[0])):
                 continue        # at the manifest's full scale: the data-fault scan leaves it out and says so
@@ -142,7 +143,9 @@ def _at_declared_rail(capture: Capture, k: int, value: float) -> bool:
 def _finer_than(column: np.ndarray, step: float) -> bool:
     """True if two distinct values of ``column`` lie closer than ``step``, found among its first
     thousand samples (cheap; False means "not shown so", not "no")."""
-    head = np.unique(column[:1000])
+    from station.estimate.arrays import distinct
+
+    head = distinct(column[:1000])
     return len(head) > 1 and float(np.min(np.diff(head))) < step
 
 

@@ -54,6 +54,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from station.estimate.arrays import median
+
 RAIL_RATIO = 2.5            # > 1 + sqrt 2: a quantised noiseless sinusoid's top level over the next
 RAIL_ALPHA = 1e-6           # Poisson tail of a rail by chance, per axis, side and segment
 RAIL_GUARD_SIGMA = 8.0      # a rotation's phases within this many noise sigma of a rail are left out
@@ -438,7 +440,7 @@ class Scanner:
         if kept is None or kept[0] != len(reference):
             p = np.array([r[0] for r in reference])
             steps = np.array([r[1] for r in reference])
-            kept = (len(reference), p.max(axis=0), np.median(steps, axis=0), steps.min(axis=0))
+            kept = (len(reference), p.max(axis=0), median(steps, axis=0), steps.min(axis=0))
             self._reference[s] = kept
         return kept[1:]
 
