@@ -163,7 +163,7 @@ def spy(*args, **kwargs):
 capture_module.read_csv_pieces = spy
 from station.estimate import estimate_capture
 cal, capture, provenance = estimate_capture(sys.argv[1])
-print(json.dumps([sorted(readers) == [os.getpid()], "scipy.optimize" in sys.modules,
+print(json.dumps([sorted(readers) == [os.getpid()], "station.estimate.lsq" in sys.modules,
                   provenance["capture_sha256"], cal.fit["chi2"],
                   [(s.name, s.status, s.content_sha256) for s in capture.segments]]))
 """
