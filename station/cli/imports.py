@@ -11,6 +11,18 @@ from station.cli.output import out
 from station.core.errors import UserError
 
 
+def _check_estimate_options(args) -> None:
+    """--estimate's options, refused before anything is imported (one line, exit status 2)."""
+    if args.estimate is None:
+        asked = [flag for flag, given in (("--accept-poor-fit", args.accept_poor_fit),
+                                          ("--table/--no-table", args.table is not None)) if given]
+        if asked:
+            raise UserError(f"{' and '.join(asked)}: only with --estimate (they choose how its calibration "
+                            "is reported)")
+    elif args.estimate is not True and not args.estimate.strip():
+        raise UserError("--estimate: an empty file name (give CAL.yaml, or nothing for CAPTURE/calibration.yaml)")
+
+
 def _then_estimate(args, path) -> int:
     """``--estimate [CAL.yaml]``: the capture just written estimated in this process, as `station
     estimate CAPTURE [-o CAL.yaml]` would (the same file, report and exit status), without a
@@ -20,16 +32,15 @@ def _then_estimate(args, path) -> int:
         return 0
     from station.cli.calibration import estimate_and_report
 
-    output = None if args.estimate is True else args.estimate
-    if output is not None and not output.strip():
-        raise UserError("--estimate: an empty file name (give CAL.yaml, or nothing for CAPTURE/calibration.yaml)")
-    return estimate_and_report(path, output, accept_poor_fit=args.accept_poor_fit, table=args.table)
+    return estimate_and_report(path, None if args.estimate is True else args.estimate,
+                               accept_poor_fit=args.accept_poor_fit, table=args.table)
 
 
 def _add_estimate_options(p) -> None:
     p.add_argument("--estimate", nargs="?", const=True, default=None, metavar="CAL.yaml",
                    help="then estimate the calibration from the capture in this process, as station estimate "
-                        "CAPTURE would: into CAPTURE/calibration.yaml, or CAL.yaml when given")
+                        "CAPTURE would: into CAPTURE/calibration.yaml, or CAL.yaml when given (after the "
+                        "input file, or last: a name right after it is taken as CAL.yaml)")
     p.add_argument("--accept-poor-fit", action="store_true",
                    help="with --estimate: exit 0 even when the fit fails (default: exit status 3; the file says so)")
     p.add_argument("--table", action=argparse.BooleanOptionalAction, default=None,
@@ -39,6 +50,7 @@ def _add_estimate_options(p) -> None:
 def cmd_import_imucal(args) -> int:
     from station import api
 
+    _check_estimate_options(args)
     path = api.import_imucal(
         args.csv, args.output, rate_hz=args.rate_hz, sections_path=args.sections, fmt=args.format,
         gravity_mps2=args.gravity_mps2, accel_unit=args.accel_unit, gyro_unit=args.gyro_unit,
@@ -76,6 +88,7 @@ def cmd_import_csv(args) -> int:
     from station import api
     from station.io.importers.delimited import parse_columns     # the --columns text, parsed
 
+    _check_estimate_options(args)
     columns = parse_columns(args.columns) if args.columns else None
     report = api.import_csv(
         args.file, args.output, preset=args.preset, columns=columns, delimiter=args.delimiter, header=args.header,
@@ -89,6 +102,7 @@ def cmd_import_csv(args) -> int:
 def cmd_import_rosbag(args) -> int:
     from station import api
 
+    _check_estimate_options(args)
     report = api.import_rosbag(args.bag, args.output, topic=args.topic, stamps=args.stamps, rate_hz=args.rate_hz,
                                **_recording_options(args))
     _print_report(report)
