@@ -173,3 +173,25 @@ def test_bad_estimate_options_are_one_line_before_anything_is_imported(tmp_path,
     err = capsys.readouterr().err
     assert words in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
     assert not (tmp_path / "cap").exists()
+
+
+def test_a_small_capture_is_read_line_by_line_as_the_engine_reads_it(imucal_estimated, monkeypatch):
+    """station.io.capture: a capture of at most SMALL_CAPTURE_ROWS rows is read by the
+    line-by-line reader while the CSV engine is not imported (its import costs more than the
+    rows): the same samples and hashes as the engine's; in a fresh process the engine is not
+    imported for it."""
+    import station.io.capture as capture_module
+
+    tmp, _, _ = imucal_estimated
+    read = {}
+    for small in (True, False):
+        monkeypatch.setattr(capture_module, "_small", lambda capture, small=small: small)
+        cap = capture_module.read_capture(tmp / "cap")
+        read[small] = [(s.content_sha256, s.data.t.tobytes(), s.data.accel.tobytes(), s.data.gyro.tobytes(),
+                        None if s.data.temp is None else s.data.temp.tobytes()) for s in cap.segments]
+    assert read[True] == read[False] and len(read[True]) == 9
+    code = ("import sys; from station.io.capture import read_capture; read_capture(sys.argv[1]); "
+            "print('pyarrow' in sys.modules)")
+    r = subprocess.run([sys.executable, "-c", code, str(tmp / "cap")], capture_output=True, text=True, timeout=60,
+                       env=dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path)))
+    assert r.returncode == 0 and r.stdout.split() == ["False"], r.stderr
