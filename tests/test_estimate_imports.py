@@ -195,3 +195,28 @@ def test_a_small_capture_is_read_line_by_line_as_the_engine_reads_it(imucal_esti
     r = subprocess.run([sys.executable, "-c", code, str(tmp / "cap")], capture_output=True, text=True, timeout=60,
                        env=dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path)))
     assert r.returncode == 0 and r.stdout.split() == ["False"], r.stderr
+
+
+def test_a_small_capture_is_summarised_in_this_process(imucal_estimated, monkeypatch):
+    """station.estimate.summarise_while_importing forks no reader for a small capture (its rows
+    take less than the fork), and gives the summaries the forked reader gives."""
+    from station.core import forked
+    from station.estimate import summaries, summarise_while_importing
+    from station.io.capture import is_small, read_capture
+
+    tmp, _, _ = imucal_estimated
+    here = read_capture(tmp / "cap", load_data=False)
+    assert is_small(here)
+
+    def no_fork(*args, **kwargs):
+        raise AssertionError("a small capture forked a reader")
+    with monkeypatch.context() as m:
+        m.setattr(forked, "Forked", no_fork)
+        summarise_while_importing(here)
+    child = read_capture(tmp / "cap", load_data=False)
+    if forked.available():
+        summarise_while_importing(child, then=lambda: None)     # with ``then``: the forked reader
+    import pickle
+
+    a, b = summaries.kept(here), summaries.kept(child)
+    assert a is not None and pickle.dumps(a) == pickle.dumps(b)

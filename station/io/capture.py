@@ -719,13 +719,9 @@ def _read_segment_data(capture, segment, label, keep=True):
 SMALL_CAPTURE_ROWS = 50_000
 
 
-def _small(capture) -> bool:
-    """Whether ``capture`` is read line by line (SMALL_CAPTURE_ROWS; every segment states its
-    sample count; the engine not already imported).  $STATION_CSV_ENGINE set: never."""
-    import sys
-
-    if "pyarrow" in sys.modules or os.environ.get("STATION_CSV_ENGINE"):
-        return False
+def is_small(capture) -> bool:
+    """At most SMALL_CAPTURE_ROWS rows in all, by the manifest's counts (False when a segment
+    states none)."""
     rows = 0
     for seg in capture.segments:
         samples = seg.extra.get("samples")
@@ -733,6 +729,16 @@ def _small(capture) -> bool:
             return False
         rows += samples
     return rows <= SMALL_CAPTURE_ROWS
+
+
+def _small(capture) -> bool:
+    """Whether ``capture`` is read line by line (is_small, and the engine not already imported).
+    $STATION_CSV_ENGINE set: never."""
+    import sys
+
+    if "pyarrow" in sys.modules or os.environ.get("STATION_CSV_ENGINE"):
+        return False
+    return is_small(capture)
 
 
 def _warn(capture, message):
