@@ -38,6 +38,8 @@ class LazyConsole:
         return self._rich
 
     def __getattr__(self, name):
+        if name.startswith("__") or name in ("_stderr", "_width", "_rich"):
+            raise AttributeError(name)      # not the Console's (copy, pickle, a half-made instance)
         return getattr(self.rich, name)
 
     def _file(self):
