@@ -11,7 +11,12 @@ Work measured, each a fresh process (two for an import and its estimate):
               `t x y z`, 38 hand poses, simulated) + station estimate (accelerometers and gyros)
   imucal      station import imucal + estimate of imucal's own example session (102.4 Hz,
               --turn-deg 360, as imucal assumes), against imucal 2.6's FerrarisCalibration in a
-              process of its own (pandas reads the CSV, the sections, compute, the result saved)
+              process of its own (pandas reads the CSV, the sections, compute, the result saved);
+              and the same in one process, `station import imucal ... --estimate` (the capture
+              written, then estimated as `station estimate` would: the same file).  What each
+              calibrates: imucal its Ferraris model (accelerometer and gyro scale and
+              misalignment matrices, biases, 21 numbers, no uncertainty); station what the
+              session determines (9 parameters here: the rest are left out, not guessed)
   imu_tk      imu_tk's own Xsens log (bin/test_data/xsens_acc.mat, xsens_gyro.mat, 51,175 rows,
               raw counts): its compiled `test_imu_calib ACC GYRO` (it reads both files,
               calibrates the accelerometers and the gyros, writes two .calib files; its verbose
@@ -20,7 +25,8 @@ Work measured, each a fresh process (two for an import and its estimate):
               (`gnuplot` on its PATH a sink that reads and draws nothing: its calibration's own
               time), against `station import csv --preset imu_tk --gyro-file GYRO
               --gravity-mps2 9.81744` + `station estimate` of the same files, the import alone,
-              and `station estimate` alone of that capture (imported once).  Given by --imu-tk
+              and `station estimate` alone of that capture (imported once); and the import and the
+              estimate in one process (`--estimate`).  Given by --imu-tk
               BIN (or $STATION_IMU_TK) and --imu-tk-data DIR (or $STATION_IMU_TK_DATA; default
               BIN's folder's test_data/, imu_tk's layout); skipped, and said, without them.
               imu_tk is not built by this repository (benchmarks/imu_tk_compare.py says how, and
@@ -155,8 +161,9 @@ def main() -> int:
     ap.add_argument("--imu-tk", type=Path, help="imu_tk's compiled test_imu_calib (or $STATION_IMU_TK)")
     ap.add_argument("--imu-tk-data", type=Path, help="imu_tk's bin/test_data (or $STATION_IMU_TK_DATA)")
     ap.add_argument("--only", help="the work to time, comma-separated: numpy, estimate, imu_tk log, imucal, "
-                                   "imu_tk (the Xsens log: imu_tk and station's three), or one of those four: "
-                                   "imu_tk test_imu_calib, xsens import + estimate, xsens import, xsens estimate")
+                                   "imu_tk (the Xsens log: imu_tk and station's four), or one of those five: "
+                                   "imu_tk test_imu_calib, xsens import + estimate, xsens import, xsens estimate, "
+                                   "xsens import --estimate")
     ap.add_argument("--xsens-gravity", type=float, default=IMU_TK_GRAVITY,
                     help=f"the gravity station imports the Xsens log with (default imu_tk's {IMU_TK_GRAVITY})")
     ap.add_argument("--keep", type=Path, help="keep the data here (made once)")
@@ -199,6 +206,13 @@ def main() -> int:
                             "-o", out / "cap"), env)
             b = run(station("estimate", out / "cap", "-o", out / "c.yaml"), env)
             return a[0] + b[0], a[1] + b[1]
+        if name == "imucal session, one process":
+            return run(station("import", "imucal", DATA / "example_ferraris_session.csv", "--sections",
+                               DATA / "example_ferraris_session_list.json", "--rate-hz", "102.4", "--turn-deg",
+                               "360", "-o", out / "cap", "--estimate", out / "c.yaml"), env)
+        if name == "imu_tk log, one process":
+            return run(station("import", "csv", data["pair"] / "acc.txt", "--preset", "imu_tk", "--gyro-file",
+                               data["pair"] / "gyr.txt", "-o", out / "cap", "--estimate", out / "c.yaml"), env)
         if name == "imucal 2.6":
             return run([sys.executable, "-P", "-c", IMUCAL_SCRIPT, DATA / "example_ferraris_session.csv",
                         DATA / "example_ferraris_session_list.json", out / "imucal.json"], env)
@@ -214,19 +228,24 @@ def main() -> int:
             return a[0] + b[0], a[1] + b[1]
         if name == "xsens import":
             return run(import_xsens(xsens, out / "cap"), env)
+        if name == "xsens import --estimate":
+            return run(import_xsens(xsens, out / "cap") + ["--estimate", out / "c.yaml"], env)
         if name == "xsens estimate":
             return run(station("estimate", data["xsens capture"], "-o", out / "c.yaml"), env)
         raise ValueError(name)
 
     jobs = [("numpy", "now")] if wanted("numpy") else []
     jobs += [(w, t) for w in ("estimate", "imu_tk log") if wanted(w) for t in trees]
+    if wanted("imu_tk log"):
+        jobs += [("imu_tk log, one process", "now")]
     if have_imucal and wanted("imucal"):
-        jobs += [(("imucal session"), t) for t in trees] + [("imucal 2.6", "now")]
+        jobs += [(("imucal session"), t) for t in trees] + [("imucal session, one process", "now"),
+                                                           ("imucal 2.6", "now")]
     if imu_tk is not None:
         xsens_work = ("imu_tk test_imu_calib", "imu_tk without plots", "xsens import + estimate", "xsens import",
-                      "xsens estimate")
+                      "xsens estimate", "xsens import --estimate")
         jobs += [(w, t) for w in xsens_work if wanted("imu_tk") or wanted(w)
-                 for t in (("now",) if w.startswith("imu_tk") else trees)]
+                 for t in (("now",) if w.startswith("imu_tk") or w.endswith("--estimate") else trees)]
     print(f"load average before: {os.getloadavg()}; {args.repeat} rounds of {len(jobs)} processes, interleaved")
     times = {j: [] for j in jobs}
     for k in range(args.repeat):
@@ -245,11 +264,16 @@ def main() -> int:
     pairs = [(("estimate", "now"), ("numpy", "now"), "100 Hz optimal9 estimate / import numpy")]
     if "before" in trees:
         pairs += [((w, "now"), (w, "before"), f"{w}: now / before") for w in ("estimate", "imu_tk log")]
+    pairs.append((("imu_tk log, one process", "now"), ("imu_tk log", "now"), "imu_tk log: one process / two"))
     if have_imucal:
         pairs.append((("imucal session", "now"), ("imucal 2.6", "now"), "imucal session: station / imucal 2.6"))
+        pairs.append((("imucal session, one process", "now"), ("imucal 2.6", "now"),
+                      "imucal session, one process: station / imucal 2.6"))
+        pairs.append((("imucal session, one process", "now"), ("imucal session", "now"),
+                      "imucal session: one process / two"))
         if "before" in trees:
             pairs.append((("imucal session", "now"), ("imucal session", "before"), "imucal session: now / before"))
-    for w in ("xsens import + estimate", "xsens import", "xsens estimate"):
+    for w in ("xsens import + estimate", "xsens import", "xsens estimate", "xsens import --estimate"):
         pairs += [((w, t), ("imu_tk test_imu_calib", "now"), f"{w} ({t}) / imu_tk") for t in trees]
         pairs += [((w, t), ("imu_tk without plots", "now"), f"{w} ({t}) / imu_tk without plots")
                   for t in trees]

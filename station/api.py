@@ -97,12 +97,14 @@ def _registry(plugins=(), effects_dirs=(), config=None):
     ``config`` names (else $STATION_CONFIG, else station.yaml in the user's own configuration
     folder; never a ./station.yaml merely found in the working directory: loading a plugin runs
     its code), then the folders ``effects_dirs`` and the files ``plugins`` (loaded, not added)."""
-    from station.bench.config import load_config, plugin_config
+    from station.io.config_paths import plugin_config
     from station.model.registry import EffectRegistry
 
     reg = EffectRegistry()
     config_path = plugin_config(None if config is None else str(config))
     if config_path is not None:
+        from station.bench.config import load_config      # the bench only when there is a file to read
+
         cfg = load_config(str(config_path))
         reg.add_all(cfg.effects.plugins, cfg.effects.folders)
     reg.add_all(list(plugins), list(effects_dirs))

@@ -263,8 +263,8 @@ def _interrupting_import(real, name):
 
 
 def _parser_with(build, func):
-    def build_and_patch():
-        parser = build()
+    def build_and_patch(*args):
+        parser = build(*args)
         parser.set_defaults(func=func)
         for action in parser._subparsers._group_actions:
             for sub in action.choices.values():

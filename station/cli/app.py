@@ -8,7 +8,7 @@ import sys
 
 import station
 from station.cli.output import err
-from station.core.blas import blas_threads
+from station.core.blas import blas_threads, whole_process
 from station.core.errors import UserError
 
 
@@ -19,32 +19,33 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: {message} (see {self.prog} --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    from station.cli import (batch, calibration, design, devices, diagnose, export, fleet, history, imports,
-                             montecarlo, noise, report, run)
+# the module that adds each command's parser (kept equal to what the modules add by
+# tests/test_estimate_imports.py): a command line naming its command first builds that module's
+# parsers only, and imports no other command module (issue 27: 15-20 ms of a small estimate)
+GROUPS = ("run", "calibration", "montecarlo", "design", "diagnose", "imports", "devices", "export", "noise",
+          "history", "fleet", "report", "batch")
+COMMAND_GROUPS = {"run": "run", "schemes": "run", "plan": "run", "init": "run",
+                  "estimate": "calibration", "apply": "calibration", "show": "calibration",
+                  "montecarlo": "montecarlo", "design": "design", "diagnose": "diagnose", "effects": "diagnose",
+                  "import": "imports", "sim": "devices", "probe": "devices", "export": "export", "noise": "noise",
+                  "history": "history", "diff": "history", "fleet": "fleet", "report": "report", "batch": "batch"}
+
+
+def build_parser(argv=None) -> argparse.ArgumentParser:
+    """The parser of every command; or, when ``argv`` begins with a command's name, of the
+    commands of that command's module only (the same parser for that command line: its
+    sub-parser, options, help and errors are the whole parser's)."""
+    import importlib
+
+    first = argv[0] if argv else None
+    groups = (COMMAND_GROUPS[first],) if first in COMMAND_GROUPS else GROUPS
 
     p = _Parser(prog="station", description="IMU calibration with a rate table.")
     p.add_argument("--version", action="version", version=f"station {station.__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
-    for group in (run, calibration, montecarlo, design, diagnose, imports, devices, export, noise, history,
-                  fleet, report, batch):
-        group.add_parsers(sub)
+    for group in groups:
+        importlib.import_module(f"station.cli.{group}").add_parsers(sub)
     return p
-
-
-# BLAS libraries read their thread count when they are loaded: numpy's and scipy's OpenBLAS (MKL
-# in some distributions).  Not OMP_NUM_THREADS: pyarrow's CSV engine sizes its pool by it.
-_BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-
-
-def _limit_blas_before_loading(threads: int) -> None:
-    """The commands import numpy and scipy only when they need them, after threadpool_limits has
-    run (which limits only libraries already loaded): the limit is also given to those not loaded
-    yet, through the variables they read at load time (left alone when the user set them).
-    Without it a 200 x 100 SVD in the fit span two OpenBLAS threads on a busy machine: 6 s of
-    CPU for one `station estimate` instead of 0.8 s."""
-    for name in _BLAS_THREAD_VARIABLES:
-        os.environ.setdefault(name, str(threads))
 
 
 # every option that names a file or folder a command writes (``dest`` -> as the user types it):
@@ -73,14 +74,11 @@ def main(argv=None) -> int:
     traceback."""
     command = "?"
     try:
-        args = build_parser().parse_args(argv)
+        argv = sys.argv[1:] if argv is None else list(argv)
+        args = build_parser(argv).parse_args(argv)
         command = args.command
         check_outputs(args)
-        threads = blas_threads()
-        _limit_blas_before_loading(threads)
-        from threadpoolctl import threadpool_limits
-
-        with threadpool_limits(limits=threads, user_api="blas"):     # the libraries already loaded
+        with whole_process(blas_threads()):       # station/core/blas.py
             return args.func(args)
     except UserError as e:
         err.print(f"station {command}: {e}", markup=False, soft_wrap=True)

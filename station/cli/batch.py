@@ -6,7 +6,7 @@ import argparse
 
 from station.cli import argtypes
 from station.cli.choices import ESTIMATE_METHODS, EXPORT_FORMATS
-from station.cli.output import EXIT_POOR_FIT, err, out
+from station.cli.output import EXIT_POOR_FIT, err, out, rich_console
 from station.core.errors import UserError
 
 COMMANDS = {"estimate": "estimate a calibration from every capture (station estimate)",
@@ -92,8 +92,8 @@ def _progress(total: int):
                                TimeRemainingColumn)
 
     return Progress(TextColumn("captures"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                    TextColumn("left"), TimeRemainingColumn(), console=err, transient=True,
-                    disable=not err.is_terminal)
+                    TextColumn("left"), TimeRemainingColumn(), console=rich_console(err),
+                    transient=True, disable=not err.is_terminal)
 
 
 def _terminate_as_interrupt() -> None:

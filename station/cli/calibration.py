@@ -100,20 +100,33 @@ def report_calibration(cal, title: str, target, accept_poor_fit: bool, truth=Non
 
 
 def cmd_estimate(args) -> int:
+    return estimate_and_report(args.capture, args.output, method=args.method, add=args.add,
+                               plugin_options=plugins.options(args), turn_sigma_deg=args.turn_sigma_deg,
+                               max_missing_fraction=args.max_missing_fraction, max_gap_s=args.max_gap_s,
+                               history=bool(args.history), accept_poor_fit=args.accept_poor_fit, table=args.table)
+
+
+def estimate_and_report(capture, output=None, *, method: str = "auto", add=(), plugin_options=None,
+                        turn_sigma_deg=None, max_missing_fraction: float = 0.01, max_gap_s: float = 1.0,
+                        history: bool = False, accept_poor_fit: bool = False, table: bool | None = None) -> int:
+    """What `station estimate CAPTURE` does after parsing its options: the estimate, its warnings,
+    the calibration file (``output``, default CAPTURE/calibration.yaml), the history when asked,
+    the report; the exit status (0, or EXIT_POOR_FIT).  `station import ... --estimate` calls it
+    on the capture it has just written, in the same process."""
     from station import api
 
-    est = api.estimate(args.capture, method=args.method, add=args.add, **plugins.options(args),
-                       turn_sigma_deg=args.turn_sigma_deg, max_missing_fraction=args.max_missing_fraction,
-                       max_gap_s=args.max_gap_s)
+    est = api.estimate(capture, method=method, add=list(add), **(plugin_options or {}),
+                       turn_sigma_deg=turn_sigma_deg, max_missing_fraction=max_missing_fraction,
+                       max_gap_s=max_gap_s)
     for w in est.capture.warnings:
         err.print(f"warning: {w}", markup=False, soft_wrap=True)
-    target = est.save(Path(args.output) if args.output else est.capture.path / "calibration.yaml")
+    target = est.save(Path(output) if output else est.capture.path / "calibration.yaml")
     from station.cli.history import file_quietly
 
-    file_quietly(target, asked=bool(args.history))
-    table = sys.stdout.isatty() if args.table is None else args.table
+    file_quietly(target, asked=history)
+    table = sys.stdout.isatty() if table is None else table
     return report_calibration(est.calibration, f"calibration of {est.capture.path} ({est.provenance['method']})",
-                              target, args.accept_poor_fit, table=table)
+                              target, accept_poor_fit, table=table)
 
 
 def print_messages(lines) -> None:

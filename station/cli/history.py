@@ -50,12 +50,12 @@ def file_quietly(cal_path, store=None, *, asked: bool, simulated: bool = False) 
     SIM-...) into the simulations' own store; one without a serial not at all.  A calibration of
     the same capture and model already filed is not filed again.  A store that cannot be written
     is a warning, never a failure (the calibration file itself is already safe)."""
+    if not asked:
+        return      # before the imports: the store's modules (sqlite3, its schema) only when filing
     from station.core.errors import UserError
     from station.io.calfile import read_calfile
     from station.io.history import SIMULATED_PREFIX, Store, real_serial, simulation_store
 
-    if not asked:
-        return
     try:
         doc = read_calfile(cal_path)
         serial = ((doc.get("provenance") or {}).get("imu_serial") or "")

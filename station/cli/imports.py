@@ -2,6 +2,8 @@
 output only; the work is in station.io.importers)."""
 from __future__ import annotations
 
+import argparse
+
 from station.cli import argtypes
 from station.cli.choices import (CSV_PRESETS, IMUCAL_DEFAULT_GRAVITY_MPS2, IMUCAL_FORMATS,
                                  RECORDING_MIN_POSES, ROSBAG_STAMPS)
@@ -9,9 +11,46 @@ from station.cli.output import out
 from station.core.errors import UserError
 
 
+def _check_estimate_options(args) -> None:
+    """--estimate's options, refused before anything is imported (one line, exit status 2)."""
+    if args.estimate is None:
+        asked = [flag for flag, given in (("--accept-poor-fit", args.accept_poor_fit),
+                                          ("--table/--no-table", args.table is not None)) if given]
+        if asked:
+            raise UserError(f"{' and '.join(asked)}: only with --estimate (they choose how its calibration "
+                            "is reported)")
+    elif args.estimate is not True and not args.estimate.strip():
+        raise UserError("--estimate: an empty file name (give CAL.yaml, or nothing for CAPTURE/calibration.yaml)")
+
+
+def _then_estimate(args, path) -> int:
+    """``--estimate [CAL.yaml]``: the capture just written estimated in this process, as `station
+    estimate CAPTURE [-o CAL.yaml]` would (the same file, report and exit status), without a
+    second interpreter, numpy and station to start (issue 27: an import and its calibration in
+    one command).  0 when not asked."""
+    if args.estimate is None:
+        return 0
+    from station.cli.calibration import estimate_and_report
+
+    return estimate_and_report(path, None if args.estimate is True else args.estimate,
+                               accept_poor_fit=args.accept_poor_fit, table=args.table)
+
+
+def _add_estimate_options(p) -> None:
+    p.add_argument("--estimate", nargs="?", const=True, default=None, metavar="CAL.yaml",
+                   help="then estimate the calibration from the capture in this process, as station estimate "
+                        "CAPTURE would: into CAPTURE/calibration.yaml, or CAL.yaml when given (after the "
+                        "input file, or last: a name right after it is taken as CAL.yaml)")
+    p.add_argument("--accept-poor-fit", action="store_true",
+                   help="with --estimate: exit 0 even when the fit fails (default: exit status 3; the file says so)")
+    p.add_argument("--table", action=argparse.BooleanOptionalAction, default=None,
+                   help="with --estimate: print the parameters as a table (default: only on a terminal)")
+
+
 def cmd_import_imucal(args) -> int:
     from station import api
 
+    _check_estimate_options(args)
     path = api.import_imucal(
         args.csv, args.output, rate_hz=args.rate_hz, sections_path=args.sections, fmt=args.format,
         gravity_mps2=args.gravity_mps2, accel_unit=args.accel_unit, gyro_unit=args.gyro_unit,
@@ -30,7 +69,7 @@ def cmd_import_imucal(args) -> int:
         out.print(f"{seg.name:6s} {seg.kind:8s} {seg.extra['samples']:6d} samples  {what}", markup=False)
     out.print(f"capture: {path} ({capture.imu.accel_unit}, {capture.imu.gyro_unit}, "
               f"{capture.imu.sample_rate_hz:g} Hz)", markup=False)
-    return 0
+    return _then_estimate(args, path)
 
 
 def _print_report(report) -> None:
@@ -49,21 +88,25 @@ def cmd_import_csv(args) -> int:
     from station import api
     from station.io.importers.delimited import parse_columns     # the --columns text, parsed
 
+    _check_estimate_options(args)
     columns = parse_columns(args.columns) if args.columns else None
-    _print_report(api.import_csv(
+    report = api.import_csv(
         args.file, args.output, preset=args.preset, columns=columns, delimiter=args.delimiter, header=args.header,
         accel_unit=args.accel_unit, gyro_unit=args.gyro_unit, accel_nominal=args.accel_nominal,
         gyro_nominal=args.gyro_nominal, time_unit=args.time_unit, rate_hz=args.rate_hz, gyro_path=args.gyro_file,
-        **_recording_options(args)))
-    return 0
+        **_recording_options(args))
+    _print_report(report)
+    return _then_estimate(args, report.path)
 
 
 def cmd_import_rosbag(args) -> int:
     from station import api
 
-    _print_report(api.import_rosbag(args.bag, args.output, topic=args.topic, stamps=args.stamps, rate_hz=args.rate_hz,
-                                    **_recording_options(args)))
-    return 0
+    _check_estimate_options(args)
+    report = api.import_rosbag(args.bag, args.output, topic=args.topic, stamps=args.stamps, rate_hz=args.rate_hz,
+                               **_recording_options(args))
+    _print_report(report)
+    return _then_estimate(args, report.path)
 
 
 def _add_recording_options(p) -> None:
@@ -121,6 +164,7 @@ def add_parsers(sub) -> None:
                         "that the least-squares model can use it; no encoder measured it")
     p.add_argument("--placement-deg", type=argtypes.positive, default=1.0, metavar="DEG",
                    help="1-sigma accuracy of the hand placement and turns (default 1 deg)")
+    _add_estimate_options(p)
     p.set_defaults(func=cmd_import_imucal)
 
     c = kinds.add_parser("csv", help="a continuous recording in delimited text: statics and hand turns found in it")
@@ -144,6 +188,7 @@ def add_parsers(sub) -> None:
                    help="sample rate: time = index column (or row number) / rate, when there is no time column")
     c.add_argument("--gyro-file", metavar="FILE", help="imu_tk layout: the gyro's file")
     _add_recording_options(c)
+    _add_estimate_options(c)
     c.set_defaults(func=cmd_import_csv)
 
     b = kinds.add_parser("rosbag", help="sensor_msgs/Imu from a ROS 1 bag or a ROS 2 bag (db3 or MCAP)")
@@ -155,6 +200,7 @@ def add_parsers(sub) -> None:
                    help="re-time the messages evenly at HZ (stamps that jitter: a driver stamped at receive "
                         "time); refused when the stamps' span disagrees with the count at HZ by more than 1 %%")
     _add_recording_options(b)
+    _add_estimate_options(b)
     b.set_defaults(func=cmd_import_rosbag)
 
 

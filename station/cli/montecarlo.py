@@ -4,7 +4,7 @@ from __future__ import annotations
 import contextlib
 
 from station.cli import argtypes
-from station.cli.output import err, out
+from station.cli.output import err, out, rich_console
 
 
 def add_parsers(sub) -> None:
@@ -45,8 +45,8 @@ def _progress_bar(runs: int):
                                TimeRemainingColumn)
 
     bar = Progress(TextColumn("dry runs"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                   TextColumn("left"), TimeRemainingColumn(), console=err, transient=True,
-                   disable=not err.is_terminal)
+                   TextColumn("left"), TimeRemainingColumn(), console=rich_console(err),
+                   transient=True, disable=not err.is_terminal)
     task = bar.add_task("runs", total=runs)
     with bar:
         yield lambda done, total: bar.update(task, completed=done, total=total)

@@ -2,14 +2,106 @@
 from __future__ import annotations
 
 import math
+import os
+import re
 import sys
-
-from rich.console import Console
 
 EXIT_POOR_FIT = 3      # the calibration file is written, but its fit fails (see --accept-poor-fit)
 
-out = Console(highlight=False, width=None if sys.stdout.isatty() else 160)
-err = Console(stderr=True, highlight=False)
+# what rich does to a string that plain text would not: emoji codes (``:name:``, even with
+# markup off), markup tags (``[...]``, when markup is on), control characters it strips, tabs it
+# expands
+_RICH_ONLY = re.compile(r":\S*:|[\x00-\x08\x0b-\x1f\x7f]")
+
+
+class LazyConsole:
+    """A rich Console made when it is first needed (issue 27: `station estimate` into a pipe or a
+    file imports no rich, ~20 ms of a 0.5 s process).  ``print`` of one plain string to a stream
+    that is not a terminal writes the very bytes rich would (no styles without a terminal, the
+    same width and wrapping rule: only lines that fit are written here, the rest through rich);
+    anything else — a table, a terminal, markup, emoji codes, control characters, a forced
+    terminal (FORCE_COLOR, TTY_COMPATIBLE) — goes to the rich Console (``.rich``), and every
+    other attribute is the Console's (``status``, ``width``, ...).  Tests compare the two
+    (tests/test_estimate_output.py)."""
+
+    def __init__(self, *, stderr: bool = False, width: int | None = None):
+        self._stderr = stderr
+        self._width = width
+        self._rich = None
+
+    @property
+    def rich(self):
+        if self._rich is None:
+            from rich.console import Console
+
+            self._rich = Console(stderr=self._stderr, highlight=False, width=self._width)
+        return self._rich
+
+    def __getattr__(self, name):
+        if name.startswith("__") or name in ("_stderr", "_width", "_rich"):
+            raise AttributeError(name)      # not the Console's (copy, pickle, a half-made instance)
+        return getattr(self.rich, name)
+
+    def _file(self):
+        return sys.stderr if self._stderr else sys.stdout
+
+    def _plain_width(self) -> int:
+        """The width rich would wrap at on a stream that is not a terminal (rich.console.Console.size)."""
+        if self._width is not None:
+            return self._width
+        columns = os.environ.get("COLUMNS")
+        if columns is not None and columns.isdigit():
+            return int(columns) or 80
+        width = None
+        for fd in (0, 1, 2):
+            try:
+                width = os.get_terminal_size(fd)[0]
+            except (AttributeError, ValueError, OSError):
+                continue
+            break
+        return width or 80
+
+    def _plain(self, objects, kwargs) -> str | None:
+        """The text to write for this call without rich, or None when only rich can tell."""
+        if self._rich is not None or len(objects) != 1 or type(objects[0]) is not str:
+            return None
+        if not set(kwargs) <= {"markup", "soft_wrap", "style", "highlight"} or kwargs.get("highlight"):
+            return None
+        if "FORCE_COLOR" in os.environ or os.environ.get("TTY_COMPATIBLE", "") not in ("", "0"):
+            return None
+        text = objects[0]
+        if (kwargs.get("markup", True) and "[" in text) or _RICH_ONLY.search(text) or "\t" in text:
+            return None
+        stream = self._file()
+        try:
+            if stream.isatty():
+                return None
+        except (AttributeError, ValueError):
+            return None
+        if not kwargs.get("soft_wrap", False):
+            width = self._plain_width()
+            per_cell = 1 if text.isascii() else 2      # no character is wider than two cells
+            if any(len(line) * per_cell > width for line in text.split("\n")):
+                return None
+        return text + "\n"
+
+    def print(self, *objects, **kwargs) -> None:
+        text = self._plain(objects, kwargs)
+        if text is None:
+            self.rich.print(*objects, **kwargs)
+            return
+        stream = self._file()
+        stream.write(text)
+        stream.flush()
+
+
+def rich_console(console):
+    """The rich Console behind ``console`` (a LazyConsole, or a Console a test put in its place)."""
+    return console.rich if isinstance(console, LazyConsole) else console
+
+
+out = LazyConsole(width=None if sys.stdout.isatty() else 160)
+err = LazyConsole(stderr=True)
 
 
 def print_parameters(rows, title: str) -> None:

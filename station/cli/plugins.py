@@ -18,7 +18,7 @@ def options(args) -> dict:
     """The plugin options as the API takes them (station.api: plugins, effects_dirs, config); a
     note when a ./station.yaml found in the working directory names plugins, which are not loaded
     (loading one runs its code)."""
-    from station.bench.config import implicit_plugins
+    from station.io.config_paths import implicit_plugins
 
     if implicit_plugins(getattr(args, "config", None)):
         from station.cli.output import err

@@ -11,7 +11,7 @@ import yaml
 
 from station.cli import argtypes
 from station.cli.calibration import add_accept_poor_fit, report_calibration
-from station.cli.output import err, out
+from station.cli.output import err, out, rich_console
 from station.core.errors import UserError, cannot_write
 from station.core import yaml_text
 # the pieces shared with several-IMU runs (station/cli/run_multi.py); their names kept here
@@ -342,7 +342,7 @@ def _record_and_estimate(args, config, scheme, plan, steps, directory, text) -> 
         out.print(f"capture: {directory}", markup=False)
         from station.bench.live import make_display
 
-        display = make_display(out, sum(s.estimate_s for s in steps),
+        display = make_display(rich_console(out), sum(s.estimate_s for s in steps),
                                f"{scheme.name} on {config.table.axes if scheme.table else 'no'}-axis table")
         status = sequence(steps, display, directory, table=table, imu=imu, writer=writer, config=config,
                           rate_hz=rate_hz, reset_faults=args.reset_faults)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import yaml
 
-from station.cli.output import err, out
+from station.cli.output import err, out, rich_console
 from station.core import yaml_text
 from station.core.errors import UserError
 
@@ -131,7 +131,7 @@ def _record(args, config, reference, scheme, plan, steps, directory, text, folde
         out.print(f"run: {directory} ({len(channels)} IMUs: " +
                   ", ".join(f"{ch.label} -> {directory / f}" for ch, f in zip(channels, folders)) + ")",
                   markup=False, soft_wrap=True)
-        display = make_display(out, sum(s.estimate_s for s in steps),
+        display = make_display(rich_console(out), sum(s.estimate_s for s in steps),
                                f"{scheme.name} on {config.table.axes}-axis table, {len(channels)} IMUs")
         status = None if idle else sequence(steps, display, directory, table=table, config=reference,
                                             reset_faults=args.reset_faults, channels=channels)

@@ -54,6 +54,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from station.estimate.arrays import median
+
 RAIL_RATIO = 2.5            # > 1 + sqrt 2: a quantised noiseless sinusoid's top level over the next
 RAIL_ALPHA = 1e-6           # Poisson tail of a rail by chance, per axis, side and segment
 RAIL_GUARD_SIGMA = 8.0      # a rotation's phases within this many noise sigma of a rail are left out
@@ -207,6 +209,15 @@ def _mode_share(column: np.ndarray, step: float) -> float:
     if not levels < MAX_LEVELS:
         return 0.0
     index = np.rint((column - lo) / step).astype(np.int64)
+    if levels > 8 * len(column):
+        # far more levels than samples (floating-point output on a fine grid: up to 1.5 M levels
+        # for 10,000 samples): the longest run of the sorted levels, not a count of every level
+        # (bincount's array of up to 32 MB, most of a 100 Hz estimate's scan: 60 ms of 21
+        # segments), the same count
+        index.sort()
+        edges = np.flatnonzero(index[1:] != index[:-1])
+        runs = np.diff(edges, prepend=-1, append=len(index) - 1)
+        return float(runs.max()) / len(column)
     return float(np.bincount(index).max()) / len(column)
 
 
@@ -444,7 +455,7 @@ class Scanner:
         if kept is None or kept[0] != len(reference):
             p = np.array([r[0] for r in reference])
             steps = np.array([r[1] for r in reference])
-            kept = (len(reference), p.max(axis=0), np.median(steps, axis=0), steps.min(axis=0))
+            kept = (len(reference), p.max(axis=0), median(steps, axis=0), steps.min(axis=0))
             self._reference[s] = kept
         return kept[1:]
 

@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from station.estimate import solver
+from station.estimate.arrays import median
 from station.estimate.distributions import binom_sf, norm_ppf
 
 P_TERM = 1e-3               # a term is added when white noise alone is this improbable (6 axes in all)
@@ -155,7 +156,7 @@ def pose_instability(statics, sigma: np.ndarray) -> PoseInstability | None:
         # robust to a pose or two that jump (a bias step, a knock: effects or faults, not a
         # noise that every pose shares): the median of D^2 / E against chi2(1)'s, 0.4549
         u = resid**2 / (E[:, k] * dof / len(use))
-        ratio[k] = float(np.median(u)) / CHI2_1_MEDIAN
+        ratio[k] = median(u) / CHI2_1_MEDIAN
         exceed[k] = int(np.sum(u > CHI2_1_EXCEED))
         p[k] = float(stats_binom_sf(exceed[k], len(use)))
         variance[k] = max(0.0, ratio[k] - 1.0) * float(np.mean(E[:, k])) / 2.0

@@ -18,9 +18,10 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from station.core import units
+from station.core.blas import limited_blas
+from station.estimate.arrays import distinct, median
 from station.core.errors import UserError
 from station.estimate import table_geometry
 from station.estimate import data_faults
@@ -144,7 +145,7 @@ def _stamp_jitter(t) -> float:
     dt = np.diff(np.asarray(t, float))
     if len(dt) > JITTER_INTERVALS:
         dt = dt[::len(dt) // JITTER_INTERVALS]
-    return float(1.4826 * np.median(np.abs(dt - np.median(dt))) / np.sqrt(2.0))
+    return float(1.4826 * median(np.abs(dt - median(dt))) / np.sqrt(2.0))
 
 
 def _window(t: np.ndarray) -> tuple[float, float]:
@@ -266,7 +267,7 @@ def _lsb(x, head: int = 2000) -> np.ndarray:
     (not quantised on a grid the samples show: floating-point output)."""
     out = np.zeros(x.shape[1])
     for k in range(x.shape[1]):
-        values = np.unique(x[:head, k])
+        values = distinct(x[:head, k])
         if len(values) < 2:
             continue
         gaps = np.diff(values)
@@ -446,7 +447,7 @@ def summarise(capture, *, table_angle_arcsec: float | None = None, check_segment
     if kept is None:
         # one BLAS thread: vector operations over the samples, which a BLAS thread pool only
         # slows down (4x on a busy 2-core machine: docs/performance.md)
-        with threadpool_limits(1, user_api="blas"):
+        with limited_blas(1):
             parts = _summarise_segments(capture, ca, cg, check_segment)
         if streamed:
             _KEPT[capture] = parts
@@ -650,6 +651,6 @@ def _assemble(capture, parts: _SegmentSummaries, ca, cg, table_angle_arcsec) -> 
                      table_angle_sigma_deg=angle_sigma, mounting_offset_m=offset, skipped=skipped,
                      hand_rotations=hand_rotations, gyro_nominal=nominal,
                      gyro_raw=capture.imu.gyro_unit == "raw", accel_raw=capture.imu.accel_unit == "raw",
-                     accel_nominal=accel_nominal, stamp_jitter_s=float(np.median(jitter)) if jitter else 0.0,
+                     accel_nominal=accel_nominal, stamp_jitter_s=median(jitter) if jitter else 0.0,
                      geometry=table_geometry.read(capture, rotations),
                      data_faults=report, data_fault_notes=fault_notes)

@@ -659,7 +659,22 @@ def _read_segment_data(capture, segment, label, keep=True):
     rate = capture.imu.sample_rate_hz
     sha_problem = "file content does not match the manifest's sha256 (changed or corrupted)"
     expected_sha = segment.extra.get("sha256")
-    if complete:
+    if complete and _small(capture):
+        # a small capture: the line-by-line reader (~1 us a row), not the CSV engine, whose import
+        # alone (~35 ms) is more than reading every row of the capture (issue 27)
+        try:
+            data, problem, segment.content_sha256 = _parse_csv_file(csv_file, rate, csv_file, label)
+        except OSError as e:
+            raise CaptureError(csv_file, f"cannot read: {e.strerror}", segment=label) from None
+        if expected_sha is not None and segment.content_sha256 != expected_sha.lower():
+            raise CaptureError(csv_file, sha_problem, segment=label, field="sha256")
+        if problem is not None:
+            raise problem
+        samples = segment.extra.get("samples")
+        if samples is not None and samples != len(data.t):
+            raise CaptureError(csv_file, f"has {len(data.t)} data rows, the manifest says "
+                               f"samples: {samples}", segment=label, field="samples")
+    elif complete:
         try:
             data, segment.content_sha256 = read_csv_pieces(csv_file, rate)
             if expected_sha is not None and segment.content_sha256 != expected_sha.lower():
@@ -695,6 +710,35 @@ def _read_segment_data(capture, segment, label, keep=True):
         _warn(capture, f"{label}: {data.gaps} gaps in time in {segment.file} "
                        f"(steps longer than {GAP_FACTOR} periods where the stamps jump: lost samples)")
     return data if keep else None
+
+
+# a capture whose segments hold at most this many rows in all (the manifest's counts) is read by
+# the line-by-line reader while the CSV engine is not imported: at ~0.8-1 us a row against the
+# engine's ~0.23 us and its ~35 ms import, the engine pays above ~60,000 rows (imucal's example
+# session: 4,382 rows, 5 ms; a 100 Hz optimal9 capture: 306,000 rows, the engine)
+SMALL_CAPTURE_ROWS = 50_000
+
+
+def is_small(capture) -> bool:
+    """At most SMALL_CAPTURE_ROWS rows in all, by the manifest's counts (False when a segment
+    states none)."""
+    rows = 0
+    for seg in capture.segments:
+        samples = seg.extra.get("samples")
+        if not isinstance(samples, int) or isinstance(samples, bool) or samples < 0:
+            return False
+        rows += samples
+    return rows <= SMALL_CAPTURE_ROWS
+
+
+def _small(capture) -> bool:
+    """Whether ``capture`` is read line by line (is_small, and the engine not already imported).
+    $STATION_CSV_ENGINE set: never."""
+    import sys
+
+    if "pyarrow" in sys.modules or os.environ.get("STATION_CSV_ENGINE"):
+        return False
+    return is_small(capture)
 
 
 def _warn(capture, message):
@@ -970,6 +1014,10 @@ def _parse_header(header, fail):
 
 PIECE_BYTES = 8 * 2**20   # a segment file is read, hashed and parsed this many bytes at a time
 MAX_LINE_BYTES = 2**16    # a line still open after this many bytes at a piece's end is refused
+# a block this long is parsed on the engine's threads; a shorter one (a 100 Hz segment: ~2 MB) on
+# this thread: the pool's start and hand-overs cost more CPU than they save there (issue 27: a
+# 100 Hz optimal9 capture read with 0.14-0.16 s of CPU against 0.16-0.25 s, and no later)
+THREADED_BLOCK_BYTES = 4 * 2**20
 _DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 _BOM = b"\xef\xbb\xbf"
 _BLANK = b" \t\r\n"
@@ -988,19 +1036,23 @@ def read_csv_pieces(path, sample_rate_hz) -> tuple[SegmentData | None, str]:
     which accepts it or names the line, column and text.  OSError if the file cannot be read."""
     digest = hashlib.sha256()
     parser = _PieceParser(sample_rate_hz)
-    # One buffer for the whole file: a partial last line is moved to its start and the next piece
-    # read in after it (no copy of a piece to join it to the line it ends)
-    buffer = bytearray(PIECE_BYTES + 4096)
     held = 0            # bytes at the buffer's start: the partial line carried over
     with open_regular_file(path) as f:
         parser.size = os.fstat(f.fileno()).st_size
+        # One buffer for the whole file: a partial last line is moved to its start and the next
+        # piece read in after it (no copy of a piece to join it to the line it ends).  A file
+        # shorter than a piece gets a buffer its size (+1: the read that finds its end): a
+        # zeroed 8 MB buffer for a 100 Hz segment's 1.7 MB was ~2 ms of page faults and
+        # zeroing per file (issue 27)
+        piece = min(PIECE_BYTES, parser.size + 1)
+        buffer = bytearray(piece + 4096)
         while True:
-            if len(buffer) < held + PIECE_BYTES:    # a line longer than the room left
-                grown = bytearray(held + PIECE_BYTES)
+            if len(buffer) < held + piece:    # a line longer than the room left
+                grown = bytearray(held + piece)
                 grown[:held] = buffer[:held]
                 buffer = grown
             with memoryview(buffer) as view:
-                got = f.readinto(view[held:held + PIECE_BYTES])
+                got = f.readinto(view[held:held + piece])
                 if not got:
                     break
                 # hashlib and the engine both release the GIL: hashing overlaps parsing
@@ -1132,7 +1184,7 @@ def _arrow_table(block, columns, usecols):
     try:
         return pacsv.read_csv(
             pa.py_buffer(block),
-            read_options=pacsv.ReadOptions(column_names=columns, use_threads=True),
+            read_options=_read_options(pacsv, columns, len(block)),
             parse_options=pacsv.ParseOptions(delimiter=",", quote_char=False, double_quote=False,
                                              escape_char=False, newlines_in_values=False,
                                              ignore_empty_lines=False),
@@ -1142,6 +1194,15 @@ def _arrow_table(block, columns, usecols):
                 null_values=[], strings_can_be_null=False, quoted_strings_can_be_null=False))
     except (pa.ArrowException, ValueError):
         return None
+
+
+def _read_options(pacsv, columns, size: int):
+    """The engine's reading options for a block of ``size`` bytes: a long block on its threads
+    (its default 1 MB blocks parsed in parallel), a shorter one on this thread in one block (one
+    chunk per column: 2.3 ms of CPU for a 100 Hz segment's 1.7 MB against 3.4 ms in 1 MB blocks)."""
+    if size >= THREADED_BLOCK_BYTES:
+        return pacsv.ReadOptions(column_names=columns, use_threads=True)
+    return pacsv.ReadOptions(column_names=columns, use_threads=False, block_size=max(size + 1, 2**20))
 
 
 def _copy_column(chunked, out):
