@@ -17,6 +17,7 @@ angle limits, and returns the one with the least travel from the present angles.
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -177,7 +178,36 @@ class Gimbal:
                 jac.append(cross(b, w[:, None, :]).transpose(0, 2, 1))   # (S, 3, k)
             return np.concatenate(res, axis=1), np.concatenate(jac, axis=1)
 
-        return self._solve(residual, theta0, free=list(range(self.n_axes)))
+        closed = None
+        if CLOSED_FORM:
+            closed = lambda th0: self._closed_static(pairs, th0)     # noqa: E731
+        return self._solve(residual, theta0, free=list(range(self.n_axes)), closed=closed)
+
+    def _closed_static(self, pairs, theta0):
+        """Candidate angles (rows) of a static in closed form, or None (iterate)."""
+        axes = [a for a, _ in self._axes]
+        v = self.mounting @ pairs[0][0]
+        if len(pairs) == 1:                     # up only: R_1 ... R_k v = up
+            sols = _direction(axes, v, UP_ENU)
+            return None if sols is None else _combine(theta0, [range(self.n_axes)], [sols])
+        if self.n_axes != 3:
+            return None
+        h, H = self.mounting @ pairs[1][0], pairs[1][1]
+        if abs(v @ h) > _PARALLEL or abs(v @ v - 1.0) > _PARALLEL or abs(h @ h - 1.0) > _PARALLEL:
+            return None
+        # the whole attitude: R_1 R_2 R_3 = T, T v = up, T h = H; then R_1 R_2 a_3 = T a_3
+        T = np.column_stack([UP_ENU, H, np.cross(UP_ENU, H)]) @ np.column_stack([v, h, np.cross(v, h)]).T
+        a1, a2, a3 = axes
+        pairs12 = _sub2(a1, a2, a3, T @ a3)
+        if pairs12 is None:
+            return None
+        x = np.cross(a3, np.eye(3)[int(np.argmin(np.abs(a3)))])
+        x /= np.linalg.norm(x)
+        rows = []
+        for t1, t2 in pairs12:
+            t3 = _sub1(a3, x, _rot(a2, -t2, _rot(a1, -t1, T @ x)))
+            rows.append([math.degrees(t1), math.degrees(t2), math.degrees(t3)])
+        return np.array(rows).reshape(-1, 3)
 
     def solve_rotation(self, axis_body, elevation_deg, theta0, axis: int, sign: float):
         """Start angles for turning table ``axis`` so that the rotation is about ``axis_body``
@@ -208,10 +238,49 @@ class Gimbal:
             jac = np.concatenate([jw - sign * jb, sign * jb[:, 2:3, :]], axis=1)
             return res[:, :rows], jac[:, :rows]
 
-        return self._solve(residual, theta0, free=[j for j in range(self.n_axes) if j != i])
+        closed = None
+        if CLOSED_FORM:
+            closed = lambda th0: self._closed_rotation(a, elevation_deg, th0, i, sign)    # noqa: E731
+        return self._solve(residual, theta0, free=[j for j in range(self.n_axes) if j != i], closed=closed)
 
-    def _solve(self, residual, theta0, free):
+    def _closed_rotation(self, axis_body, elevation_deg, theta0, i, sign):
+        """Candidate angles of a rotation's start in closed form, or None (iterate).  C a = s b_i
+        is R_(i+1) ... R_k (M a) = s a_i (the inner axes only); the elevation is
+        (R_1 ... R_(i-1) a_i)_z = s sin(elevation) (the outer axes only)."""
+        axes = [a for a, _ in self._axes]
+        inner = _direction(axes[i + 1:], self.mounting @ axis_body, sign * axes[i])
+        if inner is None:
+            return None
+        outer = [{}]
+        if elevation_deg is not None:
+            outer = _cone(axes[:i], axes[i], sign * math.sin(math.radians(elevation_deg)))
+            if outer is None:
+                return None
+        return _combine(theta0, [range(i + 1, self.n_axes), range(i)], [inner, outer])
+
+    def _solve(self, residual, theta0, free, closed=None):
         theta0 = self.unwrap(theta0)
+        theta = None if closed is None else closed(theta0)
+        if theta is not None:                   # every solution (a finite set): none to slide
+            r, _ = residual(theta)
+            theta = theta[np.linalg.norm(r, axis=1) < SOLVE_TOL]
+        else:
+            theta = self._iterate(residual, theta0, free)
+        best, best_key = None, None
+        for th in theta:
+            th = self._in_limits(th)
+            if th is None:
+                continue
+            # the least travel; between equal travels (1e-9 deg: an axis in gimbal lock makes a
+            # line of them), the least squared travel, then the smallest angles: one answer,
+            # whatever order the solutions were found in
+            key = (round(self.travel(theta0, th), 9), round(self._travel2(theta0, th), 6), tuple(np.round(th, 9)))
+            if best_key is None or key < best_key:
+                best, best_key = th, key
+        return best
+
+    def _iterate(self, residual, theta0, free):
+        """The solutions by Gauss-Newton from a grid of starts, slid to their least travel."""
         if free:
             grid = np.arange(0.0, 360.0, GRID_DEG)
             starts = np.tile(theta0, (len(grid) ** len(free) + 1, 1))
@@ -226,18 +295,7 @@ class Gimbal:
             theta = self._least_travel(residual, theta, theta0, free)
             r, _ = residual(theta)
             theta = theta[np.linalg.norm(r, axis=1) < SOLVE_TOL]
-        best, best_key = None, None
-        for th in theta:
-            th = self._in_limits(th)
-            if th is None:
-                continue
-            # the least travel; between equal travels (1e-9 deg: an axis in gimbal lock makes a
-            # line of them), the least squared travel, then the smallest angles: one answer,
-            # whatever order the solutions were found in
-            key = (round(self.travel(theta0, th), 9), round(self._travel2(theta0, th), 6), tuple(np.round(th, 9)))
-            if best_key is None or key < best_key:
-                best, best_key = th, key
-        return best
+        return theta
 
     def _least_travel(self, residual, theta, theta0, free):
         """Slide solutions along their solution set (when it is not a point) towards the least
@@ -341,3 +399,121 @@ def _newton(residual, theta, free):
         if not len(active):
             break
     return theta
+
+
+# ---------------------------------------------------------------------- closed-form inverse kinematics
+# The common cases solved by Paden-Kahan subproblems for arbitrary unit axes (issue 26): every
+# solution, when they are finitely many up to axes the constraint does not involve (those keep
+# their present angle: the least travel on a decoupled axis is none).  None means "not a case
+# solved here" (a solution curve, a near-degenerate geometry): the iterative solve decides.  The
+# candidates then go through the iterative solver's own residual test and least-travel choice.
+CLOSED_FORM = True
+_PARALLEL = 1e-12          # |a x q| below this: the axis leaves q as it is (an exact decoupling)
+_DEGENERATE = 1e-6         # ... between this and _PARALLEL: too near a degenerate case, iterate
+
+
+def _sub1(a, p, q) -> float:
+    """The angle (rad) turning ``p`` about the unit ``a`` onto ``q`` (in the plane normal to a)."""
+    pp, qp = p - a * (a @ p), q - a * (a @ q)
+    return math.atan2(float(a @ np.cross(pp, qp)), float(pp @ qp))
+
+
+def _rot(a, angle, p):
+    """``p`` turned by ``angle`` (rad) about the unit ``a`` (Rodrigues)."""
+    c, s = math.cos(angle), math.sin(angle)
+    return p * c + np.cross(a, p) * s + a * (a @ p) * (1.0 - c)
+
+
+def _sub2(ao, ai, p, q):
+    """Angles (rad) (outer, inner) with R(ao, outer) R(ai, inner) p = q: a list (0-2 pairs), or
+    None when the case is degenerate (parallel axes, a tangency)."""
+    d = float(ao @ ai)
+    n = np.cross(ao, ai)
+    nn = float(n @ n)
+    if nn < _DEGENERATE:
+        return None
+    den = d * d - 1.0
+    alpha = (d * float(ai @ p) - float(ao @ q)) / den
+    beta = (d * float(ao @ q) - float(ai @ p)) / den
+    g2 = (float(p @ p) - alpha * alpha - beta * beta - 2.0 * alpha * beta * d) / nn
+    if g2 < -_DEGENERATE:
+        return []                               # the two cones do not meet: no solution
+    if g2 < _DEGENERATE:
+        return None                             # (nearly) touching: iterate
+    out = []
+    for gamma in (math.sqrt(g2), -math.sqrt(g2)):
+        c = alpha * ao + beta * ai + gamma * n
+        out.append((_sub1(ao, c, q), _sub1(ai, p, c)))
+    return out
+
+
+def _direction(axes, p, q):
+    """Solutions of R(axes[0]) ... R(axes[-1]) p = q (unit p, q) as a list of dicts
+    {index in axes: angle rad}; the axes not in a dict are not involved (they keep their present
+    angle).  None: not solved here."""
+    lo, hi = 0, len(axes)
+    while lo < hi and np.linalg.norm(np.cross(axes[lo], q)) < _DEGENERATE:      # leaves q as it is
+        if np.linalg.norm(np.cross(axes[lo], q)) >= _PARALLEL:
+            return None
+        lo += 1
+    while lo < hi and np.linalg.norm(np.cross(axes[hi - 1], p)) < _DEGENERATE:  # leaves p as it is
+        if np.linalg.norm(np.cross(axes[hi - 1], p)) >= _PARALLEL:
+            return None
+        hi -= 1
+    n = hi - lo
+    if n == 0:
+        return [{}]
+    if n == 1:
+        return [{lo: _sub1(axes[lo], p, q)}]
+    if n == 2:
+        pairs = _sub2(axes[lo], axes[lo + 1], p, q)
+        return None if pairs is None else [{lo: o, lo + 1: i} for o, i in pairs]
+    return None
+
+
+def _cone(axes, p, height):
+    """Solutions of (R(axes[0]) ... R(axes[-1]) p)_z = height, as _direction (None: a curve)."""
+    lo, hi = 0, len(axes)
+    z = UP_ENU
+    while lo < hi and np.linalg.norm(np.cross(axes[lo], z)) < _DEGENERATE:
+        if np.linalg.norm(np.cross(axes[lo], z)) >= _PARALLEL:
+            return None
+        lo += 1
+    while lo < hi and np.linalg.norm(np.cross(axes[hi - 1], p)) < _DEGENERATE:
+        if np.linalg.norm(np.cross(axes[hi - 1], p)) >= _PARALLEL:
+            return None
+        hi -= 1
+    n = hi - lo
+    if n == 0:
+        return [{}]
+    if n > 1:
+        return None
+    a = axes[lo]
+    # z . R p = z.a a.p + cos (z.p - z.a a.p) + sin z.(a x p) = height
+    mid = float(a @ z) * float(a @ p)
+    A, B = float(p @ z) - mid, float(z @ np.cross(a, p))
+    r = math.hypot(A, B)
+    if r < _DEGENERATE:
+        return None
+    c = (height - mid) / r
+    if abs(c) > 1.0 + _DEGENERATE:
+        return []
+    if abs(c) > 1.0 - _DEGENERATE:
+        return None                             # tangent: iterate
+    phi, delta = math.atan2(B, A), math.acos(c)
+    return [{lo: phi + delta}, {lo: phi - delta}]
+
+
+def _combine(theta0, axes_idx, parts):
+    """Candidate angle rows (deg): ``theta0`` with each combination of the parts' solutions."""
+    rows = [theta0.copy()]
+    for idx, sols in zip(axes_idx, parts):
+        new = []
+        for row in rows:
+            for sol in sols:
+                r = row.copy()
+                for j, angle in sol.items():
+                    r[idx[j]] = math.degrees(angle)
+                new.append(r)
+        rows = new
+    return np.array(rows).reshape(-1, len(theta0))
