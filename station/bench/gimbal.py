@@ -190,24 +190,31 @@ class Gimbal:
         if len(pairs) == 1:                     # up only: R_1 ... R_k v = up
             sols = _direction(axes, v, UP_ENU)
             return None if sols is None else _combine(theta0, [range(self.n_axes)], [sols])
-        if self.n_axes != 3:
-            return None
         h, H = self.mounting @ pairs[1][0], pairs[1][1]
         if abs(v @ h) > _PARALLEL or abs(v @ v - 1.0) > _PARALLEL or abs(h @ h - 1.0) > _PARALLEL:
             return None
-        # the whole attitude: R_1 R_2 R_3 = T, T v = up, T h = H; then R_1 R_2 a_3 = T a_3
+        # the whole attitude: R_1 ... R_k = T with T v = up, T h = H
         T = np.column_stack([UP_ENU, H, np.cross(UP_ENU, H)]) @ np.column_stack([v, h, np.cross(v, h)]).T
-        a1, a2, a3 = axes
-        pairs12 = _sub2(a1, a2, a3, T @ a3)
-        if pairs12 is None:
+        last = axes[-1]
+        x = np.cross(last, np.eye(3)[int(np.argmin(np.abs(last)))])
+        x /= np.linalg.norm(x)                  # a direction the innermost axis turns
+        if self.n_axes == 3:                    # R_1 R_2 a_3 = T a_3, then the inner angle
+            outer = _sub2(axes[0], axes[1], axes[2], T @ axes[2])
+        elif self.n_axes == 2:                  # R_1 a_2 = T a_2, then the inner angle
+            if np.linalg.norm(np.cross(axes[0], axes[1])) < _DEGENERATE:
+                return None
+            outer = [(_sub1(axes[0], axes[1], T @ axes[1]),)]
+        else:
+            outer = [()]
+        if outer is None:
             return None
-        x = np.cross(a3, np.eye(3)[int(np.argmin(np.abs(a3)))])
-        x /= np.linalg.norm(x)
         rows = []
-        for t1, t2 in pairs12:
-            t3 = _sub1(a3, x, _rot(a2, -t2, _rot(a1, -t1, T @ x)))
-            rows.append([math.degrees(t1), math.degrees(t2), math.degrees(t3)])
-        return np.array(rows).reshape(-1, 3)
+        for angles in outer:
+            y = T @ x
+            for a, t in zip(axes, angles):      # (R_1 ... R_(k-1))^T T x
+                y = _rot(a, -t, y)
+            rows.append([math.degrees(t) for t in (*angles, _sub1(last, x, y))])
+        return np.array(rows).reshape(-1, self.n_axes)
 
     def solve_rotation(self, axis_body, elevation_deg, theta0, axis: int, sign: float):
         """Start angles for turning table ``axis`` so that the rotation is about ``axis_body``
@@ -496,11 +503,16 @@ def _cone(axes, p, height):
     if r < _DEGENERATE:
         return None
     c = (height - mid) / r
+    phi = math.atan2(B, A)
     if abs(c) > 1.0 + _DEGENERATE:
         return []
     if abs(c) > 1.0 - _DEGENERATE:
-        return None                             # tangent: iterate
-    phi, delta = math.atan2(B, A), math.acos(c)
+        # (nearly) tangent: iterate.  Not the exact double root here: Gauss-Newton stops 6e-7 deg
+        # short of it (the residual is quadratic there), and a compilation choosing between two
+        # axes of equal travel (sizeeffect's y100) then takes the one whose travel is 6e-7 deg
+        # "shorter": the exact root would change that plan's axis
+        return None
+    delta = math.acos(c)
     return [{lo: phi + delta}, {lo: phi - delta}]
 
 
