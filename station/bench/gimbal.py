@@ -194,14 +194,14 @@ class Gimbal:
         if abs(v @ h) > _PARALLEL or abs(v @ v - 1.0) > _PARALLEL or abs(h @ h - 1.0) > _PARALLEL:
             return None
         # the whole attitude: R_1 ... R_k = T with T v = up, T h = H
-        T = np.column_stack([UP_ENU, H, np.cross(UP_ENU, H)]) @ np.column_stack([v, h, np.cross(v, h)]).T
+        T = np.column_stack([UP_ENU, H, _cx(UP_ENU, H)]) @ np.column_stack([v, h, _cx(v, h)]).T
         last = axes[-1]
-        x = np.cross(last, np.eye(3)[int(np.argmin(np.abs(last)))])
+        x = _cx(last, np.eye(3)[int(np.argmin(np.abs(last)))])
         x /= np.linalg.norm(x)                  # a direction the innermost axis turns
         if self.n_axes == 3:                    # R_1 R_2 a_3 = T a_3, then the inner angle
             outer = _sub2(axes[0], axes[1], axes[2], T @ axes[2])
         elif self.n_axes == 2:                  # R_1 a_2 = T a_2, then the inner angle
-            if np.linalg.norm(np.cross(axes[0], axes[1])) < _DEGENERATE:
+            if _norm(_cx(axes[0], axes[1])) < _DEGENERATE:
                 return None
             outer = [(_sub1(axes[0], axes[1], T @ axes[1]),)]
         else:
@@ -418,24 +418,35 @@ CLOSED_FORM = True
 _PARALLEL = 1e-12          # |a x q| below this: the axis leaves q as it is (an exact decoupling)
 _DEGENERATE = 1e-6         # ... between this and _PARALLEL: too near a degenerate case, iterate
 
+def _cx(a, b) -> np.ndarray:
+    """a x b of two 3-vectors (np.cross's general machinery costs 20 us a call; this 2)."""
+    a0, a1, a2 = a
+    b0, b1, b2 = b
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
+def _norm(v) -> float:
+    return math.sqrt(float(v @ v))
+
+
 
 def _sub1(a, p, q) -> float:
     """The angle (rad) turning ``p`` about the unit ``a`` onto ``q`` (in the plane normal to a)."""
     pp, qp = p - a * (a @ p), q - a * (a @ q)
-    return math.atan2(float(a @ np.cross(pp, qp)), float(pp @ qp))
+    return math.atan2(float(a @ _cx(pp, qp)), float(pp @ qp))
 
 
 def _rot(a, angle, p):
     """``p`` turned by ``angle`` (rad) about the unit ``a`` (Rodrigues)."""
     c, s = math.cos(angle), math.sin(angle)
-    return p * c + np.cross(a, p) * s + a * (a @ p) * (1.0 - c)
+    return p * c + _cx(a, p) * s + a * (a @ p) * (1.0 - c)
 
 
 def _sub2(ao, ai, p, q):
     """Angles (rad) (outer, inner) with R(ao, outer) R(ai, inner) p = q: a list (0-2 pairs), or
     None when the case is degenerate (parallel axes, a tangency)."""
     d = float(ao @ ai)
-    n = np.cross(ao, ai)
+    n = _cx(ao, ai)
     nn = float(n @ n)
     if nn < _DEGENERATE:
         return None
@@ -459,12 +470,12 @@ def _direction(axes, p, q):
     {index in axes: angle rad}; the axes not in a dict are not involved (they keep their present
     angle).  None: not solved here."""
     lo, hi = 0, len(axes)
-    while lo < hi and np.linalg.norm(np.cross(axes[lo], q)) < _DEGENERATE:      # leaves q as it is
-        if np.linalg.norm(np.cross(axes[lo], q)) >= _PARALLEL:
+    while lo < hi and _norm(_cx(axes[lo], q)) < _DEGENERATE:      # leaves q as it is
+        if _norm(_cx(axes[lo], q)) >= _PARALLEL:
             return None
         lo += 1
-    while lo < hi and np.linalg.norm(np.cross(axes[hi - 1], p)) < _DEGENERATE:  # leaves p as it is
-        if np.linalg.norm(np.cross(axes[hi - 1], p)) >= _PARALLEL:
+    while lo < hi and _norm(_cx(axes[hi - 1], p)) < _DEGENERATE:  # leaves p as it is
+        if _norm(_cx(axes[hi - 1], p)) >= _PARALLEL:
             return None
         hi -= 1
     n = hi - lo
@@ -482,12 +493,12 @@ def _cone(axes, p, height):
     """Solutions of (R(axes[0]) ... R(axes[-1]) p)_z = height, as _direction (None: a curve)."""
     lo, hi = 0, len(axes)
     z = UP_ENU
-    while lo < hi and np.linalg.norm(np.cross(axes[lo], z)) < _DEGENERATE:
-        if np.linalg.norm(np.cross(axes[lo], z)) >= _PARALLEL:
+    while lo < hi and _norm(_cx(axes[lo], z)) < _DEGENERATE:
+        if _norm(_cx(axes[lo], z)) >= _PARALLEL:
             return None
         lo += 1
-    while lo < hi and np.linalg.norm(np.cross(axes[hi - 1], p)) < _DEGENERATE:
-        if np.linalg.norm(np.cross(axes[hi - 1], p)) >= _PARALLEL:
+    while lo < hi and _norm(_cx(axes[hi - 1], p)) < _DEGENERATE:
+        if _norm(_cx(axes[hi - 1], p)) >= _PARALLEL:
             return None
         hi -= 1
     n = hi - lo
@@ -498,7 +509,7 @@ def _cone(axes, p, height):
     a = axes[lo]
     # z . R p = z.a a.p + cos (z.p - z.a a.p) + sin z.(a x p) = height
     mid = float(a @ z) * float(a @ p)
-    A, B = float(p @ z) - mid, float(z @ np.cross(a, p))
+    A, B = float(p @ z) - mid, float(z @ _cx(a, p))
     r = math.hypot(A, B)
     if r < _DEGENERATE:
         return None
