@@ -267,7 +267,11 @@ class Gimbal:
 
     def _solve(self, residual, theta0, free, closed=None):
         theta0 = self.unwrap(theta0)
-        theta = None if closed is None else closed(theta0)
+        theta = None
+        if closed is not None and all(lim is None or t <= lim[1] for t, lim in zip(theta0, self.angle_limits_deg)):
+            # (from outside an axis's limits an axis that the target does not involve is not to
+            # stay where it is: the iterative solve)
+            theta = closed(theta0)
         if theta is not None:                   # every solution (a finite set): none to slide
             r, _ = residual(theta)
             theta = theta[np.linalg.norm(r, axis=1) < SOLVE_TOL]
