@@ -10,9 +10,12 @@ and M the mounting (case -> platform coordinates, ``v_platform = M v_case``):
 
 so d(C_nb v)/d theta_j = b_j x (C_nb v), and d b_i / d theta_j = b_j x b_i for j < i.
 
-Inverse kinematics solves a few direction constraints for the angles by batched Gauss-Newton
-from a grid of starting points plus the present angles, keeps the exact solutions inside the
-angle limits, and returns the one with the least travel from the present angles.
+Inverse kinematics solves a few direction constraints for the angles: in closed form where the
+solutions are finitely many up to axes the constraint does not involve (Paden-Kahan subproblems
+for arbitrary unit axes, at the end of this module; issue 26), else by batched Gauss-Newton from
+a grid of starting points plus the present angles, slid along the solution set; it keeps the
+exact solutions inside the angle limits and returns the one with the least travel from the
+present angles.
 """
 from __future__ import annotations
 
