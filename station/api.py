@@ -895,10 +895,9 @@ def schemes(*, config=None) -> list[dict]:
     recording, and compiled for the table of ``config``: seconds of device time (None when it
     cannot run there: ``note`` says why) and operator steps.  A scheme compiled before for this
     table (by this code) is read from the user's cache folder (station/bench/compile_cache.py);
-    the others are compiled each in a forked child, as many at once as there are cores."""
+    the others are compiled in this process."""
     from station.bench.compile_cache import cached_plan
     from station.bench.config import load_config
-    from station.core import forked
     from station.io.scheme import builtin_names, load_scheme
 
     cfg = load_config(None if config is None else str(config))
@@ -907,8 +906,11 @@ def schemes(*, config=None) -> list[dict]:
         sch = load_scheme(name)
         rows[name] = (sch, cached_plan(sch, cfg))
     missing = [name for name, (_, hit) in rows.items() if hit is None]
-    computed = dict(zip(missing, forked.map_in_children(lambda name: _scheme_row(name, cfg, rows[name][0]),
-                                                          missing)))
+    # compiled here, one after the other: with the closed-form inverse kinematics (issue 26) a
+    # scheme compiles in ~25 ms, and forked children (one per scheme, each with its own memory of
+    # solves) cost more than they saved: 549 -> 351 ms CPU, 0.98 -> 0.53 s wall for the cold
+    # listing (7 interleaved pairs, docs/performance.md)
+    computed = {name: _scheme_row(name, cfg, rows[name][0]) for name in missing}
     return [computed[name] if name in computed else _scheme_row(name, cfg, sch, hit)
             for name, (sch, hit) in rows.items()]
 

@@ -166,7 +166,13 @@ class _HalfStepGimbal(Gimbal):
     """The inverse kinematics as it was before the solver was sped up (issue 26): every start
     iterated until all converge, the solutions slid along their solution set by half steps (35
     slides to 1e-9 deg), the first of the least travel kept.  The reference the faster solver
-    must agree with."""
+    must agree with.  (Iterative only: no closed form.)"""
+
+    def _closed_static(self, pairs, theta0):
+        return None
+
+    def _closed_rotation(self, axis_body, elevation_deg, theta0, i, sign):
+        return None
 
     def _least_travel(self, residual, theta, theta0, free):
         continuous = np.array([lim is None for lim in self.angle_limits_deg])

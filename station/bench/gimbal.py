@@ -10,13 +10,17 @@ and M the mounting (case -> platform coordinates, ``v_platform = M v_case``):
 
 so d(C_nb v)/d theta_j = b_j x (C_nb v), and d b_i / d theta_j = b_j x b_i for j < i.
 
-Inverse kinematics solves a few direction constraints for the angles by batched Gauss-Newton
-from a grid of starting points plus the present angles, keeps the exact solutions inside the
-angle limits, and returns the one with the least travel from the present angles.
+Inverse kinematics solves a few direction constraints for the angles: in closed form where the
+solutions are finitely many up to axes the constraint does not involve (Paden-Kahan subproblems
+for arbitrary unit axes, at the end of this module; issue 26), else by batched Gauss-Newton from
+a grid of starting points plus the present angles, slid along the solution set; it keeps the
+exact solutions inside the angle limits and returns the one with the least travel from the
+present angles.
 """
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -177,7 +181,43 @@ class Gimbal:
                 jac.append(cross(b, w[:, None, :]).transpose(0, 2, 1))   # (S, 3, k)
             return np.concatenate(res, axis=1), np.concatenate(jac, axis=1)
 
-        return self._solve(residual, theta0, free=list(range(self.n_axes)))
+        closed = None
+        if CLOSED_FORM:
+            closed = lambda th0: self._closed_static(pairs, th0)     # noqa: E731
+        return self._solve(residual, theta0, free=list(range(self.n_axes)), closed=closed)
+
+    def _closed_static(self, pairs, theta0):
+        """Candidate angles (rows) of a static in closed form, or None (iterate)."""
+        axes = [a for a, _ in self._axes]
+        v = self.mounting @ pairs[0][0]
+        if len(pairs) == 1:                     # up only: R_1 ... R_k v = up
+            sols = _direction(axes, v, UP_ENU)
+            return None if sols is None else _combine(theta0, [range(self.n_axes)], [sols])
+        h, H = self.mounting @ pairs[1][0], pairs[1][1]
+        if abs(v @ h) > _PARALLEL or abs(v @ v - 1.0) > _PARALLEL or abs(h @ h - 1.0) > _PARALLEL:
+            return None
+        # the whole attitude: R_1 ... R_k = T with T v = up, T h = H
+        T = np.column_stack([UP_ENU, H, _cx(UP_ENU, H)]) @ np.column_stack([v, h, _cx(v, h)]).T
+        last = axes[-1]
+        x = _cx(last, np.eye(3)[int(np.argmin(np.abs(last)))])
+        x /= np.linalg.norm(x)                  # a direction the innermost axis turns
+        if self.n_axes == 3:                    # R_1 R_2 a_3 = T a_3, then the inner angle
+            outer = _sub2(axes[0], axes[1], axes[2], T @ axes[2])
+        elif self.n_axes == 2:                  # R_1 a_2 = T a_2, then the inner angle
+            if _norm(_cx(axes[0], axes[1])) < _DEGENERATE:
+                return None
+            outer = [(_sub1(axes[0], axes[1], T @ axes[1]),)]
+        else:
+            outer = [()]
+        if outer is None:
+            return None
+        rows = []
+        for angles in outer:
+            y = T @ x
+            for a, t in zip(axes, angles):      # (R_1 ... R_(k-1))^T T x
+                y = _rot(a, -t, y)
+            rows.append([math.degrees(t) for t in (*angles, _sub1(last, x, y))])
+        return np.array(rows).reshape(-1, self.n_axes)
 
     def solve_rotation(self, axis_body, elevation_deg, theta0, axis: int, sign: float):
         """Start angles for turning table ``axis`` so that the rotation is about ``axis_body``
@@ -208,10 +248,53 @@ class Gimbal:
             jac = np.concatenate([jw - sign * jb, sign * jb[:, 2:3, :]], axis=1)
             return res[:, :rows], jac[:, :rows]
 
-        return self._solve(residual, theta0, free=[j for j in range(self.n_axes) if j != i])
+        closed = None
+        if CLOSED_FORM:
+            closed = lambda th0: self._closed_rotation(a, elevation_deg, th0, i, sign)    # noqa: E731
+        return self._solve(residual, theta0, free=[j for j in range(self.n_axes) if j != i], closed=closed)
 
-    def _solve(self, residual, theta0, free):
+    def _closed_rotation(self, axis_body, elevation_deg, theta0, i, sign):
+        """Candidate angles of a rotation's start in closed form, or None (iterate).  C a = s b_i
+        is R_(i+1) ... R_k (M a) = s a_i (the inner axes only); the elevation is
+        (R_1 ... R_(i-1) a_i)_z = s sin(elevation) (the outer axes only)."""
+        axes = [a for a, _ in self._axes]
+        inner = _direction(axes[i + 1:], self.mounting @ axis_body, sign * axes[i])
+        if inner is None:
+            return None
+        outer = [{}]
+        if elevation_deg is not None:
+            outer = _cone(axes[:i], axes[i], sign * math.sin(math.radians(elevation_deg)))
+            if outer is None:
+                return None
+        return _combine(theta0, [range(i + 1, self.n_axes), range(i)], [inner, outer])
+
+    def _solve(self, residual, theta0, free, closed=None):
         theta0 = self.unwrap(theta0)
+        theta = None
+        if closed is not None and all(lim is None or t <= lim[1] for t, lim in zip(theta0, self.angle_limits_deg)):
+            # (from outside an axis's limits an axis that the target does not involve is not to
+            # stay where it is: the iterative solve)
+            theta = closed(theta0)
+        if theta is not None:                   # every solution (a finite set): none to slide
+            r, _ = residual(theta)
+            theta = theta[np.linalg.norm(r, axis=1) < SOLVE_TOL]
+        else:
+            theta = self._iterate(residual, theta0, free)
+        best, best_key = None, None
+        for th in theta:
+            th = self._in_limits(th)
+            if th is None:
+                continue
+            # the least travel; between equal travels (1e-9 deg: an axis in gimbal lock makes a
+            # line of them), the least squared travel, then the smallest angles: one answer,
+            # whatever order the solutions were found in
+            key = (round(self.travel(theta0, th), 9), round(self._travel2(theta0, th), 6), tuple(np.round(th, 9)))
+            if best_key is None or key < best_key:
+                best, best_key = th, key
+        return best
+
+    def _iterate(self, residual, theta0, free):
+        """The solutions by Gauss-Newton from a grid of starts, slid to their least travel."""
         if free:
             grid = np.arange(0.0, 360.0, GRID_DEG)
             starts = np.tile(theta0, (len(grid) ** len(free) + 1, 1))
@@ -226,18 +309,7 @@ class Gimbal:
             theta = self._least_travel(residual, theta, theta0, free)
             r, _ = residual(theta)
             theta = theta[np.linalg.norm(r, axis=1) < SOLVE_TOL]
-        best, best_key = None, None
-        for th in theta:
-            th = self._in_limits(th)
-            if th is None:
-                continue
-            # the least travel; between equal travels (1e-9 deg: an axis in gimbal lock makes a
-            # line of them), the least squared travel, then the smallest angles: one answer,
-            # whatever order the solutions were found in
-            key = (round(self.travel(theta0, th), 9), round(self._travel2(theta0, th), 6), tuple(np.round(th, 9)))
-            if best_key is None or key < best_key:
-                best, best_key = th, key
-        return best
+        return theta
 
     def _least_travel(self, residual, theta, theta0, free):
         """Slide solutions along their solution set (when it is not a point) towards the least
@@ -341,3 +413,137 @@ def _newton(residual, theta, free):
         if not len(active):
             break
     return theta
+
+
+# ---------------------------------------------------------------------- closed-form inverse kinematics
+# The common cases solved by Paden-Kahan subproblems for arbitrary unit axes (issue 26): every
+# solution, when they are finitely many up to axes the constraint does not involve (those keep
+# their present angle: the least travel on a decoupled axis is none).  None means "not a case
+# solved here" (a solution curve, a near-degenerate geometry): the iterative solve decides.  The
+# candidates then go through the iterative solver's own residual test and least-travel choice.
+CLOSED_FORM = True
+_PARALLEL = 1e-12          # |a x q| below this: the axis leaves q as it is (an exact decoupling)
+_DEGENERATE = 1e-6         # ... between this and _PARALLEL: too near a degenerate case, iterate
+
+def _cx(a, b) -> np.ndarray:
+    """a x b of two 3-vectors (np.cross's general machinery costs 20 us a call; this 2)."""
+    a0, a1, a2 = a
+    b0, b1, b2 = b
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
+def _norm(v) -> float:
+    return math.sqrt(float(v @ v))
+
+
+
+def _sub1(a, p, q) -> float:
+    """The angle (rad) turning ``p`` about the unit ``a`` onto ``q`` (in the plane normal to a)."""
+    pp, qp = p - a * (a @ p), q - a * (a @ q)
+    return math.atan2(float(a @ _cx(pp, qp)), float(pp @ qp))
+
+
+def _rot(a, angle, p):
+    """``p`` turned by ``angle`` (rad) about the unit ``a`` (Rodrigues)."""
+    c, s = math.cos(angle), math.sin(angle)
+    return p * c + _cx(a, p) * s + a * (a @ p) * (1.0 - c)
+
+
+def _sub2(ao, ai, p, q):
+    """Angles (rad) (outer, inner) with R(ao, outer) R(ai, inner) p = q: a list (0-2 pairs), or
+    None when the case is degenerate (parallel axes, a tangency)."""
+    d = float(ao @ ai)
+    n = _cx(ao, ai)
+    nn = float(n @ n)
+    if nn < _DEGENERATE:
+        return None
+    den = d * d - 1.0
+    alpha = (d * float(ai @ p) - float(ao @ q)) / den
+    beta = (d * float(ao @ q) - float(ai @ p)) / den
+    g2 = (float(p @ p) - alpha * alpha - beta * beta - 2.0 * alpha * beta * d) / nn
+    if g2 < -_DEGENERATE:
+        return []                               # the two cones do not meet: no solution
+    if g2 < _DEGENERATE:
+        return None                             # (nearly) touching: iterate
+    out = []
+    for gamma in (math.sqrt(g2), -math.sqrt(g2)):
+        c = alpha * ao + beta * ai + gamma * n
+        out.append((_sub1(ao, c, q), _sub1(ai, p, c)))
+    return out
+
+
+def _direction(axes, p, q):
+    """Solutions of R(axes[0]) ... R(axes[-1]) p = q (unit p, q) as a list of dicts
+    {index in axes: angle rad}; the axes not in a dict are not involved (they keep their present
+    angle).  None: not solved here."""
+    lo, hi = 0, len(axes)
+    while lo < hi and _norm(_cx(axes[lo], q)) < _DEGENERATE:      # leaves q as it is
+        if _norm(_cx(axes[lo], q)) >= _PARALLEL:
+            return None
+        lo += 1
+    while lo < hi and _norm(_cx(axes[hi - 1], p)) < _DEGENERATE:  # leaves p as it is
+        if _norm(_cx(axes[hi - 1], p)) >= _PARALLEL:
+            return None
+        hi -= 1
+    n = hi - lo
+    if n == 0:
+        return [{}]
+    if n == 1:
+        return [{lo: _sub1(axes[lo], p, q)}]
+    if n == 2:
+        pairs = _sub2(axes[lo], axes[lo + 1], p, q)
+        return None if pairs is None else [{lo: o, lo + 1: i} for o, i in pairs]
+    return None
+
+
+def _cone(axes, p, height):
+    """Solutions of (R(axes[0]) ... R(axes[-1]) p)_z = height, as _direction (None: a curve)."""
+    lo, hi = 0, len(axes)
+    z = UP_ENU
+    while lo < hi and _norm(_cx(axes[lo], z)) < _DEGENERATE:
+        if _norm(_cx(axes[lo], z)) >= _PARALLEL:
+            return None
+        lo += 1
+    while lo < hi and _norm(_cx(axes[hi - 1], p)) < _DEGENERATE:
+        if _norm(_cx(axes[hi - 1], p)) >= _PARALLEL:
+            return None
+        hi -= 1
+    n = hi - lo
+    if n == 0:
+        return [{}]
+    if n > 1:
+        return None
+    a = axes[lo]
+    # z . R p = z.a a.p + cos (z.p - z.a a.p) + sin z.(a x p) = height
+    mid = float(a @ z) * float(a @ p)
+    A, B = float(p @ z) - mid, float(z @ _cx(a, p))
+    r = math.hypot(A, B)
+    if r < _DEGENERATE:
+        return None
+    c = (height - mid) / r
+    phi = math.atan2(B, A)
+    if abs(c) > 1.0 + _DEGENERATE:
+        return []
+    if abs(c) > 1.0 - _DEGENERATE:
+        # (nearly) tangent: iterate.  Not the exact double root here: Gauss-Newton stops 6e-7 deg
+        # short of it (the residual is quadratic there), and a compilation choosing between two
+        # axes of equal travel (sizeeffect's y100) then takes the one whose travel is 6e-7 deg
+        # "shorter": the exact root would change that plan's axis
+        return None
+    delta = math.acos(c)
+    return [{lo: phi + delta}, {lo: phi - delta}]
+
+
+def _combine(theta0, axes_idx, parts):
+    """Candidate angle rows (deg): ``theta0`` with each combination of the parts' solutions."""
+    rows = [theta0.copy()]
+    for idx, sols in zip(axes_idx, parts):
+        new = []
+        for row in rows:
+            for sol in sols:
+                r = row.copy()
+                for j, angle in sol.items():
+                    r[idx[j]] = math.degrees(angle)
+                new.append(r)
+        rows = new
+    return np.array(rows).reshape(-1, len(theta0))
