@@ -236,6 +236,11 @@ def _scheduler(directory, captures, out, workers, env) -> dict:
     # (station/batch/cluster.py), unless the environment says otherwise
     env = dict(env)
     env.setdefault("DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED", "False")
+    # and with the cluster's clockwork slowed as the local cluster's is (cluster.CLOCKWORK)
+    from station.batch.cluster import CLOCKWORK
+
+    for _, variable, value in CLOCKWORK:
+        env.setdefault(variable, value)
     logs = open(directory.parent / f"dask-bench-{os.getpid()}.log", "w")
     procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
                                "--port", str(port), "--no-dashboard"], env=env, stdout=logs, stderr=logs)]
