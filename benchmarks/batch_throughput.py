@@ -176,6 +176,11 @@ def run(directory: Path, n_single: int, workers: int, phases=PHASES) -> dict:
                     r["same_captures"] = {"captures": len(both), "single_cpu_s": single_cpu,
                                           "tasks_cpu_s": sum(tasks[c] for c in both),
                                           "tasks_over_single": sum(tasks[c] for c in both) / single_cpu}
+                    # the CPU ceiling for the batch's own mix of captures: what the single process
+                    # would take for all of them (their tasks' CPU over the same-capture ratio)
+                    # against what the batch took in all
+                    r["of_ceiling_cpu_same_mix"] = (r["tasks_cpu_per_capture_s"] / r["same_captures"]["tasks_over_single"]
+                                                    / r["cpu_per_capture_s"])
     shutil.rmtree(out, ignore_errors=True)
     return results
 
@@ -358,4 +363,6 @@ if __name__ == "__main__":
               f"{r['cpu_per_capture_s']:.3f} s CPU per capture; {r['of_ceiling_wall']:.2f} of the wall-time "
               f"ceiling, {r['of_ceiling_cpu']:.2f} of the CPU ceiling"
               + (f"; on the {r['same_captures']['captures']} captures timed alone too, the tasks took "
-                 f"{r['same_captures']['tasks_over_single']:.2f} x their single-process CPU" if "same_captures" in r else ""))
+                 f"{r['same_captures']['tasks_over_single']:.2f} x their single-process CPU, "
+                 f"{r['of_ceiling_cpu_same_mix']:.2f} of the CPU ceiling for the batch's own captures"
+                 if "same_captures" in r else ""))
