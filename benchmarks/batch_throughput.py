@@ -53,10 +53,25 @@ def load() -> str:
     return f"load average {one:.1f} / {five:.1f} / {fifteen:.1f} (1/5/15 min) on {os.cpu_count()} cores"
 
 
+def spread(captures: list[Path], n: int) -> list[Path]:
+    """``n`` of the captures, evenly spread over the sorted list (the first and the last among
+    them): the single-process ceiling is measured on the same mix of captures as the batch runs.
+    A capture's estimate costs from 0.2 s to 4.5 s of CPU (27 Nov 2026, 200 of these captures:
+    median 0.34 s, mean 0.50 s; 7 of the 200 take 2.5-4.5 s, their fits a thousand Jacobians),
+    so the first n or the last n of a folder (what single and single-stream timed before) measure
+    different mixes: 0.31 s against 0.52 s of CPU per capture in the thirteenth session."""
+    if n >= len(captures):
+        return list(captures)
+    step = (len(captures) - 1) / max(1, n - 1)
+    return [captures[round(i * step)] for i in range(n)]
+
+
 def single(captures: list[Path]) -> dict:
     """The single-process estimate rate: station.estimate.estimate_capture and the calibration
     file written, one capture after the other in this process (warmed up on one first), reading
-    in process, one BLAS thread -- what one worker does per capture, without the cluster."""
+    in process, one BLAS thread -- what one worker does per capture, without the cluster.  CPU:
+    this process's (user + system of every thread: RUSAGE_SELF, which is time.process_time; it
+    starts no child, so RUSAGE_CHILDREN stays 0, checked)."""
     os.environ["STATION_READ_IN_PROCESS"] = "1"
     from threadpoolctl import threadpool_limits
 
@@ -65,16 +80,26 @@ def single(captures: list[Path]) -> dict:
 
     out = Path(os.environ.get("TMPDIR", "/tmp")) / f"batch-single-{os.getpid()}"
     out.mkdir(exist_ok=True)
+    each = []
     with threadpool_limits(limits=1, user_api="blas"):
         estimate_capture(captures[0])
+        children = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu, wall = time.process_time(), time.perf_counter()
         for i, c in enumerate(captures):
+            before = time.process_time()
             cal, _, prov = estimate_capture(c)
             write_calfile(out / f"{i}.yaml", cal, prov)
+            each.append((c.name, time.process_time() - before))
         cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
     shutil.rmtree(out)
-    return {"captures": len(captures), "wall_s": wall, "cpu_s": cpu, "rate_per_s": len(captures) / wall,
-            "cpu_per_capture_s": cpu / len(captures), "load": load()}
+    costs = sorted(x for _, x in each)
+    return {"captures": len(captures), "first": captures[0].name, "last": captures[-1].name,
+            "wall_s": wall, "cpu_s": cpu, "rate_per_s": len(captures) / wall,
+            "cpu_per_capture_s": cpu / len(captures), "cpu_median_s": costs[len(costs) // 2], "cpu_max_s": costs[-1],
+            "per_capture_cpu_s": dict(each),
+            "children_cpu_s": (after.ru_utime - children.ru_utime) + (after.ru_stime - children.ru_stime),
+            "load": load()}
 
 
 def _batch(args, env) -> tuple[float, float, str]:
@@ -123,8 +148,8 @@ def run(directory: Path, n_single: int, workers: int, phases=PHASES) -> dict:
     env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
     results = {"captures": len(captures), "workers": workers}
     if "single" in phases:
-        results["single_before"] = single(captures[:n_single])
-        print(json.dumps(results["single_before"]), flush=True)
+        results["single_before"] = single(spread(captures, n_single))
+        print(json.dumps({k: v for k, v in results["single_before"].items() if k != "per_capture_cpu_s"}), flush=True)
     out = directory.parent / f"batch-out-{os.getpid()}"
     shutil.rmtree(out, ignore_errors=True)
     if "local" in phases:
@@ -132,8 +157,8 @@ def run(directory: Path, n_single: int, workers: int, phases=PHASES) -> dict:
     if "scheduler" in phases:
         results["scheduler"] = _scheduler(directory, captures, out, workers, env)
     if "single" in phases:
-        results["single_after"] = single(captures[:n_single])
-        print(json.dumps(results["single_after"]), flush=True)
+        results["single_after"] = single(spread(captures, n_single))
+        print(json.dumps({k: v for k, v in results["single_after"].items() if k != "per_capture_cpu_s"}), flush=True)
         rate = (results["single_before"]["rate_per_s"] + results["single_after"]["rate_per_s"]) / 2
         cpu_each = (results["single_before"]["cpu_per_capture_s"] + results["single_after"]["cpu_per_capture_s"]) / 2
         for name in ("local", "scheduler"):
@@ -141,6 +166,21 @@ def run(directory: Path, n_single: int, workers: int, phases=PHASES) -> dict:
                 r = results[name]
                 r["of_ceiling_wall"] = r["rate_per_s"] / (rate * workers)
                 r["of_ceiling_cpu"] = cpu_each / r["cpu_per_capture_s"]
+                # the same captures, one by one: each task's CPU in the workers against the single
+                # process's CPU for that capture (the mean of before and after), whatever the mix
+                tasks = r.get("tasks_by_capture", {})
+                both = [c for c in results["single_before"]["per_capture_cpu_s"] if c in tasks]
+                if both:
+                    single_cpu = sum((results["single_before"]["per_capture_cpu_s"][c]
+                                      + results["single_after"]["per_capture_cpu_s"][c]) / 2 for c in both)
+                    r["same_captures"] = {"captures": len(both), "single_cpu_s": single_cpu,
+                                          "tasks_cpu_s": sum(tasks[c] for c in both),
+                                          "tasks_over_single": sum(tasks[c] for c in both) / single_cpu}
+                    # the CPU ceiling for the batch's own mix of captures: what the single process
+                    # would take for all of them (their tasks' CPU over the same-capture ratio)
+                    # against what the batch took in all
+                    r["of_ceiling_cpu_same_mix"] = (r["tasks_cpu_per_capture_s"] / r["same_captures"]["tasks_over_single"]
+                                                    / r["cpu_per_capture_s"])
     shutil.rmtree(out, ignore_errors=True)
     return results
 
@@ -148,10 +188,16 @@ def run(directory: Path, n_single: int, workers: int, phases=PHASES) -> dict:
 def _tasks_cpu(state: Path) -> float:
     """CPU time the tasks themselves took in the workers (each Outcome's cpu_s: the worker
     process's CPU from the task's start to its end), from the batch's state file."""
-    total = 0.0
+    return sum(_tasks_by_capture(state).values())
+
+
+def _tasks_by_capture(state: Path) -> dict:
+    """{capture folder name: its task's CPU s} from the batch's state file."""
+    out = {}
     for line in state.read_text().splitlines():
-        total += json.loads(line).get("cpu_s", 0.0)
-    return total
+        rec = json.loads(line)
+        out[Path(rec.get("source", "")).name] = rec.get("cpu_s", 0.0)
+    return out
 
 
 def _breakdown(r: dict, tasks_cpu: float, startup: dict | None, n: int) -> dict:
@@ -181,7 +227,8 @@ def _local(directory, captures, out, workers, env) -> dict:
     r = {"wall_s": wall, "cpu_s": cpu, "rate_per_s": len(captures) / wall,
          "cpu_per_capture_s": cpu / len(captures), "load_before": load_before, "load_after": load()}
     _breakdown(r, _tasks_cpu(out / "local" / ".station-batch-estimate.jsonl"), startup, len(captures))
-    print(json.dumps({"local": r}), flush=True)
+    r["tasks_by_capture"] = _tasks_by_capture(out / "local" / ".station-batch-estimate.jsonl")
+    print(json.dumps({"local": {k: v for k, v in r.items() if k != "tasks_by_capture"}}), flush=True)
     return r
 
 
@@ -194,6 +241,11 @@ def _scheduler(directory, captures, out, workers, env) -> dict:
     # (station/batch/cluster.py), unless the environment says otherwise
     env = dict(env)
     env.setdefault("DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED", "False")
+    # and with the cluster's clockwork slowed as the local cluster's is (cluster.CLOCKWORK)
+    from station.batch.cluster import CLOCKWORK
+
+    for _, variable, value in CLOCKWORK:
+        env.setdefault(variable, value)
     logs = open(directory.parent / f"dask-bench-{os.getpid()}.log", "w")
     procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
                                "--port", str(port), "--no-dashboard"], env=env, stdout=logs, stderr=logs)]
@@ -216,7 +268,8 @@ def _scheduler(directory, captures, out, workers, env) -> dict:
              "rate_per_s": len(captures) / wall, "cpu_per_capture_s": (cpu + cluster_cpu) / len(captures),
              "load_before": load_before, "load_after": load()}
         _breakdown(r, _tasks_cpu(out / "scheduler" / ".station-batch-estimate.jsonl"), None, len(captures))
-        print(json.dumps({"scheduler": r}), flush=True)
+        r["tasks_by_capture"] = _tasks_by_capture(out / "scheduler" / ".station-batch-estimate.jsonl")
+        print(json.dumps({"scheduler": {k: v for k, v in r.items() if k != "tasks_by_capture"}}), flush=True)
     finally:
         for p in reversed(procs):
             p.terminate()
@@ -250,14 +303,14 @@ def sample(pid: int, state: Path, extra_pids=()) -> dict:
 def single_stream(directory: Path, n: int) -> None:
     """single() one capture at a time, a JSON line (captures, wall, CPU so far) after each ten:
     run beside a batch on a loaded machine, both see the same load, and it can be read at any
-    moment."""
+    moment.  The captures: ``n`` spread over the folder (spread(), as single() takes them)."""
     os.environ["STATION_READ_IN_PROCESS"] = "1"
     from threadpoolctl import threadpool_limits
 
     from station.estimate import estimate_capture
     from station.io.calfile import write_calfile
 
-    captures = sorted(p for p in directory.iterdir() if (p / "manifest.yaml").exists())[-n:]
+    captures = spread(sorted(p for p in directory.iterdir() if (p / "manifest.yaml").exists()), n)
     out = Path(os.environ.get("TMPDIR", "/tmp")) / f"batch-single-{os.getpid()}"
     out.mkdir(exist_ok=True)
     with threadpool_limits(limits=1, user_api="blas"):
@@ -308,4 +361,8 @@ if __name__ == "__main__":
             continue
         print(f"{name}: {res['captures']} captures in {r['wall_s']:.0f} s wall ({r['rate_per_s']:.2f}/s), "
               f"{r['cpu_per_capture_s']:.3f} s CPU per capture; {r['of_ceiling_wall']:.2f} of the wall-time "
-              f"ceiling, {r['of_ceiling_cpu']:.2f} of the CPU ceiling")
+              f"ceiling, {r['of_ceiling_cpu']:.2f} of the CPU ceiling"
+              + (f"; on the {r['same_captures']['captures']} captures timed alone too, the tasks took "
+                 f"{r['same_captures']['tasks_over_single']:.2f} x their single-process CPU, "
+                 f"{r['of_ceiling_cpu_same_mix']:.2f} of the CPU ceiling for the batch's own captures"
+                 if "same_captures" in r else ""))

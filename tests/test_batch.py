@@ -18,6 +18,7 @@ import pytest
 
 from processes import running
 from station import api
+from station.batch.cluster import CLOCKWORK
 
 ROOT = Path(__file__).resolve().parents[1]
 GOOD = 3
@@ -412,7 +413,10 @@ import os
 
 def probe():
     import dask
-    return dask.config.get("distributed.worker.profile.enabled")
+    return (dask.config.get("distributed.worker.profile.enabled"),
+            *(str(dask.config.get(k)) for k in ("distributed.admin.tick.interval",
+                                                "distributed.worker.memory.monitor-interval",
+                                                "distributed.admin.system-monitor.interval")))
 
 if __name__ == "__main__":
     from station.batch.cluster import open_client
@@ -421,20 +425,26 @@ if __name__ == "__main__":
 '''
 
 
-@pytest.mark.parametrize("user_yaml, expected", [(None, "[False]"), ("true", "[True]")],
-                         ids=["off-by-default", "the-users-dask-yaml-wins"])
+@pytest.mark.parametrize("user_yaml, expected", [
+    (None, "[(False, '1s', '1s', '2s')]"),
+    ("true", "[(True, '20ms', '1s', '2s')]")], ids=["off-by-default", "the-users-dask-yaml-wins"])
 def test_the_workers_profiler_is_off_unless_the_users_dask_configuration_turns_it_on(tmp_path, user_yaml, expected):
     """The local cluster's workers run without Dask's statistical profiler (7 % of their CPU,
-    docs/fleet.md), unless the user's own Dask configuration turns it on: a setting in their
-    YAML (here $DASK_CONFIG) is theirs and is kept, in the workers too."""
+    docs/fleet.md) and with its clockwork slowed (the event loop's tick monitor 1 s, not 20 ms; the
+    memory monitor 1 s, not 100 ms; the system monitor 2 s, not 500 ms: cluster.CLOCKWORK), unless
+    the user's own Dask configuration says otherwise: a setting in their YAML (here $DASK_CONFIG:
+    the profiler on and the tick at 20 ms) is theirs and is kept, in the workers too."""
     script = tmp_path / "probe.py"
     script.write_text(_PROFILER_PROBE)
     env = _env(tmp_path)
     env.pop("DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED", None)
+    for _, variable, _ in CLOCKWORK:       # set in this process by an earlier open_client: not the user's
+        env.pop(variable, None)
     env["DASK_CONFIG"] = str(tmp_path / "dask")
     (tmp_path / "dask").mkdir()
     if user_yaml is not None:
-        (tmp_path / "dask" / "mine.yaml").write_text(f"distributed:\n  worker:\n    profile:\n      enabled: {user_yaml}\n")
+        (tmp_path / "dask" / "mine.yaml").write_text(f"distributed:\n  worker:\n    profile:\n      enabled: {user_yaml}\n"
+                                                     "  admin:\n    tick:\n      interval: 20ms\n")
     done = subprocess.run([sys.executable, str(script)], env=env, cwd=tmp_path, capture_output=True, text=True,
                           timeout=180)
     assert done.returncode == 0, done.stderr[-2000:]

@@ -54,10 +54,12 @@ def _raw(table, *commands):
 
 
 def _motion(server, t0, t1, n=4000):
-    """The twin's own axis-1 positions (unwrapped deg) and rates (deg/s) over [t0, t1]."""
+    """The twin's own axis-1 positions (unwrapped deg) and rates (deg/s) over [t0, t1], as its
+    controller drives them: the encoder's (the axis itself differs by the encoder's error, whose
+    ripple on the rate, up to ~0.05 deg/s at 250 deg/s, is no part of the braking profile)."""
     t = np.linspace(t0, t1, n)
-    th, thd, _ = server.table.axis_states(t)
-    return th[:, 0], thd[:, 0]
+    th, thd, _ = server.table.axes[0].motion.eval(t)
+    return th, thd
 
 
 #: the hold at the rest position as read (the twin's encoder resolution, 1e-5 deg) may correct

@@ -11,6 +11,7 @@ same platform motion; the lossless clock waits for the slowest reading reader.
 """
 from __future__ import annotations
 
+import dataclasses
 import select
 import threading
 import time
@@ -54,7 +55,7 @@ class BenchOptions:
     imu_protocol: str = "vectornav"
     faults: Faults = field(default_factory=Faults)
     csv_format: CsvFormat = field(default_factory=CsvFormat)
-    table_config: TableConfig = field(default_factory=TableConfig)
+    table_config: TableConfig = field(default_factory=lambda: TableConfig(angle_error_arcsec=None))
     table_framing: str = "tcp"    # acutrol replies: "tcp" (error code, length first) or "gpib"
     table_tcp_port: int | None = None   # serve the table on TCP 127.0.0.1:port (0: any free port)
     table_silent_motion: bool = False   # aerosmith: JOG, STO, SGO not answered (docs/protocols.md)
@@ -106,7 +107,11 @@ class BenchServer:
         self.step_clock = StepClock(self.clock)     # the table's: commands at the step's time
         geo_rng, fault_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(o.seed).spawn(2))
         geometry = TableGeometry.default(o.axes, truth0.bench.lever_arm_m)
-        self.table = TableTwin(geometry, self.step_clock, config=o.table_config,
+        table_config = o.table_config
+        if table_config.angle_error_arcsec is None:       # the truth's table angle error
+            table_config = dataclasses.replace(table_config,
+                                               angle_error_arcsec=truth0.bench.table_angle_error_arcsec)
+        self.table = TableTwin(geometry, self.step_clock, config=table_config,
                                ripple_fraction=truth0.bench.rate_ripple_fraction,
                                ripple_hz=truth0.bench.rate_ripple_hz, rng=geo_rng,
                                faults=o.faults.table,

@@ -43,6 +43,10 @@ class TableConfig:
     encoder_resolution_deg: float = 1e-5
     rate_resolution_dps: float = 1e-5
     settle_s: float = 1.0
+    #: 1-sigma (arcsec) of an angle the table turns between two unrelated angles, read by its
+    #: encoder (station.yaml's ``table.angle_error_arcsec``; None: the truth's
+    #: ``bench.table_angle_error_arcsec``, BenchServer); see EncoderError
+    angle_error_arcsec: float | None = 0.0
     identity: str = "Acutronic,ACUTROL3000-SIM,{axes}AX-0001,3.1.0"
 
     def hardware(self, axis: int) -> tuple[float, float]:
@@ -50,6 +54,42 @@ class TableConfig:
         def pick(v):
             return float(v if isinstance(v, (int, float)) else v[axis - 1])
         return pick(self.max_rate_dps), pick(self.max_accel_dps2)
+
+
+class EncoderError:
+    """What an axis's encoder reads wrong: e(p) (deg) at encoder angle p, the graduation and
+    mounting errors of a real angle encoder, a function of the angle alone (the same at every
+    visit, periodic over a revolution):
+
+        e(p) = sum_{h=1..H} c_h cos(h p) + d_h sin(h p),     c_h, d_h ~ N(0, s^2 / H)
+
+    (rms s over the angle; H = HARMONICS, correlated over about 360/H deg).  The controller closes
+    its loops on the encoder, so the axis truly stands (and turns) at p - e(p): a position move
+    ends where the encoder reads the demand, the axis off by -e(demand); in rate mode the encoder
+    angle follows the demanded ramp, the readback rate is the demand, and the angle truly turned
+    between encoder angles p0 and p1 is (p1 - p0) - (e(p1) - e(p0)).  With s = sigma / sqrt 2 the
+    angle turned between two unrelated angles errs by sigma (the configured figure, the 1-sigma
+    the estimator states for a rotation's angle); over whole revolutions the periodic error
+    cancels (e(p0 + 360) = e(p0)), as on a real table.  The readbacks are quantised besides
+    (TableConfig.encoder_resolution_deg)."""
+
+    HARMONICS = 16
+
+    def __init__(self, sigma_arcsec: float, rng):
+        s = float(sigma_arcsec) / 3600.0 / math.sqrt(2.0)
+        self.h = np.arange(1, self.HARMONICS + 1, dtype=float)
+        self.c = rng.normal(0.0, s / math.sqrt(self.HARMONICS), self.HARMONICS)
+        self.d = rng.normal(0.0, s / math.sqrt(self.HARMONICS), self.HARMONICS)
+
+    def true_states(self, p, v, a):
+        """The axis's true (angle deg, rate deg/s, acceleration deg/s²) from the encoder's."""
+        x = np.radians(np.asarray(p, dtype=float))[..., None] * self.h
+        cos, sin = np.cos(x), np.sin(x)
+        k = math.pi / 180.0
+        e = cos @ self.c + sin @ self.d
+        de = (self.h * (self.d * cos - self.c * sin)).sum(-1) * k           # de/dp, deg/deg
+        d2e = -(self.h ** 2 * (self.c * cos + self.d * sin)).sum(-1) * k * k
+        return p - e, v * (1.0 - de), a * (1.0 - de) - v * v * d2e
 
 
 @dataclass
@@ -99,6 +139,10 @@ class TableTwin:
                  "R": [rate, min(config.rate_accel_dps2, acc)]},
                 interlock_closed=interlocks_closed, hardware=(rate, acc)))
         self._tripped = False
+        # each axis's encoder error (none at 0 arcsec: the rng untouched, the motion exact)
+        sigma = config.angle_error_arcsec or 0.0
+        self.encoder_errors = ([EncoderError(sigma, np.random.default_rng(rng.integers(2**63)))
+                                for _ in self.axes] if sigma > 0 else None)
 
     @property
     def n_axes(self) -> int:
@@ -248,9 +292,12 @@ class TableTwin:
 
     # ------------------------------------------------------------------ for the IMU twin
     def axis_states(self, t):
-        """(theta, theta_dot, theta_ddot), each (N, k) in deg, deg/s, deg/s²."""
+        """(theta, theta_dot, theta_ddot), each (N, k) in deg, deg/s, deg/s²: the axes' true
+        angles (the encoder's, less its error: EncoderError)."""
         t = np.atleast_1d(np.asarray(t, dtype=float))
         cols = [ax.motion.eval(t) for ax in self.axes]
+        if self.encoder_errors is not None:         # the motion is the encoder's: the axis's own
+            cols = [err.true_states(*c) for err, c in zip(self.encoder_errors, cols)]
         return tuple(np.column_stack([c[i] for c in cols]) for i in range(3))
 
     def kinematics_at(self, t):

@@ -49,6 +49,38 @@ def _check_address(scheduler: str) -> str:
     return scheduler
 
 
+#: the cluster's clockwork, slowed where a batch does not need Dask's defaults: the event loop's
+#: tick monitor (20 ms: it only warns of a blocked loop), the workers' memory monitor (100 ms: 1 s
+#: still pauses a worker over its memory limit within a second; a capture takes ~1 MB) and the
+#: system monitor (500 ms: the dashboard's CPU and memory plots, which a batch does not serve).
+#: An idle local cluster of two workers: 0.016 s of CPU per wall second in each worker and 0.035 s
+#: in the command (scheduler, nannies) with Dask's defaults, 0.0027 s and 0.007 s with these; a
+#: task's process CPU (Outcome.cpu_s) carries its worker's share: 0.49 s against 0.08 s over a
+#: task that sleeps 30 s (27 Nov 2026, load 15; docs/fleet.md, Fourteenth session).  Each is kept
+#: as the user's own Dask configuration sets it (YAML or environment), and local workers inherit
+#: these through the environment.
+CLOCKWORK = (("distributed.admin.tick.interval", "DASK_DISTRIBUTED__ADMIN__TICK__INTERVAL", "1s"),
+             ("distributed.worker.memory.monitor-interval", "DASK_DISTRIBUTED__WORKER__MEMORY__MONITOR_INTERVAL", "1s"),
+             ("distributed.admin.system-monitor.interval", "DASK_DISTRIBUTED__ADMIN__SYSTEM_MONITOR__INTERVAL", "2s"))
+
+
+def _users_setting(dask, key: str):
+    """``key`` (dotted) as the user's own Dask configuration sets it, None when it does not."""
+    node = dask.config.collect(paths=dask.config.paths, env=os.environ)
+    for part in key.split("."):
+        if not isinstance(node, dict):
+            return None
+        node = node.get(part, node.get(part.replace("-", "_")))
+    return node
+
+
+def _slower_clockwork(dask) -> None:
+    for key, env, value in CLOCKWORK:
+        if _users_setting(dask, key) is None:
+            os.environ.setdefault(env, value)
+            dask.config.set({key: value})
+
+
 @contextlib.contextmanager
 def open_client(scheduler: str | None = None, workers: int | None = None):
     """``with open_client(...) as client``: a distributed.Client on the scheduler at ``scheduler``
@@ -70,6 +102,7 @@ def open_client(scheduler: str | None = None, workers: int | None = None):
         enabled = False
         os.environ.setdefault(PROFILE_ENV, "False")
     dask.config.set({"distributed.worker.profile.enabled": enabled})
+    _slower_clockwork(dask)
 
     if scheduler:
         address = _check_address(scheduler)
