@@ -136,3 +136,26 @@ def test_estimate_imports_no_scipy(optimal9_run, tmp_path, in_process):
                           capture_output=True, text=True, env=env, timeout=120)
     assert done.returncode == 0, done.stderr
     assert "SCIPY []" in done.stdout, done.stdout[-500:]
+
+
+@pytest.mark.parametrize("f, lo, hi", [
+    (lambda x: (x - 0.3) ** 2, -1.0, 1.0),
+    (lambda x: np.cosh(3.0 * (x + 0.71)), -2.0, 0.5),
+    (lambda x: abs(x - 0.123456), 0.0, 1.0),                      # a kink: no parabola helps
+    (lambda x: x, 0.2, 0.9),                                      # the minimum at a bound
+    (lambda x: -np.exp(-((x - 0.05) / 0.2) ** 2) + 0.01 * x, -0.47, 0.47),
+])
+def test_the_bounded_search_finds_brents_minimum(f, lo, hi):
+    """solver.minimise_bounded (the hand-rotation start's 1-D search, golden section) against
+    scipy's bounded Brent: the same minimum within the tolerance asked of both (xatol 1e-3,
+    as start_scale asks), and a narrower tolerance brings them nearer."""
+    for xatol in (1e-3, 1e-6):
+        ours = solver.minimise_bounded(f, lo, hi, xatol=xatol)
+        ref = optimize.minimize_scalar(f, bounds=(lo, hi), method="bounded", options={"xatol": xatol}).x
+        assert lo <= ours <= hi
+        assert abs(ours - ref) < 3 * xatol, (xatol, ours, ref)
+
+
+def test_the_bounded_search_refuses_an_empty_bracket():
+    with pytest.raises(ValueError):
+        solver.minimise_bounded(lambda x: x * x, 1.0, 1.0)

@@ -227,7 +227,8 @@ def start_scale(integrator: Integrator, bias: np.ndarray, ups: np.ndarray, nomin
     the manifest's nominal count for raw) refined, or for raw without a nominal scale the
     median ratio of the integrated turn to the gravity direction's change, refined; the
     refinement minimises the mismatch over the scale (a bounded 1-D search)."""
-    from scipy.optimize import minimize_scalar
+    from station.estimate.arrays import median
+    from station.estimate.solver import minimise_bounded
 
     if nominal is None:
         ratios = []
@@ -235,13 +236,12 @@ def start_scale(integrator: Integrator, bias: np.ndarray, ups: np.ndarray, nomin
             tilt = np.degrees(np.arccos(np.clip(ups[h.before] @ ups[h.after], -1.0, 1.0)))
             if tilt > 30.0:
                 ratios.append(np.linalg.norm(((h.gyro - bias) * h.dt).sum(axis=0)) / tilt)
-        nominal = float(np.median(ratios)) if ratios else 1.0
+        nominal = float(median(ratios)) if ratios else 1.0
     if not nominal > 0:
         nominal = 1.0
-    res = minimize_scalar(lambda ls: mismatch(integrator, np.eye(3) / np.exp(ls), bias, ups),
-                          bounds=(np.log(nominal) - np.log(1.6), np.log(nominal) + np.log(1.6)),
-                          method="bounded", options={"xatol": 1e-3})
-    return float(np.exp(res.x))
+    log_scale = minimise_bounded(lambda ls: mismatch(integrator, np.eye(3) / np.exp(ls), bias, ups),
+                                 np.log(nominal) - np.log(1.6), np.log(nominal) + np.log(1.6), xatol=1e-3)
+    return float(np.exp(log_scale))
 
 
 def heading_visible(s, counts_per_dps: float = 1.0) -> bool:
