@@ -8,7 +8,7 @@ that are run every time, e.g. the warm-up), and how long it should take in devic
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from station.io.scheme import RotationSpec, StaticSpec
 
@@ -191,5 +191,24 @@ class Plan:
 
     def remaining(self, done: set[str]) -> list:
         """The steps still to run when the segments ``done`` are complete (``--resume``):
-        steps of no segment (warm-up) and those of the segments not done."""
-        return [s for s in self.steps if s.segment is None or s.segment not in done]
+        steps of no segment (warm-up) and those of the segments not done.  A chamber step belongs
+        to the first segment of its setpoint: when that segment is done but a later one of the
+        same setpoint is not, the step is run again before that one (bound to it), so that a
+        resumed run sets the chamber and waits as the first run did -- the chamber may have been
+        switched off or changed in between (the review's finding: the rest of the level was
+        recorded at whatever temperature the room had, with no trace in the capture)."""
+        out, pending = [], None
+        for s in self.steps:
+            if isinstance(s, Chamber):
+                if s.segment is None or s.segment not in done:
+                    out.append(s)
+                    pending = None
+                else:
+                    pending = s
+                continue
+            if s.segment is None or s.segment not in done:
+                if pending is not None and s.segment is not None:
+                    out.append(replace(pending, segment=s.segment))
+                    pending = None
+                out.append(s)
+        return out
