@@ -33,6 +33,8 @@ COMMANDS = {
     ("import imucal", "-o"): ["import", "imucal", "S.csv", "--rate-hz", "100", "-o", "{out}"],
     ("import csv", "-o"): ["import", "csv", "LOG.csv", "-o", "{out}"],
     ("import rosbag", "-o"): ["import", "rosbag", "X.bag", "-o", "{out}"],
+    **{(f"import {k}", "--estimate"): ["import", k, *args, "-o", "NEWCAP", "--estimate", "{out}"]
+       for k, args in (("imucal", ("S.csv", "--rate-hz", "100")), ("csv", ("LOG.csv",)), ("rosbag", ("X.bag",)))},
     ("run", "--out"): ["run", "--scheme", "optimal9", "--sim", "--out", "{out}"],
     ("design", "-o"): ["design", "--duration", "600", "-o", "{out}"],
     ("noise", "--plot"): ["noise", "CAP", "--plot", "{out}"],
@@ -62,7 +64,7 @@ def test_every_output_option_of_every_command_is_in_the_list():
         for action in parser._actions:
             if action.dest in OUTPUT_OPTIONS and action.option_strings:
                 found.add((command, action.option_strings[0]))
-            elif action.option_strings and any(o in ("-o", "--out", "--output", "--report", "--plot", "--drift")
+            elif action.option_strings and any(o in ("-o", "--out", "--output", "--report", "--plot", "--drift", "--estimate")
                                                for o in action.option_strings):
                 pytest.fail(f"{command} {action.option_strings}: an output option outside OUTPUT_OPTIONS")
     found.add(("init", "PATH"))

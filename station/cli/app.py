@@ -51,7 +51,8 @@ def build_parser(argv=None) -> argparse.ArgumentParser:
 # every option that names a file or folder a command writes (``dest`` -> as the user types it):
 # checked by the one rule for outputs (station.core.user_files.output_path) before any work
 OUTPUT_OPTIONS = {"output": "-o", "out": "--out", "output_dir": "-o", "report": "--report", "drift": "--drift",
-                  "plot": "--plot", "emit_effect": "--emit-effect", "state": "--state"}
+                  "plot": "--plot", "emit_effect": "--emit-effect", "state": "--state",
+                  "estimate": "--estimate"}     # import … --estimate CAL.yaml (a bare --estimate: True)
 
 
 def check_outputs(args) -> None:
