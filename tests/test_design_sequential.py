@@ -233,3 +233,17 @@ def test_a_plugins_design_command_names_its_file_and_runs_as_printed(dry_run, tm
     capsys.readouterr()
     assert main([*command[1:], "--json", *SMALL]) == 0
     assert json.loads(capsys.readouterr().out)["segments"]
+
+
+def test_reveal_of_one_component_of_an_axis_offset_is_one_line(dry_run, tmp_path, capsys):
+    """The review's finding: one component of an axis group's offset (a turn sees the three
+    together, across its axis) gave a design with no goal row for it -- alone, a traceback from
+    an empty matrix product."""
+    cap = _copy_dry_run(dry_run, tmp_path, capsys)
+    status = main(["design", "--from", str(cap), "--add", "rotation_axis_offsets", "--reveal", "axis1_offset_x",
+                   "-o", str(tmp_path / "ext.yaml")])
+    err = capsys.readouterr().err
+    assert status == 2 and "Traceback" not in err, err
+    last = err.strip().splitlines()[-1]
+    assert "name the three components of table axis group 1" in last and "axis1_offset_x" in last, last
+    assert not (tmp_path / "ext.yaml").exists()

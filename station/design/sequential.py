@@ -440,7 +440,10 @@ def _goal_rows(names, targets, typical, fraction, info, base, group_a, group_b):
     l0 = axes[0] if axes else None
     for g, where in sorted(offsets.items()):
         if len(where) != 3:
-            continue
+            named = ", ".join(names[i] for i in where.values())
+            raise UserError(f"--reveal {named}: name the three components of table axis group {g}'s offset "
+                            f"(axis{g}_offset_*): a turn sees an offset only across its axis, so the "
+                            "components are revealed together or not at all")
         l = axes[g]
         idx = [where[k] for k in range(3)]
         along |= set(idx)
@@ -466,6 +469,10 @@ def _goal_rows(names, targets, typical, fraction, info, base, group_a, group_b):
         v = np.zeros(G)
         v[cols] = l0
         prior += np.outer(v, v) / (typical[i] / info.parameters.factors[i]) ** 2
+    if not rows:
+        raise UserError(f"--reveal {', '.join(names[i] for i in targets)}: nothing a turn can see: the first "
+                        "axis group's offset along and across its own axis is the common offset, which no "
+                        "segment of this table reveals (the estimator holds it by a prior)")
     return np.array(rows), np.array(limits), np.array(side), prior, along
 
 
