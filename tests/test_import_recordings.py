@@ -102,7 +102,7 @@ def test_integrator_follows_a_turn_with_a_wandering_axis():
         raw = w @ np.linalg.inv(M).T + b                  # what a gyro with matrix M^-1, bias b reads
         hands.append(HandRotation(f"t{k}", k, k + 1, raw, dt))
         truths.append(path(np.array([T]), T, phi, eps)[0])
-    got = Integrator(hands).turns(M, b)
+    got = Rotation.from_matrix(Integrator(hands).turns(M, b))
     for i, true in enumerate(truths):
         assert (got[i] * true.inv()).magnitude() < np.radians(5.0 / 3600)
 
