@@ -74,7 +74,7 @@ class PerSegmentModel(Model):
     def _hand_residuals(self, x, Mg, ups, attitudes) -> np.ndarray:
         """(H, 2) whitened residuals: the up after each turn against the up before carried through it."""
         hands = self.hands
-        dR = self.integrator.turns(np.linalg.inv(Mg), x[self.layout["gyro_bias"]])
+        dR = Rotation.from_matrix(self.integrator.turns(np.linalg.inv(Mg), x[self.layout["gyro_bias"]]))
         before = np.array([ups[h.before] for h in hands])
         if self.with_latitude:      # the Earth turns the up during the turn
             earth = np.array([attitudes[h.before].apply(self.omega_n) for h in hands])

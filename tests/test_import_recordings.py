@@ -102,7 +102,7 @@ def test_integrator_follows_a_turn_with_a_wandering_axis():
         raw = w @ np.linalg.inv(M).T + b                  # what a gyro with matrix M^-1, bias b reads
         hands.append(HandRotation(f"t{k}", k, k + 1, raw, dt))
         truths.append(path(np.array([T]), T, phi, eps)[0])
-    got = Integrator(hands).turns(M, b)
+    got = Rotation.from_matrix(Integrator(hands).turns(M, b))
     for i, true in enumerate(truths):
         assert (got[i] * true.inv()).magnitude() < np.radians(5.0 / 3600)
 
@@ -214,16 +214,9 @@ def test_imucal_session_by_the_csv_importer_agrees_with_imucal(tmp_path, capsys)
     assert cli.main(["import", "csv", str(DATA / "example_ferraris_session.csv"), "--preset", "imucal",
                      "--rate-hz", "102.4", "--gravity-mps2", "9.81", "-o", str(out)]) == 0
     assert "found 13 static poses" in capsys.readouterr().out
-    cal, _, _ = estimate_capture(out)
-    p = {n: v for n, v, _ in cal.parameters()}
-    # imucal's published result, to its printed digits plus this fit's spread on real data (its
-    # reduced chi2 is ~170: the poses were held by hand, so the residuals are ~13x the noise)
-    for a, v in zip("xyz", [0.997, 1.002, 1.023]):
-        assert abs(p[f"accel_scale_{a}"] - v) < 0.001
-    for a, v in zip("xyz", [0.54, -0.62, 0.40]):
-        assert abs(p[f"accel_bias_{a}"] * 9.80665e-6 - v) < 0.01
-    for a, v in zip("xyz", [-0.60, -0.37, 0.06]):
-        assert abs(p[f"gyro_bias_{a}"] / 3600 - v) < 0.03
+    # its estimate against imucal's published result: tests/test_solver.py::
+    # test_a_creeping_estimate_imports_no_scipy[csv-preset-imucal] (the same import and estimate,
+    # in a fresh process that also shows it imports no scipy: the suite estimates it once)
 
 
 # --- bad input: one line, exit 2 ------------------------------------------------------------------

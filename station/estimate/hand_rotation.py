@@ -29,11 +29,11 @@ model's start scale).  Only the gravity direction is matched, so a turn says not
 rotation about the vertical: every rotation gives two equations.
 
 The integration is vectorised over all turns: per-sample rotation vectors -> quaternions, then
-the ordered product by pairwise reduction (log2 N steps of scipy Rotation products).
-
-scipy is imported where it is used, not with the module: summaries.py may import this module to
-find the hand turns while a capture is read, in the child process that reads while `station
-estimate` imports scipy itself (station.estimate.summarise_while_importing).
+the ordered product by pairwise reduction (log2 N steps of quaternion products,
+station.model.rotation.quat_product), each turn's quaternion normalised and made a matrix.  In
+numpy only, as scipy's Rotation did it before: `import scipy.spatial` (~0.3 s of CPU: it imports
+scipy.sparse, scipy.linalg and scipy.special) was most of what a hand session's estimate
+imported beyond numpy (issue 27).
 """
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from station.model.geometry import cross
-from station.model.rotation import matrix_from_rotvec, quat_product
+from station.model.rotation import matrix_from_quat, matrix_from_rotvec, quat_product
 
 STEADY_SPREAD = 0.3         # as summaries.STEADY_SPREAD: a rotation whose rate varies more is a hand turn
 MAX_GAP_S = 1.0             # static end -> turn start (and turn end -> static start), IMU still
@@ -105,6 +105,12 @@ def collect(static_segments: list, hand_segments: list, gyro_factor: float) -> t
     return out, skipped
 
 
+def _unit_matrix(q: np.ndarray) -> np.ndarray:
+    """The rotation matrices (..., 3, 3) of quaternions (..., 4), scalar last, each normalised
+    first (a product of many unit quaternions drifts from unit norm by rounding)."""
+    return matrix_from_quat(q / np.linalg.norm(q, axis=-1, keepdims=True))
+
+
 class Integrator:
     """The turns of all hand rotations at once, for a given gyro matrix and bias."""
 
@@ -122,13 +128,11 @@ class Integrator:
         self._key = None
         self._tangent = None
 
-    def turns(self, gyro_inverse: np.ndarray, bias: np.ndarray) -> Rotation:
-        """dR of every turn (a stacked Rotation), with w_p = gyro_inverse (gyro - bias), deg/s.
+    def turns(self, gyro_inverse: np.ndarray, bias: np.ndarray) -> np.ndarray:
+        """dR of every turn (rotation matrices, (H,3,3)), with w_p = gyro_inverse (gyro - bias), deg/s.
         The last result is kept: the Jacobian's columns that move neither give it again.  While
         linearised (see linearise()), any other gyro_inverse and bias give the first-order turn
         about the linearisation point instead of a new integration."""
-        from scipy.spatial.transform import Rotation
-
         key = np.concatenate([np.ravel(gyro_inverse), np.ravel(bias)]).tobytes()
         if key == self._key:
             return self._last
@@ -144,7 +148,7 @@ class Integrator:
         levels = [Q.reshape(self.shape)]
         while levels[-1].shape[1] > 1:
             levels.append(quat_product(levels[-1][:, 0::2], levels[-1][:, 1::2]))
-        self._key, self._last = key, Rotation.from_quat(levels[-1][:, 0])
+        self._key, self._last = key, _unit_matrix(levels[-1][:, 0])
         self._levels, self._theta = levels, theta
         return self._last
 
@@ -158,8 +162,6 @@ class Integrator:
     def linearise(self, gyro_inverse: np.ndarray, bias: np.ndarray) -> None:
         """Integrate at (gyro_inverse, bias) and keep the first-order change of every turn with
         them: until exact() is called, turns() at other values costs no integration."""
-        from scipy.spatial.transform import Rotation
-
         self._tangent = None
         self.turns(gyro_inverse, bias)
         levels = self._levels
@@ -170,7 +172,7 @@ class Integrator:
             below[:, 1::2] = suffix
             below[:, 0::2] = quat_product(level[:, 1::2], suffix)
             suffix = below
-        S = Rotation.from_quat(suffix.reshape(-1, 4)[self.flat]).as_matrix()     # (N,3,3)
+        S = _unit_matrix(suffix.reshape(-1, 4)[self.flat])                      # (N,3,3)
         theta = self._theta
         angle = np.sqrt(np.einsum("ij,ij->i", theta, theta))
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -192,12 +194,10 @@ class Integrator:
         """Back to integrating every new gyro_inverse and bias (after linearise())."""
         self._tangent = None
 
-    def _linearised(self, gyro_inverse, bias) -> Rotation:
-        from scipy.spatial.transform import Rotation
-
+    def _linearised(self, gyro_inverse, bias) -> np.ndarray:
         M0, b0, dR0, T, B = self._tangent
         d_phi = np.einsum("haij,ij->ha", T, gyro_inverse - M0) - B @ (M0 @ (bias - b0))
-        return dR0 * Rotation.from_rotvec(d_phi)
+        return dR0 @ matrix_from_rotvec(d_phi)
 
     def turns_batch(self, gyro_inverse: np.ndarray, bias: np.ndarray) -> np.ndarray:
         """The rotation matrices (B*H,3,3) of turns() for every row of gyro_inverse (B,3,3) and
@@ -205,11 +205,11 @@ class Integrator:
         first order about the linearisation point, complex-step safe (station/model/rotation.py):
         the Jacobian's imaginary steps give d_phi's derivative exactly."""
         if self._tangent is None:
-            return np.concatenate([self.turns(m, b).as_matrix() for m, b in zip(gyro_inverse, bias)])
+            return np.concatenate([self.turns(m, b) for m, b in zip(gyro_inverse, bias)])
         M0, b0, dR0, T, B = self._tangent
         d_phi = (np.einsum("haij,nij->nha", T, gyro_inverse - M0)
                  - np.einsum("hij,nj->nhi", B, (bias - b0) @ M0.T))
-        return (dR0.as_matrix()[None] @ matrix_from_rotvec(d_phi)).reshape(-1, 3, 3)
+        return (dR0[None] @ matrix_from_rotvec(d_phi)).reshape(-1, 3, 3)
 
 
 def mismatch(integrator: Integrator, gyro_inverse, bias, ups: np.ndarray) -> float:
@@ -219,7 +219,7 @@ def mismatch(integrator: Integrator, gyro_inverse, bias, ups: np.ndarray) -> flo
     dR = integrator.turns(gyro_inverse, bias)
     before = ups[[h.before for h in hands]]
     after = ups[[h.after for h in hands]]
-    return float(np.sum((after - dR.apply(before, inverse=True)) ** 2))
+    return float(np.sum((after - np.einsum("hji,hj->hi", dR, before)) ** 2))      # dR^T before
 
 
 def start_scale(integrator: Integrator, bias: np.ndarray, ups: np.ndarray, nominal: float | None) -> float:

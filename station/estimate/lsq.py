@@ -1454,7 +1454,7 @@ def _axes_first(model: Model, x0: np.ndarray, solve) -> np.ndarray:
 
 
 class _Creeping(Exception):
-    """Raised by _CreepWatch around scipy's dogbox: its iterations creep."""
+    """Raised by _CreepWatch around dogbox (solver.dogbox or scipy's): its iterations creep."""
 
 
 class _CreepWatch:
@@ -1462,7 +1462,7 @@ class _CreepWatch:
     less than CREEP_GAIN chi2 units (max(1, reduced chi2) at the lowest point: the change of chi2
     that moves a parameter by 1 sigma).  ``seen`` is the numpy LM's watch (it pauses the solve,
     its state kept); called as the residual function it wraps ``fun`` and raises _Creeping (for
-    scipy's dogbox, which cannot be paused)."""
+    dogbox, which is not paused but abandoned)."""
 
     def __init__(self, fun):
         self.fun, self.n = fun, 0
@@ -1491,6 +1491,21 @@ class _CreepWatch:
         return max(1.0, self.best_chi2 / dof) if dof > 0 else 1.0
 
 
+#: the detour's dogbox: solver.dogbox (numpy, the algorithm of scipy's without bounds: no scipy import,
+#: ~0.3 s of CPU of a small capture's estimate) when True, scipy.optimize.least_squares(method=
+#: "dogbox", x_scale="jac") when False (docs/method-lsq.md, fourteenth session)
+NUMPY_DOGBOX = True
+
+
+def _dogbox(fun, x0, jac, *, max_nfev: int, **tolerances):
+    """Dogbox (x_scale="jac") from x0: solver.dogbox, or scipy's when NUMPY_DOGBOX is off."""
+    if NUMPY_DOGBOX:
+        return solver.dogbox(fun, x0, jac, max_nfev=max_nfev, **tolerances)
+    from scipy.optimize import least_squares
+
+    return least_squares(fun, x0, jac=jac, method="dogbox", x_scale="jac", max_nfev=max_nfev, **tolerances)
+
+
 def _lm(model: Model, start: np.ndarray, evaluations: int = MAX_EVALUATIONS):
     """MINPACK's Levenberg-Marquardt (x_scale="jac", tolerances 1e-10), watched for creeping.
 
@@ -1503,12 +1518,12 @@ def _lm(model: Model, start: np.ndarray, evaluations: int = MAX_EVALUATIONS):
     valley).  When CREEP_WINDOW evaluations in a row gain less than CREEP_GAIN chi2 units (the
     constants, above) LM pauses (solver.LevenbergMarquardt keeps its state) and its point is
     taken as the minimum if a Gauss-Newton step from it would gain less than CREEP_CHI2 (the
-    step is not taken); else scipy's dogleg ("dogbox": steps in the trust region's box, not
-    damped along the valley's steep sides: 43 evaluations there to the minimum; 37 on a failing
-    fit of diagnose --auto where LM gained 0.9 of chi2 in 3,000) goes on from it, watched the
-    same way, and LM resumes from dogbox's lowest point with the scaling, radius and damping it
-    had (the fourteenth session: it restarted from scratch before, and relearnt them at the cost
-    of tens of evaluations per fit), watched again.  When it creeps again it is at the minimum
+    step is not taken); else the dogleg of scipy's "dogbox" (solver.dogbox, in numpy: steps in
+    the trust region's box, not damped along the valley's steep sides: 43 evaluations there to
+    the minimum; 37 on a failing fit of diagnose --auto where LM gained 0.9 of chi2 in 3,000)
+    goes on from it, watched the same way, and LM resumes from dogbox's lowest point with the
+    scaling, radius and damping it had (the fourteenth session: it restarted from scratch
+    before, and relearnt them at the cost of tens of evaluations per fit), watched again.  When it creeps again it is at the minimum
     by the same test, or goes on unwatched with the evaluations left (as before the watch: its
     tolerances, or the limit and status 0, not converged).  Where dogbox creeps too, LM goes on
     unwatched from dogbox's lowest point at once, its stale column scales renewed (STALE_SCALE).
@@ -1535,9 +1550,7 @@ def _lm(model: Model, start: np.ndarray, evaluations: int = MAX_EVALUATIONS):
             break
         dog = _CreepWatch(model.residuals)
         try:
-            from scipy.optimize import least_squares      # only where a fit creeps
-            alt = least_squares(dog, lm.x, jac=model.jacobian, method="dogbox", x_scale="jac",
-                                max_nfev=max(evaluations - lm.nfev, 1), **options)
+            alt = _dogbox(dog, lm.x, model.jacobian, max_nfev=max(evaluations - lm.nfev, 1), **options)
         except _Creeping:
             # dogbox creeps too (diagnose --auto's fits beside a bias step at a wrong time, GN's
             # step gaining ~17 of chi2 ~470): LM goes on unwatched from the lowest point, with

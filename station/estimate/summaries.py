@@ -509,7 +509,7 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
                 del a, g, d
                 continue
             if seg.angle_deg is None:
-                from station.estimate import hand_rotation     # scipy: only for turns without an encoder
+                from station.estimate import hand_rotation     # only for turns without an encoder
 
                 with _holding(seg, d):
                     hand = hand_rotation.is_hand(seg)
@@ -619,7 +619,7 @@ def _assemble(capture, parts: _SegmentSummaries, ca, cg, table_angle_arcsec) -> 
     statics, rotations, skipped = parts.statics, parts.rotations, list(parts.skipped)
 
     if parts.hands:
-        from station.estimate import hand_rotation     # scipy: only for turns without an encoder
+        from station.estimate import hand_rotation     # only for turns without an encoder
 
         hand_rotations, hand_skipped = hand_rotation.collect(parts.static_spans, parts.hands, cg)
         skipped += hand_skipped
