@@ -127,9 +127,9 @@ class Chamber(Step):
     instruction: str = ""
 
     def describe(self) -> str:
-        rule = (f"soak {self.soak_s:g} s" if self.soak_s is not None else
-                f"until the IMU's temperature slope < {self.slope_c_per_min:g} C/min over {self.window_s:g} s "
-                f"(at most {self.max_s:g} s)")
+        from station.core.chamber import settle_rule
+
+        rule = settle_rule(self.soak_s, self.slope_c_per_min, self.window_s, self.max_s, degree="C")
         return (f"CHAMBER {self.from_c:g} -> {self.setpoint_c:g} C: OPERATOR: {self.instruction}; "
                 f"ramp {self.ramp_s:.0f} s, {rule} (about {self.estimate_s:.0f} s in all)")
 

@@ -73,11 +73,18 @@ class ChamberConfig:
         return self.ramp_s(from_c, to_c) + self.settle_estimate_s(from_c, to_c)
 
     def describe(self) -> str:
-        rule = (f"soak {self.soak_s:g} s" if self.soak_s is not None else
-                f"until the IMU's temperature slope < {self.settle_slope_c_per_min:g} °C/min over "
-                f"{self.settle_window_s:g} s (at most {self.settle_max_s:g} s)")
+        rule = settle_rule(self.soak_s, self.settle_slope_c_per_min, self.settle_window_s, self.settle_max_s)
         return (f"{self.kind} chamber {self.range_c[0]:g}..{self.range_c[1]:g} °C, ramp "
                 f"{self.ramp_c_per_min:g} °C/min, {rule}")
+
+
+def settle_rule(soak_s, slope_c_per_min, window_s, max_s, degree: str = "°C") -> str:
+    """The settling rule in words: a fixed soak, or the slope rule on the IMU's own temperature
+    (the configuration's and a compiled chamber step's description)."""
+    if soak_s is not None:
+        return f"soak {soak_s:g} s"
+    return (f"until the IMU's temperature slope < {slope_c_per_min:g} {degree}/min over {window_s:g} s "
+            f"(at most {max_s:g} s)")
 
 
 def order_levels(levels, ambient_c: float) -> list:
