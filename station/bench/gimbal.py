@@ -354,6 +354,9 @@ class Gimbal:
                 continue
             lo, hi = lim
             cand = lo + (t - lo) % 360.0
+            if cand >= lo + 360.0 - 1e-9:       # a hair below the lower limit (round-off: a closed
+                cand = lo                       # form's -1e-17 at a limit of 0): on it, as the
+                                                # upper limit's 1e-9 below
             if cand > hi + 1e-9:
                 return None
             out[j] = cand
