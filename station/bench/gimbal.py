@@ -479,15 +479,10 @@ def _direction(axes, p, q):
     """Solutions of R(axes[0]) ... R(axes[-1]) p = q (unit p, q) as a list of dicts
     {index in axes: angle rad}; the axes not in a dict are not involved (they keep their present
     angle).  None: not solved here."""
-    lo, hi = 0, len(axes)
-    while lo < hi and _norm(_cx(axes[lo], q)) < _DEGENERATE:      # leaves q as it is
-        if _norm(_cx(axes[lo], q)) >= _PARALLEL:
-            return None
-        lo += 1
-    while lo < hi and _norm(_cx(axes[hi - 1], p)) < _DEGENERATE:  # leaves p as it is
-        if _norm(_cx(axes[hi - 1], p)) >= _PARALLEL:
-            return None
-        hi -= 1
+    span = _involved(axes, q, p)
+    if span is None:
+        return None
+    lo, hi = span
     n = hi - lo
     if n == 0:
         return [{}]
@@ -499,18 +494,29 @@ def _direction(axes, p, q):
     return None
 
 
-def _cone(axes, p, height):
-    """Solutions of (R(axes[0]) ... R(axes[-1]) p)_z = height, as _direction (None: a curve)."""
+def _involved(axes, outer, inner):
+    """(lo, hi): the axes[lo:hi] a solve involves -- the outer axes along ``outer`` leave it as it
+    is, and so do the inner ones along ``inner`` (they keep their present angle); None when one
+    of them is neither along it nor clearly across it (near-degenerate: iterate)."""
     lo, hi = 0, len(axes)
-    z = UP_ENU
-    while lo < hi and _norm(_cx(axes[lo], z)) < _DEGENERATE:
-        if _norm(_cx(axes[lo], z)) >= _PARALLEL:
+    while lo < hi and _norm(_cx(axes[lo], outer)) < _DEGENERATE:
+        if _norm(_cx(axes[lo], outer)) >= _PARALLEL:
             return None
         lo += 1
-    while lo < hi and _norm(_cx(axes[hi - 1], p)) < _DEGENERATE:
-        if _norm(_cx(axes[hi - 1], p)) >= _PARALLEL:
+    while lo < hi and _norm(_cx(axes[hi - 1], inner)) < _DEGENERATE:
+        if _norm(_cx(axes[hi - 1], inner)) >= _PARALLEL:
             return None
         hi -= 1
+    return lo, hi
+
+
+def _cone(axes, p, height):
+    """Solutions of (R(axes[0]) ... R(axes[-1]) p)_z = height, as _direction (None: a curve)."""
+    z = UP_ENU
+    span = _involved(axes, z, p)
+    if span is None:
+        return None
+    lo, hi = span
     n = hi - lo
     if n == 0:
         return [{}]
