@@ -18,13 +18,14 @@ DATA = Path(__file__).parent / "data" / "imucal"
 
 # modules the estimate of a capture has no use for: the bench, the drivers and pyserial (an
 # estimate drives no table), rich (its output is a pipe here and no table was asked), the history
-# store (not asked to file), the other commands' modules, threadpoolctl (no BLAS library loaded
-# when the command starts: the thread count is given through the environment), the simulator
+# store (not asked to file), the other commands' modules, numpy.ma (station.estimate.arrays),
+# threadpoolctl (no BLAS library loaded when the command starts: the thread count is given
+# through the environment), the simulator
 FORBIDDEN = ("rich", "station.bench", "drivers", "serial", "station.io.history", "station.io.store_sqlite",
              "sqlite3", "threadpoolctl", "station.simulate", "sim_devices", "station.cli.run", "station.cli.devices",
              "station.cli.diagnose", "station.cli.design", "station.cli.batch", "station.cli.montecarlo",
              "station.cli.imports", "station.cli.export", "station.cli.noise", "station.cli.fleet",
-             "station.cli.report", "scipy")
+             "station.cli.report", "scipy", "numpy.ma")
 
 SPY = """
 import json, sys

@@ -41,7 +41,7 @@ import numpy as np
 from station.core import units
 from station.model.calibration import Calibration, misalignment_angles
 from station.core.errors import UserError
-from station.estimate import hand_rotation, noise_model, solver, table_geometry, zhang2010
+from station.estimate import arrays, hand_rotation, noise_model, solver, table_geometry, zhang2010
 from station.estimate.summaries import Summaries, summarise
 from station.model.geometry import cross, normalised, positive_part, tangent_basis
 from station.model.effect import Effect, SampleContext
@@ -2054,7 +2054,7 @@ def _noise_model_block(model: Model, x: np.ndarray, tested: dict | None) -> dict
     if model.hands and getattr(model, "turn_source", None) is not None:
         turn = {"sigma": model.turn_sigma_deg, "source": model.turn_source,
                 "scatter_before": model.turn_scatter_before}
-    seconds = float(np.median([st.duration_s for st in s.statics])) if s.statics else 0.0
+    seconds = float(arrays.median([st.duration_s for st in s.statics])) if s.statics else 0.0
     between = {}
     for group, entry in getattr(model, "reweighted", {}).items():
         if "extra" in entry:
