@@ -1,7 +1,8 @@
 """One function computed in a forked child process while this one goes on.
 
-`station estimate` spends about as long importing scipy and the fit (~0.2 s) as reading a 100 Hz
-capture; the two do not depend on each other.  Two threads of one interpreter would take turns
+`station diagnose` spends about as long importing the diagnosis (~0.1 s) as reading a 100 Hz
+capture; the two do not depend on each other (`station estimate`, whose fit imports ~7 ms since
+it needs no scipy, reads in its own process: a child costs more than that).  Two threads of one interpreter would take turns
 at the GIL (both are mostly Python: measured 4 % faster than one after the other); a forked
 child has its own interpreter, so the child reads while the parent imports, on two cores.
 

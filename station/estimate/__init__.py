@@ -204,13 +204,14 @@ def _estimate_with(capture: Capture, method: str, effects, registry, turn_sigma_
     return fourier.estimate(capture, "high" if method == "fourier-high" else "low"), method
 
 
-# what the fit needs once the capture is summarised: ~0.2 s of imports (scipy.optimize, scipy.special)
+# what the fit needs once the capture is summarised: ~7 ms of imports since the fit imports no scipy
+# (issue 27), less than a forked reader costs (below): estimate_capture reads in its own process
 FIT_MODULES = ("station.estimate.lsq", "station.estimate.verdict", "station.io.calfile")
 READ_IN_PROCESS = "STATION_READ_IN_PROCESS"     # set (to anything): no forked reader
 
 
 def summarise_while_importing(capture, check_segment=None, notes: dict | None = None,
-                              modules=FIT_MODULES, then=None, meanwhile=None):
+                              modules=FIT_MODULES, then=None, meanwhile=None, fork: bool = True):
     """summarise(capture, check_segment=...) and import ``modules``; then ``then()`` where the
     capture was read (what check_segment kept of the samples is there), and its value returned.
     ``meanwhile()`` is called here once the reading has begun (after the fork: whatever threads
@@ -219,7 +220,9 @@ def summarise_while_importing(capture, check_segment=None, notes: dict | None = 
     this process imports: the child sends back what reading made (the summaries, kept with the
     capture; the segments, with their status, sha256, problem and the hand turns' samples; the
     warnings; the notes; what ``then`` returned), or the error it raised, raised here.
-    Elsewhere, with $STATION_READ_IN_PROCESS set, for a small capture without ``then``
+    Elsewhere, with $STATION_READ_IN_PROCESS set, with ``fork`` False (what is imported meanwhile
+    costs less than the child: the pages it copies from this process as it touches them, its
+    result pickled, its exit), for a small capture without ``then``
     (station.io.capture.is_small), or when no child can be forked or it is lost, here, one after
     the other."""
     import importlib
@@ -242,7 +245,7 @@ def summarise_while_importing(capture, check_segment=None, notes: dict | None = 
     # milliseconds, less than forking this process (imucal's session in one process: 0.95 x the
     # CPU, 0.87 x the wall time; issue 27)
     small = then is None and is_small(capture)
-    if forked.available() and not os.environ.get(READ_IN_PROCESS) and not small:
+    if fork and forked.available() and not os.environ.get(READ_IN_PROCESS) and not small:
         try:
             child = forked.Forked(read)     # it imports the CSV engine (pyarrow): this one never needs it
         except OSError:                     # no process to be had (EAGAIN, ENOMEM): read here
@@ -278,8 +281,7 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
         resolved = choose_method(capture)
     if resolved == "lsq":
         # one pass: each segment file read, hashed, parsed, checked, summarised and freed in turn
-        # (station.estimate.summaries keeps the summaries with the capture for lsq.estimate),
-        # while the fit's modules (scipy) are imported
+        # (station.estimate.summaries keeps the summaries with the capture for lsq.estimate)
         notes = {}
 
         def check_segment(seg):
@@ -289,7 +291,10 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
             if note:
                 notes[seg.name] = note
 
-        summarise_while_importing(capture, check_segment, notes)
+        # in this process: the fit's modules (~7 ms) are too little to overlap with a forked reader,
+        # which cost more (the 100 Hz optimal9 capture: 0.95 x the CPU read here, interleaved pairs;
+        # docs/performance.md, the fifteenth session)
+        summarise_while_importing(capture, check_segment, notes, fork=False)
         excluded = [notes[seg.name] for seg in capture.segments if seg.name in notes]
     else:
         capture.load_samples()
