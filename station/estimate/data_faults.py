@@ -189,23 +189,26 @@ def _runs(equal: np.ndarray):
     return starts, ends - starts + 1
 
 
-def _share_outside_longest(equal: np.ndarray) -> float:
+def _share_outside_longest(equal: np.ndarray, runs=None, repeats: int | None = None) -> float:
     """The share of samples repeating the previous one, the longest run of repeats left out (a
-    fault's own repeats do not make it look like chance)."""
+    fault's own repeats do not make it look like chance).  ``runs``: _runs(equal) and
+    ``repeats``: the count of True in ``equal``, when known."""
     if not len(equal):
         return 0.0
-    _, lengths = _runs(equal)
+    _, lengths = _runs(equal) if runs is None else runs
     longest = int(lengths.max()) - 1 if len(lengths) else 0
-    return float(equal.sum() - longest) / max(len(equal) - longest, 1)
+    repeats = int(np.count_nonzero(equal)) if repeats is None else repeats
+    return float(repeats - longest) / max(len(equal) - longest, 1)
 
 
-def _mode_share(column: np.ndarray, step: float) -> float:
+def _mode_share(column: np.ndarray, step: float, bounds=None) -> float:
     """The share of the samples at the commonest value (0 when the values are not on a grid of
-    ``step`` with fewer than MAX_LEVELS levels: continuous outputs, which do not repeat)."""
+    ``step`` with fewer than MAX_LEVELS levels: continuous outputs, which do not repeat).
+    ``bounds``: the column's (min, max), when known."""
     if step <= 0.0:
         return 0.0
-    lo = float(column.min())
-    levels = (float(column.max()) - lo) / step
+    lo, hi = (float(column.min()), float(column.max())) if bounds is None else bounds
+    levels = (hi - lo) / step
     if not levels < MAX_LEVELS:
         return 0.0
     index = np.rint((column - lo) / step).astype(np.int64)
@@ -221,15 +224,14 @@ def _mode_share(column: np.ndarray, step: float) -> float:
     return float(np.bincount(index).max()) / len(column)
 
 
-def _extreme(column: np.ndarray, top: bool):
-    """(the extreme value, its count, the count at the next value inside) (O(N))."""
-    value = float(column.max() if top else column.min())
-    at = column == value
+def _next_count(column: np.ndarray, at: np.ndarray, top: bool) -> int:
+    """The count of samples at the next value inside the extreme (``at``: the samples at the
+    extreme; 0 when there is none) (O(N))."""
     inside = column[~at]
     if not len(inside):
-        return value, int(at.sum()), 0
+        return 0
     nxt = inside.max() if top else inside.min()
-    return value, int(at.sum()), int((inside == nxt).sum())
+    return int(np.count_nonzero(inside == nxt))
 
 
 def _level_probability(sigma: float, step: float) -> float:
@@ -261,18 +263,44 @@ def _poisson_tail_bound(k: int, lam: float) -> float:
 
 class _Column:
     """One axis' samples in one segment and what the scan takes from their first differences:
-    which samples repeat the previous one, the output step (from above: the smallest change
-    between consecutive samples, 0 when the column never changes; at least the true step, so the
-    level probability it gives is not understated) and the white noise (their spread over
-    sqrt 2: drifts do not enter).  One pass, no sort of a long segment."""
+    which samples repeat the previous one (and how many), the output step (from above: the
+    smallest change between consecutive samples, 0 when the column never changes; at least the
+    true step, so the level probability it gives is not understated) and the white noise (their
+    spread over sqrt 2: drifts do not enter).  One pass, no sort of a long segment.  What the
+    rail and stuck tests ask of it more than once (its extremes, its runs of repeats) is computed
+    once, when first asked (issue 27: the scan was a third of a 100 Hz estimate's summaries)."""
 
     def __init__(self, column):
         self.values = np.ascontiguousarray(column)
         d = np.diff(self.values)
+        n = len(d)
         self.equal = d == 0
-        change = np.abs(d[~self.equal])
-        self.step = float(change.min()) if len(change) else 0.0
-        self.sigma = float(np.sqrt(np.mean(d * d) - np.mean(d) ** 2) / math.sqrt(2.0)) if len(d) else 0.0
+        self.repeats = int(np.count_nonzero(self.equal))
+        if self.repeats < n:
+            # the smallest |change| over the changes: the repeats set to infinity, not removed
+            # (the same minimum, without a boolean selection's copy; a NaN stays a NaN)
+            change = np.abs(d)
+            change[self.equal] = np.inf
+            self.step = float(change.min())
+        else:
+            self.step = 0.0
+        # np.mean's own arithmetic (the pairwise sum, then over the count), without its Python layer
+        self.sigma = (float(np.sqrt((d * d).sum(dtype=np.float64) / n - (d.sum(dtype=np.float64) / n) ** 2)
+                            / math.sqrt(2.0)) if n else 0.0)
+        self._bounds = None
+        self._runs = None
+
+    def bounds(self) -> tuple[float, float]:
+        """(min, max) of the samples."""
+        if self._bounds is None:
+            self._bounds = (float(self.values.min()), float(self.values.max()))
+        return self._bounds
+
+    def runs(self):
+        """_runs(self.equal): (start, length) of the runs of identical values."""
+        if self._runs is None:
+            self._runs = _runs(self.equal)
+        return self._runs
 
 
 def rail_mask(column: np.ndarray, full_scale: float | None = None, stats: "_Column | None" = None):
@@ -284,19 +312,23 @@ def rail_mask(column: np.ndarray, full_scale: float | None = None, stats: "_Colu
         return mask, rails
     # one value throughout (to floating-point rounding: a noise-free simulation's axis along the
     # turn's axis varies in its 15th digit): a dead or stuck axis, not a rail, unless
-    lo, hi = float(column.min()), float(column.max())
+    lo, hi = stats.bounds() if stats is not None else (float(column.min()), float(column.max()))
     constant = hi - lo <= 1e-12 * max(1.0, abs(hi), abs(lo))
     step = (stats.step if stats is not None else _Column(column).step) if full_scale else 0.0   # declared
     for side, top in (("above", True), ("below", False)):
-        value, count, inner = _extreme(column, top)
+        value = hi if top else lo
+        at = column == value
+        count = int(np.count_nonzero(at))
         declared = (full_scale is not None and full_scale > 0
                     and abs(value) >= full_scale - max(step, 1e-9 * full_scale)
                     and (value > 0) == (side == "above"))
-        shaped = not constant and count >= 3 and _poisson_tail_bound(count, RAIL_RATIO * (inner + 1)) < RAIL_ALPHA
+        # the next level's count only where it can decide (3 or more at the extreme: a
+        # floating-point output's extreme is one sample)
+        shaped = (not constant and count >= 3
+                  and _poisson_tail_bound(count, RAIL_RATIO * (_next_count(column, at, top) + 1)) < RAIL_ALPHA)
         if declared or shaped:
-            at = column == value
             mask |= at
-            rails.append((side, value, int(at.sum())))
+            rails.append((side, value, count))
     return mask, rails
 
 
@@ -369,10 +401,13 @@ class Scanner:
         stuck = [np.zeros(n, bool), np.zeros(n, bool)]
         rail_words, stuck_words = [], []
         rail_axes = {}
+        accel_columns = None
         for s, (sensor, _) in enumerate(SENSORS):
             data = accel if s == 0 else gyro
             fs = self.full_scale[s]
             columns = [_Column(data[:, k]) for k in range(3)]
+            if s == 0:
+                accel_columns = columns
             for k, c in enumerate(columns):
                 mask, rails = rail_mask(c.values, None if fs is None else float(fs[k]), c)
                 if rails:
@@ -420,7 +455,7 @@ class Scanner:
                     verdict.accel_stuck = stuck[0]
                 if rail_axes:
                     verdict.accel_rail = rail_axes
-                    verdict.accel_sigma = self._sigma(0, [_Column(accel[:, k]) for k in range(3)])
+                    verdict.accel_sigma = self._sigma(0, accel_columns)
         if verdict.drop:
             self.left_out.append({"segment": seg.name, "reason": verdict.drop})
         elif verdict.rows is not None:
@@ -483,9 +518,9 @@ class Scanner:
                     p_axes.append(1.0)
                     limits.append(n + 1)
                     continue
-            p = max(_level_probability(float(sigma[k]), step), _share_outside_longest(c.equal))
+            p = max(_level_probability(float(sigma[k]), step), _share_outside_longest(c.equal, c.runs(), c.repeats))
             if static:
-                p = max(p, _mode_share(c.values, c.step))
+                p = max(p, _mode_share(c.values, c.step, c.bounds()))
             elif reference:
                 p = max(p, float(self._reference_of(s)[0][k]))
             p_axes.append(p)
@@ -494,14 +529,16 @@ class Scanner:
             self.static_p[s].append((np.array(p_axes), np.array([c.step for c in columns])))
         # frozen frames (all three axes repeating at once) first, then single axes
         joint = equal_axes[0] & equal_axes[1] & equal_axes[2]
-        p_joint = max(float(np.prod(p_axes)), _share_outside_longest(joint))
-        self._mark(stuck, joint, _longest_chance_run(p_joint, n), at_rail, sensor, None, seg.name)
+        joint_runs = _runs(joint)
+        p_joint = max(float(np.prod(p_axes)), _share_outside_longest(joint, joint_runs))
+        self._mark(stuck, joint_runs, _longest_chance_run(p_joint, n), at_rail, sensor, None, seg.name)
         for k in range(3):
-            self._mark(stuck, equal_axes[k], limits[k], at_rail, sensor, k, seg.name, columns[k].values)
+            self._mark(stuck, columns[k].runs(), limits[k], at_rail, sensor, k, seg.name, columns[k].values)
         return stuck
 
-    def _mark(self, stuck, equal, limit, at_rail, sensor, axis, name, values=None):
-        starts, lengths = _runs(equal)
+    def _mark(self, stuck, runs, limit, at_rail, sensor, axis, name, values=None):
+        """Mark the runs (``runs``: _runs of the repeats) of ``limit`` samples or more as stuck."""
+        starts, lengths = runs
         long = lengths >= limit
         if not long.any():
             return
