@@ -396,3 +396,60 @@ def test_an_axis_constant_to_rounding_is_not_a_rail():
     column[rng.choice(2000, 115, replace=False)] = top
     mask, rails = rail_mask(column)
     assert not mask.any() and rails == []
+
+
+def _columns_to_check():
+    """Columns of every shape the scan meets: noise on a grid and in floating point, flat tops,
+    stuck runs, a constant column, one that never repeats, NaN, short ones."""
+    rng = np.random.default_rng(27)
+    noise = rng.normal(9.8, 0.01, 5000)
+    grid = np.round(noise / 0.001) * 0.001
+    flat = np.minimum(grid, np.quantile(grid, 0.9))
+    floor = np.maximum(grid, np.quantile(grid, 0.1))
+    stuck = grid.copy()
+    stuck[100:160] = stuck[100]
+    nan = noise.copy()
+    nan[77] = np.nan
+    return [noise, grid, flat, floor, stuck, np.full(3000, 4.5), np.arange(2000.0), nan, grid[:9], grid[:2],
+            -flat, np.round(rng.normal(0, 0.3, 4000)) * 0.25]
+
+
+def test_the_columns_statistics_are_their_definitions_to_the_last_bit():
+    """What the scan computes once per column and shares (issue 27: extremes, runs, repeats, the
+    step as a minimum over the changes, np.mean's arithmetic without np.mean) is exactly what its
+    definitions give: the same step, noise, rails and runs, bit for bit."""
+    from station.estimate.data_faults import _Column, _mode_share, _runs, _share_outside_longest, rail_mask
+
+    for column in _columns_to_check():
+        c = _Column(column)
+        d = np.diff(column)
+        change = np.abs(d[d != 0])
+        assert c.repeats == int((d == 0).sum())
+        assert repr(c.step) == repr(float(change.min()) if len(change) else 0.0)
+        assert repr(c.sigma) == repr(float(np.sqrt(np.mean(d * d) - np.mean(d) ** 2) / np.sqrt(2.0)) if len(d) else 0.0)
+        assert repr(c.bounds()) == repr((float(np.min(column)), float(np.max(column))))
+        for got, expected in zip(c.runs(), _runs(d == 0)):
+            np.testing.assert_array_equal(got, expected)
+        assert _share_outside_longest(c.equal, c.runs(), c.repeats) == _share_outside_longest(d == 0)
+        assert _mode_share(column, c.step, c.bounds()) == _mode_share(column, c.step)
+        for full_scale in (None, float(np.nanmax(np.abs(column))) if len(column) else None):
+            mask, rails = rail_mask(column, full_scale, c)
+            # the definition: each extreme, its count, the count at the next value inside
+            expected_mask, expected_rails = np.zeros(len(column), bool), []
+            if len(column) >= 8:
+                lo, hi = float(column.min()), float(column.max())
+                constant = hi - lo <= 1e-12 * max(1.0, abs(hi), abs(lo))
+                for side, value in (("above", hi), ("below", lo)):
+                    at = column == value
+                    inside = column[~at]
+                    nxt = (inside.max() if side == "above" else inside.min()) if len(inside) else None
+                    inner = int((inside == nxt).sum()) if len(inside) else 0
+                    declared = (full_scale is not None and abs(value) >= full_scale - max(c.step, 1e-9 * full_scale)
+                                and (value > 0) == (side == "above"))
+                    shaped = (not constant and at.sum() >= 3
+                              and data_faults._poisson_tail_bound(int(at.sum()), 2.5 * (inner + 1)) < 1e-6)
+                    if declared or shaped:
+                        expected_mask |= at
+                        expected_rails.append((side, value, int(at.sum())))
+            np.testing.assert_array_equal(mask, expected_mask)
+            assert [(s, repr(v), n) for s, v, n in rails] == [(s, repr(v), n) for s, v, n in expected_rails]
