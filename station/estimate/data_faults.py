@@ -182,8 +182,9 @@ def _runs(equal: np.ndarray):
     sample i); length counts samples (a run of L values has L-1 equal steps)."""
     if not len(equal):
         return np.zeros(0, int), np.zeros(0, int)
-    e = np.concatenate([[False], equal, [False]])
-    d = np.diff(e.astype(np.int8))
+    e = np.zeros(len(equal) + 2, np.int8)
+    e[1:-1] = equal
+    d = np.diff(e)
     starts = np.flatnonzero(d == 1)
     ends = np.flatnonzero(d == -1)
     return starts, ends - starts + 1
@@ -299,7 +300,8 @@ class _Column:
     def runs(self):
         """_runs(self.equal): (start, length) of the runs of identical values."""
         if self._runs is None:
-            self._runs = _runs(self.equal)
+            # none (a floating-point output's usual case): no pass over the column
+            self._runs = _runs(self.equal) if self.repeats else (np.zeros(0, int), np.zeros(0, int))
         return self._runs
 
 
@@ -529,7 +531,7 @@ class Scanner:
             self.static_p[s].append((np.array(p_axes), np.array([c.step for c in columns])))
         # frozen frames (all three axes repeating at once) first, then single axes
         joint = equal_axes[0] & equal_axes[1] & equal_axes[2]
-        joint_runs = _runs(joint)
+        joint_runs = _runs(joint) if all(c.repeats for c in columns) else (np.zeros(0, int), np.zeros(0, int))
         p_joint = max(float(np.prod(p_axes)), _share_outside_longest(joint, joint_runs))
         self._mark(stuck, joint_runs, _longest_chance_run(p_joint, n), at_rail, sensor, None, seg.name)
         for k in range(3):
