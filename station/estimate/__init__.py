@@ -228,7 +228,6 @@ def summarise_while_importing(capture, check_segment=None, notes: dict | None = 
     import importlib
     import os
 
-    from station.core import forked
     from station.estimate import summaries
 
     notes = {} if notes is None else notes
@@ -245,23 +244,28 @@ def summarise_while_importing(capture, check_segment=None, notes: dict | None = 
     # milliseconds, less than forking this process (imucal's session in one process: 0.95 x the
     # CPU, 0.87 x the wall time; issue 27)
     small = then is None and is_small(capture)
-    if fork and forked.available() and not os.environ.get(READ_IN_PROCESS) and not small:
-        try:
-            child = forked.Forked(read)     # it imports the CSV engine (pyarrow): this one never needs it
-        except OSError:                     # no process to be had (EAGAIN, ENOMEM): read here
-            child = None
+    if fork and not os.environ.get(READ_IN_PROCESS) and not small:
+        from station.core import forked
+
+        if forked.available():
+            try:
+                child = forked.Forked(read)     # it imports the CSV engine (pyarrow): this one never needs it
+            except OSError:                     # no process to be had (EAGAIN, ENOMEM): read here
+                child = None
     try:
         if meanwhile is not None:
             meanwhile()
         for name in modules:
             importlib.import_module(name)
         if child is not None:
-            parts, capture.segments, capture.warnings, child_notes, value = child.result()
-            notes.update(child_notes)
-            summaries.keep(capture, parts)
-            return value
-    except forked.ChildLost:
-        pass                    # read here instead
+            try:
+                parts, capture.segments, capture.warnings, child_notes, value = child.result()
+            except forked.ChildLost:
+                pass                    # read here instead
+            else:
+                notes.update(child_notes)
+                summaries.keep(capture, parts)
+                return value
     finally:
         if child is not None:
             child.close()
