@@ -114,3 +114,18 @@ def test_the_fits_whitening_of_a_rotations_harmonics_is_their_noise(turns):
     assert np.all(np.abs(np.diag(cov) - 1.0) < 0.25) and np.all(np.abs(cov - np.diag(np.diag(cov))) < 0.25), cov
     if turns < 1:
         assert np.linalg.cond(truth.gram) > 100
+
+
+def test_column_means_are_numpys_to_the_last_bit():
+    """summaries._column_means (np.mean's sum over the count, without its Python layer: issue 27)
+    gives np.mean's numbers bit for bit: any length (numpy's pairwise sum switches at 8 and 128
+    values), strided columns, large and small magnitudes, another dtype."""
+    rng = np.random.default_rng(27)
+    for n in (1, 2, 7, 8, 9, 127, 128, 129, 1000, 10007, 70001):
+        for scale in (1e-3, 1.0, 1e6):
+            x = rng.normal(5.0, 1.0, (n, 3)) * scale
+            for view in (x, x[::2], x[:, ::-1]):
+                expected = np.array([view[:, k].mean() for k in range(view.shape[1])])
+                assert summaries._column_means(view).tobytes() == expected.tobytes()
+    ints = rng.integers(-1000, 1000, (500, 3))
+    np.testing.assert_array_equal(summaries._column_means(ints), ints.mean(axis=0))
