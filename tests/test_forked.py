@@ -152,13 +152,14 @@ def slow(*args, **kwargs):
     return real(*args, **kwargs)
 summaries.summarise = slow
 from station.cli import main
-sys.exit(main(["estimate", sys.argv[1], "-o", sys.argv[2]]))
+sys.exit(main(["diagnose", sys.argv[1], "-o", sys.argv[2]]))
 """
 
 
 def test_ctrl_c_while_the_child_reads_ends_both(optimal9_run, tmp_path):
     """Ctrl-C (SIGINT to the process group, as a terminal sends it) while the forked reader
-    reads: exit status 130, "interrupted", and no reader left running."""
+    reads (diagnose's, which imports the diagnosis meanwhile): exit status 130, "interrupted",
+    and no reader left running."""
     p = start_script(CTRL_C, optimal9_run, tmp_path / "cal.yaml")
     try:
         reader = int(p.stdout.readline())        # the child says it is reading
@@ -166,4 +167,34 @@ def test_ctrl_c_while_the_child_reads_ends_both(optimal9_run, tmp_path):
         out, err = interrupt(p)
     assert p.returncode == 130 and err.strip().splitlines()[-1] == "interrupted"
     assert still_running([reader]) == []
+    assert not (tmp_path / "cal.yaml").exists()
+
+
+CTRL_C_READING_HERE = """
+import sys, threading, time
+import station.io.capture as capture_io
+real = capture_io.read_csv_pieces
+def slow(*args, **kwargs):
+    if threading.current_thread() is not threading.main_thread():    # the reading thread
+        print("reading", flush=True)
+        time.sleep(60)
+    return real(*args, **kwargs)
+capture_io.read_csv_pieces = slow
+from station.cli import main
+sys.exit(main(["estimate", sys.argv[1], "-o", sys.argv[2]]))
+"""
+
+
+def test_ctrl_c_while_estimate_reads_ends_it_at_once(optimal9_run, tmp_path):
+    """`station estimate` reads in its own process, the next segment on a reading thread: Ctrl-C
+    while that thread reads ends the command at once (exit status 130, "interrupted", no file),
+    not after the file being read (here a read that would take a minute)."""
+    p = start_script(CTRL_C_READING_HERE, optimal9_run, tmp_path / "cal.yaml")
+    try:
+        assert p.stdout.readline().strip() == "reading"
+        started = time.monotonic()
+    finally:
+        out, err = interrupt(p)
+    assert p.returncode == 130 and err.strip().splitlines()[-1] == "interrupted"
+    assert time.monotonic() - started < 30       # the read would have taken 60 s
     assert not (tmp_path / "cal.yaml").exists()

@@ -297,21 +297,28 @@ class ReaderAhead:
             finally:
                 done.set()
 
-    def close(self):
-        """Wait for a read under way (its result is dropped) and end the reading thread."""
+    def close(self, wait: bool = True):
+        """Wait for a read under way (its result is dropped) and end the reading thread; with
+        ``wait`` False (Ctrl-C) the thread is told to end after the read under way and left to
+        it (a daemon: it ends with the process), so that an interrupted command ends at once
+        rather than after the file being read."""
+        if self._thread is not None:
+            self._work.put(None)
+        if not wait:
+            self._pending = self._thread = None
+            return
         if self._pending is not None:
             self._pending[1].wait()
             self._pending = None
         if self._thread is not None:
-            self._work.put(None)
             self._thread.join()
             self._thread = None
 
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
-        self.close()
+    def __exit__(self, kind, *exc):
+        self.close(wait=not (kind is not None and issubclass(kind, KeyboardInterrupt)))
         return False
 
 
