@@ -2,9 +2,10 @@
 
 `station diagnose` spends about as long importing the diagnosis (~0.1 s) as reading a 100 Hz
 capture; the two do not depend on each other (`station estimate`, whose fit imports ~7 ms since
-it needs no scipy, reads in its own process: a child costs more than that).  Two threads of one interpreter would take turns
-at the GIL (both are mostly Python: measured 4 % faster than one after the other); a forked
-child has its own interpreter, so the child reads while the parent imports, on two cores.
+it needs no scipy, reads in its own process: a child costs more than that).  Two threads of one
+interpreter would take turns at the GIL (both are mostly Python: measured 4 % faster than one
+after the other); a forked child has its own interpreter, so the child reads while the parent
+imports, on two cores.
 
 ``Forked(fn)`` forks at once; the child calls ``fn()`` and sends back its result or the
 exception it raised (pickled); ``result()`` waits for it and returns it or raises that
