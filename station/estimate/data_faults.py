@@ -152,7 +152,6 @@ PHASE_BINS = 720            # a turn's phases are grouped in half degrees to fin
 def _bands(marked: np.ndarray, width: float):
     """(centre, half-width) in rad of the circular runs of marked phase bins (gaps of up to two
     bins closed)."""
-    bins = len(marked)
     if marked.all():
         return [(math.pi, math.pi)]
     m = marked.copy()
