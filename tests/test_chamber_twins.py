@@ -205,3 +205,45 @@ def test_a_run_killed_after_the_chamber_step_resumes_at_the_setpoint_on_the_twin
     server.wait(10)
     said = server.stderr.read()
     assert said.count("chamber: set to 60 degC") == 2, said
+
+
+EXTENSION = """\
+name: ext
+defaults: {dwell_s: 4}
+segments:
+  - {static: x1_zd, up_body: [0, 0, -1]}
+  - {static: x1_yd, up_body: [0, -1, 0]}
+"""
+
+
+def test_a_dry_runs_capture_extended_with_append_continues_at_the_chambers_setpoint(tmp_path, monkeypatch, capsys):
+    """`run --sim --append` after a run that ended at 60 degC: the simulated chamber goes on as the
+    run left it (its history replayed from the manifest's chamber entries), so the extension's
+    temperatures are those the same segments get in one uninterrupted dry run of the run and the
+    extension together (the simulator's temperature has no noise: equal to the CSV's 1e-4 degC),
+    at the setpoint, and their manifest says the setpoint in force (chamber_c)."""
+    truth = default_truth(7)
+    truth.temperature.chamber_time_constant_s = TAU_S
+    (tmp_path / "truth.yaml").write_text(yaml.safe_dump(truth.to_yaml_dict(), sort_keys=False))
+    (tmp_path / "station.yaml").write_text(CONFIG)
+    (tmp_path / "s.yaml").write_text(SCHEME)
+    (tmp_path / "ext.yaml").write_text(EXTENSION)
+    whole = yaml.safe_load(SCHEME)
+    whole["segments"] += yaml.safe_load(EXTENSION)["segments"]
+    whole["defaults"]["dwell_s"] = 4
+    (tmp_path / "whole.yaml").write_text(yaml.safe_dump(whole, sort_keys=False))
+    monkeypatch.chdir(tmp_path)
+    sim = ["--sim", "--seed", "7", "--sim-truth", "truth.yaml", "--no-history"]
+    assert main(["run", "--scheme", "s.yaml", "--config", "station.yaml", *sim, "--out", "cap"]) in (0, 3)
+    assert main(["run", "--scheme", "whole.yaml", "--config", "station.yaml", *sim, "--out", "whole"]) in (0, 3)
+    # the append needs no configuration: the capture says when the chamber was set and its ramp
+    assert main(["run", "--sim", "--append", "cap", "--scheme", "ext.yaml", "--no-history"]) in (0, 3)
+    capsys.readouterr()
+    got = {s.name: s for s in read_capture(tmp_path / "cap").complete()}
+    once = {s.name: s for s in read_capture(tmp_path / "whole").complete()}
+    for name in ("x1_zd", "x1_yd"):
+        seg = got[name]
+        assert seg.extra["chamber_c"] == SETPOINT_C and seg.extra["appended"] == 1, seg.extra
+        assert HOT_LOW < float(np.mean(seg.data.temp)) < HOT_HIGH, (name, np.mean(seg.data.temp))
+        np.testing.assert_allclose(seg.data.t, once[name].data.t, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(seg.data.temp, once[name].data.temp, rtol=0, atol=1.5e-4)
