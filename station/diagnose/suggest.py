@@ -25,6 +25,11 @@ def added(effect_id: str, registry=None) -> str:
     """What ``--add`` needs to find ``effect_id`` in a new command: its id for the library's and
     an installed package's effects, the plugin's own spec (``/abs/path/file.py:Class``,
     ``module:Class``) for one loaded from a file or module, which a new command would not know."""
+    from station.model.unlisted import UNLISTED
+
+    if effect_id in UNLISTED and (registry is None or effect_id not in registry):
+        # kept outside the library's ranking (diagnose --auto may add one): its importable spec
+        return f"station.model.unlisted:{UNLISTED[effect_id].__name__}"
     if registry is None:
         return effect_id
     try:
