@@ -247,3 +247,29 @@ def test_a_dry_runs_capture_extended_with_append_continues_at_the_chambers_setpo
         assert HOT_LOW < float(np.mean(seg.data.temp)) < HOT_HIGH, (name, np.mean(seg.data.temp))
         np.testing.assert_allclose(seg.data.t, once[name].data.t, rtol=0, atol=1e-6)
         np.testing.assert_allclose(seg.data.temp, once[name].data.temp, rtol=0, atol=1.5e-4)
+
+
+def test_the_chamber_panel_answers_and_refuses_in_one_line():
+    """The panel's line protocol (sim_devices/twins/chamber_panel.py): a setpoint sets the air's
+    ramp at device time now (silent), SET? and AIR? answer, anything else or a setpoint out of
+    range is one ERR line and changes nothing."""
+    from sim_devices.chamber import ChamberAir
+    from sim_devices.twins.chamber_panel import ChamberPanel
+
+    air = ChamberAir(ROOM_C)
+    said = []
+    panel = ChamberPanel(air, 60.0, (-40.0, 85.0), said=said.append)
+    try:
+        assert panel.receive(b"SET?\r\nAIR?\n", 0.0) == b"none\r\n25.000\r\n"
+        assert panel.receive(b"SET 45\n", 10.0) == b"" and said and "set to 45 degC" in said[0]
+        # 20 degC at 60 degC/min: 20 s of ramp from t = 10 s
+        assert panel.receive(b"AIR?\n", 20.0) == b"35.000\r\n"
+        assert panel.receive(b"AIR?\nSET?\n", 40.0) == b"45.000\r\n45\r\n"
+        replies = panel.receive(b"hot\n200\nSET x\n", 50.0).decode().splitlines()
+        assert len(replies) == 3 and all(r.startswith("ERR ") for r in replies), replies
+        assert "outside the chamber's range -40..85" in replies[1]
+        assert panel.setpoint_c == 45.0 and float(air.air(100.0)) == 45.0
+        assert panel.receive(b"SE", 60.0) == b"" and panel.receive(b"T 30\n", 60.0) == b""   # a line in pieces
+        assert panel.setpoint_c == 30.0
+    finally:
+        panel.close()
