@@ -273,3 +273,25 @@ def test_the_chamber_panel_answers_and_refuses_in_one_line():
         assert panel.setpoint_c == 30.0
     finally:
         panel.close()
+
+
+def test_a_bench_append_after_the_chamber_level_sets_it_again_before_the_extension(tmp_path):
+    """On a bench `run --append` compiles the run's scheme with the extension after it and records
+    what is not done (as --resume): the level's chamber step, its segment done, is bound to the
+    extension's first segment, so the operator sets the chamber again and the extension is
+    recorded at the setpoint (chamber_c), never at whatever the room has."""
+    from dataclasses import replace
+
+    from station.bench.compile import compile_scheme
+    from station.bench.config import load_config
+    from station.bench.plan import Chamber
+    from station.io.scheme import scheme_from_text
+
+    (tmp_path / "station.yaml").write_text(CONFIG)
+    run = scheme_from_text(SCHEME, "s.yaml")
+    ext = scheme_from_text(EXTENSION, "ext.yaml")
+    plan = compile_scheme(replace(run, segments=run.segments + ext.segments), load_config(str(tmp_path / "station.yaml")))
+    rest = plan.remaining({"zu", "xu", *HOT})
+    first = next(s for s in rest if s.segment is not None)
+    assert isinstance(first, Chamber) and first.segment == "x1_zd" and first.setpoint_c == SETPOINT_C, first
+    assert sum(isinstance(s, Chamber) for s in rest) == 1
