@@ -65,3 +65,26 @@ def test_an_added_unlisted_effect_is_made_again_from_its_class(eid):
     assert eid not in reg
     e = auto._created(reg, eid, {})
     assert e.id == eid and e._station_source == added(eid)
+
+
+def test_a_significant_score_the_capture_cannot_size_is_not_added(monkeypatch):
+    """"And the data reveal it": on a clean capture of slow partial turns (10 deg/s for 20 s: 200
+    deg) the gyro axes' tilt with temperature scores significant by Holm (its columns match some
+    misfit of the slow turns) at hundreds of arcsec/degC with 1-sigma far above its typical 10;
+    the estimator would call every one not revealed, so --auto does not add it (the goal harness'
+    clean_10dps-partial had it as a false alarm before the rule: auto.revealed)."""
+    from station.diagnose.core import diagnose
+    from station.estimate import profile
+
+    _, cap = simhelpers.mems_capture(seed=4, overrides={"rate_dps": 10.0, "rotation_s": 20.0, "dwell_s": 6.0})
+    s = lsq.summarise(cap)
+    d = diagnose(profile.fit_located(s, []))
+    assert not fit_fails(d.result), d.verdict
+    with monkeypatch.context() as m:               # the rule is what keeps it out: without it, added
+        m.setattr(auto, "revealed", lambda cand, effect: True)
+        blind = auto.unlisted_candidates(d)
+    assert [c.effect for c in blind] == ["gyro_misalignment_temperature"]
+    assert min(blind[0].sigma) > 10.0, blind[0].sigma        # 1-sigma above the typical size: not revealed
+    assert auto.unlisted_candidates(d) == []
+    steps, _ = auto.run(s, ())
+    assert not [st.added for st in steps if st.added in UNLISTED], [st.added for st in steps]
