@@ -235,7 +235,13 @@ def test_a_dry_runs_capture_extended_with_append_continues_at_the_chambers_setpo
     monkeypatch.chdir(tmp_path)
     sim = ["--sim", "--seed", "7", "--sim-truth", "truth.yaml", "--no-history"]
     assert main(["run", "--scheme", "s.yaml", "--config", "station.yaml", *sim, "--out", "cap"]) in (0, 3)
-    assert main(["run", "--scheme", "whole.yaml", "--config", "station.yaml", *sim, "--out", "whole"]) in (0, 3)
+    # the uninterrupted run: recorded as `run --sim` records it (its estimate is not needed here)
+    from station.bench.config import load_config
+    from station.io.scheme import load_scheme
+    from station.simulate import dryrun
+
+    dryrun.record_scheme(load_scheme("whole.yaml"), dryrun.load_truth("truth.yaml", 7), 7, tmp_path / "whole",
+                         chamber=load_config("station.yaml").chamber)
     # the append needs no configuration: the capture says when the chamber was set and its ramp
     assert main(["run", "--sim", "--append", "cap", "--scheme", "ext.yaml", "--no-history"]) in (0, 3)
     capsys.readouterr()
