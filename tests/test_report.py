@@ -256,3 +256,58 @@ def test_markup_in_a_capture_is_shown_not_run(optimal9_run, tmp_path):
     assert "&lt;script&gt;alert(&#x27;model&#x27;)&lt;/script&gt;" in text
     assert "&lt;img src=x onerror=alert(1)&gt;" in text
     assert "<script" not in text and "<img src=x" not in text
+
+
+def _page_items(path) -> list:
+    """The text of every list item of the page's "cannot reveal" list, as a reader sees it."""
+    from html.parser import HTMLParser
+
+    class Items(HTMLParser):
+        def __init__(self):
+            super().__init__()
+            self.inside, self.items = 0, []
+
+        def handle_starttag(self, tag, attrs):
+            if tag == "ul" and ("class", "design") in attrs:
+                self.inside = 1
+            elif tag == "li" and self.inside:
+                self.items.append("")
+
+        def handle_endtag(self, tag):
+            if tag == "ul":
+                self.inside = 0
+
+        def handle_data(self, data):
+            if self.inside and self.items:
+                self.items[-1] += data
+
+    parser = Items()
+    parser.feed(Path(path).read_text(encoding="utf-8"))
+    return parser.items
+
+
+def test_the_page_says_what_the_capture_cannot_reveal_as_the_screen_and_json_do(optimal9_run, tmp_path, capsys):
+    """`diagnose CAP --report DIR` lists every line diagnose prints about what the capture cannot
+    reveal (issue 28): the screen's `design:` lines, JSON's `design_suggestions` and `not_revealed`,
+    each with its `station design --from` command, word for word (the page parsed as HTML; a
+    warm-up optimal9 run turns each gyro axis at one temperature and in one attitude, so the
+    effects of station/model/unlisted.py are not revealed)."""
+    import json
+
+    capsys.readouterr()
+    assert main(["diagnose", str(optimal9_run), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    said = [f"design: {x}" for x in doc["design_suggestions"] + doc["not_revealed"]]
+    assert any("station design --from" in x and "station.model.unlisted:" in x for x in said), said
+    out = tmp_path / "rep"
+    assert main(["diagnose", str(optimal9_run), "--report", str(out)]) == 0
+    screen = [x for x in capsys.readouterr().out.splitlines() if x.startswith("design: ")]
+    assert screen == said
+    items = _page_items(out / "index.html")
+    assert items[:len(said)] == said, (items, said)
+    # the command is whole on the page (a code element of its own) and runs as printed
+    text = (out / "index.html").read_text(encoding="utf-8")
+    assert text.count("<code>station design --from ") == len(items)
+    # `station report` (its own diagnosis) lists them too
+    assert main(["report", str(optimal9_run), "-o", str(tmp_path / "page.html"), "--no-auto"]) == 0
+    assert _page_items(tmp_path / "page.html")[:len(said)] == said

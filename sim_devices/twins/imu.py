@@ -5,7 +5,9 @@ attitude, rate and angular acceleration (``TableTwin.kinematics_at``), turns the
 true specific force and inertial rate at the IMU (gravity, Earth rate, centripetal and
 tangential acceleration from the lever arm; ``world.body_kinematics``), adds the white
 acceleration disturbance if the truth has one, and measures them with the true error model
-and noise (``Truth.measure``; noise per sample from the densities at the output rate).
+and noise (``Truth.measure``; noise per sample from the densities at the output rate).  Its
+temperature is the truth's warm-up over the room's, or, in a temperature chamber
+(``station sim serve --chamber``), over the case's first-order lag behind the chamber's air.
 """
 from __future__ import annotations
 
@@ -70,8 +72,11 @@ class IndexedNormal:
 
 
 class ImuTwin:
-    def __init__(self, table, truth, seed: int = 0):
+    def __init__(self, table, truth, seed: int = 0, air=None):
+        """``air``: the temperature chamber around the table (sim_devices/chamber.py ChamberAir,
+        shared by every IMU on it), None: the room's air only."""
         self.table = table
+        self.air = air
         self.site = world.Site(truth.bench.latitude_deg, truth.bench.height_m)
         self.lever_arm_m = np.asarray(truth.bench.lever_arm_m, dtype=float)
         self.disturbance_mps2 = truth.bench.accel_disturbance_ug * MICRO_G
@@ -116,9 +121,12 @@ class ImuTwin:
         f_b, w_ib = world.body_kinematics(C_bn, w_b, wd_b, self.lever_arm_m, self.site)
         f_b = world.perturb_specific_force(f_b, self.disturbance_mps2,
                                            self.noise.batch(k, 0, self.epoch))
-        temp = self.truth.temperature.at(t)
+        # in a chamber: the case follows its air as a first-order lag, plus the warm-up (the
+        # physics of the dry run's bench: TemperatureTruth.at, sim_devices/chamber.py)
+        temp = self.truth.temperature.at(t, self.air)
         self.noise.batch(k, 1, self.epoch)         # streams 1 (accel) and 2 (gyro)
         # each accelerometer senses the specific force at its own position (the size effect,
         # truth.accel.position_m): the platform's rate and its derivative relative to the Earth
-        accel, gyro = self.truth.measure(f_b, np.degrees(w_ib), temp, self.noise, w_eb_b=w_b, wdot_eb_b=wd_b, t=t)
+        accel, gyro = self.truth.measure(f_b, np.degrees(w_ib), temp, self.noise, w_eb_b=w_b, wdot_eb_b=wd_b, t=t,
+                                         air=self.air)
         return accel, gyro, temp

@@ -20,8 +20,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from drivers.protocols.csvlines import CsvFormat
+from sim_devices.chamber import ChamberAir
 from sim_devices.truth import default_truth
 
+from .chamber_panel import ChamberPanel
 from .clock import SimClock, StepClock
 from .faults import Faults, ImuFaults, StreamFaulter
 from .geometry import TableGeometry
@@ -70,6 +72,10 @@ class BenchOptions:
                                   #   device time stands still (and the table's commands wait), so no
                                   #   frame is lost at any --speed; False: frames the reader did not
                                   #   take are dropped, as a real IMU's UART does
+    chamber: bool = False         # a temperature chamber's panel on its own pseudo-terminal (chamber_panel.py)
+    chamber_ramp_c_per_min: float = 2.0     # how fast the chamber's air follows a new setpoint, degC/min
+    chamber_range_c: tuple = (-70.0, 180.0)     # the setpoints the chamber can hold, degC
+    chamber_said: object = None   # where the panel says what it was set to (the console), None: nowhere
 
 
 READER_ACTIVE_S = 2.0             # a reader that took bytes within this (wall s) is reading
@@ -116,11 +122,16 @@ class BenchServer:
                                ripple_hz=truth0.bench.rate_ripple_hz, rng=geo_rng,
                                faults=o.faults.table,
                                interlocks_closed=o.table_protocol == "aerosmith")
+        # the temperature chamber around the table: its air at the room's temperature until it is
+        # set (the panel, or set_chamber); every IMU on the table follows it (sim_devices/chamber.py)
+        self.chamber = ChamberAir(truth0.temperature.start_c)
+        self.chamber_panel = (ChamberPanel(self.chamber, o.chamber_ramp_c_per_min, o.chamber_range_c,
+                                           said=o.chamber_said) if o.chamber else None)
         truths = list(truth) if isinstance(truth, (list, tuple)) else [truth]
         if o.imus < 1 or len(truths) not in (1, o.imus):
             raise ValueError(f"{o.imus} IMUs need one truth or one per IMU, got {len(truths)}")
         self.truths = truths if len(truths) == o.imus else truths + [None] * (o.imus - 1)
-        self.lines = [ImuLine(self.table, t, o, k, fault_rng if k == 0 else None)
+        self.lines = [ImuLine(self.table, t, o, k, fault_rng if k == 0 else None, air=self.chamber)
                       for k, t in enumerate(self.truths)]
         if o.table_protocol == "acutrol":
             self.table_frontend = AcutrolFrontEnd(self.table, o.table_framing)
@@ -160,6 +171,11 @@ class BenchServer:
     def imu_paths(self) -> list:
         return [line.port.path for line in self.lines]
 
+    @property
+    def chamber_path(self) -> str | None:
+        """The chamber panel's pseudo-terminal (``chamber=True``), else None."""
+        return None if self.chamber_panel is None else self.chamber_panel.path
+
     # ------------------------------------------------------------------ the loop
     def step(self, timeout_s: float) -> None:
         """One turn of the loop: commands, the IMU frames due, faults.
@@ -186,7 +202,8 @@ class BenchServer:
         if self.clock.capped:
             timeout_s = min(timeout_s, 0.001)        # waiting for the reader
         imu_ports = [line.port for line in self.lines]
-        ports = [p for p in (*imu_ports, self.table_port)
+        panel = [self.chamber_panel.port] if self.chamber_panel is not None and not self.chamber_panel.port.closed else []
+        ports = [p for p in (*imu_ports, self.table_port, *panel)
                  if not p.closed and not (p is self.table_port and defer_table)]
         writers = [p for p in (self.table_port, *imu_ports) if not p.closed and p.backlog]
         readable, _, _ = select.select(ports, writers, [], timeout_s) if ports or writers else ([], [], [])
@@ -197,6 +214,8 @@ class BenchServer:
         now = self.clock.now()
         self.step_clock.set(now)
         self.table.update(now)
+        if self.chamber_panel is not None:       # set before the frames of this step are measured
+            self.chamber_panel.serve(readable, now)
         tf = self.options.faults.table
         if tf.disconnect_at_s is not None and now >= tf.disconnect_at_s:
             self.table_port.close()
@@ -395,7 +414,23 @@ class BenchServer:
         if self.error is not None:
             raise RuntimeError("the twins' loop failed") from self.error
 
+    def set_chamber(self, setpoint_c: float) -> None:
+        """The chamber set to ``setpoint_c`` degC now (device time), as at its panel (tests; without
+        a panel the air is set directly)."""
+        lo, hi = self.options.chamber_range_c
+        if not lo <= float(setpoint_c) <= hi:
+            raise ValueError(f"setpoint {setpoint_c:g} degC outside the chamber's range {lo:g}..{hi:g} degC")
+
+        def apply():
+            if self.chamber_panel is None:
+                self.chamber.set(self.clock.now(), float(setpoint_c), self.options.chamber_ramp_c_per_min)
+            else:
+                self.chamber_panel.set(self.clock.now(), float(setpoint_c))
+        self._between_steps(apply)
+
     def close_ports(self) -> None:
+        if self.chamber_panel is not None:
+            self.chamber_panel.close()
         self.table_port.close()
         for line in self.lines:
             line.port.close()
@@ -414,13 +449,13 @@ class ImuLine:
     ``--faults`` file); IMU k is seeded ``seed + k`` (its noise; its truth, unless given:
     ``default_truth(seed + k)``) and answers with its own serial number."""
 
-    def __init__(self, table, truth, o: BenchOptions, index: int, fault_rng=None):
+    def __init__(self, table, truth, o: BenchOptions, index: int, fault_rng=None, air=None):
         seed = o.seed + index
         if truth is None:
             truth = default_truth(seed)
         self.index = index
         self.truth = truth
-        self.imu = ImuTwin(table, truth, seed=seed)
+        self.imu = ImuTwin(table, truth, seed=seed, air=air)
         if o.imu_faults:
             self.faults = o.imu_faults[index] if index < len(o.imu_faults) else ImuFaults()
         else:

@@ -47,6 +47,12 @@ def add_parsers(sub) -> None:
     serve.add_argument("--csv-units", metavar="SPEC", default="",
                        help="units of the csv twin, e.g. t=ms,accel=g,gyro=rad/s "
                             "(default t=s,accel=m/s^2,gyro=deg/s)")
+    serve.add_argument("--chamber", action="store_true",
+                       help="a temperature chamber around the table, its panel on a pseudo-terminal (printed as "
+                            "'chamber: PATH'): set it with `echo 60 > PATH` when the run asks (docs/twins.md)")
+    serve.add_argument("--chamber-ramp-c-per-min", type=argtypes.positive, default=2.0, metavar="R",
+                       help="how fast the chamber's air follows a new setpoint, degC/min (default 2; as "
+                            "station.yaml's chamber.ramp_c_per_min says, or the run's cross-check flags it)")
     serve.set_defaults(func=cmd_sim_serve)
 
     probe = sub.add_parser("probe", help="read an IMU and/or a rate table and report")
@@ -113,6 +119,8 @@ def cmd_sim_serve(args) -> int:
             for k, line in enumerate(server.lines, 1):
                 print(f"imu{k}: {line.port.path}" + (f" serial {line.serial_number}" if line.serial_number else ""),
                       flush=True)
+        if server.chamber_path is not None:
+            print(f"chamber: {server.chamber_path}", flush=True)
         what = f"{args.imu_protocol} IMU" if n == 1 else f"{n} {args.imu_protocol} IMUs"
         print(f"station sim serve: {axes}-axis {args.table_protocol} table, {what} "
               f"at {truth[0].sample_rate_hz:g} Hz, speed {args.speed:g}; stop with Ctrl-C",
@@ -217,7 +225,9 @@ def _bench_server(truth, args, axes, faults, csv_format, imu_faults=()):
                                            imu_protocol=args.imu_protocol, faults=faults,
                                            csv_format=csv_format, table_framing=args.table_framing,
                                            table_tcp_port=args.table_tcp_port, imus=int(args.imus),
-                                           imu_faults=tuple(imu_faults)))
+                                           imu_faults=tuple(imu_faults), chamber=bool(args.chamber),
+                                           chamber_ramp_c_per_min=float(args.chamber_ramp_c_per_min),
+                                           chamber_said=lambda text: print(text, file=sys.stderr, flush=True)))
 
 
 def _csv_format(spec: str):

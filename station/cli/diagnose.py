@@ -244,8 +244,9 @@ def _summary_lines(d) -> list[str]:
     lines += [f"where it fails: {f}" for f in d.failures]
     lines += [f"not kept: {r.effect}: {r.reason}" for r in d.rejected]
     lines += [f"why it still fails: {line}" for line in getattr(d, "account", None) or []]
-    lines += [f"design: {line}" for line in getattr(d, "design_suggestions", None) or []]
-    lines += [f"design: {line}" for line in getattr(d, "not_revealed", None) or []]
+    from station.diagnose.suggest import design_lines
+
+    lines += design_lines(d)
     return lines + [f"note: {n}" for n in d.notes]
 
 
@@ -270,34 +271,19 @@ def _candidates_table(d) -> Table:
 
 def _print_suggestions(out, d) -> None:
     """Beside each candidate the capture cannot reveal, the command that designs the segments
-    that would (station design --from: docs/design.md)."""
-    for c in d.candidates:
-        if getattr(c, "suggestion", ""):
-            out.print(f"{c.effect}: the fewest segments that reveal it: {c.suggestion}", markup=False,
-                      soft_wrap=True, highlight=False)
-        cmds = getattr(c, "separations", None) or []
-        for cmd in cmds:
-            out.print(f"{c.effect}: this capture cannot tell it from {_rival(cmd)}; the fewest segments that "
-                      f"separate them: {cmd}", markup=False, soft_wrap=True, highlight=False)
-        others = list(getattr(c, "alike", None) or [])
-        if others:
-            out.print(f"{c.effect}: this capture cannot tell it from {', '.join(others)} (they explain the misfit "
-                      "alike); no segments of this table are designed to separate them", markup=False,
-                      soft_wrap=True, highlight=False)
+    that would (station design --from: docs/design.md); the words are station.diagnose.suggest's,
+    which the report page lists too."""
+    from station.diagnose.suggest import candidate_lines
 
-
-def _rival(cmd: str) -> str:
-    """B of a printed ``--separate A,B`` command."""
-    import shlex
-
-    words = shlex.split(cmd)
-    return words[words.index("--separate") + 1].rsplit(",", 1)[1]
+    for line in candidate_lines(d):
+        out.print(line, markup=False, soft_wrap=True, highlight=False)
 
 
 def _print(out, first, steps, final) -> None:
     from rich.table import Table
 
     from station.diagnose.auto import comparison_rows
+    from station.diagnose.suggest import step_lines
 
     for line in _summary_lines(first):
         # a command is printed whole (soft_wrap): it is copied into a shell
@@ -321,9 +307,8 @@ def _print(out, first, steps, final) -> None:
         out.print("added: " + "; ".join(f"{n} = {v:.4g} ± {s:.2g} {u}" for n, v, s, u in st.estimate))
         for c in st.caveats:
             out.print(f"caveat: {c}")
-        for cmd in getattr(st, "separations", None) or []:
-            out.print(f"caveat: the fewest segments that separate {st.added} from {_rival(cmd)}: {cmd}",
-                      markup=False, soft_wrap=True, highlight=False)
+        for line in step_lines(st):
+            out.print(line, markup=False, soft_wrap=True, highlight=False)
         for _, why in st.removed:
             out.print(f"removed: {why}", markup=False)
     if steps:

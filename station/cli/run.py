@@ -257,7 +257,8 @@ def _append_dry_run(args, overrides) -> int:
               f"to {directory}, on its simulated bench and IMU", markup=False, soft_wrap=True)
     with out.status("recording") as status:
         dryrun.append_scheme(ext, text, directory,
-                             progress=lambda name, i, n: status.update(f"recording {name} ({i + 1}/{n})"))
+                             progress=lambda name, i, n: status.update(f"recording {name} ({i + 1}/{n})"),
+                             chamber=_config(args).chamber)
     from station import api
     from station.cli.history import file_quietly
 

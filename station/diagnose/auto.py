@@ -116,7 +116,19 @@ def _rebuild(effects, registry, extra=()) -> list:
 
 def _created(registry, effect_id: str, state: dict | None = None):
     """A fresh instance of a library effect with what an earlier instance or the candidate's
-    score test decided restored (a bias step's located time); setup() decides the rest again."""
+    score test decided restored (a bias step's located time); setup() decides the rest again.  An
+    effect of station/model/unlisted.py that --auto added (unlisted_candidates) is made from its
+    class: it is not in the registry, so later diagnoses do not rank it among the library's."""
+    from station.model.unlisted import UNLISTED
+
+    if effect_id in UNLISTED and effect_id not in registry:
+        from station.model.raw_counts import in_capture_units
+
+        e = in_capture_units(UNLISTED[effect_id])()
+        e._station_source = f"{UNLISTED_SPEC}:{UNLISTED[effect_id].__name__}"
+        if state:
+            e.restore(state)
+        return e
     e = registry.create(effect_id)
     if state:
         e.restore(state)
@@ -136,6 +148,57 @@ def _said(after: Diagnosis, effect_id: str) -> list[str]:
 
 
 DISCOVERED = "discovered_terms"
+UNLISTED_SPEC = "station.model.unlisted"
+
+
+def revealed(cand, effect) -> bool:
+    """The data reveal every parameter of ``effect``: none aliased with the model's, each 1-sigma
+    from this capture (the score test's, with the over-dispersion) at most its typical size -- the
+    estimator's own "not revealed" rule (station estimate).  A significant score whose parameters
+    the capture cannot size is a misfit the effect's columns happen to match, not the effect: on
+    the goal harness's clean capture of 10 deg/s partial turns the gyro axes' tilt with temperature
+    scored p = 9e-5 (Holm 0.002) at 394 +/- 98 arcsec/degC, 1-sigma 68-128 against a typical 10,
+    and was added (a false alarm) before this rule."""
+    typical = {p.name: p.typical for p in effect.params}
+    return not cand.aliased and all(s <= typical[n] for n, s in zip(cand.names, cand.sigma))
+
+
+def unlisted_candidates(current: Diagnosis, exclude=()) -> list:
+    """The effects of station/model/unlisted.py not in the model, by the rule --auto applies to the
+    library's (core.rank_candidates): each score-tested at the current fit with its over-dispersion,
+    significant when its p-value, Holm-corrected over the family of the library's candidates at
+    this fit and these together (the family enlarged by them: no effect gets an easier test for
+    being outside the library), is below ALPHA, its one-step estimate is of a plausible size, and
+    the data reveal it (``revealed``: every parameter's 1-sigma at most its typical size).  The significant ones, the largest predicted
+    chi2 drop first; each tried as a library candidate is (the out-of-sample check and the share
+    of the excess misfit, holdout.judge)."""
+    from station.diagnose.core import score_test
+    from station.model.raw_counts import in_capture_units
+    from station.model.unlisted import UNLISTED
+
+    result = current.result
+    in_model = {e.id for e in result.model.effects}
+    phi = overdispersion(result)
+    mine = []
+    for eid, cls in UNLISTED.items():
+        if eid in in_model or eid in exclude:
+            continue
+        try:
+            c = score_test(result, in_capture_units(cls)(), overdispersion=phi)
+        except Exception:       # nothing of it on this capture (no temperature, no rotation): not a candidate
+            continue
+        c.source = f"{UNLISTED_SPEC}:{cls.__name__}"
+        mine.append(c)
+    family = sorted([*current.candidates, *mine], key=lambda c: c.p_value)
+    m, running, corrected = len(family), 0.0, {}
+    for rank, c in enumerate(family):            # Holm's step-down over the enlarged family
+        running = max(running, min(1.0, c.p_value * (m - rank)))
+        corrected[id(c)] = running
+    for c in mine:
+        c.p_value_corrected = corrected[id(c)]
+        c.significant = (c.dof > 0 and c.p_value_corrected < ALPHA and c.plausible
+                         and revealed(c, UNLISTED[c.effect]()))
+    return sorted([c for c in mine if c.significant], key=lambda c: -c.predicted_chi2_drop)
 MAX_TERM_STEPS = 2       # searches of the dictionary whose terms are added by --auto
 
 
@@ -282,13 +345,16 @@ def _best_out_of_sample(cand, first, tries, refused, current, h_current, summari
 
 
 def run(summaries, effects=(), attitudes="auto", progress=None,
-        registry: EffectRegistry | None = None, on_first=None, discover: bool = True) -> tuple[list[Step], Diagnosis]:
+        registry: EffectRegistry | None = None, on_first=None, discover: bool = True,
+        unlisted: bool = True) -> tuple[list[Step], Diagnosis]:
     """Diagnose; while a significant candidate passes the checks, add it, refit, diagnose again.
     When no library effect is kept and the fit still fails, the terms found outside the library
     (station.diagnose.terms) are added when they pass the same checks (``discover``), marked as
     discovered; a library effect that passes is replaced by terms that beat it out of sample.
     ``on_first(diagnosis)``, when given, is called with the diagnosis of the model as fitted as
-    soon as it is made (a report draws its candidates' figures meanwhile)."""
+    soon as it is made (a report draws its candidates' figures meanwhile).  When no library effect
+    is kept, the effects of station/model/unlisted.py are tried by the same rule (``unlisted``:
+    unlisted_candidates) before the terms."""
     registry = registry or EffectRegistry()
     current = diagnose(profile.fit_located(summaries, [registry.create(e) for e in effects], attitudes),
                        registry=registry)
@@ -343,6 +409,31 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
             rejected = [r for r in rejected if r.effect != cand.effect]
             rejected.append(Rejection(cand.effect, reason, current.chi2 - after.chi2, cv_b, cv_a, share,
                                       added_parameters(after, cand.effect)))
+        if kept is None and unlisted and not bench_fault(current):
+            # the effects kept outside the library's ranking (station/model/unlisted.py), by the
+            # library's rule, before the dictionary's terms (which would name the same physics as
+            # terms: an effect with its physics and units is the better calibration)
+            for cand in unlisted_candidates(current, refused):
+                if progress:
+                    progress(cand.effect)
+                after = diagnose(lsq.fit(summaries, _rebuild(current.result.model.effects, registry,
+                                                             [_created(registry, cand.effect)]),
+                                         attitudes, like=current.result.model), registry=registry)
+                if h_current is None:
+                    h_current = leave_one_segment_out(current.result)
+                h_after = leave_one_segment_out(after.result)
+                ok, reason, share, cv_b, cv_a = judge(current, after, h_current, h_after)
+                if ok:
+                    kept = Step(cand.effect, current, after, cand.predicted_chi2_drop, current.chi2 - after.chi2,
+                                added_parameters(after, cand.effect), cv_b, cv_a, share,
+                                [f"outside the library's ranking ({cand.source}, station effects does not list it): "
+                                 f"significant by the library's rule (p = {cand.p_value_corrected:.2g}, Holm over "
+                                 "the library's candidates and the unlisted effects)"] + caveats(summaries, cand.effect))
+                    break
+                refused.add(cand.effect)
+                rejected = [r for r in rejected if r.effect != cand.effect]
+                rejected.append(Rejection(cand.effect, reason, current.chi2 - after.chi2, cv_b, cv_a, share,
+                                          added_parameters(after, cand.effect)))
         if (kept is None and discover and term_steps < MAX_TERM_STEPS and fit_fails(current.result)
                 and bench_fault(current)):
             current.notes.append("terms outside the library not carried into the calibration: the failure names a "

@@ -173,6 +173,8 @@ img{max-width:100%;height:auto;display:block;margin:8px 0}
 .yes{color:#17692f;font-weight:600}
 .flag{color:#9b1c1c;font-weight:600}
 footer{color:#6b7385;font-size:.8em;margin-top:24px}
+ul.design li{margin:4px 0}
+ul.design code{white-space:pre-wrap;word-break:break-all;background:#f0f2f6;padding:1px 4px}
 """
 
 
@@ -255,6 +257,24 @@ def _candidates_table(d) -> str:
                   rows, left=(0, 1, 4, 5))
 
 
+def _unrevealed_section(first, steps, final) -> str:
+    """What the capture cannot reveal or separate, each line as diagnose prints it on screen and
+    in JSON (``design_suggestions``, ``not_revealed``, the candidates' and the steps' commands:
+    station.diagnose.suggest.all_lines), the `station design --from` command in code so that it
+    is copied whole."""
+    from station.diagnose.suggest import all_lines
+
+    lines = all_lines(first, steps, final)
+    if not lines:
+        return ""
+    items = []
+    for line in lines:
+        words, sep, cmd = line.partition("station design --from ")
+        items.append(f"<li>{_e(words)}<code>{_e(sep + cmd)}</code></li>" if sep else f"<li>{_e(line)}</li>")
+    return ("<h3>What this capture cannot reveal, and the segments that would</h3><ul class='design'>"
+            + "".join(items) + "</ul>")
+
+
 def _diagnosis_section(inp: ReportInput, figures: dict) -> str:
     from station.diagnose.auto import comparison_rows
 
@@ -283,6 +303,7 @@ def _diagnosis_section(inp: ReportInput, figures: dict) -> str:
     if account:
         parts.append("<h3>Why it still fails: what was tried, what each explained, what the residuals follow</h3>"
                      "<ul>" + "".join(f"<li>{_e(line)}</li>" for line in account) + "</ul>")
+    parts.append(_unrevealed_section(first, inp.steps, final))
     parts.append("<h3>Candidate effects (score test at the fit as it was first made)</h3>")
     parts.append(_candidates_table(first))
     for name in figures:
@@ -465,15 +486,21 @@ def _diagnosis(capture, effects, auto: bool, on_first=None) -> tuple:
     from station.diagnose.core import diagnose
     from station.estimate import lsq
 
+    from station.diagnose.suggest import suggest_all
+
     s = lsq.summarise(capture)
     if auto:
         steps, final = auto_loop.run(s, list(effects), on_first=on_first)
-        return (steps[0].before if steps else final), steps, final
-    registry = EffectRegistry()
-    from station.estimate.profile import fit_located
+        first = steps[0].before if steps else final
+    else:
+        registry = EffectRegistry()
+        from station.estimate.profile import fit_located
 
-    first = diagnose(fit_located(s, [registry.create(e) for e in effects]), registry=registry)
-    return first, [], first
+        steps, first = [], diagnose(fit_located(s, [registry.create(e) for e in effects]), registry=registry)
+        final = first
+    # what the capture cannot reveal, with the design --from commands (as diagnose says it)
+    suggest_all(first, final, steps, capture, s)
+    return first, steps, final
 
 
 # ----------------------------------------------------------------------------------- the noise

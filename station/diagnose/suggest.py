@@ -25,6 +25,11 @@ def added(effect_id: str, registry=None) -> str:
     """What ``--add`` needs to find ``effect_id`` in a new command: its id for the library's and
     an installed package's effects, the plugin's own spec (``/abs/path/file.py:Class``,
     ``module:Class``) for one loaded from a file or module, which a new command would not know."""
+    from station.model.unlisted import UNLISTED
+
+    if effect_id in UNLISTED and (registry is None or effect_id not in registry):
+        # kept outside the library's ranking (diagnose --auto may add one): its importable spec
+        return f"station.model.unlisted:{UNLISTED[effect_id].__name__}"
     if registry is None:
         return effect_id
     try:
@@ -177,3 +182,52 @@ def alike_candidates(candidates) -> dict:
                 out.setdefault(a.effect, []).append(b.effect)
                 out.setdefault(b.effect, []).append(a.effect)
     return out
+
+
+# ------------------------------------------------------------------ the words, screen and page alike
+
+def design_lines(diagnosis) -> list[str]:
+    """The ``design:`` lines of a diagnosis: the model's own parameters not revealed and the
+    effects outside the library the capture is blind to (unrevealed.py), each with its command."""
+    return ([f"design: {line}" for line in getattr(diagnosis, "design_suggestions", None) or []]
+            + [f"design: {line}" for line in getattr(diagnosis, "not_revealed", None) or []])
+
+
+def rival_of(cmd: str) -> str:
+    """B of a ``--separate A,B`` command."""
+    return _pair_of(cmd)[1]
+
+
+def candidate_lines(diagnosis) -> list[str]:
+    """Beside each candidate the capture cannot reveal or tell from another, the command that
+    designs the segments that would (or why there is none)."""
+    lines = []
+    for c in diagnosis.candidates:
+        if getattr(c, "suggestion", ""):
+            lines.append(f"{c.effect}: the fewest segments that reveal it: {c.suggestion}")
+        for cmd in getattr(c, "separations", None) or []:
+            lines.append(f"{c.effect}: this capture cannot tell it from {rival_of(cmd)}; the fewest segments that "
+                         f"separate them: {cmd}")
+        others = list(getattr(c, "alike", None) or [])
+        if others:
+            lines.append(f"{c.effect}: this capture cannot tell it from {', '.join(others)} (they explain the misfit "
+                         "alike); no segments of this table are designed to separate them")
+    return lines
+
+
+def step_lines(step) -> list[str]:
+    """Under a step of --auto: the commands that separate its added effect from a rival."""
+    return [f"caveat: the fewest segments that separate {step.added} from {rival_of(cmd)}: {cmd}"
+            for cmd in getattr(step, "separations", None) or []]
+
+
+def all_lines(first, steps, final) -> list[str]:
+    """Every line diagnose prints about what the capture cannot reveal or separate, in the order
+    the screen shows them (the first diagnosis, its candidates, the steps, the final), each once:
+    what the report page lists (issue 28)."""
+    lines = design_lines(first) + candidate_lines(first)
+    for st in steps:
+        lines += step_lines(st)
+    if final is not None and final is not first:
+        lines += design_lines(final)
+    return list(dict.fromkeys(lines))

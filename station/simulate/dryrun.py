@@ -88,7 +88,7 @@ def chamber_step(bench, spec, previous_c: float, chamber) -> dict:
 
     to = float(spec.chamber_c)
     bench.set_chamber(to, chamber.ramp_c_per_min)
-    start = bench.time_s
+    start = bench.time_s          # the bench's clock when the chamber was set
     ramp = chamber.ramp_s(previous_c, to)
     if chamber.soak_s is not None:
         bench.wait(ramp + chamber.soak_s)
@@ -112,7 +112,9 @@ def chamber_step(bench, spec, previous_c: float, chamber) -> dict:
             bench.wait(step)
     imu_c = float(bench.imu_temperature(bench.time_s))
     entry = {"setpoint_c": to, "from_c": float(previous_c), "waited_s": round(bench.time_s - start, 3),
-             "imu_c": round(imu_c, 4), "settled": settled}
+             "imu_c": round(imu_c, 4), "settled": settled,
+             # the simulated chamber's history, so that a --sim --append continues it (replay_chamber)
+             "set_at_s": round(float(start), 6), "ramp_c_per_min": float(chamber.ramp_c_per_min)}
     problem = finding(to, imu_c, chamber.agree_c)
     if problem is not None:
         entry["finding"] = problem
@@ -122,12 +124,12 @@ def chamber_step(bench, spec, previous_c: float, chamber) -> dict:
     return entry
 
 
-def _simulate(scheme: Scheme, bench) -> Iterator[tuple[object, object, dict]]:
+def _simulate(scheme: Scheme, bench, setpoint: float | None = None) -> Iterator[tuple[object, object, dict]]:
     """(spec, simulated segment, commanded manifest keys) for every segment, in order; a segment
     that sets the chamber first sets the simulated one and waits (chamber_step), and while a
-    chamber is set every segment says its setpoint (``chamber_c``)."""
+    chamber is set every segment says its setpoint (``chamber_c``; ``setpoint``: the one in force
+    when the scheme starts, a dry run's capture extended by --append)."""
     chamber = getattr(bench, "station_chamber", None)
-    setpoint = None
     for spec in scheme.segments:
         keys = {}
         if spec.chamber_c is not None:
@@ -213,11 +215,11 @@ def record_scheme(scheme: Scheme, truth, seed: int, out_dir: Path,
     return writer.path
 
 
-def _write_segments(writer, scheme: Scheme, bench, progress, **extra) -> None:
+def _write_segments(writer, scheme: Scheme, bench, progress, setpoint: float | None = None, **extra) -> None:
     """Simulate ``scheme``'s segments on ``bench`` into ``writer``, in blocks (``extra``: manifest
-    keys every segment gets)."""
+    keys every segment gets; ``setpoint``: the chamber's in force at the start, _simulate)."""
     block = max(1, int(round(BLOCK_SECONDS * bench.sample_rate_hz)))
-    for i, (spec, seg, meta) in enumerate(_simulate(scheme, bench)):
+    for i, (spec, seg, meta) in enumerate(_simulate(scheme, bench, setpoint)):
         if progress:
             progress(spec.name, i, len(scheme.segments))
         with writer.begin_segment(spec.name, spec.kind, **meta, **extra) as out:
@@ -227,14 +229,49 @@ def _write_segments(writer, scheme: Scheme, bench, progress, **extra) -> None:
             out.close("complete", **{k: v for k, v in seg.meta.items() if k in ("angle_deg", "table_axis")})
 
 
+def replay_chamber(bench, capture, chamber=None) -> float | None:
+    """Give ``bench``'s simulated chamber the history the dry run's ``capture`` recorded (each
+    chamber step's setpoint, when it was set and the ramp: the segments' ``chamber`` entries), so
+    that the world goes on as it was: the air where it was, the IMU's case still lagging it.
+    Returns the setpoint in force at the capture's end (None: the chamber was never set).  An
+    entry without its time is set at the end of the segment before (where the dry run sets it),
+    one without its ramp takes the configured chamber's (``chamber``), else it is refused."""
+    setpoint, end = None, None
+    for seg in capture.segments:
+        entry = seg.extra.get("chamber") if isinstance(seg.extra, dict) else None
+        if isinstance(entry, dict) and seg.status == "complete":
+            where = f"{capture.path}/manifest.yaml: segment {seg.name!r}: field 'chamber'"
+            try:
+                to = float(entry["setpoint_c"])
+                at = float(entry["set_at_s"]) if "set_at_s" in entry else end
+                ramp = entry.get("ramp_c_per_min", None if chamber is None else chamber.ramp_c_per_min)
+                ramp = float(ramp) if ramp is not None else None
+            except (KeyError, TypeError, ValueError):
+                raise UserError(f"{where}: needs a number setpoint_c (and set_at_s, ramp_c_per_min)") from None
+            if at is None or ramp is None or not (np.isfinite(to) and np.isfinite(at) and ramp > 0):
+                raise UserError(f"{where}: the simulated chamber's history is not known (no set_at_s or "
+                                "ramp_c_per_min, a capture written before they were recorded): give the run's "
+                                "configuration with --config (its chamber: ramp_c_per_min)")
+            bench.chamber.set(at, to, ramp)
+            setpoint = to
+        if seg.data is not None and len(seg.data.t):
+            end = float(seg.data.t[-1]) + 0.5 / capture.imu.sample_rate_hz
+        if seg.status == "complete" and seg.extra.get("chamber_c") is not None:
+            setpoint = float(seg.extra["chamber_c"])
+    return setpoint
+
+
 def append_scheme(extension: Scheme, text: str, directory: Path,
-                  progress: Callable[[str, int, int], None] | None = None) -> Path:
+                  progress: Callable[[str, int, int], None] | None = None, chamber=None) -> Path:
     """Record ``extension``'s segments into the dry run's capture ``directory``, after its own, on
     the same simulated bench: the IMU of the capture's ``sim_truth.yaml``, still mounted as it was,
     the bench's clock going on from the end of the capture's last segment (a warm-up, a drift or a
     step continues), new noise (the capture's seed and its count of segments make the extension's
-    seed: an extension never repeats the noise of the run).  The capture's complete segments are
-    left untouched; the extension's scheme file (``text``) is kept in it (``scheme-append-N.yaml``)."""
+    seed: an extension never repeats the noise of the run), the temperature chamber as the run left
+    it (replay_chamber: the extension's segments at the setpoint in force, and say so; a segment of
+    the extension that sets the chamber needs ``chamber``, the configured one).  The capture's
+    complete segments are left untouched; the extension's scheme file (``text``) is kept in it
+    (``scheme-append-N.yaml``)."""
     from station.io.capture import CaptureWriter, read_capture
     from station.io.scheme import load_scheme
 
@@ -264,9 +301,13 @@ def append_scheme(extension: Scheme, text: str, directory: Path,
         raise UserError(f"scheme {extension.name}: {'a hand scheme' if not extension.table else 'a table scheme'} "
                         f"cannot extend {'a table run' if run_table else 'a run by hand'}")
     ends = [float(s.data.t[-1]) for s in capture.segments if s.data is not None and len(s.data.t)]
-    start_s = max(ends, default=0.0)
+    # the bench's clock at the end of the last segment's window: half a sample after its last
+    # sample (SimulatedBench._times), as in one uninterrupted run
+    start_s = max(ends, default=-0.5 / capture.imu.sample_rate_hz) + 0.5 / capture.imu.sample_rate_hz
     seed = int(np.random.SeedSequence([int(sim["seed"]), len(capture.segments)]).generate_state(1)[0])
-    bench = _bench(extension, truth, seed, start_s=start_s)
+    bench = _bench(extension, truth, seed, start_s=start_s, chamber=chamber)
+    # the chamber as the run left it: its air, the IMU's case lagging it, the setpoint in force
+    setpoint = replay_chamber(bench, capture, chamber)
     listed = sorted(directory.glob("scheme-append-*.yaml"))
     number = len(listed) + 1
     kept = directory / f"scheme-append-{number}.yaml"
@@ -277,7 +318,7 @@ def append_scheme(extension: Scheme, text: str, directory: Path,
         kept.write_text(text)
     except OSError as e:
         raise UserError(f"{kept}: cannot write: {e.strerror}") from None
-    _write_segments(CaptureWriter.reopen(directory), extension, bench, progress, appended=number)
+    _write_segments(CaptureWriter.reopen(directory), extension, bench, progress, setpoint, appended=number)
     return directory
 
 
