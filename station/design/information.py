@@ -379,8 +379,10 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
     merged = None                    # the union's reported parameters
     placed: list = []                # (dict, key, the chunk's idx): the blocks to embed at the end
     # an offset per axis group (rotation_axis_offsets): a candidate's axis group has an offset of its
-    # own (an appended rotation is a group of its own: docs/capture.md), eliminated with the group's
-    # nuisances; the capture's own groups' offsets (station design --from) stay parameters
+    # own, eliminated with the group's nuisances -- except about an axis line the capture turned
+    # about (station design --from), where it is the capture's group's (_capture_lines: the
+    # estimator shares it with turns appended later, station.model.axis_offsets.offset_groups);
+    # the capture's own groups' offsets stay parameters
     offsets_of_groups = any(e.id == "rotation_axis_offsets" for e in effects)
     lines = None                     # the capture's axis lines and their offsets (_offset_lines)
     for chunk in chunks:

@@ -43,8 +43,10 @@ MAX_SEGMENTS = 12         # the most rotation pairs / statics an extension propo
 CHECK_ROUNDS = 4          # the estimator's check sends the search on at most this often
 # effects whose parameters the recorded segments decide and that no candidate shares: a placement
 # per segment, a step's time.  An offset per axis group (rotation_axis_offsets) is designed: the
-# capture's groups keep theirs, a candidate's group (an appended rotation is a group of its own)
-# has its own, eliminated with the group's nuisances (information.py).  The bench's effects of a table axis
+# capture's groups keep theirs, a candidate about one of the capture's axes shares its group's (an
+# appended rotation is a group of its own for its gravity angle, not for its offset:
+# station.model.axis_offsets.offset_groups), a candidate about a new axis has its own, eliminated
+# with the group's nuisances (information.py).  The bench's effects of a table axis
 # or a rate (table_wobble: one lean per table axis; table_vibration_once_per_rev: one per table axis
 # and rate) are designed: a candidate about the same table axis, or at the same rate, shares them
 # (information.column_names), one at a new rate brings its own
