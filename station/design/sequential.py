@@ -433,8 +433,10 @@ def _goal_rows(names, targets, typical, fraction, info, base, group_a, group_b):
     information and every other number is lost in it), and the targets that are such offsets
     with a part along their axis (the estimator calls them not revealed, rightly).  The capture's
     axis groups are taken as the summaries number them for a capture of one session (one group per
-    body axis, in order); a capture already extended once numbers its appended turns' groups
-    after, which this does not follow (its offsets' rows are then of the wrong axes)."""
+    body axis, in order); a capture already extended once shares the run's offsets for appended
+    turns about the run's axes (axis_offsets.offset_groups), but numbers the groups of appended
+    turns about new axes after, which this does not follow (their offsets' rows are then of the
+    wrong axes)."""
     import re
 
     in_a, in_b = set(np.asarray(group_a).tolist()), set(np.asarray(group_b).tolist())
