@@ -120,6 +120,11 @@ CASES = [
     Case("vibration", "the table vibrates once per revolution: 1 mg along its axis and 1 mg across",
          {"bench.vibration_mg": [1.0, 0.0, 1.0], "bench.vibration_phase_deg": 30.0},
          ("table_vibration_once_per_rev",), "accel_lever_arm", rate=100.0),
+    # the same vibration, the rival the axes' offsets (fifteenth session: their pair's command, turns
+    # about the capture's axes with the table axis vertical, run as printed)
+    Case("vibration_offsets", "the table vibrates once per revolution (as above); the rival: an offset per axis",
+         {"bench.vibration_mg": [1.0, 0.0, 1.0], "bench.vibration_phase_deg": 30.0},
+         ("table_vibration_once_per_rev",), "rotation_axis_offsets", rate=100.0),
 ]
 BY_NAME = {c.name: c for c in CASES}
 

@@ -2,8 +2,9 @@
 and the accelerometers' size effect at one rate are named with the `station design --from ...
 --separate` command, whose segments (a turn about a vertical axis, where no vibration is
 modelled) appended to the dry run's capture separate them; an offset per axis group and the
-vibration are said in words to be beyond any segment; a time offset is refused in one line with
-the reason (every segment a scheme describes turns at one steady rate)."""
+vibration are named with their command too (fifteenth session: tests/test_alias_offsets.py); a
+time offset is refused in one line with the reason (every segment a scheme describes turns at one
+steady rate)."""
 import json
 import shlex
 
@@ -56,10 +57,13 @@ def test_a_vibration_and_the_size_effect_at_one_rate_are_separated_by_an_appende
     said = suggest.separations("cap", [], "accel_lever_arm", s)
     assert said == ["station design --from cap --add accel_lever_arm --separate "
                     "accel_lever_arm,table_vibration_once_per_rev -o extension.yaml"], said
-    # an offset per axis group and the vibration: said why, no command (no segment separates them)
+    # an offset per axis group and the vibration: named with their command since the fifteenth
+    # session (turns about the capture's axes, table axis vertical: tests/test_alias_offsets.py)
     offsets = words.aliases(s, "rotation_axis_offsets")
-    assert [r for r, _ in offsets] == [None] and "no segments separate the two" in offsets[0][1]
-    assert suggest.separations("cap", [], "rotation_axis_offsets", s) == []
+    assert [r for r, _ in offsets] == ["table_vibration_once_per_rev"] and "vertical" in offsets[0][1]
+    assert suggest.separations("cap", [], "rotation_axis_offsets", s) == [
+        "station design --from cap --add rotation_axis_offsets --separate "
+        "rotation_axis_offsets,table_vibration_once_per_rev -o extension.yaml"]
     # the command as printed (small candidate set: one rate, one revolution, 10 s dwells)
     assert main([*shlex.split(said[0])[1:], "--json", "--rates", str(int(RATE)), "--revolutions", "1",
                  "--dwells", "10"]) == 0

@@ -96,7 +96,7 @@ def geometry_of(config) -> dict | None:
 
 
 def predict(scheme: Scheme, effects: list, noise: Noise, config=None, duration_s: float = math.nan,
-            plan=None, seeds=(0,)) -> Prediction:
+            plan=None, seeds=(0,), appended=()) -> Prediction:
     """The estimator's 1σ of every reported parameter (scale factors in ppm) for ``scheme``: its
     capture simulated without noise, summarised with the noise stated, fitted as ``station
     estimate`` fits (attitudes as the estimator chooses them, blind effect parameters held by
@@ -110,7 +110,9 @@ def predict(scheme: Scheme, effects: list, noise: Noise, config=None, duration_s
     estimator's covariance).  One geometry alone is one draw: a static's heading decides which
     horizontal direction of the gyro bias its Earth rate hides, and the gyro biases' and their
     temperature coefficients' bound moved by up to 40 % from draw to draw (docs/design.md,
-    thirteenth session)."""
+    thirteenth session).  ``appended``: segment names recorded later by ``run --append``
+    (station design --from's extension: its rotations axis groups of their own, as the estimator
+    reads the capture then)."""
     from station.estimate import lsq
 
     truth = quiet_truth(noise, config)
@@ -122,7 +124,7 @@ def predict(scheme: Scheme, effects: list, noise: Noise, config=None, duration_s
     covs, revealed = [], None
     for seed in seeds:
         model, _ = model_of(scheme, effects, noise, truth, None, seed=seed,
-                            chamber=config.chamber if config is not None else None)
+                            chamber=config.chamber if config is not None else None, appended=appended)
         result = lsq.fit(model.s, [copy.deepcopy(e) for e in effects])
         names, index, factors, units_ = lsq._reported_index(result, "m/s^2", "deg/s")
         factors, units_ = np.array(factors, float), list(units_)

@@ -136,16 +136,21 @@ def quiet_truth(noise: Noise, config=None):
 
 
 def model_of(scheme: Scheme, effects: list, noise: Noise, truth, geometry: dict | None = None,
-             attitudes: str = "unknown", seed: int = 0, chamber=None):
+             attitudes: str = "unknown", seed: int = 0, chamber=None, appended=()):
     """The least-squares model of the noiseless capture of ``scheme`` with the noise stated, as
     station.simulate.montecarlo.cramer_rao weights it: (model, capture).  ``seed``: the simulated
     bench's geometry (each static's heading, each rotation axis' heading and roll: drawn at
-    random by the simulator, as a real table's azimuths are unknown to the estimator)."""
+    random by the simulator, as a real table's azimuths are unknown to the estimator).
+    ``appended``: the names of segments recorded by a later ``run --append`` (``appended: 1`` in
+    the manifest: their rotations are axis groups of their own, as the estimator reads them)."""
     from station.estimate import lsq
     from station.estimate.summaries import summarise
     from station.simulate import dryrun
 
     capture = dryrun.simulate_capture(scheme, truth, seed, geometry, chamber=chamber)
+    for seg in capture.segments:
+        if seg.name in appended:
+            seg.extra["appended"] = 1
     capture.extra["noise_free"] = True          # (no data-fault scan: station/estimate/data_faults.py)
     s = summarise(capture, table_angle_arcsec=noise.table_angle_arcsec)
     fs = s.sample_rate_hz
@@ -255,6 +260,50 @@ def _group_offsets(model, owner: dict) -> dict:
     return out
 
 
+def _offset_lines(model) -> list:
+    """[(unit axis, table axis, its offset's three column names or None)] of the capture's own
+    chunk (the first, station design --from): each axis line the capture turned about and the
+    columns of its offset (rotation_axis_offsets), None for the first line, whose offset is the
+    common one (the model's mounting offset)."""
+    e = next((x for x in model.effects if x.id == "rotation_axis_offsets"), None)
+    if e is None:
+        return []
+    out, seen = [], set()
+    for r in model.s.rotations:
+        g = e.group_of.get(int(r.index))
+        if g is None or g in seen:
+            continue
+        seen.add(g)
+        a = np.asarray(r.axis_body, float)
+        cols = ([f"{e.id}:axis{g}_offset_{c}" for c in "xyz"] if g in e.groups else None)
+        out.append((a / np.linalg.norm(a), getattr(r, "table_axis", None), cols))
+    return out
+
+
+def _capture_lines(model, group_own: dict, lines: list) -> tuple:
+    """({column: the capture's column name}, [groups whose offset is the common one]) for the
+    candidates' groups about an axis line the capture turned about (the same body axis and table
+    axis): their offset is the capture's group's, as the estimator shares it with turns appended
+    later (station.model.axis_offsets.offset_groups; docs/design.md, fifteenth session), not a
+    nuisance of their own; about the capture's first line it is the common offset (none of its
+    own: the columns are fixed at zero)."""
+    rename, fixed = {}, []
+    for g, cols in group_own.items():
+        r = next((r for r in model.s.rotations if int(r.group) == g), None)
+        if r is None:
+            continue
+        a = np.asarray(r.axis_body, float)
+        a = a / np.linalg.norm(a)
+        k = getattr(r, "table_axis", None)
+        hit = next((names for b, kk, names in lines if kk == k and np.allclose(a, b, atol=1e-6)), False)
+        if hit is None:
+            fixed.append(g)
+        elif hit:
+            rename.update({int(c): n for c, n in zip(cols, hit)})
+            fixed.append(g)              # (no longer the group's own nuisance)
+    return rename, fixed
+
+
 def _embed(M: np.ndarray, idx: np.ndarray, G: int) -> np.ndarray:
     """A block over (a chunk's shared columns + its own nuisances) placed over (the union's shared
     columns + the same nuisances): the chunk's column j at idx[j]; a column the chunk has not (a
@@ -330,9 +379,12 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
     merged = None                    # the union's reported parameters
     placed: list = []                # (dict, key, the chunk's idx): the blocks to embed at the end
     # an offset per axis group (rotation_axis_offsets): a candidate's axis group has an offset of its
-    # own (an appended rotation is a group of its own: docs/capture.md), eliminated with the group's
-    # nuisances; the capture's own groups' offsets (station design --from) stay parameters
+    # own, eliminated with the group's nuisances -- except about an axis line the capture turned
+    # about (station design --from), where it is the capture's group's (_capture_lines: the
+    # estimator shares it with turns appended later, station.model.axis_offsets.offset_groups);
+    # the capture's own groups' offsets stay parameters
     offsets_of_groups = any(e.id == "rotation_axis_offsets" for e in effects)
+    lines = None                     # the capture's axis lines and their offsets (_offset_lines)
     for chunk in chunks:
         segments, owner = [], {}
         for key, spec in chunk:
@@ -346,14 +398,24 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
         model, _ = model_of(scheme, effects, noise, truth, geometry, attitudes)
         shared = _shared_columns(model)
         group_own = _group_offsets(model, owner)
+        rename: dict = {}
+        if offsets_of_groups and not group_own and lines is None:
+            lines = _offset_lines(model)            # the capture's own chunk (station design --from)
         if group_own:
             mine = set(c for cols in group_own.values() for c in cols.tolist())
+            rename, fixed = _capture_lines(model, group_own, lines or [])
             shared = np.array([c for c in shared if int(c) not in mine], dtype=int)
-        names_c = column_names(model, shared)
+            shared = np.concatenate([shared, np.array(sorted(rename), dtype=int)]).astype(int)
+            for g in fixed:
+                group_own.pop(g)
+        names_c = [rename.get(int(c), n) for c, n in zip(shared, column_names(model, shared))]
         for n in names_c:
             union.setdefault(n, len(union))
         idx = np.array([union[n] for n in names_c], dtype=int)
         p_c = parameters_of(model, shared)
+        for k, c in enumerate(p_c.columns):          # a candidate's offset that is the capture's
+            if int(shared[c]) in rename:
+                p_c.names[k] = rename[int(shared[c])].split(":", 1)[1]
         if merged is None:
             merged = Parameters(list(p_c.names), list(p_c.units), idx[p_c.columns], np.array(p_c.factors, float),
                                 np.array(p_c.typical, float), list(p_c.effects))

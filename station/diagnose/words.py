@@ -392,15 +392,15 @@ def aliases(summaries, effect_id: str) -> list[tuple]:
                     "mean is also what a table vibrating once per revolution leaves (its part across the axis); "
                     "turn about a vertical axis (no vibration is modelled there) or at a second rate to tell "
                     "them apart"))
-    if effect_id == "rotation_axis_offsets" and len(rates) == 1:
-        # (no command: measured on the simulated bench, the best 12 segments station design --from
-        # finds leave the vibration's part across the axis at 3.6 x its target: docs/design.md)
-        out.append((None, f"every rotation is at one rate ({rates[0]:g} °/s): an offset of the rotations' "
-                    "accelerometer mean is also what a table vibrating once per revolution leaves (its part "
-                    "across the axis); no segments separate the two: every added turn about a new axis brings "
-                    "an offset of its own and every new rate a vibration of its own, so the capture's offsets "
-                    "and its rate's vibration stay traded against each other; record the rotations again at "
-                    "a second rate about the same axes, without remounting, in one run"))
+    if effect_id == "rotation_axis_offsets" and len(rates) == 1 and not _vertical_on_own_axes(summaries):
+        # (a command: turns appended about the capture's own axes share its offsets, and about a
+        # vertical axis no vibration is modelled, so they measure the offsets alone -- station
+        # design --from ... --separate proposes them: docs/design.md, fifteenth session)
+        out.append(("table_vibration_once_per_rev",
+                    f"every rotation is at one rate ({rates[0]:g} °/s): an offset of the rotations' accelerometer "
+                    "mean is also what a table vibrating once per revolution leaves (its part across the axis); "
+                    "turns about the same body axes with the table axis vertical (no vibration is modelled "
+                    "there; the IMU still mounted, they share these offsets) tell them apart"))
     if effect_id == "table_vibration_once_per_rev" and len(rates) == 1 and not vertical:
         out.append(("accel_lever_arm", f"every rotation is at one rate ({rates[0]:g} °/s): the part of a "
                     "vibration across the axis is a constant in the rotations' accelerometer mean, as the "
@@ -412,6 +412,19 @@ def aliases(summaries, effect_id: str) -> list[tuple]:
     # faces, turns about six axes at one rate: correlation 0.10-0.15, both revealed (docs/design.md,
     # fourteenth session); where the data cannot tell them, suggest.alike_candidates names them)
     return out
+
+
+def _vertical_on_own_axes(summaries) -> bool:
+    """Whether a steady rotation about a vertical axis (no vibration modelled: _vertical_turns)
+    turns about a body axis that a turn about a level axis also has: with the offsets per axis
+    line shared (station.model.axis_offsets.offset_groups) it measures that offset alone, which
+    tells the offsets from a vibration once per revolution."""
+    from station.model import table_revolution as rev
+
+    steady = [r for r in summaries.rotations if r.steady and r.accel_cos is not None]
+    framed = rev.frames(summaries)
+    unit = [(np.asarray(r.axis_body, float) / np.linalg.norm(r.axis_body), int(r.index) in framed) for r in steady]
+    return any(not lev and any(other and np.allclose(a, b, atol=1e-6) for b, other in unit) for a, lev in unit)
 
 
 def _vertical_turns(summaries) -> bool:

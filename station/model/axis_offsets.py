@@ -38,10 +38,11 @@ class RotationAxisOffsets(Effect):
 
     def setup(self, summaries) -> None:
         steady = [r for r in summaries.rotations if r.steady]
-        self.group_of = {int(r.index): int(r.group) for r in steady}
-        order = sorted({r.group for r in steady})
+        line = offset_groups(steady)
+        self.group_of = {int(r.index): line[int(r.group)] for r in steady}
+        order = sorted(set(self.group_of.values()))
         self.groups = [int(g) for g in order[1:]]
-        self.group_names = {int(g): [r.name for r in steady if r.group == g] for g in order}
+        self.group_names = {int(g): [r.name for r in steady if line[int(r.group)] == g] for g in order}
 
     def words(self, x, sigma) -> list[str]:
         """Each axis' offset that differs from the first's by more than 3 sigma, in words (mm)."""
@@ -70,3 +71,35 @@ class RotationAxisOffsets(Effect):
             d = d + (group == g).astype(float)[:, None] * x[3 * n:3 * n + 3][None, :]
         w, wdot = ctx.w_table, ctx.wdot_table
         return (cross(w, cross(w, d)) + cross(wdot, d)) @ ctx.accel_matrix.T
+
+
+def offset_groups(rotations) -> dict:
+    """{axis group: the axis group whose offset it has}: the first group (the lowest number) about
+    the same body axis turned by the same table axis (``table_axis``, None where the bench does not
+    say).  Within one run that is the group itself (summaries give one group per body axis); a
+    rotation of an extension recorded later (``appended: N``, run --append) is a group of its own
+    for its direction on the table (the table may start that axis at another angle: its gravity
+    angle and heading are the group's), but its offset is the capture's group's about the same
+    axis.  The offset d_k is the IMU's distance from the line the table axis turns it about, fixed
+    in the IMU's case axes while the table turns (the line is the rotation's axis, the IMU rides
+    on it): a property of the table's axis and of the IMU's mounting on it, not of a run or of the
+    table's angle when the run starts -- and --append continues the run with the same IMU, still
+    mounted (the model shares the mounting offset and the mounting rotation across the two
+    sessions for the same reason).  The simulator's table is built so (sim_devices/truth.py,
+    ``axis_offsets_m``: one line per case axis, for every rotation about it).  Sharing it is what
+    lets turns appended at a second rate tell the offsets (w^2 d) from a vibration once per
+    revolution (one per rate): docs/design.md, fifteenth session."""
+    first: list = []                    # (axis, table axis, its group)
+    out: dict = {}
+    for r in sorted(rotations, key=lambda r: (int(r.group), int(r.index))):
+        g = int(r.group)
+        if g in out:
+            continue
+        a = np.asarray(r.axis_body, float)
+        a = a / np.linalg.norm(a)
+        k = getattr(r, "table_axis", None)
+        out[g] = next((h for b, kk, h in first if kk == k and np.allclose(a, b, atol=1e-6)), g)
+        if out[g] == g:
+            first.append((a, k, g))
+    return out
+
