@@ -259,16 +259,38 @@ def _segments_of(chosen, cands, masks=None, chamber=None) -> list:
     return entries, specs
 
 
-def chamber_levels(config) -> tuple:
+def chamber_levels(config, effects=(), setpoints=None) -> tuple:
     """The chamber levels a design's candidates are offered at: the room's (None) and the end of
     the configured chamber's range farther from the room (the widest temperature span for one
     ramp; both ends tripled the candidates and the search's CPU: docs/design.md, fourteenth
-    session); (None,) without a chamber."""
+    session); (None,) without a chamber.  A model with a term in the temperature's square
+    (information.squared_in_temperature: temperature_bias_quadratic, the unlisted scale factors
+    in T^2) is offered the setpoint half way between the room and that end as well: a parabola
+    needs three temperatures, and the ends and the middle of the span are where its coefficient
+    is best determined (the D-optimal design of a quadratic on an interval); the warm-up's 2 degC
+    at the room are one of them, not two.  The search chooses which levels the design uses, each
+    paid for by its chamber step (chamber_cost).  ``setpoints``: the user's (`station design
+    --setpoints`), each within the chamber's range (UserError naming the one that is not)."""
+    from station.design.information import squared_in_temperature
+
     c = config.chamber
+    if setpoints is not None:
+        if c is None:
+            raise UserError("--setpoints: no temperature chamber is configured (station.yaml chamber:)")
+        for x in setpoints:
+            if not c.in_range(x):
+                raise UserError(f"--setpoints: {x:g} °C is outside the chamber's range "
+                                f"{c.range_c[0]:g}..{c.range_c[1]:g} °C")
+        return (None,) + tuple(sorted({float(x) for x in setpoints if abs(float(x) - c.ambient_c) >= 1e-9}))
     if c is None:
         return (None,)
     far = max(c.range_c, key=lambda x: abs(x - c.ambient_c))
-    return (None,) if abs(far - c.ambient_c) < 1e-9 else (None, float(far))
+    if abs(far - c.ambient_c) < 1e-9:
+        return (None,)
+    if squared_in_temperature(effects):
+        middle = round(0.5 * (c.ambient_c + far), 1)
+        return (None, float(middle), float(far))
+    return (None, float(far))
 
 
 def chamber_cost(config):
@@ -351,14 +373,15 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
            rates_dps=cand_mod.DEFAULT_RATES_DPS, revolutions=cand_mod.DEFAULT_REVOLUTIONS,
            dwells_s=cand_mod.DEFAULT_DWELLS_S, max_passes: int = 20, name: str = "designed",
            compare=BUILTIN_TABLE_SCHEMES, progress=None, centred: bool = False,
-           verify_runs: int = VERIFY_RUNS, executor=None, statics: str = "any") -> Design:
+           verify_runs: int = VERIFY_RUNS, executor=None, statics: str = "any", setpoints=None) -> Design:
     """The design (module doc).  ``progress(text)``: told what is being done.  ``centred``: the
     IMU is to be mounted with its reference point on the table's axes (the scheme says
     ``centred: true``; the mounting offset is then known, as in the sizeeffect scheme).
     ``executor``: a Dask client's executor (`station design --scheduler`): the predictions of the
     design and of the built-in schemes, and the verification's dry runs, run on its workers.
     ``statics``: the kinds of design searched ("unknown": nine or more statics of unknown attitude;
-    "table": six to eight of the table's attitude; "any": both, the better kept)."""
+    "table": six to eight of the table's attitude; "any": both, the better kept).  ``setpoints``:
+    the chamber setpoints the candidates are offered at (degC; None: chamber_levels' choice)."""
     say = progress or (lambda text: None)
     seconds = {}
     t0 = time.perf_counter()
@@ -366,6 +389,7 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
     w = config.warmup
     fixed += max(w.duration_s, w.max_s or 0.0) if w.temp_slope_c_per_h is not None else w.duration_s
     parse_criterion(criterion, reported_names(effects))          # bad input before the work
+    levels = chamber_levels(config, effects, setpoints)
     table = cand_mod.Table(config)
     least = fixed + MIN_STATICS_TABLE * table.static_s(min(dwells_s))
     if least > budget_s:
@@ -373,7 +397,7 @@ def design(config, effects: list, noise: Noise, budget_s: float, criterion: str 
                         f"this table (the least: {least:.0f} s with the shortest dwell, {min(dwells_s):g} s)")
     say("candidates on the table (gimbal kinematics)")
     cands, chunks, notes, masks = cand_mod.candidate_set(table, rates_dps, revolutions, dwells_s,
-                                                         levels=chamber_levels(config))
+                                                         levels=levels)
     if not any(c.kind == "rotation" for c in cands):
         raise UserError("the table can turn about none of the candidate axes (a continuous axis is needed)")
     remount_s = config.run.operator_s if config.run.operator else 0.0
