@@ -218,14 +218,15 @@ def verify(scheme: Scheme, effects: list, noise: Noise, prediction: Prediction, 
     return Verification(runs, worst_z, worst, problems)
 
 
-def _segments_of(chosen, cands, masks=None, chamber=None) -> list:
+def _segments_of(chosen, cands, masks=None, chamber=None, order=None) -> list:
     """The scheme's segment entries (YAML) and specs, level by level of a chamber (the first
     segment of each setpoint says ``chamber_c``), mounting by mounting as the time model covers
     them (timeline.cover: the compiler then remounts as often as the model counts), within a
-    mounting the statics first, then the rotations."""
+    mounting the statics first, then the rotations -- or in the search's ``order``
+    (search.order_search: the sequence on the timeline a temperature design chose)."""
     from station.design.timeline import written_order
 
-    sequence = [cands[i] for i in written_order(chosen, cands, masks, chamber)]
+    sequence = [cands[i] for i in written_order(chosen, cands, masks, chamber, order)]
     entries, specs = [], []
     setpoint = None
     for c in sequence:
@@ -585,7 +586,7 @@ def _search(scorer, cands, masks, budget_s, fixed, max_passes, remount_s, min_st
             return None
         evaluations += result.evaluations
         passes += result.passes
-        entries, specs = _segments_of(result.chosen, cands, masks, config.chamber)
+        entries, specs = _segments_of(result.chosen, cands, masks, config.chamber, result.order)
         scheme = Scheme(name, "designed by station design", "docs/design.md", {}, tuple(specs), centred=centred)
         plan = compile_scheme(scheme, config)
         if plan.duration_s <= budget_s * 1.0005:
