@@ -148,3 +148,47 @@ def test_a_scale_in_the_temperatures_square_is_placed_on_the_timeline_as_a_squar
     linear = scorer.sigma(chosen)
     assert np.all(np.abs(linear[squared] / estimator.sigma[squared] - 1.0) > 0.5)
     assert info_mod.temperature_power(effects[1]) == 2
+
+
+def test_a_refused_design_of_two_setpoints_gives_way_to_the_far_end_alone(tmp_path, monkeypatch):
+    """designer.design: a design using both the middle and the far setpoint (offered by
+    chamber_levels' own choice) that its noisy dry runs refuse is searched again with the far end
+    alone, and that design is returned with a note naming the refusal; setpoints the user named,
+    a delivered design, or a design of one setpoint are returned as they are.  (The search itself
+    is replaced by one that says which setpoints it was given: the fallback's logic, not a
+    design's minute of CPU, is what is tested here; docs/design.md has the real run.)"""
+    from dataclasses import replace
+
+    from station.design import designer
+    from station.design.candidates import static_spec
+    from station.io.scheme import Scheme
+    from station.model import LIBRARY
+
+    config = _config(tmp_path)
+    effects = [LIBRARY["temperature_bias"](), LIBRARY["temperature_bias_quadratic"]()]
+    calls = []
+
+    def searched(config, effects, noise, budget_s, criterion, *, setpoints=None, progress=None, **kw):
+        calls.append(setpoints)
+        levels = (42.5, 60.0) if setpoints is None else tuple(setpoints)
+        specs = tuple(replace(static_spec((0.0, 0.0, 1.0), 10.0, f"s{k}"), chamber_c=x) for k, x in enumerate(levels))
+        refused = len(levels) > 1 and not kw.get("deliver")
+        problems = ["gyro_bias_tempco2_x: error 0.00378 in the noisy run of seed 1001, 534 x the predicted 1σ"] if refused else []
+        return designer.Design(Scheme("d", "", "", {}, specs), "", criterion, 0.024 if len(levels) > 1 else 0.035,
+                               3432.0, budget_s, None, [], np.zeros(0), 0, 0, 0, {"search": 1.0}, [],
+                               designer.Verification(4, 534.0 if refused else 2.5, "x", problems), "unknown")
+
+    monkeypatch.setattr(designer, "_design", searched)
+    said = []
+    d = designer.design(config, effects, None, 3715.0, "worst:*_tempco2_*", progress=said.append)
+    assert calls == [None, (60.0,)] and d.value == 0.035 and d.verification.ok
+    assert "setting the chamber to 42.5 C, 60 C (criterion 0.024) was not delivered" in d.notes[0]
+    assert "seed 1001" in d.notes[0] and "60 C alone" in d.notes[0] and any("refused" in x for x in said)
+    assert d.seconds["search"] == 2.0                              # both searches' time counted
+    for kw in ({"setpoints": (42.5, 60.0)}, {"deliver": True}):
+        calls.clear()
+        d = designer.design(config, effects, None, 3715.0, "worst:*_tempco2_*", **kw)
+        assert calls == [kw.get("setpoints")] and d.value == 0.024
+    calls.clear()                 # a linear model: one setpoint offered, nothing to fall back to
+    designer.design(config, effects[:1], None, 3715.0, "worst:*_tempco_*")
+    assert calls == [None]
