@@ -11,6 +11,10 @@ kind manual, range_c [20, 60], ramp_c_per_min 3, soak_s 300): the design places 
 chamber's setpoint, the built-ins run at the room's temperature and its warm-up, and the Monte
 Carlo runs the chamber (``station montecarlo --config``).
 
+With ``--quadratic`` (fifteenth session: several setpoints) the model is temperature_bias and
+temperature_bias_quadratic and the criterion the worst 1σ of the T² coefficients
+(``worst:*_tempco2_*``): with a chamber the design is offered the middle of its span as well.
+
 Heavy (a design and N dry runs: ~2 minutes of CPU); not a test."""
 from __future__ import annotations
 
@@ -47,13 +51,17 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=24)
     ap.add_argument("--out", default=None)
     ap.add_argument("--config", default=None, help="station.yaml (a chamber: the fourteenth session's goal)")
+    ap.add_argument("--quadratic", action="store_true",
+                    help="add temperature_bias_quadratic, criterion worst:*_tempco2_* (fifteenth session)")
     a = ap.parse_args()
     config = ("--config", a.config) if a.config else ()
+    effects = ("--add", "temperature_bias") + (("--add", "temperature_bias_quadratic") if a.quadratic else ())
+    pattern = "_tempco2_" if a.quadratic else "_tempco_"
     out = Path(a.out or tempfile.mkdtemp(prefix="design-temperature-"))
     out.mkdir(parents=True, exist_ok=True)
     scheme = out / "temp.yaml"
-    done, cpu, wall = run("design", "--duration", 3715, "--add", "temperature_bias", "--criterion",
-                          "worst:*_tempco_*", "--centred", "--verify-runs", 0, "-o", scheme, "--json", *config)
+    done, cpu, wall = run("design", "--duration", 3715, *effects, "--criterion",
+                          f"worst:*{pattern}*", "--centred", "--verify-runs", 0, "-o", scheme, "--json", *config)
     if done.returncode != 0:
         sys.exit(done.stderr[-3000:])
     report = json.loads(done.stdout)
@@ -63,14 +71,13 @@ def main() -> None:
             print("  " + line)
     value = report["designed"]["criterion"]
     best = min((b for b in report["builtins"] if b.get("criterion") is not None), key=lambda b: b["criterion"])
-    print(f"worst 1σ {value:.4g} µg/°C ({report['duration_s']:.0f} s, statics of {report['static_attitudes']} "
+    print(f"worst 1σ {value:.4g} µg/°C{'²' if a.quadratic else ''} ({report['duration_s']:.0f} s, statics of {report['static_attitudes']} "
           f"attitude); best built-in {best['scheme']} {best['criterion']:.4g}: {100 * (1 - value / best['criterion']):.1f} % lower")
-    done, cpu, wall = run("montecarlo", "--scheme", scheme, "--runs", a.runs, "--add", "temperature_bias", "--json",
-                          *config)
+    done, cpu, wall = run("montecarlo", "--scheme", scheme, "--runs", a.runs, *effects, "--json", *config)
     if done.returncode != 0:
         sys.exit(done.stderr[-3000:])
     pred = {p["name"]: p["sigma"] for p in report["designed"]["parameters"]}
-    rows = [r for r in json.loads(done.stdout)["parameters"] if "_tempco_" in r["name"]]
+    rows = [r for r in json.loads(done.stdout)["parameters"] if pattern in r["name"]]
     ratios = np.array([r["std"] / pred[r["name"]] for r in rows])
     for r, q in zip(rows, ratios):
         print(f"  {r['name']:22s} spread {r['std']:.4g}  predicted {pred[r['name']]:.4g}  ratio {q:.3f}  "

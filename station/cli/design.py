@@ -22,6 +22,20 @@ def _numbers(text: str) -> tuple:
     return values
 
 
+def _temperatures(text: str) -> tuple:
+    """A comma-separated list of temperatures, °C (finite; -273.15 °C or above)."""
+    import argparse
+    import math
+
+    try:
+        values = tuple(float(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a comma-separated list of temperatures: {text!r}") from None
+    if not values or any(not math.isfinite(v) or v < -273.15 for v in values):
+        raise argparse.ArgumentTypeError(f"not temperatures in °C: {text!r}")
+    return values
+
+
 def add_parsers(sub) -> None:
     d = sub.add_parser("design", help="design the scheme that calibrates your model best on your table "
                                       "within a time budget (docs/design.md)")
@@ -69,6 +83,11 @@ def add_parsers(sub) -> None:
                    help="candidate whole revolutions per rotation direction (default 1,2,5)")
     d.add_argument("--dwells", type=_numbers, default=None, metavar="S,S,...",
                    help="candidate static dwells, s (default 10,20,50,100,200,500,1000)")
+    d.add_argument("--setpoints", type=_temperatures, default=None, metavar="C,C,...",
+                   help="with a temperature chamber (station.yaml chamber:): the setpoints the candidates are "
+                        "offered at, °C, besides the room (default the end of the chamber's range farther from "
+                        "the room, and with a term in the temperature's square the middle of that span too); "
+                        "the search chooses which it uses, each paid for by its ramp and soak")
     d.add_argument("--passes", type=argtypes.whole(0), default=20,
                    help="at most this many exchange passes (default 20)")
     d.add_argument("--compare", default=",".join(("optimal9", "chatfield18", "traditional24", "sizeeffect")),
@@ -263,7 +282,7 @@ def _cmd_design(args) -> int:
                    rates_dps=args.rates or cand_mod.DEFAULT_RATES_DPS, revolutions=revolutions,
                    dwells_s=args.dwells or cand_mod.DEFAULT_DWELLS_S, max_passes=args.passes, name=args.name,
                    compare=compare, centred=args.centred, verify_runs=args.verify_runs, executor=executor,
-                   statics=args.statics,
+                   statics=args.statics, setpoints=args.setpoints,
                    progress=lambda text: err.print(f"design: {text}", markup=False, soft_wrap=True))
     v = d.verification
     if v is not None and not v.ok:

@@ -107,8 +107,31 @@ def temperature_powers(effects: list, parameters: "Parameters", shared: int) -> 
     for e in effects:
         if isinstance(e, TemperatureReferenced):
             for p in e.params:
-                power[at[p.name]] = 2 if e.id == "temperature_bias_quadratic" else 1
+                power[at[p.name]] = temperature_power(e)
     return power
+
+
+# the effects in the temperature's difference from a reference whose terms carry its square: the
+# library's bias curve and the scale factors' second order (station/model/unlisted.py).  The
+# others (temperature_bias, scale_temperature, the unlisted axis tilt) are linear in it.
+SQUARED_IN_TEMPERATURE = ("temperature_bias_quadratic", "accel_scale_temperature_squared",
+                          "gyro_scale_temperature_squared")
+
+
+def temperature_power(effect) -> int:
+    """The power of (T - T_ref) in a TemperatureReferenced effect's terms (1 or 2).  Before the
+    fifteenth session every effect but temperature_bias_quadratic counted as linear, so the
+    unlisted scale-in-T^2 effects were placed on the timeline as if linear (their information at
+    dT scaled by dT, not dT^2)."""
+    return 2 if getattr(effect, "id", "") in SQUARED_IN_TEMPERATURE else 1
+
+
+def squared_in_temperature(effects) -> bool:
+    """A model with a term in the square of the temperature difference (a chamber design then
+    offers a middle setpoint too: designer.chamber_levels)."""
+    from station.model.temperature import TemperatureReferenced
+
+    return any(isinstance(e, TemperatureReferenced) and temperature_power(e) == 2 for e in effects)
 
 
 def at_temperature(M: np.ndarray, power: np.ndarray, dt_c: float) -> np.ndarray:

@@ -50,6 +50,14 @@ MIN_LEVEL_AXES = 2
 # exchange passes of the second, timed stage (timed_exchange): each pass re-places every candidate
 # on the design's timeline (the first, untimed stage has brought the design near; docs/design.md)
 TIMED_PASSES = 3
+# the order of the segments on the timeline (order_search; fifteenth session): after the timed
+# stage ORDER_ROUNDS rounds of (order search, TIMED_PASSES timed exchange passes on that order),
+# then the order once more; each order search at most ORDER_PASSES passes of pairwise exchanges
+# within a mounting and chamber level (0: no order search).  Measured on the temperature design
+# (3715 s, docs/design.md): no round 3.687 µg/°C in 46 s of CPU, one round 3.618 in 66 s -- over
+# the minute; so none
+ORDER_ROUNDS = 0
+ORDER_PASSES = 3
 WORST_POWER = 20          # the worst criterion searched as this power mean of the 1σ (Scorer.value_of)
 
 
@@ -115,6 +123,9 @@ class Scorer:
         self.M1 = list(self.M)
         self.dt_c: dict = {}
         self.chamber = None       # station.core.chamber.ChamberConfig when candidates have levels
+        # the sequence the chosen candidates are written in within each mounting (order_search;
+        # None: the writer's rule, statics first): candidate indices, timeline.written_order's
+        self.order: list | None = None
 
     @property
     def timed(self) -> bool:
@@ -164,7 +175,7 @@ class Scorer:
             self.set_temperatures({i: d + shift(self.cands[i]) for i, d in notional.items()})
             return True
         placed, reference = timeline.differences(chosen, self.cands, info.temperature, info.clock, masks,
-                                                 self.chamber, with_reference=True)
+                                                 self.chamber, with_reference=True, order=self.order)
         by_slot, by_axis, statics, rotations = {}, {}, {}, {}
         for i, d in placed.items():
             c = self.cands[i]
@@ -196,6 +207,30 @@ class Scorer:
                 dt[i] = float(np.mean(by_axis[key])) if key in by_axis else at_level(c.level, rotations, statics)
         self.set_temperatures(dt)
         return True
+
+    def value_in_sequence(self, chosen, sequence) -> float:
+        """The criterion of the design ``chosen`` written in ``sequence`` (its candidates in the
+        order of the scheme file): each placed at its temperature on that timeline (as retime,
+        for the chosen candidates only: what the order search needs, ~1 ms for 30 candidates)."""
+        from station.design import timeline
+        from station.design.information import at_temperature
+
+        info = self.info
+        dt = timeline.differences(chosen, self.cands, info.temperature, info.clock, chamber=self.chamber,
+                                  sequence=sequence)
+        G = self.G
+        F = np.zeros((G, G))
+        groups: dict = {}
+        for i in chosen:
+            c = self.cands[i]
+            M = at_temperature(self.M1[i], info.temp_power, dt[i])
+            if c.kind == "static":
+                F += M
+            else:
+                groups[c.axis] = groups.get(c.axis, info.group_prior[c.axis]) + M
+        for S in groups.values():
+            F += _schur(S, G)
+        return self.value_of(F)
 
     # ---------------------------------------------------------------- information
     def information(self, chosen) -> np.ndarray:
@@ -329,6 +364,7 @@ class Result:
     passes: int
     evaluations: int
     history: list = field(default_factory=list)
+    order: list | None = None     # the written sequence within each mounting (order_search), None: the rule
 
 
 def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: int = 20,
@@ -509,6 +545,7 @@ def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: 
             if best_j is not None:
                 state.remove(i)
                 state.add(best_j)
+                _take_place(scorer, i, best_j)
                 current = best_v
                 history.append(current)
                 changed = True
@@ -538,6 +575,7 @@ def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: 
                 state.remove(i)
                 state.remove(k)
                 state.add(j)
+                _take_place(scorer, i, j)
                 current = best_v
                 history.append(current)
                 changed = True
@@ -556,7 +594,59 @@ def exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: 
         scorer.retime(chosen, masks, budget_s)
         state = State(scorer, chosen)
         current = score()
-    return Result(sorted(chosen), current, time_of(chosen), passes, evaluations, history)
+    return Result(sorted(chosen), current, time_of(chosen), passes, evaluations, history, order=scorer.order)
+
+
+def _take_place(scorer: Scorer, old: int, new: int) -> None:
+    """In the search's written sequence (Scorer.order), candidate ``new`` takes ``old``'s place
+    (an exchange keeps the timeline of the rest)."""
+    if scorer.order is not None:
+        scorer.order = [new if i == old else i for i in scorer.order if i != new]
+
+
+def order_search(scorer: Scorer, chosen, masks=None, max_passes: int = 3) -> tuple[list, float, int]:
+    """The sequence of a design's candidates on its timeline that minimises the criterion: from
+    the written order (Scorer.order, else the writer's rule), every two candidates of one chamber
+    level and one mounting exchanged in place (a remount or a chamber step is never added), the
+    best exchange of each candidate applied at once, passes until one changes nothing (or
+    ``max_passes``).  Only the temperatures move: a temperature coefficient is told from the
+    biases by the data whose bias is seen alone (turns about a vertical axis, statics with the
+    axis level) at the coldest and the warmest times, the attitudes that fix the scale factors
+    and misalignments best near the mean temperature, where the coefficient does not couple to
+    them (docs/design.md, fifteenth session).  Sets Scorer.order; (sequence, value, evaluations)."""
+    from station.design import timeline
+
+    groups = timeline.written_groups(chosen, scorer.cands, masks, scorer.chamber, scorer.order)
+    sequence = [i for g in groups for i in g]
+    span = []                   # per position, the (first, end) positions of its group
+    k = 0
+    for g in groups:
+        span += [(k, k + len(g))] * len(g)
+        k += len(g)
+    best = scorer.value_in_sequence(chosen, sequence)
+    evaluations = 1
+    for _ in range(max_passes):
+        changed = False
+        for a in range(len(sequence)):
+            first, end = span[a]
+            best_b, best_v = None, best
+            for b in range(first, end):
+                if b == a:
+                    continue
+                trial = list(sequence)
+                trial[a], trial[b] = trial[b], trial[a]
+                v = scorer.value_in_sequence(chosen, trial)
+                evaluations += 1
+                if v < best_v - 1e-9 * max(1.0, abs(best_v)):
+                    best_b, best_v = b, v
+            if best_b is not None:
+                sequence[a], sequence[best_b] = sequence[best_b], sequence[a]
+                best = best_v
+                changed = True
+        if not changed:
+            break
+    scorer.order = list(sequence)
+    return sequence, best, evaluations
 
 
 def timed_exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_passes: int = 20, *,
@@ -570,12 +660,31 @@ def timed_exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_pa
     stages (docs/design.md, thirteenth session).  Without temperature effects: exchange()."""
     if not scorer.timed:
         return exchange(scorer, budget_s, fixed_s, max_passes, start=start, **kw)
+    if start is None:
+        scorer.order = None
     scorer.natural()
     first = exchange(scorer, budget_s, fixed_s, max_passes, start=start, retime=False, **kw)
     second = exchange(scorer, budget_s, fixed_s, min(max_passes, TIMED_PASSES), start=first.chosen,
                       retime=True, **kw)
     second.evaluations += first.evaluations
     second.passes += first.passes
+    if ORDER_PASSES:
+        # the order of the segments on the timeline, then the exchanges again on it (each
+        # exchange's newcomer in its predecessor's place), then the order again
+        masks = kw.get("masks")
+        for _ in range(ORDER_ROUNDS):
+            _, _, n = order_search(scorer, second.chosen, masks, ORDER_PASSES)
+            second.evaluations += n
+            third = exchange(scorer, budget_s, fixed_s, min(max_passes, TIMED_PASSES), start=second.chosen,
+                             retime=True, **kw)
+            third.evaluations += second.evaluations
+            third.passes += second.passes
+            second = third
+        _, value, n = order_search(scorer, second.chosen, masks, ORDER_PASSES)
+        second.evaluations += n
+        second.order = scorer.order
+        scorer.retime(second.chosen, kw.get("masks"), budget_s)
+        second.value = value
     return second
 
 

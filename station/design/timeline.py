@@ -42,33 +42,55 @@ def level_rank(levels, chamber) -> dict:
     return rank
 
 
-def written_order(chosen, cands, masks=None, chamber=None) -> list:
+def written_order(chosen, cands, masks=None, chamber=None, order=None) -> list:
     """The chosen candidates' indices in the order the scheme file lists them: level by level
-    (a chamber's), within a level mounting by mounting, within a mounting the statics first."""
+    (a chamber's), within a level mounting by mounting, within a mounting the statics first --
+    or, given ``order`` (candidate indices: the sequence the search chose, search.order_search),
+    within a mounting in that order (the chosen ones it does not list after those it does, as
+    above).  The levels and the mountings stay in the same order either way: an order never
+    costs a chamber step or a remount more."""
+    return [i for group in written_groups(chosen, cands, masks, chamber, order) for i in group]
+
+
+def written_groups(chosen, cands, masks=None, chamber=None, order=None) -> list:
+    """written_order in its groups: one list of candidate indices per (chamber level, mounting),
+    in the written order; the search may permute a group's members (search.order_search), never
+    move one across groups."""
     chosen = list(chosen)
     levels = {level_of(cands[i]) for i in chosen}
     if len(levels) > 1 or levels - {None}:
         rank = level_rank(levels, chamber)
         out = []
         for level in sorted(levels, key=lambda x: rank[x]):
-            out += _mounting_order([i for i in chosen if level_of(cands[i]) == level], cands, masks)
+            out += _mounting_groups([i for i in chosen if level_of(cands[i]) == level], cands, masks, order)
         return out
-    return _mounting_order(chosen, cands, masks)
+    return _mounting_groups(chosen, cands, masks, order)
 
 
-def _mounting_order(chosen, cands, masks=None) -> list:
-    """Mounting by mounting, within a mounting the statics first, then the rotation pairs."""
+def _mounting_groups(chosen, cands, masks=None, order=None) -> list:
+    """Mounting by mounting, within a mounting the statics first, then the rotation pairs (or in
+    ``order``'s sequence)."""
     group = cover([masks[i] for i in chosen]) if masks is not None else [0] * len(chosen)
-    order: dict = {}
+    rank: dict = {}
     for g in group:
-        order.setdefault(g, len(order))
+        rank.setdefault(g, len(rank))
     of = dict(zip(chosen, group))
     statics = [i for i in chosen if cands[i].kind == "static"]
     rotations = [i for i in chosen if cands[i].kind == "rotation"]
-    statics.sort(key=lambda i: (order[of[i]], tuple(-x for x in cands[i].key[1])))
-    rotations.sort(key=lambda i: (order[of[i]], -cands[i].key[1], tuple(-x for x in cands[i].key[0]),
+    statics.sort(key=lambda i: (rank[of[i]], tuple(-x for x in cands[i].key[1])))
+    rotations.sort(key=lambda i: (rank[of[i]], -cands[i].key[1], tuple(-x for x in cands[i].key[0]),
                                   -cands[i].key[2], -cands[i].key[3]))
-    return sorted(statics + rotations, key=lambda i: order[of[i]])       # (a stable sort)
+    out = sorted(statics + rotations, key=lambda i: rank[of[i]])       # (a stable sort)
+    if order is not None:
+        at = {i: k for k, i in enumerate(order)}
+        first = {i: k for k, i in enumerate(out)}
+        out.sort(key=lambda i: (rank[of[i]], at.get(i, len(at)), first[i]))
+    groups: list = []
+    for i in out:
+        if not groups or of[groups[-1][0]] != of[i]:
+            groups.append([])
+        groups[-1].append(i)
+    return groups
 
 
 def segment_seconds(c) -> list:
@@ -122,11 +144,14 @@ def seconds_temperatures(items, temperature, clock, levels=None, chamber=None) -
     return out
 
 
-def differences(chosen, cands, temperature, clock, masks=None, chamber=None, with_reference: bool = False):
+def differences(chosen, cands, temperature, clock, masks=None, chamber=None, with_reference: bool = False,
+                order=None, sequence=None):
     """Per chosen candidate its temperature less the effects' reference (the mean over the chosen
-    statics), in the written order's timeline: {index: dT, degC} (``with_reference``: and the
-    reference, degC)."""
-    sequence = written_order(chosen, cands, masks, chamber)
+    statics), in the written order's timeline (``order``: written_order's; ``sequence``: the
+    chosen candidates' sequence itself, as written_order gives it): {index: dT, degC}
+    (``with_reference``: and the reference, degC)."""
+    if sequence is None:
+        sequence = written_order(chosen, cands, masks, chamber, order)
     temps = mean_temperatures(sequence, cands, temperature, clock, chamber)
     statics = [t for i, t in zip(sequence, temps) if cands[i].kind == "static"]
     reference = float(np.mean(statics)) if statics else float(np.mean(temps)) if len(temps) else 0.0
