@@ -82,3 +82,25 @@ def test_a_worker_without_the_nannys_variables_runs_one_blas_thread(capture, tmp
     status, libraries = json.loads(done.stdout.strip().splitlines()[-1])
     assert status in ("done", "poor fit") and libraries
     assert all(threads == 1 for _, threads in libraries), libraries
+
+
+def test_the_filer_files_by_the_serial_the_worker_reports_as_by_the_file(capture, tmp_path, monkeypatch):
+    """The command files each calibration by the serial its task reports (Outcome.imu_serial),
+    without reading the file a second time: the same store, rows and files as reading it."""
+    from station.batch.filing import Filer
+    from station.io.history import Store, simulation_store
+
+    monkeypatch.setenv("STATION_READ_IN_PROCESS", "1")
+    out = tasks.run(tasks.Job("estimate", str(capture), str(tmp_path / "cal.yaml"), {}))
+    assert out.imu_serial and out.imu_serial == read_calfile(tmp_path / "cal.yaml")["provenance"]["imu_serial"]
+    listings = []
+    for name, serial in (("read", None), ("given", out.imu_serial)):
+        filer = Filer(str(tmp_path / name))
+        assert filer.file(tmp_path / "cal.yaml", serial).startswith("filed as #")
+        assert filer.file(tmp_path / "cal.yaml", serial).startswith("already filed as #")
+        store = Store(simulation_store(str(tmp_path / name)))
+        entries = [e for serial_, _ in store.serials() for e in store.list(serial_)]
+        listings.append([(e.serial, e.verdict, e.sha256, e.path.name, e.problem) for e in entries])
+    assert listings[0] == listings[1] and len(listings[0]) == 1
+    # a serial that names no IMU: not filed, either way
+    assert Filer(str(tmp_path / "none")).file(tmp_path / "cal.yaml", "") == "not filed: no IMU serial"

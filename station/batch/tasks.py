@@ -46,6 +46,7 @@ class Outcome:
     fingerprint: str | None = None
     verdict: str | None = None     # estimate: the fit's verdict (passes, fails, ...)
     calibration: str | None = None  # estimate: the calibration file written (filed by the client)
+    imu_serial: str | None = None   # estimate: the serial the file states (where the client files it)
     cpu_s: float = 0.0             # this worker process's CPU time for the item (user + sys)
     wall_s: float = 0.0
     worker: str = ""
@@ -226,6 +227,8 @@ def _estimate(job: Job, out: Outcome) -> None:
         turn_sigma_deg=o.get("turn_sigma_deg"))
     est = Estimate(cal, provenance, capture)
     est.save(job.output)
+    serial = provenance.get("imu_serial")
+    out.imu_serial = serial if isinstance(serial, str) else None
     verdict = est.verdict
     out.outputs, out.calibration = [job.output], job.output
     out.verdict = verdict.get("result", "untested")
