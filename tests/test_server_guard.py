@@ -52,10 +52,10 @@ def test_servers_then_hang(tmp_path):
     serve = subprocess.Popen([sys.executable, "-m", "station.cli", "sim", "serve", "--speed", "50"],
                              stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     guarded = guard(pids=[serve.pid], sig=signal.SIGTERM, grace_s=3.0)
-    assert serve.stdout.readline().startswith("table: ")
     pids["station sim serve"] = [serve.pid]
 
     def hang(procs):
+        assert serve.stdout.readline().startswith("table: ")      # serving (started beside the others)
         # the scheduler, and the worker's nanny once it has started its worker process (not yet
         # connected: what is guarded is the same from then on, and connecting costs seconds)
         deadline = time.monotonic() + 120
