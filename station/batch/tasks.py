@@ -122,7 +122,7 @@ def _worker_setup() -> None:
         # numpy's and scipy's BLAS loaded first, so that the limit holds for both (threadpoolctl
         # limits only the libraries loaded; a worker the user started without OPENBLAS_NUM_THREADS=1
         # would run scipy's with a thread per core): once here, not per task (station.api.estimate
-        # enters threadpoolctl on every call, ~5 ms: the task calls estimate_capture itself)
+        # enters and leaves threadpoolctl on every call, ~1 ms: the task calls estimate_capture itself)
         import numpy  # noqa: F401
         import scipy.linalg  # noqa: F401
         from threadpoolctl import threadpool_limits
@@ -192,10 +192,10 @@ def _effects(options: dict) -> tuple:
     """(registry, effect ids) for a job's options, as ``station.api.estimate`` builds them (the
     library, installed entry points, $STATION_EFFECTS_PATH, the configuration's effects section,
     ``--plugin`` files, ``--add``), built once per worker process for a batch's options and kept
-    while the configuration file is unchanged.  Built for every capture, they cost 0.6 ms of CPU
-    per task with no configuration, 3.7 ms with ``--add EFFECT`` (the installed packages' entry
-    points scanned) and ~4 ms more with a station.yaml (parsed and validated): up to 2 % of a
-    capture's 0.3-0.4 s (docs/fleet.md, Fifteenth session).  A plugin file's code is loaded once
+    while the configuration file is unchanged.  Built for every capture, they cost 0.12 ms of CPU
+    per task with no configuration, 3.9 ms with ``--add EFFECT`` (the installed packages' entry
+    points scanned) and 7.9 ms with that and a station.yaml (parsed and validated): up to 2 % of
+    a capture's 0.35 s (docs/fleet.md, Fifteenth session); kept, 0.01-0.02 ms.  A plugin file's code is loaded once
     per process either way (station.model.registry keeps its module); a build that fails is not
     kept (the next capture says the same)."""
     from station import api
