@@ -142,7 +142,10 @@ def _targets(pids, pidfiles, sessions) -> tuple[list[int], list[int]]:
 def _signal_all(pidfds: dict, sessions, sig) -> None:
     for pid, fd in pidfds.items():
         try:
-            signal.pidfd_send_signal(fd, sig)
+            if fd is None:                         # no pidfds here: by pid
+                os.kill(pid, sig)
+            else:
+                signal.pidfd_send_signal(fd, sig)
         except (ProcessLookupError, OSError):
             pass
     for sid in sessions:
@@ -158,9 +161,10 @@ def _stop(pids, pidfiles, sessions, sig, grace_s) -> None:
     pidfds = {}
     for pid in pids:
         try:
-            pidfds[pid] = os.pidfd_open(pid)
+            pidfds[pid] = os.pidfd_open(pid) if hasattr(os, "pidfd_open") else (None if alive(pid) else 0)
         except OSError:
             pass
+    pidfds = {pid: fd for pid, fd in pidfds.items() if fd != 0}
     try:
         _signal_all(pidfds, sessions, sig)
         deadline = time.monotonic() + grace_s
@@ -170,7 +174,8 @@ def _stop(pids, pidfiles, sessions, sig, grace_s) -> None:
         _signal_all({p: fd for p, fd in pidfds.items() if alive(p)}, sessions, signal.SIGKILL)
     finally:
         for fd in pidfds.values():
-            os.close(fd)
+            if fd is not None:
+                os.close(fd)
 
 
 def _main(argv: list[str]) -> int:
@@ -215,18 +220,16 @@ def watched_processes() -> list[int]:
 
 
 class Guard:
-    def __init__(self, proc: subprocess.Popen):
-        self.proc = proc
+    def __init__(self, proc: subprocess.Popen | None):
+        self.proc = proc                  # None: nothing guards (no /proc here)
 
     def release(self) -> None:
         """The server was stopped by its fixture: the guard ends without doing anything."""
+        if self.proc is None:
+            return
         if self.proc.poll() is None:
             self.proc.terminate()
         self.proc.wait(timeout=30)
-
-    @property
-    def pid(self) -> int:
-        return self.proc.pid
 
 
 def guard(*, pids=(), pidfiles=(), sessions=(), sig: signal.Signals = signal.SIGTERM, grace_s: float = 3.0,
@@ -234,7 +237,9 @@ def guard(*, pids=(), pidfiles=(), sessions=(), sig: signal.Signals = signal.SIG
     """Start a guard that stops the targets (``pids``; the pid in each of ``pidfiles`` when the
     test process ends; every process of each of ``sessions``) with ``sig``, then SIGKILL after
     ``grace_s``, and removes the folders ``remove``, if the test process ends first.  Returns
-    once the guard is watching."""
+    once the guard is watching.  Linux only (it reads /proc): elsewhere nothing is guarded."""
+    if not os.path.exists(f"/proc/{os.getpid()}/stat"):
+        return Guard(None)
     argv = [sys.executable, "-I", "-S", HERE]
     for pid in watched_processes():
         argv += ["--watch", f"{pid}:{start_time(pid)}"]
