@@ -4,6 +4,7 @@ against the ceiling "single-process estimate rate x cores".
 
     python benchmarks/batch_throughput.py make DIR [--n 1000]      # the captures (simulator)
     python benchmarks/batch_throughput.py run DIR [--single 100]   # the measurements
+    python benchmarks/batch_throughput.py pairs DIR [--n 40] [--rounds 3]   # worker vs single CPU, side by side
 
 Every figure is given as wall time and as CPU time (user + sys of every process of the run,
 from /proc of the workers, or RUSAGE_CHILDREN for the command), with the load average: the
@@ -324,6 +325,77 @@ def single_stream(directory: Path, n: int) -> None:
                 print(json.dumps({"captures": i, "wall_s": w, "cpu_s": u, "rate_per_s": i / w,
                                   "cpu_per_capture_s": u / i, "load": load()}), flush=True)
     shutil.rmtree(out)
+
+
+def pairs(directory: Path, n: int, rounds: int, workers: int = 2) -> dict:
+    """CPU per capture of the batch's workers against single processes **run at the same
+    time**, on the same ``n`` captures (spread over the folder), in interleaved rounds: each
+    round runs ``workers`` single processes at once (`single-of`: capture k to process k mod
+    workers, each process's CPU from inside it, its start-up not counted), then `station batch
+    estimate --workers N` on the same captures (the command's CPU and every process it waited
+    for: RUSAGE_CHILDREN; the tasks' own CPU from the state file).  Both fill the same cores,
+    so what the machine does to two busy processes (shared caches, the host's scheduling, the
+    other sessions' load) is on both sides of the ratio; what is left is the batch's own: the
+    cluster's start-up, its clockwork over the batch's wall time, and what each task does
+    beyond the estimate (the fingerprint, the state, the result's round trip)."""
+    captures = spread(sorted(p for p in directory.iterdir() if (p / "manifest.yaml").exists()), n)
+    work = directory.parent / f"batch-pairs-{os.getpid()}"
+    shutil.rmtree(work, ignore_errors=True)
+    linked = work / "captures"
+    linked.mkdir(parents=True)
+    for c in captures:
+        (linked / c.name).symlink_to(c.resolve())
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    out = {"captures": len(captures), "workers": workers, "rounds": []}
+    try:
+        for r in range(rounds):
+            load_before = load()
+            started = time.perf_counter()
+            procs = [subprocess.Popen([sys.executable, __file__, "single-of", *map(str, captures[k::workers])],
+                                      env=env, stdout=subprocess.PIPE, text=True) for k in range(workers)]
+            singles = [json.loads(p.communicate()[0].strip().splitlines()[-1]) for p in procs]
+            single_wall = time.perf_counter() - started
+            per_capture = {name: c for s in singles for name, c in s["per_capture_cpu_s"].items()}
+            state = work / "out" / ".station-batch-estimate.jsonl"
+            wall, cpu, _ = _batch(["estimate", linked, "-o", work / "out", "--workers", workers, "--restart",
+                                   "--no-history"], env)
+            tasks = _tasks_by_capture(state)
+            single_cpu = sum(per_capture.values())
+            row = {"load_before": load_before, "load_after": load(),
+                   "singles_wall_s": single_wall, "singles_cpu_per_capture_s": single_cpu / len(captures),
+                   "batch_wall_s": wall, "batch_cpu_per_capture_s": cpu / len(captures),
+                   "tasks_cpu_per_capture_s": sum(tasks.values()) / len(captures),
+                   "tasks_over_singles": sum(tasks.values()) / single_cpu,
+                   "batch_over_singles": cpu / single_cpu}
+            out["rounds"].append(row)
+            print(json.dumps(row), flush=True)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    rows = out["rounds"]
+    for key in ("tasks_over_singles", "batch_over_singles"):
+        out[key] = sum(r[key] for r in rows) / len(rows)
+    return out
+
+
+if __name__ == "__main__" and len(sys.argv) > 1 and sys.argv[1] == "single-of":
+    res = single([Path(a) for a in sys.argv[2:]])
+    print(json.dumps({k: v for k, v in res.items() if k in ("captures", "cpu_s", "wall_s", "per_capture_cpu_s")}))
+    sys.exit(0)
+
+
+if __name__ == "__main__" and len(sys.argv) > 1 and sys.argv[1] == "pairs":
+    p = argparse.ArgumentParser()
+    p.add_argument("what")
+    p.add_argument("directory", type=Path)
+    p.add_argument("--n", type=int, default=40, help="captures (spread over the folder)")
+    p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--workers", type=int, default=2)
+    a = p.parse_args()
+    res = pairs(a.directory, a.n, a.rounds, a.workers)
+    print(json.dumps(res, indent=1))
+    print(f"{res['captures']} captures, {a.rounds} rounds: the tasks took {res['tasks_over_singles']:.3f} x and the "
+          f"batch in all {res['batch_over_singles']:.3f} x the CPU of {a.workers} single processes run at once")
+    sys.exit(0)
 
 
 if __name__ == "__main__" and len(sys.argv) > 1 and sys.argv[1] == "single-stream":

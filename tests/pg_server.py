@@ -5,7 +5,10 @@ unix socket in that folder (no port to collide with another session's server).
 PostgreSQL refuses to run as root: as root, the data folder is given to an unprivileged user
 (``nobody``) and initdb, pg_ctl and the server run as that user (``runuser``).  ``stop()``
 stops the server (fast shutdown, waited for) and removes the folder; the fixtures call it in
-their finalizer, so nothing is left running.
+their finalizer, so nothing is left running.  A pytest killed before its finalizers run (SIGKILL)
+leaves nothing either: a guard (tests/server_guard.py), armed before ``pg_ctl start`` on the
+data folder's ``postmaster.pid``, shuts the server down immediately (SIGQUIT, as ``pg_ctl stop -m
+immediate``; SIGKILL after 5 s) and removes the folder when the test process ends first.
 """
 from __future__ import annotations
 
@@ -14,11 +17,14 @@ import os
 import pwd
 import re
 import shutil
+import signal
 import subprocess
 import tempfile
 from pathlib import Path
 
 import pytest
+
+from server_guard import guard
 
 SUPERUSER = "station"
 
@@ -52,6 +58,7 @@ class Server:
         self.fsync = fsync
         self.dir: Path | None = None
         self.started = False
+        self.guard = None
 
     def _run(self, *argv, timeout=120) -> subprocess.CompletedProcess:
         cmd = [str(self.bindir / argv[0]), *map(str, argv[1:])]
@@ -70,6 +77,8 @@ class Server:
                       *(() if self.fsync else ("--no-sync",)))
         if r.returncode != 0:
             raise RuntimeError(f"initdb failed: {r.stderr[-2000:]}")
+        # guarded from before the start: a pytest killed while pg_ctl waits leaves no server either
+        self.guard = guard(pidfiles=[data / "postmaster.pid"], sig=signal.SIGQUIT, grace_s=5.0, remove=[self.dir])
         options = f"-k {self.dir} -c listen_addresses='' -c max_connections=50" + ("" if self.fsync else " -c fsync=off")
         r = self._run("pg_ctl", "-D", data, "-l", self.dir / "server.log", "-o", options, "-w", "-t", "120", "start")
         self.started = True        # stop() is worth trying even when pg_ctl said it failed
@@ -97,6 +106,9 @@ class Server:
                 if r.returncode != 0 and (self.dir / "data" / "postmaster.pid").exists():
                     self._run("pg_ctl", "-D", self.dir / "data", "-m", "immediate", "-w", "-t", "60", "stop")
         finally:
+            if self.guard is not None:
+                self.guard.release()
+                self.guard = None
             shutil.rmtree(self.dir, ignore_errors=True)
             self.dir = None
             self.started = False

@@ -16,7 +16,10 @@ from pathlib import Path
 
 import pytest
 
+import dask_processes
+from dask_processes import kill_session
 from processes import running
+from server_guard import guard, session_members
 from station import api
 from station.batch.cluster import CLOCKWORK
 
@@ -51,34 +54,11 @@ def _copy(captures, tmp_path, names=None) -> Path:
     return dest
 
 
-def _session_processes(sid: int) -> list[int]:
-    """Every live process of session ``sid`` (a command started with setsid, and all it started)."""
-    found = []
-    for d in Path("/proc").iterdir():
-        if not d.name.isdigit():
-            continue
-        try:
-            fields = (d / "stat").read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[3]) == sid and fields[0] != "Z":
-            found.append(int(d.name))
-    return found
-
-
 def _wait_session_empty(sid: int, seconds: float = 30.0) -> list[int]:
     deadline = time.monotonic() + seconds
-    while _session_processes(sid) and time.monotonic() < deadline:
+    while session_members(sid) and time.monotonic() < deadline:
         time.sleep(0.1)
-    return _session_processes(sid)
-
-
-def _kill_session(sid: int) -> None:
-    for pid in _session_processes(sid):
-        try:
-            os.kill(pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
+    return session_members(sid)
 
 
 def _start(args, tmp_path, cwd=None) -> subprocess.Popen:
@@ -90,17 +70,25 @@ def _start(args, tmp_path, cwd=None) -> subprocess.Popen:
 
 @pytest.fixture
 def started(request):
-    """start(popen) registers a process session to be killed at the end of the test."""
-    sessions = []
-    yield sessions.append
+    """start(popen) registers a process session to be killed at the end of the test (and by a
+    guard, tests/server_guard.py, if pytest is killed first: a batch's local cluster with it)."""
+    sessions, guards = [], []
+
+    def start(p):
+        sessions.append(p)
+        guards.append(guard(sessions=[p.pid], sig=signal.SIGKILL, grace_s=0.0))
+
+    yield start
     for p in sessions:
-        _kill_session(p.pid)
+        kill_session(p.pid)
         if p.poll() is None:
             p.kill()
         p.wait(timeout=30)
         for f in (p.stdout, p.stderr):
             if f:
                 f.close()
+    for g in guards:
+        g.release()
 
 
 def _records(state: Path) -> list[dict]:
@@ -138,42 +126,11 @@ def _check_outcome(caps: Path, r_stdout: str, stderr: str) -> None:
 @pytest.fixture(scope="module")
 def dask_cluster(tmp_path_factory):
     """`dask scheduler` and two `dask worker` processes on loopback (ports chosen by the
-    scheduler, its address read from the scheduler file); ended in the finalizer."""
+    scheduler, its address read from the scheduler file), each guarded against a killed pytest
+    (tests/dask_processes.py); ended in the finalizer."""
     d = tmp_path_factory.mktemp("dask")
-    env = _env(d)
-    dask = [sys.executable, "-m", "distributed.cli.dask_scheduler"]
-    sched_file = d / "scheduler.json"
-    procs = []
-
-    def spawn(cmd, name):
-        log = open(d / f"{name}.log", "w")
-        p = subprocess.Popen(cmd, cwd=d, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
-        procs.append((p, log))
-        return p
-
-    try:
-        spawn(dask + ["--host", "127.0.0.1", "--port", "0", "--no-dashboard", "--scheduler-file", sched_file],
-              "scheduler")
-        deadline = time.monotonic() + 60
-        while not sched_file.exists() and time.monotonic() < deadline:
-            time.sleep(0.1)
-        assert sched_file.exists(), (d / "scheduler.log").read_text()
-        for k in range(2):
-            spawn([sys.executable, "-m", "distributed.cli.dask_worker", "--scheduler-file", sched_file,
-                   "--host", "127.0.0.1", "--nthreads", "1", "--nworkers", "1", "--no-dashboard",
-                   "--name", f"w{k}"], f"worker{k}")
-        address = json.loads(sched_file.read_text())["address"]
-        from distributed import Client
-
-        with Client(address, timeout=60) as client:
-            client.wait_for_workers(2, timeout=120)
-            worker_pids = set(client.run(os.getpid).values())
+    with dask_processes.cluster(d, _env(d), workers=2) as (address, worker_pids, _):
         yield address, worker_pids
-    finally:
-        for p, log in reversed(procs):
-            _kill_session(p.pid)
-            p.wait(timeout=30)
-            log.close()
 
 
 def test_batch_on_a_scheduler_and_two_worker_processes(dask_cluster, captures, tmp_path, started):

@@ -83,6 +83,7 @@ def test_ctrl_c_ends_the_workers_and_says_interrupted(tmp_path):
     import sys
     import time
 
+    from server_guard import guard
     from station.io.scheme import scheme_text
 
     text, _ = scheme_text("optimal9")
@@ -95,6 +96,7 @@ def test_ctrl_c_ends_the_workers_and_says_interrupted(tmp_path):
                          # Ctrl-C as a terminal delivers it, even when this test runs with SIGINT ignored
                          # (a background job): an ignored SIGINT is inherited and Python would keep it
                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    guarded = guard(sessions=[p.pid], sig=signal.SIGKILL, grace_s=0.0)   # 100,000 runs: not past a killed pytest
     try:
         for _ in range(1200):                      # until the pool's two workers exist
             workers = _children(p.pid)
@@ -109,6 +111,7 @@ def test_ctrl_c_ends_the_workers_and_says_interrupted(tmp_path):
         if p.poll() is None:                       # its own session: the test's processes only
             os.killpg(p.pid, signal.SIGKILL)
             p.wait()
+        guarded.release()
     assert p.returncode == 130 and err.strip() == "interrupted" and out == ""
     assert not any(os.path.exists(f"/proc/{w}") and open(f"/proc/{w}/stat").read().split()[2] != "Z"
                    for w in workers)

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from drivers.base import ImuSettings
+from server_guard import guard
 from drivers.registry import open_imu, open_table
 from drivers.samples import ImuSamples
 from sim_devices.truth import default_truth
@@ -98,15 +99,18 @@ def test_probe_user_errors(capsys):
 
 
 def _serve(*args):
+    """``station sim serve`` (it serves until stopped), guarded: stopped if pytest is killed first
+    (tests/server_guard.py; the guard ends with it otherwise)."""
     proc = subprocess.Popen([sys.executable, "-m", "station.cli", "sim", "serve", *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    guarded = guard(pids=[proc.pid], sig=signal.SIGTERM, grace_s=3.0)
     lines = [proc.stdout.readline(), proc.stdout.readline()]
-    return proc, lines
+    return proc, lines, guarded
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_sim_serve_prints_two_paths_serves_and_stops_cleanly(sig):
-    proc, lines = _serve("--speed", "50", "--axes", "2", "--seed", "4")
+    proc, lines, guarded = _serve("--speed", "50", "--axes", "2", "--seed", "4")
     try:
         assert lines[0].startswith("table: /dev/") and lines[1].startswith("imu: /dev/")
         table_path, imu_path = lines[0].split(": ", 1)[1].strip(), lines[1].split(": ", 1)[1].strip()
@@ -122,6 +126,7 @@ def test_sim_serve_prints_two_paths_serves_and_stops_cleanly(sig):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+        guarded.release()
 
 
 def test_sim_serve_user_errors(tmp_path):

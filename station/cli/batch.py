@@ -133,7 +133,7 @@ def cmd_batch(args) -> int:
             if o.status == "failed":
                 err.print(f"failed: {o.source}: {o.message}", markup=False, soft_wrap=True, highlight=False)
             elif filer is not None and o.status != "skipped" and o.calibration:
-                filer.file(o.calibration)
+                filer.file(o.calibration, o.imu_serial)
 
         where = args.scheduler or "a local cluster"
         summary = run_batch(client, command, items, options, state, on_result)
