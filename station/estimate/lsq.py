@@ -1369,8 +1369,19 @@ STALE_SCALE = 100.0
 #: stopped at its limit: the written parameters within 1 % of their 1-sigma); beyond, the fit is
 #: solved once more from there and, still short, reported not converged (issue 28)
 AT_MINIMUM_CHI2 = 1e-4
-TRIAL_EVALUATIONS = 30
-HOPELESS_RATIO = 100.0
+#: _best_start's trial of each start (issue 27's heavy tail): every start is solved for up to
+#: TRIAL_EVALUATIONS evaluations; one that has not converged by then while a finished start's
+#: minimum is more than HOPELESS_RATIO times below its sum of squares is not finished.  Measured on
+#: the 300 simulated part-turn captures of benchmarks/batch_throughput.py (optimal9, 5 s dwells and
+#: rotations; docs/performance.md "Fifteenth session"): every start that ended at the lowest
+#: minimum converged within 69 evaluations (from x0_plain: 52-69 where it was the lowest, 3 % of
+#: captures, 0.13-4.5 % of chi2 below the others: a trial by chi2 at 20-50 evaluations, where it
+#: is still 600-10^4 times above them, chose the wrong minimum on 2-9 of the 300); every start
+#: still running after 100 evaluations ended above the others' minimum (by 3-20 %, or at the
+#: 1,000-evaluation limit 900-3,400 times above it), 300-2.5*10^4 times above it at the 100th.
+#: So: 100 (1.45 x the slowest winner) and 10 (30 x below the least hopeless at 100)
+TRIAL_EVALUATIONS = 100
+HOPELESS_RATIO = 10.0
 CROSSING_SEARCH_AXES = 8         # axes whose crossings are tried in every combination (2^8 short solves)
 CROSSING_SEARCH_EVALUATIONS = 3  # each combination's short solve, before the best two are solved in full
 AXES_FIRST_GYRO_WEIGHT = 1e-3     # the rotations' gyro integrals' weight while the axes are fitted first
