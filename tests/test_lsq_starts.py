@@ -103,17 +103,48 @@ segments:
 """
 
 
-@pytest.mark.parametrize("seed", [1, 3])
-def test_a_chamber_step_capture_with_its_turns_in_one_plane_converges(seed, monkeypatch):
-    """The designed chamber scheme's kind, small (docs/design.md: its turns all about x and x +/- z,
-    statics and turns at the room and at 60 degC; the Monte Carlo's IMU and noise): the pairs'
-    axes leave the gyro matrix's y-y entry to the axes' y-components (~1e-3, the misalignments),
-    which started it at 570 times its size; from there LM went to its limit (seed 3: reduced chi2
-    9256, not converged) or took 380 evaluations (seed 1).  Started nominal along what the pairs
-    do not see, each fit converges in a few evaluations, its reduced chi2 within 5 sigma of 1
-    (sqrt(2/dof): ~0.08 at ~330 degrees of freedom) and the temperature coefficients within 4.5
-    of their 1-sigma of the simulated IMU's (none)."""
-    scheme = scheme_from_text(CHAMBER_STEP, "chamber_step_small")
+# the designed chamber scheme of known attitudes, small: six statics (too few for the
+# accelerometers' ellipsoid: started nominal), the turns that gravity crosses all about z (those
+# about x + y and x + y + z are vertical): the inter-triad start's axes on one line
+CHAMBER_STEP_KNOWN = """name: chamber_step_known
+segments:
+- {static: up_xy, up_body: [1, 1, 0], dwell_s: 10.0}
+- {static: up_ymz, up_body: [0, 1, -1], dwell_s: 10.0}
+- {static: up_z, up_body: [0, 0, 1], dwell_s: 10.0}
+- {static: up_my, up_body: [0, -1, 0], dwell_s: 10.0}
+- {static: up_mxmymz, up_body: [-1, -1, -1], dwell_s: 10.0}
+- {static: up_mxmy, up_body: [-1, -1, 0], dwell_s: 10.0}
+- {rotation: rot_xy_p, axis_body: [1, 1, 0], rate_dps: 30.0, rotation_s: 12.0, axis_elevation_deg: 90.0}
+- {rotation: rot_xy_m, axis_body: [1, 1, 0], rate_dps: -30.0, rotation_s: 12.0, axis_elevation_deg: 90.0}
+- {rotation: rot_z_p, axis_body: [0, 0, 1], rate_dps: 30.0, rotation_s: 12.0}
+- {rotation: rot_z_m, axis_body: [0, 0, 1], rate_dps: -30.0, rotation_s: 12.0}
+- {rotation: rot_xy_60C_p, axis_body: [1, 1, 0], rate_dps: 30.0, rotation_s: 12.0, axis_elevation_deg: 90.0, chamber_c: 60}
+- {rotation: rot_xy_60C_m, axis_body: [1, 1, 0], rate_dps: -30.0, rotation_s: 12.0, axis_elevation_deg: 90.0}
+- {rotation: rot_xyz_60C_p, axis_body: [1, 1, 1], rate_dps: 30.0, rotation_s: 12.0, axis_elevation_deg: 90.0}
+- {rotation: rot_xyz_60C_m, axis_body: [1, 1, 1], rate_dps: -30.0, rotation_s: 12.0, axis_elevation_deg: 90.0}
+- {rotation: rot_z_60C_p, axis_body: [0, 0, 1], rate_dps: 30.0, rotation_s: 12.0}
+- {rotation: rot_z_60C_m, axis_body: [0, 0, 1], rate_dps: -30.0, rotation_s: 12.0}
+"""
+
+
+@pytest.mark.parametrize("text, seed, said", [
+    (CHAMBER_STEP, 1, "not seen by the rotation pairs' axes"),
+    (CHAMBER_STEP, 3, "not seen by the rotation pairs' axes"),
+    (CHAMBER_STEP_KNOWN, 2, "lie on one line"),
+    (CHAMBER_STEP_KNOWN, 3, "lie on one line")], ids=["in-a-plane-1", "in-a-plane-3", "on-a-line-2", "on-a-line-3"])
+def test_a_chamber_step_capture_converges_from_its_start(text, seed, said, monkeypatch):
+    """The designed chamber schemes' kinds, small (docs/design.md; statics and turns at the room
+    and at 60 degC; the Monte Carlo's IMU and noise).  Unknown attitudes, turns all about x and
+    x +/- z: the pairs' axes leave the gyro matrix's y-y entry to the axes' y-components (~1e-3,
+    the misalignments), which started it at 570 times its size; from there LM went to its limit
+    (seed 3: reduced chi2 9256, not converged) or took 380 evaluations (seed 1).  Known
+    attitudes, the turns gravity crosses all about z: the inter-triad start turned 94 deg about
+    that axis, and no seed of 1-3 converged (the limit, or stuck at reduced chi2 6e4-3e7).
+    Started nominal along what the data do not see, each fit converges (measured 9-75
+    evaluations), its reduced chi2 within 5 sigma of 1 (sqrt(2/dof): ~0.08 at ~330 degrees of
+    freedom) and the temperature coefficients within 4.5 of their 1-sigma of the simulated IMU's
+    (none)."""
+    scheme = scheme_from_text(text, "chamber_step")
     chamber = ChamberConfig(range_c=(20.0, 60.0), ramp_c_per_min=3.0, soak_s=300.0)
     capture = dryrun.simulate_capture(scheme, montecarlo.make_truth(montecarlo.Settings()), seed, chamber=chamber)
     temps = [float(np.mean(seg.data.temp)) for seg in capture.segments]
@@ -121,9 +152,9 @@ def test_a_chamber_step_capture_with_its_turns_in_one_plane_converges(seed, monk
     calls, solves = counted(monkeypatch)
     result = lsq.fit(lsq.summarise(capture), [LIBRARY["temperature_bias"]()])
     assert result.model.converged and all(status > 0 for _, status in solves), solves
-    assert len(calls) < 60, (len(calls), solves)                    # measured 9-11 (before: 385, 1005)
+    assert len(calls) < 200, (len(calls), solves)                   # measured 9-75 (before: 385-1267)
     assert abs(result.chi2 / result.dof - 1.0) < 5.0 * np.sqrt(2.0 / result.dof), result.chi2 / result.dof
-    assert any("not seen by the rotation pairs' axes" in n for n in result.model.start.notes)
+    assert any(said in n for n in result.model.start.notes), result.model.start.notes
     cal = lsq.to_calibration(result, capture.imu.accel_unit, capture.imu.gyro_unit)
     for name, value, _ in montecarlo.effect_parameters(cal):
         assert abs(value) < 4.5 * cal.sigma[name], (name, value, cal.sigma[name])

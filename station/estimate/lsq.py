@@ -143,7 +143,17 @@ def _start(s: Summaries) -> Start:
         if np.linalg.norm(l_p) > 0.1 * s.gravity_mps2**2 and np.linalg.norm(l_o) > 0:
             axes_o.append(l_o / np.linalg.norm(l_o))
             axes_p.append(l_p / np.linalg.norm(l_p))
-    if len(axes_o) >= 2:
+    if len(axes_o) >= 2 and _one_line(axes_p):
+        # every usable axis on one line (a design's turns about one axis across gravity, the
+        # others near the vertical): the rotation about it is not seen; started at none (the
+        # nominal mounting) instead of an arbitrary one (issue 28: 94 deg about z on the chamber
+        # design of known attitudes, the fit stuck at reduced chi2 7e7)
+        eye = list(np.eye(3))
+        R_po = _align_vectors(np.array(axes_o + eye), np.array(axes_p + eye),
+                              weights=[1.0] * len(axes_o) + [ONE_LINE_PRIOR] * 3)
+        notes.append("inter-triad start: the rotation axes the accelerometers see lie on one line; "
+                     "the rotation about it started at zero")
+    elif len(axes_o) >= 2:
         R_po = _align_vectors(np.array(axes_o), np.array(axes_p))
     else:
         R_po = np.eye(3)
@@ -194,6 +204,20 @@ def _fit_gyro_matrix(pairs: list, s: Summaries, notes: list) -> np.ndarray:
     notes.append(f"gyro start: {int(np.sum(sv < least))} of the gyro matrix's 6 directions not seen by the "
                  "rotation pairs' axes, started nominal")
     return zhang2010.lower_factor(np.array([[m[0], m[3], m[4]], [m[3], m[1], m[5]], [m[4], m[5], m[2]]]))
+
+
+#: the inter-triad start's axes lie on one line when the second singular value of the unit axes
+#: (stacked, N x 3) is below ONE_LINE of the first (all within ~3 deg of one line: sin 3 deg =
+#: 0.05); then identity pairs of weight ONE_LINE_PRIOR (far below the axes' 1 each) fix the
+#: rotation about that line at zero and move the rest by ~1e-6 rad
+ONE_LINE = 0.05
+ONE_LINE_PRIOR = 1e-6
+
+
+def _one_line(axes: list) -> bool:
+    """Whether the unit axes all lie within ~ONE_LINE rad of one line (either sign)."""
+    sv = np.linalg.svd(np.array(axes), compute_uv=False)
+    return bool(sv[1] < ONE_LINE * sv[0])
 
 
 def _start_gyro_matrix(st: Start) -> np.ndarray:
