@@ -175,7 +175,7 @@ def _fit_gyro_matrix(pairs: list, s: Summaries, notes: list) -> np.ndarray:
     its six entries), where the pairs' axes determine M; else M from the directions they do
     determine and nominal (isotropic, at the pairs' mean scale) along the others.
 
-    A design whose rotations all lie in one plane (the designer's chamber scheme with the known
+    A design whose rotations all lie in one plane (the designer's chamber scheme with the
     temperature coefficients as its criterion: axes x and x +/- z only) leaves M's y-y entry
     to the y-components of the axes, ~1e-3 (the misalignments): fitted, it came out at 570
     times its size (gyro scale y 0.0018 at the start), the gyro bias and the inter-triad start
@@ -1426,7 +1426,8 @@ def _minimise(model: Model, x0: np.ndarray, solve):
     (Model.x0_plain: chi and e at 0), and keep the lowest sum of squares: no start alone found
     the right basin on every part-turn capture tried (single turns one way, axes near the
     vertical or the Earth's axis), and with the plain one among them no fit ends worse than it
-    did from it alone."""
+    did from it alone.  The three are tried before they are finished (_best_start): a start
+    still far above a minimum found after its trial is not solved to the evaluation limit."""
     if not _has_earth_phases(model):
         return solve(x0)
     res = _best_start(model, [x0, _axes_first(model, x0, solve), model.x0_plain], solve)
@@ -1461,6 +1462,8 @@ def _minimise(model: Model, x0: np.ndarray, solve):
 class _Whole:
     """A start solved whole at its first trial (_best_start's trial for a solve that cannot pause:
     the large models' trf, or an _lm a test replaced)."""
+
+    crept = False
 
     def __init__(self, solve, start):
         self.solve, self.start, self.result = solve, start, None
