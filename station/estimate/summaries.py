@@ -85,6 +85,18 @@ class RotationSummary:
     # 1/2, 1/2, 1/2, 1/2)); the coefficients' noise covariance is sigma^2 / samples * gram^-1.
     # None: whole revolutions taken.
     gram: np.ndarray | None = None
+    # a turn whose recorded window keeps one of the table's ramps (manifest ``record_ramp``: start
+    # or end, issue 28 item 3): the table's rate at the window's start and end as the bench
+    # reported them (deg/s about axis_body, signed like the angle; None: not said).  gyro_start and
+    # gyro_end are then the IMU's own rates at rest and at the steady rate, where the edge means are
+    # exact.
+    record_ramp: str | None = None
+    table_rate_start_dps: float | None = None
+    table_rate_end_dps: float | None = None
+    # (integral of cos phi dt, integral of sin phi dt) over the window, s, phi the angle turned
+    # (tracked by the gyro): what a rate fixed in space across the axis (the Earth's) adds to the
+    # gyro integral.  None: T/A (sin A, 1 - cos A), a uniform turn's (every steady segment's)
+    earth_weights_s: np.ndarray | None = None
 
     @property
     def rate_dps(self) -> float:
@@ -299,8 +311,28 @@ def _gradient_chunk(w, t, i, j):
     return part[i - lo:i - lo + (j - i)]
 
 
+def _ramp_phase_scale(t, gyro, gyro_mean, angle_deg, steady_rate_dps) -> float:
+    """A recorded ramp's phase (issue 28 item 3): the factor that turns the fraction of the gyro's
+    own turn into the table's angle turned since the window's start, from the part of the window
+    at the steady rate (the gyro along its mean direction within 2 % of the window's fastest edge),
+    whose rate the table states (``steady_rate_dps``).  Not the encoder's angle over the window:
+    under a time offset dt the IMU's samples turn angle + dt (w_end - w_start) (0.5 deg at 100
+    deg/s and 5 ms), and phases scaled to the encoder's angle drift by up to that within the
+    window, which the accelerometer's harmonics see as a gravity error of g sin(0.5 deg), 8.7 mg;
+    a time offset only shifts the start of these phases, which the fit's phase takes."""
+    direction = gyro_mean / np.linalg.norm(gyro_mean)
+    along = gyro @ direction
+    edge = max(abs(along[:EDGE_SAMPLES].mean()), abs(along[-EDGE_SAMPLES:].mean()))
+    at_rate = np.abs(np.abs(along) - edge) < 0.02 * edge
+    if not at_rate.any():
+        return 1.0
+    gyro_turned = float(np.gradient(t) @ along)
+    return abs(steady_rate_dps / float(along[at_rate].mean()) * gyro_turned / angle_deg)
+
+
 def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
-                     gyro_sigma_dps=None, gyro_bias=None, accel_mask=None) -> RotationSummary:
+                     gyro_sigma_dps=None, gyro_bias=None, accel_mask=None,
+                     steady_rate_dps=None) -> RotationSummary:
     """``accel_mask(phase, accel)``: the samples (N,) bool the accelerometer harmonics use, or None
     for all (station.estimate.data_faults.Verdict.accel_keep: samples near a rail or stuck left
     out); the basis is then summed over those samples only.
@@ -321,6 +353,8 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
     spans = _chunks(n)
     gyro_mean = _column_means(gyro)
     fraction = _phase_fraction(t, gyro, start, duration, gyro_sigma_dps, gyro_mean)
+    if steady_rate_dps is not None:     # a recorded ramp: the phase at the table's steady rate
+        fraction *= _ramp_phase_scale(t, gyro, gyro_mean, angle_deg, steady_rate_dps)
     # the table rate w(t) about the axis, its square and its time derivative are projected on the
     # same basis as the accelerometer (one solve for all of them)
     w = _rate(gyro, gyro_bias, angle_deg, duration, gyro_mean)
@@ -534,13 +568,15 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
                 summary = rotation_summary(seg.name, axis, group, seg.angle_deg, d.t, _scaled(d.accel, ca),
                                            _scaled(d.gyro, cg), d.temp, gyro_sigma_dps=gyro_sigma,
                                            gyro_bias=static_gyro_mean,
-                                           accel_mask=verdict.accel_keep if verdict.masks else None)
+                                           accel_mask=verdict.accel_keep if verdict.masks else None,
+                                           steady_rate_dps=_ramp_rate(seg))
             except data_faults.TooLittleLeft as e:
                 scanner.drop(seg.name, str(e))
                 continue
             scanner.harmonics(seg.name, summary.samples, len(d.t))
             if seg.extra.get("motion") == "hand":      # the writer says so (manual schemes)
                 summary.steady = False
+            _ramp_keys(summary, seg, d.t, _scaled(d.gyro, cg))
             summary.t_mid_s, summary.index = float(np.mean(d.t)), order[seg.name]
             summary.temp_rate_c_per_s = _slope(d.t, d.temp)
             axis_no = seg.extra.get("table_axis")
@@ -561,6 +597,41 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
         seg.data = d                    # hand turns are short: their samples are kept for the fit
     return _SegmentSummaries(statics, spans, diff_sq_a, diff_sq_g, diff_count, rotations, skipped,
                              [seg for seg, _ in hands], jitters, scanner.report())
+
+
+def _ramp_rate(seg) -> float | None:
+    """A recorded ramp's steady rate (deg/s): the table's at the window's end (a ramp up recorded)
+    or start (a brake recorded), else the commanded rate; None for a segment without a ramp."""
+    ramp = seg.extra.get("record_ramp")
+    if ramp not in ("start", "end"):
+        return None
+    x = seg.extra.get("rate_end_dps" if ramp == "start" else "rate_start_dps")
+    if isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) and x != 0:
+        return float(x)
+    return seg.rate_dps if seg.rate_dps else None
+
+
+def _ramp_keys(summary, seg, t, gyro) -> None:
+    """A recorded ramp's manifest keys onto its summary: the turn is the table's (steady: its
+    accelerometer harmonics are used, the phase tracked by the gyro through the ramp), the
+    table's rates at the window's edges are kept (a key that is not a finite number: not said),
+    and the Earth rate's weights over the window are taken from the gyro-tracked phase (a rest and
+    a ramp spend longer at some angles than a uniform turn: on the simulated bench at 100 deg/s
+    and 50 deg/s^2 the uniform weights left 0.006 deg in the integral, 144 sigma of its noise)."""
+    ramp = seg.extra.get("record_ramp")
+    if ramp not in ("start", "end"):
+        return
+    summary.record_ramp = ramp
+    summary.steady = True
+    start, end = _window(t)
+    fraction = _turned_fraction(t, gyro, start, end - start, _column_means(gyro))
+    phase = np.radians(summary.angle_deg) * fraction
+    weights = np.gradient(t)            # each sample's share of the window (as the gyro integral's)
+    summary.earth_weights_s = np.array([weights @ np.cos(phase), weights @ np.sin(phase)])
+    for key, attr in (("rate_start_dps", "table_rate_start_dps"), ("rate_end_dps", "table_rate_end_dps")):
+        x = seg.extra.get(key)
+        if isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x):
+            setattr(summary, attr, float(x))
 
 
 def _scanned(scanner, seg, d, ca, cg):
