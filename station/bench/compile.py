@@ -240,10 +240,9 @@ class Compiler:
                           settle_s=self.settle_s, elevation_deg=elevation,
                           table_deg=tuple(float(x) for x in angles), record_ramp=recorded,
                           rest_s=RAMP_REST_S if recorded else 0.0)
-            # a recorded ramp start has no settle at the rate (the window opens at rest); its ramp and
-            # rest are in capture_s, the ramp not recorded is run outside the window
-            unrecorded = (ramp + self.settle_s) if recorded != "start" else ramp
-            plan.steps.append(_with_estimate(step, unrecorded + (ramp if not recorded else 0.0) + step.capture_s))
+            # the settling (at the rate; a recorded ramp up: at rest, after the move) and the ramps;
+            # a recorded ramp and its rest are in capture_s
+            plan.steps.append(_with_estimate(step, (1 if recorded else 2) * ramp + self.settle_s + step.capture_s))
             theta = angles
         plan.steps.append(Checkpoint(f"{spec.name} saved", spec.name, 0.0))
         return theta

@@ -277,8 +277,7 @@ def _print_suggestions(out, d) -> None:
                       soft_wrap=True, highlight=False)
         cmds = getattr(c, "separations", None) or []
         for cmd in cmds:
-            out.print(f"{c.effect}: this capture cannot tell it from {_rival(cmd)}; the fewest segments that "
-                      f"separate them: {cmd}", markup=False, soft_wrap=True, highlight=False)
+            out.print(_separation_line(c.effect, cmd), markup=False, soft_wrap=True, highlight=False)
         others = list(getattr(c, "alike", None) or [])
         if others:
             out.print(f"{c.effect}: this capture cannot tell it from {', '.join(others)} (they explain the misfit "
@@ -287,11 +286,23 @@ def _print_suggestions(out, d) -> None:
 
 
 def _rival(cmd: str) -> str:
-    """B of a printed ``--separate A,B`` command."""
+    """B of a printed ``--separate A,B`` command ("" for a --reveal one: the time offset's)."""
     import shlex
 
     words = shlex.split(cmd)
+    if "--separate" not in words:
+        return ""
     return words[words.index("--separate") + 1].rsplit(",", 1)[1]
+
+
+def _separation_line(effect: str, cmd: str) -> str:
+    """What diagnose prints beside an alias and its command: a pair's --separate, or the time
+    offset's --reveal (its rivals are no effect: the gyro scale, the mounting offset)."""
+    rival = _rival(cmd)
+    if rival:
+        return f"{effect}: this capture cannot tell it from {rival}; the fewest segments that separate them: {cmd}"
+    return (f"{effect}: this capture's turns keep one steady rate in their windows, where a time offset does not "
+            f"show (it aliases the gyro scale); the fewest turns with their ramp recorded that reveal it: {cmd}")
 
 
 def _print(out, first, steps, final) -> None:
@@ -322,8 +333,9 @@ def _print(out, first, steps, final) -> None:
         for c in st.caveats:
             out.print(f"caveat: {c}")
         for cmd in getattr(st, "separations", None) or []:
-            out.print(f"caveat: the fewest segments that separate {st.added} from {_rival(cmd)}: {cmd}",
-                      markup=False, soft_wrap=True, highlight=False)
+            line = (f"caveat: the fewest segments that separate {st.added} from {_rival(cmd)}: {cmd}"
+                    if _rival(cmd) else f"caveat: {_separation_line(st.added, cmd)}")
+            out.print(line, markup=False, soft_wrap=True, highlight=False)
         for _, why in st.removed:
             out.print(f"removed: {why}", markup=False)
     if steps:

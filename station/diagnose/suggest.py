@@ -19,6 +19,7 @@ NOT_DESIGNED = ("remount_per_segment", "bias_step")
 # pairs no segments separate (measured: station design --from refuses them with what stays
 # furthest; words.aliases says why): no command is printed for them
 NOT_SEPARABLE = ({"rotation_axis_offsets", "table_vibration_once_per_rev"},)
+TIME_OFFSET = "time_offset"     # revealed by turns whose ramp is recorded (separations)
 
 
 def added(effect_id: str, registry=None) -> str:
@@ -91,6 +92,12 @@ def separations(capture, model_effects, effect_id: str, summaries, registry=None
         effects.append(effect_id)
     if effect_id in NOT_DESIGNED:
         return []
+    if effect_id == TIME_OFFSET and summaries.rotations and not any(
+            getattr(r, "record_ramp", None) for r in summaries.rotations):
+        # its aliases have no effect for a rival (the gyro scale, the mounting offset): the turns
+        # with their ramp recorded that reveal it (station design --from: candidates with
+        # record_ramp: start, issue 28 item 3)
+        return [command(capture, effects, [TIME_OFFSET], registry)]
     return [separate_command(capture, effects, effect_id, rival, registry)
             for rival, _ in aliases(summaries, effect_id)
             if rival is not None and rival != effect_id and rival not in NOT_DESIGNED
@@ -144,7 +151,10 @@ def suggest(diagnosis, capture, registry=None, summaries=None, hand=()) -> None:
 
 
 def _pair_of(cmd: str) -> tuple:
+    """(A, B) of a --separate command; ("", "") for a --reveal one (the time offset's)."""
     words = shlex.split(cmd)
+    if "--separate" not in words:
+        return "", ""
     a, _, b = words[words.index("--separate") + 1].rpartition(",")
     return a, b
 
