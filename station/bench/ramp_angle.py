@@ -72,7 +72,10 @@ def window_angle(rest_deg: float, turning_deg: float, expected_deg: float, ramp:
     return float(d + 360.0 * np.round((expected_deg - d) / 360.0))
 
 
-def expected_angle(rate_dps: float, steady_s: float, accel_dps2: float) -> float:
-    """The angle of the compiled profile over a ramp's window (signed like the rate): the turns at
-    the rate and the ramp's r^2 / 2a (the rest adds none)."""
-    return rate_dps * steady_s + np.sign(rate_dps) * rate_dps ** 2 / (2.0 * accel_dps2)
+def expected_angle(rate_dps: float, moving_s: float, accel_dps2: float, ramp: str) -> float:
+    """The angle a ramp's window holds (signed like the rate) when ``moving_s`` of it lies between
+    the rate's command and the window's end (ramp "start": the ramp up is in that time, r^2 / 2a
+    less than the rate's), or between the window's start and the brake's command ("end": the brake
+    adds r^2 / 2a after it)."""
+    ramp_deg = np.sign(rate_dps) * rate_dps ** 2 / (2.0 * accel_dps2)
+    return float(rate_dps * moving_s + (-ramp_deg if ramp == "start" else ramp_deg))

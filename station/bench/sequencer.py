@@ -537,7 +537,7 @@ class Sequencer:
         self._discard(step.settle_s)
         n = int(round(step.capture_s * self.rate_hz))
         first = int(round((step.rest_s if start_kind else step.steady_s) * self.rate_hz))
-        marks, rests = [], []
+        marks, rests, command_t = [], [], []
         hold = max(RATE_HOLD_FRACTION * abs(rate), 10 * self.config.table.rate_tolerance_dps)
         still = 10 * self.config.table.rate_tolerance_dps
 
@@ -560,9 +560,16 @@ class Sequencer:
                 r.n = int(round(first * ch.rate_hz / self.rate_hz))
             self._record(recs, poll)
             mark()
+            command_t.append(self._reference().stream.sync() or rec_last(recs))   # the command on the IMU's clock
             self.table.set_rate(axis, rate if start_kind else 0.0)
+            # the window closes the compiled time after the command on the IMU's clock (the
+            # ramp and the turns, or the brake and the rest), not after a count of samples: the
+            # stream runs ahead of what was recorded when the command went out (what the line and
+            # the reader hold), and a brake cut short would end the window still turning
+            after = step.capture_s - (step.rest_s if start_kind else step.steady_s)
             for ch, r in recs.items():
-                r.n = total[id(ch)]
+                r.n = max(total[id(ch)] - r.n + r.done if r.last_t is None else
+                          r.done + int(round((command_t[-1] + after - float(r.last_t)) * ch.rate_hz)), r.done)
             self._record(recs, poll)
             if start_kind:
                 mark()              # still at the rate after the window (the brake comes after)
@@ -585,8 +592,12 @@ class Sequencer:
             if turning is None or not rests:
                 raise SequencerError(f"{spec.name}: the table's position was not read at the rate and at rest "
                                      "around the recorded ramp: its angle is unknown")
+            # the whole turns: the profile from the command's moment (the window may hold more rest
+            # than compiled: the stream runs ahead of the command by what the line holds)
+            turning_s = (edge - command_t[-1]) if start_kind else (command_t[-1] - edge)
             angle = ramp_angle.window_angle(rests[-1].position_deg, turning,
-                                            ramp_angle.expected_angle(rate, step.steady_s, step.accel_dps2),
+                                            ramp_angle.expected_angle(rate, turning_s, step.accel_dps2,
+                                                                      step.record_ramp),
                                             step.record_ramp)
             rates = (0.0, mean_rate) if start_kind else (mean_rate, 0.0)
             # the reads the angle came from (position deg, rate deg/s, the IMU stamps before and after)
@@ -744,6 +755,11 @@ class Sequencer:
                 point[i] = start[i] + (targets[i] - start[i]) * k / steps
             out.append(point)
         return out + [targets]
+
+
+def rec_last(recs) -> float:
+    """The newest stamp recorded by any of ``recs`` (channel -> Recording)."""
+    return max(float(r.last_t) for r in recs.values() if r.last_t is not None)
 
 
 def _optional(**values) -> dict:
