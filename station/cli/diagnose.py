@@ -301,8 +301,9 @@ def _separation_line(effect: str, cmd: str) -> str:
     rival = _rival(cmd)
     if rival:
         return f"{effect}: this capture cannot tell it from {rival}; the fewest segments that separate them: {cmd}"
-    return (f"{effect}: this capture's turns keep one steady rate in their windows, where a time offset does not "
-            f"show (it aliases the gyro scale); the fewest turns with their ramp recorded that reveal it: {cmd}")
+    return (f"{effect}: this capture's turns keep one steady rate in their windows, so a time offset shows only "
+            f"through their rate ripple, alike with the gyro scale and the mounting offset's tangential term; the "
+            f"fewest turns with their ramp recorded that reveal it: {cmd}")
 
 
 def _print(out, first, steps, final) -> None:
