@@ -174,3 +174,33 @@ def test_a_time_offset_is_not_seen_without_a_ramp_and_the_designer_proposes_one(
     assert sigma < 0.05 and abs(value - 5.0) < 4.5 * sigma, (value, sigma)
     assert words.aliases(summarise(capture), "time_offset") == []
     assert math.isfinite(value)
+
+
+def test_the_benchs_angle_of_a_ramp_from_reads_placed_on_the_imus_clock():
+    """station/bench/ramp_angle.py on a table written here: rest at 10 deg until the command at
+    IMU time 5.0 s, then 100 deg/s^2 up to 200 deg/s; reads every 0.1 s while it turns, each
+    bracketed by the stamp before it (the read's moment less 0-9 ms) and the one after; the window
+    ends at 9.005 s.  The angle is the profile's within the placement: each read is placed at the
+    stamp before + half a period, within 5 ms of its moment: 200 deg/s x 5 ms = 1 deg at most,
+    and the mean of 20 reads placed with errors uniform in +-5 ms is within 0.5 deg."""
+    from station.bench import ramp_angle
+
+    period, a, w, t_cmd, rest = 0.01, 100.0, 200.0, 5.0, 10.0
+    ramp_s = w / a
+
+    def position(t):                # the table's unwrapped angle at table time t
+        s = np.clip(t - t_cmd, 0.0, ramp_s)
+        return rest + 0.5 * a * s * s + w * max(t - t_cmd - ramp_s, 0.0)
+
+    rng = np.random.default_rng(1)
+    marks = []
+    for T in np.arange(7.2, 9.2, 0.1):
+        before = np.floor(T / period + 1e-9) * period - rng.uniform(0, 0.009)   # the newest stamp received
+        marks.append(ramp_angle.Mark(position(T) % 360.0, w, before, before + 0.02))
+    edge = 9.005
+    turning = ramp_angle.position_at(marks, edge, w, period)
+    angle = ramp_angle.window_angle(rest, turning, ramp_angle.expected_angle(w, edge - t_cmd, a, "start"), "start")
+    assert abs(angle - (position(edge) - rest)) < 0.5, (angle, position(edge) - rest)
+    # a brake: the same reads before the command, the rest position after
+    assert ramp_angle.window_angle(100.0, 30.0 + 720.0, 200.0 * 2.0 + 200.0, "end") == pytest.approx(
+        100.0 - 30.0 + 360.0 * round((600.0 - 70.0) / 360.0))

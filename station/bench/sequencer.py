@@ -163,6 +163,10 @@ class Sequencer:
     # ------------------------------------------------------------------ the run
     def run(self, steps: list) -> None:
         """Execute ``steps``; the table is at rest and the IMU stream stopped afterwards."""
+        ramps = [s.segment for s in steps if isinstance(s, Rotate) and s.record_ramp]
+        if ramps and self.multi:        # before anything moves: one line, exit 2
+            raise SequencerError(f"{ramps[0]}: a turn with its ramp recorded (record_ramp) is placed on one IMU's "
+                                 "clock (the table's reads against its frames): record it with one IMU per run")
         try:
             self._prepare()
             i = 0
