@@ -311,23 +311,53 @@ def _gradient_chunk(w, t, i, j):
     return part[i - lo:i - lo + (j - i)]
 
 
-def _ramp_phase_scale(t, gyro, gyro_mean, angle_deg, steady_rate_dps) -> float:
-    """A recorded ramp's phase (issue 28 item 3): the factor that turns the fraction of the gyro's
-    own turn into the table's angle turned since the window's start, from the part of the window
-    at the steady rate (the gyro along its mean direction within 2 % of the window's fastest edge),
-    whose rate the table states (``steady_rate_dps``).  Not the encoder's angle over the window:
-    under a time offset dt the IMU's samples turn angle + dt (w_end - w_start) (0.5 deg at 100
-    deg/s and 5 ms), and phases scaled to the encoder's angle drift by up to that within the
+def _ramp_fraction(t, gyro, gyro_mean, angle_deg, steady_rate_dps, gyro_sigma_dps=None) -> np.ndarray:
+    """A recorded ramp's phase (issue 28 item 3) as a fraction of ``angle_deg``: the table's angle
+    turned since the window's start, from the gyro along its mean direction with its bias and
+    scale taken from the window itself -- its mean at rest (the run of samples at the slower edge
+    within five times the gyro's noise of it: bias and the Earth rate along the axis) and at the
+    rate (the run at the faster edge: the table's stated ``steady_rate_dps``).  Not the encoder's angle over
+    the window: under a time offset dt the IMU's samples turn angle + dt (w_end - w_start) (0.5 deg
+    at 100 deg/s and 5 ms), and phases scaled to the encoder's angle drift by up to that within the
     window, which the accelerometer's harmonics see as a gravity error of g sin(0.5 deg), 8.7 mg;
-    a time offset only shifts the start of these phases, which the fit's phase takes."""
+    nor the raw gyro's turn: its bias integrates to a phase error growing with time (a MEMS
+    0.1 deg/s: 0.6 deg over 6 s), which a uniform turn's phase absorbs and a ramp's cannot (the
+    designer's noiseless fit of ramp turns was left at chi2 5 per turn in the harmonics).  A time
+    offset only shifts these phases, which the fit's phase takes."""
     direction = gyro_mean / np.linalg.norm(gyro_mean)
     along = gyro @ direction
-    edge = max(abs(along[:EDGE_SAMPLES].mean()), abs(along[-EDGE_SAMPLES:].mean()))
-    at_rate = np.abs(np.abs(along) - edge) < 0.02 * edge
-    if not at_rate.any():
-        return 1.0
-    gyro_turned = float(np.gradient(t) @ along)
-    return abs(steady_rate_dps / float(along[at_rate].mean()) * gyro_turned / angle_deg)
+    head, tail = along[:EDGE_SAMPLES].mean(), along[-EDGE_SAMPLES:].mean()
+    span = abs(tail - head)
+    noise = 0.0 if gyro_sigma_dps is None else float(np.max(gyro_sigma_dps))
+    level = max(5.0 * noise, 1e-3 * span)
+
+    def run_from(edge_first: bool, value: float) -> np.ndarray:
+        """The samples of the run at one edge within ``level`` of ``value``, less EDGE_SAMPLES at
+        its inner end (the ramp's first or last samples: 50 deg/s^2 is 0.5 deg/s per sample at 100
+        Hz, and one such sample in the rest's mean tilts the phase by 0.1 deg over 6 s)."""
+        off = np.abs(along - value) >= level
+        inner = np.flatnonzero(off if edge_first else off[::-1])
+        n = (inner[0] if len(inner) else len(along)) - EDGE_SAMPLES
+        if n < EDGE_SAMPLES:
+            return np.zeros(0)
+        return along[:n] if edge_first else along[len(along) - n:]
+
+    start_is_rest = abs(head) < abs(tail)
+    rest_run = run_from(start_is_rest, head if start_is_rest else tail)
+    rate_run = run_from(not start_is_rest, tail if start_is_rest else head)
+    if span == 0 or not len(rest_run) or not len(rate_run):
+        return _turned_fraction(t, gyro, *_window_start_duration(t), gyro_mean)
+    rest, rate = float(rest_run.mean()), float(rate_run.mean())
+    w = (along - rest) * (abs(steady_rate_dps) / (rate - rest))       # the table's rate, deg/s
+    turned = np.empty(len(t))
+    turned[0] = 0.5 * w[0] * (t[1] - t[0])                            # from the window's start
+    turned[1:] = turned[0] + np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t))
+    return turned / abs(angle_deg)
+
+
+def _window_start_duration(t):
+    start, end = _window(t)
+    return start, end - start
 
 
 def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
@@ -354,7 +384,7 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
     gyro_mean = _column_means(gyro)
     fraction = _phase_fraction(t, gyro, start, duration, gyro_sigma_dps, gyro_mean)
     if steady_rate_dps is not None:     # a recorded ramp: the phase at the table's steady rate
-        fraction *= _ramp_phase_scale(t, gyro, gyro_mean, angle_deg, steady_rate_dps)
+        fraction = _ramp_fraction(t, gyro, gyro_mean, angle_deg, steady_rate_dps, gyro_sigma_dps)
     # the table rate w(t) about the axis, its square and its time derivative are projected on the
     # same basis as the accelerometer (one solve for all of them)
     w = _rate(gyro, gyro_bias, angle_deg, duration, gyro_mean)
