@@ -3,8 +3,6 @@
 encoder can be designed and separated: the scheme key, its compiled step on 1-, 2- and 3-axis
 tables, the simulated bench's ramp, the manifest's rates at the window's edges, the estimate of a
 simulated time offset (honest 1σ over seeds) and the designer's proposal."""
-import math
-
 import numpy as np
 import pytest
 import yaml
@@ -170,10 +168,9 @@ def test_a_time_offset_is_not_seen_without_a_ramp_and_the_designer_proposes_one(
     capture = read_capture("cap", load_data=True)
     assert sum(1 for s in capture.segments if s.extra.get("record_ramp") == "start") == 2
     result, value, sigma = _fit(capture)
-    assert result.verdict if hasattr(result, "verdict") else True
+    assert result.chi2 / result.dof < 1.5, (result.chi2, result.dof)      # the fit of all of it holds
     assert sigma < 0.05 and abs(value - 5.0) < 4.5 * sigma, (value, sigma)
     assert words.aliases(summarise(capture), "time_offset") == []
-    assert math.isfinite(value)
 
 
 def test_the_benchs_angle_of_a_ramp_from_reads_placed_on_the_imus_clock():
