@@ -187,7 +187,8 @@ class SimulatedBench:
 
     def rotation(self, axis_body, rate_dps, duration_s, *, start_up_body=None,
                  axis_elevation_deg: float = 0.0, drift_fraction: float = 0.0,
-                 encoder: bool = True) -> SimSegment:
+                 encoder: bool = True, record_ramp: str | None = None,
+                 ramp_accel_dps2: float = 50.0, ramp_rest_s: float = 0.5) -> SimSegment:
         """Spin the IMU about case direction ``axis_body`` at ``rate_dps``.
 
         The table axis is Earth-fixed, ``axis_elevation_deg`` above the horizontal (0: a
@@ -196,6 +197,11 @@ class SimulatedBench:
         second call of a +/- pair starts from the same attitude.  ``drift_fraction`` changes
         the rate linearly by that fraction over the segment (-0.2: 20 % slower at the end, as a
         screwdriver); ``encoder=False`` reports no angle (a hand or screwdriver rotation).
+        ``record_ramp`` "start": the recording opens with the table at rest for ``ramp_rest_s``
+        (table time), then the table ramps up at ``ramp_accel_dps2`` and turns ``duration_s`` at the
+        rate; "end": ``duration_s`` at the rate, then the brake at ``ramp_accel_dps2`` and
+        ``ramp_rest_s`` at rest (world.ramp_profile); the rates at the window's edges are reported
+        (``rate_start_dps``, ``rate_end_dps``, as the table's own rate read at those table times).
         """
         a_cmd = world._unit(axis_body, "axis_body")
         r = float(rate_dps)
@@ -226,7 +232,8 @@ class SimulatedBench:
             remount = self._remount_error()
             C_bn0 = world.small_rotation(remount) * C_bn0
 
-        n = self._n_samples(duration_s)
+        ramp_s = abs(r) / float(ramp_accel_dps2) if record_ramp else 0.0
+        n = self._n_samples(duration_s + (ramp_s + ramp_rest_s if record_ramp else 0.0))
         fs = self.sample_rate_hz
         dt = 1.0 / fs
         bench = self.truth.bench
@@ -236,10 +243,18 @@ class SimulatedBench:
         w_rad = math.radians(r)
         duration = n * dt
         # the profile is defined in table time, theta = 0 at table time t[0]
-        prof = dict(t0=t[0], rate_rad_s=w_rad, ripple_fraction=bench.rate_ripple_fraction,
-                    ripple_hz=bench.rate_ripple_hz, ripple_phase_rad=phase,
-                    drift_per_s=float(drift_fraction) / duration)
-        theta, theta_dot, theta_ddot = world.rate_profile(tau, **prof)
+        if record_ramp:
+            window0 = t[0] - 0.5 * dt           # the window's start in table time, nominally
+            ramp_at = window0 + (ramp_rest_s if record_ramp == "start" else float(duration_s))
+            prof = dict(t0=t[0], rate_rad_s=w_rad, accel_rad_s2=math.radians(float(ramp_accel_dps2)),
+                        ramp=record_ramp, ramp_at=ramp_at)
+            profile = world.ramp_profile
+        else:
+            prof = dict(t0=t[0], rate_rad_s=w_rad, ripple_fraction=bench.rate_ripple_fraction,
+                        ripple_hz=bench.rate_ripple_hz, ripple_phase_rad=phase,
+                        drift_per_s=float(drift_fraction) / duration)
+            profile = world.rate_profile
+        theta, theta_dot, theta_ddot = profile(tau, **prof)
         wobble_rad = bench.wobble_arcsec * ARCSEC
         wobble_phase = math.radians(bench.wobble_phase_deg)
         if wobble_rad > 0.0:
@@ -261,8 +276,7 @@ class SimulatedBench:
 
         # encoder: true swept angle over the table-time window [t0 - dt/2, t_{N-1} + dt/2] that
         # the station computes from the IMU stamps, plus error
-        edges, _, _ = world.rate_profile(np.array([stamps[0] - 0.5 * dt, stamps[-1] + 0.5 * dt]),
-                                         **prof)
+        edges, edge_rates, _ = profile(np.array([stamps[0] - 0.5 * dt, stamps[-1] + 0.5 * dt]), **prof)
         swept_deg = math.degrees(edges[1] - edges[0])
         enc_err_arcsec = float(self._enc_rng.normal(0.0, bench.table_angle_error_arcsec))
         # an encoder scale error: the table turned (1 + e) times what the encoder reads
@@ -277,6 +291,10 @@ class SimulatedBench:
             meta["angle_deg"] = angle_deg
         if bench.table_axes == 3:
             meta["table_axis"] = k_axis + 1
+        if record_ramp:
+            meta.update(record_ramp=record_ramp, ramp_accel_dps2=float(ramp_accel_dps2),
+                        rate_start_dps=math.degrees(float(edge_rates[0])),
+                        rate_end_dps=math.degrees(float(edge_rates[1])))
         return SimSegment(
             kind="rotation", t=stamps, accel=accel, gyro=gyro, temp=temp, meta=meta,
             truth={

@@ -244,6 +244,44 @@ def rate_profile(t, t0: float, rate_rad_s: float, ripple_fraction: float = 0.0,
     return theta, theta_dot, theta_ddot
 
 
+def ramp_profile(t, t0: float, rate_rad_s: float, accel_rad_s2: float, ramp: str, ramp_at: float):
+    """Table angle, rate and angular acceleration about its axis for a turn whose ramp is part of
+    the motion looked at: ``ramp`` "start": at rest until table time ``ramp_at``, then the rate
+    grows at ``accel_rad_s2`` (magnitude) to ``rate_rad_s`` and holds; "end": ``rate_rad_s`` until
+    ``ramp_at``, then it falls at ``accel_rad_s2`` to rest and stays there.  theta(t0) = 0.
+
+    The rate is piecewise linear in time: with T = |w| / a the ramp's length and s(t) the time
+    since ``ramp_at`` clipped to [0, T], the rate is w s/T (start) or w (1 - s/T) (end), and the
+    angle its exact integral.  Returns (theta, theta_dot, theta_ddot) shaped like ``t``."""
+    t = np.asarray(t, dtype=float)
+    w = float(rate_rad_s)
+    a = abs(float(accel_rad_s2))
+    if not a > 0.0 or ramp not in ("start", "end"):
+        raise ValueError(f"ramp_profile: accel must be > 0 and ramp start or end, got {accel_rad_s2!r}, {ramp!r}")
+    T = abs(w) / a
+    sign = math.copysign(1.0, w)
+
+    def angle(x):
+        """The angle turned from table time -inf (start: at rest) or from ramp_at (end) to x."""
+        s = np.clip(x - ramp_at, 0.0, T)
+        after = np.maximum(x - ramp_at - T, 0.0)
+        if ramp == "start":
+            return sign * 0.5 * a * s * s + w * after
+        before = np.minimum(x - ramp_at, 0.0)       # (negative) time at the rate before the brake
+        return w * before + w * s - sign * 0.5 * a * s * s
+
+    theta = angle(t) - angle(np.asarray(float(t0)))
+    s = np.clip(t - ramp_at, 0.0, T)
+    inside = (t > ramp_at) & (t < ramp_at + T)
+    if ramp == "start":
+        theta_dot = sign * a * s
+        theta_ddot = np.where(inside, sign * a, 0.0)
+    else:
+        theta_dot = w - sign * a * s
+        theta_ddot = np.where(inside, -sign * a, 0.0)
+    return theta, theta_dot, theta_ddot
+
+
 def quat_product(p, q) -> np.ndarray:
     """Hamilton product p (x) q of unit quaternions stored scalar last, (x, y, z, w), as arrays
     (..., 4) broadcast against each other: the rotation q followed by p, i.e. scipy's

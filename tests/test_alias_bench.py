@@ -3,8 +3,7 @@ and the accelerometers' size effect at one rate are named with the `station desi
 --separate` command, whose segments (a turn about a vertical axis, where no vibration is
 modelled) appended to the dry run's capture separate them; an offset per axis group and the
 vibration are named with their command too (fifteenth session: tests/test_alias_offsets.py); a
-time offset is refused in one line with the reason (every segment a scheme describes turns at one
-steady rate)."""
+time offset is designed with turns whose ramp is recorded (fifteenth session: record_ramp)."""
 import json
 import shlex
 
@@ -90,10 +89,13 @@ def test_a_vibration_and_the_size_effect_at_one_rate_are_separated_by_an_appende
         assert p.sigma is not None and abs(p.value) < 4.5 * p.sigma, p
 
 
-def test_a_time_offset_is_refused_in_one_line_with_the_reason_and_diagnose_says_it(tmp_path, capsys, monkeypatch):
-    """time_offset: seen only where the rate changes within a segment; every segment a scheme
-    describes turns at one steady rate, so design --from refuses it (exit 2, one line, before any
-    information is computed) and diagnose names no command for it, only the words."""
+def test_a_time_offset_is_designed_with_turns_whose_ramp_is_recorded_and_diagnose_says_it(tmp_path, capsys,
+                                                                                          monkeypatch):
+    """time_offset: seen only where the rate changes within a segment.  Until the fourteenth session
+    every segment a scheme described turned at one steady rate and design --from refused it; since
+    the fifteenth (record_ramp, issue 28 item 3) it proposes turns with their ramp up recorded, and
+    diagnose's words point to them with the --reveal command (tests/test_ramp_segments.py appends
+    them and estimates the offset)."""
     (tmp_path / "s.yaml").write_text(yaml.safe_dump({
         "name": "tiny", "defaults": {"dwell_s": 1.0, "rate_dps": 30.0, "rotation_s": 12.0},
         "segments": [{"static": f"s{i}", "up_body": u} for i, u in enumerate(
@@ -102,12 +104,11 @@ def test_a_time_offset_is_refused_in_one_line_with_the_reason_and_diagnose_says_
     monkeypatch.chdir(tmp_path)
     assert main(["run", "--scheme", "s.yaml", "--sim", "--out", "cap", "--no-history"]) in (0, 3)
     capsys.readouterr()
-    for args in (["--separate", "time_offset,gyro_scale_asymmetry"], ["--add", "time_offset", "--reveal", "time_offset"]):
-        assert main(["design", "--from", "cap", *args]) == 2
-        lines = capsys.readouterr().err.strip().splitlines()
-        assert len(lines) == 1 and "time_offset is seen only in a rate that changes within a segment" in lines[0] \
-            and "steady rate" in lines[0], lines
-    assert not (tmp_path / "extension.yaml").exists()
+    assert main(["design", "--from", "cap", "--add", "time_offset", "--separate", "time_offset,gyro_scale_asymmetry",
+                 "--rates", "30", "--revolutions", "1", "--dwells", "1", "-o", "ext.yaml"]) == 0
+    entries = yaml.safe_load((tmp_path / "ext.yaml").read_text())["segments"]
+    assert any(e.get("record_ramp") == "start" for e in entries), entries
     said = words.aliases(_summaries("cap"), "time_offset")
-    assert said and all(r is None for r, _ in said) and "steady rate" in said[-1][1], said
-    assert suggest.separations("cap", [], "time_offset", _summaries("cap")) == []
+    assert said and all(r is None for r, _ in said) and "record_ramp: start" in said[-1][1], said
+    assert suggest.separations("cap", [], "time_offset", _summaries("cap")) == [
+        "station design --from cap --add time_offset --reveal time_offset -o extension.yaml"]

@@ -87,6 +87,9 @@ class ImuTwin:
         self.rate_hz = float(truth.sample_rate_hz)
         self.next_k: int | None = None
         self.frames_skipped = 0       # not made: the loop was held up longer than MAX_BATCH samples
+        # the IMU's clock against the table's (truth.bench.time_offset_s, as the simulated bench's):
+        # the sample stamped t was taken at table time t + time_offset_s
+        self.time_offset_s = float(truth.bench.time_offset_s)
 
     def set_rate(self, rate_hz: float, now: float) -> None:
         """Output rate (Hz); the noise per sample follows (densities are per √Hz)."""
@@ -117,6 +120,9 @@ class ImuTwin:
         """(accel m/s², gyro deg/s, temp °C) of the samples at device times ``t`` (on the
         output grid: t = k / rate)."""
         k = np.round(np.asarray(t) * self.rate_hz).astype(np.int64)
+        # stamped t, taken at table time t + time_offset_s (a few ms: the table's plan already holds
+        # that moment, except a command that arrives within it)
+        t = np.asarray(t, float) + self.time_offset_s if self.time_offset_s else t
         C_bn, w_b, wd_b = self.table.kinematics_at(t)
         f_b, w_ib = world.body_kinematics(C_bn, w_b, wd_b, self.lever_arm_m, self.site)
         f_b = world.perturb_specific_force(f_b, self.disturbance_mps2,

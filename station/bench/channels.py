@@ -109,4 +109,5 @@ class Recording:
         times one period; never from wall-clock time), the frames lost, the longest step and
         the mean temperature."""
         return {"window_s": (self.done + self.lost) * self.period, "gaps": self.lost, "samples": self.done,
+                "first_t": self.first_t, "last_t": self.last_t,
                 "longest_step_s": self.longest, "temp": self.temp_sum / self.temp_n if self.temp_n else None}

@@ -23,7 +23,7 @@ from station.core.errors import UserError
 from station.bench.gimbal import Gimbal, right_angle_mountings
 from station.bench.plan import (Chamber, Checkpoint, Dwell, HandRotation, HandStatic, MoveTo, Operator, Plan, Rotate,
                           Settle, WarmUp)
-from station.io.scheme import RotationSpec, Scheme, StaticSpec
+from station.io.scheme import RAMP_REST_S, RotationSpec, Scheme, StaticSpec
 
 MOVE_SETTLE_S = 1.0      # estimate of a move's settling (driver polls), device s
 CARDINAL = {"up": (0, 0, 1), "down": (0, 0, -1), "east": (1, 0, 0), "west": (-1, 0, 0),
@@ -231,12 +231,18 @@ class Compiler:
             rate = sign * spec.rate_dps
             revolutions = max(1, round(abs(spec.rate_dps) * spec.duration_s / 360.0))
             ramp = abs(rate) / lim.rate_accel_dps2
+            recorded = spec.record_ramp
             step = Rotate(f"about IMU axis {_vec(spec.axis_body)} at {spec.rate_dps:+g} deg/s, "
-                          f"{elevation:.4g} deg elevation", spec.name, 0.0, spec=spec, axis=axis,
+                          f"{elevation:.4g} deg elevation"
+                          + (f", its ramp at the {recorded} recorded" if recorded else ""),
+                          spec.name, 0.0, spec=spec, axis=axis,
                           table_rate_dps=rate, revolutions=revolutions, accel_dps2=lim.rate_accel_dps2,
                           settle_s=self.settle_s, elevation_deg=elevation,
-                          table_deg=tuple(float(x) for x in angles))
-            plan.steps.append(_with_estimate(step, 2 * ramp + self.settle_s + step.capture_s))
+                          table_deg=tuple(float(x) for x in angles), record_ramp=recorded,
+                          rest_s=RAMP_REST_S if recorded else 0.0)
+            # the settling (at the rate; a recorded ramp up: at rest, after the move) and the ramps;
+            # a recorded ramp and its rest are in capture_s
+            plan.steps.append(_with_estimate(step, (1 if recorded else 2) * ramp + self.settle_s + step.capture_s))
             theta = angles
         plan.steps.append(Checkpoint(f"{spec.name} saved", spec.name, 0.0))
         return theta

@@ -9,6 +9,7 @@ the driver (timeouts, disconnection) are raised again in the thread that takes s
 from __future__ import annotations
 
 import collections
+import contextlib
 import threading
 import time
 
@@ -118,6 +119,19 @@ class ImuStream:
                 have += len(block)
             self._queued -= have
         return ImuSamples.concat(blocks)
+
+    @contextlib.contextmanager
+    def fine(self, frames: int = 1):
+        """Read ``frames`` frames at a time (not BLOCK_S) while inside: a sync then answers within
+        that many frames of the newest received, instead of up to a block later (a recorded ramp's
+        table reads are placed on the IMU's clock by it: station/bench/ramp_angle.py).  The read
+        under way when entered finishes at the old size."""
+        block = self._block
+        self._block = max(1, int(frames))
+        try:
+            yield self
+        finally:
+            self._block = block
 
     def ask_sync(self) -> int:
         """Ask the reader thread to read everything waiting in the port (the first half of

@@ -76,7 +76,11 @@ class Dwell(Step):
 @dataclass(frozen=True)
 class Rotate(Step):
     """Record a rotation segment: ramp ``axis`` to ``table_rate_dps``, settle, record
-    ``revolutions`` whole turns, ramp down."""
+    ``revolutions`` whole turns, ramp down.  With ``record_ramp`` (issue 28 item 3) one ramp is
+    recorded: "start": the recording opens with the axis at rest (``rest_s``), then the ramp up at
+    ``accel_dps2`` and the whole turns at the rate; "end": the whole turns at the rate, then the
+    brake at ``accel_dps2`` and ``rest_s`` at rest.  The window then holds a change of rate, which
+    shows a time offset between the IMU's stamps and the table's encoder."""
 
     spec: RotationSpec = None
     axis: int = 1                       # table axis, 1 = outer
@@ -86,14 +90,32 @@ class Rotate(Step):
     settle_s: float = 0.0
     elevation_deg: float = 0.0          # the rotation axis above the horizontal, as compiled
     table_deg: tuple = ()               # start angles
+    record_ramp: str | None = None      # "start" | "end": that ramp is inside the recorded window
+    rest_s: float = 0.0                 # with record_ramp: the axis at rest in the window, s
+
+    @property
+    def steady_s(self) -> float:
+        """The whole turns at the rate, s."""
+        return self.revolutions * 360.0 / abs(self.table_rate_dps)
+
+    @property
+    def ramp_s(self) -> float:
+        """The recorded ramp (0 without one), s."""
+        return abs(self.table_rate_dps) / self.accel_dps2 if self.record_ramp else 0.0
 
     @property
     def capture_s(self) -> float:
-        return self.revolutions * 360.0 / abs(self.table_rate_dps)
+        """The recorded window, s."""
+        return self.steady_s + (self.ramp_s + self.rest_s if self.record_ramp else 0.0)
 
     def describe(self) -> str:
+        ramp = ""
+        if self.record_ramp == "start":
+            ramp = f" after {self.rest_s:g} s at rest and the ramp up ({self.ramp_s:.3g} s at {self.accel_dps2:g} deg/s^2)"
+        elif self.record_ramp == "end":
+            ramp = f" then the brake ({self.ramp_s:.3g} s at {self.accel_dps2:g} deg/s^2) and {self.rest_s:g} s at rest"
         return (f"record {self.spec.name}: axis {self.axis} at {self.table_rate_dps:+g} deg/s, "
-                f"{self.revolutions} rev ({self.capture_s:g} s), {self.purpose}")
+                f"{self.revolutions} rev{ramp} ({self.capture_s:g} s), {self.purpose}")
 
 
 @dataclass(frozen=True)

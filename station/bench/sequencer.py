@@ -163,6 +163,10 @@ class Sequencer:
     # ------------------------------------------------------------------ the run
     def run(self, steps: list) -> None:
         """Execute ``steps``; the table is at rest and the IMU stream stopped afterwards."""
+        ramps = [s.segment for s in steps if isinstance(s, Rotate) and s.record_ramp]
+        if ramps and self.multi:        # before anything moves: one line, exit 2
+            raise SequencerError(f"{ramps[0]}: a turn with its ramp recorded (record_ramp) is placed on one IMU's "
+                                 "clock (the table's reads against its frames): record it with one IMU per run")
         try:
             self._prepare()
             i = 0
@@ -359,7 +363,7 @@ class Sequencer:
             problems.append(f"no frame for {gap:.2f} s (limit {run.max_gap_s:g} s)")
         return "; ".join(problems) or None
 
-    def _record_segment(self, name, kind, meta, n, poll, completed, start=None) -> None:
+    def _record_segment(self, name, kind, meta, n, poll, completed, start=None, record=None) -> None:
         """Record segment ``name`` (``n`` samples); a recording over the data-loss limits is
         closed as incomplete with a note, kept aside (``.incomplete``) and recorded again, at
         most ``run.rerecord_attempts`` times.  ``completed(rec)`` gives the manifest keys of a
@@ -380,7 +384,7 @@ class Sequencer:
                     recs[ch] = Recording(seg, int(round(n * ch.rate_hz / self.rate_hz)), ch.rate_hz)
                 if start is not None:
                     start()
-                self._record(recs, poll)
+                (record or self._record)(recs, poll)
                 problems = {}
                 for ch, r in recs.items():
                     if not ch.alive:
@@ -483,6 +487,8 @@ class Sequencer:
         if lim.angle_limits is not None or not math.isfinite(rate) or abs(rate) > lim.max_rate_dps:
             raise SequencerError(f"{spec.name}: {rate:g} deg/s on axis {axis} is outside its limits "
                                  f"(max_rate_dps {lim.max_rate_dps:g}, continuous axes only)")
+        if step.record_ramp:
+            return self._rotate_ramp(step)
         self.table.set_rate(axis, rate)
         self._discard(step.settle_s)
         n = int(round(step.revolutions * 360.0 / abs(rate) * self.rate_hz))
@@ -518,6 +524,116 @@ class Sequencer:
 
         self._record_segment(spec.name, "rotation", meta, n, poll, completed, start=start)
         self.table.set_rate(axis, 0.0)
+
+    def _rotate_ramp(self, step: Rotate) -> None:
+        """A rotation whose window keeps a ramp (issue 28 item 3): "start": settle at rest after
+        the move, open the window, record ``rest_s``, command the rate (the table ramps at its
+        rate_accel_dps2), record the ramp and the turns; "end": ramp up and settle at the rate,
+        open the window, record the turns, command rest (the table brakes), record the brake and
+        ``rest_s`` at rest.  The angle is the rest position against the turning edge's, placed on
+        the IMU's clock by the frames around each read (station/bench/ramp_angle.py)."""
+        from station.bench import ramp_angle
+
+        spec, axis, rate = step.spec, step.axis, step.table_rate_dps
+        start_kind = step.record_ramp == "start"
+        if not start_kind:
+            self.table.set_rate(axis, rate)
+        self._discard(step.settle_s)
+        n = int(round(step.capture_s * self.rate_hz))
+        first = int(round((step.rest_s if start_kind else step.steady_s) * self.rate_hz))
+        marks, rests, command_t = [], [], []
+        hold = max(RATE_HOLD_FRACTION * abs(rate), 10 * self.config.table.rate_tolerance_dps)
+        still = 10 * self.config.table.rate_tolerance_dps
+
+        def mark():
+            stream = self._reference().stream
+            t_before = stream.sync()
+            pos, rates = self._poll_table()
+            t_after = stream.sync()
+            if t_before is None or t_after is None:
+                return
+            m = ramp_angle.Mark(float(pos[axis - 1]), float(rates[axis - 1]), t_before, t_after)
+            if abs(m.rate_dps - rate) <= hold:
+                marks.append(m)
+            elif abs(m.rate_dps) <= still:
+                rests.append(m)
+
+        def record(recs, poll):
+            total = {id(ch): r.n for ch, r in recs.items()}
+            for ch, r in recs.items():
+                r.n = int(round(first * ch.rate_hz / self.rate_hz))
+            self._record(recs, poll)
+            mark()
+            command_t.append(self._reference().stream.sync() or rec_last(recs))   # the command on the IMU's clock
+            self.table.set_rate(axis, rate if start_kind else 0.0)
+            # the window closes the compiled time after the command on the IMU's clock (the
+            # ramp and the turns, or the brake and the rest), not after a count of samples: the
+            # stream runs ahead of what was recorded when the command went out (what the line and
+            # the reader hold), and a brake cut short would end the window still turning
+            after = step.capture_s - (step.rest_s if start_kind else step.steady_s)
+            for ch, r in recs.items():
+                r.n = max(total[id(ch)] - r.n + r.done if r.last_t is None else
+                          r.done + int(round((command_t[-1] + after - float(r.last_t)) * ch.rate_hz)), r.done)
+            self._record(recs, poll)
+            if start_kind:
+                mark()              # still at the rate after the window (the brake comes after)
+            else:                   # at rest after the window: its position
+                self._wait_rest(axis)
+                mark()
+
+        body_sign = spec.rate_dps / rate
+        meta = {"axis_body": list(spec.axis_body), "rate_dps": spec.rate_dps, "table_axis": axis,
+                "table_rate_dps": rate, "revolutions": step.revolutions,
+                "axis_elevation_deg": round(step.elevation_deg, 9), "table_deg": list(step.table_deg),
+                "mounting": list(self.mounting), "record_ramp": step.record_ramp,
+                "ramp_accel_dps2": step.accel_dps2}
+
+        def completed(rec):
+            period = 1.0 / self.rate_hz
+            edge = rec["last_t"] + 0.5 * period if start_kind else rec["first_t"] - 0.5 * period
+            mean_rate = float(np.mean([m.rate_dps for m in marks])) if marks else rate
+            turning = ramp_angle.position_at(marks, edge, mean_rate, period)
+            if turning is None or not rests:
+                raise SequencerError(f"{spec.name}: the table's position was not read at the rate and at rest "
+                                     "around the recorded ramp: its angle is unknown")
+            # the whole turns: the profile from the command's moment (the window may hold more rest
+            # than compiled: the stream runs ahead of the command by what the line holds)
+            turning_s = (edge - command_t[-1]) if start_kind else (command_t[-1] - edge)
+            angle = ramp_angle.window_angle(rests[-1].position_deg, turning,
+                                            ramp_angle.expected_angle(rate, turning_s, step.accel_dps2,
+                                                                      step.record_ramp),
+                                            step.record_ramp)
+            rates = (0.0, mean_rate) if start_kind else (mean_rate, 0.0)
+            # the reads the angle came from (position deg, rate deg/s, the IMU stamps before and after)
+            reads = [[round(m.position_deg, 6), round(m.rate_dps, 6), m.t_before, m.t_after] for m in rests + marks]
+            return _optional(angle_deg=body_sign * angle, table_rate_readback_dps=mean_rate,
+                             rate_start_dps=body_sign * rates[0], rate_end_dps=body_sign * rates[1],
+                             temperature_c=rec["temp"], table_reads=reads)
+
+        def start():
+            marks.clear()
+            rests.clear()
+            mark()                  # at rest ("start") or at the rate ("end") before the window
+
+        with contextlib.ExitStack() as fine:       # each IMU read frame by frame: reads placed within a frame
+            for ch in self._alive():
+                fine.enter_context(ch.stream.fine())
+            self._record_segment(spec.name, "rotation", meta, n, mark, completed, start=start, record=record)
+        self.table.set_rate(axis, 0.0)
+
+    def _wait_rest(self, axis: int, wall_s: float = 30.0) -> None:
+        """Until the axis reads back at rest (within ten rate tolerances), checking for a pause."""
+        still = 10 * self.config.table.rate_tolerance_dps
+        deadline = time.monotonic() + wall_s
+        while True:
+            _, rates = self._poll_table()
+            if abs(float(rates[axis - 1])) <= still:
+                return
+            if time.monotonic() > deadline:
+                raise SequencerError(f"{self.table.name}: axis {axis} did not come to rest after the recorded "
+                                     f"brake (read {float(rates[axis - 1]):.4f} deg/s)")
+            self._check_pause()
+            time.sleep(0.01)
 
     def _operator(self, step: Operator) -> None:
         opened = False
@@ -643,6 +759,11 @@ class Sequencer:
                 point[i] = start[i] + (targets[i] - start[i]) * k / steps
             out.append(point)
         return out + [targets]
+
+
+def rec_last(recs) -> float:
+    """The newest stamp recorded by any of ``recs`` (channel -> Recording)."""
+    return max(float(r.last_t) for r in recs.values() if r.last_t is not None)
 
 
 def _optional(**values) -> dict:

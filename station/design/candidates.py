@@ -28,7 +28,7 @@ import numpy as np
 from station.bench.compile import MOVE_SETTLE_S, Compiler
 from station.bench.gimbal import right_angle_mountings
 from station.design.search import Candidate
-from station.io.scheme import RotationSpec, Scheme, StaticSpec
+from station.io.scheme import RAMP_REST_S, RotationSpec, Scheme, StaticSpec
 
 DEFAULT_RATES_DPS = (10.0, 30.0, 100.0, 200.0)
 DEFAULT_REVOLUTIONS = (1, 2, 5)
@@ -122,24 +122,33 @@ class Table:
     def static_s(self, dwell_s: float) -> float:
         return dwell_s + self.settle_s + self.move_s
 
-    def rotation_pair_s(self, rate_dps: float, revolutions: int) -> float:
+    def rotation_pair_s(self, rate_dps: float, revolutions: int, record_ramp: str | None = None) -> float:
+        """Both directions: whole revolutions, the ramps up and down, the settling and a move each
+        (the compiler's Rotate step); a recorded ramp adds its RAMP_REST_S at rest to the window."""
         one = revolutions * 360.0 / rate_dps + 2.0 * self.ramp_s(rate_dps) + self.settle_s + self.move_s
-        return 2.0 * one
+        return 2.0 * (one + (RAMP_REST_S if record_ramp else 0.0))
 
 
 def static_spec(up, dwell_s: float, name: str | None = None) -> StaticSpec:
     return StaticSpec(name or f"up_{name_of(up)}", tuple(up), float(dwell_s))
 
 
-def rotation_pair(axis, elevation: float, rate: float, revolutions: int, name: str | None = None) -> tuple:
-    base = name or f"rot_{name_of(axis)}_e{elevation:g}_{rate:g}dps_{revolutions}rev"
+def rotation_pair(axis, elevation: float, rate: float, revolutions: int, name: str | None = None,
+                  record_ramp: str | None = None) -> tuple:
+    base = name or (f"rot_{name_of(axis)}_e{elevation:g}_{rate:g}dps_{revolutions}rev"
+                    + (f"_ramp{record_ramp}" if record_ramp else ""))
     T = revolutions * 360.0 / rate
-    return (RotationSpec(f"{base}_p", tuple(axis), +rate, T, axis_elevation_deg=elevation),
-            RotationSpec(f"{base}_m", tuple(axis), -rate, T, axis_elevation_deg=elevation))
+    return (RotationSpec(f"{base}_p", tuple(axis), +rate, T, axis_elevation_deg=elevation, record_ramp=record_ramp),
+            RotationSpec(f"{base}_m", tuple(axis), -rate, T, axis_elevation_deg=elevation, record_ramp=record_ramp))
+
+
+def ramp_of(key) -> str | None:
+    """A rotation candidate's recorded ramp: its key (axis, elevation, rate, revolutions[, ramp])."""
+    return key[4] if len(key) > 4 else None
 
 
 def candidate_set(table: Table, rates_dps=DEFAULT_RATES_DPS, revolutions=DEFAULT_REVOLUTIONS,
-                  dwells_s=DEFAULT_DWELLS_S, elevations=ELEVATIONS_DEG, levels=(None,)):
+                  dwells_s=DEFAULT_DWELLS_S, elevations=ELEVATIONS_DEG, levels=(None,), ramps: bool = False):
     """(candidates for the search, the chunks to compute their information from, notes, masks):
     masks[i] is the candidate's reachable-mounting bit mask (time model's remounts).  ``levels``:
     the temperature chamber's levels every candidate is offered at (None: the room's, no
@@ -147,7 +156,11 @@ def candidate_set(table: Table, rates_dps=DEFAULT_RATES_DPS, revolutions=DEFAULT
     at every level (the search places it at its temperature: information.at_temperature); a
     static's slot stays its attitude, so that each attitude is held at one level (designs whose
     attitudes were repeated at two levels left the accelerometers' scale factors undetermined
-    for the temperature coefficients' sake: docs/design.md, fourteenth session)."""
+    for that temperature coefficients' sake: docs/design.md, fourteenth session).  ``ramps``
+    (a model with a time offset, issue 28 item 3): every rotation pair is offered a second time
+    with its ramp up recorded (``record_ramp: start``, key (axis, elevation, rate, revolutions,
+    "start")), the one kind of segment whose rate changes within its window; one revolution
+    only (the offset's information is the change of rate, not the length)."""
     from station.design.information import UNIT_DWELL_S
 
     cands, masks, notes = [], [], []
@@ -178,6 +191,13 @@ def candidate_set(table: Table, rates_dps=DEFAULT_RATES_DPS, revolutions=DEFAULT
                     key = (axis, float(e), float(rate), int(rev))
                     rot_chunks[e].append((key, rotation_pair(axis, e, rate, rev)))
                     cands.append(Candidate(key, "rotation", table.rotation_pair_s(rate, rev),
+                                           axis=(axis, float(e))))
+                    masks.append(m)
+                if ramps:
+                    rev = min(revolutions)
+                    key = (axis, float(e), float(rate), int(rev), "start")
+                    rot_chunks[e].append((key, rotation_pair(axis, e, rate, rev, record_ramp="start")))
+                    cands.append(Candidate(key, "rotation", table.rotation_pair_s(rate, rev, "start"),
                                            axis=(axis, float(e))))
                     masks.append(m)
     # rotations about one body axis at two elevations in one capture would share one axis group

@@ -247,13 +247,16 @@ def _segments_of(chosen, cands, masks=None, chamber=None, order=None) -> list:
             entries.append(entry)
             specs.append(spec)
             continue
-        axis, e, rate, rev = c.key
-        name = f"rot_{cand_mod.name_of(axis)}_e{e:g}_{rate:g}dps_{rev}rev{tag}"
+        axis, e, rate, rev = c.key[:4]
+        ramp = cand_mod.ramp_of(c.key)
+        name = f"rot_{cand_mod.name_of(axis)}_e{e:g}_{rate:g}dps_{rev}rev{tag}" + (f"_ramp{ramp}" if ramp else "")
         entry = {"rotation": name, "axis_body": [_num(x) for x in _integer_vector(axis)], "rate_dps": rate,
                  "rotation_s": rev * 360.0 / rate}
         if e:
             entry["axis_elevation_deg"] = e
-        pair = cand_mod.rotation_pair(axis, e, rate, rev, name)
+        if ramp:
+            entry["record_ramp"] = ramp
+        pair = cand_mod.rotation_pair(axis, e, rate, rev, name, record_ramp=ramp)
         if sets:
             entry["chamber_c"] = _num(level)
             pair = (replace(pair[0], chamber_c=float(level)), pair[1])
@@ -430,7 +433,8 @@ def _design(config, effects: list, noise: Noise, budget_s: float, criterion: str
                         f"this table (the least: {least:.0f} s with the shortest dwell, {min(dwells_s):g} s)")
     say("candidates on the table (gimbal kinematics)")
     cands, chunks, notes, masks = cand_mod.candidate_set(table, rates_dps, revolutions, dwells_s,
-                                                         levels=levels)
+                                                         levels=levels,
+                                                         ramps=any(e.id == "time_offset" for e in effects))
     if not any(c.kind == "rotation" for c in cands):
         raise UserError("the table can turn about none of the candidate axes (a continuous axis is needed)")
     remount_s = config.run.operator_s if config.run.operator else 0.0

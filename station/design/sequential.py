@@ -52,15 +52,10 @@ CHECK_ROUNDS = 4          # the estimator's check sends the search on at most th
 # (information.column_names), one at a new rate brings its own
 PER_SEGMENT_EFFECTS = ("remount_per_segment", "bias_step")
 # a time offset is seen only where the rate changes within a segment's window (time_offset: the
-# gyro integral moves by dt (w_end - w_start)); every segment a scheme describes turns at one
-# steady rate (the compiler ramps before the window and brakes after it: station/bench/compile.py),
-# so no candidate informs it, at any rate, in either direction or one
+# gyro integral moves by dt (w_end - w_start)); a steady turn's window has none (the compiler ramps
+# before it and brakes after it), so with a time offset in the model the candidates include turns
+# whose ramp up is recorded (record_ramp: start, issue 28 item 3; candidates.candidate_set)
 TIME_OFFSET = "time_offset"
-TIME_OFFSET_REASON = ("time_offset is seen only in a rate that changes within a segment (the gyro integral "
-                      "moves by the offset times the change), and every segment a scheme can describe turns at "
-                      "one steady rate after its ramp, so no segment this table can record separates it: its "
-                      "data are the rate ripple of the turns already recorded; vary the rate within a turn "
-                      "(a ramp recorded whole) or centre the IMU (docs/design.md, fourteenth session)")
 
 
 # an offset per axis group and a vibration once per revolution: turns appended about the capture's
@@ -100,7 +95,7 @@ class Extension:
 def capture_scheme(capture):
     """The capture's complete segments as a Scheme (attitudes, axes, rates, lengths,
     elevations from its manifest)."""
-    from station.io.scheme import RotationSpec, Scheme, StaticSpec
+    from station.io.scheme import RECORD_RAMPS, RotationSpec, Scheme, StaticSpec
 
     rate_hz = float(capture.imu.sample_rate_hz)
     specs = []
@@ -110,9 +105,16 @@ def capture_scheme(capture):
             specs.append(StaticSpec(seg.name, tuple(float(x) for x in seg.up_body), max(samples / rate_hz, 1.0)))
         elif seg.kind == "rotation" and seg.axis_body is not None and seg.rate_dps and seg.angle_deg:
             angle = abs(seg.angle_deg) if seg.angle_deg else samples / rate_hz * abs(seg.rate_dps)
+            ramp = seg.extra.get("record_ramp") if seg.extra.get("record_ramp") in RECORD_RAMPS else None
+            if ramp:        # the turn at the rate only (the ramp's angle, rate^2 / 2a, is the spec's own)
+                accel = seg.extra.get("ramp_accel_dps2")
+                accel = float(accel) if isinstance(accel, (int, float)) and not isinstance(accel, bool) \
+                    and accel > 0 else math.inf
+                angle = max(angle - seg.rate_dps ** 2 / (2.0 * accel), 1.0)
             specs.append(RotationSpec(seg.name, tuple(float(x) for x in seg.axis_body), float(seg.rate_dps),
                                       angle / abs(seg.rate_dps),
-                                      axis_elevation_deg=float(seg.extra.get("axis_elevation_deg", 0.0) or 0.0)))
+                                      axis_elevation_deg=float(seg.extra.get("axis_elevation_deg", 0.0) or 0.0),
+                                      record_ramp=ramp))
     if not any(s.kind == "static" for s in specs):
         raise UserError(f"{capture.path}: no complete static segment with an attitude (up_body): nothing "
                         "to design from")
@@ -186,9 +188,6 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     if "axes" not in table_doc and "no table" in str(table_doc.get("note", "")):
         raise UserError(f"{path}: recorded by hand, without a rate table: station design --from designs segments "
                         "for a table (record the extra attitudes by hand with a hand scheme)")
-    if any(e.id == TIME_OFFSET for e in effects) and (TIME_OFFSET in separate or any(
-            fnmatch.fnmatchcase("time_offset", p) for p in reveal)):
-        raise UserError(f"--from: {TIME_OFFSET_REASON}")
     config, table_source = capture_config(path, config_path)
     base = capture_scheme(capture)
     noise = noise_mod.from_capture(path)
@@ -197,7 +196,7 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     table = cand_mod.Table(config)
     cands, chunks, notes, masks = cand_mod.candidate_set(
         table, rates_dps or cand_mod.DEFAULT_RATES_DPS, revolutions or cand_mod.DEFAULT_REVOLUTIONS,
-        dwells_s or cand_mod.DEFAULT_DWELLS_S)
+        dwells_s or cand_mod.DEFAULT_DWELLS_S, ramps=any(e.id == TIME_OFFSET for e in effects))
     own_chunk, own = [], []
     for spec in base.segments:
         if spec.kind == "static":
@@ -422,7 +421,8 @@ def _entry_s(table, entry) -> float:
     if "static" in entry:
         return float(table.static_s(entry["dwell_s"]))
     rate = float(entry["rate_dps"])
-    return float(table.rotation_pair_s(rate, max(1, round(rate * entry["rotation_s"] / 360.0))))
+    return float(table.rotation_pair_s(rate, max(1, round(rate * entry["rotation_s"] / 360.0)),
+                                       entry.get("record_ramp")))
 
 
 def _goal_rows(names, targets, typical, fraction, info, base, group_a, group_b):

@@ -98,7 +98,12 @@ def segment_seconds(c) -> list:
     two directions, whole revolutions each)."""
     if c.kind == "static":
         return [float(c.dwell_s)]
-    axis, e, rate, rev = c.key
+    axis, e, rate, rev = c.key[:4]
+    if len(c.key) > 4:          # a recorded ramp: the rest and the ramp at the simulated bench's acceleration
+        from station.io.scheme import RAMP_REST_S
+        from station.simulate.dryrun import RAMP_ACCEL_DPS2
+
+        return [rev * 360.0 / rate + rate / RAMP_ACCEL_DPS2 + RAMP_REST_S] * 2
     return [rev * 360.0 / rate] * 2
 
 

@@ -21,6 +21,7 @@ NOT_DESIGNED = ("remount_per_segment", "bias_step")
 # session: an offset per axis group and a vibration once per revolution at one rate are separated
 # by turns about the capture's axes with the table axis vertical (docs/design.md)
 NOT_SEPARABLE: tuple = ()
+TIME_OFFSET = "time_offset"     # revealed by turns whose ramp is recorded (separations)
 
 
 def added(effect_id: str, registry=None) -> str:
@@ -98,6 +99,12 @@ def separations(capture, model_effects, effect_id: str, summaries, registry=None
         effects.append(effect_id)
     if effect_id in NOT_DESIGNED:
         return []
+    if effect_id == TIME_OFFSET and summaries.rotations and not any(
+            getattr(r, "record_ramp", None) for r in summaries.rotations):
+        # its aliases have no effect for a rival (the gyro scale, the mounting offset): the turns
+        # with their ramp recorded that reveal it (station design --from: candidates with
+        # record_ramp: start, issue 28 item 3)
+        return [command(capture, effects, [TIME_OFFSET], registry)]
     return [separate_command(capture, effects, effect_id, rival, registry)
             for rival, _ in aliases(summaries, effect_id)
             if rival is not None and rival != effect_id and rival not in NOT_DESIGNED
@@ -151,7 +158,10 @@ def suggest(diagnosis, capture, registry=None, summaries=None, hand=()) -> None:
 
 
 def _pair_of(cmd: str) -> tuple:
+    """(A, B) of a --separate command; ("", "") for a --reveal one (the time offset's)."""
     words = shlex.split(cmd)
+    if "--separate" not in words:
+        return "", ""
     a, _, b = words[words.index("--separate") + 1].rpartition(",")
     return a, b
 
@@ -196,7 +206,7 @@ def design_lines(diagnosis) -> list[str]:
 
 
 def rival_of(cmd: str) -> str:
-    """B of a ``--separate A,B`` command."""
+    """B of a ``--separate A,B`` command ("" for a --reveal one: the time offset's)."""
     return _pair_of(cmd)[1]
 
 
@@ -208,8 +218,7 @@ def candidate_lines(diagnosis) -> list[str]:
         if getattr(c, "suggestion", ""):
             lines.append(f"{c.effect}: the fewest segments that reveal it: {c.suggestion}")
         for cmd in getattr(c, "separations", None) or []:
-            lines.append(f"{c.effect}: this capture cannot tell it from {rival_of(cmd)}; the fewest segments that "
-                         f"separate them: {cmd}")
+            lines.append(separation_line(c.effect, cmd))
         others = list(getattr(c, "alike", None) or [])
         if others:
             lines.append(f"{c.effect}: this capture cannot tell it from {', '.join(others)} (they explain the misfit "
@@ -219,8 +228,19 @@ def candidate_lines(diagnosis) -> list[str]:
 
 def step_lines(step) -> list[str]:
     """Under a step of --auto: the commands that separate its added effect from a rival."""
-    return [f"caveat: the fewest segments that separate {step.added} from {rival_of(cmd)}: {cmd}"
-            for cmd in getattr(step, "separations", None) or []]
+    return [f"caveat: the fewest segments that separate {step.added} from {rival_of(cmd)}: {cmd}" if rival_of(cmd)
+            else f"caveat: {separation_line(step.added, cmd)}" for cmd in getattr(step, "separations", None) or []]
+
+
+def separation_line(effect: str, cmd: str) -> str:
+    """What diagnose prints beside an alias and its command: a pair's --separate, or the time
+    offset's --reveal (its rivals are no effect: the gyro scale, the mounting offset)."""
+    rival = rival_of(cmd)
+    if rival:
+        return f"{effect}: this capture cannot tell it from {rival}; the fewest segments that separate them: {cmd}"
+    return (f"{effect}: this capture's turns keep one steady rate in their windows, so a time offset shows only "
+            f"through their rate ripple, alike with the gyro scale and the mounting offset's tangential term; the "
+            f"fewest turns with their ramp recorded that reveal it: {cmd}")
 
 
 def all_lines(first, steps, final) -> list[str]:

@@ -372,15 +372,17 @@ def aliases(summaries, effect_id: str) -> list[tuple]:
                     f"every rotation is at one rate ({rates[0]:g} °/s): a scale asymmetry (|w|) and a "
                     "term in the square of the rate (w|w|) act alike there; turn at two rates to tell "
                     "them apart"))
-    if effect_id == "time_offset" and summaries.mounting_offset_m is None:
+    ramps = any(getattr(r, "record_ramp", None) for r in summaries.rotations)
+    if effect_id == "time_offset" and summaries.mounting_offset_m is None and not ramps:
         out.append((None, "a time offset and the tangential acceleration of a varying rate at an unknown "
                     "mounting offset both follow the rate's changes; centre the IMU on the axis, or vary "
                     "the rate with the IMU centred, to tell them apart"))
-    if effect_id == "time_offset" and summaries.rotations:
-        out.append((None, "a time offset is seen only where the rate changes within a segment (here: the "
-                    "turns' rate ripple); every segment a scheme describes turns at one steady rate after its "
-                    "ramp, so no added segment separates it from the gyro scale (no station design --from "
-                    "command): record a turn whose rate changes within it"))
+    if effect_id == "time_offset" and summaries.rotations and not ramps:
+        # (suggest.separations prints the command: turns whose ramp up is recorded, issue 28 item 3)
+        out.append((None, "a time offset is seen only where the rate changes within a segment (here: only the "
+                    "turns' rate ripple: every turn of this capture was recorded at one steady rate, after its "
+                    "ramp); turns whose ramp up is recorded (record_ramp: start) change the rate within the "
+                    "window and separate it from the gyro scale"))
     if effect_id == "accel_lever_arm" and len(rates) == 1:
         out.append((None, f"every rotation is at one rate ({rates[0]:g} °/s): the size effect and any other "
                     "term in the square of the rate act alike; turn at two rates to confirm it grows "

@@ -901,6 +901,9 @@ class Model:
         with np.errstate(invalid="ignore", divide="ignore"):
             self._rot_earth = np.where(visible[:, None], np.column_stack(
                 [self._rot_duration / A * np.sin(A), self._rot_duration / A * (1.0 - np.cos(A))]), 0.0).reshape(R, 2)
+        for i, r in enumerate(rots):    # a recorded ramp: the Earth rate's weights over its own phase
+            if visible[i] and getattr(r, "earth_weights_s", None) is not None:
+                self._rot_earth[i] = r.earth_weights_s
         self._rot_data = np.array([[r.accel_dc, r.accel_cos, r.accel_sin, r.accel_cos2, r.accel_sin2]
                                    for r in rots], float).reshape(R, 5, 3)
         # the harmonics' whitening: the noise covariance of a rotation's coefficients is

@@ -85,6 +85,18 @@ class RotationSummary:
     # 1/2, 1/2, 1/2, 1/2)); the coefficients' noise covariance is sigma^2 / samples * gram^-1.
     # None: whole revolutions taken.
     gram: np.ndarray | None = None
+    # a turn whose recorded window keeps one of the table's ramps (manifest ``record_ramp``: start
+    # or end, issue 28 item 3): the table's rate at the window's start and end as the bench
+    # reported them (deg/s about axis_body, signed like the angle; None: not said).  gyro_start and
+    # gyro_end are then the IMU's own rates at rest and at the steady rate, where the edge means are
+    # exact.
+    record_ramp: str | None = None
+    table_rate_start_dps: float | None = None
+    table_rate_end_dps: float | None = None
+    # (integral of cos phi dt, integral of sin phi dt) over the window, s, phi the angle turned
+    # (tracked by the gyro): what a rate fixed in space across the axis (the Earth's) adds to the
+    # gyro integral.  None: T/A (sin A, 1 - cos A), a uniform turn's (every steady segment's)
+    earth_weights_s: np.ndarray | None = None
 
     @property
     def rate_dps(self) -> float:
@@ -303,8 +315,58 @@ def _gradient_chunk(w, t, i, j):
     return part[i - lo:i - lo + (j - i)]
 
 
+def _ramp_fraction(t, gyro, gyro_mean, angle_deg, steady_rate_dps, gyro_sigma_dps=None) -> np.ndarray:
+    """A recorded ramp's phase (issue 28 item 3) as a fraction of ``angle_deg``: the table's angle
+    turned since the window's start, from the gyro along its mean direction with its bias and
+    scale taken from the window itself -- its mean at rest (the run of samples at the slower edge
+    within five times the gyro's noise of it: bias and the Earth rate along the axis) and at the
+    rate (the run at the faster edge: the table's stated ``steady_rate_dps``).  Not the encoder's angle over
+    the window: under a time offset dt the IMU's samples turn angle + dt (w_end - w_start) (0.5 deg
+    at 100 deg/s and 5 ms), and phases scaled to the encoder's angle drift by up to that within the
+    window, which the accelerometer's harmonics see as a gravity error of g sin(0.5 deg), 8.7 mg;
+    nor the raw gyro's turn: its bias integrates to a phase error growing with time (a MEMS
+    0.1 deg/s: 0.6 deg over 6 s), which a uniform turn's phase absorbs and a ramp's cannot (the
+    designer's noiseless fit of ramp turns was left at chi2 5 per turn in the harmonics).  A time
+    offset only shifts these phases, which the fit's phase takes."""
+    direction = gyro_mean / np.linalg.norm(gyro_mean)
+    along = gyro @ direction
+    head, tail = along[:EDGE_SAMPLES].mean(), along[-EDGE_SAMPLES:].mean()
+    span = abs(tail - head)
+    noise = 0.0 if gyro_sigma_dps is None else float(np.max(gyro_sigma_dps))
+    level = max(5.0 * noise, 1e-3 * span)
+
+    def run_from(edge_first: bool, value: float) -> np.ndarray:
+        """The samples of the run at one edge within ``level`` of ``value``, less EDGE_SAMPLES at
+        its inner end (the ramp's first or last samples: 50 deg/s^2 is 0.5 deg/s per sample at 100
+        Hz, and one such sample in the rest's mean tilts the phase by 0.1 deg over 6 s)."""
+        off = np.abs(along - value) >= level
+        inner = np.flatnonzero(off if edge_first else off[::-1])
+        n = (inner[0] if len(inner) else len(along)) - EDGE_SAMPLES
+        if n < EDGE_SAMPLES:
+            return np.zeros(0)
+        return along[:n] if edge_first else along[len(along) - n:]
+
+    start_is_rest = abs(head) < abs(tail)
+    rest_run = run_from(start_is_rest, head if start_is_rest else tail)
+    rate_run = run_from(not start_is_rest, tail if start_is_rest else head)
+    if span == 0 or not len(rest_run) or not len(rate_run):
+        return _turned_fraction(t, gyro, *_window_start_duration(t), gyro_mean)
+    rest, rate = float(rest_run.mean()), float(rate_run.mean())
+    w = (along - rest) * (abs(steady_rate_dps) / (rate - rest))       # the table's rate, deg/s
+    turned = np.empty(len(t))
+    turned[0] = 0.5 * w[0] * (t[1] - t[0])                            # from the window's start
+    turned[1:] = turned[0] + np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t))
+    return turned / abs(angle_deg)
+
+
+def _window_start_duration(t):
+    start, end = _window(t)
+    return start, end - start
+
+
 def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
-                     gyro_sigma_dps=None, gyro_bias=None, accel_mask=None) -> RotationSummary:
+                     gyro_sigma_dps=None, gyro_bias=None, accel_mask=None,
+                     steady_rate_dps=None) -> RotationSummary:
     """``accel_mask(phase, accel)``: the samples (N,) bool the accelerometer harmonics use, or None
     for all (station.estimate.data_faults.Verdict.accel_keep: samples near a rail or stuck left
     out); the basis is then summed over those samples only.
@@ -325,6 +387,8 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
     spans = _chunks(n)
     gyro_mean = _column_means(gyro)
     fraction = _phase_fraction(t, gyro, start, duration, gyro_sigma_dps, gyro_mean)
+    if steady_rate_dps is not None:     # a recorded ramp: the phase at the table's steady rate
+        fraction = _ramp_fraction(t, gyro, gyro_mean, angle_deg, steady_rate_dps, gyro_sigma_dps)
     # the table rate w(t) about the axis, its square and its time derivative are projected on the
     # same basis as the accelerometer (one solve for all of them)
     w = _rate(gyro, gyro_bias, angle_deg, duration, gyro_mean)
@@ -538,13 +602,15 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
                 summary = rotation_summary(seg.name, axis, group, seg.angle_deg, d.t, _scaled(d.accel, ca),
                                            _scaled(d.gyro, cg), d.temp, gyro_sigma_dps=gyro_sigma,
                                            gyro_bias=static_gyro_mean,
-                                           accel_mask=verdict.accel_keep if verdict.masks else None)
+                                           accel_mask=verdict.accel_keep if verdict.masks else None,
+                                           steady_rate_dps=_ramp_rate(seg))
             except data_faults.TooLittleLeft as e:
                 scanner.drop(seg.name, str(e))
                 continue
             scanner.harmonics(seg.name, summary.samples, len(d.t))
             if seg.extra.get("motion") == "hand":      # the writer says so (manual schemes)
                 summary.steady = False
+            _ramp_keys(summary, seg, d.t, _scaled(d.gyro, cg))
             summary.t_mid_s, summary.index = float(np.mean(d.t)), order[seg.name]
             summary.temp_rate_c_per_s = _slope(d.t, d.temp)
             axis_no = seg.extra.get("table_axis")
@@ -565,6 +631,41 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
         seg.data = d                    # hand turns are short: their samples are kept for the fit
     return _SegmentSummaries(statics, spans, diff_sq_a, diff_sq_g, diff_count, rotations, skipped,
                              [seg for seg, _ in hands], jitters, scanner.report())
+
+
+def _ramp_rate(seg) -> float | None:
+    """A recorded ramp's steady rate (deg/s): the table's at the window's end (a ramp up recorded)
+    or start (a brake recorded), else the commanded rate; None for a segment without a ramp."""
+    ramp = seg.extra.get("record_ramp")
+    if ramp not in ("start", "end"):
+        return None
+    x = seg.extra.get("rate_end_dps" if ramp == "start" else "rate_start_dps")
+    if isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) and x != 0:
+        return float(x)
+    return seg.rate_dps if seg.rate_dps else None
+
+
+def _ramp_keys(summary, seg, t, gyro) -> None:
+    """A recorded ramp's manifest keys onto its summary: the turn is the table's (steady: its
+    accelerometer harmonics are used, the phase tracked by the gyro through the ramp), the
+    table's rates at the window's edges are kept (a key that is not a finite number: not said),
+    and the Earth rate's weights over the window are taken from the gyro-tracked phase (a rest and
+    a ramp spend longer at some angles than a uniform turn: on the simulated bench at 100 deg/s
+    and 50 deg/s^2 the uniform weights left 0.006 deg in the integral, 144 sigma of its noise)."""
+    ramp = seg.extra.get("record_ramp")
+    if ramp not in ("start", "end"):
+        return
+    summary.record_ramp = ramp
+    summary.steady = True
+    start, end = _window(t)
+    fraction = _turned_fraction(t, gyro, start, end - start, _column_means(gyro))
+    phase = np.radians(summary.angle_deg) * fraction
+    weights = np.gradient(t)            # each sample's share of the window (as the gyro integral's)
+    summary.earth_weights_s = np.array([weights @ np.cos(phase), weights @ np.sin(phase)])
+    for key, attr in (("rate_start_dps", "table_rate_start_dps"), ("rate_end_dps", "table_rate_end_dps")):
+        x = seg.extra.get(key)
+        if isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x):
+            setattr(summary, attr, float(x))
 
 
 def _scanned(scanner, seg, d, ca, cg):

@@ -26,7 +26,14 @@ from station.core import yaml_text
 DEFAULT_KEYS = ("dwell_s", "rate_dps", "rotation_s")
 SEGMENT_KEYS = {"static": ("static", "up_body", "dwell_s", "heading_body", "heading_deg", "chamber_c"),
                 "rotation": ("rotation", "axis_body", "rate_dps", "rotation_s", "axis_elevation_deg", "pair",
-                             "encoder", "turn_deg", "chamber_c")}
+                             "encoder", "turn_deg", "chamber_c", "record_ramp")}
+# record_ramp: which of the table's ramps a rotation's recorded window keeps (issue 28 item 3): "start"
+# (the window opens with the table at rest, RAMP_REST_S before the ramp, and keeps the ramp up to the
+# rate), "end" (the window keeps the brake from the rate and closes with the table at rest, RAMP_REST_S
+# after it).  Such a turn's rate changes within its window, the only thing that shows a time offset
+# between the IMU's stamps and the table's encoder (station/model/time_offset.py).
+RECORD_RAMPS = ("start", "end")
+RAMP_REST_S = 0.5       # s of the table at rest kept in a ramp's window (the rate there is exactly 0)
 
 
 @dataclass(frozen=True)
@@ -59,6 +66,7 @@ class RotationSpec:
     kind: str = "rotation"
     turn_deg: float | None = None     # a hand turn's angle by protocol (e.g. 360: one whole turn)
     chamber_c: float | None = None    # set the chamber to this (degC) before the segment; None: as it is
+    record_ramp: str | None = None    # "start" | "end": the window keeps that ramp (RECORD_RAMPS); None: steady
 
     @property
     def revolutions(self) -> float:
@@ -203,8 +211,16 @@ def parse_scheme(doc, source: str, overrides: dict) -> Scheme:
                 if flags["encoder"]:
                     raise UserError(f"{where}.turn_deg: only for turns without an encoder "
                                     "(encoder: false); the encoder measures a table's turns")
+            ramp = entry.get("record_ramp")
+            if ramp is not None:
+                if ramp not in RECORD_RAMPS:
+                    raise UserError(f"{where}.record_ramp: must be start or end (which ramp the recorded "
+                                    f"window keeps), got {str(ramp)[:40]!r}")
+                if not flags["encoder"] or not uses_table:
+                    raise UserError(f"{where}.record_ramp: only for a table's turns (measured by its encoder)")
             base = str(entry["rotation"])
-            common = dict(axis_elevation_deg=elevation, encoder=flags["encoder"], turn_deg=turn)
+            common = dict(axis_elevation_deg=elevation, encoder=flags["encoder"], turn_deg=turn,
+                          record_ramp=ramp)
             chamber = _chamber(entry, where, uses_table)
             if flags["pair"]:
                 segments.append(RotationSpec(f"{base}_p", axis, +rate, duration, **common, chamber_c=chamber))

@@ -13,10 +13,16 @@ import yaml
 
 from station.core.errors import UserError
 from station.io.capture import Capture, DeferredCaptureWriter, ImuInfo, Segment, SegmentData, Site
-from station.io.scheme import RotationSpec, Scheme
+from station.io.scheme import RAMP_REST_S, RotationSpec, Scheme
 
 BLOCK_SECONDS = 10.0     # samples are written and flushed in blocks of this length
 TRUTH_FILE = "sim_truth.yaml"
+# a recorded ramp's acceleration on the simulated table: station.yaml's default rate_accel_dps2
+# (station.bench.config.AxisLimits; a configured table's own is set on the bench by the caller,
+# ``bench.station_ramp_accel_dps2``)
+RAMP_ACCEL_DPS2 = 50.0
+# the keys a simulated rotation reports as the bench does (written when it closes)
+SEGMENT_KEYS = ("angle_deg", "table_axis", "record_ramp", "ramp_accel_dps2", "rate_start_dps", "rate_end_dps")
 
 
 def load_truth(truth_path: str | None, seed: int):
@@ -149,9 +155,13 @@ def _simulate_one(spec, bench):
         # bench's angle error), written as the bench writes it (station/bench/manual.py)
         protocol = not spec.encoder and spec.turn_deg is not None
         drift = 0.0 if spec.encoder or protocol else bench.truth.bench.rate_drift_fraction
+        ramp = {}
+        if spec.record_ramp:        # the ramp recorded (issue 28 item 3): at the configured table's rate_accel
+            ramp = dict(record_ramp=spec.record_ramp, ramp_rest_s=RAMP_REST_S,
+                        ramp_accel_dps2=getattr(bench, "station_ramp_accel_dps2", None) or RAMP_ACCEL_DPS2)
         seg = bench.rotation(spec.axis_body, spec.rate_dps, spec.duration_s,
                              axis_elevation_deg=spec.axis_elevation_deg,
-                             drift_fraction=drift, encoder=spec.encoder)
+                             drift_fraction=drift, encoder=spec.encoder, **ramp)
         meta = {"axis_body": list(spec.axis_body), "rate_dps": spec.rate_dps}
         if spec.encoder:        # on the table: the elevation it turned axis_body at (as station run records)
             meta["axis_elevation_deg"] = float(spec.axis_elevation_deg)
@@ -226,7 +236,7 @@ def _write_segments(writer, scheme: Scheme, bench, progress, setpoint: float | N
             for k in range(0, len(seg.t), block):
                 sl = slice(k, k + block)
                 out.write(seg.t[sl], seg.accel[sl], seg.gyro[sl], seg.temp[sl])
-            out.close("complete", **{k: v for k, v in seg.meta.items() if k in ("angle_deg", "table_axis")})
+            out.close("complete", **{k: v for k, v in seg.meta.items() if k in SEGMENT_KEYS})
 
 
 def replay_chamber(bench, capture, chamber=None) -> float | None:
@@ -335,7 +345,8 @@ def simulate_capture(scheme: Scheme, truth, seed: int, geometry: dict | None = N
             rate_dps=meta.get("rate_dps"), angle_deg=seg.meta.get("angle_deg", meta.get("angle_deg")),
             note=meta.get("note"), extra={**{k: meta[k] for k in ("motion", "axis_elevation_deg", "chamber_c",
                                                                   "chamber") if k in meta},
-                                          **{k: v for k, v in seg.meta.items() if k == "table_axis"}},
+                                          **{k: v for k, v in seg.meta.items()
+                                             if k in SEGMENT_KEYS and k != "angle_deg"}},
             data=SegmentData(t=seg.t, accel=seg.accel, gyro=seg.gyro, temp=seg.temp, gaps=0)))
     return Capture(path=Path(f"<simulated seed {seed}>"), imu=imu, site=site, scheme=scheme.name,
                    segments=segments, extra=_bench_keys(truth, scheme, geometry), warnings=[])

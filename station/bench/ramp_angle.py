@@ -1,0 +1,81 @@
+"""The encoder angle of a rotation whose recorded window keeps a ramp (issue 28 item 3).
+
+A steady turn's angle is its rate read back times the frames' window (station/bench/sequencer.py):
+no moment has to be placed on the IMU's clock.  A window that keeps a ramp cannot be measured
+that way: its angle is the table's position at one edge of the window (where the table is at
+rest: read at any moment) against its position at the other edge, where it turns at the rate.
+That edge is on the IMU's clock (the first or last frame's stamp, half a period out); the table's
+positions are read on the table's.  Each position read while the table turns at the rate is
+placed on the IMU's clock by the frames around the read: every frame that had reached the
+computer before the query was measured before the table answered, and every frame measured
+before the answer had reached it when the reader was asked again afterwards (ImuStream.sync), so
+the answer's moment lies between the newest stamp before (``t_before``) and the newest after
+(``t_after``) plus one period; where in that bracket is said in ``placed``.  At the rate, each
+read is carried to the window's edge; their mean is taken (position_at).  What is left of the placement (half the bracket at most, ~ms on a
+real line) is part of what the estimator's time offset measures: the IMU's clock against the
+table's as the station aligned them -- which is the offset a compensation must use.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Mark:
+    """One read of the turning axis: its position (deg, as the table reports it), its rate
+    (deg/s) and the IMU stamps around the read (s: ``t_before`` <= the table's moment <=
+    ``t_after`` + one period)."""
+
+    position_deg: float
+    rate_dps: float
+    t_before: float
+    t_after: float
+
+
+def placed(mark: Mark, period_s: float) -> float:
+    """The read's moment on the IMU's clock: the newest stamp before the query plus half a period.
+    The bracket's upper end is loose: the reader thread answers the second sync only when its
+    block of frames (ImuStream, 0.1 s) is complete, so ``t_after`` lies up to a block after the
+    answer, while the query goes out as soon as the first sync returns -- at the newest frame then
+    received.  Measured on the twins over pseudo-terminals (--speed 1, 100 Hz): brackets 0.1 s
+    wide, the reads' moments consistent within 2 ms of one another, and the bracket's middle 43 ms
+    after them (4.3 deg at 100 deg/s); the newest stamp before plus half a period is within the
+    query's own latency of the answer (docs/design.md, fifteenth session)."""
+    return mark.t_before + 0.5 * period_s
+
+
+def position_at(marks: list, t: float, rate_dps: float, period_s: float) -> float | None:
+    """The axis' position (deg, unwrapped about the first mark's) at IMU time ``t`` from the marks
+    read while it turned at ``rate_dps``: each mark, placed on the IMU's clock (placed), carried
+    to ``t`` at the rate; their mean.  None without a mark."""
+    if not marks:
+        return None
+    first = marks[0]
+    t0 = placed(first, period_s)
+    values = []
+    for m in marks:
+        tm = placed(m, period_s)
+        expected = first.position_deg + rate_dps * (tm - t0)
+        unwrapped = m.position_deg + 360.0 * np.round((expected - m.position_deg) / 360.0)
+        values.append(unwrapped + rate_dps * (t - tm))
+    return float(np.mean(values))
+
+
+def window_angle(rest_deg: float, turning_deg: float, expected_deg: float, ramp: str) -> float:
+    """The table angle over the window (deg, the table axis' sense): from the rest position to the
+    turning edge's (ramp "start") or from it to the rest position ("end"), the whole turns chosen
+    nearest ``expected_deg`` (the compiled profile's angle: the rest, the ramp r^2 / 2a and the
+    turns at the rate, far nearer than half a turn)."""
+    d = (turning_deg - rest_deg) if ramp == "start" else (rest_deg - turning_deg)
+    return float(d + 360.0 * np.round((expected_deg - d) / 360.0))
+
+
+def expected_angle(rate_dps: float, moving_s: float, accel_dps2: float, ramp: str) -> float:
+    """The angle a ramp's window holds (signed like the rate) when ``moving_s`` of it lies between
+    the rate's command and the window's end (ramp "start": the ramp up is in that time, r^2 / 2a
+    less than the rate's), or between the window's start and the brake's command ("end": the brake
+    adds r^2 / 2a after it)."""
+    ramp_deg = np.sign(rate_dps) * rate_dps ** 2 / (2.0 * accel_dps2)
+    return float(rate_dps * moving_s + (-ramp_deg if ramp == "start" else ramp_deg))

@@ -1,0 +1,203 @@
+"""Issue 28 item 3 (fifteenth session): a rotation whose recorded window keeps the table's ramp
+(``record_ramp: start | end``), so that a time offset between the IMU's stamps and the table's
+encoder can be designed and separated: the scheme key, its compiled step on 1-, 2- and 3-axis
+tables, the simulated bench's ramp, the manifest's rates at the window's edges, the estimate of a
+simulated time offset (honest 1σ over seeds) and the designer's proposal."""
+import numpy as np
+import pytest
+import yaml
+
+from station.bench.compile import compile_scheme
+from station.bench.config import AxisConfig, Config, RunConfig, TableConfig
+from station.bench.plan import Rotate
+from station.core.errors import UserError
+from station.io.scheme import RAMP_REST_S, scheme_from_text
+from test_compile import check_plan
+
+RAMPS = """\
+name: ramps
+defaults: {dwell_s: 2, rate_dps: 100, rotation_s: 3.6}
+segments:
+  - {static: s1, up_body: [0, 0, 1]}
+  - {rotation: up, axis_body: [1, 0, 0], record_ramp: start}
+  - {rotation: down, axis_body: [0, 1, 1], record_ramp: end}
+  - {rotation: steady, axis_body: [0, 0, 1]}
+"""
+# steady pairs about the three axes (the gyro scale factors) beside the ramps (the time offset: a
+# ramp alone moves the integral by S A + dt w, the scale and the offset together)
+STEADY_XY = """\
+  - {rotation: steady_x, axis_body: [1, 0, 0]}
+  - {rotation: steady_y, axis_body: [0, 1, 0]}
+"""
+
+
+def test_the_scheme_key_is_checked():
+    scheme = scheme_from_text(RAMPS, "ramps.yaml")
+    ramps = {s.name: s.record_ramp for s in scheme.segments if s.kind == "rotation"}
+    assert ramps == {"up_p": "start", "up_m": "start", "down_p": "end", "down_m": "end",
+                     "steady_p": None, "steady_m": None}
+    for bad, said in (("record_ramp: both", "must be start or end"), ("record_ramp: [start]", "must be start or end"),
+                      ("record_ramp: start, encoder: false", "only for a table's turns")):
+        text = RAMPS.replace("record_ramp: start", bad)
+        with pytest.raises(UserError, match=f"ramps.yaml: segments\\[1\\].record_ramp: {said}"):
+            scheme_from_text(text, "ramps.yaml")
+
+
+@pytest.mark.parametrize("axes", [1, 2, 3])
+def test_a_recorded_ramp_compiles_on_one_two_and_three_axis_tables(axes):
+    """The step turns the scheme's axis (forward kinematics: test_compile.check_plan), keeps the
+    ramp in its window at the table's own rate_accel_dps2 and says so; the plan's time counts the
+    ramp once in the window and the other outside it."""
+    accel = 40.0
+    fast = AxisConfig(max_rate_dps=300, max_accel_dps2=300, rate_accel_dps2=accel)
+    config = Config(table=TableConfig(axes=axes, limits=(fast,)), run=RunConfig(operator=True, settle_s=5))
+    plan = compile_scheme(scheme_from_text(RAMPS, "ramps.yaml"), config)
+    assert check_plan(plan, config) == 7
+    rot = {s.spec.name: s for s in plan if isinstance(s, Rotate)}
+    ramp_s = 100.0 / accel
+    for name, kind in (("up_p", "start"), ("up_m", "start"), ("down_p", "end"), ("down_m", "end")):
+        step = rot[name]
+        assert step.record_ramp == kind and step.accel_dps2 == accel and step.rest_s == RAMP_REST_S
+        assert step.capture_s == pytest.approx(3.6 + ramp_s + RAMP_REST_S)
+        assert step.estimate_s == pytest.approx(ramp_s + 5 + step.capture_s)      # the other ramp, settling
+        assert ("after 0.5 s at rest and the ramp up" if kind == "start" else "then the brake") in step.describe()
+    steady = rot["steady_p"]
+    assert steady.record_ramp is None and steady.capture_s == pytest.approx(3.6)
+    assert steady.estimate_s == pytest.approx(2 * ramp_s + 5 + 3.6)
+
+
+def _ramp_capture(tmp_path, time_offset_s, seed, rate=100.0):
+    """A small dry run: six faces, one steady pair, ramp pairs up (start) and down (end)."""
+    from sim_devices.truth import default_truth
+    from station.simulate import dryrun
+
+    truth = default_truth(1)
+    truth.bench.time_offset_s = time_offset_s
+    text = RAMPS.replace("rate_dps: 100", f"rate_dps: {rate:g}").replace(
+        "  - {static: s1, up_body: [0, 0, 1]}\n",
+        "".join(f"  - {{static: s{i}, up_body: {u}}}\n" for i, u in enumerate(
+            [[0, 0, 1], [0, 0, -1], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0]]))) + STEADY_XY
+    return truth, dryrun.simulate_capture(scheme_from_text(text, "ramps.yaml"), truth, seed)
+
+
+def test_the_simulated_bench_records_the_ramp_and_the_rates_at_the_window_edges(tmp_path):
+    """The window of a ramp up opens at rest and ends at the rate; the gyro shows it; the encoder
+    angle is the table's over the window: the rest, the ramp (r^2 / 2a) and the turns."""
+    from station.simulate.dryrun import RAMP_ACCEL_DPS2
+
+    _, capture = _ramp_capture(tmp_path, 0.0, 2)
+    seg = {s.name: s for s in capture.segments}
+    up, down = seg["up_p"], seg["down_m"]
+    assert up.extra["record_ramp"] == "start" and up.extra["rate_start_dps"] == 0.0
+    assert up.extra["rate_end_dps"] == pytest.approx(100.0)
+    assert down.extra["rate_start_dps"] == pytest.approx(-100.0) and down.extra["rate_end_dps"] == 0.0
+    ramp_deg = 100.0 ** 2 / (2 * RAMP_ACCEL_DPS2)
+    # the encoder's 2 arcsec and the window's rounding to whole samples (half a sample at the rate: 0.5 deg)
+    assert up.angle_deg == pytest.approx(360.0 + ramp_deg, abs=0.6)
+    g = up.data.gyro @ np.array([1.0, 0, 0])
+    assert abs(g[:3].mean()) < 0.5 and g[-3:].mean() == pytest.approx(100.0, rel=0.01)
+
+
+def _fit(capture):
+    from station.estimate import lsq
+    from station.estimate.summaries import summarise
+    from station.model import EFFECTS
+
+    result = lsq.fit(summarise(capture), [EFFECTS["time_offset"]()])
+    names, index, factors, units = lsq._reported_index(result, "m/s^2", "deg/s")
+    k = names.index("time_offset")
+    value = float(result.x[index[k]]) * factors[k]
+    sigma = float(np.sqrt(result.covariance[index[k], index[k]])) * factors[k]
+    return result, value, sigma
+
+
+def test_the_estimate_recovers_a_simulated_time_offset_with_an_honest_sigma(tmp_path):
+    """A 5 ms offset of the twin's clock (truth.bench.time_offset_s), estimated from the ramps over
+    seeds: the errors over their own 1σ are standard normal.  Over N seeds sum z^2 ~ chi2(N); the
+    test takes the 0.1 % and 99.9 % points, so a 1σ 1.9x too large (E sum z^2 = N/3.6) or too
+    small (3.6 N) fails: with N = 8 the bounds are 1.65 and 26.1, against 2.2 and 29 expected."""
+    from scipy.stats import chi2
+
+    n = 8
+    z = []
+    for seed in range(n):
+        _, capture = _ramp_capture(tmp_path, 0.005, 10 + seed)
+        result, value, sigma = _fit(capture)
+        # the 1σ from the gyro noise: a ramp pair's integral noise sqrt(2 T / fs) sigma_g over its change
+        # of rate (100 deg/s): at the simulated 0.03 deg/h/rtHz, a few microseconds; the fit's 1σ
+        # cannot be below 1 us nor above 0.1 ms
+        assert 1e-3 < sigma < 0.1, sigma
+        z.append((value - 5.0) / sigma)
+    s = float(np.sum(np.square(z)))
+    assert chi2.ppf(0.001, n) < s < chi2.ppf(0.999, n), z
+
+
+def test_a_time_offset_is_not_seen_without_a_ramp_and_the_designer_proposes_one(tmp_path, capsys, monkeypatch):
+    """On a capture of steady turns a time offset is not revealed and diagnose's words point to the
+    ramps; `station design --from CAP --add time_offset --reveal time_offset` proposes turns with
+    their ramp up recorded (the fewest: one pair), `run --append` records them into the capture and
+    the estimate then finds the simulated 5 ms within 4.5σ."""
+    from sim_devices.truth import default_truth
+    from station.cli import main
+    from station.diagnose import suggest, words
+    from station.estimate.summaries import summarise
+    from station.io.capture import read_capture
+
+    truth = default_truth(1)
+    truth.bench.time_offset_s = 0.005
+    (tmp_path / "truth.yaml").write_text(yaml.safe_dump(truth.to_yaml_dict(), sort_keys=False))
+    (tmp_path / "s.yaml").write_text(yaml.safe_dump({
+        "name": "tiny", "defaults": {"dwell_s": 2.0, "rate_dps": 100.0, "rotation_s": 3.6},
+        "segments": [{"static": f"s{i}", "up_body": u} for i, u in enumerate(
+            [[0, 0, 1], [0, 0, -1], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0]])]
+        + [{"rotation": "rz", "axis_body": [0, 0, 1]}, {"rotation": "rx", "axis_body": [1, 0, 0]}]}))
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "--scheme", "s.yaml", "--sim", "--sim-truth", "truth.yaml", "--seed", "3", "--out", "cap",
+                 "--no-history"]) in (0, 3)
+    summaries = summarise(read_capture("cap", load_data=True))
+    said = words.aliases(summaries, "time_offset")
+    assert said and "record_ramp: start" in said[-1][1], said
+    cmd = suggest.separations("cap", [], "time_offset", summaries)
+    assert cmd == ["station design --from cap --add time_offset --reveal time_offset -o extension.yaml"]
+    capsys.readouterr()
+    assert main(["design", "--from", "cap", "--add", "time_offset", "--reveal", "time_offset", "--rates", "100",
+                 "--revolutions", "1", "--dwells", "10", "-o", "ext.yaml"]) == 0
+    ext = yaml.safe_load((tmp_path / "ext.yaml").read_text())
+    assert len(ext["segments"]) == 1 and ext["segments"][0]["record_ramp"] == "start", ext
+    assert main(["run", "--sim", "--append", "cap", "--scheme", "ext.yaml", "--no-history"]) in (0, 3)
+    capture = read_capture("cap", load_data=True)
+    assert sum(1 for s in capture.segments if s.extra.get("record_ramp") == "start") == 2
+    result, value, sigma = _fit(capture)
+    assert result.chi2 / result.dof < 1.5, (result.chi2, result.dof)      # the fit of all of it holds
+    assert sigma < 0.05 and abs(value - 5.0) < 4.5 * sigma, (value, sigma)
+    assert words.aliases(summarise(capture), "time_offset") == []
+
+
+def test_the_benchs_angle_of_a_ramp_from_reads_placed_on_the_imus_clock():
+    """station/bench/ramp_angle.py on a table written here: rest at 10 deg until the command at
+    IMU time 5.0 s, then 100 deg/s^2 up to 200 deg/s; reads every 0.1 s while it turns, each
+    bracketed by the stamp before it (the read's moment less 0-9 ms) and the one after; the window
+    ends at 9.005 s.  The angle is the profile's within the placement: each read is placed at the
+    stamp before + half a period, within 5 ms of its moment: 200 deg/s x 5 ms = 1 deg at most,
+    and the mean of 20 reads placed with errors uniform in +-5 ms is within 0.5 deg."""
+    from station.bench import ramp_angle
+
+    period, a, w, t_cmd, rest = 0.01, 100.0, 200.0, 5.0, 10.0
+    ramp_s = w / a
+
+    def position(t):                # the table's unwrapped angle at table time t
+        s = np.clip(t - t_cmd, 0.0, ramp_s)
+        return rest + 0.5 * a * s * s + w * max(t - t_cmd - ramp_s, 0.0)
+
+    rng = np.random.default_rng(1)
+    marks = []
+    for T in np.arange(7.2, 9.2, 0.1):
+        before = np.floor(T / period + 1e-9) * period - rng.uniform(0, 0.009)   # the newest stamp received
+        marks.append(ramp_angle.Mark(position(T) % 360.0, w, before, before + 0.02))
+    edge = 9.005
+    turning = ramp_angle.position_at(marks, edge, w, period)
+    angle = ramp_angle.window_angle(rest, turning, ramp_angle.expected_angle(w, edge - t_cmd, a, "start"), "start")
+    assert abs(angle - (position(edge) - rest)) < 0.5, (angle, position(edge) - rest)
+    # a brake: the same reads before the command, the rest position after
+    assert ramp_angle.window_angle(100.0, 30.0 + 720.0, 200.0 * 2.0 + 200.0, "end") == pytest.approx(
+        100.0 - 30.0 + 360.0 * round((600.0 - 70.0) / 360.0))
