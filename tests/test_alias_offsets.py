@@ -9,6 +9,7 @@ import json
 import shlex
 
 import numpy as np
+import pytest
 import yaml
 
 from sim_devices.truth import mems_truth
@@ -47,6 +48,25 @@ def test_appended_turns_share_the_capture_offsets_about_the_same_axis_line():
 
     rots = [R(0, 0, [1, 0, 0]), R(1, 1, [0, 1, 0]), R(2, 2, [2, 0, 0]), R(3, 3, [0, 1, 0], 2), R(4, 4, [0, 0, 1])]
     assert offset_groups(rots) == {0: 0, 1: 1, 2: 0, 3: 3, 4: 4}
+
+
+@pytest.mark.parametrize("vertical_table_axis, resolved", [(1, True), (2, False), (None, False)])
+def test_diagnose_says_the_pair_resolved_only_where_the_model_shares_the_offset(vertical_table_axis, resolved):
+    """words._vertical_on_own_axes follows offset_groups: an appended vertical turn about body x
+    resolves the pair only when the level turn about x was turned by the same table axis (the
+    review's case: the same body axis on another table axis has an offset of its own)."""
+    from types import SimpleNamespace as NS
+
+    from station.diagnose.words import _vertical_on_own_axes
+
+    g = 9.80665
+    level = NS(index=0, group=0, steady=True, axis_body=np.array([1.0, 0, 0]), table_axis=1,
+               accel_cos=np.array([0, g, 0.0]), accel_sin=np.array([0, 0, g]), accel_dc=np.zeros(3))
+    vertical = NS(index=1, group=1, steady=True, axis_body=np.array([1.0, 0, 0]), table_axis=vertical_table_axis,
+                  accel_cos=np.zeros(3), accel_sin=np.zeros(3), accel_dc=np.array([g, 0, 0]))
+    s = NS(rotations=[level, vertical])
+    assert (offset_groups([level, vertical])[1] == 0) == resolved
+    assert _vertical_on_own_axes(s) == resolved
 
 
 def test_axis_offsets_and_the_vibration_are_named_with_a_command_and_separated_by_vertical_turns(

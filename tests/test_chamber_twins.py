@@ -24,6 +24,8 @@ from sim_devices.truth import default_truth
 from station.cli import main
 from station.io.capture import read_capture
 
+from server_guard import guard
+
 SETPOINT_C = 60.0
 ROOM_C = 25.0
 RAMP_C_PER_MIN = 30.0       # the twin's chamber and station.yaml agree
@@ -81,6 +83,8 @@ def served(tmp_path):
                           "--seed", "7", "--sim-truth", str(tmp_path / "truth.yaml"),
                           "--chamber-ramp-c-per-min", f"{RAMP_C_PER_MIN:g}"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
+    # stopped if pytest is killed first (tests/server_guard.py; the guard ends with it otherwise)
+    guarded = guard(pids=[p.pid], sig=signal.SIGTERM, grace_s=3.0)
     try:
         paths = {}
         while "chamber" not in paths:
@@ -96,6 +100,7 @@ def served(tmp_path):
         except subprocess.TimeoutExpired:
             p.kill()
             p.wait()
+        guarded.release()
 
 
 class Operator(threading.Thread):

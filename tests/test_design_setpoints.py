@@ -192,3 +192,17 @@ def test_a_refused_design_of_two_setpoints_gives_way_to_the_far_end_alone(tmp_pa
     calls.clear()                 # a linear model: one setpoint offered, nothing to fall back to
     designer.design(config, effects[:1], None, 3715.0, "worst:*_tempco_*")
     assert calls == [None]
+
+
+def test_setpoints_with_from_are_refused_in_one_line(tmp_path, capsys):
+    """--from adds segments at the capture's temperatures: --setpoints is refused, not ignored
+    (it was: the whole search ran without a word of it)."""
+    from station.cli.app import main
+
+    (tmp_path / "cap").mkdir()
+    (tmp_path / "cap" / "manifest.yaml").write_text("not read: the options are refused first\n")
+    status = main(["design", "--from", str(tmp_path / "cap"), "--reveal", "gyro_bias_tempco_*", "--add",
+                   "temperature_bias", "--setpoints", "60"])
+    err = capsys.readouterr().err
+    assert status == 2 and len([x for x in err.splitlines() if x.strip()]) == 1, err
+    assert "--setpoints" in err and "Traceback" not in err

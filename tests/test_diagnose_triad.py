@@ -94,6 +94,16 @@ def test_what_a_warm_up_scheme_cannot_reveal_is_said_with_its_1_sigma_and_the_de
         (eid,) = reg.add(u.spec)
         names = [p.name for p in reg.create(eid).params]
         assert any(fnmatch.fnmatchcase(n, u.reveal.strip("'")) for n in names), (u.reveal, names)
+    # a change with the temperature's square: no `--from` command (segments added at the capture's
+    # temperatures cannot reveal it: the designer refused such proposals on the quick-start
+    # capture), a new design at a chamber's setpoints instead; the force's scale keeps its command
+    cmd = (lambda cap, effects, reveal: f"station design --from {cap} --add {effects[0]} --reveal {reveal[0]}")
+    t2_after = unrevealed.after(said["GyroScaleTemperatureSquared"], "cap", cmd)
+    assert "--from" not in t2_after and "chamber" in t2_after and t2_after.endswith("-o scheme.yaml")
+    assert "station design --config station.yaml --add station.model.unlisted:GyroScaleTemperatureSquared" in t2_after
+    assert "'worst:gyro_scale_tempco2_*'" in t2_after
+    assert unrevealed.after(said["GyroScaleForce"], "cap", cmd).startswith(
+        "; the segments that would reveal it: station design --from cap --add station.model.unlisted:GyroScaleForce")
 
 
 def test_the_unlisted_effects_follow_the_simulators_physics():

@@ -307,7 +307,7 @@ def test_the_page_says_what_the_capture_cannot_reveal_as_the_screen_and_json_do(
     assert items[:len(said)] == said, (items, said)
     # the command is whole on the page (a code element of its own) and runs as printed
     text = (out / "index.html").read_text(encoding="utf-8")
-    assert text.count("<code>station design --from ") == len(items)
+    assert text.count("<code>station design --") == len(items)
     # `station report` (its own diagnosis) lists them too
     assert main(["report", str(optimal9_run), "-o", str(tmp_path / "page.html"), "--no-auto"]) == 0
     assert _page_items(tmp_path / "page.html")[:len(said)] == said

@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 import pg_server
-from server_guard import alive, session_members
+from server_guard import alive, session_members, start_time
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -91,7 +91,7 @@ def test_a_killed_pytest_leaves_no_server_running(tmp_path):
                               str(tmp_path / "test_inner.py")],
                              cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                              stdin=subprocess.DEVNULL, start_new_session=True)
-    pids = {}
+    pids, started = {}, {}
     try:
         deadline = time.monotonic() + 180
         while not record.exists() and inner.poll() is None and time.monotonic() < deadline:
@@ -102,17 +102,20 @@ def test_a_killed_pytest_leaves_no_server_running(tmp_path):
         assert pids["station sim serve"] and len(pids["dask scheduler and worker"]) >= 3   # scheduler, nanny, worker
         if why is None:
             assert pids["postgres"] and Path(folder).is_dir()
-        assert all(alive(pid) for group in pids.values() for pid in group)
+        # who each pid is (its start time): a pid the system gives to another process after the
+        # server's ends is neither counted as the server nor killed below
+        started.update({pid: start_time(pid) for group in pids.values() for pid in group})
+        assert all(alive(pid, started[pid]) for group in pids.values() for pid in group)
 
         inner.kill()                          # SIGKILL to the controlling pytest alone, as it happened
         killed = time.monotonic()
         inner.wait(timeout=30)
         # the guards stop each server (SIGQUIT / SIGTERM, SIGKILL after 3-5 s): well within 20 s
         deadline = killed + 20
-        left = {name: [p for p in group if alive(p)] for name, group in pids.items()}
+        left = {name: [p for p in group if alive(p, started[p])] for name, group in pids.items()}
         while any(left.values()) and time.monotonic() < deadline:
             time.sleep(0.05)
-            left = {name: [p for p in group if alive(p)] for name, group in left.items()}
+            left = {name: [p for p in group if alive(p, started[p])] for name, group in left.items()}
         took = time.monotonic() - killed
         assert not any(left.values()), f"still running {took:.1f} s after pytest was killed: {left}"
         if folder:
@@ -125,7 +128,7 @@ def test_a_killed_pytest_leaves_no_server_running(tmp_path):
         for pid in session_members(inner.pid):
             os.kill(pid, signal.SIGKILL)
         for pid in (p for group in pids.values() for p in group):
-            if alive(pid):
+            if pid in started and alive(pid, started[pid]):
                 os.kill(pid, signal.SIGKILL)
         if inner.poll() is None:
             inner.kill()

@@ -163,6 +163,9 @@ def _cmd_from(args) -> int:
         raise UserError("--from: give --reveal PARAMS or --separate A,B (one of them)")
     if args.duration is not None:
         raise UserError("--from proposes the fewest segments whatever their time: leave out --duration")
+    if getattr(args, "setpoints", None) is not None:
+        raise UserError("--setpoints chooses a new scheme's chamber levels; --from adds segments at the capture's "
+                        "temperatures: leave out --setpoints")
     if not Path(args.from_capture).is_dir():
         raise UserError(f"--from {args.from_capture}: not a capture directory")
     separate = ()

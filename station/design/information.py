@@ -26,6 +26,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from station.io.scheme import Scheme
+# the effects whose terms carry the square of (T - T_ref): the library's bias curve and the scale
+# factors' second order (station/model/unlisted.py); the others are linear in it
+from station.model.temperature import SQUARED_IN_TEMPERATURE
 
 # a static's rows that are priors on its attitude (the table's angles; the weak one), not data:
 # their information does not grow with the dwell
@@ -109,13 +112,6 @@ def temperature_powers(effects: list, parameters: "Parameters", shared: int) -> 
             for p in e.params:
                 power[at[p.name]] = temperature_power(e)
     return power
-
-
-# the effects in the temperature's difference from a reference whose terms carry its square: the
-# library's bias curve and the scale factors' second order (station/model/unlisted.py).  The
-# others (temperature_bias, scale_temperature, the unlisted axis tilt) are linear in it.
-SQUARED_IN_TEMPERATURE = ("temperature_bias_quadratic", "accel_scale_temperature_squared",
-                          "gyro_scale_temperature_squared")
 
 
 def temperature_power(effect) -> int:

@@ -260,8 +260,8 @@ def _candidates_table(d) -> str:
 def _unrevealed_section(first, steps, final) -> str:
     """What the capture cannot reveal or separate, each line as diagnose prints it on screen and
     in JSON (``design_suggestions``, ``not_revealed``, the candidates' and the steps' commands:
-    station.diagnose.suggest.all_lines), the `station design --from` command in code so that it
-    is copied whole."""
+    station.diagnose.suggest.all_lines), the `station design` command that ends it (--from, or a
+    new run's --config) in code so that it is copied whole."""
     from station.diagnose.suggest import all_lines
 
     lines = all_lines(first, steps, final)
@@ -269,7 +269,7 @@ def _unrevealed_section(first, steps, final) -> str:
         return ""
     items = []
     for line in lines:
-        words, sep, cmd = line.partition("station design --from ")
+        words, sep, cmd = line.partition("station design --")
         items.append(f"<li>{_e(words)}<code>{_e(sep + cmd)}</code></li>" if sep else f"<li>{_e(line)}</li>")
     return ("<h3>What this capture cannot reveal, and the segments that would</h3><ul class='design'>"
             + "".join(items) + "</ul>")

@@ -68,9 +68,8 @@ def suggest_all(first, final, steps, capture, summaries, registry=None) -> None:
     # the effects outside the library a warm-up scheme is blind to, when this capture is (unrevealed.py)
     from station.diagnose import unrevealed
 
-    final.not_revealed = [
-        u.text + ("" if hand else f"; the segments that would reveal it: {command(capture.path, [u.spec], [u.reveal])}")
-        for u in unrevealed.find(final, summaries)]
+    final.not_revealed = [u.text + ("" if hand else unrevealed.after(u, capture.path, command))
+                          for u in unrevealed.find(final, summaries)]
 
 
 def command(capture, effects, reveal, registry=None) -> str:

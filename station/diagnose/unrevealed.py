@@ -27,6 +27,7 @@ import numpy as np
 
 from station.diagnose.core import ALPHA, POWER_Z, norm_isf, overdispersion, score_test
 from station.model.raw_counts import in_capture_units
+from station.model.temperature import SQUARED_IN_TEMPERATURE
 from station.model.unlisted import UNLISTED
 
 AX = "xyz"
@@ -107,6 +108,20 @@ class Unrevealed:
     spec: str                 # what --add takes: station.model.unlisted:CLASS
     reveal: str               # the --reveal pattern of its parameters
     sigmas: dict              # parameter -> its 1-sigma from this capture (reported unit)
+    squared_in_temperature: bool = False    # needs each axis at three or more temperatures
+
+
+def after(u: Unrevealed, capture_path, design_command) -> str:
+    """What follows the words: the `station design --from` command, or, for a change with the
+    temperature's square, why segments added at this capture's temperatures cannot reveal it and
+    what can (a chamber's setpoints in a new design: --from adds no chamber step, and its
+    proposals were refused on the quick-start capture: 'no 12 segments ... reveal')."""
+    if u.squared_in_temperature:
+        return ("; segments added at this capture's temperatures cannot reveal it (each axis needs three or more "
+                "temperatures); a run at several setpoints of a temperature chamber (chamber: in station.yaml) "
+                f"would: station design --config station.yaml --add {u.spec} "
+                f"--criterion 'worst:{u.reveal.strip(chr(39))}' --duration S -o scheme.yaml")
+    return f"; the segments that would reveal it: {design_command(capture_path, [u.spec], [u.reveal])}"
 
 
 def find(diagnosis, summaries) -> list[Unrevealed]:
@@ -140,7 +155,7 @@ def find(diagnosis, summaries) -> list[Unrevealed]:
         text = (f"not revealed by this capture: {cls.title[0].lower() + cls.title[1:]} (1-sigma {sizes} {unit}: "
                 f"detected only above {DETECT_Z:.2g}x that, typical {typical[blind[0][0]]:g}): {WHY[eid](summaries)}")
         out.append(Unrevealed(text, f"{SPEC}:{cls.__name__}", shlex.quote(blind[0][0].rsplit("_", 1)[0] + "_*"),
-                              {n: s for n, s, _ in blind}))
+                              {n: s for n, s, _ in blind}, eid in SQUARED_IN_TEMPERATURE))
     return out
 
 

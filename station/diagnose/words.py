@@ -422,11 +422,16 @@ def _vertical_on_own_axes(summaries) -> bool:
     line shared (station.model.axis_offsets.offset_groups) it measures that offset alone, which
     tells the offsets from a vibration once per revolution."""
     from station.model import table_revolution as rev
+    from station.model.axis_offsets import offset_groups
 
     steady = [r for r in summaries.rotations if r.steady and r.accel_cos is not None]
     framed = rev.frames(summaries)
-    unit = [(np.asarray(r.axis_body, float) / np.linalg.norm(r.axis_body), int(r.index) in framed) for r in steady]
-    return any(not lev and any(other and np.allclose(a, b, atol=1e-6) for b, other in unit) for a, lev in unit)
+    # the model's own rule for whose offset a turn has (the same body axis turned by the same
+    # table axis): a vertical turn about body x on another table axis than the level ones has an
+    # offset of its own, and measures nothing of theirs
+    shared = offset_groups(steady)
+    level = {shared[int(r.group)] for r in steady if int(r.index) in framed}
+    return any(shared[int(r.group)] in level for r in steady if int(r.index) not in framed)
 
 
 def _vertical_turns(summaries) -> bool:

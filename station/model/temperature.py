@@ -6,6 +6,13 @@ import numpy as np
 from station.core import units
 from station.model.effect import Effect, Param
 
+# the effects whose terms are in the square of (T - T_ref), library and unlisted: the designer
+# places them on its timeline as dT^2 (station.design.information.temperature_power), and a
+# capture reveals them only with each axis at three or more temperatures (diagnose's words:
+# station.diagnose.unrevealed)
+SQUARED_IN_TEMPERATURE = ("temperature_bias_quadratic", "accel_scale_temperature_squared",
+                          "gyro_scale_temperature_squared")
+
 
 class TemperatureReferenced(Effect):
     """An effect in the temperature's difference from a reference, the mean temperature of the
