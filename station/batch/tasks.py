@@ -237,11 +237,10 @@ def _estimate(job: Job, out: Outcome) -> None:
 
 
 def _diagnose(job: Job, out: Outcome) -> None:
-    """As ``station diagnose CAPTURE [--add E] [--auto] --json`` (the JSON into the output file)."""
-    from station.diagnose import auto, segment_check
+    """As ``station diagnose CAPTURE [--add E] [--auto] --json`` (the JSON into the output file):
+    the same diagnosis (station.diagnose.pipeline.run)."""
+    from station.diagnose import pipeline, segment_check
     from station.diagnose.as_json import to_json
-    from station.diagnose.core import diagnose
-    from station.estimate import lsq
     from station.estimate.summaries import summarise
     from station.io.calfile import write_new_file
     from station.io.capture import read_capture
@@ -249,12 +248,7 @@ def _diagnose(job: Job, out: Outcome) -> None:
     reg, ids = _registry(job.options)
     capture = read_capture(Path(job.source), load_data=False)
     summarise(capture, check_segment=segment_check(capture))
-    s = lsq.summarise(capture)
-    if job.options.get("auto"):
-        steps, final = auto.run(s, ids, progress=None, registry=reg)
-    else:
-        steps, final = [], diagnose(lsq.fit(s, [reg.create(e) for e in ids]), registry=reg)
-        auto.conclude(final, s)
+    _, steps, final, _ = pipeline.run(capture, ids, registry=reg, auto=bool(job.options.get("auto")))
     doc = to_json(final, steps)
     write_new_file(Path(job.output), (json.dumps(doc, indent=1) + "\n").encode(), what="diagnosis")
     out.outputs, out.status = [job.output], DONE
