@@ -183,7 +183,7 @@ def _diagnose(args, job) -> tuple:
                                           on_first=figures.first_known)
     if args.emit_effect:
         _emit(args.emit_effect, final, steps)
-    summary = _summary_lines(final)
+    summary = _summary_lines(final, design=False)       # the page lists the design lines in their own place
     from station.diagnose.report import ReportInput, capture_facts
     from station.io.history import verdict_of
 
@@ -226,15 +226,16 @@ def _emit(path, d, steps=()) -> None:
               f"python {path})", markup=False, soft_wrap=True)
 
 
-def _summary_lines(d) -> list[str]:
+def _summary_lines(d, design: bool = True) -> list[str]:
     lines = [d.verdict, f"effects in the model: {', '.join(d.effects)}",
              f"chi2 {d.chi2:.1f} for {d.dof} degrees of freedom (reduced {d.reduced_chi2:.3f}, p = {d.p_value:.3g})"]
     lines += [f"where it fails: {f}" for f in d.failures]
     lines += [f"not kept: {r.effect}: {r.reason}" for r in d.rejected]
     lines += [f"why it still fails: {line}" for line in getattr(d, "account", None) or []]
-    from station.diagnose.suggest import design_lines
+    if design:
+        from station.diagnose.suggest import design_lines
 
-    lines += design_lines(d)
+        lines += design_lines(d)
     return lines + [f"note: {n}" for n in d.notes]
 
 
