@@ -204,23 +204,11 @@ def diagnose(capture, *, add=(), plugins=(), effects_dirs=(), config=None, calib
     cap = read_capture(_path(capture), samples=False)        # the manifest: samples below
     # each segment read, checked and summarised (in a child, while the fit is imported here)
     summarise_while_importing(cap, segment_check(cap), modules=DIAGNOSIS_MODULES)
-    from station.diagnose import auto as _auto
-    from station.diagnose.core import diagnose as _diagnose
-    from station.estimate import lsq
+    from station.diagnose import pipeline
 
-    s = lsq.summarise(cap)
     registry = _registry(plugins, effects_dirs, config)
     ids, warnings = _model_effects(cap, registry, add, calibration, force)
-    if auto:
-        steps, final = _auto.run(s, ids, progress=None, registry=registry)
-        first = steps[0].before if steps else final
-    else:
-        steps, first = [], _diagnose(lsq.fit(s, [registry.create(e) for e in ids]), registry=registry)
-        _auto.conclude(first, s)
-        final = first
-    from station.diagnose.suggest import suggest_all
-
-    suggest_all(first, final, steps, cap, s, registry)
+    first, steps, final, _ = pipeline.run(cap, ids, registry=registry, auto=auto)
     final.steps, final.first, final.warnings = steps, first, warnings
     return final
 
@@ -609,8 +597,11 @@ def report(capture, *, calibration=None, output=None, force: bool = False, auto:
         warning = _check_serial(cal_doc, cal_path, cap.imu.serial, force, f"capture {cap.path}")
         if warning:
             warnings.append(warning)
-    effects = [e for e in (cal_doc or {}).get("effects", []) if e not in ("base_triads", "inter_triad")]
-    inp = report_input(cap, cal_doc, cal_path if cal_doc else None, effects=effects, auto=auto)
+    # the effects as diagnose builds them (station.diagnose.pipeline.run: the same diagnosis)
+    registry = _registry()
+    effects = _effect_ids(registry, [e for e in (cal_doc or {}).get("effects", [])
+                                     if e not in ("base_triads", "inter_triad")])
+    inp = report_input(cap, cal_doc, cal_path if cal_doc else None, effects=effects, auto=auto, registry=registry)
     target = Path(output) if output is not None else cap.path / "report.html"
     write_page(target, inp)
     return Report(target, warnings)

@@ -12,6 +12,13 @@ so that an operator at a shell sets it with ``echo 60 > PANEL`` and a test write
     AIR?             the chamber's air temperature now, degC
     anything else    "ERR <why>"
 
+The panel answers the commands it has just been given: what it said before and nobody read (the
+``ERR`` of an ``echo hello > PANEL``, whose writer never reads) is dropped when the next command
+comes, so that a reader who asks ``SET?`` reads the answer to ``SET?``.  (A real serial line loses
+what is sent while no program has the port open; the twin keeps the pseudo-terminal open, so the
+panel drops it itself.)  Ask, read the answer, ask again: commands sent together in one write
+are answered together, in order.
+
 The physics is the dry run's (sim_devices/chamber.py ChamberAir): the air ramps at the chamber's
 own rate (``--chamber-ramp-c-per-min``, its heater and cooler; the station's ``chamber:
 ramp_c_per_min`` is the station's belief about it) and every IMU on the table follows the air as
@@ -83,6 +90,8 @@ class ChamberPanel:
         if self.port in readable:
             data = self.port.read()
             if data:
+                # what was said before and is still unread answers nobody's question now
+                self.port.discard_unread()
                 self.port.write(self.receive(data, now))
         self.port.flush()
 

@@ -113,6 +113,21 @@ class PtyEndpoint(QueuedEndpoint):
         except OSError:
             return 0
 
+    def discard_unread(self) -> int:
+        """Drop what was written and not read yet, queued here or held by the line (the slave
+        side's input queue: tcflush TCIFLUSH); returns the bytes dropped.  A real serial line
+        loses what a device sends while no program has the port open; here the twin holds the
+        slave side open, so a reply nobody read would wait for the next reader."""
+        if self.closed:
+            return 0
+        dropped = self.unread() + len(self._out)
+        self.clear_output()
+        try:
+            termios.tcflush(self._slave, termios.TCIFLUSH)
+        except termios.error:
+            return 0
+        return dropped
+
     def read(self) -> bytes:
         if self.closed:
             return b""

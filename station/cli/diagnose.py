@@ -152,7 +152,8 @@ def _specs(args, effects) -> dict:
 
 
 def _diagnose(args, job) -> tuple:
-    """(first, steps, final, summary lines, the page's ReportInput): api.diagnose's steps, with
+    """(first, steps, final, summary lines, the page's ReportInput): api.diagnose's diagnosis
+    (the same station.diagnose.pipeline.run), with
     the capture read where the figures' noise is taken, the candidates' figures drawn as soon as
     the first diagnosis is known, and the diagnosis printed while the figures are drawn."""
     from station.api import _model_effects, _registry
@@ -172,33 +173,20 @@ def _diagnose(args, job) -> tuple:
     from station.diagnose.report import DiagnosisFigures       # (imported while reading)
 
     figures = DiagnosisFigures(job)
-    from station.diagnose import auto
-    from station.diagnose.core import diagnose
-    from station.estimate import lsq
+    from station.diagnose import pipeline
 
-    s = lsq.summarise(capture)
     reg = _registry(**plugins.options(args))
     effects, warnings = _model_effects(capture, reg, args.add, args.calib, args.force)
     for line in warnings:
         err.print(line, markup=False, soft_wrap=True)
-    if args.auto:
-        steps, final = auto.run(s, effects, progress=None, registry=reg, on_first=figures.first_known)
-        first = steps[0].before if steps else final
-    else:
-        from station.estimate.profile import fit_located
-
-        steps, first = [], diagnose(fit_located(s, [reg.create(e) for e in effects]), registry=reg)
-        auto.conclude(first, s)
-        final = first
+    first, steps, final, _ = pipeline.run(capture, effects, registry=reg, auto=args.auto,
+                                          on_first=figures.first_known)
     if args.emit_effect:
         _emit(args.emit_effect, final, steps)
-    summary = _summary_lines(final)
+    summary = _summary_lines(final, design=False)       # the page lists the design lines in their own place
     from station.diagnose.report import ReportInput, capture_facts
     from station.io.history import verdict_of
 
-    from station.diagnose.suggest import suggest_all
-
-    suggest_all(first, final, steps, capture, s, reg)
     figures.known(first, steps)
     if not args.json:
         _print(out, first, steps, final)        # while the figures are drawn
@@ -238,15 +226,16 @@ def _emit(path, d, steps=()) -> None:
               f"python {path})", markup=False, soft_wrap=True)
 
 
-def _summary_lines(d) -> list[str]:
+def _summary_lines(d, design: bool = True) -> list[str]:
     lines = [d.verdict, f"effects in the model: {', '.join(d.effects)}",
              f"chi2 {d.chi2:.1f} for {d.dof} degrees of freedom (reduced {d.reduced_chi2:.3f}, p = {d.p_value:.3g})"]
     lines += [f"where it fails: {f}" for f in d.failures]
     lines += [f"not kept: {r.effect}: {r.reason}" for r in d.rejected]
     lines += [f"why it still fails: {line}" for line in getattr(d, "account", None) or []]
-    from station.diagnose.suggest import design_lines
+    if design:
+        from station.diagnose.suggest import design_lines
 
-    lines += design_lines(d)
+        lines += design_lines(d)
     return lines + [f"note: {n}" for n in d.notes]
 
 

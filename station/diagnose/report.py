@@ -22,7 +22,6 @@ from station.diagnose.core import PRIOR_QUANTITIES
 from station.diagnose.figures import (CandidateFigure, SegmentPanel, SegmentsFigure, allan_figure, draw,
                                       figure_format)
 from station.diagnose.figure_job import ALLAN_FIGURE, SEGMENTS_FIGURE, FigureJob
-from station.model.registry import EffectRegistry
 
 VARIABLE_LABEL = {
     "rate_squared": "rotation rate squared (deg/s)^2",
@@ -437,12 +436,13 @@ def capture_facts(capture, cal_doc=None) -> list:
     return rows
 
 
-def report_input(capture, cal_doc=None, cal_path=None, *, effects=(), auto=True) -> ReportInput:
+def report_input(capture, cal_doc=None, cal_path=None, *, effects=(), auto=True, registry=None) -> ReportInput:
     """Everything for the page from a capture (read with or without its samples) and its
     calibration; the diagnosis (with ``auto``, the add-and-refit loop) needs encoder angles on
     every rotation.  As ``diagnose --report``: the capture is read and summarised in a child
     while the fit is imported, which also computes the noise's Allan curves, and the figures
-    are drawn by a FigureJob."""
+    are drawn by a FigureJob.  ``registry``: where the effects come from (station.api._registry,
+    as diagnose builds it; default the library's)."""
     from station.diagnose import RotationWithoutAngle, segment_check
     from station.diagnose.figure_job import read_for_report
     from station.io.history import verdict_of
@@ -468,7 +468,8 @@ def report_input(capture, cal_doc=None, cal_path=None, *, effects=(), auto=True)
                 inp.diagnosis_note = without_angle
         if inp.diagnosis_note is None:
             figures = DiagnosisFigures(job)
-            inp.first, inp.steps, inp.final = _diagnosis(capture, effects, auto, on_first=figures.first_known)
+            inp.first, inp.steps, inp.final = _diagnosis(capture, effects, auto, on_first=figures.first_known,
+                                                          registry=registry)
             figures.known(inp.first, inp.steps)
         else:
             inp.noise, inp.noise_note = noise_of(capture, cal_doc)
@@ -479,27 +480,13 @@ def report_input(capture, cal_doc=None, cal_path=None, *, effects=(), auto=True)
     return inp
 
 
-def _diagnosis(capture, effects, auto: bool, on_first=None) -> tuple:
-    """(first, steps, final) of the capture's (summarised) least-squares fit; ``on_first`` as
-    in station.diagnose.auto.run (``auto`` only)."""
-    from station.diagnose import auto as auto_loop
-    from station.diagnose.core import diagnose
-    from station.estimate import lsq
+def _diagnosis(capture, effects, auto: bool, on_first=None, registry=None) -> tuple:
+    """(first, steps, final) of the capture's (summarised) least-squares fit: the diagnosis
+    ``station diagnose`` makes (station.diagnose.pipeline.run), with or without --auto's loop;
+    ``on_first`` as in station.diagnose.auto.run."""
+    from station.diagnose import pipeline
 
-    from station.diagnose.suggest import suggest_all
-
-    s = lsq.summarise(capture)
-    if auto:
-        steps, final = auto_loop.run(s, list(effects), on_first=on_first)
-        first = steps[0].before if steps else final
-    else:
-        registry = EffectRegistry()
-        from station.estimate.profile import fit_located
-
-        steps, first = [], diagnose(fit_located(s, [registry.create(e) for e in effects]), registry=registry)
-        final = first
-    # what the capture cannot reveal, with the design --from commands (as diagnose says it)
-    suggest_all(first, final, steps, capture, s)
+    first, steps, final, _ = pipeline.run(capture, effects, registry=registry, auto=auto, on_first=on_first)
     return first, steps, final
 
 

@@ -56,6 +56,9 @@ class EffectRegistry:
         importlib.metadata nor scans the installed distributions (~20 ms of its start)."""
         self.classes: dict[str, type] = {}
         self.sources: dict[str, str] = {}
+        # the folders whose *.py were loaded (add), in order, each with the (name, modification
+        # time in ns) of the files found there: what a kept registry is checked against
+        self.folders: list[tuple[str, tuple]] = []
         for eid, cls in _library().items():
             self._register(cls, "library")
         self._entry_points_pending = entry_points
@@ -99,8 +102,9 @@ class EffectRegistry:
             path_part, cls_name = spec, ""
         path = Path(path_part)
         if path.is_dir() and not cls_name:
-            ids = []
-            for f in sorted(path.glob("*.py")):
+            ids, files = [], sorted(path.glob("*.py"))
+            self.folders.append((str(path), folder_files(path, files)))
+            for f in files:
                 ids += self._add_module(self._load_file(f), str(f), None)
             return ids
         if path_part.endswith(".py") or path.exists():
@@ -198,6 +202,16 @@ class EffectRegistry:
                 raise UserError(f"effect entry point {ep.name} = {ep.value}: fails to load: "
                                 f"{type(e).__name__}: {e}") from None
             self._register(cls, f"entry point {ep.value}")
+
+
+def folder_files(folder, files=None) -> tuple | None:
+    """((name, modification time in ns), ...) of a plugin folder's ``*.py`` files (``files``:
+    as globbed already), sorted; None when the folder or a file cannot be read."""
+    try:
+        return tuple(sorted((f.name, f.stat().st_mtime_ns)
+                            for f in (files if files is not None else Path(folder).glob("*.py"))))
+    except OSError:
+        return None
 
 
 def _env_paths() -> list[str]:
