@@ -344,6 +344,18 @@ def _best_out_of_sample(cand, first, tries, refused, current, h_current, summari
     return (c, a, h, ok, reason, share, cv_b, cv_a, words)
 
 
+def _tried(summaries, current, h_current, effect, registry, attitudes):
+    """One effect tried at the current fit: (its diagnosis, the current fit's leave-one-segment-out
+    scores (computed once), its own, judge()'s verdict on it) -- the library's candidates and the
+    effects outside its ranking by one rule."""
+    after = diagnose(lsq.fit(summaries, _rebuild(current.result.model.effects, registry, [effect]), attitudes,
+                             like=current.result.model), registry=registry)
+    if h_current is None:
+        h_current = leave_one_segment_out(current.result)
+    h_after = leave_one_segment_out(after.result)
+    return after, h_current, h_after, judge(current, after, h_current, h_after)
+
+
 def run(summaries, effects=(), attitudes="auto", progress=None,
         registry: EffectRegistry | None = None, on_first=None, discover: bool = True,
         unlisted: bool = True) -> tuple[list[Step], Diagnosis]:
@@ -382,12 +394,8 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
             effect = registry.create(cand.effect)
             if profile.is_profiled(effect):     # a bias step: its time from fits of the best candidates
                 profile.locate(current.result, effect)
-            after = diagnose(lsq.fit(summaries, _rebuild(current.result.model.effects, registry, [effect]),
-                                     attitudes, like=current.result.model), registry=registry)
-            if h_current is None:
-                h_current = leave_one_segment_out(current.result)
-            h_after = leave_one_segment_out(after.result)
-            ok, reason, share, cv_b, cv_a = judge(current, after, h_current, h_after)
+            after, h_current, h_after, (ok, reason, share, cv_b, cv_a) = _tried(
+                summaries, current, h_current, effect, registry, attitudes)
             if ok:
                 cand, after, h_after, ok, reason, share, cv_b, cv_a, preferred = _best_out_of_sample(
                     cand, (after, h_after, ok, reason, share, cv_b, cv_a), tries, refused, current, h_current,
@@ -416,13 +424,8 @@ def run(summaries, effects=(), attitudes="auto", progress=None,
             for cand in unlisted_candidates(current, refused):
                 if progress:
                     progress(cand.effect)
-                after = diagnose(lsq.fit(summaries, _rebuild(current.result.model.effects, registry,
-                                                             [_created(registry, cand.effect)]),
-                                         attitudes, like=current.result.model), registry=registry)
-                if h_current is None:
-                    h_current = leave_one_segment_out(current.result)
-                h_after = leave_one_segment_out(after.result)
-                ok, reason, share, cv_b, cv_a = judge(current, after, h_current, h_after)
+                after, h_current, h_after, (ok, reason, share, cv_b, cv_a) = _tried(
+                    summaries, current, h_current, _created(registry, cand.effect), registry, attitudes)
                 if ok:
                     kept = Step(cand.effect, current, after, cand.predicted_chi2_drop, current.chi2 - after.chi2,
                                 added_parameters(after, cand.effect), cv_b, cv_a, share,
