@@ -606,9 +606,11 @@ class Sequencer:
             rates = (0.0, mean_rate) if start_kind else (mean_rate, 0.0)
             # the reads the angle came from (position deg, rate deg/s, the IMU stamps before and after)
             reads = [[round(m.position_deg, 6), round(m.rate_dps, 6), m.t_before, m.t_after] for m in rests + marks]
+            # the angle's own 1-sigma from placing the reads at the rate (beyond the encoder's)
+            sigma = ramp_angle.angle_sigma(marks, mean_rate, period)
             return _optional(angle_deg=body_sign * angle, table_rate_readback_dps=mean_rate,
                              rate_start_dps=body_sign * rates[0], rate_end_dps=body_sign * rates[1],
-                             temperature_c=rec["temp"], table_reads=reads)
+                             temperature_c=rec["temp"], table_reads=reads, angle_sigma_deg=round(sigma, 9))
 
         def start():
             marks.clear()

@@ -97,6 +97,10 @@ class RotationSummary:
     # (tracked by the gyro): what a rate fixed in space across the axis (the Earth's) adds to the
     # gyro integral.  None: T/A (sin A, 1 - cos A), a uniform turn's (every steady segment's)
     earth_weights_s: np.ndarray | None = None
+    # the 1-sigma of this window's angle beyond the encoder's (deg): a recorded ramp's angle is
+    # the table's reads placed on the IMU's clock (manifest ``angle_sigma_deg``, issue 28 review
+    # item 1); added in quadrature to the encoder's in the gyro integral's variance.  0: none said
+    angle_sigma_deg: float = 0.0
 
     @property
     def rate_dps(self) -> float:
@@ -666,6 +670,12 @@ def _ramp_keys(summary, seg, t, gyro) -> None:
         x = seg.extra.get(key)
         if isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x):
             setattr(summary, attr, float(x))
+    sigma = seg.extra.get("angle_sigma_deg")
+    if sigma is not None:
+        if isinstance(sigma, bool) or not isinstance(sigma, (int, float)) or not np.isfinite(sigma) or sigma < 0:
+            raise UserError(f"{seg.name}: angle_sigma_deg: must be a finite number >= 0 (the 1-sigma of the "
+                            f"window's angle from its reads, deg), got {sigma!r}")
+        summary.angle_sigma_deg = float(sigma)
 
 
 def _scanned(scanner, seg, d, ca, cg):
