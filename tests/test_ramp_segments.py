@@ -201,3 +201,30 @@ def test_the_benchs_angle_of_a_ramp_from_reads_placed_on_the_imus_clock():
     # a brake: the same reads before the command, the rest position after
     assert ramp_angle.window_angle(100.0, 30.0 + 720.0, 200.0 * 2.0 + 200.0, "end") == pytest.approx(
         100.0 - 30.0 + 360.0 * round((600.0 - 70.0) / 360.0))
+
+
+def test_a_recorded_ramps_earth_weights_follow_the_harmonics_phase():
+    """Issue 28 review item 5: a ramp window's Earth-rate weights (integral of cos, sin of the phase
+    over the window) come from the one phase the harmonics use (_ramp_fraction: the gyro with its
+    bias taken at rest), computed in rotation_summary.  Noiseless ramp up (1 s rest, 50 deg/s^2 to
+    100 deg/s, 6 s) with a 0.1 deg/s gyro bias along the axis: the bias-corrected phase is the
+    truth to rounding (the trapezoid of a piecewise-linear rate is exact), so the weights agree to
+    1e-9 s; the raw gyro's turn (the bias integrated: 0.6 deg over 6 s) left them ~3e-3 s off."""
+    from station.estimate import summaries as S
+
+    hz, rate, accel_dps2, rest = 100.0, 100.0, 50.0, 1.0
+    t = np.arange(0.0, 6.0, 1.0 / hz) + 0.5 / hz
+    w = np.clip((t - rest) * accel_dps2, 0.0, rate)
+    turned = 0.5 * w[0] / hz + np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t))])
+    angle = turned[-1] + 0.5 * w[-1] / hz
+    gyro = np.zeros((len(t), 3))
+    gyro[:, 2] = w + 0.1
+    phase = np.radians(turned)
+    acc = np.column_stack([9.8 * np.cos(phase), 9.8 * np.sin(phase), np.zeros(len(t))])
+    truth = np.array([np.gradient(t) @ np.cos(phase), np.gradient(t) @ np.sin(phase)])
+    r = S.rotation_summary("r", (0, 0, 1), 0, angle, t, acc, gyro, None, gyro_sigma_dps=np.full(3, 0.01),
+                           steady_rate_dps=rate)
+    assert r.earth_weights_s is not None
+    assert np.allclose(r.earth_weights_s, truth, atol=1e-9, rtol=0), r.earth_weights_s - truth
+    steady = S.rotation_summary("s", (0, 0, 1), 0, 360.0, t, acc, np.tile([0.0, 0.0, 60.0], (len(t), 1)), None)
+    assert steady.earth_weights_s is None        # a steady turn keeps the uniform turn's weights
