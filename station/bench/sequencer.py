@@ -612,7 +612,20 @@ class Sequencer:
                              rate_start_dps=body_sign * rates[0], rate_end_dps=body_sign * rates[1],
                              temperature_c=rec["temp"], table_reads=reads, angle_sigma_deg=round(sigma, 9))
 
+        attempts = []
+
         def start():
+            # every attempt from the window's initial state (issue 28 review item 2): a recording
+            # kept aside leaves a "start" window's table turning and an "end" window's at rest,
+            # where the next would read neither a rest nor the rate before its command
+            if attempts:
+                if start_kind:
+                    self.table.set_rate(axis, 0.0)
+                    self._wait_rest(axis)
+                else:
+                    self.table.set_rate(axis, rate)
+                self._discard(step.settle_s)
+            attempts.append(1)
             marks.clear()
             rests.clear()
             mark()                  # at rest ("start") or at the rate ("end") before the window
