@@ -228,3 +228,29 @@ def test_a_recorded_ramps_earth_weights_follow_the_harmonics_phase():
     assert np.allclose(r.earth_weights_s, truth, atol=1e-9, rtol=0), r.earth_weights_s - truth
     steady = S.rotation_summary("s", (0, 0, 1), 0, 360.0, t, acc, np.tile([0.0, 0.0, 60.0], (len(t), 1)), None)
     assert steady.earth_weights_s is None        # a steady turn keeps the uniform turn's weights
+
+
+def test_the_dry_run_ramps_at_the_configured_tables_acceleration(tmp_path, monkeypatch):
+    """Issue 28 review item 4: `station run --sim` with station.yaml's rate_accel_dps2: 20 records
+    its ramps at 20 deg/s^2 (before: the dry run's 50 whatever the table): the manifest says so
+    and a ramp up's window holds the turn and the ramp, 360 + 100^2 / (2 * 20) = 610 deg (the
+    encoder's 2" and half a sample at the rate: 0.6 deg).  The designer's timeline takes the same
+    acceleration (information.Information.clock's third element)."""
+    from types import SimpleNamespace
+
+    from station.cli import main
+    from station.design import timeline
+    from station.io.capture import read_capture
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "station.yaml").write_text(
+        "version: 1\ntable:\n  axes: 3\n  limits: [{max_rate_dps: 300, max_accel_dps2: 300, rate_accel_dps2: 20}]\n")
+    (tmp_path / "s.yaml").write_text(
+        "name: r\ndefaults: {dwell_s: 1, rate_dps: 100, rotation_s: 3.6}\nsegments:\n"
+        "  - {static: s0, up_body: [0, 0, 1]}\n  - {rotation: up, axis_body: [0, 0, 1], record_ramp: start, pair: false}\n")
+    main(["run", "--sim", "--config", "station.yaml", "--scheme", "s.yaml", "--out", "cap", "--no-history"])
+    up = read_capture(tmp_path / "cap").segment("up")
+    assert up.extra["ramp_accel_dps2"] == 20.0
+    assert up.angle_deg == pytest.approx(360.0 + 100.0 ** 2 / (2 * 20.0), abs=0.6)
+    c = SimpleNamespace(kind="rotation", key=((0, 0, 1), 0.0, 100.0, 1, "start"))
+    assert timeline.segment_seconds(c, 20.0) == pytest.approx([3.6 + 5.0 + RAMP_REST_S] * 2)
