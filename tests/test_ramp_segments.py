@@ -254,3 +254,34 @@ def test_the_dry_run_ramps_at_the_configured_tables_acceleration(tmp_path, monke
     assert up.angle_deg == pytest.approx(360.0 + 100.0 ** 2 / (2 * 20.0), abs=0.6)
     c = SimpleNamespace(kind="rotation", key=((0, 0, 1), 0.0, 100.0, 1, "start"))
     assert timeline.segment_seconds(c, 20.0) == pytest.approx([3.6 + 5.0 + RAMP_REST_S] * 2)
+
+
+def test_a_windows_angle_sigma_is_read_and_checked(tmp_path):
+    """Issue 28 review item 1: a ramp window's angle_sigma_deg reaches its summary (and the gyro
+    integral's weight: 1 deg along the axis dominates the encoder's 2"); a value that is not a
+    finite number >= 0 is refused naming the segment and the key."""
+    from station.estimate import lsq
+    from station.estimate.summaries import summarise
+
+    _, capture = _ramp_capture(tmp_path, 0.0, 2)
+    up = next(s for s in capture.segments if s.name == "up_p")
+    up.extra["angle_sigma_deg"] = 1.0
+    s = summarise(capture)
+    rot = {r.name: r for r in s.rotations}
+    assert rot["up_p"].angle_sigma_deg == 1.0 and rot["up_m"].angle_sigma_deg == 0.0
+    model = lsq.Model(s, [])
+    names = [r.name for r in s.rotations]
+
+    def along_axis_variance(name):      # deg^2: the gyro integral's variance along the turn's axis
+        k = names.index(name)
+        chol = np.linalg.inv(model.gyro_whiten[k])
+        axis = model._rotation_axes_raw[k]
+        return float(axis @ chol @ chol.T @ axis)
+
+    # 1 deg^2 added to the encoder's (2")^2 and the white noise's (~1e-6 deg^2 here)
+    assert 1.0 <= along_axis_variance("up_p") < 1.001
+    assert along_axis_variance("up_m") < 1e-3
+    for bad in ("x", -1.0, float("nan"), True):
+        up.extra["angle_sigma_deg"] = bad
+        with pytest.raises(UserError, match="up_p: angle_sigma_deg"):
+            summarise(capture)
