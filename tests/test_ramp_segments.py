@@ -201,3 +201,87 @@ def test_the_benchs_angle_of_a_ramp_from_reads_placed_on_the_imus_clock():
     # a brake: the same reads before the command, the rest position after
     assert ramp_angle.window_angle(100.0, 30.0 + 720.0, 200.0 * 2.0 + 200.0, "end") == pytest.approx(
         100.0 - 30.0 + 360.0 * round((600.0 - 70.0) / 360.0))
+
+
+def test_a_recorded_ramps_earth_weights_follow_the_harmonics_phase():
+    """Issue 28 review item 5: a ramp window's Earth-rate weights (integral of cos, sin of the phase
+    over the window) come from the one phase the harmonics use (_ramp_fraction: the gyro with its
+    bias taken at rest), computed in rotation_summary.  Noiseless ramp up (1 s rest, 50 deg/s^2 to
+    100 deg/s, 6 s) with a 0.1 deg/s gyro bias along the axis: the bias-corrected phase is the
+    truth to rounding (the trapezoid of a piecewise-linear rate is exact), so the weights agree to
+    1e-9 s; the raw gyro's turn (the bias integrated: 0.6 deg over 6 s) left them ~3e-3 s off."""
+    from station.estimate import summaries as S
+
+    hz, rate, accel_dps2, rest = 100.0, 100.0, 50.0, 1.0
+    t = np.arange(0.0, 6.0, 1.0 / hz) + 0.5 / hz
+    w = np.clip((t - rest) * accel_dps2, 0.0, rate)
+    turned = 0.5 * w[0] / hz + np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t))])
+    angle = turned[-1] + 0.5 * w[-1] / hz
+    gyro = np.zeros((len(t), 3))
+    gyro[:, 2] = w + 0.1
+    phase = np.radians(turned)
+    acc = np.column_stack([9.8 * np.cos(phase), 9.8 * np.sin(phase), np.zeros(len(t))])
+    truth = np.array([np.gradient(t) @ np.cos(phase), np.gradient(t) @ np.sin(phase)])
+    r = S.rotation_summary("r", (0, 0, 1), 0, angle, t, acc, gyro, None, gyro_sigma_dps=np.full(3, 0.01),
+                           steady_rate_dps=rate)
+    assert r.earth_weights_s is not None
+    assert np.allclose(r.earth_weights_s, truth, atol=1e-9, rtol=0), r.earth_weights_s - truth
+    steady = S.rotation_summary("s", (0, 0, 1), 0, 360.0, t, acc, np.tile([0.0, 0.0, 60.0], (len(t), 1)), None)
+    assert steady.earth_weights_s is None        # a steady turn keeps the uniform turn's weights
+
+
+def test_the_dry_run_ramps_at_the_configured_tables_acceleration(tmp_path, monkeypatch):
+    """Issue 28 review item 4: `station run --sim` with station.yaml's rate_accel_dps2: 20 records
+    its ramps at 20 deg/s^2 (before: the dry run's 50 whatever the table): the manifest says so
+    and a ramp up's window holds the turn and the ramp, 360 + 100^2 / (2 * 20) = 610 deg (the
+    encoder's 2" and half a sample at the rate: 0.6 deg).  The designer's timeline takes the same
+    acceleration (information.Information.clock's third element)."""
+    from types import SimpleNamespace
+
+    from station.cli import main
+    from station.design import timeline
+    from station.io.capture import read_capture
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "station.yaml").write_text(
+        "version: 1\ntable:\n  axes: 3\n  limits: [{max_rate_dps: 300, max_accel_dps2: 300, rate_accel_dps2: 20}]\n")
+    (tmp_path / "s.yaml").write_text(
+        "name: r\ndefaults: {dwell_s: 1, rate_dps: 100, rotation_s: 3.6}\nsegments:\n"
+        "  - {static: s0, up_body: [0, 0, 1]}\n  - {rotation: up, axis_body: [0, 0, 1], record_ramp: start, pair: false}\n")
+    main(["run", "--sim", "--config", "station.yaml", "--scheme", "s.yaml", "--out", "cap", "--no-history"])
+    up = read_capture(tmp_path / "cap").segment("up")
+    assert up.extra["ramp_accel_dps2"] == 20.0
+    assert up.angle_deg == pytest.approx(360.0 + 100.0 ** 2 / (2 * 20.0), abs=0.6)
+    c = SimpleNamespace(kind="rotation", key=((0, 0, 1), 0.0, 100.0, 1, "start"))
+    assert timeline.segment_seconds(c, 20.0) == pytest.approx([3.6 + 5.0 + RAMP_REST_S] * 2)
+
+
+def test_a_windows_angle_sigma_is_read_and_checked(tmp_path):
+    """Issue 28 review item 1: a ramp window's angle_sigma_deg reaches its summary (and the gyro
+    integral's weight: 1 deg along the axis dominates the encoder's 2"); a value that is not a
+    finite number >= 0 is refused naming the segment and the key."""
+    from station.estimate import lsq
+    from station.estimate.summaries import summarise
+
+    _, capture = _ramp_capture(tmp_path, 0.0, 2)
+    up = next(s for s in capture.segments if s.name == "up_p")
+    up.extra["angle_sigma_deg"] = 1.0
+    s = summarise(capture)
+    rot = {r.name: r for r in s.rotations}
+    assert rot["up_p"].angle_sigma_deg == 1.0 and rot["up_m"].angle_sigma_deg == 0.0
+    model = lsq.Model(s, [])
+    names = [r.name for r in s.rotations]
+
+    def along_axis_variance(name):      # deg^2: the gyro integral's variance along the turn's axis
+        k = names.index(name)
+        chol = np.linalg.inv(model.gyro_whiten[k])
+        axis = model._rotation_axes_raw[k]
+        return float(axis @ chol @ chol.T @ axis)
+
+    # 1 deg^2 added to the encoder's (2")^2 and the white noise's (~1e-6 deg^2 here)
+    assert 1.0 <= along_axis_variance("up_p") < 1.001
+    assert along_axis_variance("up_m") < 1e-3
+    for bad in ("x", -1.0, float("nan"), True):
+        up.extra["angle_sigma_deg"] = bad
+        with pytest.raises(UserError, match="up_p: angle_sigma_deg"):
+            summarise(capture)

@@ -11,9 +11,16 @@ computer before the query was measured before the table answered, and every fram
 before the answer had reached it when the reader was asked again afterwards (ImuStream.sync), so
 the answer's moment lies between the newest stamp before (``t_before``) and the newest after
 (``t_after``) plus one period; where in that bracket is said in ``placed``.  At the rate, each
-read is carried to the window's edge; their mean is taken (position_at).  What is left of the placement (half the bracket at most, ~ms on a
-real line) is part of what the estimator's time offset measures: the IMU's clock against the
-table's as the station aligned them -- which is the offset a compensation must use.
+read is carried to the window's edge; their mean is taken (position_at).  What is left of the placement is
+not the encoder's 2": each read's moment is known only within its bracket (tens of ms on the
+twins' pseudo-terminals, 10-80 ms measured), ~ms of it per window at the rate, so the window's
+angle carries an uncertainty of its own (``angle_sigma``), written into the manifest
+(``angle_sigma_deg``) and added to that rotation's gyro-integral variance by the estimator
+(issue 28 review item 1).  The part of the placement shared by every window is what the
+estimator's time offset measures: on a bench that is the IMU's clock against the table's reads as
+the station placed them (the reads' latency and the reader's blocks included), not the IMU's
+clock against the table's motion -- a compensation of the IMU's own time stamps must not take it
+for that.
 """
 from __future__ import annotations
 
@@ -79,3 +86,37 @@ def expected_angle(rate_dps: float, moving_s: float, accel_dps2: float, ramp: st
     adds r^2 / 2a after it)."""
     ramp_deg = np.sign(rate_dps) * rate_dps ** 2 / (2.0 * accel_dps2)
     return float(rate_dps * moving_s + (-ramp_deg if ramp == "start" else ramp_deg))
+
+
+def angle_sigma(marks: list, rate_dps: float, period_s: float) -> float:
+    """The 1-sigma (deg) of a window's angle from placing its reads at the rate on the IMU's
+    clock (``position_at``; the reads at rest need no placement).  Two parts, in quadrature:
+
+    - the placement: a read's moment is known only to lie in its bracket, ``t_before`` ..
+      ``t_after`` + one period, wide ``w``; anywhere in it equally likely gives w / sqrt 12 (s).
+      Not divided by the reads' number: their placements share the reader's block phase and the
+      line's latency, so their errors need not average out (on the twins, speed 2, 100 Hz, 5 ms
+      clock offset: per-read spread 4-7 ms, but the windows' angles off by 2-4 ms beyond a common
+      offset -- more than the spread over sqrt 18 reads).  The rms of w / sqrt 12 over the reads,
+      times |rate|.
+    - the reads' own spread about one another once carried to a common moment (the table's rate
+      ripple, the positions' quantisation, placement jitter beyond the brackets): their standard
+      deviation over sqrt(n), the mean's.
+
+    0 without reads at the rate."""
+    if not marks:
+        return 0.0
+    widths = np.array([m.t_after + period_s - m.t_before for m in marks])
+    placement = abs(rate_dps) * float(np.sqrt(np.mean(widths ** 2) / 12.0))
+    spread = 0.0
+    if len(marks) > 1:
+        first = marks[0]
+        t0 = placed(first, period_s)
+        carried = []
+        for m in marks:
+            tm = placed(m, period_s)
+            expected = first.position_deg + rate_dps * (tm - t0)
+            unwrapped = m.position_deg + 360.0 * np.round((expected - m.position_deg) / 360.0)
+            carried.append(unwrapped - rate_dps * (tm - t0))
+        spread = float(np.std(carried, ddof=1) / np.sqrt(len(carried)))
+    return float(np.hypot(placement, spread))

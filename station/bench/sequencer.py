@@ -545,18 +545,42 @@ class Sequencer:
         hold = max(RATE_HOLD_FRACTION * abs(rate), 10 * self.config.table.rate_tolerance_dps)
         still = 10 * self.config.table.rate_tolerance_dps
 
+        period = 1.0 / self.rate_hz
+        # the command's moment on the IMU's clock, at most: the stamp the reader answers with right
+        # after set_rate returned (every frame measured before the table's answer had arrived by
+        # then); None before this attempt's command
+        commanded = {"by": None}
+        rest_by = []                # "end": the first read at rest after the brake, bracket's end
+
+        def settled(m) -> bool:
+            """The read came after the ramp's compiled time (a read's moment is after its t_before;
+            the ramp ends |rate| / accel after the command, 5 % and a period allowed)."""
+            return (commanded["by"] is not None
+                    and m.t_before > commanded["by"] + period + 1.05 * step.ramp_s)
+
         def mark():
             stream = self._reference().stream
             t_before = stream.sync()
             pos, rates = self._poll_table()
             t_after = stream.sync()
             if t_before is None or t_after is None:
-                return
+                return None
             m = ramp_angle.Mark(float(pos[axis - 1]), float(rates[axis - 1]), t_before, t_after)
-            if abs(m.rate_dps - rate) <= hold:
+            at_rate, at_rest = abs(m.rate_dps - rate) <= hold, abs(m.rate_dps) <= still
+            if at_rate:
                 marks.append(m)
-            elif abs(m.rate_dps) <= still:
+            elif at_rest:
                 rests.append(m)
+            # outside the ramp the table must hold its state, as _rotate's poll (issue 28 review
+            # item 3): before the command the initial one, after the ramp's time the final one
+            initial_rest = start_kind
+            expect = (initial_rest if commanded["by"] is None else
+                      (not initial_rest) if settled(m) else None)
+            if expect is not None and not (at_rest if expect else at_rate):
+                want = "at rest" if expect else f"{rate:g} deg/s"
+                raise SequencerError(f"{self.table.name}: axis {axis} did not hold {want} while recording "
+                                     f"{spec.name} outside its ramp (read {m.rate_dps:.6f} deg/s)")
+            return m
 
         def record(recs, poll):
             total = {id(ch): r.n for ch, r in recs.items()}
@@ -565,7 +589,26 @@ class Sequencer:
             self._record(recs, poll)
             mark()
             command_t.append(self._reference().stream.sync() or rec_last(recs))   # the command on the IMU's clock
-            self.table.set_rate(axis, rate if start_kind else 0.0)
+            if start_kind:
+                self.table.set_rate(axis, rate)
+                commanded["by"] = self._reference().stream.sync() or command_t[-1]
+            else:
+                # the brake commanded without the driver's wait: the axis read here until at rest,
+                # each read bracketed on the IMU's clock, so the rest's moment is known within a
+                # read (the driver's own wait confirms it only after settle_polls reads at rest:
+                # on the twins at speed 8 that is ~0.8 s of device time, past the window's end)
+                self.table.set_rate(axis, 0.0, wait=False)
+                commanded["by"] = self._reference().stream.sync() or command_t[-1]
+                deadline = time.monotonic() + 30.0
+                while True:
+                    m = mark()          # a read off both the rate and rest after the brake's time stops
+                    if m is not None and abs(m.rate_dps) <= still:
+                        rest_by.append(m.t_after + period)     # at rest by then on the IMU's clock
+                        break
+                    if time.monotonic() > deadline:
+                        raise SequencerError(f"{self.table.name}: axis {axis} did not come to rest after the "
+                                             f"recorded brake of {spec.name}")
+                    self._check_pause()
             # the window closes the compiled time after the command on the IMU's clock (the
             # ramp and the turns, or the brake and the rest), not after a count of samples: the
             # stream runs ahead of what was recorded when the command went out (what the line and
@@ -578,6 +621,14 @@ class Sequencer:
             if start_kind:
                 mark()              # still at the rate after the window (the brake comes after)
             else:                   # at rest after the window: its position
+                # a read after the window's last stamp still turning: the table was turning at
+                # the window's end, which then does not hold the whole brake (the angle and the
+                # rest edge would be wrong)
+                after_window = mark()
+                if after_window is not None and abs(after_window.rate_dps) > still:
+                    raise SequencerError(f"{self.table.name}: axis {axis} was still braking after the window of "
+                                         f"{spec.name} closed (read {after_window.rate_dps:.6f} deg/s): the table "
+                                         f"brakes slower than its rate_accel_dps2 ({step.accel_dps2:g} deg/s^2)")
                 self._wait_rest(axis)
                 mark()
 
@@ -589,9 +640,19 @@ class Sequencer:
                 "ramp_accel_dps2": step.accel_dps2}
 
         def completed(rec):
-            period = 1.0 / self.rate_hz
             edge = rec["last_t"] + 0.5 * period if start_kind else rec["first_t"] - 0.5 * period
             mean_rate = float(np.mean([m.rate_dps for m in marks])) if marks else rate
+            if not start_kind and (not rest_by or rest_by[-1] > rec["last_t"] + period):
+                # the brake's end must lie inside the window: the first read at rest bounds it (its
+                # bracket's end and a period); later than the window's last stamp (and a period:
+                # the brake's last period at most, a T^2 / 2 = 0.015 deg at 300 deg/s^2 and 100
+                # Hz, far below the window's angle_sigma_deg), the window may not hold the whole
+                # brake (issue 28 review item 3)
+                late = (rest_by[-1] - rec["last_t"]) if rest_by else float("nan")
+                raise SequencerError(f"{spec.name}: the table was read at rest only after the window closed "
+                                     f"(by {late:.3f} s of the IMU's clock): "
+                                     f"its brake may be cut short; check rate_accel_dps2 ({step.accel_dps2:g} "
+                                     "deg/s^2) against the table's")
             turning = ramp_angle.position_at(marks, edge, mean_rate, period)
             if turning is None or not rests:
                 raise SequencerError(f"{spec.name}: the table's position was not read at the rate and at rest "
@@ -606,11 +667,28 @@ class Sequencer:
             rates = (0.0, mean_rate) if start_kind else (mean_rate, 0.0)
             # the reads the angle came from (position deg, rate deg/s, the IMU stamps before and after)
             reads = [[round(m.position_deg, 6), round(m.rate_dps, 6), m.t_before, m.t_after] for m in rests + marks]
+            # the angle's own 1-sigma from placing the reads at the rate (beyond the encoder's)
+            sigma = ramp_angle.angle_sigma(marks, mean_rate, period)
             return _optional(angle_deg=body_sign * angle, table_rate_readback_dps=mean_rate,
                              rate_start_dps=body_sign * rates[0], rate_end_dps=body_sign * rates[1],
-                             temperature_c=rec["temp"], table_reads=reads)
+                             temperature_c=rec["temp"], table_reads=reads, angle_sigma_deg=round(sigma, 9))
+
+        attempts = []
 
         def start():
+            # every attempt from the window's initial state (issue 28 review item 2): a recording
+            # kept aside leaves a "start" window's table turning and an "end" window's at rest,
+            # where the next would read neither a rest nor the rate before its command
+            if attempts:
+                if start_kind:
+                    self.table.set_rate(axis, 0.0)
+                    self._wait_rest(axis)
+                else:
+                    self.table.set_rate(axis, rate)
+                self._discard(step.settle_s)
+            attempts.append(1)
+            commanded["by"] = None
+            rest_by.clear()
             marks.clear()
             rests.clear()
             mark()                  # at rest ("start") or at the rate ("end") before the window

@@ -217,7 +217,7 @@ def cmd_run(args) -> int:
         capture = dryrun.record_scheme(
             scheme, truth, args.seed, out_dir,
             progress=lambda name, i, n: status.update(f"recording {name} ({i + 1}/{n})"), geometry=geometry,
-            chamber=config.chamber)
+            chamber=config.chamber, ramp_accel_dps2=dryrun.table_ramp_accel(config.table))
     from station.cli.history import file_quietly
     from station.cli.noise import characterise_run, is_noise_recording
 
@@ -258,7 +258,8 @@ def _append_dry_run(args, overrides) -> int:
     with out.status("recording") as status:
         dryrun.append_scheme(ext, text, directory,
                              progress=lambda name, i, n: status.update(f"recording {name} ({i + 1}/{n})"),
-                             chamber=_config(args).chamber)
+                             chamber=_config(args).chamber,
+                             ramp_accel_dps2=dryrun.table_ramp_accel(_config(args).table))
     from station import api
     from station.cli.history import file_quietly
 

@@ -16,7 +16,7 @@ from station.bench.compile import compile_scheme
 from station.bench.plan import Chamber
 from station.core.errors import UserError
 from station.design import candidates as cand_mod
-from station.design.information import Noise, information, model_of, quiet_truth
+from station.design.information import Noise, information, model_of, quiet_truth, ramp_accel_of
 from station.design.search import (MIN_LEVEL_AXES, MIN_STATICS, MIN_STATICS_TABLE, MAX_STATICS_TABLE, Scorer,
                                    parse_criterion,
                                    timed_exchange)
@@ -124,7 +124,8 @@ def predict(scheme: Scheme, effects: list, noise: Noise, config=None, duration_s
     covs, revealed = [], None
     for seed in seeds:
         model, _ = model_of(scheme, effects, noise, truth, None, seed=seed,
-                            chamber=config.chamber if config is not None else None, appended=appended)
+                            chamber=config.chamber if config is not None else None, appended=appended,
+                            ramp_accel_dps2=ramp_accel_of(config))
         result = lsq.fit(model.s, [copy.deepcopy(e) for e in effects])
         names, index, factors, units_ = lsq._reported_index(result, "m/s^2", "deg/s")
         factors, units_ = np.array(factors, float), list(units_)

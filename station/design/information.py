@@ -83,7 +83,8 @@ class Information:
     # them scaled by dT^power on those rows and columns (at_temperature)
     temp_power: np.ndarray | None = None
     temperature: object = None                     # the temperature model T(t) (the simulated bench's)
-    clock: tuple = (0.0, 0.0)                      # the dry run's (gap before a segment, sample rate)
+    clock: tuple = (0.0, 0.0)                      # the dry run's (gap before a segment, sample rate[,
+                                                   #   its recorded ramps' acceleration deg/s^2])
     # per candidate key the temperature difference it had in the candidates' own capture (the
     # information before timeline=True: the search's first stage ranks on it, search.Scorer.natural)
     natural_dt: dict = field(default_factory=dict)
@@ -141,6 +142,14 @@ def at_temperature(M: np.ndarray, power: np.ndarray, dt_c: float) -> np.ndarray:
     return M * np.outer(lam, lam)
 
 
+def ramp_accel_of(config) -> float:
+    """The recorded ramps' acceleration on the simulated bench (deg/s^2): the configured table's
+    (station.simulate.dryrun.table_ramp_accel), the dry run's default without a configuration."""
+    from station.simulate import dryrun
+
+    return dryrun.table_ramp_accel(config.table) if config is not None else dryrun.RAMP_ACCEL_DPS2
+
+
 def quiet_truth(noise: Noise, config=None):
     """The simulated IMU of the Monte Carlo without noise, placed as the configured table
     places it (table.imu_offset_m), for the Jacobian."""
@@ -155,7 +164,7 @@ def quiet_truth(noise: Noise, config=None):
 
 
 def model_of(scheme: Scheme, effects: list, noise: Noise, truth, geometry: dict | None = None,
-             attitudes: str = "unknown", seed: int = 0, chamber=None, appended=()):
+             attitudes: str = "unknown", seed: int = 0, chamber=None, appended=(), ramp_accel_dps2=None):
     """The least-squares model of the noiseless capture of ``scheme`` with the noise stated, as
     station.simulate.montecarlo.cramer_rao weights it: (model, capture).  ``seed``: the simulated
     bench's geometry (each static's heading, each rotation axis' heading and roll: drawn at
@@ -166,7 +175,7 @@ def model_of(scheme: Scheme, effects: list, noise: Noise, truth, geometry: dict 
     from station.estimate.summaries import summarise
     from station.simulate import dryrun
 
-    capture = dryrun.simulate_capture(scheme, truth, seed, geometry, chamber=chamber)
+    capture = dryrun.simulate_capture(scheme, truth, seed, geometry, chamber=chamber, ramp_accel_dps2=ramp_accel_dps2)
     for seg in capture.segments:
         if seg.name in appended:
             seg.extra["appended"] = 1
@@ -386,6 +395,7 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
     in the candidates' capture, whose order is not the design's (the twelfth session's temperature
     design: the search's worst 1σ 3.24 µg/°C, the estimator's fit of the written scheme 7.00)."""
     truth = quiet_truth(noise, config)
+    ramp_accel = ramp_accel_of(config)
     warm = copy.deepcopy(truth.temperature)
     power = None
     if timeline:
@@ -414,7 +424,7 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
         if offsets_of_groups:
             segments = _anchored(segments, owner, len(placed))
         scheme = Scheme("candidates", "", "", {}, tuple(segments), centred=centred, table=True)
-        model, _ = model_of(scheme, effects, noise, truth, geometry, attitudes)
+        model, _ = model_of(scheme, effects, noise, truth, geometry, attitudes, ramp_accel_dps2=ramp_accel)
         shared = _shared_columns(model)
         group_own = _group_offsets(model, owner)
         rename: dict = {}
@@ -465,7 +475,8 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
             info = Information(len(shared), merged, attitudes=attitudes)
             if power is not None:
                 info.temp_power, info.temperature = power, warm
-                info.clock = (float(truth.bench.move_s + truth.bench.settle_s), float(truth.sample_rate_hz))
+                info.clock = (float(truth.bench.move_s + truth.bench.settle_s), float(truth.sample_rate_hz),
+                              ramp_accel)
         info.chunk_parameters.append(list(p_c.names))
         if power is not None:
             from station.design.timeline import seconds_temperatures

@@ -93,9 +93,10 @@ def _mounting_groups(chosen, cands, masks=None, order=None) -> list:
     return groups
 
 
-def segment_seconds(c) -> list:
+def segment_seconds(c, ramp_accel_dps2: float | None = None) -> list:
     """The recorded lengths of a candidate's segments (a static: its dwell; a rotation pair: its
-    two directions, whole revolutions each)."""
+    two directions, whole revolutions each; a recorded ramp's at ``ramp_accel_dps2``, the
+    configured table's: the dry run's default without it)."""
     if c.kind == "static":
         return [float(c.dwell_s)]
     axis, e, rate, rev = c.key[:4]
@@ -103,7 +104,7 @@ def segment_seconds(c) -> list:
         from station.io.scheme import RAMP_REST_S
         from station.simulate.dryrun import RAMP_ACCEL_DPS2
 
-        return [rev * 360.0 / rate + rate / RAMP_ACCEL_DPS2 + RAMP_REST_S] * 2
+        return [rev * 360.0 / rate + rate / (ramp_accel_dps2 or RAMP_ACCEL_DPS2) + RAMP_REST_S] * 2
     return [rev * 360.0 / rate] * 2
 
 
@@ -113,7 +114,8 @@ def mean_temperatures(sequence, cands, temperature, clock, chamber=None) -> np.n
     sample rate, Hz); ``temperature.at(t)`` the IMU's temperature at bench time t; ``chamber``
     (station.core.chamber.ChamberConfig) the chamber the candidates' levels set."""
     levels = [level_of(cands[i]) for i in sequence]
-    return seconds_temperatures([segment_seconds(cands[i]) for i in sequence], temperature, clock,
+    accel = clock[2] if len(clock) > 2 else None        # the recorded ramps' (information.Information.clock)
+    return seconds_temperatures([segment_seconds(cands[i], accel) for i in sequence], temperature, clock,
                                 levels if chamber is not None and any(x is not None for x in levels) else None,
                                 chamber)
 
@@ -121,7 +123,7 @@ def mean_temperatures(sequence, cands, temperature, clock, chamber=None) -> np.n
 def seconds_temperatures(items, temperature, clock, levels=None, chamber=None) -> np.ndarray:
     """mean_temperatures of items given as the lengths of their segments, in order (``levels``:
     each item's chamber level, None: no chamber)."""
-    gap, fs = clock
+    gap, fs = clock[:2]
     dt = 1.0 / fs
     end = 0.0
     out = np.zeros(len(items))

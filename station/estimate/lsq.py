@@ -471,7 +471,10 @@ class Model:
         self.gyro_whiten = []
         for r, axis_raw in zip(s.rotations, self._rotation_axes_raw):
             cov = np.diag(s.gyro_sigma**2 * r.duration_s / s.sample_rate_hz + self.pose_extra[3:] * r.duration_s**2)
-            cov += s.table_angle_sigma_deg**2 * np.outer(axis_raw, axis_raw)
+            # a recorded ramp's own angle error (its reads placed on the IMU's clock, issue 28
+            # review item 1: RotationSummary.angle_sigma_deg) in quadrature with the encoder's
+            angle_var = s.table_angle_sigma_deg**2 + getattr(r, "angle_sigma_deg", 0.0)**2
+            cov += angle_var * np.outer(axis_raw, axis_raw)
             self.gyro_whiten.append(np.linalg.inv(np.linalg.cholesky(cov)))
 
     def set_pose_extra(self, extra) -> None:

@@ -97,6 +97,10 @@ class RotationSummary:
     # (tracked by the gyro): what a rate fixed in space across the axis (the Earth's) adds to the
     # gyro integral.  None: T/A (sin A, 1 - cos A), a uniform turn's (every steady segment's)
     earth_weights_s: np.ndarray | None = None
+    # the 1-sigma of this window's angle beyond the encoder's (deg): a recorded ramp's angle is
+    # the table's reads placed on the IMU's clock (manifest ``angle_sigma_deg``, issue 28 review
+    # item 1); added in quadrature to the encoder's in the gyro integral's variance.  0: none said
+    angle_sigma_deg: float = 0.0
 
     @property
     def rate_dps(self) -> float:
@@ -387,8 +391,16 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
     spans = _chunks(n)
     gyro_mean = _column_means(gyro)
     fraction = _phase_fraction(t, gyro, start, duration, gyro_sigma_dps, gyro_mean)
+    earth_weights = None
     if steady_rate_dps is not None:     # a recorded ramp: the phase at the table's steady rate
         fraction = _ramp_fraction(t, gyro, gyro_mean, angle_deg, steady_rate_dps, gyro_sigma_dps)
+        # the Earth rate's weights over the window from the same phase as the harmonics' (a rest
+        # and a ramp spend longer at some angles than a uniform turn; issue 28 review item 5:
+        # one phase per window, not the raw gyro's turn beside it)
+        phase = np.radians(angle_deg) * fraction
+        weights = np.gradient(t)        # each sample's share of the window (as the gyro integral's)
+        earth_weights = np.array([weights @ np.cos(phase), weights @ np.sin(phase)])
+        del phase, weights
     # the table rate w(t) about the axis, its square and its time derivative are projected on the
     # same basis as the accelerometer (one solve for all of them)
     w = _rate(gyro, gyro_bias, angle_deg, duration, gyro_mean)
@@ -444,7 +456,7 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
                            gyro_start=gyro[:edge].mean(axis=0), gyro_end=gyro[-edge:].mean(axis=0),
                            steady=steady, rate_sq_factor=rate_sq_factor,
                            rate_coef=rate_coefs[0], rate_sq_coef=rate_coefs[1], rate_dot_coef=rate_coefs[2],
-                           gram=gram_per_sample)
+                           gram=gram_per_sample, earth_weights_s=earth_weights)
 
 
 def _scaled(values, factor):
@@ -610,7 +622,7 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
             scanner.harmonics(seg.name, summary.samples, len(d.t))
             if seg.extra.get("motion") == "hand":      # the writer says so (manual schemes)
                 summary.steady = False
-            _ramp_keys(summary, seg, d.t, _scaled(d.gyro, cg))
+            _ramp_keys(summary, seg)
             summary.t_mid_s, summary.index = float(np.mean(d.t)), order[seg.name]
             summary.temp_rate_c_per_s = _slope(d.t, d.temp)
             axis_no = seg.extra.get("table_axis")
@@ -645,27 +657,30 @@ def _ramp_rate(seg) -> float | None:
     return seg.rate_dps if seg.rate_dps else None
 
 
-def _ramp_keys(summary, seg, t, gyro) -> None:
+def _ramp_keys(summary, seg) -> None:
     """A recorded ramp's manifest keys onto its summary: the turn is the table's (steady: its
     accelerometer harmonics are used, the phase tracked by the gyro through the ramp), the
     table's rates at the window's edges are kept (a key that is not a finite number: not said),
-    and the Earth rate's weights over the window are taken from the gyro-tracked phase (a rest and
-    a ramp spend longer at some angles than a uniform turn: on the simulated bench at 100 deg/s
-    and 50 deg/s^2 the uniform weights left 0.006 deg in the integral, 144 sigma of its noise)."""
+    and the window's own angle 1-sigma (``angle_sigma_deg``: its reads' placement).  The Earth
+    rate's weights over the window (a rest and a ramp spend longer at some angles than a uniform
+    turn: on the simulated bench at 100 deg/s and 50 deg/s^2 the uniform weights left 0.006 deg
+    in the integral, 144 sigma of its noise) are rotation_summary's, from the phase the harmonics
+    use (_ramp_fraction)."""
     ramp = seg.extra.get("record_ramp")
     if ramp not in ("start", "end"):
         return
     summary.record_ramp = ramp
     summary.steady = True
-    start, end = _window(t)
-    fraction = _turned_fraction(t, gyro, start, end - start, _column_means(gyro))
-    phase = np.radians(summary.angle_deg) * fraction
-    weights = np.gradient(t)            # each sample's share of the window (as the gyro integral's)
-    summary.earth_weights_s = np.array([weights @ np.cos(phase), weights @ np.sin(phase)])
     for key, attr in (("rate_start_dps", "table_rate_start_dps"), ("rate_end_dps", "table_rate_end_dps")):
         x = seg.extra.get(key)
         if isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x):
             setattr(summary, attr, float(x))
+    sigma = seg.extra.get("angle_sigma_deg")
+    if sigma is not None:
+        if isinstance(sigma, bool) or not isinstance(sigma, (int, float)) or not np.isfinite(sigma) or sigma < 0:
+            raise UserError(f"{seg.name}: angle_sigma_deg: must be a finite number >= 0 (the 1-sigma of the "
+                            f"window's angle from its reads, deg), got {sigma!r}")
+        summary.angle_sigma_deg = float(sigma)
 
 
 def _scanned(scanner, seg, d, ca, cg):

@@ -17,10 +17,18 @@ from station.io.scheme import RAMP_REST_S, RotationSpec, Scheme
 
 BLOCK_SECONDS = 10.0     # samples are written and flushed in blocks of this length
 TRUTH_FILE = "sim_truth.yaml"
-# a recorded ramp's acceleration on the simulated table: station.yaml's default rate_accel_dps2
-# (station.bench.config.AxisLimits; a configured table's own is set on the bench by the caller,
-# ``bench.station_ramp_accel_dps2``)
+# a recorded ramp's acceleration on the simulated table without a configured table: station.yaml's
+# default rate_accel_dps2 (station.bench.config.AxisConfig); a configured table's own is passed
+# in (``ramp_accel_dps2``: table_ramp_accel of station.yaml's table, issue 28 review item 4)
 RAMP_ACCEL_DPS2 = 50.0
+
+
+def table_ramp_accel(table) -> float:
+    """The acceleration (deg/s^2) a dry run's recorded ramps take on the configured ``table``
+    (station.bench.config.TableConfig): its axes' rate_accel_dps2, the slowest (the simulated bench
+    turns a body axis, not a table axis; the slowest's ramp is the longest a window holds)."""
+    values = [float(lim.rate_accel_dps2) for lim in getattr(table, "limits", ()) or ()]
+    return min(values) if values else RAMP_ACCEL_DPS2
 # the keys a simulated rotation reports as the bench does (written when it closes)
 SEGMENT_KEYS = ("angle_deg", "table_axis", "record_ramp", "ramp_accel_dps2", "rate_start_dps", "rate_end_dps")
 
@@ -34,7 +42,7 @@ def load_truth(truth_path: str | None, seed: int):
 MAX_SIMULATED_SAMPLES = 5_000_000   # per segment: the simulator holds a segment whole (~1 GB at this)
 
 
-def _bench(scheme: Scheme, truth, seed: int, start_s: float = 0.0, chamber=None):
+def _bench(scheme: Scheme, truth, seed: int, start_s: float = 0.0, chamber=None, ramp_accel_dps2=None):
     """The simulated bench for ``scheme`` (its clock from ``start_s``); UserError naming the segment
     when one gives fewer than 2 samples, or more than the simulator holds at once, or sets a
     temperature chamber that ``chamber`` (station.core.chamber.ChamberConfig) does not provide,
@@ -44,6 +52,7 @@ def _bench(scheme: Scheme, truth, seed: int, start_s: float = 0.0, chamber=None)
     check_chamber(scheme, chamber)
     bench = SimulatedBench(_mounted(truth, scheme), seed, start_s=start_s)
     bench.station_chamber = chamber
+    bench.station_ramp_accel_dps2 = ramp_accel_dps2        # None: RAMP_ACCEL_DPS2
     rate_hz = bench.sample_rate_hz
     for spec in scheme.segments:
         n = spec.duration_s * rate_hz
@@ -205,11 +214,12 @@ def _headers(bench, seed: int) -> tuple[ImuInfo, Site]:
 
 def record_scheme(scheme: Scheme, truth, seed: int, out_dir: Path,
                   progress: Callable[[str, int, int], None] | None = None, geometry: dict | None = None,
-                  chamber=None) -> Path:
+                  chamber=None, ramp_accel_dps2: float | None = None) -> Path:
     """Simulate every segment of ``scheme`` and write the capture bundle to ``out_dir``
     (``geometry``: the table's as stated, _bench_keys; ``chamber``: the configured temperature
-    chamber, station.core.chamber.ChamberConfig, needed by a scheme that sets one)."""
-    bench = _bench(scheme, truth, seed, chamber=chamber)
+    chamber, station.core.chamber.ChamberConfig, needed by a scheme that sets one; ``ramp_accel_dps2``:
+    the recorded ramps' acceleration, table_ramp_accel of the configured table)."""
+    bench = _bench(scheme, truth, seed, chamber=chamber, ramp_accel_dps2=ramp_accel_dps2)
     imu, site = _headers(bench, seed)
     # the manifest written at the start and the end (a dry run is redone, never resumed: a run's
     # writer rewrites it at every segment's start and end, quadratic in the segments), and in the
@@ -272,7 +282,8 @@ def replay_chamber(bench, capture, chamber=None) -> float | None:
 
 
 def append_scheme(extension: Scheme, text: str, directory: Path,
-                  progress: Callable[[str, int, int], None] | None = None, chamber=None) -> Path:
+                  progress: Callable[[str, int, int], None] | None = None, chamber=None,
+                  ramp_accel_dps2: float | None = None) -> Path:
     """Record ``extension``'s segments into the dry run's capture ``directory``, after its own, on
     the same simulated bench: the IMU of the capture's ``sim_truth.yaml``, still mounted as it was,
     the bench's clock going on from the end of the capture's last segment (a warm-up, a drift or a
@@ -315,7 +326,7 @@ def append_scheme(extension: Scheme, text: str, directory: Path,
     # sample (SimulatedBench._times), as in one uninterrupted run
     start_s = max(ends, default=-0.5 / capture.imu.sample_rate_hz) + 0.5 / capture.imu.sample_rate_hz
     seed = int(np.random.SeedSequence([int(sim["seed"]), len(capture.segments)]).generate_state(1)[0])
-    bench = _bench(extension, truth, seed, start_s=start_s, chamber=chamber)
+    bench = _bench(extension, truth, seed, start_s=start_s, chamber=chamber, ramp_accel_dps2=ramp_accel_dps2)
     # the chamber as the run left it: its air, the IMU's case lagging it, the setpoint in force
     setpoint = replay_chamber(bench, capture, chamber)
     listed = sorted(directory.glob("scheme-append-*.yaml"))
@@ -332,9 +343,10 @@ def append_scheme(extension: Scheme, text: str, directory: Path,
     return directory
 
 
-def simulate_capture(scheme: Scheme, truth, seed: int, geometry: dict | None = None, chamber=None) -> Capture:
+def simulate_capture(scheme: Scheme, truth, seed: int, geometry: dict | None = None, chamber=None,
+                     ramp_accel_dps2: float | None = None) -> Capture:
     """The capture a dry run would write, kept in memory (for Monte Carlo runs)."""
-    bench = _bench(scheme, truth, seed, chamber=chamber)
+    bench = _bench(scheme, truth, seed, chamber=chamber, ramp_accel_dps2=ramp_accel_dps2)
     imu, site = _headers(bench, seed)
     segments = []
     for spec, seg, meta in _simulate(scheme, bench):
