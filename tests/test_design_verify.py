@@ -127,3 +127,25 @@ def test_a_design_of_unknown_attitudes_turns_about_two_level_axes():
         level = {tuple(np.round(s.axis_body, 6)) for s in d.scheme.segments
                  if isinstance(s, RotationSpec) and s.axis_elevation_deg == 0.0}
         assert d.attitudes == "unknown" and len(level) >= MIN_LEVEL_AXES, (criterion, level)
+
+
+def test_a_design_with_an_effect_outside_the_library_is_verified_not_a_traceback():
+    """The designer's noisy dry runs with a plugin effect (station/model/unlisted.py, as diagnose's
+    chamber-design command adds it): station montecarlo takes library ids only, and given the id
+    every verification run raised KeyError (a traceback of `station design`); now the run is
+    estimated with the effect's instance and its parameters come back by name, as a library
+    effect's do."""
+    import numpy as np
+
+    from station.io.scheme import scheme_from_text
+    from station.model.unlisted import GyroScaleTemperatureSquared
+
+    faces = [[0, 0, 1], [0, 0, -1], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0]]
+    text = "name: small\ndefaults: {dwell_s: 2, rate_dps: 90, rotation_s: 4}\nsegments:\n" + "".join(
+        f"  - {{static: s{i}, up_body: {u}}}\n" for i, u in enumerate(faces)) + "".join(
+        f"  - {{rotation: r{a}, axis_body: {v}}}\n" for a, v in zip("xyz", [[1, 0, 0], [0, 1, 0], [0, 0, 1]]))
+    effect = GyroScaleTemperatureSquared()
+    names, errors, sigmas, notes = designer.verify_one(scheme_from_text(text, "small.yaml"), (effect,), Noise(), 1000)
+    wanted = [p.name for p in effect.params]
+    assert names[-len(wanted):] == wanted and len(errors) == len(sigmas) == len(names)
+    assert np.all(np.isfinite(sigmas[-len(wanted):])) and np.all(sigmas[-len(wanted):] > 0)

@@ -157,18 +157,37 @@ class Verification:
 def verify_one(scheme: Scheme, effect_ids: tuple, noise: Noise, seed: int, chamber=None) -> tuple:
     """One noisy dry run of ``scheme`` estimated as ``station montecarlo`` estimates it (the same
     function, station.simulate.montecarlo.one_run): (names, errors, the fit's own 1σ, the fit's
-    notes), errors and 1σ in the prediction's units (scale factors in ppm)."""
+    notes), errors and 1σ in the prediction's units (scale factors in ppm).  ``effect_ids`` the
+    library's ids, or effect instances where the model has one the library has not (a plugin,
+    station/model/unlisted.py): their fit is station montecarlo's with those effects (it takes
+    library ids only; given ids, a plugin's was a KeyError in every verification run)."""
+    import copy
+
     from station.model.calibration import parameter_errors
     from station.simulate import dryrun, montecarlo
 
-    settings = replace(noise.settings(), effects=tuple(effect_ids), chamber=chamber)
+    instances = None if all(isinstance(e, str) for e in effect_ids) else [copy.deepcopy(e) for e in effect_ids]
+    ids = tuple(e if isinstance(e, str) else e.id for e in effect_ids)
+    settings = replace(noise.settings(), effects=ids if instances is None else (), chamber=chamber)
     truth = montecarlo.make_truth(settings)
-    cal = montecarlo._estimate(dryrun.simulate_capture(scheme, truth, seed, chamber=chamber), settings)
+    capture = dryrun.simulate_capture(scheme, truth, seed, chamber=chamber)
+    if instances is None:
+        cal = montecarlo._estimate(capture, settings)
+        effects = montecarlo._effects(settings)
+    else:
+        from station.estimate import lsq
+
+        cal = lsq.estimate(capture, instances)
+        effects = [copy.deepcopy(e) for e in effect_ids]
     names = [e[0] for e in parameter_errors(cal, dryrun.truth_calibration(truth))]
-    names += [p.name for e in montecarlo._effects(settings) for p in e.params]
+    names += [p.name for e in effects for p in e.params]
     errors = [e[3] for e in parameter_errors(cal, dryrun.truth_calibration(truth))]
-    errors += montecarlo._effect_values(cal, settings)
-    sigmas = np.concatenate([montecarlo._error_sigmas(cal), montecarlo._effect_values(cal, settings, sigma=True)])
+    # each effect parameter against zero (the simulator's default IMU has none), NaN where the
+    # calibration does not carry it (as montecarlo._effect_values)
+    got = {name: (value, cal.sigma.get(name, np.nan)) for name, value, _ in montecarlo.effect_parameters(cal)}
+    errors += [got.get(p.name, (np.nan, np.nan))[0] for e in effects for p in e.params]
+    sigmas = np.concatenate([montecarlo._error_sigmas(cal),
+                             [got.get(p.name, (np.nan, np.nan))[1] for e in effects for p in e.params]])
     return names, np.array(errors, float), np.asarray(sigmas, float), list(cal.fit.get("notes", []))
 
 
@@ -192,7 +211,12 @@ def verify(scheme: Scheme, effects: list, noise: Noise, prediction: Prediction, 
     estimator's covariance at the noiseless capture; what it leaves out is what the estimator
     does with noise: a start the solver does not converge from, a direction the noiseless fit
     sees and a noisy one does not, a noise model or reweighting the designed segments set off."""
+    from station.model import LIBRARY
+
+    # the library's effects by id (what station montecarlo takes, and what a Dask worker unpickles
+    # without the user's files); a model with another effect by its instances
     ids = tuple(e.id for e in effects)
+    ids = ids if all(i in LIBRARY for i in ids) else tuple(effects)
     results = _map(executor, lambda seed: verify_one(scheme, ids, noise, seed, chamber),
                    [first_seed + k for k in range(runs)])
     problems, worst_z, worst = [], 0.0, ""
