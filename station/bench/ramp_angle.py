@@ -59,15 +59,21 @@ def position_at(marks: list, t: float, rate_dps: float, period_s: float) -> floa
     to ``t`` at the rate; their mean.  None without a mark."""
     if not marks:
         return None
+    return float(np.mean([p + rate_dps * (t - tm) for tm, p in _unwrapped(marks, rate_dps, period_s)]))
+
+
+def _unwrapped(marks: list, rate_dps: float, period_s: float) -> list:
+    """(IMU time, position unwrapped about the first mark's, deg) of each mark read while the axis
+    turned at ``rate_dps``: the whole turns a mark's reading lost, restored from where the rate
+    carries the first mark to its time."""
     first = marks[0]
     t0 = placed(first, period_s)
-    values = []
+    out = []
     for m in marks:
         tm = placed(m, period_s)
         expected = first.position_deg + rate_dps * (tm - t0)
-        unwrapped = m.position_deg + 360.0 * np.round((expected - m.position_deg) / 360.0)
-        values.append(unwrapped + rate_dps * (t - tm))
-    return float(np.mean(values))
+        out.append((tm, m.position_deg + 360.0 * np.round((expected - m.position_deg) / 360.0)))
+    return out
 
 
 def window_angle(rest_deg: float, turning_deg: float, expected_deg: float, ramp: str) -> float:
@@ -110,13 +116,7 @@ def angle_sigma(marks: list, rate_dps: float, period_s: float) -> float:
     placement = abs(rate_dps) * float(np.sqrt(np.mean(widths ** 2) / 12.0))
     spread = 0.0
     if len(marks) > 1:
-        first = marks[0]
-        t0 = placed(first, period_s)
-        carried = []
-        for m in marks:
-            tm = placed(m, period_s)
-            expected = first.position_deg + rate_dps * (tm - t0)
-            unwrapped = m.position_deg + 360.0 * np.round((expected - m.position_deg) / 360.0)
-            carried.append(unwrapped - rate_dps * (tm - t0))
+        t0 = placed(marks[0], period_s)
+        carried = [p - rate_dps * (tm - t0) for tm, p in _unwrapped(marks, rate_dps, period_s)]
         spread = float(np.std(carried, ddof=1) / np.sqrt(len(carried)))
     return float(np.hypot(placement, spread))
