@@ -178,7 +178,7 @@ def verify_one(scheme: Scheme, effect_ids: tuple, noise: Noise, seed: int, chamb
         from station.estimate import lsq
 
         cal = lsq.estimate(capture, instances)
-        effects = [copy.deepcopy(e) for e in effect_ids]
+        effects = instances             # (their parameters' names: what the fit set does not rename)
     names = [e[0] for e in parameter_errors(cal, dryrun.truth_calibration(truth))]
     names += [p.name for e in effects for p in e.params]
     errors = [e[3] for e in parameter_errors(cal, dryrun.truth_calibration(truth))]
