@@ -1779,23 +1779,27 @@ def _detours(model: Model, lm, evaluations: int, options: dict):
     return lm.result()
 
 
-def _gauss_newton_gain(res) -> float:
+def _gauss_newton_gain(res, svd: "_ScaledSVD | None" = None) -> float:
     """The chi2 a Gauss-Newton step from res (a least_squares-like result: fun, jac) would gain
-    by the linear model: g^T (J^T J)^+ g with g = J^T r, zero at a minimum (the gradient is)."""
+    by the linear model: g^T (J^T J)^+ g with g = J^T r, zero at a minimum (the gradient is).
+    ``svd``: the scaled SVD of res.jac when one is at hand (_solve's, for the covariance), read
+    instead of another factorisation of J when it is of that very matrix."""
     fun, jac = res.fun, np.asarray(res.jac)
+    if svd is not None and svd.u is not None and np.array_equal(svd.J, jac):
+        return svd.gauss_newton_gain(fun)
     left = fun + jac @ _gauss_newton_step(jac, fun)
     return float(fun @ fun - left @ left)
 
 
-def _at_minimum(res, chi2_units: float = None) -> bool:
+def _at_minimum(res, chi2_units: float = None, svd: "_ScaledSVD | None" = None) -> bool:
     """Whether a Gauss-Newton step from res would gain less than ``chi2_units`` (CREEP_CHI2 by
     default) chi2 units, a unit max(1, chi2 / degrees of freedom) (_CreepWatch.unit: a failing
     fit's 1-sigma is scaled by its square root): every parameter within ~sqrt(CREEP_CHI2) = 1e-3
-    sigma of the minimum (chi2 - chi2_min = |delta / sigma|^2 near it)."""
+    sigma of the minimum (chi2 - chi2_min = |delta / sigma|^2 near it).  ``svd``: _gauss_newton_gain's."""
     fun, jac = res.fun, np.asarray(res.jac)
     dof = len(fun) - jac.shape[1]
     unit = max(1.0, float(fun @ fun) / dof) if dof > 0 else 1.0
-    return _gauss_newton_gain(res) < (CREEP_CHI2 if chi2_units is None else chi2_units) * unit
+    return _gauss_newton_gain(res, svd) < (CREEP_CHI2 if chi2_units is None else chi2_units) * unit
 
 
 def _solve(model: Model, x0: np.ndarray):
@@ -1818,13 +1822,18 @@ def _solve(model: Model, x0: np.ndarray):
         # the numpy LM pauses for _best_start's trials; an _lm replaced (tests) is solved whole
         solve.begin = (lambda start: _LMSolve(model, start)) if _lm is _numpy_lm else None
         res = _minimise(model, x0, solve)
-        stopped_short = res.status != 0 and not _at_minimum(res, AT_MINIMUM_CHI2)
+        # the Jacobian at the solution (the solver's last, kept by Model.jacobian) factorised once:
+        # the at-minimum test, the covariance, the null space and the leverages read its SVD
+        reduced = _Reduced(model, model.jacobian(res.x))
+        stopped_short = res.status != 0 and not _at_minimum(res, AT_MINIMUM_CHI2, reduced.svd)
         if stopped_short:
             # stopped by its tolerances where a Gauss-Newton step still gains: once more from there
             again = solve(res.x)
-            res = again if again.cost <= res.cost else res
-            stopped_short = res.status != 0 and not _at_minimum(res, AT_MINIMUM_CHI2)
-        reduced = _Reduced(model, model.jacobian(res.x))
+            if again.cost <= res.cost:
+                res = again
+                reduced = _Reduced(model, model.jacobian(res.x))
+            stopped_short = res.status != 0 and not _at_minimum(res, AT_MINIMUM_CHI2, reduced.svd)
+        model.solution_svd = reduced.svd       # (_solution_svd: the noise groups' leverages)
     model.stopped_short = res.status != 0 and not model.is_large and stopped_short
     model.converged = res.status != 0 and not model.stopped_short
     model.remaining_step = None
@@ -1874,7 +1883,22 @@ class _ScaledSVD:
         self.J = J
         self.norms = np.array(np.linalg.norm(J, axis=0) if scale is None else scale, float)
         self.norms[self.norms == 0] = 1.0
-        _, self.sv, self.vt = np.linalg.svd(J / self.norms, full_matrices=False)
+        u, self.sv, self.vt = np.linalg.svd(J / self.norms, full_matrices=False)
+        # the left singular vectors of a dense model's J (scaled by its column norms: scale None)
+        # are kept for what else is read from that J at the solution, without another
+        # factorisation of it (issue 27: three per fit before): the Gauss-Newton gain of the
+        # at-minimum test and the leverages of the noise groups (noise_groups.leverages, the same
+        # SVD of the same matrix, so the same numbers to the last bit).  Not a large model's
+        # (its reduced J has a row per measurement)
+        self.u = u if scale is None else None
+
+    def gauss_newton_gain(self, r) -> float:
+        """_gauss_newton_gain through this SVD (J the solver's at r): the chi2 a Gauss-Newton step
+        would gain by the linear model, ||U_k^T r||^2 over the singular values above 1e-12 of the
+        largest (lstsq's rcond=1e-12 there)."""
+        keep = self.sv > 1e-12 * self.sv[0] if self.sv.size else self.sv.astype(bool)
+        c = self.u[:, keep].T @ r
+        return float(c @ c)
 
     def covariance(self) -> np.ndarray:
         """(J^T J)^-1 (J^T J would square J's condition).  A direction the data cannot see at
@@ -2099,7 +2123,7 @@ def _reweight(model: Model, x, cov, r, reduced, turns: bool, statics: list):
     def components(x):
         J = None if model.is_large else np.asarray(model.jacobian(x))
         out = variance_components(model.row_labels(x), model.residuals(x), J, parameters=model.layout.size,
-                                  by_axis=statics)
+                                  by_axis=statics, svd=_solution_svd(model, J))
         if J is not None:       # kept for to_calibration's fit.noise_groups at the same x
             model.components_at = (np.array(x, copy=True), [{k: v for k, v in c.items() if k != "axes"} for c in out])
         return {c["group"]: c for c in out}
@@ -2234,7 +2258,17 @@ def _noise_groups(result: FitResult) -> list:
     J = model.jacobian(result.x)
     if len(labels) != len(r) or J.shape[0] != len(r):
         return []
-    return variance_components(labels, r, np.asarray(J), parameters=model.layout.size)
+    return variance_components(labels, r, np.asarray(J), parameters=model.layout.size,
+                               svd=_solution_svd(model, np.asarray(J)))
+
+
+def _solution_svd(model: Model, J) -> tuple | None:
+    """(U, singular values) of J scaled by its column norms when _solve factorised that very
+    matrix at the solution (model.solution_svd), for noise_groups.leverages; None otherwise."""
+    svd = getattr(model, "solution_svd", None)
+    if J is None or svd is None or svd.u is None or not np.array_equal(svd.J, J):
+        return None
+    return svd.u, svd.sv
 
 
 def _to_reported(model: Model, x: np.ndarray):

@@ -62,17 +62,23 @@ def group_of(kind: str, quantity: str) -> str | None:
     return None
 
 
-def leverages(J: np.ndarray) -> np.ndarray:
-    """The hat matrix' diagonal of J (column-scaled; directions the data do not see take none)."""
-    norms = np.linalg.norm(J, axis=0)
-    norms[norms == 0] = 1.0
-    U, sv, _ = np.linalg.svd(J / norms, full_matrices=False)
+def leverages(J: np.ndarray, svd=None) -> np.ndarray:
+    """The hat matrix' diagonal of J (column-scaled; directions the data do not see take none).
+    ``svd``: (U, singular values) of J with its columns scaled by their norms (a zero one by 1),
+    when the caller has that SVD already (lsq's at the solution: the same numbers, one
+    factorisation of J fewer)."""
+    if svd is not None:
+        U, sv = svd
+    else:
+        norms = np.linalg.norm(J, axis=0)
+        norms[norms == 0] = 1.0
+        U, sv, _ = np.linalg.svd(J / norms, full_matrices=False)
     keep = sv > sv[0] * 1e-10 if sv.size else sv.astype(bool)
     return np.einsum("ij,ij->i", U[:, keep], U[:, keep])
 
 
 def variance_components(labels, residuals: np.ndarray, J: np.ndarray | None, parameters: int | None = None,
-                        by_axis=()) -> list[dict]:
+                        by_axis=(), svd=None) -> list[dict]:
     """Per data group: rows, redundancy, chi2, the scatter factor s_g and its p-value.
 
     ``labels``: lsq.Model.row_labels of every row of ``J`` (and ``residuals``), priors included;
@@ -80,8 +86,8 @@ def variance_components(labels, residuals: np.ndarray, J: np.ndarray | None, par
     model, whose Jacobian is not taken dense): every row takes the same share of the
     ``parameters`` (an approximation, used only to reweight the hand turns).  ``by_axis``: groups
     whose rows are also split by sensor axis, under the entry's "axes" ({axis: the same numbers}:
-    a bias that wanders on one axis of a triad only is its own component)."""
-    h = leverages(J) if J is not None else np.full(len(residuals), (parameters or 0) / max(len(residuals), 1))
+    a bias that wanders on one axis of a triad only is its own component).  ``svd``: leverages'."""
+    h = leverages(J, svd) if J is not None else np.full(len(residuals), (parameters or 0) / max(len(residuals), 1))
     groups: dict[str, list[int]] = {}
     for i, (_, kind, quantity, _) in enumerate(labels):
         g = group_of(kind, quantity)

@@ -164,7 +164,8 @@ def held_refit(joint: lsq.FitResult, values: np.ndarray, cov_held: np.ndarray) -
     model.converged = res.status != 0
     J = _dense_jacobian(model, x)
     J_f, J_h = J[:, free], J[:, held]
-    cov_ff = lsq.covariance(J_f)
+    svd = lsq._ScaledSVD(J_f)          # one factorisation for the covariance and the null space
+    cov_ff = svd.covariance()
     G = -cov_ff @ (J_f.T @ J_h)
     cov = np.zeros((size, size))
     cov[np.ix_(free, free)] = cov_ff + G @ cov_held @ G.T
@@ -172,7 +173,7 @@ def held_refit(joint: lsq.FitResult, values: np.ndarray, cov_held: np.ndarray) -
     cov[np.ix_(held, free)] = (G @ cov_held).T
     cov[np.ix_(held, held)] = cov_held
     r = res.fun[model.data_rows]
-    null = [int(free[k]) for k in lsq._null_columns(J_f)]
+    null = [int(free[k]) for k in svd.null_columns()]
     return lsq.FitResult(x=x, covariance=cov, model=model, chi2=float(r @ r), dof=joint.dof + len(held),
                          residuals=r, rank_deficient=null, covariance_columns=None)
 
