@@ -274,12 +274,8 @@ class BenchServer:
                 baud = frontend.line_baud
                 port.write(frontend.receive(data, now), baud=baud)
         if not port.closed:
-            # nobody reads: the frames due are lost anyway, do not compute them.  Lossless, a line
-            # with no reading reader holds what the line took and nothing more (a UART's): its
-            # queue would reach a reader that reads again after the table's answers given
-            # meanwhile (issue 29); without lossless, the queue's half as before
-            limit = 0 if self.options.lossless else port.max_backlog // 2
-            if self._imu_behind(limit, line) and not (self.options.lossless and reader_active):
+            if self._imu_behind(port.max_backlog // 2, line) and not (self.options.lossless and reader_active):
+                # nobody reads: the frames due are lost anyway, do not compute them
                 faulter.overflowed(line.imu.sample_times_until(now).size, recorded=False)
             else:
                 before = faulter.frames_sent
