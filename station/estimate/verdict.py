@@ -142,7 +142,7 @@ def _verdict(cal: Calibration) -> None:
         return
     if overestimated:
         verdict["p_below"] = p_below
-        verdict["reason"] = (f"reduced chi2 {reduced:.3g} (P(chi2 below) = {p_below:.2g} for {dof} degrees of "
+        verdict["reason"] = (f"reduced chi2 {reduced:.3g} (P(chi2 below) = {p_below:.2g} for {dof:.4g} degrees of "
                              f"freedom): the residuals are smaller than the stated noise, so every 1-sigma "
                              f"is too large, by up to {1 / math.sqrt(reduced):.3g} times (kept as they are: "
                              "conservative); the noise given to the fit is overestimated (a noise figure "
@@ -150,7 +150,7 @@ def _verdict(cal: Calibration) -> None:
         fit["verdict"] = verdict
         return
     if fails:
-        verdict["reason"] = (f"reduced chi2 {reduced:.3g} (p = {p_value:.2g} for {dof} degrees of freedom): "
+        verdict["reason"] = (f"reduced chi2 {reduced:.3g} (p = {p_value:.2g} for {dof:.4g} degrees of freedom): "
                              "the residuals are larger than the noise explains (a missing effect, a "
                              "bad segment, data lost or a table that slipped); station diagnose "
                              "shows where")
