@@ -133,8 +133,7 @@ def test_the_check_refuses_motion_and_passes_noise_and_drift():
     (accelerometer 100 ug/sqrt(Hz), gyro 0.01 deg/s/sqrt(Hz)) with a bias drifting through a
     60 s static by 50 ug and 0.005 deg/s (a warm-up's worth) is never refused in 200 seeds (the
     6-sigma test: 2e-9 per axis; the drifts stay well below the floors, 1/30 and 1/7 of them); the
-    last 0.5 s of a 90 deg
-    move (60 deg/s braking at 120 deg/s^2) at the start of a 2 s window, and a rotation window
+    last 0.5 s of a 90 deg move (60 deg/s braking at 120 deg/s^2) at the start of a 2 s window, and a rotation window
     holding the last 0.2 s of a spin-up to 100 deg/s at 300 deg/s^2, are refused."""
     from station.bench.steadiness import motion_found
     rate, g = 100.0, 9.80665
