@@ -86,7 +86,6 @@ LINE_BYTES = 16384
 #: most 64 KiB (TTYB_DEFAULT_MEM_LIMIT, the most any tty port has) besides the unread bytes of
 #: n_tty's read buffer (a pty took 14-22 KiB in all on Linux 6.18, by the size of the writes)
 FLIP_MAX_BYTES = 65536
-TABLE_WAIT_S = 0.1                # lossless: longest (wall s) the table's commands wait for the IMU's reader
 #: lossless: a reader that takes nothing from the IMU line for this long (wall s) while device
 #: time is held for it and the table's client asks something is not reading (a program busy with
 #: the table that reads the IMU only now and then, not a starved reader): it is taken for absent
@@ -95,6 +94,14 @@ TABLE_WAIT_S = 0.1                # lossless: longest (wall s) the table's comma
 #: READER_ACTIVE_S: a client that moved the table without reading the IMU saw the axis stand
 #: still and took it for stalled (docs/twins.md, "The twins' clock waits for the IMU's reader")
 READER_STALL_S = 0.25
+#: Lossless, and no longer a bound of its own (issue 29, the kill/resume flake): the table's
+#: commands wait while a reading reader still has frames in its transmit queue, for as long as it
+#: takes them; a reader that takes nothing for READER_STALL_S is judged absent and its queue
+#: dropped (as a UART's).  Before, they waited at most 0.1 s of wall time (TABLE_WAIT_S): under
+#: load a reader thread descheduled that long found the table's answer ("at rest") before the
+#: frames measured before it -- up to 7.4 s of device time (16 KiB of a 50 Hz stream) and, once
+#: its queue had grown while it was judged absent, 52 s -- and the settle that counts from the
+#: newest frame received began inside the move: a static recorded while the table turned.
 
 
 class BenchServer:
@@ -141,7 +148,6 @@ class BenchServer:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
-        self._table_wait_since: float | None = None
         self.table_deferred_steps = 0     # loop steps in which the table's commands waited (lossless)
         self._table_asked = False         # a table command came (or waited) in the last step
         self._requests: list = []         # (function, done event): run by the loop between steps
@@ -299,21 +305,17 @@ class BenchServer:
 
     def _defer_table(self, readers_active) -> bool:
         """Lossless: the table's commands wait while frames already measured are still in an
-        IMU's transmit queue and its reader is taking them (at most TABLE_WAIT_S: a reader
-        that has just died does not hold up the table long).  What the kernel holds reaches
-        the reader when it reads what is waiting (``drivers.transport.Port.read_waiting``)."""
+        IMU's transmit queue and its reader is taking them, however long it takes (the frames
+        measured before an answer are on the IMU line when the answer is written: the reader's
+        settle counts from them).  A reader that takes nothing meanwhile is judged absent after
+        READER_STALL_S (:meth:`_judge_reader`), its queue dropped, and the table answered: a
+        reader that has just died does not hold up the table long.  What the kernel holds
+        reaches the reader when it reads what is waiting (``drivers.transport.Port.read_waiting``)."""
         if isinstance(readers_active, bool):
             readers_active = [readers_active] + [False] * (len(self.lines) - 1)
-        wait = self.options.lossless and any(
+        return self.options.lossless and any(
             a and not line.port.closed and line.frontend.streaming and line.port.backlog > 0
             for a, line in zip(readers_active, self.lines))
-        if not wait:
-            self._table_wait_since = None
-            return False
-        now = time.monotonic()
-        if self._table_wait_since is None:
-            self._table_wait_since = now
-        return now - self._table_wait_since < TABLE_WAIT_S
 
     def _judge_reader(self, wall: float, line=None) -> None:
         """Lossless: while device time is held for an IMU's reader (frames wait in the
@@ -335,6 +337,19 @@ class BenchServer:
             line.last_taken_wall = wall - READER_ACTIVE_S            # absent until it reads
             line.held_table_since = None
             line.readers_given_up += 1
+            self._drop_queue(line)
+
+    def _drop_queue(self, line) -> None:
+        """Lossless, a reader judged absent: the frames waiting in its transmit queue are lost,
+        as a UART's that nobody empties (counted: ``faulter.frames_overflowed``, the port's
+        ``dropped_bytes``).  Kept, they would reach the reader when it reads again, after the
+        table's answers given meanwhile: measured before those answers and received after them,
+        they would break what a settle counts from (issue 29)."""
+        queued = line.port.backlog
+        if queued:
+            line.port.dropped_bytes += queued
+            line.port.clear_output()
+            line.faulter.overflowed(int(round(queued / line.bytes_per_frame)), recorded=False)
 
     def _imu_behind(self, limit: int, line=None) -> bool:
         """The IMU's transmit queue holds more than ``limit`` bytes its line could not take."""

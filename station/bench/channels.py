@@ -75,6 +75,7 @@ class Recording:
         self.first_t = self.last_t = None
         self.with_temp = None
         self.temp_sum, self.temp_n = 0.0, 0
+        self._accel, self._gyro = [], []      # kept for the IMU's agreement with the table (steadiness.py)
 
     @property
     def needed(self) -> int:
@@ -102,7 +103,15 @@ class Recording:
             self.temp_sum += float(temp.sum())
             self.temp_n += len(temp)
         self.seg.write(b.t_s, b.accel_mps2, b.gyro_dps, temp)
+        self._accel.append(np.asarray(b.accel_mps2, dtype=float))
+        self._gyro.append(np.asarray(b.gyro_dps, dtype=float))
         self.done += len(b)
+
+    def samples(self) -> tuple:
+        """(accel (n, 3) m/s^2, gyro (n, 3) deg/s) of the samples recorded."""
+        if not self._accel:
+            return np.zeros((0, 3)), np.zeros((0, 3))
+        return np.concatenate(self._accel), np.concatenate(self._gyro)
 
     def result(self) -> dict:
         """The window the samples stand for, from the frame count (received plus lost frames

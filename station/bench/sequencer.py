@@ -28,6 +28,7 @@ from station.io.capture import CaptureWriter
 from station.core.errors import UserError
 from station.bench.channels import ImuChannel, Recording, segment_meta
 from station.bench.imu_stream import ImuStream, lost_frames_note
+from station.bench.steadiness import motion_found
 from station.bench.plan import (Chamber, Checkpoint, Dwell, HandRotation, HandStatic, MoveTo, Operator, Rotate, Settle,
                           WarmUp)
 
@@ -35,6 +36,7 @@ BLOCK_S = 1.0                 # device seconds written to a segment per write
 POLL_WALL_S = 0.1             # at most this often (wall) the table is read while recording
 RATE_HOLD_FRACTION = 0.01     # a rotation's rate must stay within 1 % (or 10 rate tolerances)
 POSITION_HOLD_FACTOR = 10     # a dwell's angles must stay within 10 position tolerances
+MOTION_WORDS = "the IMU disagrees with the table"    # a bad recording's note, when it is this
 WAYPOINT_DEG = 170.0          # largest single move of an axis with angle limits
 
 
@@ -363,6 +365,15 @@ class Sequencer:
             problems.append(f"no frame for {gap:.2f} s (limit {run.max_gap_s:g} s)")
         return "; ".join(problems) or None
 
+    def _disagreement(self, kind, rec) -> str | None:
+        """Why the IMU's samples say the table was not holding while they were recorded
+        (station/bench/steadiness.py: every redundancy of the bench cross-checked), or None."""
+        accel, gyro = rec.samples()
+        table = self.config.table
+        found = motion_found(kind, accel, gyro, rate_tolerance_dps=table.rate_tolerance_dps,
+                             hold_deg=POSITION_HOLD_FACTOR * table.position_tolerance_deg)
+        return None if found is None else f"{MOTION_WORDS}: {found}"
+
     def _record_segment(self, name, kind, meta, n, poll, completed, start=None, record=None) -> None:
         """Record segment ``name`` (``n`` samples); a recording over the data-loss limits is
         closed as incomplete with a note, kept aside (``.incomplete``) and recorded again, at
@@ -377,6 +388,10 @@ class Sequencer:
         for attempt in range(1, attempts + 1):
             if not pending:
                 return
+            if any(MOTION_WORDS in p for p in problems.values()):
+                # the IMU saw the table move: its samples came late against the table's answer,
+                # so the settle began too early; settle again from a fresh look at the stream
+                self._discard(self.config.run.settle_s)
             with contextlib.ExitStack() as stack:
                 recs = {}
                 for ch in pending:
@@ -391,6 +406,8 @@ class Sequencer:
                         continue              # closed as incomplete when it was lost
                     rec = r.result()
                     problem = self._data_loss(rec, ch.rate_hz)
+                    if problem is None and record is None:      # a recorded ramp moves by design
+                        problem = self._disagreement(kind, r)
                     if problem is None:
                         r.seg.close("complete", **completed(rec))
                         ch.done = ch.done | {name}

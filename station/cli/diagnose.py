@@ -229,6 +229,12 @@ def _emit(path, d, steps=()) -> None:
 def _summary_lines(d, design: bool = True) -> list[str]:
     lines = [d.verdict, f"effects in the model: {', '.join(d.effects)}",
              f"chi2 {d.chi2:.1f} for {d.dof} degrees of freedom (reduced {d.reduced_chi2:.3f}, p = {d.p_value:.3g})"]
+    t = getattr(d, "test", None)
+    if t is not None and abs(t["dof"] - d.dof) > 0.005:
+        # the verdict's test, the calibration file's (station.diagnose.core.fit_test)
+        lines.append(f"verdict: {t['result']}: the data's chi2 {t['chi2']:.1f} on their redundancy {t['dof']:.1f} "
+                     f"(reduced {t['reduced_chi2']:.3f}, p = {t['p_value']:.3g}; the rest of the degrees of "
+                     "freedom are the priors'), as station estimate judges it")
     lines += [f"where it fails: {f}" for f in d.failures]
     lines += [f"not kept: {r.effect}: {r.reason}" for r in d.rejected]
     lines += [f"why it still fails: {line}" for line in getattr(d, "account", None) or []]

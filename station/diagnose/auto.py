@@ -574,8 +574,10 @@ def conclude(d: Diagnosis, summaries, steps=(), search_terms: bool = True) -> Di
         d.proposal = terms.propose(d, summaries)
         if d.proposal is not None and d.proposal.kept and steps:
             d.proposal.redundant = redundant_with(d, d.proposal.effect, {st.added for st in steps}, summaries)
-    head = (not_converged(d.result) + f"the model does not explain the data{added} (reduced chi2 {d.reduced_chi2:.3g})"
-            + within_calibration_threshold(d.reduced_chi2))
+    reduced = d.test["reduced_chi2"] if d.test else d.reduced_chi2       # the verdict's test (core.fit_test)
+    on = f" on the data's redundancy {d.test['dof']:.1f}" if d.test and d.test["dof"] != d.dof else ""
+    head = (not_converged(d.result) + f"the model does not explain the data{added} (reduced chi2 {reduced:.3g}{on})"
+            + within_calibration_threshold(reduced))
     if now:
         head += f"; first look at this: {now[0]}"
     elif first:

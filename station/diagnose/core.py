@@ -21,6 +21,7 @@ from scipy import special
 from station.estimate import lsq, profile
 from station.estimate.profile import fit_jacobian, model_basis, outside_model  # noqa: F401 (shared)
 from station.model.registry import EffectRegistry
+from station.estimate.verdict import P_FAIL
 
 def chi2_sf(x: float, k: int) -> float:
     """P(chi2_k > x)."""
@@ -114,6 +115,7 @@ class Diagnosis:
     not_revealed: list = field(default_factory=list)  # lines: effects outside the library and the model
                                              #   this capture could not detect at their typical size, and the
                                              #   station design --from command (unrevealed.py)
+    test: dict | None = None                 # the verdict's test, as the calibration file takes it (fit_test)
 
 
 def _data_mask(labels) -> np.ndarray:
@@ -225,9 +227,33 @@ def _tested(result, effect_id, registry, phi) -> Candidate:
                          source=getattr(effect, "_station_source", "library"))
 
 
+def fit_test(result) -> dict | None:
+    """The verdict's test of ``result``, exactly as the calibration file takes it
+    (station.estimate.lsq.verdict_test, station.estimate.verdict.chi2_verdict): chi2, dof (the
+    data's redundancy, or the counted degrees of freedom for a large model), reduced_chi2,
+    p_value and result ("passes", "fails", "noise overestimated"); None without redundancy."""
+    from station.estimate.verdict import chi2_verdict
+
+    cached = getattr(result, "_verdict_test", False)
+    if cached is not False:
+        return cached
+    t = lsq.verdict_test(result)
+    chi2, dof = (t["chi2"], t["redundancy"]) if t else (result.chi2, result.dof)
+    out = None
+    if dof >= 0.5 and np.isfinite(chi2):
+        out = {"chi2": float(chi2), "dof": float(dof), **chi2_verdict(chi2, dof)}
+    try:
+        result._verdict_test = out          # the leverages once per fit (auto asks several times)
+    except AttributeError:
+        pass
+    return out
+
+
 def fit_fails(result) -> bool:
-    """The fit's chi2 is beyond what the noise explains (p below ALPHA / 10)."""
-    return result.dof > 0 and chi2_sf(result.chi2, result.dof) < ALPHA / 10
+    """The fit's chi2 is beyond what the noise explains: the p-value of the verdict's test
+    (:func:`fit_test`, the calibration file's) below P_FAIL (= ALPHA / 10)."""
+    t = fit_test(result)
+    return t is not None and t["p_value"] < P_FAIL
 
 
 def overdispersion(result) -> float:
@@ -290,18 +316,25 @@ def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diag
     cands = rank_candidates(result, exclude, registry)
     p = chi2_sf(result.chi2, result.dof) if result.dof > 0 else float("nan")
     reduced = result.chi2 / result.dof if result.dof > 0 else float("nan")
-    good = p > ALPHA / 10
+    test = fit_test(result)
+    # the verdict from the calibration's own test (the data's chi2 on their redundancy, the
+    # calibration's rule): "explains" exactly when its p-value is not significant, so diagnose and
+    # the file never disagree (issue 29: "fails" at 1.55 on a redundancy of 98.8 in the file,
+    # "explains" at 1.42 on 108 counted degrees of freedom here, for one capture)
+    t_reduced, t_p = (test["reduced_chi2"], test["p_value"]) if test else (reduced, p)
+    on = f" on the data's redundancy {test['dof']:.1f}" if test and test["dof"] != result.dof else ""
+    good = test is None or not t_p < P_FAIL
     failures = describe_failures(result, labels, segs, fails=not good)
     if good:
-        verdict = (f"the model explains the data: reduced chi2 {reduced:.3f} (p = {p:.3g})")
+        verdict = (f"the model explains the data: reduced chi2 {t_reduced:.3f}{on} (p = {t_p:.3g})")
     elif any(c.significant for c in cands):
-        verdict = (f"the model does not explain the data (reduced chi2 {reduced:.3g}); the most "
+        verdict = (f"the model does not explain the data (reduced chi2 {t_reduced:.3g}{on}); the most "
                    f"likely missing effect is {next(c for c in cands if c.significant).effect}")
     else:
-        verdict = (f"the model does not explain the data (reduced chi2 {reduced:.3g}, p = {p:.2g}) "
+        verdict = (f"the model does not explain the data (reduced chi2 {t_reduced:.3g}{on}, p = {t_p:.2g}) "
                    "and no effect of the library accounts for it: see where it fails")
     if not good:
-        verdict += within_calibration_threshold(reduced)
+        verdict += within_calibration_threshold(t_reduced)
     verdict = not_converged(result) + verdict
     notes = []
     phi = overdispersion(result)
@@ -315,7 +348,7 @@ def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diag
     return Diagnosis(effects=["base_triads", "inter_triad"] + [e.id for e in result.model.effects],
                      chi2=result.chi2, dof=result.dof, reduced_chi2=reduced, p_value=p,
                      segments=segs, candidates=cands, failures=failures, verdict=verdict,
-                     result=result, labels=labels, notes=notes)
+                     result=result, labels=labels, notes=notes, test=test)
 
 
 def rms_by_kind(segs) -> dict:

@@ -2242,6 +2242,32 @@ def _reported_columns(result: FitResult) -> np.ndarray:
     return np.array(cols, dtype=int)
 
 
+def verdict_test(result: FitResult, components: list | None = None) -> dict | None:
+    """The chi-square test a fit's verdict is taken on, the same for every surface (the
+    calibration file's verdict, station/estimate/verdict.py; station diagnose, report and batch
+    diagnose, station/diagnose/core.py): the data's chi2 on the data's own redundancy (issue 29).
+
+    A fit with priors minimises chi2_data + chi2_priors; under the noise model the first has the
+    expectation sum over the data rows of (1 - h_ii), the data's redundancy (h the leverages of
+    the whitened Jacobian; Forstner 1979), the second the rest of n - p.  Each is tested on its
+    own count: the counted degrees of freedom n - p belong to the whole chi2, the redundancy to
+    the data's.  Before, the calibration's verdict divided the whole chi2 (priors' share included)
+    by the data's redundancy -- biased up by about (n - p) / redundancy, 108 / 98.8 = 1.09 on the
+    flake's 12-segment captures -- while diagnose divided it by n - p: one capture was "fails"
+    (1.55) in the file and "explains" (1.42) in diagnose.  The groups whose noise was estimated
+    from their own scatter (the hand turns, noise_model) are left out: they test nothing.
+    ``components``: noise_groups' (computed if None).  None for a model whose Jacobian is not
+    taken dense (no leverages): the counted chi2 and dof then, on every surface alike."""
+    if components is None:
+        components = _noise_groups(result)
+    if not components:
+        return None
+    estimated = set(getattr(result.model, "reweighted", None) or {})
+    kept = [c for c in components if c["group"] not in estimated]
+    return {"chi2": float(sum(c["chi2"] for c in kept)), "redundancy": float(sum(c["redundancy"] for c in kept)),
+            "left_out": [c["group"] for c in components if c["group"] in estimated]}
+
+
 def _noise_groups(result: FitResult) -> list:
     """Each data group's scatter against its stated noise (station/estimate/noise_groups.py);
     [] for a large model (its Jacobian is not taken dense)."""
@@ -2361,13 +2387,8 @@ def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=())
             fit_stats["notes"].append(
                 f"the fit counts {result.dof} degrees of freedom, the data's own redundancy is "
                 f"{redundancy:.1f} (the rest is taken by priors): the chi-square verdict is taken "
-                "on the data's")
-        # the verdict's test: the data's chi2 on the data's redundancy, less the groups whose
-        # noise was estimated from their own scatter (they carry no test of the model)
-        estimated = [c for c in components if c["group"] in getattr(model, "reweighted", {})]
-        tested = {"chi2": result.chi2 - sum(c["chi2"] for c in estimated),
-                  "redundancy": redundancy - sum(c["redundancy"] for c in estimated),
-                  "left_out": [c["group"] for c in estimated]}
+                "on the data's (their chi2 on their redundancy)")
+        tested = verdict_test(result, components)
     fit_stats["noise_model"] = _noise_model_block(model, x, tested)
     fit_stats["notes"] += noise_model.words(model.noise, fit_stats["noise_model"])
     if getattr(model, "remaining_step", None) is not None:      # where the solver stopped short

@@ -78,6 +78,20 @@ def not_determined(cal: Calibration) -> list:
 
 # ------------------------------------------------------------------------------------ verdict
 
+def chi2_verdict(chi2: float, dof: float) -> dict:
+    """The verdict of a chi2 on ``dof`` (> 0) degrees of freedom: result ("passes", "fails",
+    "noise overestimated"), reduced chi2, p-value above and below.  The one rule of every
+    surface: the calibration file (:func:`judge`) and station diagnose (station/diagnose/core.py),
+    both on station.estimate.lsq.verdict_test's chi2 and redundancy (issue 29)."""
+    reduced = chi2 / dof
+    p_value = chi2_sf(dof, chi2)        # P(chi2_dof > chi2) (distributions.py: scipy costs 0.17-0.5 s to import)
+    p_below = chi2_cdf(dof, chi2)       # P(chi2_dof < chi2)
+    fails = p_value < P_FAIL and reduced > REDUCED_CHI2_FAIL
+    overestimated = p_below < P_FAIL and reduced < 1.0 / REDUCED_CHI2_FAIL
+    result = "fails" if fails else "noise overestimated" if overestimated else "passes"
+    return {"result": result, "reduced_chi2": float(reduced), "p_value": p_value, "p_below": p_below}
+
+
 def _verdict(cal: Calibration) -> None:
     fit = cal.fit
     chi2, dof = fit.get("chi2"), fit.get("dof")
@@ -106,12 +120,9 @@ def _verdict(cal: Calibration) -> None:
                               "reason": f"no redundancy is left to test the model ({dof:.2g}) once the noise of "
                                         f"{', '.join(left_out) or 'the data'} is estimated from its own scatter"}
             return
-    reduced = chi2 / dof
-    p_value = chi2_sf(dof, chi2)        # P(chi2_dof > chi2) (distributions.py: scipy costs 0.17-0.5 s to import)
-    p_below = chi2_cdf(dof, chi2)       # P(chi2_dof < chi2)
-    fails = p_value < P_FAIL and reduced > REDUCED_CHI2_FAIL
-    overestimated = p_below < P_FAIL and reduced < 1.0 / REDUCED_CHI2_FAIL
-    result = "fails" if fails else "noise overestimated" if overestimated else "passes"
+    test = chi2_verdict(chi2, dof)
+    reduced, p_value, p_below, result = test["reduced_chi2"], test["p_value"], test["p_below"], test["result"]
+    fails, overestimated = result == "fails", result == "noise overestimated"
     verdict = {"result": result, "reduced_chi2": float(reduced), "dof": round(dof, 2) if tested else int(dof),
                "p_value": p_value}
     if left_out:
@@ -131,7 +142,7 @@ def _verdict(cal: Calibration) -> None:
         return
     if overestimated:
         verdict["p_below"] = p_below
-        verdict["reason"] = (f"reduced chi2 {reduced:.3g} (P(chi2 below) = {p_below:.2g} for {dof} degrees of "
+        verdict["reason"] = (f"reduced chi2 {reduced:.3g} (P(chi2 below) = {p_below:.2g} for {dof:.4g} degrees of "
                              f"freedom): the residuals are smaller than the stated noise, so every 1-sigma "
                              f"is too large, by up to {1 / math.sqrt(reduced):.3g} times (kept as they are: "
                              "conservative); the noise given to the fit is overestimated (a noise figure "
@@ -139,7 +150,7 @@ def _verdict(cal: Calibration) -> None:
         fit["verdict"] = verdict
         return
     if fails:
-        verdict["reason"] = (f"reduced chi2 {reduced:.3g} (p = {p_value:.2g} for {dof} degrees of freedom): "
+        verdict["reason"] = (f"reduced chi2 {reduced:.3g} (p = {p_value:.2g} for {dof:.4g} degrees of freedom): "
                              "the residuals are larger than the noise explains (a missing effect, a "
                              "bad segment, data lost or a table that slipped); station diagnose "
                              "shows where")
