@@ -23,6 +23,7 @@ from station.estimate.profile import fit_jacobian, model_basis, outside_model  #
 from station.model.registry import EffectRegistry
 from station.estimate.verdict import P_FAIL
 
+
 def chi2_sf(x: float, k: int) -> float:
     """P(chi2_k > x)."""
     return float(special.chdtrc(k, x))
