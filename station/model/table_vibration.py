@@ -87,7 +87,8 @@ class TableVibration(Effect):
     term = ("rotations only (the fit's phase grid, p the signed angle turned about l): accel_raw += M_a Rot(l, -p) "
             "(cos p P + sin p Q), P = P_l l + P_v v_hat + P_u (l x v_hat) and Q alike, v_hat gravity's direction "
             "across the axis at the rotation's start; one (P, Q) per table axis and rate (rotations start at the "
-            "same platter angle)")
+            "same platter angle); about an axis within 20° of the vertical P_l, Q_l per table axis and rate and "
+            "the parts across on a case-fixed basis (e1, e2 = l x e1) per axis group and mounting")
     excited_by = ("rotations about an axis with gravity across it (the frame is fixed by gravity: one vibration per "
                   "table axis and rate); about an axis within 20° of the vertical the part along the axis per table "
                   "axis and rate and the part across it per body axis, session and mounting (no gravity fixes the "
