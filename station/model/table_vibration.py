@@ -187,28 +187,53 @@ class TableVibration(Effect):
         # Rot(l, -p) a: the IMU has turned by p since the start
         return along + c * (a - along) - s * np.cross(l[None, :], a)
 
+    def _framed(self):
+        """Every framed rotation at once: (segment indices sorted, their frames (R, 3, 3) as rows
+        l, b1, b2, and the positions in x of their P_l, P_1, P_2, Q_l, Q_1, Q_2 (R, 6)); b1, b2 gravity's
+        (v_hat, u) about a level axis, the case-fixed (e1, e2) about a vertical one."""
+        axial0 = 6 * len(self.groups)
+        across0 = axial0 + 2 * len(self.vertical_axial)
+        rows = []
+        for index, (l, v, u) in self.frame.items():
+            g = 6 * self.group_of[index]
+            rows.append((index, (l, v, u), (g, g + 1, g + 2, g + 3, g + 4, g + 5)))
+        for index, (l, e1, e2) in self.vframe.items():
+            a, b = axial0 + 2 * self.vaxial_of[index], across0 + 4 * self.vacross_of[index]
+            rows.append((index, (l, e1, e2), (a, b, b + 1, a + 1, b + 2, b + 3)))
+        rows.sort(key=lambda r: r[0])
+        return (np.array([r[0] for r in rows], float), np.array([r[1] for r in rows], float).reshape(-1, 3, 3),
+                np.array([r[2] for r in rows], int).reshape(-1, 6))
+
     def accel(self, x, ctx):
         if getattr(ctx, "turned_s", None) is None:      # station apply: the bench's fault, not the IMU's
             return None
         out = np.zeros((len(ctx), 3), dtype=np.result_type(x, ctx.f_p))
-        for index, (l, v, u) in self.frame.items():
-            rows, p = rev.phase_rows(ctx, index)
-            if not len(rows):
-                continue
-            g = self.group_of[index]
-            P = x[6 * g] * l + x[6 * g + 1] * v + x[6 * g + 2] * u
-            Q = x[6 * g + 3] * l + x[6 * g + 4] * v + x[6 * g + 5] * u
-            out[rows] = self._sensed(P, Q, l, p) @ ctx.accel_matrix.T
-        axial0 = 6 * len(self.groups)
-        across0 = axial0 + 2 * len(self.vertical_axial)
-        for index, (l, e1, e2) in self.vframe.items():
-            rows, p = rev.phase_rows(ctx, index)
-            if not len(rows):
-                continue
-            a, b = axial0 + 2 * self.vaxial_of[index], across0 + 4 * self.vacross_of[index]
-            P = x[a] * l + x[b] * e1 + x[b + 1] * e2
-            Q = x[a + 1] * l + x[b + 2] * e1 + x[b + 3] * e2
-            out[rows] = self._sensed(P, Q, l, p) @ ctx.accel_matrix.T
+        known, frames, cols = self._framed()
+        if not len(known):
+            return out
+        # every framed rotation's points at once (one pass, not one per rotation: the designer
+        # evaluates hundreds of candidate rotations): each rotation is one block of points on the
+        # uniform grid of its signed angle, p = 2 pi j / n (table_revolution.phase_rows)
+        seg = np.asarray(ctx.column("segment_index"), float)
+        pos = np.clip(np.searchsorted(known, seg), 0, len(known) - 1)
+        rows = np.flatnonzero(known[pos] == seg)
+        if not len(rows):
+            return out
+        r = pos[rows]
+        counts = np.bincount(r, minlength=len(known))
+        order = np.argsort(r, kind="stable")
+        rank = np.empty(len(r), int)
+        rank[order] = np.arange(len(r)) - (np.cumsum(counts) - counts)[r[order]]
+        p = 2.0 * np.pi * rank / counts[r]
+        l, b1, b2 = frames[r, 0], frames[r, 1], frames[r, 2]
+        xv = x[cols[r]]                                             # (n, 6)
+        P = xv[:, 0:1] * l + xv[:, 1:2] * b1 + xv[:, 2:3] * b2
+        Q = xv[:, 3:4] * l + xv[:, 4:5] * b1 + xv[:, 5:6] * b2
+        c, s = np.cos(p)[:, None], np.sin(p)[:, None]
+        a = c * P + s * Q                                           # table frame at the start
+        along = (a[:, 0] * l[:, 0] + a[:, 1] * l[:, 1] + a[:, 2] * l[:, 2])[:, None] * l
+        # (1) of the module's derivation, Rot(l, -p) a: the IMU has turned by p since the start
+        out[rows] = (along + c * (a - along) - s * np.cross(l, a)) @ ctx.accel_matrix.T
         return out
 
     def words(self, x, sigma) -> list[str]:
