@@ -388,26 +388,36 @@ def aliases(summaries, effect_id: str) -> list[tuple]:
                     "term in the square of the rate act alike; turn at two rates to confirm it grows "
                     "with the square of the rate"))
     vertical = _vertical_turns(summaries)
+    # a turn about a vertical axis separates the size effect from a vibration (measured, docs/design.md
+    # sixteenth session): gravity along such an axis is g itself (no part across it to trade against),
+    # so the constant along the axis that the size effect leaves (each accelerometer at its own point
+    # sees its own centripetal acceleration, not one vector across the axis) is measured there, and a
+    # vibration makes none (its part along the axis is once per revolution; since the sixteenth session
+    # it is modelled about a vertical axis too, its part across it per rotation group)
     if effect_id == "accel_lever_arm" and len(rates) == 1 and not vertical:
         out.append(("table_vibration_once_per_rev",
                     f"every rotation is at one rate ({rates[0]:g} °/s): an offset of the rotations' accelerometer "
                     "mean is also what a table vibrating once per revolution leaves (its part across the axis); "
-                    "turn about a vertical axis (no vibration is modelled there) or at a second rate to tell "
-                    "them apart"))
-    if effect_id == "rotation_axis_offsets" and len(rates) == 1 and not _vertical_on_own_axes(summaries):
-        # (a command: turns appended about the capture's own axes share its offsets, and about a
-        # vertical axis no vibration is modelled, so they measure the offsets alone -- station
-        # design --from ... --separate proposes them: docs/design.md, fifteenth session)
+                    "a turn about a vertical axis (the size effect's constant along the axis, which no vibration "
+                    "makes) or at a second rate tells them apart"))
+    if effect_id == "rotation_axis_offsets" and rates:
+        # no command (suggest.NOT_SEPARABLE since the sixteenth session): a vibration's part turning
+        # with the platter is a constant across the axis in the case's frame, as an offset's w^2 d is;
+        # the vibration has its own parameters at every rate (and about a vertical axis for every
+        # rotation group), so offsets that look alike in the table's frame for every axis are a
+        # vibration at every rate and elevation (station/model/table_vibration.py)
         out.append(("table_vibration_once_per_rev",
-                    f"every rotation is at one rate ({rates[0]:g} °/s): an offset of the rotations' accelerometer "
-                    "mean is also what a table vibrating once per revolution leaves (its part across the axis); "
-                    "turns about the same body axes with the table axis vertical (no vibration is modelled "
-                    "there; the IMU still mounted, they share these offsets) tell them apart"))
+                    "an offset of the rotations' accelerometer mean for each rotation axis is also what a table "
+                    "vibrating once per revolution leaves: its part turning with the platter is a constant across "
+                    "the axis, as the centripetal acceleration w² d of an offset is, at any rate and about a "
+                    "vertical axis too; no segment tells them apart. Where the table's axes meet and the IMU "
+                    "stayed mounted, the model's one mounting offset holds (leave rotation_axis_offsets out); "
+                    "otherwise check the table's vibration with an accelerometer on its base"))
     if effect_id == "table_vibration_once_per_rev" and len(rates) == 1 and not vertical:
         out.append(("accel_lever_arm", f"every rotation is at one rate ({rates[0]:g} °/s): the part of a "
                     "vibration across the axis is a constant in the rotations' accelerometer mean, as the "
-                    "accelerometers' size effect is; turns about a vertical axis (no vibration modelled there) "
-                    "or at another rate separate the two"))
+                    "accelerometers' size effect is; turns about a vertical axis (the size effect's constant "
+                    "along the axis, which no vibration makes) or at another rate separate the two"))
     # (an even accelerometer error and a wobbling table axis are not named from the words: wobble
     # leaves its second harmonic along the rotation's axis, an even error across it, and the
     # estimator's information tells them apart on every capture measured -- nine statics or the six
@@ -416,28 +426,10 @@ def aliases(summaries, effect_id: str) -> list[tuple]:
     return out
 
 
-def _vertical_on_own_axes(summaries) -> bool:
-    """Whether a steady rotation about a vertical axis (no vibration modelled: _vertical_turns)
-    turns about a body axis that a turn about a level axis also has: with the offsets per axis
-    line shared (station.model.axis_offsets.offset_groups) it measures that offset alone, which
-    tells the offsets from a vibration once per revolution."""
-    from station.model import table_revolution as rev
-    from station.model.axis_offsets import offset_groups
-
-    steady = [r for r in summaries.rotations if r.steady and r.accel_cos is not None]
-    framed = rev.frames(summaries)
-    # the model's own rule for whose offset a turn has (the same body axis turned by the same
-    # table axis): a vertical turn about body x on another table axis than the level ones has an
-    # offset of its own, and measures nothing of theirs
-    shared = offset_groups(steady)
-    level = {shared[int(r.group)] for r in steady if int(r.index) in framed}
-    return any(shared[int(r.group)] in level for r in steady if int(r.index) not in framed)
-
-
 def _vertical_turns(summaries) -> bool:
     """Whether a steady rotation is about an axis near the vertical (table_revolution.VERTICAL_DEG):
-    no vibration once per revolution (nor wobble) is modelled there, so such a turn sees the
-    accelerometers' size effect alone."""
+    gravity along it is g itself, so such a turn measures the constant along the axis that the
+    accelerometers' size effect leaves and a vibration once per revolution does not (aliases)."""
     from station.model import table_revolution as rev
 
     steady = [r for r in summaries.rotations if r.steady and r.accel_cos is not None]

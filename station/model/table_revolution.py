@@ -40,6 +40,30 @@ def frames(summaries) -> dict:
     return out
 
 
+def vertical_frames(summaries) -> dict:
+    """{segment index: (l, e1, e2)} of every steady rotation about an axis within VERTICAL_DEG of
+    the vertical (the ones :func:`frames` leaves out): l the recorded ``axis_body`` (the direction
+    the signed angle turns about, as in :func:`frames`), e1 the case axis most nearly across it made
+    perpendicular to it, e2 = l x e1.  A frame fixed to the IMU's case, not to the table: nothing in
+    the data fixes the table's frame about a vertical axis (table_vibration's docstring)."""
+    out = {}
+    for r in summaries.rotations:
+        if not r.steady or r.accel_cos is None:
+            continue
+        c, s, dc = (np.asarray(v, float) for v in (r.accel_cos, r.accel_sin, r.accel_dc))
+        across = np.sqrt(0.5 * (c @ c + s @ s))
+        total = np.hypot(across, np.linalg.norm(dc))
+        if not total > 0 or not across < np.sin(np.radians(VERTICAL_DEG)) * total:
+            continue
+        l = np.asarray(r.axis_body, float)
+        l = l / np.linalg.norm(l)
+        k = int(np.argmin(np.abs(l)))
+        e1 = np.eye(3)[k] - l[k] * l
+        e1 = e1 / np.linalg.norm(e1)
+        out[int(r.index)] = (l, e1, np.cross(l, e1))
+    return out
+
+
 def table_axis_of(r) -> int:
     """The table axis a rotation was turned by (0: not recorded, one axis)."""
     k = getattr(r, "table_axis", None)

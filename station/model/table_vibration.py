@@ -1,6 +1,68 @@
 """table_vibration: the table accelerates once per revolution (an imbalance of the platter, a
-bearing, a belt), in a direction fixed to the table's frame."""
+bearing, a belt), in a direction fixed to the table's frame.
+
+The derivation (issue 28, the vibration about a vertical axis).  The simulator writes the base's
+acceleration (sim_devices/world.py ``table_vibration_enu``, read and not imported: the model stays
+independent) as
+
+    a(theta) = cos(theta + phi) D,   D = A_axis a_n + A_ref r + A_perp (a_n x r)
+
+theta the table's signed angle about its own axis a_n since the rotation's start, r the part of up
+across a_n (north about a vertical axis).  The IMU's case at the start has attitude C0 (table ->
+case) and at theta C0 Rot(a_n, -theta).  In case coordinates at the start, l = C0 a_n (the
+direction the recorded signed angle p = theta turns about: a rotation turns about its axis_body in
+the table's positive sense), P = cos phi C0 D and Q = -sin phi C0 D, the IMU senses
+
+    f_vib(p) = Rot(l, -p) (cos p P + sin p Q)                                            (1)
+
+Along l: (cos p P_l + sin p Q_l) l, a first harmonic along the axis; it needs no frame across the
+axis.  Across it, Rot(l, -p) X = cos p X - sin p (l x X) gives, with P, Q the parts across l,
+
+    f_across(p) = 1/2 (P - l x Q) + 1/2 cos 2p (P + l x Q) + 1/2 sin 2p (Q - l x P)         (2)
+
+a constant (the vibration's part turning with the platter) and a second harmonic (the part turning
+against it): four numbers for four parameters, each in a frame across the axis.
+
+* About an axis with gravity across it (table_revolution.frames) that frame is gravity's at the
+  start, (v_hat, u = l x v_hat), which is the table's (r = up's part across a_n is where gravity
+  points across the axis): the same numbers for every rotation about that table axis at that rate,
+  whatever body axis, mounting or half of a pair.  One (P, Q) per table axis and rate:
+  ``table_vibration[_axisK]_{rate}dps_{axis|gravity|third}_{cos|sin}`` (as before).
+* About an axis within table_revolution.VERTICAL_DEG of the vertical gravity is all along l and
+  nothing in the data fixes where r is in the case.  The along part needs no frame: P_l, Q_l are one
+  pair per table axis and rate over its vertical rotations,
+  ``table_vibration_vertical[_axisK]_{rate}dps_axis_{cos|sin}``.  The across part needs C0's turn
+  about l, i.e. the platter's angle at the start and the IMU's mounting on it: it holds only for
+  rotations that start from the same platter angle with the IMU mounted the same way.  A capture
+  says that of the rotations about one body axis recorded in one session (the summaries' axis
+  group: both halves of a pair and repeats; an appended extension is a session of its own, the
+  table may start that axis elsewhere) with one mounting (table.geometry's, where recorded).  One
+  (P, Q) across per table axis, rate, axis group and mounting, on a case-fixed basis (e1 the case
+  axis most nearly across l made perpendicular to it, e2 = l x e1: table_revolution.vertical_frames),
+  ``table_vibration_vertical[_axisK]_{rate}dps_{rotation}_across{1|2}_{cos|sin}``, named by the
+  group's first rotation.
+* The two halves of a +/- pair: the - half turns by a negative p about the same l (the capture's
+  harmonics are taken in the signed angle, station/estimate/summaries.py, and the fit's phase grid
+  is that angle), and the world's theta is that same signed angle, so (1) is one function of p for
+  both halves and nothing flips: they share every parameter.  (Parametrised instead by the angle
+  turned, q = -p about -l, in the frame (-l, v_hat, -u), the - half's P_l, P_u and Q_v would flip
+  sign and Q_l, P_v, Q_u would not; the signed angle avoids that.)  Checked on twins: the
+  horizontal case with optimal9's pairs fits to the noise floor (tests/test_effects_table_revolution.py),
+  the vertical one too (tests/test_vibration_vertical.py).
+* What stays aliased (docs/design.md, sixteenth session): the constant of (2) is a constant in the
+  case frame at that rate, as the centripetal acceleration -w^2 d_across of an offset d from the
+  axis is; free per axis group and rate about a vertical axis, it leaves a vertical turn's constant
+  across the axis to the vibration or the offsets alike.  What tells them apart there is the rest
+  of (1) and (2): the first harmonic along the axis and the second across it, which an offset never
+  makes.
+* The wobble (table_wobble) needs no such parameters: about a vertical axis its lean tilts gravity
+  by b across the axis once per revolution, which is what a tilt of the axis does (the fit's own
+  gravity angle and phase per axis group take it), and its rate across the axis averages out over
+  whole revolutions.
+"""
 from __future__ import annotations
+
+import re
 
 import numpy as np
 
@@ -25,10 +87,13 @@ class TableVibration(Effect):
     term = ("rotations only (the fit's phase grid, p the signed angle turned about l): accel_raw += M_a Rot(l, -p) "
             "(cos p P + sin p Q), P = P_l l + P_v v_hat + P_u (l x v_hat) and Q alike, v_hat gravity's direction "
             "across the axis at the rotation's start; one (P, Q) per table axis and rate (rotations start at the "
-            "same platter angle)")
-    excited_by = ("rotations about an axis with gravity across it (the frame is fixed by gravity; not modelled about "
-                  "an axis within 20° of the vertical); the part along the axis is seen once per revolution, the "
-                  "part across it as a constant and twice per revolution")
+            "same platter angle); about an axis within 20° of the vertical P_l, Q_l per table axis and rate and "
+            "the parts across on a case-fixed basis (e1, e2 = l x e1) per axis group and mounting")
+    excited_by = ("rotations about an axis with gravity across it (the frame is fixed by gravity: one vibration per "
+                  "table axis and rate); about an axis within 20° of the vertical the part along the axis per table "
+                  "axis and rate and the part across it per body axis, session and mounting (no gravity fixes the "
+                  "table's frame there); the part along the axis is seen once per revolution, the part across it "
+                  "as a constant and twice per revolution")
     magnitudes = "< 0.01 mg (balanced precision tables), 0.1-1 mg (an unbalanced load), several mg (a worn bearing or belt)"
     signature = ("accelerometer, rotation segments: a first harmonic along the rotation's own axis (which gravity "
                  "cannot make about a horizontal axis), of one size and phase in every rotation at that rate; "
@@ -37,13 +102,22 @@ class TableVibration(Effect):
     complex_step = True
     bench = True
     named_by = ("once per revolution along the rotation's own axis",)   # station.diagnose.words: tried first
-    state_fields = ("groups",)
+    state_fields = ("groups", "vertical_axial", "vertical_across")
 
     def __init__(self):
         self.groups = []              # [table axis, rate deg/s] with a vibration of their own
         self.frame = {}               # segment index -> (l, v_hat, u)
         self.group_of = {}            # segment index -> position in groups
         self.count = {}
+        # about a vertical axis (the module's derivation): the part along the axis per [table axis,
+        # rate], the part across it per [table axis, rate, first rotation's name] (an axis group and
+        # mounting), on the case-fixed basis (l, e1, e2)
+        self.vertical_axial = []
+        self.vertical_across = []
+        self.vframe = {}              # segment index -> (l, e1, e2)
+        self.vaxial_of = {}           # segment index -> position in vertical_axial
+        self.vacross_of = {}          # segment index -> position in vertical_across
+        self.vcount = {}              # position in vertical_across -> rotations
 
     def setup(self, summaries) -> None:
         self.frame = rev.frames(summaries)
@@ -54,33 +128,112 @@ class TableVibration(Effect):
         self.groups = [[int(k), float(rate)] for k, rate in groups]
         self.group_of = {i: groups.index(g) for i, g in key.items()}
         self.count = {g: sum(1 for v in self.group_of.values() if v == g) for g in range(len(groups))}
+        self._setup_vertical(summaries)
+
+    def _setup_vertical(self, summaries) -> None:
+        self.vframe = rev.vertical_frames(summaries)
+        vertical = [r for r in summaries.rotations if int(r.index) in self.vframe]
+        geometry = getattr(summaries, "geometry", None)
+        mounting = getattr(geometry, "mounting", None) or {}
+        axial, across, names = {}, {}, {}
+        for r in vertical:
+            k, rate = rev.table_axis_of(r), float(np.round(abs(r.rate_dps) / RATE_ROUND_DPS) * RATE_ROUND_DPS)
+            axial.setdefault((k, rate), []).append(int(r.index))
+            m = mounting.get(r.name)
+            key = (k, rate, int(r.group), None if m is None else repr(m))
+            across.setdefault(key, []).append(int(r.index))
+            names.setdefault(key, re.sub(r"\W", "_", str(r.name)))
+        self.vertical_axial = [[int(k), float(rate)] for k, rate in axial]
+        self.vaxial_of = {i: n for n, members in enumerate(axial.values()) for i in members}
+        self.vertical_across = [[int(key[0]), float(key[1]), names[key]] for key in across]
+        self.vacross_of = {i: n for n, members in enumerate(across.values()) for i in members}
+        self.vcount = {n: len(members) for n, members in enumerate(across.values())}
+
+    def state(self) -> dict:
+        """As Effect.state, without the vertical lists when there are none (the calibration file of
+        a capture without vertical turns is as before)."""
+        out = super().state()
+        out.pop("vertical_axial", None)
+        out.pop("vertical_across", None)
+        if self.vertical_axial:         # plain numbers and names (numpy would make the rows strings)
+            out["vertical_axial"] = [[int(k), float(rate)] for k, rate in self.vertical_axial]
+            out["vertical_across"] = [[int(k), float(rate), str(name)] for k, rate, name in self.vertical_across]
+        return out
 
     def _tag(self, g) -> str:
         k, rate = self.groups[g]
         return (f"_axis{k}" if k else "") + f"_{rate:g}dps"
 
+    @staticmethod
+    def _vtag(k, rate) -> str:
+        return "table_vibration_vertical" + (f"_axis{int(k)}" if int(k) else "") + f"_{float(rate):g}dps"
+
     @property
     def params(self):
-        return tuple(Param(f"table_vibration{self._tag(g)}_{d}_{h}", "mg", 1.0 / MG, 0.1, 100.0)
-                     for g in range(len(self.groups)) for h in ("cos", "sin") for d in ("axis", "gravity", "third"))
+        out = [Param(f"table_vibration{self._tag(g)}_{d}_{h}", "mg", 1.0 / MG, 0.1, 100.0)
+               for g in range(len(self.groups)) for h in ("cos", "sin") for d in ("axis", "gravity", "third")]
+        out += [Param(f"{self._vtag(k, rate)}_axis_{h}", "mg", 1.0 / MG, 0.1, 100.0)
+                for k, rate in self.vertical_axial for h in ("cos", "sin")]
+        out += [Param(f"{self._vtag(k, rate)}_{name}_{d}_{h}", "mg", 1.0 / MG, 0.1, 100.0)
+                for k, rate, name in self.vertical_across for h in ("cos", "sin") for d in ("across1", "across2")]
+        return tuple(out)
+
+    @staticmethod
+    def _sensed(P, Q, l, p):
+        """(1) of the module's derivation: Rot(l, -p) (cos p P + sin p Q), rows per phase p."""
+        c, s = np.cos(p)[:, None], np.sin(p)[:, None]
+        a = c * P[None, :] + s * Q[None, :]                          # table frame at the start
+        along = (a @ l)[:, None] * l[None, :]
+        # Rot(l, -p) a: the IMU has turned by p since the start
+        return along + c * (a - along) - s * np.cross(l[None, :], a)
+
+    def _framed(self):
+        """Every framed rotation at once: (segment indices sorted, their frames (R, 3, 3) as rows
+        l, b1, b2, and the positions in x of their P_l, P_1, P_2, Q_l, Q_1, Q_2 (R, 6)); b1, b2 gravity's
+        (v_hat, u) about a level axis, the case-fixed (e1, e2) about a vertical one."""
+        axial0 = 6 * len(self.groups)
+        across0 = axial0 + 2 * len(self.vertical_axial)
+        rows = []
+        for index, (l, v, u) in self.frame.items():
+            g = 6 * self.group_of[index]
+            rows.append((index, (l, v, u), (g, g + 1, g + 2, g + 3, g + 4, g + 5)))
+        for index, (l, e1, e2) in self.vframe.items():
+            a, b = axial0 + 2 * self.vaxial_of[index], across0 + 4 * self.vacross_of[index]
+            rows.append((index, (l, e1, e2), (a, b, b + 1, a + 1, b + 2, b + 3)))
+        rows.sort(key=lambda r: r[0])
+        return (np.array([r[0] for r in rows], float), np.array([r[1] for r in rows], float).reshape(-1, 3, 3),
+                np.array([r[2] for r in rows], int).reshape(-1, 6))
 
     def accel(self, x, ctx):
         if getattr(ctx, "turned_s", None) is None:      # station apply: the bench's fault, not the IMU's
             return None
         out = np.zeros((len(ctx), 3), dtype=np.result_type(x, ctx.f_p))
-        for index, (l, v, u) in self.frame.items():
-            rows, p = rev.phase_rows(ctx, index)
-            if not len(rows):
-                continue
-            g = self.group_of[index]
-            P = x[6 * g] * l + x[6 * g + 1] * v + x[6 * g + 2] * u
-            Q = x[6 * g + 3] * l + x[6 * g + 4] * v + x[6 * g + 5] * u
-            c, s = np.cos(p)[:, None], np.sin(p)[:, None]
-            a = c * P[None, :] + s * Q[None, :]                          # table frame at the start
-            along = (a @ l)[:, None] * l[None, :]
-            # Rot(l, -p) a: the IMU has turned by p since the start
-            a_body = along + c * (a - along) - s * np.cross(l[None, :], a)
-            out[rows] = a_body @ ctx.accel_matrix.T
+        known, frames, cols = self._framed()
+        if not len(known):
+            return out
+        # every framed rotation's points at once (one pass, not one per rotation: the designer
+        # evaluates hundreds of candidate rotations): each rotation is one block of points on the
+        # uniform grid of its signed angle, p = 2 pi j / n (table_revolution.phase_rows)
+        seg = np.asarray(ctx.column("segment_index"), float)
+        pos = np.clip(np.searchsorted(known, seg), 0, len(known) - 1)
+        rows = np.flatnonzero(known[pos] == seg)
+        if not len(rows):
+            return out
+        r = pos[rows]
+        counts = np.bincount(r, minlength=len(known))
+        order = np.argsort(r, kind="stable")
+        rank = np.empty(len(r), int)
+        rank[order] = np.arange(len(r)) - (np.cumsum(counts) - counts)[r[order]]
+        p = 2.0 * np.pi * rank / counts[r]
+        l, b1, b2 = frames[r, 0], frames[r, 1], frames[r, 2]
+        xv = x[cols[r]]                                             # (n, 6)
+        P = xv[:, 0:1] * l + xv[:, 1:2] * b1 + xv[:, 2:3] * b2
+        Q = xv[:, 3:4] * l + xv[:, 4:5] * b1 + xv[:, 5:6] * b2
+        c, s = np.cos(p)[:, None], np.sin(p)[:, None]
+        a = c * P + s * Q                                           # table frame at the start
+        along = (a[:, 0] * l[:, 0] + a[:, 1] * l[:, 1] + a[:, 2] * l[:, 2])[:, None] * l
+        # (1) of the module's derivation, Rot(l, -p) a: the IMU has turned by p since the start
+        out[rows] = (along + c * (a - along) - s * np.cross(l, a)) @ ctx.accel_matrix.T
         return out
 
     def words(self, x, sigma) -> list[str]:
@@ -103,4 +256,37 @@ class TableVibration(Effect):
                        f"{self.count.get(g, 0)} rotations); a fault of the bench (an imbalance of the platter or its "
                        "load, a bearing, a belt), not of the IMU, and not compensated: balance the platter or load it "
                        "symmetrically")
+        return out + self._vertical_words(x, sigma)
+
+    def _vertical_words(self, x, sigma) -> list[str]:
+        """The same about vertical axes: along the axis per table axis and rate, across it per
+        rotation group (its own frame), each said when it stands out (> 3 sigma), in mg."""
+        x, sigma = np.asarray(x, float), np.asarray(sigma, float)
+        axial0 = 6 * len(self.groups)
+        across0 = axial0 + 2 * len(self.vertical_axial)
+        if len(x) < across0 + 4 * len(self.vertical_across):
+            return []
+        out = []
+        for n, (k, rate) in enumerate(self.vertical_axial):
+            j = axial0 + 2 * n
+            m, sm = rev.amplitude(x[j], x[j + 1], sigma[j], sigma[j + 1])
+            parts = [f"{m:.3g} ± {sm:.2g} mg along its axis"] if m > 3 * sm else []
+            seen = []
+            for i, (k2, rate2, name) in enumerate(self.vertical_across):
+                if (k2, rate2) != (k, rate):
+                    continue
+                b = across0 + 4 * i
+                v, sg = x[b:b + 4], sigma[b:b + 4]
+                ma, sa = rev.amplitude(np.hypot(v[0], v[1]), np.hypot(v[2], v[3]),
+                                       float(np.hypot(sg[0], sg[1]) / np.sqrt(2)), float(np.hypot(sg[2], sg[3]) / np.sqrt(2)))
+                if ma > 3 * sa:
+                    seen.append(f"{ma:.3g} ± {sa:.2g} mg across it in the rotations from {name}'s start")
+            parts += seen
+            if not parts:
+                continue
+            which = f"table axis {k}" if k else "the table"
+            out.append(f"{which} vibrates once per revolution at {rate:g} °/s about a vertical axis: "
+                       f"{' and '.join(parts)}; a fault of the bench, not of the IMU, and not compensated: balance "
+                       "the platter or load it symmetrically (across a vertical axis its direction is known only "
+                       "from each rotation's own start, not the table's)")
         return out
