@@ -72,9 +72,15 @@ segments:
                                "--out", "cap", "--no-history"], cwd=tmp_path, capture_output=True, text=True,
                               timeout=300)
     # one static: the run's own estimate refuses (exit 2, the accelerometers undetermined); the
-    # recording itself must have completed
+    # recording itself must have completed.  Which of the estimator's two refusals it is depends on
+    # the window's length, which on a loaded host holds more rest than compiled (the reads' latency
+    # on the twins' clock): "does not determine the accelerometers" (the rank) or, once in 12
+    # loaded runs with an 8.9 s "start" window, "cannot determine the model: 34 measurements for
+    # 35 unknowns" (the count, docs/twins.md "Recorded ramps under load")
     assert "angle is unknown" not in proc.stderr, proc.stderr[-2000:]
-    assert "does not determine" in proc.stderr, proc.stderr[-2000:]
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    assert ("does not determine the accelerometers" in proc.stderr
+            or "cannot determine the model" in proc.stderr), proc.stderr[-2000:]
     assert stall.at is not None, "the window's command never reached the table"
     assert (tmp_path / "cap" / "r.csv.incomplete").is_file(), "the stall missed the window"
     capture = read_capture(tmp_path / "cap", load_data=True)
