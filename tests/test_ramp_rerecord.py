@@ -10,7 +10,6 @@ import pytest
 import yaml
 
 from sim_devices.truth import default_truth
-from sim_devices.twins.faults import faults_from_dict
 from sim_devices.twins.serve import BenchOptions, BenchServer
 from station.io.capture import read_capture
 
@@ -21,10 +20,40 @@ table:
   limits: [{max_rate_dps: 300, max_accel_dps2: 300, move_rate_dps: 60, move_accel_dps2: 60, rate_accel_dps2: 300}]
 run: {operator: false, settle_s: 0.5, max_missing_fraction: 0.02, max_gap_s: 0.3, rerecord_attempts: 2}
 """
-# at speed 8 the window (4.8 s of device time) lies at ~8.6-13.4 s ("start") and ~9.6-14.5 s
-# ("end") of the twins' clock, measured on a loaded machine; the IMU's 0.6 s stall is put in its
-# middle, over a second from either edge (the test checks that it fell inside: a kept-aside copy)
-STALL_AT_S = {"start": 11.0, "end": 12.0}
+# The IMU's 0.6 s stall is put relative to the window's own command, by the twins' loop when the
+# command reaches the table (StallAfterCommand), never at a fixed device time: where the window
+# lies on the twins' clock depends on the host's load (their clock runs on at speed 8 while the
+# station is between its reads: at load 13 the window began 4-6 s of device time later than at
+# load 2, and a stall at a fixed 11 s missed it; docs/twins.md, "Recorded ramps under load").
+# "start": 1.0 s after the ramp's command (the ramp ends 0.33 s after it; the window holds the
+# ramp and 3.6 s of turns after the command's latest moment); "end": 0.1 s after the brake's (the
+# window holds the 0.33 s brake and 0.5 s at rest after it, and the first read at rest): inside
+# either way, whatever the load (the test checks that it fell inside: a kept-aside copy)
+STALL_S = 0.6
+STALL_AFTER_S = {"start": 1.0, "end": 0.1}
+
+
+class StallAfterCommand:
+    """The IMU twin's frames from ``STALL_AFTER_S[kind]`` after the window's command (device s),
+    for STALL_S, are not sent: "start" the first rate demand other than 0 (the ramp up), "end" the
+    first demand of 0 after one (the brake).  Put in the twins' loop as the command is executed
+    (each axis's ``plan_rate``, at the loop step's device time): the stall's frames are not made
+    yet then, so it lands where it is put; once, so that the recording again is clean."""
+
+    def __init__(self, bench, kind):
+        self.bench, self.kind, self.at, self.turned = bench, kind, None, False
+        for ax in bench.table.axes:
+            ax.motion.plan_rate = self._wrap(ax.motion.plan_rate)
+
+    def _wrap(self, plan):
+        def plan_rate(t, rate_dps, amax):
+            if self.at is None and (rate_dps != 0.0 if self.kind == "start" else self.turned and rate_dps == 0.0):
+                imu = self.bench.lines[0].faults
+                imu.stall_at_s, imu.stall_duration_s = t + STALL_AFTER_S[self.kind], STALL_S
+                self.at = t
+            self.turned = self.turned or rate_dps != 0.0
+            return plan(t, rate_dps, amax)
+        return plan_rate
 
 
 @pytest.mark.parametrize("kind", ["start", "end"])
@@ -36,17 +65,23 @@ segments:
   - {{static: s0, up_body: [0, 0, 1]}}
   - {{rotation: r, axis_body: [0, 0, 1], record_ramp: {kind}, pair: false}}
 """)
-    faults = faults_from_dict({"version": 1, "imu": {"stall": {"at_s": STALL_AT_S[kind], "duration_s": 0.6}}})
-    with BenchServer(default_truth(11), BenchOptions(speed=8.0, seed=11, axes=3, lossless=True,
-                                                     faults=faults)) as bench:
+    with BenchServer(default_truth(11), BenchOptions(speed=8.0, seed=11, axes=3, lossless=True)) as bench:
+        stall = StallAfterCommand(bench, kind)
         proc = subprocess.run([sys.executable, "-m", "station.cli", "run", "--config", "station.yaml",
                                "--port", bench.imu_path, "--table-port", bench.table_path, "--scheme", "s.yaml",
                                "--out", "cap", "--no-history"], cwd=tmp_path, capture_output=True, text=True,
                               timeout=300)
     # one static: the run's own estimate refuses (exit 2, the accelerometers undetermined); the
-    # recording itself must have completed
+    # recording itself must have completed.  Which of the estimator's two refusals it is depends on
+    # the window's length, which on a loaded host holds more rest than compiled (the reads' latency
+    # on the twins' clock): "does not determine the accelerometers" (the rank) or, once in 12
+    # loaded runs with an 8.9 s "start" window, "cannot determine the model: 34 measurements for
+    # 35 unknowns" (the count, docs/twins.md "Recorded ramps under load")
     assert "angle is unknown" not in proc.stderr, proc.stderr[-2000:]
-    assert "does not determine" in proc.stderr, proc.stderr[-2000:]
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    assert ("does not determine the accelerometers" in proc.stderr
+            or "cannot determine the model" in proc.stderr), proc.stderr[-2000:]
+    assert stall.at is not None, "the window's command never reached the table"
     assert (tmp_path / "cap" / "r.csv.incomplete").is_file(), "the stall missed the window"
     capture = read_capture(tmp_path / "cap", load_data=True)
     r = next(s for s in capture.segments if s.name == "r")

@@ -176,10 +176,13 @@ def test_a_time_offset_is_not_seen_without_a_ramp_and_the_designer_proposes_one(
 def test_the_benchs_angle_of_a_ramp_from_reads_placed_on_the_imus_clock():
     """station/bench/ramp_angle.py on a table written here: rest at 10 deg until the command at
     IMU time 5.0 s, then 100 deg/s^2 up to 200 deg/s; reads every 0.1 s while it turns, each
-    bracketed by the stamp before it (the read's moment less 0-9 ms) and the one after; the window
-    ends at 9.005 s.  The angle is the profile's within the placement: each read is placed at the
-    stamp before + half a period, within 5 ms of its moment: 200 deg/s x 5 ms = 1 deg at most,
-    and the mean of 20 reads placed with errors uniform in +-5 ms is within 0.5 deg."""
+    bracketed by the stamp before it and the one after (the read's moment 0-20 ms after the first,
+    0-20 ms before the second's end: the host's latency either side); the window ends at 9.005 s.
+    The angle is the profile's within the placement: each read is placed at its bracket's middle,
+    within 10 ms of its moment (2 deg at 200 deg/s), errors of mean 0 and 1-sigma 4.1 ms: the mean
+    of 20 reads within 0.5 deg (2.7 sigma of the mean's 0.18 deg).  A placement at the stamp
+    before plus half a period (the old one) is off by the mean latency less 5 ms: ~1 deg, and fails
+    (0.84 deg)."""
     from station.bench import ramp_angle
 
     period, a, w, t_cmd, rest = 0.01, 100.0, 200.0, 5.0, 10.0
@@ -192,8 +195,9 @@ def test_the_benchs_angle_of_a_ramp_from_reads_placed_on_the_imus_clock():
     rng = np.random.default_rng(1)
     marks = []
     for T in np.arange(7.2, 9.2, 0.1):
-        before = np.floor(T / period + 1e-9) * period - rng.uniform(0, 0.009)   # the newest stamp received
-        marks.append(ramp_angle.Mark(position(T) % 360.0, w, before, before + 0.02))
+        before = T - rng.uniform(0, 0.02)                  # the newest stamp received before the query
+        after = T + rng.uniform(0, 0.02) - period          # the newest after the answer (its end: + period)
+        marks.append(ramp_angle.Mark(position(T) % 360.0, w, before, after))
     edge = 9.005
     turning = ramp_angle.position_at(marks, edge, w, period)
     angle = ramp_angle.window_angle(rest, turning, ramp_angle.expected_angle(w, edge - t_cmd, a, "start"), "start")

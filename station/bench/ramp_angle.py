@@ -42,15 +42,20 @@ class Mark:
 
 
 def placed(mark: Mark, period_s: float) -> float:
-    """The read's moment on the IMU's clock: the newest stamp before the query plus half a period.
-    The bracket's upper end is loose: the reader thread answers the second sync only when its
-    block of frames (ImuStream, 0.1 s) is complete, so ``t_after`` lies up to a block after the
-    answer, while the query goes out as soon as the first sync returns -- at the newest frame then
-    received.  Measured on the twins over pseudo-terminals (--speed 1, 100 Hz): brackets 0.1 s
-    wide, the reads' moments consistent within 2 ms of one another, and the bracket's middle 43 ms
-    after them (4.3 deg at 100 deg/s); the newest stamp before plus half a period is within the
-    query's own latency of the answer (docs/design.md, fifteenth session)."""
-    return mark.t_before + 0.5 * period_s
+    """The read's moment on the IMU's clock: the middle of its bracket, ``t_before`` ..
+    ``t_after`` + one period (the answer's moment lies anywhere in it: ``angle_sigma``'s w / sqrt 12).
+    Before (issue 28, fifteenth session), the newest stamp before the query plus half a period,
+    because the reader thread answered the second sync only when its block of frames (0.1 s) was
+    complete, which made ``t_after`` loose by up to a block (measured at --speed 1: the bracket's
+    middle 43 ms after the reads).  A ramp's window reads the IMU frame by frame
+    (``ImuStream.fine``), so ``t_after`` is the newest frame after the answer; what is left between
+    the stamps is the host's latency on both sides of the query, and on a loaded host the moment
+    lies well inside the bracket: on the twins at --speed 8 under load (brackets 0.2-1.9 s of
+    device time) the stamp before placed the reads too early, the windows' angles off their gyro
+    integrals by 1.3-1.5 of their 1-sigma rms (84 windows, always in that sense) and the fit's
+    gyro integrals at chi2 75-666 on 11 (tests/test_ramp_twins.py, six copies at once: 1 of 6
+    passed); at the middle, 0.22-0.29 rms and 6 of 6 (docs/twins.md, "Recorded ramps under load")."""
+    return 0.5 * (mark.t_before + mark.t_after + period_s)
 
 
 def position_at(marks: list, t: float, rate_dps: float, period_s: float) -> float | None:

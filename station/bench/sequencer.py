@@ -605,17 +605,24 @@ class Sequencer:
                 r.n = int(round(first * ch.rate_hz / self.rate_hz))
             self._record(recs, poll)
             mark()
-            command_t.append(self._reference().stream.sync() or rec_last(recs))   # the command on the IMU's clock
+            # the command's moment on the IMU's clock lies between the newest stamp before it was
+            # sent and the newest after its answer (command_t .. commanded["by"]); on a slow host
+            # that bracket is the host's latency (on the twins times their speed: up to 2 s of
+            # device time measured at speed 8 under load, docs/twins.md "Recorded ramps under load")
+            command_t.append(self._reference().stream.sync() or rec_last(recs))
             if start_kind:
-                self.table.set_rate(axis, rate)
-                commanded["by"] = self._reference().stream.sync() or command_t[-1]
+                # without the driver's wait (its settle_polls reads at the rate would widen the
+                # bracket by seconds of device time on the twins, and the window with it): the
+                # reads at the rate in the window, after the ramp's time, confirm it (mark)
+                self.table.set_rate(axis, rate, wait=False)
+                commanded["by"] = self._sync_reference()
             else:
                 # the brake commanded without the driver's wait: the axis read here until at rest,
                 # each read bracketed on the IMU's clock, so the rest's moment is known within a
                 # read (the driver's own wait confirms it only after settle_polls reads at rest:
                 # on the twins at speed 8 that is ~0.8 s of device time, past the window's end)
                 self.table.set_rate(axis, 0.0, wait=False)
-                commanded["by"] = self._reference().stream.sync() or command_t[-1]
+                commanded["by"] = self._sync_reference()
                 deadline = time.monotonic() + 30.0
                 while True:
                     m = mark()          # a read off both the rate and rest after the brake's time stops
@@ -629,11 +636,19 @@ class Sequencer:
             # the window closes the compiled time after the command on the IMU's clock (the
             # ramp and the turns, or the brake and the rest), not after a count of samples: the
             # stream runs ahead of what was recorded when the command went out (what the line and
-            # the reader hold), and a brake cut short would end the window still turning
+            # the reader hold), and a brake cut short would end the window still turning.  After
+            # the command's latest moment (commanded["by"]), not its earliest (command_t): a command
+            # that reached the table late (a slow host: the twins' clock runs on meanwhile, at
+            # their speed) otherwise cut the brake ("read at rest only after the window closed",
+            # the run stopped) or the turns; and a brake's window holds its first read at rest
+            # (rest_by: the brake's end proved inside the window, however late that read came)
             after = step.capture_s - (step.rest_s if start_kind else step.steady_s)
+            end_t = commanded["by"] + after
+            if rest_by:
+                end_t = max(end_t, rest_by[-1] - period)
             for ch, r in recs.items():
                 r.n = max(total[id(ch)] - r.n + r.done if r.last_t is None else
-                          r.done + int(round((command_t[-1] + after - float(r.last_t)) * ch.rate_hz)), r.done)
+                          r.done + int(round((end_t - float(r.last_t)) * ch.rate_hz)), r.done)
             self._record(recs, poll)
             if start_kind:
                 mark()              # still at the rate after the window (the brake comes after)
@@ -676,7 +691,9 @@ class Sequencer:
                                      "around the recorded ramp: its angle is unknown")
             # the whole turns: the profile from the command's moment (the window may hold more rest
             # than compiled: the stream runs ahead of the command by what the line holds)
-            turning_s = (edge - command_t[-1]) if start_kind else (command_t[-1] - edge)
+            # (the command's moment: the middle of its bracket, within half of it)
+            commanded_t = 0.5 * (command_t[-1] + commanded["by"])
+            turning_s = (edge - commanded_t) if start_kind else (commanded_t - edge)
             angle = ramp_angle.window_angle(rests[-1].position_deg, turning,
                                             ramp_angle.expected_angle(rate, turning_s, step.accel_dps2,
                                                                       step.record_ramp),
@@ -715,6 +732,15 @@ class Sequencer:
                 fine.enter_context(ch.stream.fine())
             self._record_segment(spec.name, "rotation", meta, n, mark, completed, start=start, record=record)
         self.table.set_rate(axis, 0.0)
+
+    def _sync_reference(self) -> float:
+        """The reference IMU's newest stamp received (``ImuStream.sync``), asked until its reader
+        answers (a loaded host can take longer than one ask's 0.25 s), checking for a pause."""
+        while True:
+            t = self._reference().stream.sync()
+            if t is not None:
+                return t
+            self._check_pause()
 
     def _wait_rest(self, axis: int, wall_s: float = 30.0) -> None:
         """Until the axis reads back at rest (within ten rate tolerances), checking for a pause."""
