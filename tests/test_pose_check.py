@@ -129,6 +129,12 @@ def test_turn_errors_bend_the_joint_fit_the_poses_are_written_and_the_turns_name
     assert check["largest_sigma"] > 10 * check["threshold_sigma"]
     assert check["written"].startswith("pose-only")
     assert all(s["segment"].startswith("turn") for s in check["pulling_segments"])
+    # the noise groups (station/estimate/noise_model.py; moved here from test_noise_groups.py,
+    # which estimated the same session again): the hand turns scatter most (62 times their
+    # stated noise on seed 11) and are named; they also push the poses' residuals
+    groups = sorted(doc["fit"]["noise_groups"], key=lambda g: -g["scatter"])
+    assert groups[0]["group"] == "hand turn" and groups[0]["scatter"] > 5 and groups[0]["p_value"] < 1e-6
+    assert any(n.startswith("the hand turns (gravity after each turn) scatter") for n in doc["fit"]["notes"])
     # the file's parameters (the estimate the command wrote: estimate_capture(out,
     # turn_sigma_deg=0.0) gives the same values and 1-sigma, to the bit)
     cal = Written(doc)
@@ -143,10 +149,15 @@ def test_turn_errors_bend_the_joint_fit_the_poses_are_written_and_the_turns_name
 
 
 def test_the_same_session_without_turn_errors_agrees(tmp_path):
+    """... and, without the turn errors, no noise group is named and every group scatters as
+    stated (the noise groups' check, moved here from test_noise_groups.py: the same estimate)."""
     truth, hs = coarse_session(turn_error_deg=0.0)
     cal, _, _ = estimate_capture(import_session(tmp_path, hs))
     assert cal.fit["pose_check"]["result"] == "agree", cal.fit["pose_check"]["largest_sigma"]
     within_sigma(cal, truth, ACCEL)
+    assert not any("times their stated noise" in n for n in cal.fit["notes"])
+    for g in cal.fit["noise_groups"]:       # chi2(f)/f within 4.5 sigma of 1 (Gaussian approximation)
+        assert abs(g["scatter"] ** 2 - 1.0) < 4.5 * np.sqrt(2.0 / g["redundancy"]), g
 
 
 def test_13_poses_in_6_attitudes_write_no_accelerometer_misalignments(tmp_path, capsys):
