@@ -42,6 +42,23 @@ def page(hidden_effect_capture):
     return hidden_effect_capture / "report.html"
 
 
+@pytest.fixture(scope="module")
+def auto_diagnosed(hidden_effect_capture, tmp_path_factory):
+    """`station diagnose HIDDEN --auto --report DIR -o CAL.yaml`, once for the module: (DIR, CAL,
+    what it printed on stderr).  The page's candidate figures and the loop's calibration file are
+    read from the same --auto diagnosis (two tests made it twice, with one option each)."""
+    import contextlib
+    import io
+
+    base = tmp_path_factory.mktemp("auto")
+    out, cal = base / "hidden", base / "cal.yaml"
+    said = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(said):
+        status = main(["diagnose", str(hidden_effect_capture), "--auto", "--report", str(out), "-o", str(cal)])
+    assert status == 0, said.getvalue()
+    return out, cal, said.getvalue()
+
+
 def test_the_page_is_self_contained_and_says_what_a_reader_needs(page):
     text = page.read_text(encoding="utf-8")
     # nothing fetched from elsewhere: every src is a data: URI, no stylesheet or script link
@@ -73,13 +90,12 @@ def test_diagnose_report_writes_the_same_kind_of_page(hidden_effect_capture, tmp
     assert (out / "residuals_per_segment.svg").stat().st_size > 1000
 
 
-def test_the_page_draws_the_significant_candidates_or_the_leading_one(hidden_effect_capture, optimal9_run, tmp_path):
+def test_the_page_draws_the_significant_candidates_or_the_leading_one(auto_diagnosed, optimal9_run, tmp_path):
     """A candidate's figure is drawn when the candidate is significant (here the non-linearity the
     IMU has; the lever arm and the temperature bias rank next on the misfit it leaves, and are
     not); when none is, the leading one's only (optimal9 of the default IMU)."""
-    for cap, out in ((hidden_effect_capture, tmp_path / "hidden"), (optimal9_run, tmp_path / "plain")):
-        assert main(["diagnose", str(cap), "--auto", "--report", str(out), "--json"]) == 0
-    hidden = sorted(p.name for p in (tmp_path / "hidden").glob("candidate_*.svg"))
+    assert main(["diagnose", str(optimal9_run), "--auto", "--report", str(tmp_path / "plain"), "--json"]) == 0
+    hidden = sorted(p.name for p in auto_diagnosed[0].glob("candidate_*.svg"))
     assert hidden == ["candidate_accel_nonlinearity.svg"]
     plain = sorted(p.name for p in (tmp_path / "plain").glob("candidate_*.svg"))
     text = (tmp_path / "plain" / "index.html").read_text(encoding="utf-8")
@@ -215,7 +231,7 @@ def test_the_page_never_contradicts_the_calibration_it_describes(optimal9_run, t
     assert all("own fit verdict is: fails" in t for _, t in diagnosis)
 
 
-def test_the_loop_ends_in_a_calibration_file(hidden_effect_capture, tmp_path, capsys):
+def test_the_loop_ends_in_a_calibration_file(auto_diagnosed, tmp_path):
     """`diagnose --auto -o CAL.yaml` writes the calibration of the model it ends with (the
     effect it added, the estimate `station estimate --add` makes) and prints the commands that
     reproduce and apply it; the command printed gives the same file (issue 26, item 2)."""
@@ -223,10 +239,7 @@ def test_the_loop_ends_in_a_calibration_file(hidden_effect_capture, tmp_path, ca
 
     import yaml
 
-    cal = tmp_path / "cal.yaml"
-    capsys.readouterr()
-    assert main(["diagnose", str(hidden_effect_capture), "--auto", "-o", str(cal)]) == 0
-    said = capsys.readouterr().err
+    _, cal, said = auto_diagnosed
     doc = yaml.safe_load(cal.read_text())
     assert "accel_nonlinearity" in doc["effects"] and doc["verdict"]["result"] == "passes"
     line = next(x for x in said.splitlines() if x.startswith("to estimate it: "))
