@@ -5,13 +5,10 @@ none is named; on a hand session whose turns the gyro misses by 1 degree, the ha
 named first (tests/test_pose_check.py, on its estimates of that session)."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
-import pytest
 
 from sim_devices.truth import default_truth
-from station.estimate import estimate_capture, estimate_with
+from station.estimate import estimate_with
 from station.io.scheme import load_scheme
 from station.simulate import dryrun
 
@@ -43,22 +40,6 @@ def test_clean_captures_scatter_as_stated_and_name_no_group():
 # (test_turn_errors_bend_the_joint_fit_the_poses_are_written_and_the_turns_named,
 # test_the_same_session_without_turn_errors_agrees), not estimated a second time here.
 
-
-DATA = Path(__file__).resolve().parent / "data" / "imucal"
-
-
-@pytest.mark.skipif(not DATA.exists(), reason="tests/data/imucal not present")
-def test_imucals_session_has_no_data_redundancy_and_is_untested(tmp_path):
-    """imucal's session through `station import imucal`: six poses, the turns not usable. The
-    fit counted 6 degrees of freedom and called the noise overestimated (reduced chi2 0.03);
-    the leverages say the data have none of their own (the 6 are the priors'): untested."""
-    from station.io.importers import imucal
-
-    from test_import_imucal import SECTIONS, SESSION
-
-    cal, _, _ = estimate_capture(imucal.import_imucal(SESSION, tmp_path / "c", rate_hz=102.4,
-                                                      sections_path=SECTIONS))
-    assert cal.fit["data_redundancy"] < 0.5 and cal.fit["dof"] == 6
-    assert cal.fit["verdict"]["result"] == "untested"
-    assert "the data have no redundancy of their own" in cal.fit["verdict"]["reason"]
-    assert any("the chi-square verdict is taken on the data's" in n for n in cal.fit["notes"])
+# imucal's session through `station import imucal` (six poses, the turns not usable: no data
+# redundancy of their own, untested): checked in tests/test_import_imucal.py's
+# test_cli_import_and_what_station_can_estimate, on its estimate of the same import.
