@@ -148,7 +148,9 @@ def test_turn_errors_bend_the_joint_fit_the_poses_are_written_and_the_turns_name
 
 def test_the_same_session_without_turn_errors_agrees(tmp_path):
     """... and, without the turn errors, no noise group is named and every group scatters as
-    stated (the noise groups' check, moved here from test_noise_groups.py: the same estimate)."""
+    stated (the noise groups' check, moved here from test_noise_groups.py: the same estimate);
+    turns that follow the gyro add no term to the noise model (test_noise_model.py's check: its
+    session(11) is this session, sample for sample)."""
     truth, hs = coarse_session(turn_error_deg=0.0)
     cal, _, _ = estimate_capture(import_session(tmp_path, hs))
     assert cal.fit["pose_check"]["result"] == "agree", cal.fit["pose_check"]["largest_sigma"]
@@ -156,6 +158,12 @@ def test_the_same_session_without_turn_errors_agrees(tmp_path):
     assert not any("times their stated noise" in n for n in cal.fit["notes"])
     for g in cal.fit["noise_groups"]:       # chi2(f)/f within 4.5 sigma of 1 (Gaussian approximation)
         assert abs(g["scatter"] ** 2 - 1.0) < 4.5 * np.sqrt(2.0 / g["redundancy"]), g
+    nm = cal.fit["noise_model"]
+    assert "turn_angle_deg" not in nm and nm["terms"] == ["white", "quantisation"]
+    assert "left_out" not in cal.fit["verdict"] and cal.fit["verdict"]["result"] == "passes"
+    # the gyro's output step is found (0.061 deg/s = 219.6 deg/h), the accelerometer's floats have none
+    assert nm["quantisation"]["gyro_lsb_degph"] == pytest.approx([219.6] * 3, rel=1e-6)
+    assert nm["quantisation"]["accel_lsb_ug"] == [0.0, 0.0, 0.0]
 
 
 def test_13_poses_in_6_attitudes_write_no_accelerometer_misalignments(tmp_path, capsys):
