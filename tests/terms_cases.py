@@ -202,6 +202,7 @@ def heldout(case, tmp, seed=3, library_patch=None):
         assert rc == 0, err
         d = json.loads(out)
         res["emit_line"] = err.strip().splitlines()[-1] if err.strip() else ""
+        res["diagnose_stderr"] = err
         steps = d["steps"]
         res["added"] = [s["added"] for s in steps]
         res["reduced_before"] = steps[0]["chi2_before"] / (d["dof"] + sum(0 for _ in steps)) if steps else d["reduced_chi2"]

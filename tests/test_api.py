@@ -31,9 +31,16 @@ def test_the_worked_example_runs_as_written(tmp_path, monkeypatch, capsys):
     assert (tmp_path / "run1" / "cal.yaml").is_file() and (tmp_path / "run1" / "imucal.json").exists()
 
 
-def test_the_api_gives_what_the_cli_gives(tmp_path):
-    bundle = api.simulate("optimal9", tmp_path / "cap", seed=4, dwell_s=10.0)
-    est = api.estimate(bundle)
+@pytest.fixture(scope="module")
+def simulated(tmp_path_factory):
+    """One optimal9 dry run and its estimate through the API, for the tests below to read (the
+    bad-input test needs only a calibration file to refuse things with)."""
+    bundle = api.simulate("optimal9", tmp_path_factory.mktemp("api") / "cap", seed=4, dwell_s=10.0)
+    return bundle, api.estimate(bundle)
+
+
+def test_the_api_gives_what_the_cli_gives(tmp_path, simulated):
+    bundle, est = simulated
     assert cli.main(["estimate", str(bundle), "-o", str(tmp_path / "cli.yaml")]) == 0
     doc = yaml.safe_load((tmp_path / "cli.yaml").read_text())
     assert est.verdict["result"] == doc["verdict"]["result"] == "passes"
@@ -65,13 +72,12 @@ def test_import_station_is_instant_and_the_api_light():
     assert out.strip() == "[] [] True"
 
 
-def test_bad_input_raises_the_clis_message(tmp_path):
+def test_bad_input_raises_the_clis_message(tmp_path, simulated):
     with pytest.raises(api.UserError, match="no-such"):
         api.estimate(tmp_path / "no-such")
-    bundle = api.simulate("optimal9", tmp_path / "cap", seed=5, dwell_s=5.0)
+    bundle, est = simulated
     with pytest.raises(api.UserError, match="unknown effect|no effect"):
         api.estimate(bundle, add=["no_such_effect"])
-    est = api.estimate(bundle)
     est.save(tmp_path / "cal.yaml")
     with pytest.raises(api.UserError, match=r"\(5, 3\)"):
         api.apply(tmp_path / "cal.yaml", np.zeros(5), np.zeros((5, 2)), np.zeros((5, 3)))

@@ -161,13 +161,9 @@ def test_the_emitted_plugin_is_used_unchanged_and_the_held_out_error_falls_to_th
     ns["test_compensation_removes_the_terms"]()
 
 
-def test_nothing_to_emit_is_one_line_and_exit_0(tmp_path, capsys):
-    from station.cli import main
-
-    _, cap = tc.training(None, 3, tmp_path, out=tmp_path / "cap")
-    plugin = tmp_path / "found.py"
-    capsys.readouterr()
-    assert main(["diagnose", str(cap), "--auto", "--emit-effect", str(plugin), "--json"]) == 0
-    err = capsys.readouterr().err.strip().splitlines()
+def test_nothing_to_emit_is_one_line_and_exit_0(floor):
+    """The floor's loop ran `diagnose CLEAN --auto --json --emit-effect found.py` (exit 0, or
+    tc.heldout fails) on the clean training capture: one line on stderr, no file written."""
+    err = floor["diagnose_stderr"].strip().splitlines()
     assert len(err) == 1 and "nothing to emit" in err[0], err
-    assert not plugin.exists()
+    assert floor["added"] == [] and floor["plugin"] is None

@@ -38,12 +38,22 @@ def test_a_bias_step_when_the_table_starts_turning_is_named_as_a_step(boundary_s
     assert 80 < size < 120, steps[0]
 
 
-def test_stamp_jitter_is_named_from_the_stamps_and_the_rotations_scatter():
+@pytest.fixture(scope="module")
+def jittered(tmp_path_factory):
+    """The seed-3 SHORT optimal9 with 1 ms stamp jitter, recorded once as a bundle (both jitter
+    tests read it: one in memory, one through the command)."""
+    return simhelpers.mems_capture(3, "optimal9", SHORT, out=tmp_path_factory.mktemp("jitter") / "cap",
+                                   bench__time_stamp_jitter_ms=1.0)[1]
+
+
+def test_stamp_jitter_is_named_from_the_stamps_and_the_rotations_scatter(jittered):
     """1 ms (1 sigma) stamp jitter at 100 Hz: at 100 °/s a sample stamped 1 ms off is taken for an
     attitude 0.1° away, so gravity across the axis is off by g·w·dt = 1.7 mg against a per-sample
     noise of ~2 mg (200 µg/√Hz at 100 Hz): the rotations' accelerometer residuals grow, the
     statics do not."""
-    s = lsq.summarise(capture(bench__time_stamp_jitter_ms=1.0))
+    from station.io.capture import read_capture
+
+    s = lsq.summarise(read_capture(jittered))
     assert abs(s.stamp_jitter_s - 1e-3) < 0.1e-3          # from the stamps: 9 segments, thousands of intervals
     d = diagnose(lsq.fit(s))
     jitter = [f for f in d.failures if f.startswith("the time stamps jitter")]
@@ -68,14 +78,14 @@ def test_no_time_or_bench_words_on_a_clean_capture():
                 or "stamps jitter" in f or "twice per revolution" in f], d.failures
 
 
-def test_stamp_jitter_is_named_by_the_command_that_reads_the_capture_segment_by_segment(tmp_path, capsys):
+def test_stamp_jitter_is_named_by_the_command_that_reads_the_capture_segment_by_segment(jittered, capsys):
     """`station diagnose CAPTURE` reads the capture a segment at a time (its samples are freed):
     the jitter is taken from each segment as it goes by, not from samples kept afterwards (it
     read 0 there, and the finding never reached the command)."""
     from station.cli import main
     from station.io.capture import read_capture
 
-    _, path = simhelpers.mems_capture(3, "optimal9", SHORT, out=tmp_path / "cap", bench__time_stamp_jitter_ms=1.0)
+    path = jittered
     streamed = lsq.summarise(read_capture(path, load_data=False))
     assert abs(streamed.stamp_jitter_s - lsq.summarise(read_capture(path)).stamp_jitter_s) < 1e-12
     assert main(["diagnose", str(path)]) == 0

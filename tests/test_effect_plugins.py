@@ -10,7 +10,7 @@ from station.cli import main
 from station.core.errors import UserError
 from station.diagnose import auto
 from station.estimate import lsq
-from station.io.calfile import compensation_effects, read_calfile, write_calfile
+from station.io.calfile import compensation_effects, read_calfile
 from station.io.capture import read_capture
 from station.model import LIBRARY
 from station.model.compensate import compensate_with_effects
@@ -188,10 +188,19 @@ def test_estimate_apply_with_a_plugin_cuts_the_held_out_error(cross_coupled, tmp
     assert after < 50e-6 * g, after
 
 
-def test_apply_compensates_library_effects_and_refuses_missing_inputs(tmp_path, capsys):
-    truth, train = mems_capture(seed=5, out=tmp_path / "k2", accel__nonlinearity_ug_per_g2=[3000.0, -2000.0, 4000.0])
-    cal = tmp_path / "k2.yaml"
+@pytest.fixture(scope="module")
+def k2_calibration(tmp_path_factory):
+    """A capture with the accelerometers' K2 and `station estimate --add accel_nonlinearity`'s
+    calibration of it (read by the tests below, never changed)."""
+    d = tmp_path_factory.mktemp("k2")
+    _, train = mems_capture(seed=5, out=d / "k2", accel__nonlinearity_ug_per_g2=[3000.0, -2000.0, 4000.0])
+    cal = d / "k2.yaml"
     assert main(["estimate", str(train), "--add", "accel_nonlinearity", "-o", str(cal)]) == 0
+    return train, cal
+
+
+def test_apply_compensates_library_effects_and_refuses_missing_inputs(tmp_path, capsys, k2_calibration):
+    train, cal = k2_calibration
     reg = EffectRegistry()
     (effect, x), = compensation_effects(read_calfile(cal), reg)
     assert effect.id == "accel_nonlinearity" and np.allclose(x, [3000, -2000, 4000], atol=200)
@@ -220,11 +229,10 @@ def test_apply_compensates_library_effects_and_refuses_missing_inputs(tmp_path, 
     assert "no temp column" in err and "temperature_bias" in err and len(err.strip().splitlines()) == 1
 
 
-def test_a_calibration_file_with_a_bad_effects_block_is_one_line(tmp_path):
-    truth, train = mems_capture(seed=5)
-    cal = tmp_path / "c.yaml"
-    write_calfile(cal, lsq.estimate(train, [EffectRegistry().create("accel_nonlinearity")]), {})
-    doc = yaml.safe_load(cal.read_text())
+def test_a_calibration_file_with_a_bad_effects_block_is_one_line(tmp_path, k2_calibration):
+    cal = tmp_path / "c.yaml"                  # a calibration with an effects block, to spoil
+    doc = yaml.safe_load(k2_calibration[1].read_text())
+    assert doc["compensation"]["effects"][0]["id"] == "accel_nonlinearity"
     for bad in ([{"id": 3}], "x", [{"id": "accel_nonlinearity", "parameters": {"accel_k2_x": "a"}}],
                 [{"id": "accel_nonlinearity", "parameters": {}}]):
         doc["compensation"]["effects"] = bad

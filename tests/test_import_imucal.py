@@ -125,6 +125,14 @@ def test_cli_import_and_what_station_can_estimate(tmp_path, capsys):
     notes = " ".join(cal.fit["notes"])
     assert "x_rot: hand rotation without a static segment just before and after" in notes
     assert "accelerometer-only calibration" in notes and cal.fit["gyro_calibrated"] is False
+    # (tests/test_noise_groups.py's check, on this estimate of the same import) six poses, the
+    # turns not usable: the fit counted 6 degrees of freedom and called the noise overestimated
+    # (reduced chi2 0.03); the leverages say the data have none of their own (the 6 are the
+    # priors'): untested
+    assert cal.fit["data_redundancy"] < 0.5 and cal.fit["dof"] == 6
+    assert cal.fit["verdict"]["result"] == "untested"
+    assert "the data have no redundancy of their own" in cal.fit["verdict"]["reason"]
+    assert any("the chi-square verdict is taken on the data's" in n for n in cal.fit["notes"])
     with pytest.raises(UserError, match="at least 9 static attitudes; the capture has 6"):
         estimate_capture(out, "zhang2010")
     assert cli.main(["estimate", str(out)]) == 0

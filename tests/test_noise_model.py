@@ -6,7 +6,6 @@ drawn turn errors and bias walk (sim_devices/hand.py), and numpy's own sums."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 from scipy import stats
 
 from sim_devices.hand import hand_session
@@ -83,15 +82,9 @@ def test_missed_turns_get_their_own_sigma_and_the_fit_passes(tmp_path):
     assert 0.6 < np.sqrt(np.mean(z**2)) < 1.4 and np.max(np.abs(z)) < 4.5, z
 
 
-def test_turns_that_follow_the_gyro_add_no_term(tmp_path):
-    truth, hs = session(11)
-    cal, _, _ = estimate_capture(import_session(tmp_path, hs))
-    nm = cal.fit["noise_model"]
-    assert "turn_angle_deg" not in nm and nm["terms"] == ["white", "quantisation"]
-    assert "left_out" not in cal.fit["verdict"] and cal.fit["verdict"]["result"] == "passes"
-    # the gyro's output step is found (0.061 deg/s = 219.6 deg/h), the accelerometer's floats have none
-    assert nm["quantisation"]["gyro_lsb_degph"] == pytest.approx([219.6] * 3, rel=1e-6)
-    assert nm["quantisation"]["accel_lsb_ug"] == [0.0, 0.0, 0.0]
+# Turns that follow the gyro add no term (session(11), no turn errors): checked in
+# tests/test_pose_check.py's test_the_same_session_without_turn_errors_agrees, whose session is
+# this one sample for sample (its coarse_session(turn_error_deg=0.0)): one estimate, not two.
 
 
 def test_a_stated_turn_sigma_is_tested(tmp_path, capsys):
