@@ -110,9 +110,10 @@ def predict(scheme: Scheme, effects: list, noise: Noise, config=None, duration_s
     estimator's covariance).  One geometry alone is one draw: a static's heading decides which
     horizontal direction of the gyro bias its Earth rate hides, and the gyro biases' and their
     temperature coefficients' bound moved by up to 40 % from draw to draw (docs/design.md,
-    thirteenth session).  ``appended``: segment names recorded later by ``run --append``
-    (station design --from's extension: its rotations axis groups of their own, as the estimator
-    reads the capture then)."""
+    thirteenth session).  ``appended``: segment names recorded later by ``run --append``, or
+    {name: N} for the N-th extension's (station design --from's extension of a capture already
+    extended: its rotations axis groups of their own per extension, as the estimator reads the
+    capture then; information.model_of)."""
     from station.estimate import lsq
 
     truth = quiet_truth(noise, config)
