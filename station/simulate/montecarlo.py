@@ -129,11 +129,14 @@ def run_one(scheme: Scheme, settings: Settings, seed: int) -> tuple:
     else:
         cal = _estimate(capture, settings)
     rows = parameter_errors(cal, dryrun.truth_calibration(truth))
-    names = [e[0] for e in rows] + [p.name for e in effects for p in e.params]
+    # the effects' full parameter lists, as study() names its columns: new instances (the fit's
+    # own were set up on the capture, and an effect may drop there what its convention fixes --
+    # the size effect's own-axis positions: a shorter list, every column after it shifted)
+    listed = [p for e in _effects(settings) for p in e.params]
+    names = [e[0] for e in rows] + [p.name for p in listed]
     got = {name: (value, cal.sigma.get(name, np.nan)) for name, value, _ in effect_parameters(cal, effects)}
-    errors = [e[3] for e in rows] + [got.get(p.name, (np.nan, np.nan))[0] for e in effects for p in e.params]
-    sigmas = np.concatenate([_error_sigmas(cal), [got.get(p.name, (np.nan, np.nan))[1] for e in effects
-                                                  for p in e.params]])
+    errors = [e[3] for e in rows] + [got.get(p.name, (np.nan, np.nan))[0] for p in listed]
+    sigmas = np.concatenate([_error_sigmas(cal), [got.get(p.name, (np.nan, np.nan))[1] for p in listed]])
     return names, np.array(errors, float), np.asarray(sigmas, float), list(cal.fit.get("notes", []))
 
 
