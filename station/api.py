@@ -91,6 +91,12 @@ class Estimate:
         return write_calfile(Path(path), self.calibration, self.provenance)
 
 
+def _mc_library() -> dict:
+    from station.model import LIBRARY
+
+    return LIBRARY
+
+
 def _registry(plugins=(), effects_dirs=(), config=None):
     """Where effects come from, as the commands' --config, --effects-dir and --plugin: the library,
     installed entry points, $STATION_EFFECTS_PATH, the effects section of the configuration
@@ -661,14 +667,17 @@ class MonteCarlo:
 def montecarlo(scheme: str = "optimal9", runs: int = 100, *, seed: int = 1000, accel_noise_ug: float = 100.0,
                gyro_noise_dph: float = 0.03, table_angle_arcsec: float = 2.0, accel_disturbance_ug: float = 50.0,
                method: str = "lsq", effects=(), progress=None, executor=None, workers=None,
-               config=None) -> MonteCarlo:
+               config=None, plugins=(), effects_dirs=()) -> MonteCarlo:
     """``station montecarlo``: ``runs`` dry runs of ``scheme`` (seeds ``seed``, ``seed`` + 1, ...)
     estimated with ``method`` (lsq or zhang2010) on every usable core, against the Cramér-Rao
     bound.  Noise densities: accelerometer µg/√Hz, gyro °/h/√Hz; ``table_angle_arcsec``: 1-sigma
     table angle error; ``accel_disturbance_ug``: 1-sigma white acceleration disturbance.
     ``effects``: library effects fitted too (lsq only; the simulated IMU has none of them, so
     their parameters' errors are against zero; one that its convention fixes is in no run's
-    calibration and left out).  ``progress(done, total)`` is called as runs finish.  ``executor``:
+    calibration and left out): ids or plugins as :func:`estimate` takes them (``plugins``,
+    ``effects_dirs``, ``config``: the same registry; an unlisted effect, station/model/unlisted.py,
+    by its id).  The dry runs ramp at the configured table's ``rate_accel_dps2`` (``config``: as
+    ``station run --sim`` does).  ``progress(done, total)`` is called as runs finish.  ``executor``:
     a concurrent.futures executor to run them on (a Dask client's: ``station montecarlo
     --scheduler``) with ``workers`` its workers (default: a process pool on every usable core)."""
     import warnings
@@ -679,23 +688,27 @@ def montecarlo(scheme: str = "optimal9", runs: int = 100, *, seed: int = 1000, a
     _whole("runs", runs, 2)
     _whole("seed", seed, 0)
     effects = tuple(dict.fromkeys(effects or ()))
+    instances = []
     if effects:
-        from station.model import LIBRARY
-
-        unknown = [e for e in effects if e not in LIBRARY]
-        if unknown:
-            raise UserError(f"--add: unknown effect {', '.join(unknown)} (library effects: {', '.join(LIBRARY)})")
         if method != "lsq":
             raise UserError("--add needs --method lsq (the 2010 method fits the base model only)")
+        # the registry estimate and design use (library, plugins, unlisted effects): one model
+        registry = _registry(plugins, effects_dirs, config)
+        instances = [registry.create(e) for e in _effect_ids(registry, effects)]
+        effects = tuple(e.id for e in instances)
     plan = load_scheme(scheme)
-    chamber = None
-    if plan.chamber_steps:
-        from station.bench.config import load_config
+    from station.bench.config import load_config
+    from station.simulate.dryrun import table_ramp_accel
 
-        chamber = load_config(config).chamber
+    cfg = load_config(config)
+    if executor is not None and not all(e.id in _mc_library() for e in instances):
+        raise UserError("--scheduler: a plugin's effect cannot be sent to the Dask workers (they do not load your "
+                        "files); run its Monte Carlo on this machine's cores (without --scheduler)")
     settings = _mc.Settings(accel_noise_ug=accel_noise_ug, gyro_noise_dph=gyro_noise_dph,
                             table_angle_arcsec=table_angle_arcsec, accel_disturbance_ug=accel_disturbance_ug,
-                            method=method, effects=effects, chamber=chamber)
+                            method=method, effects=_mc.effect_settings(instances),
+                            chamber=cfg.chamber if plan.chamber_steps else None,
+                            ramp_accel_dps2=table_ramp_accel(cfg.table))
     result = _mc.study(plan, settings, runs, first_seed=seed, bound=True, progress=progress, executor=executor,
                        workers=workers)
     errors, sigmas = result.errors, result.sigmas

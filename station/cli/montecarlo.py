@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import contextlib
 
-from station.cli import argtypes
+from station.cli import argtypes, plugins
 from station.cli.output import err, out, rich_console
 
 
@@ -22,15 +22,17 @@ def add_parsers(sub) -> None:
     mc.add_argument("--method", choices=("lsq", "zhang2010"), default="lsq",
                     help="estimation method (default lsq)")
     mc.add_argument("--add", action="append", default=[], metavar="EFFECT",
-                    help="a library effect the lsq fit adds (station effects lists them); repeatable: its "
-                         "parameters' spread, bound and 1σ are reported too (against zero: the simulated IMU "
-                         "has none of the effects)")
+                    help="an effect the lsq fit adds (an id: station effects lists them; or FILE.py:CLASS, as "
+                         "station estimate and station design take them); repeatable: its parameters' spread, "
+                         "bound and 1σ are reported too (against zero: the simulated IMU has none of the effects)")
+    plugins.add_arguments(mc)
     mc.add_argument("--seed", type=argtypes.seed, default=1000, help="first seed (runs use seed, seed+1, ...)")
     mc.add_argument("--scheduler", metavar="tcp://HOST:8786",
                     help="run the repetitions on this Dask scheduler's workers (default: a pool of "
                          "worker processes on this machine's cores)")
     mc.add_argument("--config", metavar="FILE",
-                    help="station.yaml whose temperature chamber a scheme that sets one (chamber_c) runs with "
+                    help="station.yaml: the table whose rate_accel_dps2 the recorded ramps take (as station run "
+                         "--sim) and the temperature chamber a scheme that sets one (chamber_c) runs with "
                          "(default: $STATION_CONFIG, ./station.yaml)")
     mc.add_argument("--json", action="store_true",
                     help="print the per-parameter table as JSON on stdout (error std, Cramér–Rao bound, mean 1σ)")
@@ -71,7 +73,7 @@ def cmd_montecarlo(args) -> int:
                                 gyro_noise_dph=args.gyro_noise_dph, table_angle_arcsec=args.table_angle_arcsec,
                                 accel_disturbance_ug=args.accel_disturbance_ug, method=args.method,
                                 effects=args.add, progress=progress, executor=executor, workers=workers,
-                                config=args.config)
+                                **plugins.options(args))
         elapsed = time.perf_counter() - started
     err.print(f"{args.runs} dry runs and the Cramér-Rao bound in {elapsed:.1f} s on {mc.workers} "
               f"{'Dask worker thread(s) at ' + args.scheduler if args.scheduler else 'worker process(es)'}: "

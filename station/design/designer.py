@@ -110,9 +110,10 @@ def predict(scheme: Scheme, effects: list, noise: Noise, config=None, duration_s
     estimator's covariance).  One geometry alone is one draw: a static's heading decides which
     horizontal direction of the gyro bias its Earth rate hides, and the gyro biases' and their
     temperature coefficients' bound moved by up to 40 % from draw to draw (docs/design.md,
-    thirteenth session).  ``appended``: segment names recorded later by ``run --append``
-    (station design --from's extension: its rotations axis groups of their own, as the estimator
-    reads the capture then)."""
+    thirteenth session).  ``appended``: segment names recorded later by ``run --append``, or
+    {name: N} for the N-th extension's (station design --from's extension of a capture already
+    extended: its rotations axis groups of their own per extension, as the estimator reads the
+    capture then; information.model_of)."""
     from station.estimate import lsq
 
     truth = quiet_truth(noise, config)
@@ -154,41 +155,19 @@ class Verification:
         return not self.problems
 
 
-def verify_one(scheme: Scheme, effect_ids: tuple, noise: Noise, seed: int, chamber=None) -> tuple:
+def verify_one(scheme: Scheme, effects: tuple, noise: Noise, seed: int, chamber=None,
+               ramp_accel_dps2: float | None = None) -> tuple:
     """One noisy dry run of ``scheme`` estimated as ``station montecarlo`` estimates it (the same
-    function, station.simulate.montecarlo.one_run): (names, errors, the fit's own 1σ, the fit's
-    notes), errors and 1σ in the prediction's units (scale factors in ppm).  ``effect_ids`` the
+    function, station.simulate.montecarlo.run_one): (names, errors, the fit's own 1σ, the fit's
+    notes), errors and 1σ in the prediction's units (scale factors in ppm).  ``effects``: the
     library's ids, or effect instances where the model has one the library has not (a plugin,
-    station/model/unlisted.py): their fit is station montecarlo's with those effects (it takes
-    library ids only; given ids, a plugin's was a KeyError in every verification run)."""
-    import copy
+    station/model/unlisted.py: montecarlo.effect_settings).  ``ramp_accel_dps2``: the configured
+    table's recorded ramps (information.ramp_accel_of), as the prediction and the dry run take
+    them (before: the dry run's default 50 deg/s^2 whatever the table)."""
+    from station.simulate import montecarlo
 
-    from station.model.calibration import parameter_errors
-    from station.simulate import dryrun, montecarlo
-
-    instances = None if all(isinstance(e, str) for e in effect_ids) else [copy.deepcopy(e) for e in effect_ids]
-    ids = tuple(e if isinstance(e, str) else e.id for e in effect_ids)
-    settings = replace(noise.settings(), effects=ids if instances is None else (), chamber=chamber)
-    truth = montecarlo.make_truth(settings)
-    capture = dryrun.simulate_capture(scheme, truth, seed, chamber=chamber)
-    if instances is None:
-        cal = montecarlo._estimate(capture, settings)
-        effects = montecarlo._effects(settings)
-    else:
-        from station.estimate import lsq
-
-        cal = lsq.estimate(capture, instances)
-        effects = instances             # (their parameters' names: what the fit set does not rename)
-    names = [e[0] for e in parameter_errors(cal, dryrun.truth_calibration(truth))]
-    names += [p.name for e in effects for p in e.params]
-    errors = [e[3] for e in parameter_errors(cal, dryrun.truth_calibration(truth))]
-    # each effect parameter against zero (the simulator's default IMU has none), NaN where the
-    # calibration does not carry it (as montecarlo._effect_values)
-    got = {name: (value, cal.sigma.get(name, np.nan)) for name, value, _ in montecarlo.effect_parameters(cal)}
-    errors += [got.get(p.name, (np.nan, np.nan))[0] for e in effects for p in e.params]
-    sigmas = np.concatenate([montecarlo._error_sigmas(cal),
-                             [got.get(p.name, (np.nan, np.nan))[1] for e in effects for p in e.params]])
-    return names, np.array(errors, float), np.asarray(sigmas, float), list(cal.fit.get("notes", []))
+    settings = replace(noise.settings(), effects=tuple(effects), chamber=chamber, ramp_accel_dps2=ramp_accel_dps2)
+    return montecarlo.run_one(scheme, settings, seed)
 
 
 def _map(executor, fn, items) -> list:
@@ -202,7 +181,8 @@ def _map(executor, fn, items) -> list:
 
 
 def verify(scheme: Scheme, effects: list, noise: Noise, prediction: Prediction, which,
-           runs: int = VERIFY_RUNS, first_seed: int = 1000, executor=None, chamber=None) -> Verification:
+           runs: int = VERIFY_RUNS, first_seed: int = 1000, executor=None, chamber=None,
+           ramp_accel_dps2: float | None = None) -> Verification:
     """Does the estimator deliver the prediction?  ``runs`` noisy dry runs of the designed scheme
     (seeds first_seed, ...: the first runs `station montecarlo` makes) estimated as it does;
     for every criterion parameter ``which`` (the prediction's indices) the error must be within
@@ -211,13 +191,12 @@ def verify(scheme: Scheme, effects: list, noise: Noise, prediction: Prediction, 
     estimator's covariance at the noiseless capture; what it leaves out is what the estimator
     does with noise: a start the solver does not converge from, a direction the noiseless fit
     sees and a noisy one does not, a noise model or reweighting the designed segments set off."""
-    from station.model import LIBRARY
+    from station.simulate.montecarlo import effect_settings
 
-    # the library's effects by id (what station montecarlo takes, and what a Dask worker unpickles
-    # without the user's files); a model with another effect by its instances
-    ids = tuple(e.id for e in effects)
-    ids = ids if all(i in LIBRARY for i in ids) else tuple(effects)
-    results = _map(executor, lambda seed: verify_one(scheme, ids, noise, seed, chamber),
+    # the library's effects by id (what a Dask worker unpickles without the user's files); a model
+    # with another effect by its instances
+    ids = effect_settings(effects)
+    results = _map(executor, lambda seed: verify_one(scheme, ids, noise, seed, chamber, ramp_accel_dps2),
                    [first_seed + k for k in range(runs)])
     problems, worst_z, worst = [], 0.0, ""
     for k, (names, errors, sigmas, notes) in enumerate(results):
@@ -539,7 +518,7 @@ def _design(config, effects: list, noise: Noise, budget_s: float, criterion: str
                 say(f"{verify_runs} noisy dry runs of the statics-of-{f[0]}-attitude design through the "
                     "estimator (does it deliver the prediction?)")
                 v = verify(f[2][3], effects, noise, preds[i], f[1].which, verify_runs, executor=executor,
-                           chamber=config.chamber)
+                           chamber=config.chamber, ramp_accel_dps2=ramp_accel_of(config))
                 if v.ok or i == order[-1]:
                     k, verification = (i, v) if v.ok else (k, verified.get(k, v))
                     break
@@ -575,7 +554,7 @@ def _design(config, effects: list, noise: Noise, budget_s: float, criterion: str
         t4 = time.perf_counter()
         say(f"{verify_runs} noisy dry runs of the design through the estimator (does it deliver the prediction?)")
         verification = verify(scheme, effects, noise, prediction, which, verify_runs, executor=executor,
-                              chamber=config.chamber)
+                              chamber=config.chamber, ramp_accel_dps2=ramp_accel_of(config))
         seconds["verification"] = time.perf_counter() - t4
     header = [f"{name}: designed by `station design` for the {config.table.axes}-axis table of {config.source}",
               f"criterion {crit.text}: {criterion_of(prediction, crit.text):.6g}; compiled time {plan.duration_s:.0f} s "

@@ -169,16 +169,19 @@ def model_of(scheme: Scheme, effects: list, noise: Noise, truth, geometry: dict 
     station.simulate.montecarlo.cramer_rao weights it: (model, capture).  ``seed``: the simulated
     bench's geometry (each static's heading, each rotation axis' heading and roll: drawn at
     random by the simulator, as a real table's azimuths are unknown to the estimator).
-    ``appended``: the names of segments recorded by a later ``run --append`` (``appended: 1`` in
-    the manifest: their rotations are axis groups of their own, as the estimator reads them)."""
+    ``appended``: the segments recorded by a later ``run --append``: their names (``appended: 1``
+    in the manifest), or {name: N} (the N-th extension's, as the manifest numbers them: a capture
+    already extended once, then extended again): their rotations are axis groups of their own per
+    extension, as the estimator reads them (summaries: one group per body axis and session)."""
     from station.estimate import lsq
     from station.estimate.summaries import summarise
     from station.simulate import dryrun
 
     capture = dryrun.simulate_capture(scheme, truth, seed, geometry, chamber=chamber, ramp_accel_dps2=ramp_accel_dps2)
+    sessions = appended if isinstance(appended, dict) else {name: 1 for name in appended}
     for seg in capture.segments:
-        if seg.name in appended:
-            seg.extra["appended"] = 1
+        if sessions.get(seg.name):
+            seg.extra["appended"] = int(sessions[seg.name])
     capture.extra["noise_free"] = True          # (no data-fault scan: station/estimate/data_faults.py)
     s = summarise(capture, table_angle_arcsec=noise.table_angle_arcsec)
     fs = s.sample_rate_hz
@@ -381,7 +384,7 @@ def static_information(info: Information, key, dwell_s: float) -> np.ndarray:
 
 def information(chunks: list, effects: list, noise: Noise, config=None,
                 geometry: dict | None = None, centred: bool = False,
-                attitudes: str = "unknown", timeline: bool = False) -> Information:
+                attitudes: str = "unknown", timeline: bool = False, appended=None) -> Information:
     """The information of every candidate.  ``chunks``: lists of (key, spec) where spec is a
     StaticSpec (dwell UNIT_DWELL_S) or a RotationSpec pair (``pair`` of two specs), each chunk
     a capture of its own (rotations about one body axis at two elevations go in different
@@ -393,7 +396,11 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
     below it), so that the search can place it at the temperature it will have in the designed
     scheme's own timeline (at_temperature; station/design/timeline.py) -- not at the one it had
     in the candidates' capture, whose order is not the design's (the twelfth session's temperature
-    design: the search's worst 1σ 3.24 µg/°C, the estimator's fit of the written scheme 7.00)."""
+    design: the search's worst 1σ 3.24 µg/°C, the estimator's fit of the written scheme 7.00).
+
+    ``appended``: {segment name: N} of the capture's own segments recorded by its N-th ``run
+    --append`` (station design --from on a capture already extended: sequential.capture_sessions),
+    so that the capture's chunk has the estimator's axis groups (model_of)."""
     truth = quiet_truth(noise, config)
     ramp_accel = ramp_accel_of(config)
     warm = copy.deepcopy(truth.temperature)
@@ -424,7 +431,8 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
         if offsets_of_groups:
             segments = _anchored(segments, owner, len(placed))
         scheme = Scheme("candidates", "", "", {}, tuple(segments), centred=centred, table=True)
-        model, _ = model_of(scheme, effects, noise, truth, geometry, attitudes, ramp_accel_dps2=ramp_accel)
+        model, _ = model_of(scheme, effects, noise, truth, geometry, attitudes, ramp_accel_dps2=ramp_accel,
+                            appended=appended or ())
         shared = _shared_columns(model)
         group_own = _group_offsets(model, owner)
         rename: dict = {}

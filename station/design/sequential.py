@@ -122,6 +122,35 @@ def capture_scheme(capture):
     return Scheme(capture.scheme or "capture", "the capture's segments", "", {}, tuple(specs), centred=centred)
 
 
+def capture_sessions(capture) -> dict:
+    """{segment name: N} of the capture's complete segments recorded by its N-th ``run --append``
+    (the manifest's ``appended: N``); the run's own segments are not listed.  The estimator gives
+    an extension's rotations axis groups of their own (summaries: one per body axis and session),
+    so the design's model of the capture must too (information.model_of)."""
+    out = {}
+    for seg in capture.complete():
+        n = seg.extra.get("appended", 0)
+        if isinstance(n, int) and not isinstance(n, bool) and n > 0:
+            out[seg.name] = n
+    return out
+
+
+def capture_groups(base, sessions: dict) -> list:
+    """The unit axis of each axis group of the capture, in the estimator's numbering (summaries:
+    a new group for each body axis in each session -- the run, then every ``run --append`` --
+    in the order the rotations come).  The offsets per axis group (rotation_axis_offsets) are
+    named by these numbers (axis<g>_offset_*; an appended turn about a line the run turned about
+    shares that group's offset and has no name of its own: axis_offsets.offset_groups)."""
+    axes = []                      # (unit axis, session)
+    for spec in base.segments:
+        if spec.kind == "rotation":
+            a = np.asarray(spec.axis_body, float) / np.linalg.norm(spec.axis_body)
+            n = sessions.get(spec.name, 0)
+            if not any(s == n and np.allclose(a, b, atol=1e-6) for b, s in axes):
+                axes.append((a, n))
+    return [a for a, _ in axes]
+
+
 def capture_config(path: Path, config_path: str | None):
     """The table the capture was recorded on: --config if given, else the run's own
     configuration (run.yaml), else the built-in simulated bench's (a dry run's capture)."""
@@ -190,6 +219,7 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
                         "for a table (record the extra attitudes by hand with a hand scheme)")
     config, table_source = capture_config(path, config_path)
     base = capture_scheme(capture)
+    sessions = capture_sessions(capture)          # a capture extended before: its extensions' segments
     noise = noise_mod.from_capture(path)
     names_all = None
     # --- the candidates: the capture's own segments first (chosen), then the table's
@@ -210,7 +240,8 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
             own.append(Candidate(key, "rotation", 0.0, axis=key[:2]))
     say(f"the information of the capture's {len(own)} segments and of {len(cands)} candidates on "
         f"{table_source}")
-    info = information([own_chunk] + chunks, effects, noise, config, geometry_of(config), base.centred)
+    info = information([own_chunk] + chunks, effects, noise, config, geometry_of(config), base.centred,
+                       appended=sessions)
     all_cands = own + cands
     names = info.parameters.names
     units = info.parameters.units
@@ -258,7 +289,8 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     # the part along its axis is seen by no segment (w x (w x d) and dw/dt x d are across w), the
     # part along the first group's trades with the common offset's, which no turn sees; both are
     # held by the estimator's prior, so they are neither targets nor "not revealed" (_goal_rows)
-    T, row_limit, side, prior, along = _goal_rows(names, targets, typical, fraction, info, base, group_a, group_b)
+    T, row_limit, side, prior, along = _goal_rows(names, targets, typical, fraction, info,
+                                                  capture_groups(base, sessions), group_a, group_b)
 
     def badness(F) -> float:
         """Above 1 while the goal is not met: the worst 1σ over its target, or a correlation
@@ -340,7 +372,7 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
                 added[k] = j
         return added
 
-    before = _aligned(predict(base, effects, noise, config), names)
+    before = _aligned(predict(base, effects, noise, config, appended=sessions), names)
     if (badness(State(scorer, list(range(n_own))).information()) <= 1.0
             and all(before.revealed[i] or i in along for i in targets)):
         # the capture's own segments meet the goal already (by the information and by the
@@ -366,7 +398,10 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
         whole = Scheme(base.name, "", "", {}, base.segments + more, centred=base.centred)
         # (the extension's segments as run --append records them: its rotations axis groups of
         # their own for the estimator, an offset per axis group the capture's about the same axis)
-        after = _aligned(predict(whole, effects, noise, config, appended={s.name for s in more}), names)
+        # (a capture extended before: this is its next extension, the manifest's appended: N + 1)
+        following = max(sessions.values(), default=0) + 1
+        after = _aligned(predict(whole, effects, noise, config,
+                                 appended={**sessions, **{s.name: following for s in more}}), names)
         blind = [names[i] for i in targets if not after.revealed[i] and i not in along]
         if reached <= 1.0 and not blind:
             break
@@ -425,27 +460,20 @@ def _entry_s(table, entry) -> float:
                                        entry.get("record_ramp")))
 
 
-def _goal_rows(names, targets, typical, fraction, info, base, group_a, group_b):
+def _goal_rows(names, targets, typical, fraction, info, axes, group_a, group_b):
     """(T, limits, side, prior, along): the goal's quantities as rows of T over the reported
     parameters (reported units), each row's largest 1σ, its side (1: effect A, 2: B, 0: --reveal),
     the prior information over G that holds each capture axis group's offset along its own axis
     (its typical size, as the estimator's prior holds it: without it that direction has no
     information and every other number is lost in it), and the targets that are such offsets
-    with a part along their axis (the estimator calls them not revealed, rightly).  The capture's
-    axis groups are taken as the summaries number them for a capture of one session (one group per
-    body axis, in order); a capture already extended once shares the run's offsets for appended
-    turns about the run's axes (axis_offsets.offset_groups), but numbers the groups of appended
-    turns about new axes after, which this does not follow (their offsets' rows are then of the
-    wrong axes)."""
+    with a part along their axis (the estimator calls them not revealed, rightly).  ``axes``: the
+    capture's axis groups' unit axes as the estimator numbers them (capture_groups: per body axis
+    and session, a capture already extended counted right; before, the groups were taken as one
+    session's, and on a capture extended once the offsets' rows were of the wrong axes or the
+    estimator's names refused: issue 28)."""
     import re
 
     in_a, in_b = set(np.asarray(group_a).tolist()), set(np.asarray(group_b).tolist())
-    axes = []                      # the capture's axis groups in order (summaries: one per body axis)
-    for spec in base.segments:
-        if spec.kind == "rotation":
-            a = np.asarray(spec.axis_body, float) / np.linalg.norm(spec.axis_body)
-            if not any(np.allclose(a, b, atol=1e-6) for b in axes):
-                axes.append(a)
     G = info.shared
     prior = np.zeros((G, G))
     rows, limits, side, along = [], [], [], set()

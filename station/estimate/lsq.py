@@ -285,6 +285,26 @@ def _turned_one_way(r, s: Summaries) -> bool:
     return all(q.angle_deg * r.angle_deg > 0 for q in s.rotations if q.group == r.group and q.steady)
 
 
+def _earth_factor(rots: list) -> np.ndarray:
+    """The Earth rate's integral across each rotation's axis as a complex factor f of u, the Earth
+    rate across the axis at the window's start (E = f u in the tangent plane, l x w as i w):
+    T/A (sin A - i (1 - cos A)) over a uniform turn, w_c - i w_s over a recorded ramp (its
+    ``earth_weights_s``, the residuals' _rot_earth).  The starts (_earth_phase_start,
+    _other_crossing) took every window as uniform: over a ramp window (a 360 deg turn and its
+    ramp, 100 deg/s, 50 deg/s^2) the "other crossing" so placed was no crossing at all (chi2
+    1.85e5 above the minimum on the designer's table-attitude chunk), and each vertical axis' flip
+    cost a whole fit back to the same minimum (issue 28: 26 axes, 1,523 evaluations)."""
+    out = np.empty(len(rots), complex)
+    for j, r in enumerate(rots):
+        w = getattr(r, "earth_weights_s", None)
+        if w is not None:
+            out[j] = w[0] - 1j * w[1]
+        else:
+            A = np.radians(r.angle_deg)
+            out[j] = r.duration_s / A * (np.sin(A) - 1j * (1.0 - np.cos(A)))
+    return out
+
+
 def _earth_angle_group(s: Summaries, k: int) -> bool:
     """Whether axis k's Earth rate may be parametrised by its angle beta from the axis (Model.
     _earth_along_across; Model._earth_phase_start chooses): turns about it both ways have an
@@ -547,7 +567,7 @@ class Model:
             A = np.radians([r.angle_deg for r in rots])
             if not np.all(np.isfinite(y)) or np.any(A == 0.0):
                 continue
-            f = T / A * (np.sin(A) - 1j * (1.0 - np.cos(A)))       # E = f u in the tangent plane
+            f = _earth_factor(rots)                                 # E = f u in the tangent plane
             c = (rate + e) * T
             resid = y - c[:, None] * l
             z = resid @ e1 + 1j * (resid @ e2)
@@ -1568,7 +1588,7 @@ def _other_crossing(model: Model, x: np.ndarray, k: int):
     A = np.radians([r.angle_deg for r in rots])
     e, across = (float(v[0, k]) for v in model._earth_along_across(x[model._axis_cols][None, :, 3]))
     c = (np.array([r.rate_dps for r in rots]) + e) * T
-    f = T / A * (np.sin(A) - 1j * (1.0 - np.cos(A)))
+    f = _earth_factor(rots)
     y = np.array([Lg @ (r.gyro_integral - bg * r.duration_s) for r in rots]) - c[:, None] * l
     z = y @ e1 + 1j * (y @ e2)
     a, b = int(np.argmax(c)), int(np.argmin(c))
@@ -1577,6 +1597,18 @@ def _other_crossing(model: Model, x: np.ndarray, k: int):
         return None
     u = (p2 - p1) / abs(p2 - p1)
     d = p1 + u * np.conj(-p1 / u)          # d = 0 (the axis now) reflected across the centres' line
+    # a turn about the axis without an Earth-rate phase (whole turns, or a trace below the noise:
+    # _earth_rate_visible) has no chi to take the tilt: its integral across the axis moves by A d,
+    # so where that is beyond three of its noise (the gyro's over T and the encoder's angle) the
+    # reflected point fits no integral of it and there is no other crossing (issue 28: the
+    # designer's chunks turn each axis in steady whole-turn pairs beside ramp windows; 12 urad of
+    # tilt put 1.5e5 of chi2 on a whole turn's integral, and each of 26 vertical axes' flips cost
+    # a whole fit back to the same minimum: 1,523 evaluations where 50 reach it)
+    for i, r in enumerate(s.rotations):
+        if r.group == k and L[f"phase{i}"].stop - L[f"phase{i}"].start != 2:
+            noise = np.sqrt(np.max(s.gyro_sigma)**2 * r.duration_s / s.sample_rate_hz + s.table_angle_sigma_deg**2)
+            if abs(r.angle_deg) * abs(d) > 3.0 * noise:
+                return None
     tilted = l + d.real * e1 + d.imag * e2
     x[axis.start:axis.start + 2] = [tilted @ t1 / (tilted @ ref), tilted @ t2 / (tilted @ ref)]
     for i, chi in zip(segs, np.angle(z - c * d) - np.angle(f)):

@@ -24,8 +24,13 @@ class Settings:
     accel_disturbance_ug: float = 50.0    # the 2010 paper's "perturbed acceleration", 1σ
     truth_seed: int = 0                   # the true sensor errors, the same in every run
     method: str = "lsq"                   # lsq | zhang2010
-    effects: tuple = ()                   # library effect ids the lsq fit adds (station estimate --add)
+    # the effects the lsq fit adds (station estimate --add): library ids, or Effect instances where
+    # the model has one the library has not (a plugin, station/model/unlisted.py; _effects)
+    effects: tuple = ()
     chamber: object = None                # the configured temperature chamber (station.core.chamber.ChamberConfig)
+    # the recorded ramps' acceleration, deg/s^2: the configured table's, as the dry run (station run
+    # --sim) takes it (dryrun.table_ramp_accel); None: the dry run's default without a configuration
+    ramp_accel_dps2: float | None = None
 
 
 def make_truth(settings: Settings):
@@ -40,9 +45,20 @@ def make_truth(settings: Settings):
 
 
 def _effects(settings: Settings) -> list:
+    """New instances of the settings' effects: a library id's, or a copy of an instance given (a
+    plugin's or an unlisted effect's: the same model station estimate and station design fit)."""
     from station.model import LIBRARY
 
-    return [LIBRARY[e]() for e in settings.effects]
+    return [LIBRARY[e]() if isinstance(e, str) else copy.deepcopy(e) for e in settings.effects]
+
+
+def effect_settings(effects) -> tuple:
+    """Settings.effects for a model's effects (instances): their library ids when every one is
+    the library's (what a Dask worker unpickles without the user's files), else the instances."""
+    from station.model import LIBRARY
+
+    ids = tuple(e.id for e in effects)
+    return ids if all(i in LIBRARY and isinstance(e, LIBRARY[i]) for i, e in zip(ids, effects)) else tuple(effects)
 
 
 def _estimate(capture, settings: Settings):
@@ -53,12 +69,13 @@ def _estimate(capture, settings: Settings):
     return zhang2010.estimate(capture)
 
 
-def effect_parameters(cal) -> list:
-    """(name, value, unit) of the effects' parameters of a calibration, in their reported units."""
-    units_ = {}
-    for e in cal.effect_compensation or []:
-        from station.model import LIBRARY
+def effect_parameters(cal, effects=()) -> list:
+    """(name, value, unit) of the effects' parameters of a calibration, in their reported units
+    (the library's, or those of the instances ``effects``: a plugin's)."""
+    from station.model import LIBRARY
 
+    units_ = {p.name: p.unit for e in effects for p in e.params}
+    for e in cal.effect_compensation or []:
         cls = LIBRARY.get(e["id"])
         if cls is not None:
             units_.update({p.name: p.unit for p in cls().params})
@@ -85,16 +102,42 @@ def _effect_values(cal, settings: Settings, sigma: bool = False) -> list:
 
 
 def one_run(args) -> tuple[list[float], np.ndarray]:
-    scheme, settings, seed = args
+    """One noisy dry run of the scheme estimated: (errors, the fit's own 1σ), parameter_errors'
+    units, the effects' parameters after the base model's (run_one)."""
+    _, errors, sigmas, _ = run_one(*args)
+    return list(errors), sigmas
+
+
+def run_one(scheme: Scheme, settings: Settings, seed: int) -> tuple:
+    """One noisy dry run (seed) of ``scheme`` on the simulated bench (the configured table's ramps,
+    its chamber), estimated with the settings' method and effects: (names, errors, the fit's own
+    1σ, the fit's notes); errors in parameter_errors' units (scale factors relative, in ppm), each
+    effect parameter against zero (the simulator's default IMU has none of the effects: NaN where
+    the calibration does not carry it).  station montecarlo's runs and station design's
+    verification (designer.verify_one) are this one function."""
     from station.simulate import dryrun
     from station.model.calibration import parameter_errors
 
     truth = make_truth(settings)
-    cal = _estimate(dryrun.simulate_capture(scheme, truth, seed, chamber=settings.chamber), settings)
-    errors = [e[3] for e in parameter_errors(cal, dryrun.truth_calibration(truth))]
-    # an effect's parameters against zero: the simulator's default IMU has none of the effects
-    errors += _effect_values(cal, settings)
-    return errors, np.concatenate([_error_sigmas(cal), _effect_values(cal, settings, sigma=True)])
+    capture = dryrun.simulate_capture(scheme, truth, seed, chamber=settings.chamber,
+                                      ramp_accel_dps2=settings.ramp_accel_dps2)
+    effects = _effects(settings)
+    if settings.method == "lsq":
+        from station.estimate import lsq
+
+        cal = lsq.estimate(capture, effects)
+    else:
+        cal = _estimate(capture, settings)
+    rows = parameter_errors(cal, dryrun.truth_calibration(truth))
+    # the effects' full parameter lists, as study() names its columns: new instances (the fit's
+    # own were set up on the capture, and an effect may drop there what its convention fixes --
+    # the size effect's own-axis positions: a shorter list, every column after it shifted)
+    listed = [p for e in _effects(settings) for p in e.params]
+    names = [e[0] for e in rows] + [p.name for p in listed]
+    got = {name: (value, cal.sigma.get(name, np.nan)) for name, value, _ in effect_parameters(cal, effects)}
+    errors = [e[3] for e in rows] + [got.get(p.name, (np.nan, np.nan))[0] for p in listed]
+    sigmas = np.concatenate([_error_sigmas(cal), [got.get(p.name, (np.nan, np.nan))[1] for p in listed]])
+    return names, np.array(errors, float), np.asarray(sigmas, float), list(cal.fit.get("notes", []))
 
 
 def cramer_rao(scheme: Scheme, settings: Settings, seed: int = 0) -> np.ndarray:
@@ -111,7 +154,8 @@ def cramer_rao(scheme: Scheme, settings: Settings, seed: int = 0) -> np.ndarray:
     quiet = copy.deepcopy(truth)
     quiet.accel.noise_density = quiet.gyro.noise_density = 0.0
     quiet.bench.accel_disturbance_ug = quiet.bench.table_angle_error_arcsec = 0.0
-    capture = dryrun.simulate_capture(scheme, quiet, seed, chamber=settings.chamber)
+    capture = dryrun.simulate_capture(scheme, quiet, seed, chamber=settings.chamber,
+                                      ramp_accel_dps2=settings.ramp_accel_dps2)
     capture.extra["noise_free"] = True          # (no data-fault scan: station/estimate/data_faults.py)
     s = summarise(capture, table_angle_arcsec=settings.table_angle_arcsec)
     fs = s.sample_rate_hz
@@ -174,14 +218,29 @@ def preload() -> None:
     from station.simulate import dryrun  # noqa: F401
 
 
+# the settings of a study whose effects are instances (a plugin's: a class the registry made, which
+# pickles by no importable name), held here for the pool's forked workers, which inherit it: their
+# jobs carry None in its place (study)
+_INHERITED: list = []
+
+
+def _settings_of(settings):
+    return settings if settings is not None else _INHERITED[0]
+
+
 def _numbered_run(numbered):
-    i, job = numbered
-    return i, one_run(job)
+    i, (scheme, settings, seed) = numbered
+    return i, one_run((scheme, _settings_of(settings), seed))
 
 
 def _bound_job(args) -> np.ndarray:
     scheme, settings = args
-    return expected_cramer_rao(scheme, settings)
+    return expected_cramer_rao(scheme, _settings_of(settings))
+
+
+def picklable(settings: Settings) -> bool:
+    """Whether the settings can be sent to another interpreter (a Dask worker): effects by id."""
+    return all(isinstance(e, str) for e in settings.effects)
 
 
 # the simulated bench's geometries the bound of a study is averaged over (each static's heading,
@@ -236,9 +295,15 @@ def study(scheme: Scheme, settings: Settings, runs: int, first_seed: int = 1000,
             crlb = expected_cramer_rao(scheme, settings) if bound else None
     else:
         preload()                       # once here, not once in every worker after the fork
-        pool = multiprocessing.Pool(workers, initializer=_worker_start)
+        sent = settings
+        if not picklable(settings):
+            # a plugin's instances: inherited by the forked workers, not pickled to them
+            _INHERITED[:] = [settings]
+            sent = None
+            jobs = [(scheme, None, seed) for _, _, seed in jobs]
+        pool = multiprocessing.get_context("fork").Pool(workers, initializer=_worker_start)
         try:
-            pending_bound = pool.apply_async(_bound_job, ((scheme, settings),)) if bound else None
+            pending_bound = pool.apply_async(_bound_job, ((scheme, sent),)) if bound else None
             for done, (i, row) in enumerate(pool.imap_unordered(_numbered_run, enumerate(jobs)), 1):
                 rows[i] = row
                 if progress:
@@ -249,6 +314,7 @@ def study(scheme: Scheme, settings: Settings, runs: int, first_seed: int = 1000,
             # after Ctrl-C (the parent's alone) or a failed run the workers are ended at once
             pool.terminate()
             pool.join()
+            _INHERITED.clear()
     return Study(names, np.array([r[0] for r in rows]), np.array([r[1] for r in rows]), crlb, workers)
 
 
