@@ -5,9 +5,6 @@ deg/s^2 whatever station.yaml said), and it takes the effects `station estimate`
 design` take (a plugin file, an unlisted effect), not library ids only."""
 import json
 
-import numpy as np
-import pytest
-
 from station import api
 from station.cli import main
 from station.design import designer

@@ -193,7 +193,7 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     from station.design.information import UNIT_DWELL_S, information
     from station.design.search import Candidate, Criterion, Scorer, State
     from station.io.capture import read_capture
-    from station.io.scheme import RotationSpec, Scheme
+    from station.io.scheme import Scheme
 
     say = progress or (lambda text: None)
     path = Path(capture_path)
@@ -221,7 +221,6 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     base = capture_scheme(capture)
     sessions = capture_sessions(capture)          # a capture extended before: its extensions' segments
     noise = noise_mod.from_capture(path)
-    names_all = None
     # --- the candidates: the capture's own segments first (chosen), then the table's
     table = cand_mod.Table(config)
     cands, chunks, notes, masks = cand_mod.candidate_set(
