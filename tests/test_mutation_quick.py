@@ -123,7 +123,7 @@ def _verdict_checks(ns):
 
 
 def test_the_verdicts_thresholds_and_widening(monkeypatch):
-    ns, names = _mutate(verdict, ["_verdict"],
+    ns, names = _mutate(verdict, ["chi2_verdict", "_verdict"],
                         r"P_FAIL|REDUCED_CHI2_FAIL|chdtr|chi2_sf|chi2_cdf|reduced = |scale = |fails = |overestimated = |cal.sigma = ")
     assert len(names) >= 20, len(names)
     assert _survivors(monkeypatch, verdict, ns, names, _verdict_checks) == []
@@ -149,6 +149,12 @@ def _covariance_checks(ns):
     assert ns["covariance"](aliased)[0, 0] > 1e15 > 1.0 > ns["covariance"](aliased, np.array([1.0, 1.0, 1e-6]))[0, 0]
     svd = ns["_ScaledSVD"](J0, np.r_[np.linalg.norm(J0, axis=0)[:2], 0.0, np.linalg.norm(J0, axis=0)[3:]])
     assert svd.norms[2] == 1.0 and svd.null_columns() == [2]
+    # the Gauss-Newton gain read from the SVD (the at-minimum test): |J dx|^2 of the least-squares
+    # step dx of J dx = r, as lstsq gives it, also with a null column
+    r = rng.standard_normal(40)
+    for M in (J, J0):
+        dx = np.linalg.lstsq(M, r, rcond=None)[0]
+        assert ns["_ScaledSVD"](M).gauss_newton_gain(r) == pytest.approx(float((M @ dx) @ (M @ dx)), rel=1e-9)
 
 
 def test_the_least_squares_covariance(monkeypatch):

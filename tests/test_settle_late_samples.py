@@ -111,7 +111,7 @@ def test_a_static_begun_inside_the_move_is_found_and_recorded_again_at_rest(tmp_
     aside = tmp_path / "cap" / "xdown.csv.incomplete"
     assert aside.exists(), said
     bad = np.loadtxt(aside, delimiter=",", skiprows=1)
-    assert motion_found("static", bad[:, 1:4], bad[:, 4:7], rate_tolerance_dps=0.01, hold_deg=0.02)
+    assert motion_found("static", bad[:, 1:4], bad[:, 4:7], rate_hz=RATE_HZ, rate_tolerance_dps=0.01, hold_deg=0.02)
     assert "xdown: bad recording (the IMU disagrees with the table" in said
     # the recording kept: at rest, after the late sync's stamp + the settle, at x down.  At rest
     # its gyro scatters as white noise: no sample beyond 6 of its own 1-sigma from the mean, plus
@@ -122,7 +122,7 @@ def test_a_static_begun_inside_the_move_is_found_and_recorded_again_at_rest(tmp_
         gyro = np.asarray(d.gyro)
         spread = np.abs(gyro - gyro.mean(axis=0)).max(axis=0)
         assert np.all(spread < 6 * white_sigma(gyro) + 0.01), (name, spread)
-        assert motion_found("static", d.accel, gyro, rate_tolerance_dps=0.01, hold_deg=0.02) is None
+        assert motion_found("static", d.accel, gyro, rate_hz=RATE_HZ, rate_tolerance_dps=0.01, hold_deg=0.02) is None
         f = np.asarray(d.accel).mean(axis=0)
         assert np.sign(f[0]) == up and abs(f[0]) > 0.99 * np.linalg.norm(f), (name, f)
     assert np.asarray(segs["xdown"].data.t)[0] >= syncs[1] + 1.0 - 0.5 / RATE_HZ
@@ -137,7 +137,7 @@ def test_the_check_refuses_motion_and_passes_noise_and_drift():
     holding the last 0.2 s of a spin-up to 100 deg/s at 300 deg/s^2, are refused."""
     from station.bench.steadiness import motion_found
     rate, g = 100.0, 9.80665
-    kw = dict(rate_tolerance_dps=0.01, hold_deg=0.02)
+    kw = dict(rate_hz=rate, rate_tolerance_dps=0.01, hold_deg=0.02)
     refused = 0
     for seed in range(200):
         rng = np.random.default_rng(seed)
@@ -162,3 +162,61 @@ def test_the_check_refuses_motion_and_passes_noise_and_drift():
     w = np.where(t < 0.2, 40.0 + 300.0 * t, 100.0) + 0.1 * rng.standard_normal(len(t))
     gyro = np.column_stack([np.zeros_like(t), np.zeros_like(t), w])
     assert "before the table was at rate" in motion_found("rotation", accel, gyro, **kw)
+
+
+def test_a_long_window_keeps_its_sensitivity_and_ignores_a_slow_drift():
+    """The leading spans (steadiness.SPANS_S), not thirds: the last 0.2 s of a brake (60 deg/s at
+    120 deg/s^2: 2.4 deg turned) at the start of a 100 s and of a 2 h static is refused (compared by
+    thirds it was diluted to nothing past ~60 s: the review's case, 87 deg/h left in the gyro
+    mean), and so is the last 0.2 s of a spin-up at the start of a 10 min rotation; a 2 h noise
+    recording whose accelerometer drifts across gravity by 1 mg (a consumer MEMS in a room that
+    moves 1 deg C; by thirds: refused, 'turned 0.038 deg') passes, its drift 2 ug between two
+    adjacent 16 s spans, far below the 0.02 deg (340 ug) floor."""
+    rate, g = 100.0, 9.80665
+    kw = dict(rate_hz=rate, rate_tolerance_dps=0.01, hold_deg=0.02)
+    rng = np.random.default_rng(7)
+    for seconds in (100.0, 7200.0):
+        n = int(seconds * rate)
+        t = np.arange(n) / rate
+        w = np.where(t < 0.2, 24.0 - 120.0 * t, 0.0)                    # the brake's last 0.2 s
+        angle = np.radians(np.cumsum(w) / rate)
+        accel = g * np.column_stack([np.sin(angle), np.zeros_like(t), np.cos(angle)])
+        accel += 100e-6 * g * np.sqrt(rate) * rng.standard_normal(accel.shape)
+        gyro = np.column_stack([np.zeros_like(t), w, np.zeros_like(t)]) + 0.1 * rng.standard_normal((n, 3))
+        assert "recorded while it was moving" in (motion_found("static", accel, gyro, **kw) or ""), seconds
+        drift = 1e-3 * g * (t / seconds)[:, None] * np.array([1.0, 0.0, 0.0])
+        quiet = (np.array([0.0, 0.0, g]) + drift + 100e-6 * g * np.sqrt(rate) * rng.standard_normal((n, 3)))
+        assert motion_found("static", quiet, 0.1 * rng.standard_normal((n, 3)), **kw) is None, seconds
+    n = int(600 * rate)
+    t = np.arange(n) / rate
+    w = np.where(t < 0.2, 40.0 + 300.0 * t, 100.0) + 0.1 * rng.standard_normal(n)
+    gyro = np.column_stack([np.zeros_like(t), np.zeros_like(t), w])
+    assert "before the table was at rate" in (motion_found("rotation", gyro * 0, gyro, **kw) or "")
+
+
+def test_a_recording_keeps_only_the_window_start_the_check_reads():
+    """channels.Recording keeps the first steadiness.HEAD_S seconds of samples for the check, not
+    the whole window (a 2 h recording at 1 kHz kept 389 MB before)."""
+    from station.bench.channels import Recording
+    from station.bench.steadiness import HEAD_S
+
+    class Seg:
+        def write(self, *a):
+            pass
+
+    class Block:
+        def __init__(self, t):
+            self.t_s = t
+            self.accel_mps2 = np.zeros((len(t), 3))
+            self.gyro_dps = np.zeros((len(t), 3))
+            self.temp_c = np.full(len(t), np.nan)
+
+        def __len__(self):
+            return len(self.t_s)
+
+    rate = 1000.0
+    rec = Recording(Seg(), int(120 * rate), rate)
+    for k in range(120):
+        rec.add(Block(k + np.arange(int(rate)) / rate))
+    accel, gyro = rec.samples()
+    assert len(gyro) == int(np.ceil(HEAD_S * rate)) + 1 and accel.shape == gyro.shape

@@ -15,10 +15,12 @@ together, so ``R`` stays.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from station.bench import steadiness
 from station.bench.config import AXIS_NAMES
 
 BODY_VECTORS = ("up_body", "heading_body", "axis_body")
@@ -75,7 +77,11 @@ class Recording:
         self.first_t = self.last_t = None
         self.with_temp = None
         self.temp_sum, self.temp_n = 0.0, 0
-        self._accel, self._gyro = [], []      # kept for the IMU's agreement with the table (steadiness.py)
+        # the window's first seconds, kept for the IMU's agreement with the table (steadiness.py
+        # reads its first HEAD_S s: the memory of a recording stays bounded however long it is)
+        self._accel, self._gyro = [], []
+        self._head = int(math.ceil(steadiness.HEAD_S * float(rate_hz))) + 1
+        self._kept = 0
 
     @property
     def needed(self) -> int:
@@ -103,12 +109,16 @@ class Recording:
             self.temp_sum += float(temp.sum())
             self.temp_n += len(temp)
         self.seg.write(b.t_s, b.accel_mps2, b.gyro_dps, temp)
-        self._accel.append(np.asarray(b.accel_mps2, dtype=float))
-        self._gyro.append(np.asarray(b.gyro_dps, dtype=float))
+        if self._kept < self._head:
+            take = self._head - self._kept
+            self._accel.append(np.array(b.accel_mps2[:take], dtype=float))
+            self._gyro.append(np.array(b.gyro_dps[:take], dtype=float))
+            self._kept += len(self._gyro[-1])
         self.done += len(b)
 
     def samples(self) -> tuple:
-        """(accel (n, 3) m/s^2, gyro (n, 3) deg/s) of the samples recorded."""
+        """(accel (n, 3) m/s^2, gyro (n, 3) deg/s) of the recording's first samples (its first
+        steadiness.HEAD_S seconds, or all of a shorter one)."""
         if not self._accel:
             return np.zeros((0, 3)), np.zeros((0, 3))
         return np.concatenate(self._accel), np.concatenate(self._gyro)

@@ -370,7 +370,7 @@ class Sequencer:
         (station/bench/steadiness.py: every redundancy of the bench cross-checked), or None."""
         accel, gyro = rec.samples()
         table = self.config.table
-        found = motion_found(kind, accel, gyro, rate_tolerance_dps=table.rate_tolerance_dps,
+        found = motion_found(kind, accel, gyro, rate_hz=1.0 / rec.period, rate_tolerance_dps=table.rate_tolerance_dps,
                              hold_deg=POSITION_HOLD_FACTOR * table.position_tolerance_deg)
         return None if found is None else f"{MOTION_WORDS}: {found}"
 
@@ -425,8 +425,13 @@ class Sequencer:
                                       f"it again ({attempt}/{attempts - 1})")
         for ch in pending:
             problem = problems[id(ch)]
-            error = SequencerError(f"{name}: every recording lost too much data ({problem}; {attempts} "
-                                   "attempts): check the IMU's connection and the computer's load, then resume")
+            if MOTION_WORDS in problem:
+                error = SequencerError(f"{name}: every recording disagreed with the table ({problem}; {attempts} "
+                                       "attempts): check that the IMU is fixed to the platform and the line's latency "
+                                       "(a USB adapter's, the computer's load), then resume")
+            else:
+                error = SequencerError(f"{name}: every recording lost too much data ({problem}; {attempts} "
+                                       "attempts): check the IMU's connection and the computer's load, then resume")
             self._lose(ch, error)
 
     # ------------------------------------------------------------------ steps

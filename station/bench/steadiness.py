@@ -1,9 +1,9 @@
 """Does the IMU agree with the table about a recording?  While a static is recorded the table
 holds still, while a rotation is recorded it holds its rate (the sequencer reads the table's
 encoders meanwhile: station/bench/sequencer.py).  The IMU measures the same motion: a static
-whose gyro changes, or whose gravity direction turns, between the first and the last third of
-the window, or a rotation whose measured rate changes between them, was recorded while the
-table was still moving (the end of a move, a rotation's spin-up).  That happens when the IMU's
+whose gyro changes, or whose gravity direction turns, between the window's first seconds and the
+next, or a rotation whose measured rate changes between them, was recorded while the table was
+still moving (the end of a move, a rotation's spin-up).  That happens when the IMU's
 samples reach this computer late against the table's answer ("at rest", "at rate"): the settle
 counts from the newest sample received then (``ImuStream.sync``), so a reader whose frames were
 still on their way starts the window too early.  It was seen on the device twins under load
@@ -12,15 +12,19 @@ to "not converged"); a USB adapter's latency or an overloaded computer can do it
 The disagreement is a finding, never fitted: the recording is kept aside and recorded again
 after a fresh settle (station/bench/sequencer.py ``_record_segment``).
 
-The test compares the means of the first and the last third of the window (m samples each):
-their difference of white noise has 1-sigma ``sigma * sqrt(2 / m)``, sigma per axis from the
-median absolute successive difference (``median |x[k+1] - x[k]| = 0.6745 sqrt(2) sigma`` for
-white noise; a few samples of motion barely move a median).  A difference beyond ``Z`` of those
-1-sigma *and* beyond the table's own tolerance (what the sequencer accepts from the encoders:
-the rate tolerance, the position hold) is motion.  Z = 6: a two-sided normal tail of 2e-9 per
-axis, so a clean recording is never refused by chance; a bias that drifts (temperature, bias
-instability) moves far less than the floors (0.1 deg/s; 0.02 deg of gravity's direction, 340 ug
-at 1 g) within one segment.
+The test compares, at the window's start, the mean of a leading span of k samples with the mean
+of the next k (k for 1 s, 4 s and 16 s of samples, at most half the window): a move's tail or a
+spin-up is where the window began, and a short span is not diluted by a long window (a static of
+2 h compared by thirds kept the last 0.2 s of a brake: found by this session's review), while two
+adjacent spans of at most 16 s see almost nothing of a slow drift (a horizontal accelerometer
+drift of 1 mg over a 2 h noise recording moves 2 ug between them; compared by thirds it was
+refused).  The difference of two means of k white samples has 1-sigma ``sigma * sqrt(2 / k)``,
+sigma per axis from the median absolute successive difference (``median |x[k+1] - x[k]| = 0.6745
+sqrt(2) sigma`` for white noise; a few samples of motion barely move a median).  A difference
+beyond ``Z`` of those 1-sigma *and* beyond the table's own tolerance (what the sequencer accepts
+from the encoders: the rate tolerance, the position hold) is motion.  Z = 6: a two-sided normal
+tail of 2e-9 per axis and span, so a clean recording is never refused by chance.  Only the
+window's first ``HEAD_S`` seconds are needed (channels.Recording keeps those, not the window).
 """
 from __future__ import annotations
 
@@ -31,7 +35,9 @@ import numpy as np
 Z = 6.0
 #: the table's tolerances are multiplied by this for the floor (as the sequencer's hold checks)
 TOLERANCE_FACTOR = 10.0
-MIN_THIRD = 3               # fewer samples per third: nothing tested
+SPANS_S = (1.0, 4.0, 16.0)  # leading spans compared with the next span of the same length
+HEAD_S = 2 * max(SPANS_S)   # the window's first seconds the test reads
+MIN_SPAN = 3                # fewer samples per span: nothing tested
 
 
 def white_sigma(x: np.ndarray) -> np.ndarray:
@@ -41,43 +47,55 @@ def white_sigma(x: np.ndarray) -> np.ndarray:
     return np.median(d, axis=0) / (0.6744897501960817 * math.sqrt(2.0))
 
 
-def motion_found(kind: str, accel: np.ndarray, gyro: np.ndarray, *, rate_tolerance_dps: float,
+def spans(n: int, rate_hz: float) -> list[int]:
+    """The leading spans' lengths (samples) tested in a window of ``n`` samples."""
+    out = sorted({min(int(round(s * rate_hz)), n // 2) for s in SPANS_S})
+    return [k for k in out if k >= MIN_SPAN]
+
+
+def motion_found(kind: str, accel: np.ndarray, gyro: np.ndarray, *, rate_hz: float, rate_tolerance_dps: float,
                  hold_deg: float) -> str | None:
-    """Why the IMU says the table was not holding during this recording (words for the note of
-    a bad recording), or None.  ``kind``: "static" or "rotation"; ``accel`` (n, 3) in m/s^2 and
-    ``gyro`` (n, 3) in deg/s (the driver's units); ``rate_tolerance_dps`` and ``hold_deg``: the
-    table's rate tolerance and the position hold the sequencer allows while recording."""
+    """Why the IMU says the table was not holding at the start of this recording (words for the
+    note of a bad recording), or None.  ``kind``: "static" or "rotation"; ``accel`` (n, 3) in
+    m/s^2 and ``gyro`` (n, 3) in deg/s (the driver's units): the window's samples from its start
+    (its first HEAD_S seconds are enough), at ``rate_hz``; ``rate_tolerance_dps`` and
+    ``hold_deg``: the table's rate tolerance and the position hold the sequencer allows while
+    recording."""
     accel, gyro = np.asarray(accel, dtype=float), np.asarray(gyro, dtype=float)
-    m = len(gyro) // 3
-    if m < MIN_THIRD:
+    head = int(math.ceil(HEAD_S * rate_hz))
+    accel, gyro = accel[:head], gyro[:head]
+    ks = spans(len(gyro), rate_hz)
+    if not ks or kind not in ("static", "rotation"):
         return None
-    scale = math.sqrt(2.0 / m)                 # the difference of two means of m white samples
     rate_floor = TOLERANCE_FACTOR * rate_tolerance_dps
     if kind == "rotation":
         w = np.linalg.norm(gyro, axis=1)
-        change = float(w[-m:].mean() - w[:m].mean())
-        limit = max(Z * float(white_sigma(w[:, None])[0]) * scale, rate_floor)
-        if abs(change) > limit:
-            return (f"the IMU's rate changed by {change:+.3g} deg/s between the window's first and last "
-                    f"third (limit {limit:.3g} deg/s) while the table held its rate: recorded before the "
-                    "table was at rate")
+        sigma = float(white_sigma(w[:, None])[0])
+        for k in ks:
+            change = float(w[k:2 * k].mean() - w[:k].mean())
+            limit = max(Z * sigma * math.sqrt(2.0 / k), rate_floor)
+            if abs(change) > limit:
+                return (f"the IMU's rate changed by {change:+.3g} deg/s between the window's first {k / rate_hz:.3g} s "
+                        f"and the next (limit {limit:.3g} deg/s) while the table held its rate: recorded before "
+                        "the table was at rate")
         return None
-    if kind != "static":
-        return None
-    change = gyro[-m:].mean(axis=0) - gyro[:m].mean(axis=0)
-    limits = np.maximum(Z * white_sigma(gyro) * scale, rate_floor)
-    if np.any(np.abs(change) > limits):
-        i = int(np.argmax(np.abs(change) / limits))
-        return (f"the IMU's {'xyz'[i]} gyro changed by {change[i]:+.3g} deg/s between the window's first "
-                f"and last third (limit {limits[i]:.3g} deg/s) while the table held still: recorded while "
-                "it was moving")
-    a0, a1 = accel[:m].mean(axis=0), accel[-m:].mean(axis=0)
-    n0, n1 = float(np.linalg.norm(a0)), float(np.linalg.norm(a1))
-    if n0 > 0 and n1 > 0:
-        turned = math.degrees(math.acos(max(-1.0, min(1.0, float(a0 @ a1) / (n0 * n1)))))
-        limit = max(Z * math.degrees(float(np.linalg.norm(white_sigma(accel) * scale)) / n0), hold_deg)
-        if turned > limit:
-            return (f"the IMU's gravity direction turned {turned:.3g} deg between the window's first and "
-                    f"last third (limit {limit:.3g} deg) while the table held still: recorded while it "
-                    "was moving")
+    sg, sa = white_sigma(gyro), white_sigma(accel)
+    for k in ks:
+        scale = math.sqrt(2.0 / k)
+        change = gyro[k:2 * k].mean(axis=0) - gyro[:k].mean(axis=0)
+        limits = np.maximum(Z * sg * scale, rate_floor)
+        if np.any(np.abs(change) > limits):
+            i = int(np.argmax(np.abs(change) / limits))
+            return (f"the IMU's {'xyz'[i]} gyro changed by {change[i]:+.3g} deg/s between the window's first "
+                    f"{k / rate_hz:.3g} s and the next (limit {limits[i]:.3g} deg/s) while the table held still: "
+                    "recorded while it was moving")
+        a0, a1 = accel[:k].mean(axis=0), accel[k:2 * k].mean(axis=0)
+        n0, n1 = float(np.linalg.norm(a0)), float(np.linalg.norm(a1))
+        if n0 > 0 and n1 > 0:
+            turned = math.degrees(math.acos(max(-1.0, min(1.0, float(a0 @ a1) / (n0 * n1)))))
+            limit = max(Z * math.degrees(float(np.linalg.norm(sa * scale)) / n0), hold_deg)
+            if turned > limit:
+                return (f"the IMU's gravity direction turned {turned:.3g} deg between the window's first "
+                        f"{k / rate_hz:.3g} s and the next (limit {limit:.3g} deg) while the table held still: "
+                        "recorded while it was moving")
     return None
