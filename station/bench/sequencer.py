@@ -36,6 +36,7 @@ BLOCK_S = 1.0                 # device seconds written to a segment per write
 POLL_WALL_S = 0.1             # at most this often (wall) the table is read while recording
 RATE_HOLD_FRACTION = 0.01     # a rotation's rate must stay within 1 % (or 10 rate tolerances)
 POSITION_HOLD_FACTOR = 10     # a dwell's angles must stay within 10 position tolerances
+WHOLE_TURN_MARGIN_DEG = 90.0  # a recorded ramp's command known within less than this at the rate
 MOTION_WORDS = "the IMU disagrees with the table"    # a bad recording's note, when it is this
 WAYPOINT_DEG = 170.0          # largest single move of an axis with angle limits
 
@@ -54,6 +55,11 @@ class RunPaused(Exception):
 
 class SequencerError(UserError):
     """The bench did not do what it was told (a rate not held, a table that moved)."""
+
+
+class BadRecording(Exception):
+    """A recording whose metadata cannot be stated truthfully (raised by a segment's ``completed``):
+    kept aside and recorded again, like one that lost data (Sequencer._record_segment)."""
 
 
 class Interrupts:
@@ -408,8 +414,14 @@ class Sequencer:
                     problem = self._data_loss(rec, ch.rate_hz)
                     if problem is None and record is None:      # a recorded ramp moves by design
                         problem = self._disagreement(kind, r)
+                    done = None
                     if problem is None:
-                        r.seg.close("complete", **completed(rec))
+                        try:
+                            done = completed(rec)
+                        except BadRecording as e:
+                            problem = str(e)
+                    if problem is None:
+                        r.seg.close("complete", **done)
                         ch.done = ch.done | {name}
                     else:
                         r.seg.close("incomplete", note=f"bad recording: {problem}")
@@ -429,6 +441,10 @@ class Sequencer:
                 error = SequencerError(f"{name}: every recording disagreed with the table ({problem}; {attempts} "
                                        "attempts): check that the IMU is fixed to the platform and the line's latency "
                                        "(a USB adapter's, the computer's load), then resume")
+            elif "whole turns in the window are ambiguous" in problem:
+                error = SequencerError(f"{name}: every recording was refused ({problem}; {attempts} attempts): "
+                                       "lower the load on this computer or the line's latency (a USB adapter's), "
+                                       "or record this ramp at a lower rate, then resume")
             else:
                 error = SequencerError(f"{name}: every recording lost too much data ({problem}; {attempts} "
                                        "attempts): check the IMU's connection and the computer's load, then resume")
@@ -698,6 +714,17 @@ class Sequencer:
             # than compiled: the stream runs ahead of the command by what the line holds)
             # (the command's moment: the middle of its bracket, within half of it)
             commanded_t = 0.5 * (command_t[-1] + commanded["by"])
+            # the whole turns are chosen nearest the compiled profile's angle: that takes the
+            # command's moment within a quarter turn at the rate (half of it is the window's
+            # angle's own 1-sigma budget); a wider bracket (a slow host: the line or the reader
+            # late) could put the angle a whole turn off, with nothing in angle_sigma_deg to say
+            # so (this session's review: 250 deg/s, 1.6 s late, written complete one turn off)
+            ambiguity = abs(rate) * 0.5 * (commanded["by"] - command_t[-1])
+            if ambiguity >= WHOLE_TURN_MARGIN_DEG:
+                raise BadRecording(f"the table's whole turns in the window are ambiguous: the rate's command reached "
+                                   f"the table within {commanded['by'] - command_t[-1]:.3g} s of the IMU's clock, "
+                                   f"{ambiguity:.0f} deg at {abs(rate):g} deg/s (limit {WHOLE_TURN_MARGIN_DEG:g} deg): "
+                                   "the host or the line was late")
             turning_s = (edge - commanded_t) if start_kind else (commanded_t - edge)
             angle = ramp_angle.window_angle(rests[-1].position_deg, turning,
                                             ramp_angle.expected_angle(rate, turning_s, step.accel_dps2,
