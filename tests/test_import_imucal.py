@@ -75,7 +75,8 @@ def test_annotated_session_detected_raw_and_inverted_gyro(tmp_path):
 def test_a_raw_gyro_without_a_scale_is_diagnosed_and_reported(tmp_path, capsys):
     """The annotated session (raw counts, hand turns without encoder angles): the diagnosis and the
     page are made (both refused the capture, naming an internal effect 'discovered_terms'), and
-    say what the fit at its minimum says: the model explains the data.
+    say what the fit at its minimum says: untested, as the calibration file (no redundancy of the
+    data's own).
 
     Its base fit (36 parameters, 54 rows; the gyro block of a raw gyro that nothing turned by a
     known angle, held by NO_ROTATION_PRIORS and the statics' Earth-rate magnitudes only) crept:
@@ -95,7 +96,9 @@ def test_a_raw_gyro_without_a_scale_is_diagnosed_and_reported(tmp_path, capsys):
     assert cli.main(["diagnose", str(path)]) == 0
     printed = " ".join(capsys.readouterr().out.split())
     assert "discovered_terms" not in printed and "not converged" not in printed
-    assert "the model explains the data" in printed
+    # the file's verdict: untested (a redundancy of 0.2 of its own; the 6 degrees of freedom counted
+    # are the priors'), said by diagnose too since this session (it said "explains" on the 6)
+    assert "untested: the data have no redundancy of their own" in printed
     # the fit diagnose shows is at its minimum: from where it ends a solver with far tighter
     # tolerances gains less than 0.01 of chi2, i.e. every parameter is within 0.1 sigma of the
     # minimum (chi2 - chi2_min = |delta / sigma|^2 near it); stopped early it was 59 (MINPACK's
@@ -106,11 +109,11 @@ def test_a_raw_gyro_without_a_scale_is_diagnosed_and_reported(tmp_path, capsys):
                           xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=200)
     assert fit.chi2 - 2 * tight.cost < 0.01, (fit.chi2, 2 * tight.cost)
     # and that is the fit printed: its reduced chi2 to the 3 digits shown
-    reduced = float(re.search(r"reduced chi2 ([0-9.]+)", printed).group(1))
+    reduced = float(re.search(r"degrees of freedom \(reduced ([0-9.]+)", printed).group(1))
     assert abs(reduced - fit.chi2 / fit.dof) <= 0.0005 + 1e-9, (reduced, fit.chi2, fit.dof)
     assert cli.main(["report", str(path), "-o", str(tmp_path / "page.html")]) == 0
     page = (tmp_path / "page.html").read_text(encoding="utf-8")
-    assert "discovered_terms" not in page and "the model explains the data" in page
+    assert "discovered_terms" not in page and "untested: the data have no redundancy of their own" in page
 
 
 def test_cli_import_and_what_station_can_estimate(tmp_path, capsys):
@@ -136,6 +139,12 @@ def test_cli_import_and_what_station_can_estimate(tmp_path, capsys):
     with pytest.raises(UserError, match="at least 9 static attitudes; the capture has 6"):
         estimate_capture(out, "zhang2010")
     assert cli.main(["estimate", str(out)]) == 0
+    # station diagnose says the same: untested, not "the model explains the data" on the counted
+    # degrees of freedom (the review's case: "explains, reduced chi2 0.030" before)
+    capsys.readouterr()
+    assert cli.main(["diagnose", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "untested: the data have no redundancy of their own" in said and "explains" not in said, said
 
 
 def test_protocol_turn_lets_lsq_agree_with_imucal(tmp_path):

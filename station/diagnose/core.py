@@ -324,9 +324,21 @@ def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diag
     # "explains" at 1.42 on 108 counted degrees of freedom here, for one capture)
     t_reduced, t_p = (test["reduced_chi2"], test["p_value"]) if test else (reduced, p)
     on = f" on the data's redundancy {test['dof']:.1f}" if test and test["dof"] != result.dof else ""
+    # "untested" where the file says so (the data have no redundancy of their own: the counted
+    # degrees of freedom are the priors'), not "explains" on the counted ones (this session's
+    # review: imucal's session imported with station import imucal, "explains, reduced chi2 0.030"
+    # here, "untested" in the file), and the noise overestimated as the file says it; a misfit
+    # significant by its p-value within the file's REDUCED_CHI2_FAIL is said with
+    # within_calibration_threshold's words (a calibration from it passes)
     good = test is None or not t_p < P_FAIL
     failures = describe_failures(result, labels, segs, fails=not good)
-    if good:
+    if test is None:
+        verdict = ("untested: the data have no redundancy of their own (the degrees of freedom counted are the "
+                   "priors'): the model cannot be checked against the measurements")
+    elif test["result"] == "noise overestimated":
+        verdict = (f"the residuals are smaller than the noise model says: reduced chi2 {t_reduced:.3f}{on} "
+                   f"(p below = {test['p_below']:.3g}): the noise is overestimated")
+    elif good:
         verdict = (f"the model explains the data: reduced chi2 {t_reduced:.3f}{on} (p = {t_p:.3g})")
     elif any(c.significant for c in cands):
         verdict = (f"the model does not explain the data (reduced chi2 {t_reduced:.3g}{on}); the most "

@@ -388,7 +388,7 @@ def aliases(summaries, effect_id: str) -> list[tuple]:
                     "term in the square of the rate act alike; turn at two rates to confirm it grows "
                     "with the square of the rate"))
     vertical = _vertical_turns(summaries)
-    # a turn about a vertical axis separates the size effect from a vibration (measured, docs/design.md
+    # a turn about a vertical axis off every body axis separates the size effect from a vibration (measured, docs/design.md
     # sixteenth session): gravity along such an axis is g itself (no part across it to trade against),
     # so the constant along the axis that the size effect leaves (each accelerometer at its own point
     # sees its own centripetal acceleration, not one vector across the axis) is measured there, and a
@@ -398,8 +398,8 @@ def aliases(summaries, effect_id: str) -> list[tuple]:
         out.append(("table_vibration_once_per_rev",
                     f"every rotation is at one rate ({rates[0]:g} °/s): an offset of the rotations' accelerometer "
                     "mean is also what a table vibrating once per revolution leaves (its part across the axis); "
-                    "a turn about a vertical axis (the size effect's constant along the axis, which no vibration "
-                    "makes) or at a second rate tells them apart"))
+                    "a turn about a vertical axis off the IMU's axes (the size effect's constant along the axis, "
+                    "which no vibration makes) or at a second rate tells them apart"))
     if effect_id == "rotation_axis_offsets" and rates:
         # no command (suggest.NOT_SEPARABLE since the sixteenth session): a vibration's part turning
         # with the platter is a constant across the axis in the case's frame, as an offset's w^2 d is;
@@ -416,8 +416,8 @@ def aliases(summaries, effect_id: str) -> list[tuple]:
     if effect_id == "table_vibration_once_per_rev" and len(rates) == 1 and not vertical:
         out.append(("accel_lever_arm", f"every rotation is at one rate ({rates[0]:g} °/s): the part of a "
                     "vibration across the axis is a constant in the rotations' accelerometer mean, as the "
-                    "accelerometers' size effect is; turns about a vertical axis (the size effect's constant "
-                    "along the axis, which no vibration makes) or at another rate separate the two"))
+                    "accelerometers' size effect is; turns about a vertical axis off the IMU's axes (the size "
+                    "effect's constant along the axis, which no vibration makes) or at another rate separate the two"))
     # (an even accelerometer error and a wobbling table axis are not named from the words: wobble
     # leaves its second harmonic along the rotation's axis, an even error across it, and the
     # estimator's information tells them apart on every capture measured -- nine statics or the six
@@ -426,15 +426,25 @@ def aliases(summaries, effect_id: str) -> list[tuple]:
     return out
 
 
+OFF_BODY_AXES = 0.985      # a rotation axis whose largest body component is below this (10 deg off each)
+
+
 def _vertical_turns(summaries) -> bool:
-    """Whether a steady rotation is about an axis near the vertical (table_revolution.VERTICAL_DEG):
-    gravity along it is g itself, so such a turn measures the constant along the axis that the
-    accelerometers' size effect leaves and a vibration once per revolution does not (aliases)."""
+    """Whether a steady rotation is about an axis near the vertical (table_revolution.VERTICAL_DEG)
+    and off every body axis: gravity along it is g itself, so such a turn measures the constant
+    along the axis that the accelerometers' size effect leaves and a vibration once per revolution
+    does not (aliases).  About a body axis the size effect leaves nothing along it (the
+    centripetal acceleration is across the axis, and the accelerometer along it is the only one
+    whose reading the axis takes), and its constant across the axis is the vertical vibration's
+    too (four parameters per rotation group since the sixteenth session): such a turn separates
+    nothing (this session's review: level pairs about x, y, [1,1,0] and a vertical pair about z
+    left every accelerometer position undetermined with no alias named)."""
     from station.model import table_revolution as rev
 
     steady = [r for r in summaries.rotations if r.steady and r.accel_cos is not None]
     framed = rev.frames(summaries)
-    return any(int(r.index) not in framed for r in steady)
+    return any(int(r.index) not in framed and float(np.max(np.abs(r.axis_body))) < OFF_BODY_AXES
+               for r in steady)
 
 
 def _pattern(sensor, kind, rows, s) -> str:

@@ -1605,7 +1605,7 @@ def _other_crossing(model: Model, x: np.ndarray, k: int):
     # tilt put 1.5e5 of chi2 on a whole turn's integral, and each of 26 vertical axes' flips cost
     # a whole fit back to the same minimum: 1,523 evaluations where 50 reach it)
     for i, r in enumerate(s.rotations):
-        if r.group == k and L[f"phase{i}"].stop - L[f"phase{i}"].start != 2:
+        if r.group == k and r.steady and L[f"phase{i}"].stop - L[f"phase{i}"].start != 2:   # (a hand turn's angle is nominal)
             noise = np.sqrt(np.max(s.gyro_sigma)**2 * r.duration_s / s.sample_rate_hz + s.table_angle_sigma_deg**2)
             if abs(r.angle_deg) * abs(d) > 3.0 * noise:
                 return None

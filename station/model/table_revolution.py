@@ -8,8 +8,10 @@ across the axis, v (at the start), turning as Rot(l, -p) v with the signed angle
 the axis l.  So every rotation gets the right-handed frame (l, v_hat, u = l x v_hat) from its own
 data (constants: the fit's parameters do not move it; a scale or misalignment error of a percent
 turns it by far less than the faults' phase is known to).  A rotation about an axis within
-VERTICAL_DEG of the vertical has no gravity across it to fix the frame: the faults are not
-modelled there.  The phase and the frame are the same for every rotation about one table axis
+VERTICAL_DEG of the vertical has no gravity across it to fix the frame: the wobble is not
+modelled there, and the vibration is modelled on a frame fixed to the case per group of rotations
+that start at the same platter angle with the same mounting (vertical_frames; table_vibration's
+docstring).  The phase and the frame are the same for every rotation about one table axis
 when each rotation starts at the same angle of the platter relative to the world, as a table
 does that moves to its start before it turns (the simulator's faults, sim_devices/world.py,
 assume that too, written independently).
