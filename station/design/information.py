@@ -291,6 +291,35 @@ def _group_offsets(model, owner: dict) -> dict:
     return out
 
 
+def _vertical_own(model, owner: dict) -> dict:
+    """{axis group: its own columns of table_vibration_once_per_rev} for the candidates' groups
+    about a vertical axis: the vibration's part across such an axis is one (P, Q) per table axis,
+    rate, axis group and mounting (station/model/table_vibration.py), four columns that only the
+    turns of that group see -- a group's own nuisances, as its offset is (_group_offsets), not
+    shared columns: eliminated with the group's nuisances (search: the Schur complement of each
+    axis group), so that G stays the shared parameters' (the sixteenth session's vertical model
+    made every vertical candidate bring four columns of its own into G: the search's matrices
+    grew with the candidates, docs/design.md).  The capture's own groups (station design --from)
+    keep theirs as parameters; an anchor's (no rows used) are dropped with them."""
+    e = next((x for x in model.effects if x.id == "table_vibration_once_per_rev"), None)
+    if e is None or not getattr(e, "vertical_across", None):
+        return {}
+    sl = model.layout["effect:table_vibration_once_per_rev"]
+    across0 = sl.start + 6 * len(e.groups) + 2 * len(e.vertical_axial)
+    rotations = {int(r.index): r for r in model.s.rotations}
+    by_group: dict = {}           # position in vertical_across -> the axis groups and keys of its turns
+    for index, n in e.vacross_of.items():
+        r = rotations[int(index)]
+        by_group.setdefault(n, set()).add((int(r.group), _is_capture_key(owner.get(r.name, ("anchor",)))))
+    out: dict = {}
+    for n, members in sorted(by_group.items()):
+        groups = {g for g, _ in members}
+        if len(groups) != 1 or any(capture for _, capture in members):
+            continue              # (shared by two axis groups, or the capture's: a parameter)
+        out.setdefault(groups.pop(), []).extend(range(across0 + 4 * n, across0 + 4 * n + 4))
+    return {g: np.array(cols, dtype=int) for g, cols in out.items()}
+
+
 def _offset_lines(model) -> list:
     """[(unit axis, table axis, its offset's three column names or None)] of the capture's own
     chunk (the first, station design --from): each axis line the capture turned about and the
@@ -445,6 +474,12 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
             shared = np.concatenate([shared, np.array(sorted(rename), dtype=int)]).astype(int)
             for g in fixed:
                 group_own.pop(g)
+        vertical_own = _vertical_own(model, owner)
+        if vertical_own:
+            mine = set(c for cols in vertical_own.values() for c in cols.tolist())
+            shared = np.array([c for c in shared if int(c) not in mine], dtype=int)
+            for g, cols in vertical_own.items():
+                group_own[g] = np.concatenate([group_own.get(g, _NONE), cols]).astype(int)
         names_c = [rename.get(int(c), n) for c, n in zip(shared, column_names(model, shared))]
         for n in names_c:
             union.setdefault(n, len(union))
