@@ -101,3 +101,34 @@ def test_a_vertical_groups_own_columns_are_eliminated_exactly(monkeypatch):
     at = {n: k for k, n in enumerate(full_names)}
     ratio = np.array([s_new[k] / s_full[at[n]] for k, n in enumerate(names)])
     assert np.max(np.abs(ratio - 1.0)) < 1e-6, ratio
+
+
+def test_a_vertical_groups_complement_is_cleaned_of_rounding_only(monkeypatch):
+    """One vertical turn alone: its own columns take nearly all it tells of the positions, so the
+    plain complement there is rounding of either sign (an indefinite matrix: negative variances in
+    a known-attitude design with few turns).  search.complement (information.group_schur) is
+    positive semi-definite and differs from the plain complement by at most ROUNDING (1e-12) of the
+    information that entered it (scaled to a unit diagonal before the elimination); a level group
+    keeps the plain complement, bit for bit."""
+    from station.design import search
+    from station.design.information import ROUNDING
+
+    info, _ = _information(monkeypatch, eliminate=True)
+    G = info.shared
+    _, cands = _chunks()
+    vertical = [c for c in cands if c.kind == "rotation" and c.axis[1] == 90.0]
+    level = [c for c in cands if c.kind == "rotation" and c.axis[1] == 0.0]
+    assert {c.axis for c in vertical} == info.own_columns
+    for c in vertical:
+        S = info.group_prior[c.axis] + info.rotation[c.key][1]
+        d = np.sqrt(np.diag(S)[:G])
+        d[d == 0] = 1.0
+        plain = schur(S, G) / np.outer(d, d)
+        clean = search.complement(info, c.axis, S, G) / np.outer(d, d)
+        # (the eigenvalues of V w V^T as computed: rounding of G eps x the largest, 4 here: ~4e-14)
+        assert np.min(np.linalg.eigvalsh(clean)) >= -1e-13
+        # (G eigenvalues each moved by at most ROUNDING: an entry by at most G x ROUNDING)
+        assert np.max(np.abs(clean - plain)) <= G * ROUNDING
+    for c in level:
+        S = info.group_prior[c.axis] + info.rotation[c.key][1]
+        assert np.array_equal(search.complement(info, c.axis, S, G), schur(S, G))
