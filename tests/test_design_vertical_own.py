@@ -111,24 +111,29 @@ def test_a_vertical_groups_complement_is_cleaned_of_rounding_only(monkeypatch):
     information that entered it (scaled to a unit diagonal before the elimination); a level group
     keeps the plain complement, bit for bit."""
     from station.design import search
-    from station.design.information import ROUNDING
+    from station.design.information import ROUNDING, group_schur
 
     info, _ = _information(monkeypatch, eliminate=True)
     G = info.shared
     _, cands = _chunks()
     vertical = [c for c in cands if c.kind == "rotation" and c.axis[1] == 90.0]
     level = [c for c in cands if c.kind == "rotation" and c.axis[1] == 0.0]
-    assert {c.axis for c in vertical} == info.own_columns
+    # (4 columns per rate: two rates)
+    assert info.own_columns == {c.axis: 8 for c in vertical}
     for c in vertical:
         S = info.group_prior[c.axis] + info.rotation[c.key][1]
         d = np.sqrt(np.diag(S)[:G])
         d[d == 0] = 1.0
         plain = schur(S, G) / np.outer(d, d)
         clean = search.complement(info, c.axis, S, G) / np.outer(d, d)
+        # (without the covariance's ridge on the group's own columns: the plain complement to rounding)
+        exact = group_schur(S, G, info.own_columns[c.axis], 0.0) / np.outer(d, d)
         # (the eigenvalues of V w V^T as computed: rounding of G eps x the largest, 4 here: ~4e-14)
         assert np.min(np.linalg.eigvalsh(clean)) >= -1e-13
         # (G eigenvalues each moved by at most ROUNDING: an entry by at most G x ROUNDING)
-        assert np.max(np.abs(clean - plain)) <= G * ROUNDING
+        assert np.max(np.abs(exact - plain)) <= G * ROUNDING
+        # the ridge (search.RIDGE, 1e-10 of the own columns' diagonal) moves it by ~1e-10 at most
+        assert np.max(np.abs(clean - plain)) <= 10 * search.RIDGE
     for c in level:
         S = info.group_prior[c.axis] + info.rotation[c.key][1]
         assert np.array_equal(search.complement(info, c.axis, S, G), schur(S, G))
