@@ -433,13 +433,19 @@ def group_schur(S: np.ndarray, G: int, own: int = 0, ridge: float = 0.0) -> np.n
             S1[G:, G:] += ridge * np.diag(np.diag(S1)[G:])
         R = schur(S1, G)
     else:
-        R = schur(S, G)
+        S1, R = S, schur(S, G)
     d = np.sqrt(np.clip(np.diag(S)[:G], 0.0, None))
     d[d == 0] = 1.0
     Rs = R / np.outer(d, d)
     w, V = np.linalg.eigh(0.5 * (Rs + Rs.T))
     w = np.where(w > ROUNDING, w, 0.0)
-    return (V * w) @ V.T * np.outer(d, d)
+    out = (V * w) @ V.T * np.outer(d, d)
+    if ridge:
+        # the shared columns' ridge as it was: covariance_of adds ridge x the design's diagonal, which
+        # held this group's information before its own columns were eliminated (diag S1); the part
+        # the elimination took is added here, so the ridge is the same
+        out[np.diag_indices(G)] += ridge * np.clip(np.diag(S1)[:G] - np.diag(R), 0.0, None)
+    return out
 
 
 def static_information(info: Information, key, dwell_s: float) -> np.ndarray:
