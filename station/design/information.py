@@ -92,6 +92,10 @@ class Information:
     # station design --from), and the union's shared columns by name (column_names)
     chunk_parameters: list = field(default_factory=list)
     column_names: list = field(default_factory=list)
+    # the axis groups (keys of group_prior) that eliminate columns of their own beyond the axis'
+    # (a vertical group's vibration across the axis: _vertical_own); their complement is taken by
+    # group_schur, cleaned of rounding
+    own_columns: dict = field(default_factory=dict)     # group key -> how many (the block's last)
 
 
 def temperature_powers(effects: list, parameters: "Parameters", shared: int) -> np.ndarray | None:
@@ -291,6 +295,35 @@ def _group_offsets(model, owner: dict) -> dict:
     return out
 
 
+def _vertical_own(model, owner: dict) -> dict:
+    """{axis group: its own columns of table_vibration_once_per_rev} for the candidates' groups
+    about a vertical axis: the vibration's part across such an axis is one (P, Q) per table axis,
+    rate, axis group and mounting (station/model/table_vibration.py), four columns that only the
+    turns of that group see -- a group's own nuisances, as its offset is (_group_offsets), not
+    shared columns: eliminated with the group's nuisances (search: the Schur complement of each
+    axis group), so that G stays the shared parameters' (the sixteenth session's vertical model
+    made every vertical candidate bring four columns of its own into G: the search's matrices
+    grew with the candidates, docs/design.md).  The capture's own groups (station design --from)
+    keep theirs as parameters; an anchor's (no rows used) are dropped with them."""
+    e = next((x for x in model.effects if x.id == "table_vibration_once_per_rev"), None)
+    if e is None or not getattr(e, "vertical_across", None):
+        return {}
+    sl = model.layout["effect:table_vibration_once_per_rev"]
+    across0 = sl.start + 6 * len(e.groups) + 2 * len(e.vertical_axial)
+    rotations = {int(r.index): r for r in model.s.rotations}
+    by_group: dict = {}           # position in vertical_across -> the axis groups and keys of its turns
+    for index, n in e.vacross_of.items():
+        r = rotations[int(index)]
+        by_group.setdefault(n, set()).add((int(r.group), _is_capture_key(owner.get(r.name, ("anchor",)))))
+    out: dict = {}
+    for n, members in sorted(by_group.items()):
+        groups = {g for g, _ in members}
+        if len(groups) != 1 or any(capture for _, capture in members):
+            continue              # (shared by two axis groups, or the capture's: a parameter)
+        out.setdefault(groups.pop(), []).extend(range(across0 + 4 * n, across0 + 4 * n + 4))
+    return {g: np.array(cols, dtype=int) for g, cols in out.items()}
+
+
 def _offset_lines(model) -> list:
     """[(unit axis, table axis, its offset's three column names or None)] of the capture's own
     chunk (the first, station design --from): each axis line the capture turned about and the
@@ -372,6 +405,49 @@ def schur(S: np.ndarray, G: int) -> np.ndarray:
     return S[:G, :G] - Bs @ np.linalg.pinv(A / np.outer(d, d), rcond=1e-13, hermitian=True) @ Bs.T
 
 
+# an eigenvalue of a group's complement scaled by its information before the elimination (unit
+# diagonal) below this is rounding, not information (group_schur)
+ROUNDING = 1e-12
+
+
+def group_schur(S: np.ndarray, G: int, own: int = 0, ridge: float = 0.0) -> np.ndarray:
+    """schur(S, G) of an axis group whose last ``own`` columns are a vertical turn's vibration across
+    the axis (_vertical_own), taken as the search took it while they were columns of G: the axis'
+    columns eliminated first, then ``ridge`` (search.RIDGE) of their own diagonal added to them, as
+    search.covariance_of adds it to every column of its unit-diagonal information, then they are
+    eliminated -- and cleaned of rounding.  Those columns take nearly all a vertical turn tells of
+    some shared columns (the size effect's constant across the axis is the vibration's: the
+    positions keep ~1e-13 of their information before the elimination), so the complement's
+    entries there are differences of numbers 1e13 times their size, and rounding leaves noise of
+    ~1e-16 x the information before the elimination, of either sign: an indefinite complement whose
+    noise, scaled by the design's own small diagonal there, gave negative variances (the known-
+    attitude design's search stopped at 7 statics with a criterion of nan).  In the information
+    before the elimination scaled to a unit diagonal the noise is ~1e-14 (n eps); an eigenvalue of
+    the scaled complement below ROUNDING (1e-12, 100x that) is set to zero: what stays is the
+    complement to 1e-12 of the information that entered it."""
+    n = S.shape[0]
+    if own:
+        order = np.concatenate([np.arange(G), np.arange(n - own, n), np.arange(G, n - own)])
+        S1 = schur(S[np.ix_(order, order)], G + own)
+        if ridge:
+            S1[G:, G:] += ridge * np.diag(np.diag(S1)[G:])
+        R = schur(S1, G)
+    else:
+        S1, R = S, schur(S, G)
+    d = np.sqrt(np.clip(np.diag(S)[:G], 0.0, None))
+    d[d == 0] = 1.0
+    Rs = R / np.outer(d, d)
+    w, V = np.linalg.eigh(0.5 * (Rs + Rs.T))
+    w = np.where(w > ROUNDING, w, 0.0)
+    out = (V * w) @ V.T * np.outer(d, d)
+    if ridge:
+        # the shared columns' ridge as it was: covariance_of adds ridge x the design's diagonal, which
+        # held this group's information before its own columns were eliminated (diag S1); the part
+        # the elimination took is added here, so the ridge is the same
+        out[np.diag_indices(G)] += ridge * np.clip(np.diag(S1)[:G] - np.diag(R), 0.0, None)
+    return out
+
+
 def static_information(info: Information, key, dwell_s: float) -> np.ndarray:
     """A static's information about G with a dwell of ``dwell_s``: its data rows scale with the
     dwell and its attitude's prior rows do not (the table's angles, attitudes="table"; the weak
@@ -445,6 +521,12 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
             shared = np.concatenate([shared, np.array(sorted(rename), dtype=int)]).astype(int)
             for g in fixed:
                 group_own.pop(g)
+        vertical_own = _vertical_own(model, owner)
+        if vertical_own:
+            mine = set(c for cols in vertical_own.values() for c in cols.tolist())
+            shared = np.array([c for c in shared if int(c) not in mine], dtype=int)
+            for g, cols in vertical_own.items():
+                group_own[g] = np.concatenate([group_own.get(g, _NONE), cols]).astype(int)
         names_c = [rename.get(int(c), n) for c, n in zip(shared, column_names(model, shared))]
         for n in names_c:
             union.setdefault(n, len(union))
@@ -536,6 +618,8 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
             info.group_prior[gkey] = (_reduce(J[rows].toarray(), keep, np.zeros(0, int)) if rows
                                       else np.zeros((len(keep), len(keep))))
             placed.append(("prior", info.group_prior, gkey, idx))
+            if group in vertical_own:
+                info.own_columns[gkey] = len(vertical_own[group])
     # every block over the union's shared columns (column_names: a bench effect's table axes and
     # rates are those of the chunk's own turns; the base model's columns are the same in all)
     G = len(union)

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from station.core.errors import UserError
-from station.design.information import schur as _schur, static_information
+from station.design.information import group_schur, schur as _schur, static_information
 
 RIDGE = 1e-10            # on the unit-diagonal information: a column nothing sees gets 1σ 1e5 of its size
 CRITERIA = ("D", "A", "worst")    # (station/cli/choices.py copies it)
@@ -98,6 +98,14 @@ class Candidate:
     slot: tuple = ()              # at most one candidate per slot: a static's attitude (and chamber level)
     axis: tuple = ()              # rotations: (axis, elevation) group; one elevation per axis
     level: float | None = None    # the chamber's setpoint it is recorded at (degC), None: the room's
+
+
+def complement(info, g, S: np.ndarray, G: int) -> np.ndarray:
+    """An axis group's information about G (its nuisances eliminated): information.group_schur for
+    a group with columns of its own beyond the axis' (a vertical turn's vibration across it), else
+    the plain Schur complement."""
+    own = getattr(info, "own_columns", {}).get(g, 0)
+    return group_schur(S, G, own, RIDGE) if own else _schur(S, G)
 
 
 class Scorer:
@@ -228,8 +236,8 @@ class Scorer:
                 F += M
             else:
                 groups[c.axis] = groups.get(c.axis, info.group_prior[c.axis]) + M
-        for S in groups.values():
-            F += _schur(S, G)
+        for g, S in groups.items():
+            F += complement(info, g, S, G)
         return self.value_of(F)
 
     # ---------------------------------------------------------------- information
@@ -244,8 +252,8 @@ class Scorer:
             else:
                 g = c.axis
                 groups[g] = groups.get(g, self.info.group_prior[g]) + self.M[i]
-        for S in groups.values():
-            F += _schur(S, G)
+        for g, S in groups.items():
+            F += complement(self.info, g, S, G)
         return F
 
     def covariance(self, chosen) -> np.ndarray:
@@ -313,7 +321,7 @@ class State:
         for i in add:
             S += sc.M[i]
         members += len(add) - len(remove)
-        return S, members, (_schur(S, sc.G) if members > 0 else np.zeros((sc.G, sc.G)))
+        return S, members, (complement(sc.info, g, S, sc.G) if members > 0 else np.zeros((sc.G, sc.G)))
 
     def information(self, remove=(), add=()) -> np.ndarray:
         """F of the design with ``remove`` taken out and ``add`` put in (not applied)."""
