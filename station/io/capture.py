@@ -1097,11 +1097,14 @@ def read_csv_pieces(path, sample_rate_hz) -> tuple[SegmentData | None, str]:
                     total += more
                     got += more
                     last = not more
-                # hashed on this thread: a thread per piece to overlap the hash with the parse
-                # cost more than it saved (a 100 Hz optimal9 estimate, whole processes at real-
-                # time priority, 2 cores, 20 interleaved rounds: 285 -> 280 ms of wall, 317 ->
-                # 310 ms of CPU; issue 27)
-                digest.update(view[held:held + got])
+                # hashlib and the engine both release the GIL: hashing overlaps parsing
+                # (a thread per piece: measured again on a quiet machine, 14 interleaved rounds of
+                # the 100 Hz estimate, 298 against 320 ms of wall, 351 against 346 ms of CPU, for
+                # hashing on the reading thread; at real-time priority beside other work the
+                # other way round, 280 against 285 ms: the quiet machine is the one that counts)
+                hashing = threading.Thread(target=digest.update, args=(view[held:held + got],),
+                                           daemon=True)
+                hashing.start()
                 end = held + got
                 cut = 0
                 if not parser.failed:
@@ -1118,6 +1121,7 @@ def read_csv_pieces(path, sample_rate_hz) -> tuple[SegmentData | None, str]:
                         parser.feed(buffer, cut)
                     if end - cut > MAX_LINE_BYTES:     # a line without end: the line reader names
                         parser.failed = True            # it (grown here, quadratic in its length)
+                hashing.join()          # before the buffer's bytes are moved or read over
             held = 0 if parser.failed else end - cut
             if held:        # same length: the buffer is never resized (views of it may live on)
                 buffer[:held] = buffer[cut:end]
