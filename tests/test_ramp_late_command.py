@@ -54,13 +54,14 @@ class LateCommand:
         return self.inner.set_rate(axis, rate_dps, **kw)
 
 
-@pytest.mark.parametrize("kind", ["start", "end"])
-def test_a_late_command_leaves_the_whole_ramp_and_the_compiled_turns_in_the_window(tmp_path, kind):
+def run_late(tmp_path, kind, rate):
+    """One recorded ramp of ``kind`` at ``rate`` deg/s on the twins, its command held LATE_S: the
+    LateCommand (its ``sent`` time)."""
     config = Config(table=TableConfig(axes=3, limits=tuple(
                         AxisConfig(max_rate_dps=300, max_accel_dps2=300, rate_accel_dps2=ACCEL) for _ in range(3))),
                     run=RunConfig(operator=False, settle_s=0.5, max_missing_fraction=0.02, max_gap_s=2.0))
     scheme = scheme_from_text(f"""name: r
-defaults: {{dwell_s: 1, rate_dps: {RATE:g}, rotation_s: {ROTATION_S:g}}}
+defaults: {{dwell_s: 1, rate_dps: {rate:g}, rotation_s: {ROTATION_S:g}}}
 segments:
   - {{rotation: r, axis_body: [0, 0, 1], record_ramp: {kind}, pair: false}}
 """, "r.yaml")
@@ -69,12 +70,18 @@ segments:
         seq, table, imu = sequencer(bench, config, new_writer(tmp_path / "cap"), Hands(bench, speed=SPEED))
         seq.table = late = LateCommand(table, bench)
         try:
-            seq.run(plan.steps)       # before: "end" raised "read at rest only after the window closed"
+            seq.run(plan.steps)
         finally:
             table.stop()
             table.close()
             imu.close()
     assert late.sent is not None
+    return late
+
+
+@pytest.mark.parametrize("kind", ["start", "end"])
+def test_a_late_command_leaves_the_whole_ramp_and_the_compiled_turns_in_the_window(tmp_path, kind):
+    run_late(tmp_path, kind, RATE)      # before: "end" raised "read at rest only after the window closed"
     r = next(s for s in read_capture(tmp_path / "cap", load_data=True).segments if s.name == "r")
     assert r.status == "complete" and r.extra["record_ramp"] == kind
     g = r.data.gyro @ np.asarray(r.axis_body, float)
@@ -110,25 +117,7 @@ def test_a_command_too_late_for_the_whole_turns_is_recorded_again(tmp_path, kind
     bound of the gyro's integral."""
     rate = 250.0
     monkeypatch.setattr(__import__(__name__), "LATE_S", 1.6)
-    config = Config(table=TableConfig(axes=3, limits=tuple(
-                        AxisConfig(max_rate_dps=300, max_accel_dps2=300, rate_accel_dps2=ACCEL) for _ in range(3))),
-                    run=RunConfig(operator=False, settle_s=0.5, max_missing_fraction=0.02, max_gap_s=2.0))
-    scheme = scheme_from_text(f"""name: r
-defaults: {{dwell_s: 1, rate_dps: {rate:g}, rotation_s: {ROTATION_S:g}}}
-segments:
-  - {{rotation: r, axis_body: [0, 0, 1], record_ramp: {kind}, pair: false}}
-""", "r.yaml")
-    plan = compile_scheme(scheme, config)
-    with BenchServer(default_truth(11), BenchOptions(speed=SPEED, seed=11, axes=3, lossless=True)) as bench:
-        seq, table, imu = sequencer(bench, config, new_writer(tmp_path / "cap"), Hands(bench, speed=SPEED))
-        seq.table = late = LateCommand(table, bench)
-        try:
-            seq.run(plan.steps)
-        finally:
-            table.stop()
-            table.close()
-            imu.close()
-    assert late.sent is not None
+    run_late(tmp_path, kind, rate)
     aside = sorted((tmp_path / "cap").glob("r*.incomplete"))
     assert aside, list((tmp_path / "cap").iterdir())
     capture = read_capture(tmp_path / "cap", load_data=True)

@@ -23,18 +23,28 @@ import numpy as np
 VERTICAL_DEG = 20.0       # an axis nearer the vertical than this: gravity across it below sin 20° = 0.34 g
 
 
+def _vertical(r):
+    """Whether steady rotation ``r`` is about an axis within VERTICAL_DEG of the vertical (its
+    first harmonic, gravity's part across the axis, below sin VERTICAL_DEG of gravity); None for a
+    rotation neither frame takes (not steady, no harmonics, no gravity)."""
+    if not r.steady or r.accel_cos is None:
+        return None
+    c, s, dc = (np.asarray(v, float) for v in (r.accel_cos, r.accel_sin, r.accel_dc))
+    across = np.sqrt(0.5 * (c @ c + s @ s))
+    total = np.hypot(across, np.linalg.norm(dc))
+    if not total > 0:
+        return None
+    return bool(not across >= np.sin(np.radians(VERTICAL_DEG)) * total)
+
+
 def frames(summaries) -> dict:
     """{segment index: (l, v_hat, u)} of every steady rotation whose axis is far enough from the
     vertical (unit 3-vectors in the IMU's frame, from the rotation's measured harmonics)."""
     out = {}
     for r in summaries.rotations:
-        if not r.steady or r.accel_cos is None:
+        if _vertical(r) is not False:
             continue
-        c, s, dc = (np.asarray(v, float) for v in (r.accel_cos, r.accel_sin, r.accel_dc))
-        across = np.sqrt(0.5 * (c @ c + s @ s))
-        total = np.hypot(across, np.linalg.norm(dc))
-        if not total > 0 or across < np.sin(np.radians(VERTICAL_DEG)) * total:
-            continue
+        c, s = np.asarray(r.accel_cos, float), np.asarray(r.accel_sin, float)
         v = c / np.linalg.norm(c)
         u = -s - (-s @ v) * v                      # Rot(l, -p) v = cos p v - sin p (l x v)
         u = u / np.linalg.norm(u)
@@ -50,12 +60,7 @@ def vertical_frames(summaries) -> dict:
     the data fixes the table's frame about a vertical axis (table_vibration's docstring)."""
     out = {}
     for r in summaries.rotations:
-        if not r.steady or r.accel_cos is None:
-            continue
-        c, s, dc = (np.asarray(v, float) for v in (r.accel_cos, r.accel_sin, r.accel_dc))
-        across = np.sqrt(0.5 * (c @ c + s @ s))
-        total = np.hypot(across, np.linalg.norm(dc))
-        if not total > 0 or not across < np.sin(np.radians(VERTICAL_DEG)) * total:
+        if _vertical(r) is not True:
             continue
         l = np.asarray(r.axis_body, float)
         l = l / np.linalg.norm(l)
