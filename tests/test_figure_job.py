@@ -240,7 +240,8 @@ def test_ctrl_c_while_the_figures_are_drawn_leaves_no_process(optimal9_run, tmp_
         drawers = drawing(p, tmp_path / "drawing")
     finally:
         out, err = interrupt(p)
-    assert p.returncode == 130 and err.strip().splitlines()[-1] == "interrupted"
+    # (what the command said, on failure: CI once saw exit status 1 here, cause not yet known)
+    assert p.returncode == 130 and err.strip().splitlines()[-1] == "interrupted", (p.returncode, err[-3000:])
     assert still_running(drawers) == []
     assert not (tmp_path / "report" / "index.html").exists()
     assert list(temporary.iterdir()) == []
