@@ -24,15 +24,15 @@ POSITIONS_M = np.array([[0.0, 0.008, -0.006], [0.005, 0.0, 0.009], [-0.007, 0.00
 RATE = 100.0
 
 
-def _scheme() -> str:
-    """Nine 3 s statics and one ± pair (one revolution) about each of the six body and diagonal
-    axes, all at 100 deg/s, the table axis level: the capture that cannot tell the two apart."""
+def _scheme(revolutions: int = 1) -> str:
+    """Nine 3 s statics and one ± pair (``revolutions`` each) about each of the six body and
+    diagonal axes, all at 100 deg/s, the table axis level: the capture that cannot tell the two apart."""
     ups = [[0, 0, 1], [0, 0, -1], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [1, 1, 0], [0, 1, 1], [1, 0, 1]]
     axes = [[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [0, 1, 1], [1, 0, 1]]
     segs = [{"static": f"s{i}", "up_body": u} for i, u in enumerate(ups)]
     segs += [{"rotation": f"r{i}", "axis_body": a} for i, a in enumerate(axes)]
     return yaml.safe_dump({"name": "onerate", "segments": segs,
-                           "defaults": {"dwell_s": 3.0, "rate_dps": RATE, "rotation_s": 360.0 / RATE}})
+                           "defaults": {"dwell_s": 3.0, "rate_dps": RATE, "rotation_s": 360.0 * revolutions / RATE}})
 
 
 def _summaries(cap):

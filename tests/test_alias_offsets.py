@@ -16,8 +16,8 @@ from station.diagnose import suggest, words
 from station.estimate.summaries import summarise
 from station.io.capture import read_capture
 from station.model.axis_offsets import offset_groups
+from test_alias_bench import _scheme as alias_bench_scheme
 
-RATE = 100.0
 # the simulated table's axis that turns the IMU about case axis y runs 20 mm from it along z, the
 # one about z 15 mm along x (sim_devices/truth.py axis_offsets_m): w^2 d at 100 deg/s = 3.0 mm/s^2
 # per mm, 4.6-6.1 mg across the axis
@@ -25,14 +25,8 @@ OFFSETS_M = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.02], [0.015, 0.0, 0.0]]
 
 
 def _scheme() -> str:
-    """Nine 3 s statics and one ± pair (two revolutions) about each of the six body and diagonal
-    axes, all at 100 deg/s, the table axis level: the capture that cannot tell the two apart."""
-    ups = [[0, 0, 1], [0, 0, -1], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [1, 1, 0], [0, 1, 1], [1, 0, 1]]
-    axes = [[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [0, 1, 1], [1, 0, 1]]
-    segs = [{"static": f"s{i}", "up_body": u} for i, u in enumerate(ups)]
-    segs += [{"rotation": f"r{i}", "axis_body": a} for i, a in enumerate(axes)]
-    return yaml.safe_dump({"name": "onerate", "segments": segs,
-                           "defaults": {"dwell_s": 3.0, "rate_dps": RATE, "rotation_s": 720.0 / RATE}})
+    """test_alias_bench's capture that cannot tell the two apart, two revolutions a turn."""
+    return alias_bench_scheme(revolutions=2)
 
 
 def test_appended_turns_share_the_capture_offsets_about_the_same_axis_line():

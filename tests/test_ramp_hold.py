@@ -46,25 +46,31 @@ class Faulty:
         return self.inner.set_rate(axis, rate_dps, **kw)
 
 
-def _run(tmp_path, kind, **fault):
+def run_ramp(tmp_path, kind, wrap, rate_dps=100.0, rotation_s=3.6):
+    """One recorded ramp of ``kind`` ("start"/"end") at ``rate_dps`` on the twins (speed SPEED,
+    ACCEL deg/s^2), through the table driver ``wrap(table, bench)`` returns (a fault, a delay)."""
     config = Config(table=TableConfig(axes=3, limits=tuple(
                         AxisConfig(max_rate_dps=300, max_accel_dps2=300, rate_accel_dps2=ACCEL) for _ in range(3))),
                     run=RunConfig(operator=False, settle_s=0.5, max_missing_fraction=0.02, max_gap_s=2.0))
     scheme = scheme_from_text(f"""name: r
-defaults: {{dwell_s: 1, rate_dps: 100, rotation_s: 3.6}}
+defaults: {{dwell_s: 1, rate_dps: {rate_dps:g}, rotation_s: {rotation_s:g}}}
 segments:
   - {{rotation: r, axis_body: [0, 0, 1], record_ramp: {kind}, pair: false}}
 """, "r.yaml")
     plan = compile_scheme(scheme, config)
     with BenchServer(default_truth(11), BenchOptions(speed=SPEED, seed=11, axes=3, lossless=True)) as bench:
         seq, table, imu = sequencer(bench, config, new_writer(tmp_path / "cap"), Hands(bench, speed=SPEED))
-        seq.table = Faulty(table, **fault)
+        seq.table = wrap(table, bench)
         try:
             seq.run(plan.steps)
         finally:
             table.stop()
             table.close()
             imu.close()
+
+
+def _run(tmp_path, kind, **fault):
+    run_ramp(tmp_path, kind, lambda table, bench: Faulty(table, **fault))
 
 
 @pytest.mark.parametrize("kind", ["start", "end"])

@@ -16,16 +16,11 @@ import time
 import numpy as np
 import pytest
 
-from sim_devices.truth import default_truth
-from sim_devices.twins.serve import BenchOptions, BenchServer
-from station.bench.compile import compile_scheme
-from station.bench.config import AxisConfig, Config, RunConfig, TableConfig
 from station.io.capture import read_capture
-from station.io.scheme import RAMP_REST_S, scheme_from_text
-from test_sequencer_safety import Hands, new_writer, sequencer
+from station.io.scheme import RAMP_REST_S
+from test_ramp_hold import run_ramp
 
-SPEED = 8.0
-RATE, ACCEL = 100.0, 300.0
+RATE = 100.0                  # deg/s (the twins: test_ramp_hold.run_ramp, speed 8, 300 deg/s^2)
 ROTATION_S = 3.6
 #: the command held this long (device s): twice the rest a brake's window keeps after the brake
 #: (0.5 s), so that a window closed after the command's earliest moment ends before the brake does
@@ -57,26 +52,11 @@ class LateCommand:
 def run_late(tmp_path, kind, rate):
     """One recorded ramp of ``kind`` at ``rate`` deg/s on the twins, its command held LATE_S: the
     LateCommand (its ``sent`` time)."""
-    config = Config(table=TableConfig(axes=3, limits=tuple(
-                        AxisConfig(max_rate_dps=300, max_accel_dps2=300, rate_accel_dps2=ACCEL) for _ in range(3))),
-                    run=RunConfig(operator=False, settle_s=0.5, max_missing_fraction=0.02, max_gap_s=2.0))
-    scheme = scheme_from_text(f"""name: r
-defaults: {{dwell_s: 1, rate_dps: {rate:g}, rotation_s: {ROTATION_S:g}}}
-segments:
-  - {{rotation: r, axis_body: [0, 0, 1], record_ramp: {kind}, pair: false}}
-""", "r.yaml")
-    plan = compile_scheme(scheme, config)
-    with BenchServer(default_truth(11), BenchOptions(speed=SPEED, seed=11, axes=3, lossless=True)) as bench:
-        seq, table, imu = sequencer(bench, config, new_writer(tmp_path / "cap"), Hands(bench, speed=SPEED))
-        seq.table = late = LateCommand(table, bench)
-        try:
-            seq.run(plan.steps)
-        finally:
-            table.stop()
-            table.close()
-            imu.close()
-    assert late.sent is not None
-    return late
+    made = []
+    run_ramp(tmp_path, kind, lambda table, bench: made.append(LateCommand(table, bench)) or made[-1],
+             rate_dps=rate, rotation_s=ROTATION_S)
+    assert made[0].sent is not None
+    return made[0]
 
 
 @pytest.mark.parametrize("kind", ["start", "end"])

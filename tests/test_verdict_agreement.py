@@ -19,6 +19,8 @@ reduced chi2 here: far from the threshold's 0.1 between the neighbouring cases.
 import numpy as np
 import pytest
 
+import simhelpers
+
 from sim_devices.truth import default_truth
 from station.diagnose import pipeline
 from station.diagnose.core import chi2_sf
@@ -27,20 +29,8 @@ from station.estimate.verdict import P_FAIL, judge
 from station.io.scheme import scheme_from_text
 from station.simulate.dryrun import simulate_capture
 
-TINY = """\
-name: tiny12
-defaults: {dwell_s: 2.0, rate_dps: 180.0, rotation_s: 2.0}
-segments:
-  - {static: pos01, up_body: [1, 0, 0]}
-  - {static: pos02, up_body: [-1, 0, 0]}
-  - {static: pos03, up_body: [0, 1, 0]}
-  - {static: pos04, up_body: [0, -1, 0]}
-  - {static: pos05, up_body: [0, 0, 1]}
-  - {static: pos06, up_body: [0, 0, -1]}
-  - {rotation: rotx, axis_body: [1, 0, 0]}
-  - {rotation: roty, axis_body: [0, 1, 0]}
-  - {rotation: rotz, axis_body: [0, 0, 1]}
-"""
+TINY = ("name: tiny12\ndefaults: {dwell_s: 2.0, rate_dps: 180.0, rotation_s: 2.0}\nsegments:\n"
+        + "".join(simhelpers.NINE_STATICS.splitlines(keepends=True)[:6]) + simhelpers.THREE_ROTATIONS)
 
 
 def capture_with(g_dph_per_g: float):
