@@ -123,8 +123,8 @@ def test_summaries_stream_one_segment_at_a_time_and_match_loaded_samples(optimal
     lazy_capture = read_capture(optimal9_run, load_data=False)
     held = []          # segments holding samples whenever a file is read: one at a time
     real_read = lazy_capture.read_samples
-    lazy_capture.read_samples = lambda seg: (held.append(sum(s.data is not None for s in lazy_capture.segments)),
-                                             real_read(seg))[1]
+    lazy_capture.read_samples = lambda seg, **kw: (held.append(sum(s.data is not None for s in lazy_capture.segments)),
+                                                   real_read(seg, **kw))[1]
     lazy = summaries.summarise(lazy_capture)
     assert held == [0] * len(held) and len(held) > 0
     files = [seg.file for seg in lazy_capture.complete() if seg.kind in ("static", "rotation")]

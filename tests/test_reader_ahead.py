@@ -2,6 +2,7 @@
 ReaderAhead): the same samples as reading in turn, errors at their segment's turn and in the
 segments' order, no reading thread left behind."""
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -48,8 +49,8 @@ def test_a_read_that_fails_ahead_raises_at_its_segments_turn(tmp_path):
 
 def test_summaries_raise_the_first_segments_error_first(tmp_path):
     """The check of the first segment refuses: its error is raised, not the broken second one's
-    (whose file is read only once the first segment has passed its check); when the first passes,
-    the second one's error is raised at its turn.  No reading thread is left either way."""
+    (whose file may be read ahead meanwhile: its error is kept for its turn); when the first
+    passes, the second one's error is raised at its turn.  No reading thread is left either way."""
     manifest = base_manifest()
     manifest["segments"].insert(1, {"name": "pos02", "kind": "static", "file": "pos02.csv",
                                     "status": "complete", "up_body": [0, 0, -1]})
@@ -86,3 +87,71 @@ def test_summarise_runs_on_a_thread_that_is_not_the_main_one(optimal9_run):
                 np.testing.assert_array_equal(value, getattr(b, name))
     np.testing.assert_array_equal(here.gyro_sigma, there.gyro_sigma)
     assert len(here.rotations) == len(there.rotations) > 0
+
+
+def _gappy(t0):
+    """Five rows at 100 Hz with a jump of 0.5 s after the second: one gap in time."""
+    text = csv_text(5, t0=t0).splitlines()
+    header, body = text[0], text[1:]
+    shifted = [line if k < 2 else ",".join([f"{float(line.split(',')[0]) + 0.5:.10g}"] + line.split(",")[1:])
+               for k, line in enumerate(body)]
+    return "\n".join([header] + shifted) + "\n"
+
+
+def test_warnings_come_in_the_segments_order_whichever_file_is_read_first(tmp_path, monkeypatch):
+    """Two files are read at once: the first segment's read is made slow, so the second one's
+    ends first; its warning (a gap in time) still comes after the first one's, when it is taken."""
+    from station.io import capture as capture_module
+
+    manifest = base_manifest()
+    manifest["segments"] = [{"name": f"pos0{k}", "kind": "static", "file": f"pos0{k}.csv", "status": "complete",
+                             "up_body": [0, 0, 1]} for k in range(1, 5)]
+    directory = make_bundle(tmp_path, manifest, files={f"pos0{k}.csv": _gappy(k) for k in range(1, 5)})
+    monkeypatch.setattr(capture_module, "read_ahead_threads", lambda: 2)
+    real = capture_module._read_segment_data
+    finished = []
+
+    def slow_first(capture, segment, label, *args, **kwargs):
+        if segment.name == "pos01":
+            time.sleep(0.3)
+        data = real(capture, segment, label, *args, **kwargs)
+        finished.append(segment.name)
+        return data
+
+    monkeypatch.setattr(capture_module, "_read_segment_data", slow_first)
+    capture = read_capture(directory, load_data=False)
+    with capture.reader_ahead(capture.segments) as reader:
+        for seg in capture.segments:
+            reader.take(seg)
+            reader.ahead()
+    assert finished[0] != "pos01"           # the second file's read did end first
+    gaps = [w.split(":")[0] for w in capture.warnings if "gaps in time" in w]
+    assert gaps == [f"segments[{k}] (pos0{k + 1})" for k in range(4)]
+    assert not reading_threads()
+
+
+def test_files_are_read_ahead_within_the_byte_limit(tmp_path, monkeypatch):
+    """With a limit of no bytes only the next file is read ahead; with room for them, every file
+    of the list is handed to the reading threads at the first take."""
+    from station.io import capture as capture_module
+
+    manifest = base_manifest()
+    manifest["segments"] = [{"name": f"pos0{k}", "kind": "static", "file": f"pos0{k}.csv", "status": "complete",
+                             "up_body": [0, 0, 1]} for k in range(1, 6)]
+    directory = make_bundle(tmp_path, manifest, files={f"pos0{k}.csv": csv_text(t0=k) for k in range(1, 6)})
+    real = capture_module._read_segment_data
+    for limit, most in ((0, 1), (10**6, 5)):
+        begun = []
+        monkeypatch.setattr(capture_module, "READ_AHEAD_BYTES", limit)
+        monkeypatch.setattr(capture_module, "_read_segment_data",
+                            lambda capture, segment, *a, **k: begun.append(segment.name) or real(capture, segment, *a, **k))
+        capture = read_capture(directory, load_data=False)
+        with capture.reader_ahead(capture.segments) as reader:
+            reader.take(capture.segments[0])
+            # the files handed out by the first take: read, or being read, by now
+            time.sleep(0.2)
+            assert len(begun) == most, (limit, begun)
+            for seg in capture.segments[1:]:
+                reader.ahead()
+                reader.take(seg)
+        assert sorted(begun) == [f"pos0{k}" for k in range(1, 6)]

@@ -163,14 +163,16 @@ class Capture:
     # segment's file when asked (once: read as bytes, hashed and parsed in one pass), so a caller
     # that summarises one segment at a time never holds more than one segment's samples.
 
-    def read_samples(self, segment) -> SegmentData | None:
+    def read_samples(self, segment, warnings: list | None = None) -> SegmentData | None:
         """The samples of ``segment``: segment.data when loaded, else read from its file now and
         not kept (each call reads the file again).  Refuses (CaptureError) a complete segment
         whose file does not follow the format or whose sha256 does not match; None for an
-        incomplete one without readable rows (segment.problem and warnings say why)."""
+        incomplete one without readable rows (segment.problem and warnings say why).  What it
+        warns of goes to capture.warnings, or to ``warnings`` when given (a reading thread's: the
+        caller adds them in the segments' order)."""
         if segment.data is not None:
             return segment.data
-        return _read_segment_data(self, segment, self._label(segment))
+        return _read_segment_data(self, segment, self._label(segment), warnings=warnings)
 
     def check_incomplete(self, segment) -> None:
         """Read an incomplete segment's file for what reading it says (its readable rows, what
@@ -228,90 +230,122 @@ class Capture:
 
 
 class ReaderAhead:
-    """The samples of a list of segments, taken in their order, with the next segment's file read
-    (Capture.read_samples: read, hashed, parsed, checked) on another thread while the caller works
-    on the current segment's samples: the CSV engine and sha256 on one core, the caller's numpy
-    work on the other.  At most two segments' samples exist at once: the one taken and the one
-    being read.  A read that fails raises its error when that segment is taken, so errors come in
-    the segments' order, as without reading ahead.  Loaded segments (seg.data) are given as they
-    are; nothing is stored in seg.data.
+    """The samples of a list of segments, taken in their order, with the next segments' files read
+    (Capture.read_samples: read, hashed, parsed, checked) on reading threads while the caller works
+    on the current segment's samples.  Up to READ_AHEAD_THREADS threads read one file each at once
+    (the CSV engine and sha256 release the GIL: two files parse on two cores), and the list is read
+    ahead by up to READ_AHEAD_BYTES of files (always the next one, however long): at most that much
+    more than the segment taken exists at once.  A read that fails raises its error when that
+    segment is taken, so errors come in the segments' order, as without reading ahead; warnings
+    (gaps in time) are added to capture.warnings in the segments' order too, when each is taken.
+    Loaded segments (seg.data) are given as they are; nothing is stored in seg.data.
 
-    One reading thread serves every segment of the list (started at the first ``ahead()``, ended
-    by ``close()``), not one thread started per file (issue 27: no change measurable in a whole
-    100 Hz estimate, within the noise of interleaved pairs; the simpler of the two)."""
+    The first ``take`` of a segment not read yet sets the reading going (that segment and the next
+    ones) and waits for its own file.  Why several files at once (issue 27, seventeenth session):
+    with one file read ahead the caller's numpy work and the reading thread's handed the GIL to
+    each other at every call, and the reading was the slower of the two: the 100 Hz optimal9
+    estimate's summaries took 200-240 ms of wall for ~70 ms of the caller's own CPU
+    (docs/performance.md)."""
 
     def __init__(self, capture, segments):
+        import collections
+
         self._capture = capture
         self._segments = list(segments)
         self._next = 0              # index of the next segment to take
-        self._pending = None        # (segment, done event, box) of the read under way
-        self._thread = None         # the reading thread, once started
-        self._work = None           # its queue: (segment, event, box), None to end
+        self._queued = 0            # index of the next segment to hand to the readers
+        self._pending = collections.deque()     # (segment, done event, box, file bytes), in order
+        self._pending_bytes = 0
+        self._threads = []          # the reading threads, once started
+        self._work = None           # their queue: (segment, event, box), None to end one
+        self._closing = False       # set by close(): jobs not begun are dropped
 
     def take(self, segment) -> SegmentData | None:
-        """The samples of ``segment``, the next one in the list (read now unless read ahead)."""
+        """The samples of ``segment``, the next one in the list."""
         if self._next >= len(self._segments) or self._segments[self._next] is not segment:
             raise ValueError(f"segment {segment.name!r} is not the next one to take")
+        if not self._pending and segment.data is None:
+            self.ahead()                    # this one and the next ones, on the reading threads
         self._next += 1
-        if self._pending is None:
+        if not self._pending or self._pending[0][0] is not segment:
+            self._queued = max(self._queued, self._next)
             return self._capture.read_samples(segment)
-        _, done, box = self._pending      # ahead() reads only the next segment: this one
+        _, done, box, size = self._pending[0]
         done.wait()
-        self._pending = None                # after the wait: an interrupted wait leaves it to close()
+        self._pending.popleft()             # after the wait: an interrupted wait leaves it to close()
+        self._pending_bytes -= size
+        for message in box.get("warnings", ()):
+            _warn(self._capture, message)
         if "error" in box:
             raise box["error"]
         return box["data"]
 
     def ahead(self):
-        """Have the next segment's file read on the reading thread (nothing if it is loaded, or
-        if there is none or a read is under way)."""
-        if self._pending is not None or self._next >= len(self._segments):
-            return
-        segment = self._segments[self._next]
-        if segment.data is not None:
-            return
-        if self._thread is None:
-            import queue
+        """Have the next segments' files read on the reading threads: the next one, and those
+        after it while the files handed out and not taken stay within READ_AHEAD_BYTES (nothing
+        past a loaded segment; nothing when the list is read)."""
+        self._queued = max(self._queued, self._next)
+        while self._queued < len(self._segments) and not self._closing:
+            segment = self._segments[self._queued]
+            if segment.data is not None:
+                return
+            try:
+                size = os.stat(self._capture.path / segment.file).st_size
+            except (OSError, TypeError, ValueError):
+                size = 0                    # the read says what is wrong with it
+            if self._pending and self._pending_bytes + size > READ_AHEAD_BYTES:
+                return
+            if not self._threads:
+                import queue
 
-            self._work = queue.SimpleQueue()
-            self._thread = threading.Thread(target=self._serve, args=(self._capture, self._work),
-                                            name="capture-read-ahead", daemon=True)
-            self._thread.start()
-        box, done = {}, threading.Event()
-        self._work.put((segment, done, box))
-        self._pending = (segment, done, box)
+                self._work = queue.SimpleQueue()
+                for _ in range(read_ahead_threads()):
+                    thread = threading.Thread(target=self._serve, args=(self._capture, self._work),
+                                              name="capture-read-ahead", daemon=True)
+                    thread.start()
+                    self._threads.append(thread)
+            box, done = {"warnings": []}, threading.Event()
+            self._work.put((segment, done, box))
+            self._pending.append((segment, done, box, size))
+            self._pending_bytes += size
+            self._queued += 1
 
-    @staticmethod
-    def _serve(capture, work):
-        """The reading thread: each segment asked for read in turn, until None."""
+    def _serve(self, capture, work):
+        """A reading thread: each segment asked for read in turn, until None."""
         while True:
             job = work.get()
             if job is None:
                 return
             segment, done, box = job
             try:
-                box["data"] = capture.read_samples(segment)
+                if self._closing:
+                    box["error"] = RuntimeError("not read: the reader was closed")
+                else:
+                    box["data"] = capture.read_samples(segment, warnings=box["warnings"])
             except BaseException as e:  # noqa: BLE001 - handed to the caller by take()
                 box["error"] = e
             finally:
                 done.set()
 
     def close(self, wait: bool = True):
-        """Wait for a read under way (its result is dropped) and end the reading thread; with
-        ``wait`` False (Ctrl-C) the thread is told to end after the read under way and left to
-        it (a daemon: it ends with the process), so that an interrupted command ends at once
-        rather than after the file being read."""
-        if self._thread is not None:
+        """Drop the reads not begun, wait for those under way (their results are dropped) and end
+        the reading threads; with ``wait`` False (Ctrl-C) the threads are told to end after the
+        reads under way and left to them (daemons: they end with the process), so that an
+        interrupted command ends at once rather than after the files being read."""
+        self._closing = True
+        for _ in self._threads:
             self._work.put(None)
         if not wait:
-            self._pending = self._thread = None
+            self._pending.clear()
+            self._threads = []
             return
-        if self._pending is not None:
-            self._pending[1].wait()
-            self._pending = None
-        if self._thread is not None:
-            self._thread.join()
-            self._thread = None
+        for _, done, _, _ in self._pending:
+            done.wait()
+        self._pending.clear()
+        self._pending_bytes = 0
+        for thread in self._threads:
+            thread.join()
+        self._threads = []
 
     def __enter__(self):
         return self
@@ -678,13 +712,20 @@ def _parse_segment(entry, index, directory, manifest_file):
     return segment
 
 
-def _read_segment_data(capture, segment, label, keep=True):
+def _read_segment_data(capture, segment, label, keep=True, warnings: list | None = None):
     """A segment's samples from its file, refusing (complete) or describing (incomplete).
 
     The file is read once as bytes; those bytes are hashed (segment.content_sha256, checked
     against the manifest's sha256) and parsed (read_csv_pieces).  Warnings (gaps, what an
     incomplete segment lacks) are added to capture.warnings once, however often it is read.
-    ``keep`` False (an incomplete segment only): its rows counted, not kept; None returned."""
+    ``keep`` False (an incomplete segment only): its rows counted, not kept; None returned.
+    ``warnings``: a list for the warnings instead of capture.warnings."""
+    def warn(message):
+        if warnings is None:
+            _warn(capture, message)
+        else:
+            warnings.append(message)
+
     csv_file = capture.path / segment.file
     complete = segment.status != "incomplete"     # "excluded" (estimate) was complete
     rate = capture.imu.sample_rate_hz
@@ -728,17 +769,17 @@ def _read_segment_data(capture, segment, label, keep=True):
                                                                             incomplete=True, keep=keep)
         except OSError as e:
             segment.problem = f"cannot read {segment.file}: {e.strerror}"
-            _warn(capture, f"{label}: incomplete, no data: {segment.problem}")
+            warn(f"{label}: incomplete, no data: {segment.problem}")
             return None
         if segment.problem is None and expected_sha is not None \
                 and segment.content_sha256 != expected_sha.lower():
             segment.problem = sha_problem
         rows = 0 if data is None else data.rows
         problem = f": {segment.problem}" if segment.problem else ""
-        _warn(capture, f"{label}: incomplete, {rows} readable rows{problem}")
+        warn(f"{label}: incomplete, {rows} readable rows{problem}")
 
     if data is not None and data.gaps:
-        _warn(capture, f"{label}: {data.gaps} gaps in time in {segment.file} "
+        warn(f"{label}: {data.gaps} gaps in time in {segment.file} "
                        f"(steps longer than {GAP_FACTOR} periods where the stamps jump: lost samples)")
     return data if keep else None
 
@@ -1041,6 +1082,16 @@ def _parse_header(header, fail):
         raise fail(f"missing required column(s) {', '.join(map(repr, missing))} in the header", 1)
     wanted = list(REQUIRED_COLUMNS) + (["temp"] if "temp" in names else [])
     return names, wanted, [names.index(n) for n in wanted]
+
+
+# Reading ahead (ReaderAhead): files read at once, and how far ahead of the segment taken the
+# files handed to the reading threads may reach (the next one is always read, however long)
+READ_AHEAD_BYTES = 64 * 2**20
+
+
+def read_ahead_threads() -> int:
+    """Files read at once by a ReaderAhead: two where there are two cores (one file each), else one."""
+    return 2 if (os.cpu_count() or 1) >= 2 else 1
 
 
 PIECE_BYTES = 8 * 2**20   # a segment file is read, hashed and parsed this many bytes at a time
