@@ -155,3 +155,57 @@ def test_files_are_read_ahead_within_the_byte_limit(tmp_path, monkeypatch):
                 reader.ahead()
                 reader.take(seg)
         assert sorted(begun) == [f"pos0{k}" for k in range(1, 6)]
+
+
+def test_ctrl_c_before_the_summaries_take_the_early_reader_leaves_its_reads_at_once(optimal9_run, monkeypatch):
+    """estimate_capture starts reading the files before it imports the summaries: Ctrl-C there
+    (before the summaries take the reader over) ends it at once, the reads under way left to
+    their threads, not waited for."""
+    import station.estimate as estimate
+    from station.io import capture as capture_module
+
+    release = threading.Event()
+    real = capture_module.read_csv_pieces
+
+    def held(*args, **kwargs):
+        if threading.current_thread() is not threading.main_thread():
+            release.wait(60)
+        return real(*args, **kwargs)
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(capture_module, "read_csv_pieces", held)
+    monkeypatch.setattr(estimate, "summarise_while_importing", interrupted)
+    started = time.monotonic()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            estimate.estimate_capture(optimal9_run)
+        assert time.monotonic() - started < 20
+    finally:
+        release.set()
+    for thread in reading_threads():
+        thread.join(30)
+    assert not reading_threads()
+
+
+def test_a_reader_started_early_is_taken_over_by_the_same_list_and_closed_by_another(tmp_path, monkeypatch):
+    from station.io import capture as capture_module
+
+    real = capture_module._read_segment_data
+    begun = []
+    monkeypatch.setattr(capture_module, "_read_segment_data",
+                        lambda capture, segment, *a, **k: begun.append(segment.name) or real(capture, segment, *a, **k))
+    capture = read_capture(make_bundle(tmp_path), load_data=False)
+    capture.read_ahead(capture.summary_order())
+    with capture.reader_ahead(capture.summary_order()) as reader:
+        taken = [reader.take(seg) for seg in capture.summary_order()]
+    assert begun == ["pos01", "rot1p"] and all(d is not None for d in taken)     # each file read once
+    capture.read_ahead(capture.summary_order())
+    with capture.reader_ahead(capture.summary_order()[1:]) as reader:      # another list: read anew
+        assert reader.take(capture.segments[1]) is not None
+    # the early reader's reads begun before it was closed (none, one or both), then rot1p anew
+    assert begun[-1] == "rot1p" and sorted(begun[2:-1]) in ([], ["pos01"], ["rot1p"], ["pos01", "rot1p"])
+    capture.read_ahead(capture.summary_order())
+    capture.stop_reading_ahead()
+    assert not reading_threads()

@@ -297,8 +297,19 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
 
         # in this process: the fit's modules (~7 ms) are too little to overlap with a forked reader,
         # which cost more (the 100 Hz optimal9 capture: 0.95 x the CPU read here, interleaved pairs;
-        # docs/performance.md, the fifteenth session)
-        summarise_while_importing(capture, check_segment, notes, fork=False)
+        # docs/performance.md, the fifteenth session); the files are read from here on, on reading
+        # threads, while the summaries' modules are imported (issue 27, seventeenth session)
+        from station.io.capture import is_small
+
+        if not is_small(capture):
+            capture.read_ahead(capture.summary_order(every=True))
+        try:
+            summarise_while_importing(capture, check_segment, notes, fork=False)
+        except KeyboardInterrupt:
+            capture.stop_reading_ahead(wait=False)      # at once: not after the files being read
+            raise
+        finally:
+            capture.stop_reading_ahead()
         excluded = [notes[seg.name] for seg in capture.segments if seg.name in notes]
     else:
         capture.load_samples()

@@ -553,9 +553,7 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
     # statics first (the rotation summaries use their noise and gyro bias), then the rotations,
     # then the segments estimation does not use (only checked); each file is read while the
     # previous segment is summarised (ReaderAhead)
-    queue = capture.complete("static") + capture.complete("rotation")
-    if check_segment is not None:
-        queue += [seg for seg in capture.complete() if seg.kind not in ("static", "rotation")]
+    queue = capture.summary_order(every=check_segment is not None)
     with capture.reader_ahead(queue) as reader:
         for seg in queue:
             if seg.kind != "static" and gyro_sigma is None:

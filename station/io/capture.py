@@ -217,8 +217,41 @@ class Capture:
     def reader_ahead(self, segments):
         """A ReaderAhead over ``segments``: ``with capture.reader_ahead(segs) as reader:`` then,
         for each segment in order, ``reader.take(seg)`` for its samples and ``reader.ahead()`` to
-        read the next one's file on another thread while working on the current one."""
+        read the next ones' files on other threads while working on the current one.  The reader
+        :meth:`read_ahead` started for the same list (the same segments, in order) is that one,
+        its files already under way; one started for another list is closed."""
+        early = self.__dict__.pop("_early_reader", None)
+        if early is not None:
+            if early.segments_are(segments):
+                return early
+            early.close()
         return ReaderAhead(self, segments)
+
+    def read_ahead(self, segments) -> None:
+        """Start reading ``segments``' files now, on reading threads, for the next
+        ``reader_ahead(segments)`` (which takes the reader over), while this thread does other
+        work first (imports: the CSV engine's parse releases the GIL).  :meth:`stop_reading_ahead`
+        ends it if no reader_ahead takes it over."""
+        self.stop_reading_ahead()
+        reader = ReaderAhead(self, segments)
+        reader.ahead()
+        self._early_reader = reader
+
+    def stop_reading_ahead(self, wait: bool = True) -> None:
+        """Close the reader :meth:`read_ahead` started, unless reader_ahead took it over (``wait``
+        False: Ctrl-C, the reads under way left to their threads: ReaderAhead.close)."""
+        early = self.__dict__.pop("_early_reader", None)
+        if early is not None:
+            early.close(wait=wait)
+
+    def summary_order(self, every: bool = False) -> list:
+        """The complete segments in the order a summary takes them: the statics first (the
+        rotation summaries use their noise and gyro bias), then the rotations, then (``every``)
+        the other complete segments (checked only)."""
+        order = self.complete("static") + self.complete("rotation")
+        if every:
+            order += [seg for seg in self.complete() if seg.kind not in ("static", "rotation")]
+        return order
 
     def segment(self, name):
         """The segment called `name`; UserError if there is none."""
@@ -259,6 +292,12 @@ class ReaderAhead:
         self._threads = []          # the reading threads, once started
         self._work = None           # their queue: (segment, event, box), None to end one
         self._closing = False       # set by close(): jobs not begun are dropped
+
+    def segments_are(self, segments) -> bool:
+        """Whether ``segments`` is this reader's list (the same objects, in order) and none taken."""
+        segments = list(segments)
+        return (self._next == 0 and len(segments) == len(self._segments)
+                and all(a is b for a, b in zip(segments, self._segments)))
 
     def take(self, segment) -> SegmentData | None:
         """The samples of ``segment``, the next one in the list."""
