@@ -708,7 +708,7 @@ def montecarlo(scheme: str = "optimal9", runs: int = 100, *, seed: int = 1000, a
                             table_angle_arcsec=table_angle_arcsec, accel_disturbance_ug=accel_disturbance_ug,
                             method=method, effects=_mc.effect_settings(instances),
                             chamber=cfg.chamber if plan.chamber_steps else None,
-                            ramp_accel_dps2=table_ramp_accel(cfg.table))
+                            ramp_accel_dps2=table_ramp_accel(cfg.table), warmup=cfg.warmup)
     result = _mc.study(plan, settings, runs, first_seed=seed, bound=True, progress=progress, executor=executor,
                        workers=workers)
     errors, sigmas = result.errors, result.sigmas
