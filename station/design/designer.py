@@ -570,6 +570,15 @@ def _design(config, effects: list, noise: Noise, budget_s: float, criterion: str
               "predicted 1-sigma (the estimator's fit of this scheme's noiseless capture):"]
     for n, u, s, r in zip(prediction.names, prediction.units, prediction.sigma, prediction.revealed):
         header.append(f"  {n}: {s:.4g} {u}" + ("" if r else " (not revealed)"))
+    from station.simulate.dryrun import warmup_seconds
+
+    warm_s = warmup_seconds(config.warmup, quiet_truth(noise, config).temperature)
+    if warm_s > 0:
+        # the timeline, the predictions (the built-ins' too), the verification, station run --sim and
+        # station montecarlo with this configuration record after the warm-up (seventeenth session)
+        notes.append(f"warm-up ({config.source}): every scheme predicted as recorded after it, the simulated IMU "
+                     f"powered on {warm_s:.0f} s before the first segment (station run --sim and station montecarlo "
+                     "wait for it too, given the same --config)")
     if config.chamber is not None:
         sets = [s.chamber_c for s in specs if s.chamber_c is not None]
         c = config.chamber
