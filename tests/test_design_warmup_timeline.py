@@ -134,3 +134,21 @@ def test_a_warm_up_until_the_temperature_settles_lasts_as_the_sequencers_rule_sa
     assert dryrun.warmup_seconds(replace(w, temp_slope_c_per_h=1e-9, max_s=900.0), temperature) == 900.0
     assert dryrun.warmup_seconds(WarmupConfig(duration_s=42.0), temperature) == 42.0
     assert dryrun.warmup_seconds(None, temperature) == 0.0
+
+
+def test_a_warm_up_longer_than_the_dry_run_simulates_is_one_line_exit_2(tmp_path, capsys):
+    """A configured warm-up the dry run cannot wait (over a week of readings a second: warmup.csv
+    alone would be millions of rows) is refused in one line, exit status 2, nothing written; a
+    slope rule the simulated IMU does not meet within the week (max_s longer) likewise."""
+    from station.cli.app import main
+    from station.core.errors import UserError
+
+    config = tmp_path / "long.yaml"
+    config.write_text("warmup:\n  duration_s: 1000000000\n")
+    assert main(["run", "--scheme", "sizeeffect", "--sim", "--config", str(config), "--out", str(tmp_path / "cap")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "warmup.duration_s" in err and "a week" in err, err
+    assert not (tmp_path / "cap").exists()
+    slope = WarmupConfig(temp_slope_c_per_h=1e-12, max_s=1e9, window_s=300.0)
+    with pytest.raises(UserError, match="still above temp_slope_c_per_h"):
+        dryrun.warmup_seconds(slope, type("Flat", (), {"at": staticmethod(lambda t: 25.0 + 1e-3 * np.asarray(t))})())

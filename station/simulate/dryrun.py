@@ -5,6 +5,7 @@ Only this module (and only when the user asks for simulation) imports ``sim_devi
 from __future__ import annotations
 
 import copy
+import math
 from pathlib import Path
 from typing import Callable, Iterator
 
@@ -43,6 +44,7 @@ MAX_SIMULATED_SAMPLES = 5_000_000   # per segment: the simulator holds a segment
 
 
 WARMUP_READ_S = 1.0       # the station reads the IMU's temperature this often during a warm-up (sequencer)
+MAX_SIMULATED_WARMUP_S = 7 * 86400.0     # a longer configured warm-up is refused by the dry run (one line)
 
 
 def warmup_seconds(warmup, temperature) -> float:
@@ -56,18 +58,26 @@ def warmup_seconds(warmup, temperature) -> float:
     if warmup is None:
         return 0.0
     least = max(0.0, float(warmup.duration_s))
+    if least > MAX_SIMULATED_WARMUP_S:
+        raise UserError(f"warmup.duration_s: {least:g} s is longer than a dry run simulates a warm-up "
+                        f"({MAX_SIMULATED_WARMUP_S:g} s, a week)")
     if warmup.temp_slope_c_per_h is None:
         return least
     from station.core.chamber import SlopeSettle
 
     rule = SlopeSettle(float(warmup.temp_slope_c_per_h) / 60.0, float(warmup.window_s))
-    most = float(warmup.max_s) if warmup.max_s is not None else max(least, 0.0) + 24 * 3600.0
-    t = np.arange(WARMUP_READ_S, max(least, most) + WARMUP_READ_S, WARMUP_READ_S)
-    for ti, Ti in zip(t, temperature.at(t)):
-        rule.feed(ti, Ti)
-        if ti >= least and (rule.settled or ti >= most):
-            return float(ti)
-    return float(t[-1])
+    most = max(least, float(warmup.max_s)) if warmup.max_s is not None else math.inf
+    start = WARMUP_READ_S
+    while start <= MAX_SIMULATED_WARMUP_S:         # (an hour of readings at a time)
+        t = start + WARMUP_READ_S * np.arange(3600)
+        for ti, Ti in zip(t, temperature.at(t)):
+            rule.feed(ti, Ti)
+            if ti >= least and (rule.settled or ti >= most):
+                return float(ti)
+        start = float(t[-1]) + WARMUP_READ_S
+    raise UserError(f"warmup: the simulated IMU's temperature slope is still above temp_slope_c_per_h "
+                    f"({warmup.temp_slope_c_per_h:g} C/h) after {MAX_SIMULATED_WARMUP_S:g} s (a week), and max_s "
+                    f"({most:g} s) is longer: a dry run simulates a warm-up of at most a week")
 
 
 def _bench(scheme: Scheme, truth, seed: int, start_s: float = 0.0, chamber=None, ramp_accel_dps2=None,
