@@ -145,7 +145,8 @@ def test_a_warm_up_longer_than_the_dry_run_simulates_is_one_line_exit_2(tmp_path
 
     config = tmp_path / "long.yaml"
     config.write_text("warmup:\n  duration_s: 1000000000\n")
-    assert main(["run", "--scheme", "sizeeffect", "--sim", "--config", str(config), "--out", str(tmp_path / "cap")]) == 2
+    out = tmp_path / "cap"
+    assert main(["run", "--scheme", "sizeeffect", "--sim", "--config", str(config), "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "warmup.duration_s" in err and "a week" in err, err
     assert not (tmp_path / "cap").exists()
