@@ -698,7 +698,7 @@ def montecarlo(scheme: str = "optimal9", runs: int = 100, *, seed: int = 1000, a
         effects = tuple(e.id for e in instances)
     plan = load_scheme(scheme)
     from station.bench.config import load_config
-    from station.simulate.dryrun import table_ramp_accel
+    from station.simulate.dryrun import table_ramp_accel, warmup_seconds
 
     cfg = load_config(config)
     if executor is not None and not all(e.id in _mc_library() for e in instances):
@@ -708,7 +708,8 @@ def montecarlo(scheme: str = "optimal9", runs: int = 100, *, seed: int = 1000, a
                             table_angle_arcsec=table_angle_arcsec, accel_disturbance_ug=accel_disturbance_ug,
                             method=method, effects=_mc.effect_settings(instances),
                             chamber=cfg.chamber if plan.chamber_steps else None,
-                            ramp_accel_dps2=table_ramp_accel(cfg.table))
+                            ramp_accel_dps2=table_ramp_accel(cfg.table), warmup=cfg.warmup)
+    warmup_seconds(cfg.warmup, _mc.make_truth(settings).temperature)     # (a warm-up it cannot wait: one line)
     result = _mc.study(plan, settings, runs, first_seed=seed, bound=True, progress=progress, executor=executor,
                        workers=workers)
     errors, sigmas = result.errors, result.sigmas

@@ -21,7 +21,7 @@ def test_an_error_far_beyond_the_predicted_sigma_is_a_problem(monkeypatch):
     """The divergence found before (a size-effect design: Monte Carlo spread 701 mm against a
     predicted 0.073 mm): an estimate 2 m off in one noisy run is named, with its seed; the
     other runs' errors within the prediction are not."""
-    def fake(scheme, ids, noise, seed, chamber=None, ramp_accel_dps2=None):
+    def fake(scheme, ids, noise, seed, chamber=None, ramp_accel_dps2=None, warmup=None):
         errors = np.array([5.0, 0.05, -0.04]) if seed != 1002 else np.array([5.0, 2000.0, 0.05])
         return NAMES, errors, np.array([10.0, 0.07, 0.075]), []
     monkeypatch.setattr(designer, "verify_one", fake)
@@ -31,13 +31,13 @@ def test_an_error_far_beyond_the_predicted_sigma_is_a_problem(monkeypatch):
     assert "accel_position_x_y" in v.problems[0] and "seed 1002" in v.problems[0]
     assert v.worst == "accel_position_x_y (seed 1002)" and v.worst_z > 1e4
     # held by its prior in a noisy run (a fit that does not see it) or its own 1σ far off: problems too
-    def blind(scheme, ids, noise, seed, chamber=None, ramp_accel_dps2=None):
+    def blind(scheme, ids, noise, seed, chamber=None, ramp_accel_dps2=None, warmup=None):
         return NAMES, np.array([5.0, 0.05, 0.0]), np.array([10.0, 0.07, 10.0]), \
             ["not revealed by this capture (...): accel_position_y_x"]
     monkeypatch.setattr(designer, "verify_one", blind)
     v = verify(None, effects, Noise(), _prediction(), [1, 2], runs=1)
     assert [p.split()[0] for p in v.problems] == ["accel_position_y_x"] and "not estimated" in v.problems[0]
-    def wide(scheme, ids, noise, seed, chamber=None, ramp_accel_dps2=None):
+    def wide(scheme, ids, noise, seed, chamber=None, ramp_accel_dps2=None, warmup=None):
         return NAMES, np.array([5.0, 0.05, 0.05]), np.array([10.0, 0.2, 0.07]), []
     monkeypatch.setattr(designer, "verify_one", wide)
     v = verify(None, effects, Noise(), _prediction(), [1, 2], runs=1)
@@ -91,7 +91,7 @@ def test_a_kind_the_noisy_runs_refuse_gives_way_to_the_other(monkeypatch):
     shown = []
 
     def refuse_first(scheme, effects, noise, prediction, which, runs=4, first_seed=1000, executor=None, chamber=None,
-                     ramp_accel_dps2=None):
+                     ramp_accel_dps2=None, warmup=None):
         shown.append(scheme)
         problems = ["accel_position_x_y: error 1.11e+03 mm in the noisy run of seed 1000"] if len(shown) == 1 else []
         return designer.Verification(runs, 1e4 if problems else 1.5, "accel_position_x_y (seed 1000)", problems)

@@ -29,6 +29,9 @@ def test_a_configured_warm_up_is_paid_for_within_the_budget():
     steps = [s for s in plan.steps if isinstance(s, WarmUp)]
     assert len(steps) == 1 and steps[0].estimate_s == pytest.approx(WARMUP_S)
     assert d.duration_s == pytest.approx(plan.duration_s) and d.duration_s <= BUDGET_S
+    # and it is said that every scheme is predicted as recorded after it (seventeenth session)
+    assert any(n.startswith("warm-up") and f"powered on {WARMUP_S:.0f} s before the first segment" in n
+               for n in d.notes), d.notes
     # the segments had the budget less the warm-up: the same design without the warm-up in the
     # configuration fills more of the same budget with segments
     segments_s = plan.duration_s - WARMUP_S

@@ -367,7 +367,9 @@ def _cmd_design(args) -> int:
                   f"{v.worst_z:.2f} x the predicted 1σ ({v.worst})", markup=False, soft_wrap=True)
     out.print(f"wrote {out_path} ({len(d.scheme.segments)} segments, {d.scheme.duration_s:.0f} s of recording, "
               f"{d.duration_s:.0f} s compiled): station plan --scheme {out_path}"
-              f"{' --config ' + args.config if args.config else ''}; station run --scheme {out_path} --sim",
+              f"{' --config ' + args.config if args.config else ''}; station run --scheme {out_path} --sim"
+              # (the configuration's warm-up and chamber are in the prediction: the dry run takes them too)
+              f"{' --config ' + args.config if args.config else ''}",
               markup=False, soft_wrap=True)
     return 0
 

@@ -217,7 +217,7 @@ def cmd_run(args) -> int:
         capture = dryrun.record_scheme(
             scheme, truth, args.seed, out_dir,
             progress=lambda name, i, n: status.update(f"recording {name} ({i + 1}/{n})"), geometry=geometry,
-            chamber=config.chamber, ramp_accel_dps2=dryrun.table_ramp_accel(config.table))
+            chamber=config.chamber, ramp_accel_dps2=dryrun.table_ramp_accel(config.table), warmup=config.warmup)
     from station.cli.history import file_quietly
     from station.cli.noise import characterise_run, is_noise_recording
 

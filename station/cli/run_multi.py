@@ -372,7 +372,8 @@ def run_multi_sim(args, config, scheme) -> int:
             capture = dryrun.record_scheme(
                 scheme, truth, seed, directory / folder,
                 progress=lambda name, i, n: status.update(f"IMU {folder}: recording {name} ({i + 1}/{n})"),
-                geometry=geometry, chamber=cfg.chamber, ramp_accel_dps2=dryrun.table_ramp_accel(cfg.table))
+                geometry=geometry, chamber=cfg.chamber, ramp_accel_dps2=dryrun.table_ramp_accel(cfg.table),
+                warmup=cfg.warmup)
         cal, _, provenance = estimate_capture(capture)
         cal_path = write_calfile(capture / "calibration.yaml", cal, provenance)
         file_quietly(cal_path, asked=bool(args.history), simulated=True)

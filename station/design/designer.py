@@ -126,7 +126,7 @@ def predict(scheme: Scheme, effects: list, noise: Noise, config=None, duration_s
     for seed in seeds:
         model, _ = model_of(scheme, effects, noise, truth, None, seed=seed,
                             chamber=config.chamber if config is not None else None, appended=appended,
-                            ramp_accel_dps2=ramp_accel_of(config))
+                            ramp_accel_dps2=ramp_accel_of(config), warmup=config.warmup if config is not None else None)
         result = lsq.fit(model.s, [copy.deepcopy(e) for e in effects])
         names, index, factors, units_ = lsq._reported_index(result, "m/s^2", "deg/s")
         factors, units_ = np.array(factors, float), list(units_)
@@ -156,17 +156,19 @@ class Verification:
 
 
 def verify_one(scheme: Scheme, effects: tuple, noise: Noise, seed: int, chamber=None,
-               ramp_accel_dps2: float | None = None) -> tuple:
+               ramp_accel_dps2: float | None = None, warmup=None) -> tuple:
     """One noisy dry run of ``scheme`` estimated as ``station montecarlo`` estimates it (the same
     function, station.simulate.montecarlo.run_one): (names, errors, the fit's own 1σ, the fit's
     notes), errors and 1σ in the prediction's units (scale factors in ppm).  ``effects``: the
     library's ids, or effect instances where the model has one the library has not (a plugin,
     station/model/unlisted.py: montecarlo.effect_settings).  ``ramp_accel_dps2``: the configured
     table's recorded ramps (information.ramp_accel_of), as the prediction and the dry run take
-    them (before: the dry run's default 50 deg/s^2 whatever the table)."""
+    them (before: the dry run's default 50 deg/s^2 whatever the table).  ``warmup``: the configured
+    warm-up (station.yaml warmup:), waited for before the first segment as the prediction does."""
     from station.simulate import montecarlo
 
-    settings = replace(noise.settings(), effects=tuple(effects), chamber=chamber, ramp_accel_dps2=ramp_accel_dps2)
+    settings = replace(noise.settings(), effects=tuple(effects), chamber=chamber, ramp_accel_dps2=ramp_accel_dps2,
+                       warmup=warmup)
     return montecarlo.run_one(scheme, settings, seed)
 
 
@@ -182,7 +184,7 @@ def _map(executor, fn, items) -> list:
 
 def verify(scheme: Scheme, effects: list, noise: Noise, prediction: Prediction, which,
            runs: int = VERIFY_RUNS, first_seed: int = 1000, executor=None, chamber=None,
-           ramp_accel_dps2: float | None = None) -> Verification:
+           ramp_accel_dps2: float | None = None, warmup=None) -> Verification:
     """Does the estimator deliver the prediction?  ``runs`` noisy dry runs of the designed scheme
     (seeds first_seed, ...: the first runs `station montecarlo` makes) estimated as it does;
     for every criterion parameter ``which`` (the prediction's indices) the error must be within
@@ -196,7 +198,7 @@ def verify(scheme: Scheme, effects: list, noise: Noise, prediction: Prediction, 
     # the library's effects by id (what a Dask worker unpickles without the user's files); a model
     # with another effect by its instances
     ids = effect_settings(effects)
-    results = _map(executor, lambda seed: verify_one(scheme, ids, noise, seed, chamber, ramp_accel_dps2),
+    results = _map(executor, lambda seed: verify_one(scheme, ids, noise, seed, chamber, ramp_accel_dps2, warmup),
                    [first_seed + k for k in range(runs)])
     problems, worst_z, worst = [], 0.0, ""
     for k, (names, errors, sigmas, notes) in enumerate(results):
@@ -518,7 +520,7 @@ def _design(config, effects: list, noise: Noise, budget_s: float, criterion: str
                 say(f"{verify_runs} noisy dry runs of the statics-of-{f[0]}-attitude design through the "
                     "estimator (does it deliver the prediction?)")
                 v = verify(f[2][3], effects, noise, preds[i], f[1].which, verify_runs, executor=executor,
-                           chamber=config.chamber, ramp_accel_dps2=ramp_accel_of(config))
+                           chamber=config.chamber, ramp_accel_dps2=ramp_accel_of(config), warmup=config.warmup)
                 if v.ok or i == order[-1]:
                     k, verification = (i, v) if v.ok else (k, verified.get(k, v))
                     break
@@ -554,7 +556,7 @@ def _design(config, effects: list, noise: Noise, budget_s: float, criterion: str
         t4 = time.perf_counter()
         say(f"{verify_runs} noisy dry runs of the design through the estimator (does it deliver the prediction?)")
         verification = verify(scheme, effects, noise, prediction, which, verify_runs, executor=executor,
-                              chamber=config.chamber, ramp_accel_dps2=ramp_accel_of(config))
+                              chamber=config.chamber, ramp_accel_dps2=ramp_accel_of(config), warmup=config.warmup)
         seconds["verification"] = time.perf_counter() - t4
     header = [f"{name}: designed by `station design` for the {config.table.axes}-axis table of {config.source}",
               f"criterion {crit.text}: {criterion_of(prediction, crit.text):.6g}; compiled time {plan.duration_s:.0f} s "
@@ -568,6 +570,15 @@ def _design(config, effects: list, noise: Noise, budget_s: float, criterion: str
               "predicted 1-sigma (the estimator's fit of this scheme's noiseless capture):"]
     for n, u, s, r in zip(prediction.names, prediction.units, prediction.sigma, prediction.revealed):
         header.append(f"  {n}: {s:.4g} {u}" + ("" if r else " (not revealed)"))
+    from station.simulate.dryrun import warmup_seconds
+
+    warm_s = warmup_seconds(config.warmup, quiet_truth(noise, config).temperature)
+    if warm_s > 0:
+        # the timeline, the predictions (the built-ins' too), the verification, station run --sim and
+        # station montecarlo with this configuration record after the warm-up (seventeenth session)
+        notes.append(f"warm-up ({config.source}): every scheme predicted as recorded after it, the simulated IMU "
+                     f"powered on {warm_s:.0f} s before the first segment (station run --sim and station montecarlo "
+                     "wait for it too, given the same --config)")
     if config.chamber is not None:
         sets = [s.chamber_c for s in specs if s.chamber_c is not None]
         c = config.chamber

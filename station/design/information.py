@@ -85,6 +85,9 @@ class Information:
     temperature: object = None                     # the temperature model T(t) (the simulated bench's)
     clock: tuple = (0.0, 0.0)                      # the dry run's (gap before a segment, sample rate[,
                                                    #   its recorded ramps' acceleration deg/s^2])
+    # the bench's clock when the scheme starts: the configured warm-up's end on the simulated IMU
+    # powered on at 0 (station.simulate.dryrun.warmup_seconds; 0 without a warm-up), s
+    start_s: float = 0.0
     # per candidate key the temperature difference it had in the candidates' own capture (the
     # information before timeline=True: the search's first stage ranks on it, search.Scorer.natural)
     natural_dt: dict = field(default_factory=dict)
@@ -168,7 +171,8 @@ def quiet_truth(noise: Noise, config=None):
 
 
 def model_of(scheme: Scheme, effects: list, noise: Noise, truth, geometry: dict | None = None,
-             attitudes: str = "unknown", seed: int = 0, chamber=None, appended=(), ramp_accel_dps2=None):
+             attitudes: str = "unknown", seed: int = 0, chamber=None, appended=(), ramp_accel_dps2=None,
+             warmup=None):
     """The least-squares model of the noiseless capture of ``scheme`` with the noise stated, as
     station.simulate.montecarlo.cramer_rao weights it: (model, capture).  ``seed``: the simulated
     bench's geometry (each static's heading, each rotation axis' heading and roll: drawn at
@@ -181,7 +185,8 @@ def model_of(scheme: Scheme, effects: list, noise: Noise, truth, geometry: dict 
     from station.estimate.summaries import summarise
     from station.simulate import dryrun
 
-    capture = dryrun.simulate_capture(scheme, truth, seed, geometry, chamber=chamber, ramp_accel_dps2=ramp_accel_dps2)
+    capture = dryrun.simulate_capture(scheme, truth, seed, geometry, chamber=chamber, ramp_accel_dps2=ramp_accel_dps2,
+                                      warmup=warmup)
     sessions = appended if isinstance(appended, dict) else {name: 1 for name in appended}
     for seg in capture.segments:
         if sessions.get(seg.name):
@@ -477,8 +482,13 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
     ``appended``: {segment name: N} of the capture's own segments recorded by its N-th ``run
     --append`` (station design --from on a capture already extended: sequential.capture_sessions),
     so that the capture's chunk has the estimator's axis groups (model_of)."""
+    from station.simulate import dryrun
+
     truth = quiet_truth(noise, config)
     ramp_accel = ramp_accel_of(config)
+    # the configured warm-up (station.yaml warmup:): the candidates' capture and the design's
+    # timeline start at its end on the simulated IMU, as the dry run and station montecarlo record
+    warmup = config.warmup if config is not None else None
     warm = copy.deepcopy(truth.temperature)
     power = None
     if timeline:
@@ -508,7 +518,7 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
             segments = _anchored(segments, owner, len(placed))
         scheme = Scheme("candidates", "", "", {}, tuple(segments), centred=centred, table=True)
         model, _ = model_of(scheme, effects, noise, truth, geometry, attitudes, ramp_accel_dps2=ramp_accel,
-                            appended=appended or ())
+                            appended=appended or (), warmup=warmup)
         shared = _shared_columns(model)
         group_own = _group_offsets(model, owner)
         rename: dict = {}
@@ -567,12 +577,14 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
                 info.temp_power, info.temperature = power, warm
                 info.clock = (float(truth.bench.move_s + truth.bench.settle_s), float(truth.sample_rate_hz),
                               ramp_accel)
+                info.start_s = dryrun.warmup_seconds(warmup, warm)
         info.chunk_parameters.append(list(p_c.names))
         if power is not None:
             from station.design.timeline import seconds_temperatures
 
             temps = seconds_temperatures([[p.duration_s for p in (spec if isinstance(spec, tuple) else (spec,))]
-                                          for _, spec in chunk], info.temperature, info.clock)
+                                          for _, spec in chunk], info.temperature, info.clock,
+                                         start_s=info.start_s)
             ref = np.mean([t for (_, spec), t in zip(chunk, temps) if not isinstance(spec, tuple)])
             for (key, spec), t in zip(chunk, temps):
                 if key[0] != "anchor":

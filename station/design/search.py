@@ -179,11 +179,13 @@ class Scorer:
         info = self.info
         if not chosen:
             shift = self._level_shift()
-            notional = timeline.notional(self.cands, info.temperature, info.clock, budget_s or 3600.0)
+            notional = timeline.notional(self.cands, info.temperature, info.clock, budget_s or 3600.0,
+                                         info.start_s)
             self.set_temperatures({i: d + shift(self.cands[i]) for i, d in notional.items()})
             return True
         placed, reference = timeline.differences(chosen, self.cands, info.temperature, info.clock, masks,
-                                                 self.chamber, with_reference=True, order=self.order)
+                                                 self.chamber, with_reference=True, order=self.order,
+                                                 start_s=info.start_s)
         by_slot, by_axis, statics, rotations = {}, {}, {}, {}
         for i, d in placed.items():
             c = self.cands[i]
@@ -225,7 +227,7 @@ class Scorer:
 
         info = self.info
         dt = timeline.differences(chosen, self.cands, info.temperature, info.clock, chamber=self.chamber,
-                                  sequence=sequence)
+                                  sequence=sequence, start_s=info.start_s)
         G = self.G
         F = np.zeros((G, G))
         groups: dict = {}

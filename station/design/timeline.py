@@ -7,7 +7,10 @@ covers them, within a mounting the statics first, then the rotation pairs.  The 
 simulated bench's, on which the design's prediction and ``station montecarlo`` record the scheme
 (sim_devices/bench.py: before each segment the bench's move and settling gap, then its samples;
 a rotation pair is two segments), and the temperature at a time is the simulated IMU's
-(its warm-up, sim_devices/truth.py TemperatureTruth); a segment's summary carries its mean
+(its warm-up, sim_devices/truth.py TemperatureTruth), from the end of a configured warm-up
+(station.yaml ``warmup:``: the IMU powered on at 0 warms while the station waits, the first
+segment's gap after it, as the dry run waits: station.simulate.dryrun.warmup_seconds; seventeenth
+session); a segment's summary carries its mean
 temperature (station/estimate/summaries.py), here Simpson's rule over its samples' span (the
 warm-up's curvature over a 1000 s dwell: < 1e-3 degC off the mean of its samples).  The effects'
 reference is the estimator's: the mean temperature of the statics.
@@ -108,24 +111,26 @@ def segment_seconds(c, ramp_accel_dps2: float | None = None) -> list:
     return [rev * 360.0 / rate] * 2
 
 
-def mean_temperatures(sequence, cands, temperature, clock, chamber=None) -> np.ndarray:
+def mean_temperatures(sequence, cands, temperature, clock, chamber=None, start_s: float = 0.0) -> np.ndarray:
     """Each candidate's mean temperature (degC) when ``sequence`` (candidate indices, in order)
-    is recorded from the bench clock's start: ``clock`` = (the gap before each segment, s; the
+    is recorded from the bench clock's ``start_s`` (the configured warm-up's end, the IMU powered
+    on at 0: information.Information.start_s): ``clock`` = (the gap before each segment, s; the
     sample rate, Hz); ``temperature.at(t)`` the IMU's temperature at bench time t; ``chamber``
     (station.core.chamber.ChamberConfig) the chamber the candidates' levels set."""
     levels = [level_of(cands[i]) for i in sequence]
     accel = clock[2] if len(clock) > 2 else None        # the recorded ramps' (information.Information.clock)
     return seconds_temperatures([segment_seconds(cands[i], accel) for i in sequence], temperature, clock,
                                 levels if chamber is not None and any(x is not None for x in levels) else None,
-                                chamber)
+                                chamber, start_s)
 
 
-def seconds_temperatures(items, temperature, clock, levels=None, chamber=None) -> np.ndarray:
+def seconds_temperatures(items, temperature, clock, levels=None, chamber=None, start_s: float = 0.0) -> np.ndarray:
     """mean_temperatures of items given as the lengths of their segments, in order (``levels``:
-    each item's chamber level, None: no chamber)."""
+    each item's chamber level, None: no chamber; ``start_s``: the bench's clock at the first
+    item's gap)."""
     gap, fs = clock[:2]
     dt = 1.0 / fs
-    end = 0.0
+    end = float(start_s)
     out = np.zeros(len(items))
     air, setpoint = None, None
     if levels is not None:
@@ -152,28 +157,30 @@ def seconds_temperatures(items, temperature, clock, levels=None, chamber=None) -
 
 
 def differences(chosen, cands, temperature, clock, masks=None, chamber=None, with_reference: bool = False,
-                order=None, sequence=None):
+                order=None, sequence=None, start_s: float = 0.0):
     """Per chosen candidate its temperature less the effects' reference (the mean over the chosen
     statics), in the written order's timeline (``order``: written_order's; ``sequence``: the
-    chosen candidates' sequence itself, as written_order gives it): {index: dT, degC}
-    (``with_reference``: and the reference, degC)."""
+    chosen candidates' sequence itself, as written_order gives it; ``start_s``: the bench's clock
+    when the scheme starts, mean_temperatures): {index: dT, degC} (``with_reference``: and the
+    reference, degC)."""
     if sequence is None:
         sequence = written_order(chosen, cands, masks, chamber, order)
-    temps = mean_temperatures(sequence, cands, temperature, clock, chamber)
+    temps = mean_temperatures(sequence, cands, temperature, clock, chamber, start_s)
     statics = [t for i, t in zip(sequence, temps) if cands[i].kind == "static"]
     reference = float(np.mean(statics)) if statics else float(np.mean(temps)) if len(temps) else 0.0
     out = {i: float(t - reference) for i, t in zip(sequence, temps)}
     return (out, reference) if with_reference else out
 
 
-def notional(cands, temperature, clock, budget_s: float) -> dict:
+def notional(cands, temperature, clock, budget_s: float, start_s: float = 0.0) -> dict:
     """Each candidate's temperature difference before there is a design to place it in: the
     statics in the first third of the budget (the writer lists them first), the rotations in the
-    rest, the reference the statics' mean.  The search then places every candidate on the
-    design's own timeline at each exchange pass (search.Scorer.retime)."""
-    t = np.linspace(0.0, float(budget_s), 301)
+    rest, the reference the statics' mean (the budget from the bench's clock ``start_s``: the
+    warm-up's end).  The search then places every candidate on the design's own timeline at each
+    exchange pass (search.Scorer.retime)."""
+    t = float(start_s) + np.linspace(0.0, float(budget_s), 301)
     T = temperature.at(t)
-    split = t <= budget_s / 3.0
+    split = t <= float(start_s) + budget_s / 3.0
     static_c, rotation_c = float(np.mean(T[split])), float(np.mean(T[~split]))
     return {i: (0.0 if c.kind == "static" else rotation_c - static_c) for i, c in enumerate(cands)}
 

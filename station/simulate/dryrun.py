@@ -5,6 +5,7 @@ Only this module (and only when the user asks for simulation) imports ``sim_devi
 from __future__ import annotations
 
 import copy
+import math
 from pathlib import Path
 from typing import Callable, Iterator
 
@@ -42,8 +43,48 @@ def load_truth(truth_path: str | None, seed: int):
 MAX_SIMULATED_SAMPLES = 5_000_000   # per segment: the simulator holds a segment whole (~1 GB at this)
 
 
-def _bench(scheme: Scheme, truth, seed: int, start_s: float = 0.0, chamber=None, ramp_accel_dps2=None):
-    """The simulated bench for ``scheme`` (its clock from ``start_s``); UserError naming the segment
+WARMUP_READ_S = 1.0       # the station reads the IMU's temperature this often during a warm-up (sequencer)
+MAX_SIMULATED_WARMUP_S = 7 * 86400.0     # a longer configured warm-up is refused by the dry run (one line)
+
+
+def warmup_seconds(warmup, temperature) -> float:
+    """How long the configured ``warmup`` (station.yaml ``warmup:``, station.bench.config.WarmupConfig:
+    duration_s, max_s, temp_slope_c_per_h, window_s; None: none) lasts on the simulated IMU powered
+    on at bench time 0, whose temperature is ``temperature.at(t)`` (sim_devices/truth.py
+    TemperatureTruth): the sequencer's rule (station/bench/sequencer.py ``_warmup``) on readings a
+    second apart -- at least ``duration_s``, then until the least-squares slope over the last
+    ``window_s`` is below ``temp_slope_c_per_h`` or ``max_s`` is reached; without a slope rule
+    ``duration_s`` exactly.  0 without a warm-up."""
+    if warmup is None:
+        return 0.0
+    least = max(0.0, float(warmup.duration_s))
+    if least > MAX_SIMULATED_WARMUP_S:
+        raise UserError(f"warmup.duration_s: {least:g} s is longer than a dry run simulates a warm-up "
+                        f"({MAX_SIMULATED_WARMUP_S:g} s, a week)")
+    if warmup.temp_slope_c_per_h is None:
+        return least
+    from station.core.chamber import SlopeSettle
+
+    rule = SlopeSettle(float(warmup.temp_slope_c_per_h) / 60.0, float(warmup.window_s))
+    most = max(least, float(warmup.max_s)) if warmup.max_s is not None else math.inf
+    start = WARMUP_READ_S
+    while start <= MAX_SIMULATED_WARMUP_S:         # (an hour of readings at a time)
+        t = start + WARMUP_READ_S * np.arange(3600)
+        for ti, Ti in zip(t, temperature.at(t)):
+            rule.feed(ti, Ti)
+            if ti >= least and (rule.settled or ti >= most):
+                return float(ti)
+        start = float(t[-1]) + WARMUP_READ_S
+    raise UserError(f"warmup: the simulated IMU's temperature slope is still above temp_slope_c_per_h "
+                    f"({warmup.temp_slope_c_per_h:g} C/h) after {MAX_SIMULATED_WARMUP_S:g} s (a week), and max_s "
+                    f"({most:g} s) is longer: a dry run simulates a warm-up of at most a week")
+
+
+def _bench(scheme: Scheme, truth, seed: int, start_s: float = 0.0, chamber=None, ramp_accel_dps2=None,
+           warmup=None):
+    """The simulated bench for ``scheme`` (its clock from ``start_s``; ``warmup``: the configured
+    warm-up, station.yaml's, waited for first -- the IMU powered on at ``start_s``, warming as its
+    physics says, the first segment recorded after it: warmup_seconds); UserError naming the segment
     when one gives fewer than 2 samples, or more than the simulator holds at once, or sets a
     temperature chamber that ``chamber`` (station.core.chamber.ChamberConfig) does not provide,
     before anything is simulated or written."""
@@ -51,6 +92,8 @@ def _bench(scheme: Scheme, truth, seed: int, start_s: float = 0.0, chamber=None,
 
     check_chamber(scheme, chamber)
     bench = SimulatedBench(_mounted(truth, scheme), seed, start_s=start_s)
+    bench.station_warmup_s = warmup_seconds(warmup, bench.truth.temperature)
+    bench.wait(bench.station_warmup_s)
     bench.station_chamber = chamber
     bench.station_ramp_accel_dps2 = ramp_accel_dps2        # None: RAMP_ACCEL_DPS2
     rate_hz = bench.sample_rate_hz
@@ -214,12 +257,14 @@ def _headers(bench, seed: int) -> tuple[ImuInfo, Site]:
 
 def record_scheme(scheme: Scheme, truth, seed: int, out_dir: Path,
                   progress: Callable[[str, int, int], None] | None = None, geometry: dict | None = None,
-                  chamber=None, ramp_accel_dps2: float | None = None) -> Path:
+                  chamber=None, ramp_accel_dps2: float | None = None, warmup=None) -> Path:
     """Simulate every segment of ``scheme`` and write the capture bundle to ``out_dir``
     (``geometry``: the table's as stated, _bench_keys; ``chamber``: the configured temperature
     chamber, station.core.chamber.ChamberConfig, needed by a scheme that sets one; ``ramp_accel_dps2``:
-    the recorded ramps' acceleration, table_ramp_accel of the configured table)."""
-    bench = _bench(scheme, truth, seed, chamber=chamber, ramp_accel_dps2=ramp_accel_dps2)
+    the recorded ramps' acceleration, table_ramp_accel of the configured table; ``warmup``: the
+    configured warm-up, station.bench.config.WarmupConfig, waited for before the first segment and
+    its temperatures written to ``warmup.csv`` as the sequencer writes them)."""
+    bench = _bench(scheme, truth, seed, chamber=chamber, ramp_accel_dps2=ramp_accel_dps2, warmup=warmup)
     imu, site = _headers(bench, seed)
     # the manifest written at the start and the end (a dry run is redone, never resumed: a run's
     # writer rewrites it at every segment's start and end, quadratic in the segments), and in the
@@ -229,10 +274,20 @@ def record_scheme(scheme: Scheme, truth, seed: int, out_dir: Path,
                                           "simulation": {"seed": seed, "truth_file": TRUTH_FILE}})
     try:
         writer.write_file(TRUTH_FILE, yaml.safe_dump(truth.to_yaml_dict(), sort_keys=False))
+        if bench.station_warmup_s > 0:
+            writer.write_file("warmup.csv", _warmup_csv(bench))
         _write_segments(writer, scheme, bench, progress)
     finally:
         writer.finish()
     return writer.path
+
+
+def _warmup_csv(bench) -> str:
+    """The warm-up's temperatures as the sequencer writes them (``warmup.csv``: a reading a second,
+    ms and 0.1 mK) for the dry run's bench, which waited ``bench.station_warmup_s`` from power-on."""
+    t = np.arange(WARMUP_READ_S, bench.station_warmup_s + 0.5 * WARMUP_READ_S, WARMUP_READ_S)
+    rows = ["t_s,temp_c"] + [f"{a:.3f},{b:.4f}" for a, b in zip(t, bench.imu_temperature(t))]
+    return "\n".join(rows) + "\n"
 
 
 def _write_segments(writer, scheme: Scheme, bench, progress, setpoint: float | None = None, **extra) -> None:
@@ -344,9 +399,10 @@ def append_scheme(extension: Scheme, text: str, directory: Path,
 
 
 def simulate_capture(scheme: Scheme, truth, seed: int, geometry: dict | None = None, chamber=None,
-                     ramp_accel_dps2: float | None = None) -> Capture:
-    """The capture a dry run would write, kept in memory (for Monte Carlo runs)."""
-    bench = _bench(scheme, truth, seed, chamber=chamber, ramp_accel_dps2=ramp_accel_dps2)
+                     ramp_accel_dps2: float | None = None, warmup=None) -> Capture:
+    """The capture a dry run would write, kept in memory (for Monte Carlo runs; ``warmup``: the
+    configured warm-up, waited for before the first segment, as record_scheme)."""
+    bench = _bench(scheme, truth, seed, chamber=chamber, ramp_accel_dps2=ramp_accel_dps2, warmup=warmup)
     imu, site = _headers(bench, seed)
     segments = []
     for spec, seg, meta in _simulate(scheme, bench):

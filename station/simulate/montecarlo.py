@@ -31,6 +31,9 @@ class Settings:
     # the recorded ramps' acceleration, deg/s^2: the configured table's, as the dry run (station run
     # --sim) takes it (dryrun.table_ramp_accel); None: the dry run's default without a configuration
     ramp_accel_dps2: float | None = None
+    # the configured warm-up (station.yaml warmup:, station.bench.config.WarmupConfig), waited for
+    # before the first segment as the dry run waits for it (dryrun.warmup_seconds); None: none
+    warmup: object = None
 
 
 def make_truth(settings: Settings):
@@ -120,7 +123,7 @@ def run_one(scheme: Scheme, settings: Settings, seed: int) -> tuple:
 
     truth = make_truth(settings)
     capture = dryrun.simulate_capture(scheme, truth, seed, chamber=settings.chamber,
-                                      ramp_accel_dps2=settings.ramp_accel_dps2)
+                                      ramp_accel_dps2=settings.ramp_accel_dps2, warmup=settings.warmup)
     effects = _effects(settings)
     if settings.method == "lsq":
         from station.estimate import lsq
@@ -155,7 +158,7 @@ def cramer_rao(scheme: Scheme, settings: Settings, seed: int = 0) -> np.ndarray:
     quiet.accel.noise_density = quiet.gyro.noise_density = 0.0
     quiet.bench.accel_disturbance_ug = quiet.bench.table_angle_error_arcsec = 0.0
     capture = dryrun.simulate_capture(scheme, quiet, seed, chamber=settings.chamber,
-                                      ramp_accel_dps2=settings.ramp_accel_dps2)
+                                      ramp_accel_dps2=settings.ramp_accel_dps2, warmup=settings.warmup)
     capture.extra["noise_free"] = True          # (no data-fault scan: station/estimate/data_faults.py)
     s = summarise(capture, table_angle_arcsec=settings.table_angle_arcsec)
     fs = s.sample_rate_hz

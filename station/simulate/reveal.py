@@ -49,7 +49,7 @@ def reveals(scheme, config, plan=None, effect_ids=("accel_lever_arm",), seed: in
         scheme = replace(scheme, segments=[replace(spec, axis_elevation_deg=elevation[spec.name])
                                            if spec.name in elevation else spec for spec in scheme.segments])
     capture = dryrun.simulate_capture(scheme, truth, seed, geometry if scheme.table else None,
-                                      chamber=getattr(config, "chamber", None))
+                                      chamber=getattr(config, "chamber", None), warmup=getattr(config, "warmup", None))
     if t.imu_offset_m is not None:
         capture.extra["mounting"] = {"offset_m": [float(x) for x in t.imu_offset_m]}
     for seg in capture.segments:
