@@ -10,11 +10,12 @@ placed on the IMU's clock by the frames around the read: every frame that had re
 computer before the query was measured before the table answered, and every frame measured
 before the answer had reached it when the reader was asked again afterwards (ImuStream.sync), so
 the answer's moment lies between the newest stamp before (``t_before``) and the newest after
-(``t_after``) plus one period; where in that bracket is said in ``placed``.  At the rate, each
-read is carried to the window's edge; their mean is taken (position_at).  What is left of the placement is
-not the encoder's 2": each read's moment is known only within its bracket (tens of ms on the
-twins' pseudo-terminals, 10-80 ms measured), ~ms of it per window at the rate, so the window's
-angle carries an uncertainty of its own (``angle_sigma``), written into the manifest
+(``t_after``) plus one period.  At the rate, the reads' positions give their moments relative
+to one another, so every bracket bounds one common moment (``moment``: their intersection, and
+where in it the host's waits put it); the first read is carried from there to the window's edge
+(position_at).  What is left of the placement is not the encoder's 2": the common moment is known
+only within the brackets (tens of ms on the twins' pseudo-terminals, 10-80 ms measured), so the
+window's angle carries an uncertainty of its own (``angle_sigma``), written into the manifest
 (``angle_sigma_deg``) and added to that rotation's gyro-integral variance by the estimator
 (issue 28 review item 1).  The part of the placement shared by every window is what the
 estimator's time offset measures: on a bench that is the IMU's clock against the table's reads as
@@ -42,8 +43,9 @@ class Mark:
 
 
 def placed(mark: Mark, period_s: float) -> float:
-    """The read's moment on the IMU's clock: the middle of its bracket, ``t_before`` ..
-    ``t_after`` + one period (the answer's moment lies anywhere in it: ``angle_sigma``'s w / sqrt 12).
+    """The read's moment on the IMU's clock taken alone: the middle of its bracket, ``t_before`` ..
+    ``t_after`` + one period (used to restore the whole turns a read lost; the window's angle
+    places every read at once: ``moment``).
     Before (issue 28, fifteenth session), the newest stamp before the query plus half a period,
     because the reader thread answered the second sync only when its block of frames (0.1 s) was
     complete, which made ``t_after`` loose by up to a block (measured at --speed 1: the bracket's
