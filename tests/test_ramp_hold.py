@@ -48,7 +48,8 @@ class Faulty:
 
 def run_ramp(tmp_path, kind, wrap, rate_dps=100.0, rotation_s=3.6):
     """One recorded ramp of ``kind`` ("start"/"end") at ``rate_dps`` on the twins (speed SPEED,
-    ACCEL deg/s^2), through the table driver ``wrap(table, bench)`` returns (a fault, a delay)."""
+    ACCEL deg/s^2), through the table driver ``wrap(table, bench)`` returns (a fault, a delay).
+    Returns the sequencer (its ``console``: what it said)."""
     config = Config(table=TableConfig(axes=3, limits=tuple(
                         AxisConfig(max_rate_dps=300, max_accel_dps2=300, rate_accel_dps2=ACCEL) for _ in range(3))),
                     run=RunConfig(operator=False, settle_s=0.5, max_missing_fraction=0.02, max_gap_s=2.0))
@@ -67,6 +68,7 @@ segments:
             table.stop()
             table.close()
             imu.close()
+    return seq
 
 
 def _run(tmp_path, kind, **fault):

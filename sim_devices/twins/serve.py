@@ -94,6 +94,9 @@ FLIP_MAX_BYTES = 65536
 #: READER_ACTIVE_S: a client that moved the table without reading the IMU saw the axis stand
 #: still and took it for stalled (docs/twins.md, "The twins' clock waits for the IMU's reader")
 READER_STALL_S = 0.25
+#: the loop looks at every line at least every 20 ms of wall time (``_timeout``); a look longer
+#: after the previous one than this is the loop's own absence, not the reader's
+LOOP_AWAY_S = 0.1
 #: Lossless, and no longer a bound of its own (issue 29, the kill/resume flake): the table's
 #: commands wait while a reading reader still has frames in its transmit queue, for as long as it
 #: takes them; a reader that takes nothing for READER_STALL_S is judged absent and its queue
@@ -325,6 +328,22 @@ class BenchServer:
         bytes and is waited for; with no table client asking, nobody sees the world wait and a
         silent reader is waited for up to READER_ACTIVE_S, as before."""
         line = self.lines[0] if line is None else line
+        # what the loop saw of the reader is as old as the loop's previous look: a loop that was
+        # itself away (descheduled: a loaded host, the GIL of an in-process run) for more than
+        # LOOP_AWAY_S has not seen the reader meanwhile, so it looks at the line first (the reader
+        # took bytes: the queue moves on into the line) and counts the reader's silence again
+        # from its return.  Before (issue 28, seventeenth session), a loop away 0.3 s judged a
+        # reader that had been reading all along absent on its return and dropped its queue.
+        away = wall - line.looked_wall > LOOP_AWAY_S
+        line.looked_wall = wall
+        if away and not line.port.closed:
+            sent, unread = line.port.sent_bytes, line.port.unread()
+            line.port.flush()
+            if line.port.sent_bytes > sent or line.port.unread() < unread:
+                line.last_taken_wall = wall
+            line.unread = line.port.unread()
+            if line.held_table_since is not None:
+                line.held_table_since = wall
         held = (self.options.lossless and not line.port.closed and line.frontend.streaming
                 and line.port.backlog > 0 and wall - line.last_taken_wall < READER_ACTIVE_S)
         if not held:
@@ -500,6 +519,7 @@ class ImuLine:
         self.reader_seen = False          # a reader has taken bytes from the line
         self.bytes_per_frame = 44.0       # of the stream (measured as frames go out)
         self.held_table_since: float | None = None   # the table asked while time was held since
+        self.looked_wall = time.monotonic()   # the loop's last look at its reader (_judge_reader)
         self.readers_given_up = getattr(self, "readers_given_up", 0)   # its reader judged not reading (READER_STALL_S)
 
     def replug(self) -> None:

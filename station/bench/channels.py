@@ -82,6 +82,11 @@ class Recording:
         self._accel, self._gyro = [], []
         self._head = int(math.ceil(steadiness.HEAD_S * float(rate_hz))) + 1
         self._kept = 0
+        # and, for a recorded ramp's check (steadiness.ramp_disagreement), the sum of every gyro
+        # sample of the window and its last HEAD_S seconds (a brake's rest is at the window's end)
+        self.gyro_sum = np.zeros(3)
+        self._tail: list = []
+        self._tail_n = 0
 
     @property
     def needed(self) -> int:
@@ -109,6 +114,12 @@ class Recording:
             self.temp_sum += float(temp.sum())
             self.temp_n += len(temp)
         self.seg.write(b.t_s, b.accel_mps2, b.gyro_dps, temp)
+        gyro = np.asarray(b.gyro_dps, dtype=float)
+        self.gyro_sum = self.gyro_sum + gyro.sum(axis=0)
+        self._tail.append(gyro[-self._head:].copy())
+        self._tail_n += len(self._tail[-1])
+        while self._tail_n - len(self._tail[0]) >= self._head:
+            self._tail_n -= len(self._tail.pop(0))
         if self._kept < self._head:
             take = self._head - self._kept
             self._accel.append(np.array(b.accel_mps2[:take], dtype=float))
@@ -122,6 +133,13 @@ class Recording:
         if not self._accel:
             return np.zeros((0, 3)), np.zeros((0, 3))
         return np.concatenate(self._accel), np.concatenate(self._gyro)
+
+    def gyro_tail(self) -> np.ndarray:
+        """The gyro samples (n, 3) deg/s of the recording's last steadiness.HEAD_S seconds (or all
+        of a shorter one)."""
+        if not self._tail:
+            return np.zeros((0, 3))
+        return np.concatenate(self._tail)[-self._head:]
 
     def result(self) -> dict:
         """The window the samples stand for, from the frame count (received plus lost frames

@@ -28,6 +28,7 @@ from station.io.capture import CaptureWriter
 from station.core.errors import UserError
 from station.bench.channels import ImuChannel, Recording, segment_meta
 from station.bench.imu_stream import ImuStream, lost_frames_note
+from station.bench import steadiness
 from station.bench.steadiness import motion_found
 from station.bench.plan import (Chamber, Checkpoint, Dwell, HandRotation, HandStatic, MoveTo, Operator, Rotate, Settle,
                           WarmUp)
@@ -380,11 +381,12 @@ class Sequencer:
                              hold_deg=POSITION_HOLD_FACTOR * table.position_tolerance_deg)
         return None if found is None else f"{MOTION_WORDS}: {found}"
 
-    def _record_segment(self, name, kind, meta, n, poll, completed, start=None, record=None) -> None:
+    def _record_segment(self, name, kind, meta, n, poll, completed, start=None, record=None, check=None) -> None:
         """Record segment ``name`` (``n`` samples); a recording over the data-loss limits is
         closed as incomplete with a note, kept aside (``.incomplete``) and recorded again, at
         most ``run.rerecord_attempts`` times.  ``completed(rec)`` gives the manifest keys of a
-        good recording."""
+        good recording; ``check(recording, keys)``, if given, why the IMU disagrees with them
+        (a bad recording, as one that lost data), or None."""
         attempts = 1 + self.config.run.rerecord_attempts
         pending = [ch for ch in self._alive() if name not in ch.done]
         problems: dict = {}
@@ -420,6 +422,8 @@ class Sequencer:
                             done = completed(rec)
                         except BadRecording as e:
                             problem = str(e)
+                    if problem is None and check is not None:
+                        problem = check(r, done)
                     if problem is None:
                         r.seg.close("complete", **done)
                         ch.done = ch.done | {name}
@@ -706,7 +710,13 @@ class Sequencer:
                                      f"(by {late:.3f} s of the IMU's clock): "
                                      f"its brake may be cut short; check rate_accel_dps2 ({step.accel_dps2:g} "
                                      "deg/s^2) against the table's")
-            turning = ramp_angle.position_at(marks, edge, mean_rate, period)
+            placing = dict(accel_dps2=step.accel_dps2, tolerance_deg=self.config.table.position_tolerance_deg)
+            try:
+                turning = ramp_angle.position_at(marks, edge, mean_rate, period, **placing)
+                # the angle's own 1-sigma from placing the reads at the rate (beyond the encoder's)
+                sigma = ramp_angle.angle_sigma(marks, mean_rate, period, **placing)
+            except ramp_angle.Inconsistent as e:
+                raise BadRecording(f"{MOTION_WORDS}: {e}") from None
             if turning is None or not rests:
                 raise SequencerError(f"{spec.name}: the table's position was not read at the rate and at rest "
                                      "around the recorded ramp: its angle is unknown")
@@ -733,11 +743,21 @@ class Sequencer:
             rates = (0.0, mean_rate) if start_kind else (mean_rate, 0.0)
             # the reads the angle came from (position deg, rate deg/s, the IMU stamps before and after)
             reads = [[round(m.position_deg, 6), round(m.rate_dps, 6), m.t_before, m.t_after] for m in rests + marks]
-            # the angle's own 1-sigma from placing the reads at the rate (beyond the encoder's)
-            sigma = ramp_angle.angle_sigma(marks, mean_rate, period)
             return _optional(angle_deg=body_sign * angle, table_rate_readback_dps=mean_rate,
                              rate_start_dps=body_sign * rates[0], rate_end_dps=body_sign * rates[1],
                              temperature_c=rec["temp"], table_reads=reads, angle_sigma_deg=round(sigma, 9))
+
+        def agrees(r, done):
+            # the IMU's gyro over the window against the table's angle (issue 28, seventeenth
+            # session): the redundancy a recorded ramp offers, as statics' and steady turns' have
+            _, head = r.samples()
+            found = steadiness.ramp_disagreement(
+                step.record_ramp, head, r.gyro_tail(), r.gyro_sum, r.done, window_s=(r.done + r.lost) * r.period,
+                rate_hz=1.0 / r.period, rest_s=step.rest_s, turning_s=step.steady_s,
+                table_rate_dps=done["table_rate_readback_dps"], table_angle_deg=done["angle_deg"],
+                angle_sigma_deg=done["angle_sigma_deg"],
+                position_tolerance_deg=self.config.table.position_tolerance_deg)
+            return None if found is None else f"{MOTION_WORDS}: {found}"
 
         attempts = []
 
@@ -762,7 +782,8 @@ class Sequencer:
         with contextlib.ExitStack() as fine:       # each IMU read frame by frame: reads placed within a frame
             for ch in self._alive():
                 fine.enter_context(ch.stream.fine())
-            self._record_segment(spec.name, "rotation", meta, n, mark, completed, start=start, record=record)
+            self._record_segment(spec.name, "rotation", meta, n, mark, completed, start=start, record=record,
+                                 check=agrees)
         self.table.set_rate(axis, 0.0)
 
     def _sync_reference(self) -> float:

@@ -99,3 +99,59 @@ def motion_found(kind: str, accel: np.ndarray, gyro: np.ndarray, *, rate_hz: flo
                         f"{k / rate_hz:.3g} s and the next (limit {limit:.3g} deg) while the table held still: "
                         "recorded while it was moving")
     return None
+
+
+#: a recorded ramp's check allows the IMU's clock this far from the table's reads as placed (s):
+#: a time offset is what the estimator measures from these windows (station/model/time_offset.py:
+#: 1-10 ms over USB and serial links, buffered MEMS), not a disagreement; five times the largest
+RAMP_OFFSET_ALLOWANCE_S = 0.05
+#: of the window's compiled rest and turns at the rate, the part whose samples the check takes as
+#: at rest or at the rate (the rest before a late command, the turns after a late one: the rest
+#: of each is the margin)
+RAMP_PART = 0.5
+
+
+def ramp_disagreement(ramp: str, head: np.ndarray, tail: np.ndarray, gyro_sum: np.ndarray, samples: int, *,
+                      window_s: float, rate_hz: float, rest_s: float, turning_s: float, table_rate_dps: float,
+                      table_angle_deg: float, angle_sigma_deg: float, position_tolerance_deg: float) -> str | None:
+    """Why the IMU's gyro says a recorded ramp's window did not turn through the table's angle
+    (words for a bad recording's note), or None.  The IMU's angle over the window, from its own
+    samples and nothing the calibration is to find: the integral of the gyro (``gyro_sum`` over
+    ``samples`` frames, times ``window_s``), less its bias (the mean of the window's rest: its first
+    ``RAMP_PART`` x ``rest_s`` s for ramp "start", ``head``; its last for "end", ``tail``) over the
+    window, along the rate's direction in the IMU's frame (the mean of the samples at the rate: the
+    last or first ``RAMP_PART`` x ``turning_s`` s), scaled to the table's rate (their norm against
+    ``table_rate_dps``: the gyro's scale and misalignment cancel).  Against the table's angle
+    (``table_angle_deg``, its magnitude), a difference beyond Z of its 1-sigma (the window's
+    angle_sigma_deg; the gyro's white noise over the window, its bias and scale from the samples
+    taken; two encoder reads) and the time offset allowed (RAMP_OFFSET_ALLOWANCE_S at the rate) is
+    a finding: the table's reads misplaced on the IMU's clock, the IMU's frames late against them,
+    or a window that does not hold what the table says."""
+    head, tail = np.asarray(head, dtype=float), np.asarray(tail, dtype=float)
+    n_rest = int(RAMP_PART * rest_s * rate_hz)
+    n_turn = int(RAMP_PART * turning_s * rate_hz)
+    if samples < 1 or n_rest < MIN_SPAN or n_turn < MIN_SPAN or len(head) < max(n_rest, n_turn) \
+            or len(tail) < max(n_rest, n_turn):
+        return None
+    rest, turn = (head[:n_rest], tail[-n_turn:]) if ramp == "start" else (tail[-n_rest:], head[:n_turn])
+    bias = rest.mean(axis=0)
+    w = turn.mean(axis=0) - bias
+    gain = float(np.linalg.norm(w)) / abs(float(table_rate_dps))
+    if not gain > 0:
+        return "the IMU's gyro saw no turn where the table turned"
+    u = w / np.linalg.norm(w)
+    imu_deg = float((np.asarray(gyro_sum, dtype=float) / samples - bias) @ u) * window_s / gain
+    table_deg = abs(float(table_angle_deg))
+    sigma_g = float(np.sqrt(white_sigma(rest) ** 2 @ u ** 2))       # one sample along u, deg/s
+    period = 1.0 / rate_hz
+    sigma = math.sqrt(float(angle_sigma_deg) ** 2
+                      + ((sigma_g * period) ** 2 * samples                      # white noise integrated
+                         + (sigma_g / math.sqrt(n_rest) * window_s) ** 2) / gain ** 2     # the bias taken
+                      + (table_deg * sigma_g / math.sqrt(n_turn) / float(np.linalg.norm(w))) ** 2   # the gain
+                      + 2.0 * float(position_tolerance_deg) ** 2)
+    limit = Z * sigma + abs(float(table_rate_dps)) * RAMP_OFFSET_ALLOWANCE_S
+    if abs(imu_deg - table_deg) > limit:
+        return (f"the IMU's gyro turned {imu_deg:.4g} deg over the recorded ramp's window where the table's reads "
+                f"say {table_deg:.4g} deg (limit {limit:.3g} deg: {Z:g} x its 1-sigma {sigma:.3g} deg and "
+                f"{RAMP_OFFSET_ALLOWANCE_S * 1e3:g} ms of time offset at {abs(table_rate_dps):g} deg/s)")
+    return None
