@@ -268,6 +268,14 @@ class BenchServer:
         sent = port.sent_bytes
         if port in readable:
             data = port.read()
+            if data and not reader_active:
+                # a driver speaks on a line nobody has read for READER_ACTIVE_S (a port just
+                # opened, an adapter plugged in again): what the twin queued meanwhile went to
+                # nobody, as a real IMU's bytes on a line nobody reads, and its reply follows what
+                # the line itself holds, not seconds of queued stream (issue 29: 1.2 MB queued on
+                # the replugged line of tests/test_multi_imu.py, "no reply to $VNASY,0 within
+                # 10 s" at load 17)
+                self._drop_queue(line)
             if data:
                 # the replies go out at the rate in effect when the commands came (a new baud
                 # rate, register 05, applies after its reply)
