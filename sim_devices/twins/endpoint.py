@@ -47,3 +47,9 @@ class QueuedEndpoint:
 
     def clear_output(self) -> None:
         self._out.clear()
+
+    def discard_front(self, n: int) -> None:
+        """Drop the first ``n`` queued bytes (the oldest), counted as dropped."""
+        n = min(n, len(self._out))
+        del self._out[:n]
+        self.dropped_bytes += n

@@ -272,6 +272,8 @@ class BenchServer:
         if port in readable:
             data = port.read()
             if data:
+                self._drop_stale(line)
+            if data:
                 # the replies go out at the rate in effect when the commands came (a new baud
                 # rate, register 05, applies after its reply)
                 baud = frontend.line_baud
@@ -304,7 +306,25 @@ class BenchServer:
             line.last_taken_wall = time.monotonic()
             reader_active = True
         line.unread = port.unread()
+        if not reader_active:       # what is queued now was made while nobody read the line
+            line.stale_end = port.sent_bytes + port.backlog
         return reader_active
+
+    def _drop_stale(self, line) -> None:
+        """A driver's command has come: the frames still queued that were made while nobody read
+        the line (a port just opened, an adapter plugged in again: up to half the transmit
+        buffer, two seconds of wall time of the stream) are dropped, as a real IMU's bytes on a
+        line nobody reads are gone (counted as overflowed); the reply then follows what the line
+        itself holds and what was queued for a reading reader, not seconds of queued stream
+        (issue 29: 1.2 MB queued on the replugged line of tests/test_multi_imu.py, "no reply
+        to $VNASY,0 within 10 s" at load 17).  The reader may already be seen when its command
+        comes (a serial library flushes the input when it opens the port), so the frames are
+        judged by when they were made, not by the reader's state at the command."""
+        stale = min(line.stale_end - line.port.sent_bytes, line.port.backlog)
+        if stale > 0:
+            line.port.discard_front(stale)
+            line.faulter.overflowed(int(round(stale / line.bytes_per_frame)), recorded=False)
+        line.stale_end = line.port.sent_bytes
 
     def _defer_table(self, readers_active) -> bool:
         """Lossless: the table's commands wait while frames already measured are still in an
@@ -521,6 +541,7 @@ class ImuLine:
         self.held_table_since: float | None = None   # the table asked while time was held since
         self.looked_wall = time.monotonic()   # the loop's last look at its reader (_judge_reader)
         self.readers_given_up = getattr(self, "readers_given_up", 0)   # its reader judged not reading (READER_STALL_S)
+        self.stale_end = 0                # the port's byte count up to which what it sends was made while nobody read
 
     def replug(self) -> None:
         """A fresh pseudo-terminal (the old one closed); the twin keeps its state."""
