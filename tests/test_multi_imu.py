@@ -62,7 +62,11 @@ segments:
   - {rotation: rotz, axis_body: [0, 0, 1]}
 """
 SEGMENTS = 12                 # six statics, three rotations each way
-Z_MAX, Z_RMS = 4.5, 1.6
+# Each statistical check below fails an honest calibration with probability TEST_ALPHA at most: the
+# product's verdict fails an honest fit at 1e-3 by design, which five fits per run made a failure
+# of these tests about once in 220 runs (seventeenth session: 158 fits on the twins at reduced
+# chi2 1.00 +- 0.14, the one failure seen at 1.504, p = 8.9e-4; docs/fleet.md)
+TEST_ALPHA = 1e-6
 LIMITS = "[{max_rate_dps: 300, max_accel_dps2: 300, move_rate_dps: 90, move_accel_dps2: 180, rate_accel_dps2: 150}]"
 
 
@@ -144,8 +148,24 @@ def z_scores(bundle: Path, truth) -> np.ndarray:
                      for name, true, _ in dryrun.truth_calibration(truth).parameters()])
 
 
-def verdict(bundle: Path) -> str:
-    return read_calfile(bundle / "calibration.yaml")["fit"]["verdict"]["result"]
+def calibrated(bundle: Path) -> bool:
+    """The fit passes (or its noise is overestimated), or it fails on its chi2 only as an honest
+    fit does by chance at TEST_ALPHA (the verdict's own threshold is 1e-3)."""
+    v = read_calfile(bundle / "calibration.yaml")["fit"]["verdict"]
+    if v["result"] in ("passes", "noise overestimated"):
+        return True
+    return (v["result"] == "fails" and str(v.get("reason", "")).startswith("reduced chi2")
+            and float(v.get("p_value", 0.0)) > TEST_ALPHA)
+
+
+def accurate(z: np.ndarray) -> bool:
+    """The errors against the twin's truth, in their own 1-sigma, as honest ones are but with
+    probability TEST_ALPHA: the largest |z| (Bonferroni over the parameters) and their sum of
+    squares (chi2 with as many degrees of freedom)."""
+    from scipy.stats import chi2, norm
+
+    return bool(np.abs(z).max() < norm.isf(TEST_ALPHA / (2 * len(z)))
+                and np.sum(z ** 2) < chi2.isf(TEST_ALPHA, len(z)))
 
 
 _LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
@@ -202,10 +222,10 @@ def check_estimates(run: Path, bench, n, folders: dict | None = None):
         # kill, a resume); in CI one resumed capture came out "noise overestimated" (chi2 below
         # its 0.1 % point: the 1-sigma conservative) -- the errors against the truth, below, are
         # the accuracy check
-        assert verdict(bundle) in ("passes", "noise overestimated"), bundle
+        assert calibrated(bundle), (bundle, read_calfile(bundle / "calibration.yaml")["fit"]["verdict"])
         z = z_scores(bundle, line.truth)
         print(f"IMU {line.serial_number}: max |z| {np.abs(z).max():.2f}, rms z {np.sqrt(np.mean(z**2)):.2f}")
-        assert np.abs(z).max() < Z_MAX and np.sqrt(np.mean(z**2)) < Z_RMS
+        assert accurate(z), z
         table = {s.name: s.extra.get("table_deg") for s in capture.complete()}
         angles = table if angles is None else angles
         assert table == angles           # the table moved once for all: the same angles for every IMU
@@ -250,7 +270,7 @@ def test_an_imu_mute_at_start_and_one_lost_mid_run_do_not_stop_the_third_and_res
         assert 3 <= len(done_before) < SEGMENTS
         # IMU 1 went on to the end and estimated; the others did not
         assert len(read_capture(first, load_data=False).complete()) == SEGMENTS
-        assert verdict(first) == "passes"
+        assert calibrated(first)
         assert not (second / "calibration.yaml").exists() and not (third / "calibration.yaml").exists()
         kept1 = {s["name"]: s["sha256"] for s in segments(first)}
 
@@ -461,8 +481,8 @@ def test_a_dry_run_of_several_imus_simulates_each_as_its_own_sensor(tmp_path, mo
     truths = {}
     for folder, seed in (("left", 5), ("sim-6", 6)):
         bundle = tmp_path / "run" / folder
-        assert verdict(bundle) == "passes"
+        assert calibrated(bundle)
         truths[folder] = yaml.safe_load((bundle / dryrun.TRUTH_FILE).read_text())
         z = z_scores(bundle, default_truth(seed))
-        assert np.abs(z).max() < Z_MAX and np.sqrt(np.mean(z**2)) < Z_RMS
+        assert accurate(z), z
     assert truths["left"] != truths["sim-6"]
