@@ -209,3 +209,61 @@ def test_a_reader_started_early_is_taken_over_by_the_same_list_and_closed_by_ano
     capture.read_ahead(capture.summary_order())
     capture.stop_reading_ahead()
     assert not reading_threads()
+
+
+def test_no_reading_thread_to_be_had_reads_on_the_callers_thread(tmp_path, monkeypatch):
+    """Where no thread can be started (a limit on a process's threads, no memory for a thread's
+    stack: RuntimeError "can't start new thread"), the files are read on the caller's thread, as
+    where no child can be forked: the same summaries, not a wait for a read no thread will do."""
+    real_start = threading.Thread.start
+
+    def refused(thread):
+        if thread.name == "capture-read-ahead":
+            raise RuntimeError("can't start new thread")
+        return real_start(thread)
+
+    directory = make_bundle(tmp_path, files={"pos01.csv": csv_text(40), "rot1p.csv": csv_text(40)})
+    expected = summaries.summarise(read_capture(directory, load_data=False), check_segment=lambda seg: None)
+    monkeypatch.setattr(threading.Thread, "start", refused)
+    result = {}
+
+    def summarise():
+        try:
+            result["s"] = summaries.summarise(read_capture(directory, load_data=False),
+                                              check_segment=lambda seg: None)
+        except BaseException as e:  # noqa: BLE001 - said by the assertion below
+            result["error"] = e
+
+    worker = threading.Thread(target=summarise, daemon=True)
+    worker.start()
+    worker.join(30)
+    assert not worker.is_alive(), "summarise waits for a read no thread will do"
+    assert "error" not in result, result
+    assert [s.name for s in result["s"].statics + result["s"].rotations] == \
+        [s.name for s in expected.statics + expected.rotations]
+    np.testing.assert_array_equal(result["s"].statics[0].accel, expected.statics[0].accel)
+
+
+def test_ctrl_c_while_the_early_reader_hands_out_its_files_leaves_no_reading_thread(optimal9_run, monkeypatch):
+    """Ctrl-C while estimate_capture's early reader is handing out the files (a reading thread
+    started for the first one, the next ones' sizes being looked up): its threads end after the
+    reads begun, none is left waiting for files forever (a long-lived process: a notebook's
+    interrupted estimate)."""
+    import station.estimate as estimate
+    from station.io import capture as capture_module
+
+    calls = []
+
+    def interrupted_at_the_second_file():
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return 2
+
+    monkeypatch.setattr(capture_module, "read_ahead_threads", interrupted_at_the_second_file)
+    with pytest.raises(KeyboardInterrupt):
+        estimate.estimate_capture(optimal9_run)
+    assert len(calls) == 2
+    for thread in reading_threads():
+        thread.join(30)
+    assert not reading_threads()
