@@ -234,8 +234,8 @@ class Capture:
         ends it if no reader_ahead takes it over."""
         self.stop_reading_ahead()
         reader = ReaderAhead(self, segments)
+        self._early_reader = reader     # before its threads start: a Ctrl-C meanwhile ends them
         reader.ahead()
-        self._early_reader = reader
 
     def stop_reading_ahead(self, wait: bool = True) -> None:
         """Close the reader :meth:`read_ahead` started, unless reader_ahead took it over (``wait``
@@ -350,8 +350,19 @@ class ReaderAhead:
             if len(self._threads) < min(read_ahead_threads(), len(self._pending)):
                 thread = threading.Thread(target=self._serve, args=(self._capture, self._work),
                                           name="capture-read-ahead", daemon=True)
-                thread.start()
-                self._threads.append(thread)
+                self._threads.append(thread)    # before it starts: close() ends it whatever happens
+                try:
+                    thread.start()
+                except RuntimeError:
+                    # no thread to be had (a limit on a process's threads, no memory for its
+                    # stack): those started read the rest; with none, take reads on this thread
+                    self._threads.pop()
+                    if not self._threads:
+                        self._work = None
+                        self._pending.clear()
+                        self._pending_bytes = 0
+                        self._queued = self._next
+                    return
 
     def _serve(self, capture, work):
         """A reading thread: each segment asked for read in turn, until None."""
