@@ -1,6 +1,7 @@
 """Reading the next segment while the current one is worked on (station/io/capture.py,
 ReaderAhead): the same samples as reading in turn, errors at their segment's turn and in the
 segments' order, no reading thread left behind."""
+import os
 import threading
 import time
 
@@ -267,3 +268,19 @@ def test_ctrl_c_while_the_early_reader_hands_out_its_files_leaves_no_reading_thr
     for thread in reading_threads():
         thread.join(30)
     assert not reading_threads()
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity") or (os.cpu_count() or 1) < 2,
+                    reason="needs CPU affinity and two cores")
+def test_one_reading_thread_where_the_process_may_run_on_one_core():
+    """Under taskset, a container's cpuset or a pinned worker the process runs on the cores it is
+    given, not the machine's: on one core, one file read at a time (a second thread there gains no
+    core, and its malloc arena costs memory)."""
+    import subprocess
+    import sys
+
+    code = ("import os; os.sched_setaffinity(0, {min(os.sched_getaffinity(0))}); "
+            "from station.io.capture import read_ahead_threads; print(read_ahead_threads())")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "1"
