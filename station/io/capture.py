@@ -1144,8 +1144,11 @@ READ_AHEAD_BYTES = 64 * 2**20
 
 
 def read_ahead_threads() -> int:
-    """Files read at once by a ReaderAhead: two where there are two cores (one file each), else one."""
-    return 2 if (os.cpu_count() or 1) >= 2 else 1
+    """Files read at once by a ReaderAhead: two where the process may run on two cores (its CPU
+    affinity: taskset, a container's cpuset; one file each), else one."""
+    from station.core.forked import usable_cores
+
+    return 2 if usable_cores() >= 2 else 1
 
 
 PIECE_BYTES = 8 * 2**20   # a segment file is read, hashed and parsed this many bytes at a time
