@@ -284,3 +284,33 @@ def test_one_reading_thread_where_the_process_may_run_on_one_core():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "1"
+
+
+def test_a_segment_taken_and_let_go_is_not_held_by_the_thread_that_read_it(tmp_path, monkeypatch):
+    """Once taken and let go by the caller, a segment's samples are freed: the reading thread that
+    read them, idle until its next file, holds nothing (else each idle thread kept one segment's
+    samples beyond READ_AHEAD_BYTES)."""
+    import gc
+    import weakref
+
+    from station.io import capture as capture_module
+
+    real = capture_module._read_segment_data
+
+    def slow(capture, segment, *args, **kwargs):
+        # the first file's thread busy long enough for the second thread to take the second file
+        time.sleep(0.3 if segment.name == "pos01" else 0.6)
+        return real(capture, segment, *args, **kwargs)
+
+    monkeypatch.setattr(capture_module, "read_ahead_threads", lambda: 2)
+    monkeypatch.setattr(capture_module, "_read_segment_data", slow)
+    capture = read_capture(make_bundle(tmp_path), load_data=False)
+    with capture.reader_ahead(capture.segments) as reader:
+        first = reader.take(capture.segments[0])     # both files handed out: one thread each
+        assert len(reading_threads()) == 2
+        freed = weakref.ref(first)
+        del first
+        gc.collect()
+        assert freed() is None
+        assert reader.take(capture.segments[1]) is not None
+    assert not reading_threads()
