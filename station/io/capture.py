@@ -380,6 +380,8 @@ class ReaderAhead:
                 box["error"] = e
             finally:
                 done.set()
+            # nothing of it held while waiting for the next file: the samples are the caller's
+            job = segment = done = box = None
 
     def close(self, wait: bool = True):
         """Drop the reads not begun, wait for those under way (their results are dropped) and end
