@@ -394,6 +394,7 @@ class ReaderAhead:
         for _ in self._threads:
             self._work.put(None)
         if not wait:
+            _left_to_end(self._threads)
             self._pending.clear()
             self._threads = []
             return
@@ -1153,6 +1154,35 @@ def read_ahead_threads() -> int:
     from station.core.forked import usable_cores
 
     return 2 if usable_cores() >= 2 else 1
+
+
+_LEFT = []      # reading threads left to end by ReaderAhead.close(wait=False), joined at exit
+LEFT_READS_WAIT_S = 2.0     # at most this long (a 4 kHz segment's file: ~0.5 s; a stuck read: not for ever)
+
+
+def _left_to_end(threads) -> None:
+    """The process, when it ends, waits for ``threads`` (told to end after the reads under way),
+    up to LEFT_READS_WAIT_S: a reading thread still in the CSV engine while the interpreter ended
+    crashed it (exit status -11 instead of 130 after Ctrl-C; review of issue 27: ~1 Ctrl-C in 6
+    while a 1 kHz estimate reads).  "interrupted" is said at once; a second Ctrl-C ends the wait."""
+    import atexit
+
+    atexit.unregister(_join_left)       # registered once
+    atexit.register(_join_left)
+    _LEFT[:] = [t for t in _LEFT if t.is_alive()] + list(threads)
+
+
+def _join_left() -> None:
+    import time
+
+    deadline = time.monotonic() + LEFT_READS_WAIT_S
+    try:
+        while _LEFT:
+            thread = _LEFT.pop()
+            if thread.ident is not None:    # started
+                thread.join(max(0.0, deadline - time.monotonic()))
+    except KeyboardInterrupt:
+        pass
 
 
 def _import_engine() -> None:
