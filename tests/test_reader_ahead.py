@@ -1,6 +1,7 @@
 """Reading the next segment while the current one is worked on (station/io/capture.py,
 ReaderAhead): the same samples as reading in turn, errors at their segment's turn and in the
 segments' order, no reading thread left behind."""
+import os
 import threading
 import time
 
@@ -209,3 +210,193 @@ def test_a_reader_started_early_is_taken_over_by_the_same_list_and_closed_by_ano
     capture.read_ahead(capture.summary_order())
     capture.stop_reading_ahead()
     assert not reading_threads()
+
+
+def test_no_reading_thread_to_be_had_reads_on_the_callers_thread(tmp_path, monkeypatch):
+    """Where no thread can be started (a limit on a process's threads, no memory for a thread's
+    stack: RuntimeError "can't start new thread"), the files are read on the caller's thread, as
+    where no child can be forked: the same summaries, not a wait for a read no thread will do."""
+    real_start = threading.Thread.start
+
+    def refused(thread):
+        if thread.name == "capture-read-ahead":
+            raise RuntimeError("can't start new thread")
+        return real_start(thread)
+
+    directory = make_bundle(tmp_path, files={"pos01.csv": csv_text(40), "rot1p.csv": csv_text(40)})
+    expected = summaries.summarise(read_capture(directory, load_data=False), check_segment=lambda seg: None)
+    monkeypatch.setattr(threading.Thread, "start", refused)
+    result = {}
+
+    def summarise():
+        try:
+            result["s"] = summaries.summarise(read_capture(directory, load_data=False),
+                                              check_segment=lambda seg: None)
+        except BaseException as e:  # noqa: BLE001 - said by the assertion below
+            result["error"] = e
+
+    worker = threading.Thread(target=summarise, daemon=True)
+    worker.start()
+    worker.join(30)
+    assert not worker.is_alive(), "summarise waits for a read no thread will do"
+    assert "error" not in result, result
+    assert [s.name for s in result["s"].statics + result["s"].rotations] == \
+        [s.name for s in expected.statics + expected.rotations]
+    np.testing.assert_array_equal(result["s"].statics[0].accel, expected.statics[0].accel)
+
+
+def test_ctrl_c_while_the_early_reader_hands_out_its_files_leaves_no_reading_thread(optimal9_run, monkeypatch):
+    """Ctrl-C while estimate_capture's early reader is handing out the files (a reading thread
+    started for the first one, the next ones' sizes being looked up): its threads end after the
+    reads begun, none is left waiting for files forever (a long-lived process: a notebook's
+    interrupted estimate)."""
+    import station.estimate as estimate
+    from station.io import capture as capture_module
+
+    calls = []
+
+    def interrupted_at_the_second_file():
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return 2
+
+    monkeypatch.setattr(capture_module, "read_ahead_threads", interrupted_at_the_second_file)
+    with pytest.raises(KeyboardInterrupt):
+        estimate.estimate_capture(optimal9_run)
+    assert len(calls) == 2
+    for thread in reading_threads():
+        thread.join(30)
+    assert not reading_threads()
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity") or (os.cpu_count() or 1) < 2,
+                    reason="needs CPU affinity and two cores")
+def test_one_reading_thread_where_the_process_may_run_on_one_core():
+    """Under taskset, a container's cpuset or a pinned worker the process runs on the cores it is
+    given, not the machine's: on one core, one file read at a time (a second thread there gains no
+    core, and its malloc arena costs memory)."""
+    import subprocess
+    import sys
+
+    code = ("import os; os.sched_setaffinity(0, {min(os.sched_getaffinity(0))}); "
+            "from station.io.capture import read_ahead_threads; print(read_ahead_threads())")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "1"
+
+
+def test_a_segment_taken_and_let_go_is_not_held_by_the_thread_that_read_it(tmp_path, monkeypatch):
+    """Once taken and let go by the caller, a segment's samples are freed: the reading thread that
+    read them, idle until its next file, holds nothing (else each idle thread kept one segment's
+    samples beyond READ_AHEAD_BYTES)."""
+    import gc
+    import weakref
+
+    from station.io import capture as capture_module
+
+    real = capture_module._read_segment_data
+
+    def slow(capture, segment, *args, **kwargs):
+        # the first file's thread busy long enough for the second thread to take the second file
+        time.sleep(0.3 if segment.name == "pos01" else 0.6)
+        return real(capture, segment, *args, **kwargs)
+
+    monkeypatch.setattr(capture_module, "read_ahead_threads", lambda: 2)
+    monkeypatch.setattr(capture_module, "_read_segment_data", slow)
+    capture = read_capture(make_bundle(tmp_path), load_data=False)
+    with capture.reader_ahead(capture.segments) as reader:
+        first = reader.take(capture.segments[0])     # both files handed out: one thread each
+        assert len(reading_threads()) == 2
+        freed = weakref.ref(first)
+        del first
+        gc.collect()
+        assert freed() is None
+        assert reader.take(capture.segments[1]) is not None
+    assert not reading_threads()
+
+
+SPY = """
+import sys, threading
+seen = []
+
+class Spy:
+    def find_spec(self, name, path=None, target=None):
+        seen.append((threading.current_thread().name, name))
+        return None
+
+sys.meta_path.insert(0, Spy())
+import station
+assert station.__file__.startswith(sys.argv[2]), station.__file__
+import station.estimate
+station.estimate.estimate_capture(sys.argv[1])
+print(sorted({name for thread, name in seen if thread == "capture-read-ahead"}))
+"""
+
+
+def test_the_reading_threads_import_nothing(optimal9_run):
+    """The reading threads import no module (the CSV engine is imported by the thread that starts
+    them): the main thread imports the fit's modules meanwhile, and a Ctrl-C that lands while it
+    waits for the import lock a reading thread holds is raised inside importlib's own lock
+    handling (``_get_module_lock``'s callback: "Exception ignored"), the Ctrl-C lost and the lock
+    never given back: the reading thread waits for it for ever, the estimate for the reading
+    thread (seen: `station estimate` of a 1 kHz capture hung after ~1 Ctrl-C in 20 within its
+    first 0.7 s)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = str(Path(__file__).resolve().parents[1])
+    done = subprocess.run([sys.executable, "-c", SPY, str(optimal9_run), root], capture_output=True, text=True,
+                          timeout=120, cwd=root, env=dict(os.environ, PYTHONPATH=root))
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip().splitlines()[-1] == "[]"
+
+
+LEFT = """
+import sys, threading, time
+from pathlib import Path
+import station
+assert station.__file__.startswith(sys.argv[2]), station.__file__
+from station.io import capture as capture_module
+from station.io.capture import read_capture
+
+real = capture_module._read_segment_data
+begun = threading.Event()
+
+def slow(capture, segment, *args, **kwargs):
+    begun.set()
+    time.sleep(1.0)
+    data = real(capture, segment, *args, **kwargs)
+    with open(sys.argv[3], "a") as f:
+        f.write(segment.name + " ")
+    return data
+
+capture_module._read_segment_data = slow
+capture = read_capture(sys.argv[1], load_data=False)
+reader = capture.reader_ahead(capture.segments)
+reader.ahead()
+begun.wait(30)
+reader.close(wait=False)        # Ctrl-C: the read under way left to its thread
+print("closed")
+"""
+
+
+def test_a_read_left_by_ctrl_c_ends_before_the_process(tmp_path):
+    """close(wait=False) (Ctrl-C) leaves the read under way to its thread and returns at once; the
+    process then ends after that read (up to LEFT_READS_WAIT_S: here 1 s), not during it: a reading
+    thread still in the CSV engine while the interpreter ended crashed the process (`station
+    estimate` of a 1 kHz capture interrupted while reading: exit status -11 instead of 130, ~1
+    Ctrl-C in 6).  (tests/test_forked.py: a read of a minute does not hold the process.)"""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = str(Path(__file__).resolve().parents[1])
+    marker = tmp_path / "read"
+    done = subprocess.run([sys.executable, "-c", LEFT, str(make_bundle(tmp_path)), root, str(marker)],
+                          capture_output=True, text=True, timeout=120, cwd=root, env=dict(os.environ, PYTHONPATH=root))
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip() == "closed"
+    assert marker.exists(), "the process ended during the read"
+    assert "pos01" in marker.read_text().split()

@@ -301,9 +301,9 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
         # threads, while the summaries' modules are imported (issue 27, seventeenth session)
         from station.io.capture import is_small
 
-        if not is_small(capture):
-            capture.read_ahead(capture.summary_order(every=True))
         try:
+            if not is_small(capture):
+                capture.read_ahead(capture.summary_order(every=True))
             summarise_while_importing(capture, check_segment, notes, fork=False)
         except KeyboardInterrupt:
             capture.stop_reading_ahead(wait=False)      # at once: not after the files being read

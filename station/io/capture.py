@@ -234,8 +234,8 @@ class Capture:
         ends it if no reader_ahead takes it over."""
         self.stop_reading_ahead()
         reader = ReaderAhead(self, segments)
+        self._early_reader = reader     # before its threads start: a Ctrl-C meanwhile ends them
         reader.ahead()
-        self._early_reader = reader
 
     def stop_reading_ahead(self, wait: bool = True) -> None:
         """Close the reader :meth:`read_ahead` started, unless reader_ahead took it over (``wait``
@@ -348,10 +348,23 @@ class ReaderAhead:
             # thread reads them all, its memory reused from file to file (a second thread's own
             # malloc arena held ~50 MB more at the 4 kHz capture's peak)
             if len(self._threads) < min(read_ahead_threads(), len(self._pending)):
+                if not self._threads and not _small(self._capture):
+                    _import_engine()        # here: the reading threads import nothing
                 thread = threading.Thread(target=self._serve, args=(self._capture, self._work),
                                           name="capture-read-ahead", daemon=True)
-                thread.start()
-                self._threads.append(thread)
+                self._threads.append(thread)    # before it starts: close() ends it whatever happens
+                try:
+                    thread.start()
+                except RuntimeError:
+                    # no thread to be had (a limit on a process's threads, no memory for its
+                    # stack): those started read the rest; with none, take reads on this thread
+                    self._threads.pop()
+                    if not self._threads:
+                        self._work = None
+                        self._pending.clear()
+                        self._pending_bytes = 0
+                        self._queued = self._next
+                    return
 
     def _serve(self, capture, work):
         """A reading thread: each segment asked for read in turn, until None."""
@@ -369,6 +382,8 @@ class ReaderAhead:
                 box["error"] = e
             finally:
                 done.set()
+            # nothing of it held while waiting for the next file: the samples are the caller's
+            job = segment = done = box = None
 
     def close(self, wait: bool = True):
         """Drop the reads not begun, wait for those under way (their results are dropped) and end
@@ -379,6 +394,7 @@ class ReaderAhead:
         for _ in self._threads:
             self._work.put(None)
         if not wait:
+            _left_to_end(self._threads)
             self._pending.clear()
             self._threads = []
             return
@@ -1133,8 +1149,54 @@ READ_AHEAD_BYTES = 64 * 2**20
 
 
 def read_ahead_threads() -> int:
-    """Files read at once by a ReaderAhead: two where there are two cores (one file each), else one."""
-    return 2 if (os.cpu_count() or 1) >= 2 else 1
+    """Files read at once by a ReaderAhead: two where the process may run on two cores (its CPU
+    affinity: taskset, a container's cpuset; one file each), else one."""
+    from station.core.forked import usable_cores
+
+    return 2 if usable_cores() >= 2 else 1
+
+
+_LEFT = []      # reading threads left to end by ReaderAhead.close(wait=False), joined at exit
+LEFT_READS_WAIT_S = 2.0     # at most this long (a 4 kHz segment's file: ~0.5 s; a stuck read: not for ever)
+
+
+def _left_to_end(threads) -> None:
+    """The process, when it ends, waits for ``threads`` (told to end after the reads under way),
+    up to LEFT_READS_WAIT_S: a reading thread still in the CSV engine while the interpreter ended
+    crashed it (exit status -11 instead of 130 after Ctrl-C; review of issue 27: ~1 Ctrl-C in 6
+    while a 1 kHz estimate reads).  "interrupted" is said at once; a second Ctrl-C ends the wait."""
+    import atexit
+
+    atexit.unregister(_join_left)       # registered once
+    atexit.register(_join_left)
+    _LEFT[:] = [t for t in _LEFT if t.is_alive()] + list(threads)
+
+
+def _join_left() -> None:
+    import time
+
+    deadline = time.monotonic() + LEFT_READS_WAIT_S
+    try:
+        while _LEFT:
+            thread = _LEFT.pop()
+            if thread.ident is not None:    # started
+                thread.join(max(0.0, deadline - time.monotonic()))
+    except KeyboardInterrupt:
+        pass
+
+
+def _import_engine() -> None:
+    """Import the CSV engine (pyarrow.csv) on this thread, before the reading threads that use it
+    start.  A reading thread that imports while the main thread imports (estimate_capture's early
+    reader: the fit's modules meanwhile) holds the import lock at times, and a Ctrl-C that lands
+    while the main thread waits for it is raised inside importlib's own lock handling
+    (``_get_module_lock``'s callback): the Ctrl-C is lost and the lock never given back, the
+    reading thread waits for it for ever and the estimate for the reading thread (review of
+    issue 27: ~1 Ctrl-C in 20 in a 1 kHz estimate's first 0.7 s)."""
+    try:
+        import pyarrow.csv  # noqa: F401
+    except ImportError:  # pragma: no cover - a dependency; the line-by-line reader still works
+        pass
 
 
 PIECE_BYTES = 8 * 2**20   # a segment file is read, hashed and parsed this many bytes at a time
