@@ -167,8 +167,7 @@ def spy(*args, **kwargs):
 capture_module.read_csv_pieces = spy
 import station.estimate
 if sys.argv[2:] == ["fork"]:        # the forked reader (diagnose's), given to the estimate
-    real = station.estimate.summarise_while_importing
-    station.estimate.summarise_while_importing = lambda *a, **k: real(*a, **{**k, "fork": True})
+    station.estimate.ESTIMATE_FORKS = True
 from station.estimate import estimate_capture
 cal, capture, provenance = estimate_capture(sys.argv[1])
 print(json.dumps([sorted(readers) == [os.getpid()], "station.estimate.lsq" in sys.modules,

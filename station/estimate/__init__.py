@@ -208,6 +208,9 @@ def _estimate_with(capture: Capture, method: str, effects, registry, turn_sigma_
 # (issue 27), less than a forked reader costs (below): estimate_capture reads in its own process
 FIT_MODULES = ("station.estimate.lsq", "station.estimate.verdict", "station.io.calfile")
 READ_IN_PROCESS = "STATION_READ_IN_PROCESS"     # set (to anything): no forked reader
+# estimate_capture reads in its own process, its files from right after the manifest on reading
+# threads (Capture.read_ahead); True: in a forked reader instead (diagnose's way), no early reader
+ESTIMATE_FORKS = False
 
 
 def summarise_while_importing(capture, check_segment=None, notes: dict | None = None,
@@ -248,6 +251,10 @@ def summarise_while_importing(capture, check_segment=None, notes: dict | None = 
         from station.core import forked
 
         if forked.available():
+            # no reading thread of this process at the fork (the child would wait for ever for
+            # the reads of threads it does not have): an early reader (Capture.read_ahead) is
+            # closed, the child reads every file itself
+            capture.stop_reading_ahead()
             try:
                 child = forked.Forked(read)     # it imports the CSV engine (pyarrow): this one never needs it
             except OSError:                     # no process to be had (EAGAIN, ENOMEM): read here
@@ -302,9 +309,9 @@ def estimate_capture(path, method: str = "auto", effects=(), registry=None, *,
         from station.io.capture import is_small
 
         try:
-            if not is_small(capture):
+            if not ESTIMATE_FORKS and not is_small(capture):
                 capture.read_ahead(capture.summary_order(every=True))
-            summarise_while_importing(capture, check_segment, notes, fork=False)
+            summarise_while_importing(capture, check_segment, notes, fork=ESTIMATE_FORKS)
         except KeyboardInterrupt:
             capture.stop_reading_ahead(wait=False)      # at once: not after the files being read
             raise
