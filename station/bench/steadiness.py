@@ -128,10 +128,12 @@ def ramp_disagreement(ramp: str, head: np.ndarray, tail: np.ndarray, gyro_sum: n
     a finding: the table's reads misplaced on the IMU's clock, the IMU's frames late against them,
     or a window that does not hold what the table says."""
     head, tail = np.asarray(head, dtype=float), np.asarray(tail, dtype=float)
-    n_rest = int(RAMP_PART * rest_s * rate_hz)
-    n_turn = int(RAMP_PART * turning_s * rate_hz)
-    if samples < 1 or n_rest < MIN_SPAN or n_turn < MIN_SPAN or len(head) < max(n_rest, n_turn) \
-            or len(tail) < max(n_rest, n_turn):
+    at_rest, at_rate = (head, tail) if ramp == "start" else (tail, head)
+    # as many of those samples as the recording kept of its ends (HEAD_S each): a longer rest or
+    # turns are taken in part (before, a window with more than 2 HEAD_S of turns went unchecked)
+    n_rest = min(int(RAMP_PART * rest_s * rate_hz), len(at_rest))
+    n_turn = min(int(RAMP_PART * turning_s * rate_hz), len(at_rate))
+    if samples < 1 or n_rest < MIN_SPAN or n_turn < MIN_SPAN:
         return None
     rest, turn = (head[:n_rest], tail[-n_turn:]) if ramp == "start" else (tail[-n_rest:], head[:n_turn])
     bias = rest.mean(axis=0)
