@@ -91,9 +91,8 @@ def test_the_twins_record_a_ramp_up_and_a_brake_with_their_rates_and_angles(run)
         dw = edges[1] - edges[0]
         bound = RATE * (widest + 1.0 / capture.imu.sample_rate_hz) + 2e-3 * abs(s.angle_deg)
         assert abs(integral - s.angle_deg - OFFSET_S * dw) < bound, (name, integral, s.angle_deg, bound)
-        # the angle's own 1-sigma from the reads' placement: their common moment's (every bracket
-        # at once: station/bench/ramp_angle.moment) times the rate, so between a period's / sqrt 12
-        # and the widest bracket's
+        # the angle's own 1-sigma from the reads' placement: their brackets (w / sqrt 12, w one
+        # to several periods) times the rate, so between a period's and the widest bracket's
         period = 1.0 / capture.imu.sample_rate_hz
         sigma = s.extra["angle_sigma_deg"]
         assert RATE * period / np.sqrt(12) <= sigma <= RATE * (widest + period), (name, sigma)

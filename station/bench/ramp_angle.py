@@ -10,12 +10,11 @@ placed on the IMU's clock by the frames around the read: every frame that had re
 computer before the query was measured before the table answered, and every frame measured
 before the answer had reached it when the reader was asked again afterwards (ImuStream.sync), so
 the answer's moment lies between the newest stamp before (``t_before``) and the newest after
-(``t_after``) plus one period.  At the rate, the reads' positions give their moments relative
-to one another, so every bracket bounds one common moment (``moment``: their intersection, and
-where in it the host's waits put it); the first read is carried from there to the window's edge
-(position_at).  What is left of the placement is not the encoder's 2": the common moment is known
-only within the brackets (tens of ms on the twins' pseudo-terminals, 10-80 ms measured), so the
-window's angle carries an uncertainty of its own (``angle_sigma``), written into the manifest
+(``t_after``) plus one period; where in that bracket is said in ``placed``.  At the rate, each
+read is carried to the window's edge; their mean is taken (position_at).  What is left of the placement is
+not the encoder's 2": each read's moment is known only within its bracket (tens of ms on the
+twins' pseudo-terminals, 10-80 ms measured), ~ms of it per window at the rate, so the window's
+angle carries an uncertainty of its own (``angle_sigma``), written into the manifest
 (``angle_sigma_deg``) and added to that rotation's gyro-integral variance by the estimator
 (issue 28 review item 1).  The part of the placement shared by every window is what the
 estimator's time offset measures: on a bench that is the IMU's clock against the table's reads as
@@ -43,9 +42,8 @@ class Mark:
 
 
 def placed(mark: Mark, period_s: float) -> float:
-    """The read's moment on the IMU's clock taken alone: the middle of its bracket, ``t_before`` ..
-    ``t_after`` + one period (used to restore the whole turns a read lost; the window's angle
-    places every read at once: ``moment``).
+    """The read's moment on the IMU's clock: the middle of its bracket, ``t_before`` ..
+    ``t_after`` + one period (the answer's moment lies anywhere in it: ``angle_sigma``'s w / sqrt 12).
     Before (issue 28, fifteenth session), the newest stamp before the query plus half a period,
     because the reader thread answered the second sync only when its block of frames (0.1 s) was
     complete, which made ``t_after`` loose by up to a block (measured at --speed 1: the bracket's
@@ -60,96 +58,13 @@ def placed(mark: Mark, period_s: float) -> float:
     return 0.5 * (mark.t_before + mark.t_after + period_s)
 
 
-def position_at(marks: list, t: float, rate_dps: float, period_s: float, *, accel_dps2: float | None = None,
-                tolerance_deg: float = 0.0) -> float | None:
+def position_at(marks: list, t: float, rate_dps: float, period_s: float) -> float | None:
     """The axis' position (deg, unwrapped about the first mark's) at IMU time ``t`` from the marks
-    read while it turned at ``rate_dps``: the first mark's position carried from its moment on the
-    IMU's clock (``moment``: every read's bracket at once) to ``t`` at the rate.  None without a
-    mark.  Raises Inconsistent when no moment fits every read's bracket."""
+    read while it turned at ``rate_dps``: each mark, placed on the IMU's clock (placed), carried
+    to ``t`` at the rate; their mean.  None without a mark."""
     if not marks:
         return None
-    t0, _ = moment(marks, rate_dps, period_s, accel_dps2=accel_dps2, tolerance_deg=tolerance_deg)
-    return float(marks[0].position_deg + rate_dps * (t - t0))
-
-
-class Inconsistent(ValueError):
-    """The table's reads at the rate cannot all have been answered inside their brackets on the
-    IMU's clock: the IMU's frames came later than the table's answers (a line's or a reader's
-    latency beyond what a sync sees), or the axis did not turn at the rate between the reads."""
-
-
-#: the host's delays on either side of a read's moment (ask the reader, write the query, the
-#: table's answer; read the answer, the rate's query and its answer, ask the reader again): each
-#: side a sum of at least two independent waits of the same kind, i.e. Gamma(2) with a common
-#: scale, so the moment's fraction of its bracket is Beta(2, 2) (independent of the bracket's width)
-BRACKET_BETA = 2.0
-GRID = 401
-QUANTA = 4               # points per period where a sync's answer lies after its stamp
-
-
-def moment(marks: list, rate_dps: float, period_s: float, *, accel_dps2: float | None = None,
-           tolerance_deg: float = 0.0) -> tuple[float, float]:
-    """(mean, 1-sigma) of the first mark's moment on the IMU's clock (s), from every mark read at
-    ``rate_dps``.  The marks' positions give their moments relative to the first (k_i = (p_i -
-    p_0) / rate: the axis turns at the rate between them), so each bracket ``t_before`` ..
-    ``t_after`` + one period, less k_i, bounds the one unknown moment: it lies in their
-    intersection (widened by what the positions leave of k_i: ``tolerance_deg``, the encoder's
-    read, and a read on the ramp's last 1 % short of the line by (r - r_i)^2 / 2a).  Where in
-    its bracket a read was answered: a fraction u of it with density ~ (u (1 - u))^(BRACKET_BETA -
-    1) (BRACKET_BETA: the host's waits either side of the moment); the product over the reads,
-    on the intersection, is the moment's distribution: its mean and standard deviation.
-    Before (issue 28, sixteenth session), each read was placed at its bracket's middle, their mean
-    taken, and the 1-sigma was the brackets' rms w / sqrt 12, not divided by their number: on the
-    twins at speed 8 (17 windows quiet, 10 under two busy loops) the windows' errors were 0.22 and
-    0.25 of that 1-sigma rms (docs/design.md, "Seventeenth session: recorded ramps")."""
-    if not marks:
-        raise ValueError("no mark")
-    rate = float(rate_dps)
-    times = _unwrapped_k(marks, rate, period_s)
-    k = np.array([kk for kk, _ in times])
-    a = np.array([m.t_before for m in marks]) - k
-    b = np.array([m.t_after + period_s for m in marks]) - k
-    dev = np.full(len(marks), float(tolerance_deg))
-    if accel_dps2:
-        dev = dev + np.array([(m.rate_dps - rate) ** 2 for m in marks]) / (2.0 * abs(float(accel_dps2)))
-    margin = dev / abs(rate)
-    a, b = a - margin, b + margin
-    lo, hi = float(np.max(a)), float(np.min(b))
-    if lo > hi:
-        raise Inconsistent(f"the table's {len(marks)} reads at {rate:g} deg/s fit no common moment on the "
-                           f"IMU's clock (their brackets miss one another by {lo - hi:.3g} s)")
-    c = np.linspace(lo, hi, GRID)
-    # the host's waits run from the first sync's answer to the moment and on to the second's: each
-    # answer lies within the period after its stamp (the next frame had not arrived), so the
-    # waits' bracket is (s1, s2), s1 uniform in t_before .. + period, s2 in t_after .. + period;
-    # the moment's density given them (BRACKET_BETA's fraction of s2 - s1, over s2 - s1) averaged
-    # over both (QUANTA points each)
-    q = (np.arange(QUANTA) + 0.5) / QUANTA * period_s
-    s1 = (a + margin)[:, None, None] + q[None, :, None]        # (read, s1, s2) less k_i
-    s2 = (b - margin - period_s)[:, None, None] + q[None, None, :]
-    width = s2 - s1
-    ok = width > 0
-    width = np.where(ok, width, 1.0)
-    logw = np.zeros(len(c))
-    for i in range(len(marks)):
-        u = (c[:, None, None] - s1[i][None]) / width[i][None]
-        dens = np.where(ok[i][None] & (u > 0) & (u < 1), (u * (1.0 - u)) ** (BRACKET_BETA - 1.0) / width[i][None], 0.0)
-        m = dens.mean(axis=(1, 2))
-        if m.max() > 0:          # within the margins only (a read outside its waits' bracket): no weight
-            logw += np.log(np.maximum(m / m.max(), 1e-300))
-    w = np.exp(logw - logw.max())
-    w /= w.sum()
-    mean = float(c @ w)
-    sd = float(np.sqrt(((c - mean) ** 2) @ w))
-    # the grid's own resolution (its step / sqrt 12) bounds the 1-sigma from below
-    return mean, max(sd, (hi - lo) / (GRID - 1) / np.sqrt(12.0))
-
-
-def _unwrapped_k(marks: list, rate_dps: float, period_s: float) -> list:
-    """(k_i, position unwrapped, deg) of each mark: its moment after the first's (s) from the
-    positions at the rate."""
-    p0 = marks[0].position_deg
-    return [(float((p - p0) / rate_dps), p) for _, p in _unwrapped(marks, rate_dps, period_s)]
+    return float(np.mean([p + rate_dps * (t - tm) for tm, p in _unwrapped(marks, rate_dps, period_s)]))
 
 
 def _unwrapped(marks: list, rate_dps: float, period_s: float) -> list:
@@ -184,12 +99,29 @@ def expected_angle(rate_dps: float, moving_s: float, accel_dps2: float, ramp: st
     return float(rate_dps * moving_s + (-ramp_deg if ramp == "start" else ramp_deg))
 
 
-def angle_sigma(marks: list, rate_dps: float, period_s: float, *, accel_dps2: float | None = None,
-                tolerance_deg: float = 0.0) -> float:
+def angle_sigma(marks: list, rate_dps: float, period_s: float) -> float:
     """The 1-sigma (deg) of a window's angle from placing its reads at the rate on the IMU's
-    clock: the 1-sigma of their common moment (``moment``) times |rate| (the reads at rest need
-    no placement).  0 without reads at the rate."""
+    clock (``position_at``; the reads at rest need no placement).  Two parts, in quadrature:
+
+    - the placement: a read's moment is known only to lie in its bracket, ``t_before`` ..
+      ``t_after`` + one period, wide ``w``; anywhere in it equally likely gives w / sqrt 12 (s).
+      Not divided by the reads' number: their placements share the reader's block phase and the
+      line's latency, so their errors need not average out (on the twins, speed 2, 100 Hz, 5 ms
+      clock offset: per-read spread 4-7 ms, but the windows' angles off by 2-4 ms beyond a common
+      offset -- more than the spread over sqrt 18 reads).  The rms of w / sqrt 12 over the reads,
+      times |rate|.
+    - the reads' own spread about one another once carried to a common moment (the table's rate
+      ripple, the positions' quantisation, placement jitter beyond the brackets): their standard
+      deviation over sqrt(n), the mean's.
+
+    0 without reads at the rate."""
     if not marks:
         return 0.0
-    _, sd = moment(marks, rate_dps, period_s, accel_dps2=accel_dps2, tolerance_deg=tolerance_deg)
-    return abs(float(rate_dps)) * sd
+    widths = np.array([m.t_after + period_s - m.t_before for m in marks])
+    placement = abs(rate_dps) * float(np.sqrt(np.mean(widths ** 2) / 12.0))
+    spread = 0.0
+    if len(marks) > 1:
+        t0 = placed(marks[0], period_s)
+        carried = [p - rate_dps * (tm - t0) for tm, p in _unwrapped(marks, rate_dps, period_s)]
+        spread = float(np.std(carried, ddof=1) / np.sqrt(len(carried)))
+    return float(np.hypot(placement, spread))
