@@ -20,10 +20,11 @@ TURNS = [((0.0, 1.0, 0.0), 90.0, 200.0, 5), ((0.0, 0.0, 1.0), 90.0, 100.0, 2), (
 DWELL_S = 150.0
 
 
-def _design(timed: bool):
+def _design(timed: bool, noise: Noise | None = None, config=None):
     """The candidates (these faces and turns), in the order the scheme writer lists them, their
     information (the candidates' capture in that order: the simulated bench draws the same
-    headings as for the written scheme) and the scheme the writer makes of them."""
+    headings as for the written scheme; ``noise``, default Noise(); ``config``: a station.yaml's,
+    its warm-up on the timeline) and the scheme the writer makes of them."""
     cands, chunk = [], []
     for up in FACES:
         chunk.append((("static", up), static_spec(up, UNIT_DWELL_S)))
@@ -35,7 +36,8 @@ def _design(timed: bool):
     chosen = list(range(len(cands)))
     assert timeline.written_order(chosen, cands) == chosen          # (the writer keeps this order)
     effects = [LIBRARY["temperature_bias"]()]
-    info = information([chunk], effects, Noise(), centred=True, attitudes="table", timeline=timed)
+    info = information([chunk], effects, Noise() if noise is None else noise, config, centred=True,
+                       attitudes="table", timeline=timed)
     scorer = search.Scorer(info, cands, search.Criterion("D"), np.arange(len(info.parameters.names)))
     if timed:
         assert scorer.retime(chosen)

@@ -10,20 +10,18 @@ import numpy as np
 import pytest
 
 from station.bench.config import WarmupConfig, load_config
-from station.design import search, timeline
-from station.design.candidates import rotation_pair, static_spec
-from station.design.designer import _segments_of, predict
-from station.design.information import UNIT_DWELL_S, Noise, information, quiet_truth
+from station.design import timeline
+from station.design.candidates import static_spec
+from station.design.designer import predict
+from station.design.information import Noise, quiet_truth
 from station.io.scheme import Scheme
-from station.model import LIBRARY
 from station.simulate import dryrun, montecarlo
+from test_design_timeline import _design as timeline_design
 
-# test_design_timeline's six faces of known attitude and three turns; the accelerometers' noise
-# lowered so that their coefficients are revealed after the warm-up too (at the Monte Carlo's
-# noise their 1σ, 45 ug/degC, is above the typical 30: the estimator then holds them by a prior)
-FACES = [(1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (0.0, 0.0, -1.0), (0.0, -1.0, 0.0), (-1.0, 0.0, 0.0)]
-TURNS = [((0.0, 1.0, 0.0), 90.0, 200.0, 5), ((0.0, 0.0, 1.0), 90.0, 100.0, 2), ((1.0, 0.0, 0.0), 0.0, 30.0, 1)]
-DWELL_S = 150.0
+# test_design_timeline's six faces of known attitude and three turns (its _design); the
+# accelerometers' noise lowered so that their coefficients are revealed after the warm-up too (at
+# the Monte Carlo's noise their 1σ, 45 ug/degC, is above the typical 30: the estimator then holds
+# them by a prior)
 NOISE = Noise(accel_noise_ug=40.0, accel_disturbance_ug=20.0)
 WARMUP_S = 600.0
 # the simulated IMU's warm-up (sim_devices/truth.py TemperatureTruth defaults), written out here
@@ -34,22 +32,8 @@ GAP_S = 15.0                         # the simulated bench's move and settling b
 
 def _design(config):
     """The candidates in the writer's order, searched on the timeline of ``config`` (its warm-up),
-    and the scheme the writer makes of them."""
-    cands, chunk = [], []
-    for up in FACES:
-        chunk.append((("static", up), static_spec(up, UNIT_DWELL_S)))
-        cands.append(search.Candidate(("static", up, DWELL_S), "static", DWELL_S, dwell_s=DWELL_S, slot=up))
-    for axis, e, rate, rev in TURNS:
-        key = (axis, e, rate, rev)
-        chunk.append((key, rotation_pair(axis, e, rate, rev)))
-        cands.append(search.Candidate(key, "rotation", 0.0, axis=(axis, e)))
-    chosen = list(range(len(cands)))
-    effects = [LIBRARY["temperature_bias"]()]
-    info = information([chunk], effects, NOISE, config, centred=True, attitudes="table", timeline=True)
-    scorer = search.Scorer(info, cands, search.Criterion("D"), np.arange(len(info.parameters.names)))
-    assert scorer.retime(chosen)
-    _, specs = _segments_of(chosen, cands)
-    return scorer, chosen, Scheme("t", "", "", {}, tuple(specs), centred=True), effects
+    and the scheme the writer makes of them (test_design_timeline's, at NOISE)."""
+    return timeline_design(True, NOISE, config)
 
 
 @pytest.fixture(scope="module")

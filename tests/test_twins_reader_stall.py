@@ -10,20 +10,14 @@ the table is asked is still taken for absent."""
 from __future__ import annotations
 
 import os
-import types
 
 from sim_devices.truth import default_truth
-from sim_devices.twins import clock as clock_module
-from sim_devices.twins import serve
 from sim_devices.twins.serve import BenchOptions, BenchServer
-from test_twins_speed import _Line
+from test_twins_speed import _Line, simulated_wall
 
 
 def _bench(monkeypatch):
-    wall = [1000.0]
-    fake_time = types.SimpleNamespace(monotonic=lambda: wall[0])
-    monkeypatch.setattr(serve, "time", fake_time)
-    monkeypatch.setattr(clock_module, "time", fake_time)
+    wall = simulated_wall(monkeypatch)
     server = BenchServer(default_truth(2), BenchOptions(speed=50.0, imu_protocol="csv"))
     server.imu_port.close()
     server.imu_port = line = _Line()

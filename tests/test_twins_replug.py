@@ -21,20 +21,16 @@ from __future__ import annotations
 
 import os
 import termios
-import types
 
 from drivers.protocols import vectornav as V
 from sim_devices.truth import default_truth
-from sim_devices.twins import clock as clock_module
 from sim_devices.twins import serve
 from sim_devices.twins.serve import BenchOptions, BenchServer
+from test_twins_speed import simulated_wall
 
 
 def test_a_command_on_a_line_nobody_read_is_answered_after_what_the_line_holds(monkeypatch):
-    wall = [1000.0]
-    fake_time = types.SimpleNamespace(monotonic=lambda: wall[0])
-    monkeypatch.setattr(serve, "time", fake_time)
-    monkeypatch.setattr(clock_module, "time", fake_time)
+    wall = simulated_wall(monkeypatch)
     server = BenchServer(default_truth(2), BenchOptions(speed=100.0, imu_startup="binary"))
     line = server.lines[0]
     try:

@@ -115,6 +115,16 @@ class _Line(QueuedEndpoint):
             os.close(self._wfd)
 
 
+
+def simulated_wall(monkeypatch, start_s: float = 1000.0) -> list:
+    """The twins' wall time (their loop's and clock's time.monotonic) moved by hand: a list whose
+    one element the test advances; nothing then depends on the machine's speed or load."""
+    wall = [start_s]
+    fake_time = types.SimpleNamespace(monotonic=lambda: wall[0])
+    monkeypatch.setattr(serve, "time", fake_time)
+    monkeypatch.setattr(clock_module, "time", fake_time)
+    return wall
+
 def test_a_reader_of_a_line_the_queue_keeps_full_is_seen_and_waited_for(monkeypatch):
     """The twins' clock waits for a reader that reads (lossless): it must see the reader
     although the unread count never falls.  A csv twin streams from power-up, nobody reads for
@@ -124,10 +134,7 @@ def test_a_reader_of_a_line_the_queue_keeps_full_is_seen_and_waited_for(monkeypa
     stays 4095.  Before, such a reader was taken for absent: the clock ran free and the twin
     dropped frames once its queue was half full (the flake of the test above at --speed 500,
     under load).  Wall time is simulated (steps of 10 ms); nothing depends on the machine."""
-    wall = [1000.0]
-    fake_time = types.SimpleNamespace(monotonic=lambda: wall[0])
-    monkeypatch.setattr(serve, "time", fake_time)
-    monkeypatch.setattr(clock_module, "time", fake_time)
+    wall = simulated_wall(monkeypatch)
     server = BenchServer(default_truth(2), BenchOptions(speed=50.0, imu_protocol="csv"))
     server.imu_port.close()
     server.imu_port = line = _Line()
