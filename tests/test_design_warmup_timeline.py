@@ -90,8 +90,9 @@ def test_the_dry_run_records_after_the_warm_up_as_the_imu_warms(warm, tmp_path):
     np.testing.assert_allclose(first.temp, expected, atol=1e-3)
     rows = (path / "warmup.csv").read_text().splitlines()
     assert rows[0] == "t_s,temp_c" and len(rows) == 1 + int(WARMUP_S)
-    assert float(rows[-1].split(",")[1]) == pytest.approx(ROOM_C + DELTA_C * (1.0 - np.exp(-WARMUP_S / TAU_S)),
-                                                          abs=1e-4)
+    # the last reading: the mean of the warm-up's last second (as the sequencer reads it), 0.1 mK
+    last_second = ROOM_C + DELTA_C * (1.0 - TAU_S * (np.exp(-(WARMUP_S - 1.0) / TAU_S) - np.exp(-WARMUP_S / TAU_S)))
+    assert float(rows[-1].split(",")[1]) == pytest.approx(last_second, abs=0.6e-4)
     on_timeline = timeline.seconds_temperatures([[20.0]], truth.temperature, (GAP_S, truth.sample_rate_hz),
                                                 start_s=WARMUP_S)
     assert on_timeline[0] == pytest.approx(first.temp.mean(), abs=1e-4)
@@ -137,3 +138,48 @@ def test_a_warm_up_longer_than_the_dry_run_simulates_is_one_line_exit_2(tmp_path
     slope = WarmupConfig(temp_slope_c_per_h=1e-12, max_s=1e9, window_s=300.0)
     with pytest.raises(UserError, match="still above temp_slope_c_per_h"):
         dryrun.warmup_seconds(slope, type("Flat", (), {"at": staticmethod(lambda t: 25.0 + 1e-3 * np.asarray(t))})())
+
+
+def test_the_dry_runs_slope_rule_ends_the_warm_up_where_the_sequencers_does(tmp_path, capsys):
+    """Review (revwarm): the sequencer (station/bench/sequencer.py ``_warmup``) decides on its
+    readings -- each the mean of a second of the IMU's samples, stamped at its last, rounded to
+    0.1 mK as warmup.csv keeps them -- with its own ``_slope_c_per_h`` (numpy's polyfit).  Run
+    here on the simulated IMU's 100 Hz samples, it must end the warm-up where
+    dryrun.warmup_seconds does, to the reading.  Before the fix the dry run fitted the exact
+    temperature at each whole second: 2497 s against the sequencer's 2441 s for 0.5 C/h over 3 s,
+    1253 s against 1252 over 10 s (the 0.1 mK steps are 0.12 C/h of slope over 3 s).  And a
+    window under 2 s (fewer than three readings: the sequencer fitted a line to one or two, the
+    dry run never settled and waited max_s, 7200 s against the sequencer's 1185 s) is refused
+    by the configuration in one line, exit 2."""
+    import warnings
+
+    from sim_devices.truth import TemperatureTruth
+    from station.bench.sequencer import _slope_c_per_h
+    from station.cli.app import main
+
+    temperature, fs = TemperatureTruth(), 100.0
+
+    def sequencer_end(w):
+        times, temps, k = [], [], 0
+        while True:
+            t = (k + 0.5 + np.arange(int(fs))) / fs
+            k += int(fs)
+            elapsed = t[-1] - 0.5 / fs
+            times.append(round(float(t[-1]), 3))
+            temps.append(round(float(temperature.at(t).mean()), 4))
+            if elapsed >= w.duration_s:
+                slope = _slope_c_per_h(times, temps, w.window_s)
+                if (slope is not None and abs(slope) < w.temp_slope_c_per_h) or elapsed >= w.max_s:
+                    return elapsed
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")          # (polyfit's RankWarning on a short window: not here)
+        for limit, window in ((0.5, 3.0), (2.0, 3.0), (2.0, 10.0), (0.5, 300.0)):
+            w = WarmupConfig(duration_s=0.0, max_s=7200.0, temp_slope_c_per_h=limit, window_s=window)
+            assert dryrun.warmup_seconds(w, temperature) == pytest.approx(sequencer_end(w), abs=0.5), (limit, window)
+    config = tmp_path / "short.yaml"
+    config.write_text("warmup:\n  temp_slope_c_per_h: 2\n  max_s: 7200\n  window_s: 1.5\n")
+    capsys.readouterr()
+    assert main(["plan", "--scheme", "sizeeffect", "--config", str(config)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "warmup.window_s" in err, err

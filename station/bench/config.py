@@ -272,6 +272,9 @@ def parse_config(doc, source: str) -> Config:
                                                 "geometry.axes_intersect false there is none (leave it out)")
     if warmup.temp_slope_c_per_h is not None and warmup.max_s is None:
         raise v.fail("warmup.max_s", "needed with temp_slope_c_per_h (the longest warm-up)")
+    if warmup.temp_slope_c_per_h is not None and warmup.window_s < 2.0:
+        raise v.fail("warmup.window_s", f"must be at least 2 s, got {warmup.window_s:g}: the temperature is read "
+                                        "once a second and its slope fitted to three readings at least")
     return Config(imu=imu, table=table, site=site, warmup=warmup, run=run, effects=effects, source=source,
                   imus=imus, chamber=_chamber(doc, v))
 
