@@ -105,6 +105,11 @@ def motion_found(kind: str, accel: np.ndarray, gyro: np.ndarray, *, rate_hz: flo
 #: a time offset is what the estimator measures from these windows (station/model/time_offset.py:
 #: 1-10 ms over USB and serial links, buffered MEMS), not a disagreement; five times the largest
 RAMP_OFFSET_ALLOWANCE_S = 0.05
+#: the gyro's bias may differ between the window's rest and its turns by this much (deg/s): a
+#: MEMS gyro's g-sensitivity (up to ~0.1 deg/s/g) moves its bias with the attitude, and the rest
+#: is at one attitude while the turns sweep gravity round (0.1 deg/s/g coupled into the axis: 8 deg
+#: over an 82 s window at 5 deg/s, every good window refused before; review of issue 28)
+RAMP_BIAS_SHIFT_DPS = 0.1
 #: of the window's compiled rest and turns at the rate, the part whose samples the check takes as
 #: at rest or at the rate (the rest before a late command, the turns after a late one: the rest
 #: of each is the margin)
@@ -124,7 +129,8 @@ def ramp_disagreement(ramp: str, head: np.ndarray, tail: np.ndarray, gyro_sum: n
     ``table_rate_dps``: the gyro's scale and misalignment cancel).  Against the table's angle
     (``table_angle_deg``, its magnitude), a difference beyond Z of its 1-sigma (the window's
     angle_sigma_deg; the gyro's white noise over the window, its bias and scale from the samples
-    taken; two encoder reads) and the time offset allowed (RAMP_OFFSET_ALLOWANCE_S at the rate) is
+    taken; two encoder reads), the time offset allowed (RAMP_OFFSET_ALLOWANCE_S at the rate) and the bias shift
+    allowed (RAMP_BIAS_SHIFT_DPS over the window: a gyro's g-sensitivity between rest and turns) is
     a finding: the table's reads misplaced on the IMU's clock, the IMU's frames late against them,
     or a window that does not hold what the table says."""
     head, tail = np.asarray(head, dtype=float), np.asarray(tail, dtype=float)
@@ -151,9 +157,11 @@ def ramp_disagreement(ramp: str, head: np.ndarray, tail: np.ndarray, gyro_sum: n
                          + (sigma_g / math.sqrt(n_rest) * window_s) ** 2) / gain ** 2     # the bias taken
                       + (table_deg * sigma_g / math.sqrt(n_turn) / float(np.linalg.norm(w))) ** 2   # the gain
                       + 2.0 * float(position_tolerance_deg) ** 2)
-    limit = Z * sigma + abs(float(table_rate_dps)) * RAMP_OFFSET_ALLOWANCE_S
+    shift_deg = RAMP_BIAS_SHIFT_DPS * window_s / gain
+    limit = Z * sigma + abs(float(table_rate_dps)) * RAMP_OFFSET_ALLOWANCE_S + shift_deg
     if abs(imu_deg - table_deg) > limit:
         return (f"the IMU's gyro turned {imu_deg:.4g} deg over the recorded ramp's window where the table's reads "
-                f"say {table_deg:.4g} deg (limit {limit:.3g} deg: {Z:g} x its 1-sigma {sigma:.3g} deg and "
-                f"{RAMP_OFFSET_ALLOWANCE_S * 1e3:g} ms of time offset at {abs(table_rate_dps):g} deg/s)")
+                f"say {table_deg:.4g} deg (limit {limit:.3g} deg: {Z:g} x its 1-sigma {sigma:.3g} deg, "
+                f"{RAMP_OFFSET_ALLOWANCE_S * 1e3:g} ms of time offset at {abs(table_rate_dps):g} deg/s and "
+                f"{RAMP_BIAS_SHIFT_DPS:g} deg/s of bias shift over {window_s:.3g} s)")
     return None

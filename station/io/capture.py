@@ -265,7 +265,7 @@ class Capture:
 class ReaderAhead:
     """The samples of a list of segments, taken in their order, with the next segments' files read
     (Capture.read_samples: read, hashed, parsed, checked) on reading threads while the caller works
-    on the current segment's samples.  Up to READ_AHEAD_THREADS threads read one file each at once
+    on the current segment's samples.  Up to read_ahead_threads() threads read one file each at once
     (the CSV engine and sha256 release the GIL: two files parse on two cores), and the list is read
     ahead by up to READ_AHEAD_BYTES of files (always the next one, however long): at most that much
     more than the segment taken exists at once.  A read that fails raises its error when that
@@ -275,10 +275,11 @@ class ReaderAhead:
 
     The first ``take`` of a segment not read yet sets the reading going (that segment and the next
     ones) and waits for its own file.  Why several files at once (issue 27, seventeenth session):
-    with one file read ahead the caller's numpy work and the reading thread's handed the GIL to
-    each other at every call, and the reading was the slower of the two: the 100 Hz optimal9
-    estimate's summaries took 200-240 ms of wall for ~70 ms of the caller's own CPU
-    (docs/performance.md)."""
+    with one file read ahead the reading thread was the slower of the two and the caller waited
+    for it (the 100 Hz optimal9 estimate's summaries: 200-240 ms of wall for ~70 ms of the caller's
+    own CPU, measured under load); reading two files at once took the whole estimate to 0.93 x its
+    wall at real-time priority under load, but gained nothing measurable on a quiet machine, for up
+    to ~5 % more CPU (docs/performance.md, "Seventeenth session: reading ahead")."""
 
     def __init__(self, capture, segments):
         import collections
