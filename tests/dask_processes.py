@@ -55,11 +55,15 @@ def cluster(directory: Path, env: dict, workers: int = 2, on_started=None):
                    "--name", f"w{k}"], f"worker{k}")
         if on_started is not None:
             on_started(procs)
-        deadline = time.monotonic() + 60
-        while not sched_file.exists() and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert sched_file.exists(), (directory / "scheduler.log").read_text()
-        address = json.loads(sched_file.read_text())["address"]
+        # the file appears before its JSON is written whole (seen in CI: read empty): read until it
+        # parses, as distributed's own json_load_robust does
+        deadline, address = time.monotonic() + 60, None
+        while address is None and time.monotonic() < deadline:
+            try:
+                address = json.loads(sched_file.read_text())["address"]
+            except (FileNotFoundError, ValueError, KeyError):
+                time.sleep(0.05)
+        assert address is not None, (directory / "scheduler.log").read_text()
         from distributed import Client
 
         with Client(address, timeout=60) as client:

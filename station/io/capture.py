@@ -348,7 +348,10 @@ class ReaderAhead:
             # fits the limit (long segments, which the CSV engine parses on its own threads) one
             # thread reads them all, its memory reused from file to file (a second thread's own
             # malloc arena held ~50 MB more at the 4 kHz capture's peak)
-            if len(self._threads) < min(read_ahead_threads(), len(self._pending)):
+            # (one thread for a small capture: its files go through the line-by-line reader, which
+            # holds the GIL, so a second one only contends)
+            threads = 1 if _small(self._capture) else read_ahead_threads()
+            if len(self._threads) < min(threads, len(self._pending)):
                 if not self._threads and not _small(self._capture):
                     _import_engine()        # here: the reading threads import nothing
                 thread = threading.Thread(target=self._serve, args=(self._capture, self._work),
