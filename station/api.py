@@ -709,7 +709,8 @@ def montecarlo(scheme: str = "optimal9", runs: int = 100, *, seed: int = 1000, a
                             method=method, effects=_mc.effect_settings(instances),
                             chamber=cfg.chamber if plan.chamber_steps else None,
                             ramp_accel_dps2=table_ramp_accel(cfg.table), warmup=cfg.warmup)
-    warmup_seconds(cfg.warmup, _mc.make_truth(settings).temperature)     # (a warm-up it cannot wait: one line)
+    # (a warm-up it cannot wait: one line, before any run); said in the result's settings
+    warm_s = warmup_seconds(cfg.warmup, _mc.make_truth(settings).temperature)
     result = _mc.study(plan, settings, runs, first_seed=seed, bound=True, progress=progress, executor=executor,
                        workers=workers)
     errors, sigmas = result.errors, result.sigmas
@@ -724,7 +725,10 @@ def montecarlo(scheme: str = "optimal9", runs: int = 100, *, seed: int = 1000, a
     return MonteCarlo(plan.name, runs, method, {"accel_noise_ug_rthz": accel_noise_ug,
                                                 "gyro_noise_dph_rthz": gyro_noise_dph,
                                                 "table_angle_arcsec": table_angle_arcsec,
-                                                "accel_disturbance_ug": accel_disturbance_ug},
+                                                "accel_disturbance_ug": accel_disturbance_ug,
+                                                # the configured warm-up waited on the simulated IMU
+                                                # before every run's first segment (0: none)
+                                                "warmup_s": float(warm_s)},
                       result.workers, rows, effects)
 
 

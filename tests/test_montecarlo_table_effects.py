@@ -54,13 +54,15 @@ def test_the_designers_verification_ramps_at_the_configured_tables_acceleration(
 
 def test_station_montecarlo_ramps_at_the_configured_tables_acceleration(tmp_path, monkeypatch):
     """api.montecarlo with --config: every dry run and the bound's capture at the table's 20 deg/s^2
-    (one worker: the runs in this process, where the spy sees them)."""
-    (tmp_path / "station.yaml").write_text(CONFIG)
+    (one worker: the runs in this process, where the spy sees them); the configured warm-up is
+    waited before each run and said in the result's settings (--json's "settings")."""
+    (tmp_path / "station.yaml").write_text(CONFIG + "warmup: {duration_s: 30}\n")
     (tmp_path / "r.yaml").write_text(RAMP)
     seen = _spy(monkeypatch)
     mc = api.montecarlo(str(tmp_path / "r.yaml"), 2, workers=1, config=str(tmp_path / "station.yaml"))
     assert mc.runs == 2 and seen and set(seen) == {20.0}, seen
     assert len(seen) == 2 * (2 + len(montecarlo.GEOMETRY_SEEDS))      # 2 runs + the bound's geometries
+    assert mc.settings["warmup_s"] == 30.0
 
 
 PLUGIN = '''\
