@@ -26,24 +26,15 @@ from station.model import table_revolution
 from station.model.table_vibration import TableVibration
 from station.simulate import dryrun
 
+from simhelpers import NINE_STATICS, THREE_ROTATIONS
+
 PHI = 30.0                      # deg: the vibration's phase against the table angle
 A = np.array([1.0, 0.0, 1.0])   # mg along the axis, towards r, along a_n x r (the benchmark's case)
 SCHEME = """\
 name: vertical_vibration
 defaults: {dwell_s: 6.0, rate_dps: 100.0, rotation_s: 36.0}
 segments:
-  - {static: s1, up_body: [1, 0, 0]}
-  - {static: s2, up_body: [-1, 0, 0]}
-  - {static: s3, up_body: [0, 1, 0]}
-  - {static: s4, up_body: [0, -1, 0]}
-  - {static: s5, up_body: [0, 0, 1]}
-  - {static: s6, up_body: [0, 0, -1]}
-  - {static: s7, up_body: [1, 1, 0]}
-  - {static: s8, up_body: [1, 0, 1]}
-  - {static: s9, up_body: [0, 1, 1]}
-  - {rotation: hx, axis_body: [1, 0, 0]}
-  - {rotation: hy, axis_body: [0, 1, 0]}
-  - {rotation: hz, axis_body: [0, 0, 1]}
+""" + NINE_STATICS.replace("pos0", "s") + THREE_ROTATIONS.replace(": rot", ": h") + """\
   - {rotation: vxy, axis_body: [1, 1, 0], axis_elevation_deg: 90}
   - {rotation: vyz, axis_body: [0, 1, 1], axis_elevation_deg: 90}
   - {rotation: vxz, axis_body: [1, 0, 1], axis_elevation_deg: 90}
