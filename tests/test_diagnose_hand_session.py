@@ -56,3 +56,50 @@ def test_a_diagnosis_whose_fit_stopped_at_its_limit_says_not_converged_first(tmp
     capsys.readouterr()
     assert cli.main(["diagnose", str(good), "--json"]) == 0
     assert not json.loads(capsys.readouterr().out)["verdict"].startswith("not converged")
+
+
+def test_an_imported_capture_gets_no_design_command_and_the_command_refuses_in_one_line(tmp_path, capsys,
+                                                                                         monkeypatch):
+    """imucal's Ferraris session imported with its turns' nominal 360 deg has a rate and an angle
+    for every turn, so the hand rule does not apply: diagnose printed `station design --from`
+    commands and the designer proposed segments on the built-in simulated bench's 3-axis table
+    (no run.yaml in the capture) -- a table the user may not have, for a capture that `station
+    run --append` cannot record into (it needs a run's run.yaml).  Both now say so instead (issue
+    28, eighteenth session).  The other side: a dry run's capture is still extended, on the
+    table station.yaml describes when there is one (named as such: "the built-in simulated
+    bench's" was said whatever was read)."""
+    from station.design import sequential
+    from station.io.capture import read_capture
+
+    path = imucal.import_imucal(SESSION, tmp_path / "b", rate_hz=102.4, sections_path=SECTIONS, turn_deg=360.0)
+    capsys.readouterr()
+    assert cli.main(["diagnose", str(path)]) == 0
+    printed = " ".join("".join(capsys.readouterr()).split())
+    assert "--reveal" not in printed and "--separate" not in printed
+    assert "no `station design --from` command: this capture was imported (imucal)" in printed
+    rc = cli.main(["design", "--from", str(path), "--add", "temperature_bias", "--reveal", "accel_bias_tempco_*",
+                   "-o", str(tmp_path / "ext.yaml")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "Traceback" not in err
+    assert f"{path}: imported (imucal), not a capture of station run" in " ".join(err.split())
+    assert not (tmp_path / "ext.yaml").exists()
+    # the other side, without a design: a dry run's capture is not "imported"; its table is
+    # ./station.yaml's when there is one, named so
+    from station.diagnose.suggest import imported
+    from station.simulate import dryrun
+
+    dry = dryrun.record_scheme(_two_statics(), dryrun.load_truth(None, 1), 1, tmp_path / "dry")
+    assert imported(read_capture(dry, load_data=False)) is None
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("STATION_CONFIG", raising=False)
+    assert sequential.capture_config(dry, None)[1].startswith("the built-in simulated bench's table")
+    (tmp_path / "station.yaml").write_text("version: 1\n")
+    assert sequential.capture_config(dry, None)[1] == "the table of station.yaml (a dry run's capture: no run.yaml in it)"
+
+
+def _two_statics():
+    from station.io.scheme import scheme_from_text
+
+    return scheme_from_text("name: two\nsegments:\n"
+                            "  - {static: up, up_body: [0, 0, 1], dwell_s: 2}\n"
+                            "  - {static: down, up_body: [0, 0, -1], dwell_s: 2}\n", "two.yaml")

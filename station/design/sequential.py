@@ -157,8 +157,10 @@ def capture_groups(base, sessions: dict) -> list:
 
 def capture_config(path: Path, config_path: str | None):
     """The table the capture was recorded on: --config if given, else the run's own
-    configuration (run.yaml), else the built-in simulated bench's (a dry run's capture)."""
-    from station.bench.config import from_dict, load_config
+    configuration (run.yaml), else the configuration station finds ($STATION_CONFIG,
+    ./station.yaml) or the built-in simulated bench's (a dry run's capture: extend refuses an
+    imported one, suggest.imported)."""
+    from station.bench.config import find_config, from_dict, load_config
     from station.core import yaml_text
 
     if config_path:
@@ -171,7 +173,9 @@ def capture_config(path: Path, config_path: str | None):
             raise UserError(f"{run_file}: cannot read it: {e}") from None
         if isinstance(doc, dict) and isinstance(doc.get("config"), dict):
             return from_dict(doc["config"], str(run_file)), f"the run's table ({run_file})"
-    return load_config(None), "the built-in simulated bench's table (no run.yaml in the capture)"
+    found = find_config(None)
+    return load_config(None), (f"the table of {found} (a dry run's capture: no run.yaml in it)" if found is not None
+                               else "the built-in simulated bench's table (a dry run's capture: no run.yaml in it)")
 
 
 def _blind_names(result) -> set:
@@ -209,7 +213,7 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
         raise UserError(f"--from: {', '.join(per_segment)} has parameters of its own per segment or a step's time "
                         "(set from the segments recorded) that no added segment shares, so segments to add cannot "
                         "be weighed for it; what separates it is said beside it in station diagnose")
-    from station.diagnose.suggest import hand_turns       # the one rule: diagnose prints no command for these
+    from station.diagnose.suggest import hand_turns, imported       # the rules diagnose's commands follow
 
     hand = hand_turns(capture)
     if hand:
@@ -221,6 +225,13 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     if "axes" not in table_doc and "no table" in str(table_doc.get("note", "")):
         raise UserError(f"{path}: recorded by hand, without a rate table: station design --from designs segments "
                         "for a table (record the extra attitudes by hand with a hand scheme)")
+    source = imported(capture)
+    if source:
+        raise UserError(f"{path}: imported ({source}), not a capture of station run: station design --from designs "
+                        "segments that station run --append records into a run's capture; design a scheme for "
+                        "your table with station design --config station.yaml (--add, --criterion "
+                        "'worst:PARAMS', --duration) and record it with station run, or record more attitudes "
+                        "and turns by hand")
     config, table_source = capture_config(path, config_path)
     base = capture_scheme(capture)
     sessions = capture_sessions(capture)          # a capture extended before: its extensions' segments

@@ -51,6 +51,22 @@ def added(effect_id: str, registry=None) -> str:
     return source
 
 
+def imported(capture) -> str | None:
+    """What ``capture`` (a Capture, as read) was imported from, when it is not a capture of
+    ``station run`` (no run.yaml beside it) nor a dry run's: ``station design --from`` designs
+    segments that ``station run --append`` records into the capture, which it does only into a
+    run's (its configuration, scheme and table are the run's), so it refuses such a capture
+    (sequential.extend, the same rule) and diagnose prints no command for it.  Before, the
+    designer took the built-in simulated bench's table for it and proposed segments on a table
+    the user may not have, into a capture nothing could append to (issue 28, eighteenth session:
+    imucal's session)."""
+    if (Path(capture.path) / "run.yaml").is_file() or isinstance(capture.extra.get("simulation"), dict):
+        return None
+    source = capture.extra.get("import")
+    source = source.get("from") if isinstance(source, dict) else None
+    return str(source) if isinstance(source, str) and source else "outside station run"
+
+
 def hand_turns(capture) -> list[str]:
     """The complete rotations of ``capture`` (a Capture, as read) without a table's angle and rate
     (turned by hand, or an encoder that did not report): ``station design --from`` weighs table
@@ -64,14 +80,16 @@ def suggest_all(first, final, steps, capture, summaries, registry=None) -> None:
     final, each once) and on --auto's steps; ``capture`` the Capture the diagnosis read (its
     manifest is not read again)."""
     hand = hand_turns(capture)
+    source = None if hand else imported(capture)
     for d in {id(first): first, id(final): final}.values():
-        suggest(d, capture.path, registry, summaries=summaries, hand=hand)
-    if not hand:
+        suggest(d, capture.path, registry, summaries=summaries, hand=hand, source=source)
+    no_command = bool(hand or source)
+    if not no_command:
         suggest_steps(steps, capture.path, summaries, registry)
     # the effects outside the library a warm-up scheme is blind to, when this capture is (unrevealed.py)
     from station.diagnose import unrevealed
 
-    final.not_revealed = [u.text + ("" if hand else unrevealed.after(u, capture.path, command))
+    final.not_revealed = [u.text + ("" if no_command else unrevealed.after(u, capture.path, command))
                           for u in unrevealed.find(final, summaries)]
 
 
@@ -122,12 +140,22 @@ def suggest_steps(steps, capture, summaries, registry=None) -> None:
         st.separations = separations(capture, st.after.effects, st.added, summaries, registry)
 
 
-def suggest(diagnosis, capture, registry=None, summaries=None, hand=()) -> None:
+def suggest(diagnosis, capture, registry=None, summaries=None, hand=(), source=None) -> None:
     """Set ``suggestion`` on every candidate the capture cannot reveal (no parameter it can
     size, or parameters aliased with the model's) and ``design_suggestions`` on the diagnosis
     for the model's own parameters it left not revealed (held by their priors); ``registry``:
-    where the effects came from, so that a plugin's is named by its file (added())."""
+    where the effects came from, so that a plugin's is named by its file (added()).  ``hand``:
+    the rotations turned by hand (hand_turns), ``source``: what the capture was imported from
+    (imported): no command, but why."""
     model_effects = [e for e in diagnosis.effects if e not in BASE and e != "discovered_terms"]
+    if source and not hand:
+        hidden = list(getattr(diagnosis.result.model, "unobservable", None) or [])
+        diagnosis.design_suggestions = ([f"not revealed by this capture: {', '.join(hidden)}"] if hidden else []) + [
+            f"no `station design --from` command: this capture was imported ({source}), and `station run "
+            "--append` records extra segments only into a capture of `station run`; design a scheme for your "
+            "table (`station design --config station.yaml --add EFFECT --criterion 'worst:PARAMS' --duration S`) "
+            "and record it with `station run`, or record more attitudes and turns by hand"]
+        return
     if hand:        # turned by hand (hand_turns): no command, but why
         hidden = list(getattr(diagnosis.result.model, "unobservable", None) or [])
         diagnosis.design_suggestions = ([f"not revealed by this capture: {', '.join(hidden)}"] if hidden else []) + [
