@@ -224,6 +224,9 @@ def _parameters_section(inp: ReportInput) -> str:
         chi = (f"<p>χ² {fit.get('chi2', float('nan')):.1f} for {fit.get('dof', '?')} degrees of freedom "
                f"(reduced {fit['reduced_chi2']:.3f}), method {_e(fit.get('method', ''))}</p>")
     notes = "".join(f"<li>{_e(n)}</li>" for n in fit.get("notes", []) if isinstance(n, str))
+    held = [str(n) for n in fit.get("not_determined") or []] if isinstance(fit.get("not_determined"), list) else []
+    if held:
+        chi += f"<p>Not determined by the capture (not written): {_e(', '.join(held))}.</p>"
     return (f"<section><h2>Parameters ± 1σ</h2>"
             f"<p>Calibration file <code>{_e(inp.calibration_path)}</code>; effects: {_e(effects)}.</p>"
             f"<div class='verdict {_verdict_class(verdict)}'>fit verdict: {_e(verdict)}</div>{chi}"
