@@ -178,3 +178,16 @@ def test_show_diff_export_and_montecarlo_say_not_determined(fitted, tmp_path, ca
     row = next(r for r in mc.parameters if r["name"] == "time_offset")
     assert row["std"] == pytest.approx(np.std([0.5, -0.5], ddof=1)) and row["mean_sigma"] == pytest.approx(0.5)
     assert row["crlb"] is None
+
+
+def test_diagnose_says_an_added_parameter_is_held_not_estimated(fitted):
+    """diagnose --auto's step prints the added effect's refit; a parameter the refit holds by its
+    prior is said to be not revealed (its figure is the prior's posterior, not an estimate)."""
+    from types import SimpleNamespace
+
+    from station.diagnose.auto import Step
+
+    result, _, _, _ = fitted
+    step = Step("time_offset", None, SimpleNamespace(result=result), 1.0, 1.0, [("time_offset", 0.03, 3.0, "ms")] +
+                [(n, 1.0, 0.1, "ug/degC") for n in TEMPCO[:1]])
+    assert step.not_revealed == ["time_offset"]
