@@ -19,7 +19,7 @@ setting when they return (station/core/blas.py).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -53,8 +53,16 @@ class Estimate:
     def parameters(self) -> dict[str, Parameter]:
         """Every written parameter (the ones the capture determines), base and effects."""
         sigma = self.calibration.sigma
+        dropped = set(self.calibration.fit.get("not_determined", []))
         return {name: Parameter(float(value), sigma.get(name), unit)
-                for name, value, unit in self.calibration.parameters()}
+                for name, value, unit in self.calibration.parameters() if name not in dropped}
+
+    @property
+    def held(self) -> dict[str, Parameter]:
+        """The added effects' parameters the capture does not reveal (not written: the file's
+        fit.not_determined): held by their priors, 0 +/- their typical size, in the fit; their
+        posterior (value, 1-sigma as fitted, unit), for study only: the calibration does not use it."""
+        return {name: Parameter(value, sigma, unit) for name, value, unit, sigma in self.calibration.held}
 
     @property
     def verdict(self) -> dict:
@@ -261,13 +269,18 @@ def _compensate(doc, where, source, t, accel, gyro, temp, registry_args, message
     """What ``station apply`` computes, for :func:`apply` (arrays: ``source`` None) and
     :func:`apply_file` (``source`` the input file): the checks, the compensation with every
     effect of the calibration, and the lines the command prints (into ``messages``)."""
-    from station.io.calfile import compensation_effects
+    from station.io.calfile import compensation_effects, not_compensated
     from station.model.compensate import LEGACY_EFFECTS, compensate, compensate_with_effects
 
     _check_gyro_output(doc, where)
     comp = doc["compensation"]
     if "effects" in comp:
         effects = compensation_effects(doc, _registry(*registry_args), where)
+        # parameters the capture did not determine: compensated at their nominal 0, which is no
+        # correction; an effect none of whose parameters is determined is left out (nor are its
+        # inputs, a temperature column or rates of change, needed)
+        held = {eid: (names, whole) for eid, names, whole in not_compensated(doc)}
+        effects = [(e, x) for e, x in effects if not held.get(e.id, ((), False))[1]]
         needs = {need: [e.id for e, _ in effects if need in e.needs] for need in ("temperature", "time")}
         if needs["temperature"] and temp is None:
             if source is None:
@@ -280,8 +293,15 @@ def _compensate(doc, where, source, t, accel, gyro, temp, registry_args, message
         t, f, w = compensate_with_effects(comp, effects, t, accel, gyro, temp)
         for e, _ in effects:
             inputs = ", ".join(e.needs)
+            part = held.get(e.id, ((), False))[0]
             messages.append(f"compensated: {e.id} ({getattr(e, '_station_source', 'library')})"
-                            + (f", using {inputs}" if inputs else ""))
+                            + (f", using {inputs}" if inputs else "")
+                            + (f"; not compensated: {', '.join(part)} (not determined by the capture: its "
+                               "nominal 0 is used)" if part else ""))
+        for eid, (names, whole) in held.items():
+            if whole:
+                messages.append(f"not compensated: {eid} (not determined by the capture: {', '.join(names)}; "
+                                "the effect is left out)")
     else:                               # a file written before compensation.effects
         f, w = compensate(comp, t, accel, gyro, temp)
         skipped = [e for e in doc.get("effects", []) if e not in LEGACY_EFFECTS]
@@ -654,7 +674,9 @@ class MonteCarlo:
     processes used), and ``parameters``: per parameter a dict with ``name``, ``unit``, ``std``
     (of the error against the simulated truth), ``crlb`` (the Cramér-Rao bound), ``mean_sigma``
     (the mean reported 1-sigma; None when the method reports none) and ``mean_error`` (scale
-    factors relative)."""
+    factors relative); ``crlb`` None for a parameter the noiseless capture does not reveal.
+    ``not_revealed``: {name: the runs whose capture did not reveal it} of the effects' parameters
+    held by their priors and not written (its row, if any, is over the other runs)."""
     scheme: str
     runs: int
     method: str
@@ -662,6 +684,7 @@ class MonteCarlo:
     workers: int
     parameters: list
     effects: tuple = ()
+    not_revealed: dict = field(default_factory=dict)
 
 
 def montecarlo(scheme: str = "optimal9", runs: int = 100, *, seed: int = 1000, accel_noise_ug: float = 100.0,
@@ -714,14 +737,20 @@ def montecarlo(scheme: str = "optimal9", runs: int = 100, *, seed: int = 1000, a
     result = _mc.study(plan, settings, runs, first_seed=seed, bound=True, progress=progress, executor=executor,
                        workers=workers)
     errors, sigmas = result.errors, result.sigmas
-    std = errors.std(axis=0, ddof=1)
+    # an effect parameter a run's capture does not reveal (held by its prior, not written: no
+    # error, 1σ inf): its statistics are those of the runs that reveal it, the count said apart
+    held = np.isinf(sigmas) & np.isnan(errors)
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)        # (a column of NaN: left out below)
+        std = np.where(held.any(axis=0), np.nanstd(errors, axis=0, ddof=1), errors.std(axis=0, ddof=1))
+        mean_error = np.where(held.any(axis=0), np.nanmean(errors, axis=0), errors.mean(axis=0))
+        sigmas = np.where(held, np.nan, sigmas)
         mean_sigma = np.nanmean(sigmas, axis=0) if np.isfinite(sigmas).any() else np.full(len(std), np.nan)
-    rows = [{"name": n, "unit": u, "std": float(sd), "crlb": float(c),
+    rows = [{"name": n, "unit": u, "std": float(sd), "crlb": float(c) if np.isfinite(c) else None,
              "mean_sigma": None if not np.isfinite(ms) else float(ms), "mean_error": float(me)}
-            for (n, u), sd, c, ms, me in zip(result.names, std, result.crlb, mean_sigma, errors.mean(axis=0))
+            for (n, u), sd, c, ms, me in zip(result.names, std, result.crlb, mean_sigma, mean_error)
             if np.isfinite(sd)]
+    not_revealed = {n: int(k) for (n, _), k in zip(result.names, held.sum(axis=0)) if k}
     return MonteCarlo(plan.name, runs, method, {"accel_noise_ug_rthz": accel_noise_ug,
                                                 "gyro_noise_dph_rthz": gyro_noise_dph,
                                                 "table_angle_arcsec": table_angle_arcsec,
@@ -729,7 +758,7 @@ def montecarlo(scheme: str = "optimal9", runs: int = 100, *, seed: int = 1000, a
                                                 # the configured warm-up waited on the simulated IMU
                                                 # before every run's first segment (0: none)
                                                 "warmup_s": float(warm_s)},
-                      result.workers, rows, effects)
+                      result.workers, rows, effects, not_revealed)
 
 
 @dataclass

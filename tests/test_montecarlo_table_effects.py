@@ -90,9 +90,16 @@ def test_station_montecarlo_takes_a_plugin_as_estimate_and_design_do(tmp_path, c
 
     wanted = [p.name for p in GyroScaleTemperatureSquared().params]
     rows = {r["name"]: r for r in report["parameters"]}
-    assert set(wanted) <= set(rows), sorted(rows)
+    # each fitted in every run: estimated (a row: spread, bound and mean 1σ finite and positive),
+    # or not revealed by the capture (held by its prior, not written since issue 28's eighteenth
+    # session: counted in not_revealed, not reported as an estimate with an error)
+    held = report["not_revealed"]
+    assert set(wanted) <= set(rows) | set(held), (sorted(rows), held)
     for n in wanted:
-        assert rows[n]["std"] > 0 and rows[n]["crlb"] > 0 and rows[n]["mean_sigma"] > 0, rows[n]
+        if n in rows:
+            assert rows[n]["std"] > 0 and rows[n]["crlb"] > 0 and rows[n]["mean_sigma"] > 0, rows[n]
+        else:
+            assert held[n] == 2, held
 
 
 def test_an_unknown_effect_is_one_line(capsys):

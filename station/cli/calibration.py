@@ -153,6 +153,15 @@ def cmd_show(args) -> int:
     print_parameters(rows, f"{args.calibration}")
     prov = doc.get("provenance") or {}
     out.print(f"effects: {', '.join(doc.get('effects', []))}", markup=False)
+    held = (doc.get("fit") or {}).get("not_determined")
+    if isinstance(held, list) and held:
+        out.print(f"not determined by the capture (not written): {', '.join(map(str, held))}", markup=False,
+                  soft_wrap=True)
+    from station.io.calfile import not_compensated
+
+    for eid, names, whole in not_compensated(doc):
+        out.print(f"{eid}: not compensated" + ("" if whole else f" for {', '.join(names)}")
+                  + " (not determined by the capture: its nominal 0 is used)", markup=False, soft_wrap=True)
     if doc.get("gyro_pass_through"):
         out.print("gyro: not calibrated (accelerometer-only calibration; apply passes the gyro through)")
     for key in ("method", "capture", "capture_sha256", "imu_model", "imu_serial", "imu_firmware", "imu_lot",

@@ -299,7 +299,10 @@ def _print(out, first, steps, final) -> None:
         if st.share is not None:
             t.add_row("share of the excess χ² explained", f"{100 * st.share:.0f} %", "")
         out.print(t)
-        out.print("added: " + "; ".join(f"{n} = {v:.4g} ± {s:.2g} {u}" for n, v, s, u in st.estimate))
+        held = set(st.not_revealed)
+        out.print("added: " + "; ".join(f"{n} = {v:.4g} ± {s:.2g} {u}"
+                                        + (" (not revealed: held by its prior, not written)" if n in held else "")
+                                        for n, v, s, u in st.estimate))
         for c in st.caveats:
             out.print(f"caveat: {c}")
         for line in step_lines(st):

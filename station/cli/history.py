@@ -172,9 +172,12 @@ def cmd_diff(args) -> int:
                   "not judged (" + ", ".join(c.name for c in rows if c.z is None) + ")", markup=False, soft_wrap=True)
     for line in d.warnings:
         err.print(line, markup=False, soft_wrap=True)
-    for label, names in (("only in A", d.only_a), ("only in B", d.only_b)):
+    for label, names, other, side in (("only in A", d.only_a, d.doc_b, "B"), ("only in B", d.only_b, d.doc_a, "A")):
+        held = (other.get("fit") or {}).get("not_determined")
+        held = held if isinstance(held, list) else []
         if names:
-            out.print(f"{label}: {', '.join(names)}", markup=False)
+            out.print(f"{label}: " + ", ".join(f"{n} (not determined by {side}'s capture)" if n in held else n
+                                               for n in names), markup=False, soft_wrap=True)
     if args.drift:
         from station.core.errors import UserError
 

@@ -80,7 +80,8 @@ def cmd_montecarlo(args) -> int:
               f"{args.runs / elapsed:.2f} runs/s", markup=False, soft_wrap=True)
     if args.json:
         print(json.dumps({"scheme": mc.scheme, "runs": mc.runs, "method": mc.method, "effects": list(mc.effects),
-                          "settings": mc.settings, "parameters": mc.parameters}, indent=1))
+                          "settings": mc.settings, "parameters": mc.parameters,
+                          "not_revealed": mc.not_revealed}, indent=1))
         return 0
     from rich.table import Table
 
@@ -90,8 +91,14 @@ def cmd_montecarlo(args) -> int:
         table.add_column(col, justify="left" if col in ("parameter", "unit") else "right")
     for r in mc.parameters:
         ms = r["mean_sigma"]
-        table.add_row(r["name"], f"{r['std']:.4g}", f"{r['crlb']:.4g}", f"{r['std'] / r['crlb']:.2f}",
+        crlb = r["crlb"]
+        table.add_row(r["name"], f"{r['std']:.4g}", "not revealed" if crlb is None else f"{crlb:.4g}",
+                      "" if crlb is None else f"{r['std'] / crlb:.2f}",
                       "" if ms is None else f"{ms:.4g}", "" if ms is None else f"{ms / r['std']:.2f}",
                       f"{r['mean_error']:+.3g}", r["unit"])
     out.print(table)
+    if mc.not_revealed:
+        out.print("not revealed by the capture (held by its prior, not written; a row above is over the other "
+                  "runs): " + ", ".join(f"{n} in {k} of {mc.runs} runs" for n, k in mc.not_revealed.items()),
+                  markup=False, soft_wrap=True)
     return 0

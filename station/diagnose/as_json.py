@@ -56,6 +56,8 @@ def to_json(d, steps) -> dict:
                    "share_of_excess": _num(st.share), "caveats": st.caveats,
                    "separate_commands": list(getattr(st, "separations", None) or []),
                    "removed": [{"effect": e, "reason": why} for e, why in st.removed],
-                   "estimate": [{"name": n, "value": v, "sigma": sg, "unit": u}
+                   "estimate": [{"name": n, "value": v, "sigma": sg, "unit": u,
+                                 # held by its prior (the capture does not reveal it): not written
+                                 "not_revealed": n in set(getattr(st, "not_revealed", None) or ())}
                                 for n, v, sg, u in st.estimate]} for st in steps],
     }

@@ -85,6 +85,15 @@ class Step:
     instead_of: str = ""                     # the library effect the terms beat out of sample
     proposal: object = None                  # terms.Proposal of a discovered step
 
+    @property
+    def not_revealed(self) -> list:
+        """The added effect's parameters the refit holds by their prior (not revealed by the
+        capture: a calibration does not write them, docs/calibration-file.md); their estimate
+        is that posterior, said so where it is printed."""
+        model = getattr(getattr(self.after, "result", None), "model", None)
+        held = set(getattr(model, "unobservable", None) or ())
+        return [n for n, _, _, _ in self.estimate if n in held]
+
 
 @dataclass
 class Rejection:

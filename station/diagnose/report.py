@@ -224,6 +224,9 @@ def _parameters_section(inp: ReportInput) -> str:
         chi = (f"<p>χ² {fit.get('chi2', float('nan')):.1f} for {fit.get('dof', '?')} degrees of freedom "
                f"(reduced {fit['reduced_chi2']:.3f}), method {_e(fit.get('method', ''))}</p>")
     notes = "".join(f"<li>{_e(n)}</li>" for n in fit.get("notes", []) if isinstance(n, str))
+    held = [str(n) for n in fit.get("not_determined") or []] if isinstance(fit.get("not_determined"), list) else []
+    if held:
+        chi += f"<p>Not determined by the capture (not written): {_e(', '.join(held))}.</p>"
     return (f"<section><h2>Parameters ± 1σ</h2>"
             f"<p>Calibration file <code>{_e(inp.calibration_path)}</code>; effects: {_e(effects)}.</p>"
             f"<div class='verdict {_verdict_class(verdict)}'>fit verdict: {_e(verdict)}</div>{chi}"
@@ -295,7 +298,10 @@ def _diagnosis_section(inp: ReportInput, figures: dict) -> str:
         rows = [[_e(what), f"{b:.4g}", f"{a:.4g}"] for what, b, a in comparison_rows(st.before, st.after)]
         rows += [["predicted χ² drop", f"{st.predicted_drop:.4g}", ""], ["actual χ² drop", f"{st.actual_drop:.4g}", ""]]
         parts.append(f"<h3>Step {k}: added {_e(st.added)}</h3>" + _table(["", "before", "after"], rows))
-        parts.append("<p>" + "; ".join(_e(f"{n} = {v:.4g} ± {s:.2g} {u}") for n, v, s, u in st.estimate) + "</p>")
+        held = set(getattr(st, "not_revealed", None) or ())
+        parts.append("<p>" + "; ".join(_e(f"{n} = {v:.4g} ± {s:.2g} {u}"
+                                          + (" (not revealed: held by its prior, not written)" if n in held else ""))
+                                       for n, v, s, u in st.estimate) + "</p>")
     if inp.steps:
         parts.append(_verdict_box(final.verdict, inp, "after the added effects: "))
     account = getattr(final, "account", None) or []

@@ -2376,6 +2376,13 @@ def _noise_per_sample(model: Model, x: np.ndarray) -> dict:
 
 
 def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=()) -> Calibration:
+    """The calibration of a fit.  An effect parameter the capture does not reveal (held by its
+    prior 0 +/- its typical size: ``model.unobservable``) is not written (issue 28, eighteenth
+    session): it is left out of the parameters, their 1-sigma and correlation, named in
+    ``fit.not_determined``, and its effect's compensation uses the prior's mean, 0 (the effect's
+    nominal: no correction for it), listed in that entry's ``not_determined``.  The fit is not
+    changed: the other parameters' 1-sigma carry its uncertainty (what the prior is for).  Its
+    posterior stays in memory only (``Calibration.held``: value, unit, 1-sigma)."""
     model, x = result.model, result.x
     L, s = model.layout, model.s
     names, values, units_, cov = reported(result, accel_unit, gyro_unit)
@@ -2384,13 +2391,17 @@ def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=())
     sigma[np.isin(_reported_columns(result), result.rank_deficient)] = np.inf
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(sigma, sigma)
+    held_names = set(model.unobservable)
     extra, effect_compensation = {}, []
     for e in model.effects:
         xe = x[L[f"effect:{e.id}"]]
-        extra.update(e.report(xe, None))
+        held_here = [p.name for p in e.params if p.name in held_names]
+        nominal = np.where([p.name in held_names for p in e.params], 0.0, xe) if held_here else xe
+        extra.update(e.report(nominal, None))
         effect_compensation.append({
             "id": e.id, "source": getattr(e, "_station_source", "library"), "state": e.state(),
-            "parameters": {p.name: float(v * p.scale) for p, v in zip(e.params, xe)}})
+            "parameters": {p.name: float(v * p.scale) for p, v in zip(e.params, nominal)},
+            **({"not_determined": held_here} if held_here else {})})
     fit_stats = {
         "method": "lsq",
         "chi2": result.chi2,
@@ -2427,18 +2438,22 @@ def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=())
         _, index, factors, _ = _reported_index(result, accel_unit, gyro_unit)
         with np.errstate(invalid="ignore", divide="ignore"):
             steps = np.abs(model.remaining_step[index] * factors) / sigma
-        fit_stats["remaining_step_sigma"] = {n: float(v) for n, v in zip(names, steps) if np.isfinite(v)}
+        fit_stats["remaining_step_sigma"] = {n: float(v) for n, v in zip(names, steps)
+                                             if np.isfinite(v) and n not in held_names}
     if model.unobservable:
         fit_stats["notes"].append(
             f"not revealed by this capture (1-sigma above the typical size), held at 0 +/- the "
-            f"typical size by a prior: "
+            f"typical size by a prior in the fit (the other parameters' 1-sigma carry its uncertainty), "
+            f"not written, and not compensated (its nominal 0 is used): "
             f"{', '.join(model.unobservable)}")
     for e in model.effects:       # what an effect's own convention fixes (not the capture's doing)
         fit_stats["notes"] += list(e.notes()) if hasattr(e, "notes") else []
         if getattr(e, "bench", False) and callable(getattr(e, "words", None)):
-            # a fault of the bench found, with its size (a finding for the lab: apply compensates nothing)
+            # a fault of the bench found, with its size (a finding for the lab: apply compensates nothing);
+            # a held parameter is no finding (its 1-sigma taken as infinite)
             own = [names.index(p.name) for p in e.params if p.name in names]
-            fit_stats["notes"] += list(e.words(np.asarray(values, float)[own], sigma[own]))
+            own_sigma = np.where([names[i] in held_names for i in own], np.inf, sigma[own])
+            fit_stats["notes"] += list(e.words(np.asarray(values, float)[own], own_sigma))
     if model.geometry.describe(s.rotations):
         fit_stats["notes"].append(model.geometry.describe(s.rotations))
     if "mounting_offset" in L.blocks:
@@ -2448,6 +2463,13 @@ def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=())
         fit_stats["mounting_offsets_mm"] = [
             (x[L[f"mounting_offset{m}"]] @ (np.eye(3) if k is None else model.axis_basis[k]) * 1e3).tolist()
             for m, k in enumerate(model.offset_axis)]
+    held = [(n, float(v), u, float(sg)) for n, v, u, sg in zip(names, values, units_, sigma) if n in held_names]
+    if held:
+        fit_stats["not_determined"] = [n for n, _, _, _ in held]
+    keep = [i for i, n in enumerate(names) if n not in held_names]
+    names, values, units_, sigma = ([names[i] for i in keep], np.asarray(values)[keep],
+                                    [units_[i] for i in keep], sigma[keep])
+    corr = corr[np.ix_(keep, keep)]
     return Calibration(
         accel_unit=accel_unit, gyro_unit=gyro_unit,
         accel_scale=x[L["accel_scale"]].copy(), accel_T=lower_unit_rows(x[L["accel_misalignment"]]),
@@ -2458,7 +2480,7 @@ def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=())
         effects=["base_triads", "inter_triad"] + [e.id for e in model.effects],
         fit=fit_stats, sigma=dict(zip(names, sigma.tolist())), correlation=(names, corr),
         extra_parameters=[(n, float(v), u) for n, v, u in zip(names[21:], values[21:], units_[21:])],
-        compensation_extra=extra, effect_compensation=effect_compensation)
+        compensation_extra=extra, effect_compensation=effect_compensation, held=held)
 
 
 def estimate(capture, effects: list[Effect] | None = None, attitudes: str = "auto",

@@ -21,6 +21,10 @@ determines.  Applied to every estimate before it is written (station.estimate.es
   any rotation segment it is never written (a scale factor needs a known rotation: the Earth
   rate alone is 0.004 deg/s).  The inter-triad rotation alone may be missing: the gyro output
   then stays in its own frame o.
+- **Effect parameters not revealed**: an added effect's parameter the capture cannot reveal is
+  held by a prior in the fit and not written (station.estimate.lsq.to_calibration names it in
+  ``fit.not_determined``; its compensation uses the effect's nominal).  Not a failure: the
+  verdict does not change.
 - **Words for large rotations**: an inter-triad rotation above ``LARGE_ROTATION_DEG``, or a
   negative scale factor, is named in the notes (axes swapped or inverted between the triads).
 """
@@ -285,8 +289,11 @@ def _identifiability(cal: Calibration) -> None:
                          "or above its bound): not written; the compensated gyro output stays in the "
                          "gyros' own frame o")
     dropped = held + dropped
+    # the effect parameters the capture does not reveal (held by their priors: lsq.to_calibration
+    # leaves them out and names them) stay named after the base parameters dropped here
+    effects = [n for n in fit.get("not_determined", []) if n not in dropped]
     if dropped:
-        fit["not_determined"] = dropped
+        fit["not_determined"] = dropped + effects
         for name in dropped:
             cal.sigma.pop(name, None)
 

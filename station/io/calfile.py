@@ -437,7 +437,11 @@ def _scales_agree(doc, imu, params, pass_through, path) -> None:
 
 
 def _effect_entries(entries, path) -> list:
-    """Validate ``compensation.effects``: a list of {id, source, state, parameters}."""
+    """Validate ``compensation.effects``: a list of {id, source, state, parameters, and
+    not_determined when the capture did not reveal some of them}.  A parameter not determined
+    is written at its nominal, 0 (station.estimate.lsq.to_calibration): one listed with another
+    value says two things about it and is refused.  Files written before not_determined (the
+    eighteenth session) have none: every parameter is used as written."""
     if not isinstance(entries, list):
         raise UserError(f"{path}: field 'compensation.effects': must be a list")
     out = []
@@ -456,14 +460,23 @@ def _effect_entries(entries, path) -> list:
         source = e.get("source", "library")
         if not isinstance(source, str):
             raise UserError(f"{where}.source': must be text")
-        out.append({"id": e["id"], "source": source, "state": state, "parameters": dict(params)})
+        held = e.get("not_determined", [])
+        if not isinstance(held, list) or not all(isinstance(n, str) and n in params for n in held):
+            raise UserError(f"{where}.not_determined': must list names of its parameters")
+        given = [n for n in held if params[n] != 0]
+        if given:
+            raise UserError(f"{where}.parameters': {', '.join(given)} not determined (not_determined), yet "
+                            "given a value other than its nominal 0: not one calibration")
+        out.append({"id": e["id"], "source": source, "state": state, "parameters": dict(params),
+                    **({"not_determined": list(held)} if held else {})})
     return out
 
 
 def compensation_effects(doc: dict, registry, path="calibration") -> list:
     """(Effect, x internal) for every effect of a calibration read by read_calfile, created from
     ``registry`` (station.model.registry): the library, installed plugins and those the user
-    loaded.  A plugin effect the registry lacks is refused with the way to load it; station never
+    loaded; a parameter the capture did not determine (its entry's ``not_determined``) is at its
+    nominal 0 in x (not_compensated names them).  A plugin effect the registry lacks is refused with the way to load it; station never
     runs code named in a calibration file."""
     out = []
     for k, entry in enumerate(doc["compensation"].get("effects", [])):
@@ -486,4 +499,17 @@ def compensation_effects(doc: dict, registry, path="calibration") -> list:
                             f".parameters': missing {', '.join(missing)}")
         x = np.array([entry["parameters"][p.name] / p.scale for p in params], dtype=float)
         out.append((effect, x))
+    return out
+
+
+def not_compensated(doc: dict) -> list:
+    """(effect id, [parameter names], all of them) of every effect of a calibration read by
+    read_calfile whose entry lists parameters the capture did not determine (compensated at their
+    nominal 0: no correction for them); ``all`` True when none of the effect's parameters is
+    determined (the effect is not compensated at all)."""
+    out = []
+    for entry in doc["compensation"].get("effects", []):
+        held = list(entry.get("not_determined", []))
+        if held:
+            out.append((entry["id"], held, set(held) >= set(entry["parameters"])))
     return out

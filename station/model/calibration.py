@@ -53,6 +53,9 @@ class Calibration:
     compensation_extra: dict = field(default_factory=dict)  # e.g. accel_lever_arm_m (3x3, m)
     effect_compensation: list = field(default_factory=list)  # per added effect: id, source, state,
                                                              #   parameters (reported units)
+    # (name, value, unit, 1-sigma) of the effect parameters the capture does not reveal, held by
+    # their priors in the fit: its posterior, in memory only (not written; fit.not_determined)
+    held: list = field(default_factory=list)
 
     # --- unit factors: SI (m/s^2, deg/s) per raw unit; 1 for "raw" -------------------------
     @property

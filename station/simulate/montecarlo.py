@@ -74,7 +74,9 @@ def _estimate(capture, settings: Settings):
 
 def effect_parameters(cal, effects=()) -> list:
     """(name, value, unit) of the effects' parameters of a calibration, in their reported units
-    (the library's, or those of the instances ``effects``: a plugin's)."""
+    (the library's, or those of the instances ``effects``: a plugin's); not those the capture
+    does not reveal (an entry's not_determined: held by their priors, not written; the tables
+    show them as not revealed, NaN)."""
     from station.model import LIBRARY
 
     units_ = {p.name: p.unit for e in effects for p in e.params}
@@ -83,7 +85,7 @@ def effect_parameters(cal, effects=()) -> list:
         if cls is not None:
             units_.update({p.name: p.unit for p in cls().params})
     return [(name, float(v), units_.get(name, "")) for e in cal.effect_compensation or []
-            for name, v in e["parameters"].items()]
+            for name, v in e["parameters"].items() if name not in e.get("not_determined", ())]
 
 
 def _error_sigmas(cal) -> np.ndarray:
@@ -101,7 +103,8 @@ def _effect_values(cal, settings: Settings, sigma: bool = False) -> list:
     calibration does not carry (fixed by the effect's convention, e.g. the size effect's own-axis
     positions when the mounting offset is unknown)."""
     got = {name: (cal.sigma.get(name, np.nan) if sigma else value) for name, value, _ in effect_parameters(cal)}
-    return [got.get(p.name, np.nan) for e in _effects(settings) for p in e.params]
+    held = {name: (np.inf if sigma else np.nan) for name in cal.fit.get("not_determined", [])}
+    return [got.get(p.name, held.get(p.name, np.nan)) for e in _effects(settings) for p in e.params]
 
 
 def one_run(args) -> tuple[list[float], np.ndarray]:
@@ -116,7 +119,7 @@ def run_one(scheme: Scheme, settings: Settings, seed: int) -> tuple:
     its chamber), estimated with the settings' method and effects: (names, errors, the fit's own
     1σ, the fit's notes); errors in parameter_errors' units (scale factors relative, in ppm), each
     effect parameter against zero (the simulator's default IMU has none of the effects: NaN where
-    the calibration does not carry it).  station montecarlo's runs and station design's
+    the calibration does not carry it; a 1σ of inf where the capture does not reveal it).  station montecarlo's runs and station design's
     verification (designer.verify_one) are this one function."""
     from station.simulate import dryrun
     from station.model.calibration import parameter_errors
@@ -138,6 +141,9 @@ def run_one(scheme: Scheme, settings: Settings, seed: int) -> tuple:
     listed = [p for e in _effects(settings) for p in e.params]
     names = [e[0] for e in rows] + [p.name for p in listed]
     got = {name: (value, cal.sigma.get(name, np.nan)) for name, value, _ in effect_parameters(cal, effects)}
+    # a parameter the capture does not reveal (held by its prior, not written): no error, an
+    # infinite 1σ (NaN and NaN: one its convention fixes)
+    got.update({name: (np.nan, np.inf) for name in cal.fit.get("not_determined", []) if name not in got})
     errors = [e[3] for e in rows] + [got.get(p.name, (np.nan, np.nan))[0] for p in listed]
     sigmas = np.concatenate([_error_sigmas(cal), [got.get(p.name, (np.nan, np.nan))[1] for p in listed]])
     return names, np.array(errors, float), np.asarray(sigmas, float), list(cal.fit.get("notes", []))

@@ -37,6 +37,9 @@ class ExportSource:
     parameters: dict = field(default_factory=dict)
     noise: dict | None = None       # the calibration file's noise block (station noise)
     noise_origin: str | None = None  # the noise file the block came from (export --noise), else the calibration
+    # the added effects' parameters the capture did not determine (not written; compensated at
+    # their nominal 0 by station apply)
+    not_determined: list = field(default_factory=list)
 
     @property
     def dropped_effects(self) -> list[str]:
@@ -68,6 +71,8 @@ class ExportSource:
         if self.dropped_effects:
             lines.append("estimated but not representable in this format (not compensated): "
                          + ", ".join(self.dropped_effects))
+        if self.not_determined:
+            lines.append("not determined by the capture (not written): " + ", ".join(self.not_determined))
         return lines
 
 
@@ -117,9 +122,12 @@ def source_from_document(doc: dict, origin) -> ExportSource:
         from station.io.noise_file import check_kalibr
 
         check_kalibr(noise["kalibr"], origin)
+    held = [n for entry in comp.get("effects") or [] if isinstance(entry, dict)
+            for n in entry.get("not_determined") or [] if isinstance(n, str)]
     return ExportSource(accel_matrix, accel_bias, gyro_matrix, gyro_bias, accel_unit, gyro_unit,
                         origin, text(prov.get("imu_model")), text(prov.get("imu_serial")),
-                        text(prov.get("date_utc")), effects, doc.get("parameters") or {}, noise)
+                        text(prov.get("date_utc")), effects, doc.get("parameters") or {}, noise,
+                        not_determined=held)
 
 
 def safe_comment(text: str) -> str:

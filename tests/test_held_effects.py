@@ -1,0 +1,193 @@
+"""Issue 28 (eighteenth session): an added effect's parameter the capture does not reveal is not
+written.  The fit holds it by a prior of 0 +/- its typical size (station/estimate/lsq.py fit:
+model.unobservable) so that the other parameters' 1-sigma carry its uncertainty; the calibration
+leaves it out of ``parameters``, their 1-sigma and ``correlation``, names it in
+``fit.not_determined``, and compensates it at its nominal 0 (its effect's entry says so); station
+apply says which effect parameters it does not compensate.
+
+One capture (module fixture, ~1 s of CPU): the 2010 paper's nine-position scheme, a simulated IMU
+whose accelerometer biases follow the temperature over a 6 degC warm-up, fitted with
+temperature_bias (revealed: written as before) and time_offset (steady turns only: no change of
+rate to see a clock offset by, its 1-sigma above its typical 3 ms: held)."""
+import numpy as np
+import pytest
+import yaml
+
+from station import api
+from station.cli import main
+from station.estimate import lsq
+from station.estimate.summaries import summarise
+from station.estimate.verdict import judge
+from station.io.calfile import read_calfile, write_calfile
+from station.io.scheme import load_scheme
+from station.model import EFFECTS
+from station.simulate import dryrun
+
+TEMPCO = ["accel_bias_tempco_x", "accel_bias_tempco_y", "accel_bias_tempco_z",
+          "gyro_bias_tempco_x", "gyro_bias_tempco_y", "gyro_bias_tempco_z"]
+
+
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory):
+    """(the fit, its judged calibration, the written file's path and document)."""
+    truth = dryrun.load_truth(None, 0)
+    truth.accel.bias_tempco = np.array([60.0, -40.0, 50.0])         # ug/degC
+    truth.temperature.warmup_delta_c = 6.0
+    capture = dryrun.simulate_capture(load_scheme("optimal9"), truth, 3)
+    result = lsq.fit(summarise(capture), [EFFECTS["temperature_bias"](), EFFECTS["time_offset"]()])
+    cal = judge(lsq.to_calibration(result, capture.imu.accel_unit, capture.imu.gyro_unit))
+    path = tmp_path_factory.mktemp("held") / "cal.yaml"
+    write_calfile(path, cal, {})
+    return result, cal, path, yaml.safe_load(path.read_text())
+
+
+def test_a_parameter_the_capture_does_not_reveal_is_not_written_the_revealed_ones_are(fitted):
+    result, cal, _, doc = fitted
+    assert result.model.unobservable == ["time_offset"]          # the fit's own judgement (unchanged)
+    # not written: no value, no 1-sigma, no correlation; named, with the reason
+    assert "time_offset" not in doc["parameters"] and "time_offset" not in doc["correlation"]["names"]
+    assert "time_offset" not in cal.sigma and "time_offset" not in [n for n, _, _ in cal.parameters()]
+    assert doc["fit"]["not_determined"] == ["time_offset"]
+    note = next(n for n in doc["fit"]["notes"] if n.startswith("not revealed by this capture"))
+    assert "not written" in note and note.endswith(": time_offset")
+    entry = {e["id"]: e for e in doc["compensation"]["effects"]}
+    assert entry["time_offset"]["parameters"] == {"time_offset": 0.0}
+    assert entry["time_offset"]["not_determined"] == ["time_offset"]
+    # the revealed effect is written as before: value, 1-sigma, correlation, compensated at its value
+    names, values, _, cov = lsq.reported(result, "m/s^2", "deg/s")
+    for n in TEMPCO:
+        k = names.index(n)
+        assert doc["parameters"][n]["value"] == pytest.approx(values[k], rel=1e-12)
+        assert doc["parameters"][n]["sigma"] == pytest.approx(np.sqrt(cov[k, k]), rel=1e-12)
+        assert entry["temperature_bias"]["parameters"][n] == pytest.approx(values[k], rel=1e-12)
+        assert n in doc["correlation"]["names"]
+    assert "not_determined" not in entry["temperature_bias"]
+    # the simulated tempcos are recovered within 4 of their 1-sigma (they are revealed)
+    for n, true in zip(TEMPCO[:3], [60.0, -40.0, 50.0]):
+        assert abs(doc["parameters"][n]["value"] - true) < 4 * doc["parameters"][n]["sigma"]
+    # the fit is the one with the prior: every written 1-sigma is the fit's own (the held parameter's
+    # uncertainty carried), and the verdict is not changed by the held parameter
+    for n in ("accel_bias_x", "gyro_bias_z", "accel_scale_y"):
+        k = names.index(n)
+        assert cal.sigma[n] == pytest.approx(np.sqrt(cov[k, k]), rel=1e-12)
+    assert doc["verdict"]["result"] == "passes"
+    # the held posterior stays in memory (for study), its 1-sigma the prior's at most
+    (name, _, unit, sigma), = cal.held
+    assert name == "time_offset" and unit == "ms" and 0 < sigma <= 3.0 + 1e-9
+
+
+def test_apply_compensates_the_held_parameter_at_its_nominal_and_says_so(fitted, tmp_path, capsys):
+    _, _, path, _ = fitted
+    n = 200
+    t = np.arange(n) / 100.0
+    accel = np.tile([0.01, -0.02, 9.81], (n, 1)) + 0.01 * np.sin(t)[:, None]
+    gyro = np.column_stack([np.zeros(n), np.zeros(n), 10.0 * np.sin(3 * t)])
+    temp = 25.0 + 0.5 * t
+    doc = read_calfile(path)
+    got = api.apply(doc, t, accel, gyro, temp)
+    # exactly what the calibration without the time offset gives
+    without = dict(doc, compensation=dict(doc["compensation"], effects=[
+        e for e in doc["compensation"]["effects"] if e["id"] != "time_offset"]))
+    for a, b in zip(got, api.apply(without, t, accel, gyro, temp)):
+        assert np.array_equal(a, b)
+    # ... and the temperature bias is compensated (the output differs from no effect at all)
+    bare = dict(doc, compensation=dict(doc["compensation"], effects=[]))
+    assert not np.array_equal(got[1], api.apply(bare, t, accel, gyro, temp)[1])
+    # station apply runs and says which effect it does not compensate, and why
+    csv = tmp_path / "in.csv"
+    np.savetxt(csv, np.column_stack([t, accel, gyro, temp]), delimiter=",", header="t,ax,ay,az,gx,gy,gz,temp",
+               comments="")
+    assert main(["apply", str(path), str(csv), "-o", str(tmp_path / "out.csv")]) == 0
+    err = capsys.readouterr().err
+    assert "compensated: temperature_bias" in err
+    assert "not compensated: time_offset (not determined by the capture: time_offset" in err, err
+
+
+def test_a_partly_held_effect_and_old_or_edited_files(fitted, tmp_path, capsys):
+    """An effect some of whose parameters are held is compensated with the others and apply names
+    the held ones; a file written before not_determined (a value for every parameter) still loads
+    and is used as written; a held parameter given another value than its nominal is refused."""
+    _, _, path, text = fitted
+    n = 50
+    t, temp = np.arange(n) / 100.0, 25.0 + np.arange(n) / 10.0
+    accel, gyro = np.tile([0.0, 0.0, 9.81], (n, 1)), np.tile([0.0, 0.0, 5.0], (n, 1))
+
+    def write(doc, name):
+        p = tmp_path / name
+        p.write_text(yaml.safe_dump(doc, sort_keys=False))
+        return p
+
+    partly = yaml.safe_load(yaml.safe_dump(text))
+    entry = next(e for e in partly["compensation"]["effects"] if e["id"] == "temperature_bias")
+    entry["not_determined"] = TEMPCO[3:]
+    entry["parameters"].update({k: 0.0 for k in TEMPCO[3:]})
+    messages = []
+    api._compensate(read_calfile(write(partly, "partly.yaml")), "partly.yaml", None, t, accel, gyro, temp,
+                    ((), (), None), messages)
+    said = next(m for m in messages if m.startswith("compensated: temperature_bias"))
+    assert said.endswith("not compensated: gyro_bias_tempco_x, gyro_bias_tempco_y, gyro_bias_tempco_z (not "
+                         "determined by the capture: its nominal 0 is used)"), said
+    old = yaml.safe_load(yaml.safe_dump(text))
+    for e in old["compensation"]["effects"]:
+        e.pop("not_determined", None)
+    old["compensation"]["effects"][-1]["parameters"]["time_offset"] = 2.0        # ms, as a file of before
+    messages = []
+    t_old, _, _ = api._compensate(read_calfile(write(old, "old.yaml")), "old.yaml", None, t, accel, gyro, temp,
+                                  ((), (), None), messages)
+    assert "compensated: time_offset (library)" in messages
+    assert not np.allclose(t_old, t)          # the clock offset used as written
+    edited = yaml.safe_load(yaml.safe_dump(text))
+    edited["compensation"]["effects"][-1]["parameters"]["time_offset"] = 2.0
+    assert main(["show", str(write(edited, "edited.yaml"))]) == 2
+    err = capsys.readouterr().err
+    assert "time_offset not determined (not_determined), yet given a value" in err and err.count("\n") == 1
+
+
+def test_show_diff_export_and_montecarlo_say_not_determined(fitted, tmp_path, capsys, monkeypatch):
+    _, _, path, _ = fitted
+    assert main(["show", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "not determined by the capture (not written): time_offset" in out
+    assert "time_offset: not compensated (not determined by the capture" in out
+    exported = api.export(path, "json", tmp_path / "cal.json")
+    import json
+
+    plain = json.loads(exported[0].read_text())
+    assert "time_offset" not in plain["parameters"]
+    assert "not determined by the capture (not written): time_offset" in plain["notes"]
+    # diff against a file that wrote it (an older one): the parameter only in A, said why
+    older = yaml.safe_load(path.read_text())
+    older["parameters"]["time_offset"] = {"value": 0.03, "unit": "ms", "sigma": 3.0}
+    del older["fit"]["not_determined"]
+    (tmp_path / "older.yaml").write_text(yaml.safe_dump(older, sort_keys=False))
+    assert main(["diff", str(tmp_path / "older.yaml"), str(path), "--store", str(tmp_path / "store")]) == 0
+    assert "only in A: time_offset (not determined by B's capture)" in capsys.readouterr().out
+    # montecarlo: a held parameter is no estimate with an error (effect_parameters leaves it out)
+    from station.simulate import montecarlo
+
+    _, cal, _, _ = fitted
+    assert [n for n, _, _ in montecarlo.effect_parameters(cal)] == TEMPCO
+    # ... and the table says in how many runs it was not revealed, its row over the others
+    names = [("a", "1"), ("time_offset", "ms")]
+    errors = np.array([[1.0, np.nan], [-1.0, 0.5], [0.0, np.nan], [2.0, -0.5]])
+    sigmas = np.array([[1.0, np.inf], [1.0, 0.4], [1.0, np.inf], [1.0, 0.6]])
+    study = montecarlo.Study(names, errors, sigmas, np.array([1.0, np.inf]), 1)
+    monkeypatch.setattr(montecarlo, "study", lambda *a, **k: study)
+    mc = api.montecarlo("optimal9", runs=4, effects=["time_offset"])
+    assert mc.not_revealed == {"time_offset": 2}
+    row = next(r for r in mc.parameters if r["name"] == "time_offset")
+    assert row["std"] == pytest.approx(np.std([0.5, -0.5], ddof=1)) and row["mean_sigma"] == pytest.approx(0.5)
+    assert row["crlb"] is None
+
+
+def test_diagnose_says_an_added_parameter_is_held_not_estimated(fitted):
+    """diagnose --auto's step prints the added effect's refit; a parameter the refit holds by its
+    prior is said to be not revealed (its figure is the prior's posterior, not an estimate)."""
+    from types import SimpleNamespace
+
+    from station.diagnose.auto import Step
+
+    result, _, _, _ = fitted
+    step = Step("time_offset", None, SimpleNamespace(result=result), 1.0, 1.0, [("time_offset", 0.03, 3.0, "ms")] +
+                [(n, 1.0, 0.1, "ug/degC") for n in TEMPCO[:1]])
+    assert step.not_revealed == ["time_offset"]
