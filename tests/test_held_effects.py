@@ -191,3 +191,80 @@ def test_diagnose_says_an_added_parameter_is_held_not_estimated(fitted):
     step = Step("time_offset", None, SimpleNamespace(result=result), 1.0, 1.0, [("time_offset", 0.03, 3.0, "ms")] +
                 [(n, 1.0, 0.1, "ug/degC") for n in TEMPCO[:1]])
     assert step.not_revealed == ["time_offset"]
+
+
+def test_an_edited_fit_block_is_refused_in_one_line_not_a_traceback(fitted, tmp_path, capsys):
+    """A file whose ``fit`` is not a mapping (show and diff read fit.not_determined from it) or
+    whose fit.not_determined is not a list of names: one clear message, exit 2 (review of issue
+    28: ``fit: 5`` ended station show and station diff in an AttributeError traceback, exit 1)."""
+    _, _, path, text = fitted
+    for k, fit in enumerate((5, ["time_offset"], dict(text["fit"], not_determined=5),
+                             dict(text["fit"], not_determined=[{"time_offset": 1}]))):
+        doc = yaml.safe_load(yaml.safe_dump(text))
+        doc["fit"] = fit
+        p = tmp_path / f"fit{k}.yaml"
+        p.write_text(yaml.safe_dump(doc, sort_keys=False))
+        for argv in (["show", str(p)], ["diff", str(path), str(p), "--store", str(tmp_path / "store")]):
+            assert main(argv) == 2, (fit, argv)
+            err = capsys.readouterr().err
+            assert f"{p}: field 'fit" in err and err.count("\n") == 1, err
+
+
+def test_a_file_that_says_a_parameter_is_not_determined_and_gives_it_a_value_is_refused(fitted, tmp_path, capsys):
+    """fit.not_determined names time_offset, yet the file writes it under ``parameters`` (2 ms +/-
+    0.1) or its effect's entry compensates it at 2 ms without saying it is not determined: two
+    things about one parameter (station show printed the value beside "not determined", station
+    apply compensated the 2 ms while show said not written).  Refused in one line, exit 2, as an
+    entry that lists it and gives it a value already is (review of issue 28)."""
+    _, _, path, text = fitted
+    written = yaml.safe_load(yaml.safe_dump(text))
+    written["parameters"]["time_offset"] = {"value": 2.0, "unit": "ms", "sigma": 0.1}
+    used = yaml.safe_load(yaml.safe_dump(text))
+    entry = used["compensation"]["effects"][-1]
+    del entry["not_determined"]
+    entry["parameters"]["time_offset"] = 2.0
+    for name, doc in (("written", written), ("used", used)):
+        p = tmp_path / f"{name}.yaml"
+        p.write_text(yaml.safe_dump(doc, sort_keys=False))
+        assert main(["show", str(p)]) == 2, name
+        err = capsys.readouterr().err
+        assert "time_offset" in err and "not_determined" in err and err.count("\n") == 1, err
+    # the file as written is read (both lists agree, no value given)
+    assert main(["show", str(path)]) == 0
+
+
+def test_effects_sharing_a_parameter_name_are_refused_not_written_as_one(fitted):
+    """Two effects of one model with a parameter of the same name (a plugin reusing
+    temperature_bias's accel_bias_tempco_x): the file names parameters, so the two cannot be told
+    apart in it -- the held one (a term these steady turns do not excite) took the revealed
+    temperature slope with it: accel_bias_tempco_x (true 60 ug/degC) was left out of parameters and
+    compensated at 0 in temperature_bias's entry (review of issue 28).  Refused before any fit."""
+    from station.core.errors import UserError
+    from station.model.effect import Effect, Param
+
+    class SharedName(Effect):
+        id = "shared_name"
+        complex_step = True
+
+        @property
+        def params(self):
+            return (Param("accel_bias_tempco_x", "ug/degC", 1.0, 30.0, 1000.0),)
+
+        def accel(self, x, ctx):
+            out = np.zeros((len(ctx.f_p), 3), dtype=np.result_type(x, float))
+            out[:, 0] = x[0] * 1e-6 * ctx.wdot_table[:, 2]
+            return out
+
+    class BaseName(SharedName):
+        id = "base_name"
+
+        @property
+        def params(self):
+            return (Param("accel_bias_x", "ug", 1.0, 30.0, 1000.0),)
+
+    result, _, _, _ = fitted
+    s = result.model.s
+    with pytest.raises(UserError, match="accel_bias_tempco_x.*temperature_bias.*shared_name"):
+        lsq.fit(s, [EFFECTS["temperature_bias"](), SharedName()])
+    with pytest.raises(UserError, match="accel_bias_x.*base_name"):
+        lsq.fit(s, [BaseName()])
