@@ -401,6 +401,15 @@ class Model:
                              if self.geometry.level_sigma_rad else [])
         for e in effects:
             L.add(f"effect:{e.id}", len(e.params))
+        # a calibration names its parameters (parameters, correlation, fit.not_determined): two of
+        # one name cannot be told apart in it (a held one took a revealed namesake with it)
+        owner = {f"{block}_{suffix}": "the base model" for block, _, _ in GLOBAL for suffix in SUFFIX.get(block, "xyz")}
+        for e in effects:
+            for p in e.params:
+                if p.name in owner:
+                    raise UserError(f"parameter {p.name!r}: of {owner[p.name]} and of effect {e.id!r} (a "
+                                    "calibration names its parameters: one name cannot be two; rename one)")
+                owner[p.name] = f"effect {e.id!r}"
         self.static_colour = hand_rotation.static_colours(len(s.statics), self.hands) if self.hands else None
         self.priors: dict[int, float] = {}     # column -> 1-sigma of a zero-mean prior
         self._initialise(like if like is not None and self._same_nuisances(like) else None)

@@ -399,7 +399,34 @@ def read_calfile(path) -> dict:
                             f"compensation cannot be trusted (an accelerometer-only file has compensation.gyro: "
                             f"{GYRO_PASS_THROUGH!r})")
     _scales_agree(doc, imu, params, pass_through, path)
+    _not_determined_agrees(doc, params, path)
     return doc
+
+
+def _not_determined_agrees(doc, params, path) -> None:
+    """``fit`` a mapping, its ``not_determined`` a list of names; a parameter named there is not
+    written under ``parameters`` (to_document leaves it out) and, if an added effect's, its entry
+    in ``compensation.effects`` lists it in its own not_determined (at the nominal 0): a file that
+    says a parameter is not determined and gives it a value says two things about it (review of
+    issue 28).  Files written before not_determined have none: nothing to check."""
+    fit = doc.get("fit")
+    if fit is None:
+        return
+    if not isinstance(fit, dict):
+        raise UserError(f"{path}: field 'fit': must be a mapping")
+    held = fit.get("not_determined", [])
+    if not isinstance(held, list) or not all(isinstance(n, str) for n in held):
+        raise UserError(f"{path}: field 'fit.not_determined': must be a list of parameter names")
+    written = [n for n in held if n in params]
+    if written:
+        raise UserError(f"{path}: field 'parameters': {', '.join(written)[:200]} not determined "
+                        "(fit.not_determined), yet written: not one calibration")
+    for k, entry in enumerate(doc["compensation"].get("effects", [])):
+        used = [n for n in held if n in entry["parameters"] and n not in entry.get("not_determined", [])]
+        if used:
+            raise UserError(f"{path}: field 'compensation.effects[{k}].parameters': {', '.join(used)[:200]} "
+                            "not determined (fit.not_determined), yet compensated at the value given "
+                            "(not in the entry's not_determined): not one calibration")
 
 
 def _scales_agree(doc, imu, params, pass_through, path) -> None:
