@@ -121,6 +121,9 @@ def test_a_partly_held_effect_and_old_or_edited_files(fitted, tmp_path, capsys):
     entry = next(e for e in partly["compensation"]["effects"] if e["id"] == "temperature_bias")
     entry["not_determined"] = TEMPCO[3:]
     entry["parameters"].update({k: 0.0 for k in TEMPCO[3:]})
+    for k in TEMPCO[3:]:                      # not written, named in the fit's list too (as written)
+        partly["parameters"].pop(k)
+    partly["fit"]["not_determined"] += TEMPCO[3:]
     messages = []
     api._compensate(read_calfile(write(partly, "partly.yaml")), "partly.yaml", None, t, accel, gyro, temp,
                     ((), (), None), messages)
@@ -160,6 +163,9 @@ def test_show_diff_export_and_montecarlo_say_not_determined(fitted, tmp_path, ca
     older = yaml.safe_load(path.read_text())
     older["parameters"]["time_offset"] = {"value": 0.03, "unit": "ms", "sigma": 3.0}
     del older["fit"]["not_determined"]
+    older_entry = older["compensation"]["effects"][-1]            # (compensated at its value, then)
+    del older_entry["not_determined"]
+    older_entry["parameters"]["time_offset"] = 0.03
     (tmp_path / "older.yaml").write_text(yaml.safe_dump(older, sort_keys=False))
     assert main(["diff", str(tmp_path / "older.yaml"), str(path), "--store", str(tmp_path / "store")]) == 0
     assert "only in A: time_offset (not determined by B's capture)" in capsys.readouterr().out

@@ -409,6 +409,11 @@ def _not_determined_agrees(doc, params, path) -> None:
     in ``compensation.effects`` lists it in its own not_determined (at the nominal 0): a file that
     says a parameter is not determined and gives it a value says two things about it (review of
     issue 28).  Files written before not_determined have none: nothing to check."""
+    entries = doc["compensation"].get("effects", [])
+    written = [n for entry in entries for n in entry.get("not_determined", []) if n in params]
+    if written:
+        raise UserError(f"{path}: field 'parameters': {', '.join(written)[:200]} not determined (its "
+                        "compensation entry's not_determined), yet written: not one calibration")
     fit = doc.get("fit")
     if fit is None:
         return
@@ -421,7 +426,7 @@ def _not_determined_agrees(doc, params, path) -> None:
     if written:
         raise UserError(f"{path}: field 'parameters': {', '.join(written)[:200]} not determined "
                         "(fit.not_determined), yet written: not one calibration")
-    for k, entry in enumerate(doc["compensation"].get("effects", [])):
+    for k, entry in enumerate(entries):
         used = [n for n in held if n in entry["parameters"] and n not in entry.get("not_determined", [])]
         if used:
             raise UserError(f"{path}: field 'compensation.effects[{k}].parameters': {', '.join(used)[:200]} "
