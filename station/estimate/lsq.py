@@ -1425,18 +1425,23 @@ CREEP_CHI2 = 1e-6
 #: converges (chi2 1.068738) in 278, as LM restarted from scratch did.  The tilted Monte Carlo's
 #: fits (tests/test_lsq_partial_arcs.py) keep ratios of 2-65 there: LM goes on with its state
 STALE_SCALE = 100.0
-#: the last phase (LM after dogbox crept too, or after LM crept again) was unwatched: diagnose's
-#: failing fits ran there to the limit of 1,000 evaluations gaining hundredths of a chi2 unit (the
-#: eighteenth session: a gyro bias step of +100 deg/h beside the statics, 550 evaluations from 1576.92
-#: to 1576.76 of chi2, 0.02 units, the written parameters moving < 0.01 sigma).  It is watched: it
-#: stops ("settled", not converged) where its last CREEP_WINDOW evaluations lowered chi2 at a pace
-#: at which MAX_EVALUATIONS more would gain less than SETTLED_CHI2 chi2 units AND the Gauss-Newton
-#: step from there moves no written parameter (Calibration.parameters() and the effects': what
-#: to_calibration writes) by SETTLED_SIGMA of its 1-sigma or more (verdict.py's REMAINING_STEP_SIGMA:
-#: the file then says the written parameters are at the minimum).  A fit still gaining more, or
-#: whose written parameters the step would still move, goes on as before (its tolerances, or the limit)
+#: the last phase (LM after dogbox crept too, or after LM crept again) was unwatched: a failing fit
+#: ran there to the limit of 1,000 evaluations gaining hundredths of a chi2 unit (the eighteenth
+#: session: a gyro bias step of +100 deg/h between the statics and the rotations, 550 evaluations
+#: from chi2 1576.92 to 1576.76, 0.02 units, the written parameters moving < 0.01 sigma; the
+#: Gauss-Newton step, which the at-minimum test reads, promised 29 of chi2 along the headings of two
+#: statics where chi2 rises after 1 % of that step: the linear model does not see the valley).  It
+#: is watched (_SettledWatch): it stops, "settled" and not converged, where its last CREEP_WINDOW
+#: evaluations gained so little that MAX_EVALUATIONS more at that pace would gain less than
+#: SETTLED_CHI2 chi2 units, that window gained less than SETTLED_SHARE of what the Gauss-Newton step
+#: would (which is at least AT_MINIMUM_CHI2 units: a converging LM, e.g. imucal's annotated session
+#: 79 evaluations into its last phase, gains what is left within a window), and that step moves no
+#: written parameter by SETTLED_SIGMA of its 1-sigma (verdict.py's REMAINING_STEP_SIGMA: the file
+#: then says the written parameters are at the minimum).  Otherwise LM goes on as before, on the
+#: same path (its tolerances or the limit)
 SETTLED_CHI2 = 0.05
 SETTLED_SIGMA = 0.01
+SETTLED_SHARE = 0.1
 #: the first words of _solve's note for a fit that settled (verdict.py and diagnose read them)
 SETTLED_NOTE = "the fit stopped where it crept"
 #: a fit that met its tolerances is at a minimum when a Gauss-Newton step from it would gain less
@@ -1827,53 +1832,60 @@ def _detours(model: Model, lm, evaluations: int, options: dict):
 
 def _last_phase(model: Model, lm, evaluations: int):
     """LM on after both solvers crept: to its tolerances or the limit, as before the watch, unless
-    it settles first (SETTLED_CHI2, SETTLED_SIGMA): then its result has status 0 (not converged)
-    and ``settled`` True, which _solve says in the fit's notes."""
+    it settles first (_SettledWatch): then its result has status 0 (not converged) and ``settled``
+    True, which _solve says in the fit's notes.  Pausing to test does not change LM's path (its
+    state is kept): a fit that does not settle takes, evaluation for evaluation, the path it took."""
     watch = _SettledWatch(model, lm)
     while lm.run(evaluations, watch.seen) is None:
         res = lm.result()             # LM's point: the lowest it accepted (its Jacobian, kept by LM)
-        if _at_minimum(res):          # at the minimum after all (as _detours takes it)
-            res.status = 2
-            return res
-        if watch.written_still_move(res) is None:
-            res.status, res.settled = 0, True
+        if watch.settled(res):
+            res.status, res.settled, res.window_gain = 0, True, watch.window_gain
             return res
     return lm.result()
 
 
 class _SettledWatch(_CreepWatch):
-    """_CreepWatch's record with _last_phase's rule: ``seen`` pauses LM where the last CREEP_WINDOW
+    """_CreepWatch's record with _last_phase's rule.  ``seen`` pauses LM where its last CREEP_WINDOW
     evaluations lowered the lowest chi2 by less than SETTLED_CHI2 * CREEP_WINDOW / MAX_EVALUATIONS
-    chi2 units (so that MAX_EVALUATIONS more at that pace gain less than SETTLED_CHI2), at most once
-    per window (the written parameters' test costs an SVD of the Jacobian)."""
+    chi2 units (MAX_EVALUATIONS more at that pace would gain less than SETTLED_CHI2), at most once
+    per window (``settled`` costs an SVD of the Jacobian).  ``settled`` then says whether to stop:
+    when the Gauss-Newton step from LM's point (i) would gain at least AT_MINIMUM_CHI2 units (below,
+    _solve's own test takes the point for a minimum: LM is left to its tolerances, as before), (ii)
+    more than 1 / SETTLED_SHARE times what the window gained (LM realises a small share of what
+    the linear model says is left: it creeps along a curve that model does not see, where a
+    converging LM gains what is left within a few steps), and (iii) moves no written parameter
+    by SETTLED_SIGMA of its 1-sigma."""
 
     def __init__(self, model: Model, lm):
         super().__init__(model.residuals)
         self.written = _reported_columns(SimpleNamespace(model=model))
         self.seen(lm.x, lm.f, lm.fnorm)
         self.tested_at = 0
-        self.step_sigma = None        # the written parameters' largest Gauss-Newton step in 1-sigma
+        self.window_gain = self.gauss_newton_gain = self.step_sigma = None      # at the last test
 
     def seen(self, x, r, norm=None) -> bool:
         super().seen(x, r, norm)
         if len(self.history) <= CREEP_WINDOW or len(self.history) - self.tested_at < CREEP_WINDOW:
             return False
-        gain = self.history[-1 - CREEP_WINDOW] - self.best_chi2
-        return gain < SETTLED_CHI2 * CREEP_WINDOW / MAX_EVALUATIONS * self.unit(r, x)
+        self.window_gain = self.history[-1 - CREEP_WINDOW] - self.best_chi2
+        return self.window_gain < SETTLED_CHI2 * CREEP_WINDOW / MAX_EVALUATIONS * self.unit(r, x)
 
-    def written_still_move(self, res):
-        """None when the Gauss-Newton step from res moves no written parameter by SETTLED_SIGMA of
-        its 1-sigma (the covariance of res.jac, as to_calibration's remaining_step_sigma reads it);
-        else the largest such movement (LM goes on, tested again a window later)."""
+    def settled(self, res) -> bool:
+        """The test at LM's point (res: fun and jac there), as the class says."""
         self.tested_at = len(self.history)
         svd = _ScaledSVD(np.asarray(res.jac))
-        keep = svd.sv > 1e-12 * svd.sv[0]
-        step = -(svd.vt[keep].T @ ((svd.u[:, keep].T @ res.fun) / svd.sv[keep])) / svd.norms
+        keep = svd.sv > 1e-12 * svd.sv[0]                 # (lstsq's rcond in _gauss_newton_step)
+        c = svd.u[:, keep].T @ res.fun
+        self.gauss_newton_gain = float(c @ c)
+        unit = self.unit(res.fun, res.x)
+        if self.gauss_newton_gain < AT_MINIMUM_CHI2 * unit or self.window_gain * SETTLED_SHARE > self.gauss_newton_gain:
+            return False
+        step = -(svd.vt[keep].T @ (c / svd.sv[keep])) / svd.norms
         with np.errstate(invalid="ignore", divide="ignore"):
             moved = np.abs(step[self.written]) / np.sqrt(np.diag(svd.covariance())[self.written])
         moved = moved[np.isfinite(moved)]
         self.step_sigma = float(moved.max()) if moved.size else 0.0
-        return None if self.step_sigma < SETTLED_SIGMA else self.step_sigma
+        return self.step_sigma < SETTLED_SIGMA
 
 
 def _gauss_newton_gain(res, svd: "_ScaledSVD | None" = None) -> float:
@@ -1937,11 +1949,13 @@ def _solve(model: Model, x0: np.ndarray):
     model.settled = res.status == 0 and getattr(res, "settled", False)
     if model.settled:     # _last_phase: said how it stopped
         model.remaining_step = _gauss_newton_step(res.jac, res.fun)
-        note = (f"{SETTLED_NOTE} after {res.nfev} of its {MAX_EVALUATIONS} evaluations: LM and dogbox both crept "
-                f"(its last {CREEP_WINDOW} evaluations lowered chi2 at a pace at which {MAX_EVALUATIONS} more would "
-                f"lower it by less than {SETTLED_CHI2:g} of a chi2 unit, max(1, reduced chi2)), and the "
-                f"Gauss-Newton step from there moves no written parameter by {SETTLED_SIGMA:g} of its 1-sigma; "
-                "not a minimum, so not converged; the values and 1-sigma are those where it stopped")
+        note = (f"{SETTLED_NOTE} after {res.nfev} of its {MAX_EVALUATIONS} evaluations: Levenberg-Marquardt and "
+                f"dogbox both crept along a valley the linear model does not see (its last {CREEP_WINDOW} "
+                f"evaluations lowered chi2 by {res.window_gain:.2g}, less than {SETTLED_SHARE:g} of what a "
+                f"Gauss-Newton step promises, a pace at which {MAX_EVALUATIONS} more would lower it by less than "
+                f"{SETTLED_CHI2:g} of a chi2 unit, max(1, reduced chi2)), and that step moves no written "
+                f"parameter by {SETTLED_SIGMA:g} of its 1-sigma; not a minimum, so not converged; the values "
+                "and 1-sigma are those where it stopped")
         if note not in model.notes:
             model.notes.append(note)
     elif res.status == 0:       # max_nfev: said, not hidden (a stress test found statics-only captures there)
