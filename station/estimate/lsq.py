@@ -1878,7 +1878,7 @@ class _SettledWatch(_CreepWatch):
         c = svd.u[:, keep].T @ res.fun
         self.gauss_newton_gain = float(c @ c)
         unit = self.unit(res.fun, res.x)
-        if self.gauss_newton_gain < AT_MINIMUM_CHI2 * unit or self.window_gain * SETTLED_SHARE > self.gauss_newton_gain:
+        if self.gauss_newton_gain < AT_MINIMUM_CHI2 * unit or self.window_gain >= SETTLED_SHARE * self.gauss_newton_gain:
             return False
         step = -(svd.vt[keep].T @ (c / svd.sv[keep])) / svd.norms
         with np.errstate(invalid="ignore", divide="ignore"):
