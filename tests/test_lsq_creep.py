@@ -159,3 +159,67 @@ def test_a_fit_stopped_short_of_its_minimum_by_its_tolerances_is_not_converged(o
     from station.diagnose.core import not_converged       # diagnose's first words say the same
     assert not_converged(short).startswith("not converged: the fit stopped on its tolerances short")
     assert not_converged(good) == ""
+
+
+def test_a_failing_fit_that_creeps_to_the_end_stops_where_nothing_written_moves(monkeypatch):
+    """A gyro bias step of +100 deg/h between the statics and the rotations (tests/test_diagnose_words.py's
+    capture, the other sign): LM crept, dogbox crept, and LM went on unwatched to the limit of
+    1,000 evaluations (6.2 s), its last 550 gaining 0.16 of chi2 ~1577 (0.02 units of reduced chi2
+    8.5) while the written parameters moved < 0.01 sigma.  The last phase is now watched: the fit
+    stops after ~470 evaluations, says where and why (settled, not converged), and the file's
+    verdict is the failing fit's, its written parameters at the minimum (the Gauss-Newton step
+    moves none by 1 % of its 1-sigma).  Counts of residual evaluations, not times."""
+    import simhelpers
+    from station.diagnose.core import not_converged
+    from station.estimate import verdict
+
+    boundary_s = 196.4975         # halfway between the last static and the first rotation
+    _, cap = simhelpers.mems_capture(3, "optimal9", {"rate_dps": 100.0, "rotation_s": 36.0, "dwell_s": 6.0},
+                                     gyro__bias_step=[0.0, 0.0, 100.0], gyro__bias_step_time_s=boundary_s)
+    s = lsq.summarise(cap)
+    assert max(st.t_mid_s + 0.5 * st.duration_s for st in s.statics) < boundary_s
+    assert boundary_s < min(r.t_mid_s - 0.5 * r.duration_s for r in s.rotations)
+    calls = []
+    residuals = lsq.Model.residuals
+    monkeypatch.setattr(lsq.Model, "residuals", lambda self, x: calls.append(1) or residuals(self, x))
+    result = lsq.fit(s)
+    model = result.model
+    # 1,002 evaluations before (the limit); ~470 settled
+    assert len(calls) < 600, len(calls)
+    assert model.settled and not model.converged and not model.stopped_short
+    assert any(n.startswith(lsq.SETTLED_NOTE) for n in model.notes), model.notes
+    assert not any("limit of" in n for n in model.notes)
+    assert not_converged(result).startswith("not converged: the fit stopped where it crept")
+    cal = verdict.judge(lsq.to_calibration(result, "m/s^2", "deg/s"))
+    assert cal.fit["converged"] is False
+    steps = cal.fit["remaining_step_sigma"]
+    assert max(steps[n] for n in cal.sigma) < lsq.SETTLED_SIGMA, steps
+    # the verdict is the fit's chi2's (it fails: a missing effect), not "not converged"
+    assert cal.fit["verdict"]["result"] == "fails", cal.fit["verdict"]
+    assert any(n.startswith("the solver stopped where it crept, but every parameter written is at the minimum")
+               for n in cal.fit["notes"])
+
+
+@pytest.mark.skipif(not (DATA / "annotated_session.csv").exists(), reason="tests/data/imucal not present")
+def test_a_fit_still_converging_in_its_last_phase_is_not_stopped(tmp_path, monkeypatch):
+    """The other side: imucal's annotated session (raw counts, six poses, three hand turns) creeps,
+    dogbox creeps, and LM's last phase then converges in 79 more evaluations (278 in all), its
+    last windows gaining ~1e-3 of chi2 ~1.07, slowly enough for the settle rule's pace, but more
+    than the Gauss-Newton step says is left: LM is converging, not creeping.  It is tested there
+    and not stopped: converged, at the minimum (LM from it gains nothing: the path it took
+    unwatched, 278 evaluations).  Fails with a rule of pace and written steps alone (the first
+    version: settled after 236 evaluations, "not converged")."""
+    path = imucal.import_imucal(DATA / "annotated_session.csv", tmp_path / "c", rate_hz=204.8)
+    tests, results = [], []
+    settled = lsq._SettledWatch.settled
+    monkeypatch.setattr(lsq._SettledWatch, "settled", lambda self, res: tests.append(1) or settled(self, res))
+    last = lsq._last_phase
+    monkeypatch.setattr(lsq, "_last_phase", lambda model, lm, n: results.append((model, last(model, lm, n))) or results[-1][1])
+    cal, _, _ = estimate_capture(path)
+    assert cal.fit["converged"] is True and results and tests      # the last phase was tested, not stopped
+    assert all(r.status > 0 and not getattr(r, "settled", False) for _, r in results)
+    model, res = results[-1]
+    assert res.nfev > lsq.MAX_EVALUATIONS // 5                     # a long fit (278 evaluations)
+    again = least_squares(model.residuals, res.x, jac=model.jacobian, method="lm", x_scale="jac", xtol=1e-10,
+                          ftol=1e-10, gtol=1e-10, max_nfev=50)
+    assert again.status > 0 and 2 * res.cost - 2 * again.cost < 1e-6

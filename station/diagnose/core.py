@@ -305,7 +305,9 @@ def not_converged(result) -> str:
     if getattr(result.model, "converged", True):
         return ""
     where = ("on its tolerances short of its minimum (a Gauss-Newton step still lowers chi2)"
-             if getattr(result.model, "stopped_short", False) else "at its evaluation limit before its minimum")
+             if getattr(result.model, "stopped_short", False)
+             else "where it crept, before its minimum" if getattr(result.model, "settled", False)
+             else "at its evaluation limit before its minimum")
     return f"not converged: the fit stopped {where}, so the chi2 and what follows are those where it stopped; "
 
 
@@ -357,7 +359,8 @@ def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diag
                      "the 1-sigma): only a drop large against the misfit counts")
     # the data faults found before the fit (station/estimate/data_faults.py): what was left out
     notes += list(getattr(result.model.s, "data_fault_notes", None) or [])
-    notes += [n for n in getattr(result.model, "notes", None) or [] if n.startswith("the fit stopped at its limit")]
+    notes += [n for n in getattr(result.model, "notes", None) or []
+              if n.startswith(("the fit stopped at its limit", lsq.SETTLED_NOTE))]
     return Diagnosis(effects=["base_triads", "inter_triad"] + [e.id for e in result.model.effects],
                      chi2=result.chi2, dof=result.dof, reduced_chi2=reduced, p_value=p,
                      segments=segs, candidates=cands, failures=failures, verdict=verdict,

@@ -137,7 +137,7 @@ def _verdict(cal: Calibration) -> None:
     if fit.get("converged") is False and not _written_at_minimum(cal, fit.get("remaining_step_sigma")):
         verdict["result"] = "not converged"
         how = ("on its tolerances short of its minimum (a Gauss-Newton step from there still lowers chi2)"
-               if fit.get("stopped_short") else "at its evaluation limit")
+               if fit.get("stopped_short") else "where it crept" if _settled(fit) else "at its evaluation limit")
         verdict["reason"] = (f"the fit stopped {how} before it converged (reduced chi2 "
                              f"{reduced:.3g} where it stopped): the values and 1-sigma are not those of a "
                              "minimum; do not use this calibration (station diagnose shows which "
@@ -203,10 +203,18 @@ def _convergence(cal: Calibration) -> None:
             fit["verdict"].pop("result")
             _verdict_without_convergence(cal)
         worst = max((v for n, v in steps.items() if n in cal.sigma), default=0.0)
+        where = "where it crept" if _settled(fit) else "at its evaluation limit"
         fit.setdefault("notes", []).append(
-            f"the solver stopped at its evaluation limit, but every parameter written is at the "
+            f"the solver stopped {where}, but every parameter written is at the "
             f"minimum: the step it would still take is at most {worst:.2g} of a 1-sigma (what remains "
             f"is in directions the data barely see, not written)")
+
+
+def _settled(fit: dict) -> bool:
+    """Whether the fit stopped where it crept (lsq._last_phase; its note says so), not at its limit."""
+    from station.estimate.lsq import SETTLED_NOTE
+
+    return any(str(n).startswith(SETTLED_NOTE) for n in fit.get("notes", []))
 
 
 def _verdict_without_convergence(cal: Calibration) -> None:
