@@ -335,6 +335,10 @@ class Model:
         self.s, self.effects = s, effects
         self.noise = noise_model.of(s)
         self.turn_sigma_deg = like.turn_sigma_deg if like is not None else 0.0
+        # the factor k^2 on the recorded ramps' stated placement variance (angle_sigma_deg^2):
+        # 1 as stated; lsq.fit estimates it from their scatter where they are enough to say
+        # (_ramp_reweight; a model taken ``like`` another starts from the stated 1-sigma again)
+        self.ramp_k2 = 1.0
         # variance added to every pose mean (accel 3, gyro 3, summary units^2; its gyro part also
         # to the gyro integrals, times T^2): the noise model's terms, raised by lsq.fit where a
         # group is reweighted (noise_model: the bias moving between poses)
@@ -443,6 +447,9 @@ class Model:
             self.axis_basis, self.gyro_whiten = like.axis_basis, like.gyro_whiten
             self.earth_angle = like.earth_angle.copy()
             self._rotation_axes_raw = like._rotation_axes_raw
+            self.ramp_windows = like.ramp_windows
+            if like.ramp_k2 != self.ramp_k2:
+                self._gyro_integral_whitening()
             if self.hands:
                 self._initialise_hands(st)
             self.x0, self.x0_plain = x, x.copy()
@@ -496,16 +503,23 @@ class Model:
 
     def _gyro_integral_whitening(self):
         """The rotations' gyro integral whitening: white noise, the bias' instability over the
-        window (pose_extra's gyro part times T^2) and the encoder error along the axis."""
+        window (pose_extra's gyro part times T^2) and the encoder error along the axis; a recorded
+        ramp's placement (its angle_sigma_deg times the factor k = sqrt(ramp_k2)) along it too.
+        ``ramp_windows``: {name: the placement's share of the whitened rows, W a k sigma} of every
+        rotation with a placement 1-sigma (noise_groups.placement_component)."""
         s = self.s
-        self.gyro_whiten = []
+        self.gyro_whiten, self.ramp_windows = [], {}
         for r, axis_raw in zip(s.rotations, self._rotation_axes_raw):
             cov = np.diag(s.gyro_sigma**2 * r.duration_s / s.sample_rate_hz + self.pose_extra[3:] * r.duration_s**2)
             # a recorded ramp's own angle error (its reads placed on the IMU's clock, issue 28
             # review item 1: RotationSummary.angle_sigma_deg) in quadrature with the encoder's
-            angle_var = s.table_angle_sigma_deg**2 + getattr(r, "angle_sigma_deg", 0.0)**2
+            placement = getattr(r, "angle_sigma_deg", 0.0)
+            angle_var = s.table_angle_sigma_deg**2 + self.ramp_k2 * placement**2
             cov += angle_var * np.outer(axis_raw, axis_raw)
-            self.gyro_whiten.append(np.linalg.inv(np.linalg.cholesky(cov)))
+            whiten = np.linalg.inv(np.linalg.cholesky(cov))
+            self.gyro_whiten.append(whiten)
+            if placement > 0:
+                self.ramp_windows[r.name] = whiten @ np.asarray(axis_raw, float) * (placement * np.sqrt(self.ramp_k2))
 
     def set_pose_extra(self, extra) -> None:
         """Set the variance added to every pose mean (6,) and rebuild the weights that use it."""
@@ -2185,6 +2199,9 @@ def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "aut
         model.refresh()
         x, cov, r, reduced = _solve(model, model.x0)
     x, cov, r, reduced = _reweight(model, x, cov, r, reduced, turns=turn_sigma_deg is None, statics=statics)
+    x, cov, r, reduced = _ramp_reweight(model, x, cov, r, reduced)
+    if (model.ramp_estimate or {}).get("estimated") and model.unobservable:
+        x, cov, r, reduced = _revealed_by_ramps(model, x, cov, r, reduced)
     dof = len(r[model.data_rows]) - model.layout.size + _held_by_weak_priors(model, reduced, cov)
     r = r[model.data_rows]      # the weak priors on nuisance angles are not data
     if not s.rotations and not s.hand_rotations:     # the gyro block's wide priors are not data
@@ -2253,7 +2270,7 @@ def _reweight(model: Model, x, cov, r, reduced, turns: bool, statics: list):
     def components(x):
         J = None if model.is_large else np.asarray(model.jacobian(x))
         out = variance_components(model.row_labels(x), model.residuals(x), J, parameters=model.layout.size,
-                                  by_axis=statics, svd=_solution_svd(model, J))
+                                  by_axis=statics, svd=_solution_svd(model, J), ramps=_ramp_names(model))
         if J is not None:       # kept for to_calibration's fit.noise_groups at the same x
             model.components_at = (np.array(x, copy=True), [{k: v for k, v in c.items() if k != "axes"} for c in out])
         return {c["group"]: c for c in out}
@@ -2311,6 +2328,158 @@ def _reweight(model: Model, x, cov, r, reduced, turns: bool, statics: list):
         else:
             model.reweighted[g]["extra"] = (extra[k] - base[k]).tolist()
     return x, cov, r, reduced
+
+
+def _ramp_names(model: Model) -> frozenset:
+    """The rotations whose gyro integrals are the "ramp gyro" group: a recorded ramp whose angle
+    carries a stated placement 1-sigma (RotationSummary.angle_sigma_deg > 0; noise_groups)."""
+    return frozenset(getattr(model, "ramp_windows", None) or ())
+
+
+RAMP_SOLVES = 3         # whole fits at most while the ramps' placement factor is estimated (_ramp_reweight)
+
+
+def _ramp_reweight(model: Model, x, cov, r, reduced):
+    """The recorded ramps' placement variance from their own scatter (issue 28, eighteenth session).
+
+    A recorded ramp's angle carries the placement of the table's reads on the IMU's clock, stated
+    per window as angle_sigma_deg: deliberately conservative (station/bench/ramp_angle.py:
+    w / sqrt 12 per read, not divided by the reads; on the twins the windows' errors were 0.22-0.5
+    of it in rms), and how the host's latencies spread them cannot be known beforehand.  So the
+    windows' variance is taken as N_i + k^2 sigma_i^2 along the axis (N_i the gyro's white noise,
+    bias instability and encoder: known) and k^2 is estimated from the windows' residuals
+    (noise_groups.placement_component, Helmert/REML; up or down), the fit repeated from where it
+    is until k^2 moves by less than noise_model.TURN_TOLERANCE, as _reweight does for the hand
+    turns.  From residuals: what the model takes of the placement -- a part common to every
+    window is the time offset's, when it is in the model -- is not counted as scatter.
+
+    Only where the windows are enough to say: k^2's relative 1-sigma is sqrt(2 / f), f the
+    estimate's degrees of freedom; with f below noise_groups.RAMP_MIN_DOF (at the stated 1-sigma,
+    or at the estimate) the stated 1-sigma is kept (conservative) and the group is tested
+    against it as any other; an estimated one is left out of the verdict's test (verdict_test:
+    model.reweighted).  ``model.ramp_estimate``: {"k", "dof", "windows", "estimated", ...} (None
+    without such windows)."""
+    from station.estimate.noise_groups import RAMP_MIN_DOF, placement_component
+
+    model.ramp_estimate = None
+    if not getattr(model, "ramp_windows", None):
+        return x, cov, r, reduced
+    old = getattr(model, "ramp_note", None)
+    if old in model.notes:
+        model.notes.remove(old)
+    if model.is_large:          # (no dense Jacobian: no hat matrix to take the model's share out)
+        model.ramp_estimate = {"windows": len(model.ramp_windows), "estimated": False, "k": 1.0}
+        model.ramp_note = (f"the {len(model.ramp_windows)} recorded ramps' angles keep their stated placement "
+                           "1-sigma (angle_sigma_deg, conservative): a model this large is not reweighted")
+        model.notes.append(model.ramp_note)
+        return x, cov, r, reduced
+
+    def component(x, J=None):
+        J = np.asarray(model.jacobian(x)) if J is None else J
+        return placement_component(model.row_labels(x), model.residuals(x), J, model.ramp_windows,
+                                   svd=_solution_svd(model, J))
+
+    def set_k2(k2):
+        model.ramp_k2 = float(k2)
+        model._gyro_integral_whitening()
+        model._prepare()
+        model.refresh()
+
+    stated = component(x)
+    if stated is None:
+        return x, cov, r, reduced
+    first = (x, cov, r, reduced)
+    entry = {"windows": stated["windows"], "dof_stated": stated["dof"],
+             "scatter_before": float(np.sqrt(stated["ratio"] * model.ramp_k2))}
+    comp, estimated = stated, stated["dof"] >= RAMP_MIN_DOF
+    if estimated:
+        # k^2 and the parameters together: each new k^2 followed by a Gauss-Newton step from where
+        # the fit is (the residuals move little with the weights), then the fit itself from there
+        # (a whole _solve per step took 0.7 s of CPU on 24 windows, 5-6 of them)
+        for _ in range(RAMP_SOLVES):
+            if abs(comp["ratio"] - 1.0) < noise_model.TURN_TOLERANCE:
+                break
+            for _ in range(noise_model.TURN_ITERATIONS):
+                set_k2(model.ramp_k2 * comp["ratio"])
+                J = np.asarray(model.jacobian(x))
+                x = x + _gauss_newton_step(J, model.residuals(x))
+                comp = component(x)
+                if abs(comp["ratio"] - 1.0) < noise_model.TURN_TOLERANCE:
+                    break
+            x, cov, r, reduced = _solve(model, x)
+            comp = component(x)
+        estimated = comp["dof"] >= RAMP_MIN_DOF
+        if not estimated:       # so little placement beside the white noise that k says too little
+            set_k2(1.0)
+            x, cov, r, reduced = _solve(model, first[0])
+    k = float(np.sqrt(model.ramp_k2))
+    model.ramp_estimate = dict(entry, k=k, dof=float(comp["dof"]), estimated=estimated)
+    n = entry["windows"]
+    if estimated:
+        model.reweighted["ramp gyro"] = {"scatter_before": entry["scatter_before"], "k": k, "dof": comp["dof"]}
+        model.ramp_note = (f"the {n} recorded ramps scatter {k:.3g} of their stated placement 1-sigma "
+                           f"(angle_sigma_deg), estimated from their {comp['dof']:.1f} degrees of freedom "
+                           f"(k^2 to +/- {100 * np.sqrt(2 / comp['dof']):.0f} %): their angles are weighted so")
+    else:
+        model.reweighted.pop("ramp gyro", None)
+        model.ramp_note = (f"the {n} recorded ramps' angles keep their stated placement 1-sigma "
+                           f"(angle_sigma_deg, conservative: their scatter is {entry['scatter_before']:.3g} of it): "
+                           f"{comp['dof']:.1f} degrees of freedom say too little to estimate it (at least "
+                           f"{RAMP_MIN_DOF:g}: more recorded ramps)")
+    model.notes.append(model.ramp_note)
+    return x, cov, r, reduced
+
+
+def _revealed_by_ramps(model: Model, x, cov, r, reduced):
+    """Effect parameters held by their prior (model.unobservable) that the ramps reveal once their
+    placement 1-sigma is estimated (_ramp_reweight: the stated one is conservative, and a time
+    offset informed by the ramps came out 1-sigma above its typical size): each is examined
+    again without its prior (_blind_effect_parameters at the solution); those revealed are
+    released, the fit repeated and the placement estimated again (the time offset then takes
+    the part of the placement common to every window)."""
+    held = []
+    for e in model.effects:
+        sl = model.layout[f"effect:{e.id}"]
+        for k, p in enumerate(e.params):
+            c = sl.start + k
+            if p.name in model.unobservable and c in model.priors:
+                held.append((c, p))
+    if not held:
+        return x, cov, r, reduced
+    saved = {c: model.priors.pop(c) for c, _ in held}
+    model.refresh()
+    blind = {c for c, _ in _blind_effect_parameters(model, _Reduced(model, model.jacobian(x)))}
+    released = [(c, p) for c, p in held if c not in blind]
+    for c, _ in held:
+        if c in blind:
+            model.priors[c] = saved[c]
+    model.refresh()
+    if not released:
+        return x, cov, r, reduced
+    for _, p in released:
+        model.unobservable.remove(p.name)
+    x, cov, r, reduced = _solve(model, x)
+    x, cov, r, reduced = _ramp_reweight(model, x, cov, r, reduced)
+    model.notes.append("revealed once the recorded ramps' placement 1-sigma was estimated from their scatter: "
+                       + ", ".join(p.name for _, p in released))
+    return x, cov, r, reduced
+
+
+def _with_placement(model: Model, components: list) -> list:
+    """The "ramp gyro" group's entry with the ramps' placement factor (placement_k, the factor k on
+    their stated angle_sigma_deg; 1: kept as stated), its degrees of freedom and whether it was
+    estimated (_ramp_reweight)."""
+    est = getattr(model, "ramp_estimate", None)
+    if not est:
+        return components
+    out = []
+    for c in components:
+        if c["group"] == "ramp gyro":
+            c = dict(c, placement_k=est["k"], placement_estimated=est["estimated"])
+            if "dof" in est:
+                c["placement_dof"] = est["dof"]
+        out.append(c)
+    return out
 
 
 def _scatters(component: dict, p_named: float) -> bool:
@@ -2406,7 +2575,7 @@ def _noise_groups(result: FitResult) -> list:
         return []
     kept = getattr(model, "components_at", None)
     if kept is not None and np.array_equal(kept[0], result.x):      # computed while reweighting
-        return kept[1]
+        return _with_placement(model, kept[1])
     from station.estimate.noise_groups import variance_components
 
     labels = model.row_labels(result.x)
@@ -2414,8 +2583,9 @@ def _noise_groups(result: FitResult) -> list:
     J = model.jacobian(result.x)
     if len(labels) != len(r) or J.shape[0] != len(r):
         return []
-    return variance_components(labels, r, np.asarray(J), parameters=model.layout.size,
-                               svd=_solution_svd(model, np.asarray(J)))
+    return _with_placement(model, variance_components(labels, r, np.asarray(J), parameters=model.layout.size,
+                                                      svd=_solution_svd(model, np.asarray(J)),
+                                                      ramps=_ramp_names(model)))
 
 
 def _solution_svd(model: Model, J) -> tuple | None:

@@ -17,6 +17,12 @@ holds.  s_g is the factor by which the group scatters more (or less) than its st
 its redundancy f_g, f_g s_g^2 is chi2(f_g) under the noise model, which gives the p-value that
 names a group whose noise the fit understates ("hand turns scatter 6.9 times their stated
 noise").  Only for models whose Jacobian is taken dense (not Model.is_large).
+
+The recorded ramps' gyro integrals (rotations whose manifest states an ``angle_sigma_deg``, the
+placement of the table's reads on the IMU's clock: station/bench/ramp_angle.py) are a group of
+their own, "ramp gyro" (issue 28, eighteenth session): their stated placement 1-sigma is
+deliberately conservative, and lsq.fit estimates the factor k on it from their own scatter
+(placement_component) where they are enough to say.
 """
 from __future__ import annotations
 
@@ -27,11 +33,17 @@ from station.estimate.distributions import chi2_sf
 
 P_NAMED = 1e-3          # a group is named when its scatter is this improbable under its stated noise
 MIN_REDUNDANCY = 2.0    # below this a group's scatter says too little to be reported
+# the ramp windows' placement variance k^2 sigma^2 is estimated only from this many degrees of
+# freedom (placement_component's f: k^2's relative standard deviation is sqrt(2 / f), 0.45 at 10;
+# the chance that the estimate puts k at half the truth or less, chi2(f)/f < 1/4, is 0.9 % at 10,
+# 4 % at 6, 9 % at 4); below it the stated (conservative) 1-sigma is kept
+RAMP_MIN_DOF = 10.0
 
 GROUP_WORDS = {"static accel": "the static accelerometer means",
                "static gyro": "the static gyro means",
                "rotation accel": "the rotations' accelerometer harmonics",
                "rotation gyro": "the rotations' gyro integrals",
+               "ramp gyro": "the recorded ramps' gyro integrals",
                "hand turn": "the hand turns (gravity after each turn)"}
 
 
@@ -42,13 +54,17 @@ CAUSES = {
                     "poses although their halves do not show it moving (then record longer poses)"),
     "rotation accel": "a missing effect or a bench fault (station diagnose shows which segments)",
     "rotation gyro": "a missing effect, an encoder angle off, or a table that slipped (station diagnose)",
+    "ramp gyro": ("the table's reads placed on the IMU's clock scatter beyond their stated 1-sigma "
+                  "(angle_sigma_deg), a missing effect, or a table that slipped (station diagnose)"),
     "hand turn": ("the turns miss by more than their stated 1-sigma (--turn-sigma-deg; without it the "
                   "station estimates it from their scatter)"),
 }
 
 
-def group_of(kind: str, quantity: str) -> str | None:
-    """The data group of a residual row from its label (lsq.Model.row_labels); None: not data."""
+def group_of(kind: str, quantity: str, ramp: bool = False) -> str | None:
+    """The data group of a residual row from its label (lsq.Model.row_labels); None: not data.
+    ``ramp``: the row's segment is a recorded ramp whose angle carries a stated placement 1-sigma
+    (RotationSummary.angle_sigma_deg > 0): its gyro integral is "ramp gyro"."""
     if kind == "static":
         return "static accel" if quantity.startswith("accel") else (
             "static gyro" if quantity.startswith(("gyro", "|w|")) else None)
@@ -56,17 +72,15 @@ def group_of(kind: str, quantity: str) -> str | None:
         if quantity.startswith("accel"):
             return "rotation accel"
         if quantity.startswith("gyro"):
-            return "rotation gyro"
+            return "ramp gyro" if ramp else "rotation gyro"
         if quantity.startswith("gravity_after"):
             return "hand turn"
     return None
 
 
-def leverages(J: np.ndarray, svd=None) -> np.ndarray:
-    """The hat matrix' diagonal of J (column-scaled; directions the data do not see take none).
-    ``svd``: (U, singular values) of J with its columns scaled by their norms (a zero one by 1),
-    when the caller has that SVD already (lsq's at the solution: the same numbers, one
-    factorisation of J fewer)."""
+def _hat_basis(J: np.ndarray, svd=None) -> np.ndarray:
+    """An orthonormal basis of J's column space (the left singular vectors of J column-scaled
+    that the data see): the hat matrix is its product with its transpose."""
     if svd is not None:
         U, sv = svd
     else:
@@ -74,11 +88,20 @@ def leverages(J: np.ndarray, svd=None) -> np.ndarray:
         norms[norms == 0] = 1.0
         U, sv, _ = np.linalg.svd(J / norms, full_matrices=False)
     keep = sv > sv[0] * 1e-10 if sv.size else sv.astype(bool)
-    return np.einsum("ij,ij->i", U[:, keep], U[:, keep])
+    return U[:, keep]
+
+
+def leverages(J: np.ndarray, svd=None) -> np.ndarray:
+    """The hat matrix' diagonal of J (column-scaled; directions the data do not see take none).
+    ``svd``: (U, singular values) of J with its columns scaled by their norms (a zero one by 1),
+    when the caller has that SVD already (lsq's at the solution: the same numbers, one
+    factorisation of J fewer)."""
+    U = _hat_basis(J, svd)
+    return np.einsum("ij,ij->i", U, U)
 
 
 def variance_components(labels, residuals: np.ndarray, J: np.ndarray | None, parameters: int | None = None,
-                        by_axis=(), svd=None) -> list[dict]:
+                        by_axis=(), svd=None, ramps=frozenset()) -> list[dict]:
     """Per data group: rows, redundancy, chi2, the scatter factor s_g and its p-value.
 
     ``labels``: lsq.Model.row_labels of every row of ``J`` (and ``residuals``), priors included;
@@ -86,11 +109,12 @@ def variance_components(labels, residuals: np.ndarray, J: np.ndarray | None, par
     model, whose Jacobian is not taken dense): every row takes the same share of the
     ``parameters`` (an approximation, used only to reweight the hand turns).  ``by_axis``: groups
     whose rows are also split by sensor axis, under the entry's "axes" ({axis: the same numbers}:
-    a bias that wanders on one axis of a triad only is its own component).  ``svd``: leverages'."""
+    a bias that wanders on one axis of a triad only is its own component).  ``svd``: leverages'.
+    ``ramps``: the names of the rotations whose gyro integrals are "ramp gyro" (group_of)."""
     h = leverages(J, svd) if J is not None else np.full(len(residuals), (parameters or 0) / max(len(residuals), 1))
     groups: dict[str, list[int]] = {}
-    for i, (_, kind, quantity, _) in enumerate(labels):
-        g = group_of(kind, quantity)
+    for i, (name, kind, quantity, _) in enumerate(labels):
+        g = group_of(kind, quantity, name in ramps)
         if g is not None:
             groups.setdefault(g, []).append(i)
     out = []
@@ -124,3 +148,41 @@ def words(components: list[dict]) -> list[str]:
                          f"stated noise (chi2 {c['chi2']:.4g} on a redundancy of {c['redundancy']:.1f}, "
                          f"p = {c['p_value']:.2g}): " + CAUSES.get(c["group"], "a missing effect or an understated noise"))
     return notes
+
+
+def placement_component(labels, residuals: np.ndarray, J: np.ndarray, windows: dict, svd=None) -> dict | None:
+    """The ramp windows' placement variance from their residuals (Helmert's variance-component
+    estimate for one component beside known ones; Förstner 1979, Koch 1999 ch. 3.6).
+
+    Each window's gyro integral has the covariance C_i = N_i + k^2 sigma_i^2 a_i a_i^T (N_i the
+    white noise, the bias' instability and the encoder: known; sigma_i its stated placement
+    1-sigma, a_i the turn's axis in the gyro's raw frame) and is whitened by C_i's Cholesky factor
+    W_i at the current k.  ``windows``: {rotation name: u_i = W_i a_i k sigma_i}, the placement's
+    share of the whitened rows (3,).  With M the whitened rows' matrix whose column i is u_i on
+    window i's rows, Q the hat matrix's basis (what the fit's parameters take, the time offset's
+    share of a placement common to all windows included) and G = M^T (I - Q Q^T) M:
+
+        ratio = sum_i (u_i . r_i)^2 / tr G        (the factor on k^2: 1 at the estimate)
+        dof   = tr(G G)                           (k^2's relative 1-sigma is sqrt(2 / dof))
+
+    the REML score equation's fixed point and its Fisher information; tr G is the placement's share
+    of the redundancy.  A window whose rows the fit uses up entirely (a turn alone about its axis)
+    adds nothing to either.  None without windows among the labels."""
+    names = list(windows)
+    at = {n: i for i, n in enumerate(names)}
+    rows = [[] for _ in names]
+    for j, (name, kind, quantity, _) in enumerate(labels):
+        if name in at and kind == "rotation" and quantity.startswith("gyro"):
+            rows[at[name]].append(j)
+    kept = [i for i, r in enumerate(rows) if len(r) == 3]
+    if not kept:
+        return None
+    M = np.zeros((len(residuals), len(kept)))
+    for c, i in enumerate(kept):
+        M[rows[i], c] = windows[names[i]]
+    B = _hat_basis(J, svd).T @ M
+    G = M.T @ M - B.T @ B
+    share = float(np.trace(G))
+    projected = float(np.sum((M.T @ residuals) ** 2))
+    return {"windows": len(kept), "ratio": projected / share if share > 0 else 1.0, "redundancy": share,
+            "dof": float(np.sum(G * G))}

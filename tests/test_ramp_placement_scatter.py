@@ -1,0 +1,197 @@
+"""Issue 28 (eighteenth session): the recorded ramps' angle 1-sigma from their own scatter.
+
+A recorded ramp's angle carries the placement of the table's reads on the IMU's clock; the bench
+states it per window (angle_sigma_deg: w / sqrt 12 per read, not divided by the reads,
+station/bench/ramp_angle.py), deliberately conservative: on the twins the windows' errors were
+0.22-0.5 of it in rms, and the time offset the ramps inform came out with a 1-sigma 2-4x its
+scatter.  The estimator now takes the windows' variance as the gyro's known noise plus k^2 times
+the stated placement variance and estimates k from their residuals (lsq._ramp_reweight), where
+their degrees of freedom are enough to say (noise_groups.RAMP_MIN_DOF).
+
+The reference shares no code with the estimator: a host written here places each read's answer
+in its bracket (two Gamma(2) waits each side of the table's answer, of a scale that changes
+from window to window, IMU stamps on a 10 ms grid), the bench's own ramp_angle places the reads
+and states the 1-sigma as it does on a bench, and the windows' true timing errors are known.  The
+capture is the dry run's (station/simulate/dryrun.py: the IMU's clock 5 ms behind the table's,
+the encoder exact): only the ramps' angles and their stated 1-sigma are the host's."""
+import copy
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from station.bench import ramp_angle
+
+OFFSET_MS = 5.0
+PERIOD_S = 0.01          # the dry run's 100 Hz
+READS = 6                # reads at the rate per window
+
+STATICS = [[0, 0, 1], [0, 0, -1], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0]]
+AXES = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]
+
+
+def _scheme(ramp_axes=AXES, repeats=2):
+    """Six faces, a steady pair about each axis (the gyro scale factors), and ``repeats`` times a
+    ramp up and a brake pair about each of ``ramp_axes``: 24 recorded ramps."""
+    from station.io.scheme import scheme_from_text
+
+    text = "name: many-ramps\ndefaults: {dwell_s: 1, rate_dps: 100, rotation_s: 3.6}\nsegments:\n"
+    text += "".join(f"  - {{static: s{i}, up_body: {u}}}\n" for i, u in enumerate(STATICS))
+    text += "".join(f"  - {{rotation: st{i}, axis_body: {a}}}\n" for i, a in enumerate(AXES))
+    for rep in range(repeats):
+        for i, a in enumerate(ramp_axes):
+            text += (f"  - {{rotation: up{i}r{rep}, axis_body: {a}, record_ramp: start}}\n"
+                     f"  - {{rotation: dn{i}r{rep}, axis_body: {a}, record_ramp: end}}\n")
+    return scheme_from_text(text, "many-ramps.yaml")
+
+
+@pytest.fixture(scope="module")
+def base():
+    from sim_devices.truth import default_truth
+    from station.simulate import dryrun
+
+    truth = default_truth(1)
+    truth.bench.time_offset_s = OFFSET_MS * 1e-3
+    return dryrun.simulate_capture(_scheme(), truth, 3)
+
+
+def _host_window(rng, rate, late_s, slow=1.0):
+    """One window's reads at the rate on a host: each query at its moment q, the table's answer
+    w1 later, back at the computer w2 after that (w1, w2 ~ Gamma(2, scale), the scale the host's
+    load during this window); the bracket's ends are the newest IMU stamps before the query and
+    after the answer's return.  ``late_s``: every answer's moment that much later than its
+    bracket says (an IMU behind a USB adapter's latency timer: its frames reach the computer up
+    to 16 ms after their stamps).  ``slow``: the waits' scales times this (a busier host).  (the position error at the window's turning edge, deg; the
+    true timing error, s; the bench's stated 1-sigma, deg)."""
+    scale = slow * rng.uniform(0.002, 0.015)
+    q = np.cumsum(rng.uniform(0.05, 0.15, READS))
+    w1, w2 = rng.gamma(2.0, scale, READS), rng.gamma(2.0, scale, READS)
+    answer = q + w1
+    before = np.floor(q / PERIOD_S) * PERIOD_S
+    after = np.floor((answer + w2) / PERIOD_S) * PERIOD_S
+    moment = answer + late_s
+    marks = [ramp_angle.Mark(position_deg=float(rate * t), rate_dps=rate, t_before=float(b), t_after=float(a))
+             for t, b, a in zip(moment, before, after)]
+    edge = q[-1] + 0.3
+    error = ramp_angle.position_at(marks, edge, rate, PERIOD_S) - rate * edge
+    return error, error / rate, ramp_angle.angle_sigma(marks, rate, PERIOD_S)
+
+
+def _placed(base, seed, late_s=0.0, keep=None, slow=1.0):
+    """The capture with every ramp window's angle placed by the host (its error added, its
+    stated 1-sigma written as a bench writes it); (capture, {name: (timing error s, stated 1-sigma
+    in s)}).  ``keep``: the ramp windows kept (None: all)."""
+    capture = copy.deepcopy(base)
+    rng = np.random.default_rng(seed)
+    if keep is not None:
+        capture.segments = [s for s in capture.segments if not s.extra.get("record_ramp") or s.name in keep]
+    truth = {}
+    for seg in capture.segments:
+        kind = seg.extra.get("record_ramp")
+        if kind:
+            rate = seg.extra["rate_end_dps" if kind == "start" else "rate_start_dps"]
+            error, tau, sigma = _host_window(rng, rate, late_s, slow)
+            seg.angle_deg += error if kind == "start" else -error      # the turning edge ends or starts it
+            seg.extra["angle_sigma_deg"] = sigma
+            truth[seg.name] = (tau, sigma / abs(rate))
+    return capture, truth
+
+
+def _fit(capture, effect=None):
+    from station.estimate import lsq
+    from station.estimate.summaries import summarise
+    from station.model.time_offset import TimeOffset
+
+    result = lsq.fit(summarise(capture), [effect or TimeOffset()])
+    names, index, factors, _ = lsq._reported_index(result, "m/s^2", "deg/s")
+    k = names.index("time_offset")
+    value = float(result.x[index[k]]) * factors[k]
+    sigma = float(np.sqrt(result.covariance[index[k], index[k]])) * factors[k]
+    return result, value, sigma
+
+
+def _window_z(truth, k):
+    """The windows' timing errors about their common part (what the time offset takes: their
+    mean weighted by the stated 1-sigma) over their 1-sigma k times the stated one: rms."""
+    tau, sigma = np.array(list(truth.values())).T
+    w = 1.0 / sigma ** 2
+    common = float(np.sum(w * tau) / np.sum(w))
+    return float(np.sqrt(np.mean(((tau - common) / (k * sigma)) ** 2))), common
+
+
+def _bounds(n):
+    """rms z's 0.1 % and 99.9 % points for n windows less their common part (chi2(n - 1))."""
+    return tuple(np.sqrt(chi2.ppf([0.001, 0.999], n - 1) / (n - 1)))
+
+
+def test_many_ramp_windows_take_their_placement_1sigma_from_their_scatter(base):
+    """24 windows: the estimated factor k puts the windows' true errors at rms z within chi2's
+    0.1-99.9 % points (0.62-1.46 for 23); the stated 1-sigma alone (k = 1, before) gives ~0.25,
+    below them (the test fails without the estimate), and a k half or twice the right one would
+    fail too.  The 5 ms time offset is recovered within 4 of its 1-sigma and revealed (before: its
+    1-sigma ~1.2 ms, 3-4x its scatter; benchmarks/ramp_placement_scatter.py for the Monte Carlo),
+    the group is named and left out of the verdict's test (its noise is estimated).  The offset
+    is given a typical size of 1 ms here, between its 1-sigma at the stated placement (~1.2 ms:
+    held by its prior, not revealed) and at the estimated one (~0.6 ms): the fit must release it
+    once k is estimated and say so (lsq._revealed_by_ramps)."""
+    import dataclasses
+
+    from station.estimate import lsq
+    from station.model.time_offset import TimeOffset
+
+    class TightOffset(TimeOffset):
+        @property
+        def params(self):
+            return tuple(dataclasses.replace(p, typical=1.0) for p in super().params)
+
+    capture, truth = _placed(base, 100)
+    result, value, sigma = _fit(capture, TightOffset())
+    est = result.model.ramp_estimate
+    low, high = _bounds(len(truth))
+    stated, _ = _window_z(truth, 1.0)
+    assert stated < low, stated         # the host's stated 1-sigma is conservative: k = 1 fails
+    assert est["estimated"] and est["windows"] == 24 and est["dof"] >= 10.0, est
+    rms, _ = _window_z(truth, est["k"])
+    assert low < rms < high, (rms, est)
+    assert abs(value - OFFSET_MS) < 4.0 * sigma and "time_offset" not in result.model.unobservable, (value, sigma)
+    assert "ramp gyro" in lsq.verdict_test(result)["left_out"]
+    cal = lsq.to_calibration(result, "m/s^2", "deg/s")
+    group = next(g for g in cal.fit["noise_groups"] if g["group"] == "ramp gyro")
+    assert group["placement_k"] == pytest.approx(est["k"]) and group["placement_estimated"]
+    assert any(n.startswith("the 24 recorded ramps scatter") for n in cal.fit["notes"]), cal.fit["notes"]
+    assert any(n.startswith("revealed once the recorded ramps' placement") and n.endswith("time_offset")
+               for n in cal.fit["notes"]), cal.fit["notes"]
+
+
+def test_reads_all_late_by_16_ms_go_to_the_time_offset_and_the_windows_stay_honest(base):
+    """The review's first host: every read's moment 16 ms after where its bracket places it.
+    The common part is the time offset's to take: the fitted offset moves from the IMU's 5 ms
+    toward 5 - 16 = -11 ms (the rotations' accelerometer rows, which see the IMU's own 5 ms, pull
+    it back by their weight: -8 to -10 ms measured), and the windows' scatter about it is
+    not overconfident: their true errors about their common part over k times the stated
+    1-sigma within chi2's 0.1-99.9 % points (before the review's fix of the placement was taken
+    back, 45 of 100 such windows were refused and the rest off by up to 1000 of their 1-sigma)."""
+    capture, truth = _placed(base, 200, late_s=0.016)
+    result, value, sigma = _fit(capture)
+    est = result.model.ramp_estimate
+    rms, common = _window_z(truth, est["k"])
+    assert common == pytest.approx(0.016, abs=0.004)
+    low, high = _bounds(len(truth))
+    assert est["estimated"] and low < rms < high, (rms, est)
+    assert -11.0 - 4.0 * sigma < value < OFFSET_MS - 0.5 * 16.0, (value, sigma)
+
+
+def test_few_ramp_windows_keep_their_stated_1sigma(base):
+    """Four windows (a ramp up and a brake pair about z, as the twins' capture): k's degrees of
+    freedom are too few to say, so the stated (conservative) 1-sigma is kept, the file says so
+    and the group is tested against it like any other."""
+    from station.estimate import lsq
+
+    capture, truth = _placed(base, 300, keep={"up2r0_p", "up2r0_m", "dn2r0_p", "dn2r0_m"})
+    assert len(truth) == 4
+    result, _, _ = _fit(capture)
+    est = result.model.ramp_estimate
+    assert not est["estimated"] and est["k"] == 1.0 and est["dof"] < 10.0 and result.model.ramp_k2 == 1.0, est
+    assert "ramp gyro" not in lsq.verdict_test(result)["left_out"]
+    assert any(n.startswith("the 4 recorded ramps' angles keep their stated placement 1-sigma")
+               for n in result.model.notes), result.model.notes
