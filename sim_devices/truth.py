@@ -35,7 +35,7 @@ from scipy.spatial.transform import Rotation
 from station.core.errors import UserError
 from station.core import yaml_text
 
-from .world import ARCSEC, DEG_PER_HOUR, G_STANDARD, MICRO_G
+from .world import ARCSEC, DEG_PER_HOUR, G_STANDARD, MICRO_G, cross3
 
 SCHEMA_VERSION = 1
 
@@ -146,7 +146,7 @@ def triad_frame(S: np.ndarray) -> np.ndarray:
     x = S[0] / np.linalg.norm(S[0])
     y = S[1] - np.dot(S[1], x) * x
     y /= np.linalg.norm(y)
-    z = np.cross(x, y)
+    z = cross3(x, y)
     return np.vstack([x, y, z])
 
 
@@ -636,7 +636,7 @@ class Truth:
             wd = np.atleast_2d(np.asarray(wdot_eb_b if wdot_eb_b is not None else 0.0, dtype=float))
             extras = []
             for i, p in enumerate(self.accel.position_m):
-                extra = np.cross(wd, p) + np.cross(w, np.cross(w, p))
+                extra = cross3(wd, p) + cross3(w, cross3(w, p))
                 extras.append(extra)
                 accel[:, i] += extra @ self.accel.matrix[i]
         K2 = self.accel.nonlinearity_ug_per_g2

@@ -120,6 +120,22 @@ class Site:
 # Attitudes
 # --------------------------------------------------------------------------
 
+def cross3(a, b) -> np.ndarray:
+    """a x b over the last axis (length 3), broadcast against each other: numpy.cross's own
+    arithmetic (a1 b2 - a2 b1, a2 b0 - a0 b2, a0 b1 - a1 b0: the same floats) without its
+    handling of axes and dtypes at every call (np.cross ~40 us a call on the twins' small batches
+    against ~6 us; eighteenth session, the suite's time)."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    out[..., 0] = a1 * b2 - a2 * b1
+    out[..., 1] = a2 * b0 - a0 * b2
+    out[..., 2] = a0 * b1 - a1 * b0
+    return out
+
+
 def _unit(v, name: str = "vector") -> np.ndarray:
     v = np.asarray(v, dtype=float).reshape(-1)
     if v.shape != (3,) or not np.all(np.isfinite(v)):
@@ -134,7 +150,7 @@ def _any_perpendicular(u: np.ndarray) -> np.ndarray:
     """A deterministic unit vector perpendicular to unit vector u."""
     e = np.zeros(3)
     e[int(np.argmin(np.abs(u)))] = 1.0
-    p = np.cross(u, e)
+    p = cross3(u, e)
     return p / np.linalg.norm(p)
 
 
@@ -145,8 +161,8 @@ def _frame_map(src: tuple[np.ndarray, np.ndarray], dst: tuple[np.ndarray, np.nda
     """
     s1, s2 = src
     d1, d2 = dst
-    S = np.column_stack([s1, s2, np.cross(s1, s2)])
-    D = np.column_stack([d1, d2, np.cross(d1, d2)])
+    S = np.column_stack([s1, s2, cross3(s1, s2)])
+    D = np.column_stack([d1, d2, cross3(d1, d2)])
     return Rotation.from_matrix(D @ S.T)
 
 
@@ -295,7 +311,7 @@ def quat_product(p, q) -> np.ndarray:
     q = np.asarray(q, dtype=float)
     pv, pw, qv, qw = p[..., :3], p[..., 3:], q[..., :3], q[..., 3:]
     out = np.empty(np.broadcast_shapes(p.shape, q.shape))
-    out[..., :3] = pw * qv + qw * pv + np.cross(pv, qv)
+    out[..., :3] = pw * qv + qw * pv + cross3(pv, qv)
     out[..., 3] = (pw * qw)[..., 0] - np.einsum("...i,...i->...", pv, qv)
     return out
 
@@ -378,7 +394,7 @@ def wobbling_table(C_bn0: Rotation, axis_enu, theta, theta_dot, theta_ddot,
     b = float(wobble_rad)
     m = int(harmonic)
     d = wobble_direction_enu(a_n, phase_rad)
-    axd = np.cross(a_n, d)
+    axd = cross3(a_n, d)
     phi = (m * theta)[:, None]
     e = np.cos(phi) * d[None, :] + np.sin(phi) * axd[None, :]          # Rot(a_n, m theta) d
     a_x_e = np.cos(phi) * axd[None, :] - np.sin(phi) * d[None, :]      # a_n x e
@@ -389,7 +405,7 @@ def wobbling_table(C_bn0: Rotation, axis_enu, theta, theta_dot, theta_ddot,
     vt = -np.sin(0.5 * theta)[:, None] * a_n[None, :]                   # Rot(a_n, -theta)
     wt = np.cos(0.5 * theta)[:, None]
     q = np.empty((len(theta), 4))
-    q[:, :3] = we * vt + wt * ve + np.cross(ve, vt)
+    q[:, :3] = we * vt + wt * ve + cross3(ve, vt)
     q[:, 3] = we * wt[:, 0] - np.einsum("ij,ij->i", ve, vt)
     C_bn = Rotation.from_quat(quat_product(C_bn0.as_quat(), q))         # C_bn0 (x) q
     along = math.cos(b) - m * (1.0 - math.cos(b))
@@ -415,7 +431,7 @@ def table_vibration_enu(axis_enu, theta, amplitude_mps2, phase_rad: float = 0.0)
     a_n = _unit(axis_enu, "axis_enu")
     ref = axis_reference_enu(a_n)
     A = np.asarray(amplitude_mps2, dtype=float).reshape(3)
-    direction = A[0] * a_n + A[1] * ref + A[2] * np.cross(a_n, ref)
+    direction = A[0] * a_n + A[1] * ref + A[2] * cross3(a_n, ref)
     theta = np.asarray(theta, dtype=float).reshape(-1, 1)
     return np.cos(theta + float(phase_rad)) * direction[None, :]
 
@@ -452,7 +468,7 @@ def body_kinematics(C_bn: Rotation, w_eb_b, wdot_eb_b, lever_arm_b, site: Site):
     earth_b = np.atleast_2d(C_bn.apply(site.earth_rate_enu))
     n = max(len(w), len(wd), len(grav_b))
     r_row = r[None, :]
-    f_b = grav_b + np.cross(wd, r_row) + np.cross(w, np.cross(w, r_row))
+    f_b = grav_b + cross3(wd, r_row) + cross3(w, cross3(w, r_row))
     w_ib = w + earth_b
     return np.broadcast_to(f_b, (n, 3)).copy(), np.broadcast_to(w_ib, (n, 3)).copy()
 

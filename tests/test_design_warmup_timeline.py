@@ -174,7 +174,8 @@ def test_the_dry_runs_slope_rule_ends_the_warm_up_where_the_sequencers_does(tmp_
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")          # (polyfit's RankWarning on a short window: not here)
-        for limit, window in ((0.5, 3.0), (2.0, 3.0), (2.0, 10.0), (0.5, 300.0)):
+        # (4000 s: a window longer than the hour of readings the dry run's rule takes at once)
+        for limit, window in ((0.5, 3.0), (2.0, 3.0), (2.0, 10.0), (0.5, 300.0), (2.0, 4000.0)):
             w = WarmupConfig(duration_s=0.0, max_s=7200.0, temp_slope_c_per_h=limit, window_s=window)
             assert dryrun.warmup_seconds(w, temperature) == pytest.approx(sequencer_end(w), abs=0.5), (limit, window)
     config = tmp_path / "short.yaml"

@@ -70,13 +70,23 @@ class TableGeometry:
         C_bn = Rotation.identity(n)
         for i in reversed(range(k)):
             C_bn = world.table_attitude(C_bn, axes[i], th[:, i])
-        # current axis directions in ENU
-        R_prefix = Rotation.identity(n)
+        # current axis directions in ENU: b_i = R_1 ... R_(i-1) a_i, the prefix product kept as
+        # quaternion arrays (world.quat_product, scalar last) and applied to a_i as
+        # v + 2 q_w (q_v x v) + 2 q_v x (q_v x v): scipy's stacked Rotation.__mul__ and apply cost
+        # ~1 us a sample (a quarter of the IMU twin's time, eighteenth session)
+        q_prefix = None
         w_n = np.zeros((n, 3))
         wd_n = np.zeros((n, 3))
         for i in range(k):
-            b = R_prefix.apply(axes[i]) if i else np.broadcast_to(axes[i], (n, 3))
-            wd_n += thdd[:, i:i + 1] * b + thd[:, i:i + 1] * np.cross(w_n, b)
+            if q_prefix is None:
+                b = np.broadcast_to(axes[i], (n, 3))
+            else:
+                qv, qw = q_prefix[:, :3], q_prefix[:, 3:]
+                t = 2.0 * world.cross3(qv, axes[i])
+                b = axes[i] + qw * t + world.cross3(qv, t)
+            wd_n += thdd[:, i:i + 1] * b + thd[:, i:i + 1] * world.cross3(w_n, b)
             w_n += thd[:, i:i + 1] * b
-            R_prefix = R_prefix * Rotation.from_rotvec(th[:, i:i + 1] * axes[i][None, :])
+            if i + 1 < k:
+                q_i = world.axis_angle_quats(axes[i], th[:, i])
+                q_prefix = q_i if q_prefix is None else world.quat_product(q_prefix, q_i)
         return C_bn, C_bn.apply(w_n), C_bn.apply(wd_n)

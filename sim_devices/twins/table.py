@@ -80,15 +80,17 @@ class EncoderError:
         self.h = np.arange(1, self.HARMONICS + 1, dtype=float)
         self.c = rng.normal(0.0, s / math.sqrt(self.HARMONICS), self.HARMONICS)
         self.d = rng.normal(0.0, s / math.sqrt(self.HARMONICS), self.HARMONICS)
+        # (2H, 3): the columns giving e, de/dp (deg/deg) and d2e/dp2 (per deg) from [cos(h p) | sin(h p)]
+        h, c, d, k = self.h, self.c, self.d, math.pi / 180.0
+        self._weights = np.column_stack([np.concatenate([c, d]), np.concatenate([h * d, -h * c]) * k,
+                                         -np.concatenate([h * h * c, h * h * d]) * k * k])
 
     def true_states(self, p, v, a):
         """The axis's true (angle deg, rate deg/s, acceleration deg/s²) from the encoder's."""
         x = np.radians(np.asarray(p, dtype=float))[..., None] * self.h
-        cos, sin = np.cos(x), np.sin(x)
-        k = math.pi / 180.0
-        e = cos @ self.c + sin @ self.d
-        de = (self.h * (self.d * cos - self.c * sin)).sum(-1) * k           # de/dp, deg/deg
-        d2e = -(self.h ** 2 * (self.c * cos + self.d * sin)).sum(-1) * k * k
+        # e, de/dp and d2e/dp2 as one product of [cos | sin] with the harmonics' coefficients
+        # (they were sums of (N, H) temporaries: ~13 us a sample)
+        e, de, d2e = np.moveaxis(np.concatenate([np.cos(x), np.sin(x)], axis=-1) @ self._weights, -1, 0)
         return p - e, v * (1.0 - de), a * (1.0 - de) - v * v * d2e
 
 
