@@ -221,3 +221,30 @@ def test_windows_scattering_beyond_their_stated_placement_are_not_absorbed_into_
     cal = lsq.to_calibration(result, "m/s^2", "deg/s")
     group = next(g for g in cal.fit["noise_groups"] if g["group"] == "ramp gyro")
     assert group["p_value"] < 1e-3, group          # named: beyond its stated noise
+
+
+def test_an_effect_parameter_the_estimated_ramps_still_do_not_reveal_stays_held_without_a_crash(base):
+    """Review of the eighteenth session: lsq._revealed_by_ramps examines a held parameter without
+    its prior and puts the prior back when the ramps do not reveal it either; the model's data
+    rows must then be the ones with the prior (an IndexError in lsq.fit before: 391 residuals
+    against 390 data rows).  Eleven windows (k estimated from ~10.6 degrees of freedom) and the
+    offset given a typical size of 1 ms, below its 1-sigma even at the estimated placement: held,
+    not written, the fit ends and says so."""
+    import dataclasses
+
+    from station.estimate import lsq
+    from station.model.time_offset import TimeOffset
+
+    class TightOffset(TimeOffset):
+        @property
+        def params(self):
+            return tuple(dataclasses.replace(p, typical=1.0) for p in super().params)
+
+    names = [s.name for s in base.segments if s.extra.get("record_ramp")][:11]
+    capture, _ = _placed(base, 100, keep=set(names))
+    result, _, _ = _fit(capture, TightOffset())
+    assert result.model.ramp_estimate["estimated"], result.model.ramp_estimate
+    assert result.model.unobservable == ["time_offset"]
+    cal = lsq.to_calibration(result, "m/s^2", "deg/s")
+    assert "time_offset" not in dict((n, v) for n, v, _ in cal.parameters())
+    assert np.isfinite(result.chi2) and result.dof > 0
