@@ -2461,16 +2461,22 @@ def _revealed_by_ramps(model: Model, x, cov, r, reduced):
                 held.append((c, p))
     if not held:
         return x, cov, r, reduced
+    # (the priors and the data rows as they were, in their order: r, cov and reduced are theirs)
+    priors, data_rows = dict(model.priors), model.data_rows
     saved = {c: model.priors.pop(c) for c, _ in held}
     model.refresh()
     blind = {c for c, _ in _blind_effect_parameters(model, _Reduced(model, model.jacobian(x)))}
     released = [(c, p) for c, p in held if c not in blind]
+    if not released:
+        model.priors.clear()
+        model.priors.update(priors)
+        model.refresh()
+        model.data_rows = data_rows
+        return x, cov, r, reduced
     for c, _ in held:
         if c in blind:
             model.priors[c] = saved[c]
     model.refresh()
-    if not released:
-        return x, cov, r, reduced
     for _, p in released:
         model.unobservable.remove(p.name)
     x, cov, r, reduced = _solve(model, x)
