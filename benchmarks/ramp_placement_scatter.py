@@ -7,7 +7,10 @@ the bench's ramp_angle stating the 1σ); per run a new host draw (seed 100 + run
 run and over the runs: the time offset against its truth (5 ms less the hosts' ``--late-ms``), sum
 z² against chi2(N)'s 0.1 and 99.9 % points, its spread over the mean 1σ, and the windows' true
 timing errors about their common part over k times the stated 1σ (rms z; ~1 when k is right).
-``--stated``: the stated 1σ kept (the estimate switched off: before).
+``--stated``: the stated 1σ kept (the estimate switched off: before).  ``--correlated-ms S``
+(review of the eighteenth session): each window's timing also off by an AR(1) error along the
+windows in recording order (standard deviation S ms, ``--rho`` between neighbours: a host whose
+latency drifts with its load), which the windows share in part without it being common to all.
 
     PYTHONPATH=$PWD python benchmarks/ramp_placement_scatter.py --runs 20 --vary-capture
 """
@@ -30,6 +33,8 @@ def main() -> None:
     ap.add_argument("--late-ms", type=float, default=0.0)
     ap.add_argument("--vary-capture", action="store_true")
     ap.add_argument("--stated", action="store_true")
+    ap.add_argument("--correlated-ms", type=float, default=0.0)
+    ap.add_argument("--rho", type=float, default=0.9)
     args = ap.parse_args()
     from sim_devices.truth import default_truth
     from station.estimate import noise_groups
@@ -47,6 +52,16 @@ def main() -> None:
     for run in range(args.runs):
         base = dryrun.simulate_capture(_scheme(), truth, 3 + run) if args.vary_capture else fixed
         capture, placed = _placed(base, 100 + run, args.late_ms * 1e-3)
+        if args.correlated_ms:
+            rng = np.random.default_rng(5000 + run)
+            d = rng.normal(0.0, args.correlated_ms * 1e-3)
+            for seg in capture.segments:
+                kind = seg.extra.get("record_ramp")
+                if kind:
+                    d = args.rho * d + np.sqrt(1.0 - args.rho ** 2) * rng.normal(0.0, args.correlated_ms * 1e-3)
+                    rate = seg.extra["rate_end_dps" if kind == "start" else "rate_start_dps"]
+                    seg.angle_deg += rate * d if kind == "start" else -rate * d
+                    placed[seg.name] = (placed[seg.name][0] + d, placed[seg.name][1])
         result, value, sigma = _fit(capture)
         est = result.model.ramp_estimate
         rms, common = _window_z(placed, est["k"])

@@ -2393,6 +2393,11 @@ def _ramp_reweight(model: Model, x, cov, r, reduced):
              "scatter_before": float(np.sqrt(stated["ratio"] * model.ramp_k2))}
     comp, estimated = stated, stated["dof"] >= RAMP_MIN_DOF
     wider = False
+    if not estimated and model.ramp_k2 != 1.0:
+        # entered at an earlier estimate (_revealed_by_ramps: a released parameter took a degree of
+        # freedom from the windows): back to the stated 1-sigma the note says
+        set_k2(1.0)
+        x, cov, r, reduced = _solve(model, x)
     if estimated:
         # k^2 and the parameters together: each new k^2 followed by a Gauss-Newton step from where
         # the fit is (the residuals move little with the weights), then the fit itself from there
@@ -2461,20 +2466,34 @@ def _revealed_by_ramps(model: Model, x, cov, r, reduced):
                 held.append((c, p))
     if not held:
         return x, cov, r, reduced
+    # (the priors and the data rows as they were, in their order: r, cov and reduced are theirs)
+    priors, data_rows = dict(model.priors), model.data_rows
     saved = {c: model.priors.pop(c) for c, _ in held}
     model.refresh()
     blind = {c for c, _ in _blind_effect_parameters(model, _Reduced(model, model.jacobian(x)))}
     released = [(c, p) for c, p in held if c not in blind]
+    if not released:
+        model.priors.clear()
+        model.priors.update(priors)
+        model.refresh()
+        model.data_rows = data_rows
+        return x, cov, r, reduced
     for c, _ in held:
         if c in blind:
             model.priors[c] = saved[c]
     model.refresh()
-    if not released:
-        return x, cov, r, reduced
     for _, p in released:
         model.unobservable.remove(p.name)
     x, cov, r, reduced = _solve(model, x)
     x, cov, r, reduced = _ramp_reweight(model, x, cov, r, reduced)
+    if not model.ramp_estimate["estimated"]:
+        # the placement estimated again says too little (or beyond the stated one): the windows are
+        # back at their stated 1-sigma, where these parameters were held: held again
+        for c, p in released:
+            model.priors[c] = saved[c]
+            model.unobservable.append(p.name)
+        model.refresh()
+        return _solve(model, x)
     model.notes.append("revealed once the recorded ramps' placement 1-sigma was estimated from their scatter: "
                        + ", ".join(p.name for _, p in released))
     return x, cov, r, reduced
