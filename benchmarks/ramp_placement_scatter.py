@@ -72,7 +72,7 @@ def main() -> None:
         sigmas.append(sigma)
         print(f"run {run}: time offset {value:.3f} +- {sigma:.3f} ms (z {z[-1]:+.2f}); windows' common part "
               f"{common * 1e3:+.2f} ms, k {est['k']:.3f} from {est['dof']:.1f} dof (estimated: {est['estimated']}), "
-              f"rms z {rms:.2f}; revealed: {'time_offset' not in result.model.unobservable}", flush=True)
+              f"rms z {rms:.2f}, lag1 {est.get('lag1', 0):+.2f}; revealed: {'time_offset' not in result.model.unobservable}", flush=True)
     cpu = time.process_time() - t0
     z = np.array(z)
     n = len(z)

@@ -279,3 +279,36 @@ def test_ramps_not_estimated_again_after_a_release_go_back_to_their_stated_1sigm
     assert not any(n.startswith("revealed once the recorded ramps") for n in result.model.notes), result.model.notes
     cal = lsq.to_calibration(result, "m/s^2", "deg/s")
     assert "time_offset" not in dict((n, v) for n, v, _ in cal.parameters())
+
+
+def test_the_windows_lag1_correlation_is_taken_in_their_reads_timing():
+    """noise_groups.placement_component's lag-1 correlation of the windows' placement residuals,
+    in the capture's order, is their reads' timing error's: a pair turned each way (and a ramp up
+    against a brake) has angle errors of opposite sign for the same late reads.  Synthetic rows
+    (one window a row of its own, a common column the fit takes): timing errors drifting along the
+    session (AR(1), rho 0.95) give a lag-1 far above independent windows' 1 / sqrt(n), whatever the
+    windows' signs; independent ones stay near 0; with the signs left out the alternating pairs
+    read as anticorrelated (what the check saw before it took the signs)."""
+    from station.estimate.noise_groups import placement_component
+
+    rng = np.random.default_rng(7)
+    n = 60
+    names = [f"w{i}" for i in range(n)]
+    signs = {name: (1.0 if i % 2 == 0 else -1.0) * (1.0 if i % 4 < 2 else -1.0) for i, name in enumerate(names)}
+    windows = {name: np.array([1.0, 0.0, 0.0]) for name in names}
+    labels = [(name, "rotation", f"gyro_{a}", a) for name in names for a in "xyz"]
+    J = np.zeros((3 * n, 1))
+    J[0::3, 0] = [signs[name] for name in names]        # a common timing offset: the time offset's
+    drift = np.zeros(n)
+    for i in range(1, n):
+        drift[i] = 0.95 * drift[i - 1] + np.sqrt(1 - 0.95 ** 2) * rng.normal()
+    def residuals_of(timing):
+        out = np.zeros(3 * n)
+        out[0::3] = timing * np.array([signs[name] for name in names])
+        return out
+
+    drifting = placement_component(labels, residuals_of(drift), J, windows, signs=signs)["lag1"] * np.sqrt(n)
+    independent = placement_component(labels, residuals_of(rng.normal(size=n)), J, windows, signs=signs)["lag1"]
+    unsigned = placement_component(labels, residuals_of(drift), J, windows)["lag1"] * np.sqrt(n)
+    assert drifting > 4.0 and abs(independent) * np.sqrt(n) < 2.33 and abs(unsigned) < 4.0, \
+        (drifting, independent, unsigned)

@@ -38,6 +38,13 @@ MIN_REDUNDANCY = 2.0    # below this a group's scatter says too little to be rep
 # the chance that the estimate puts k at half the truth or less, chi2(f)/f < 1/4, is 0.9 % at 10,
 # 4 % at 6, 9 % at 4); below it the stated (conservative) 1-sigma is kept
 RAMP_MIN_DOF = 10.0
+# the windows' placement residuals correlated from one window to the next beyond this many of the
+# lag-1 correlation's 1-sigma for independent windows (1 / sqrt n; p ~ 0.01 one-sided): their
+# placement errors are not independent (a host whose latency drifts over the session), so the
+# scatter about the fit understates what the parameters carry -- the stated 1-sigma is kept
+# (review of the eighteenth session: an AR(1) of 2 ms at rho 0.9 between neighbouring windows put
+# the time offset's spread at 2.5 of its estimated 1-sigma, 1.02 of the stated one)
+RAMP_LAG1_Z = 2.33
 
 GROUP_WORDS = {"static accel": "the static accelerometer means",
                "static gyro": "the static gyro means",
@@ -150,7 +157,8 @@ def words(components: list[dict]) -> list[str]:
     return notes
 
 
-def placement_component(labels, residuals: np.ndarray, J: np.ndarray, windows: dict, svd=None) -> dict | None:
+def placement_component(labels, residuals: np.ndarray, J: np.ndarray, windows: dict, svd=None,
+                        signs: dict | None = None) -> dict | None:
     """The ramp windows' placement variance from their residuals (Helmert's variance-component
     estimate for one component beside known ones; Förstner 1979, Koch 1999 ch. 3.6).
 
@@ -167,7 +175,10 @@ def placement_component(labels, residuals: np.ndarray, J: np.ndarray, windows: d
 
     the REML score equation's fixed point and its Fisher information; tr G is the placement's share
     of the redundancy.  A window whose rows the fit uses up entirely (a turn alone about its axis)
-    adds nothing to either.  None without windows among the labels."""
+    adds nothing to either.  ``signs``: {name: +-1} turning a window's angle error into its reads'
+    timing error (lag1: a host's latency drifting over the session is a timing error shared by
+    neighbouring windows, of opposite angle in a pair turned each way).  None without windows
+    among the labels."""
     names = list(windows)
     at = {n: i for i, n in enumerate(names)}
     rows = [[] for _ in names]
@@ -183,6 +194,18 @@ def placement_component(labels, residuals: np.ndarray, J: np.ndarray, windows: d
     B = _hat_basis(J, svd).T @ M
     G = M.T @ M - B.T @ B
     share = float(np.trace(G))
-    projected = float(np.sum((M.T @ residuals) ** 2))
+    s = M.T @ residuals
+    projected = float(np.sum(s ** 2))
+    # the windows' placement residuals in their order (the capture's), each over its own spread:
+    # their lag-1 correlation, ~N(0, 1/n) for independent windows (lag1_correlation)
+    spread = np.sqrt(np.clip(np.diag(G), 1e-300, None))
+    timing = np.array([(signs or {}).get(names[i], 1.0) for i in kept])
     return {"windows": len(kept), "ratio": projected / share if share > 0 else 1.0, "redundancy": share,
-            "dof": float(np.sum(G * G))}
+            "dof": float(np.sum(G * G)), "lag1": lag1_correlation(timing * s / spread)}
+
+
+def lag1_correlation(z: np.ndarray) -> float:
+    """sum z_i z_(i+1) / sum z_i^2 of a sequence (0 for fewer than three)."""
+    z = np.asarray(z, float)
+    den = float(z @ z)
+    return float(z[:-1] @ z[1:]) / den if len(z) >= 3 and den > 0 else 0.0
