@@ -1976,8 +1976,8 @@ def _solve(model: Model, x0: np.ndarray):
     model.settled = res.status == 0 and getattr(res, "settled", False)
     if model.settled:     # _last_phase: said how it stopped
         model.remaining_step = _gauss_newton_step(res.jac, res.fun)
-        note = (f"{SETTLED_NOTE} after {res.nfev} of its {MAX_EVALUATIONS} evaluations: Levenberg-Marquardt and "
-                f"dogbox both crept along a valley the linear model does not see (its last {CREEP_WINDOW} "
+        note = (f"{SETTLED_NOTE}, {res.nfev} evaluations into its last solve (at most {MAX_EVALUATIONS} each): "
+                f"its last phase crept along a valley the linear model does not see (its last {CREEP_WINDOW} "
                 f"evaluations lowered chi2 by {res.window_gain:.2g}, less than {SETTLED_SHARE:g} of what a "
                 f"Gauss-Newton step promises, a pace at which {MAX_EVALUATIONS} more would lower it by less than "
                 f"{SETTLED_CHI2:g} of a chi2 unit, max(1, reduced chi2)), and that step moves no written "
