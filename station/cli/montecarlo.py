@@ -98,7 +98,13 @@ def cmd_montecarlo(args) -> int:
                       f"{r['mean_error']:+.3g}", r["unit"])
     out.print(table)
     if mc.not_revealed:
-        out.print("not revealed by the capture (held by its prior, not written; a row above is over the other "
-                  "runs): " + ", ".join(f"{n} in {k} of {mc.runs} runs" for n, k in mc.not_revealed.items()),
+        # a row is over the runs that revealed it (two at least): where a run reveals it by its
+        # value (a prior contradicted by the data is released) those are its larger errors, so
+        # the row says which runs it is over
+        rows = {r["name"] for r in mc.parameters}
+        out.print("not revealed by the capture (held by its prior, not written): "
+                  + ", ".join(f"{n} in {k} of {mc.runs} runs"
+                              + (" (its row: the other runs only)" if n in rows else " (no row: too few runs revealed it)")
+                              for n, k in mc.not_revealed.items()),
                   markup=False, soft_wrap=True)
     return 0
