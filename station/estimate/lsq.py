@@ -2079,6 +2079,19 @@ def _null_columns(J: np.ndarray, scale=None) -> list:
     return _ScaledSVD(J, scale).null_columns()
 
 
+def _effect_columns(model: Model, effects=None):
+    """(column, Param) of every parameter of ``effects`` (default: the model's)."""
+    for e in model.effects if effects is None else effects:
+        sl = model.layout[f"effect:{e.id}"]
+        for k, p in enumerate(e.params):
+            yield sl.start + k, p
+
+
+def _held(model: Model) -> list:
+    """(column, Param) of the effect parameters held by their prior (model.unobservable)."""
+    return [(c, p) for c, p in _effect_columns(model) if p.name in model.unobservable and c in model.priors]
+
+
 def _blind_effect_parameters(model: Model, reduced: _Reduced) -> list:
     """Effect parameters the data cannot reveal: in the null space of the Jacobian (exactly
     aliased with other parameters), or with a 1-sigma above their typical size."""
@@ -2087,16 +2100,13 @@ def _blind_effect_parameters(model: Model, reduced: _Reduced) -> list:
     null, cov = reduced.svd.null(), reduced.svd.covariance()
     where = {int(c): k for k, c in enumerate(reduced.columns)}
     blind = []
-    for e in model.effects:
-        sl = model.layout[f"effect:{e.id}"]
-        for k, p in enumerate(e.params):
-            c = sl.start + k
-            if c in model.priors:
-                continue
-            j = where[c]          # (an effect's columns are never a segment's own nuisance)
-            aliased = null.size and np.max(np.abs(null[:, j])) > 1e-6
-            if aliased or np.sqrt(cov[j, j]) * p.scale > p.typical:
-                blind.append((c, p))
+    for c, p in _effect_columns(model):
+        if c in model.priors:
+            continue
+        j = where[c]          # (an effect's columns are never a segment's own nuisance)
+        aliased = null.size and np.max(np.abs(null[:, j])) > 1e-6
+        if aliased or np.sqrt(cov[j, j]) * p.scale > p.typical:
+            blind.append((c, p))
     return blind
 
 
@@ -2118,13 +2128,10 @@ def _contradicted_priors(model: Model, x) -> list:
     # its parameters stay held where the capture cannot resolve them; a bias drift over a warm-up
     # fitted freely at 9,000 ug/h for a bias quadratic in temperature (typical 100: held, it is
     # rejected and temperature_bias kept, tests/test_effects_recovered.py)
-    for e in model.effects[:-1]:
-        sl = model.layout[f"effect:{e.id}"]
-        for k, p in enumerate(e.params):
-            c = sl.start + k
-            if p.name in model.unobservable and c in model.priors and model.priors[c] == p.typical / p.scale \
-                    and abs(x[c]) > CONTRADICTED * model.priors[c]:
-                out.append((c, p))
+    for c, p in _effect_columns(model, model.effects[:-1]):
+        if p.name in model.unobservable and c in model.priors and model.priors[c] == p.typical / p.scale \
+                and abs(x[c]) > CONTRADICTED * model.priors[c]:
+            out.append((c, p))
     return out
 
 
@@ -2480,13 +2487,7 @@ def _revealed_by_ramps(model: Model, x, cov, r, reduced):
     again without its prior (_blind_effect_parameters at the solution); those revealed are
     released, the fit repeated and the placement estimated again (the time offset then takes
     the part of the placement common to every window)."""
-    held = []
-    for e in model.effects:
-        sl = model.layout[f"effect:{e.id}"]
-        for k, p in enumerate(e.params):
-            c = sl.start + k
-            if p.name in model.unobservable and c in model.priors:
-                held.append((c, p))
+    held = _held(model)
     if not held:
         return x, cov, r, reduced
     # (the priors and the data rows as they were, in their order: r, cov and reduced are theirs)
