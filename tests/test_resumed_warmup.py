@@ -1,0 +1,153 @@
+"""The warm-up of a resumed or extended run (issue 28, nineteenth session).
+
+`station run --resume` and `--append` on a bench, and `run --sim --append`, wait the configured
+warm-up again before their first segment, decided by the IMU's temperature then
+(station.bench.plan.resumed_warmup: with a slope rule, without the minimum counted from power-on,
+so that an IMU still warm passes after one window of readings and one switched off meanwhile
+warms up again), and keep its readings as the capture's next warm-up record (warmup-2.csv, ...):
+the first run's warmup.csv is never overwritten.  The bench (the sequencer over the twins' real
+pseudo-terminals) and the dry run write the same files.
+
+Expected durations are derived from the simulated IMU's exponential warm-up (tau, delta) and the
+rule's window, not taken from the code under test; the slopes are checked with numpy's polyfit
+(the sequencer's and the dry run's slope code is not used here)."""
+from __future__ import annotations
+
+import io
+import math
+
+import numpy as np
+import pytest
+from rich.console import Console
+
+from drivers.base import ImuSettings
+from drivers.registry import open_imu, open_table
+from sim_devices.truth import default_truth
+from sim_devices.twins.serve import BenchOptions, BenchServer
+from station.bench.compile import compile_scheme
+from station.bench.config import Config, RunConfig, TableConfig, WarmupConfig, normal_gravity
+from station.bench.live import PlainDisplay
+from station.bench.sequencer import Sequencer
+from station.io.capture import CaptureWriter, ImuInfo, Site, read_capture
+from station.io.scheme import scheme_from_text
+
+SPEED = 200.0
+RATE_HZ = 25.0
+TAU_S, DELTA_C = 30.0, 1.0        # the simulated IMU's warm-up: dT/dt = 120 C/h exp(-t / 30 s)
+SLOPE_C_PER_H, WINDOW_S, MIN_S = 6.0, 20.0, 60.0
+# from power-on the 20 s straight-line fit crosses 6 C/h at about 100 s (exp(-(t - 10 s)/30 s)
+# = 1/20); the minimum of 60 s is below it, so the first warm-up ends on the slope
+FIRST_END_S = 10.0 + TAU_S * math.log(120.0 / SLOPE_C_PER_H)
+WARMUP = WarmupConfig(duration_s=MIN_S, max_s=2000.0, temp_slope_c_per_h=SLOPE_C_PER_H, window_s=WINDOW_S)
+RUN = "name: z\ndefaults: {dwell_s: 2}\nsegments:\n  - {static: zup, up_body: [0, 0, 1]}\n"
+WHOLE = RUN + "  - {static: zup2, up_body: [0, 0, 1]}\n"
+
+
+def _truth():
+    truth = default_truth(4)
+    truth.temperature.warmup_delta_c = DELTA_C
+    truth.temperature.warmup_time_constant_s = TAU_S
+    return truth
+
+
+def _config():
+    return Config(table=TableConfig(axes=1), warmup=WARMUP,
+                  run=RunConfig(operator=False, settle_s=1, max_missing_fraction=0.5, max_gap_s=100.0))
+
+
+def _run(bench, writer, steps):
+    """``steps`` run by the sequencer on the twins (a new connection, as a new station run)."""
+    table = open_table(bench.table_path)
+    imu = open_imu(bench.imu_path, settings=ImuSettings(frame_timeout_s=2.0))
+    try:
+        rate = imu.configure(RATE_HZ)
+        Sequencer(table=table, imu=imu, writer=writer, config=_config(), operator=None, rate_hz=rate,
+                  display=PlainDisplay(Console(file=io.StringIO(), width=200), 1.0, "test")).run(steps)
+    finally:
+        table.close()
+        imu.close()
+
+
+def _rows(path):
+    rows = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    return rows[:, 0], rows[:, 1]
+
+
+def _slope_c_per_h(t, temp):
+    return float(np.polyfit(t, temp, 1)[0] * 3600.0)
+
+
+def _warmups(directory):
+    return sorted(p.name for p in directory.glob("warmup*.csv"))
+
+
+@pytest.mark.parametrize("power_cycled", [False, True], ids=["warm", "switched-off"])
+def test_a_resumed_bench_run_keeps_the_first_warm_up_and_warms_up_by_the_temperature(tmp_path, power_cycled):
+    """The run records zup after its warm-up and stops; `--resume` of the run extended by zup2
+    (what --append does: station.cli.run_bench._resume_steps of the compiled whole) waits the
+    warm-up again: an IMU left on passes after one window (well below the 60 s minimum of the
+    first); one switched off meanwhile (the twins restarted: the IMU powered on again, cold)
+    warms up until the slope is below the limit again.  warmup.csv is kept byte for byte."""
+    from station.cli.run_bench import _resume_steps
+
+    truth, config = _truth(), _config()
+    cap = tmp_path / "cap"
+    server = BenchServer(truth, BenchOptions(speed=SPEED, seed=4, axes=1, lossless=True))
+    with server as bench:
+        writer = CaptureWriter(cap, ImuInfo(RATE_HZ, "m/s^2", "deg/s"), Site(normal_gravity(45.0), 45.0), "z")
+        _run(bench, writer, compile_scheme(scheme_from_text(RUN, "z.yaml"), config).steps)
+        first = (cap / "warmup.csv").read_bytes()
+        whole = scheme_from_text(WHOLE, "z.yaml")
+        steps = _resume_steps(compile_scheme(whole, config), whole, {"zup"}, config)
+        if not power_cycled:
+            _run(bench, CaptureWriter.reopen(cap), steps)
+    if power_cycled:
+        with BenchServer(truth, BenchOptions(speed=SPEED, seed=5, axes=1, lossless=True)) as bench:
+            _run(bench, CaptureWriter.reopen(cap), steps)
+    assert _warmups(cap) == ["warmup-2.csv", "warmup.csv"]
+    assert (cap / "warmup.csv").read_bytes() == first                  # never overwritten
+    t1, _ = _rows(cap / "warmup.csv")
+    assert t1[-1] == pytest.approx(FIRST_END_S, abs=5.0)
+    t2, temp2 = _rows(cap / "warmup-2.csv")
+    last = t2 >= t2[-1] - WINDOW_S
+    assert abs(_slope_c_per_h(t2[last], temp2[last])) < SLOPE_C_PER_H
+    span = t2[-1] - t2[0]
+    if power_cycled:
+        # cold again: the same end as from power-on (the slope, not one window, decides)
+        assert t2[-1] == pytest.approx(FIRST_END_S, abs=5.0)
+    else:
+        # warm: after the run (t > 100 s) the slope is < 120 C/h e^-3.3 = 4.4 C/h: one window
+        # of readings (20 s, the first reading a second after the resume) and no more
+        assert t2[0] > t1[-1] and span == pytest.approx(WINDOW_S, abs=2.0)
+    capture = read_capture(cap, load_data=True)
+    assert [s.name for s in capture.complete()] == ["zup", "zup2"]
+    assert capture.segment("zup2").data.t[0] > t2[-1]         # the segment after its warm-up
+
+
+def test_a_dry_runs_append_keeps_the_first_warm_up_and_writes_what_the_bench_writes(tmp_path):
+    """`run --sim --append` with the configured warm-up: the extension's warm-up is waited for
+    on the simulated IMU as warm as the run left it (one window, as the bench's), kept as
+    warmup-2.csv after the run's warmup.csv (untouched), stamped on the capture's clock between
+    the run's last segment and the extension's first."""
+    from station.io.scheme import load_scheme
+    from station.simulate import dryrun
+
+    truth = _truth()
+    (tmp_path / "run.yaml").write_text(RUN)
+    (tmp_path / "ext.yaml").write_text("name: ext\ndefaults: {dwell_s: 2}\nsegments:\n"
+                                       "  - {static: zup2, up_body: [0, 0, 1]}\n")
+    cap = dryrun.record_scheme(load_scheme(str(tmp_path / "run.yaml")), truth, 4, tmp_path / "cap", warmup=WARMUP)
+    first = (cap / "warmup.csv").read_bytes()
+    dryrun.append_scheme(load_scheme(str(tmp_path / "ext.yaml")), (tmp_path / "ext.yaml").read_text(), cap,
+                         warmup=WARMUP)
+    assert _warmups(cap) == ["warmup-2.csv", "warmup.csv"]            # the files the bench writes
+    assert (cap / "warmup.csv").read_bytes() == first
+    t1, _ = _rows(cap / "warmup.csv")
+    t2, temp2 = _rows(cap / "warmup-2.csv")
+    assert t1[-1] == pytest.approx(FIRST_END_S, abs=5.0)
+    capture = read_capture(cap, load_data=True)
+    zup, zup2 = capture.segment("zup").data.t, capture.segment("zup2").data.t
+    assert zup[-1] < t2[0] and t2[-1] < zup2[0]
+    assert t2[-1] - t2[0] == pytest.approx(WINDOW_S, abs=2.0)
+    last = t2 >= t2[-1] - WINDOW_S
+    assert abs(_slope_c_per_h(t2[last], temp2[last])) < SLOPE_C_PER_H
