@@ -152,6 +152,13 @@ def test_a_resumed_bench_run_keeps_the_first_warm_up_and_warms_up_by_the_tempera
         # warm: after the run (t > 100 s) the slope is < 120 C/h e^-3.3 = 4.4 C/h: one window
         # of readings (20 s, the first reading a second after the resume) and no more
         assert t2[0] > t1[-1] and span == pytest.approx(WINDOW_S, abs=2.0)
+    # the dry run's rule (station run --sim --append) on the same IMU begun at the same moment
+    # ends at the same reading, to a reading (the bench's readings are means of a second of samples)
+    from station.simulate import dryrun
+
+    begun = t2[0] - 1.0
+    assert begun + dryrun.warmup_seconds(WARMUP, truth.temperature, begun, resumed=True) == \
+        pytest.approx(t2[-1], abs=1.5)
     capture = read_capture(cap, load_data=True)
     assert [s.name for s in capture.complete()] == ["zup", "zup2"]
     assert capture.segment("zup2").data.t[0] > t2[-1]         # the segment after its warm-up
