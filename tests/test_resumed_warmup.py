@@ -31,7 +31,7 @@ from station.bench.sequencer import Interrupts, RunPaused, Sequencer
 from station.io.capture import CaptureWriter, ImuInfo, Site, read_capture
 from station.io.scheme import scheme_from_text
 
-SPEED = 500.0
+SPEED = 200.0
 RATE_HZ = 25.0
 TAU_S, DELTA_C = 30.0, 1.0        # the simulated IMU's warm-up: dT/dt = 120 C/h exp(-t / 30 s)
 SLOPE_C_PER_H, WINDOW_S, MIN_S = 6.0, 20.0, 60.0
