@@ -164,30 +164,42 @@ def test_a_resumed_bench_run_keeps_the_first_warm_up_and_warms_up_by_the_tempera
     assert capture.segment("zup2").data.t[0] > t2[-1]         # the segment after its warm-up
 
 
-def test_a_dry_runs_append_keeps_the_first_warm_up_and_writes_what_the_bench_writes(tmp_path):
-    """`run --sim --append` with the configured warm-up: the extension's warm-up is waited for
-    on the simulated IMU as warm as the run left it (one window, as the bench's), kept as
-    warmup-2.csv after the run's warmup.csv (untouched), stamped on the capture's clock between
-    the run's last segment and the extension's first."""
-    from station.io.scheme import load_scheme
-    from station.simulate import dryrun
+SIX = ("name: six\ndefaults: {dwell_s: 4}\nsegments:\n" + "".join(
+    f"  - {{static: {n}, up_body: {u}}}\n" for n, u in (("zu", [0, 0, 1]), ("zd", [0, 0, -1]), ("xu", [1, 0, 0]),
+                                                      ("xd", [-1, 0, 0]), ("yu", [0, 1, 0]), ("yd", [0, -1, 0]))))
 
-    truth = _truth()
-    (tmp_path / "run.yaml").write_text(RUN)
-    (tmp_path / "ext.yaml").write_text("name: ext\ndefaults: {dwell_s: 2}\nsegments:\n"
-                                       "  - {static: zup2, up_body: [0, 0, 1]}\n")
-    cap = dryrun.record_scheme(load_scheme(str(tmp_path / "run.yaml")), truth, 4, tmp_path / "cap", warmup=WARMUP)
+
+def test_a_dry_runs_append_keeps_the_first_warm_up_and_writes_what_the_bench_writes(tmp_path, monkeypatch, capsys):
+    """`run --sim --append` with the configured warm-up (station.yaml, as the run had it): the
+    extension's warm-up is waited for on the simulated IMU as warm as the run left it (one window,
+    as the bench's), kept as warmup-2.csv after the run's warmup.csv (untouched), stamped on the
+    capture's clock between the run's last segment and the extension's first."""
+    import yaml
+
+    from station.cli import main
+
+    (tmp_path / "truth.yaml").write_text(yaml.safe_dump(_truth().to_yaml_dict(), sort_keys=False))
+    (tmp_path / "station.yaml").write_text(f"version: 1\nwarmup: {{duration_s: {MIN_S:g}, max_s: {WARMUP.max_s:g}, "
+                                           f"temp_slope_c_per_h: {SLOPE_C_PER_H:g}, window_s: {WINDOW_S:g}}}\n")
+    (tmp_path / "six.yaml").write_text(SIX)
+    (tmp_path / "ext.yaml").write_text("name: ext\ndefaults: {dwell_s: 4}\nsegments:\n"
+                                       "  - {static: x1_zu, up_body: [0, 0, 1]}\n")
+    monkeypatch.chdir(tmp_path)
+    common = ["--config", "station.yaml", "--no-history"]
+    assert main(["run", "--scheme", "six.yaml", "--sim", "--seed", "4", "--sim-truth", "truth.yaml", "--out", "cap",
+                 *common]) == 0
+    cap = tmp_path / "cap"
     first = (cap / "warmup.csv").read_bytes()
-    dryrun.append_scheme(load_scheme(str(tmp_path / "ext.yaml")), (tmp_path / "ext.yaml").read_text(), cap,
-                         warmup=WARMUP)
+    assert main(["run", "--sim", "--append", "cap", "--scheme", "ext.yaml", *common]) == 0
+    capsys.readouterr()
     assert _warmups(cap) == ["warmup-2.csv", "warmup.csv"]            # the files the bench writes
     assert (cap / "warmup.csv").read_bytes() == first
     t1, _ = _rows(cap / "warmup.csv")
     t2, temp2 = _rows(cap / "warmup-2.csv")
     assert t1[-1] == pytest.approx(_end(t1), abs=5.0)
     capture = read_capture(cap, load_data=True)
-    zup, zup2 = capture.segment("zup").data.t, capture.segment("zup2").data.t
-    assert zup[-1] < t2[0] and t2[-1] < zup2[0]
+    run_end, ext = capture.segment("yd").data.t[-1], capture.segment("x1_zu").data.t
+    assert run_end < t2[0] and t2[-1] < ext[0]
     assert t2[-1] - t2[0] == pytest.approx(WINDOW_S, abs=2.0)
     last = t2 >= t2[-1] - WINDOW_S
     assert abs(_slope_c_per_h(t2[last], temp2[last])) < SLOPE_C_PER_H
