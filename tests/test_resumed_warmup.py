@@ -229,3 +229,48 @@ def test_a_warm_up_cut_short_by_a_pause_is_kept_and_the_resume_warms_up_in_full(
     assert t2[-1] - t2[0] >= MIN_S - 1.0
     last = t2 >= t2[-1] - WINDOW_S
     assert abs(_slope_c_per_h(t2[last], temp2[last])) < SLOPE_C_PER_H
+
+
+def test_a_resume_after_a_power_cycle_waits_the_configured_minimum_from_the_imus_power_on(tmp_path):
+    """The minimum duration_s counts from the IMU's power-on (what resumed_warmup drops it for):
+    an IMU switched off while the run was stopped (the twins restarted: their clock, the IMU's
+    time since startup, from 0 again, the IMU cold) has been on for less than it at the resume,
+    and its clock says so (its stamps went back below the capture's).  With a minimum longer than
+    the slope's end (240 s against ~100 s from power-on) the resumed warm-up must not end before
+    the IMU has been on for the minimum -- the slope alone cannot tell an IMU that has not
+    started warming yet (a sensor lagging the heat source, a coarse temperature LSB) from a warm
+    one.  (Before the fix: ended at the slope's end, ~100 s after power-on.)"""
+    from station.cli.run_bench import _resume_steps
+
+    least = 240.0
+    truth = _truth()
+    config = Config(table=TableConfig(axes=1), warmup=WarmupConfig(duration_s=least, max_s=2000.0,
+                                                                     temp_slope_c_per_h=SLOPE_C_PER_H,
+                                                                     window_s=WINDOW_S),
+                    run=RunConfig(operator=False, settle_s=1, max_missing_fraction=0.5, max_gap_s=100.0))
+
+    def run(bench, writer, steps):
+        table = open_table(bench.table_path)
+        imu = open_imu(bench.imu_path, settings=ImuSettings(frame_timeout_s=10.0))
+        try:
+            Sequencer(table=table, imu=imu, writer=writer, config=config, operator=NobodyThere(),
+                      rate_hz=imu.configure(RATE_HZ),
+                      display=PlainDisplay(Console(file=io.StringIO(), width=200), 1.0, "test")).run(steps)
+        finally:
+            table.close()
+            imu.close()
+
+    cap = tmp_path / "cap"
+    scheme = scheme_from_text(RUN, "z.yaml")
+    with BenchServer(truth, BenchOptions(speed=SPEED, seed=4, axes=1, lossless=True)) as bench:
+        writer = CaptureWriter(cap, ImuInfo(RATE_HZ, "m/s^2", "deg/s"), Site(normal_gravity(45.0), 45.0), "z")
+        run(bench, writer, compile_scheme(scheme, config).steps)
+    whole = scheme_from_text(WHOLE, "z.yaml")
+    steps = _resume_steps(compile_scheme(whole, config), whole, {"zup"}, config)
+    with BenchServer(truth, BenchOptions(speed=SPEED, seed=5, axes=1, lossless=True)) as bench:   # switched on again
+        run(bench, CaptureWriter.reopen(cap), steps)
+    t2, _ = _rows(cap / "warmup-2.csv")
+    # the twins' device time is the IMU's time since power-on; its first sample a second before
+    # the first reading
+    assert t2[-1] >= least - 1.0, f"the resumed warm-up ended {t2[-1]:.1f} s after the IMU's power-on"
+    assert read_capture(cap, load_data=True).segment("zup2").data.t[0] > t2[-1]
