@@ -27,13 +27,15 @@ class Step:
 class WarmUp(Step):
     """Stream the IMU for at least ``min_s``; with ``slope_c_per_h``, until the temperature
     changes more slowly than that over ``window_s`` (at most ``max_s``).  ``resumed``: the warm-up
-    of a resumed or extended run (``resumed_warmup``)."""
+    of a resumed or extended run (``resumed_warmup``); ``restart_min_s``: its minimum when the
+    IMU's clock shows that the IMU was restarted (switched off) while the run was stopped."""
 
     min_s: float = 0.0
     max_s: float | None = None
     slope_c_per_h: float | None = None
     window_s: float = 300.0
     resumed: bool = False
+    restart_min_s: float = 0.0
 
     def describe(self) -> str:
         text = f"warm up{' again' if self.resumed else ''}: at least {self.min_s:g} s"
@@ -50,12 +52,17 @@ def resumed_warmup(step: WarmUp) -> WarmUp:
     minimum ``min_s`` (a minimum counted from power-on): a warm IMU passes after one window of
     readings (``window_s``), a cooled one warms up again until the slope is below the limit (at
     most ``max_s``).  Without a slope rule the station cannot tell a warm IMU from a cold one: the
-    whole ``min_s`` again.  station.simulate.dryrun.warmup_seconds (``resumed``) is this rule on
-    the simulated IMU."""
+    whole ``min_s`` again.  An IMU switched off meanwhile has been on for less than ``min_s``: when
+    its clock went back below the capture's warm-up records (``restart_min_s``: the sequencer's
+    ``_clock_restarted``; the clock of a VectorNav or of the twins is the time since startup) the
+    minimum applies again, counted from the resumed warm-up's first sample -- the slope alone
+    cannot tell an IMU whose temperature has not started rising (a sensor lagging the heat
+    source, a coarse temperature LSB) from a warm one.  station.simulate.dryrun.warmup_seconds
+    (``resumed``) is this rule on the simulated IMU (never switched off on a dry run's append)."""
     least = 0.0 if step.slope_c_per_h is not None else step.min_s
     estimate = max(step.window_s, step.max_s or 0.0) if step.slope_c_per_h is not None else step.min_s
     return replace(step, purpose="let the IMU reach a steady temperature again after the pause", min_s=least,
-                   estimate_s=estimate, resumed=True)
+                   estimate_s=estimate, resumed=True, restart_min_s=step.min_s)
 
 
 @dataclass(frozen=True)

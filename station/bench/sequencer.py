@@ -18,13 +18,15 @@ from __future__ import annotations
 
 import contextlib
 import math
+import re
 import signal
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 
-from station.io.capture import CaptureWriter, warmup_file
+from station.io.capture import CaptureWriter, read_regular_file, warmup_file
 from station.core.errors import UserError
 from station.bench.channels import ImuChannel, Recording, segment_meta
 from station.bench.imu_stream import ImuStream, lost_frames_note
@@ -465,10 +467,16 @@ class Sequencer:
         t_first = None
         times, temps, rows = [], [], ["t_s,temp_c"]
         again = " again" if step.resumed else ""
+        least = step.min_s
         try:
             while True:
                 b = self._take(max(1, int(round(self.rate_hz))))
-                t_first = b.t_s[0] if t_first is None else t_first
+                if t_first is None:
+                    t_first = b.t_s[0]
+                    if step.restart_min_s > least and _clock_restarted(self._reference().writer.path, t_first):
+                        least = step.restart_min_s
+                        self.display.note(f"the IMU's clock restarted since the run stopped (switched off?): "
+                                          f"warming up again for at least {least:g} s")
                 elapsed = float(b.t_s[-1] - t_first)
                 finite = np.isfinite(b.temp_c)
                 if finite.any():
@@ -482,7 +490,7 @@ class Sequencer:
                 self._each(lambda ch: ch is reference or ch.stream.drain())
                 self._show_values()
                 self.display.advance(min(elapsed, total), total)
-                if elapsed >= step.min_s:
+                if elapsed >= least:
                     if step.slope_c_per_h is None:
                         break
                     slope = _slope_c_per_h(times, temps, step.window_s)
@@ -957,6 +965,21 @@ def rec_last(recs) -> float:
 
 def _optional(**values) -> dict:
     return {k: v for k, v in values.items() if v is not None}
+
+
+def _clock_restarted(directory, t_s) -> bool:
+    """Whether the IMU's stamp ``t_s`` is earlier than the last reading of a warm-up record in the
+    capture ``directory`` (warmup.csv, warmup-2.csv, ...): its clock went back, the IMU was
+    restarted since (a record that cannot be read, a FIFO in its place, is left out)."""
+    last = []
+    for path in Path(directory).glob("warmup*.csv"):
+        if re.fullmatch(r"warmup(-[0-9]+)?\.csv", path.name):
+            try:
+                last.append(float(read_regular_file(path).split()[-1].split(b",")[0]))
+            except (OSError, ValueError, IndexError):
+                pass
+    last = [t for t in last if math.isfinite(t)]
+    return bool(last) and float(t_s) < max(last)
 
 
 def _slope_c_per_h(times, temps, window_s):
