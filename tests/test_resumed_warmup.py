@@ -273,3 +273,21 @@ def test_a_resume_after_a_power_cycle_waits_the_configured_minimum_from_the_imus
     # the first reading
     assert t2[-1] >= least - 1.0, f"the resumed warm-up ended {t2[-1]:.1f} s after the IMU's power-on"
     assert read_capture(cap, load_data=True).segment("zup2").data.t[0] > t2[-1]
+
+
+def test_the_next_warm_up_record_never_takes_the_name_of_a_link_left_in_the_capture(tmp_path):
+    """A symbolic link named warmup-2.csv (a user's, to a disk not mounted now; or to a file
+    moved away) is a name taken: the resume's record goes to the next free name, and writing it
+    neither fails after the whole warm-up (a link outside the capture is refused by write_file:
+    ValueError, a traceback, the record lost) nor replaces the link."""
+    from station.io.capture import warmup_file
+
+    cap = tmp_path / "cap"
+    writer = CaptureWriter(cap, ImuInfo(RATE_HZ, "m/s^2", "deg/s"), Site(normal_gravity(45.0), 45.0), "z")
+    writer.write_file(warmup_file(cap), "t_s,temp_c\n1.000,25.0000\n")
+    (cap / "warmup-2.csv").symlink_to(tmp_path / "unmounted" / "warmup-2.csv")
+    (cap / "warmup-3.csv").symlink_to("warmup-3.csv.moved")
+    name = warmup_file(cap)
+    writer.write_file(name, "t_s,temp_c\n900.000,26.0000\n")
+    assert name == "warmup-4.csv"
+    assert (cap / "warmup-2.csv").is_symlink() and (cap / "warmup-3.csv").is_symlink()
