@@ -484,11 +484,11 @@ def warmup_file(directory) -> str:
     ``warmup.csv`` for the run's first warm-up, then ``warmup-2.csv``, ``warmup-3.csv``, ... for
     the warm-ups of its resumptions and extensions (``station run --resume``/``--append``, on a
     bench or simulated), so that none is overwritten (issue 28: a resume rewrote the first)."""
-    directory = Path(directory)
-    if not (directory / WARMUP_FILE).exists():
+    directory = Path(directory)             # (lexists: a link to nothing is a name taken too)
+    if not os.path.lexists(directory / WARMUP_FILE):
         return WARMUP_FILE
     n = 2
-    while (directory / f"warmup-{n}.csv").exists():
+    while os.path.lexists(directory / f"warmup-{n}.csv"):
         n += 1
     return f"warmup-{n}.csv"
 
