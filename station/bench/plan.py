@@ -26,19 +26,43 @@ class Step:
 @dataclass(frozen=True)
 class WarmUp(Step):
     """Stream the IMU for at least ``min_s``; with ``slope_c_per_h``, until the temperature
-    changes more slowly than that over ``window_s`` (at most ``max_s``)."""
+    changes more slowly than that over ``window_s`` (at most ``max_s``).  ``resumed``: the warm-up
+    of a resumed or extended run (``resumed_warmup``); ``restart_min_s``: its minimum when the
+    IMU's clock shows that the IMU was restarted (switched off) while the run was stopped."""
 
     min_s: float = 0.0
     max_s: float | None = None
     slope_c_per_h: float | None = None
     window_s: float = 300.0
+    resumed: bool = False
+    restart_min_s: float = 0.0
 
     def describe(self) -> str:
-        text = f"warm up: at least {self.min_s:g} s"
+        text = f"warm up{' again' if self.resumed else ''}: at least {self.min_s:g} s"
         if self.slope_c_per_h is not None:
             text += (f", until |dT/dt| < {self.slope_c_per_h:g} C/h over {self.window_s:g} s "
                      f"(at most {self.max_s:g} s)")
         return text
+
+
+def resumed_warmup(step: WarmUp) -> WarmUp:
+    """The warm-up a resumed or extended run waits before its first segment (issue 28): the IMU
+    may have cooled while the run was stopped (switched off, unplugged), or be as warm as it was,
+    so the temperature decides -- with a slope rule (``slope_c_per_h``) the same rule without the
+    minimum ``min_s`` (a minimum counted from power-on): a warm IMU passes after one window of
+    readings (``window_s``), a cooled one warms up again until the slope is below the limit (at
+    most ``max_s``).  Without a slope rule the station cannot tell a warm IMU from a cold one: the
+    whole ``min_s`` again.  An IMU switched off meanwhile has been on for less than ``min_s``: when
+    its clock went back below the capture's warm-up records (``restart_min_s``: the sequencer's
+    ``_clock_restarted``; the clock of a VectorNav or of the twins is the time since startup) the
+    minimum applies again, counted from the resumed warm-up's first sample -- the slope alone
+    cannot tell an IMU whose temperature has not started rising (a sensor lagging the heat
+    source, a coarse temperature LSB) from a warm one.  station.simulate.dryrun.warmup_seconds
+    (``resumed``) is this rule on the simulated IMU (never switched off on a dry run's append)."""
+    least = 0.0 if step.slope_c_per_h is not None else step.min_s
+    estimate = max(step.window_s, step.max_s or 0.0) if step.slope_c_per_h is not None else step.min_s
+    return replace(step, purpose="let the IMU reach a steady temperature again after the pause", min_s=least,
+                   estimate_s=estimate, resumed=True, restart_min_s=step.min_s)
 
 
 @dataclass(frozen=True)
@@ -213,7 +237,8 @@ class Plan:
 
     def remaining(self, done: set[str]) -> list:
         """The steps still to run when the segments ``done`` are complete (``--resume``):
-        steps of no segment (warm-up) and those of the segments not done.  A chamber step belongs
+        steps of no segment (the warm-up: once a segment is done, the resumed rule,
+        resumed_warmup) and those of the segments not done.  A chamber step belongs
         to the first segment of its setpoint: when that segment is done but a later one of the
         same setpoint is not, the step is run again before that one (bound to it), so that a
         resumed run sets the chamber and waits as the first run did -- the chamber may have been
@@ -221,6 +246,8 @@ class Plan:
         recorded at whatever temperature the room had, with no trace in the capture)."""
         out, pending = [], None
         for s in self.steps:
+            if isinstance(s, WarmUp) and done:      # a segment was recorded after the first warm-up
+                s = resumed_warmup(s)
             if isinstance(s, Chamber):
                 if s.segment is None or s.segment not in done:
                     out.append(s)

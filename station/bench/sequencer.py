@@ -18,13 +18,15 @@ from __future__ import annotations
 
 import contextlib
 import math
+import re
 import signal
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 
-from station.io.capture import CaptureWriter
+from station.io.capture import CaptureWriter, read_regular_file, warmup_file
 from station.core.errors import UserError
 from station.bench.channels import ImuChannel, Recording, segment_meta
 from station.bench.imu_stream import ImuStream, lost_frames_note
@@ -457,40 +459,61 @@ class Sequencer:
     # ------------------------------------------------------------------ steps
     def _warmup(self, step: WarmUp) -> None:
         """Until the first IMU's temperature settles (the others warm up beside it; their
-        samples are dropped)."""
+        samples are dropped).  Its readings are kept in each IMU's capture as the next warm-up
+        record (station.io.capture.warmup_file: ``warmup.csv``, then ``warmup-2.csv``, ... for a
+        resumed or extended run's, which never overwrites the first), also when the warm-up is
+        cut short (a pause, an abort, a failing stream: what was read is kept)."""
         self._each(lambda ch: ch.stream.drain())
         t_first = None
         times, temps, rows = [], [], ["t_s,temp_c"]
-        while True:
-            b = self._take(max(1, int(round(self.rate_hz))))
-            t_first = b.t_s[0] if t_first is None else t_first
-            elapsed = float(b.t_s[-1] - t_first)
-            finite = np.isfinite(b.temp_c)
-            if finite.any():
-                # the decision is taken on the values written to warmup.csv (ms, 0.1 mK), so
-                # that the record reproduces it exactly
-                times.append(round(float(b.t_s[-1]), 3))
-                temps.append(round(float(b.temp_c[finite].mean()), 4))
-                rows.append(f"{times[-1]:.3f},{temps[-1]:.4f}")
-            total = step.max_s if step.slope_c_per_h is not None else step.min_s
-            reference = self._reference()
-            self._each(lambda ch: ch is reference or ch.stream.drain())
-            self._show_values()
-            self.display.advance(min(elapsed, total), total)
-            if elapsed >= step.min_s:
-                if step.slope_c_per_h is None:
-                    break
-                slope = _slope_c_per_h(times, temps, step.window_s)
-                if slope is not None and abs(slope) < step.slope_c_per_h:
-                    self.display.note(f"warm-up done after {elapsed:.0f} s: {slope:+.3f} C/h")
-                    break
-                if step.max_s is not None and elapsed >= step.max_s:
-                    self.display.note(f"warm-up stopped at its maximum, {step.max_s:g} s "
-                                      f"(slope {slope if slope is not None else float('nan'):+.3f} C/h)")
-                    break
-            self._check_pause()
-        for ch in self._alive():
-            ch.writer.write_file("warmup.csv", "\n".join(rows) + "\n")
+        again = " again" if step.resumed else ""
+        least = step.min_s
+        try:
+            while True:
+                b = self._take(max(1, int(round(self.rate_hz))))
+                if t_first is None:
+                    t_first = b.t_s[0]
+                    if step.restart_min_s > least and _clock_restarted(self._reference().writer.path, t_first):
+                        least = step.restart_min_s
+                        self.display.note(f"the IMU's clock restarted since the run stopped (switched off?): "
+                                          f"warming up again for at least {least:g} s")
+                elapsed = float(b.t_s[-1] - t_first)
+                finite = np.isfinite(b.temp_c)
+                if finite.any():
+                    # the decision is taken on the values written to warmup.csv (ms, 0.1 mK), so
+                    # that the record reproduces it exactly
+                    times.append(round(float(b.t_s[-1]), 3))
+                    temps.append(round(float(b.temp_c[finite].mean()), 4))
+                    rows.append(f"{times[-1]:.3f},{temps[-1]:.4f}")
+                total = step.max_s if step.slope_c_per_h is not None else step.min_s
+                reference = self._reference()
+                self._each(lambda ch: ch is reference or ch.stream.drain())
+                self._show_values()
+                self.display.advance(min(elapsed, total), total)
+                if elapsed >= least:
+                    if step.slope_c_per_h is None:
+                        break
+                    slope = _slope_c_per_h(times, temps, step.window_s)
+                    if slope is not None and abs(slope) < step.slope_c_per_h:
+                        self.display.note(f"warm-up{again} done after {elapsed:.0f} s: {slope:+.3f} C/h")
+                        break
+                    if step.max_s is not None and elapsed >= step.max_s:
+                        self.display.note(f"warm-up{again} stopped at its maximum, {step.max_s:g} s "
+                                          f"(slope {slope if slope is not None else float('nan'):+.3f} C/h)")
+                        break
+                self._check_pause()
+        except BaseException:
+            with contextlib.suppress(Exception):     # the reason the warm-up stopped is what is said
+                self._keep_warmup(rows)
+            raise
+        self._keep_warmup(rows)
+
+    def _keep_warmup(self, rows: list) -> None:
+        """The warm-up's readings (``rows``: the CSV's lines) into each IMU's capture, as its next
+        warm-up record (none read: nothing written)."""
+        if len(rows) > 1:
+            for ch in self._alive():
+                ch.writer.write_file(warmup_file(ch.writer.path), "\n".join(rows) + "\n")
 
     def _move(self, step: MoveTo) -> None:
         targets = list(step.positions_deg)
@@ -942,6 +965,21 @@ def rec_last(recs) -> float:
 
 def _optional(**values) -> dict:
     return {k: v for k, v in values.items() if v is not None}
+
+
+def _clock_restarted(directory, t_s) -> bool:
+    """Whether the IMU's stamp ``t_s`` is earlier than the last reading of a warm-up record in the
+    capture ``directory`` (warmup.csv, warmup-2.csv, ...): its clock went back, the IMU was
+    restarted since (a record that cannot be read, a FIFO in its place, is left out)."""
+    last = []
+    for path in Path(directory).glob("warmup*.csv"):
+        if re.fullmatch(r"warmup(-[0-9]+)?\.csv", path.name):
+            try:
+                last.append(float(read_regular_file(path).split()[-1].split(b",")[0]))
+            except (OSError, ValueError, IndexError):
+                pass
+    last = [t for t in last if math.isfinite(t)]
+    return bool(last) and float(t_s) < max(last)
 
 
 def _slope_c_per_h(times, temps, window_s):

@@ -255,11 +255,13 @@ def _append_dry_run(args, overrides) -> int:
     ext = load_scheme(args.scheme, overrides)
     out.print(f"dry run: appending {len(ext.segments)} segment(s) of {source} ({ext.duration_s:.0f} s of data) "
               f"to {directory}, on its simulated bench and IMU", markup=False, soft_wrap=True)
+    config = _config(args)
     with out.status("recording") as status:
+        # the configured warm-up waited for again before the extension, as on a bench's --append
         dryrun.append_scheme(ext, text, directory,
                              progress=lambda name, i, n: status.update(f"recording {name} ({i + 1}/{n})"),
-                             chamber=_config(args).chamber,
-                             ramp_accel_dps2=dryrun.table_ramp_accel(_config(args).table))
+                             chamber=config.chamber, ramp_accel_dps2=dryrun.table_ramp_accel(config.table),
+                             warmup=config.warmup)
     from station import api
     from station.cli.history import file_quietly
 

@@ -29,6 +29,7 @@ from station.core.units import ACCEL_UNITS, GYRO_UNITS
 
 FORMAT = "station-capture/1"
 MANIFEST = "manifest.yaml"
+WARMUP_FILE = "warmup.csv"     # the station's record of a warm-up (t_s,temp_c); no reader needs it
 REQUIRED_COLUMNS = ("t", "ax", "ay", "az", "gx", "gy", "gz")
 STATUSES = ("complete", "incomplete")
 GAP_FACTOR = 1.5  # a time step longer than GAP_FACTOR periods may be a gap (lost samples: stamp_gaps)
@@ -476,6 +477,20 @@ def _warn_shared_files(capture) -> None:
 
 
 USED_KINDS = ("static", "rotation", "session")   # the kinds station's estimators and importers read
+
+
+def warmup_file(directory) -> str:
+    """The name of the next warm-up record in the capture ``directory`` (docs/capture-format.md):
+    ``warmup.csv`` for the run's first warm-up, then ``warmup-2.csv``, ``warmup-3.csv``, ... for
+    the warm-ups of its resumptions and extensions (``station run --resume``/``--append``, on a
+    bench or simulated), so that none is overwritten (issue 28: a resume rewrote the first)."""
+    directory = Path(directory)             # (lexists: a link to nothing is a name taken too)
+    if not os.path.lexists(directory / WARMUP_FILE):
+        return WARMUP_FILE
+    n = 2
+    while os.path.lexists(directory / f"warmup-{n}.csv"):
+        n += 1
+    return f"warmup-{n}.csv"
 
 
 def _warn_unused_kinds(capture) -> None:

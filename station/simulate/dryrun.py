@@ -47,22 +47,27 @@ WARMUP_READ_S = 1.0       # the station reads the IMU's temperature this often d
 MAX_SIMULATED_WARMUP_S = 7 * 86400.0     # a longer configured warm-up is refused by the dry run (one line)
 
 
-def warmup_seconds(warmup, temperature) -> float:
+def warmup_seconds(warmup, temperature, start_s: float = 0.0, resumed: bool = False) -> float:
     """How long the configured ``warmup`` (station.yaml ``warmup:``, station.bench.config.WarmupConfig:
     duration_s, max_s, temp_slope_c_per_h, window_s; None: none) lasts on the simulated IMU powered
     on at bench time 0, whose temperature is ``temperature.at(t)`` (sim_devices/truth.py
-    TemperatureTruth): the sequencer's rule (station/bench/sequencer.py ``_warmup``) on readings a
-    second apart -- at least ``duration_s``, then until the least-squares slope over the last
-    ``window_s`` is below ``temp_slope_c_per_h`` or ``max_s`` is reached; without a slope rule
-    ``duration_s`` exactly.  0 without a warm-up."""
+    TemperatureTruth; or a function of t), begun at bench time ``start_s``: the sequencer's rule
+    (station/bench/sequencer.py ``_warmup``) on readings a second apart -- at least ``duration_s``,
+    then until the least-squares slope over the last ``window_s`` is below ``temp_slope_c_per_h``
+    or ``max_s`` is reached; without a slope rule ``duration_s`` exactly.  ``resumed``: the warm-up
+    of a resumed or extended run (station.bench.plan.resumed_warmup): with a slope rule, without
+    the minimum ``duration_s`` (a warm IMU passes after one window).  0 without a warm-up."""
     if warmup is None:
         return 0.0
+    at = temperature.at if hasattr(temperature, "at") else temperature
     least = max(0.0, float(warmup.duration_s))
     if least > MAX_SIMULATED_WARMUP_S:
         raise UserError(f"warmup.duration_s: {least:g} s is longer than a dry run simulates a warm-up "
                         f"({MAX_SIMULATED_WARMUP_S:g} s, a week)")
     if warmup.temp_slope_c_per_h is None:
         return least
+    if resumed:
+        least = 0.0
     limit = float(warmup.temp_slope_c_per_h) / 60.0     # C/min, compared as SlopeSettle compares
     window = float(warmup.window_s)
     most = max(least, float(warmup.max_s)) if warmup.max_s is not None else math.inf
@@ -79,7 +84,7 @@ def warmup_seconds(warmup, temperature) -> float:
     while done * WARMUP_READ_S < MAX_SIMULATED_WARMUP_S:         # (an hour of readings at a time)
         t = WARMUP_READ_S * (done + 1 + np.arange(3600))
         t = t[t <= MAX_SIMULATED_WARMUP_S]
-        temps = _warmup_readings(t, temperature.at)
+        temps = _warmup_readings(float(start_s) + t, at)
         x = t - WARMUP_READ_S                     # from the first reading
         settled = np.zeros(t.size, bool)
         if weights is not None:
@@ -120,6 +125,7 @@ def _bench(scheme: Scheme, truth, seed: int, start_s: float = 0.0, chamber=None,
     check_chamber(scheme, chamber)
     bench = SimulatedBench(_mounted(truth, scheme), seed, start_s=start_s)
     bench.station_warmup_s = warmup_seconds(warmup, bench.truth.temperature)
+    bench.station_warmup_from_s = float(start_s)
     bench.wait(bench.station_warmup_s)
     bench.station_chamber = chamber
     bench.station_ramp_accel_dps2 = ramp_accel_dps2        # None: RAMP_ACCEL_DPS2
@@ -311,8 +317,11 @@ def record_scheme(scheme: Scheme, truth, seed: int, out_dir: Path,
 
 def _warmup_csv(bench) -> str:
     """The warm-up's temperatures as the sequencer writes them (``warmup.csv``: a reading a second,
-    ms and 0.1 mK) for the dry run's bench, which waited ``bench.station_warmup_s`` from power-on."""
-    t = np.arange(WARMUP_READ_S, bench.station_warmup_s + 0.5 * WARMUP_READ_S, WARMUP_READ_S)
+    ms and 0.1 mK, stamped on the bench's clock) for the dry run's bench, which waited
+    ``bench.station_warmup_s`` from its clock's ``bench.station_warmup_from_s`` (0: power-on; an
+    extension's: the capture's end)."""
+    start = getattr(bench, "station_warmup_from_s", 0.0)
+    t = start + np.arange(WARMUP_READ_S, bench.station_warmup_s + 0.5 * WARMUP_READ_S, WARMUP_READ_S)
     rows = ["t_s,temp_c"] + [f"{a:.3f},{b:.4f}" for a, b in zip(t, _warmup_readings(t, bench.imu_temperature))]
     return "\n".join(rows) + "\n"
 
@@ -365,7 +374,7 @@ def replay_chamber(bench, capture, chamber=None) -> float | None:
 
 def append_scheme(extension: Scheme, text: str, directory: Path,
                   progress: Callable[[str, int, int], None] | None = None, chamber=None,
-                  ramp_accel_dps2: float | None = None) -> Path:
+                  ramp_accel_dps2: float | None = None, warmup=None) -> Path:
     """Record ``extension``'s segments into the dry run's capture ``directory``, after its own, on
     the same simulated bench: the IMU of the capture's ``sim_truth.yaml``, still mounted as it was,
     the bench's clock going on from the end of the capture's last segment (a warm-up, a drift or a
@@ -374,8 +383,13 @@ def append_scheme(extension: Scheme, text: str, directory: Path,
     it (replay_chamber: the extension's segments at the setpoint in force, and say so; a segment of
     the extension that sets the chamber needs ``chamber``, the configured one).  The capture's
     complete segments are left untouched; the extension's scheme file (``text``) is kept in it
-    (``scheme-append-N.yaml``)."""
-    from station.io.capture import CaptureWriter, read_capture
+    (``scheme-append-N.yaml``).  ``warmup``: the configured warm-up (station.yaml ``warmup:``),
+    waited for again before the extension as the sequencer waits on a bench's ``--append``
+    (station.bench.plan.resumed_warmup: the IMU as warm as the run left it passes after one window
+    of a slope rule), on the simulated IMU's temperature in the chamber as the run left it, and
+    its readings kept as the capture's next warm-up record (station.io.capture.warmup_file:
+    ``warmup-2.csv``, ...; the run's own ``warmup.csv`` is not touched)."""
+    from station.io.capture import CaptureWriter, read_capture, warmup_file
     from station.io.scheme import load_scheme
 
     directory = Path(directory)
@@ -411,6 +425,10 @@ def append_scheme(extension: Scheme, text: str, directory: Path,
     bench = _bench(extension, truth, seed, start_s=start_s, chamber=chamber, ramp_accel_dps2=ramp_accel_dps2)
     # the chamber as the run left it: its air, the IMU's case lagging it, the setpoint in force
     setpoint = replay_chamber(bench, capture, chamber)
+    # the warm-up again, on the IMU's temperature there (a run's segments came after its first)
+    bench.station_warmup_s = warmup_seconds(warmup, bench.imu_temperature, start_s,
+                                            resumed=bool(capture.complete()))
+    bench.wait(bench.station_warmup_s)
     listed = sorted(directory.glob("scheme-append-*.yaml"))
     number = len(listed) + 1
     kept = directory / f"scheme-append-{number}.yaml"
@@ -421,7 +439,10 @@ def append_scheme(extension: Scheme, text: str, directory: Path,
         kept.write_text(text)
     except OSError as e:
         raise UserError(f"{kept}: cannot write: {e.strerror}") from None
-    _write_segments(CaptureWriter.reopen(directory), extension, bench, progress, setpoint, appended=number)
+    writer = CaptureWriter.reopen(directory)
+    if bench.station_warmup_s > 0:
+        writer.write_file(warmup_file(directory), _warmup_csv(bench))
+    _write_segments(writer, extension, bench, progress, setpoint, appended=number)
     return directory
 
 
