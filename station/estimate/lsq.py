@@ -1202,6 +1202,10 @@ class Model:
         harmonics = self._harmonics @ a_r                                        # (B,R,5,3)
         integral = w_mean * self._rot_duration[:, None] + earth_integral @ Mg.transpose(0, 2, 1)
         for eff in self._integral_effects:
+            batch = getattr(eff, "integral_batch", None)
+            if batch is not None:       # every row of X at once (TimeOffset: B x R calls of integral before)
+                integral = integral + _checked(eff, batch, X[:, L[f"effect:{eff.id}"]], s.rotations)
+                continue
             for n in range(B):
                 px = X[n, L[f"effect:{eff.id}"]]
                 for i, r in enumerate(s.rotations):
