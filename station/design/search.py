@@ -27,6 +27,8 @@ recomputed (State).
 """
 from __future__ import annotations
 
+import functools
+
 import fnmatch
 import math
 from dataclasses import dataclass, field
@@ -699,20 +701,25 @@ def timed_exchange(scorer: Scorer, budget_s: float, fixed_s: float = 0.0, max_pa
 
 
 def mountings_needed(chosen_masks) -> int:
-    """The fewest mountings (greedy set cover) that reach every chosen candidate."""
-    left = list(chosen_masks)
-    if not left:
-        return 0
-    n = 0
+    """The fewest mountings (greedy set cover) that reach every chosen candidate: at each step the
+    mounting (bit) that reaches the most candidates left, the lowest bit of equals.  Counted over
+    the bits the masks have (not every bit up to the highest: the fixtures' are 24 and above), and
+    remembered per set of masks: the exchange search times the same sets again and again (the
+    nineteenth session: 9,815 calls, a third of `station design`'s CPU in test_design's design)."""
+    return _mountings_needed(tuple(sorted(chosen_masks)))
+
+
+@functools.lru_cache(maxsize=4096)
+def _mountings_needed(masks: tuple) -> int:
+    left, n = list(masks), 0
     while left:
-        best, best_count = 0, -1
-        bit = 1
-        while bit <= max(left):
-            if any(m & bit for m in left):
-                count = sum(1 for m in left if m & bit)
-                if count > best_count:
-                    best, best_count = bit, count
-            bit <<= 1
+        counts: dict = {}
+        for m in left:
+            while m:
+                low = m & -m
+                counts[low] = counts.get(low, 0) + 1
+                m ^= low
+        best = max(counts.items(), key=lambda kv: (kv[1], -kv[0]))[0]
         left = [m for m in left if not m & best]
         n += 1
     return n

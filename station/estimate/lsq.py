@@ -1202,6 +1202,10 @@ class Model:
         harmonics = self._harmonics @ a_r                                        # (B,R,5,3)
         integral = w_mean * self._rot_duration[:, None] + earth_integral @ Mg.transpose(0, 2, 1)
         for eff in self._integral_effects:
+            batch = getattr(eff, "integral_batch", None)
+            if batch is not None:       # every row of X at once (TimeOffset: B x R calls of integral before)
+                integral = integral + _checked(eff, batch, X[:, L[f"effect:{eff.id}"]], s.rotations)
+                continue
             for n in range(B):
                 px = X[n, L[f"effect:{eff.id}"]]
                 for i, r in enumerate(s.rotations):
@@ -1489,8 +1493,23 @@ AT_MINIMUM_CHI2 = 1e-4
 #: So: 100 (1.45 x the slowest winner) and 10 (30 x below the least hopeless at 100)
 TRIAL_EVALUATIONS = 100
 HOPELESS_RATIO = 10.0
-CROSSING_SEARCH_AXES = 8         # axes whose crossings are tried in every combination (2^8 short solves)
-CROSSING_SEARCH_EVALUATIONS = 3  # each combination's short solve, before the best two are solved in full
+#: _minimise's search of the other crossings (_other_crossing): every combination of flips of up to
+#: CROSSING_SEARCH_AXES eligible axes (2^8 - 1 at most), then each axis alone until no flip lowers
+#: the sum of squares.  A flip is screened by the sum of squares a Gauss-Newton step from it
+#: predicts (one residual and one Jacobian: _predicted_cost) and solved whole only where that is
+#: below CROSSING_SCREEN_RATIO times the lowest minimum found so far (of the combinations, the
+#: best two so).  Measured (nineteenth session, docs/performance.md): on the 10 captures of
+#: tests/test_lsq_partial_arcs.py whose axes are near the vertical (630 combinations, 60 single
+#: flips, each also solved whole) the whole solve ended at 0.934-1.010 (combinations) and
+#: 0.921-1.000 (single flips) times the predicted sum of squares, and the lowest prediction of
+#: each capture's combinations was its lowest whole solve (the 3-evaluation solves that screened
+#: them before ranked it first on 9 of 10); so a flip that ends below the minimum is predicted
+#: below 1.09 times it, and 1.5 leaves a margin.  Every fit
+#: ended where it did before, bit for bit (those 10, 64 more about vertical axes, 100 of
+#: benchmarks/batch_throughput.py's part-turn captures, which have no eligible axis), with 47 % of
+#: the residual evaluations and 47 % of the Jacobians on the 10 (4,545 -> 2,120; 3,819 -> 1,810)
+CROSSING_SEARCH_AXES = 8
+CROSSING_SCREEN_RATIO = 1.5
 AXES_FIRST_GYRO_WEIGHT = 1e-3     # the rotations' gyro integrals' weight while the axes are fitted first
 AXES_FIRST_EVALUATIONS = 10       # and that fit's evaluations: only a start (chi and e, barely held by
                                   #   the weak gyro rows, wander there without converging; 8 to 100 gave
@@ -1530,20 +1549,35 @@ def _minimise(model: Model, x0: np.ndarray, solve):
                 if x is None:
                     break
             if x is not None:
-                tried.append((solve(x, CROSSING_SEARCH_EVALUATIONS).cost, x))
-        for _, x in sorted(tried, key=lambda t: t[0])[:2]:
-            other = solve(x)
-            res = other if other.cost < res.cost else res
+                tried.append((_predicted_cost(model, x), x))
+        for predicted, x in sorted(tried, key=lambda t: t[0])[:2]:
+            if predicted < CROSSING_SCREEN_RATIO * res.cost:
+                other = solve(x)
+                res = other if other.cost < res.cost else res
     improved = True
     while improved:           # then each axis alone, until no flip lowers the sum of squares
         improved = False
         for k in range(model.s.groups):
             start = _other_crossing(model, res.x, k)
-            if start is not None:
+            if start is not None and _predicted_cost(model, start) < CROSSING_SCREEN_RATIO * res.cost:
                 other = solve(start)
                 if other.cost < res.cost * (1 - 1e-9):
                     res, improved = other, True
     return res
+
+
+def _predicted_cost(model: Model, x: np.ndarray) -> float:
+    """The sum of squares (halved, as a solve's cost) a Gauss-Newton step from x would reach by
+    the linear model: _minimise's screen of a crossing's flip (CROSSING_SCREEN_RATIO).  The
+    Jacobian the solver left (the one at its solution, Model._last_jacobian) is kept."""
+    last = model._last_jacobian
+    try:
+        r = model.residuals(x)
+        J = model.sparse_jacobian(x) if model.is_large else model.jacobian(x)
+        left = r + J @ _gauss_newton_step(J, r)
+    finally:
+        model._last_jacobian = last
+    return 0.5 * float(left @ left)
 
 
 class _Whole:

@@ -64,9 +64,12 @@ class RotationAxisOffsets(Effect):
     def accel(self, x, ctx):
         if getattr(ctx, "turned_s", None) is None:      # station apply: the bench's, not the IMU's
             return None
-        index = ctx.column("segment_index")
-        group = np.array([self.group_of.get(int(i), -1) if np.isfinite(i) else -1 for i in index])
-        d = np.zeros((len(index), 3), dtype=np.result_type(x, ctx.f_p))
+        # each point's group, looked up once per segment (point by point it was 9 ms a call at
+        # ~2,000 points: a third of the effect's residuals; nineteenth session)
+        values, where = np.unique(ctx.column("segment_index"), return_inverse=True)
+        group = np.array([self.group_of.get(int(i), -1) if np.isfinite(i) else -1 for i in values], dtype=int)
+        group = group[where.reshape(-1)]
+        d = np.zeros((len(group), 3), dtype=np.result_type(x, ctx.f_p))
         for n, g in enumerate(self.groups):
             d = d + (group == g).astype(float)[:, None] * x[3 * n:3 * n + 3][None, :]
         w, wdot = ctx.w_table, ctx.wdot_table

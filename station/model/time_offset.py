@@ -1,6 +1,8 @@
 """time_offset: the IMU's clock against the table's."""
 from __future__ import annotations
 
+import numpy as np
+
 from station.model.effect import Effect, Param
 
 
@@ -34,3 +36,11 @@ class TimeOffset(Effect):
 
     def integral(self, x, rotation):
         return x[0] * (rotation.gyro_end - rotation.gyro_start)
+
+    def integral_batch(self, X, rotations):
+        """integral() of every row of X (B, 1) and every rotation at once, (B, R, 3): the fit's
+        residuals call it for each batch of the Jacobian (lsq.Model._blocks), B x R calls of
+        integral() before (the nineteenth session: 11 s of the 37 s of CPU of
+        tests/test_ramp_placement_scatter.py)."""
+        change = np.array([r.gyro_end - r.gyro_start for r in rotations], float).reshape(len(rotations), 3)
+        return X[:, :1, None] * change[None, :, :]
