@@ -1467,7 +1467,7 @@ STALE_SCALE = 100.0
 #: then says the written parameters are at the minimum).  Otherwise LM goes on as before, on the
 #: same path (its tolerances or the limit).  The nineteenth session found that where (i) and (ii)
 #: hold LM crawls in a valley that is not the minimum's (the settled fits of the +100 and +150 deg/h
-#: steps were 4.8-5.6 chi2 units above a minimum that dogbox from the start reaches in ~50
+#: steps were 1.0-5.8 chi2 units above a minimum that dogbox from the start reaches in ~50
 #: evaluations, written parameters 0.09-0.17 sigma away): there dogbox is tried from the solve's
 #: start once (_dogbox_from_start), and a solve that ends not converged (limit or settled) tries it too
 SETTLED_CHI2 = 0.05
@@ -1900,7 +1900,7 @@ def _dogbox_from_start(model: Model, lm, res):
     statics' attitudes (nuisances) where the linear model is wrong (its Gauss-Newton step raises
     chi2 by 10^2-10^6; the eighteenth session's "settled" fits stopped there); the dogleg in its
     box from the start does not enter it.  On the captures of docs/performance.md "Nineteenth
-    session" it converged in 37-81 evaluations, 0.02-5.6 chi2 units below where LM settled, crawled
+    session" it converged in 37-81 evaluations, 0.005-5.8 chi2 units below where LM settled, crawled
     or stopped at its limit (and below where 6,000 unwatched LM evaluations end)."""
     if getattr(lm, "tried_from_start", False):
         return None
