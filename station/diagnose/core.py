@@ -359,8 +359,9 @@ def diagnose(result, exclude=(), registry: EffectRegistry | None = None) -> Diag
                      "the 1-sigma): only a drop large against the misfit counts")
     # the data faults found before the fit (station/estimate/data_faults.py): what was left out
     notes += list(getattr(result.model.s, "data_fault_notes", None) or [])
-    notes += [n for n in getattr(result.model, "notes", None) or []
-              if n.startswith(("the fit stopped at its limit", lsq.SETTLED_NOTE))]
+    # where the solver stopped short of converging (at its limit, or settled): lsq._solve's note
+    stop_note = getattr(result.model, "stop_note", None)
+    notes += [stop_note] if stop_note else []
     return Diagnosis(effects=["base_triads", "inter_triad"] + [e.id for e in result.model.effects],
                      chi2=result.chi2, dof=result.dof, reduced_chi2=reduced, p_value=p,
                      segments=segs, candidates=cands, failures=failures, verdict=verdict,

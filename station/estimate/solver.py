@@ -113,6 +113,7 @@ class LevenbergMarquardt:
         self.fun, self.jac = fun, jac
         self.xtol, self.ftol, self.gtol, self.factor = xtol, ftol, gtol, factor
         self.x = np.array(x0, dtype=float)
+        self.x0 = self.x.copy()     # where the solve started (lsq._last_phase: dogbox from there)
         self.f = np.asarray(fun(self.x), dtype=float)
         self.nfev, self.njev = 1, 0
         self.fnorm = float(np.linalg.norm(self.f))

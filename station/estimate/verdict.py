@@ -211,7 +211,12 @@ def _convergence(cal: Calibration) -> None:
 
 
 def _settled(fit: dict) -> bool:
-    """Whether the fit stopped where it crept (lsq._last_phase; its note says so), not at its limit."""
+    """Whether the fit stopped where it crept (lsq._last_phase), not at its limit: ``fit.settled``
+    (true; written since the nineteenth session).  A file without the key is settled only if it
+    is one the eighteenth session wrote for a settled fit, which said so in a note's first words
+    (lsq.SETTLED_NOTE) and nowhere else; any other file without it: not settled."""
+    if "settled" in fit:
+        return fit["settled"] is True
     from station.estimate.lsq import SETTLED_NOTE
 
     return any(str(n).startswith(SETTLED_NOTE) for n in fit.get("notes", []))

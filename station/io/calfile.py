@@ -419,6 +419,9 @@ def _not_determined_agrees(doc, params, path) -> None:
         return
     if not isinstance(fit, dict):
         raise UserError(f"{path}: field 'fit': must be a mapping")
+    for key in ("settled", "stopped_short"):      # how the solver stopped (lsq.to_calibration)
+        if key in fit and not isinstance(fit[key], bool):
+            raise UserError(f"{path}: field 'fit.{key}': must be true or false")
     held = fit.get("not_determined", [])
     if not isinstance(held, list) or not all(isinstance(n, str) for n in held):
         raise UserError(f"{path}: field 'fit.not_determined': must be a list of parameter names")
