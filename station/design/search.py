@@ -191,8 +191,8 @@ class Scorer:
         return lambda c: (self.chamber.ambient_c if c.level is None else c.level) - mid
 
     def retime(self, chosen, masks=None, budget_s: float | None = None) -> bool:
-        """Place every candidate at the temperature it has on the timeline of the design
-        ``chosen`` (timeline.py: the written order, the simulated bench's clock): a chosen one
+        """Place every candidate at the temperature (with bias_drift also the time) it has on the
+        timeline of the design ``chosen`` (timeline.py: the written order, the simulated bench's clock): a chosen one
         where it is, a static not chosen where its attitude's chosen dwell is (else at the chosen
         statics' mean), a rotation not chosen at its axis group's chosen ones (else the chosen
         rotations').  With nothing chosen yet, the notional timeline (timeline.notional).  False

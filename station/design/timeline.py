@@ -1,6 +1,8 @@
 """The designed scheme's own timeline: the order its segments are written in, and the temperature
-each has when the scheme is run, so that the search informs temperature-dependent effects at the
-temperatures the design gives them (station/design/information.py, ``timeline=True``).
+and the time each has when the scheme is run, so that the search informs temperature-dependent
+effects at the temperatures the design gives them (station/design/information.py,
+``timeline=True``), and effects in the time (bias_drift) at the times it gives them (each
+candidate's mean sample time less the statics' mean: time_differences; nineteenth session).
 
 The order is the scheme writer's (designer._segments_of): mounting by mounting as the time model
 covers them, within a mounting the statics first, then the rotation pairs.  The clock is the
