@@ -91,6 +91,12 @@ class Information:
     # per candidate key the temperature difference it had in the candidates' own capture (the
     # information before timeline=True: the search's first stage ranks on it, search.Scorer.natural)
     natural_dt: dict = field(default_factory=dict)
+    # effects linear in the time (bias_drift, its time_shear): (drift column, bias column, per
+    # second) over G: a candidate recorded s seconds later than in the candidates' capture has
+    # its block moved by at_time; natural_time: per candidate key its time in that capture less
+    # its reference there (the chunk's statics' mean time, as the effect's setup takes it), s
+    time_shear: list = field(default_factory=list)
+    natural_time: dict = field(default_factory=dict)
     # the reported parameters each chunk's model has (the first: the capture's own segments in
     # station design --from), and the union's shared columns by name (column_names)
     chunk_parameters: list = field(default_factory=list)
@@ -147,6 +153,52 @@ def at_temperature(M: np.ndarray, power: np.ndarray, dt_c: float) -> np.ndarray:
     lam = np.ones(M.shape[0])
     lam[:len(power)] = np.where(power > 0, float(dt_c) ** power, 1.0)
     return M * np.outer(lam, lam)
+
+
+def at_time(M: np.ndarray, shear: list, delta_s: float) -> np.ndarray:
+    """A candidate's information block moved ``delta_s`` seconds later relative to the reference of
+    the effects in the time (Information.time_shear): each drift column's Jacobian gains delta_s x
+    factor x its bias column's (a drift d over s seconds adds the bias d s), so the block is
+    T^T M T, T = I + delta_s K (K: the bias column into the drift column, K^2 = 0) -- exact, as
+    the drift is linear in the time and its columns are in G (they commute with the elimination of
+    a candidate's own nuisances and its axis group's)."""
+    if not shear or not delta_s:
+        return M
+    out = np.array(M, dtype=float, copy=True)
+    for d, b, k in shear:                        # columns: M T
+        out[:, d] += (delta_s * k) * out[:, b]
+    for d, b, k in shear:                        # rows: T^T (M T)
+        out[d, :] += (delta_s * k) * out[b, :]
+    return out
+
+
+def time_shear_of(effects, names: list) -> list:
+    """Information.time_shear from the effects' time_shear() and the union's column names."""
+    at = {n: k for k, n in enumerate(names)}
+    out = []
+    for e in effects:
+        for param, block, axis, per_s in (e.time_shear() if hasattr(e, "time_shear") else ()):
+            d, b = at.get(f"{e.id}:{param}"), at.get(f"{block}[{axis}]")
+            if d is not None and b is not None:
+                out.append((d, b, float(per_s)))
+    return out
+
+
+def _segment_times(model, chunk, owner) -> dict:
+    """Per candidate key of a chunk its time less the time effects' reference in the chunk's
+    capture (Information.natural_time): the mean of its segments' mean sample times, counted as
+    the effect's setup counts them (from the earliest segment's, less the statics' mean)."""
+    e = next((x for x in model.effects if hasattr(x, "time_shear")), None)
+    if e is None:
+        return {}
+    s = model.s
+    mids = {x.name: x.t_mid_s for x in (*s.statics, *s.rotations) if np.isfinite(x.t_mid_s)}
+    t0 = min(mids.values()) if mids else 0.0
+    by_key: dict = {}
+    for name, key in owner.items():
+        if name in mids:
+            by_key.setdefault(key, []).append(mids[name])
+    return {key: float(np.mean(t)) - t0 - float(e.reference_s) for key, t in by_key.items() if key[0] != "anchor"}
 
 
 def ramp_accel_of(config) -> float:
@@ -478,6 +530,10 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
     scheme's own timeline (at_temperature; station/design/timeline.py) -- not at the one it had
     in the candidates' capture, whose order is not the design's (the twelfth session's temperature
     design: the search's worst 1σ 3.24 µg/°C, the estimator's fit of the written scheme 7.00).
+    With effects in the time (bias_drift's time_shear), each candidate's time in that capture
+    (natural_time) and the columns' shear (time_shear), so that the search moves it to the time it
+    will have in the designed scheme (at_time; nineteenth session: a 900 s design ranked on the
+    candidates' times at a worst drift 1σ of 1.24 µg/h, the estimator's fit of it 84.8).
 
     ``appended``: {segment name: N} of the capture's own segments recorded by its N-th ``run
     --append`` (station design --from on a capture already extended: sequential.capture_sessions),
@@ -573,12 +629,14 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
         labels = model.row_labels(x)
         if info is None:
             info = Information(len(shared), merged, attitudes=attitudes)
-            if power is not None:
+            if power is not None or (timeline and any(hasattr(e, "time_shear") for e in model.effects)):
                 info.temp_power, info.temperature = power, warm
                 info.clock = (float(truth.bench.move_s + truth.bench.settle_s), float(truth.sample_rate_hz),
                               ramp_accel)
                 info.start_s = dryrun.warmup_seconds(warmup, warm)
         info.chunk_parameters.append(list(p_c.names))
+        if timeline:
+            info.natural_time.update(_segment_times(model, chunk, owner))
         if power is not None:
             from station.design.timeline import seconds_temperatures
 
@@ -647,4 +705,6 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
     info.column_names = list(union)
     if power is not None and len(power) != G:
         info.temp_power = temperature_powers(model.effects, merged, G)
+    if timeline:
+        info.time_shear = time_shear_of(model.effects, info.column_names)
     return info

@@ -132,30 +132,55 @@ class Scorer:
         # timeline (retime)
         self.M1 = list(self.M)
         self.dt_c: dict = {}
+        # effects in the time (bias_drift: information.Information.time_shear): M1 is each candidate's
+        # information at its time in the candidates' capture (natural_time); self.M at the time it
+        # has on the design's timeline less the statics' mean (dt_s, s; retime)
+        self.dt_s: dict = {}
+        self.shear = list(getattr(info, "time_shear", None) or [])
+        natural_time = getattr(info, "natural_time", {})
+        self.t0 = [natural_time.get(self._info_key(c), 0.0) for c in candidates]
         self.chamber = None       # station.core.chamber.ChamberConfig when candidates have levels
         # the sequence the chosen candidates are written in within each mounting (order_search;
         # None: the writer's rule, statics first): candidate indices, timeline.written_order's
         self.order: list | None = None
 
+    @staticmethod
+    def _info_key(c) -> tuple:
+        """A candidate's key in the Information (a static's without its dwell)."""
+        return c.key[:-1] if c.kind == "static" else c.key
+
     @property
     def timed(self) -> bool:
+        """Effects in the temperature or in the time, informed on the design's own timeline."""
+        return self.temperature_timed or bool(self.shear)
+
+    @property
+    def temperature_timed(self) -> bool:
         return getattr(self.info, "temp_power", None) is not None
 
-    def set_temperatures(self, dt_c: dict) -> None:
-        """Each candidate's information at its temperature difference ``dt_c[i]`` (degC)."""
-        from station.design.information import at_temperature
-
+    def set_temperatures(self, dt_c: dict, dt_s: dict | None = None) -> None:
+        """Each candidate's information at its temperature difference ``dt_c[i]`` (degC) and, with
+        effects in the time, at its time less the statics' mean ``dt_s[i]`` (s; None: as it was
+        in the candidates' capture)."""
         self.dt_c = dict(dt_c)
+        self.dt_s = dict(dt_s) if dt_s is not None else {}
         p = self.info.temp_power
-        self.M = [at_temperature(M, p, self.dt_c.get(i, 0.0)) for i, M in enumerate(self.M1)]
+        self.M = [self._placed(i, M, p, self.dt_c.get(i, 0.0), self.dt_s.get(i)) for i, M in enumerate(self.M1)]
+
+    def _placed(self, i, M1, power, dt_c, dt_s):
+        from station.design.information import at_temperature, at_time
+
+        M = at_temperature(M1, power, dt_c) if power is not None else M1
+        if self.shear and dt_s is not None:
+            M = at_time(M, self.shear, dt_s - self.t0[i])
+        return M
 
     def natural(self) -> None:
-        """Every candidate at the temperature it had in the candidates' own capture (the search's
-        first stage: information.Information.natural_dt)."""
+        """Every candidate at the temperature and the time it had in the candidates' own capture
+        (the search's first stage: information.Information.natural_dt, natural_time)."""
         nat = self.info.natural_dt
         shift = self._level_shift()
-        self.set_temperatures({i: nat.get(c.key[:-1] if c.kind == "static" else c.key, 0.0) + shift(c)
-                               for i, c in enumerate(self.cands)})
+        self.set_temperatures({i: nat.get(self._info_key(c), 0.0) + shift(c) for i, c in enumerate(self.cands)})
 
     def _level_shift(self):
         """A candidate's chamber level less the middle of the levels (degC; 0 without a chamber):
@@ -168,8 +193,8 @@ class Scorer:
         return lambda c: (self.chamber.ambient_c if c.level is None else c.level) - mid
 
     def retime(self, chosen, masks=None, budget_s: float | None = None) -> bool:
-        """Place every candidate at the temperature it has on the timeline of the design
-        ``chosen`` (timeline.py: the written order, the simulated bench's clock): a chosen one
+        """Place every candidate at the temperature (with bias_drift also the time) it has on the
+        timeline of the design ``chosen`` (timeline.py: the written order, the simulated bench's clock): a chosen one
         where it is, a static not chosen where its attitude's chosen dwell is (else at the chosen
         statics' mean), a rotation not chosen at its axis group's chosen ones (else the chosen
         rotations').  With nothing chosen yet, the notional timeline (timeline.notional).  False
@@ -181,13 +206,35 @@ class Scorer:
         info = self.info
         if not chosen:
             shift = self._level_shift()
-            notional = timeline.notional(self.cands, info.temperature, info.clock, budget_s or 3600.0,
-                                         info.start_s)
-            self.set_temperatures({i: d + shift(self.cands[i]) for i, d in notional.items()})
+            dt_c = {}
+            if self.temperature_timed:
+                notional = timeline.notional(self.cands, info.temperature, info.clock, budget_s or 3600.0,
+                                             info.start_s)
+                dt_c = {i: d + shift(self.cands[i]) for i, d in notional.items()}
+            dt_s = timeline.notional_times(self.cands, budget_s or 3600.0) if self.shear else None
+            self.set_temperatures(dt_c, dt_s)
             return True
-        placed, reference = timeline.differences(chosen, self.cands, info.temperature, info.clock, masks,
-                                                 self.chamber, with_reference=True, order=self.order,
-                                                 start_s=info.start_s)
+        dt_c = {}
+        if self.temperature_timed:
+            placed, reference = timeline.differences(chosen, self.cands, info.temperature, info.clock, masks,
+                                                     self.chamber, with_reference=True, order=self.order,
+                                                     start_s=info.start_s)
+            dt_c = self._spread(placed, reference)
+        dt_s = None
+        if self.shear:
+            # (a time with no chosen candidate at its level or axis: the statics' mean, 0)
+            dt_s = self._spread(timeline.time_differences(chosen, self.cands, info.clock, masks, self.chamber,
+                                                          order=self.order, start_s=info.start_s,
+                                                          temperature=info.temperature), None)
+        self.set_temperatures(dt_c, dt_s)
+        return True
+
+    def _spread(self, placed: dict, reference) -> dict:
+        """retime's placement of every candidate from the chosen ones' ``placed`` (index: value less
+        the reference): a chosen one where it is, a static not chosen where its attitude's chosen
+        dwell is (else at the chosen statics' mean), a rotation not chosen at its axis group's
+        chosen ones (else the chosen rotations'); ``reference`` (degC) a temperature's, for a
+        chamber level nothing is chosen at (None: a time's, 0 there)."""
         by_slot, by_axis, statics, rotations = {}, {}, {}, {}
         for i, d in placed.items():
             c = self.cands[i]
@@ -204,7 +251,7 @@ class Scorer:
                 return float(np.mean(first[level]))
             if level in second:
                 return float(np.mean(second[level]))
-            if level is None or self.chamber is None:
+            if level is None or self.chamber is None or reference is None:
                 return 0.0
             return float(level) - reference
 
@@ -217,25 +264,25 @@ class Scorer:
             else:
                 key = (c.axis, c.level)
                 dt[i] = float(np.mean(by_axis[key])) if key in by_axis else at_level(c.level, rotations, statics)
-        self.set_temperatures(dt)
-        return True
+        return dt
 
     def value_in_sequence(self, chosen, sequence) -> float:
         """The criterion of the design ``chosen`` written in ``sequence`` (its candidates in the
         order of the scheme file): each placed at its temperature on that timeline (as retime,
         for the chosen candidates only: what the order search needs, ~1 ms for 30 candidates)."""
         from station.design import timeline
-        from station.design.information import at_temperature
 
         info = self.info
-        dt = timeline.differences(chosen, self.cands, info.temperature, info.clock, chamber=self.chamber,
-                                  sequence=sequence, start_s=info.start_s)
+        dt = (timeline.differences(chosen, self.cands, info.temperature, info.clock, chamber=self.chamber,
+                                   sequence=sequence, start_s=info.start_s) if self.temperature_timed else {})
+        ds = (timeline.time_differences(chosen, self.cands, info.clock, chamber=self.chamber, sequence=sequence,
+                                        start_s=info.start_s, temperature=info.temperature) if self.shear else {})
         G = self.G
         F = np.zeros((G, G))
         groups: dict = {}
         for i in chosen:
             c = self.cands[i]
-            M = at_temperature(self.M1[i], info.temp_power, dt[i])
+            M = self._placed(i, self.M1[i], info.temp_power, dt.get(i, 0.0), ds.get(i))
             if c.kind == "static":
                 F += M
             else:

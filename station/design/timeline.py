@@ -1,6 +1,8 @@
 """The designed scheme's own timeline: the order its segments are written in, and the temperature
-each has when the scheme is run, so that the search informs temperature-dependent effects at the
-temperatures the design gives them (station/design/information.py, ``timeline=True``).
+and the time each has when the scheme is run, so that the search informs temperature-dependent
+effects at the temperatures the design gives them (station/design/information.py,
+``timeline=True``), and effects in the time (bias_drift) at the times it gives them (each
+candidate's mean sample time less the statics' mean: time_differences; nineteenth session).
 
 The order is the scheme writer's (designer._segments_of): mounting by mounting as the time model
 covers them, within a mounting the statics first, then the rotation pairs.  The clock is the
@@ -128,11 +130,33 @@ def seconds_temperatures(items, temperature, clock, levels=None, chamber=None, s
     """mean_temperatures of items given as the lengths of their segments, in order (``levels``:
     each item's chamber level, None: no chamber; ``start_s``: the bench's clock at the first
     item's gap)."""
+    return seconds_timeline(items, temperature, clock, levels, chamber, start_s)[0]
+
+
+def mean_times(sequence, cands, clock, chamber=None, start_s: float = 0.0, temperature=None) -> np.ndarray:
+    """Each candidate's time on the bench's clock when ``sequence`` is recorded (mean_temperatures'
+    timeline): the mean of its segments' mean sample times (a static's one segment; a rotation
+    pair's two), s -- the time the estimator's summaries give a segment (t_mid_s: the mean of its
+    samples' times), which is what an effect in the time (bias_drift) reads."""
+    levels = [level_of(cands[i]) for i in sequence]
+    accel = clock[2] if len(clock) > 2 else None
+    return seconds_timeline([segment_seconds(cands[i], accel) for i in sequence], temperature, clock,
+                            levels if chamber is not None and any(x is not None for x in levels) else None,
+                            chamber, start_s)[1]
+
+
+def seconds_timeline(items, temperature, clock, levels=None, chamber=None, start_s: float = 0.0):
+    """(mean temperatures, mean times) of items given as the lengths of their segments, in order
+    (seconds_temperatures; ``temperature`` None: the times only, the temperatures nan; the time
+    of an item: the mean of its segments' mean sample times, s on the bench's clock)."""
     gap, fs = clock[:2]
     dt = 1.0 / fs
     end = float(start_s)
-    out = np.zeros(len(items))
+    out = np.full(len(items), np.nan)
+    mids = np.zeros(len(items))
     air, setpoint = None, None
+    if levels is not None and temperature is None:
+        raise ValueError("a chamber's timeline needs the temperature model (its waits)")
     if levels is not None:
         from station.simulate.dryrun import chamber_air
 
@@ -142,18 +166,23 @@ def seconds_temperatures(items, temperature, clock, levels=None, chamber=None, s
             air.set(end, levels[k], chamber.ramp_c_per_min)          # as the dry run: chamber_step
             end += chamber.ramp_s(setpoint, levels[k]) + chamber.settle_estimate_s(setpoint, levels[k])
             setpoint = levels[k]
-        temps, weights = [], []
+        temps, weights, centres = [], [], []
         for seconds in lengths:
             n = max(1, int(round(seconds * fs)))
             a = end + gap + 0.5 * dt
             b = a + (n - 1) * dt
             end = b + 0.5 * dt
+            centres.append(0.5 * (a + b))
+            weights.append(n)
+            if temperature is None:
+                continue
             tt = np.array([a, 0.5 * (a + b), b])
             ta, tm, tb = temperature.at(tt) if air is None else temperature.at(tt, air)
             temps.append((ta + 4.0 * tm + tb) / 6.0)
-            weights.append(n)
-        out[k] = float(np.average(temps, weights=weights))
-    return out
+        if temperature is not None:
+            out[k] = float(np.average(temps, weights=weights))
+        mids[k] = float(np.mean(centres))
+    return out, mids
 
 
 def differences(chosen, cands, temperature, clock, masks=None, chamber=None, with_reference: bool = False,
@@ -170,6 +199,26 @@ def differences(chosen, cands, temperature, clock, masks=None, chamber=None, wit
     reference = float(np.mean(statics)) if statics else float(np.mean(temps)) if len(temps) else 0.0
     out = {i: float(t - reference) for i, t in zip(sequence, temps)}
     return (out, reference) if with_reference else out
+
+
+def time_differences(chosen, cands, clock, masks=None, chamber=None, order=None, sequence=None,
+                     start_s: float = 0.0, temperature=None) -> dict:
+    """Per chosen candidate its time less the reference of an effect in the time (bias_drift: the
+    mean time of the statics, station.model.bias_drift), in the written order's timeline (as
+    differences; ``temperature``: the IMU's, needed for a chamber's waits only): {index: s}."""
+    if sequence is None:
+        sequence = written_order(chosen, cands, masks, chamber, order)
+    times = mean_times(sequence, cands, clock, chamber, start_s, temperature)
+    statics = [t for i, t in zip(sequence, times) if cands[i].kind == "static"]
+    reference = float(np.mean(statics)) if statics else float(np.mean(times)) if len(times) else 0.0
+    return {i: float(t - reference) for i, t in zip(sequence, times)}
+
+
+def notional_times(cands, budget_s: float) -> dict:
+    """Each candidate's time less the statics' mean before there is a design (notional's rule:
+    the statics in the first third of the budget, the rotations in the rest), s."""
+    half = 0.5 * float(budget_s)            # (the rest's middle, 2/3 B, less the first third's, B/6)
+    return {i: (0.0 if c.kind == "static" else half) for i, c in enumerate(cands)}
 
 
 def notional(cands, temperature, clock, budget_s: float, start_s: float = 0.0) -> dict:

@@ -48,6 +48,15 @@ class BiasDrift(Effect):
         first = min((x.t_mid_s - 0.5 * x.duration_s for x in segs if np.isfinite(x.duration_s)), default=t0)
         self.apply_offset_s = float(max(t0 - first, 0.0))
 
+    def time_shear(self) -> tuple:
+        """(parameter, the base model's bias block, its axis, per second): a drift's term at time
+        t is the bias' term times (t - t_ref) x this factor (its unit per the bias' internal unit:
+        accelerometer m/s^2, gyro deg/s), so a segment recorded later by s seconds has the drift's
+        Jacobian plus s x factor x the bias' (station/design/information.py: the designer places
+        each candidate at its time in the designed scheme)."""
+        return (tuple((f"accel_bias_drift_{a}", "accel_bias", i, units.UG_MPS2 / 3600.0) for i, a in enumerate("xyz"))
+                + tuple((f"gyro_bias_drift_{a}", "gyro_bias", i, 1.0 / 3600.0 / 3600.0) for i, a in enumerate("xyz")))
+
     @property
     def params(self):
         return (tuple(Param(f"accel_bias_drift_{a}", "ug/h", 1.0, 100.0, 1e5) for a in "xyz")
