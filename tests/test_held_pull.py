@@ -112,3 +112,24 @@ def test_no_pull_where_the_effect_is_absent_and_the_pull_is_standard_normal_unde
     for k, name in enumerate(names):
         assert abs(np.std(w[:, k]) - 1.0) < spread, (name, np.std(w[:, k]))
         assert np.std(w0[:, k]) < 1.0 + spread, (name, np.std(w0[:, k]))
+
+
+def test_diagnose_steps_say_the_pull_beside_a_held_parameter(present, absent):
+    """diagnose --auto's step (screen and report page) prints a held parameter of the added effect
+    as not revealed, and, where the data pull it beyond its prior's check, with the pull."""
+    from types import SimpleNamespace
+
+    from station.diagnose.auto import Step
+
+    for (_, result), said in ((present, {"gyro_rate_sq_even_y": -7.5, "gyro_rate_sq_even_z": 4.5}), (absent, {})):
+        estimate = [(p.name, float(result.x[c] * p.scale), 1.0, p.unit) for c, p in lsq._held(result.model)]
+        step = Step("gyro_rate_nonlinearity", None, SimpleNamespace(result=result), 1.0, 1.0, estimate)
+        assert set(step.held_pulled) == set(said)
+        for name, _, _, _ in estimate:
+            words = step.held_words(name)
+            assert words.startswith(" (not revealed: held by its prior, not written")
+            if name in said:
+                assert f"the data pull it {step.held_pulled[name]:+.1f} sigma from that prior" in words
+                assert step.held_pulled[name] == pytest.approx(said[name], abs=0.2)
+            else:
+                assert "pull" not in words
