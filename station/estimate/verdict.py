@@ -89,8 +89,8 @@ def _held_contradicted(cal: Calibration) -> None:
     verdict["held_contradicted"] = dict(pulled)
     verdict["reason"] = (str(verdict.get("reason", "")) + "; but the data pull "
                          + ", ".join(f"{n} {w:+.1f} sigma" for n, w in pulled.items())
-                         + " from the prior that holds it (0 +/- its typical size, not revealed): the "
-                         "parameters correlated with it rest on a prior the capture contradicts (notes)")
+                         + " from the prior that holds each (0 +/- its typical size: not revealed): "
+                         "the parameters correlated with them rest on a prior the capture contradicts (notes)")
 
 
 def fit_fails(cal: Calibration) -> bool:
