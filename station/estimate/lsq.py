@@ -2146,8 +2146,10 @@ def held_pulls(result: "FitResult") -> dict:
     session).  For one parameter it is d / sqrt(tau^2 + sigma_d^2), d +/- sigma_d what the data
     alone say of it (x = d tau^2 / (tau^2 + sigma_d^2), P = tau^2 sigma_d^2 / (tau^2 + sigma_d^2)):
     the prior-predictive check of the prior.  Standard normal (linearised) when the parameter is
-    of its typical size, as the prior says; narrower when it is 0 (its variance sigma_d^2 /
-    (tau^2 + sigma_d^2), at least 1/2 for a held one, whose sigma_d exceeds tau); so a pull beyond
+    of its typical size, as the prior says; narrower when it is 0 (for one held parameter its
+    variance is sigma_d^2 / (tau^2 + sigma_d^2), at least 1/2 since its sigma_d exceeds tau; held
+    parameters the data see only together can be far narrower: optimal9's even rate-squared terms,
+    sigma_d 0.68 tau given the others' priors, their pulls' sd 0.17 at 0, docs/design.md); so a pull beyond
     held_pull_limit says the capture contradicts the typical size and that holding it at 0 biases
     what is correlated with it.  A parameter whose information the data hold less than
     HELD_PULL_MIN_SHARE of (sigma_d above 1,000 tau: x is then the prior's within the solver's
