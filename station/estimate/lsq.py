@@ -2826,9 +2826,11 @@ def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=())
                 "the data pull held parameters beyond their prior 0 +/- the typical size ("
                 + ", ".join(f"{n} {w:+.1f} sigma" for n, w in pulled.items())
                 + f"; beyond {limit:.2f}, the {HELD_PULL_P:g} false-alarm point of the prior's own "
-                "check): the capture contradicts their typical size, so the prior is wrong for them and what "
-                "is correlated with them rests on it; add segments that reveal them (station design --from "
-                "CAPTURE --reveal NAMES) or an effect that explains what pulls")
+                "check): the capture contradicts the model that holds them -- they exceed their typical size "
+                "(the prior is then wrong for them, and what is correlated with them rests on it) or the model "
+                "misses what pulls on them (an effect not added) --, and they are compensated at their nominal 0 "
+                "all the same; add segments that reveal them (station design --from CAPTURE --reveal NAMES) or "
+                "an effect that explains what pulls")
     for e in model.effects:       # what an effect's own convention fixes (not the capture's doing)
         fit_stats["notes"] += list(e.notes()) if hasattr(e, "notes") else []
         if getattr(e, "bench", False) and callable(getattr(e, "words", None)):

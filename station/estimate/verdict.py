@@ -78,7 +78,9 @@ def judge(cal: Calibration) -> Calibration:
 def _held_contradicted(cal: Calibration) -> None:
     """Held effect parameters whose prior the data contradict (fit.held_contradicted:
     station.estimate.lsq.held_pulls, beyond its false-alarm limit) are named in the verdict with
-    their pull: the values correlated with them rest on a prior the capture contradicts.  The
+    their pull: they exceed their typical size (the values correlated with them then rest on a
+    prior the capture contradicts) or the model misses what pulls on them (a linear tempco beside
+    the quadratic term held alone fired so: review of held28).  The
     result is not changed: the verdict's chi-square is the data's, and the data agree with the
     noise while the prior rows take the conflict (optimal9 with rate-squared terms 5 times their
     typical size: the data's chi2 193.31 against 193.32 without them, the held priors' rows 61.2)."""
@@ -89,8 +91,8 @@ def _held_contradicted(cal: Calibration) -> None:
     verdict["held_contradicted"] = dict(pulled)
     verdict["reason"] = (str(verdict.get("reason", "")) + "; but the data pull "
                          + ", ".join(f"{n} {w:+.1f} sigma" for n, w in pulled.items())
-                         + " from the prior that holds each (0 +/- its typical size: not revealed): "
-                         "the parameters correlated with them rest on a prior the capture contradicts (notes)")
+                         + " from the prior that holds each (0 +/- its typical size: not revealed, compensated "
+                         "at 0): they exceed their typical size or the model misses what pulls on them (notes)")
 
 
 def fit_fails(cal: Calibration) -> bool:
