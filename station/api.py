@@ -676,7 +676,10 @@ class MonteCarlo:
     (the mean reported 1-sigma; None when the method reports none) and ``mean_error`` (scale
     factors relative); ``crlb`` None for a parameter the noiseless capture does not reveal.
     ``not_revealed``: {name: the runs whose capture did not reveal it} of the effects' parameters
-    held by their priors and not written (its row, if any, is over the other runs)."""
+    held by their priors and not written.  Such a parameter revealed in some runs has a row over
+    every run (the error of the value each calibration compensates with: its nominal 0 where held,
+    not the revealing runs alone, which are selected on the outcome), ``revealed_runs`` (how many
+    revealed it) and no ``mean_sigma`` (the held runs write none); held in every run, none."""
     scheme: str
     runs: int
     method: str
@@ -738,18 +741,28 @@ def montecarlo(scheme: str = "optimal9", runs: int = 100, *, seed: int = 1000, a
                        workers=workers)
     errors, sigmas = result.errors, result.sigmas
     # an effect parameter a run's capture does not reveal (held by its prior, not written: no
-    # error, 1σ inf): its statistics are those of the runs that reveal it, the count said apart
+    # error, 1σ inf) is compensated there at its nominal 0, and the simulated IMU has none of the
+    # effects: that run's error is 0.  Its row is over every run, of the value each calibration
+    # compensates with (written, or the nominal where held): over the revealing runs only it was
+    # selected on the outcome (a prior the data contradict is released by the value's size:
+    # lsq._contradicted_priors).  Its mean 1σ is None: the held runs write none, and the revealing
+    # runs' alone would be compared with a spread they are not the runs of (issue 28, nineteenth
+    # session)
     held = np.isinf(sigmas) & np.isnan(errors)
+    revealed = len(errors) - held.sum(axis=0)
+    errors = np.where(held, 0.0, errors)
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)        # (a column of NaN: left out below)
-        std = np.where(held.any(axis=0), np.nanstd(errors, axis=0, ddof=1), errors.std(axis=0, ddof=1))
-        mean_error = np.where(held.any(axis=0), np.nanmean(errors, axis=0), errors.mean(axis=0))
+        std = errors.std(axis=0, ddof=1)
+        mean_error = errors.mean(axis=0)
         sigmas = np.where(held, np.nan, sigmas)
         mean_sigma = np.nanmean(sigmas, axis=0) if np.isfinite(sigmas).any() else np.full(len(std), np.nan)
+    mean_sigma = np.where(held.any(axis=0), np.nan, mean_sigma)
     rows = [{"name": n, "unit": u, "std": float(sd), "crlb": float(c) if np.isfinite(c) else None,
-             "mean_sigma": None if not np.isfinite(ms) else float(ms), "mean_error": float(me)}
-            for (n, u), sd, c, ms, me in zip(result.names, std, result.crlb, mean_sigma, mean_error)
-            if np.isfinite(sd)]
+             "mean_sigma": None if not np.isfinite(ms) else float(ms), "mean_error": float(me),
+             **({"revealed_runs": int(k)} if k < runs else {})}
+            for (n, u), sd, c, ms, me, k in zip(result.names, std, result.crlb, mean_sigma, mean_error, revealed)
+            if np.isfinite(sd) and k > 0]
     not_revealed = {n: int(k) for (n, _), k in zip(result.names, held.sum(axis=0)) if k}
     return MonteCarlo(plan.name, runs, method, {"accel_noise_ug_rthz": accel_noise_ug,
                                                 "gyro_noise_dph_rthz": gyro_noise_dph,

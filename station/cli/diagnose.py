@@ -299,9 +299,7 @@ def _print(out, first, steps, final) -> None:
         if st.share is not None:
             t.add_row("share of the excess χ² explained", f"{100 * st.share:.0f} %", "")
         out.print(t)
-        held = set(st.not_revealed)
-        out.print("added: " + "; ".join(f"{n} = {v:.4g} ± {s:.2g} {u}"
-                                        + (" (not revealed: held by its prior, not written)" if n in held else "")
+        out.print("added: " + "; ".join(f"{n} = {v:.4g} ± {s:.2g} {u}" + st.held_words(n)
                                         for n, v, s, u in st.estimate))
         for c in st.caveats:
             out.print(f"caveat: {c}")

@@ -92,19 +92,24 @@ def cmd_montecarlo(args) -> int:
     for r in mc.parameters:
         ms = r["mean_sigma"]
         crlb = r["crlb"]
-        table.add_row(r["name"], f"{r['std']:.4g}", "not revealed" if crlb is None else f"{crlb:.4g}",
-                      "" if crlb is None else f"{r['std'] / crlb:.2f}",
+        # a parameter revealed in some runs only: its row is over every run (the nominal 0 where
+        # held), it says in how many it was revealed, and has no mean 1σ (api.montecarlo)
+        name = r["name"] + (f" (revealed in {r['revealed_runs']} of {mc.runs})" if "revealed_runs" in r else "")
+        table.add_row(name, f"{r['std']:.4g}", "not revealed" if crlb is None else f"{crlb:.4g}",
+                      # (a partly-held row's spread, its held runs exact at the twin's 0, is no
+                      # unbiased estimator's: not compared with the bound, as not with a 1σ)
+                      "" if crlb is None or "revealed_runs" in r else f"{r['std'] / crlb:.2f}",
                       "" if ms is None else f"{ms:.4g}", "" if ms is None else f"{ms / r['std']:.2f}",
                       f"{r['mean_error']:+.3g}", r["unit"])
     out.print(table)
     if mc.not_revealed:
-        # a row is over the runs that revealed it (two at least): where a run reveals it by its
-        # value (a prior contradicted by the data is released) those are its larger errors, so
-        # the row says which runs it is over
+        # a row over the runs that revealed it would be selected on the outcome (a prior the data
+        # contradict is released by its value's size): over every run, of what is compensated
         rows = {r["name"] for r in mc.parameters}
         out.print("not revealed by the capture (held by its prior, not written): "
                   + ", ".join(f"{n} in {k} of {mc.runs} runs"
-                              + (" (its row: the other runs only)" if n in rows else " (no row: too few runs revealed it)")
+                              + (" (its row: every run, the value each calibration compensates with -- the nominal 0 "
+                                 "where held --, no mean 1σ)" if n in rows else " (no row: no run revealed it)")
                               for n, k in mc.not_revealed.items()),
                   markup=False, soft_wrap=True)
     return 0

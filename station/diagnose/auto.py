@@ -94,6 +94,25 @@ class Step:
         held = set(getattr(model, "unobservable", None) or ())
         return [n for n, _, _, _ in self.estimate if n in held]
 
+    @property
+    def held_pulled(self) -> dict:
+        """{name: pull in sigma} of the held parameters whose prior the data contradict
+        (lsq.contradicted_held: beyond the prior's own check; issue 28, nineteenth session)."""
+        result = getattr(self.after, "result", None)
+        if result is None or not getattr(getattr(result, "model", None), "unobservable", None):
+            return {}
+        from station.estimate import lsq
+
+        return lsq.contradicted_held(result)[0]
+
+    def held_words(self, name: str) -> str:
+        """What follows a held parameter's estimate where a step is printed."""
+        if name not in self.not_revealed:
+            return ""
+        pull = self.held_pulled.get(name)
+        return (" (not revealed: held by its prior, not written"
+                + ("" if pull is None else f"; the data pull it {pull:+.1f} sigma from that prior") + ")")
+
 
 @dataclass
 class Rejection:

@@ -298,9 +298,8 @@ def _diagnosis_section(inp: ReportInput, figures: dict) -> str:
         rows = [[_e(what), f"{b:.4g}", f"{a:.4g}"] for what, b, a in comparison_rows(st.before, st.after)]
         rows += [["predicted χ² drop", f"{st.predicted_drop:.4g}", ""], ["actual χ² drop", f"{st.actual_drop:.4g}", ""]]
         parts.append(f"<h3>Step {k}: added {_e(st.added)}</h3>" + _table(["", "before", "after"], rows))
-        held = set(getattr(st, "not_revealed", None) or ())
-        parts.append("<p>" + "; ".join(_e(f"{n} = {v:.4g} ± {s:.2g} {u}"
-                                          + (" (not revealed: held by its prior, not written)" if n in held else ""))
+        words = getattr(st, "held_words", None) or (lambda n: "")
+        parts.append("<p>" + "; ".join(_e(f"{n} = {v:.4g} ± {s:.2g} {u}" + words(n))
                                        for n, v, s, u in st.estimate) + "</p>")
     if inp.steps:
         parts.append(_verdict_box(final.verdict, inp, "after the added effects: "))

@@ -2257,6 +2257,51 @@ def _contradicted_priors(model: Model, x) -> list:
     return out
 
 
+HELD_PULL_P = 1e-3      # the family-wise false-alarm rate of the held priors' pull test (held_pulls)
+HELD_PULL_MIN_SHARE = 1e-6      # the data's least share of a held parameter's information to be tested
+
+
+def held_pulls(result: "FitResult") -> dict:
+    """{name: pull} of every effect parameter held by its prior (model.unobservable: 0 +/- tau,
+    tau its typical size) that the data inform at all: the prior row's normalised residual
+    x / sqrt(tau^2 - P), x its posterior value and P its posterior variance (issue 28, nineteenth
+    session).  For one parameter it is d / sqrt(tau^2 + sigma_d^2), d +/- sigma_d what the data
+    alone say of it (x = d tau^2 / (tau^2 + sigma_d^2), P = tau^2 sigma_d^2 / (tau^2 + sigma_d^2)):
+    the prior-predictive check of the prior.  Standard normal (linearised) when the parameter is
+    of its typical size, as the prior says; narrower when it is 0 (for one held parameter its
+    variance is sigma_d^2 / (tau^2 + sigma_d^2), at least 1/2 since its sigma_d exceeds tau; held
+    parameters the data see only together can be far narrower: optimal9's even rate-squared terms,
+    sigma_d 0.68 tau given the others' priors, their pulls' sd 0.17 at 0, docs/design.md); so a pull beyond
+    held_pull_limit says the capture contradicts the typical size and that holding it at 0 biases
+    what is correlated with it.  A parameter whose information the data hold less than
+    HELD_PULL_MIN_SHARE of (sigma_d above 1,000 tau: x is then the prior's within the solver's
+    tolerance, and no effect of a typical size's thousands exists) is not tested."""
+    model = result.model
+    out = {}
+    for c, p in _held(model):
+        tau2 = float(model.priors[c]) ** 2
+        data = tau2 - float(result.covariance_of([c])[0, 0])        # tau^4 / (tau^2 + sigma_d^2)
+        if data > HELD_PULL_MIN_SHARE * tau2:
+            out[p.name] = float(result.x[c] / np.sqrt(data))
+    return out
+
+
+def held_pull_limit(tested: int) -> float:
+    """The |pull| beyond which a held prior is contradicted (held_pulls): the two-sided
+    HELD_PULL_P point of a standard normal, Bonferroni over the ``tested`` parameters (3.29 for
+    one, 3.76 for six)."""
+    from station.estimate.distributions import norm_ppf
+
+    return norm_ppf(1.0 - HELD_PULL_P / (2.0 * max(tested, 1)))
+
+
+def contradicted_held(result: "FitResult") -> tuple[dict, float]:
+    """({name: pull} of the held parameters whose pull is beyond held_pull_limit, the limit)."""
+    pulls = held_pulls(result)
+    limit = held_pull_limit(len(pulls))
+    return {n: w for n, w in pulls.items() if abs(w) > limit}, limit
+
+
 def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "auto",
         like: Model | None = None, turn_sigma_deg: float | None = None, pose_extra=None,
         start_from: FitResult | None = None) -> FitResult:
@@ -2896,6 +2941,20 @@ def to_calibration(result: FitResult, accel_unit: str, gyro_unit: str, notes=())
             f"typical size by a prior in the fit (the other parameters' 1-sigma carry its uncertainty), "
             f"not written, and not compensated (its nominal 0 is used): "
             f"{', '.join(model.unobservable)}")
+        pulled, limit = contradicted_held(result)
+        if pulled:
+            # a disagreement is a finding: the prior is kept (the loop's candidates are judged held,
+            # _contradicted_priors), the file and the verdict say it (docs/calibration-file.md)
+            fit_stats["held_contradicted"] = {n: round(w, 2) for n, w in pulled.items()}
+            fit_stats["notes"].append(
+                "the data pull held parameters beyond their prior 0 +/- the typical size ("
+                + ", ".join(f"{n} {w:+.1f} sigma" for n, w in pulled.items())
+                + f"; beyond {limit:.2f}, the {HELD_PULL_P:g} false-alarm point of the prior's own "
+                "check): the capture contradicts the model that holds them -- they exceed their typical size "
+                "(the prior is then wrong for them, and what is correlated with them rests on it) or the model "
+                "misses what pulls on them (an effect not added) --, and they are compensated at their nominal 0 "
+                "all the same; add segments that reveal them (station design --from CAPTURE --reveal NAMES) or "
+                "an effect that explains what pulls")
     for e in model.effects:       # what an effect's own convention fixes (not the capture's doing)
         fit_stats["notes"] += list(e.notes()) if hasattr(e, "notes") else []
         if getattr(e, "bench", False) and callable(getattr(e, "words", None)):

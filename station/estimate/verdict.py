@@ -24,7 +24,10 @@ determines.  Applied to every estimate before it is written (station.estimate.es
 - **Effect parameters not revealed**: an added effect's parameter the capture cannot reveal is
   held by a prior in the fit and not written (station.estimate.lsq.to_calibration names it in
   ``fit.not_determined``; its compensation uses the effect's nominal).  Not a failure: the
-  verdict does not change.
+  verdict does not change.  When the data pull such a parameter beyond its prior's own check
+  (``fit.held_contradicted``, station.estimate.lsq.held_pulls) the verdict's reason names it and
+  the pull in sigma (``verdict.held_contradicted``): the parameters correlated with it rest on a
+  prior the capture contradicts.
 - **Words for large rotations**: an inter-triad rotation above ``LARGE_ROTATION_DEG``, or a
   negative scale factor, is named in the notes (axes swapped or inverted between the triads).
 """
@@ -67,8 +70,29 @@ def judge(cal: Calibration) -> Calibration:
     _verdict(cal)
     _identifiability(cal)
     _convergence(cal)
+    _held_contradicted(cal)
     _rotations_in_words(cal)
     return cal
+
+
+def _held_contradicted(cal: Calibration) -> None:
+    """Held effect parameters whose prior the data contradict (fit.held_contradicted:
+    station.estimate.lsq.held_pulls, beyond its false-alarm limit) are named in the verdict with
+    their pull: they exceed their typical size (the values correlated with them then rest on a
+    prior the capture contradicts) or the model misses what pulls on them (a linear tempco beside
+    the quadratic term held alone fired so: review of held28).  The
+    result is not changed: the verdict's chi-square is the data's, and the data agree with the
+    noise while the prior rows take the conflict (optimal9 with rate-squared terms 5 times their
+    typical size: the data's chi2 193.31 against 193.32 without them, the held priors' rows 61.2)."""
+    pulled = cal.fit.get("held_contradicted")
+    verdict = cal.fit.get("verdict")
+    if not pulled or not isinstance(verdict, dict):
+        return
+    verdict["held_contradicted"] = dict(pulled)
+    verdict["reason"] = (str(verdict.get("reason", "")) + "; but the data pull "
+                         + ", ".join(f"{n} {w:+.1f} sigma" for n, w in pulled.items())
+                         + " from the prior that holds each (0 +/- its typical size: not revealed, compensated "
+                         "at 0): they exceed their typical size or the model misses what pulls on them (notes)")
 
 
 def fit_fails(cal: Calibration) -> bool:

@@ -435,6 +435,21 @@ def _not_determined_agrees(doc, params, path) -> None:
             raise UserError(f"{path}: field 'compensation.effects[{k}].parameters': {', '.join(used)[:200]} "
                             "not determined (fit.not_determined), yet compensated at the value given "
                             "(not in the entry's not_determined): not one calibration")
+    # the held parameters the data pull on (lsq.held_pulls): {name: pull in sigma} of parameters
+    # held by their prior, so named in fit.not_determined and not written (review of held28)
+    for where, block in (("fit", fit), ("verdict", doc.get("verdict") or {})):
+        pulled = block.get("held_contradicted")
+        if pulled is None:
+            continue
+        if not isinstance(pulled, dict) or not all(
+                isinstance(n, str) and isinstance(w, (int, float)) and not isinstance(w, bool) and math.isfinite(w)
+                for n, w in pulled.items()):
+            raise UserError(f"{path}: field '{where}.held_contradicted': must be a mapping of held parameter "
+                            "names to their pull in sigma (finite numbers)")
+        stray = [n for n in pulled if n not in held]
+        if stray:
+            raise UserError(f"{path}: field '{where}.held_contradicted': {', '.join(stray)[:200]} not held by its "
+                            "prior (not in fit.not_determined), yet said to be: not one calibration")
 
 
 def _scales_agree(doc, imu, params, pass_through, path) -> None:
