@@ -965,6 +965,11 @@ class Model:
         for i, r in enumerate(rots):    # a recorded ramp: the Earth rate's weights over its own phase
             if visible[i] and getattr(r, "earth_weights_s", None) is not None:
                 self._rot_earth[i] = r.earth_weights_s
+        # the Earth rate across the axis at the window's end less at its start (the phase A from
+        # 0), as factors of u and l x u: what a shift of the samples' window adds to their Earth
+        # integral, which _rot_earth's weights (over the samples' own phases) already hold
+        self._rot_earth_change = np.where(visible[:, None], np.column_stack([np.cos(A) - 1.0, -np.sin(A)]),
+                                          0.0).reshape(R, 2)
         self._rot_data = np.array([[r.accel_dc, r.accel_cos, r.accel_sin, r.accel_cos2, r.accel_sin2]
                                    for r in rots], float).reshape(R, 5, 3)
         # the harmonics' whitening: the noise covariance of a rotation's coefficients is
@@ -1014,6 +1019,8 @@ class Model:
         self.evaluations = 0        # residual evaluations (the Jacobian's included), for benchmarks
         self._integral_effects = [e for e in self.effects
                                   if getattr(type(e), "integral", Effect.integral) is not Effect.integral]
+        self._shift_effects = [e for e in self._integral_effects
+                               if getattr(type(e), "window_shift_s", Effect.window_shift_s) is not Effect.window_shift_s]
         if self.hands:
             self._hand_before = np.array([h.before for h in self.hands], int)
             self._hand_after = np.array([h.after for h in self.hands], int)
@@ -1208,6 +1215,18 @@ class Model:
                     term = _checked(eff, eff.integral, px, r)
                     if term is not None:
                         integral[n, i] += term
+        if self._shift_effects:
+            # a term that is the samples' window shift times the measured rate's change counts the
+            # Earth rate's change at the window's ends, which the Earth integral above already takes
+            # over the samples' phases (their window, shifted): taken out once (issue 28,
+            # nineteenth session: across the axis it held a dry run's time offset toward 0, at a
+            # quarter of its truth where the ramps' angles carry little)
+            change = (self._rot_earth_change[:, :1] * earth_perp
+                      + self._rot_earth_change[:, 1:] * cross(l, earth_perp)) @ Mg.transpose(0, 2, 1)
+            for eff in self._shift_effects:
+                shift = [_checked(eff, eff.window_shift_s, X[n, L[f"effect:{eff.id}"]]) for n in range(B)]
+                if shift[0] is not None:
+                    integral = integral - np.array(shift)[:, None, None] * change
         gyro_rows = (self._rot_gyro_whiten @ (self._rot_gyro - integral)[..., None])[..., 0]
         whitened = np.einsum("rij,brjc->bric", self._rot_whiten, self._rot_data - harmonics) * self._rot_weight
         blocks.append(np.concatenate([whitened.reshape(B, R, 15),

@@ -34,3 +34,10 @@ class TimeOffset(Effect):
 
     def integral(self, x, rotation):
         return x[0] * (rotation.gyro_end - rotation.gyro_start)
+
+    def window_shift_s(self, x):
+        """The integral term is the window's shift times the measured rate's change, the Earth
+        rate's included; the estimator's Earth term is over the samples' own phases, already
+        shifted, so it takes the Earth's share of the change out (lsq.Model: else counted twice,
+        and across the axis that pulled the offset toward 0, issue 28, nineteenth session)."""
+        return x[0]
