@@ -2389,7 +2389,7 @@ def _ramp_reweight(model: Model, x, cov, r, reduced):
     against it as any other; an estimated one is left out of the verdict's test (verdict_test:
     model.reweighted).  ``model.ramp_estimate``: {"k", "dof", "windows", "estimated", ...} (None
     without such windows)."""
-    from station.estimate.noise_groups import RAMP_LAG1_Z, RAMP_MIN_DOF, placement_component
+    from station.estimate.noise_groups import RAMP_DRIFT_P, RAMP_MIN_DOF, placement_component
 
     model.ramp_estimate = None
     if not getattr(model, "ramp_windows", None):
@@ -2404,11 +2404,11 @@ def _ramp_reweight(model: Model, x, cov, r, reduced):
         model.notes.append(model.ramp_note)
         return x, cov, r, reduced
 
-    def component(x, J=None):
+    def component(x, J=None, drift=False):
         J = np.asarray(model.jacobian(x)) if J is None else J
         return placement_component(model.row_labels(x), model.residuals(x), J, model.ramp_windows,
                                    signs=getattr(model, "ramp_signs", None),
-                                   svd=_solution_svd(model, J))
+                                   svd=_solution_svd(model, J), drift=drift)
 
     def set_k2(k2):
         model.ramp_k2 = float(k2)
@@ -2448,7 +2448,11 @@ def _ramp_reweight(model: Model, x, cov, r, reduced):
         estimated = comp["dof"] >= RAMP_MIN_DOF
         k2_found = model.ramp_k2
         wider = estimated and k2_found >= 1.0
-        correlated = estimated and not wider and comp["lag1"] > RAMP_LAG1_Z / np.sqrt(comp["windows"])
+        if estimated and not wider:
+            # the windows' residuals tested for a drift along the session (noise_groups.drift_test:
+            # a host whose latency wanders; the lag-1 correlation before, with less power)
+            comp = component(x, drift=True)
+        correlated = estimated and not wider and comp.get("drift_p", 1.0) < RAMP_DRIFT_P
         if estimated and not wider and not correlated:
             # k^2 estimated from f degrees of freedom: the parameters resting on the windows carry
             # its sampling error too; weighted at f / (f - 2) of it (the variance of a t with f
@@ -2470,6 +2474,8 @@ def _ramp_reweight(model: Model, x, cov, r, reduced):
     k = float(np.sqrt(model.ramp_k2))
     model.ramp_estimate = dict(entry, k=k, dof=float(comp["dof"]), estimated=estimated,
                                lag1=float(comp.get("lag1", 0.0)))
+    if "drift_p" in comp:
+        model.ramp_estimate.update(drift_lr=float(comp["drift_lr"]), drift_p=float(comp["drift_p"]))
     n = entry["windows"]
     if estimated:
         model.reweighted["ramp gyro"] = {"scatter_before": entry["scatter_before"], "k": k, "dof": comp["dof"]}
@@ -2480,9 +2486,10 @@ def _ramp_reweight(model: Model, x, cov, r, reduced):
     elif correlated:
         model.reweighted.pop("ramp gyro", None)
         model.ramp_note = (f"the {n} recorded ramps' angles keep their stated placement 1-sigma "
-                           f"(angle_sigma_deg, conservative): their residuals are correlated from one window to "
-                           f"the next (lag-1 {comp['lag1']:.2f}, above {RAMP_LAG1_Z / np.sqrt(n):.2f} for "
-                           "independent windows), so their scatter about the fit would understate it")
+                           f"(angle_sigma_deg, conservative): their residuals drift along the session (the "
+                           f"likelihood ratio of a drifting placement {comp['drift_lr']:.3g}, p = {comp['drift_p']:.2g} "
+                           f"for independent windows; lag-1 {comp['lag1']:.2f}), so their scatter about the fit "
+                           "would understate it")
     elif wider:
         model.reweighted.pop("ramp gyro", None)
         model.ramp_note = (f"the {n} recorded ramps' angles keep their stated placement 1-sigma "
