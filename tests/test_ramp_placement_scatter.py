@@ -387,3 +387,30 @@ def test_a_drifting_host_is_found_more_often_than_by_lag1_and_an_independent_one
                          sum(c["lag1"] > 2.33 / np.sqrt(n) for c in comps))
     (clean, _), (drifting, lag1) = counts[0.0], counts[2.0 / 3.8]
     assert clean <= 3 and drifting >= 20 and drifting > lag1, counts
+
+
+def test_the_drift_test_does_not_call_residuals_it_cannot_read_a_drift():
+    """Review of the nineteenth session: drift_test's statistic is scale-free (lambda profiled),
+    but it took log(y'y) as it came: residuals all zero, or so small (large) that y'y under-
+    (over-)flows, made the ratio NaN, and a NaN ratio counted no null draw at or above it -- p =
+    1/401, below RAMP_DRIFT_P: the fit kept the stated 1-sigma and its note said the windows
+    "drift along the session (likelihood ratio nan, p = 0.0025)".  Residuals that say nothing
+    (zero) or nothing readable (NaN) are no evidence of a drift, and the residuals' units do not
+    change the verdict."""
+    from station.estimate.noise_groups import RAMP_DRIFT_P, drift_test
+
+    rng = np.random.default_rng(4)
+    n = 24
+    A = rng.normal(size=(n, n + 6))
+    G = A @ A.T / (n + 6)
+    timing = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
+    s = rng.multivariate_normal(np.zeros(n), G)
+    plain = drift_test(G, s, timing)
+    assert np.isfinite(plain["drift_lr"]), plain
+    for scale in (1e-170, 1e170):
+        scaled = drift_test(G, s * scale, timing)
+        assert scaled["drift_p"] == plain["drift_p"], (scale, scaled, plain)
+    zero = drift_test(G, np.zeros(n), timing)
+    assert zero["drift_lr"] == 0.0 and zero["drift_p"] == 1.0, zero
+    unreadable = drift_test(G, np.where(np.arange(n) == 5, np.nan, s), timing)
+    assert not unreadable["drift_p"] < RAMP_DRIFT_P, unreadable
