@@ -253,6 +253,16 @@ def drift_test(G: np.ndarray, s: np.ndarray, timing: np.ndarray) -> dict:
     if m < 3:
         return {"drift_lr": 0.0, "drift_p": 1.0}
     y = Z.T @ ((U.T @ s) / half)
+    # the statistic is scale-free (lambda profiled): taken on the unit vector, so that y'y neither
+    # under- nor overflows; residuals that are all zero say nothing, NaN ones nothing readable --
+    # neither is a drift (a NaN ratio counted no null draw above it: p = 1/401)
+    size = float(np.max(np.abs(y))) if len(y) else 0.0
+    if not np.isfinite(size):
+        return {"drift_lr": float("nan"), "drift_p": float("nan")}
+    if size == 0.0:
+        return {"drift_lr": 0.0, "drift_p": 1.0}
+    y = y / size
+    y = y / np.sqrt(y @ y)
     key = (G.tobytes(), timing.tobytes())
     grid = _DRIFT_CACHE.get(key)
     if grid is None:
