@@ -522,8 +522,14 @@ class Model:
             if placement > 0:
                 self.ramp_windows[r.name] = whiten @ np.asarray(axis_raw, float) * (placement * np.sqrt(self.ramp_k2))
                 # the sign that turns its angle error into its reads' timing error: the rate's, and
-                # the turning edge at the window's end (a ramp up) or at its start (a brake)
-                self.ramp_signs[r.name] = float(np.sign(r.angle_deg) or 1.0) * (-1.0 if r.record_ramp == "end" else 1.0)
+                # the turning edge at the window's end (a ramp up) or at its start (a brake); times
+                # the window's timing scale |rate| / angle_sigma (a timing error tau is tau |rate| /
+                # angle_sigma in its placement residual: windows of different stated 1-sigma weigh a
+                # common or drifting timing differently; review of the nineteenth session)
+                edge = r.table_rate_end_dps if r.record_ramp == "start" else r.table_rate_start_dps
+                rate = abs(edge) if edge else abs(r.rate_dps)
+                self.ramp_signs[r.name] = (float(np.sign(r.angle_deg) or 1.0) * (-1.0 if r.record_ramp == "end" else 1.0)
+                                           * (rate / placement if rate > 0 else 1.0))
 
     def set_pose_extra(self, extra) -> None:
         """Set the variance added to every pose mean (6,) and rebuild the weights that use it."""
