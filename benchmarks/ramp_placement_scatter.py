@@ -35,6 +35,7 @@ def main() -> None:
     ap.add_argument("--stated", action="store_true")
     ap.add_argument("--correlated-ms", type=float, default=0.0)
     ap.add_argument("--rho", type=float, default=0.9)
+    ap.add_argument("--first", type=int, default=0, help="the first run's number (its seeds: 100 + run, 3 + run)")
     args = ap.parse_args()
     from sim_devices.truth import default_truth
     from station.estimate import noise_groups
@@ -49,7 +50,7 @@ def main() -> None:
     expected = OFFSET_MS - args.late_ms
     z, values, sigmas, windows = [], [], [], []
     t0 = time.process_time()
-    for run in range(args.runs):
+    for run in range(args.first, args.first + args.runs):
         base = dryrun.simulate_capture(_scheme(), truth, 3 + run) if args.vary_capture else fixed
         capture, placed = _placed(base, 100 + run, args.late_ms * 1e-3)
         if args.correlated_ms:
@@ -72,7 +73,7 @@ def main() -> None:
         sigmas.append(sigma)
         print(f"run {run}: time offset {value:.3f} +- {sigma:.3f} ms (z {z[-1]:+.2f}); windows' common part "
               f"{common * 1e3:+.2f} ms, k {est['k']:.3f} from {est['dof']:.1f} dof (estimated: {est['estimated']}), "
-              f"rms z {rms:.2f}, lag1 {est.get('lag1', 0):+.2f}; revealed: {'time_offset' not in result.model.unobservable}", flush=True)
+              f"rms z {rms:.2f}, lag1 {est.get('lag1', 0):+.2f}, drift p {est.get('drift_p', float('nan')):.3f}; revealed: {'time_offset' not in result.model.unobservable}", flush=True)
     cpu = time.process_time() - t0
     z = np.array(z)
     n = len(z)

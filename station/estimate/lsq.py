@@ -522,8 +522,14 @@ class Model:
             if placement > 0:
                 self.ramp_windows[r.name] = whiten @ np.asarray(axis_raw, float) * (placement * np.sqrt(self.ramp_k2))
                 # the sign that turns its angle error into its reads' timing error: the rate's, and
-                # the turning edge at the window's end (a ramp up) or at its start (a brake)
-                self.ramp_signs[r.name] = float(np.sign(r.angle_deg) or 1.0) * (-1.0 if r.record_ramp == "end" else 1.0)
+                # the turning edge at the window's end (a ramp up) or at its start (a brake); times
+                # the window's timing scale |rate| / angle_sigma (a timing error tau is tau |rate| /
+                # angle_sigma in its placement residual: windows of different stated 1-sigma weigh a
+                # common or drifting timing differently; review of the nineteenth session)
+                edge = r.table_rate_end_dps if r.record_ramp == "start" else r.table_rate_start_dps
+                rate = abs(edge) if edge else abs(r.rate_dps)
+                self.ramp_signs[r.name] = (float(np.sign(r.angle_deg) or 1.0) * (-1.0 if r.record_ramp == "end" else 1.0)
+                                           * (rate / placement if rate > 0 else 1.0))
 
     def set_pose_extra(self, extra) -> None:
         """Set the variance added to every pose mean (6,) and rebuild the weights that use it."""
@@ -965,6 +971,11 @@ class Model:
         for i, r in enumerate(rots):    # a recorded ramp: the Earth rate's weights over its own phase
             if visible[i] and getattr(r, "earth_weights_s", None) is not None:
                 self._rot_earth[i] = r.earth_weights_s
+        # the Earth rate across the axis at the window's end less at its start (the phase A from
+        # 0), as factors of u and l x u: what a shift of the samples' window adds to their Earth
+        # integral, which _rot_earth's weights (over the samples' own phases) already hold
+        self._rot_earth_change = np.where(visible[:, None], np.column_stack([np.cos(A) - 1.0, -np.sin(A)]),
+                                          0.0).reshape(R, 2)
         self._rot_data = np.array([[r.accel_dc, r.accel_cos, r.accel_sin, r.accel_cos2, r.accel_sin2]
                                    for r in rots], float).reshape(R, 5, 3)
         # the harmonics' whitening: the noise covariance of a rotation's coefficients is
@@ -1014,6 +1025,8 @@ class Model:
         self.evaluations = 0        # residual evaluations (the Jacobian's included), for benchmarks
         self._integral_effects = [e for e in self.effects
                                   if getattr(type(e), "integral", Effect.integral) is not Effect.integral]
+        self._shift_effects = [e for e in self._integral_effects
+                               if getattr(type(e), "window_shift_s", Effect.window_shift_s) is not Effect.window_shift_s]
         if self.hands:
             self._hand_before = np.array([h.before for h in self.hands], int)
             self._hand_after = np.array([h.after for h in self.hands], int)
@@ -1212,6 +1225,18 @@ class Model:
                     term = _checked(eff, eff.integral, px, r)
                     if term is not None:
                         integral[n, i] += term
+        if self._shift_effects:
+            # a term that is the samples' window shift times the measured rate's change counts the
+            # Earth rate's change at the window's ends, which the Earth integral above already takes
+            # over the samples' phases (their window, shifted): taken out once (issue 28,
+            # nineteenth session: across the axis it held a dry run's time offset toward 0, at a
+            # quarter of its truth where the ramps' angles carry little)
+            change = (self._rot_earth_change[:, :1] * earth_perp
+                      + self._rot_earth_change[:, 1:] * cross(l, earth_perp)) @ Mg.transpose(0, 2, 1)
+            for eff in self._shift_effects:
+                shift = [_checked(eff, eff.window_shift_s, X[n, L[f"effect:{eff.id}"]]) for n in range(B)]
+                if shift[0] is not None:
+                    integral = integral - np.array(shift)[:, None, None] * change
         gyro_rows = (self._rot_gyro_whiten @ (self._rot_gyro - integral)[..., None])[..., 0]
         whitened = np.einsum("rij,brjc->bric", self._rot_whiten, self._rot_data - harmonics) * self._rot_weight
         blocks.append(np.concatenate([whitened.reshape(B, R, 15),
@@ -2537,7 +2562,7 @@ def _ramp_reweight(model: Model, x, cov, r, reduced):
     against it as any other; an estimated one is left out of the verdict's test (verdict_test:
     model.reweighted).  ``model.ramp_estimate``: {"k", "dof", "windows", "estimated", ...} (None
     without such windows)."""
-    from station.estimate.noise_groups import RAMP_LAG1_Z, RAMP_MIN_DOF, placement_component
+    from station.estimate.noise_groups import RAMP_DRIFT_P, RAMP_MIN_DOF, placement_component
 
     model.ramp_estimate = None
     if not getattr(model, "ramp_windows", None):
@@ -2552,11 +2577,11 @@ def _ramp_reweight(model: Model, x, cov, r, reduced):
         model.notes.append(model.ramp_note)
         return x, cov, r, reduced
 
-    def component(x, J=None):
+    def component(x, J=None, drift=False):
         J = np.asarray(model.jacobian(x)) if J is None else J
         return placement_component(model.row_labels(x), model.residuals(x), J, model.ramp_windows,
                                    signs=getattr(model, "ramp_signs", None),
-                                   svd=_solution_svd(model, J))
+                                   svd=_solution_svd(model, J), drift=drift)
 
     def set_k2(k2):
         model.ramp_k2 = float(k2)
@@ -2596,7 +2621,11 @@ def _ramp_reweight(model: Model, x, cov, r, reduced):
         estimated = comp["dof"] >= RAMP_MIN_DOF
         k2_found = model.ramp_k2
         wider = estimated and k2_found >= 1.0
-        correlated = estimated and not wider and comp["lag1"] > RAMP_LAG1_Z / np.sqrt(comp["windows"])
+        if estimated and not wider:
+            # the windows' residuals tested for a drift along the session (noise_groups.drift_test:
+            # a host whose latency wanders; the lag-1 correlation before, with less power)
+            comp = component(x, drift=True)
+        correlated = estimated and not wider and comp.get("drift_p", 1.0) < RAMP_DRIFT_P
         if estimated and not wider and not correlated:
             # k^2 estimated from f degrees of freedom: the parameters resting on the windows carry
             # its sampling error too; weighted at f / (f - 2) of it (the variance of a t with f
@@ -2618,6 +2647,8 @@ def _ramp_reweight(model: Model, x, cov, r, reduced):
     k = float(np.sqrt(model.ramp_k2))
     model.ramp_estimate = dict(entry, k=k, dof=float(comp["dof"]), estimated=estimated,
                                lag1=float(comp.get("lag1", 0.0)))
+    if "drift_p" in comp:
+        model.ramp_estimate.update(drift_lr=float(comp["drift_lr"]), drift_p=float(comp["drift_p"]))
     n = entry["windows"]
     if estimated:
         model.reweighted["ramp gyro"] = {"scatter_before": entry["scatter_before"], "k": k, "dof": comp["dof"]}
@@ -2628,9 +2659,10 @@ def _ramp_reweight(model: Model, x, cov, r, reduced):
     elif correlated:
         model.reweighted.pop("ramp gyro", None)
         model.ramp_note = (f"the {n} recorded ramps' angles keep their stated placement 1-sigma "
-                           f"(angle_sigma_deg, conservative): their residuals are correlated from one window to "
-                           f"the next (lag-1 {comp['lag1']:.2f}, above {RAMP_LAG1_Z / np.sqrt(n):.2f} for "
-                           "independent windows), so their scatter about the fit would understate it")
+                           f"(angle_sigma_deg, conservative): their residuals drift along the session (the "
+                           f"likelihood ratio of a drifting placement {comp['drift_lr']:.3g}, p = {comp['drift_p']:.2g} "
+                           f"for independent windows; lag-1 {comp['lag1']:.2f}), so their scatter about the fit "
+                           "would understate it")
     elif wider:
         model.reweighted.pop("ramp gyro", None)
         model.ramp_note = (f"the {n} recorded ramps' angles keep their stated placement 1-sigma "

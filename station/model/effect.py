@@ -103,6 +103,14 @@ class Effect:
         """Additive term of a rotation segment's gyro integral (deg before unit conversion)."""
         return None
 
+    def window_shift_s(self, x: np.ndarray):
+        """The time (s) by which the samples' window is shifted against the encoder's, when
+        integral() is that shift times the change of the measured rate across the window
+        (time_offset); None: no such term.  The measured rate's change includes the Earth rate's
+        across the axis, whose integral the estimator already takes over the samples' own phases
+        (the window the samples cover): the estimator takes that share out of the term."""
+        return None
+
     def notes(self) -> tuple[str, ...]:
         """Sentences for the calibration's fit.notes about what setup() decided (e.g. parameters a
         convention fixes, so that they are not mistaken for ones the capture failed to reveal)."""
