@@ -1869,8 +1869,9 @@ class _LMSolve:
                 # path unchanged, and dogbox's end is kept for the limit)
                 half = 0
                 here = lm.result()
-                pace = watch.history[-1 - CREEP_WINDOW] - watch.best_chi2
-                reach = 2.0 * here.cost - pace * (self.evaluations - lm.nfev) / CREEP_WINDOW
+                window = min(CREEP_WINDOW, len(watch.history) - 1)     # (a limit below 2 windows: tests)
+                pace = watch.history[-1 - window] - watch.best_chi2
+                reach = 2.0 * here.cost - pace * (self.evaluations - lm.nfev) / max(window, 1)
                 other = _dogbox_from_start(self.model, lm, here)
                 if other is not None and other.status > 0 and 2.0 * other.cost < reach:
                     self.result = other
