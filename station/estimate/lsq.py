@@ -1877,11 +1877,13 @@ class _LMSolve:
                     self.result = other
         if self.result is None:
             self.result = _detours(self.model, lm, self.evaluations, self.options)
-        if self.result.status == 0 and self.evaluations >= MAX_EVALUATIONS:
+        if self.evaluations >= MAX_EVALUATIONS and (self.result.status == 0 or getattr(lm, "from_start", None) is not None):
             # not converged (at the limit, or settled): dogbox from the start, once (a short solve,
-            # a trial of AXES_FIRST_EVALUATIONS or CROSSING_SEARCH_EVALUATIONS, stops there by design)
+            # a trial of AXES_FIRST_EVALUATIONS or CROSSING_SEARCH_EVALUATIONS, stops there by design);
+            # converged where the second solve already ran (half its evaluations): its end where lower
+            # and converged too (not a lower point at dogbox's limit for a converged LM)
             other = _dogbox_from_start(self.model, lm, self.result)
-            if other is not None:
+            if other is not None and (self.result.status == 0 or other.status > 0):
                 self.result = other
         return self.result
 
