@@ -1894,18 +1894,21 @@ class _LMSolve:
                 # path unchanged, and dogbox's end is kept for the limit)
                 half = 0
                 here = lm.result()
-                pace = watch.history[-1 - CREEP_WINDOW] - watch.best_chi2
-                reach = 2.0 * here.cost - pace * (self.evaluations - lm.nfev) / CREEP_WINDOW
+                window = min(CREEP_WINDOW, len(watch.history) - 1)     # (a limit below 2 windows: tests)
+                pace = watch.history[-1 - window] - watch.best_chi2
+                reach = 2.0 * here.cost - pace * (self.evaluations - lm.nfev) / max(window, 1)
                 other = _dogbox_from_start(self.model, lm, here)
                 if other is not None and other.status > 0 and 2.0 * other.cost < reach:
                     self.result = other
         if self.result is None:
             self.result = _detours(self.model, lm, self.evaluations, self.options)
-        if self.result.status == 0 and self.evaluations >= MAX_EVALUATIONS:
+        if self.evaluations >= MAX_EVALUATIONS and (self.result.status == 0 or getattr(lm, "from_start", None) is not None):
             # not converged (at the limit, or settled): dogbox from the start, once (a short solve,
-            # a trial of AXES_FIRST_EVALUATIONS or CROSSING_SEARCH_EVALUATIONS, stops there by design)
+            # a trial of AXES_FIRST_EVALUATIONS or CROSSING_SEARCH_EVALUATIONS, stops there by design);
+            # converged where the second solve already ran (half its evaluations): its end where lower
+            # and converged too (not a lower point at dogbox's limit for a converged LM)
             other = _dogbox_from_start(self.model, lm, self.result)
-            if other is not None:
+            if other is not None and (self.result.status == 0 or other.status > 0):
                 self.result = other
         return self.result
 
