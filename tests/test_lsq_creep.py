@@ -291,10 +291,11 @@ def test_a_solve_whose_second_solve_converged_lower_keeps_that_end_when_lm_conve
     """chatfield18 (MEMS IMU, seed 1, 100 deg/s, 6 s dwells) with a gyro bias step of +200 deg/h on z
     halfway between the last static and the first rotation: LM's first phase descends steadily
     to its 500th evaluation (chi2 9340.40), where dogbox from the start converges in 63
-    evaluations at 9263.21; LM at its last window's pace would reach lower, so it goes on -- and
-    converges (ftol) at 9296.55 after 795 evaluations, ~33 of chi2 (~0.7 of a chi2 unit) above the
+    evaluations at 9263.21.  LM at its last window's pace looked as if it would reach lower, so it
+    went on -- and converged (ftol) at 9296.55 after 795 evaluations, ~33 of chi2 above the
     minimum dogbox had found, which was dropped: only a solve ending not converged looked at it
-    again.  Every full solve now ends at the lower of the two (review of settle27)."""
+    again.  Every full solve now ends at the lower of the two (review of settle27), and a second
+    solve that converged below LM's point at the trigger ends the solve there."""
     import simhelpers
 
     boundary_s = 385.4975         # halfway between the last static (377.995) and the first rotation (393.0)
