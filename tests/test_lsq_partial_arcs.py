@@ -256,3 +256,22 @@ def test_parameters_held_by_weak_priors_take_no_degree_of_freedom():
     for (result, _), held in ((noise_free_fit(one_way), 6), (noise_free_optimal9(10, 120), 0)):
         rows = int(np.count_nonzero(result.model.data_rows))
         assert result.dof == rows - result.model.layout.size + held, (result.dof, rows, result.model.layout.size)
+
+
+def test_axes_first_start_where_the_weak_gyro_rows_leave_the_gyro_matrix_singular():
+    """Slow short part turns (2 deg/s over 20 degrees) about vertical axes, seed 3: the axes-first
+    fit (gyro integrals at AXES_FIRST_GYRO_WEIGHT, 10 evaluations) ends with M_g singular
+    (singular values 0.84, 0.33, 1e-17), and _earth_phase_start inverted it: lsq.fit raised
+    LinAlgError ("Singular matrix") with one BLAS thread, and with several went on from a start
+    of ~1e16 (review of branch arcs).  That start is none: the fit starts from the others."""
+    from threadpoolctl import threadpool_limits
+
+    text = (f"name: t\ndefaults: {{dwell_s: 5, rate_dps: 2, rotation_s: 10}}\n"
+            f"segments:\n{NINE_STATICS}{TURNS.format(extra='axis_elevation_deg: 90')}")
+    s = lsq.summarise(dryrun.simulate_capture(scheme_from_text(text, "test scheme"), default_truth(3), 3))
+    model = lsq.Model(s, [])
+    with threadpool_limits(1):
+        start = lsq._axes_first(model, model.x0, lambda x, evaluations=lsq.MAX_EVALUATIONS:
+                                lsq._lm(model, x, evaluations))
+    assert np.all(np.isfinite(start))
+    assert np.linalg.matrix_rank(model._matrices(start)[1]) == 3

@@ -1746,6 +1746,10 @@ def _axes_first(model: Model, x0: np.ndarray, solve) -> np.ndarray:
     finally:
         model._rot_gyro_whiten = whiten
         model._last_jacobian = None
+    # the weak gyro rows can leave M_g singular (2 deg/s over 20 degrees about vertical axes:
+    # singular values 0.84, 0.33, 1e-17): no start there, the fit starts from the others
+    if not np.all(np.isfinite(x)) or np.linalg.matrix_rank(model._matrices(x)[1]) < 3:
+        return x0
     # the gyro integrals' weight was small: chi may have wandered; started again at these axes
     return model._earth_phase_start(x.copy())
 
