@@ -206,6 +206,11 @@ def test_a_failing_fit_that_crawls_converges_where_dogbox_from_its_start_ends(mo
     bad.write_text((tmp_path / "settled.yaml").read_text().replace("settled: true", "settled: 'yes'"))
     with pytest.raises(UserError, match="fit.settled"):
         read_calfile(bad)
+    text = (tmp_path / "settled.yaml").read_text()
+    assert "converged: false" in text
+    bad.write_text(text.replace("converged: false", "converged: true"))     # a settled fit did not converge
+    with pytest.raises(UserError, match="fit.settled.*converged"):
+        read_calfile(bad)
 
     calls = []
     residuals = lsq.Model.residuals

@@ -422,6 +422,12 @@ def _not_determined_agrees(doc, params, path) -> None:
     for key in ("settled", "stopped_short"):      # how the solver stopped (lsq.to_calibration)
         if key in fit and not isinstance(fit[key], bool):
             raise UserError(f"{path}: field 'fit.{key}': must be true or false")
+    if fit.get("settled") is True and (fit.get("converged") is True or fit.get("stopped_short") is True):
+        # settled: stopped where it crept, not at a minimum (lsq._last_phase): neither converged nor
+        # stopped short by its tolerances (review of settle27: such a file was read)
+        raise UserError(f"{path}: field 'fit.settled': true beside "
+                        + ("converged" if fit.get("converged") is True else "stopped_short")
+                        + " true: a fit that settled did not converge: not one calibration")
     held = fit.get("not_determined", [])
     if not isinstance(held, list) or not all(isinstance(n, str) for n in held):
         raise UserError(f"{path}: field 'fit.not_determined': must be a list of parameter names")
