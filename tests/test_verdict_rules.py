@@ -53,7 +53,7 @@ def test_a_failing_stopped_fit_says_its_minimum_rests_on_the_linear_model():
     """A failing fit (reduced chi2 3) stopped with its written parameters' step below 0.01 sigma:
     the note says so by the linear model, which a failing fit's residuals can mislead (the
     eighteenth session's settled fits were 1.0-5.8 chi2 units above a minimum dogbox from the start
-    reached: nineteenth session), and what was tried; a passing one's note does not."""
+    reached: nineteenth session); a passing one's note does not."""
     steps = {**{n: 0.005 for n in ACCEL_BLOCK}, **{n: 7.0 for n in GYRO_BLOCK + INTER_TRIAD}}
     failing = judge(calibration(chi2=3.0 * DOF, converged=False, steps=steps, rotations=0))
     assert failing.fit["verdict"]["result"] == "fails"
