@@ -15,6 +15,14 @@ SESSION = DATA / "example_ferraris_session.csv"
 SECTIONS = DATA / "example_ferraris_session_list.json"
 
 
+def _count_residuals(monkeypatch):
+    """(a list that grows by one at each residual evaluation of any lsq.Model, the unwrapped
+    Model.residuals to put back)."""
+    calls, residuals = [], lsq.Model.residuals
+    monkeypatch.setattr(lsq.Model, "residuals", lambda self, x: calls.append(1) or residuals(self, x))
+    return calls, residuals
+
+
 def test_a_fit_that_does_not_creep_takes_the_path_it_always_did():
     """Meyer's thermistor problem (Moré, Garbow & Hillstrom 1981, problem 10: a long, steady
     descent, 126 evaluations from its standard start to the sum of squares 87.9458...): watched,
@@ -91,9 +99,7 @@ def test_a_failing_fit_that_creeps_goes_on_to_its_minimum(monkeypatch):
                                      gyro__bias_step=[0.0, 0.0, 50.0], gyro__bias_step_time_s=300.0)
     s = lsq.summarise(cap)
     base = lsq.fit(s)
-    calls = []
-    residuals = lsq.Model.residuals
-    monkeypatch.setattr(lsq.Model, "residuals", lambda self, x: calls.append(1) or residuals(self, x))
+    calls, residuals = _count_residuals(monkeypatch)
     result = lsq.fit(s, [GyroAnisoelastic()], like=base.model)
     model = result.model
     assert model.converged
@@ -212,9 +218,7 @@ def test_a_failing_fit_that_crawls_converges_where_dogbox_from_its_start_ends(mo
     with pytest.raises(UserError, match="fit.settled.*converged"):
         read_calfile(bad)
 
-    calls = []
-    residuals = lsq.Model.residuals
-    monkeypatch.setattr(lsq.Model, "residuals", lambda self, x: calls.append(1) or residuals(self, x))
+    calls, residuals = _count_residuals(monkeypatch)
     result = lsq.fit(s)
     model = result.model
     # 182 evaluations, settled, on the eighteenth session's code; 232 converged
@@ -252,9 +256,7 @@ def test_a_failing_fit_of_a_g_sensitive_gyro_converges_instead_of_crawling_to_th
                                      gyro__g_sensitivity_dph_per_g=[[30.0, -20.0, 10.0], [15.0, 40.0, -25.0],
                                                                      [-10.0, 20.0, 35.0]])
     s = lsq.summarise(cap)
-    calls = []
-    residuals = lsq.Model.residuals
-    monkeypatch.setattr(lsq.Model, "residuals", lambda self, x: calls.append(1) or residuals(self, x))
+    calls, residuals = _count_residuals(monkeypatch)
     result = lsq.fit(s)
     model = result.model
     # 1,002 evaluations (the limit) before; 314

@@ -18,15 +18,13 @@ from __future__ import annotations
 
 import contextlib
 import math
-import re
 import signal
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 
-from station.io.capture import CaptureWriter, read_regular_file, warmup_file
+from station.io.capture import CaptureWriter, read_regular_file, warmup_file, warmup_records
 from station.core.errors import UserError
 from station.bench.channels import ImuChannel, Recording, segment_meta
 from station.bench.imu_stream import ImuStream, lost_frames_note
@@ -972,12 +970,11 @@ def _clock_restarted(directory, t_s) -> bool:
     capture ``directory`` (warmup.csv, warmup-2.csv, ...): its clock went back, the IMU was
     restarted since (a record that cannot be read, a FIFO in its place, is left out)."""
     last = []
-    for path in Path(directory).glob("warmup*.csv"):
-        if re.fullmatch(r"warmup(-[0-9]+)?\.csv", path.name):
-            try:
-                last.append(float(read_regular_file(path).split()[-1].split(b",")[0]))
-            except (OSError, ValueError, IndexError):
-                pass
+    for path in warmup_records(directory):
+        try:
+            last.append(float(read_regular_file(path).split()[-1].split(b",")[0]))
+        except (OSError, ValueError, IndexError):
+            pass
     last = [t for t in last if math.isfinite(t)]
     return bool(last) and float(t_s) < max(last)
 

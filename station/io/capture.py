@@ -493,6 +493,12 @@ def warmup_file(directory) -> str:
     return f"warmup-{n}.csv"
 
 
+def warmup_records(directory) -> list:
+    """The warm-up records in the capture ``directory`` that warmup_file names (``warmup.csv``,
+    ``warmup-N.csv``), as paths."""
+    return [p for p in Path(directory).glob("warmup*.csv") if re.fullmatch(r"warmup(-[0-9]+)?\.csv", p.name)]
+
+
 def _warn_unused_kinds(capture) -> None:
     """Complete segments of a kind station does not use (the format allows any: they are left
     out of estimation) in one warning, with the kind they may have meant ("statc": static): a typo
