@@ -17,7 +17,7 @@ from test_ramp_late_command import gyro_agrees
 #: times the spread of its reads' moments on the IMU's clock, the host's latency between its looks
 #: at the stream and the table's answers, in device time (times the twins' speed): it grows with
 #: the host's load.  A slip far beyond it on a loaded host: 150 deg, the most a slip can put a
-#: window's angle off is 180 (before, 60: under load at speed 8 angle_sigma_deg reached 29-52 deg at
+#: window's angle off is 180 (before, 60: under load at speed 8 angle_sigma_deg reached 9-62 deg at
 #: 100 deg/s and a 60 or a 150 deg slip was rightly written complete, within the check's limit;
 #: docs/twins.md "A slipped encoder under load")
 SLIP_DEG = 150.0
