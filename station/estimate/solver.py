@@ -27,11 +27,11 @@ message, optimality.
 import was ~0.25-0.39 s of CPU of each estimate whose fit creeps: imucal's session, imu_tk's
 log).  The same steps as scipy's to rounding (tests/test_solver.py).
 
-Both take ``canonical``, a function returning another point of the same residuals (but a lower
-or equal sum of squares: rotation vectors of angle above pi, lsq.Model.canonical) or None: each
-accepted point is replaced by it, one more evaluation, where it returns one (and its sum of
-squares is not higher).  A parameterisation's chart: the solver's path is its own otherwise,
-step for step (None everywhere: no evaluation, nothing changed).
+Both take ``canonical``, a function returning another point of the same data (lsq.Model.canonical:
+the statics' rotation vectors wound past 1.5 pi turned back, the same rotations, weak-prior rows
+lower) or None: each accepted point is replaced by it, one more evaluation, where it returns one
+and its sum of squares is not higher.  A parameterisation's chart: the solver's path is its own
+otherwise, step for step (None everywhere: no evaluation, nothing changed).
 """
 from __future__ import annotations
 
