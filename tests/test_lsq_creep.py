@@ -403,3 +403,41 @@ def test_a_failing_fit_whose_statics_wound_past_half_a_turn_converges(monkeypatc
     rw, data = model.residuals(wound), model.data_rows
     assert np.allclose(rw[data], r[data], rtol=0, atol=1e-9 * np.max(np.abs(r[data])))
     assert rw @ rw > r @ r + (4 * np.pi * (np.pi - angles[j]) - 1e-9) / lsq.WEAK_PRIOR_RAD ** 2 * 0.999
+
+
+def test_the_half_budget_second_solve_is_not_skipped_where_the_chart_moves_lms_point(monkeypatch):
+    """_LMSolve.finish starts dogbox from the start once LM has spent half its evaluations
+    (``half``) without converging or creeping; its pause tested ``lm.nfev == half``.  The chart
+    (Model.canonical) adds an evaluation to an accepted step whose point it moves, after that
+    step's evaluation and before the watch sees it: where that step's evaluation was LM's
+    ``half``-th, the watch saw half + 1 and the second solve waited for LM's limit (review of
+    limit27).  optimal9 (MEMS IMU, seed 3) with a +100 deg/h gyro bias step on z between the
+    statics and the rotations (a fit that reaches the half-budget trigger, docs/performance.md
+    "Twentieth session"); the budget set so that its half falls on an evaluation the chart
+    moved."""
+    import simhelpers
+
+    _, cap = simhelpers.mems_capture(3, "optimal9", {"rate_dps": 100.0, "rotation_s": 36.0, "dwell_s": 6.0},
+                                     gyro__bias_step=[0.0, 0.0, 100.0], gyro__bias_step_time_s=196.4975)
+    model = lsq.Model(lsq.summarise(cap), [])
+    solving, moved = [], []
+    canonical = model.canonical
+
+    def charted(x):
+        out = canonical(x)
+        if out is not None:
+            moved.append(solving[-1].lm.nfev)       # LM's evaluations with that of the step it moves
+        return out
+
+    model.canonical = charted
+    solving.append(lsq._LMSolve(model, model.x0))
+    solving[-1].trial(60)
+    assert solving[-1].result is None and not solving[-1].crept and moved, moved
+    half = max(moved)
+    assert 2 <= half < 60, moved
+    tried = []
+    monkeypatch.setattr(lsq, "MAX_EVALUATIONS", 2 * half)
+    monkeypatch.setattr(lsq, "_dogbox_from_start", lambda model, lm, res: tried.append(lm.nfev))
+    solving.append(lsq._LMSolve(model, model.x0, 2 * half))
+    solving[-1].finish()
+    assert tried and tried[0] <= half + 1, (half, moved, tried)
