@@ -1934,7 +1934,7 @@ class _LMSolve:
 
         def pause(x, f, norm):
             self.crept = watch.seen(x, f, norm)
-            return self.crept or lm.nfev == half
+            return self.crept or 0 < half <= lm.nfev     # (>=: the chart adds an evaluation to a step)
 
         while not self.crept and self.result is None:
             if lm.run(self.evaluations, pause) is not None:
