@@ -26,6 +26,12 @@ message, optimality.
 ``least_squares(method="dogbox", x_scale="jac")`` without bounds, in numpy (scipy.optimize's
 import was ~0.25-0.39 s of CPU of each estimate whose fit creeps: imucal's session, imu_tk's
 log).  The same steps as scipy's to rounding (tests/test_solver.py).
+
+Both take ``canonical``, a function returning another point of the same data (lsq.Model.canonical:
+the statics' rotation vectors wound past 1.5 pi turned back, the same rotations, weak-prior rows
+lower) or None: each accepted point is replaced by it, one more evaluation, where it returns one
+and its sum of squares is not higher.  A parameterisation's chart: the solver's path is its own
+otherwise, step for step (None everywhere: no evaluation, nothing changed).
 """
 from __future__ import annotations
 
@@ -109,8 +115,9 @@ class LevenbergMarquardt:
     tens of evaluations to relearn them)."""
 
     def __init__(self, fun, x0, jac, *, xtol: float = 1e-8, ftol: float = 1e-8, gtol: float = 1e-8,
-                 factor: float = 100.0):
+                 factor: float = 100.0, canonical=None):
         self.fun, self.jac = fun, jac
+        self.canonical = canonical      # (the module's docstring: an accepted point's own chart)
         self.xtol, self.ftol, self.gtol, self.factor = xtol, ftol, gtol, factor
         self.x = np.array(x0, dtype=float)
         self.x0 = self.x.copy()     # where the solve started (lsq._last_phase: dogbox from there)
@@ -210,6 +217,8 @@ class LevenbergMarquardt:
                     self.delta = pnorm / 0.5
                     self.par = 0.5 * par
                 if ratio >= 1e-4:                         # accepted
+                    if self.canonical is not None and self.nfev < max_nfev:
+                        x_new, f_new, fnorm1 = self._canonical(x_new, f_new, fnorm1)
                     x, f, fnorm = x_new, f_new, fnorm1
                     self.x, self.f, self.fnorm = x, f, fnorm
                     self.xnorm = float(np.linalg.norm(diag * x))
@@ -235,6 +244,18 @@ class LevenbergMarquardt:
                     break
         return self.status
 
+    def _canonical(self, x, f, fnorm):
+        """The accepted point x (residuals f, their norm) in its own chart (canonical(x), one
+        evaluation) where that is another point and its sum of squares is not higher."""
+        other = self.canonical(x)
+        if other is None:
+            return x, f, fnorm
+        f_other = np.asarray(self.fun(other), dtype=float)
+        self.nfev += 1
+        with np.errstate(over="ignore", invalid="ignore"):
+            norm = float(np.linalg.norm(f_other))
+        return (other, f_other, norm) if norm <= fnorm else (x, f, fnorm)
+
     def result(self) -> Result:
         """The result where the iterations are (the Jacobian evaluated there if it is not yet)."""
         if not self.J_at_x:
@@ -248,10 +269,10 @@ class LevenbergMarquardt:
 
 
 def least_squares(fun, x0, jac, *, xtol: float = 1e-8, ftol: float = 1e-8, gtol: float = 1e-8,
-                  max_nfev: int | None = None, factor: float = 100.0) -> Result:
+                  max_nfev: int | None = None, factor: float = 100.0, canonical=None) -> Result:
     """Minimise 0.5 ||fun(x)||^2 from x0 (Levenberg–Marquardt, MINPACK's updates, column-norm
-    scaling); ``jac(x)`` the dense Jacobian (m x n, m >= n)."""
-    lm = LevenbergMarquardt(fun, x0, jac, xtol=xtol, ftol=ftol, gtol=gtol, factor=factor)
+    scaling); ``jac(x)`` the dense Jacobian (m x n, m >= n); ``canonical``: the module's docstring."""
+    lm = LevenbergMarquardt(fun, x0, jac, xtol=xtol, ftol=ftol, gtol=gtol, factor=factor, canonical=canonical)
     lm.run(100 * len(lm.x) if max_nfev is None else int(max_nfev))
     return lm.result()
 
@@ -287,7 +308,7 @@ def _box_dogleg(newton, g, a, b, half):
 
 
 def dogbox(fun, x0, jac, *, xtol: float = 1e-8, ftol: float = 1e-8, gtol: float = 1e-8,
-           max_nfev: int | None = None) -> Result:
+           max_nfev: int | None = None, canonical=None) -> Result:
     """Minimise 0.5 ||fun(x)||^2 from x0 by dogleg steps in a rectangular trust region (Voglis &
     Lagaris 2004, "A rectangular trust region dogleg approach for unconstrained and bound
     constrained nonlinear optimization"): the algorithm of ``scipy.optimize.least_squares(
@@ -365,6 +386,14 @@ def dogbox(fun, x0, jac, *, xtol: float = 1e-8, ftol: float = 1e-8, gtol: float 
             if status is not None:
                 break
         if reduction > 0:                          # accepted: the Jacobian and scaling there
+            other = canonical(x_new) if canonical is not None else None
+            if other is not None and nfev < max_nfev:       # (its own chart: the module's docstring)
+                f_other = np.asarray(fun(other), dtype=float)
+                nfev += 1
+                with np.errstate(over="ignore", invalid="ignore"):
+                    cost_other = 0.5 * float(f_other @ f_other)
+                if cost_other <= cost_new:
+                    x_new, f_new, cost_new = other, f_other, cost_other
             x, f, cost = x_new, f_new, cost_new
             J = np.asarray(jac(x), dtype=float)
             njev += 1
