@@ -28,20 +28,6 @@ from station.cli import main  # noqa: E402
 
 _BLAS_LIMIT = _threadpool_limits(limits=1, user_api="blas")
 
-
-def pytest_xdist_auto_num_workers(config):
-    """``-n auto`` (pyproject.toml's addopts): one test worker more than the cores this process may
-    run on.  Many tests wait on the wall clock (the twins' serial lines, the probes' listening
-    windows, `station` processes started and waited for, the Dask cluster's and PostgreSQL's
-    start-up): measured (twentieth session, a whole run with per-test CPU) ~600 s of CPU in ~700 s
-    of the two workers' time, and a third worker fills the waits: 381 s against 421 s with two, the
-    same machine and minutes (docs/performance.md, "Twentieth session: the suite")."""
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:          # not Linux
-        cores = os.cpu_count() or 1
-    return cores + 1
-
 SHORT = ["--dwell-s", "20", "--rotation-s", "36"]   # one revolution at 10 deg/s: a quick run
 
 
