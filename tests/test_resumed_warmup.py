@@ -291,3 +291,92 @@ def test_the_next_warm_up_record_never_takes_the_name_of_a_link_left_in_the_capt
     writer.write_file(name, "t_s,temp_c\n900.000,26.0000\n")
     assert name == "warmup-4.csv"
     assert (cap / "warmup-2.csv").is_symlink() and (cap / "warmup-3.csv").is_symlink()
+
+
+@pytest.mark.parametrize("power_cycled", [False, True], ids=["warm", "switched-off"])
+def test_a_host_stamped_imu_switched_off_waits_the_minimum_and_a_warm_one_does_not(tmp_path, power_cycled):
+    """An IMU whose lines are stamped by the host's clock (a logger stamping each line as it
+    arrives: the csv twin with ``csv_clock_start_s``) never has its clock go back, so
+    _clock_restarted cannot see it switched off.  What the capture then holds is the temperature:
+    switched off while the run was stopped (the twins started again, cold, their stamps going on
+    from after the run's last: a pause of 50 s), its first reading is below the capture's last
+    (here by about 1 C, the self-heating) far beyond the readings' noise, and the resume must wait
+    the minimum (240 s from its power-on, not the slope's end near 100 s); left on, it is as warm
+    as the run left it and passes after one window (20 s).  (Before the change: the switched-off
+    IMU's resumed warm-up ended on the slope after ~100 s.)"""
+    from drivers.protocols.csvlines import CsvFormat
+    from station.cli.run_bench import _resume_steps
+
+    least = 240.0
+    truth = _truth()
+    truth.sample_rate_hz = RATE_HZ
+    config = Config(table=TableConfig(axes=1), warmup=WarmupConfig(duration_s=least, max_s=2000.0,
+                                                                     temp_slope_c_per_h=SLOPE_C_PER_H,
+                                                                     window_s=WINDOW_S),
+                    run=RunConfig(operator=False, settle_s=1, max_missing_fraction=0.5, max_gap_s=100.0))
+    host_s = 5000.0                  # the host's clock at the IMU's first power-on
+
+    def options(seed, start_s):
+        return BenchOptions(speed=SPEED, seed=seed, axes=1, lossless=True, imu_protocol="csv",
+                            csv_format=CsvFormat(), csv_clock_start_s=start_s)
+
+    def run(bench, writer, steps):
+        table = open_table(bench.table_path)
+        imu = open_imu(bench.imu_path, "csv", settings=ImuSettings(frame_timeout_s=10.0, csv_format=CsvFormat()))
+        try:
+            Sequencer(table=table, imu=imu, writer=writer, config=config, operator=NobodyThere(),
+                      rate_hz=imu.configure(RATE_HZ),
+                      display=PlainDisplay(Console(file=io.StringIO(), width=200), 1.0, "test")).run(steps)
+        finally:
+            table.close()
+            imu.close()
+
+    cap = tmp_path / "cap"
+    whole = scheme_from_text(WHOLE, "z.yaml")
+    with BenchServer(truth, options(4, host_s)) as bench:
+        writer = CaptureWriter(cap, ImuInfo(RATE_HZ, "m/s^2", "deg/s"), Site(normal_gravity(45.0), 45.0), "z")
+        run(bench, writer, compile_scheme(scheme_from_text(RUN, "z.yaml"), config).steps)
+        steps = _resume_steps(compile_scheme(whole, config), whole, {"zup"}, config)
+        if not power_cycled:
+            run(bench, CaptureWriter.reopen(cap), steps)
+    t1, temp1 = _rows(cap / "warmup.csv")
+    assert t1[0] > host_s
+    if power_cycled:
+        ended = float(read_capture(cap, load_data=True).segment("zup").data.t[-1])
+        with BenchServer(truth, options(5, ended + 50.0)) as bench:       # switched on again, 50 s later
+            run(bench, CaptureWriter.reopen(cap), steps)
+    t2, temp2 = _rows(cap / "warmup-2.csv")
+    assert t2[0] > t1[-1]                                      # the host's clock went on
+    if power_cycled:
+        assert temp1[-1] - temp2[0] > 0.5 * DELTA_C            # cold again (the twin: from the room)
+        # its power-on a second before its first reading at the most
+        assert t2[-1] - t2[0] >= least - 1.0, f"the resumed warm-up ended {t2[-1] - t2[0]:.1f} s after its start"
+    else:
+        assert temp2[0] >= temp1[-1] - 1e-3
+        assert t2[-1] - t2[0] == pytest.approx(WINDOW_S, abs=2.0)      # one window, not the minimum
+    assert read_capture(cap, load_data=True).segment("zup2").data.t[0] > t2[-1]
+
+
+def test_a_temperature_drop_within_the_readings_noise_is_not_a_restart(tmp_path):
+    """The drop is judged against the noise of the capture's own readings (the newest warm-up
+    record's scatter about a line over the slope rule's window): a noisy sensor (1-s readings of
+    sd 0.05 C) left on, whose first reading at the resume is 2.5 sd of one reading below the
+    last one recorded, is not held back (5000 pairs of such readings: the rule's false alarms at
+    most 1 %, counted here); one switched off, 1 C colder, is."""
+    from station.bench.sequencer import _temperature_fell
+
+    rng = np.random.default_rng(7)
+    sd = 0.05
+    t = np.arange(0.0, 120.0, 1.0)
+    temp = np.round(26.0 + sd * rng.standard_normal(t.size), 4)
+    cap = tmp_path / "cap"
+    cap.mkdir()
+    (cap / "warmup.csv").write_text("t_s,temp_c\n" + "".join(f"{a:.3f},{b:.4f}\n" for a, b in zip(t, temp)))
+    last = temp[-1]
+    assert _temperature_fell(cap, last - 2.5 * sd, WINDOW_S) is None
+    assert _temperature_fell(cap, last - 1.0, WINDOW_S) is not None
+    # the false alarms of a warm IMU: both readings noisy about the same temperature
+    _, threshold = _temperature_fell(cap, last - 1.0, WINDOW_S)
+    pairs = sd * rng.standard_normal((5000, 2))
+    assert np.mean(pairs[:, 0] - pairs[:, 1] > threshold) <= 0.01
+    assert threshold < 0.5                     # a switched-off IMU's drop of a fraction of a degree is seen
