@@ -224,7 +224,7 @@ def quiet_truth(noise: Noise, config=None):
 
 def model_of(scheme: Scheme, effects: list, noise: Noise, truth, geometry: dict | None = None,
              attitudes: str = "unknown", seed: int = 0, chamber=None, appended=(), ramp_accel_dps2=None,
-             warmup=None):
+             warmup=None, times=None):
     """The least-squares model of the noiseless capture of ``scheme`` with the noise stated, as
     station.simulate.montecarlo.cramer_rao weights it: (model, capture).  ``seed``: the simulated
     bench's geometry (each static's heading, each rotation axis' heading and roll: drawn at
@@ -232,7 +232,10 @@ def model_of(scheme: Scheme, effects: list, noise: Noise, truth, geometry: dict 
     ``appended``: the segments recorded by a later ``run --append``: their names (``appended: 1``
     in the manifest), or {name: N} (the N-th extension's, as the manifest numbers them: a capture
     already extended once, then extended again): their rotations are axis groups of their own per
-    extension, as the estimator reads them (summaries: one group per body axis and session)."""
+    extension, as the estimator reads them (summaries: one group per body axis and session).
+    ``times``: {segment name: its mean sample time, s} in place of the simulated bench's (station
+    design --from: the capture's own segments at theirs, the extension's after the capture's end;
+    the effects in the time read them: bias_drift)."""
     from station.estimate import lsq
     from station.estimate.summaries import summarise
     from station.simulate import dryrun
@@ -245,6 +248,10 @@ def model_of(scheme: Scheme, effects: list, noise: Noise, truth, geometry: dict 
             seg.extra["appended"] = int(sessions[seg.name])
     capture.extra["noise_free"] = True          # (no data-fault scan: station/estimate/data_faults.py)
     s = summarise(capture, table_angle_arcsec=noise.table_angle_arcsec)
+    if times:
+        for x in (*s.statics, *s.rotations):
+            if x.name in times:
+                x.t_mid_s = float(times[x.name])
     fs = s.sample_rate_hz
     accel_sigma = np.hypot(noise.accel_noise_ug * np.sqrt(fs), noise.accel_disturbance_ug)
     s.accel_sigma = np.full(3, accel_sigma * 9.80665e-6)
@@ -517,7 +524,7 @@ def static_information(info: Information, key, dwell_s: float) -> np.ndarray:
 
 def information(chunks: list, effects: list, noise: Noise, config=None,
                 geometry: dict | None = None, centred: bool = False,
-                attitudes: str = "unknown", timeline: bool = False, appended=None) -> Information:
+                attitudes: str = "unknown", timeline: bool = False, appended=None, times: bool = False) -> Information:
     """The information of every candidate.  ``chunks``: lists of (key, spec) where spec is a
     StaticSpec (dwell UNIT_DWELL_S) or a RotationSpec pair (``pair`` of two specs), each chunk
     a capture of its own (rotations about one body axis at two elevations go in different
@@ -537,7 +544,11 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
 
     ``appended``: {segment name: N} of the capture's own segments recorded by its N-th ``run
     --append`` (station design --from on a capture already extended: sequential.capture_sessions),
-    so that the capture's chunk has the estimator's axis groups (model_of)."""
+    so that the capture's chunk has the estimator's axis groups (model_of).
+
+    ``times``: the effects in the time only (natural_time, time_shear; the temperature's as
+    without ``timeline``): station design --from places every candidate at its time after the
+    capture's end, and the capture's own segments at theirs (sequential.py; twentieth session)."""
     from station.simulate import dryrun
 
     truth = quiet_truth(noise, config)
@@ -629,13 +640,13 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
         labels = model.row_labels(x)
         if info is None:
             info = Information(len(shared), merged, attitudes=attitudes)
-            if power is not None or (timeline and any(hasattr(e, "time_shear") for e in model.effects)):
+            if power is not None or ((timeline or times) and any(hasattr(e, "time_shear") for e in model.effects)):
                 info.temp_power, info.temperature = power, warm
                 info.clock = (float(truth.bench.move_s + truth.bench.settle_s), float(truth.sample_rate_hz),
                               ramp_accel)
                 info.start_s = dryrun.warmup_seconds(warmup, warm)
         info.chunk_parameters.append(list(p_c.names))
-        if timeline:
+        if timeline or times:
             info.natural_time.update(_segment_times(model, chunk, owner))
         if power is not None:
             from station.design.timeline import seconds_temperatures
@@ -705,6 +716,6 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
     info.column_names = list(union)
     if power is not None and len(power) != G:
         info.temp_power = temperature_powers(model.effects, merged, G)
-    if timeline:
+    if timeline or times:
         info.time_shear = time_shear_of(model.effects, info.column_names)
     return info

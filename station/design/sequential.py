@@ -94,6 +94,7 @@ class Extension:
     correlation_before: float | None = None
     noise: object = None
     notes: list = field(default_factory=list)
+    searched: dict = field(default_factory=dict)   # name -> 1σ the search's information gives the extension
 
 
 def capture_scheme(capture):
@@ -235,14 +236,23 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     config, table_source = capture_config(path, config_path)
     base = capture_scheme(capture)
     sessions = capture_sessions(capture)          # a capture extended before: its extensions' segments
-    noise = noise_mod.from_capture(path)
+    # effects in the time (bias_drift): the capture's own segments informed at their times on the
+    # capture's clock, the extension's after its end (CaptureTimeline; twentieth session)
+    timed = any(hasattr(e, "time_shear") for e in effects)
+    summaries = None
+    if timed:
+        from station.estimate.summaries import summarise
+
+        summaries = summarise(capture)
+    noise = noise_mod.from_capture(path, summaries)
     # --- the candidates: the capture's own segments first (chosen), then the table's
     table = cand_mod.Table(config)
     cands, chunks, notes, masks = cand_mod.candidate_set(
         table, rates_dps or cand_mod.DEFAULT_RATES_DPS, revolutions or cand_mod.DEFAULT_REVOLUTIONS,
         dwells_s or cand_mod.DEFAULT_DWELLS_S, ramps=any(e.id == TIME_OFFSET for e in effects))
-    own_chunk, own = [], []
+    own_chunk, own, own_segments = [], [], []
     for spec in base.segments:
+        own_segments.append(spec.name)
         if spec.kind == "static":
             own_chunk.append((("capture", spec.name), replace(spec, dwell_s=UNIT_DWELL_S)))
             own.append(Candidate(("capture", spec.name, spec.dwell_s), "static", 0.0, dwell_s=spec.dwell_s,
@@ -255,8 +265,9 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     say(f"the information of the capture's {len(own)} segments and of {len(cands)} candidates on "
         f"{table_source}")
     info = information([own_chunk] + chunks, effects, noise, config, geometry_of(config), base.centred,
-                       appended=sessions)
+                       appended=sessions, times=timed)
     all_cands = own + cands
+    masks_all = [0] * len(own) + list(masks)
     names = info.parameters.names
     units = info.parameters.units
     typical = info.parameters.typical
@@ -298,6 +309,13 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     targets = np.array(targets, int)
     scorer = Scorer(info, all_cands, Criterion("worst"), targets)
     n_own = len(own)
+    placed = (CaptureTimeline(scorer, all_cands, own_segments, summaries, masks_all, config, noise)
+              if timed and scorer.shear else None)
+
+    def place(added) -> None:
+        """Every candidate at its time (CaptureTimeline.place): nothing without effects in the time."""
+        if placed is not None:
+            placed.place(added)
     # the goal as rows over the reported parameters: each target itself, but an offset per axis
     # group (rotation_axis_offsets) by its component across both its axis and the first group's --
     # the part along its axis is seen by no segment (w x (w x d) and dw/dt x d are across w), the
@@ -347,13 +365,21 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
         notes.append(VERTICAL_ONLY)
     say(f"searching for the fewest segments ({goal})")
 
+    def state(added) -> State:
+        """The capture's segments and ``added``, every candidate placed on the capture's timeline
+        for them (place: the next one after them)."""
+        place(added)
+        return State(scorer, list(range(n_own)) + list(added))
+
     def search(forced=()) -> list:
-        st = State(scorer, list(range(n_own)) + list(forced))
+        st = state(forced)
         added = list(forced)
         if not forced:          # one candidate alone, the shortest that does it
             ok = [j for j in pool if allowed(st.chosen, j) and badness(st.information(add=(j,))) <= 1.0]
             if ok:
-                return [min(ok, key=lambda j: secs[j])]
+                best = min(ok, key=lambda j: secs[j])
+                state([best])
+                return [best]
         current = badness(st.information())
         while current > 1.0 and len(added) < MAX_SEGMENTS:
             best, best_gain, best_v = None, 0.0, current
@@ -366,28 +392,51 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
                     best, best_gain, best_v = j, gain, v
             if best is None:
                 break
-            st.add(best)
             added.append(best)
-            current = best_v
+            if placed is None:
+                st.add(best)
+                current = best_v
+            else:               # the others after it now
+                st = state(added)
+                current = badness(st.information())
         if current > 1.0:
+            state(added)
             return added
         for i in list(reversed(added)):          # fewest: drop what is not needed
             if len(added) > 1 and badness(st.information(remove=(i,))) <= 1.0:
-                st.remove(i)
-                added.remove(i)
+                rest = [j for j in added if j != i]
+                if placed is None:
+                    st.remove(i)
+                    added = rest
+                    continue
+                # (on the timeline: the others move up without it, so judged again placed so)
+                trial = state(rest)
+                if badness(trial.information()) <= 1.0:
+                    st, added = trial, rest
+                else:
+                    st = state(added)
         for k, i in enumerate(list(added)):      # least time: a shorter one that keeps the goal
             rest = st.chosen - {i}
             better = [j for j in pool if secs[j] < secs[i] and allowed(rest, j)
                       and badness(st.information(remove=(i,), add=(j,))) <= 1.0]
-            if better:
-                j = min(better, key=lambda j: secs[j])
-                st.remove(i)
-                st.add(j)
-                added[k] = j
+            for j in sorted(better, key=lambda j: secs[j]):
+                changed = added[:k] + [j] + added[k + 1:]
+                if placed is None:
+                    st.remove(i)
+                    st.add(j)
+                    added = changed
+                    break
+                trial = state(changed)
+                if badness(trial.information()) <= 1.0:
+                    st, added = trial, changed
+                    break
+                st = state(added)
+        state(added)
         return added
 
-    before = _aligned(predict(base, effects, noise, config, appended=sessions), names)
-    if (badness(State(scorer, list(range(n_own))).information()) <= 1.0
+    times = placed.own_times if placed is not None else None
+    before = _aligned(predict(base, effects, noise, config, appended=sessions, times=times), names)
+    if (badness(state(()).information()) <= 1.0
             and all(before.revealed[i] or i in along for i in targets)):
         # the capture's own segments meet the goal already (by the information and by the
         # estimator's own fit of them): the fewest segments are none, and none is proposed
@@ -404,7 +453,7 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     for _ in range(CHECK_ROUNDS):
         if not added:
             raise UserError(f"{path}: no candidate segment on this table can {goal.split(' (')[0]}")
-        reached = badness(State(scorer, list(range(n_own)) + added).information())
+        reached = badness(state(added).information())
         entries, specs = _segments_of(added, all_cands, [0] * n_own + list(masks))
         ext = Scheme(name, "extension designed by station design --from", "docs/design.md", {}, tuple(specs),
                      centred=base.centred)
@@ -414,18 +463,21 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
         # their own for the estimator, an offset per axis group the capture's about the same axis)
         # (a capture extended before: this is its next extension, the manifest's appended: N + 1)
         following = max(sessions.values(), default=0) + 1
+        if placed is not None:          # the capture's segments at their times, the extension's after its end
+            times = {**placed.own_times, **placed.segment_times(added, [x.name for x in more])}
         after = _aligned(predict(whole, effects, noise, config,
-                                 appended={**sessions, **{s.name: following for s in more}}), names)
+                                 appended={**sessions, **{s.name: following for s in more}}, times=times), names)
+        searched = scorer.sigma(list(range(n_own)) + added)
         blind = [names[i] for i in targets if not after.revealed[i] and i not in along]
         if reached <= 1.0 and not blind:
             break
         if reached > 1.0:
             raise UserError(f"{path}: no {MAX_SEGMENTS} segments this table can do {goal.split(' (')[0]} "
-                            f"(the closest: {worst_of(State(scorer, list(range(n_own)) + added).information())})")
+                            f"(the closest: {worst_of(state(added).information())})")
         notes.append(f"the estimator still called {', '.join(blind)} not revealed with {len(added)} "
                      "segment(s): one more added")
         extra = [j for j in pool if allowed(set(range(n_own)) | set(added), j)]
-        st = State(scorer, list(range(n_own)) + added)
+        st = state(added)
         best = min(extra, key=lambda j: badness(st.information(add=(j,))))
         added = search(forced=added + [best])
     else:
@@ -461,7 +513,95 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
                      {names[i]: bool(after.revealed[i]) for i in targets},
                      {names[i]: units[i] for i in targets}, ext_entries, text, plan.duration_s,
                      [_entry_s(table, e) for e in ext_entries], corr_after, corr_before, noise,
-                     notes + list(plan.notes))
+                     notes + list(plan.notes), {names[i]: float(searched[i]) for i in targets})
+
+
+class CaptureTimeline:
+    """Where every candidate of station design --from is recorded in time, for the effects in the
+    time (bias_drift; information.Information.time_shear; twentieth session): the capture's own
+    segments at their mean sample times on the capture's clock (its summaries' t_mid_s, as the
+    estimator reads them), the extension's after the capture's end -- from its last sample (half a
+    sample after it), the configured warm-up of a resumed run (station.yaml ``warmup:``, as
+    ``run --append`` waits it: dryrun.warmup_seconds(resumed=True) on the simulated IMU), then its
+    segments in the written order on the simulated bench's clock (timeline.seconds_timeline: the
+    gap before each segment, its samples), as ``station run --sim --append`` records them; a
+    candidate not chosen where it would be recorded next, after the chosen ones.  The reference
+    is the estimator's, the mean time of every static (the capture's and the extension's).
+    Before, each candidate was informed at its time in the candidates' own simulated capture (and
+    the capture's segments in theirs), with a reference of its own chunk."""
+
+    def __init__(self, scorer, cands, own_names, summaries, masks, config, noise):
+        from station.design import timeline
+        from station.design.information import quiet_truth
+        from station.simulate import dryrun
+
+        self.scorer, self.cands, self.masks = scorer, cands, masks
+        self.n_own = len(own_names)
+        self.clock = scorer.info.clock
+        mids = {x.name: float(x.t_mid_s) for x in (*summaries.statics, *summaries.rotations)
+                if np.isfinite(x.t_mid_s)}
+        ends = [float(x.t_mid_s) + 0.5 * float(x.duration_s) for x in (*summaries.statics, *summaries.rotations)
+                if np.isfinite(x.t_mid_s) and np.isfinite(x.duration_s)]
+        fs = float(summaries.sample_rate_hz)
+        self.own_times = {n: mids[n] for n in own_names if n in mids}
+        self.own = [mids.get(n) for n in own_names]
+        end = (max(ends) if ends else 0.0) + 0.5 / fs
+        warmup = config.warmup if config is not None else None
+        self.start_s = end + (dryrun.warmup_seconds(warmup, quiet_truth(noise, config).temperature, end, resumed=True)
+                              if warmup is not None else 0.0)
+        gap, rate = self.clock[:2]
+        accel = self.clock[2] if len(self.clock) > 2 else None
+        self.lengths = [timeline.segment_seconds(c, accel) if i >= self.n_own else []
+                        for i, c in enumerate(cands)]
+        # each candidate's mean time recorded first from 0, and the time it takes with its gaps
+        self.first = {}
+        self.span = {}
+        for i in range(self.n_own, len(cands)):
+            self.first[i] = float(timeline.seconds_timeline([self.lengths[i]], None, self.clock)[1][0])
+            self.span[i] = sum(gap + max(1, int(round(x * rate))) / rate for x in self.lengths[i])
+
+    def sequence(self, added) -> list:
+        """The added candidates in the order the extension is written (designer._segments_of's)."""
+        from station.design import timeline
+
+        return timeline.written_order(list(added), self.cands, self.masks)
+
+    def times(self, added) -> dict:
+        """{candidate index: its time on the capture's clock, s} (class doc)."""
+        from station.design import timeline
+
+        seq = self.sequence(added)
+        out = {i: t for i, t in enumerate(self.own) if t is not None}
+        if seq:
+            mids = timeline.seconds_timeline([self.lengths[i] for i in seq], None, self.clock,
+                                             start_s=self.start_s)[1]
+            out.update({i: float(t) for i, t in zip(seq, mids)})
+        end = self.start_s + sum(self.span[i] for i in seq)
+        chosen = set(seq)
+        for i in self.first:
+            if i not in chosen:
+                out[i] = end + self.first[i]
+        return out
+
+    def place(self, added) -> None:
+        """Every candidate's information at its time less the reference (Scorer.set_temperatures)."""
+        t = self.times(added)
+        chosen = set(range(self.n_own)) | set(added)
+        statics = [t[i] for i in chosen if i in t and self.cands[i].kind == "static"]
+        reference = float(np.mean(statics)) if statics else 0.0
+        self.scorer.set_temperatures({}, {i: v - reference for i, v in t.items()})
+
+    def segment_times(self, added, names) -> dict:
+        """{segment name: mean sample time} of the extension's segments (``names``: in the order
+        written, a rotation pair's two), as the estimator's summaries would have them."""
+        from station.design import timeline
+
+        seq = self.sequence(added)
+        lengths = [[x] for i in seq for x in self.lengths[i]]
+        mids = timeline.seconds_timeline(lengths, None, self.clock, start_s=self.start_s)[1]
+        if len(mids) != len(names):
+            raise ValueError("the extension's segments and their times do not match")
+        return {n: float(t) for n, t in zip(names, mids)}
 
 
 def _entry_s(table, entry) -> float:
