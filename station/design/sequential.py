@@ -50,7 +50,11 @@ CHECK_ROUNDS = 4          # the estimator's check sends the search on at most th
 # or a rate (table_wobble: one lean per table axis; table_vibration_once_per_rev: one per table axis
 # and rate) are designed: a candidate about the same table axis, or at the same rate, shares them
 # (information.column_names), one at a new rate brings its own
-PER_SEGMENT_EFFECTS = ("remount_per_segment", "bias_step")
+PER_SEGMENT_EFFECTS = ("remount_per_segment",)
+# a bias step's time is located in the capture (locate_step, as the estimator locates it) and every
+# segment added after the capture's end is after it (information.information's first_times;
+# twentieth session: it was refused with the per-segment effects)
+STEP = "bias_step"
 # a time offset is seen only where the rate changes within a segment's window (time_offset: the
 # gyro integral moves by dt (w_end - w_start)); a steady turn's window has none (the compiler ramps
 # before it and brakes after it), so with a time offset in the model the candidates include turns
@@ -211,9 +215,9 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
         raise UserError("--from: give --reveal PARAMS or --separate A,B (one of them)")
     per_segment = [e.id for e in effects if e.id in PER_SEGMENT_EFFECTS]
     if per_segment:
-        raise UserError(f"--from: {', '.join(per_segment)} has parameters of its own per segment or a step's time "
-                        "(set from the segments recorded) that no added segment shares, so segments to add cannot "
-                        "be weighed for it; what separates it is said beside it in station diagnose")
+        raise UserError(f"--from: {', '.join(per_segment)} has parameters of its own per segment (set from the "
+                        "segments recorded) that no added segment shares, so segments to add cannot be weighed for "
+                        "it; what separates it is said beside it in station diagnose")
     from station.diagnose.suggest import hand_turns, imported       # the rules diagnose's commands follow
 
     hand = hand_turns(capture)
@@ -239,12 +243,16 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     # effects in the time (bias_drift): the capture's own segments informed at their times on the
     # capture's clock, the extension's after its end (CaptureTimeline; twentieth session)
     timed = any(hasattr(e, "time_shear") for e in effects)
+    stepped = any(e.id == STEP for e in effects)
     summaries = None
-    if timed:
+    if timed or stepped:
         from station.estimate.summaries import summarise
 
         summaries = summarise(capture)
     noise = noise_mod.from_capture(path, summaries)
+    if stepped:
+        say("locating the bias step in the capture (as station estimate does)")
+        locate_step(capture, effects)
     # --- the candidates: the capture's own segments first (chosen), then the table's
     table = cand_mod.Table(config)
     cands, chunks, notes, masks = cand_mod.candidate_set(
@@ -264,8 +272,14 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
             own.append(Candidate(key, "rotation", 0.0, axis=key[:2]))
     say(f"the information of the capture's {len(own)} segments and of {len(cands)} candidates on "
         f"{table_source}")
+    first_times = None
+    if stepped:                 # the capture's own segments at their times: which are after the step
+        # (and their spans: a static is informed at another dwell, UNIT_DWELL_S, than its own,
+        # and the step may fall inside it: bias_step.sample_share)
+        first_times = {x.name: (float(x.t_mid_s), float(x.duration_s))
+                       for x in (*summaries.statics, *summaries.rotations) if np.isfinite(x.t_mid_s)}
     info = information([own_chunk] + chunks, effects, noise, config, geometry_of(config), base.centred,
-                       appended=sessions, times=timed)
+                       appended=sessions, times=timed, first_times=first_times)
     all_cands = own + cands
     masks_all = [0] * len(own) + list(masks)
     names = info.parameters.names
@@ -310,7 +324,7 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     scorer = Scorer(info, all_cands, Criterion("worst"), targets)
     n_own = len(own)
     placed = (CaptureTimeline(scorer, all_cands, own_segments, summaries, masks_all, config, noise)
-              if timed and scorer.shear else None)
+              if (timed and scorer.shear) or stepped else None)
 
     def place(added) -> None:
         """Every candidate at its time (CaptureTimeline.place): nothing without effects in the time."""
@@ -532,12 +546,14 @@ class CaptureTimeline:
 
     def __init__(self, scorer, cands, own_names, summaries, masks, config, noise):
         from station.design import timeline
-        from station.design.information import quiet_truth
+        from station.design.information import quiet_truth, ramp_accel_of
         from station.simulate import dryrun
 
         self.scorer, self.cands, self.masks = scorer, cands, masks
         self.n_own = len(own_names)
-        self.clock = scorer.info.clock
+        truth = quiet_truth(noise, config)          # (information.Information.clock's)
+        self.clock = (float(truth.bench.move_s + truth.bench.settle_s), float(truth.sample_rate_hz),
+                      ramp_accel_of(config))
         mids = {x.name: float(x.t_mid_s) for x in (*summaries.statics, *summaries.rotations)
                 if np.isfinite(x.t_mid_s)}
         ends = [float(x.t_mid_s) + 0.5 * float(x.duration_s) for x in (*summaries.statics, *summaries.rotations)
@@ -547,7 +563,7 @@ class CaptureTimeline:
         self.own = [mids.get(n) for n in own_names]
         end = (max(ends) if ends else 0.0) + 0.5 / fs
         warmup = config.warmup if config is not None else None
-        self.start_s = end + (dryrun.warmup_seconds(warmup, quiet_truth(noise, config).temperature, end, resumed=True)
+        self.start_s = end + (dryrun.warmup_seconds(warmup, truth.temperature, end, resumed=True)
                               if warmup is not None else 0.0)
         gap, rate = self.clock[:2]
         accel = self.clock[2] if len(self.clock) > 2 else None
@@ -584,7 +600,10 @@ class CaptureTimeline:
         return out
 
     def place(self, added) -> None:
-        """Every candidate's information at its time less the reference (Scorer.set_temperatures)."""
+        """Every candidate's information at its time less the reference (Scorer.set_temperatures;
+        nothing without an effect in the time: a bias step's candidates are all after it)."""
+        if not self.scorer.shear:
+            return
         t = self.times(added)
         chosen = set(range(self.n_own)) | set(added)
         statics = [t[i] for i in chosen if i in t and self.cands[i].kind == "static"]
@@ -602,6 +621,22 @@ class CaptureTimeline:
         if len(mids) != len(names):
             raise ValueError("the extension's segments and their times do not match")
         return {n: float(t) for n, t in zip(names, mids)}
+
+
+def locate_step(capture, effects) -> None:
+    """A bias step's time (bias_step in ``effects`` not located yet) located in ``capture`` as
+    station estimate locates it (station.estimate: the profile of the score test at the fit
+    without it, station/estimate/profile.py), on the capture's fit clock."""
+    import copy
+
+    from station.estimate import lsq, profile
+
+    pending = [e for e in effects if e.id == STEP and getattr(e, "step_time_s", 0.0) is None]
+    if not pending:
+        return
+    base = lsq.fit(lsq.summarise(capture), [copy.deepcopy(e) for e in effects if e not in pending])
+    for e in pending:
+        profile.locate(base, e)
 
 
 def _entry_s(table, entry) -> float:

@@ -9,8 +9,11 @@ from pathlib import Path
 BASE = ("base_triads", "inter_triad")
 ALIAS_COS = 0.95      # two candidates whose one-step signatures are this alike: aliases (terms.py's threshold)
 # effects a scheme extension cannot be designed for: parameters per segment that no added segment
-# shares, a step's time (a table axis' wobble, a vibration per table axis and rate and an offset per
-# axis group are designed: station/design/information.py) (station.design.sequential.PER_SEGMENT_EFFECTS, copied: diagnose is below design)
+# shares (a table axis' wobble, a vibration per table axis and rate and an offset per axis group are
+# designed: station/design/information.py) (station.design.sequential.PER_SEGMENT_EFFECTS, copied:
+# diagnose is below design); a step's time: since the twentieth session station design --from
+# --add bias_step weighs segments after the capture (all after the step), asked by hand; diagnose
+# prints no command for it (its words say which segments to record again later)
 # effects of the time and the temperature: the candidates' temperatures are on their own timeline,
 # not the capture's clock going on (the drift's time is, since the twentieth session:
 # sequential.CaptureTimeline), and the table has no chamber: two of them are not separated by
