@@ -234,7 +234,7 @@ def quiet_truth(noise: Noise, config=None):
 
 def model_of(scheme: Scheme, effects: list, noise: Noise, truth, geometry: dict | None = None,
              attitudes: str = "unknown", seed: int = 0, chamber=None, appended=(), ramp_accel_dps2=None,
-             warmup=None, times=None):
+             warmup=None, times=None, temperatures=None):
     """The least-squares model of the noiseless capture of ``scheme`` with the noise stated, as
     station.simulate.montecarlo.cramer_rao weights it: (model, capture).  ``seed``: the simulated
     bench's geometry (each static's heading, each rotation axis' heading and roll: drawn at
@@ -247,7 +247,8 @@ def model_of(scheme: Scheme, effects: list, noise: Noise, truth, geometry: dict 
     design --from: the capture's own segments at theirs, the extension's after the capture's end;
     the effects in the time read them: bias_drift), or {name: (that time, the span from its first
     sample to its last, s)} (a static simulated at another dwell than its own: where a bias step
-    falls inside it)."""
+    falls inside it).  ``temperatures``: {segment name: its mean temperature, degC} likewise (the
+    effects in the temperature read them)."""
     from station.estimate import lsq
     from station.estimate.summaries import summarise
     from station.simulate import dryrun
@@ -268,6 +269,10 @@ def model_of(scheme: Scheme, effects: list, noise: Noise, truth, geometry: dict 
                     x.t_mid_s, x.duration_s = float(v[0]), float(v[1])
                 else:
                     x.t_mid_s = float(v)
+    if temperatures:
+        for x in (*s.statics, *s.rotations):
+            if x.name in temperatures:
+                x.temp_c = float(temperatures[x.name])
     fs = s.sample_rate_hz
     accel_sigma = np.hypot(noise.accel_noise_ug * np.sqrt(fs), noise.accel_disturbance_ug)
     s.accel_sigma = np.full(3, accel_sigma * 9.80665e-6)

@@ -244,8 +244,12 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     # capture's clock, the extension's after its end (CaptureTimeline; twentieth session)
     timed = any(hasattr(e, "time_shear") for e in effects)
     stepped = any(e.id == STEP for e in effects)
+    # effects in the temperature's difference from a reference: the capture's segments at their
+    # recorded temperatures, the extension's at the simulated IMU's after the capture's end
+    # (CaptureTimeline; not with a chamber: its levels are the candidates' own)
+    tempered = _temperature_referenced(effects) and getattr(config, "chamber", None) is None
     summaries = None
-    if timed or stepped:
+    if timed or stepped or tempered:
         from station.estimate.summaries import summarise
 
         summaries = summarise(capture)
@@ -279,7 +283,7 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
         first_times = {x.name: (float(x.t_mid_s), float(x.duration_s))
                        for x in (*summaries.statics, *summaries.rotations) if np.isfinite(x.t_mid_s)}
     info = information([own_chunk] + chunks, effects, noise, config, geometry_of(config), base.centred,
-                       appended=sessions, times=timed, first_times=first_times)
+                       appended=sessions, times=timed, first_times=first_times, timeline=tempered)
     all_cands = own + cands
     masks_all = [0] * len(own) + list(masks)
     names = info.parameters.names
@@ -324,7 +328,7 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     scorer = Scorer(info, all_cands, Criterion("worst"), targets)
     n_own = len(own)
     placed = (CaptureTimeline(scorer, all_cands, own_segments, summaries, masks_all, config, noise)
-              if (timed and scorer.shear) or stepped else None)
+              if (timed and scorer.shear) or stepped or scorer.temperature_timed else None)
 
     def place(added) -> None:
         """Every candidate at its time (CaptureTimeline.place): nothing without effects in the time."""
@@ -449,7 +453,9 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
         return added
 
     times = placed.own_times if placed is not None else None
-    before = _aligned(predict(base, effects, noise, config, appended=sessions, times=times), names)
+    temps = placed.own_temps if placed is not None and scorer.temperature_timed else None
+    before = _aligned(predict(base, effects, noise, config, appended=sessions, times=times, temperatures=temps),
+                      names)
     if (badness(state(()).information()) <= 1.0
             and all(before.revealed[i] or i in along for i in targets)):
         # the capture's own segments meet the goal already (by the information and by the
@@ -479,8 +485,11 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
         following = max(sessions.values(), default=0) + 1
         if placed is not None:          # the capture's segments at their times, the extension's after its end
             times = {**placed.own_times, **placed.segment_times(added, [x.name for x in more])}
+            if scorer.temperature_timed:
+                temps = {**placed.own_temps, **placed.segment_temperatures(added, [x.name for x in more])}
         after = _aligned(predict(whole, effects, noise, config,
-                                 appended={**sessions, **{s.name: following for s in more}}, times=times), names)
+                                 appended={**sessions, **{s.name: following for s in more}}, times=times,
+                                 temperatures=temps), names)
         searched = scorer.sigma(list(range(n_own)) + added)
         blind = [names[i] for i in targets if not after.revealed[i] and i not in along]
         if reached <= 1.0 and not blind:
@@ -561,6 +570,17 @@ class CaptureTimeline:
         fs = float(summaries.sample_rate_hz)
         self.own_times = {n: mids[n] for n in own_names if n in mids}
         self.own = [mids.get(n) for n in own_names]
+        # the recorded temperatures (each segment's mean), and the simulated IMU's warm-up going on
+        # from the newest of them (its temperature model, shifted to meet it: IMUShifted)
+        recorded = {x.name: float(x.temp_c) for x in (*summaries.statics, *summaries.rotations)
+                    if x.temp_c is not None and np.isfinite(x.temp_c)}
+        self.own_temps = {n: recorded[n] for n in own_names if n in recorded}
+        self.own_t = [recorded.get(n) for n in own_names]
+        self.temperature = None
+        if recorded and scorer.temperature_timed:
+            newest = max(recorded, key=lambda n: mids.get(n, -math.inf))
+            model = scorer.info.temperature
+            self.temperature = _Shifted(model, recorded[newest] - float(model.at(np.array([mids[newest]]))[0]))
         end = (max(ends) if ends else 0.0) + 0.5 / fs
         warmup = config.warmup if config is not None else None
         self.start_s = end + (dryrun.warmup_seconds(warmup, truth.temperature, end, resumed=True)
@@ -599,16 +619,55 @@ class CaptureTimeline:
                 out[i] = end + self.first[i]
         return out
 
+    def temperatures(self, added) -> dict:
+        """{candidate index: its mean temperature, degC} (class doc): the capture's recorded, the
+        extension's on the simulated IMU's warm-up after the capture (self.temperature)."""
+        from station.design import timeline
+
+        seq = self.sequence(added)
+        out = {i: v for i, v in enumerate(self.own_t) if v is not None}
+        if self.temperature is None:
+            return out
+        if seq:
+            temps = timeline.seconds_timeline([self.lengths[i] for i in seq], self.temperature, self.clock,
+                                              start_s=self.start_s)[0]
+            out.update({i: float(v) for i, v in zip(seq, temps)})
+        end = self.start_s + sum(self.span[i] for i in seq)
+        chosen = set(seq)
+        rest = [i for i in self.first if i not in chosen]
+        for i in rest:        # (each as if recorded next)
+            out[i] = float(timeline.seconds_timeline([self.lengths[i]], self.temperature, self.clock, start_s=end)[0][0])
+        return out
+
     def place(self, added) -> None:
-        """Every candidate's information at its time less the reference (Scorer.set_temperatures;
-        nothing without an effect in the time: a bias step's candidates are all after it)."""
-        if not self.scorer.shear:
+        """Every candidate's information at its time and temperature less the references
+        (Scorer.set_temperatures; nothing without an effect in the time or the temperature: a
+        bias step's candidates are all after it)."""
+        sc = self.scorer
+        if not (sc.shear or sc.temperature_timed):
             return
-        t = self.times(added)
         chosen = set(range(self.n_own)) | set(added)
-        statics = [t[i] for i in chosen if i in t and self.cands[i].kind == "static"]
-        reference = float(np.mean(statics)) if statics else 0.0
-        self.scorer.set_temperatures({}, {i: v - reference for i, v in t.items()})
+        dt_s = dt_c = None
+        if sc.shear:
+            t = self.times(added)
+            statics = [t[i] for i in chosen if i in t and self.cands[i].kind == "static"]
+            reference = float(np.mean(statics)) if statics else 0.0
+            dt_s = {i: v - reference for i, v in t.items()}
+        if sc.temperature_timed:
+            T = self.temperatures(added)
+            statics = [T[i] for i in chosen if i in T and self.cands[i].kind == "static"]
+            reference = float(np.mean(statics)) if statics else 0.0
+            dt_c = {i: v - reference for i, v in T.items()}
+        sc.set_temperatures(dt_c or {}, dt_s)
+
+    def segment_temperatures(self, added, names) -> dict:
+        """{segment name: mean temperature} of the extension's segments (segment_times')."""
+        from station.design import timeline
+
+        seq = self.sequence(added)
+        lengths = [[x] for i in seq for x in self.lengths[i]]
+        temps = timeline.seconds_timeline(lengths, self.temperature, self.clock, start_s=self.start_s)[0]
+        return {n: float(t) for n, t in zip(names, temps)}
 
     def segment_times(self, added, names) -> dict:
         """{segment name: mean sample time} of the extension's segments (``names``: in the order
@@ -621,6 +680,26 @@ class CaptureTimeline:
         if len(mids) != len(names):
             raise ValueError("the extension's segments and their times do not match")
         return {n: float(t) for n, t in zip(names, mids)}
+
+
+class _Shifted:
+    """A temperature model T(t) moved by ``offset`` degC (CaptureTimeline.temperature)."""
+
+    def __init__(self, model, offset: float):
+        self.model, self.offset = model, float(offset)
+        self.start_c = getattr(model, "start_c", 0.0)
+
+    def at(self, t, air=None):
+        return self.model.at(t) + self.offset
+
+
+def _temperature_referenced(effects) -> bool:
+    """Effects in the temperature's difference from a reference, and no other that needs the
+    temperature (information.temperature_powers' condition)."""
+    from station.model.temperature import TemperatureReferenced
+
+    needs = [e for e in effects if "temperature" in getattr(e, "needs", ())]
+    return bool(needs) and all(isinstance(e, TemperatureReferenced) for e in needs)
 
 
 def locate_step(capture, effects) -> None:
