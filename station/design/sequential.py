@@ -25,6 +25,12 @@ goal holds without it (fewest), and each is exchanged for a shorter one that kee
 time).  Then the estimator's own fit of the capture's segments plus the extension (designer.
 predict) checks the proposal: a named parameter it still calls not revealed makes the search
 go on (the next best candidate added), so what is written is what `station estimate` will say.
+
+Effects in the time and the temperature (bias_drift, a bias step, temperature_bias, ...; twentieth
+session): the capture's segments are informed at their times and recorded temperatures on the
+capture's clock, the extension's after the capture's end (CaptureTimeline), and the estimator's
+check is the fit at those times and temperatures; a bias step is located in the capture as the
+estimator locates it (locate_step), every added segment after it.
 """
 from __future__ import annotations
 
