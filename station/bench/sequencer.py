@@ -993,11 +993,14 @@ def _clock_restarted(directory, t_s) -> bool:
     return bool(last) and float(t_s) < max(last)
 
 
+NEWEST_SEGMENTS = 3     # the last segments of the manifest whose files' stamps are read (_last_temperature)
+
+
 def _last_temperature(directory):
     """(stamp s, temperature degC) of the newest temperature the capture ``directory`` recorded, and
     the warm-up records' readings the noise is judged from: the last reading of each warm-up record
-    (warmup.csv, warmup-2.csv, ...) and each segment's mean temperature (the manifest's
-    ``temperature_c``) at its file's last stamp; (None, None, readings) when there is none.  What
+    (warmup.csv, warmup-2.csv, ...) and the mean temperature (the manifest's ``temperature_c``)
+    of the last NEWEST_SEGMENTS segments the manifest lists with one, at their files' last stamps; (None, None, readings) when there is none.  What
     cannot be read (a record or a file missing, a FIFO in its place) is left out."""
     from station.io.capture import read_capture
 
@@ -1017,7 +1020,10 @@ def _last_temperature(directory):
         segments = list(capture.segments)
     except Exception:            # (the capture's own reader says what is wrong elsewhere)
         segments = []
-    for seg in segments:
+    found = 0
+    for seg in reversed(segments):      # (the manifest lists them as recorded: the newest few)
+        if found >= NEWEST_SEGMENTS:
+            break
         temp = seg.extra.get("temperature_c")
         if isinstance(temp, bool) or not isinstance(temp, (int, float)) or not math.isfinite(temp):
             continue
@@ -1028,6 +1034,7 @@ def _last_temperature(directory):
             continue
         if math.isfinite(t):
             newest.append((t, float(temp)))
+            found += 1
     if not newest:
         return None, None, readings
     t, temp = max(newest)
