@@ -280,6 +280,8 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
             key = (("capture",) + tuple(spec.axis_body), spec.axis_elevation_deg, spec.name)
             own_chunk.append((key, (spec,)))
             own.append(Candidate(key, "rotation", 0.0, axis=key[:2]))
+    if stepped:           # where the step was located, which the design takes as known
+        notes += [f"{n}; every added segment comes after it" for e in effects if e.id == STEP for n in e.notes()]
     say(f"the information of the capture's {len(own)} segments and of {len(cands)} candidates on "
         f"{table_source}")
     first_times = None
@@ -719,9 +721,11 @@ def locate_step(capture, effects) -> None:
     pending = [e for e in effects if e.id == STEP and getattr(e, "step_time_s", 0.0) is None]
     if not pending:
         return
-    base = lsq.fit(lsq.summarise(capture), [copy.deepcopy(e) for e in effects if e not in pending])
+    summaries = lsq.summarise(capture)
+    base = lsq.fit(summaries, [copy.deepcopy(e) for e in effects if e not in pending])
     for e in pending:
         profile.locate(base, e)
+        e.setup(summaries)          # (its clock's origin and the spans, for its notes; the time kept)
 
 
 def _entry_s(table, entry) -> float:
