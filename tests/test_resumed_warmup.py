@@ -388,3 +388,50 @@ def test_a_temperature_drop_within_the_readings_noise_is_not_a_restart(tmp_path)
     pairs = sd * rng.standard_normal((5000, 2))
     assert np.mean(pairs[:, 0] - pairs[:, 1] > threshold) <= 0.01
     assert threshold < 0.5                     # a switched-off IMU's drop of a fraction of a degree is seen
+
+
+def _record(path, t, temp):
+    path.write_text("t_s,temp_c\n" + "".join(f"{a:.3f},{b:.4f}\n" for a, b in zip(t, temp)))
+
+
+@pytest.mark.parametrize("kept", [1, 2])
+def test_a_warm_up_cut_short_does_not_make_a_noisy_warm_imu_wait(tmp_path, kept):
+    """A resume stopped (Ctrl-C) after its first reading or two keeps them as the newest warm-up
+    record (Sequencer._warmup keeps what was read).  The noise of the readings is the sensor's all
+    the same (sd 0.05 C, seen over 120 readings of warmup.csv): the next resume of the warm IMU,
+    its first reading 1 sd below the last, is not a restart, and one 1 C colder is.  (Review of the
+    twentieth session: with the newest record's 1-2 readings taken for the noise, the threshold
+    fell to 0.00016 C and half of a warm IMU's resumes waited the minimum.)"""
+    from station.bench.sequencer import _temperature_fell
+
+    rng = np.random.default_rng(11)
+    sd = 0.05
+    cap = tmp_path / "cap"
+    cap.mkdir()
+    t = np.arange(0.0, 120.0, 1.0)
+    _record(cap / "warmup.csv", t, np.round(26.0 + sd * rng.standard_normal(t.size), 4))
+    t2 = 500.0 + np.arange(kept)
+    temp2 = np.round(26.0 + sd * rng.standard_normal(kept), 4)
+    _record(cap / "warmup-2.csv", t2, temp2)
+    last = temp2[-1]
+    assert _temperature_fell(cap, last - sd, WINDOW_S) is None
+    assert _temperature_fell(cap, last - 1.0, WINDOW_S) is not None
+
+
+def test_a_quantised_sensor_one_step_lower_is_not_a_restart(tmp_path):
+    """An IMU whose temperature comes in 0.5 C steps: warm and steady, its last resume's record (one
+    window) read one value throughout, and at the next resume it reads one step lower (the
+    temperature a hair across a step's edge).  Its resolution was seen in warmup.csv (the steps of
+    the first warm-up), so a drop of one step is within it and not a restart; a switched-off IMU,
+    2 C colder, is.  (Review of the twentieth session: the resolution was taken from the newest
+    record alone, constant, so the threshold was 0.00016 C and the warm IMU waited the minimum.)"""
+    from station.bench.sequencer import _temperature_fell
+
+    cap = tmp_path / "cap"
+    cap.mkdir()
+    t = np.arange(0.0, 300.0, 1.0)
+    _record(cap / "warmup.csv", t, np.round((26.0 - 3.0 * np.exp(-t / 60.0)) / 0.5) * 0.5)
+    t2 = 900.0 + np.arange(21.0)
+    _record(cap / "warmup-2.csv", t2, np.full(t2.size, 26.0))
+    assert _temperature_fell(cap, 25.5, WINDOW_S) is None
+    assert _temperature_fell(cap, 24.0, WINDOW_S) is not None
