@@ -998,13 +998,14 @@ NEWEST_SEGMENTS = 3     # the last segments of the manifest whose files' stamps 
 
 def _last_temperature(directory):
     """(stamp s, temperature degC) of the newest temperature the capture ``directory`` recorded, and
-    the warm-up records' readings the noise is judged from: the last reading of each warm-up record
+    every warm-up record's readings the noise is judged from (arrays of (t, temp), the newest
+    last): the newest temperature is the last reading of each warm-up record
     (warmup.csv, warmup-2.csv, ...) and the mean temperature (the manifest's ``temperature_c``)
-    of the last NEWEST_SEGMENTS segments the manifest lists with one, at their files' last stamps; (None, None, readings) when there is none.  What
+    of the last NEWEST_SEGMENTS segments the manifest lists with one, at their files' last stamps; (None, None, records) when there is none.  What
     cannot be read (a record or a file missing, a FIFO in its place) is left out."""
     from station.io.capture import read_capture
 
-    newest, readings = [], None
+    newest, records = [], []
     for path in warmup_records(directory):
         try:
             rows = np.loadtxt(io.BytesIO(read_regular_file(path)), delimiter=",", skiprows=1, ndmin=2)
@@ -1013,8 +1014,7 @@ def _last_temperature(directory):
         rows = rows[np.all(np.isfinite(rows), axis=1)] if rows.size and rows.shape[1] >= 2 else np.zeros((0, 2))
         if len(rows):
             newest.append((float(rows[-1, 0]), float(rows[-1, 1])))
-            if readings is None or rows[-1, 0] > readings[-1, 0]:
-                readings = rows[:, :2]
+            records.append(rows[:, :2])
     try:
         capture = read_capture(directory, load_data=False)
         segments = list(capture.segments)
@@ -1035,10 +1035,11 @@ def _last_temperature(directory):
         if math.isfinite(t):
             newest.append((t, float(temp)))
             found += 1
+    records.sort(key=lambda r: r[-1, 0])          # (the newest last)
     if not newest:
-        return None, None, readings
+        return None, None, records
     t, temp = max(newest)
-    return t, temp, readings
+    return t, temp, records
 
 
 def _temperature_fell(directory, temp_c, window_s):
@@ -1047,26 +1048,31 @@ def _temperature_fell(directory, temp_c, window_s):
     its readings' noise allows; None otherwise.  For an IMU whose stamps are the host's clock
     (they never go back, _clock_restarted cannot tell): left on, its self-heating holds it where
     the run left it (a warm-up's slope is never negative); switched off, it cooled toward the
-    room.  The noise: the newest warm-up record's readings about a straight line over its last
-    ``window_s`` (the slope rule's window), and their resolution (the smallest step between
-    readings, as a uniform quantisation, q^2/12), for both readings (x sqrt 2), 4 sigma: a drop
+    room.  The noise: the readings of the newest warm-up record with three in its last
+    ``window_s`` (the slope rule's window) about a straight line there, and their resolution (the
+    smallest step between readings of any record, as a uniform quantisation, q^2/12), for both
+    readings (x sqrt 2), 4 sigma: a drop
     beyond that is not noise.  A room that cooled meanwhile counts as a drop too (the IMU is not
     where the run left it: the minimum is waited)."""
-    _, last, readings = _last_temperature(directory)
+    _, last, records = _last_temperature(directory)
     if last is None or not math.isfinite(temp_c):
         return None
     var = 0.0
-    if readings is not None and len(readings) >= 3:
+    # the scatter: the newest record with 3 readings in its last window (one cut short after a
+    # reading or two says nothing of it); the resolution: the smallest step of any record (a
+    # quantised sensor steady in the newest shows none)
+    for readings in reversed(records):
         t, temp = readings[:, 0], readings[:, 1]
         sel = t >= t[-1] - window_s
         if np.count_nonzero(sel) >= 3:
             fit = np.polyfit(t[sel], temp[sel], 1)
             resid = temp[sel] - np.polyval(fit, t[sel])
             var += float(np.sum(resid ** 2) / max(np.count_nonzero(sel) - 2, 1))
-        steps = np.abs(np.diff(temp))
-        steps = steps[steps > 0]
-        if len(steps):
-            var += float(np.min(steps)) ** 2 / 12.0
+            break
+    steps = np.concatenate([np.abs(np.diff(r[:, 1])) for r in records] or [np.zeros(0)])
+    steps = steps[steps > 0]
+    if len(steps):
+        var += float(np.min(steps)) ** 2 / 12.0
     # (no record to judge the noise by: the last digit the record keeps, 0.1 mK, as a resolution)
     threshold = 4.0 * math.sqrt(2.0 * max(var, 1e-8 / 12.0))
     drop = last - float(temp_c)
