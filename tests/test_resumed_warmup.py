@@ -435,3 +435,31 @@ def test_a_quantised_sensor_one_step_lower_is_not_a_restart(tmp_path):
     _record(cap / "warmup-2.csv", t2, np.full(t2.size, 26.0))
     assert _temperature_fell(cap, 25.5, WINDOW_S) is None
     assert _temperature_fell(cap, 24.0, WINDOW_S) is not None
+
+
+@pytest.mark.parametrize("power_cycled", [False, True], ids=["warm", "switched-off"])
+def test_a_restarted_warm_up_cut_short_is_still_a_restart_at_the_next_resume(tmp_path, power_cycled):
+    """A host-stamped IMU switched off during a pause: the resume sees it cold and warms it up
+    again, and is stopped (Ctrl-C) 10 s into that warm-up, which keeps its cold readings as the
+    newest warm-up record.  Resumed again at once, the IMU (on for 15 s, still 3.8 C below where
+    the run recorded its segments) is still cold: the minimum counted from power-on must apply
+    again, as it does for an IMU whose clock went back (its stamps below the first warm-up's).  A
+    warm IMU whose resume was stopped likewise is not held back.  (Review of the twentieth
+    session: the drop was judged from the cut warm-up's last reading, 21.9 C, and the cold IMU
+    passed on the slope.)"""
+    from station.bench.sequencer import _temperature_fell
+
+    cap = tmp_path / "cap"
+    writer = CaptureWriter(cap, ImuInfo(RATE_HZ, "m/s^2", "deg/s"), Site(normal_gravity(45.0), 45.0), "z")
+    t = 5000.0 + np.arange(0.0, 200.0, 1.0)
+    _record(cap / "warmup.csv", t, np.round(26.0 - 5.0 * np.exp(-(t - 5000.0) / 40.0), 4))
+    ts = 5300.0 + np.arange(250) / RATE_HZ
+    with writer.begin_segment("zup", "static", up_body=[0, 0, 1]) as out:
+        out.write(ts, np.tile([0.0, 0.0, 9.8], (ts.size, 1)), np.zeros((ts.size, 3)), np.full(ts.size, 26.0))
+        out.close("complete", temperature_c=26.0)
+    t2 = 5400.0 + np.arange(10.0)
+    temp2 = np.round(26.0 - 5.0 * np.exp(-(t2 - 5399.0) / 40.0), 4) if power_cycled else np.full(t2.size, 26.0)
+    _record(cap / "warmup-2.csv", t2, temp2)
+    first = round(26.0 - 5.0 * np.exp(-15.0 / 40.0), 4) if power_cycled else 26.0
+    fell = _temperature_fell(cap, first, WINDOW_S)
+    assert (fell is not None) == power_cycled, fell
