@@ -999,13 +999,14 @@ NEWEST_SEGMENTS = 3     # the last segments of the manifest whose files' stamps 
 def _last_temperature(directory):
     """(stamp s, temperature degC) of the newest temperature the capture ``directory`` recorded, and
     every warm-up record's readings the noise is judged from (arrays of (t, temp), the newest
-    last): the newest temperature is the last reading of each warm-up record
-    (warmup.csv, warmup-2.csv, ...) and the mean temperature (the manifest's ``temperature_c``)
-    of the last NEWEST_SEGMENTS segments the manifest lists with one, at their files' last stamps; (None, None, records) when there is none.  What
+    last): the newest temperature is the mean temperature (the manifest's ``temperature_c``)
+    of the last NEWEST_SEGMENTS segments the manifest lists with one, at their files' last stamps,
+    or without any, the last reading of each warm-up record (warmup.csv, warmup-2.csv, ...); (None,
+    None, records) when there is none.  What
     cannot be read (a record or a file missing, a FIFO in its place) is left out."""
     from station.io.capture import read_capture
 
-    newest, records = [], []
+    newest, warmups, records = [], [], []
     for path in warmup_records(directory):
         try:
             rows = np.loadtxt(io.BytesIO(read_regular_file(path)), delimiter=",", skiprows=1, ndmin=2)
@@ -1013,7 +1014,7 @@ def _last_temperature(directory):
             continue
         rows = rows[np.all(np.isfinite(rows), axis=1)] if rows.size and rows.shape[1] >= 2 else np.zeros((0, 2))
         if len(rows):
-            newest.append((float(rows[-1, 0]), float(rows[-1, 1])))
+            warmups.append((float(rows[-1, 0]), float(rows[-1, 1])))
             records.append(rows[:, :2])
     try:
         capture = read_capture(directory, load_data=False)
@@ -1036,6 +1037,10 @@ def _last_temperature(directory):
             newest.append((t, float(temp)))
             found += 1
     records.sort(key=lambda r: r[-1, 0])          # (the newest last)
+    # a segment's when there is one (recorded warm, after a warm-up that ended): a warm-up record
+    # newer than it may be one cut short (Ctrl-C) while an IMU switched off warmed up again, whose
+    # last reading is still cold (review of the twentieth session)
+    newest = newest or warmups
     if not newest:
         return None, None, records
     t, temp = max(newest)
