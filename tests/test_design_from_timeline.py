@@ -171,3 +171,37 @@ def test_design_from_informs_temperature_after_the_captures_end(dry_run, tmp_pat
     for p in params:
         assert abs(p["sigma_searched"] / recorded[p["name"]] - 1.0) < 2e-2, p
         assert abs(p["sigma_after"] / recorded[p["name"]] - 1.0) < 1e-2, p
+
+
+@pytest.mark.parametrize("effect,reveal", [("bias_drift", "accel_bias_drift_*"), ("bias_step", "accel_bias_step_*")])
+def test_design_from_refuses_time_effects_on_a_capture_whose_clock_went_back(dry_run, tmp_path, capsys, effect, reveal):
+    """An IMU stamping its samples with its own clock (time since power-on), switched off and on
+    between two sessions of the capture: the later session's segments are stamped earlier than
+    the first's (here from yup on, 560 s earlier: yup at 25 s, xdown ended at 570 s).  The
+    capture's clock then interleaves the sessions, and an extension recorded next goes on from the
+    newest session's clock, not after the largest stamp: there is no timeline to place a drift or
+    a step on, and a design on it says what the estimator will not.  station design --from says so
+    in one line, exit 2.  (Review of the twentieth session: the extension was placed after the
+    largest stamp, 570 s, and the step "located between zup and xz", two segments of different
+    sessions overlapping in time.)"""
+    import yaml
+
+    cap = tmp_path / "cap"
+    shutil.copytree(dry_run / "cap", cap)
+    manifest = yaml.safe_load((cap / "manifest.yaml").read_text())
+    names = [s["name"] for s in manifest["segments"]]
+    for s in manifest["segments"]:
+        s.pop("sha256", None)
+        if names.index(s["name"]) >= names.index("yup"):
+            lines = (cap / s["file"]).read_text().splitlines()
+            moved = [lines[0]] + [f"{float(x.split(',', 1)[0]) - 560.0:.3f}," + x.split(",", 1)[1] for x in lines[1:]]
+            (cap / s["file"]).write_text("\n".join(moved) + "\n")
+    (cap / "manifest.yaml").write_text(yaml.safe_dump(manifest, sort_keys=False))
+    capsys.readouterr()
+    status = main(["design", "--from", str(cap), "--config", str(dry_run / "station.yaml"), "--add", effect,
+                   "--reveal", reveal, "--fraction", "1", "--rates", "100", "--revolutions", "1", "--dwells", "60",
+                   "-o", str(tmp_path / "ext.yaml")])
+    said = capsys.readouterr()
+    assert status == 2, said.out
+    assert "clock went back" in said.err and "Traceback" not in said.err, said.err
+    assert not (tmp_path / "ext.yaml").exists()
