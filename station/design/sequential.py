@@ -259,6 +259,7 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
         from station.estimate.summaries import summarise
 
         summaries = summarise(capture)
+        _one_clock(path, summaries)
     noise = noise_mod.from_capture(path, summaries)
     if stepped:
         say("locating the bias step in the capture (as station estimate does)")
@@ -688,6 +689,25 @@ class CaptureTimeline:
         if len(mids) != len(names):
             raise ValueError("the extension's segments and their times do not match")
         return {n: float(t) for n, t in zip(names, mids)}
+
+
+def _one_clock(path, summaries) -> None:
+    """UserError when two segments of the capture overlap in time on its clock (one clock never
+    records two at once): an IMU's own clock restarted between two sessions (switched off and
+    on), the sessions interleaved on it -- an extension recorded next goes on from the newest
+    session's clock, not after the largest stamp, and a drift or a step has no timeline to be
+    placed on (review of the twentieth session).  (Segments listed out of time order without
+    overlapping, as an import may list them, are not refused.)"""
+    segs = sorted((x for x in (*summaries.statics, *summaries.rotations)
+                   if np.isfinite(x.t_mid_s) and np.isfinite(x.duration_s)), key=lambda x: x.t_mid_s)
+    half = 0.5 / float(summaries.sample_rate_hz)
+    for a, b in zip(segs, segs[1:]):
+        if b.t_mid_s - 0.5 * b.duration_s < a.t_mid_s + 0.5 * a.duration_s - half:
+            first, later = (a, b) if a.index < b.index else (b, a)
+            raise UserError(f"{path}: the capture's clock went back: {later.name} (recorded after {first.name}) "
+                            f"overlaps it in time ({b.t_mid_s - 0.5 * b.duration_s:.1f} s, before "
+                            f"{a.t_mid_s + 0.5 * a.duration_s:.1f} s: the IMU restarted between sessions?): the "
+                            "effects in the time cannot be placed on it")
 
 
 class _Shifted:
