@@ -336,7 +336,8 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     targets = np.array(targets, int)
     scorer = Scorer(info, all_cands, Criterion("worst"), targets)
     n_own = len(own)
-    placed = (CaptureTimeline(scorer, all_cands, own_segments, summaries, masks_all, config, noise)
+    placed = (CaptureTimeline(scorer, all_cands, own_segments, summaries, masks_all, config, noise,
+                              _unsummarised_end(capture, summaries))
               if (timed and scorer.shear) or stepped or scorer.temperature_timed else None)
 
     def place(added) -> None:
@@ -562,7 +563,7 @@ class CaptureTimeline:
     Before, each candidate was informed at its time in the candidates' own simulated capture (and
     the capture's segments in theirs), with a reference of its own chunk."""
 
-    def __init__(self, scorer, cands, own_names, summaries, masks, config, noise):
+    def __init__(self, scorer, cands, own_names, summaries, masks, config, noise, last_sample_s=None):
         from station.design import timeline
         from station.design.information import quiet_truth, ramp_accel_of
         from station.simulate import dryrun
@@ -590,6 +591,8 @@ class CaptureTimeline:
             newest = max(recorded, key=lambda n: mids.get(n, -math.inf))
             model = scorer.info.temperature
             self.temperature = _Shifted(model, recorded[newest] - float(model.at(np.array([mids[newest]]))[0]))
+        if last_sample_s is not None:       # (a segment the summaries leave out: an aborted one's samples)
+            ends.append(float(last_sample_s))
         end = (max(ends) if ends else 0.0) + 0.5 / fs
         warmup = config.warmup if config is not None else None
         self.start_s = end + (dryrun.warmup_seconds(warmup, truth.temperature, end, resumed=True)
@@ -689,6 +692,25 @@ class CaptureTimeline:
         if len(mids) != len(names):
             raise ValueError("the extension's segments and their times do not match")
         return {n: float(t) for n, t in zip(names, mids)}
+
+
+def _unsummarised_end(capture, summaries):
+    """The last stamp of the segments the summaries leave out (an incomplete one: a segment aborted
+    by a pause or a failure; the bench's clock went on through its samples, and an extension
+    recorded next comes after them, as dryrun.append_scheme and the sequencer record it), or None
+    (review of the twentieth session)."""
+    summarised = {x.name for x in (*summaries.statics, *summaries.rotations)}
+    last = []
+    for seg in capture.segments:
+        if seg.name in summarised:
+            continue
+        try:
+            data = capture.read_samples(seg, warnings=[])
+        except Exception:           # (what is wrong with it is said where it is read for the estimate)
+            continue
+        if data is not None and len(data.t) and np.isfinite(data.t[-1]):
+            last.append(float(data.t[-1]))
+    return max(last) if last else None
 
 
 def _one_clock(path, summaries) -> None:
