@@ -291,3 +291,175 @@ def test_the_next_warm_up_record_never_takes_the_name_of_a_link_left_in_the_capt
     writer.write_file(name, "t_s,temp_c\n900.000,26.0000\n")
     assert name == "warmup-4.csv"
     assert (cap / "warmup-2.csv").is_symlink() and (cap / "warmup-3.csv").is_symlink()
+
+
+@pytest.mark.parametrize("power_cycled", [False, True], ids=["warm", "switched-off"])
+def test_a_host_stamped_imu_switched_off_waits_the_minimum_and_a_warm_one_does_not(tmp_path, power_cycled):
+    """An IMU whose lines are stamped by the host's clock (a logger stamping each line as it
+    arrives: the csv twin with ``csv_clock_start_s``) never has its clock go back, so
+    _clock_restarted cannot see it switched off.  What the capture then holds is the temperature:
+    switched off while the run was stopped (the twins started again, cold, their stamps going on
+    from after the run's last: a pause of 50 s), its first reading is below the capture's last
+    (by what it has not warmed again yet of its 5 C) far beyond the readings' noise, and the
+    resume must wait the minimum (240 s from its first reading, not the slope's end near 183 s
+    from power-on); left on, it is as warm as the run left it and passes after one window
+    (20 s).  (Before the change: the switched-off IMU's resumed warm-up ended on the slope.)"""
+    from drivers.protocols.csvlines import CsvFormat
+    from drivers.table import TableSettings
+    from drivers.transport import SerialSettings
+    from station.cli.run_bench import _resume_steps
+
+    least = 240.0
+    truth = _truth()
+    truth.sample_rate_hz = RATE_HZ
+    # a warm-up of 5 C over tau 40 s: its slope falls below 6 C/h about 183 s after power-on (before
+    # the minimum), and an IMU switched on again is still measurably cold (5 exp(-t/40) C below)
+    # however long the twins' clock ran before the first reading on a loaded machine (0.3-0.5 C of
+    # warming seen with 1 C over 30 s at a load of 23 on 2 cores)
+    truth.temperature.warmup_delta_c, truth.temperature.warmup_time_constant_s = 5.0, 40.0
+    config = Config(table=TableConfig(axes=1), warmup=WarmupConfig(duration_s=least, max_s=2000.0,
+                                                                     temp_slope_c_per_h=SLOPE_C_PER_H,
+                                                                     window_s=WINDOW_S),
+                    run=RunConfig(operator=False, settle_s=1, max_missing_fraction=0.5, max_gap_s=100.0))
+    host_s = 5000.0                  # the host's clock at the IMU's first power-on
+
+    def options(seed, start_s):
+        return BenchOptions(speed=SPEED, seed=seed, axes=1, lossless=True, imu_protocol="csv",
+                            csv_format=CsvFormat(), csv_clock_start_s=start_s)
+
+    def run(bench, writer, steps):
+        # (replies within 10 s: on a loaded machine the table's first reply once took over 1 s)
+        table = open_table(bench.table_path, settings=TableSettings(serial=SerialSettings(timeout_s=10.0)))
+        imu = open_imu(bench.imu_path, "csv", settings=ImuSettings(frame_timeout_s=10.0, csv_format=CsvFormat()))
+        try:
+            Sequencer(table=table, imu=imu, writer=writer, config=config, operator=NobodyThere(),
+                      rate_hz=imu.configure(RATE_HZ),
+                      display=PlainDisplay(Console(file=io.StringIO(), width=200), 1.0, "test")).run(steps)
+        finally:
+            table.close()
+            imu.close()
+
+    cap = tmp_path / "cap"
+    whole = scheme_from_text(WHOLE, "z.yaml")
+    with BenchServer(truth, options(4, host_s)) as bench:
+        writer = CaptureWriter(cap, ImuInfo(RATE_HZ, "m/s^2", "deg/s"), Site(normal_gravity(45.0), 45.0), "z")
+        run(bench, writer, compile_scheme(scheme_from_text(RUN, "z.yaml"), config).steps)
+        steps = _resume_steps(compile_scheme(whole, config), whole, {"zup"}, config)
+        if not power_cycled:
+            run(bench, CaptureWriter.reopen(cap), steps)
+    t1, temp1 = _rows(cap / "warmup.csv")
+    assert t1[0] > host_s
+    if power_cycled:
+        ended = float(read_capture(cap, load_data=True).segment("zup").data.t[-1])
+        with BenchServer(truth, options(5, ended + 50.0)) as bench:       # switched on again, 50 s later
+            run(bench, CaptureWriter.reopen(cap), steps)
+    t2, temp2 = _rows(cap / "warmup-2.csv")
+    assert t2[0] > t1[-1]                                      # the host's clock went on
+    if power_cycled:
+        assert temp1[-1] - temp2[0] > 0.01                     # colder again (the twin: from the room)
+        # its power-on a second before its first reading at the most
+        assert t2[-1] - t2[0] >= least - 1.0, f"the resumed warm-up ended {t2[-1] - t2[0]:.1f} s after its start"
+    else:
+        assert temp2[0] >= temp1[-1] - 1e-3
+        assert t2[-1] - t2[0] == pytest.approx(WINDOW_S, abs=2.0)      # one window, not the minimum
+    assert read_capture(cap, load_data=True).segment("zup2").data.t[0] > t2[-1]
+
+
+def test_a_temperature_drop_within_the_readings_noise_is_not_a_restart(tmp_path):
+    """The drop is judged against the noise of the capture's own readings (the newest warm-up
+    record's scatter about a line over the slope rule's window): a noisy sensor (1-s readings of
+    sd 0.05 C) left on, whose first reading at the resume is 2.5 sd of one reading below the
+    last one recorded, is not held back (5000 pairs of such readings: the rule's false alarms at
+    most 1 %, counted here); one switched off, 1 C colder, is."""
+    from station.bench.sequencer import _temperature_fell
+
+    rng = np.random.default_rng(7)
+    sd = 0.05
+    t = np.arange(0.0, 120.0, 1.0)
+    temp = np.round(26.0 + sd * rng.standard_normal(t.size), 4)
+    cap = tmp_path / "cap"
+    cap.mkdir()
+    (cap / "warmup.csv").write_text("t_s,temp_c\n" + "".join(f"{a:.3f},{b:.4f}\n" for a, b in zip(t, temp)))
+    last = temp[-1]
+    assert _temperature_fell(cap, last - 2.5 * sd, WINDOW_S) is None
+    assert _temperature_fell(cap, last - 1.0, WINDOW_S) is not None
+    # the false alarms of a warm IMU: both readings noisy about the same temperature
+    _, threshold = _temperature_fell(cap, last - 1.0, WINDOW_S)
+    pairs = sd * rng.standard_normal((5000, 2))
+    assert np.mean(pairs[:, 0] - pairs[:, 1] > threshold) <= 0.01
+    assert threshold < 0.5                     # a switched-off IMU's drop of a fraction of a degree is seen
+
+
+def _record(path, t, temp):
+    path.write_text("t_s,temp_c\n" + "".join(f"{a:.3f},{b:.4f}\n" for a, b in zip(t, temp)))
+
+
+@pytest.mark.parametrize("kept", [1, 2])
+def test_a_warm_up_cut_short_does_not_make_a_noisy_warm_imu_wait(tmp_path, kept):
+    """A resume stopped (Ctrl-C) after its first reading or two keeps them as the newest warm-up
+    record (Sequencer._warmup keeps what was read).  The noise of the readings is the sensor's all
+    the same (sd 0.05 C, seen over 120 readings of warmup.csv): the next resume of the warm IMU,
+    its first reading 1 sd below the last, is not a restart, and one 1 C colder is.  (Review of the
+    twentieth session: with the newest record's 1-2 readings taken for the noise, the threshold
+    fell to 0.00016 C and half of a warm IMU's resumes waited the minimum.)"""
+    from station.bench.sequencer import _temperature_fell
+
+    rng = np.random.default_rng(11)
+    sd = 0.05
+    cap = tmp_path / "cap"
+    cap.mkdir()
+    t = np.arange(0.0, 120.0, 1.0)
+    _record(cap / "warmup.csv", t, np.round(26.0 + sd * rng.standard_normal(t.size), 4))
+    t2 = 500.0 + np.arange(kept)
+    temp2 = np.round(26.0 + sd * rng.standard_normal(kept), 4)
+    _record(cap / "warmup-2.csv", t2, temp2)
+    last = temp2[-1]
+    assert _temperature_fell(cap, last - sd, WINDOW_S) is None
+    assert _temperature_fell(cap, last - 1.0, WINDOW_S) is not None
+
+
+def test_a_quantised_sensor_one_step_lower_is_not_a_restart(tmp_path):
+    """An IMU whose temperature comes in 0.5 C steps: warm and steady, its last resume's record (one
+    window) read one value throughout, and at the next resume it reads one step lower (the
+    temperature a hair across a step's edge).  Its resolution was seen in warmup.csv (the steps of
+    the first warm-up), so a drop of one step is within it and not a restart; a switched-off IMU,
+    2 C colder, is.  (Review of the twentieth session: the resolution was taken from the newest
+    record alone, constant, so the threshold was 0.00016 C and the warm IMU waited the minimum.)"""
+    from station.bench.sequencer import _temperature_fell
+
+    cap = tmp_path / "cap"
+    cap.mkdir()
+    t = np.arange(0.0, 300.0, 1.0)
+    _record(cap / "warmup.csv", t, np.round((26.0 - 3.0 * np.exp(-t / 60.0)) / 0.5) * 0.5)
+    t2 = 900.0 + np.arange(21.0)
+    _record(cap / "warmup-2.csv", t2, np.full(t2.size, 26.0))
+    assert _temperature_fell(cap, 25.5, WINDOW_S) is None
+    assert _temperature_fell(cap, 24.0, WINDOW_S) is not None
+
+
+@pytest.mark.parametrize("power_cycled", [False, True], ids=["warm", "switched-off"])
+def test_a_restarted_warm_up_cut_short_is_still_a_restart_at_the_next_resume(tmp_path, power_cycled):
+    """A host-stamped IMU switched off during a pause: the resume sees it cold and warms it up
+    again, and is stopped (Ctrl-C) 10 s into that warm-up, which keeps its cold readings as the
+    newest warm-up record.  Resumed again at once, the IMU (on for 15 s, still 3.8 C below where
+    the run recorded its segments) is still cold: the minimum counted from power-on must apply
+    again, as it does for an IMU whose clock went back (its stamps below the first warm-up's).  A
+    warm IMU whose resume was stopped likewise is not held back.  (Review of the twentieth
+    session: the drop was judged from the cut warm-up's last reading, 21.9 C, and the cold IMU
+    passed on the slope.)"""
+    from station.bench.sequencer import _temperature_fell
+
+    cap = tmp_path / "cap"
+    writer = CaptureWriter(cap, ImuInfo(RATE_HZ, "m/s^2", "deg/s"), Site(normal_gravity(45.0), 45.0), "z")
+    t = 5000.0 + np.arange(0.0, 200.0, 1.0)
+    _record(cap / "warmup.csv", t, np.round(26.0 - 5.0 * np.exp(-(t - 5000.0) / 40.0), 4))
+    ts = 5300.0 + np.arange(250) / RATE_HZ
+    with writer.begin_segment("zup", "static", up_body=[0, 0, 1]) as out:
+        out.write(ts, np.tile([0.0, 0.0, 9.8], (ts.size, 1)), np.zeros((ts.size, 3)), np.full(ts.size, 26.0))
+        out.close("complete", temperature_c=26.0)
+    t2 = 5400.0 + np.arange(10.0)
+    temp2 = np.round(26.0 - 5.0 * np.exp(-(t2 - 5399.0) / 40.0), 4) if power_cycled else np.full(t2.size, 26.0)
+    _record(cap / "warmup-2.csv", t2, temp2)
+    first = round(26.0 - 5.0 * np.exp(-15.0 / 40.0), 4) if power_cycled else 26.0
+    fell = _temperature_fell(cap, first, WINDOW_S)
+    assert (fell is not None) == power_cycled, fell

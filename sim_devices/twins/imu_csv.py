@@ -1,6 +1,8 @@
 """csv front-end of the IMU twin: one ``t,ax,ay,az,gx,gy,gz,temp`` line per sample, from
 power-up, in the units of a :class:`drivers.protocols.csvlines.CsvFormat`.  Input is ignored
-(hobby firmware takes no commands)."""
+(hobby firmware takes no commands).  ``clock_start_s``: the ``t`` column is a host's clock (a logger
+that stamps each line as it arrives), the device time plus the host's clock at the IMU's power-on
+(0: the IMU's own time since power-up)."""
 from __future__ import annotations
 
 from drivers.protocols.csvlines import CsvFormat, encode_lines
@@ -10,8 +12,9 @@ from .imu import ImuTwin
 
 
 class CsvFrontEnd:
-    def __init__(self, imu: ImuTwin, faulter: StreamFaulter, fmt: CsvFormat = CsvFormat()):
+    def __init__(self, imu: ImuTwin, faulter: StreamFaulter, fmt: CsvFormat = CsvFormat(), clock_start_s: float = 0.0):
         self.imu = imu
+        self.clock_start_s = float(clock_start_s)
         self.faulter = faulter
         self.fmt = fmt
         self.streaming = True
@@ -25,7 +28,7 @@ class CsvFrontEnd:
         if not t.size:
             return b""
         accel, gyro, temp = self.imu.measure(t)
-        blob = encode_lines(self.fmt, t, accel, gyro, temp)
+        blob = encode_lines(self.fmt, t + self.clock_start_s, accel, gyro, temp)
         if not self.faulter.faults.active and not self.faulter.record:
             self.faulter.frames_sent += t.size
             return blob

@@ -57,6 +57,11 @@ class BenchOptions:
     imu_protocol: str = "vectornav"
     faults: Faults = field(default_factory=Faults)
     csv_format: CsvFormat = field(default_factory=CsvFormat)
+    csv_clock_start_s: float = 0.0      # csv: the line's ``t`` is a host's clock, not the IMU's (a logger that
+                                        #   stamps each line as it arrives): device time plus this, the host's
+                                        #   clock at the IMU's power-on.  A twin started again with a later one
+                                        #   is a host-stamped IMU switched off and on: its stamps go on, the
+                                        #   IMU is cold again (issue 28)
     table_config: TableConfig = field(default_factory=lambda: TableConfig(angle_error_arcsec=None))
     table_framing: str = "tcp"    # acutrol replies: "tcp" (error code, length first) or "gpib"
     table_tcp_port: int | None = None   # serve the table on TCP 127.0.0.1:port (0: any free port)
@@ -526,7 +531,7 @@ class ImuLine:
             self.frontend = XsensFrontEnd(self.imu, self.faulter, device_id=0x03700001 + index)
             self.serial_number = f"{self.frontend.device_id:08X}"
         else:
-            self.frontend = CsvFrontEnd(self.imu, self.faulter, o.csv_format)
+            self.frontend = CsvFrontEnd(self.imu, self.faulter, o.csv_format, clock_start_s=o.csv_clock_start_s)
             self.serial_number = None          # a csv line says no identity
         self._open_port()
 

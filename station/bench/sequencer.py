@@ -17,6 +17,7 @@ session and split into segments by station/io/segment_detect.py.
 from __future__ import annotations
 
 import contextlib
+import io
 import math
 import signal
 import threading
@@ -466,17 +467,30 @@ class Sequencer:
         times, temps, rows = [], [], ["t_s,temp_c"]
         again = " again" if step.resumed else ""
         least = step.min_s
+        judged = False
         try:
             while True:
                 b = self._take(max(1, int(round(self.rate_hz))))
+                finite = np.isfinite(b.temp_c)
                 if t_first is None:
                     t_first = b.t_s[0]
                     if step.restart_min_s > least and _clock_restarted(self._reference().writer.path, t_first):
                         least = step.restart_min_s
                         self.display.note(f"the IMU's clock restarted since the run stopped (switched off?): "
                                           f"warming up again for at least {least:g} s")
+                if step.restart_min_s > least and not judged and finite.any():
+                    # an IMU stamped by the host's clock (which never goes back): its temperature
+                    # fallen below the capture's last reading beyond the readings' noise says it was
+                    # off (the first finite reading, as the record keeps it)
+                    judged = True
+                    fell = _temperature_fell(self._reference().writer.path, round(float(b.temp_c[finite].mean()), 4),
+                                             step.window_s)
+                    if fell is not None:
+                        least = step.restart_min_s
+                        self.display.note(f"the IMU's temperature fell {fell[0]:.3g} C since the run stopped (more "
+                                          f"than its readings' noise, {fell[1]:.2g} C: switched off?): warming up "
+                                          f"again for at least {least:g} s")
                 elapsed = float(b.t_s[-1] - t_first)
-                finite = np.isfinite(b.temp_c)
                 if finite.any():
                     # the decision is taken on the values written to warmup.csv (ms, 0.1 mK), so
                     # that the record reproduces it exactly
@@ -977,6 +991,97 @@ def _clock_restarted(directory, t_s) -> bool:
             pass
     last = [t for t in last if math.isfinite(t)]
     return bool(last) and float(t_s) < max(last)
+
+
+NEWEST_SEGMENTS = 3     # the last segments of the manifest whose files' stamps are read (_last_temperature)
+
+
+def _last_temperature(directory):
+    """(stamp s, temperature degC) of the newest temperature the capture ``directory`` recorded, and
+    every warm-up record's readings the noise is judged from (arrays of (t, temp), the newest
+    last): the newest temperature is the mean temperature (the manifest's ``temperature_c``)
+    of the last NEWEST_SEGMENTS segments the manifest lists with one, at their files' last stamps,
+    or without any, the last reading of each warm-up record (warmup.csv, warmup-2.csv, ...); (None,
+    None, records) when there is none.  What
+    cannot be read (a record or a file missing, a FIFO in its place) is left out."""
+    from station.io.capture import read_capture
+
+    newest, warmups, records = [], [], []
+    for path in warmup_records(directory):
+        try:
+            rows = np.loadtxt(io.BytesIO(read_regular_file(path)), delimiter=",", skiprows=1, ndmin=2)
+        except (OSError, ValueError):
+            continue
+        rows = rows[np.all(np.isfinite(rows), axis=1)] if rows.size and rows.shape[1] >= 2 else np.zeros((0, 2))
+        if len(rows):
+            warmups.append((float(rows[-1, 0]), float(rows[-1, 1])))
+            records.append(rows[:, :2])
+    try:
+        capture = read_capture(directory, load_data=False)
+        segments = list(capture.segments)
+    except Exception:            # (the capture's own reader says what is wrong elsewhere)
+        segments = []
+    found = 0
+    for seg in reversed(segments):      # (the manifest lists them as recorded: the newest few)
+        if found >= NEWEST_SEGMENTS:
+            break
+        temp = seg.extra.get("temperature_c")
+        if isinstance(temp, bool) or not isinstance(temp, (int, float)) or not math.isfinite(temp):
+            continue
+        try:
+            tail = read_regular_file(capture.path / seg.file)[-4096:].split()
+            t = float(tail[-1].split(b",")[0])
+        except (OSError, ValueError, IndexError):
+            continue
+        if math.isfinite(t):
+            newest.append((t, float(temp)))
+            found += 1
+    records.sort(key=lambda r: r[-1, 0])          # (the newest last)
+    # a segment's when there is one (recorded warm, after a warm-up that ended): a warm-up record
+    # newer than it may be one cut short (Ctrl-C) while an IMU switched off warmed up again, whose
+    # last reading is still cold (review of the twentieth session)
+    newest = newest or warmups
+    if not newest:
+        return None, None, records
+    t, temp = max(newest)
+    return t, temp, records
+
+
+def _temperature_fell(directory, temp_c, window_s):
+    """(how far, the threshold) in degC when the IMU's first reading ``temp_c`` of a resumed
+    warm-up is below the newest temperature the capture recorded (_last_temperature) by more than
+    its readings' noise allows; None otherwise.  For an IMU whose stamps are the host's clock
+    (they never go back, _clock_restarted cannot tell): left on, its self-heating holds it where
+    the run left it (a warm-up's slope is never negative); switched off, it cooled toward the
+    room.  The noise: the readings of the newest warm-up record with three in its last
+    ``window_s`` (the slope rule's window) about a straight line there, and their resolution (the
+    smallest step between readings of any record, as a uniform quantisation, q^2/12), for both
+    readings (x sqrt 2), 4 sigma: a drop
+    beyond that is not noise.  A room that cooled meanwhile counts as a drop too (the IMU is not
+    where the run left it: the minimum is waited)."""
+    _, last, records = _last_temperature(directory)
+    if last is None or not math.isfinite(temp_c):
+        return None
+    var = 0.0
+    # the scatter: the newest record with 3 readings in its last window (one cut short after a
+    # reading or two says nothing of it); the resolution: the smallest step of any record (a
+    # quantised sensor steady in the newest shows none)
+    for readings in reversed(records):
+        t, temp = readings[:, 0], readings[:, 1]
+        sel = t >= t[-1] - window_s
+        if np.count_nonzero(sel) >= 3:
+            fit = np.polyfit(t[sel], temp[sel], 1)
+            resid = temp[sel] - np.polyval(fit, t[sel])
+            var += float(np.sum(resid ** 2) / max(np.count_nonzero(sel) - 2, 1))
+            break
+    steps = np.concatenate([np.abs(np.diff(r[:, 1])) for r in records] or [np.zeros(0)])
+    steps = steps[steps > 0]
+    if len(steps):
+        var += float(np.min(steps)) ** 2 / 12.0
+    # (no record to judge the noise by: the last digit the record keeps, 0.1 mK, as a resolution)
+    threshold = 4.0 * math.sqrt(2.0 * max(var, 1e-8 / 12.0))
+    drop = last - float(temp_c)
+    return (drop, threshold) if drop > threshold else None
 
 
 def _slope_c_per_h(times, temps, window_s):

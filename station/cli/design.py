@@ -226,7 +226,8 @@ def _cmd_from(args) -> int:
                           "duration_s": e.duration_s, "segments": e.entries, "segment_s": e.segment_s,
                           "parameters": [{"name": n, "unit": e.units[n], "sigma_before": e.before[n],
                                           "sigma_after": e.after[n], "revealed_before": e.revealed_before[n],
-                                          "revealed_after": e.revealed_after[n]} for n in e.names],
+                                          "revealed_after": e.revealed_after[n],
+                                          "sigma_searched": e.searched.get(n)} for n in e.names],
                           "correlation_before": e.correlation_before, "correlation_after": e.correlation_after,
                           "noise": vars(e.noise), "record": record, "notes": e.notes}, indent=1))
         return 0

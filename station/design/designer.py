@@ -96,7 +96,7 @@ def geometry_of(config) -> dict | None:
 
 
 def predict(scheme: Scheme, effects: list, noise: Noise, config=None, duration_s: float = math.nan,
-            plan=None, seeds=(0,), appended=()) -> Prediction:
+            plan=None, seeds=(0,), appended=(), times=None, temperatures=None) -> Prediction:
     """The estimator's 1σ of every reported parameter (scale factors in ppm) for ``scheme``: its
     capture simulated without noise, summarised with the noise stated, fitted as ``station
     estimate`` fits (attitudes as the estimator chooses them, blind effect parameters held by
@@ -113,7 +113,9 @@ def predict(scheme: Scheme, effects: list, noise: Noise, config=None, duration_s
     thirteenth session).  ``appended``: segment names recorded later by ``run --append``, or
     {name: N} for the N-th extension's (station design --from's extension of a capture already
     extended: its rotations axis groups of their own per extension, as the estimator reads the
-    capture then; information.model_of)."""
+    capture then; information.model_of).  ``times``: {segment name: mean sample time, s} in place
+    of the simulated bench's (information.model_of: station design --from's capture timeline);
+    ``temperatures``: {segment name: mean temperature, degC} likewise."""
     from station.estimate import lsq
 
     truth = quiet_truth(noise, config)
@@ -126,7 +128,8 @@ def predict(scheme: Scheme, effects: list, noise: Noise, config=None, duration_s
     for seed in seeds:
         model, _ = model_of(scheme, effects, noise, truth, None, seed=seed,
                             chamber=config.chamber if config is not None else None, appended=appended,
-                            ramp_accel_dps2=ramp_accel_of(config), warmup=config.warmup if config is not None else None)
+                            ramp_accel_dps2=ramp_accel_of(config), warmup=config.warmup if config is not None else None,
+                            times=times, temperatures=temperatures)
         result = lsq.fit(model.s, [copy.deepcopy(e) for e in effects])
         names, index, factors, units_ = lsq._reported_index(result, "m/s^2", "deg/s")
         factors, units_ = np.array(factors, float), list(units_)

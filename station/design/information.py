@@ -201,6 +201,16 @@ def _segment_times(model, chunk, owner) -> dict:
     return {key: float(np.mean(t)) - t0 - float(e.reference_s) for key, t in by_key.items() if key[0] != "anchor"}
 
 
+def _after_the_step(effect):
+    """``effect`` for segments recorded after the capture's end (information's ``first_times``):
+    a bias step (a located step time, bias_step) before all of them; any other as it is."""
+    if getattr(effect, "id", "") != "bias_step":
+        return effect
+    e = copy.deepcopy(effect)
+    e.locate(-1e12, "before every segment added after the capture")
+    return e
+
+
 def ramp_accel_of(config) -> float:
     """The recorded ramps' acceleration on the simulated bench (deg/s^2): the configured table's
     (station.simulate.dryrun.table_ramp_accel), the dry run's default without a configuration."""
@@ -224,7 +234,7 @@ def quiet_truth(noise: Noise, config=None):
 
 def model_of(scheme: Scheme, effects: list, noise: Noise, truth, geometry: dict | None = None,
              attitudes: str = "unknown", seed: int = 0, chamber=None, appended=(), ramp_accel_dps2=None,
-             warmup=None):
+             warmup=None, times=None, temperatures=None):
     """The least-squares model of the noiseless capture of ``scheme`` with the noise stated, as
     station.simulate.montecarlo.cramer_rao weights it: (model, capture).  ``seed``: the simulated
     bench's geometry (each static's heading, each rotation axis' heading and roll: drawn at
@@ -232,7 +242,13 @@ def model_of(scheme: Scheme, effects: list, noise: Noise, truth, geometry: dict 
     ``appended``: the segments recorded by a later ``run --append``: their names (``appended: 1``
     in the manifest), or {name: N} (the N-th extension's, as the manifest numbers them: a capture
     already extended once, then extended again): their rotations are axis groups of their own per
-    extension, as the estimator reads them (summaries: one group per body axis and session)."""
+    extension, as the estimator reads them (summaries: one group per body axis and session).
+    ``times``: {segment name: its mean sample time, s} in place of the simulated bench's (station
+    design --from: the capture's own segments at theirs, the extension's after the capture's end;
+    the effects in the time read them: bias_drift), or {name: (that time, the span from its first
+    sample to its last, s)} (a static simulated at another dwell than its own: where a bias step
+    falls inside it).  ``temperatures``: {segment name: its mean temperature, degC} likewise (the
+    effects in the temperature read them)."""
     from station.estimate import lsq
     from station.estimate.summaries import summarise
     from station.simulate import dryrun
@@ -245,6 +261,18 @@ def model_of(scheme: Scheme, effects: list, noise: Noise, truth, geometry: dict 
             seg.extra["appended"] = int(sessions[seg.name])
     capture.extra["noise_free"] = True          # (no data-fault scan: station/estimate/data_faults.py)
     s = summarise(capture, table_angle_arcsec=noise.table_angle_arcsec)
+    if times:
+        for x in (*s.statics, *s.rotations):
+            if x.name in times:
+                v = times[x.name]
+                if isinstance(v, tuple):        # (mean sample time, span from first to last sample)
+                    x.t_mid_s, x.duration_s = float(v[0]), float(v[1])
+                else:
+                    x.t_mid_s = float(v)
+    if temperatures:
+        for x in (*s.statics, *s.rotations):
+            if x.name in temperatures:
+                x.temp_c = float(temperatures[x.name])
     fs = s.sample_rate_hz
     accel_sigma = np.hypot(noise.accel_noise_ug * np.sqrt(fs), noise.accel_disturbance_ug)
     s.accel_sigma = np.full(3, accel_sigma * 9.80665e-6)
@@ -517,7 +545,8 @@ def static_information(info: Information, key, dwell_s: float) -> np.ndarray:
 
 def information(chunks: list, effects: list, noise: Noise, config=None,
                 geometry: dict | None = None, centred: bool = False,
-                attitudes: str = "unknown", timeline: bool = False, appended=None) -> Information:
+                attitudes: str = "unknown", timeline: bool = False, appended=None, times: bool = False,
+                first_times: dict | None = None) -> Information:
     """The information of every candidate.  ``chunks``: lists of (key, spec) where spec is a
     StaticSpec (dwell UNIT_DWELL_S) or a RotationSpec pair (``pair`` of two specs), each chunk
     a capture of its own (rotations about one body axis at two elevations go in different
@@ -537,7 +566,17 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
 
     ``appended``: {segment name: N} of the capture's own segments recorded by its N-th ``run
     --append`` (station design --from on a capture already extended: sequential.capture_sessions),
-    so that the capture's chunk has the estimator's axis groups (model_of)."""
+    so that the capture's chunk has the estimator's axis groups (model_of).
+
+    ``times``: the effects in the time only (natural_time, time_shear; the temperature's as
+    without ``timeline``): station design --from places every candidate at its time after the
+    capture's end, and the capture's own segments at theirs (sequential.py; twentieth session).
+
+    ``first_times``: {segment name: mean sample time} of the first chunk's segments (station
+    design --from: the capture's own, at their times on its clock), and with it a bias step
+    (bias_step, its time located in the capture: sequential.locate_step) is where it was located
+    for the first chunk and before every segment of the others (recorded after the capture's end:
+    all after the step; twentieth session)."""
     from station.simulate import dryrun
 
     truth = quiet_truth(noise, config)
@@ -563,7 +602,8 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
     # the capture's own groups' offsets stay parameters
     offsets_of_groups = any(e.id == "rotation_axis_offsets" for e in effects)
     lines = None                     # the capture's axis lines and their offsets (_offset_lines)
-    for chunk in chunks:
+    later = [_after_the_step(e) for e in effects] if first_times is not None else effects
+    for k_chunk, chunk in enumerate(chunks):
         segments, owner = [], {}
         for key, spec in chunk:
             parts = spec if isinstance(spec, tuple) else (spec,)
@@ -573,8 +613,9 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
         if offsets_of_groups:
             segments = _anchored(segments, owner, len(placed))
         scheme = Scheme("candidates", "", "", {}, tuple(segments), centred=centred, table=True)
-        model, _ = model_of(scheme, effects, noise, truth, geometry, attitudes, ramp_accel_dps2=ramp_accel,
-                            appended=appended or (), warmup=warmup)
+        model, _ = model_of(scheme, effects if k_chunk == 0 else later, noise, truth, geometry, attitudes,
+                            ramp_accel_dps2=ramp_accel, appended=appended or (), warmup=warmup,
+                            times=first_times if k_chunk == 0 else None)
         shared = _shared_columns(model)
         group_own = _group_offsets(model, owner)
         rename: dict = {}
@@ -629,13 +670,13 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
         labels = model.row_labels(x)
         if info is None:
             info = Information(len(shared), merged, attitudes=attitudes)
-            if power is not None or (timeline and any(hasattr(e, "time_shear") for e in model.effects)):
+            if power is not None or ((timeline or times) and any(hasattr(e, "time_shear") for e in model.effects)):
                 info.temp_power, info.temperature = power, warm
                 info.clock = (float(truth.bench.move_s + truth.bench.settle_s), float(truth.sample_rate_hz),
                               ramp_accel)
                 info.start_s = dryrun.warmup_seconds(warmup, warm)
         info.chunk_parameters.append(list(p_c.names))
-        if timeline:
+        if timeline or times:
             info.natural_time.update(_segment_times(model, chunk, owner))
         if power is not None:
             from station.design.timeline import seconds_temperatures
@@ -705,6 +746,6 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
     info.column_names = list(union)
     if power is not None and len(power) != G:
         info.temp_power = temperature_powers(model.effects, merged, G)
-    if timeline:
+    if timeline or times:
         info.time_shear = time_shear_of(model.effects, info.column_names)
     return info

@@ -40,14 +40,14 @@ def from_noise_file(path, table_angle_arcsec: float) -> Noise:
                  source=f"white noise of {Path(path).name} (station noise)")
 
 
-def from_capture(path) -> Noise:
+def from_capture(path, summaries=None) -> Noise:
     """The white noise the capture's statics show (per sample, to densities by the sample rate)
-    and the table angle error its manifest states."""
+    and the table angle error its manifest states (``summaries``: the capture's, when read
+    already)."""
     from station.estimate.summaries import summarise
     from station.io.capture import read_capture
 
-    capture = read_capture(Path(path), load_data=False)
-    s = summarise(capture)
+    s = summaries if summaries is not None else summarise(read_capture(Path(path), load_data=False))
     fs = float(s.sample_rate_hz)
     a = float(np.max(s.accel_sigma)) / G0 * 1e6 / math.sqrt(fs)
     g = float(np.max(s.gyro_sigma)) * 3600.0 / math.sqrt(fs)

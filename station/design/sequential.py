@@ -25,6 +25,12 @@ goal holds without it (fewest), and each is exchanged for a shorter one that kee
 time).  Then the estimator's own fit of the capture's segments plus the extension (designer.
 predict) checks the proposal: a named parameter it still calls not revealed makes the search
 go on (the next best candidate added), so what is written is what `station estimate` will say.
+
+Effects in the time and the temperature (bias_drift, a bias step, temperature_bias, ...; twentieth
+session): the capture's segments are informed at their times and recorded temperatures on the
+capture's clock, the extension's after the capture's end (CaptureTimeline), and the estimator's
+check is the fit at those times and temperatures; a bias step is located in the capture as the
+estimator locates it (locate_step), every added segment after it.
 """
 from __future__ import annotations
 
@@ -50,7 +56,11 @@ CHECK_ROUNDS = 4          # the estimator's check sends the search on at most th
 # or a rate (table_wobble: one lean per table axis; table_vibration_once_per_rev: one per table axis
 # and rate) are designed: a candidate about the same table axis, or at the same rate, shares them
 # (information.column_names), one at a new rate brings its own
-PER_SEGMENT_EFFECTS = ("remount_per_segment", "bias_step")
+PER_SEGMENT_EFFECTS = ("remount_per_segment",)
+# a bias step's time is located in the capture (locate_step, as the estimator locates it) and every
+# segment added after the capture's end is after it (information.information's first_times;
+# twentieth session: it was refused with the per-segment effects)
+STEP = "bias_step"
 # a time offset is seen only where the rate changes within a segment's window (time_offset: the
 # gyro integral moves by dt (w_end - w_start)); a steady turn's window has none (the compiler ramps
 # before it and brakes after it), so with a time offset in the model the candidates include turns
@@ -94,6 +104,7 @@ class Extension:
     correlation_before: float | None = None
     noise: object = None
     notes: list = field(default_factory=list)
+    searched: dict = field(default_factory=dict)   # name -> 1σ the search's information gives the extension
 
 
 def capture_scheme(capture):
@@ -210,9 +221,9 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
         raise UserError("--from: give --reveal PARAMS or --separate A,B (one of them)")
     per_segment = [e.id for e in effects if e.id in PER_SEGMENT_EFFECTS]
     if per_segment:
-        raise UserError(f"--from: {', '.join(per_segment)} has parameters of its own per segment or a step's time "
-                        "(set from the segments recorded) that no added segment shares, so segments to add cannot "
-                        "be weighed for it; what separates it is said beside it in station diagnose")
+        raise UserError(f"--from: {', '.join(per_segment)} has parameters of its own per segment (set from the "
+                        "segments recorded) that no added segment shares, so segments to add cannot be weighed for "
+                        "it; what separates it is said beside it in station diagnose")
     from station.diagnose.suggest import hand_turns, imported       # the rules diagnose's commands follow
 
     hand = hand_turns(capture)
@@ -235,14 +246,32 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     config, table_source = capture_config(path, config_path)
     base = capture_scheme(capture)
     sessions = capture_sessions(capture)          # a capture extended before: its extensions' segments
-    noise = noise_mod.from_capture(path)
+    # effects in the time (bias_drift): the capture's own segments informed at their times on the
+    # capture's clock, the extension's after its end (CaptureTimeline; twentieth session)
+    timed = any(hasattr(e, "time_shear") for e in effects)
+    stepped = any(e.id == STEP for e in effects)
+    # effects in the temperature's difference from a reference: the capture's segments at their
+    # recorded temperatures, the extension's at the simulated IMU's after the capture's end
+    # (CaptureTimeline; not with a chamber: its levels are the candidates' own)
+    tempered = _temperature_referenced(effects) and getattr(config, "chamber", None) is None
+    summaries = None
+    if timed or stepped or tempered:
+        from station.estimate.summaries import summarise
+
+        summaries = summarise(capture)
+        _one_clock(path, summaries)
+    noise = noise_mod.from_capture(path, summaries)
+    if stepped:
+        say("locating the bias step in the capture (as station estimate does)")
+        locate_step(capture, effects)
     # --- the candidates: the capture's own segments first (chosen), then the table's
     table = cand_mod.Table(config)
     cands, chunks, notes, masks = cand_mod.candidate_set(
         table, rates_dps or cand_mod.DEFAULT_RATES_DPS, revolutions or cand_mod.DEFAULT_REVOLUTIONS,
         dwells_s or cand_mod.DEFAULT_DWELLS_S, ramps=any(e.id == TIME_OFFSET for e in effects))
-    own_chunk, own = [], []
+    own_chunk, own, own_segments = [], [], []
     for spec in base.segments:
+        own_segments.append(spec.name)
         if spec.kind == "static":
             own_chunk.append((("capture", spec.name), replace(spec, dwell_s=UNIT_DWELL_S)))
             own.append(Candidate(("capture", spec.name, spec.dwell_s), "static", 0.0, dwell_s=spec.dwell_s,
@@ -252,11 +281,20 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
             key = (("capture",) + tuple(spec.axis_body), spec.axis_elevation_deg, spec.name)
             own_chunk.append((key, (spec,)))
             own.append(Candidate(key, "rotation", 0.0, axis=key[:2]))
+    if stepped:           # where the step was located, which the design takes as known
+        notes += [f"{n}; every added segment comes after it" for e in effects if e.id == STEP for n in e.notes()]
     say(f"the information of the capture's {len(own)} segments and of {len(cands)} candidates on "
         f"{table_source}")
+    first_times = None
+    if stepped:                 # the capture's own segments at their times: which are after the step
+        # (and their spans: a static is informed at another dwell, UNIT_DWELL_S, than its own,
+        # and the step may fall inside it: bias_step.sample_share)
+        first_times = {x.name: (float(x.t_mid_s), float(x.duration_s))
+                       for x in (*summaries.statics, *summaries.rotations) if np.isfinite(x.t_mid_s)}
     info = information([own_chunk] + chunks, effects, noise, config, geometry_of(config), base.centred,
-                       appended=sessions)
+                       appended=sessions, times=timed, first_times=first_times, timeline=tempered)
     all_cands = own + cands
+    masks_all = [0] * len(own) + list(masks)
     names = info.parameters.names
     units = info.parameters.units
     typical = info.parameters.typical
@@ -298,6 +336,14 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     targets = np.array(targets, int)
     scorer = Scorer(info, all_cands, Criterion("worst"), targets)
     n_own = len(own)
+    placed = (CaptureTimeline(scorer, all_cands, own_segments, summaries, masks_all, config, noise,
+                              _unsummarised_end(capture, summaries))
+              if (timed and scorer.shear) or stepped or scorer.temperature_timed else None)
+
+    def place(added) -> None:
+        """Every candidate at its time (CaptureTimeline.place): nothing without effects in the time."""
+        if placed is not None:
+            placed.place(added)
     # the goal as rows over the reported parameters: each target itself, but an offset per axis
     # group (rotation_axis_offsets) by its component across both its axis and the first group's --
     # the part along its axis is seen by no segment (w x (w x d) and dw/dt x d are across w), the
@@ -347,13 +393,21 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
         notes.append(VERTICAL_ONLY)
     say(f"searching for the fewest segments ({goal})")
 
+    def state(added) -> State:
+        """The capture's segments and ``added``, every candidate placed on the capture's timeline
+        for them (place: the next one after them)."""
+        place(added)
+        return State(scorer, list(range(n_own)) + list(added))
+
     def search(forced=()) -> list:
-        st = State(scorer, list(range(n_own)) + list(forced))
+        st = state(forced)
         added = list(forced)
         if not forced:          # one candidate alone, the shortest that does it
             ok = [j for j in pool if allowed(st.chosen, j) and badness(st.information(add=(j,))) <= 1.0]
             if ok:
-                return [min(ok, key=lambda j: secs[j])]
+                best = min(ok, key=lambda j: secs[j])
+                state([best])
+                return [best]
         current = badness(st.information())
         while current > 1.0 and len(added) < MAX_SEGMENTS:
             best, best_gain, best_v = None, 0.0, current
@@ -366,28 +420,53 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
                     best, best_gain, best_v = j, gain, v
             if best is None:
                 break
-            st.add(best)
             added.append(best)
-            current = best_v
+            if placed is None:
+                st.add(best)
+                current = best_v
+            else:               # the others after it now
+                st = state(added)
+                current = badness(st.information())
         if current > 1.0:
+            state(added)
             return added
         for i in list(reversed(added)):          # fewest: drop what is not needed
             if len(added) > 1 and badness(st.information(remove=(i,))) <= 1.0:
-                st.remove(i)
-                added.remove(i)
+                rest = [j for j in added if j != i]
+                if placed is None:
+                    st.remove(i)
+                    added = rest
+                    continue
+                # (on the timeline: the others move up without it, so judged again placed so)
+                trial = state(rest)
+                if badness(trial.information()) <= 1.0:
+                    st, added = trial, rest
+                else:
+                    st = state(added)
         for k, i in enumerate(list(added)):      # least time: a shorter one that keeps the goal
             rest = st.chosen - {i}
             better = [j for j in pool if secs[j] < secs[i] and allowed(rest, j)
                       and badness(st.information(remove=(i,), add=(j,))) <= 1.0]
-            if better:
-                j = min(better, key=lambda j: secs[j])
-                st.remove(i)
-                st.add(j)
-                added[k] = j
+            for j in sorted(better, key=lambda j: secs[j]):
+                changed = added[:k] + [j] + added[k + 1:]
+                if placed is None:
+                    st.remove(i)
+                    st.add(j)
+                    added = changed
+                    break
+                trial = state(changed)
+                if badness(trial.information()) <= 1.0:
+                    st, added = trial, changed
+                    break
+                st = state(added)
+        state(added)
         return added
 
-    before = _aligned(predict(base, effects, noise, config, appended=sessions), names)
-    if (badness(State(scorer, list(range(n_own))).information()) <= 1.0
+    times = placed.own_times if placed is not None else None
+    temps = placed.own_temps if placed is not None and scorer.temperature_timed else None
+    before = _aligned(predict(base, effects, noise, config, appended=sessions, times=times, temperatures=temps),
+                      names)
+    if (badness(state(()).information()) <= 1.0
             and all(before.revealed[i] or i in along for i in targets)):
         # the capture's own segments meet the goal already (by the information and by the
         # estimator's own fit of them): the fewest segments are none, and none is proposed
@@ -404,7 +483,7 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
     for _ in range(CHECK_ROUNDS):
         if not added:
             raise UserError(f"{path}: no candidate segment on this table can {goal.split(' (')[0]}")
-        reached = badness(State(scorer, list(range(n_own)) + added).information())
+        reached = badness(state(added).information())
         entries, specs = _segments_of(added, all_cands, [0] * n_own + list(masks))
         ext = Scheme(name, "extension designed by station design --from", "docs/design.md", {}, tuple(specs),
                      centred=base.centred)
@@ -414,18 +493,24 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
         # their own for the estimator, an offset per axis group the capture's about the same axis)
         # (a capture extended before: this is its next extension, the manifest's appended: N + 1)
         following = max(sessions.values(), default=0) + 1
+        if placed is not None:          # the capture's segments at their times, the extension's after its end
+            times = {**placed.own_times, **placed.segment_times(added, [x.name for x in more])}
+            if scorer.temperature_timed:
+                temps = {**placed.own_temps, **placed.segment_temperatures(added, [x.name for x in more])}
         after = _aligned(predict(whole, effects, noise, config,
-                                 appended={**sessions, **{s.name: following for s in more}}), names)
+                                 appended={**sessions, **{s.name: following for s in more}}, times=times,
+                                 temperatures=temps), names)
+        searched = scorer.sigma(list(range(n_own)) + added)
         blind = [names[i] for i in targets if not after.revealed[i] and i not in along]
         if reached <= 1.0 and not blind:
             break
         if reached > 1.0:
             raise UserError(f"{path}: no {MAX_SEGMENTS} segments this table can do {goal.split(' (')[0]} "
-                            f"(the closest: {worst_of(State(scorer, list(range(n_own)) + added).information())})")
+                            f"(the closest: {worst_of(state(added).information())})")
         notes.append(f"the estimator still called {', '.join(blind)} not revealed with {len(added)} "
                      "segment(s): one more added")
         extra = [j for j in pool if allowed(set(range(n_own)) | set(added), j)]
-        st = State(scorer, list(range(n_own)) + added)
+        st = state(added)
         best = min(extra, key=lambda j: badness(st.information(add=(j,))))
         added = search(forced=added + [best])
     else:
@@ -461,7 +546,228 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
                      {names[i]: bool(after.revealed[i]) for i in targets},
                      {names[i]: units[i] for i in targets}, ext_entries, text, plan.duration_s,
                      [_entry_s(table, e) for e in ext_entries], corr_after, corr_before, noise,
-                     notes + list(plan.notes))
+                     notes + list(plan.notes), {names[i]: float(searched[i]) for i in targets})
+
+
+class CaptureTimeline:
+    """Where every candidate of station design --from is recorded in time, for the effects in the
+    time (bias_drift; information.Information.time_shear; twentieth session): the capture's own
+    segments at their mean sample times on the capture's clock (its summaries' t_mid_s, as the
+    estimator reads them), the extension's after the capture's end -- from its last sample (half a
+    sample after it), the configured warm-up of a resumed run (station.yaml ``warmup:``, as
+    ``run --append`` waits it: dryrun.warmup_seconds(resumed=True) on the simulated IMU), then its
+    segments in the written order on the simulated bench's clock (timeline.seconds_timeline: the
+    gap before each segment, its samples), as ``station run --sim --append`` records them; a
+    candidate not chosen where it would be recorded next, after the chosen ones.  The reference
+    is the estimator's, the mean time of every static (the capture's and the extension's).
+    Before, each candidate was informed at its time in the candidates' own simulated capture (and
+    the capture's segments in theirs), with a reference of its own chunk."""
+
+    def __init__(self, scorer, cands, own_names, summaries, masks, config, noise, last_sample_s=None):
+        from station.design import timeline
+        from station.design.information import quiet_truth, ramp_accel_of
+        from station.simulate import dryrun
+
+        self.scorer, self.cands, self.masks = scorer, cands, masks
+        self.n_own = len(own_names)
+        truth = quiet_truth(noise, config)          # (information.Information.clock's)
+        self.clock = (float(truth.bench.move_s + truth.bench.settle_s), float(truth.sample_rate_hz),
+                      ramp_accel_of(config))
+        mids = {x.name: float(x.t_mid_s) for x in (*summaries.statics, *summaries.rotations)
+                if np.isfinite(x.t_mid_s)}
+        ends = [float(x.t_mid_s) + 0.5 * float(x.duration_s) for x in (*summaries.statics, *summaries.rotations)
+                if np.isfinite(x.t_mid_s) and np.isfinite(x.duration_s)]
+        fs = float(summaries.sample_rate_hz)
+        self.own_times = {n: mids[n] for n in own_names if n in mids}
+        self.own = [mids.get(n) for n in own_names]
+        # the recorded temperatures (each segment's mean), and the simulated IMU's warm-up going on
+        # from the newest of them (its temperature model, shifted to meet it: IMUShifted)
+        recorded = {x.name: float(x.temp_c) for x in (*summaries.statics, *summaries.rotations)
+                    if x.temp_c is not None and np.isfinite(x.temp_c)}
+        self.own_temps = {n: recorded[n] for n in own_names if n in recorded}
+        self.own_t = [recorded.get(n) for n in own_names]
+        self.temperature = None
+        if recorded and scorer.temperature_timed:
+            newest = max(recorded, key=lambda n: mids.get(n, -math.inf))
+            model = scorer.info.temperature
+            self.temperature = _Shifted(model, recorded[newest] - float(model.at(np.array([mids[newest]]))[0]))
+        if last_sample_s is not None:       # (a segment the summaries leave out: an aborted one's samples)
+            ends.append(float(last_sample_s))
+        end = (max(ends) if ends else 0.0) + 0.5 / fs
+        warmup = config.warmup if config is not None else None
+        self.start_s = end + (dryrun.warmup_seconds(warmup, truth.temperature, end, resumed=True)
+                              if warmup is not None else 0.0)
+        gap, rate = self.clock[:2]
+        accel = self.clock[2] if len(self.clock) > 2 else None
+        self.lengths = [timeline.segment_seconds(c, accel) if i >= self.n_own else []
+                        for i, c in enumerate(cands)]
+        # each candidate's mean time recorded first from 0, and the time it takes with its gaps
+        self.first = {}
+        self.span = {}
+        for i in range(self.n_own, len(cands)):
+            self.first[i] = float(timeline.seconds_timeline([self.lengths[i]], None, self.clock)[1][0])
+            self.span[i] = sum(gap + max(1, int(round(x * rate))) / rate for x in self.lengths[i])
+
+    def sequence(self, added) -> list:
+        """The added candidates in the order the extension is written (designer._segments_of's)."""
+        from station.design import timeline
+
+        return timeline.written_order(list(added), self.cands, self.masks)
+
+    def times(self, added) -> dict:
+        """{candidate index: its time on the capture's clock, s} (class doc)."""
+        from station.design import timeline
+
+        seq = self.sequence(added)
+        out = {i: t for i, t in enumerate(self.own) if t is not None}
+        if seq:
+            mids = timeline.seconds_timeline([self.lengths[i] for i in seq], None, self.clock,
+                                             start_s=self.start_s)[1]
+            out.update({i: float(t) for i, t in zip(seq, mids)})
+        end = self.start_s + sum(self.span[i] for i in seq)
+        chosen = set(seq)
+        for i in self.first:
+            if i not in chosen:
+                out[i] = end + self.first[i]
+        return out
+
+    def temperatures(self, added) -> dict:
+        """{candidate index: its mean temperature, degC} (class doc): the capture's recorded, the
+        extension's on the simulated IMU's warm-up after the capture (self.temperature)."""
+        from station.design import timeline
+
+        seq = self.sequence(added)
+        out = {i: v for i, v in enumerate(self.own_t) if v is not None}
+        if self.temperature is None:
+            return out
+        if seq:
+            temps = timeline.seconds_timeline([self.lengths[i] for i in seq], self.temperature, self.clock,
+                                              start_s=self.start_s)[0]
+            out.update({i: float(v) for i, v in zip(seq, temps)})
+        end = self.start_s + sum(self.span[i] for i in seq)
+        chosen = set(seq)
+        rest = [i for i in self.first if i not in chosen]
+        for i in rest:        # (each as if recorded next)
+            out[i] = float(timeline.seconds_timeline([self.lengths[i]], self.temperature, self.clock, start_s=end)[0][0])
+        return out
+
+    def place(self, added) -> None:
+        """Every candidate's information at its time and temperature less the references
+        (Scorer.set_temperatures; nothing without an effect in the time or the temperature: a
+        bias step's candidates are all after it)."""
+        sc = self.scorer
+        if not (sc.shear or sc.temperature_timed):
+            return
+        chosen = set(range(self.n_own)) | set(added)
+        dt_s = dt_c = None
+        if sc.shear:
+            t = self.times(added)
+            statics = [t[i] for i in chosen if i in t and self.cands[i].kind == "static"]
+            reference = float(np.mean(statics)) if statics else 0.0
+            dt_s = {i: v - reference for i, v in t.items()}
+        if sc.temperature_timed:
+            T = self.temperatures(added)
+            statics = [T[i] for i in chosen if i in T and self.cands[i].kind == "static"]
+            reference = float(np.mean(statics)) if statics else 0.0
+            dt_c = {i: v - reference for i, v in T.items()}
+        sc.set_temperatures(dt_c or {}, dt_s)
+
+    def segment_temperatures(self, added, names) -> dict:
+        """{segment name: mean temperature} of the extension's segments (segment_times')."""
+        from station.design import timeline
+
+        seq = self.sequence(added)
+        lengths = [[x] for i in seq for x in self.lengths[i]]
+        temps = timeline.seconds_timeline(lengths, self.temperature, self.clock, start_s=self.start_s)[0]
+        return {n: float(t) for n, t in zip(names, temps)}
+
+    def segment_times(self, added, names) -> dict:
+        """{segment name: mean sample time} of the extension's segments (``names``: in the order
+        written, a rotation pair's two), as the estimator's summaries would have them."""
+        from station.design import timeline
+
+        seq = self.sequence(added)
+        lengths = [[x] for i in seq for x in self.lengths[i]]
+        mids = timeline.seconds_timeline(lengths, None, self.clock, start_s=self.start_s)[1]
+        if len(mids) != len(names):
+            raise ValueError("the extension's segments and their times do not match")
+        return {n: float(t) for n, t in zip(names, mids)}
+
+
+def _unsummarised_end(capture, summaries):
+    """The last stamp of the segments the summaries leave out (an incomplete one: a segment aborted
+    by a pause or a failure; the bench's clock went on through its samples, and an extension
+    recorded next comes after them, as dryrun.append_scheme and the sequencer record it), or None
+    (review of the twentieth session)."""
+    summarised = {x.name for x in (*summaries.statics, *summaries.rotations)}
+    last = []
+    for seg in capture.segments:
+        if seg.name in summarised:
+            continue
+        try:
+            data = capture.read_samples(seg, warnings=[])
+        except Exception:           # (what is wrong with it is said where it is read for the estimate)
+            continue
+        if data is not None and len(data.t) and np.isfinite(data.t[-1]):
+            last.append(float(data.t[-1]))
+    return max(last) if last else None
+
+
+def _one_clock(path, summaries) -> None:
+    """UserError when two segments of the capture overlap in time on its clock (one clock never
+    records two at once): an IMU's own clock restarted between two sessions (switched off and
+    on), the sessions interleaved on it -- an extension recorded next goes on from the newest
+    session's clock, not after the largest stamp, and a drift or a step has no timeline to be
+    placed on (review of the twentieth session).  (Segments listed out of time order without
+    overlapping, as an import may list them, are not refused.)"""
+    segs = sorted((x for x in (*summaries.statics, *summaries.rotations)
+                   if np.isfinite(x.t_mid_s) and np.isfinite(x.duration_s)), key=lambda x: x.t_mid_s)
+    half = 0.5 / float(summaries.sample_rate_hz)
+    for a, b in zip(segs, segs[1:]):
+        if b.t_mid_s - 0.5 * b.duration_s < a.t_mid_s + 0.5 * a.duration_s - half:
+            first, later = (a, b) if a.index < b.index else (b, a)
+            raise UserError(f"{path}: the capture's clock went back: {later.name} (recorded after {first.name}) "
+                            f"overlaps it in time ({b.t_mid_s - 0.5 * b.duration_s:.1f} s, before "
+                            f"{a.t_mid_s + 0.5 * a.duration_s:.1f} s: the IMU restarted between sessions?): the "
+                            "effects in the time cannot be placed on it")
+
+
+class _Shifted:
+    """A temperature model T(t) moved by ``offset`` degC (CaptureTimeline.temperature)."""
+
+    def __init__(self, model, offset: float):
+        self.model, self.offset = model, float(offset)
+        self.start_c = getattr(model, "start_c", 0.0)
+
+    def at(self, t, air=None):
+        return self.model.at(t) + self.offset
+
+
+def _temperature_referenced(effects) -> bool:
+    """Effects in the temperature's difference from a reference, and no other that needs the
+    temperature (information.temperature_powers' condition)."""
+    from station.model.temperature import TemperatureReferenced
+
+    needs = [e for e in effects if "temperature" in getattr(e, "needs", ())]
+    return bool(needs) and all(isinstance(e, TemperatureReferenced) for e in needs)
+
+
+def locate_step(capture, effects) -> None:
+    """A bias step's time (bias_step in ``effects`` not located yet) located in ``capture`` as
+    station estimate locates it (station.estimate: the profile of the score test at the fit
+    without it, station/estimate/profile.py), on the capture's fit clock."""
+    import copy
+
+    from station.estimate import lsq, profile
+
+    pending = [e for e in effects if e.id == STEP and getattr(e, "step_time_s", 0.0) is None]
+    if not pending:
+        return
+    summaries = lsq.summarise(capture)
+    base = lsq.fit(summaries, [copy.deepcopy(e) for e in effects if e not in pending])
+    for e in pending:
+        profile.locate(base, e)
+        e.setup(summaries)          # (its clock's origin and the spans, for its notes; the time kept)
 
 
 def _entry_s(table, entry) -> float:

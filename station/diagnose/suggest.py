@@ -9,11 +9,15 @@ from pathlib import Path
 BASE = ("base_triads", "inter_triad")
 ALIAS_COS = 0.95      # two candidates whose one-step signatures are this alike: aliases (terms.py's threshold)
 # effects a scheme extension cannot be designed for: parameters per segment that no added segment
-# shares, a step's time (a table axis' wobble, a vibration per table axis and rate and an offset per
-# axis group are designed: station/design/information.py) (station.design.sequential.PER_SEGMENT_EFFECTS, copied: diagnose is below design)
-# effects of the time and the temperature: the candidates' information is on their own timeline,
-# not the capture's clock going on, and the table has no chamber: two of them are not separated
-# by segments the designer can weigh (docs/design.md, Limits)
+# shares (a table axis' wobble, a vibration per table axis and rate and an offset per axis group are
+# designed: station/design/information.py) (station.design.sequential.PER_SEGMENT_EFFECTS, copied:
+# diagnose is below design); a step's time: since the twentieth session station design --from
+# --add bias_step weighs segments after the capture (all after the step), asked by hand; diagnose
+# prints no command for it (its words say which segments to record again later)
+# effects of the time and the temperature: the candidates' temperatures are on their own timeline,
+# not the capture's clock going on (the drift's time is, since the twentieth session:
+# sequential.CaptureTimeline), and the table has no chamber: two of them are not separated by
+# segments the designer can weigh (docs/design.md, Limits)
 TIMELINE = ("bias_drift", "temperature_bias", "temperature_bias_quadratic", "scale_temperature")
 NOT_DESIGNED = ("remount_per_segment", "bias_step")
 # pairs no segments separate (measured: station design --from refuses them with what stays
