@@ -53,7 +53,7 @@ def test_every_library_effects_batch_form_is_its_per_row_form(optimal9, monkeypa
     for x in (X, Xc):
         np.testing.assert_array_equal(model._residuals_batch(x), per_row(model, x, monkeypatch))
     # each batch form's term reaches the residuals: without it they change
-    for e in effects:
+    for e in effects if not scaled else ():
         if e.id in batched and e.id != "time_offset":
             alone = lsq.Model(optimal9, [in_capture_units(type(e).__mro__[2])()])
             x = rows(alone)
@@ -78,3 +78,20 @@ def test_a_subclass_overriding_accel_alone_keeps_its_override(optimal9, monkeypa
     mine = plugin._residuals_batch(X)
     np.testing.assert_array_equal(mine, per_row(plugin, X, monkeypatch))
     assert not np.array_equal(mine, library._residuals_batch(X))
+
+
+def test_diagnoses_discovered_terms_batch_form_is_its_per_row_form(optimal9, monkeypatch):
+    """station diagnose's TermsEffect: every regressor of both sensors on its own axis, some rows'
+    coefficients 0 (the per-row form skips those terms)."""
+    from station.diagnose.terms import Term, TermsEffect, dictionary
+
+    terms = [Term(sensor, k % 3, r) for sensor in ("accel", "gyro")
+             for k, r in enumerate(dictionary(sensor, n_segments=len(optimal9.statics) + len(optimal9.rotations)))]
+    model = lsq.Model(optimal9, [in_capture_units(TermsEffect)(terms, 20.0)])
+    assert lsq._own_term_batch(model.effects[0], "accel") is not None
+    rng = np.random.default_rng(2)
+    X = model.x0 + 1e-3 * rng.standard_normal((B, len(model.x0)))
+    sl = model.layout["effect:discovered_terms"]
+    X[:, sl] = 1e-9 * rng.standard_normal((B, sl.stop - sl.start)) * (rng.random((B, sl.stop - sl.start)) < 0.7)
+    X[:, sl.start] = 0.0            # a term no row carries
+    np.testing.assert_array_equal(model._residuals_batch(X), per_row(model, X, monkeypatch))
