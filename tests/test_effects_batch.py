@@ -9,8 +9,11 @@ import pytest
 from station.estimate import lsq
 from station.io.scheme import load_scheme
 from station.model import LIBRARY
+from station.model.lever_arm import AccelLeverArm
 from station.model.nonlinearity import AccelNonlinearity
 from station.model.raw_counts import in_capture_units
+from station.model.table_encoder_scale import TableEncoderScale
+from station.model.table_wobble import TableWobble
 from station.simulate import dryrun
 
 B = 4
@@ -95,3 +98,43 @@ def test_diagnoses_discovered_terms_batch_form_is_its_per_row_form(optimal9, mon
     X[:, sl] = 1e-9 * rng.standard_normal((B, sl.stop - sl.start)) * (rng.random((B, sl.stop - sl.start)) < 0.7)
     X[:, sl.start] = 0.0            # a term no row carries
     np.testing.assert_array_equal(model._residuals_batch(X), per_row(model, X, monkeypatch))
+
+
+class MirroredArms(AccelLeverArm):
+    """A plugin: the library's size effect with its elements' positions mapped its own way
+    (``positions`` overridden alone: a helper accel calls and the batch form did not)."""
+    id = "mirrored_lever_arm"
+
+    def positions(self, x):
+        p = super().positions(x)
+        return p + p[::-1]
+
+
+class SteeperWobble(TableWobble):
+    """A plugin: the library's wobble with its lean three times (``_lean`` overridden alone)."""
+    id = "steeper_wobble"
+
+    def _lean(self, x, index):
+        l, w, lxw = super()._lean(x, index)
+        return l, 3.0 * w, 3.0 * lxw
+
+
+class GearedEncoder(TableEncoderScale):
+    """A plugin: the library's encoder scale error in units of 5 ppm (``_per_row`` overridden alone)."""
+    id = "geared_encoder_scale"
+
+    def _per_row(self, x, ctx):
+        return 5.0 * super()._per_row(x, ctx)
+
+
+@pytest.mark.parametrize("plugin", [MirroredArms, SteeperWobble, GearedEncoder], ids=lambda c: c.__name__)
+def test_a_subclass_overriding_a_helper_of_accel_alone_keeps_its_override(optimal9, monkeypatch, plugin):
+    """The review of batch27: a plugin overriding a method the per-row term calls but the batch
+    form does not (its own arithmetic) lost its override in the fit (silently: station apply, row
+    by row, kept it); such a subclass is called row by row."""
+    mine = lsq.Model(optimal9, [in_capture_units(plugin)()])
+    library = lsq.Model(optimal9, [in_capture_units(plugin.__mro__[1])()])
+    X = rows(mine)
+    ours = mine._residuals_batch(X)
+    np.testing.assert_array_equal(ours, per_row(mine, X, monkeypatch))
+    assert not np.array_equal(ours, library._residuals_batch(X))
