@@ -9,6 +9,7 @@ package's entry point (group ``station.effects``); docs/effects.md walks through
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -107,8 +108,9 @@ class Effect:
     # (B, 3, 3), one per row of X, the other fields (the points' temperature, time, segment index,
     # ...) shared, (N,); the result is (B, N, 3) or None, row n equal to accel(X[n], ctx of row n).
     # The fit uses it where the class that defines accel (gyro) defines accel_batch (gyro_batch)
-    # too, so a subclass overriding accel alone keeps its override (estimate.lsq._own_term_batch);
-    # else it calls accel row by row.  An effect without a term returns None from both.
+    # too, so a subclass overriding accel alone keeps its override (estimate.lsq._own_term_batch),
+    # and no subclass redefines a method of that class (a helper accel calls: batch_form); else it
+    # calls accel row by row.  An effect without a term returns None from both.
     def accel_batch(self, X: np.ndarray, ctx: SampleContext) -> np.ndarray | None:
         """accel() of every row of X (B, p) at once: (B, N, 3) (see above)."""
         return None
@@ -167,10 +169,23 @@ class Effect:
 
 def batch_form(effect: Effect, name: str, classes):
     """``effect``'s ``name + "_batch"`` (bound) when the first of ``classes`` that defines ``name``
-    or its batch form defines the batch form; else None."""
-    for cls in classes:
+    or its batch form defines the batch form and no class before it redefines one of its methods
+    (a helper ``name`` calls that the batch form may not: a plugin overriding the lever arm's
+    ``positions`` alone lost it in the fit, review of batch27); else None (row by row)."""
+    classes = tuple(classes)
+    for at, cls in enumerate(classes):
         own = vars(cls)
         if name in own or f"{name}_batch" in own:
             batch = own.get(f"{name}_batch")
-            return None if batch is None else batch.__get__(effect, type(effect))
+            if batch is None or (cls is not Effect and _redefined(classes[:at], cls)):
+                return None
+            return batch.__get__(effect, type(effect))
     return None
+
+
+@functools.lru_cache(maxsize=1024)
+def _redefined(subclasses: tuple, cls: type) -> bool:
+    """Whether one of ``subclasses`` defines a method or property that ``cls`` or a base of it has."""
+    methods = {k for c in cls.__mro__[:-1] for k, v in vars(c).items()
+               if callable(v) or isinstance(v, (property, staticmethod, classmethod))}
+    return any(k in methods for c in subclasses for k in vars(c))

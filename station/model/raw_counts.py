@@ -111,7 +111,7 @@ class InCaptureUnits:
         here = mro.index(InCaptureUnits)
         if any(name in vars(c) or f"{name}_batch" in vars(c) for c in mro[:here]):
             return batch_form(self, name, mro[:here])
-        inner = batch_form(self, name, mro[here + 1:])
+        inner = batch_form(self, name, mro[:here] + mro[here + 1:])     # a subclass' methods checked too
         if inner is None or not self._scaled():
             return inner
         return functools.partial(self._scaled_batch, name, inner)
