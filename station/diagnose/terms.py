@@ -304,11 +304,41 @@ class TermsEffect(Effect):
             out[:, t.axis] += x[k] * values[key]
         return out
 
+    def _term_batch(self, X, ctx, sensor):
+        """_term of every row of X (B, terms) with a batch context (Effect.accel_batch): the
+        regressors, elementwise in the points, on the B x N points flattened (the same numbers).
+        A term no row carries is skipped, as _term skips it; in a row whose coefficient alone is 0
+        it adds 0 x a finite regressor, which changes no number."""
+        B, N = len(X), len(ctx)
+        out = np.zeros_like(ctx.f_p)
+        v, values = None, {}
+        for k, t in enumerate(self.terms):
+            if t.sensor != sensor:
+                continue
+            if not np.any(X[:, k] != 0.0):
+                continue
+            key = t.regressor.key
+            if key not in values:
+                if v is None:
+                    v = _variables(ctx, self.reference_c)
+                    v.update(f=ctx.f_p.reshape(-1, 3), w=ctx.w_p.reshape(-1, 3), wd=v["wd"].reshape(-1, 3),
+                             T=np.tile(v["T"], B), Tr=np.tile(v["Tr"], B), t=np.tile(v["t"], B),
+                             seg=np.tile(v["seg"], B), _n=B * N)
+                values[key] = np.broadcast_to(eval(self._code[key], {"__builtins__": {}}, v), (B * N,)).reshape(B, N)
+            out[:, :, t.axis] += X[:, k, None] * values[key]
+        return out
+
     def accel(self, x, ctx):
         return self._term(x, ctx, "accel") if any(t.sensor == "accel" for t in self.terms) else None
 
     def gyro(self, x, ctx):
         return self._term(x, ctx, "gyro") if any(t.sensor == "gyro" for t in self.terms) else None
+
+    def accel_batch(self, X, ctx):
+        return self._term_batch(X, ctx, "accel") if any(t.sensor == "accel" for t in self.terms) else None
+
+    def gyro_batch(self, X, ctx):
+        return self._term_batch(X, ctx, "gyro") if any(t.sensor == "gyro" for t in self.terms) else None
 
 
 def _reference_c(s) -> float:

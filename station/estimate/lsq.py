@@ -1297,27 +1297,47 @@ class Model:
 
     def _add_effects(self, X, a, w, f_p, w_p, Ma, Mg, l, w_k, wdot_k, offset=None):
         """a and w with every effect's terms added (the Effect interface: one parameter vector,
-        all sample points; _checked: under complex step an unsafe term raises _ComplexUnsafe)."""
+        all sample points; _checked: under complex step an unsafe term raises _ComplexUnsafe).
+        An effect whose class gives the batch form (Effect.accel_batch, _own_term_batch) is called
+        once for all B rows of X, with a context whose per-row fields have a leading B axis; the
+        others once per row, with that context's row n (the same numbers)."""
         L, S, B = self.layout, len(self.s.statics), len(X)
-        zeros = np.zeros((S, 3))
-        a, w = a.copy(), w.copy()
         R = len(self.s.rotations)
         if offset is not None:      # the mounting offset at every point (statics: 0), (B, N, 3)
             offset = np.concatenate([np.zeros((B, S, 3), dtype=np.result_type(offset)),
                                      np.repeat(np.broadcast_to(offset, (B, R, 3)), PHASES, axis=1)], axis=1)
-        for n in range(B):
-            ctx = SampleContext(
-                f_p=f_p[n], w_p=w_p[n],
-                w_table=np.concatenate([zeros, (w_k * l[n][:, None, :]).reshape(-1, 3)]),
-                wdot_table=np.concatenate([zeros, (wdot_k * l[n][:, None, :]).reshape(-1, 3)]),
-                temp_c=self._ctx_temp, accel_matrix=Ma[n], gyro_matrix=Mg[n], t_s=self._ctx_t,
-                segment_index=self._ctx_index, temp_rate_c_per_s=self._ctx_temp_rate, turned_s=self._ctx_turned,
-                turned_sq_s2=self._ctx_turned_sq, offset_m=None if offset is None else offset[n])
-            for eff in self.effects:
-                px = X[n, L[f"effect:{eff.id}"]]
-                for term, out in ((_checked(eff, eff.accel, px, ctx), a), (_checked(eff, eff.gyro, px, ctx), w)):
+        zeros = np.zeros((B, S, 3))
+        ctx = SampleContext(
+            f_p=f_p, w_p=w_p,
+            w_table=np.concatenate([zeros, (w_k * l[:, :, None, :]).reshape(B, -1, 3)], axis=1),
+            wdot_table=np.concatenate([zeros, (wdot_k * l[:, :, None, :]).reshape(B, -1, 3)], axis=1),
+            temp_c=self._ctx_temp, accel_matrix=Ma, gyro_matrix=Mg, t_s=self._ctx_t,
+            segment_index=self._ctx_index, temp_rate_c_per_s=self._ctx_temp_rate, turned_s=self._ctx_turned,
+            turned_sq_s2=self._ctx_turned_sq, offset_m=offset)
+        rows = None                 # the per-row contexts, made when an effect has no batch form
+        for eff in self.effects:
+            P = X[:, L[f"effect:{eff.id}"]]
+            for name, out in (("accel", a), ("gyro", w)):
+                batch = _own_term_batch(eff, name)
+                if batch is not None:
+                    term = _checked(eff, batch, P, ctx)
                     if term is not None:
-                        out[n] = out[n] + term
+                        out = out + term
+                else:
+                    if rows is None:
+                        rows = [dataclasses.replace(ctx, f_p=f_p[n], w_p=w_p[n], w_table=ctx.w_table[n],
+                                        wdot_table=ctx.wdot_table[n], accel_matrix=Ma[n], gyro_matrix=Mg[n],
+                                        offset_m=None if offset is None else offset[n]) for n in range(B)]
+                    term = getattr(eff, name)
+                    out = out.copy()
+                    for n in range(B):
+                        t = _checked(eff, term, P[n], rows[n])
+                        if t is not None:
+                            out[n] = out[n] + t
+                if name == "accel":
+                    a = out
+                else:
+                    w = out
         return a, w
 
     def _hand_block(self, Mg, b_g, ups, w_static) -> np.ndarray:
@@ -1631,6 +1651,14 @@ def _minimise(model: Model, x0: np.ndarray, solve):
                 if other.cost < res.cost * (1 - 1e-9):
                     res, improved = other, True
     return res
+
+
+def _own_term_batch(effect, name: str):
+    """The effect's batch form of accel (name "accel") or gyro ("gyro"), or None (Effect.batch_term:
+    a plugin that subclasses a library effect and overrides accel alone gets its accel called row
+    by row, not its parent's batch).  An effect not derived from Effect (duck-typed) has none."""
+    find = getattr(effect, "batch_term", None)
+    return None if find is None else find(name)
 
 
 def _own_batch(effect):

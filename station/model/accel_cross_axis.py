@@ -36,13 +36,16 @@ class AccelCrossAxis(Effect):
 
     def accel(self, x, ctx):
         g = units.STANDARD_GRAVITY
-        along = ctx.f_p @ normalised(ctx.accel_matrix).T / g        # a_i, g
+        # x (6,), or a batch X (B, 6) with a batch context (accel_batch): the points' axis second to last
+        along = ctx.f_p @ normalised(ctx.accel_matrix).mT / g       # a_i, g
         f = ctx.f_p / g
         rows = []
         for i in range(3):
             term = 0.0
             for k, (ii, j) in enumerate(PAIRS):
                 if ii == i:
-                    term = term + x[k] * f[:, j]
-            rows.append(along[:, i] * term)
-        return units.UG_MPS2 * np.stack(rows, axis=1)
+                    term = term + x[..., k, None] * f[..., j]
+            rows.append(along[..., i] * term)
+        return units.UG_MPS2 * np.stack(rows, axis=-1)
+
+    accel_batch = accel

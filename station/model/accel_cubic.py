@@ -32,5 +32,8 @@ class AccelCubic(Effect):
         return tuple(Param(f"accel_k3_{a}", "ug/g^3", 1.0, 100.0, 20000.0) for a in "xyz")
 
     def accel(self, x, ctx):
-        along = ctx.f_p @ normalised(ctx.accel_matrix).T / units.STANDARD_GRAVITY   # g, per axis
-        return x * units.UG_MPS2 * along * along * along
+        """One parameter vector x (3,), or a batch X (B, 3) with a batch context (accel_batch)."""
+        along = ctx.f_p @ normalised(ctx.accel_matrix).mT / units.STANDARD_GRAVITY   # g, per axis
+        return x[..., None, :] * units.UG_MPS2 * along * along * along
+
+    accel_batch = accel

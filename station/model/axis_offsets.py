@@ -69,11 +69,14 @@ class RotationAxisOffsets(Effect):
         values, where = np.unique(ctx.column("segment_index"), return_inverse=True)
         group = np.array([self.group_of.get(int(i), -1) if np.isfinite(i) else -1 for i in values], dtype=int)
         group = group[where.reshape(-1)]
-        d = np.zeros((len(group), 3), dtype=np.result_type(x, ctx.f_p))
+        # x (p,), or a batch X (B, p) with a batch context (accel_batch): the points' axis second to last
+        d = np.zeros((*np.shape(x)[:-1], len(group), 3), dtype=np.result_type(x, ctx.f_p))
         for n, g in enumerate(self.groups):
-            d = d + (group == g).astype(float)[:, None] * x[3 * n:3 * n + 3][None, :]
+            d = d + (group == g).astype(float)[:, None] * x[..., None, 3 * n:3 * n + 3]
         w, wdot = ctx.w_table, ctx.wdot_table
-        return (cross(w, cross(w, d)) + cross(wdot, d)) @ ctx.accel_matrix.T
+        return (cross(w, cross(w, d)) + cross(wdot, d)) @ ctx.accel_matrix.mT
+
+    accel_batch = accel
 
 
 def offset_groups(rotations) -> dict:

@@ -69,8 +69,11 @@ class BiasDrift(Effect):
         t = ctx.column("t_s") - reference
         return np.where(np.isfinite(t), t, 0.0)[:, None] / 3600.0
 
+    # one parameter vector x (6,) or a batch X (B, 6) with a batch context (Effect.accel_batch)
     def accel(self, x, ctx):
-        return self._hours(ctx) * x[:3] * units.UG_MPS2
+        return self._hours(ctx) * x[..., None, :3] * units.UG_MPS2
 
     def gyro(self, x, ctx):
-        return self._hours(ctx) * x[3:] / 3600.0
+        return self._hours(ctx) * x[..., None, 3:] / 3600.0
+
+    accel_batch, gyro_batch = accel, gyro

@@ -228,11 +228,14 @@ class BiasStep(Effect):
         self._weights_key, self._weights = key, out[:, None]
         return self._weights
 
+    # one parameter vector x (6,) or a batch X (B, 6) with a batch context (Effect.accel_batch)
     def accel(self, x, ctx):
-        return self._after(ctx) * x[:3] * units.UG_MPS2
+        return self._after(ctx) * x[..., None, :3] * units.UG_MPS2
 
     def gyro(self, x, ctx):
-        return self._after(ctx) * x[3:] / 3600.0
+        return self._after(ctx) * x[..., None, 3:] / 3600.0
+
+    accel_batch, gyro_batch = accel, gyro
 
     def words(self, x, sigma) -> list[str]:
         """The step in words: "gyro z bias steps by +X °/h at t = Y s"."""

@@ -9,6 +9,7 @@ package's entry point (group ``station.effects``); docs/effects.md walks through
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,7 +53,8 @@ class SampleContext:
                                            #   rotation axis at each point, m, frame p (0 at statics)
 
     def __len__(self) -> int:
-        return len(self.f_p)
+        """N, the points (also of a batch context, whose f_p is (B, N, 3): Effect.accel_batch)."""
+        return self.f_p.shape[-2]
 
     def column(self, name: str) -> np.ndarray:
         """An optional quantity as an (N,) array; NaN where it is not known."""
@@ -99,6 +101,30 @@ class Effect:
         """Additive term of the raw gyro output (deg/s before unit conversion)."""
         return None
 
+    # --- optional: the terms of a whole batch of parameter vectors at once -------------------
+    # The fit evaluates its residuals for B parameter vectors at a time (the Jacobian's columns).
+    # An effect may give the terms of all of them in one call: X is (B, p); ctx is a SampleContext
+    # whose f_p, w_p, w_table, wdot_table and offset_m are (B, N, 3) and accel_matrix, gyro_matrix
+    # (B, 3, 3), one per row of X, the other fields (the points' temperature, time, segment index,
+    # ...) shared, (N,); the result is (B, N, 3) or None, row n equal to accel(X[n], ctx of row n).
+    # The fit uses it where the class that defines accel (gyro) defines accel_batch (gyro_batch)
+    # too, so a subclass overriding accel alone keeps its override (estimate.lsq._own_term_batch),
+    # and no subclass redefines a method of that class (a helper accel calls: batch_form); else it
+    # calls accel row by row.  An effect without a term returns None from both.
+    def accel_batch(self, X: np.ndarray, ctx: SampleContext) -> np.ndarray | None:
+        """accel() of every row of X (B, p) at once: (B, N, 3) (see above)."""
+        return None
+
+    def gyro_batch(self, X: np.ndarray, ctx: SampleContext) -> np.ndarray | None:
+        """gyro() of every row of X (B, p) at once: (B, N, 3) (see above)."""
+        return None
+
+    def batch_term(self, name: str):
+        """The batch form the fit may call for ``name`` ("accel" or "gyro"): the class that defines
+        the term (first in the method resolution order) defines ``name + "_batch"`` too; else None
+        (the fit calls the term row by row)."""
+        return batch_form(self, name, type(self).__mro__)
+
     def integral(self, x: np.ndarray, rotation) -> np.ndarray | None:
         """Additive term of a rotation segment's gyro integral (deg before unit conversion)."""
         return None
@@ -139,3 +165,27 @@ class Effect:
     def compensate_time(self, x: np.ndarray, t: np.ndarray) -> np.ndarray:
         """Time stamps corrected for this effect (e.g. a clock offset); most effects leave them."""
         return t
+
+
+def batch_form(effect: Effect, name: str, classes):
+    """``effect``'s ``name + "_batch"`` (bound) when the first of ``classes`` that defines ``name``
+    or its batch form defines the batch form and no class before it redefines one of its methods
+    (a helper ``name`` calls that the batch form may not: a plugin overriding the lever arm's
+    ``positions`` alone lost it in the fit, review of batch27); else None (row by row)."""
+    classes = tuple(classes)
+    for at, cls in enumerate(classes):
+        own = vars(cls)
+        if name in own or f"{name}_batch" in own:
+            batch = own.get(f"{name}_batch")
+            if batch is None or (cls is not Effect and _redefined(classes[:at], cls)):
+                return None
+            return batch.__get__(effect, type(effect))
+    return None
+
+
+@functools.lru_cache(maxsize=1024)
+def _redefined(subclasses: tuple, cls: type) -> bool:
+    """Whether one of ``subclasses`` defines a method or property that ``cls`` or a base of it has."""
+    methods = {k for c in cls.__mro__[:-1] for k, v in vars(c).items()
+               if callable(v) or isinstance(v, (property, staticmethod, classmethod))}
+    return any(k in methods for c in subclasses for k in vars(c))

@@ -28,5 +28,8 @@ class GyroGSensitivity(Effect):
         return tuple(Param(f"gyro_g_sens_{i}{j}", "deg/h/g", 1.0, 30.0, 3000.0) for i in "xyz" for j in "xyz")
 
     def gyro(self, x, ctx):
-        G = x.reshape(3, 3) / 3600.0                      # deg/s per g
-        return (ctx.f_p / units.STANDARD_GRAVITY) @ G.T
+        """One parameter vector x (9,), or a batch X (B, 9) with a batch context (gyro_batch)."""
+        G = x.reshape(*x.shape[:-1], 3, 3) / 3600.0       # deg/s per g
+        return (ctx.f_p / units.STANDARD_GRAVITY) @ G.mT
+
+    gyro_batch = gyro

@@ -38,6 +38,9 @@ class GyroAnisoelastic(Effect):
                      for i in range(3) for n in NAMES)
 
     def gyro(self, x, ctx):
+        # x (15,), or a batch X (B, 15) with a batch context (gyro_batch): the points' axis second to last
         F = ctx.f_p / units.STANDARD_GRAVITY
-        products = np.stack([F[:, j] * F[:, k] for j, k in PRODUCTS], axis=1)      # (N, 5)
-        return products @ x.reshape(3, len(PRODUCTS)).T / 3600.0
+        products = np.stack([F[..., j] * F[..., k] for j, k in PRODUCTS], axis=-1)  # (N, 5)
+        return products @ x.reshape(*x.shape[:-1], 3, len(PRODUCTS)).mT / 3600.0
+
+    gyro_batch = gyro

@@ -30,5 +30,8 @@ class GyroRateNonlinearity(Effect):
                 + tuple(Param(f"gyro_rate_sq_odd_{a}", "ppm/(deg/s)", 1.0, 1.0, 1000.0) for a in "xyz"))
 
     def gyro(self, x, ctx):
-        r = ctx.w_p @ ctx.gyro_matrix.T                       # deg/s along each gyro
-        return 1e-6 * (x[:3] * r * r + x[3:] * r * analytic_abs(r))
+        """One parameter vector x (6,), or a batch X (B, 6) with a batch context (gyro_batch)."""
+        r = ctx.w_p @ ctx.gyro_matrix.mT                      # deg/s along each gyro
+        return 1e-6 * (x[..., None, :3] * r * r + x[..., None, 3:] * r * analytic_abs(r))
+
+    gyro_batch = gyro

@@ -66,5 +66,18 @@ class AccelLeverArm(Effect):
             out[:, i] = a @ ctx.accel_matrix[i]
         return out
 
+    def accel_batch(self, X, ctx):
+        """accel() of every row of X (B, p) with a batch context (Effect.accel_batch)."""
+        p = np.zeros((len(X), 3, 3), dtype=np.result_type(X, float))
+        for k, (i, c) in enumerate(self.free):
+            p[:, i, c] = X[:, k]
+        w, wd = ctx.w_table, ctx.wdot_table
+        out = np.empty(ctx.f_p.shape, np.result_type(ctx.f_p, ctx.accel_matrix, ctx.w_table, p))
+        for i in range(3):
+            pi = p[:, None, i, :]
+            a = cross(wd, pi) + cross(w, cross(w, pi))
+            out[..., i] = (a @ ctx.accel_matrix[:, i, :, None])[..., 0]
+        return out
+
     def report(self, x, cov):
         return {"accel_lever_arm_m": self.positions(x)}

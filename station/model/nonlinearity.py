@@ -27,5 +27,8 @@ class AccelNonlinearity(Effect):
         return tuple(Param(f"accel_k2_{a}", "ug/g^2", 1.0, 100.0, 5000.0) for a in "xyz")
 
     def accel(self, x, ctx):
-        along = ctx.f_p @ normalised(ctx.accel_matrix).T      # along each sensing direction
-        return x * units.UG_MPS2 * (along / units.STANDARD_GRAVITY) ** 2
+        """One parameter vector x (3,), or a batch X (B, 3) with a batch context (accel_batch)."""
+        along = ctx.f_p @ normalised(ctx.accel_matrix).mT      # along each sensing direction
+        return x[..., None, :] * units.UG_MPS2 * (along / units.STANDARD_GRAVITY) ** 2
+
+    accel_batch = accel

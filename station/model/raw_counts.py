@@ -33,6 +33,7 @@ import functools
 import numpy as np
 
 from station.core.errors import UserError
+from station.model.effect import batch_form
 
 STATE_KEY = "raw_counts_per_unit"     # [counts per m/s^2, counts per deg/s]
 
@@ -95,6 +96,31 @@ class InCaptureUnits:
         if not self._scaled():
             return super().gyro(x, ctx)
         term = super().gyro(x, self._physical(ctx))
+        if term is None:
+            return None
+        if self._counts_per_unit[1] is None:
+            raise UserError(f"effect {self.id!r}: a raw gyro capture without a nominal scale "
+                            "(imu.gyro_nominal_dps_per_count) or a rotation with an encoder angle: its "
+                            "gyro term cannot be sized")
+        return self._counts_per_unit[1] * np.asarray(term)
+
+    def batch_term(self, name: str):
+        """The wrapped class's batch form of accel or gyro, its terms scaled as accel() and gyro()
+        scale them; None where the class has none (or a class before this mixin defines the term)."""
+        mro = type(self).__mro__
+        here = mro.index(InCaptureUnits)
+        if any(name in vars(c) or f"{name}_batch" in vars(c) for c in mro[:here]):
+            return batch_form(self, name, mro[:here])
+        inner = batch_form(self, name, mro[:here] + mro[here + 1:])     # a subclass' methods checked too
+        if inner is None or not self._scaled():
+            return inner
+        return functools.partial(self._scaled_batch, name, inner)
+
+    def _scaled_batch(self, name, inner, X, ctx):
+        if name == "accel":
+            term = inner(X, self._physical(ctx))
+            return None if term is None else self._counts_per_unit[0] * np.asarray(term)
+        term = inner(X, self._physical(ctx))
         if term is None:
             return None
         if self._counts_per_unit[1] is None:

@@ -24,4 +24,7 @@ class GyroScaleAsymmetry(Effect):
         return tuple(Param(f"gyro_asym_{a}", "ppm", 1.0, 300.0, 20000.0) for a in "xyz")
 
     def gyro(self, x, ctx):
-        return 1e-6 * x * analytic_abs(ctx.w_p @ ctx.gyro_matrix.T)
+        """One parameter vector x (3,), or a batch X (B, 3) with a batch context (gyro_batch)."""
+        return 1e-6 * x[..., None, :] * analytic_abs(ctx.w_p @ ctx.gyro_matrix.mT)
+
+    gyro_batch = gyro

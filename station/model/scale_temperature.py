@@ -39,8 +39,12 @@ class ScaleTemperature(TemperatureReferenced):
                 # gyro_scale_tempco_2C and K3+gyro_scale_tempco)
                 + tuple(Param(f"gyro_scale_tempco_{a}", "ppm/degC", 1.0, 150.0, 5000.0) for a in "xyz"))
 
+    # one parameter vector x (p,) or a batch X (B, p) with a batch context (Effect.accel_batch):
+    # the same arithmetic, the points' axis second to last
     def accel(self, x, ctx):
-        return 1e-6 * x[:3] * self._dt(ctx) * (ctx.f_p @ ctx.accel_matrix.T)
+        return 1e-6 * x[..., None, :3] * self._dt(ctx) * (ctx.f_p @ ctx.accel_matrix.mT)
 
     def gyro(self, x, ctx):
-        return 1e-6 * x[3:] * self._dt(ctx) * (ctx.w_p @ ctx.gyro_matrix.T)
+        return 1e-6 * x[..., None, 3:] * self._dt(ctx) * (ctx.w_p @ ctx.gyro_matrix.mT)
+
+    accel_batch, gyro_batch = accel, gyro

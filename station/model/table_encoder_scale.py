@@ -157,6 +157,33 @@ class TableEncoderScale(Effect):
         e = e[:, None] if np.ndim(e) else e
         return e * (180.0 / np.pi) * ctx.w_table @ ctx.gyro_matrix.T    # (np.degrees: no complex step)
 
+    # --- every row of X (B, p) with a batch context at once (Effect.accel_batch): the same numbers
+    def _per_point_batch(self, X, ctx):
+        """(B, N or 1, 1): each row's error (ppm, times 1e-6) at every point."""
+        if not self.table_axes:
+            return (X[:, 0] * 1e-6)[:, None, None]
+        index = ctx.column("segment_index")
+        pos = np.array([self.position_of.get(int(i), 0) if np.isfinite(i) else 0 for i in index])
+        return (X[:, pos] * 1e-6)[..., None]
+
+    def accel_batch(self, X, ctx):
+        turned = getattr(ctx, "turned_s", None)
+        if turned is None:
+            return None
+        e = self._per_point_batch(X, ctx)
+        sq = getattr(ctx, "turned_sq_s2", None)
+        sq = np.asarray(turned, float) ** 2 if sq is None else np.asarray(sq, float)
+        index = ctx.column("segment_index")
+        turning = ctx.f_p - np.stack([_segment_means(index, f) for f in ctx.f_p])
+        wxf = cross(ctx.w_table, turning)
+        df = -e * np.asarray(turned, float)[:, None] * wxf + 0.5 * e * e * sq[:, None] * cross(ctx.w_table, wxf)
+        return df @ ctx.accel_matrix.mT
+
+    def gyro_batch(self, X, ctx):
+        if getattr(ctx, "turned_s", None) is None:
+            return None
+        return self._per_point_batch(X, ctx) * (180.0 / np.pi) * ctx.w_table @ ctx.gyro_matrix.mT
+
 
 def _segment_means(index: np.ndarray, f: np.ndarray) -> np.ndarray:
     """Each row's mean of f over the rows of its segment (``index``; NaN where the segment is not

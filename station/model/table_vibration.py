@@ -207,7 +207,8 @@ class TableVibration(Effect):
     def accel(self, x, ctx):
         if getattr(ctx, "turned_s", None) is None:      # station apply: the bench's fault, not the IMU's
             return None
-        out = np.zeros((len(ctx), 3), dtype=np.result_type(x, ctx.f_p))
+        # x (p,), or a batch X (B, p) with a batch context (accel_batch): the points' axis second to last
+        out = np.zeros(ctx.f_p.shape, dtype=np.result_type(x, ctx.f_p))
         known, frames, cols = self._framed()
         if not len(known):
             return out
@@ -226,15 +227,17 @@ class TableVibration(Effect):
         rank[order] = np.arange(len(r)) - (np.cumsum(counts) - counts)[r[order]]
         p = 2.0 * np.pi * rank / counts[r]
         l, b1, b2 = frames[r, 0], frames[r, 1], frames[r, 2]
-        xv = x[cols[r]]                                             # (n, 6)
-        P = xv[:, 0:1] * l + xv[:, 1:2] * b1 + xv[:, 2:3] * b2
-        Q = xv[:, 3:4] * l + xv[:, 4:5] * b1 + xv[:, 5:6] * b2
+        xv = x[..., cols[r]]                                        # (n, 6)
+        P = xv[..., 0:1] * l + xv[..., 1:2] * b1 + xv[..., 2:3] * b2
+        Q = xv[..., 3:4] * l + xv[..., 4:5] * b1 + xv[..., 5:6] * b2
         c, s = np.cos(p)[:, None], np.sin(p)[:, None]
         a = c * P + s * Q                                           # table frame at the start
-        along = (a[:, 0] * l[:, 0] + a[:, 1] * l[:, 1] + a[:, 2] * l[:, 2])[:, None] * l
+        along = (a[..., 0] * l[:, 0] + a[..., 1] * l[:, 1] + a[..., 2] * l[:, 2])[..., None] * l
         # (1) of the module's derivation, Rot(l, -p) a: the IMU has turned by p since the start
-        out[rows] = (along + c * (a - along) - s * np.cross(l, a)) @ ctx.accel_matrix.T
+        out[..., rows, :] = (along + c * (a - along) - s * np.cross(l, a)) @ ctx.accel_matrix.mT
         return out
+
+    accel_batch = accel
 
     def words(self, x, sigma) -> list[str]:
         """The vibration of each table axis and rate that stands out (> 3 sigma), in mg."""

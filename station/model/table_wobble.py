@@ -82,6 +82,23 @@ class TableWobble(Effect):
             out[rows] = -cross(eps, ctx.f_p[rows]) @ ctx.accel_matrix.T
         return out
 
+    def accel_batch(self, X, ctx):
+        """accel() of every row of X (B, p) with a batch context (Effect.accel_batch)."""
+        if getattr(ctx, "turned_s", None) is None:
+            return None
+        out = np.zeros(ctx.f_p.shape, dtype=np.result_type(X, ctx.f_p))
+        for index in self.frame:
+            rows, p = rev.phase_rows(ctx, index)
+            if not len(rows):
+                continue
+            _, v, u = self.frame[index]
+            g = self.group_of[index]
+            bv, bu = X[:, 2 * g, None], X[:, 2 * g + 1, None]
+            w, lxw = bv * v + bu * u, bv * u - bu * v                   # (B, 3), as _lean
+            eps = np.cos(p)[None, :, None] * w[:, None, :] + np.sin(p)[None, :, None] * lxw[:, None, :]
+            out[:, rows] = -cross(eps, ctx.f_p[:, rows]) @ ctx.accel_matrix.mT
+        return out
+
     def integral(self, x, rotation):
         index = int(getattr(rotation, "index", -1))
         if index not in self.frame:

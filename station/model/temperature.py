@@ -66,11 +66,14 @@ class TemperatureBias(TemperatureReferenced):
         return (tuple(Param(f"accel_bias_tempco_{a}", "ug/degC", 1.0, 30.0, 1000.0) for a in "xyz")
                 + tuple(Param(f"gyro_bias_tempco_{a}", "deg/h/degC", 1.0, 3.0, 300.0) for a in "xyz"))
 
+    # one parameter vector x (6,) or a batch X (B, 6) with a batch context (Effect.accel_batch)
     def accel(self, x, ctx):
-        return self._dt(ctx) * x[:3] * units.UG_MPS2
+        return self._dt(ctx) * x[..., None, :3] * units.UG_MPS2
 
     def gyro(self, x, ctx):
-        return self._dt(ctx) * x[3:] / 3600.0
+        return self._dt(ctx) * x[..., None, 3:] / 3600.0
+
+    accel_batch, gyro_batch = accel, gyro
 
     def report(self, x, cov):
         """Compensation data: raw units per degree C, and the reference temperature."""

@@ -34,8 +34,11 @@ class TemperatureBiasQuadratic(TemperatureReferenced):
     def _dt2(self, ctx):
         return self._dt(ctx) ** 2
 
+    # one parameter vector x (6,) or a batch X (B, 6) with a batch context (Effect.accel_batch)
     def accel(self, x, ctx):
-        return self._dt2(ctx) * x[:3] * units.UG_MPS2
+        return self._dt2(ctx) * x[..., None, :3] * units.UG_MPS2
 
     def gyro(self, x, ctx):
-        return self._dt2(ctx) * x[3:] / 3600.0
+        return self._dt2(ctx) * x[..., None, 3:] / 3600.0
+
+    accel_batch, gyro_batch = accel, gyro
