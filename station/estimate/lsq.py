@@ -1208,7 +1208,7 @@ class Model:
         a = f_p @ Ma.transpose(0, 2, 1) + b_a[:, None, :]     # matmul: ~10x einsum here
         w = w_p @ Mg.transpose(0, 2, 1) + b_g[:, None, :]
         if self.effects:
-            a, w = self._add_effects(X, a, w, f_p, w_p, Ma, Mg, l, w_k, wdot_k, offset)
+            a, w = self._add_effects(X, a, w, f_p, w_p, Ma, Mg, l, w_k, wdot_k, offset, wsq_k)
         blocks = []
         # statics
         blocks.append((self._st_data[:, :3] - a[:, :S]) * self._st_weight[:, :3])
@@ -1295,7 +1295,7 @@ class Model:
         across = np.where(mask, self.omega_dps * np.sin(column), np.sqrt(positive_part(self.omega_dps**2 - free**2)))
         return along, across
 
-    def _add_effects(self, X, a, w, f_p, w_p, Ma, Mg, l, w_k, wdot_k, offset=None):
+    def _add_effects(self, X, a, w, f_p, w_p, Ma, Mg, l, w_k, wdot_k, offset=None, wsq_k=None):
         """a and w with every effect's terms added (the Effect interface: one parameter vector,
         all sample points; _checked: under complex step an unsafe term raises _ComplexUnsafe).
         An effect whose class gives the batch form (Effect.accel_batch, _own_term_batch) is called
@@ -1307,13 +1307,19 @@ class Model:
             offset = np.concatenate([np.zeros((B, S, 3), dtype=np.result_type(offset)),
                                      np.repeat(np.broadcast_to(offset, (B, R, 3)), PHASES, axis=1)], axis=1)
         zeros = np.zeros((B, S, 3))
+        # the rate's square as the rows take it (the base model's mounting offset's, wsq_k) and the
+        # rotation's axis: an effect's centripetal term (SampleContext.centripetal) over a recorded
+        # ramp, where the square of the rate's harmonics is not its square's (twentieth session)
+        wsq = None if wsq_k is None else np.concatenate([np.zeros(S), np.broadcast_to(wsq_k[..., 0], (R, PHASES)).reshape(-1)])
+        axis = None if wsq is None else np.concatenate(
+            [zeros, np.broadcast_to(l[:, :, None, :], (B, R, PHASES, 3)).reshape(B, -1, 3)], axis=1)
         ctx = SampleContext(
             f_p=f_p, w_p=w_p,
             w_table=np.concatenate([zeros, (w_k * l[:, :, None, :]).reshape(B, -1, 3)], axis=1),
             wdot_table=np.concatenate([zeros, (wdot_k * l[:, :, None, :]).reshape(B, -1, 3)], axis=1),
             temp_c=self._ctx_temp, accel_matrix=Ma, gyro_matrix=Mg, t_s=self._ctx_t,
             segment_index=self._ctx_index, temp_rate_c_per_s=self._ctx_temp_rate, turned_s=self._ctx_turned,
-            turned_sq_s2=self._ctx_turned_sq, offset_m=offset)
+            turned_sq_s2=self._ctx_turned_sq, offset_m=offset, wsq_table=wsq, axis_table=axis)
         rows = None                 # the per-row contexts, made when an effect has no batch form
         for eff in self.effects:
             P = X[:, L[f"effect:{eff.id}"]]
@@ -1327,7 +1333,8 @@ class Model:
                     if rows is None:
                         rows = [dataclasses.replace(ctx, f_p=f_p[n], w_p=w_p[n], w_table=ctx.w_table[n],
                                         wdot_table=ctx.wdot_table[n], accel_matrix=Ma[n], gyro_matrix=Mg[n],
-                                        offset_m=None if offset is None else offset[n]) for n in range(B)]
+                                        offset_m=None if offset is None else offset[n],
+                                        axis_table=None if axis is None else axis[n]) for n in range(B)]
                     term = getattr(eff, name)
                     out = out.copy()
                     for n in range(B):

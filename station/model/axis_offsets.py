@@ -73,8 +73,7 @@ class RotationAxisOffsets(Effect):
         d = np.zeros((*np.shape(x)[:-1], len(group), 3), dtype=np.result_type(x, ctx.f_p))
         for n, g in enumerate(self.groups):
             d = d + (group == g).astype(float)[:, None] * x[..., None, 3 * n:3 * n + 3]
-        w, wdot = ctx.w_table, ctx.wdot_table
-        return (cross(w, cross(w, d)) + cross(wdot, d)) @ ctx.accel_matrix.mT
+        return (ctx.centripetal(d) + cross(ctx.wdot_table, d)) @ ctx.accel_matrix.mT
 
     accel_batch = accel
 

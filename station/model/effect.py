@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from station.model.geometry import cross
+
 
 @dataclass(frozen=True)
 class Param:
@@ -51,6 +53,11 @@ class SampleContext:
     turned_sq_s2: np.ndarray | None = None  # the fit only: the mean of that time's square, s^2
     offset_m: np.ndarray | None = None     # the fit only: (N, 3) the model's mounting offset from the
                                            #   rotation axis at each point, m, frame p (0 at statics)
+    wsq_table: np.ndarray | None = None    # the fit only: (N,) the table rate's square as the fit's rows
+                                           #   take it, rad^2/s^2 (0 at statics): over a recorded ramp
+                                           #   the square's own harmonics, not the square of the rate's
+    axis_table: np.ndarray | None = None   # the fit only: (N, 3) the rotation's unit axis, frame p (0 at
+                                           #   statics); a batch context's (B, N, 3)
 
     def __len__(self) -> int:
         """N, the points (also of a batch context, whose f_p is (B, N, 3): Effect.accel_batch)."""
@@ -60,6 +67,19 @@ class SampleContext:
         """An optional quantity as an (N,) array; NaN where it is not known."""
         v = getattr(self, name)
         return np.full(len(self), np.nan) if v is None else np.broadcast_to(np.asarray(v, float), (len(self),))
+
+    def centripetal(self, d) -> np.ndarray:
+        """w x (w x d) at every point, m/s^2 (``d``: (3,), (N, 3), or a batch's (B, N, 3), m): the
+        centripetal acceleration of a point ``d`` off the rotation axis.  In the fit it is
+        wsq_table l x (l x d), with the square of the rate the rows take (the base model's own
+        mounting offset's): over a recorded ramp the square of the rate's five harmonics is not the
+        harmonics of its square, and an offset's 20 mm at 100 deg/s left a ramp window's harmonics
+        1.5x their noise (issue 28, twentieth session, branch vib28).  Elsewhere (station apply, a
+        context without them) the cross products of w_table."""
+        if self.wsq_table is None or self.axis_table is None:
+            return cross(self.w_table, cross(self.w_table, d))
+        l = self.axis_table
+        return np.asarray(self.wsq_table)[:, None] * cross(l, cross(l, d))
 
 
 class Effect:

@@ -59,10 +59,10 @@ class AccelLeverArm(Effect):
 
     def accel(self, x, ctx):
         p = self.positions(x)
-        w, wd = ctx.w_table, ctx.wdot_table
+        wd = ctx.wdot_table
         out = np.empty(ctx.f_p.shape, np.result_type(ctx.f_p, ctx.accel_matrix, ctx.w_table, p))
         for i in range(3):
-            a = cross(wd, p[i]) + cross(w, cross(w, p[i]))
+            a = cross(wd, p[i]) + ctx.centripetal(p[i])
             out[:, i] = a @ ctx.accel_matrix[i]
         return out
 
@@ -71,11 +71,11 @@ class AccelLeverArm(Effect):
         p = np.zeros((len(X), 3, 3), dtype=np.result_type(X, float))
         for k, (i, c) in enumerate(self.free):
             p[:, i, c] = X[:, k]
-        w, wd = ctx.w_table, ctx.wdot_table
+        wd = ctx.wdot_table
         out = np.empty(ctx.f_p.shape, np.result_type(ctx.f_p, ctx.accel_matrix, ctx.w_table, p))
         for i in range(3):
             pi = p[:, None, i, :]
-            a = cross(wd, pi) + cross(w, cross(w, pi))
+            a = cross(wd, pi) + ctx.centripetal(pi)
             out[..., i] = (a @ ctx.accel_matrix[:, i, :, None])[..., 0]
         return out
 
