@@ -203,6 +203,16 @@ class PerSegmentModel(Model):
             else:
                 w_k = np.full(PHASES, np.radians(r.rate_dps) * np.sqrt(r.rate_sq_factor))
                 wsq_k, wdot_k = w_k**2, np.zeros(PHASES)
+            # a window shifted by dt: the samples turned I (the gyro's own turn), the encoder I - dt dw,
+            # and the rate's shape was scaled to the encoder's turn: the table's rate is I / (I - dt dw)
+            # times it (dw: the measured rate's change along the turn)
+            turn = np.linalg.norm(r.gyro_integral)
+            for eff in self.effects:
+                dt = eff.window_shift_s(x[L[f"effect:{eff.id}"]])
+                if dt is not None and turn > 0:
+                    dw = (np.asarray(r.gyro_end) - np.asarray(r.gyro_start)) @ (np.asarray(r.gyro_integral) / turn)
+                    c = turn / (turn - dt * dw)
+                    w_k, wsq_k, wdot_k = c * w_k, c * c * wsq_k, c * wdot_k
             l_x_d = cross(l, offset)
             at_offset = np.outer(wsq_k, cross(l, l_x_d)) + np.outer(wdot_k, l_x_d)
             f_p = kappa * l + np.outer(cos_p, v) - np.outer(sin_p, cross(l, v)) + at_offset

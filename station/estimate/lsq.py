@@ -957,6 +957,16 @@ class Model:
                 w_k = np.full(PHASES, np.radians(r.rate_dps) * np.sqrt(r.rate_sq_factor))
                 shapes.append([w_k, w_k**2, np.zeros(PHASES)])
         self._rot_rate_shape = np.array(shapes, float).reshape(R, 3, PHASES)     # w, w^2, dw/dt
+        # the measured rate's change across each window along its turn, and the turn the samples
+        # measured (gyro units: the ratio is unit-free): a window shifted by dt turns
+        # |A| + dt (w_end - w_start), while the rate's shape above was scaled to the encoder's |A|
+        # (summaries._rate): see _rate_shape_factor
+        turn = np.array([r.gyro_integral for r in rots], float).reshape(R, 3)
+        size = np.linalg.norm(turn, axis=1)
+        along = np.divide(turn, size[:, None], out=np.zeros_like(turn), where=size[:, None] > 0)
+        self._rot_turn_measured = size
+        self._rot_rate_change = np.einsum("rc,rc->r", along, np.array(
+            [np.asarray(r.gyro_end, float) - np.asarray(r.gyro_start, float) for r in rots], float).reshape(R, 3))
         self._rot_group = np.array([r.group for r in rots], int)
         self._rot_e1 = np.array([self.axis_basis[r.group][0] for r in rots]).reshape(R, 3)
         self._rot_phase_cols = np.array([(list(range(L[f"phase{i}"].start, L[f"phase{i}"].stop)) + [pad, pad])[:2]
@@ -1168,6 +1178,10 @@ class Model:
                   if self._offset is None else self._offset)
         l_x_d = cross(l, np.broadcast_to(offset, l.shape))
         w_k, wsq_k, wdot_k = (self._rot_rate_shape[:, j, :, None] for j in range(3))    # (R,PHASES,1)
+        shift = self._window_shift(X)
+        if shift is not None:       # the samples' window shifted: their rate's shape is c times the summary's
+            c = self._rate_shape_factor(shift)[..., None, None]                 # (B,R,1,1)
+            w_k, wsq_k, wdot_k = c * w_k, c * c * wsq_k, c * wdot_k             # (B,R,PHASES,1)
         f_r = (kappa[..., None, None] * l[:, :, None, :] + self._cos_p[:, None] * v[:, :, None, :]
                - self._sin_p[:, None] * cross(l, v)[:, :, None, :]
                + wsq_k * cross(l, l_x_d)[:, :, None, :] + wdot_k * l_x_d[:, :, None, :])   # (B,R,PHASES,3)
@@ -1233,10 +1247,8 @@ class Model:
             # quarter of its truth where the ramps' angles carry little)
             change = (self._rot_earth_change[:, :1] * earth_perp
                       + self._rot_earth_change[:, 1:] * cross(l, earth_perp)) @ Mg.transpose(0, 2, 1)
-            for eff in self._shift_effects:
-                shift = [_checked(eff, eff.window_shift_s, X[n, L[f"effect:{eff.id}"]]) for n in range(B)]
-                if shift[0] is not None:
-                    integral = integral - np.array(shift)[:, None, None] * change
+            if shift is not None:
+                integral = integral - shift[:, None, None] * change
         gyro_rows = (self._rot_gyro_whiten @ (self._rot_gyro - integral)[..., None])[..., 0]
         whitened = np.einsum("rij,brjc->bric", self._rot_whiten, self._rot_data - harmonics) * self._rot_weight
         blocks.append(np.concatenate([whitened.reshape(B, R, 15),
@@ -1245,6 +1257,33 @@ class Model:
         # the table's elevation of each axis: alpha, its angle from up, is 90 deg - elevation
         blocks.append(((X[:, self._level_cols] - self._level_alpha) / (self.geometry.level_sigma_rad or 1.0))[..., None])
         return blocks
+
+    def _window_shift(self, X):
+        """The samples' window's shift against the encoder's (s) of every row of X, (B,), summed
+        over the effects that say one (window_shift_s); None when none does."""
+        total = None
+        for eff in self._shift_effects:
+            shift = [_checked(eff, eff.window_shift_s, X[n, self.layout[f"effect:{eff.id}"]]) for n in range(len(X))]
+            if shift[0] is not None:
+                shift = np.array(shift).reshape(len(X))
+                total = shift if total is None else total + shift
+        return total
+
+    def _rate_shape_factor(self, shift):
+        """(B, R): the factor c by which the table's rate at the samples exceeds the summary's rate
+        shape under a window shift dt (issue 28, twentieth session).  The summary takes the rate's
+        shape from the gyro scaled to the encoder's mean rate A/T (summaries._rate: the gyro's scale
+        is not known there), but samples stamped in the encoder's window [t0, t1] were taken over
+        [t0 + dt, t1 + dt] on the table's clock and turned A + dt (w(t1) - w(t0)): the table's rate
+        at every sample is the shape times c = (A + dt dw) / A, its square c^2 times the shape's,
+        its derivative c times.  A ramp of 100 deg/s at 10 ms: c - 1 = 1 deg / A, and the
+        centripetal force at the mounting offset (w^2 l x (l x d): the accelerometers' mean) off
+        by 2 (c - 1) of itself.  In the gyro's own units: A = I - dt dw, I the turn the samples
+        measured (the gyro's scale and units cancel in the ratio)."""
+        step = shift[:, None] * self._rot_rate_change[None, :]                  # dt dw, (B,R)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            c = self._rot_turn_measured / (self._rot_turn_measured - step)
+        return np.where(self._rot_turn_measured > 0, c, 1.0)
 
     def _earth_along_across(self, column):
         """The Earth rate along each axis and across it (B, K each) from the axes' fourth column.
@@ -1278,8 +1317,9 @@ class Model:
         for n in range(B):
             ctx = SampleContext(
                 f_p=f_p[n], w_p=w_p[n],
-                w_table=np.concatenate([zeros, (w_k * l[n][:, None, :]).reshape(-1, 3)]),
-                wdot_table=np.concatenate([zeros, (wdot_k * l[n][:, None, :]).reshape(-1, 3)]),
+                w_table=np.concatenate([zeros, ((w_k if w_k.ndim == 3 else w_k[n]) * l[n][:, None, :]).reshape(-1, 3)]),
+                wdot_table=np.concatenate([zeros, ((wdot_k if wdot_k.ndim == 3 else wdot_k[n])
+                                                   * l[n][:, None, :]).reshape(-1, 3)]),
                 temp_c=self._ctx_temp, accel_matrix=Ma[n], gyro_matrix=Mg[n], t_s=self._ctx_t,
                 segment_index=self._ctx_index, temp_rate_c_per_s=self._ctx_temp_rate, turned_s=self._ctx_turned,
                 turned_sq_s2=self._ctx_turned_sq, offset_m=None if offset is None else offset[n])
