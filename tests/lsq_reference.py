@@ -195,6 +195,8 @@ class PerSegmentModel(Model):
             A = np.radians(r.angle_deg)
             earth_integral = np.zeros(3) if not _earth_rate_visible(r, s) else (r.duration_s / A) * (
                 np.sin(A) * earth_perp - (1.0 - np.cos(A)) * cross(l, earth_perp))
+            if _earth_rate_visible(r, s) and r.earth_weights_s is not None:    # a recorded ramp: over its own phase
+                earth_integral = r.earth_weights_s[0] * earth_perp - r.earth_weights_s[1] * cross(l, earth_perp)
             # at the mounting offset: centripetal w x (w x d) and tangential dw/dt x d, with the
             # rate's shape over the turn (its harmonics, from the summary): a steady rate gives a
             # constant centripetal force and no tangential one
@@ -228,6 +230,10 @@ class PerSegmentModel(Model):
                 term = eff.integral(x[L[f"effect:{eff.id}"]], r)
                 if term is not None:
                     integral = integral + term
+                dt = eff.window_shift_s(x[L[f"effect:{eff.id}"]])
+                if dt is not None:      # of the measured change, only the table rate's (along M_g l) is the shift's
+                    m, d = Mg @ l, np.asarray(r.gyro_end) - np.asarray(r.gyro_start)
+                    integral = integral - dt * (d - (m @ d) / (m @ m) * m)
             gyro_rows = self.gyro_whiten[i] @ (r.gyro_integral - integral)
             if not r.steady:        # a hand turn: its angle and axis only, through the gyro
                 put(("rot", i), gyro_rows, "rotation_gyro")
