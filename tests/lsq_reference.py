@@ -211,7 +211,7 @@ class PerSegmentModel(Model):
             turn = np.linalg.norm(r.gyro_integral)
             for eff in self.effects:
                 dt = eff.window_shift_s(x[L[f"effect:{eff.id}"]])
-                if dt is not None and turn > 0:
+                if dt is not None and turn > 0 and not r.rate_from_table:
                     dw = (np.asarray(r.gyro_end) - np.asarray(r.gyro_start)) @ (np.asarray(r.gyro_integral) / turn)
                     c = turn / (turn - dt * dw)
                     w_k, wsq_k, wdot_k = c * w_k, c * c * wsq_k, c * wdot_k

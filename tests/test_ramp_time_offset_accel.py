@@ -1,13 +1,18 @@
 """Issue 28, twentieth session: a time offset and the recorded ramps' accelerometer rows.
 
-A ramp's summary takes the table's rate at each sample from the gyro, scaled to the encoder's mean
-rate A / T (station/estimate/summaries._rate: the gyro's scale is not known there), and the
+A rotation's summary took the table's rate at each sample from the gyro scaled to the encoder's mean
+rate A / T (station/estimate/summaries._rate: the gyro's scale is not known there), and the model the
 centripetal and tangential forces at the mounting offset from that rate.  Under a time offset dt the
 samples stamped in the encoder's window [t0, t1] were taken over [t0 + dt, t1 + dt] on the table's
 clock and turned A + dt (w(t1) - w(t0)): their true rate is (A + dt dw) / A times the shape, its
-square that squared.  The estimator's time_offset took this into the gyro integral only: the ramps'
-accelerometer rows misfit (noise x 0.01, 10 ms: chi2 ~28,000 on their 60 rows, against ~50 at
-dt = 0) and pulled the offset low (9.44 +- 0.16 ms).  lsq.Model._rate_shape_factor applies it.
+square that squared.  The estimator's time_offset took the shift into the gyro integral only: the
+ramps' accelerometer rows misfit (noise x 0.01, 10 ms: chi2 ~28,000 on their 60 rows, against ~50
+at dt = 0) and pulled the offset low.  Now a recorded ramp's rate is scaled by the table's stated
+steady rate, as its phase already was (summaries._ramp_fraction; RotationSummary.rate_from_table):
+neither the offset nor the error of the window's placed angle moves it.  Every other rotation keeps
+the encoder's scale and the model multiplies its rate by c = I / (I - dt dw) (lsq.Model.
+_rate_shape_factor).  And of the offset's term dt (w_end - w_start) only the table rate's change is
+kept: the Earth rate's change across the axis between the edge means is the samples' own.
 
 The reference is the device twin's physics (sim_devices/bench.py: the samples taken at table time
 t + time_offset_s, the specific force at the lever arm from the table's own ramp profile), which
@@ -81,7 +86,7 @@ def fitted(quiet_ramps):
 
 def test_a_time_offset_moves_the_ramps_accelerometer_rows_as_the_twin_does(fitted):
     """The ramps' accelerometer rows at the fit's solution within chi2(rows)'s 99.9 % point (before:
-    28,064 on 60, the offset 9.44 +- 0.16 ms; after: 51.6, 9.92 +- 0.06), and the offset within 4
+    28,064 on 60, the offset 9.44 +- 0.16 ms; after: 50.7, 10.01 +- 0.17), and the offset within 4
     sigma of the twin's."""
     from station.estimate import lsq
 
@@ -96,30 +101,40 @@ def test_a_time_offset_moves_the_ramps_accelerometer_rows_as_the_twin_does(fitte
     assert abs(value - OFFSET_MS) < 4.0 * sigma, (value, sigma)
 
 
-def test_the_offsets_column_of_the_ramps_accelerometer_rows_is_the_residuals_derivative(quiet_ramps, fitted):
-    """Model.jacobian (complex step) of the time offset against central differences of the residual
-    on the ramps' accelerometer rows (tolerance as tests/test_jacobian_complex_step.py: 1e-6 of the
-    column's norm plus the differences' rounding), and not zero there: 1 ms of offset moves them by
-    more than their noise (after: 16.9 against sqrt 60 = 7.7; before: 0, those rows did not depend on the offset)."""
+def test_the_offsets_column_of_a_rate_scaled_to_the_encoder_is_the_residuals_derivative(quiet_ramps, fitted):
+    """Where a rotation's rate shape is scaled to the encoder's mean rate (every turn but a recorded
+    ramp's: rate_from_table False, here forced on the ramps), the time offset scales it by
+    c = I / (I - dt dw): Model.jacobian (complex step) of the offset against central differences of
+    the residual (tolerance as tests/test_jacobian_complex_step.py: 1e-6 of the column's norm plus
+    the differences' rounding), and not zero on the accelerometer rows: 1 ms of offset moves them by
+    more than their noise (16.9 against sqrt 60 = 7.7; before: 0, no rotation's accelerometer rows
+    depended on the offset).  A recorded ramp's own rate (from the table's stated rate) does not
+    move with it: its column there is 0."""
     from station.estimate import lsq
 
-    model = lsq.Model(quiet_ramps, [_untyped()])
-    x = fitted.x.copy()         # at the solution: a mounting offset (at the start's 0 no rate is seen)
-    c = model.layout["effect:time_offset"].start
-    J = model.jacobian(x)[:, c]
-    assert model.complex_step
-    h = 1e-4 * model._sizes(x)[c]
-    xp, xm = x.copy(), x.copy()
-    xp[c] += h
-    xm[c] -= h
-    central = (model.residuals(xp) - model.residuals(xm)) / (2 * h)
-    size = np.maximum(np.abs(model.residuals(x)), 1.0)
-    tolerance = 1e-6 * np.linalg.norm(central) + 4 * np.finfo(float).eps * size / h
-    assert np.all(np.abs(J - central) <= tolerance), np.max(np.abs(J - central) / tolerance)
     ramps = {r.name for r in quiet_ramps.rotations if r.record_ramp}
-    accel = np.array([seg in ramps and q.startswith("accel") for seg, _, q, _ in model.row_labels(x)])
-    # 1 ms of offset moves those rows by more than their noise (whitened: 1 per row)
-    assert np.linalg.norm(J[accel]) * 1e-3 > np.sqrt(accel.sum()), np.linalg.norm(J[accel]) * 1e-3
+    assert all(r.rate_from_table for r in quiet_ramps.rotations if r.name in ramps)
+    x = fitted.x.copy()         # at the solution: a mounting offset (at the start's 0 no rate is seen)
+    encoder = dataclasses.replace(quiet_ramps, rotations=[dataclasses.replace(r, rate_from_table=False)
+                                                          for r in quiet_ramps.rotations])
+    for s, moved in ((encoder, True), (quiet_ramps, False)):
+        model = lsq.Model(s, [_untyped()])
+        c = model.layout["effect:time_offset"].start
+        J = model.jacobian(x)[:, c]
+        assert model.complex_step
+        h = 1e-4 * model._sizes(x)[c]
+        xp, xm = x.copy(), x.copy()
+        xp[c] += h
+        xm[c] -= h
+        central = (model.residuals(xp) - model.residuals(xm)) / (2 * h)
+        size = np.maximum(np.abs(model.residuals(x)), 1.0)
+        tolerance = 1e-6 * np.linalg.norm(central) + 4 * np.finfo(float).eps * size / h
+        assert np.all(np.abs(J - central) <= tolerance), np.max(np.abs(J - central) / tolerance)
+        accel = np.array([seg in ramps and q.startswith("accel") for seg, _, q, _ in model.row_labels(x)])
+        if moved:   # 1 ms of offset moves those rows by more than their noise (whitened: 1 per row)
+            assert np.linalg.norm(J[accel]) * 1e-3 > np.sqrt(accel.sum()), np.linalg.norm(J[accel]) * 1e-3
+        else:
+            assert np.all(J[accel] == 0.0)
 
 
 def _pull(s, offset_s):
@@ -157,10 +172,10 @@ def _pull(s, offset_s):
 def test_an_offset_the_model_holds_at_its_truth_leaves_the_datas_pull_as_without_one(quiet_ramps):
     """The same dry run (seed, noise draws) with the IMU 0 and 10 ms behind, each fitted with the
     offset held at its truth: the data's step on the offset from there is the noise's alone in both,
-    the same to a tenth of its 1-sigma when the model takes the shift as the twin makes it.  Before
-    the rate shape's factor: -0.571 ms between them (3.3 of the then 1-sigma, 0.17 ms); before the
-    Earth's change was taken at the edge means' phases (and out of whole turns), by the gyro
-    integrals: -0.071 ms (1.3 sigma); after: +0.0008 ms (0.014 sigma)."""
+    the same to a tenth of its 1-sigma when the model takes the shift as the twin makes it.  Before:
+    -0.571 ms between them (3.3 of its 1-sigma, 0.17 ms: the ramps' accelerometer rows); with the
+    rates at c times the encoder's but the Earth's change taken at the phases 0 and A of part turns
+    only, -0.071 ms; now +0.0002 ms."""
     step0, sigma = _pull(_quiet_ramps(0.0), 0.0)
     step10, _ = _pull(quiet_ramps, OFFSET_MS * 1e-3)
     assert abs(step10 - step0) < 0.1 * sigma, (step10, step0, sigma)

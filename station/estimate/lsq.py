@@ -960,7 +960,8 @@ class Model:
         # the measured rate's change across each window along its turn, and the turn the samples
         # measured (gyro units: the ratio is unit-free): a window shifted by dt turns
         # |A| + dt (w_end - w_start), while the rate's shape above was scaled to the encoder's |A|
-        # (summaries._rate): see _rate_shape_factor
+        # (summaries._rate): see _rate_shape_factor.  A recorded ramp's is at the table's stated
+        # rate (rate_from_table): no change counted, c = 1
         turn = np.array([r.gyro_integral for r in rots], float).reshape(R, 3)
         size = np.linalg.norm(turn, axis=1)
         along = np.divide(turn, size[:, None], out=np.zeros_like(turn), where=size[:, None] > 0)
@@ -968,6 +969,7 @@ class Model:
         self._rot_edge_change = np.array([np.asarray(r.gyro_end, float) - np.asarray(r.gyro_start, float)
                                           for r in rots], float).reshape(R, 3)
         self._rot_rate_change = np.einsum("rc,rc->r", along, self._rot_edge_change)
+        self._rot_rate_change[[bool(getattr(r, "rate_from_table", False)) for r in rots]] = 0.0    # c = 1
         self._rot_group = np.array([r.group for r in rots], int)
         self._rot_e1 = np.array([self.axis_basis[r.group][0] for r in rots]).reshape(R, 3)
         self._rot_phase_cols = np.array([(list(range(L[f"phase{i}"].start, L[f"phase{i}"].stop)) + [pad, pad])[:2]
@@ -1279,7 +1281,8 @@ class Model:
         its derivative c times.  A ramp of 100 deg/s at 10 ms: c - 1 = 1 deg / A, and the
         centripetal force at the mounting offset (w^2 l x (l x d): the accelerometers' mean) off
         by 2 (c - 1) of itself.  In the gyro's own units: A = I - dt dw, I the turn the samples
-        measured (the gyro's scale and units cancel in the ratio)."""
+        measured (the gyro's scale and units cancel in the ratio).  A recorded ramp's rate is the
+        table's stated one (RotationSummary.rate_from_table), which the shift does not change: 1."""
         step = shift[:, None] * self._rot_rate_change[None, :]                  # dt dw, (B,R)
         with np.errstate(invalid="ignore", divide="ignore"):
             c = self._rot_turn_measured / (self._rot_turn_measured - step)
