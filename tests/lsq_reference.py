@@ -8,6 +8,7 @@ from scipy.spatial.transform import Rotation
 from station.estimate.lsq import PHASES, UP, WEAK_PRIOR_RAD, Model, _earth_rate_visible
 from station.model.effect import SampleContext
 from station.model.geometry import cross, tangent_basis
+from station.model.table_encoder_scale import turned_time
 
 
 class PerSegmentModel(Model):
@@ -209,15 +210,21 @@ class PerSegmentModel(Model):
             # and the rate's shape was scaled to the encoder's turn: the table's rate is I / (I - dt dw)
             # times it (dw: the measured rate's change along the turn)
             turn = np.linalg.norm(r.gyro_integral)
+            phase_less_1 = 0.0     # c - 1, from dt dw (not c less 1: rounding)
             for eff in self.effects:
                 dt = eff.window_shift_s(x[L[f"effect:{eff.id}"]])
                 if dt is not None and turn > 0 and not r.rate_from_table:
                     dw = (np.asarray(r.gyro_end) - np.asarray(r.gyro_start)) @ (np.asarray(r.gyro_integral) / turn)
                     c = turn / (turn - dt * dw)
                     w_k, wsq_k, wdot_k = c * w_k, c * c * wsq_k, c * wdot_k
+                    step = dt * dw / (turn - dt * dw)
+                    phase_less_1 = phase_less_1 + step + phase_less_1 * step
             l_x_d = cross(l, offset)
             at_offset = np.outer(wsq_k, cross(l, l_x_d)) + np.outer(wdot_k, l_x_d)
             f_p = kappa * l + np.outer(cos_p, v) - np.outer(sin_p, cross(l, v)) + at_offset
+            if r.duration_s > 0:    # the summary's phases at the encoder's scale, gravity's at c times them
+                angle = turned_time(r.angle_deg, r.duration_s, PHASES) * (A / r.duration_s)
+                f_p = f_p + phase_less_1 * angle[:, None] * (-np.outer(sin_p, v) - np.outer(cos_p, cross(l, v)))
             w_p = np.tile((r.rate_dps + e) * l, (PHASES, 1))
             ctx = self._context(f_p, w_p, np.outer(w_k, l), r.temp_c, Ma, Mg, r)
             ctx.wdot_table = np.outer(wdot_k, l)

@@ -1028,6 +1028,8 @@ class Model:
                                                            for r in rots])
         self._ctx_turned_sq = np.concatenate([np.zeros(S)] + [turned_time(r.angle_deg, r.duration_s, PHASES, 2)
                                                               for r in rots])
+        self._rot_angle_at_phase = self._ctx_turned[S:].reshape(R, PHASES) * np.array(
+            [np.radians(r.angle_deg) / r.duration_s if r.duration_s > 0 else 0.0 for r in rots]).reshape(R, 1)
         self._last_jacobian = None
         self._unsafe = None         # ids of the effects that are not complex-step safe (None: not asked yet)
         self.evaluations = 0        # residual evaluations (the Jacobian's included), for benchmarks
@@ -1183,6 +1185,14 @@ class Model:
         f_r = (kappa[..., None, None] * l[:, :, None, :] + self._cos_p[:, None] * v[:, :, None, :]
                - self._sin_p[:, None] * cross(l, v)[:, :, None, :]
                + wsq_k * cross(l, l_x_d)[:, :, None, :] + wdot_k * l_x_d[:, :, None, :])   # (B,R,PHASES,3)
+        if shift is not None:
+            # the summary's phases are the gyro's turn scaled to the encoder's A, the samples turned
+            # A + dt dw: gravity's true phase is c times the summary's (review of toffdc28)
+            g_turn = -self._sin_p[:, None] * v[:, :, None, :] - self._cos_p[:, None] * cross(l, v)[:, :, None, :]
+            step = shift[:, None] * self._rot_rate_change[None, :]                  # dt dw, (B,R)
+            with np.errstate(invalid="ignore", divide="ignore"):     # c - 1, not c less 1 (rounding)
+                c_less_1 = np.where(self._rot_turn_measured > 0, step / (self._rot_turn_measured - step), 0.0)
+            f_r = f_r + c_less_1[..., None, None] * self._rot_angle_at_phase[None, :, :, None] * g_turn
         w_r = np.broadcast_to(((self._rot_rate + e)[..., None] * l)[:, :, None, :], f_r.shape)
         # the model's raw outputs at every point, effects included
         f_p = np.concatenate([f_s, f_r.reshape(B, -1, 3)], axis=1)              # (B, S + R PHASES, 3)
