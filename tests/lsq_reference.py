@@ -8,6 +8,7 @@ from scipy.spatial.transform import Rotation
 from station.estimate.lsq import PHASES, UP, WEAK_PRIOR_RAD, Model, _earth_rate_visible
 from station.model.effect import SampleContext
 from station.model.geometry import cross, tangent_basis
+from station.model.table_encoder_scale import turned_time
 
 
 class PerSegmentModel(Model):
@@ -195,6 +196,8 @@ class PerSegmentModel(Model):
             A = np.radians(r.angle_deg)
             earth_integral = np.zeros(3) if not _earth_rate_visible(r, s) else (r.duration_s / A) * (
                 np.sin(A) * earth_perp - (1.0 - np.cos(A)) * cross(l, earth_perp))
+            if _earth_rate_visible(r, s) and r.earth_weights_s is not None:    # a recorded ramp: over its own phase
+                earth_integral = r.earth_weights_s[0] * earth_perp - r.earth_weights_s[1] * cross(l, earth_perp)
             # at the mounting offset: centripetal w x (w x d) and tangential dw/dt x d, with the
             # rate's shape over the turn (its harmonics, from the summary): a steady rate gives a
             # constant centripetal force and no tangential one
@@ -203,9 +206,25 @@ class PerSegmentModel(Model):
             else:
                 w_k = np.full(PHASES, np.radians(r.rate_dps) * np.sqrt(r.rate_sq_factor))
                 wsq_k, wdot_k = w_k**2, np.zeros(PHASES)
+            # a window shifted by dt: the samples turned I (the gyro's own turn), the encoder I - dt dw,
+            # and the rate's shape was scaled to the encoder's turn: the table's rate is I / (I - dt dw)
+            # times it (dw: the measured rate's change along the turn)
+            turn = np.linalg.norm(r.gyro_integral)
+            phase_less_1 = 0.0     # c - 1, from dt dw (not c less 1: rounding)
+            for eff in self.effects:
+                dt = eff.window_shift_s(x[L[f"effect:{eff.id}"]])
+                if dt is not None and turn > 0 and not r.rate_from_table:
+                    dw = (np.asarray(r.gyro_end) - np.asarray(r.gyro_start)) @ (np.asarray(r.gyro_integral) / turn)
+                    c = turn / (turn - dt * dw)
+                    w_k, wsq_k, wdot_k = c * w_k, c * c * wsq_k, c * wdot_k
+                    step = dt * dw / (turn - dt * dw)
+                    phase_less_1 = phase_less_1 + step + phase_less_1 * step
             l_x_d = cross(l, offset)
             at_offset = np.outer(wsq_k, cross(l, l_x_d)) + np.outer(wdot_k, l_x_d)
             f_p = kappa * l + np.outer(cos_p, v) - np.outer(sin_p, cross(l, v)) + at_offset
+            if r.duration_s > 0:    # the summary's phases at the encoder's scale, gravity's at c times them
+                angle = turned_time(r.angle_deg, r.duration_s, PHASES) * (A / r.duration_s)
+                f_p = f_p + phase_less_1 * angle[:, None] * (-np.outer(sin_p, v) - np.outer(cos_p, cross(l, v)))
             w_p = np.tile((r.rate_dps + e) * l, (PHASES, 1))
             ctx = self._context(f_p, w_p, np.outer(w_k, l), r.temp_c, Ma, Mg, r)
             ctx.wdot_table = np.outer(wdot_k, l)
@@ -218,6 +237,10 @@ class PerSegmentModel(Model):
                 term = eff.integral(x[L[f"effect:{eff.id}"]], r)
                 if term is not None:
                     integral = integral + term
+                dt = eff.window_shift_s(x[L[f"effect:{eff.id}"]])
+                if dt is not None:      # of the measured change, only the table rate's (along M_g l) is the shift's
+                    m, d = Mg @ l, np.asarray(r.gyro_end) - np.asarray(r.gyro_start)
+                    integral = integral - dt * (d - (m @ d) / (m @ m) * m)
             gyro_rows = self.gyro_whiten[i] @ (r.gyro_integral - integral)
             if not r.steady:        # a hand turn: its angle and axis only, through the gyro
                 put(("rot", i), gyro_rows, "rotation_gyro")

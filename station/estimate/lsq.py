@@ -958,6 +958,19 @@ class Model:
                 w_k = np.full(PHASES, np.radians(r.rate_dps) * np.sqrt(r.rate_sq_factor))
                 shapes.append([w_k, w_k**2, np.zeros(PHASES)])
         self._rot_rate_shape = np.array(shapes, float).reshape(R, 3, PHASES)     # w, w^2, dw/dt
+        # the measured rate's change across each window along its turn, and the turn the samples
+        # measured (gyro units: the ratio is unit-free): a window shifted by dt turns
+        # |A| + dt (w_end - w_start), while the rate's shape above was scaled to the encoder's |A|
+        # (summaries._rate): see _rate_shape_factor.  A recorded ramp's is at the table's stated
+        # rate (rate_from_table): no change counted, c = 1
+        turn = np.array([r.gyro_integral for r in rots], float).reshape(R, 3)
+        size = np.linalg.norm(turn, axis=1)
+        along = np.divide(turn, size[:, None], out=np.zeros_like(turn), where=size[:, None] > 0)
+        self._rot_turn_measured = size
+        self._rot_edge_change = np.array([np.asarray(r.gyro_end, float) - np.asarray(r.gyro_start, float)
+                                          for r in rots], float).reshape(R, 3)
+        self._rot_rate_change = np.einsum("rc,rc->r", along, self._rot_edge_change)
+        self._rot_rate_change[[bool(getattr(r, "rate_from_table", False)) for r in rots]] = 0.0    # c = 1
         self._rot_group = np.array([r.group for r in rots], int)
         self._rot_e1 = np.array([self.axis_basis[r.group][0] for r in rots]).reshape(R, 3)
         self._rot_phase_cols = np.array([(list(range(L[f"phase{i}"].start, L[f"phase{i}"].stop)) + [pad, pad])[:2]
@@ -972,11 +985,6 @@ class Model:
         for i, r in enumerate(rots):    # a recorded ramp: the Earth rate's weights over its own phase
             if visible[i] and getattr(r, "earth_weights_s", None) is not None:
                 self._rot_earth[i] = r.earth_weights_s
-        # the Earth rate across the axis at the window's end less at its start (the phase A from
-        # 0), as factors of u and l x u: what a shift of the samples' window adds to their Earth
-        # integral, which _rot_earth's weights (over the samples' own phases) already hold
-        self._rot_earth_change = np.where(visible[:, None], np.column_stack([np.cos(A) - 1.0, -np.sin(A)]),
-                                          0.0).reshape(R, 2)
         self._rot_data = np.array([[r.accel_dc, r.accel_cos, r.accel_sin, r.accel_cos2, r.accel_sin2]
                                    for r in rots], float).reshape(R, 5, 3)
         # the harmonics' whitening: the noise covariance of a rotation's coefficients is
@@ -1021,6 +1029,8 @@ class Model:
                                                            for r in rots])
         self._ctx_turned_sq = np.concatenate([np.zeros(S)] + [turned_time(r.angle_deg, r.duration_s, PHASES, 2)
                                                               for r in rots])
+        self._rot_angle_at_phase = self._ctx_turned[S:].reshape(R, PHASES) * np.array(
+            [np.radians(r.angle_deg) / r.duration_s if r.duration_s > 0 else 0.0 for r in rots]).reshape(R, 1)
         self._last_jacobian = None
         self._unsafe = None         # ids of the effects that are not complex-step safe (None: not asked yet)
         self.evaluations = 0        # residual evaluations (the Jacobian's included), for benchmarks
@@ -1198,9 +1208,21 @@ class Model:
                   if self._offset is None else self._offset)
         l_x_d = cross(l, np.broadcast_to(offset, l.shape))
         w_k, wsq_k, wdot_k = (self._rot_rate_shape[:, j, :, None] for j in range(3))    # (R,PHASES,1)
+        shift = self._window_shift(X)
+        if shift is not None:       # the samples' window shifted: their rate's shape is c times the summary's
+            c = self._rate_shape_factor(shift)[..., None, None]                 # (B,R,1,1)
+            w_k, wsq_k, wdot_k = c * w_k, c * c * wsq_k, c * wdot_k             # (B,R,PHASES,1)
         f_r = (kappa[..., None, None] * l[:, :, None, :] + self._cos_p[:, None] * v[:, :, None, :]
                - self._sin_p[:, None] * cross(l, v)[:, :, None, :]
                + wsq_k * cross(l, l_x_d)[:, :, None, :] + wdot_k * l_x_d[:, :, None, :])   # (B,R,PHASES,3)
+        if shift is not None:
+            # the summary's phases are the gyro's turn scaled to the encoder's A, the samples turned
+            # A + dt dw: gravity's true phase is c times the summary's (review of toffdc28)
+            g_turn = -self._sin_p[:, None] * v[:, :, None, :] - self._cos_p[:, None] * cross(l, v)[:, :, None, :]
+            step = shift[:, None] * self._rot_rate_change[None, :]                  # dt dw, (B,R)
+            with np.errstate(invalid="ignore", divide="ignore"):     # c - 1, not c less 1 (rounding)
+                c_less_1 = np.where(self._rot_turn_measured > 0, step / (self._rot_turn_measured - step), 0.0)
+            f_r = f_r + c_less_1[..., None, None] * self._rot_angle_at_phase[None, :, :, None] * g_turn
         w_r = np.broadcast_to(((self._rot_rate + e)[..., None] * l)[:, :, None, :], f_r.shape)
         # the model's raw outputs at every point, effects included
         f_p = np.concatenate([f_s, f_r.reshape(B, -1, 3)], axis=1)              # (B, S + R PHASES, 3)
@@ -1255,18 +1277,20 @@ class Model:
                     term = _checked(eff, eff.integral, px, r)
                     if term is not None:
                         integral[n, i] += term
-        if self._shift_effects:
+        if shift is not None:
             # a term that is the samples' window shift times the measured rate's change counts the
-            # Earth rate's change at the window's ends, which the Earth integral above already takes
-            # over the samples' phases (their window, shifted): taken out once (issue 28,
-            # nineteenth session: across the axis it held a dry run's time offset toward 0, at a
-            # quarter of its truth where the ramps' angles carry little)
-            change = (self._rot_earth_change[:, :1] * earth_perp
-                      + self._rot_earth_change[:, 1:] * cross(l, earth_perp)) @ Mg.transpose(0, 2, 1)
-            for eff in self._shift_effects:
-                shift = [_checked(eff, eff.window_shift_s, X[n, L[f"effect:{eff.id}"]]) for n in range(B)]
-                if shift[0] is not None:
-                    integral = integral - np.array(shift)[:, None, None] * change
+            # Earth rate's change across the axis between the window's edges, which the Earth
+            # integral above already takes over the samples' phases (their window, shifted), or
+            # which a whole turn averages out: only the table rate's change, along M_g l, is the
+            # shift's.  The measured change's part across M_g l is taken out (issue 28: nineteenth
+            # session, the Earth's change at the phases 0 and A, which across the axis held a dry
+            # run's time offset toward 0; twentieth, at the edge means' own phases, 1.5 samples
+            # in, and in whole turns too, whose Earth rate is not modelled: at noise x 0.01 the
+            # rest pulled a 10 ms offset 0.04 ms, 2 sigma, low)
+            m = l @ Mg.transpose(0, 2, 1)                                        # (B,R,3)
+            d = self._rot_edge_change
+            along = np.einsum("brc,rc->br", m, d) / np.einsum("brc,brc->br", m, m)
+            integral = integral - shift[:, None, None] * (d[None] - along[..., None] * m)
         gyro_rows = (self._rot_gyro_whiten @ (self._rot_gyro - integral)[..., None])[..., 0]
         whitened = np.einsum("rij,brjc->bric", self._rot_whiten, self._rot_data - harmonics) * self._rot_weight
         blocks.append(np.concatenate([whitened.reshape(B, R, 15),
@@ -1275,6 +1299,34 @@ class Model:
         # the table's elevation of each axis: alpha, its angle from up, is 90 deg - elevation
         blocks.append(((X[:, self._level_cols] - self._level_alpha) / (self.geometry.level_sigma_rad or 1.0))[..., None])
         return blocks
+
+    def _window_shift(self, X):
+        """The samples' window's shift against the encoder's (s) of every row of X, (B,), summed
+        over the effects that say one (window_shift_s); None when none does."""
+        total = None
+        for eff in self._shift_effects:
+            shift = [_checked(eff, eff.window_shift_s, X[n, self.layout[f"effect:{eff.id}"]]) for n in range(len(X))]
+            if shift[0] is not None:
+                shift = np.array(shift).reshape(len(X))
+                total = shift if total is None else total + shift
+        return total
+
+    def _rate_shape_factor(self, shift):
+        """(B, R): the factor c by which the table's rate at the samples exceeds the summary's rate
+        shape under a window shift dt (issue 28, twentieth session).  The summary takes the rate's
+        shape from the gyro scaled to the encoder's mean rate A/T (summaries._rate: the gyro's scale
+        is not known there), but samples stamped in the encoder's window [t0, t1] were taken over
+        [t0 + dt, t1 + dt] on the table's clock and turned A + dt (w(t1) - w(t0)): the table's rate
+        at every sample is the shape times c = (A + dt dw) / A, its square c^2 times the shape's,
+        its derivative c times.  A ramp of 100 deg/s at 10 ms: c - 1 = 1 deg / A, and the
+        centripetal force at the mounting offset (w^2 l x (l x d): the accelerometers' mean) off
+        by 2 (c - 1) of itself.  In the gyro's own units: A = I - dt dw, I the turn the samples
+        measured (the gyro's scale and units cancel in the ratio).  A recorded ramp's rate is the
+        table's stated one (RotationSummary.rate_from_table), which the shift does not change: 1."""
+        step = shift[:, None] * self._rot_rate_change[None, :]                  # dt dw, (B,R)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            c = self._rot_turn_measured / (self._rot_turn_measured - step)
+        return np.where(self._rot_turn_measured > 0, c, 1.0)
 
     def _earth_along_across(self, column):
         """The Earth rate along each axis and across it (B, K each) from the axes' fourth column.
@@ -1310,7 +1362,14 @@ class Model:
         # the rate's square as the rows take it (the base model's mounting offset's, wsq_k) and the
         # rotation's axis: an effect's centripetal term (SampleContext.centripetal) over a recorded
         # ramp, where the square of the rate's harmonics is not its square's (twentieth session)
-        wsq = None if wsq_k is None else np.concatenate([np.zeros(S), np.broadcast_to(wsq_k[..., 0], (R, PHASES)).reshape(-1)])
+        # (the rate shapes are (R, PHASES, 1), or (B, R, PHASES, 1) where a window shift scales them
+        # per row: _rate_shape_factor; wsq then (N,) shared or (B, N))
+        if wsq_k is None:
+            wsq = None
+        elif wsq_k.ndim == 3:
+            wsq = np.concatenate([np.zeros(S), np.broadcast_to(wsq_k[..., 0], (R, PHASES)).reshape(-1)])
+        else:
+            wsq = np.concatenate([np.zeros((B, S)), np.broadcast_to(wsq_k[..., 0], (B, R, PHASES)).reshape(B, -1)], axis=1)
         axis = None if wsq is None else np.concatenate(
             [zeros, np.broadcast_to(l[:, :, None, :], (B, R, PHASES, 3)).reshape(B, -1, 3)], axis=1)
         ctx = SampleContext(
@@ -1334,7 +1393,8 @@ class Model:
                         rows = [dataclasses.replace(ctx, f_p=f_p[n], w_p=w_p[n], w_table=ctx.w_table[n],
                                         wdot_table=ctx.wdot_table[n], accel_matrix=Ma[n], gyro_matrix=Mg[n],
                                         offset_m=None if offset is None else offset[n],
-                                        axis_table=None if axis is None else axis[n]) for n in range(B)]
+                                        axis_table=None if axis is None else axis[n],
+                                        wsq_table=wsq if wsq is None or wsq.ndim == 1 else wsq[n]) for n in range(B)]
                     term = getattr(eff, name)
                     out = out.copy()
                     for n in range(B):

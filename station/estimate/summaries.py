@@ -97,6 +97,10 @@ class RotationSummary:
     # (tracked by the gyro): what a rate fixed in space across the axis (the Earth's) adds to the
     # gyro integral.  None: T/A (sin A, 1 - cos A), a uniform turn's (every steady segment's)
     earth_weights_s: np.ndarray | None = None
+    # the rate's shape (rate_coef ...) at the table's stated steady rate (a recorded ramp: its
+    # phase's scale, _ramp_fraction), not at the encoder's mean rate over the window: a window
+    # shifted by a time offset does not change it (lsq.Model._rate_shape_factor: 1)
+    rate_from_table: bool = False
     # the 1-sigma of this window's angle beyond the encoder's (deg): a recorded ramp's angle is
     # the table's reads placed on the IMU's clock (manifest ``angle_sigma_deg``, issue 28 review
     # item 1); added in quadrature to the encoder's in the gyro integral's variance.  0: none said
@@ -331,7 +335,9 @@ def _ramp_fraction(t, gyro, gyro_mean, angle_deg, steady_rate_dps, gyro_sigma_dp
     nor the raw gyro's turn: its bias integrates to a phase error growing with time (a MEMS
     0.1 deg/s: 0.6 deg over 6 s), which a uniform turn's phase absorbs and a ramp's cannot (the
     designer's noiseless fit of ramp turns was left at chi2 5 per turn in the harmonics).  A time
-    offset only shifts these phases, which the fit's phase takes."""
+    offset only shifts these phases, which the fit's phase takes.  Returns (fraction, the table's
+    rate at each sample along the turn, deg/s; None where the edges' runs were not found and the
+    fraction is the gyro's turn over the window)."""
     direction = gyro_mean / np.linalg.norm(gyro_mean)
     along = gyro @ direction
     head, tail = along[:EDGE_SAMPLES].mean(), along[-EDGE_SAMPLES:].mean()
@@ -354,13 +360,13 @@ def _ramp_fraction(t, gyro, gyro_mean, angle_deg, steady_rate_dps, gyro_sigma_dp
     rest_run = run_from(start_is_rest, head if start_is_rest else tail)
     rate_run = run_from(not start_is_rest, tail if start_is_rest else head)
     if span == 0 or not len(rest_run) or not len(rate_run):
-        return _turned_fraction(t, gyro, *_window_start_duration(t), gyro_mean)
+        return _turned_fraction(t, gyro, *_window_start_duration(t), gyro_mean), None
     rest, rate = float(rest_run.mean()), float(rate_run.mean())
     w = (along - rest) * (abs(steady_rate_dps) / (rate - rest))       # the table's rate, deg/s
     turned = np.empty(len(t))
     turned[0] = 0.5 * w[0] * (t[1] - t[0])                            # from the window's start
     turned[1:] = turned[0] + np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t))
-    return turned / abs(angle_deg)
+    return turned / abs(angle_deg), w
 
 
 def _window_start_duration(t):
@@ -391,9 +397,9 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
     spans = _chunks(n)
     gyro_mean = _column_means(gyro)
     fraction = _phase_fraction(t, gyro, start, duration, gyro_sigma_dps, gyro_mean)
-    earth_weights = None
+    earth_weights = table_rate = None
     if steady_rate_dps is not None:     # a recorded ramp: the phase at the table's steady rate
-        fraction = _ramp_fraction(t, gyro, gyro_mean, angle_deg, steady_rate_dps, gyro_sigma_dps)
+        fraction, table_rate = _ramp_fraction(t, gyro, gyro_mean, angle_deg, steady_rate_dps, gyro_sigma_dps)
         # the Earth rate's weights over the window from the same phase as the harmonics' (a rest
         # and a ramp spend longer at some angles than a uniform turn; issue 28 review item 5:
         # one phase per window, not the raw gyro's turn beside it)
@@ -403,7 +409,17 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
         del phase, weights
     # the table rate w(t) about the axis, its square and its time derivative are projected on the
     # same basis as the accelerometer (one solve for all of them)
-    w = _rate(gyro, gyro_bias, angle_deg, duration, gyro_mean)
+    rate_from_table = table_rate is not None
+    if table_rate is None:
+        w = _rate(gyro, gyro_bias, angle_deg, duration, gyro_mean)
+    else:   # a recorded ramp: at the table's steady rate, as its phase (issue 28, twentieth session)
+        # -- not at the encoder's mean rate over the window, A / T: the window's angle is the
+        # table's reads placed on the IMU's clock (uncertain by its angle_sigma_deg) and the
+        # samples of a window shifted by a time offset dt turn A + dt (w_end - w_start); scaled
+        # to A / T the rates, and the centripetal and tangential forces the accelerometer rows
+        # take from them, were off by (A + dt dw) / A and by the placement's error
+        w = np.radians(table_rate) * np.sign(angle_deg)
+    del table_rate
     angle_rad = np.radians(angle_deg)
     keep = None if accel_mask is None else accel_mask(angle_rad * fraction, accel)
     used = n if keep is None else int(keep.sum())
@@ -456,7 +472,7 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
                            gyro_start=gyro[:edge].mean(axis=0), gyro_end=gyro[-edge:].mean(axis=0),
                            steady=steady, rate_sq_factor=rate_sq_factor,
                            rate_coef=rate_coefs[0], rate_sq_coef=rate_coefs[1], rate_dot_coef=rate_coefs[2],
-                           gram=gram_per_sample, earth_weights_s=earth_weights)
+                           gram=gram_per_sample, earth_weights_s=earth_weights, rate_from_table=rate_from_table)
 
 
 def _scaled(values, factor):

@@ -55,7 +55,8 @@ class SampleContext:
                                            #   rotation axis at each point, m, frame p (0 at statics)
     wsq_table: np.ndarray | None = None    # the fit only: (N,) the table rate's square as the fit's rows
                                            #   take it, rad^2/s^2 (0 at statics): over a recorded ramp
-                                           #   the square's own harmonics, not the square of the rate's
+                                           #   the square's own harmonics, not the square of the rate's;
+                                           #   a batch context's (N,) or (B, N) (a window shift per row)
     axis_table: np.ndarray | None = None   # the fit only: (N, 3) the rotation's unit axis, frame p (0 at
                                            #   statics); a batch context's (B, N, 3)
 
@@ -79,7 +80,7 @@ class SampleContext:
         if self.wsq_table is None or self.axis_table is None:
             return cross(self.w_table, cross(self.w_table, d))
         l = self.axis_table
-        return np.asarray(self.wsq_table)[:, None] * cross(l, cross(l, d))
+        return np.asarray(self.wsq_table)[..., None] * cross(l, cross(l, d))     # (N,) or a batch's (B, N)
 
 
 class Effect:
