@@ -89,20 +89,12 @@ class InCaptureUnits:
     def accel(self, x, ctx):
         if not self._scaled():
             return super().accel(x, ctx)
-        term = super().accel(x, self._physical(ctx))
-        return None if term is None else self._counts_per_unit[0] * np.asarray(term)
+        return self._in_counts("accel", super().accel(x, self._physical(ctx)))
 
     def gyro(self, x, ctx):
         if not self._scaled():
             return super().gyro(x, ctx)
-        term = super().gyro(x, self._physical(ctx))
-        if term is None:
-            return None
-        if self._counts_per_unit[1] is None:
-            raise UserError(f"effect {self.id!r}: a raw gyro capture without a nominal scale "
-                            "(imu.gyro_nominal_dps_per_count) or a rotation with an encoder angle: its "
-                            "gyro term cannot be sized")
-        return self._counts_per_unit[1] * np.asarray(term)
+        return self._in_counts("gyro", super().gyro(x, self._physical(ctx)))
 
     def batch_term(self, name: str):
         """The wrapped class's batch form of accel or gyro, its terms scaled as accel() and gyro()
@@ -117,12 +109,14 @@ class InCaptureUnits:
         return functools.partial(self._scaled_batch, name, inner)
 
     def _scaled_batch(self, name, inner, X, ctx):
-        if name == "accel":
-            term = inner(X, self._physical(ctx))
-            return None if term is None else self._counts_per_unit[0] * np.asarray(term)
-        term = inner(X, self._physical(ctx))
+        return self._in_counts(name, inner(X, self._physical(ctx)))
+
+    def _in_counts(self, name, term):
+        """A term in physical units (accel or gyro; one row or a batch) in the capture's counts."""
         if term is None:
             return None
+        if name == "accel":
+            return self._counts_per_unit[0] * np.asarray(term)
         if self._counts_per_unit[1] is None:
             raise UserError(f"effect {self.id!r}: a raw gyro capture without a nominal scale "
                             "(imu.gyro_nominal_dps_per_count) or a rotation with an encoder angle: its "
