@@ -125,9 +125,9 @@ class Effect:
     # --- optional: the terms of a whole batch of parameter vectors at once -------------------
     # The fit evaluates its residuals for B parameter vectors at a time (the Jacobian's columns).
     # An effect may give the terms of all of them in one call: X is (B, p); ctx is a SampleContext
-    # whose f_p, w_p, w_table, wdot_table and offset_m are (B, N, 3) and accel_matrix, gyro_matrix
-    # (B, 3, 3), one per row of X, the other fields (the points' temperature, time, segment index,
-    # ...) shared, (N,); the result is (B, N, 3) or None, row n equal to accel(X[n], ctx of row n).
+    # whose f_p, w_p, w_table, wdot_table, offset_m and axis_table are (B, N, 3), wsq_table (N,) or
+    # (B, N), and accel_matrix, gyro_matrix (B, 3, 3), one per row of X, the other fields (the
+    # points' temperature, time, segment index, ...) shared, (N,); the result is (B, N, 3) or None, row n equal to accel(X[n], ctx of row n).
     # The fit uses it where the class that defines accel (gyro) defines accel_batch (gyro_batch)
     # too, so a subclass overriding accel alone keeps its override (estimate.lsq._own_term_batch),
     # and no subclass redefines a method of that class (a helper accel calls: batch_form); else it
