@@ -7,6 +7,7 @@ group's prior by the first turn's (axis, elevation), the other turn's key had no
 elevation is now part of the group (summaries), and the search keys each turn by its estimator
 group (information._group_key: the group's axis nuisances and prior counted once)."""
 import numpy as np
+import yaml
 
 from sim_devices.truth import mems_truth
 from station.cli import main
@@ -61,3 +62,45 @@ def test_design_from_a_capture_with_a_level_and_a_vertical_turn_answers(tmp_path
     if code == 2:          # (its progress lines start "design: ")
         said = [ln for ln in err.splitlines() if ln.startswith("station design:")]
         assert len(said) == 1 and "separate rotation_axis_offsets from table_vibration" in said[0], err
+
+
+def test_the_capture_turns_about_one_axis_in_two_sessions_keep_two_groups_in_the_search(tmp_path, monkeypatch):
+    """A capture extended by run --append with a turn about its own z again (same elevation): two
+    estimator axis groups (one per session), which the search keyed alike ((capture z), 0.0): the
+    second group's axis nuisances were laid over the first's and one prior was lost.  Each group
+    has its own key now, one per estimator group of the capture (capture_groups)."""
+    from station.design import search, sequential
+    from station.model.registry import EffectRegistry
+
+    made = []
+
+    class Kept(search.Scorer):
+        def __init__(self, *a, **k):
+            super().__init__(*a, **k)
+            made.append(self)
+
+    monkeypatch.setattr(search, "Scorer", Kept)
+    text = SCHEME.replace("  - {rotation: vz, axis_body: [0, 0, 1], axis_elevation_deg: 90}\n",
+                          "  - {rotation: wz, axis_body: [0, 0, 1]}\n")
+    dryrun.record_scheme(scheme_from_text(text, "twosessions.yaml"), mems_truth(0), 5, tmp_path / "cap")
+    manifest = tmp_path / "cap" / "manifest.yaml"
+    doc = yaml.safe_load(manifest.read_text())
+    for seg in doc["segments"]:
+        if seg["name"].startswith("wz"):
+            seg["appended"] = 1                  # as run --append records it
+    manifest.write_text(yaml.safe_dump(doc, sort_keys=False))
+    capture = read_capture(tmp_path / "cap", load_data=False)
+    sessions = sequential.capture_sessions(capture)
+    groups = sequential.capture_groups(sequential.capture_scheme(capture), sessions)
+    assert len(groups) == 4, groups             # x, y, z, and z of the extension
+    ext = sequential.extend(tmp_path / "cap", [EffectRegistry().create("accel_lever_arm")],
+                            reveal=["accel_position_*"], rates_dps=[100.0], revolutions=[1], dwells_s=[10.0])
+    assert ext.entries
+    sc = made[-1]
+    own = [i for i, c in enumerate(sc.cands) if c.kind == "rotation" and c.key[0][0] == "capture"]
+    keys = {sc.cands[i].key[2]: sc.info.rotation[sc.cands[i].key][0] for i in own}
+    assert len(set(keys.values())) == len(groups), keys
+    assert keys["rz_p"] == keys["rz_m"] != keys["wz_p"] == keys["wz_m"], keys
+    assert all(k in sc.info.group_prior for k in keys.values())
+    # and the search adds each turn's block to its group's by that key
+    assert [sc.group[i] for i in own] == [keys[sc.cands[i].key[2]] for i in own]
