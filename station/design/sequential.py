@@ -868,9 +868,14 @@ def _aligned(pred, names):
 
 
 def _cross_correlation(cov, a, b) -> float:
+    if not (len(a) and len(b)):
+        return 0.0
     d = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
-    corr = cov / np.outer(d, d)
-    return float(np.nanmax(np.abs(corr[np.ix_(a, b)]))) if len(a) and len(b) else 0.0
+    # (only the block between the two: a parameter the design leaves ~1e5 x its target overflowed
+    # the whole matrix's division, a RuntimeWarning on screen; twentieth session)
+    with np.errstate(over="ignore", invalid="ignore"):
+        corr = cov[np.ix_(a, b)] / np.outer(d[a], d[b])
+    return float(np.nanmax(np.abs(corr)))
 
 
 PREFIX = "x"
