@@ -552,10 +552,10 @@ def _recorded_elevation(seg) -> float | None:
 
 
 def _same_elevation(a: float | None, b: float | None) -> bool:
-    """Two recorded elevations of one axis group: equal (to 1e-6 deg), or both not recorded."""
-    if a is None or b is None:
-        return a is None and b is None
-    return abs(a - b) <= 1e-6
+    """Two recorded elevations of one axis group: equal (to 1e-6 deg); one not recorded is level
+    (0), as station design --from reads it (sequential.capture_scheme), so that the design's axis
+    groups are the estimator's (a capture without elevations: one group per axis, as before)."""
+    return abs((0.0 if a is None else a) - (0.0 if b is None else b)) <= 1e-6
 
 
 def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
