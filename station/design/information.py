@@ -453,6 +453,21 @@ def _capture_lines(model, group_own: dict, lines: list) -> tuple:
     return rename, fixed
 
 
+def _group_key(gkey: tuple, taken: set) -> tuple:
+    """The search's key of an estimator axis group (Information.rotation's, group_prior's): the
+    (axis, elevation) of its first turn, unless another group has that key already (the capture's
+    turns about one axis and elevation recorded in two sessions, run --append: two groups, each
+    with its axis nuisances and prior; one key overlaid the second group's nuisances on the
+    first's and kept one prior), then that key with a count.  Every turn of one estimator group
+    takes the group's key (search.Scorer.group), so its nuisances and prior are counted once."""
+    if gkey not in taken:
+        return gkey
+    n = 1
+    while gkey + (n,) in taken:
+        n += 1
+    return gkey + (n,)
+
+
 def _embed(M: np.ndarray, idx: np.ndarray, G: int) -> np.ndarray:
     """A block over (a chunk's shared columns + its own nuisances) placed over (the union's shared
     columns + the same nuisances): the chunk's column j at idx[j]; a column the chunk has not (a
@@ -603,6 +618,7 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
     offsets_of_groups = any(e.id == "rotation_axis_offsets" for e in effects)
     lines = None                     # the capture's axis lines and their offsets (_offset_lines)
     later = [_after_the_step(e) for e in effects] if first_times is not None else effects
+    taken: set = set()               # the axis groups' keys given so far (_group_key)
     for k_chunk, chunk in enumerate(chunks):
         segments, owner = [], {}
         for key, spec in chunk:
@@ -718,10 +734,12 @@ def information(chunks: list, effects: list, noise: Noise, config=None,
                 drop = [c for n in names for c in range(L[f"phase{rot_index[n]}"].start,
                                                          L[f"phase{rot_index[n]}"].stop)]
                 keep = np.concatenate([shared, np.arange(axis.start, axis.stop), group_own.get(group, _NONE)])
-                gkey = (key[0], key[1])           # (axis, elevation)
+                if group not in groups_used:
+                    groups_used[group] = _group_key((key[0], key[1]), taken)
+                    taken.add(groups_used[group])
+                gkey = groups_used[group]         # (axis, elevation): one per estimator axis group
                 info.rotation[key] = (gkey, _reduce(Jr, keep, np.array(drop, int)))
                 placed.append(("rotation", info.rotation, key, idx))
-                groups_used[group] = gkey
         for group, gkey in groups_used.items():
             rows = rows_of.get(f"axis{group}", [])
             axis = L[f"axis{group}"]

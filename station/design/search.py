@@ -122,10 +122,16 @@ class Scorer:
         G = info.shared
         self.G = G
         self.M = []
+        # each rotation's axis group as the information keys it (information._group_key: one per
+        # estimator axis group, whose nuisances and prior are counted once), not its (axis,
+        # elevation): the capture's own turns about one axis in two sessions are two groups
+        self.group: list = []
         for c in candidates:
             if c.kind == "static":
                 self.M.append(static_information(info, c.key[:-1], c.dwell_s))
+                self.group.append(None)
             else:
+                self.group.append(info.rotation[c.key][0])
                 self.M.append(info.rotation[c.key][1])
         # effects in the temperature (information.py, timeline=True): M above is each candidate's
         # information at dT = 1 degC; self.M is set at the temperature it has on the design's
@@ -286,7 +292,8 @@ class Scorer:
             if c.kind == "static":
                 F += M
             else:
-                groups[c.axis] = groups.get(c.axis, info.group_prior[c.axis]) + M
+                g = self.group[i]
+                groups[g] = groups.get(g, info.group_prior[g]) + M
         for g, S in groups.items():
             F += complement(info, g, S, G)
         return self.value_of(F)
@@ -301,7 +308,7 @@ class Scorer:
             if c.kind == "static":
                 F += self.M[i]
             else:
-                g = c.axis
+                g = self.group[i]
                 groups[g] = groups.get(g, self.info.group_prior[g]) + self.M[i]
         for g, S in groups.items():
             F += complement(self.info, g, S, G)
@@ -383,12 +390,12 @@ class State:
             if sc.cands[i].kind == "static":
                 F -= sc.M[i]
             else:
-                touched.setdefault(sc.cands[i].axis, ([], []))[0].append(i)
+                touched.setdefault(sc.group[i], ([], []))[0].append(i)
         for i in add:
             if sc.cands[i].kind == "static":
                 F += sc.M[i]
             else:
-                touched.setdefault(sc.cands[i].axis, ([], []))[1].append(i)
+                touched.setdefault(sc.group[i], ([], []))[1].append(i)
         for g, (rm, ad) in touched.items():
             if g in self.groups:
                 F -= self.groups[g][2]
@@ -400,18 +407,18 @@ class State:
 
     def add(self, i) -> None:
         self.total = self.information(add=(i,))
-        c = self.sc.cands[i]
-        if c.kind == "rotation":
-            self.groups[c.axis] = list(self._group_after(c.axis, add=(i,)))
+        g = self.sc.group[i]
+        if g is not None:
+            self.groups[g] = list(self._group_after(g, add=(i,)))
         self.chosen.add(i)
 
     def remove(self, i) -> None:
         self.total = self.information(remove=(i,))
-        c = self.sc.cands[i]
-        if c.kind == "rotation":
-            self.groups[c.axis] = list(self._group_after(c.axis, remove=(i,)))
-            if self.groups[c.axis][1] == 0:
-                del self.groups[c.axis]
+        g = self.sc.group[i]
+        if g is not None:
+            self.groups[g] = list(self._group_after(g, remove=(i,)))
+            if self.groups[g][1] == 0:
+                del self.groups[g]
         self.chosen.discard(i)
 
 

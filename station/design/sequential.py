@@ -152,18 +152,19 @@ def capture_sessions(capture) -> dict:
 
 def capture_groups(base, sessions: dict) -> list:
     """The unit axis of each axis group of the capture, in the estimator's numbering (summaries:
-    a new group for each body axis in each session -- the run, then every ``run --append`` --
-    in the order the rotations come).  The offsets per axis group (rotation_axis_offsets) are
+    a new group for each body axis and elevation in each session -- the run, then every ``run
+    --append`` -- in the order the rotations come).  The offsets per axis group (rotation_axis_offsets) are
     named by these numbers (axis<g>_offset_*; an appended turn about a line the run turned about
     shares that group's offset and has no name of its own: axis_offsets.offset_groups)."""
-    axes = []                      # (unit axis, session)
+    axes = []                      # (unit axis, session, elevation)
     for spec in base.segments:
         if spec.kind == "rotation":
             a = np.asarray(spec.axis_body, float) / np.linalg.norm(spec.axis_body)
             n = sessions.get(spec.name, 0)
-            if not any(s == n and np.allclose(a, b, atol=1e-6) for b, s in axes):
-                axes.append((a, n))
-    return [a for a, _ in axes]
+            e = float(spec.axis_elevation_deg)
+            if not any(s == n and abs(e - f) <= 1e-6 and np.allclose(a, b, atol=1e-6) for b, s, f in axes):
+                axes.append((a, n, e))
+    return [a for a, _, _ in axes]
 
 
 def capture_config(path: Path, config_path: str | None):
@@ -867,9 +868,14 @@ def _aligned(pred, names):
 
 
 def _cross_correlation(cov, a, b) -> float:
+    if not (len(a) and len(b)):
+        return 0.0
     d = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
-    corr = cov / np.outer(d, d)
-    return float(np.nanmax(np.abs(corr[np.ix_(a, b)]))) if len(a) and len(b) else 0.0
+    # (only the block between the two: a parameter the design leaves ~1e5 x its target overflowed
+    # the whole matrix's division, a RuntimeWarning on screen; twentieth session)
+    with np.errstate(over="ignore", invalid="ignore"):
+        corr = cov[np.ix_(a, b)] / np.outer(d[a], d[b])
+    return float(np.nanmax(np.abs(corr)))
 
 
 PREFIX = "x"

@@ -559,6 +559,21 @@ def _copy(parts: _SegmentSummaries) -> _SegmentSummaries:
                                rotations=copy.deepcopy(parts.rotations), skipped=list(parts.skipped))
 
 
+def _recorded_elevation(seg) -> float | None:
+    """The elevation of a rotation's axis_body above the horizontal the capture records (deg;
+    None: not recorded, older captures and imports)."""
+    e = seg.extra.get("axis_elevation_deg")
+    ok = isinstance(e, (int, float)) and not isinstance(e, bool) and np.isfinite(e)
+    return float(e) if ok else None
+
+
+def _same_elevation(a: float | None, b: float | None) -> bool:
+    """Two recorded elevations of one axis group: equal (to 1e-6 deg); one not recorded is level
+    (0), as station design --from reads it (sequential.capture_scheme), so that the design's axis
+    groups are the estimator's (a capture without elevations: one group per axis, as before)."""
+    return abs((0.0 if a is None else a) - (0.0 if b is None else b)) <= 1e-6
+
+
 def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
     order = {seg.name: k for k, seg in enumerate(capture.segments)}
     statics, spans = [], []
@@ -616,13 +631,18 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
             # one group per physical axis: rotations about one body axis share its direction on the
             # table (elevation, heading: the gravity angle and the Earth rate's phase the fit gives
             # each group), but not across an extension recorded later (``appended: N``, run
-            # --append): the table may start that axis elsewhere
+            # --append): the table may start that axis elsewhere; nor at another recorded elevation
+            # (axis_elevation_deg: a level turn and a vertical one about the same body axis have
+            # different gravity angles; in one group the fit gave a capture with both a reduced
+            # chi2 of 2.2e6, twentieth session)
             session = seg.extra.get("appended", 0)
             session = session if isinstance(session, int) and not isinstance(session, bool) else 0
-            group = next((i for i, (a, s) in enumerate(axes) if s == session and np.allclose(a, axis, atol=1e-6)),
+            elevation = _recorded_elevation(seg)
+            group = next((i for i, (a, s, e) in enumerate(axes)
+                          if s == session and np.allclose(a, axis, atol=1e-6) and _same_elevation(e, elevation)),
                          None)
             if group is None:
-                axes.append((axis, session))
+                axes.append((axis, session, elevation))
                 group = len(axes) - 1
             try:
                 summary = rotation_summary(seg.name, axis, group, seg.angle_deg, d.t, _scaled(d.accel, ca),

@@ -81,7 +81,9 @@ class RotationAxisOffsets(Effect):
 def offset_groups(rotations) -> dict:
     """{axis group: the axis group whose offset it has}: the first group (the lowest number) about
     the same body axis turned by the same table axis (``table_axis``, None where the bench does not
-    say).  Within one run that is the group itself (summaries give one group per body axis); a
+    say).  Within one run that is the group itself (summaries give one group per body axis and
+    recorded elevation; a level and a vertical turn about one body axis on one table axis share
+    the offset); a
     rotation of an extension recorded later (``appended: N``, run --append) is a group of its own
     for its direction on the table (the table may start that axis at another angle: its gravity
     angle and heading are the group's), but its offset is the capture's group's about the same
