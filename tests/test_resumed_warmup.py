@@ -21,7 +21,7 @@ import pytest
 from rich.console import Console
 
 from drivers.base import ImuSettings
-from drivers.registry import open_imu, open_table
+from drivers.registry import DEFAULT_IMU_PROTOCOL, open_imu, open_table
 from sim_devices.truth import default_truth
 from sim_devices.twins.serve import BenchOptions, BenchServer
 from station.bench.compile import compile_scheme
@@ -76,14 +76,16 @@ class NobodyThere:
         return False
 
 
-def _run(bench, writer, steps, interrupts=None):
-    """``steps`` run by the sequencer on the twins (a new connection, as a new station run)."""
-    table = open_table(bench.table_path)
-    imu = open_imu(bench.imu_path, settings=ImuSettings(frame_timeout_s=10.0))
+def _run(bench, writer, steps, interrupts=None, config=None, imu_protocol=DEFAULT_IMU_PROTOCOL,
+         imu_settings=None, table_settings=None):
+    """``steps`` run by the sequencer on the twins (a new connection, as a new station run);
+    ``config`` _config()'s unless given, the IMU's frames waited for 10 s unless ``imu_settings``."""
+    table = open_table(bench.table_path, settings=table_settings)
+    imu = open_imu(bench.imu_path, imu_protocol, settings=imu_settings or ImuSettings(frame_timeout_s=10.0))
     try:
         rate = imu.configure(RATE_HZ)
-        Sequencer(table=table, imu=imu, writer=writer, config=_config(), operator=NobodyThere(), rate_hz=rate,
-                  interrupts=interrupts,
+        Sequencer(table=table, imu=imu, writer=writer, config=config or _config(), operator=NobodyThere(),
+                  rate_hz=rate, interrupts=interrupts,
                   display=PlainDisplay(Console(file=io.StringIO(), width=200), 1.0, "test")).run(steps)
     finally:
         table.close()
@@ -249,15 +251,7 @@ def test_a_resume_after_a_power_cycle_waits_the_configured_minimum_from_the_imus
                     run=RunConfig(operator=False, settle_s=1, max_missing_fraction=0.5, max_gap_s=100.0))
 
     def run(bench, writer, steps):
-        table = open_table(bench.table_path)
-        imu = open_imu(bench.imu_path, settings=ImuSettings(frame_timeout_s=10.0))
-        try:
-            Sequencer(table=table, imu=imu, writer=writer, config=config, operator=NobodyThere(),
-                      rate_hz=imu.configure(RATE_HZ),
-                      display=PlainDisplay(Console(file=io.StringIO(), width=200), 1.0, "test")).run(steps)
-        finally:
-            table.close()
-            imu.close()
+        _run(bench, writer, steps, config=config)
 
     cap = tmp_path / "cap"
     scheme = scheme_from_text(RUN, "z.yaml")
@@ -329,15 +323,9 @@ def test_a_host_stamped_imu_switched_off_waits_the_minimum_and_a_warm_one_does_n
 
     def run(bench, writer, steps):
         # (replies within 10 s: on a loaded machine the table's first reply once took over 1 s)
-        table = open_table(bench.table_path, settings=TableSettings(serial=SerialSettings(timeout_s=10.0)))
-        imu = open_imu(bench.imu_path, "csv", settings=ImuSettings(frame_timeout_s=10.0, csv_format=CsvFormat()))
-        try:
-            Sequencer(table=table, imu=imu, writer=writer, config=config, operator=NobodyThere(),
-                      rate_hz=imu.configure(RATE_HZ),
-                      display=PlainDisplay(Console(file=io.StringIO(), width=200), 1.0, "test")).run(steps)
-        finally:
-            table.close()
-            imu.close()
+        _run(bench, writer, steps, config=config, imu_protocol="csv",
+             imu_settings=ImuSettings(frame_timeout_s=10.0, csv_format=CsvFormat()),
+             table_settings=TableSettings(serial=SerialSettings(timeout_s=10.0)))
 
     cap = tmp_path / "cap"
     whole = scheme_from_text(WHOLE, "z.yaml")

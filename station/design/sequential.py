@@ -400,6 +400,14 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
         place(added)
         return State(scorer, list(range(n_own)) + list(added))
 
+    def kept(candidate, added):
+        """On the timeline: ``candidate`` placed and judged so; (its state, it, True) where it keeps
+        the goal, else (``added`` placed again, ``added``, False)."""
+        trial = state(candidate)
+        if badness(trial.information()) <= 1.0:
+            return trial, candidate, True
+        return state(added), added, False
+
     def search(forced=()) -> list:
         st = state(forced)
         added = list(forced)
@@ -439,11 +447,7 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
                     added = rest
                     continue
                 # (on the timeline: the others move up without it, so judged again placed so)
-                trial = state(rest)
-                if badness(trial.information()) <= 1.0:
-                    st, added = trial, rest
-                else:
-                    st = state(added)
+                st, added, _ = kept(rest, added)
         for k, i in enumerate(list(added)):      # least time: a shorter one that keeps the goal
             rest = st.chosen - {i}
             better = [j for j in pool if secs[j] < secs[i] and allowed(rest, j)
@@ -455,11 +459,9 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
                     st.add(j)
                     added = changed
                     break
-                trial = state(changed)
-                if badness(trial.information()) <= 1.0:
-                    st, added = trial, changed
+                st, added, ok = kept(changed, added)
+                if ok:
                     break
-                st = state(added)
         state(added)
         return added
 

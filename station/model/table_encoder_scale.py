@@ -146,9 +146,7 @@ class TableEncoderScale(Effect):
         sq = getattr(ctx, "turned_sq_s2", None)
         sq = np.asarray(turned, float) ** 2 if sq is None else np.asarray(sq, float)
         turning = ctx.f_p - _segment_means(ctx.column("segment_index"), ctx.f_p)
-        wxf = cross(ctx.w_table, turning)
-        df = -e * np.asarray(turned, float)[:, None] * wxf + 0.5 * e * e * sq[:, None] * cross(ctx.w_table, wxf)
-        return df @ ctx.accel_matrix.T
+        return _gravity_turned(e, turned, sq, ctx.w_table, turning) @ ctx.accel_matrix.T
 
     def gyro(self, x, ctx):
         if getattr(ctx, "turned_s", None) is None:
@@ -175,14 +173,19 @@ class TableEncoderScale(Effect):
         sq = np.asarray(turned, float) ** 2 if sq is None else np.asarray(sq, float)
         index = ctx.column("segment_index")
         turning = ctx.f_p - np.stack([_segment_means(index, f) for f in ctx.f_p])
-        wxf = cross(ctx.w_table, turning)
-        df = -e * np.asarray(turned, float)[:, None] * wxf + 0.5 * e * e * sq[:, None] * cross(ctx.w_table, wxf)
-        return df @ ctx.accel_matrix.mT
+        return _gravity_turned(e, turned, sq, ctx.w_table, turning) @ ctx.accel_matrix.mT
 
     def gyro_batch(self, X, ctx):
         if getattr(ctx, "turned_s", None) is None:
             return None
         return self._per_point_batch(X, ctx) * (180.0 / np.pi) * ctx.w_table @ ctx.gyro_matrix.mT
+
+
+def _gravity_turned(e, turned, sq, w, turning):
+    """The change of the turning part of f when the table turned further by e theta (second order:
+    accel()'s comment): -e t (w x f) + e^2/2 t^2 w x (w x f), one row's points or a batch's."""
+    wxf = cross(w, turning)
+    return -e * np.asarray(turned, float)[:, None] * wxf + 0.5 * e * e * sq[:, None] * cross(w, wxf)
 
 
 def _segment_means(index: np.ndarray, f: np.ndarray) -> np.ndarray:
