@@ -156,13 +156,15 @@ def capture_groups(base, sessions: dict) -> list:
     --append`` -- in the order the rotations come).  The offsets per axis group (rotation_axis_offsets) are
     named by these numbers (axis<g>_offset_*; an appended turn about a line the run turned about
     shares that group's offset and has no name of its own: axis_offsets.offset_groups)."""
+    from station.estimate.table_geometry import same_elevation
+
     axes = []                      # (unit axis, session, elevation)
     for spec in base.segments:
         if spec.kind == "rotation":
             a = np.asarray(spec.axis_body, float) / np.linalg.norm(spec.axis_body)
             n = sessions.get(spec.name, 0)
             e = float(spec.axis_elevation_deg)
-            if not any(s == n and abs(e - f) <= 1e-6 and np.allclose(a, b, atol=1e-6) for b, s, f in axes):
+            if not any(s == n and same_elevation(e, f) and np.allclose(a, b, atol=1e-6) for b, s, f in axes):
                 axes.append((a, n, e))
     return [a for a, _, _ in axes]
 

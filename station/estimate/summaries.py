@@ -567,13 +567,6 @@ def _recorded_elevation(seg) -> float | None:
     return float(e) if ok else None
 
 
-def _same_elevation(a: float | None, b: float | None) -> bool:
-    """Two recorded elevations of one axis group: equal (to 1e-6 deg); one not recorded is level
-    (0), as station design --from reads it (sequential.capture_scheme), so that the design's axis
-    groups are the estimator's (a capture without elevations: one group per axis, as before)."""
-    return abs((0.0 if a is None else a) - (0.0 if b is None else b)) <= 1e-6
-
-
 def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
     order = {seg.name: k for k, seg in enumerate(capture.segments)}
     statics, spans = [], []
@@ -639,7 +632,7 @@ def _summarise_segments(capture, ca, cg, check_segment) -> _SegmentSummaries:
             session = session if isinstance(session, int) and not isinstance(session, bool) else 0
             elevation = _recorded_elevation(seg)
             group = next((i for i, (a, s, e) in enumerate(axes)
-                          if s == session and np.allclose(a, axis, atol=1e-6) and _same_elevation(e, elevation)),
+                          if s == session and np.allclose(a, axis, atol=1e-6) and table_geometry.same_elevation(e, elevation)),
                          None)
             if group is None:
                 axes.append((axis, session, elevation))

@@ -26,6 +26,23 @@ import numpy as np
 from station.core import units
 from station.core.errors import UserError
 
+# Two recorded elevations of rotations about one body axis are one axis setting (one axis group,
+# one gravity angle in the fit) when they differ by no more than this.  Gravity turns by g*delta
+# across or along the axis when the elevation does: 1 arcsec is 4.8e-6 g (4.8 ug), below what
+# any table's axes are levelled to (level_arcsec: arcseconds at best) -- a smaller difference is
+# how the number was written (a tool printing 89.99999 for 90: 0.036 arcsec), not another
+# setting.  The estimator's groups (summaries), the elevation the fit's level prior takes
+# (from_capture) and station design --from's groups (design.sequential.capture_groups) share it.
+SAME_ELEVATION_ARCSEC = 1.0
+
+
+def same_elevation(a: float | None, b: float | None) -> bool:
+    """Two recorded elevations (deg) of one axis group: equal to SAME_ELEVATION_ARCSEC; one not
+    recorded (None) is level (0), as station design --from reads it (sequential.capture_scheme),
+    so that the design's axis groups are the estimator's (a capture without elevations: one
+    group per axis, as before)."""
+    return abs((0.0 if a is None else a) - (0.0 if b is None else b)) * 3600.0 <= SAME_ELEVATION_ARCSEC
+
 
 @dataclass(frozen=True)
 class TableGeometry:
@@ -98,7 +115,9 @@ def read(capture, rotations) -> TableGeometry:
         mounting[r.name] = tuple(str(x) for x in m) if isinstance(m, (list, tuple)) else None
         e = seg.extra.get("axis_elevation_deg") if seg is not None else None
         ok = isinstance(e, (int, float)) and not isinstance(e, bool) and np.isfinite(e)
-        found.setdefault(r.group, set()).add(float(e) if ok else None)
-    # one recorded elevation for every rotation about the axis, else nothing known about it
-    elevations = {k: v.pop() for k, v in found.items() if len(v) == 1 and None not in v}
+        found.setdefault(r.group, []).append(float(e) if ok else None)
+    # one recorded elevation for every rotation about the axis (to SAME_ELEVATION_ARCSEC: the
+    # first one recorded stands for the group), else nothing known about it
+    elevations = {k: v[0] for k, v in found.items()
+                  if None not in v and all(same_elevation(v[0], x) for x in v)}
     return TableGeometry(True, intersect, level, mounting, elevations)
