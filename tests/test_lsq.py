@@ -164,3 +164,7 @@ def test_the_lm_step_is_the_damped_least_squares_step(m, n, rank):
                               rcond=None)[0] if lam > 0 else gn
         assert np.linalg.norm(p - ref) < 1e-9 * np.linalg.norm(ref), (delta, lam, np.linalg.norm(p - ref))
         assert np.linalg.norm(p) <= 1.1 * delta if lam > 0 else np.linalg.norm(gn) <= 1.1 * delta
+    # a Jacobian with an infinite entry: answered as the SVD of A answers it (not finite, no exception)
+    As[0, 0] = np.inf
+    s = solver._svd_projected(As, f)[0]
+    assert not np.isfinite(s).all() and np.array_equal(s, np.linalg.svd(As, full_matrices=False)[1], equal_nan=True)

@@ -109,14 +109,18 @@ def _svd_projected(A, f):
     singular vectors, m x n): all _step needs of A = U S Vt.  For a tall A from the QR
     factorisation of [A f] (R's last column above its corner is Q^T f), then the SVD of the n x n
     R: the same s, Vt and U^T f to rounding, without forming the m x n U (a 303 x 99 scaled
-    Jacobian, one BLAS thread: 1.8 ms against 2.8 ms for the SVD of A with U; issue 27)."""
+    Jacobian, one BLAS thread: 1.8 ms against 2.8 ms for the SVD of A with U; issue 27).  A square
+    or wide A, or one the factorisations fail on (not finite), as the SVD of A answers it."""
     m, n = A.shape
-    if m <= n or n == 0:
-        U, s, Vt = np.linalg.svd(A, full_matrices=False)
-        return s, Vt, U.T @ f
-    R = np.linalg.qr(np.column_stack([A, f]), mode="r")
-    U, s, Vt = np.linalg.svd(R[:n, :n])
-    return s, Vt, U.T @ R[:n, n]
+    if m > n > 0:
+        try:
+            R = np.linalg.qr(np.column_stack([A, f]), mode="r")
+            U, s, Vt = np.linalg.svd(R[:n, :n])
+            return s, Vt, U.T @ R[:n, n]
+        except np.linalg.LinAlgError:
+            pass
+    U, s, Vt = np.linalg.svd(A, full_matrices=False)
+    return s, Vt, U.T @ f
 
 
 class LevenbergMarquardt:
