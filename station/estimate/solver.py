@@ -104,6 +104,25 @@ def _step(s, Vt, uf, diag, delta, par):
     return -(Vt_k.T @ (a / (s_k * s_k + lam))), lam
 
 
+def _svd_projected(A, f):
+    """The singular values s and right singular vectors Vt of A (m x n), and U^T f (U its left
+    singular vectors, m x n): all _step needs of A = U S Vt.  For a tall A from the QR
+    factorisation of [A f] (R's last column above its corner is Q^T f), then the SVD of the n x n
+    R: the same s, Vt and U^T f to rounding, without forming the m x n U (a 303 x 99 scaled
+    Jacobian, one BLAS thread: 1.8 ms against 2.8 ms for the SVD of A with U; issue 27).  A square
+    or wide A, or one the factorisations fail on (not finite), as the SVD of A answers it."""
+    m, n = A.shape
+    if m > n > 0:
+        try:
+            R = np.linalg.qr(np.column_stack([A, f]), mode="r")
+            U, s, Vt = np.linalg.svd(R[:n, :n])
+            return s, Vt, U.T @ R[:n, n]
+        except np.linalg.LinAlgError:
+            pass
+    U, s, Vt = np.linalg.svd(A, full_matrices=False)
+    return s, Vt, U.T @ f
+
+
 class LevenbergMarquardt:
     """The solve as an object, so that it can be paused and resumed with its state: where it is
     (x, the residuals, their norm), the column scaling ``diag``, the trust region's radius
@@ -184,8 +203,7 @@ class LevenbergMarquardt:
             if fnorm == 0 or gnorm <= max(gtol, EPS):
                 self.status = 1
                 break
-            U, s, Vt = np.linalg.svd(J / diag, full_matrices=False)
-            uf = U.T @ f
+            s, Vt, uf = _svd_projected(J / diag, f)
             while True:                                   # until a step reduces the sum of squares
                 p, self.par = _step(s, Vt, uf, diag, self.delta, self.par)
                 par = self.par
