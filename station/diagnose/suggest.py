@@ -23,6 +23,12 @@ ALIAS_COS = 0.95      # two candidates whose one-step signatures are this alike:
 # drift's 1sigma 2.9 x its target, correlation 0.91; tests/test_suggest_bias_step.py)
 TIMELINE = ("bias_drift", "temperature_bias", "temperature_bias_quadratic", "scale_temperature", "bias_step")
 NOT_DESIGNED = ("remount_per_segment",)
+# why, in words (measured, twenty-first session: station design --from refuses bias_step against
+# temperature_bias on the step capture with its extension recorded: the closest 12 segments leave
+# accel_bias_tempco_z's 1-sigma 3.1 x its target, correlation 0.96; against bias_drift likewise)
+TIMELINE_WHY = ("each follows the capture's clock or its temperature, and every segment added after the capture "
+                "comes later and warmer alike (the table has no chamber to set the temperature apart from the "
+                "time), so station design --from finds no segments that separate them")
 # pairs no segments separate (measured: station design --from refuses them with what stays
 # furthest; words.aliases says why): no command is printed for them.  An offset per axis group and
 # a vibration once per revolution: separated in the fifteenth session by turns about the capture's
@@ -153,9 +159,9 @@ def suggest_steps(steps, capture, summaries, registry=None) -> None:
                 continue
             if (rival in NOT_DESIGNED or st.added in NOT_DESIGNED or {st.added, rival} in NOT_SEPARABLE
                     or (st.added in TIMELINE and rival in TIMELINE)):
-                st.caveats.append(f"no segments of this table are designed to separate {st.added} from {rival} "
-                                  "(both follow the capture's clock or temperature, or no added segment shares "
-                                  "their parameters: docs/design.md, Limits)")
+                st.caveats.append(f"no segments of this table are designed to separate {st.added} from {rival}: "
+                                  + (TIMELINE_WHY if st.added in TIMELINE and rival in TIMELINE else
+                                     "no added segment shares their parameters (docs/design.md, Limits)"))
                 continue
             st.separations.append(separate_command(capture, effects, st.added, rival, registry))
 
@@ -272,7 +278,7 @@ def candidate_lines(diagnosis) -> list[str]:
         others = list(getattr(c, "alike", None) or [])
         if others:
             lines.append(f"{c.effect}: this capture cannot tell it from {', '.join(others)} (they explain the misfit "
-                         "alike); no segments of this table are designed to separate them")
+                         f"alike); no segments of this table are designed to separate them: {TIMELINE_WHY}")
     return lines
 
 
