@@ -119,3 +119,24 @@ def test_a_gyro_step_is_not_taken_for_g_dependent_gyro_terms(tmp_path, capsys):
     for axis, truth in zip("xyz", GYRO_STEP_DPH):
         e = est[f"gyro_bias_step_{axis}"]
         assert abs(e["value"] - truth) < 3.0 * e["sigma"], (axis, e, truth)
+
+
+def test_a_steps_rivals_get_the_command_or_the_words_why_not(monkeypatch):
+    """suggest_steps (no fit: < 0.1 s): a rival the designer separates from the step gets its
+    `station design --from --separate` command; one that, like the step, follows the capture's
+    clock or temperature (the designer refuses the pair: 3.1 x the target) gets the words why.
+    Before the change the step's rivals were ignored (no command, no words)."""
+    from types import SimpleNamespace as NS
+
+    from station.diagnose import suggest, words
+
+    monkeypatch.setattr(words, "aliases", lambda summaries, effect_id: [])    # no alias of the words' own
+    st = NS(discovered=False, added="bias_step", after=NS(effects=["base_triads", "inter_triad", "bias_step"]),
+            rivals=["accel_cross_axis", "temperature_bias"], caveats=[], separations=[])
+    suggest.suggest_steps([st], "/x/cap", NS(rotations=[]), None)
+    assert st.separations == ["station design --from /x/cap --add bias_step --separate bias_step,accel_cross_axis "
+                              "-o extension.yaml"]
+    why = [c for c in st.caveats if "separate bias_step from temperature_bias" in c]
+    assert len(why) == 1 and "clock or its temperature" in why[0], st.caveats
+    assert suggest.step_lines(st) == [f"caveat: the fewest segments that separate bias_step from accel_cross_axis: "
+                                      f"{st.separations[0]}"]
