@@ -15,6 +15,8 @@ step's caveats say the capture cannot tell it from them, and diagnose prints the
 extension recorded into a copy of the capture (the dry run's --append), and --auto on it finds
 the step at the true time with the true sizes (within 3 of their 1-sigma, a reference sharing no
 code with the estimator: the simulator's truth)."""
+import contextlib
+import io
 import json
 import shlex
 import shutil
@@ -58,14 +60,23 @@ def step_capture(tmp_path_factory):
     return _recorded(tmp_path_factory.mktemp("step-alias"), accel_ug=STEP_UG)
 
 
-def test_auto_keeps_the_step_says_what_it_cannot_tell_and_prints_the_command(step_capture, tmp_path, capsys,
-                                                                            monkeypatch):
+@pytest.fixture(scope="module")
+def step_report(step_capture):
+    """diagnose --auto --json of the step capture, once for the tests that read it."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        status = main(["diagnose", str(step_capture / "cap"), "--auto", "--json"])
+    assert status in (0, 1), err.getvalue()
+    return json.loads(out.getvalue())
+
+
+def test_auto_keeps_the_step_says_what_it_cannot_tell_and_prints_the_command(step_capture, step_report, tmp_path,
+                                                                            capsys, monkeypatch):
     """The first --auto: the step is added (not terms of an implausible size), its caveats say the
     capture cannot tell it from the terms, and the printed command works as printed; its
     extension, recorded, lets --auto find the step (the truth within 3 sigma).  Before the change:
     discovered_terms added, no command (fails at the first assert)."""
-    report = _diagnosed(step_capture / "cap", capsys)
-    steps = report["steps"]
+    steps = step_report["steps"]
     assert steps and steps[0]["added"] == "bias_step" and not steps[0]["discovered"], [s["added"] for s in steps]
     assert all(not s["discovered"] for s in steps)
     words = " ".join(steps[0]["caveats"])
@@ -171,3 +182,17 @@ def test_a_real_cubic_accelerometer_is_not_displaced_by_a_step_that_is_not_there
         assert abs(e["value"] - k3) < 3.0 * e["sigma"], (axis, e, k3)
     assert any("cannot tell accel_cubic from bias_step" in c for c in report["steps"][0]["caveats"]), \
         report["steps"][0]["caveats"]
+
+
+def test_the_steps_words_size_no_part_the_capture_does_not_reveal(step_report):
+    """Review of the twenty-first session: before the extension the step's accelerometer parts are
+    "not revealed: held by its prior, not written", yet its caveats said "accelerometer z bias
+    steps by +237 +/- 74 ug" (the prior-held posterior, sized as a finding; station estimate's
+    notes give a held parameter no size).  Every sized part the words name is revealed."""
+    step = step_report["steps"][0]
+    assert step["added"] == "bias_step", step["added"]
+    held = {e["name"] for e in step["estimate"] if e["not_revealed"]}
+    assert held, step["estimate"]          # the case: parts held by their prior
+    sized = {f"{'accel' if c.startswith('accelerometer') else 'gyro'}_bias_step_{c.split()[1]}"
+             for c in step["caveats"] if c.startswith(("accelerometer ", "gyro ")) and " bias steps by " in c}
+    assert not sized & held, (sized & held, step["caveats"])
