@@ -175,7 +175,11 @@ def _said(after: Diagnosis, effect_id: str) -> list[str]:
     if effect is None or not callable(getattr(effect, "words", None)):
         return []
     est = added_parameters(after, effect_id)
-    return effect.words(np.array([v for _, v, _, _ in est]), np.array([s for _, _, s, _ in est])) + list(effect.notes())
+    # a parameter held by its prior (not revealed, not written) is no finding: its 1-sigma taken as
+    # infinite, as station estimate's notes do (lsq: held_names)
+    held = set(getattr(after.result.model, "unobservable", None) or ())
+    return effect.words(np.array([v for _, v, _, _ in est]),
+                        np.array([np.inf if n in held else s for n, _, s, _ in est])) + list(effect.notes())
 
 
 DISCOVERED = "discovered_terms"
