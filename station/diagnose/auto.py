@@ -396,6 +396,7 @@ def _best_out_of_sample(cand, first, tries, refused, current, h_current, summari
     # outside the library must fit clearly better (_terms_step).  With a real accelerometer cubic and
     # no step, a step located among 14 times predicted the left-out segments better (237.4 against
     # 249.4) at chi2 85.9 against 93.5 and displaced the cubic (review of the twenty-first session)
+    not_clearly = ""
     if _is_event(registry, passing[best][0].effect):
         e_id, e_after = passing[best][0].effect, passing[best][1]
         located = next((e for e in e_after.result.model.effects if e.id == e_id), None)
@@ -404,18 +405,22 @@ def _best_out_of_sample(cand, first, tries, refused, current, h_current, summari
         if any((passing[k][1].chi2 - e_after.chi2) / overdispersion(e_after.result)
                < special.chdtri(max(passing[k][1].dof - e_after.dof, 0) + 1, ALPHA / times) for k in sensor):
             best = min(sensor, key=lambda k: score[k])
+            not_clearly = (f"{e_id} predicts the left-out segments better, but its time was located on them too "
+                           f"(the best of {times} candidate times) and its chi2 is not clearly lower (the 1 % "
+                           "point over those times): an event does not displace a property of the sensor on that")
     c, a, h, (ok, reason, share, cv_b, cv_a) = passing[best]
     others = [f"{p[0].effect} (leave-one-segment-out {sc:.1f} against {score[best]:.1f}, chi2 {p[1].chi2:.1f} "
               f"against {a.chi2:.1f})" for k, (p, sc) in enumerate(zip(passing, score)) if k != best]
-    words = [f"kept rather than {'; '.join(others)}: both explain the misfit, {c.effect} predicts the left-out "
-             "segments better"]
+    words = [f"kept rather than {'; '.join(others)}: both explain the misfit, "
+             + (not_clearly or f"{c.effect} predicts the left-out segments better")]
     # the rivals whose chi2 is not significantly above the kept one's: the capture cannot tell them apart
     tied = [p[0].effect for k, p in enumerate(passing) if k != best
             and (p[1].chi2 - a.chi2) / overdispersion(a.result) < special.chdtri(1, ALPHA)]
     if tied:
         words.append(f"this capture cannot tell {c.effect} from {', '.join(tied)}: "
                      f"{'they fit' if len(tied) > 1 else 'it fits'} the misfit as well (chi2 not significantly "
-                     "above); the held-out segments decide")
+                     "above); " + ("the segments that separate them decide" if not_clearly
+                                   else "the held-out segments decide"))
     passed = [p[0].effect for k, p in enumerate(passing) if k != best]
     return (c, a, h, ok, reason, share, cv_b, cv_a, words, tied, passed)
 
