@@ -301,6 +301,11 @@ def _diagnosis_section(inp: ReportInput, figures: dict) -> str:
         words = getattr(st, "held_words", None) or (lambda n: "")
         parts.append("<p>" + "; ".join(_e(f"{n} = {v:.4g} ± {s:.2g} {u}" + words(n))
                                        for n, v, s, u in st.estimate) + "</p>")
+        # what the capture cannot tell the added effect from (the screen's and the JSON's caveats;
+        # the commands that separate them are in the section of what the capture cannot reveal)
+        alike = [c for c in st.caveats if "cannot tell" in c]
+        if alike:
+            parts.append("<ul>" + "".join(f"<li>caveat: {_e(c)}</li>" for c in alike) + "</ul>")
     if inp.steps:
         parts.append(_verdict_box(final.verdict, inp, "after the added effects: "))
     account = getattr(final, "account", None) or []

@@ -11,15 +11,24 @@ ALIAS_COS = 0.95      # two candidates whose one-step signatures are this alike:
 # effects a scheme extension cannot be designed for: parameters per segment that no added segment
 # shares (a table axis' wobble, a vibration per table axis and rate and an offset per axis group are
 # designed: station/design/information.py) (station.design.sequential.PER_SEGMENT_EFFECTS, copied:
-# diagnose is below design); a step's time: since the twentieth session station design --from
-# --add bias_step weighs segments after the capture (all after the step), asked by hand; diagnose
-# prints no command for it (its words say which segments to record again later)
+# diagnose is below design).  A bias step is designed since the twentieth session (station design
+# --from --add bias_step locates it as station estimate does and weighs segments after the capture,
+# all after the step); diagnose prints its commands since the twenty-first.
 # effects of the time and the temperature: the candidates' temperatures are on their own timeline,
 # not the capture's clock going on (the drift's time is, since the twentieth session:
 # sequential.CaptureTimeline), and the table has no chamber: two of them are not separated by
-# segments the designer can weigh (docs/design.md, Limits)
-TIMELINE = ("bias_drift", "temperature_bias", "temperature_bias_quadratic", "scale_temperature")
-NOT_DESIGNED = ("remount_per_segment", "bias_step")
+# segments the designer can weigh (docs/design.md, Limits).  A step against a drift: every added
+# segment comes after the step, where a drift goes on and the step stays, but the designer finds no
+# 12 segments that separate them on a capture whose every attitude was visited once (measured: the
+# drift's 1sigma 2.9 x its target, correlation 0.91; tests/test_suggest_bias_step.py)
+TIMELINE = ("bias_drift", "temperature_bias", "temperature_bias_quadratic", "scale_temperature", "bias_step")
+NOT_DESIGNED = ("remount_per_segment",)
+# why, in words (measured, twenty-first session: station design --from refuses bias_step against
+# temperature_bias on the step capture with its extension recorded: the closest 12 segments leave
+# accel_bias_tempco_z's 1-sigma 3.1 x its target, correlation 0.96; against bias_drift likewise)
+TIMELINE_WHY = ("each follows the capture's clock or its temperature, and every segment added after the capture "
+                "comes later and warmer alike (the table has no chamber to set the temperature apart from the "
+                "time), so station design --from finds no segments that separate them")
 # pairs no segments separate (measured: station design --from refuses them with what stays
 # furthest; words.aliases says why): no command is printed for them.  An offset per axis group and
 # a vibration once per revolution: separated in the fifteenth session by turns about the capture's
@@ -142,6 +151,19 @@ def suggest_steps(steps, capture, summaries, registry=None) -> None:
         if st.discovered:
             continue
         st.separations = separations(capture, st.after.effects, st.added, summaries, registry)
+        # the library effects --auto found to explain the step's misfit as well (auto.Step.rivals)
+        named = {_pair_of(x)[1] for x in st.separations}
+        effects = [e for e in st.after.effects if e not in BASE and e != "discovered_terms" and e not in NOT_DESIGNED]
+        for rival in getattr(st, "rivals", None) or []:
+            if added(rival, registry) in named:
+                continue
+            if (rival in NOT_DESIGNED or st.added in NOT_DESIGNED or {st.added, rival} in NOT_SEPARABLE
+                    or (st.added in TIMELINE and rival in TIMELINE)):
+                st.caveats.append(f"no segments of this table are designed to separate {st.added} from {rival}: "
+                                  + (TIMELINE_WHY if st.added in TIMELINE and rival in TIMELINE else
+                                     "no added segment shares their parameters (docs/design.md, Limits)"))
+                continue
+            st.separations.append(separate_command(capture, effects, st.added, rival, registry))
 
 
 def suggest(diagnosis, capture, registry=None, summaries=None, hand=(), source=None) -> None:
@@ -256,7 +278,7 @@ def candidate_lines(diagnosis) -> list[str]:
         others = list(getattr(c, "alike", None) or [])
         if others:
             lines.append(f"{c.effect}: this capture cannot tell it from {', '.join(others)} (they explain the misfit "
-                         "alike); no segments of this table are designed to separate them")
+                         f"alike); no segments of this table are designed to separate them: {TIMELINE_WHY}")
     return lines
 
 
