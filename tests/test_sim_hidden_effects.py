@@ -493,3 +493,27 @@ def test_encoder_scale_error():
     assert integral == pytest.approx(swept, abs=1e-9)
     assert swept - seg.meta["angle_deg"] == pytest.approx(720.0 * 300e-6, rel=1e-3)
     assert 720.0 * 300e-6 * 3600 == pytest.approx(777.6)
+
+
+def test_an_imbalance_is_what_an_offset_from_the_axis_fixed_to_the_platter_makes():
+    """Why a recorded ramp cannot tell an imbalance from the IMU's offset from the axis (issue 28,
+    twenty-first session): the imbalance shakes the base by (U / M) (w^2 e - dw/dt a x e), e turning
+    with the platter; a sensing point at d from the axis, riding on the platter, accelerates by
+    w x (w x d) + dw/dt x d = -w^2 d + dw/dt a x d.  With d = -(U / M) e the two are the same at
+    every rate and through a ramp.  The twin (its two effects written apart) says so: a perfect IMU
+    on the axis with the imbalance reads what one without it reads at that offset, to rounding."""
+    U, M, phi = 2000e-6, 5.0, math.radians(-50.0)
+    seg = {}
+    for name, bench_settings in (("imbalance", dict(imbalance_g_mm=2000.0, base_mass_kg=M, imbalance_phase_deg=-50.0)),
+                                 ("offset", {})):
+        bench = SimulatedBench(perfect_truth(**bench_settings), 3)
+        if name == "offset":        # the same start attitude (the same geometry draws), the offset
+            C_bn0 = Rotation.from_matrix(seg["imbalance"].truth["C_bn0"])
+            a_n = seg["imbalance"].truth["axis_enu"]
+            r = world.axis_reference_enu(a_n)
+            e0 = math.cos(phi) * r + math.sin(phi) * np.cross(a_n, r)
+            bench.truth.bench.axis_offsets_m[2] = -(U / M) * C_bn0.apply(e0)
+        seg[name] = bench.rotation([0, 0, 1], 90.0, 4.0, record_ramp="start", ramp_accel_dps2=40.0, ramp_rest_s=0.5)
+    np.testing.assert_array_equal(seg["imbalance"].truth["C_bn0"], seg["offset"].truth["C_bn0"])
+    size = U / M * math.radians(90.0) ** 2
+    assert np.abs(seg["imbalance"].accel - seg["offset"].accel).max() < 1e-9 * size

@@ -126,12 +126,14 @@ class TableVibration(Effect):
                "the IMU once per revolution; the part across it turns in the IMU's frame against the platter's "
                "turn, so it shows as a constant and a twice-per-revolution part across the axis.  Its size and "
                "phase follow the rotation rate (an imbalance's force grows with its square, the mount's "
-               "response has its own phase), so each rate has its own.  A fault of the bench, not of the IMU: "
+               "response has its own phase), so each rate has its own; through a recorded ramp it follows the "
+               "rate's square and the angular acceleration from the steady rate's.  A fault of the bench, not of the IMU: "
                "station apply compensates nothing for it.")
     term = ("rotations only (the fit's phase grid, p the signed angle turned about l): accel_raw += M_a Rot(l, -p) "
             "(cos p P + sin p Q), P = P_l l + P_v v_hat + P_u (l x v_hat) and Q alike, v_hat gravity's direction "
             "across the axis at the rotation's start; one (P, Q) per table axis and rate (rotations start at the "
-            "same platter angle); about an axis within 20° of the vertical P_l, Q_l per table axis and rate and "
+            "same platter angle); over a recorded ramp (w/w_s)^2 (cos p P + sin p Q) + (dw/dt / w_s^2) "
+            "(sin p P - cos p Q) from its steady rate w_s's (P, Q) (zero at rest); about an axis within 20° of the vertical P_l, Q_l per table axis and rate and "
             "the parts across on a case-fixed basis (e1, e2 = l x e1) per axis group and mounting")
     excited_by = ("rotations about an axis with gravity across it (the frame is fixed by gravity: one vibration per "
                   "table axis and rate); about an axis within 20° of the vertical the part along the axis per table "
