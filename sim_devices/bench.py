@@ -268,10 +268,18 @@ class SimulatedBench:
         lever = bench.lever_arm_m + bench.axis_offsets_m[int(np.argmax(np.abs(a_cmd)))]
         f_b, w_ib = world.body_kinematics(C_bn, w_b, wdot_b, lever, self.site)
         vibration_phase = math.radians(bench.vibration_phase_deg)
+        # the base's once-per-revolution vibration, from the table's angle, rate and angular
+        # acceleration (zero at rest, ~ rate^2 at a steady rate; world.table_vibration_enu and
+        # world.imbalance_acceleration_enu)
         if np.any(bench.vibration_mg):
-            a_vib = world.table_vibration_enu(a_n, theta, bench.vibration_mg * 1e-3 * G_STANDARD,
-                                              vibration_phase)
+            a_vib = world.table_vibration_enu(a_n, theta, theta_dot, theta_ddot,
+                                              bench.vibration_mg * 1e-3 * G_STANDARD,
+                                              math.radians(bench.vibration_ref_rate_dps), vibration_phase)
             f_b = f_b + np.atleast_2d(C_bn.apply(a_vib))
+        if bench.imbalance_g_mm:
+            a_imb = world.imbalance_acceleration_enu(a_n, theta, theta_dot, theta_ddot, bench.imbalance_g_mm * 1e-6,
+                                                     bench.base_mass_kg, math.radians(bench.imbalance_phase_deg))
+            f_b = f_b + np.atleast_2d(C_bn.apply(a_imb))
         stamps = self._stamps(t)
 
         # encoder: true swept angle over the table-time window [t0 - dt/2, t_{N-1} + dt/2] that

@@ -56,6 +56,9 @@ MAX_SCALE_TEMPCO_PPM_PER_C = 1e4      # 1 % per degC
 MAX_RATE_SQUARED_PPM_PER_DPS = 1e4    # 1 % per deg/s
 MAX_ANISOELASTIC_DPH_PER_G2 = 1e6
 MAX_VIBRATION_MG = 1e4                # 10 g
+MAX_VIBRATION_REF_RATE_DPS = 1e4      # deg/s
+MAX_IMBALANCE_G_MM = 1e7              # 10 kg m
+MAX_BASE_MASS_KG = 1e6
 MAX_REMOUNT_ARCSEC = 36000.0          # 10 degrees
 MAX_ENCODER_SCALE_PPM = 1e4            # 1 %
 MAX_JITTER_FRACTION = 0.1             # stamp jitter 1 sigma <= 10 % of the sample period
@@ -353,11 +356,26 @@ class BenchSettings:
     # once per revolution relative to the platter (world.wobbling_table, harmonic 1)
     wobble_arcsec: float = 0.0
     wobble_phase_deg: float = 0.0
-    # a once-per-revolution vibration during rotations: the table base accelerates by
-    # cos(theta + phase) (A_axis a + A_ref r + A_perp a x r), amplitudes in mg along the table
-    # axis a, the reference direction r and a x r (world.table_vibration_enu)
+    # a once-per-revolution vibration during rotations, driven by the platter's angle (issue 28,
+    # twenty-first session; world.table_vibration_enu): the base moves along D = A_axis a + A_ref r
+    # + A_perp a x r (a the table axis, r the reference direction, a x r) by -cos(theta + phase)
+    # D / w_ref^2, so it accelerates by (theta_dot^2 cos(theta + phase) + theta_ddot sin(theta +
+    # phase)) D / w_ref^2: zero at rest, A cos(theta + phase) at the steady rate
+    # vibration_ref_rate_dps (vibration_mg: the amplitudes in mg AT THAT RATE), (w / w_ref)^2 of it
+    # at a steady w, with a part from the angular acceleration over a ramp.  A truth file that
+    # gives a non-zero vibration_mg must give vibration_ref_rate_dps (files written before the
+    # twenty-first session meant the amplitude at every rate, which no imbalance makes)
     vibration_mg: np.ndarray = field(default_factory=lambda: np.zeros(3))
     vibration_phase_deg: float = 0.0
+    vibration_ref_rate_dps: float = 100.0
+    # an imbalance of the platter (world.imbalance_acceleration_enu): m rho in g mm (as balancing
+    # grades state it) at the platter angle imbalance_phase_deg from r at a rotation's start, on a
+    # base of effective mass base_mass_kg that moves as a free mass (its mount's resonance below the
+    # rotation frequency): the base accelerates by (m rho / M) (theta_dot^2 e - theta_ddot a x e),
+    # e the imbalance's direction turning with the platter.  0: none
+    imbalance_g_mm: float = 0.0
+    imbalance_phase_deg: float = 0.0
+    base_mass_kg: float = 100.0
     # placement error: every static segment's attitude gets an extra random rotation, 1 sigma
     # per axis (arcsec), as when the IMU is taken off and put back for each attitude
     remount_error_arcsec: float = 0.0
@@ -565,7 +583,8 @@ _TEMP_KEYS = {"start_c", "reference_c", "drift_c_per_h", "warmup_delta_c",
 _BENCH_KEYS = {"latitude_deg", "height_m", "lever_arm_m", "axis_offsets_m", "table_angle_error_arcsec",
                "rate_ripple_fraction", "rate_ripple_hz", "rate_drift_fraction", "accel_disturbance_ug",
                "move_s", "settle_s", "time_offset_s", "wobble_arcsec", "wobble_phase_deg",
-               "vibration_mg", "vibration_phase_deg", "remount_error_arcsec", "remount_rotations", "remount_axes",
+               "vibration_mg", "vibration_phase_deg", "vibration_ref_rate_dps", "imbalance_g_mm",
+               "imbalance_phase_deg", "base_mass_kg", "remount_error_arcsec", "remount_rotations", "remount_axes",
                "time_stamp_jitter_ms", "encoder_scale_error_ppm", "table_axes",
                "encoder_scale_error_per_axis_ppm"}
 
@@ -826,6 +845,10 @@ class Truth:
                 "wobble_phase_deg": float(self.bench.wobble_phase_deg),
                 "vibration_mg": fl(self.bench.vibration_mg),
                 "vibration_phase_deg": float(self.bench.vibration_phase_deg),
+                "vibration_ref_rate_dps": float(self.bench.vibration_ref_rate_dps),
+                "imbalance_g_mm": float(self.bench.imbalance_g_mm),
+                "imbalance_phase_deg": float(self.bench.imbalance_phase_deg),
+                "base_mass_kg": float(self.bench.base_mass_kg),
                 "remount_error_arcsec": float(self.bench.remount_error_arcsec),
                 "remount_rotations": bool(self.bench.remount_rotations),
                 "remount_axes": bool(self.bench.remount_axes),
@@ -1002,6 +1025,23 @@ class Truth:
         if "vibration_phase_deg" in d:
             bench.vibration_phase_deg = c.number(d["vibration_phase_deg"],
                                                  "bench.vibration_phase_deg", lo=-360.0, hi=360.0)
+        if "vibration_ref_rate_dps" in d:
+            bench.vibration_ref_rate_dps = c.number(d["vibration_ref_rate_dps"], "bench.vibration_ref_rate_dps",
+                                                    lo=0.0, lo_open=True, hi=MAX_VIBRATION_REF_RATE_DPS)
+        elif np.any(bench.vibration_mg):
+            c.fail("bench.vibration_mg", "is the vibration's amplitude in mg at the steady rate "
+                   "bench.vibration_ref_rate_dps (since the twenty-first session the vibration grows as the "
+                   "rate squared and is zero at rest): give vibration_ref_rate_dps (deg/s), e.g. the rate at "
+                   "which the amplitude was measured")
+        if "imbalance_g_mm" in d:
+            bench.imbalance_g_mm = c.number(d["imbalance_g_mm"], "bench.imbalance_g_mm", lo=0.0,
+                                            hi=MAX_IMBALANCE_G_MM)
+        if "imbalance_phase_deg" in d:
+            bench.imbalance_phase_deg = c.number(d["imbalance_phase_deg"], "bench.imbalance_phase_deg",
+                                                 lo=-360.0, hi=360.0)
+        if "base_mass_kg" in d:
+            bench.base_mass_kg = c.number(d["base_mass_kg"], "bench.base_mass_kg", lo=0.0, lo_open=True,
+                                          hi=MAX_BASE_MASS_KG)
         if "remount_error_arcsec" in d:
             bench.remount_error_arcsec = c.number(d["remount_error_arcsec"],
                                                   "bench.remount_error_arcsec",

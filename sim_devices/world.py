@@ -416,24 +416,73 @@ def wobbling_table(C_bn0: Rotation, axis_enu, theta, theta_dot, theta_ddot,
     return C_bn, np.atleast_2d(w_b), np.atleast_2d(wd_b)
 
 
-def table_vibration_enu(axis_enu, theta, amplitude_mps2, phase_rad: float = 0.0) -> np.ndarray:
+def table_vibration_enu(axis_enu, theta, theta_dot, theta_ddot, amplitude_mps2, ref_rate_rad_s: float,
+                        phase_rad: float = 0.0) -> np.ndarray:
     """Acceleration of a table base vibrating once per revolution, ENU, m/s^2 (N,3).
 
-    The base (and everything on it) accelerates along a direction fixed in the table's
-    (Earth-fixed) frame, with the phase of the table angle:
+    The physics (issue 28, twenty-first session): a once-per-revolution vibration is driven by
+    the platter's angle -- an eccentric bearing or belt pulley moves the base by a displacement
+    that is a function of the table angle theta, as does an imbalance's force on a base that
+    responds as a mass (below: :func:`imbalance_acceleration_enu`).  Here the displacement is
+    along one direction D fixed in the table's (Earth-fixed) frame,
 
-        a_vib(t) = cos(theta(t) + phase) (A_axis a_n + A_ref r + A_perp (a_n x r))
+        x(theta) = -cos(theta + phase) D / w_ref^2,     D = A_axis a_n + A_ref r + A_perp (a_n x r)
 
-    a_n the table axis, r = :func:`axis_reference_enu` (the part of local up perpendicular to
-    the axis; north for a vertical axis), amplitudes A in m/s^2.  It adds to the specific force
-    (f = a - g), like any acceleration of the sensing point.
+    so that the base's acceleration, the second time derivative of x(theta(t)), is
+
+        a_vib = [theta_dot^2 cos(theta + phase) + theta_ddot sin(theta + phase)] D / w_ref^2
+
+    zero at rest, A cos(theta + phase) at the steady rate w_ref (the amplitudes A, m/s^2, are
+    the acceleration at that reference rate), (w / w_ref)^2 of it at a steady rate w, and during
+    a ramp a part theta_ddot sin(theta + phase) D / w_ref^2 from the angular acceleration.  a_n
+    the table axis, r = :func:`axis_reference_enu` (the part of local up perpendicular to the axis;
+    north for a vertical axis).  It adds to the specific force (f = a - g), like any acceleration of
+    the sensing point.  ``theta``, ``theta_dot``, ``theta_ddot``: rad, rad/s, rad/s^2 (N,).
     """
     a_n = _unit(axis_enu, "axis_enu")
+    w_ref = float(ref_rate_rad_s)
+    if not (math.isfinite(w_ref) and w_ref > 0.0):
+        raise ValueError(f"ref_rate_rad_s must be positive and finite, got {ref_rate_rad_s!r}")
     ref = axis_reference_enu(a_n)
     A = np.asarray(amplitude_mps2, dtype=float).reshape(3)
     direction = A[0] * a_n + A[1] * ref + A[2] * cross3(a_n, ref)
-    theta = np.asarray(theta, dtype=float).reshape(-1, 1)
-    return np.cos(theta + float(phase_rad)) * direction[None, :]
+    psi = np.asarray(theta, dtype=float).reshape(-1) + float(phase_rad)
+    thd = np.asarray(theta_dot, dtype=float).reshape(-1)
+    thdd = np.asarray(theta_ddot, dtype=float).reshape(-1)
+    size = (thd * thd * np.cos(psi) + thdd * np.sin(psi)) / (w_ref * w_ref)
+    return size[:, None] * direction[None, :]
+
+
+def imbalance_acceleration_enu(axis_enu, theta, theta_dot, theta_ddot, imbalance_kg_m: float,
+                               base_mass_kg: float, phase_rad: float = 0.0) -> np.ndarray:
+    """Acceleration of a table base shaken by an imbalance of the platter, ENU, m/s^2 (N,3).
+
+    A mass m at radius rho on the platter (the imbalance U = m rho, kg m), at the platter angle
+    psi = theta + phase from r = :func:`axis_reference_enu` about the table axis a_n (positive
+    sense), has e(psi) = cos psi r + sin psi (a_n x r) and accelerates by
+    rho [theta_ddot (a_n x e) - theta_dot^2 e].  The platter pushes it so; it pushes the platter
+    and the base back with F = U [theta_dot^2 e - theta_ddot (a_n x e)], across the axis, turning
+    with the platter: centripetal (along e) ~ w^2, tangential (across e) ~ dw/dt.  The base, of
+    effective mass M (the base, the platter and all on them; its mount's resonance well below the
+    rotation frequency, so that the mount's spring force is small beside the inertial one and the
+    base moves as a free mass: the total momentum stays put), accelerates by
+
+        a_vib = F / M = (U / M) [theta_dot^2 e(theta + phase) - theta_ddot a_n x e(theta + phase)]
+
+    which is the second time derivative of the displacement -(U / M) e(theta + phase): a circle
+    turning with the platter.  Zero at rest.  A mount stiff against the rotation frequency moves
+    the base by F / k instead (acceleration ~ w^4): not this model."""
+    a_n = _unit(axis_enu, "axis_enu")
+    M = float(base_mass_kg)
+    if not (math.isfinite(M) and M > 0.0):
+        raise ValueError(f"base_mass_kg must be positive and finite, got {base_mass_kg!r}")
+    ref = axis_reference_enu(a_n)
+    psi = np.asarray(theta, dtype=float).reshape(-1, 1) + float(phase_rad)
+    e = np.cos(psi) * ref[None, :] + np.sin(psi) * cross3(a_n, ref)[None, :]
+    a_x_e = np.cos(psi) * cross3(a_n, ref)[None, :] - np.sin(psi) * ref[None, :]
+    thd = np.asarray(theta_dot, dtype=float).reshape(-1, 1)
+    thdd = np.asarray(theta_ddot, dtype=float).reshape(-1, 1)
+    return (float(imbalance_kg_m) / M) * (thd * thd * e - thdd * a_x_e)
 
 
 # --------------------------------------------------------------------------

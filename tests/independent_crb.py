@@ -90,6 +90,7 @@ def _check_supported(truth) -> None:
     b, a, g = truth.bench, truth.accel, truth.gyro
     unsupported = {
         "rate ripple": b.rate_ripple_fraction, "wobble": b.wobble_arcsec, "vibration": np.any(b.vibration_mg),
+        "imbalance": b.imbalance_g_mm,
         "stamp jitter": b.time_stamp_jitter_ms, "remount": b.remount_error_arcsec, "encoder scale": b.encoder_scale_error_ppm,
         "accel LSB": a.lsb, "gyro LSB": g.lsb, "accel positions": np.any(a.position_m),
         "accel nonlinearity": np.any(a.nonlinearity_ug_per_g2) or np.any(a.cross_coupling_ug_per_g2) or np.any(a.cubic_ug_per_g3),

@@ -189,30 +189,108 @@ def test_bias_step_at_a_given_time():
 
 def test_once_per_revolution_vibration():
     """A perfect table with a horizontal axis and the IMU centred: along the axis gravity gives
-    nothing, so the axis accelerometer reads A_axis cos(theta + phase) exactly (2 mg -> 0.0196
-    m/s^2), and the specific force along local up is g + A_ref cos(theta + phase).  Statics do
-    not vibrate."""
-    truth = perfect_truth(vibration_mg=[2.0, 1.0, -0.5], vibration_phase_deg=40.0)
+    nothing, so the axis accelerometer reads the vibration's axial part exactly.  At the reference
+    rate (30 deg/s) it is A_axis cos(theta + phase) (2 mg -> 0.0196 m/s^2) and the specific force
+    along local up g + A_ref cos(theta + phase); at twice the rate four times that (a vibration
+    driven by the platter's angle grows as the rate squared, issue 28, twenty-first session).
+    Statics do not vibrate."""
+    truth = perfect_truth(vibration_mg=[2.0, 1.0, -0.5], vibration_phase_deg=40.0, vibration_ref_rate_dps=30.0)
     bench = SimulatedBench(truth, 3)
-    w = 30.0
-    seg = bench.rotation([0, 0, 1], w, 24.0)
-    tau = seg.t - seg.t[0]
-    arg = np.radians(w) * tau + math.radians(40.0)
     g0 = G_STANDARD
     tol = 64 * EPS * bench.gravity_mps2
-    np.testing.assert_allclose(seg.accel[:, 2], 2.0e-3 * g0 * np.cos(arg), rtol=0, atol=tol)
-    # specific force in ENU: back through the attitude
-    C_bn = world.table_attitude(Rotation.from_matrix(seg.truth["C_bn0"]), seg.truth["axis_enu"],
-                                np.radians(w) * tau)
-    f_n = C_bn.inv().apply(seg.accel)
-    np.testing.assert_allclose(f_n[:, 2], bench.gravity_mps2 + 1.0e-3 * g0 * np.cos(arg),
-                               rtol=0, atol=tol)
-    # its first harmonic at the rotation frequency has the amplitude 2 mg (2 whole turns)
-    spec = np.fft.rfft(seg.accel[:, 2]) * 2 / len(tau)
-    assert abs(spec[2]) == pytest.approx(2.0e-3 * g0, rel=1e-9)
+    for w, gain in ((30.0, 1.0), (60.0, 4.0), (-30.0, 1.0)):
+        seg = bench.rotation([0, 0, 1], w, 24.0 * 30.0 / abs(w))
+        tau = seg.t - seg.t[0]
+        arg = np.radians(w) * tau + math.radians(40.0)
+        np.testing.assert_allclose(seg.accel[:, 2], gain * 2.0e-3 * g0 * np.cos(arg), rtol=0, atol=tol)
+        # specific force in ENU: back through the attitude
+        C_bn = world.table_attitude(Rotation.from_matrix(seg.truth["C_bn0"]), seg.truth["axis_enu"],
+                                    np.radians(w) * tau)
+        f_n = C_bn.inv().apply(seg.accel)
+        np.testing.assert_allclose(f_n[:, 2], bench.gravity_mps2 + gain * 1.0e-3 * g0 * np.cos(arg),
+                                   rtol=0, atol=tol)
+        # its first harmonic at the rotation frequency has the amplitude gain x 2 mg (2 whole turns)
+        spec = np.fft.rfft(seg.accel[:, 2]) * 2 / len(tau)
+        assert abs(spec[2]) == pytest.approx(gain * 2.0e-3 * g0, rel=1e-9)
     stat = bench.static([0, 0, 1], 1.0)
     np.testing.assert_allclose(stat.accel, np.tile([0, 0, bench.gravity_mps2], (len(stat.t), 1)),
                                atol=tol)
+
+
+def test_vibration_over_a_recorded_ramp_is_the_displacement_s_second_derivative():
+    """Over a recorded ramp up (rest 0.5 s, then 50 deg/s^2 to 60 deg/s): the base's displacement
+    along the axis is x(t) = -A_axis cos(theta(t) + phase) / w_ref^2 (its definition); the axis
+    accelerometer reads its second time derivative, taken here by central differences of x over
+    the ramp's own angle theta(t) = a s^2 / 2 (s the time since the ramp began): 0 at rest, the
+    angular acceleration's part a sin(theta + phase) A / w_ref^2 at the ramp's start."""
+    A, phi, w_ref, acc = 2.0e-3 * G_STANDARD, math.radians(40.0), math.radians(30.0), math.radians(50.0)
+    truth = perfect_truth(vibration_mg=[2.0, 0.0, 0.0], vibration_phase_deg=40.0, vibration_ref_rate_dps=30.0)
+    bench = SimulatedBench(truth, 3)
+    seg = bench.rotation([0, 0, 1], 60.0, 6.0, record_ramp="start", ramp_accel_dps2=50.0, ramp_rest_s=0.5)
+    dt = 1.0 / bench.sample_rate_hz
+    ramp_at = seg.t[0] - 0.5 * dt + 0.5
+    ramp_s = math.radians(60.0) / acc
+
+    def theta(t):
+        s = np.clip(t - ramp_at, 0.0, None)
+        on = np.minimum(s, ramp_s)
+        return 0.5 * acc * on * on + math.radians(60.0) * (s - on)
+
+    def x(t):
+        return -A * np.cos(theta(t) + phi) / w_ref ** 2
+
+    h = 1e-4
+    want = (x(seg.t + h) - 2.0 * x(seg.t) + x(seg.t - h)) / h ** 2
+    kink = np.abs(seg.t - ramp_at) < 2 * h
+    kink |= np.abs(seg.t - ramp_at - ramp_s) < 2 * h
+    rest = seg.t < ramp_at - 2 * h
+    assert rest.sum() > 10
+    np.testing.assert_allclose(seg.accel[rest, 2], 0.0, atol=64 * EPS * bench.gravity_mps2)
+    np.testing.assert_allclose(seg.accel[~kink, 2], want[~kink], rtol=0, atol=1e-6 * A)
+    # the ramp's first samples: the angular acceleration's part, A acc sin(phase) / w_ref^2
+    first = np.flatnonzero(seg.t > ramp_at)[0]
+    assert seg.accel[first, 2] == pytest.approx(A * acc * math.sin(phi) / w_ref ** 2, rel=0.02)
+
+
+def test_an_imbalance_shakes_the_base_by_its_centripetal_and_tangential_force():
+    """An imbalance m rho = 500 g mm at 30 deg on the platter of a 20 kg base: at a steady rate the
+    base accelerates by m rho w^2 / M outward along the imbalance (turning with the platter: in the
+    IMU's case, which turns with it, a constant across the axis); during a ramp up a part m rho
+    dw/dt / M backward across it; nothing at rest and nothing along the axis.  The momentum check:
+    M a_base + m a_mass = 0 across the axis, a_mass the imbalance's own acceleration."""
+    U, M, phi = 500e-6, 20.0, math.radians(30.0)
+    truth = perfect_truth(imbalance_g_mm=500.0, base_mass_kg=M, imbalance_phase_deg=30.0)
+    bench = SimulatedBench(truth, 3)
+    w = math.radians(120.0)
+    seg = bench.rotation([0, 0, 1], 120.0, 6.0)
+    tau = seg.t - seg.t[0]
+    C_bn = world.table_attitude(Rotation.from_matrix(seg.truth["C_bn0"]), seg.truth["axis_enu"], w * tau)
+    a_n = seg.truth["axis_enu"]
+    r = world.axis_reference_enu(a_n)
+    a_base = C_bn.inv().apply(seg.accel) - [0.0, 0.0, bench.gravity_mps2]
+    psi = (w * tau + phi)[:, None]
+    # the imbalance (radius rho, any: U = m rho) at e(psi) accelerates by -rho w^2 e(psi)
+    a_mass_times_m = -U * w * w * (np.cos(psi) * r + np.sin(psi) * np.cross(a_n, r))
+    tol = 64 * EPS * bench.gravity_mps2
+    np.testing.assert_allclose(M * a_base + a_mass_times_m, 0.0, atol=M * tol)
+    case = seg.accel - C_bn.apply([0.0, 0.0, bench.gravity_mps2])
+    np.testing.assert_allclose(case, np.tile(case[0], (len(case), 1)), atol=tol)
+    assert np.linalg.norm(case[0]) == pytest.approx(U * w * w / M, rel=1e-9)
+    # a ramp up at 50 deg/s^2: at rest nothing, then the tangential part U dw/dt / M across e
+    acc = math.radians(50.0)
+    ramp = bench.rotation([0, 0, 1], 120.0, 1.0, record_ramp="start", ramp_accel_dps2=50.0, ramp_rest_s=0.5)
+    dt = 1.0 / bench.sample_rate_hz
+    ramp_at = ramp.t[0] - 0.5 * dt + 0.5
+    s = np.clip(ramp.t - ramp_at, 0.0, None)
+    C_bn = world.table_attitude(Rotation.from_matrix(ramp.truth["C_bn0"]), ramp.truth["axis_enu"], 0.5 * acc * s * s)
+    a_base = C_bn.inv().apply(ramp.accel) - [0.0, 0.0, bench.gravity_mps2]
+    rest = ramp.t < ramp_at
+    np.testing.assert_allclose(a_base[rest], 0.0, atol=tol)
+    early = (ramp.t > ramp_at) & (s < 0.2)
+    psi = (0.5 * acc * s[early] * s[early] + phi)[:, None]
+    e = np.cos(psi) * r + np.sin(psi) * np.cross(a_n, r)
+    want = (U / M) * ((acc * s[early])[:, None] ** 2 * e - acc * np.cross(a_n, e))
+    np.testing.assert_allclose(a_base[early], want, atol=tol)
 
 
 def test_remount_error_per_static_segment():
@@ -415,3 +493,27 @@ def test_encoder_scale_error():
     assert integral == pytest.approx(swept, abs=1e-9)
     assert swept - seg.meta["angle_deg"] == pytest.approx(720.0 * 300e-6, rel=1e-3)
     assert 720.0 * 300e-6 * 3600 == pytest.approx(777.6)
+
+
+def test_an_imbalance_is_what_an_offset_from_the_axis_fixed_to_the_platter_makes():
+    """Why a recorded ramp cannot tell an imbalance from the IMU's offset from the axis (issue 28,
+    twenty-first session): the imbalance shakes the base by (U / M) (w^2 e - dw/dt a x e), e turning
+    with the platter; a sensing point at d from the axis, riding on the platter, accelerates by
+    w x (w x d) + dw/dt x d = -w^2 d + dw/dt a x d.  With d = -(U / M) e the two are the same at
+    every rate and through a ramp.  The twin (its two effects written apart) says so: a perfect IMU
+    on the axis with the imbalance reads what one without it reads at that offset, to rounding."""
+    U, M, phi = 2000e-6, 5.0, math.radians(-50.0)
+    seg = {}
+    for name, bench_settings in (("imbalance", dict(imbalance_g_mm=2000.0, base_mass_kg=M, imbalance_phase_deg=-50.0)),
+                                 ("offset", {})):
+        bench = SimulatedBench(perfect_truth(**bench_settings), 3)
+        if name == "offset":        # the same start attitude (the same geometry draws), the offset
+            C_bn0 = Rotation.from_matrix(seg["imbalance"].truth["C_bn0"])
+            a_n = seg["imbalance"].truth["axis_enu"]
+            r = world.axis_reference_enu(a_n)
+            e0 = math.cos(phi) * r + math.sin(phi) * np.cross(a_n, r)
+            bench.truth.bench.axis_offsets_m[2] = -(U / M) * C_bn0.apply(e0)
+        seg[name] = bench.rotation([0, 0, 1], 90.0, 4.0, record_ramp="start", ramp_accel_dps2=40.0, ramp_rest_s=0.5)
+    np.testing.assert_array_equal(seg["imbalance"].truth["C_bn0"], seg["offset"].truth["C_bn0"])
+    size = U / M * math.radians(90.0) ** 2
+    assert np.abs(seg["imbalance"].accel - seg["offset"].accel).max() < 1e-9 * size

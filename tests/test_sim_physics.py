@@ -510,6 +510,11 @@ def test_truth_yaml_round_trip(tmp_path):
     ("bench", "vibration_mg", 1.0),
     ("bench", "vibration_mg", [0.0, 2e4, 0.0]),
     ("bench", "vibration_phase_deg", 400.0),
+    ("bench", "vibration_ref_rate_dps", 0.0),
+    ("bench", "vibration_ref_rate_dps", "100 dps"),
+    ("bench", "imbalance_g_mm", -1.0),
+    ("bench", "base_mass_kg", 0.0),
+    ("bench", "imbalance_phase_deg", float("inf")),
     ("bench", "remount_error_arcsec", -5.0),
     ("bench", "remount_rotations", 1),
     ("bench", "time_stamp_jitter_ms", 1.5),                          # > 10 % of 10 ms
@@ -535,6 +540,27 @@ def test_bad_truth_field_raises_user_error(tmp_path, section, field, value):
         Truth.from_yaml(path)
     msg = str(exc.value)
     assert str(path) in msg and name in msg, msg
+
+
+def test_a_vibration_without_its_reference_rate_is_refused_in_one_message(tmp_path):
+    """A truth file written before the twenty-first session gave vibration_mg without
+    vibration_ref_rate_dps (it meant that amplitude at every rate, which no imbalance makes): with a
+    non-zero vibration it is refused, naming the field and what it means now (exit 2 via UserError);
+    with none it loads; with the rate it loads that rate."""
+    data = default_truth(0).to_yaml_dict()
+    del data["bench"]["vibration_ref_rate_dps"]
+    path = tmp_path / "old.yaml"
+    path.write_text(yaml.safe_dump(data))
+    assert Truth.from_yaml(path).bench.vibration_ref_rate_dps == 100.0      # no vibration: loads
+    data["bench"]["vibration_mg"] = [1.0, 0.0, 0.0]
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(UserError) as exc:
+        Truth.from_yaml(path)
+    msg = str(exc.value)
+    assert "bench.vibration_mg" in msg and "vibration_ref_rate_dps" in msg and "at the steady rate" in msg, msg
+    data["bench"]["vibration_ref_rate_dps"] = 30.0
+    path.write_text(yaml.safe_dump(data))
+    assert Truth.from_yaml(path).bench.vibration_ref_rate_dps == 30.0
 
 
 def test_truth_yaml_not_a_mapping(tmp_path):

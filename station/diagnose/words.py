@@ -405,14 +405,19 @@ def aliases(summaries, effect_id: str) -> list[tuple]:
         # with the platter is a constant across the axis in the case's frame, as an offset's w^2 d is;
         # the vibration has its own parameters at every rate (and about a vertical axis for every
         # rotation group), so offsets that look alike in the table's frame for every axis are a
-        # vibration at every rate and elevation (station/model/table_vibration.py)
+        # vibration at every rate and elevation (station/model/table_vibration.py); a recorded ramp
+        # does not separate them either (twenty-first session: an imbalance's tangential force is the
+        # offset's dw/dt x d as its centripetal one is w^2 d; sim_devices/world.py, the twins)
         out.append(("table_vibration_once_per_rev",
                     "an offset of the rotations' accelerometer mean for each rotation axis is also what a table "
                     "vibrating once per revolution leaves: its part turning with the platter is a constant across "
                     "the axis, as the centripetal acceleration w² d of an offset is, at any rate and about a "
-                    "vertical axis too; no segment tells them apart. Where the table's axes meet and the IMU "
-                    "stayed mounted, the model's one mounting offset holds (leave rotation_axis_offsets out); "
-                    "otherwise check the table's vibration with an accelerometer on its base"))
+                    "vertical axis too, and through a recorded ramp (an imbalance's force on the base is "
+                    "m r (w² e - dw/dt a x e), what an offset d fixed to the platter gives); no segment tells them "
+                    "apart. Where the table's axes meet and the IMU stayed mounted, the model's one mounting offset "
+                    "holds (leave rotation_axis_offsets out); otherwise check the table's vibration with an "
+                    "accelerometer on its base, or turn the IMU on the platter by a known angle about the axis "
+                    "between runs (the offset turns with the IMU, an imbalance stays with the platter)"))
     if effect_id == "table_vibration_once_per_rev" and len(rates) == 1 and not vertical:
         out.append(("accel_lever_arm", f"every rotation is at one rate ({rates[0]:g} °/s): the part of a "
                     "vibration across the axis is a constant in the rotations' accelerometer mean, as the "

@@ -27,7 +27,7 @@ def _vertical(r):
     """Whether steady rotation ``r`` is about an axis within VERTICAL_DEG of the vertical (its
     first harmonic, gravity's part across the axis, below sin VERTICAL_DEG of gravity); None for a
     rotation neither frame takes (not steady, no harmonics, no gravity)."""
-    if not r.steady or r.accel_cos is None:
+    if not (r.steady or getattr(r, "record_ramp", None)) or r.accel_cos is None:
         return None
     c, s, dc = (np.asarray(v, float) for v in (r.accel_cos, r.accel_sin, r.accel_dc))
     across = np.sqrt(0.5 * (c @ c + s @ s))

@@ -1,9 +1,9 @@
 """table_vibration: the table accelerates once per revolution (an imbalance of the platter, a
 bearing, a belt), in a direction fixed to the table's frame.
 
-The derivation (issue 28, the vibration about a vertical axis).  The simulator writes the base's
-acceleration (sim_devices/world.py ``table_vibration_enu``, read and not imported: the model stays
-independent) as
+The derivation (issue 28, the vibration about a vertical axis).  At a steady rate the simulator's
+base accelerates (sim_devices/world.py ``table_vibration_enu``, read and not imported: the model
+stays independent; since the twenty-first session ~ rate^2 and zero at rest, see (3) below) as
 
     a(theta) = cos(theta + phi) D,   D = A_axis a_n + A_ref r + A_perp (a_n x r)
 
@@ -55,6 +55,31 @@ against it): four numbers for four parameters, each in a frame across the axis.
   across the axis to the vibration or the offsets alike.  What tells them apart there is the rest
   of (1) and (2): the first harmonic along the axis and the second across it, which an offset never
   makes.
+* Over a recorded ramp (issue 28, twenty-first session).  A once-per-revolution vibration is driven
+  by the platter's angle: an imbalance U = m rho pushes the base by U (w^2 e - dw/dt a_n x e), e its
+  direction turning with the platter, and a base that moves as a mass M accelerates by that over M;
+  a bearing's or pulley's eccentricity moves it by a displacement fixed to the platter.  Either way
+  the base's displacement is a function of the table's angle, x(theta) = cos theta U + sin theta V
+  (U, V fixed in the table's frame), and its acceleration is its second time derivative,
+
+      a = w^2 x''(theta) + (dw/dt) x'(theta)
+        = -w^2 (cos theta U + sin theta V) + (dw/dt) (-sin theta U + cos theta V)       (3)
+
+  zero at rest, ~ w^2 at a steady rate (the per-rate (P, Q) above are P = -w_s^2 U, Q = -w_s^2 V at
+  the steady rate w_s: a mount stiff against the rotation frequency would make them ~ w^4, which the
+  per-rate parameters take as well), and with a part from the angular acceleration over a ramp.  In
+  (P, Q) of the ramp's steady rate w_s (the table's rate at the window's steady edge, which also
+  keys its group: _steady_rate_dps)
+
+      a(p) = (w^2 / w_s^2) (cos p P + sin p Q) + ((dw/dt) / w_s^2) (sin p P - cos p Q)      (4)
+
+  at each of the ramp's phase points, w^2 the square of the rate as the fit's rows take it
+  (SampleContext.wsq_table) and dw/dt the table's angular acceleration about l (wdot_table . l),
+  both signed with the angle p; then turned into the case as (1).  A steady turn's rows keep
+  w^2 / w_s^2 = 1 and no dw/dt (its rate ripple's part is ripple-sized: 0.1 % ripple, 0.2 % of the
+  vibration).  The twins (sim_devices/world.py table_vibration_enu, imbalance_acceleration_enu)
+  write (3) independently; tests/test_vibration_ramp.py checks (4) against them point by point.
+  A recorded ramp is framed (table_revolution.frames) whatever its rate's spread.
 * The wobble (table_wobble) needs no such parameters: about a vertical axis its lean tilts gravity
   by b across the axis once per revolution, which is what a tilt of the axis does (the fit's own
   gravity angle and phase per axis group take it), and its rate across the axis averages out over
@@ -73,6 +98,25 @@ MG = 9.80665e-3              # m/s^2 per mg
 RATE_ROUND_DPS = 1.0         # rotations whose rates differ by less share a vibration
 
 
+def _steady_rate_dps(r) -> float:
+    """A rotation's steady rate (deg/s, magnitude): for a recorded ramp the table's rate at the
+    window's steady edge (the reported rate_end_dps of a ramp up, rate_start_dps of a brake), not
+    the window's mean rate (angle / duration: ~75 deg/s for a 100 deg/s turn with its ramp and rest
+    recorded, a rate the table never held; review of issue 28, twentieth session); else angle /
+    duration."""
+    rate = abs(r.rate_dps)
+    ramp = getattr(r, "record_ramp", None)
+    edge = {"start": getattr(r, "table_rate_end_dps", None), "end": getattr(r, "table_rate_start_dps", None)}.get(ramp)
+    if edge is not None and np.isfinite(edge) and edge != 0:
+        rate = abs(float(edge))
+    return float(rate)
+
+
+def _rate_key(r) -> float:
+    """The rate a rotation's vibration is keyed by: its steady rate rounded to RATE_ROUND_DPS."""
+    return float(np.round(_steady_rate_dps(r) / RATE_ROUND_DPS) * RATE_ROUND_DPS)
+
+
 class TableVibration(Effect):
     id = "table_vibration_once_per_rev"
     title = "Table vibration once per revolution: the platter and IMU accelerated at the rotation frequency"
@@ -82,12 +126,14 @@ class TableVibration(Effect):
                "the IMU once per revolution; the part across it turns in the IMU's frame against the platter's "
                "turn, so it shows as a constant and a twice-per-revolution part across the axis.  Its size and "
                "phase follow the rotation rate (an imbalance's force grows with its square, the mount's "
-               "response has its own phase), so each rate has its own.  A fault of the bench, not of the IMU: "
+               "response has its own phase), so each rate has its own; through a recorded ramp it follows the "
+               "rate's square and the angular acceleration from the steady rate's.  A fault of the bench, not of the IMU: "
                "station apply compensates nothing for it.")
     term = ("rotations only (the fit's phase grid, p the signed angle turned about l): accel_raw += M_a Rot(l, -p) "
             "(cos p P + sin p Q), P = P_l l + P_v v_hat + P_u (l x v_hat) and Q alike, v_hat gravity's direction "
             "across the axis at the rotation's start; one (P, Q) per table axis and rate (rotations start at the "
-            "same platter angle); about an axis within 20° of the vertical P_l, Q_l per table axis and rate and "
+            "same platter angle); over a recorded ramp (w/w_s)^2 (cos p P + sin p Q) + (dw/dt / w_s^2) "
+            "(sin p P - cos p Q) from its steady rate w_s's (P, Q) (zero at rest); about an axis within 20° of the vertical P_l, Q_l per table axis and rate and "
             "the parts across on a case-fixed basis (e1, e2 = l x e1) per axis group and mounting")
     excited_by = ("rotations about an axis with gravity across it (the frame is fixed by gravity: one vibration per "
                   "table axis and rate); about an axis within 20° of the vertical the part along the axis per table "
@@ -118,17 +164,20 @@ class TableVibration(Effect):
         self.vaxial_of = {}           # segment index -> position in vertical_axial
         self.vacross_of = {}          # segment index -> position in vertical_across
         self.vcount = {}              # position in vertical_across -> rotations
+        self.ramp_rate = {}           # segment index of a recorded ramp -> its steady rate, rad/s
 
     def setup(self, summaries) -> None:
         self.frame = rev.frames(summaries)
         steady = [r for r in summaries.rotations if int(r.index) in self.frame]
-        key = {int(r.index): (rev.table_axis_of(r), float(np.round(abs(r.rate_dps) / RATE_ROUND_DPS) * RATE_ROUND_DPS))
-               for r in steady}
+        key = {int(r.index): (rev.table_axis_of(r), _rate_key(r)) for r in steady}
         groups = sorted(set(key.values()))
         self.groups = [[int(k), float(rate)] for k, rate in groups]
         self.group_of = {i: groups.index(g) for i, g in key.items()}
         self.count = {g: sum(1 for v in self.group_of.values() if v == g) for g in range(len(groups))}
         self._setup_vertical(summaries)
+        # a recorded ramp's steady rate, rad/s (the derivation's w_s: its rows are scaled from it)
+        self.ramp_rate = {int(r.index): float(np.radians(_steady_rate_dps(r))) for r in summaries.rotations
+                          if getattr(r, "record_ramp", None) and (int(r.index) in self.frame or int(r.index) in self.vframe)}
 
     def _setup_vertical(self, summaries) -> None:
         self.vframe = rev.vertical_frames(summaries)
@@ -137,7 +186,7 @@ class TableVibration(Effect):
         mounting = getattr(geometry, "mounting", None) or {}
         axial, across, names = {}, {}, {}
         for r in vertical:
-            k, rate = rev.table_axis_of(r), float(np.round(abs(r.rate_dps) / RATE_ROUND_DPS) * RATE_ROUND_DPS)
+            k, rate = rev.table_axis_of(r), _rate_key(r)
             axial.setdefault((k, rate), []).append(int(r.index))
             m = mounting.get(r.name)
             key = (k, rate, int(r.group), None if m is None else repr(m))
@@ -232,12 +281,38 @@ class TableVibration(Effect):
         Q = xv[..., 3:4] * l + xv[..., 4:5] * b1 + xv[..., 5:6] * b2
         c, s = np.cos(p)[:, None], np.sin(p)[:, None]
         a = c * P + s * Q                                           # table frame at the start
+        ramps = self._ramp_rows(known, r, rows, l, ctx)
+        if ramps is not None:       # (4) of the derivation: a recorded ramp's rows
+            k2, kd, on = ramps
+            a = a + on * ((k2 - 1.0) * a + kd * (s * P - c * Q))
         along = (a[..., 0] * l[:, 0] + a[..., 1] * l[:, 1] + a[..., 2] * l[:, 2])[..., None] * l
         # (1) of the module's derivation, Rot(l, -p) a: the IMU has turned by p since the start
         out[..., rows, :] = (along + c * (a - along) - s * np.cross(l, a)) @ ctx.accel_matrix.mT
         return out
 
     accel_batch = accel
+
+    def _ramp_rows(self, known, r, rows, l, ctx):
+        """(4) of the derivation at the points ``rows`` (their framed rotations ``r``): (w^2 / w_s^2,
+        (dw/dt) / w_s^2, 1 on a recorded ramp's points and 0 elsewhere), each (n, 1) or a batch's
+        (B, n, 1); None without a recorded ramp among them.  w^2 the rate's square as the fit's rows
+        take it (SampleContext.wsq_table; the square of w_table where the context has none), dw/dt
+        the table's angular acceleration about the rotation's axis l (wdot_table . l)."""
+        if not self.ramp_rate:
+            return None
+        w_s = np.array([self.ramp_rate.get(int(i), np.nan) for i in known])[r]
+        on = np.isfinite(w_s)
+        if not on.any():
+            return None
+        inv = np.where(on, 1.0 / np.where(on, w_s, 1.0) ** 2, 0.0)
+        wdot = ctx.wdot_table[..., rows, :]
+        thdd = wdot[..., 0] * l[:, 0] + wdot[..., 1] * l[:, 1] + wdot[..., 2] * l[:, 2]
+        if ctx.wsq_table is not None:
+            wsq = np.asarray(ctx.wsq_table)[..., rows]
+        else:
+            w = ctx.w_table[..., rows, :]
+            wsq = w[..., 0] * w[..., 0] + w[..., 1] * w[..., 1] + w[..., 2] * w[..., 2]
+        return (wsq * inv)[..., None], (thdd * inv)[..., None], on.astype(float)[:, None]
 
     def words(self, x, sigma) -> list[str]:
         """The vibration of each table axis and rate that stands out (> 3 sigma), in mg."""
