@@ -1,5 +1,4 @@
 """Review of issue 28's twenty-first session (branch vibphys28): what the review found."""
-import numpy as np
 import pytest
 
 from sim_devices.truth import mems_truth
