@@ -226,8 +226,11 @@ class BenchServer:
                  if not p.closed and not (p is self.table_port and defer_table)]
         writers = [p for p in (self.table_port, *imu_ports) if not p.closed and p.backlog]
         wake = [self._wake_fds[0]] if self._wake_fds is not None else []
-        readable, _, _ = (select.select(ports + wake, writers, [], timeout_s) if ports or writers
-                          else ([], [], []))
+        if ports or writers or wake:
+            readable, _, _ = select.select(ports + wake, writers, [], timeout_s)
+        else:       # every line closed, no wake pipe (serve_forever in the caller's thread): wait
+            readable = []       #   the turn's timeout, not a turn as fast as the loop can go
+            time.sleep(timeout_s)
         if wake and wake[0] in readable:
             os.read(wake[0], 4096)
         self._table_asked = self.table_port in readable or (
