@@ -18,7 +18,7 @@ from .base import ImuSettings, TableSettings
 from .errors import DeviceError, DeviceTimeout
 from .protocols import vectornav as V
 from .protocols import xbus as X
-from .protocols.csvlines import CsvDecoder
+from .protocols.csvlines import MAX_LINE_BYTES, CsvDecoder
 from .protocols.vectornav_binary import VectorNavDecoder
 from .registry import imu_driver, open_table
 from .transport import Port
@@ -35,6 +35,20 @@ SCAN_BAUDS = {"vectornav": V.BAUD_RATES,
 SCAN_WINDOW_S = 0.5
 #: after switching to a rate, bytes that were on their way are dropped for this long, s
 SCAN_SETTLE_S = 0.05
+#: the longest message of each protocol, bytes: a VectorNav ASCII message (a body of at most 200
+#: characters, ``find_message``; station's binary frames are shorter), an Xsens message with
+#: MAX_DATA bytes of data (extended length: 7 bytes around it), a csv line (MAX_LINE_BYTES)
+LONGEST_MESSAGE = {"vectornav": 210, "xsens": X.MAX_DATA + 7, "csv": MAX_LINE_BYTES + 2}
+#: a rate is given up before its window ends once this many longest messages' worth of bytes came
+#: without one valid message: at the device's own rate those bytes hold a message cut at the start
+#: (the first boundary comes within one longest message) and two whole ones after it, which count
+#: as valid (_valid_messages: one VectorNav message, two Xsens messages or csv lines)
+SCAN_GIVE_UP_MESSAGES = 3
+#: ... but a VectorNav rate not before this long after the query (s): of binary frames only
+#: station's own layout is counted, so a device streaming another layout at its own rate shows
+#: as valid only its reply to the query, which comes within a few ms (at 115200 baud the 840
+#: bytes of the rule above take 73 ms; at 921600, 9 ms)
+SCAN_REPLY_S = {"vectornav": 0.1}
 
 
 def _mismatch_note(imu, settings: ImuSettings) -> str | None:
@@ -141,7 +155,11 @@ def scan_imu_baud(url: str, protocol: str, settings: ImuSettings,
                   window_s: float = SCAN_WINDOW_S) -> dict:
     """Listen at each of the protocol's baud rates (after a harmless query: VectorNav
     ``$VNRRG,01``, Xsens ReqDID) and count the valid frames, lines or replies; the rate with
-    the most is the device's.  Nothing is written to the device's settings."""
+    the most is the device's.  Nothing is written to the device's settings.
+
+    A rate is listened to for ``window_s`` at most: less once it has given 3 valid messages
+    (the device's rate), or SCAN_GIVE_UP_MESSAGES longest messages' worth of bytes without a
+    valid one (garbage: not the device's rate)."""
     if protocol not in SCAN_BAUDS:
         raise DeviceError(f"imu {url} ({protocol})", f"--scan-baud knows the baud rates of "
                                                      f"{', '.join(SCAN_BAUDS)} only")
@@ -159,11 +177,16 @@ def scan_imu_baud(url: str, protocol: str, settings: ImuSettings,
             query = _scan_query(protocol)
             if query:
                 port.write(query)
-            data, end = bytearray(), time.monotonic() + window_s
+            start = time.monotonic()
+            data, end = bytearray(), start + window_s
+            give_up = SCAN_GIVE_UP_MESSAGES * LONGEST_MESSAGE[protocol]
+            reply_by = start + SCAN_REPLY_S.get(protocol, 0.0)
             while time.monotonic() < end:
                 data += port.read_some()
-                if len(data) > 256 and _valid_messages(protocol, bytes(data)) >= 3:
-                    break
+                if len(data) > 256:
+                    valid = _valid_messages(protocol, bytes(data))
+                    if valid >= 3 or (valid == 0 and len(data) >= give_up and time.monotonic() >= reply_by):
+                        break
         finally:
             port.close()
         rates.append({"baud": baud, "bytes": len(data), "valid": _valid_messages(protocol, bytes(data))})

@@ -8,10 +8,13 @@ of pyserial: reads bounded by a deadline, pyserial and OS errors turned into
 from __future__ import annotations
 
 import logging
+import socket
+import struct
 import time
 from dataclasses import dataclass
 
 import serial
+from serial.urlhandler import protocol_socket
 
 from .errors import DeviceDisconnected, DeviceError, DeviceTimeout, ProtocolError
 
@@ -24,11 +27,59 @@ READ_SLICE_S = 0.05
 WAITING_RECHECK_S = 0.002
 
 
+#: pyserial's socket:// port sleeps this long in close() "in case of quick reconnects, give the
+#: server some time"; :class:`SocketPort` waits it out only when the same address is opened again
+#: that soon (a close followed by nothing, the usual case, costs no wait)
+SOCKET_RECONNECT_S = 0.3
+_socket_closed_at: dict[str, float] = {}     # socket:// URL -> time.monotonic() of its last close
+
+
 try:    # a port that hangs up mid-call: tcdrain (a write's flush) raises termios.error, not OSError
+    import fcntl
     import termios
     PORT_ERRORS: tuple = (serial.SerialException, OSError, termios.error)
 except ImportError:     # not on Windows
+    fcntl = termios = None
     PORT_ERRORS = (serial.SerialException, OSError)
+
+
+class SocketPort(protocol_socket.Serial):
+    """pyserial's ``socket://`` port with two changes: ``in_waiting`` is the number of bytes
+    received (FIONREAD; pyserial's says 0 or 1, so a reply was read one byte, one select and one
+    recv at a time), and ``close()`` does not sleep: the pause pyserial gives a server before a
+    quick reconnect (SOCKET_RECONNECT_S) is taken when the same address is opened again."""
+
+    @property
+    def in_waiting(self) -> int:
+        n = protocol_socket.Serial.in_waiting.fget(self)
+        if n and termios is not None:
+            try:
+                got = struct.unpack("i", fcntl.ioctl(self._socket.fileno(), termios.FIONREAD, b"\0\0\0\0"))[0]
+            except OSError:
+                return n
+            return got or n     # readable with nothing to read: end of file, for read() to see
+        return n
+
+    def open(self) -> None:
+        wait = _socket_closed_at.get(self.portstr, -1e9) + SOCKET_RECONNECT_S - time.monotonic()
+        if wait > 0:
+            time.sleep(wait)
+        super().open()
+
+    def close(self) -> None:
+        if self.is_open:
+            if self._socket:
+                try:
+                    self._socket.shutdown(socket.SHUT_RDWR)
+                except OSError:
+                    pass
+                try:
+                    self._socket.close()
+                except OSError:
+                    pass
+                self._socket = None
+            self.is_open = False
+            _socket_closed_at[self.portstr] = time.monotonic()
 
 
 @dataclass(frozen=True)
@@ -72,6 +123,9 @@ class Port:
         self.log = log
         try:
             ser = serial.serial_for_url(url, do_not_open=True)
+            if type(ser) is protocol_socket.Serial:        # socket://host:port
+                ser = SocketPort(None)
+                ser.port = url
             ser.baudrate = settings.baudrate
             ser.bytesize = settings.bytesize
             ser.parity = PARITIES[settings.parity]

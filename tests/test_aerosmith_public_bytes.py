@@ -31,23 +31,32 @@ def bench(request):
             speed=SPEED, axes=1, table_protocol="aerosmith",
             table_silent_motion=request.param)) as server:
         line = serial.Serial(server.table_path, timeout=0.05)
+        line.got = 0                    # bytes read from the twin so far
         try:
             yield server, line, request.param
         finally:
             line.close()
 
 
-def _send(line, data: bytes, expect: int, quiet_s: float = 0.1) -> bytes:
-    """Write ``data``; everything answered: at least ``expect`` bytes, then ``quiet_s`` of
-    silence."""
+def _send(server, line, data: bytes, expect: int) -> bytes:
+    """Write ``data``; everything the twin answered: at least ``expect`` bytes, then every byte
+    the twin wrote for it.  Once the twin's loop has served the command (``served``), the bytes
+    it sent since the line opened are counted (``table_port.sent_bytes``): those not read yet
+    are waited for (none is left unread, however late).  Before, 0.1 s of silence was taken for
+    the end of the answer: 7 s of the file's 8 s of wall time."""
     line.write(data)
     out = bytearray()
     deadline = time.monotonic() + 2.0
     while len(out) < expect and time.monotonic() < deadline:
         out += line.read(max(1, line.in_waiting))
-    end = time.monotonic() + quiet_s
-    while time.monotonic() < end:
-        out += line.read(max(1, line.in_waiting))
+    server.served()
+    port = server.table_port
+    sent = port.sent_bytes + port.backlog
+    deadline = time.monotonic() + 2.0
+    while line.got + len(out) < sent and time.monotonic() < deadline:
+        out += line.read(sent - line.got - len(out))
+    line.got += len(out)
+    assert line.got == sent, f"{sent - line.got} bytes sent by the twin not read in 2 s"
     return bytes(out)
 
 
@@ -70,18 +79,18 @@ NOT_SIMULATED = ["DIR1", "DIR0", "HOF%f" % 1.5, "RMO%d" % 10, "SAV", "ZER%d" % 0
 
 
 def test_the_queries_answer_a_value_line_then_the_prompt_line(bench):
-    _, line, _ = bench
-    assert _send(line, b"STA\r\n", 6) == b"1\r\n>\r\n"              # getStatus: int()
-    assert _send(line, b"PPO\r\n", 11) == b"0.0000\r\n>\r\n"        # getPosition: float()
-    assert _send(line, b"PVE\r\n", 11) == b"0.0000\r\n>\r\n"        # getVelocity: float()
-    assert _send(line, b"MCO1\r\n", 6) == b"1\r\n>\r\n"             # isMoving: '1' = at rest
+    server, line, _ = bench
+    assert _send(server, line, b"STA\r\n", 6) == b"1\r\n>\r\n"              # getStatus: int()
+    assert _send(server, line, b"PPO\r\n", 11) == b"0.0000\r\n>\r\n"        # getPosition: float()
+    assert _send(server, line, b"PVE\r\n", 11) == b"0.0000\r\n>\r\n"        # getVelocity: float()
+    assert _send(server, line, b"MCO1\r\n", 6) == b"1\r\n>\r\n"             # isMoving: '1' = at rest
     assert _client_lines(b"1\r\n>\r\n") == ["1", ">"]
 
 
 @pytest.mark.parametrize("command", SETTINGS + NOT_SIMULATED)
 def test_every_request_of_the_client_is_answered_by_two_lines(bench, command):
-    _, line, _ = bench
-    got = _send(line, (command + "\r\n").encode(), len(ANSWERED))
+    server, line, _ = bench
+    got = _send(server, line, (command + "\r\n").encode(), len(ANSWERED))
     assert got == (REFUSED if command in NOT_SIMULATED else ANSWERED)
     assert len(_client_lines(got)) == 2
 
@@ -104,12 +113,12 @@ def test_a_move_then_motion_complete(bench):
 
     handlers["motion_complete"] = logged
     t_move = server.step_clock.now()
-    assert _send(line, b"MOV90\r\n", 5, 0.0) == ANSWERED
+    assert _send(server, line, b"MOV90\r\n", 5) == ANSWERED
     deadline = time.monotonic() + 5.0
-    while _send(line, b"MCO1\r\n", 6, 0.0) != b"1\r\n>\r\n":
+    while _send(server, line, b"MCO1\r\n", 6) != b"1\r\n>\r\n":
         assert time.monotonic() < deadline
     assert abs(server.table.read_position(1) - 90.0) <= 1.0
-    assert _send(line, b"PPO\r\n", 12).startswith(b"90.0")
+    assert _send(server, line, b"PPO\r\n", 12).startswith(b"90.0")
     for t, value in answers:
         pos, rate, _ = server.table.axis_states(t)
         at_rest = abs(rate[0, 0]) <= server.table.config.rate_resolution_dps
@@ -120,12 +129,12 @@ def test_a_move_then_motion_complete(bench):
 
 def test_jog_then_a_request_as_the_client_does_it(bench):
     server, line, silent = bench
-    got = _send(line, b"JOG30\r\n", 0 if silent else len(ANSWERED))
+    got = _send(server, line, b"JOG30\r\n", 0 if silent else len(ANSWERED))
     assert got == (b"" if silent else ANSWERED)
     assert server.table.axes[0].mode == "rate"
     time.sleep(0.05)                                                  # at 30 deg/s
     # eatReturn: STA, two lines read, then the request itself
-    got = _send(line, b"STA\r\n", 7) + _send(line, b"PVE\r\n", 12)
+    got = _send(server, line, b"STA\r\n", 7) + _send(server, line, b"PVE\r\n", 12)
     assert got == b"13\r\n>\r\n30.0000\r\n>\r\n"
     lines = _client_lines((b"" if silent else ANSWERED) + got)
     eaten, answer = lines[:2], lines[2:4]
@@ -137,21 +146,21 @@ def test_jog_then_a_request_as_the_client_does_it(bench):
 
 def test_a_bare_sto_stops_without_a_terminator(bench):
     server, line, silent = bench
-    _send(line, b"JOG30\r\n", 0 if silent else len(ANSWERED))
+    _send(server, line, b"JOG30\r\n", 0 if silent else len(ANSWERED))
     time.sleep(0.05)
-    got = _send(line, b"STO", 0 if silent else len(ANSWERED))         # no terminator at all
+    got = _send(server, line, b"STO", 0 if silent else len(ANSWERED))         # no terminator at all
     assert got == (b"" if silent else ANSWERED)
     assert server.table.axes[0].mode == "position"                  # executed at once
     # the client's next command, a second later, is not glued to it
-    assert _send(line, b"STA\r\n", 6).endswith(b"\r\n>\r\n") and b"?" not in got
+    assert _send(server, line, b"STA\r\n", 6).endswith(b"\r\n>\r\n") and b"?" not in got
 
 
 @pytest.mark.parametrize("end", [b"\r", b"\n", b"\r\n"])
 def test_each_terminator_ends_a_command_once(bench, end):
-    _, line, _ = bench
-    assert _send(line, b"STA" + end, 6) == b"1\r\n>\r\n"
-    assert _send(line, b"ACL50" + end, len(ANSWERED)) == ANSWERED
-    assert _send(line, b"XYZ" + end, len(REFUSED)) == REFUSED
+    server, line, _ = bench
+    assert _send(server, line, b"STA" + end, 6) == b"1\r\n>\r\n"
+    assert _send(server, line, b"ACL50" + end, len(ANSWERED)) == ANSWERED
+    assert _send(server, line, b"XYZ" + end, len(REFUSED)) == REFUSED
 
 
 def test_the_driver_always_terminates_and_reads_both_framings(bench):

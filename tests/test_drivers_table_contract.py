@@ -236,3 +236,33 @@ def test_any_pyserial_url_spy_logs_the_exchange(tmp_path):
         with open_table(f"spy://{server.table_path}?file={log}") as table:
             assert table.n_axes == 2
     assert "*IDN?" in log.read_text() and ":Query:System?" in log.read_text()
+
+
+def test_a_socket_port_reads_what_came_at_once_and_closes_without_a_pause(monkeypatch):
+    """``socket://`` (acutrol over TCP, TM-9384C): ``in_waiting`` counts the bytes received, so a
+    reply is taken in one read (pyserial's port says 1, and a reply went one byte per select and
+    recv); ``close()`` does not sleep (pyserial's sleeps 0.3 s "in case of quick reconnects"), and
+    the pause is taken by the next open of the same address within 0.3 s, for the rest of it."""
+    import logging
+    import socket
+
+    from drivers import transport
+
+    slept = []
+    monkeypatch.setattr(transport.time, "sleep", lambda s: slept.append(s))
+    with socket.create_server(("127.0.0.1", 0)) as server:
+        url = "socket://127.0.0.1:%d" % server.getsockname()[1]
+        port = transport.Port(url, transport.SerialSettings(), "table test", logging.getLogger("test"))
+        peer, _ = server.accept()
+        with peer:
+            peer.sendall(b"x" * 100)
+            deadline = time.monotonic() + 10.0
+            while port._ser.in_waiting < 100 and time.monotonic() < deadline:
+                pass
+            assert port._ser.in_waiting == 100
+            assert port.read_some() == b"x" * 100
+        port.close()
+        assert slept == []                                 # closed without a pause
+        again = transport.Port(url, transport.SerialSettings(), "table test", logging.getLogger("test"))
+        again.close()
+    assert len(slept) == 1 and 0 < slept[0] <= transport.SOCKET_RECONNECT_S     # the rest, on reopening

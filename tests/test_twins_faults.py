@@ -183,6 +183,23 @@ def test_a_table_disconnect_is_reported():
                     time.sleep(0.01)
 
 
+def test_a_bench_whose_lines_all_hung_up_waits_instead_of_spinning():
+    """Every line closed (the table's and the IMU's disconnect faults): the twins' loop has no
+    port to select on, and waits its turn's timeout (<= 20 ms; 1 ms at the least) for a request
+    or a stop, instead of turning as fast as it can: a core burnt until the bench is stopped
+    (~40,000 turns a second before, on a loaded machine)."""
+    with _bench(imu=ImuFaults(disconnect_at_s=1.0), table=TableFaults(disconnect_at_s=1.0)) as server:
+        deadline = time.monotonic() + 10.0
+        while not (server.table_port.closed and server.lines[0].port.closed):
+            assert time.monotonic() < deadline, "the disconnect faults did not come within 10 s"
+            time.sleep(0.01)
+        s0, t0 = server.steps, time.monotonic()
+        time.sleep(0.5)
+        turns, wall = server.steps - s0, time.monotonic() - t0
+    # a turn waits 1 ms at the least (a capped clock; 20 ms here): at most one a ms, and one more
+    assert turns <= wall / 0.001 + 1, f"{turns} turns of the loop in {wall:.2f} s with every line closed"
+
+
 # ------------------------------------------------------------------------------ the file
 
 def test_faults_file_round_trip(tmp_path):

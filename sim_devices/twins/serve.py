@@ -12,6 +12,7 @@ same platform motion; the lossless clock waits for the slowest reading reader.
 from __future__ import annotations
 
 import dataclasses
+import os
 import select
 import threading
 import time
@@ -159,6 +160,9 @@ class BenchServer:
         self.table_deferred_steps = 0     # loop steps in which the table's commands waited (lossless)
         self._table_asked = False         # a table command came (or waited) in the last step
         self._requests: list = []         # (function, done event): run by the loop between steps
+        self.steps = 0                    # turns of the loop begun
+        self._cap: float | None = None    # lossless: the device time the clock stops at (set each step)
+        self._wake_fds: tuple[int, int] | None = None   # a pipe: a byte written wakes the loop's select
 
     # the first IMU (the only one of a one-IMU bench) by its old names
     imu = property(lambda self: self.lines[0].imu, lambda self, v: setattr(self.lines[0], "imu", v))
@@ -203,6 +207,7 @@ class BenchServer:
         is taking the frames).  So a reader that has received the table's answer and then
         reads what is waiting on the IMU line has every frame measured before that answer
         (``station.bench.imu_stream.ImuStream.sync``), at any speed."""
+        self.steps += 1
         while self._requests:
             fn, done = self._requests.pop(0)
             fn()
@@ -220,7 +225,14 @@ class BenchServer:
         ports = [p for p in (*imu_ports, self.table_port, *panel)
                  if not p.closed and not (p is self.table_port and defer_table)]
         writers = [p for p in (self.table_port, *imu_ports) if not p.closed and p.backlog]
-        readable, _, _ = select.select(ports, writers, [], timeout_s) if ports or writers else ([], [], [])
+        wake = [self._wake_fds[0]] if self._wake_fds is not None else []
+        if ports or writers or wake:
+            readable, _, _ = select.select(ports + wake, writers, [], timeout_s)
+        else:       # every line closed, no wake pipe (serve_forever in the caller's thread): wait
+            readable = []       #   the turn's timeout, not a turn as fast as the loop can go
+            time.sleep(timeout_s)
+        if wake and wake[0] in readable:
+            os.read(wake[0], 4096)
         self._table_asked = self.table_port in readable or (
             defer_table and not self.table_port.closed and bool(select.select([self.table_port], [], [], 0)[0]))
         wall = time.monotonic()
@@ -251,6 +263,7 @@ class BenchServer:
                 lead = 0.0 if line.port.backlog else LINE_BYTES / (line.bytes_per_frame * line.imu.rate_hz)
                 cap = now + lead if cap is None else min(cap, now + lead)
         self.clock.limit(cap)
+        self._cap = cap
 
     def _serve_table(self, readable, now: float, defer: bool) -> None:
         if self.table_port in readable and not defer:
@@ -421,7 +434,13 @@ class BenchServer:
                 waits.append(self.clock.wall_until(line.imu.next_k / line.imu.rate_hz))
         if not waits:
             return 0.02
-        return min(0.02, max(0.005, min(waits)))
+        wait = min(0.02, max(0.005, min(waits)))
+        if self._cap is not None:
+            # lossless: the clock stops at the cap (its line is full as far as the loop knows):
+            # look again then, not a whole batch later (at --speed 200 a csv stream's cap came
+            # 12 ms into a 20 ms batch, and its reader, having read everything, waited 8 ms)
+            wait = min(wait, max(0.001, self.clock.wall_until(self._cap)))
+        return wait
 
     def serve_forever(self, stop: threading.Event | None = None) -> None:
         stop = stop or self._stop
@@ -439,8 +458,20 @@ class BenchServer:
             return
         done = threading.Event()
         self._requests.append((fn, done))
+        self._wake()
         if not done.wait(10.0):
             raise RuntimeError("the twins' loop did not take the request")
+
+    def served(self) -> None:
+        """Return once the loop has read and answered every command written to the table's line
+        before the call (tests): the turn under way has ended then, and so has the next one (the
+        one under way may have read the line just before the bytes came; the next reads them).
+        Every byte of the answers is then written to the line or queued (``table_port.sent_bytes``
+        + ``backlog``).  Not for a table whose commands wait for an IMU reader (``lossless``, a
+        reader reading)."""
+        target = self.steps + 2         # the turn under way may have missed them; the next reads them
+        while self._thread is not None and self.steps < target:
+            self._between_steps(lambda: None)
 
     def unplug_imu(self, k: int) -> None:
         """IMU ``k``'s line hangs up (its pseudo-terminal closed): its reader gets end of file
@@ -461,14 +492,30 @@ class BenchServer:
             except BaseException as e:       # reported by stop()
                 self.error = e
 
+        self._wake_fds = os.pipe()
+        for fd in self._wake_fds:
+            os.set_blocking(fd, False)
         self._thread = threading.Thread(target=run, name="bench-twins", daemon=True)
         self._thread.start()
         return self
 
+    def _wake(self) -> None:
+        """The loop's select returns now (a request or a stop waits no turn's timeout, <= 20 ms)."""
+        if self._wake_fds is not None:
+            try:
+                os.write(self._wake_fds[1], b"\0")
+            except OSError:             # full (it wakes anyway) or closed
+                pass
+
     def stop(self) -> None:
         self._stop.set()
+        self._wake()
         if self._thread is not None:
             self._thread.join(5.0)
+            if not self._thread.is_alive() and self._wake_fds is not None:
+                for fd in self._wake_fds:
+                    os.close(fd)
+                self._wake_fds = None
             self._thread = None
         if self.error is not None:
             raise RuntimeError("the twins' loop failed") from self.error
