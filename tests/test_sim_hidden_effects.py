@@ -415,3 +415,25 @@ def test_encoder_scale_error():
     assert integral == pytest.approx(swept, abs=1e-9)
     assert swept - seg.meta["angle_deg"] == pytest.approx(720.0 * 300e-6, rel=1e-3)
     assert 720.0 * 300e-6 * 3600 == pytest.approx(777.6)
+
+
+@pytest.mark.parametrize("ramp", ["start", "end"])
+def test_encoder_scale_error_in_the_rate_a_ramp_reports(ramp):
+    """A recorded ramp's rates at the window's edges are the table's own reads, which it takes
+    from its encoder as it does the angle: the true rate over (1 + e), like the angle.  Before
+    (issue 28, twenty-first session) the twin reported the true rate beside the encoder's short
+    angle: the station's phase over the ramp (scaled to the stated rate) then turned gravity
+    through the true angle and hid the encoder's error from the accelerometers (1000 ppm read
+    as 2 +- 7 on six one-revolution turns).  By hand: a perfect gyro at the steady rate reads
+    the true rate (plus the Earth's along the axis), 100 deg/s; the table says 100 / 1.005."""
+    e = 5000.0
+    truth = perfect_truth(encoder_scale_error_ppm=e)
+    bench = SimulatedBench(truth, 2)
+    seg = bench.rotation([0, 0, 1], 100.0, 1.0, record_ramp=ramp, ramp_accel_dps2=200.0, ramp_rest_s=0.2)
+    steady = seg.meta["rate_end_dps" if ramp == "start" else "rate_start_dps"]
+    rest = seg.meta["rate_start_dps" if ramp == "start" else "rate_end_dps"]
+    gyro = (seg.gyro[-5:, 2] if ramp == "start" else seg.gyro[:5, 2]).mean() - earth_along(seg)
+    assert gyro == pytest.approx(100.0, abs=1e-9)
+    assert steady == pytest.approx(100.0 / (1 + 1e-6 * e), rel=0, abs=1e-9)
+    assert rest == pytest.approx(0.0, abs=1e-12)
+    assert seg.meta["angle_deg"] == pytest.approx(seg.truth["swept_angle_deg"] / (1 + 1e-6 * e), rel=0, abs=1e-12)
