@@ -105,6 +105,11 @@ class RotationSummary:
     # the table's reads placed on the IMU's clock (manifest ``angle_sigma_deg``, issue 28 review
     # item 1); added in quadrature to the encoder's in the gyro integral's variance.  0: none said
     angle_sigma_deg: float = 0.0
+    # (4, 5) a recorded ramp's least-squares harmonics (as accel_dc ... over the same samples) of
+    # theta cos theta, theta sin theta, theta^2 cos theta, theta^2 sin theta, theta the phase (rad):
+    # what gravity turned further by e theta leaves in them (table_encoder_scale; issue 28,
+    # twenty-first session).  None: a uniform turn's (table_encoder_scale.arc_moments)
+    turned_moments: np.ndarray | None = None
 
     @property
     def rate_dps(self) -> float:
@@ -457,6 +462,14 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
         rows = slice(None) if keep is None else keep
         coefs = np.linalg.lstsq(basis.T[rows], np.column_stack([accel, w, w * w, np.gradient(w, t)])[rows],
                                 rcond=None)[0]
+    moments = None
+    if rate_from_table:     # a recorded ramp: not a uniform turn (RotationSummary.turned_moments)
+        theta = angle_rad * fraction
+        rows = slice(None) if keep is None else keep
+        basis = _harmonic_basis(theta)
+        wanted = np.column_stack([theta * basis[1], theta * basis[2], theta**2 * basis[1], theta**2 * basis[2]])
+        moments = np.linalg.lstsq(basis.T[rows], wanted[rows], rcond=None)[0].T
+        del theta, basis, wanted
     del w, fraction
     coef, rate_coefs = coefs[:, :3], (coefs[:, 3], coefs[:, 4], coefs[:, 5])
     edge = min(EDGE_SAMPLES, n // 4)
@@ -472,7 +485,8 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
                            gyro_start=gyro[:edge].mean(axis=0), gyro_end=gyro[-edge:].mean(axis=0),
                            steady=steady, rate_sq_factor=rate_sq_factor,
                            rate_coef=rate_coefs[0], rate_sq_coef=rate_coefs[1], rate_dot_coef=rate_coefs[2],
-                           gram=gram_per_sample, earth_weights_s=earth_weights, rate_from_table=rate_from_table)
+                           gram=gram_per_sample, earth_weights_s=earth_weights, rate_from_table=rate_from_table,
+                           turned_moments=moments)
 
 
 def _scaled(values, factor):
