@@ -209,7 +209,9 @@ def test_a_recorded_ramps_turned_gravity_is_fitted_over_its_own_samples(ramp):
     p = 2 * np.pi * np.arange(phases) / phases
     # the fit's gravity on its grid: the base summary's own first harmonic (v and l x v)
     f_p = 0.2 * l + np.outer(np.cos(p), base.accel_cos) + np.outer(np.sin(p), base.accel_sin)
-    ctx = SampleContext(f_p=f_p, w_p=np.zeros((phases, 3)), w_table=np.outer(np.full(phases, np.radians(rate)), l),
+    grid = np.column_stack([np.ones(phases), np.cos(p), np.sin(p), np.cos(2 * p), np.sin(2 * p)])
+    # the table's rate on the grid as the fit takes it: the summary's harmonics of it (rad/s)
+    ctx = SampleContext(f_p=f_p, w_p=np.zeros((phases, 3)), w_table=np.outer(grid @ base.rate_coef, l),
                         wdot_table=np.zeros((phases, 3)), temp_c=np.full(phases, np.nan), accel_matrix=np.eye(3),
                         gyro_matrix=np.eye(3), segment_index=np.full(phases, 7.0),
                         turned_s=turned_time(total, t[-1] + 1 / fs, phases),
@@ -218,11 +220,15 @@ def test_a_recorded_ramps_turned_gravity_is_fitted_over_its_own_samples(ramp):
     effect = TableEncoderScale()
     effect.setup(SimpleNamespace(rotations=[base]))
     term = effect.accel(np.array([e_ppm]), ctx)
-    grid = np.column_stack([np.ones(phases), np.cos(p), np.sin(p), np.cos(2 * p), np.sin(2 * p)])
     got = (grid * np.array([1.0, 2.0, 2.0, 2.0, 2.0])).T / phases @ term
     tolerance = (1e-6 * e_ppm * np.radians(total)) ** 3 / 6 * g + 1e-9 * g
     np.testing.assert_allclose(got, expected, rtol=0, atol=tolerance)
     assert np.abs(expected).max() > 100 * tolerance
+    # the gyros: the fit's turn is the points' mean rate times T, and they turned (1 + e) A: the
+    # term adds e A (deg) -- not e times the rate's harmonics on the grid, whose mean over a ramp's
+    # window is not A / T (here 1.6 % above: 0.5 s at rest and 0.6 s of ramp in 13.1 s)
+    turn = effect.gyro(np.array([e_ppm]), ctx).mean(axis=0) * base.duration_s
+    np.testing.assert_allclose(turn, 1e-6 * e_ppm * total * l, rtol=1e-9, atol=1e-12)
 
 
 def test_apply_compensates_nothing_for_the_table():
