@@ -201,7 +201,8 @@ class SimulatedBench:
         (table time), then the table ramps up at ``ramp_accel_dps2`` and turns ``duration_s`` at the
         rate; "end": ``duration_s`` at the rate, then the brake at ``ramp_accel_dps2`` and
         ``ramp_rest_s`` at rest (world.ramp_profile); the rates at the window's edges are reported
-        (``rate_start_dps``, ``rate_end_dps``, as the table's own rate read at those table times).
+        (``rate_start_dps``, ``rate_end_dps``, as the table's own rate read at those table times, through
+        its encoder).
         """
         a_cmd = world._unit(axis_body, "axis_body")
         r = float(rate_dps)
@@ -300,9 +301,12 @@ class SimulatedBench:
         if bench.table_axes == 3:
             meta["table_axis"] = k_axis + 1
         if record_ramp:
+            # the table's own rate read at the window's edges: it knows its angle only from its
+            # encoder, so it reads the true rate over (1 + e) as it reads the angle (the true
+            # rate reported here hid an encoder scale error from a recorded ramp's phase: issue 28)
             meta.update(record_ramp=record_ramp, ramp_accel_dps2=float(ramp_accel_dps2),
-                        rate_start_dps=math.degrees(float(edge_rates[0])),
-                        rate_end_dps=math.degrees(float(edge_rates[1])))
+                        rate_start_dps=math.degrees(float(edge_rates[0])) / (1.0 + 1e-6 * e_ppm),
+                        rate_end_dps=math.degrees(float(edge_rates[1])) / (1.0 + 1e-6 * e_ppm))
         return SimSegment(
             kind="rotation", t=stamps, accel=accel, gyro=gyro, temp=temp, meta=meta,
             truth={

@@ -517,3 +517,25 @@ def test_an_imbalance_is_what_an_offset_from_the_axis_fixed_to_the_platter_makes
     np.testing.assert_array_equal(seg["imbalance"].truth["C_bn0"], seg["offset"].truth["C_bn0"])
     size = U / M * math.radians(90.0) ** 2
     assert np.abs(seg["imbalance"].accel - seg["offset"].accel).max() < 1e-9 * size
+
+
+@pytest.mark.parametrize("ramp", ["start", "end"])
+def test_encoder_scale_error_in_the_rate_a_ramp_reports(ramp):
+    """A recorded ramp's rates at the window's edges are the table's own reads, which it takes
+    from its encoder as it does the angle: the true rate over (1 + e), like the angle.  Before
+    (issue 28, twenty-first session) the twin reported the true rate beside the encoder's short
+    angle: the station's phase over the ramp (scaled to the stated rate) then turned gravity
+    through the true angle and hid the encoder's error from the accelerometers (1000 ppm read
+    as 2 +- 7 on six one-revolution turns).  By hand: a perfect gyro at the steady rate reads
+    the true rate (plus the Earth's along the axis), 100 deg/s; the table says 100 / 1.005."""
+    e = 5000.0
+    truth = perfect_truth(encoder_scale_error_ppm=e)
+    bench = SimulatedBench(truth, 2)
+    seg = bench.rotation([0, 0, 1], 100.0, 1.0, record_ramp=ramp, ramp_accel_dps2=200.0, ramp_rest_s=0.2)
+    steady = seg.meta["rate_end_dps" if ramp == "start" else "rate_start_dps"]
+    rest = seg.meta["rate_start_dps" if ramp == "start" else "rate_end_dps"]
+    gyro = (seg.gyro[-5:, 2] if ramp == "start" else seg.gyro[:5, 2]).mean() - earth_along(seg)
+    assert gyro == pytest.approx(100.0, abs=1e-9)
+    assert steady == pytest.approx(100.0 / (1 + 1e-6 * e), rel=0, abs=1e-9)
+    assert rest == pytest.approx(0.0, abs=1e-12)
+    assert seg.meta["angle_deg"] == pytest.approx(seg.truth["swept_angle_deg"] / (1 + 1e-6 * e), rel=0, abs=1e-12)

@@ -105,6 +105,11 @@ class RotationSummary:
     # the table's reads placed on the IMU's clock (manifest ``angle_sigma_deg``, issue 28 review
     # item 1); added in quadrature to the encoder's in the gyro integral's variance.  0: none said
     angle_sigma_deg: float = 0.0
+    # (4, 5) a recorded ramp's least-squares harmonics (as accel_dc ... over the same samples) of
+    # theta cos theta, theta sin theta, theta^2 cos theta, theta^2 sin theta, theta the phase (rad):
+    # what gravity turned further by e theta leaves in them (table_encoder_scale; issue 28,
+    # twenty-first session).  None: a uniform turn's (table_encoder_scale.arc_moments)
+    turned_moments: np.ndarray | None = None
 
     @property
     def rate_dps(self) -> float:
@@ -426,9 +431,12 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
     if used < 8:
         raise UserError(f"segment '{name}': fewer than 8 accelerometer samples left for its harmonics")
     gram = np.zeros((5, 5))
-    projections = np.zeros((5, 6))      # accel x, y, z; w, w^2, dw/dt
+    # accel x, y, z; w, w^2, dw/dt; a recorded ramp's also theta cos, theta sin, theta^2 cos, theta^2
+    # sin (its turned moments, RotationSummary.turned_moments: chunk by chunk as the rest)
+    width = 10 if rate_from_table else 6
+    projections = np.zeros((5, width))
     sum_m = sum_m2 = np.float64(0.0)    # the gyro's magnitude: its sum and sum of squares
-    columns = np.empty((CHUNK_SAMPLES, 6))
+    columns = np.empty((CHUNK_SAMPLES, width))
     # the gyro integral over the window: the trapezoid over the samples plus half a sample at each
     # end, i.e. each sample weighted by half the time between its neighbours (np.gradient(t): a
     # whole step at the ends)
@@ -436,9 +444,15 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
     for i, j in spans:
         gyro_integral += _gradient_chunk(t, None, i, j) @ gyro[i:j]
         basis = _harmonic_basis(angle_rad * fraction[i:j])
+        c = columns[:j - i]
+        if rate_from_table:
+            theta = angle_rad * fraction[i:j]
+            np.multiply(theta, basis[1], out=c[:, 6])
+            np.multiply(theta, basis[2], out=c[:, 7])
+            np.multiply(theta, c[:, 6], out=c[:, 8])
+            np.multiply(theta, c[:, 7], out=c[:, 9])
         if keep is not None:
             basis *= keep[i:j]
-        c = columns[:j - i]
         c[:, :3] = accel[i:j]
         c[:, 3] = w[i:j]
         np.multiply(c[:, 3], c[:, 3], out=c[:, 4])
@@ -455,8 +469,13 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
     else:   # a short sweep: the SVD solver on the whole basis
         basis = _harmonic_basis(angle_rad * fraction)
         rows = slice(None) if keep is None else keep
-        coefs = np.linalg.lstsq(basis.T[rows], np.column_stack([accel, w, w * w, np.gradient(w, t)])[rows],
-                                rcond=None)[0]
+        wanted = [accel, w, w * w, np.gradient(w, t)]
+        if rate_from_table:
+            theta = angle_rad * fraction
+            wanted += [theta * basis[1], theta * basis[2], theta**2 * basis[1], theta**2 * basis[2]]
+        coefs = np.linalg.lstsq(basis.T[rows], np.column_stack(wanted)[rows], rcond=None)[0]
+    # a recorded ramp: not a uniform turn (RotationSummary.turned_moments)
+    moments = coefs[:, 6:10].T.copy() if rate_from_table else None
     del w, fraction
     coef, rate_coefs = coefs[:, :3], (coefs[:, 3], coefs[:, 4], coefs[:, 5])
     edge = min(EDGE_SAMPLES, n // 4)
@@ -472,7 +491,8 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
                            gyro_start=gyro[:edge].mean(axis=0), gyro_end=gyro[-edge:].mean(axis=0),
                            steady=steady, rate_sq_factor=rate_sq_factor,
                            rate_coef=rate_coefs[0], rate_sq_coef=rate_coefs[1], rate_dot_coef=rate_coefs[2],
-                           gram=gram_per_sample, earth_weights_s=earth_weights, rate_from_table=rate_from_table)
+                           gram=gram_per_sample, earth_weights_s=earth_weights, rate_from_table=rate_from_table,
+                           turned_moments=moments)
 
 
 def _scaled(values, factor):

@@ -62,6 +62,39 @@ def _mean_visit(A: float, p: np.ndarray, power: int = 1) -> np.ndarray:
     return np.where(n >= 1, mean_sq, end**2)
 
 
+PHASES = 12               # the fit's phase grid (station.estimate.lsq.PHASES: its rows per rotation)
+_GRID = 2 * np.pi * np.arange(PHASES) / PHASES
+# the harmonic basis 1, cos, sin, cos 2, sin 2 at the grid's points, (PHASES, 5): values there whose
+# uniform projection (the fit's: lsq.Model._harmonics) are the harmonics h are _BASIS @ h
+_BASIS = np.column_stack([np.ones(PHASES), np.cos(_GRID), np.sin(_GRID), np.cos(2 * _GRID), np.sin(2 * _GRID)])
+
+
+def arc_moments(angle_deg: float) -> np.ndarray:
+    """(4, 5): the least-squares harmonics (1, cos, sin, cos 2, sin 2 of the phase, as the summaries
+    fit a rotation's accelerometer over its arc) of theta cos theta, theta sin theta, theta^2 cos
+    theta and theta^2 sin theta over a uniform turn theta in [0, A] (rad; A signed, whole revolutions
+    or not).  Gravity turned further by e theta adds -e theta (l x f) + e^2 theta^2 / 2 l x (l x f)
+    with f = cos p v - sin p (l x v): its harmonics are these moments times v and l x v, for any arc
+    (issue 28, twenty-first session: the phase grid's uniform projection of the mean visit's angle
+    is the least-squares fit for whole revolutions only; over 300 degrees it took 1000 ppm for 898
+    +- 9)."""
+    return _arc_moments(float(angle_deg)).copy()
+
+
+@functools.lru_cache(maxsize=4096)
+def _arc_moments(angle_deg: float) -> np.ndarray:
+    A = np.radians(angle_deg)
+    if A == 0:
+        return np.zeros((4, 5))
+    m = max(DENSE, int(DENSE * np.ceil(abs(A) / (2 * np.pi))))
+    theta = A * (np.arange(m) + 0.5) / m                   # midpoints: the samples of a uniform turn
+    basis = np.stack([np.ones(m), np.cos(theta), np.sin(theta), np.cos(2 * theta), np.sin(2 * theta)])
+    gram = basis @ basis.T / m
+    rhs = np.stack([theta * np.cos(theta), theta * np.sin(theta),
+                    theta**2 * np.cos(theta), theta**2 * np.sin(theta)]) @ basis.T / m      # (4, 5)
+    return np.linalg.lstsq(gram, rhs.T, rcond=1e-12)[0].T
+
+
 class TableEncoderScale(Effect):
     id = "table_encoder_scale"
     title = "Table encoder scale error: the table turns (1 + e) times the angle its encoder reads"
@@ -74,7 +107,9 @@ class TableEncoderScale(Effect):
                "IMU: station apply compensates nothing for it.")
     term = ("rotations only (the fit's phase grid): f_true(theta) = f(theta (1 + e 1e-6)), i.e. accel_raw += "
             "M_a (-e' t_turn (w_table x f) + e'^2/2 t_turn^2 w_table x (w_table x f)), e' = e 1e-6, t_turn the "
-            "time since the rotation's start at the point; "
+            "time since the rotation's start at the point (t_turn w_table = theta, the encoder's angle); on a steady "
+            "rotation's grid its harmonics are the least-squares fit over its arc (arc_moments), whole revolutions "
+            "or not; "
             "gyro_raw += e 1e-6 M_g w_table (the true rate); centripetal terms' 2e change neglected")
     excited_by = ("rotations about any axis with the accelerometers across gravity (the mean and second harmonic "
                   "of gravity over the revolutions); the gyros alone cannot tell it from their scale factors")
@@ -85,7 +120,7 @@ class TableEncoderScale(Effect):
                  "do not)")
     signature_variable = "signed_rate"
     complex_step = True
-    state_fields = ("table_axes", "position_of")
+    state_fields = ("table_axes", "position_of", "moments_of")
 
     def __init__(self):
         # one error per table axis when the capture records which axis turned each rotation
@@ -93,6 +128,7 @@ class TableEncoderScale(Effect):
         # encoder and gearing; otherwise one error for the table (the axes are not told apart)
         self.table_axes = []          # the table axes with an error of their own ([]: one for the table)
         self.position_of = {}         # segment index -> position of its axis in table_axes
+        self.moments_of = {}          # segment index -> (arc_moments, |A| / T rad/s): setup
 
     def setup(self, summaries) -> None:
         steady = [r for r in summaries.rotations if r.steady]
@@ -102,6 +138,17 @@ class TableEncoderScale(Effect):
             self.position_of = {int(r.index): known.index(r.table_axis) for r in steady}
         else:
             self.table_axes, self.position_of = [], {}
+        # each steady rotation's arc moments, by segment index: a recorded ramp's from its samples
+        # (RotationSummary.turned_moments), a uniform turn's over its arc (arc_moments)
+        self.moments_of = {}
+        for r in steady:
+            sampled = getattr(r, "turned_moments", None)
+            # and the encoder's mean rate over the window, |A| / T (rad/s): the gyros' turn is (1 + e) A
+            rate = abs(np.radians(r.angle_deg)) / r.duration_s if getattr(r, "duration_s", 0.0) > 0 else None
+            if sampled is not None:
+                self.moments_of[int(r.index)] = (np.asarray(sampled, float), rate)
+            elif getattr(r, "angle_deg", 0.0):
+                self.moments_of[int(r.index)] = (arc_moments(r.angle_deg), rate)
 
     @property
     def params(self):
@@ -145,15 +192,18 @@ class TableEncoderScale(Effect):
         e = e[:, None] if np.ndim(e) else e
         sq = getattr(ctx, "turned_sq_s2", None)
         sq = np.asarray(turned, float) ** 2 if sq is None else np.asarray(sq, float)
-        turning = ctx.f_p - _segment_means(ctx.column("segment_index"), ctx.f_p)
-        return _gravity_turned(e, turned, sq, ctx.w_table, turning) @ ctx.accel_matrix.T
+        index = ctx.column("segment_index")
+        turning = ctx.f_p - _segment_means(index, ctx.f_p)
+        out = _gravity_turned(e, turned, sq, ctx.w_table, turning)
+        return self._on_arcs(out, e, index, turning) @ ctx.accel_matrix.T
 
     def gyro(self, x, ctx):
         if getattr(ctx, "turned_s", None) is None:
             return None
         e = self._per_row(x, ctx) * 1e-6
         e = e[:, None] if np.ndim(e) else e
-        return e * (180.0 / np.pi) * ctx.w_table @ ctx.gyro_matrix.T    # (np.degrees: no complex step)
+        w = self._mean_rate_on_arcs(ctx.w_table, ctx.column("segment_index"))
+        return e * (180.0 / np.pi) * w @ ctx.gyro_matrix.T    # (np.degrees: no complex step)
 
     # --- every row of X (B, p) with a batch context at once (Effect.accel_batch): the same numbers
     def _per_point_batch(self, X, ctx):
@@ -173,13 +223,77 @@ class TableEncoderScale(Effect):
         sq = np.asarray(turned, float) ** 2 if sq is None else np.asarray(sq, float)
         index = ctx.column("segment_index")
         turning = ctx.f_p - np.stack([_segment_means(index, f) for f in ctx.f_p])
-        return _gravity_turned(e, turned, sq, ctx.w_table, turning) @ ctx.accel_matrix.mT
+        out = _gravity_turned(e, turned, sq, ctx.w_table, turning)
+        return self._on_arcs(out, e, index, turning) @ ctx.accel_matrix.mT
 
     def gyro_batch(self, X, ctx):
         if getattr(ctx, "turned_s", None) is None:
             return None
-        return self._per_point_batch(X, ctx) * (180.0 / np.pi) * ctx.w_table @ ctx.gyro_matrix.mT
+        w = self._mean_rate_on_arcs(ctx.w_table, ctx.column("segment_index"))
+        return self._per_point_batch(X, ctx) * (180.0 / np.pi) * w @ ctx.gyro_matrix.mT
 
+
+    def _on_arcs(self, out, e, index, turning):
+        """``out`` (.., N, 3) with each steady rotation's PHASES points replaced by values whose
+        uniform projection is the least-squares harmonics of the turned gravity over its arc
+        (arc_moments): v and l x v from the turning part's first harmonic on the grid, l the
+        fit's axis (the phase p turns about +l, signed like the angle: f = cos p v - sin p (l x v)).
+        A rotation whose points are not the grid's keeps the mean visit's form (out)."""
+        rows = self._arc_rows(index)
+        if rows is None:
+            return out
+        idx, moments = rows
+        T = turning[..., idx, :]                                              # (.., R, PHASES, 3)
+        v = 2.0 / PHASES * np.einsum("k,...kc->...c", np.cos(_GRID), T)         # (.., R, 3)
+        u = -2.0 / PHASES * np.einsum("k,...kc->...c", np.sin(_GRID), T)        # l x v
+        if np.ndim(e) == 0:
+            er = e
+        elif np.shape(e)[-2] == 1:                  # one error for the table, per row of a batch
+            er = e[..., None]
+        else:                                       # each point's axis' error: its rotation's
+            er = e[..., idx[:, 0], :][..., None]                                # (.., R, 1, 1)
+        Qc, Qs, Q2c, Q2s = (moments[:, j, :, None] for j in range(4))          # (R, 5, 1)
+        h = (-er * (Qc * u[..., None, :] + Qs * v[..., None, :])
+             + 0.5 * er * er * (Q2s * u[..., None, :] - Q2c * v[..., None, :]))   # (.., R, 5, 3)
+        out = np.array(out, dtype=np.result_type(out, h), copy=True)
+        out[..., idx, :] = _BASIS @ h
+        return out
+
+    def _mean_rate_on_arcs(self, w, index):
+        """The table rate ``w`` (.., N, 3) with each steady rotation's points at the encoder's mean
+        rate |A| / T along the points' mean direction: the fit takes the gyros' turn from the
+        points' mean times T, which over a recorded ramp's window (a rest and a ramp: the rate's
+        harmonics on the grid average 0.11 % above A / T at 10 deg/s) is not the angle; the gyros
+        turn (1 + e) A exactly (issue 28, twenty-first session)."""
+        rows = self._arc_rows(index)
+        if rows is None:
+            return w
+        idx = rows[0]
+        rate = np.array([self.moments_of[int(k)][1] or 0.0 for k in np.asarray(index, float)[idx[:, 0]]])
+        m = w[..., idx, :].mean(axis=-2)                                       # (.., R, 3)
+        norm = np.sqrt(np.sum(m * m, axis=-1, keepdims=True))                 # (complex step: no abs)
+        unit = np.divide(m, norm, out=np.zeros_like(m), where=norm.real > 0)
+        out = np.array(w, dtype=np.result_type(w, unit), copy=True)
+        out[..., idx, :] = (rate[:, None] * unit)[..., None, :]
+        return out
+
+    def _arc_rows(self, index):
+        """(rows (R, PHASES), moments (R, 4, 5)) of the rotations with arc moments whose
+        PHASES points the context holds in phase order, or None."""
+        if not self.moments_of or index is None:
+            return None
+        index = np.asarray(index, float)
+        keys = np.array(sorted(self.moments_of), float)
+        sel = np.flatnonzero(np.isin(index, keys))
+        if not len(sel):
+            return None
+        found, inverse, counts = np.unique(index[sel], return_inverse=True, return_counts=True)
+        if np.any(counts != PHASES):
+            return None
+        order = np.argsort(inverse, kind="stable")
+        idx = sel[order].reshape(len(found), PHASES)
+        moments = np.array([self.moments_of[int(k)][0] for k in found])
+        return idx, moments
 
 def _gravity_turned(e, turned, sq, w, turning):
     """The change of the turning part of f when the table turned further by e theta (second order:
