@@ -41,7 +41,6 @@ POSITION_HOLD_FACTOR = 10     # a dwell's angles must stay within 10 position to
 WHOLE_TURN_MARGIN_DEG = 90.0  # a recorded ramp's command known within less than this at the rate
 MOTION_WORDS = "the IMU disagrees with the table"    # a bad recording's note, when it is this
 WAYPOINT_DEG = 170.0          # largest single move of an axis with angle limits
-REST_POLL_S = 0.01            # _wait_rest reads the table at most this often (wall)
 
 
 class PauseRequested(Exception):
@@ -836,7 +835,6 @@ class Sequencer:
         still = 10 * self.config.table.rate_tolerance_dps
         deadline = time.monotonic() + wall_s
         while True:
-            polled = time.monotonic()
             _, rates = self._poll_table()
             if abs(float(rates[axis - 1])) <= still:
                 return
@@ -844,7 +842,7 @@ class Sequencer:
                 raise SequencerError(f"{self.table.name}: axis {axis} did not come to rest after the recorded "
                                      f"brake (read {float(rates[axis - 1]):.4f} deg/s)")
             self._check_pause()
-            time.sleep(max(0.0, REST_POLL_S - (time.monotonic() - polled)))    # reads REST_POLL_S apart
+            time.sleep(0.01)
 
     def _operator(self, step: Operator) -> None:
         opened = False
