@@ -448,13 +448,12 @@ class RateTable(Device):
         deadline = time.monotonic() + expected + self.settings.wait_margin_s
         still = 0
         while still < self.settings.settle_polls:
-            polled = time.monotonic()
             rates = self.read_rates_dps()
             still = still + 1 if np.all(np.abs(rates) <= self.settings.rate_tolerance_dps) else 0
             if time.monotonic() > deadline:
                 raise DeviceTimeout(self.name, f"did not come to rest (rates {np.round(rates, 4).tolist()} "
                                                f"deg/s)")
-            self._pace(polled)
+            time.sleep(self.settings.poll_interval_s)
         rest = self.read_positions_deg()
         for axis in self.axes:
             if axis in active:
@@ -482,7 +481,6 @@ class RateTable(Device):
         settled = at_rest = 0
         last = None
         while True:
-            polled = time.monotonic()
             pos, rates = self._poll([i + 1 for i in idx])
             err = angle_diff_deg(pos[idx], goal)
             still = np.all(np.abs(rates[idx]) <= s.rate_tolerance_dps)
@@ -505,14 +503,13 @@ class RateTable(Device):
             if time.monotonic() > deadline:
                 raise DeviceTimeout(self.name, f"axis {axis} did not reach {wrap_deg(goal[worst]):.6f} "
                                                f"deg in time (at {pos[axis - 1]:.6f} deg)")
-            self._pace(polled)
+            time.sleep(s.poll_interval_s)
 
     def _wait_rate(self, axis: int, rate: float, expected_s: float) -> float:
         s = self.settings
         deadline = time.monotonic() + 2.0 * expected_s + s.wait_margin_s
         settled = 0
         while True:
-            polled = time.monotonic()
             r = float(self._poll([axis])[1][axis - 1])
             if abs(r - rate) <= s.rate_tolerance_dps:
                 settled += 1
@@ -523,18 +520,9 @@ class RateTable(Device):
             if time.monotonic() > deadline:
                 raise DeviceTimeout(self.name, f"axis {axis} did not reach {rate:g} deg/s in time "
                                                f"(at {r:.6f} deg/s)")
-            self._pace(polled)
+            time.sleep(s.poll_interval_s)
 
     # ------------------------------------------------------------------ helpers
-    def _pace(self, polled: float) -> None:
-        """Polls start ``poll_interval_s`` apart: after a poll begun at ``polled`` (monotonic s),
-        sleep what is left of the interval.  The exchange itself counts (before, a full interval
-        was slept after it: on the twins, whose replies take 5-15 ms under load, half of a wait's
-        wall time was these sleeps).  A settle still spans at least ``settle_polls`` intervals."""
-        left = self.settings.poll_interval_s - (time.monotonic() - polled)
-        if left > 0:
-            time.sleep(left)
-
     def _check_axis(self, axis: int) -> None:
         if axis not in self.axes:
             raise LimitError(self.name, f"no axis {axis!r} (the table has axes 1..{self.n_axes})")

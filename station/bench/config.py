@@ -62,8 +62,8 @@ class TableConfig:
     load_position_deg: tuple = ()         # where the operator (re)mounts the IMU; () -> zeros
     position_tolerance_deg: float = 0.002
     rate_tolerance_dps: float = 0.01
-    # the driver's waits (a move's, a rate's settle, a stop) read the table this often (wall s):
-    # arrival is settle_polls reads in a row within the tolerances (drivers.table.TableSettings)
+    # the driver's waits (a move's, a rate's settle, a stop) sleep this long after each read of the
+    # table (wall s): arrival is settle_polls reads in a row within the tolerances (drivers.table.TableSettings)
     poll_interval_s: float = 0.01
     angle_error_arcsec: float = 2.0       # 1-sigma of the table's angles (into the capture)
     imu_offset_m: tuple | None = None     # IMU reference point from the axes' intersection
