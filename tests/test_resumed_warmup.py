@@ -22,6 +22,7 @@ from rich.console import Console
 
 from drivers.base import ImuSettings
 from drivers.registry import DEFAULT_IMU_PROTOCOL, open_imu, open_table
+from drivers.table import TableSettings
 from sim_devices.truth import default_truth
 from sim_devices.twins.serve import BenchOptions, BenchServer
 from station.bench.compile import compile_scheme
@@ -32,6 +33,9 @@ from station.io.capture import CaptureWriter, ImuInfo, Site, read_capture
 from station.io.scheme import scheme_from_text
 
 SPEED = 200.0
+#: the table driver's waits read the table every 10 ms of a real table's time: at the twins' speed
+#: (its arrival rule, 5 reads in a row within the tolerances, unchanged in device time)
+TWIN_POLL_S = 0.01 / SPEED
 RATE_HZ = 25.0
 TAU_S, DELTA_C = 30.0, 1.0        # the simulated IMU's warm-up: dT/dt = 120 C/h exp(-t / 30 s)
 SLOPE_C_PER_H, WINDOW_S, MIN_S = 6.0, 20.0, 60.0
@@ -80,7 +84,7 @@ def _run(bench, writer, steps, interrupts=None, config=None, imu_protocol=DEFAUL
          imu_settings=None, table_settings=None):
     """``steps`` run by the sequencer on the twins (a new connection, as a new station run);
     ``config`` _config()'s unless given, the IMU's frames waited for 10 s unless ``imu_settings``."""
-    table = open_table(bench.table_path, settings=table_settings)
+    table = open_table(bench.table_path, settings=table_settings or TableSettings(poll_interval_s=TWIN_POLL_S))
     imu = open_imu(bench.imu_path, imu_protocol, settings=imu_settings or ImuSettings(frame_timeout_s=10.0))
     try:
         rate = imu.configure(RATE_HZ)
@@ -299,7 +303,6 @@ def test_a_host_stamped_imu_switched_off_waits_the_minimum_and_a_warm_one_does_n
     from power-on); left on, it is as warm as the run left it and passes after one window
     (20 s).  (Before the change: the switched-off IMU's resumed warm-up ended on the slope.)"""
     from drivers.protocols.csvlines import CsvFormat
-    from drivers.table import TableSettings
     from drivers.transport import SerialSettings
     from station.cli.run_bench import _resume_steps
 
@@ -325,7 +328,7 @@ def test_a_host_stamped_imu_switched_off_waits_the_minimum_and_a_warm_one_does_n
         # (replies within 10 s: on a loaded machine the table's first reply once took over 1 s)
         _run(bench, writer, steps, config=config, imu_protocol="csv",
              imu_settings=ImuSettings(frame_timeout_s=10.0, csv_format=CsvFormat()),
-             table_settings=TableSettings(serial=SerialSettings(timeout_s=10.0)))
+             table_settings=TableSettings(serial=SerialSettings(timeout_s=10.0), poll_interval_s=TWIN_POLL_S))
 
     cap = tmp_path / "cap"
     whole = scheme_from_text(WHOLE, "z.yaml")

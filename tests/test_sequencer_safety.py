@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from drivers.base import ImuSettings
+from drivers.base import ImuSettings, TableSettings
 from drivers.registry import open_imu, open_table
 from sim_devices.truth import default_truth
 from sim_devices.twins.serve import BenchOptions, BenchServer
@@ -74,10 +74,18 @@ class Hands:
         self.table.move_to(up)
 
 
-def sequencer(bench, config, writer, operator, rate_hz=100.0, table=True):
+def twin_table(bench):
+    """The table driver on the twins, its waits reading the table every 10 ms of a real table's
+    time at the twins' speed (the arrival rule, 5 reads in a row, unchanged in device time)."""
+    return open_table(bench.table_path, settings=TableSettings(poll_interval_s=0.01 / bench.clock.speed))
+
+
+def sequencer(bench, config, writer, operator, rate_hz=100.0, table=True, paced=False):
+    """``paced``: the table driver's waits at the twins' speed (``twin_table``); otherwise a real
+    table's 10 ms of wall time (tests/test_ramp_hold.py and its kin)."""
     console = Console(file=io.StringIO(), width=200)
     display = PlainDisplay(console, 1.0, "test")
-    tab = open_table(bench.table_path) if table else None
+    tab = (twin_table(bench) if paced else open_table(bench.table_path)) if table else None
     imu = open_imu(bench.imu_path, settings=ImuSettings(frame_timeout_s=2.0))
     rate = imu.configure(rate_hz)
     seq = Sequencer(table=tab, imu=imu, writer=writer, config=config, display=display, operator=operator,
@@ -100,7 +108,7 @@ def test_rates_and_angles_beyond_the_limits_are_never_commanded(bench3, tmp_path
     limits = (AxisConfig(max_rate_dps=50, angle_min_deg=-170, angle_max_deg=170), AxisConfig(max_rate_dps=50),
               AxisConfig(max_rate_dps=50))
     config = Config(table=TableConfig(axes=3, limits=limits), run=RunConfig(**LOSS_AT_SPEED, operator=False, settle_s=1))
-    seq, table, imu = sequencer(bench3, config, new_writer(tmp_path / "cap"), Hands(bench3))
+    seq, table, imu = sequencer(bench3, config, new_writer(tmp_path / "cap"), Hands(bench3), paced=True)
     spec = RotationSpec("fast", (0.0, 1.0, 0.0), 60.0, 6.0)
     with pytest.raises(SequencerError, match="outside its limits"):
         seq.run([Rotate("too fast", "fast", 1.0, spec=spec, axis=3, table_rate_dps=60.0, revolutions=1)])
@@ -134,7 +142,7 @@ def test_the_table_is_unpowered_while_the_operator_remounts_the_imu(tmp_path):
     assert ops[0].mounting != config.table.mounting
     with BenchServer(default_truth(2), BenchOptions(speed=SPEED, seed=2, axes=2, lossless=True)) as bench:
         hands = Hands(bench)
-        seq, table, imu = sequencer(bench, config, new_writer(tmp_path / "cap"), hands)
+        seq, table, imu = sequencer(bench, config, new_writer(tmp_path / "cap"), hands, paced=True)
         seq.run(plan.steps)
         assert [closed for _, closed in hands.seen] == [[False, False]]        # open while asked
         assert all(ax.interlock_closed for ax in bench.table.axes)              # closed again
@@ -157,7 +165,7 @@ def test_warm_up_lasts_until_the_temperature_slope_is_below_the_threshold(tmp_pa
     scheme = scheme_from_text("name: z\ndefaults: {dwell_s: 2}\nsegments:\n  - {static: zup, up_body: [0, 0, 1]}\n",
                               "z.yaml")
     with BenchServer(truth, BenchOptions(speed=SPEED, seed=4, axes=1, lossless=True)) as bench:
-        seq, table, imu = sequencer(bench, config, new_writer(tmp_path / "cap"), Hands(bench))
+        seq, table, imu = sequencer(bench, config, new_writer(tmp_path / "cap"), Hands(bench), paced=True)
         seq.run(compile_scheme(scheme, config).steps)
         table.close()
         imu.close()
@@ -182,7 +190,7 @@ def test_manual6_is_found_in_one_continuous_recording(tmp_path):
     plan = compile_scheme(scheme, config)
     speed = 50.0
     with BenchServer(truth, BenchOptions(speed=speed, seed=5, axes=3, lossless=True)) as bench:
-        hands_table = open_table(bench.table_path)
+        hands_table = twin_table(bench)
         hands_table.close_interlocks()
         writer = new_writer(tmp_path / "cap", "manual6", extra={"table": {"angle_error_arcsec": 3600.0}})
         seq, _, imu = sequencer(bench, config, writer, Hands(bench, hands_table, speed), table=False)
@@ -231,7 +239,7 @@ def test_after_a_pause_the_operator_can_continue_in_place(bench3, tmp_path):
             return True
 
     operator = Continue(bench3)
-    seq, table, imu = sequencer(bench3, config, new_writer(tmp_path / "cap"), operator)
+    seq, table, imu = sequencer(bench3, config, new_writer(tmp_path / "cap"), operator, paced=True)
     seq.interrupts = interrupts
 
     def ctrl_c():                    # once xup is being recorded

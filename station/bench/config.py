@@ -62,6 +62,9 @@ class TableConfig:
     load_position_deg: tuple = ()         # where the operator (re)mounts the IMU; () -> zeros
     position_tolerance_deg: float = 0.002
     rate_tolerance_dps: float = 0.01
+    # the driver's waits (a move's, a rate's settle, a stop) sleep this long after each read of the
+    # table (wall s): arrival is settle_polls reads in a row within the tolerances (drivers.table.TableSettings)
+    poll_interval_s: float = 0.01
     angle_error_arcsec: float = 2.0       # 1-sigma of the table's angles (into the capture)
     imu_offset_m: tuple | None = None     # IMU reference point from the axes' intersection
     # the table's geometry (docs/method-lsq.md, "The table's geometry"): whether the axes meet at
@@ -251,7 +254,7 @@ def parse_config(doc, source: str) -> Config:
         "port": v.text, "protocol": v.text, "serial": v.serial, "axes": v.axes_count,
         "axes_enu": v.vectors, "mounting": v.mounting, "limits": v.limits,
         "load_position_deg": v.numbers, "position_tolerance_deg": v.positive,
-        "rate_tolerance_dps": v.positive, "angle_error_arcsec": v.non_negative,
+        "rate_tolerance_dps": v.positive, "poll_interval_s": v.non_negative, "angle_error_arcsec": v.non_negative,
         "imu_offset_m": v.vector, "geometry": None})
     site = v.section(doc, "site", SiteConfig, {
         "latitude_deg": v.latitude, "height_m": v.number, "gravity_mps2": v.gravity})
@@ -627,6 +630,7 @@ table:
   load_position_deg: [0, 0, 0]   # where the table waits while the operator remounts the IMU
   position_tolerance_deg: 0.002
   rate_tolerance_dps: 0.01
+  poll_interval_s: 0.01          # how often the driver reads the table while it waits for arrival
   angle_error_arcsec: 2.0        # 1-sigma of the table's angles (recorded in the capture)
   # imu_offset_m: [0, 0, 0]      # IMU reference point from the axes' intersection, if known
   # The table's geometry (recorded in every capture; docs/method-lsq.md "The table's geometry"):

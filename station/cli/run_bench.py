@@ -111,7 +111,8 @@ def _open_table(config):
     ramp_s = max(lim.max_rate_dps / lim.rate_accel_dps2 for lim in t.axis_limits())
     return open_table(t.port, t.protocol, TableSettings(
         serial=t.serial, axes=t.axes, limits=limits, wait_margin_s=10.0 + ramp_s,
-        position_tolerance_deg=t.position_tolerance_deg, rate_tolerance_dps=t.rate_tolerance_dps))
+        position_tolerance_deg=t.position_tolerance_deg, rate_tolerance_dps=t.rate_tolerance_dps,
+        poll_interval_s=t.poll_interval_s))
 
 
 def _open_imu(config, field: str = "imu"):
