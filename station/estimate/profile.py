@@ -341,7 +341,9 @@ def locate(result, effect, refine: int = REFINE) -> list:
         effect.alike = [{"before": c[1], "after": c[2], "chi2_more": float(chi2 - best),
                          "between": [n for tm, n in sorted(mids) if min(t, c[0]) < tm < max(t, c[0])]}
                         for chi2, c in close]
-        spread = location_spread(getattr(effect, "profile_sizes", None) or {}, (t, before, after), phi)
+        # (the profile's candidate: refine_time may have moved the time off it, and the spread is
+        # over where the profile puts it)
+        spread = location_spread(getattr(effect, "profile_sizes", None) or {}, (located, before, after), phi)
         effect.location_spread = None if spread is None else ((*SPREAD_BLOCKS, f"effect:{effect.id}"), spread)
         effect.location_spread_of = lsq.segments_key(result.model.s)     # what it was computed from
         inside = before == after
