@@ -67,3 +67,30 @@ def test_a_step_well_above_the_noise_adds_nothing():
     """The located time is certain (size 6, 12 sigma): the spread is nil."""
     out = located_runs(6.0, 100, seed=5)
     assert np.mean(out[:, 4]) < 1e-3 * np.mean(out[:, 2] ** 2), np.mean(out[:, 4])
+
+
+def test_a_failing_fits_over_dispersion_is_counted_once_in_the_spread():
+    """Issue 28 review: the noise is twice the nominal (over-dispersion phi = 4, a failing fit).
+    location_spread draws its noise times sqrt(phi), and the verdict (station.estimate.verdict)
+    then multiplies a failing fit's whole covariance, the spread with it, by its reduced chi2: the
+    spread must be in the fit's nominal units for phi to be counted once.  The reference is the
+    RMS error of the located size and base over the runs (the same change point as above, the
+    size 2 against a noise of 2: as size 1 against 1)."""
+    phi, runs = 4.0, 300
+    rng = np.random.default_rng(29)
+    out = []
+    for _ in range(runs):
+        m = 10.0 + 2.0 * (np.arange(SEGMENTS) >= STEP_AT) + 2.0 * rng.standard_normal(SEGMENTS)
+        cands = {(float(j), f"s{j - 1}", f"s{j}"): operators(j, m) for j in range(2, SEGMENTS - 1)}
+        r = m - m.mean()
+        best = max(cands, key=lambda c: float((cands[c]["Jp"].T @ r) @ cands[c]["Ainv"] @ (cands[c]["Jp"].T @ r)))
+        j = int(best[0])
+        before, after = m[:j].mean(), m[j:].mean()
+        spread = location_spread(cands, best, phi, draws=100, seed=int(rng.integers(1 << 30)))
+        out.append((after - before - 2.0, before - 10.0, np.sqrt(1 / j + 1 / (SEGMENTS - j)), np.sqrt(1 / j),
+                    spread[1, 1], spread[0, 0]))
+    out = np.array(out)
+    tol = 3 / np.sqrt(2 * runs)
+    for err, known, extra in ((out[:, 0], out[:, 2], out[:, 4]), (out[:, 1], out[:, 3], out[:, 5])):
+        stated = np.sqrt(phi * np.mean(known ** 2 + extra))      # the verdict's scaling of a failing fit
+        assert abs(stated / rms(err) - 1) < tol, (stated, rms(err))
