@@ -398,7 +398,9 @@ def location_spread(cands: dict, best, phi: float = 1.0, draws: int = 400, seed:
     best_error = values[b].T - truth
     extra = (located_error.T @ located_error - best_error.T @ best_error) / draws
     w, v = np.linalg.eigh(0.5 * (extra + extra.T))          # what locating adds: none may be negative
-    return (v * np.clip(w, 0.0, None)) @ v.T
+    # in the fit's nominal units (divided by phi): station.estimate.verdict multiplies a failing
+    # fit's whole covariance, this with it, by its reduced chi2 (phi counted once)
+    return (v * np.clip(w, 0.0, None)) @ v.T / phi
 
 
 def _spread_operators(result, effect, M, Jp, r, pinv_J) -> dict:
