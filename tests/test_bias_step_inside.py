@@ -58,7 +58,15 @@ def test_a_step_inside_a_rotation_is_located_inside_it_with_its_time_and_size(ac
     assert said and "into rotx_m" in said[0] and "1σ" in said[0] and "µg" in said[0], said
 
 
-def test_a_gyro_step_inside_a_static_is_located_there_and_apply_compensates_it_on_its_own_clock():
+@pytest.fixture(scope="module")
+def gyro_step_located():
+    """The gyro z bias steps by +50 °/h at 300 s, 5 s into pos09, located (profile.fit_located)."""
+    _, s = summaries(gyro__bias_step=[0.0, 0.0, 50.0], gyro__bias_step_time_s=300.0)
+    effect = BiasStep()
+    return s, effect, profile.fit_located(s, [effect])
+
+
+def test_a_gyro_step_inside_a_static_is_located_there_and_apply_compensates_it_on_its_own_clock(gyro_step_located):
     """The gyro z bias steps by +50 °/h at 300 s, 5 s into pos09 (the goal's gyro_bias_step).  Run 2
     put it at the boundary pos08 -> pos09 (287.5 s) and apply counted that time from the first
     sample of its data without the fit's origin (the first segment's MEAN time, 10 s later): the
@@ -66,9 +74,7 @@ def test_a_gyro_step_inside_a_static_is_located_there_and_apply_compensates_it_o
     13.9).  Now the step is located inside pos09 within 3 s (the profile's 1-sigma is ~2 s: the
     step moves pos09's mean by 50 °/h / 20 s = 2.5 °/h per second against its ~2.2 °/h noise) and
     apply's step falls at the same time on the capture's clock."""
-    _, s = summaries(gyro__bias_step=[0.0, 0.0, 50.0], gyro__bias_step_time_s=300.0)
-    effect = BiasStep()
-    result = profile.fit_located(s, [effect])
+    s, effect, result = gyro_step_located
     assert effect.segment == "pos09", effect.located_by
     t_capture = effect.step_time_s + effect.origin_s
     assert abs(t_capture - 300.0) < 3.0, effect.located_by
@@ -82,6 +88,21 @@ def test_a_gyro_step_inside_a_static_is_located_there_and_apply_compensates_it_o
     after = effect._after(ctx)[:, 0]
     first = t[np.argmax(after > 0)]
     assert abs(first - t_capture) <= 0.01, (first, t_capture)
+
+
+def test_the_location_spread_is_kept_when_the_fit_refines_the_time_of_a_step_inside_a_segment(gyro_step_located):
+    """Issue 28 review: refine_time moves the time of a step inside pos09 off the profile's split
+    (276.0 -> 275.2 s on the fit's clock, chi2 167.0 -> 166.8); location_spread was then asked for
+    a candidate the profile never had and returned None, so the spread of where the step may be
+    was silently left out of the covariance of every step inside a segment the refinement moved.
+    The spread belongs to the profile's candidate (the time's own 1-sigma is freed in the fit)."""
+    s, effect, result = gyro_step_located
+    located = [t for t, before, after in effect.profile_sizes if before == after == "pos09"]
+    assert located and effect.step_time_s not in located, (located, effect.step_time_s)   # refined
+    assert effect.location_spread is not None
+    blocks, extra = effect.location_spread
+    assert blocks[-1] == "effect:bias_step" and np.all(np.isfinite(extra))
+    assert np.all(np.linalg.eigvalsh(extra) >= -1e-12 * max(np.abs(extra).max(), 1e-300))
 
 
 def test_a_static_split_carries_the_share_of_its_samples_after_the_step():

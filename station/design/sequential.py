@@ -285,7 +285,9 @@ def extend(capture_path, effects: list, *, reveal=(), separate=(), config_path=N
             own_chunk.append((key, (spec,)))
             own.append(Candidate(key, "rotation", 0.0, axis=key[:2]))
     if stepped:           # where the step was located, which the design takes as known
-        notes += [f"{n}; every added segment comes after it" for e in effects if e.id == STEP for n in e.notes()]
+        notes += [f"{n}; every added segment comes after it; the design takes the step's time as known there (the "
+                  f"estimate counts its uncertainty too: a step of a few σ gets a larger 1σ than predicted here)"
+                  for e in effects if e.id == STEP for n in e.notes()]
     say(f"the information of the capture's {len(own)} segments and of {len(cands)} candidates on "
         f"{table_source}")
     first_times = None

@@ -186,6 +186,14 @@ def _verdict(cal: Calibration) -> None:
         # a pose-only accelerometer block (station.estimate.poses) carries its own fit's scale
         own = set(ACCEL_BLOCK) if str(fit.get("pose_check", {}).get("written", "")).startswith("pose-only") else set()
         cal.sigma = {name: s * (1.0 if name in own else scale) for name, s in cal.sigma.items()}
+        # the 1-sigma of a value an effect holds and the fit freed (station.estimate.lsq.
+        # _held_values_freed: "<name>_sigma" beside "<name>" in its state, a bias step's time)
+        for entry in cal.effect_compensation or []:
+            state = entry.get("state") if isinstance(entry, dict) else None
+            for key, v in list((state or {}).items()):
+                if (key.endswith("_sigma") and key[:-len("_sigma")] in state and isinstance(v, float)
+                        and math.isfinite(v)):
+                    state[key] = v * scale
         fit["sigma_scale"] = scale
         fit.setdefault("notes", []).append(
             f"the fit fails (reduced chi2 {reduced:.3g}): every 1-sigma is multiplied by "

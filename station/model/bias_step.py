@@ -44,7 +44,7 @@ class BiasStep(Effect):
     bias_like = True          # its term is the biases changing from a time on: its profile's columns are
                               #   the model's bias columns after that time (station.estimate.profile)
     needs = ("time",)
-    state_fields = ("step_time_s", "located_by", "origin_s", "start_s", "segment")
+    state_fields = ("step_time_s", "located_by", "origin_s", "start_s", "segment", "step_time_s_sigma")
 
     def __init__(self):
         self.step_time_s = None        # s, in the fit's clock; None: not located yet
@@ -53,6 +53,8 @@ class BiasStep(Effect):
         self.start_s = None            # the capture's first sample on its clock (station apply's zero; None:
                                        #   a file written before issue 25's run 3: apply counts as the fit)
         self.segment = ""              # the segment the step falls inside ("": between two segments)
+        self.step_time_s_sigma = None  # s: the time's 1-sigma from the fit with it free (a step inside a
+                                       #   segment: station.estimate.lsq frees it, held_values); None else
         self._spans = {}               # segment index -> its span in the fit's clock (setup)
         self._weights_key = None
         self._weights = None
@@ -91,6 +93,7 @@ class BiasStep(Effect):
     def locate(self, time_s: float, how: str) -> None:
         self.step_time_s = float(time_s)
         self.located_by = how
+        self.step_time_s_sigma = None
 
     @staticmethod
     def segment_spans(summaries) -> list[dict]:
@@ -170,6 +173,32 @@ class BiasStep(Effect):
             else:
                 self.locate(0.0, "not located: too few segments")
 
+    HELD_STEP = 0.02        # the time's central difference: this share of the segment's span (clipped to it)
+
+    def held_values(self) -> list[tuple[str, float]]:
+        """(attribute, difference step) of the values the fit holds where the profile located them
+        but the data determine (station.estimate.lsq frees them in the covariance): the step's time
+        when it falls inside a segment (the share of that segment's samples after it, a static's
+        mean or a rotation's phase points, is a continuous number the segment itself fixes; a step
+        between two segments fits alike anywhere in the gap: nothing held).  The step is a share
+        of the span, so that the difference sees many samples (a static's share moves by whole
+        samples) and less than a revolution's harmonics' scale."""
+        if not self.segment or self.step_time_s is None:
+            return []
+        span = next((x for x in self._spans.values() if x["name"] == self.segment), None)
+        if span is None or span["last"] <= span["first"]:
+            return []
+        room = min(self.step_time_s - span["first"], span["last"] - self.step_time_s)
+        h = min(self.HELD_STEP * (span["last"] - span["first"]), 0.5 * room)
+        return [("step_time_s", h)] if h > 0 else []
+
+    def held_covariance(self):
+        """(layout blocks, matrix) added to the covariance of those blocks' parameters
+        (station.estimate.lsq): the spread of the step's size and of the calibration over the
+        times the capture cannot exclude (station.estimate.profile.location_spread); None when
+        the step was not located by fits."""
+        return getattr(self, "location_spread", None)
+
     def notes(self):
         if self.located_by.startswith("not located"):
             return (f"bias_step: the step's time was {self.located_by}; station diagnose --auto locates it",)
@@ -186,6 +215,9 @@ class BiasStep(Effect):
         rng = getattr(self, "time_range", None)
         if rng:
             into += f", 1σ {rng[0] + self.origin_s:.1f}-{rng[1] + self.origin_s:.1f} s"
+        sigma = self.step_time_s_sigma
+        if sigma is not None and np.isfinite(sigma):
+            into += f" (the fit's: ±{sigma:.2g} s)"
         return "; " + into
 
     @property
