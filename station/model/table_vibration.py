@@ -287,8 +287,42 @@ class TableVibration(Effect):
             a = a + on * ((k2 - 1.0) * a + kd * (s * P - c * Q))
         along = (a[..., 0] * l[:, 0] + a[..., 1] * l[:, 1] + a[..., 2] * l[:, 2])[..., None] * l
         # (1) of the module's derivation, Rot(l, -p) a: the IMU has turned by p since the start
-        out[..., rows, :] = (along + c * (a - along) - s * np.cross(l, a)) @ ctx.accel_matrix.mT
+        sensed = along + c * (a - along) - s * np.cross(l, a)
+        exact = self._ramp_products(known, r, rows, ctx)
+        if exact is not None:       # (5) of the derivation: the window's harmonics of each product
+            sensed = sensed + exact[1] * (self._sensed_products(P, Q, l, exact[0]) - sensed)
+        out[..., rows, :] = sensed @ ctx.accel_matrix.mT
         return out
+
+    @staticmethod
+    def _sensed_products(P, Q, l, v):
+        """(5) of the derivation: (1) with (4)'s a(p) at a recorded ramp's points, from ``v`` (n, 2, 5)
+        the values of w^2 / w_s^2 and (dw/dt) / w_s^2 times 1, cos p, sin p, cos 2p, sin 2p as the fit's
+        rows take them (SampleContext.ramp_products): each product's own harmonics."""
+        W, D = v[:, 0], v[:, 1]
+        wc, ws, dc, ds = W[:, 1:2], W[:, 2:3], D[:, 1:2], D[:, 2:3]
+        wcc, wcs, wss = 0.5 * (W[:, 0:1] + W[:, 3:4]), 0.5 * W[:, 4:5], 0.5 * (W[:, 0:1] - W[:, 3:4])
+        dcc, dcs, dss = 0.5 * (D[:, 0:1] + D[:, 3:4]), 0.5 * D[:, 4:5], 0.5 * (D[:, 0:1] - D[:, 3:4])
+        Pl = (P[..., 0] * l[:, 0] + P[..., 1] * l[:, 1] + P[..., 2] * l[:, 2])[..., None]
+        Ql = (Q[..., 0] * l[:, 0] + Q[..., 1] * l[:, 1] + Q[..., 2] * l[:, 2])[..., None]
+        Pa, Qa = P - Pl * l, Q - Ql * l                             # across l
+        return ((Pl * (wc + ds) + Ql * (ws - dc)) * l + Pa * (wcc + dcs) + Qa * (wcs - dcc)
+                - np.cross(l, P) * (wcs + dss) - np.cross(l, Q) * (wss - dcs))
+
+    def _ramp_products(self, known, r, rows, ctx):
+        """(the products of (5) over w_s^2 at the points ``rows`` (n, 2, 5), 1 where a recorded ramp's
+        point has them and 0 elsewhere (n, 1)); None where none has (station apply, a context
+        without them: (4) with the harmonics of w^2 and dw/dt alone)."""
+        products = getattr(ctx, "ramp_products", None)
+        if products is None or not self.ramp_rate:
+            return None
+        w_s = np.array([self.ramp_rate.get(int(i), np.nan) for i in known])[r]
+        v = np.asarray(products)[rows]
+        on = np.isfinite(w_s) & np.isfinite(v).all(axis=(1, 2))
+        if not on.any():
+            return None
+        scale = np.where(on, 1.0 / np.where(on, w_s, 1.0) ** 2, 0.0)
+        return np.where(on[:, None, None], v, 0.0) * scale[:, None, None], on.astype(float)[:, None]
 
     accel_batch = accel
 
