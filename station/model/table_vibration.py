@@ -80,6 +80,29 @@ against it): four numbers for four parameters, each in a frame across the axis.
   vibration).  The twins (sim_devices/world.py table_vibration_enu, imbalance_acceleration_enu)
   write (3) independently; tests/test_vibration_ramp.py checks (4) against them point by point.
   A recorded ramp is framed (table_revolution.frames) whatever its rate's spread.
+* What the fit compares over a ramp (review revvibphys, twenty-first session).  The fit does not
+  see points: it sees a window's five harmonics over its angle (1, cos p, sin p, cos 2p, sin 2p:
+  the least-squares projections of the samples, station/estimate/summaries.py), and projects its
+  phase grid's values the same way.  A grid value made of w^2's own harmonics times cos p is not
+  right there: over a ramp w^2 takes several values at one angle (the rest and the ramp's first
+  turn, then the steady turns), and the harmonics of w^2(t) cos p(t) are not the product of w^2's
+  harmonics with cos p (measured: 4.8-7.3 % of the vibration at 20 and 50 deg/s^2).  Written out,
+  (1) with (4)'s a(p), W = w^2 / w_s^2, D = (dw/dt) / w_s^2, P_l = P . l, P_a = P - P_l l (Q alike):
+
+      f_vib = [P_l (W cos p + D sin p) + Q_l (W sin p - D cos p)] l
+              + P_a (W cos^2 p + D cos p sin p) + Q_a (W cos p sin p - D cos^2 p)
+              - (l x P) (W cos p sin p + D sin^2 p) - (l x Q) (W sin^2 p - D cos p sin p)      (5)
+
+  with cos^2 p = (1 + cos 2p) / 2, sin^2 p = (1 - cos 2p) / 2, cos p sin p = sin 2p / 2: a sum of
+  vectors fixed over the window times w^2 and dw/dt times 1, cos p, sin p, cos 2p, sin 2p, ten
+  functions of time.  The projection is linear, so the window's harmonics of f_vib are (5) with
+  each function replaced by its own harmonics: the summaries project those ten products of the
+  samples with the accelerometer's basis (RotationSummary.ramp_coef, recorded ramps only: w^2 and
+  dw/dt times 1 are rate_sq_coef and rate_dot_coef), the fit puts each on its grid
+  (SampleContext.ramp_products, whose projection gives the harmonics back) and the ramp's rows
+  take (5) from them: the window's harmonics exactly (the review's test, to 1e-5 of the
+  vibration: the gyro-tracked phase).  Without the products (station apply, a context that has
+  none) the rows keep (4) on the rate's shapes.
 * The wobble (table_wobble) needs no such parameters: about a vertical axis its lean tilts gravity
   by b across the axis once per revolution, which is what a tilt of the axis does (the fit's own
   gravity angle and phase per axis group take it), and its rate across the axis averages out over
