@@ -94,3 +94,16 @@ def test_a_ramp_s_rows_are_the_twin_s_vibration_and_a_steady_turn_s_unchanged():
                              "wdot_table": np.stack([thdd[:, None] * l] * 2), "accel_matrix": np.stack([np.eye(3)] * 2),
                              "wsq_table": np.stack([thd * thd] * 2)})
     np.testing.assert_allclose(e.accel_batch(X, batch), np.stack([want, 2.0 * want]), rtol=0, atol=2e-12 * scale)
+    # (5): with the fit's products (SampleContext.ramp_products, here the points' own values of w^2 and
+    # dw/dt times 1, cos p, sin p, cos 2p, sin 2p; none on the steady turn) the term is taken from them
+    # alone: w_table's square and wdot_table zeroed, the same twin
+    basis = np.stack([np.ones(3 * n), np.cos(theta), np.sin(theta), np.cos(2 * theta), np.sin(2 * theta)], axis=1)
+    products = np.stack([(thd * thd)[:, None] * basis, thdd[:, None] * basis], axis=1)       # (N, 2, 5)
+    products[:n] = np.nan
+    blind = SampleContext(**{**vars(ctx), "wsq_table": np.zeros(3 * n), "wdot_table": np.zeros((3 * n, 3)),
+                             "ramp_products": products})
+    np.testing.assert_allclose(e.accel(x, blind), want, rtol=0, atol=1e-12 * scale)
+    blind_batch = SampleContext(**{**vars(batch), "wsq_table": np.zeros((2, 3 * n)),
+                                   "wdot_table": np.zeros((2, 3 * n, 3)), "ramp_products": products})
+    np.testing.assert_array_equal(e.accel_batch(X, blind_batch)[1], e.accel(X[1], blind))
+    np.testing.assert_allclose(e.accel_batch(X, blind_batch), np.stack([want, 2.0 * want]), rtol=0, atol=2e-12 * scale)

@@ -970,6 +970,15 @@ class Model:
                 w_k = np.full(PHASES, np.radians(r.rate_dps) * np.sqrt(r.rate_sq_factor))
                 shapes.append([w_k, w_k**2, np.zeros(PHASES)])
         self._rot_rate_shape = np.array(shapes, float).reshape(R, 3, PHASES)     # w, w^2, dw/dt
+        # a recorded ramp's w^2 and dw/dt times 1, cos p, sin p, cos 2p, sin 2p on the grid, from the
+        # window's own harmonics of each product (SampleContext.ramp_products); None without one
+        ramps = [i for i, r in enumerate(rots) if getattr(r, "ramp_coef", None) is not None]
+        self._ctx_ramp_products = None
+        if ramps:
+            products = np.full((S + R * PHASES, 2, 5), np.nan)
+            for i in ramps:
+                products[S + i * PHASES:S + (i + 1) * PHASES] = np.einsum("pk,fmk->pfm", grid, rots[i].ramp_coef)
+            self._ctx_ramp_products = products
         # the measured rate's change across each window along its turn, and the turn the samples
         # measured (gyro units: the ratio is unit-free): a window shifted by dt turns
         # |A| + dt (w_end - w_start), while the rate's shape above was scaled to the encoder's |A|
@@ -1390,7 +1399,8 @@ class Model:
             wdot_table=np.concatenate([zeros, (wdot_k * l[:, :, None, :]).reshape(B, -1, 3)], axis=1),
             temp_c=self._ctx_temp, accel_matrix=Ma, gyro_matrix=Mg, t_s=self._ctx_t,
             segment_index=self._ctx_index, temp_rate_c_per_s=self._ctx_temp_rate, turned_s=self._ctx_turned,
-            turned_sq_s2=self._ctx_turned_sq, offset_m=offset, wsq_table=wsq, axis_table=axis)
+            turned_sq_s2=self._ctx_turned_sq, offset_m=offset, wsq_table=wsq, axis_table=axis,
+            ramp_products=self._ctx_ramp_products)
         rows = None                 # the per-row contexts, made when an effect has no batch form
         for eff in self.effects:
             P = X[:, L[f"effect:{eff.id}"]]

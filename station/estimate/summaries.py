@@ -101,6 +101,13 @@ class RotationSummary:
     # phase's scale, _ramp_fraction), not at the encoder's mean rate over the window: a window
     # shifted by a time offset does not change it (lsq.Model._rate_shape_factor: 1)
     rate_from_table: bool = False
+    # a recorded ramp's (rate_from_table) w^2 and dw/dt times 1, cos phi, sin phi, cos 2phi, sin 2phi,
+    # each projected on the basis as the accelerometer ((2, 5, 5): [w^2, dw/dt] x multiplier x
+    # harmonic; [:, 0] are rate_sq_coef and rate_dot_coef): the harmonics of a term w^2(t) cos phi(t)
+    # are not the product of w^2's with cos phi where w^2 takes several values at one angle (a rest
+    # and a ramp before the steady turns; station.model.table_vibration's (5), issue 28,
+    # twenty-first session).  None: a steady turn
+    ramp_coef: np.ndarray | None = None
     # the 1-sigma of this window's angle beyond the encoder's (deg): a recorded ramp's angle is
     # the table's reads placed on the IMU's clock (manifest ``angle_sigma_deg``, issue 28 review
     # item 1); added in quadrature to the encoder's in the gyro integral's variance.  0: none said
@@ -432,8 +439,10 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
         raise UserError(f"segment '{name}': fewer than 8 accelerometer samples left for its harmonics")
     gram = np.zeros((5, 5))
     # accel x, y, z; w, w^2, dw/dt; a recorded ramp's also theta cos, theta sin, theta^2 cos, theta^2
-    # sin (its turned moments, RotationSummary.turned_moments: chunk by chunk as the rest)
-    width = 10 if rate_from_table else 6
+    # sin (its turned moments, RotationSummary.turned_moments) and w^2 and dw/dt times cos, sin,
+    # cos 2, sin 2 of the phase (RotationSummary.ramp_coef), chunk by chunk as the rest; steady
+    # turns: nothing more to project
+    width = 18 if rate_from_table else 6
     projections = np.zeros((5, width))
     sum_m = sum_m2 = np.float64(0.0)    # the gyro's magnitude: its sum and sum of squares
     columns = np.empty((CHUNK_SAMPLES, width))
@@ -445,18 +454,19 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
         gyro_integral += _gradient_chunk(t, None, i, j) @ gyro[i:j]
         basis = _harmonic_basis(angle_rad * fraction[i:j])
         c = columns[:j - i]
+        c[:, :3] = accel[i:j]
+        c[:, 3] = w[i:j]
+        np.multiply(c[:, 3], c[:, 3], out=c[:, 4])
+        c[:, 5] = _gradient_chunk(w, t, i, j)
         if rate_from_table:
             theta = angle_rad * fraction[i:j]
             np.multiply(theta, basis[1], out=c[:, 6])
             np.multiply(theta, basis[2], out=c[:, 7])
             np.multiply(theta, c[:, 6], out=c[:, 8])
             np.multiply(theta, c[:, 7], out=c[:, 9])
+            _ramp_products(c, basis)
         if keep is not None:
             basis *= keep[i:j]
-        c[:, :3] = accel[i:j]
-        c[:, 3] = w[i:j]
-        np.multiply(c[:, 3], c[:, 3], out=c[:, 4])
-        c[:, 5] = _gradient_chunk(w, t, i, j)
         gram += basis @ basis.T
         projections += basis @ c
         g = gyro[i:j]
@@ -469,15 +479,23 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
     else:   # a short sweep: the SVD solver on the whole basis
         basis = _harmonic_basis(angle_rad * fraction)
         rows = slice(None) if keep is None else keep
-        wanted = [accel, w, w * w, np.gradient(w, t)]
+        c = np.empty((n, width))
+        c[:, :3], c[:, 3], c[:, 4], c[:, 5] = accel, w, w * w, np.gradient(w, t)
         if rate_from_table:
             theta = angle_rad * fraction
-            wanted += [theta * basis[1], theta * basis[2], theta**2 * basis[1], theta**2 * basis[2]]
-        coefs = np.linalg.lstsq(basis.T[rows], np.column_stack(wanted)[rows], rcond=None)[0]
+            c[:, 6], c[:, 7] = theta * basis[1], theta * basis[2]
+            c[:, 8], c[:, 9] = theta**2 * basis[1], theta**2 * basis[2]
+            _ramp_products(c, basis)
+        coefs = np.linalg.lstsq(basis.T[rows], c[rows], rcond=None)[0]
     # a recorded ramp: not a uniform turn (RotationSummary.turned_moments)
     moments = coefs[:, 6:10].T.copy() if rate_from_table else None
     del w, fraction
     coef, rate_coefs = coefs[:, :3], (coefs[:, 3], coefs[:, 4], coefs[:, 5])
+    ramp_coef = None
+    if rate_from_table:     # (2, 5, 5): [w^2, dw/dt] x [1, cos, sin, cos 2, sin 2 of the phase] x harmonic
+        ramp_coef = np.empty((2, 5, 5))
+        ramp_coef[:, 0] = np.stack([coefs[:, 4], coefs[:, 5]])
+        ramp_coef[:, 1:] = coefs[:, 10:18].T.reshape(2, 4, 5)
     edge = min(EDGE_SAMPLES, n // 4)
     mean_m, mean_m2 = sum_m / n, sum_m2 / n
     spread = np.sqrt(max(mean_m2 - mean_m * mean_m, 0.0))     # the magnitude's standard deviation
@@ -492,7 +510,15 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
                            steady=steady, rate_sq_factor=rate_sq_factor,
                            rate_coef=rate_coefs[0], rate_sq_coef=rate_coefs[1], rate_dot_coef=rate_coefs[2],
                            gram=gram_per_sample, earth_weights_s=earth_weights, rate_from_table=rate_from_table,
-                           turned_moments=moments)
+                           turned_moments=moments, ramp_coef=ramp_coef)
+
+
+def _ramp_products(columns, basis) -> None:
+    """A recorded ramp's columns 10-17 (rotation_summary): w^2 (column 4) and dw/dt (column 5)
+    times cos p, sin p, cos 2p, sin 2p (the basis' rows 1-4 at the samples' phases), to be
+    projected as the samples are (RotationSummary.ramp_coef)."""
+    columns[:, 10:14] = columns[:, 4:5] * basis[1:].T
+    columns[:, 14:18] = columns[:, 5:6] * basis[1:].T
 
 
 def _scaled(values, factor):

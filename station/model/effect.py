@@ -59,6 +59,14 @@ class SampleContext:
                                            #   a batch context's (N,) or (B, N) (a window shift per row)
     axis_table: np.ndarray | None = None   # the fit only: (N, 3) the rotation's unit axis, frame p (0 at
                                            #   statics); a batch context's (B, N, 3)
+    ramp_products: np.ndarray | None = None  # the fit only: (N, 2, 5) at a recorded ramp's phase points
+                                           #   the values of w^2 and dw/dt times 1, cos p, sin p, cos 2p,
+                                           #   sin 2p as the fit's rows take them (from the window's own
+                                           #   harmonics of each product, RotationSummary.ramp_coef: not
+                                           #   the product of w^2's harmonics with cos p), rad^2/s^2 and
+                                           #   rad/s^2; NaN elsewhere; None without such a ramp.  Shared
+                                           #   by a batch context's rows (a recorded ramp's rate shape is
+                                           #   not scaled by a window shift)
 
     def __len__(self) -> int:
         """N, the points (also of a batch context, whose f_p is (B, N, 3): Effect.accel_batch)."""

@@ -80,6 +80,29 @@ against it): four numbers for four parameters, each in a frame across the axis.
   vibration).  The twins (sim_devices/world.py table_vibration_enu, imbalance_acceleration_enu)
   write (3) independently; tests/test_vibration_ramp.py checks (4) against them point by point.
   A recorded ramp is framed (table_revolution.frames) whatever its rate's spread.
+* What the fit compares over a ramp (review revvibphys, twenty-first session).  The fit does not
+  see points: it sees a window's five harmonics over its angle (1, cos p, sin p, cos 2p, sin 2p:
+  the least-squares projections of the samples, station/estimate/summaries.py), and projects its
+  phase grid's values the same way.  A grid value made of w^2's own harmonics times cos p is not
+  right there: over a ramp w^2 takes several values at one angle (the rest and the ramp's first
+  turn, then the steady turns), and the harmonics of w^2(t) cos p(t) are not the product of w^2's
+  harmonics with cos p (measured: 4.8-7.3 % of the vibration at 20 and 50 deg/s^2).  Written out,
+  (1) with (4)'s a(p), W = w^2 / w_s^2, D = (dw/dt) / w_s^2, P_l = P . l, P_a = P - P_l l (Q alike):
+
+      f_vib = [P_l (W cos p + D sin p) + Q_l (W sin p - D cos p)] l
+              + P_a (W cos^2 p + D cos p sin p) + Q_a (W cos p sin p - D cos^2 p)
+              - (l x P) (W cos p sin p + D sin^2 p) - (l x Q) (W sin^2 p - D cos p sin p)      (5)
+
+  with cos^2 p = (1 + cos 2p) / 2, sin^2 p = (1 - cos 2p) / 2, cos p sin p = sin 2p / 2: a sum of
+  vectors fixed over the window times w^2 and dw/dt times 1, cos p, sin p, cos 2p, sin 2p, ten
+  functions of time.  The projection is linear, so the window's harmonics of f_vib are (5) with
+  each function replaced by its own harmonics: the summaries project those ten products of the
+  samples with the accelerometer's basis (RotationSummary.ramp_coef, recorded ramps only: w^2 and
+  dw/dt times 1 are rate_sq_coef and rate_dot_coef), the fit puts each on its grid
+  (SampleContext.ramp_products, whose projection gives the harmonics back) and the ramp's rows
+  take (5) from them: the window's harmonics exactly (the review's test, to 1e-5 of the
+  vibration: the gyro-tracked phase).  Without the products (station apply, a context that has
+  none) the rows keep (4) on the rate's shapes.
 * The wobble (table_wobble) needs no such parameters: about a vertical axis its lean tilts gravity
   by b across the axis once per revolution, which is what a tilt of the axis does (the fit's own
   gravity angle and phase per axis group take it), and its rate across the axis averages out over
@@ -287,8 +310,42 @@ class TableVibration(Effect):
             a = a + on * ((k2 - 1.0) * a + kd * (s * P - c * Q))
         along = (a[..., 0] * l[:, 0] + a[..., 1] * l[:, 1] + a[..., 2] * l[:, 2])[..., None] * l
         # (1) of the module's derivation, Rot(l, -p) a: the IMU has turned by p since the start
-        out[..., rows, :] = (along + c * (a - along) - s * np.cross(l, a)) @ ctx.accel_matrix.mT
+        sensed = along + c * (a - along) - s * np.cross(l, a)
+        exact = self._ramp_products(known, r, rows, ctx)
+        if exact is not None:       # (5) of the derivation: the window's harmonics of each product
+            sensed = sensed + exact[1] * (self._sensed_products(P, Q, l, exact[0]) - sensed)
+        out[..., rows, :] = sensed @ ctx.accel_matrix.mT
         return out
+
+    @staticmethod
+    def _sensed_products(P, Q, l, v):
+        """(5) of the derivation: (1) with (4)'s a(p) at a recorded ramp's points, from ``v`` (n, 2, 5)
+        the values of w^2 / w_s^2 and (dw/dt) / w_s^2 times 1, cos p, sin p, cos 2p, sin 2p as the fit's
+        rows take them (SampleContext.ramp_products): each product's own harmonics."""
+        W, D = v[:, 0], v[:, 1]
+        wc, ws, dc, ds = W[:, 1:2], W[:, 2:3], D[:, 1:2], D[:, 2:3]
+        wcc, wcs, wss = 0.5 * (W[:, 0:1] + W[:, 3:4]), 0.5 * W[:, 4:5], 0.5 * (W[:, 0:1] - W[:, 3:4])
+        dcc, dcs, dss = 0.5 * (D[:, 0:1] + D[:, 3:4]), 0.5 * D[:, 4:5], 0.5 * (D[:, 0:1] - D[:, 3:4])
+        Pl = (P[..., 0] * l[:, 0] + P[..., 1] * l[:, 1] + P[..., 2] * l[:, 2])[..., None]
+        Ql = (Q[..., 0] * l[:, 0] + Q[..., 1] * l[:, 1] + Q[..., 2] * l[:, 2])[..., None]
+        Pa, Qa = P - Pl * l, Q - Ql * l                             # across l
+        return ((Pl * (wc + ds) + Ql * (ws - dc)) * l + Pa * (wcc + dcs) + Qa * (wcs - dcc)
+                - np.cross(l, P) * (wcs + dss) - np.cross(l, Q) * (wss - dcs))
+
+    def _ramp_products(self, known, r, rows, ctx):
+        """(the products of (5) over w_s^2 at the points ``rows`` (n, 2, 5), 1 where a recorded ramp's
+        point has them and 0 elsewhere (n, 1)); None where none has (station apply, a context
+        without them: (4) with the harmonics of w^2 and dw/dt alone)."""
+        products = getattr(ctx, "ramp_products", None)
+        if products is None or not self.ramp_rate:
+            return None
+        w_s = np.array([self.ramp_rate.get(int(i), np.nan) for i in known])[r]
+        v = np.asarray(products)[rows]
+        on = np.isfinite(w_s) & np.isfinite(v).all(axis=(1, 2))
+        if not on.any():
+            return None
+        scale = np.where(on, 1.0 / np.where(on, w_s, 1.0) ** 2, 0.0)
+        return np.where(on[:, None, None], v, 0.0) * scale[:, None, None], on.astype(float)[:, None]
 
     accel_batch = accel
 
