@@ -283,3 +283,19 @@ def test_noise_overestimated_says_by_how_much():
     assert v["result"] == "noise overestimated" and 0 < v["p_below"] < 1e-3
     assert "every 1-sigma is too large, by up to 2 times (kept as they are: conservative)" in v["reason"]
     assert "a noise figure from a datasheet, or samples averaged before recording" in v["reason"]
+
+
+def test_a_pass_near_the_threshold_is_said_to_be_at_the_edge_not_to_agree():
+    """A fit passes unless p < P_FAIL (0.1 %); one whose chi2 comes by chance in 0.1-1 % of fits of a
+    right model passes, but its reason must not say the residuals agree with the noise (imucal's
+    real session through import imucal: reduced chi2 4.86 on 3, p = 0.0022, was said to "agree").
+    Both sides: p = 0.0022 at the edge, p = 0.02 agrees."""
+    from scipy.stats import chi2
+    edge = judged(chi2=14.6, noise_model={"tested": {"chi2": 14.6, "redundancy": 3.0}, "terms": ["white", "quantisation"]})
+    v = edge.fit["verdict"]
+    assert v["result"] == "passes" and 1e-3 < v["p_value"] < 1e-2, v
+    assert "agree" not in v["reason"] and "at the edge of what the noise model (white, quantisation) explains" in v["reason"], v
+    assert v["p_value"] == pytest.approx(chi2.sf(14.6, 3), rel=1e-9)
+    fine = judged(chi2=9.8, noise_model={"tested": {"chi2": 9.8, "redundancy": 3.0}, "terms": ["white", "quantisation"]})
+    w = fine.fit["verdict"]
+    assert w["result"] == "passes" and w["p_value"] > 1e-2 and "agree with the noise model" in w["reason"], w

@@ -43,6 +43,8 @@ from station.model.calibration import Calibration
 
 P_FAIL = 1e-3               # one honest fit in a thousand fails by chance
 REDUCED_CHI2_FAIL = 1.5     # and only when the residuals exceed the noise by half its variance
+P_EDGE = 1e-2               # a passing fit whose chi2 comes by chance less often than this is said to be
+                            #   at the edge of the noise model, not to agree with it (it still passes)
 #: the verdicts a calibration file may carry, and those it must not be used with (exit status 3)
 VERDICTS = ("passes", "fails", "not converged", "noise overestimated", "untested")
 UNUSABLE = ("fails", "not converged")
@@ -201,8 +203,13 @@ def _verdict(cal: Calibration) -> None:
             + (f", except the accelerometers', which are the poses' own fit's (scaled by its own "
                f"sqrt(reduced chi2) = {fit['pose_check'].get('sigma_scale', 1.0):.3g})" if own else ""))
     else:
-        verdict["reason"] = (f"reduced chi2 {reduced:.3g} (p = {p_value:.2g}): the residuals agree "
-                             "with the noise" + (f" model ({verdict['noise_model']})" if terms and terms != ["white"] else "")
+        agree = ("are at the edge of what the noise" if p_value < P_EDGE and reduced > 1.0 else "agree with the noise")
+        edge = (f" (a chi2 this large comes by chance in {100 * p_value:.2g} % of fits of a right model; it "
+                f"fails below {100 * P_FAIL:.2g} %: station diagnose shows where the residuals are largest)"
+                if p_value < P_EDGE and reduced > 1.0 else "")
+        verdict["reason"] = (f"reduced chi2 {reduced:.3g} (p = {p_value:.2g}): the residuals {agree}"
+                             + (f" model ({verdict['noise_model']})" if terms and terms != ["white"] else "")
+                             + (" explains" if edge else "") + edge
                              + (f"; {', '.join(left_out)} not tested (their noise estimated from their scatter)"
                                 if left_out else ""))
     fit["verdict"] = verdict
