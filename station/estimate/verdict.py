@@ -190,7 +190,7 @@ def _verdict(cal: Calibration) -> None:
         cal.sigma = {name: s * (1.0 if name in own else scale) for name, s in cal.sigma.items()}
         # the 1-sigma of a value an effect holds and the fit freed (station.estimate.lsq.
         # _held_values_freed: "<name>_sigma" beside "<name>" in its state, a bias step's time)
-        for entry in cal.effect_compensation or []:
+        for entry in getattr(cal, "effect_compensation", None) or []:
             state = entry.get("state") if isinstance(entry, dict) else None
             for key, v in list((state or {}).items()):
                 if (key.endswith("_sigma") and key[:-len("_sigma")] in state and isinstance(v, float)
