@@ -204,8 +204,8 @@ def _verdict(cal: Calibration) -> None:
                f"sqrt(reduced chi2) = {fit['pose_check'].get('sigma_scale', 1.0):.3g})" if own else ""))
     else:
         agree = ("are at the edge of what the noise" if p_value < P_EDGE and reduced > 1.0 else "agree with the noise")
-        edge = (f" (a chi2 this large comes by chance in {100 * p_value:.2g} % of fits of a right model; it "
-                f"fails below {100 * P_FAIL:.2g} %: station diagnose shows where the residuals are largest)"
+        edge = (f" (a chi2 this large comes by chance in a share {p_value:.2g} of the fits of a right model; a "
+                f"fit fails below {P_FAIL:g}: station diagnose shows where the residuals are largest)"
                 if p_value < P_EDGE and reduced > 1.0 else "")
         verdict["reason"] = (f"reduced chi2 {reduced:.3g} (p = {p_value:.2g}): the residuals {agree}"
                              + (f" model ({verdict['noise_model']})" if terms and terms != ["white"] else "")
