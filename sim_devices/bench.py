@@ -71,6 +71,13 @@ class SimulatedBench:
         self._g = self.site.g
         self._time_end = float(start_s)   # end of the last segment's window
         self._rotation_starts: dict = {}
+        # the platter's state (issue 28): the IMU is mounted on the platter, the imbalance (and a
+        # bearing's eccentricity, vibration_*) is fixed to it, so the angle between the two is fixed
+        # while the IMU stays mounted.  Per rotation key, the platter's zero mark (where
+        # imbalance_phase_deg / vibration_phase_deg count from) in case axes: set by the first
+        # rotation about that key (its start is the platter's zero), kept across sessions by
+        # platter_state / restore_platter, forgotten by remount
+        self._platter_marks: dict = {}
         # the temperature chamber around the table (sim_devices/chamber.py): its air at the room's
         # temperature until a setpoint is given (set_chamber)
         self.chamber = ChamberAir(truth.temperature.start_c)
@@ -158,6 +165,43 @@ class SimulatedBench:
                                          w_eb_b=w_eb_b, wdot_eb_b=wdot_eb_b, t=t, air=self.chamber)
         return accel, gyro, temp
 
+    # ------------------------------------------------------- platter (state)
+    def platter_state(self) -> list:
+        """The IMU's mounting on the platter, to carry into a later session with the IMU still
+        mounted (restore_platter): per rotation key, the platter's zero mark in case axes."""
+        return [{"axis_body": [float(x) for x in k[0]], "start_up_body": None if k[1] is None else [float(x) for x in k[1]],
+                 "axis_elevation_deg": float(k[2]), "zero_mark_body": [float(x) for x in v]}
+                for k, v in self._platter_marks.items()]
+
+    def restore_platter(self, state) -> None:
+        """A later session on the same table with the IMU still mounted: the platter's zero marks
+        of platter_state (the platter itself starts each axis wherever this session's start is)."""
+        for d in state or ():
+            hint = d.get("start_up_body")
+            key = (tuple(np.round(np.asarray(d["axis_body"], float), 12)),
+                   None if hint is None else tuple(np.round(np.asarray(hint, float), 12)),
+                   float(d["axis_elevation_deg"]))
+            self._platter_marks[key] = np.asarray(d["zero_mark_body"], dtype=float).reshape(3)
+
+    def remount(self) -> None:
+        """The IMU taken off the platter and put back at an angle of its own: the next rotation about
+        each axis finds the platter's zero where it starts (a new mounting)."""
+        self._platter_marks.clear()
+        self._rotation_starts.clear()
+
+    def _platter_start(self, key, C_nominal, a_n) -> float:
+        """The platter's angle (rad, about a_n, from its zero mark) at a rotation's start of nominal
+        attitude ``C_nominal`` (the IMU's attitude without its small placement errors, which are
+        the IMU's on the platter): 0 for the first rotation about ``key``; later, the angle that
+        puts the zero mark where the mounting holds it in the case."""
+        r = world.axis_reference_enu(a_n)
+        mark = self._platter_marks.get(key)
+        if mark is None:
+            self._platter_marks[key] = C_nominal.apply(r)
+            return 0.0
+        v = C_nominal.inv().apply(mark)
+        return math.atan2(float(np.dot(v, world.cross3(a_n, r))), float(np.dot(v, r)))
+
     # -------------------------------------------------------------- segments
     def static(self, up_body, duration_s) -> SimSegment:
         """Hold the IMU with case direction ``up_body`` up for ``duration_s``."""
@@ -221,11 +265,11 @@ class SimulatedBench:
                 # directions) shares the placement
                 delta = delta + self._remount_error()
             a_n = world.table_axis_enu(heading, math.radians(axis_elevation_deg))
-            C_bn0 = world.small_rotation(delta) * world.attitude_axis(
-                a_cmd, a_n, up_body=up_hint, roll_rad=roll)
-            start = (C_bn0, a_n, heading, delta)
+            C_nominal = world.attitude_axis(a_cmd, a_n, up_body=up_hint, roll_rad=roll)
+            C_bn0 = world.small_rotation(delta) * C_nominal
+            start = (C_bn0, a_n, heading, delta, self._platter_start(key, C_nominal, a_n))
             self._rotation_starts[key] = start
-        C_bn0, a_n, heading, delta = start
+        C_bn0, a_n, heading, delta, platter0 = start
         remount = np.zeros(3)
         if self.truth.bench.remount_rotations:
             # taken off the table and put back before every rotation segment, each half of a
@@ -257,7 +301,7 @@ class SimulatedBench:
             profile = world.rate_profile
         theta, theta_dot, theta_ddot = profile(tau, **prof)
         wobble_rad = bench.wobble_arcsec * ARCSEC
-        wobble_phase = math.radians(bench.wobble_phase_deg)
+        wobble_phase = math.radians(bench.wobble_phase_deg) + platter0     # turning with the platter
         if wobble_rad > 0.0:
             C_bn, w_b, wdot_b = world.wobbling_table(C_bn0, a_n, theta, theta_dot, theta_ddot,
                                                      wobble_rad, wobble_phase, harmonic=1)
@@ -268,7 +312,8 @@ class SimulatedBench:
         # IMU about case axis k (the nearest to axis_body) is axis_offsets_m[k] further away
         lever = bench.lever_arm_m + bench.axis_offsets_m[int(np.argmax(np.abs(a_cmd)))]
         f_b, w_ib = world.body_kinematics(C_bn, w_b, wdot_b, lever, self.site)
-        vibration_phase = math.radians(bench.vibration_phase_deg)
+        # the vibration's and the imbalance's phase: fixed to the platter, which starts at platter0
+        vibration_phase = math.radians(bench.vibration_phase_deg) + platter0
         # the base's once-per-revolution vibration, from the table's angle, rate and angular
         # acceleration (zero at rest, ~ rate^2 at a steady rate; world.table_vibration_enu and
         # world.imbalance_acceleration_enu)
@@ -279,7 +324,7 @@ class SimulatedBench:
             f_b = f_b + np.atleast_2d(C_bn.apply(a_vib))
         if bench.imbalance_g_mm:
             a_imb = world.imbalance_acceleration_enu(a_n, theta, theta_dot, theta_ddot, bench.imbalance_g_mm * 1e-6,
-                                                     bench.base_mass_kg, math.radians(bench.imbalance_phase_deg))
+                                                     bench.base_mass_kg, math.radians(bench.imbalance_phase_deg) + platter0)
             f_b = f_b + np.atleast_2d(C_bn.apply(a_imb))
         stamps = self._stamps(t)
 
@@ -326,5 +371,6 @@ class SimulatedBench:
                 "wobble_rad": wobble_rad,
                 "wobble_direction_enu": world.wobble_direction_enu(a_n, wobble_phase),
                 "vibration_phase_rad": vibration_phase,
+                "platter_start_rad": platter0,
             },
         )
