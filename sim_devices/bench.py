@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from . import world
 from .chamber import ChamberAir
@@ -72,12 +73,12 @@ class SimulatedBench:
         self._time_end = float(start_s)   # end of the last segment's window
         self._rotation_starts: dict = {}
         # the platter's state (issue 28): the IMU is mounted on the platter, the imbalance (and a
-        # bearing's eccentricity, vibration_*) is fixed to it, so the angle between the two is fixed
-        # while the IMU stays mounted.  Per rotation key, the platter's zero mark (where
-        # imbalance_phase_deg / vibration_phase_deg count from) in case axes: set by the first
-        # rotation about that key (its start is the platter's zero), kept across sessions by
-        # platter_state / restore_platter, forgotten by remount
-        self._platter_marks: dict = {}
+        # bearing's eccentricity, vibration_*; the wobble) is fixed to it, so the angle between the
+        # two is fixed while the IMU stays mounted.  Per rotation key, where the table left that axis
+        # (the IMU's attitude and the platter's angle from the imbalance's zero at the end of the last
+        # rotation about it): platter_state / restore_platter carry it into a later session with the
+        # IMU still mounted, which starts there; remount forgets it
+        self._platter_left: dict = {}
         # the temperature chamber around the table (sim_devices/chamber.py): its air at the room's
         # temperature until a setpoint is given (set_chamber)
         self.chamber = ChamberAir(truth.temperature.start_c)
@@ -167,40 +168,38 @@ class SimulatedBench:
 
     # ------------------------------------------------------- platter (state)
     def platter_state(self) -> list:
-        """The IMU's mounting on the platter, to carry into a later session with the IMU still
-        mounted (restore_platter): per rotation key, the platter's zero mark in case axes."""
-        return [{"axis_body": [float(x) for x in k[0]], "start_up_body": None if k[1] is None else [float(x) for x in k[1]],
-                 "axis_elevation_deg": float(k[2]), "zero_mark_body": [float(x) for x in v]}
-                for k, v in self._platter_marks.items()]
+        """Where the table left each rotation key (the IMU still mounted), for a later session
+        (restore_platter): the IMU's attitude at the last rotation's end (quaternion x, y, z, w, case
+        from ENU, its placement error included), the table axis (ENU), its heading, the placement
+        error (rad) and the platter's angle (rad) from where the imbalance's phase counts."""
+        out = []
+        for k, (C, a_n, heading, delta, platter) in self._platter_left.items():
+            out.append({"axis_body": [float(x) for x in k[0]],
+                        "start_up_body": None if k[1] is None else [float(x) for x in k[1]],
+                        "axis_elevation_deg": float(k[2]), "attitude_quat": [float(x) for x in C.as_quat()],
+                        "axis_enu": [float(x) for x in a_n], "heading_rad": float(heading),
+                        "placement_error_rad": [float(x) for x in delta], "platter_rad": float(platter)})
+        return out
 
     def restore_platter(self, state) -> None:
-        """A later session on the same table with the IMU still mounted: the platter's zero marks
-        of platter_state (the platter itself starts each axis wherever this session's start is)."""
+        """A later session on the same table with the IMU still mounted (platter_state of the
+        earlier one): a rotation about a key turned before starts where the table left it -- the
+        IMU's attitude and the platter's angle (the imbalance where it was against the IMU)."""
         for d in state or ():
             hint = d.get("start_up_body")
             key = (tuple(np.round(np.asarray(d["axis_body"], float), 12)),
                    None if hint is None else tuple(np.round(np.asarray(hint, float), 12)),
                    float(d["axis_elevation_deg"]))
-            self._platter_marks[key] = np.asarray(d["zero_mark_body"], dtype=float).reshape(3)
+            left = (Rotation.from_quat(d["attitude_quat"]), np.asarray(d["axis_enu"], dtype=float),
+                    float(d["heading_rad"]), np.asarray(d["placement_error_rad"], dtype=float), float(d["platter_rad"]))
+            self._platter_left[key] = left
+            self._rotation_starts[key] = left
 
     def remount(self) -> None:
-        """The IMU taken off the platter and put back at an angle of its own: the next rotation about
-        each axis finds the platter's zero where it starts (a new mounting)."""
-        self._platter_marks.clear()
+        """The IMU taken off the platter and put back: every rotation key's start is drawn anew (its
+        roll on the platter, its placement), the platter's zero where it then starts."""
+        self._platter_left.clear()
         self._rotation_starts.clear()
-
-    def _platter_start(self, key, C_nominal, a_n) -> float:
-        """The platter's angle (rad, about a_n, from its zero mark) at a rotation's start of nominal
-        attitude ``C_nominal`` (the IMU's attitude without its small placement errors, which are
-        the IMU's on the platter): 0 for the first rotation about ``key``; later, the angle that
-        puts the zero mark where the mounting holds it in the case."""
-        r = world.axis_reference_enu(a_n)
-        mark = self._platter_marks.get(key)
-        if mark is None:
-            self._platter_marks[key] = C_nominal.apply(r)
-            return 0.0
-        v = C_nominal.inv().apply(mark)
-        return math.atan2(float(np.dot(v, world.cross3(a_n, r))), float(np.dot(v, r)))
 
     # -------------------------------------------------------------- segments
     def static(self, up_body, duration_s) -> SimSegment:
@@ -265,9 +264,11 @@ class SimulatedBench:
                 # directions) shares the placement
                 delta = delta + self._remount_error()
             a_n = world.table_axis_enu(heading, math.radians(axis_elevation_deg))
-            C_nominal = world.attitude_axis(a_cmd, a_n, up_body=up_hint, roll_rad=roll)
-            C_bn0 = world.small_rotation(delta) * C_nominal
-            start = (C_bn0, a_n, heading, delta, self._platter_start(key, C_nominal, a_n))
+            C_bn0 = world.small_rotation(delta) * world.attitude_axis(
+                a_cmd, a_n, up_body=up_hint, roll_rad=roll)
+            # the platter's angle at the start, from where the imbalance's phase counts: 0 at the
+            # first start (a restored key starts where the table left it, restore_platter)
+            start = (C_bn0, a_n, heading, delta, 0.0)
             self._rotation_starts[key] = start
         C_bn0, a_n, heading, delta, platter0 = start
         remount = np.zeros(3)
@@ -332,6 +333,11 @@ class SimulatedBench:
         # the station computes from the IMU stamps, plus error
         edges, edge_rates, _ = profile(np.array([stamps[0] - 0.5 * dt, stamps[-1] + 0.5 * dt]), **prof)
         swept_deg = math.degrees(edges[1] - edges[0])
+        # where the table leaves this axis: the window's end (the IMU's attitude and the platter's
+        # angle there, the next session's start when the IMU stays mounted: restore_platter)
+        theta_end = float(edges[1])
+        self._platter_left[key] = (world.table_attitude(start[0], a_n, np.array([theta_end]))[0], a_n, heading, delta,
+                                   math.remainder(platter0 + theta_end, 2.0 * math.pi))
         enc_err_arcsec = float(self._enc_rng.normal(0.0, bench.table_angle_error_arcsec))
         # an encoder scale error: the table turned (1 + e) times what the encoder reads
         k_axis = int(np.argmax(np.abs(a_cmd)))          # the table axis that turns it (table_axes 3)

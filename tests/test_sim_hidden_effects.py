@@ -544,12 +544,13 @@ def test_encoder_scale_error_in_the_rate_a_ramp_reports(ramp):
 @pytest.mark.parametrize("remounted", [False, True])
 def test_the_imbalance_stays_where_it_is_against_the_imu_until_a_remount(remounted):
     """The IMU is mounted on the platter and the imbalance is fixed to the platter: the angle
-    between them changes only at a remount (issue 28).  Two sessions (two benches, the second
-    drawing its own start attitude) turn about the same case axis; over one whole revolution a
-    perfect IMU's mean reading across the axis is the imbalance's whirl alone (gravity's first
-    harmonic sums to zero over equally spaced angles of a whole turn), (U/M) w^2 along the
-    imbalance's direction in the case.  Still mounted: the same vector in both sessions (before the
-    fix it turned by the sessions' difference of roll); remounted: a different one, as large."""
+    between them changes only at a remount (issue 28).  Two sessions (two benches) turn about the
+    same case axis, the second starting where the first left the table (its last turn, 150 deg)
+    or, remounted, from a start of its own; over one whole revolution a perfect IMU's mean reading
+    across the axis is the imbalance's whirl alone (gravity's first harmonic sums to zero over
+    equally spaced angles of a whole turn), (U/M) w^2 along the imbalance's direction in the case.
+    Still mounted: the same vector in both sessions (before, the imbalance restarted at its phase
+    from up with every session's start); remounted: a different one, as large."""
     U, M = 500e-6, 20.0
     w = math.radians(120.0)
     means = []
@@ -561,6 +562,7 @@ def test_the_imbalance_stays_where_it_is_against_the_imu_until_a_remount(remount
         seg = bench.rotation([0, 0, 1], 120.0, 3.0)          # one revolution, 300 samples
         assert len(seg.t) == 300
         means.append(seg.accel.mean(axis=0))
+        bench.rotation([0, 0, 1], 120.0, 1.25)              # the table left 150 deg on
         first = first or bench
     size = U / M * w * w
     for m in means:
