@@ -574,3 +574,37 @@ def test_the_imbalance_stays_where_it_is_against_the_imu_until_a_remount(remount
         assert turned > 30.0
     else:
         assert turned < 1e-6
+
+
+def test_a_dry_run_appended_with_the_imu_still_mounted_sees_the_imbalance_where_it_was(tmp_path):
+    """run --sim --append: the extension's session starts each axis where the run left the table
+    (dryrun writes the platter's state, sim_platter.yaml, and reads it back), so a turn about the
+    same case axis sees the imbalance in the same case direction (the mean across the axis over a
+    whole revolution, as above); without the file (a capture from before it) the start is new."""
+    import yaml
+
+    from station.io.capture import read_capture
+    from station.io.scheme import load_scheme
+    from station.simulate import dryrun
+
+    truth = perfect_truth(imbalance_g_mm=500.0, base_mass_kg=20.0, imbalance_phase_deg=30.0)
+    truth.bench.time_stamp_jitter_ms = 0.0
+    defaults = {"dwell_s": 0.5, "rate_dps": 120.0, "rotation_s": 3.0}
+    run = {"name": "one", "segments": [{"static": "s0", "up_body": [0, 0, 1]},
+                                       {"rotation": "rz", "axis_body": [0, 0, 1], "pair": False}], "defaults": defaults}
+    ext = {"name": "ext", "segments": [{"rotation": "xz", "axis_body": [0, 0, 1], "pair": False}], "defaults": defaults}
+    (tmp_path / "run.yaml").write_text(yaml.safe_dump(run))
+    text = yaml.safe_dump(ext)
+    (tmp_path / "ext.yaml").write_text(text)
+    turned = {}
+    for kept in (True, False):
+        cap = tmp_path / f"cap{kept}"
+        dryrun.record_scheme(load_scheme(str(tmp_path / "run.yaml")), truth, 5, cap)
+        if not kept:
+            (cap / dryrun.PLATTER_FILE).unlink()
+        dryrun.append_scheme(load_scheme(str(tmp_path / "ext.yaml")), text, cap)
+        segs = {s.name: s for s in read_capture(cap, load_data=True).segments}
+        assert len(segs["rz"].data.t) == len(segs["xz"].data.t) == 300
+        (x0, y0), (x1, y1) = (segs[n].data.accel.mean(axis=0)[:2] for n in ("rz", "xz"))
+        turned[kept] = abs(math.degrees(math.atan2(x0 * y1 - y0 * x1, x0 * x1 + y0 * y1)))
+    assert turned[True] < 1e-3 and turned[False] > 10.0, turned

@@ -427,7 +427,11 @@ def append_scheme(extension: Scheme, text: str, directory: Path,
     bench = _bench(extension, truth, seed, start_s=start_s, chamber=chamber, ramp_accel_dps2=ramp_accel_dps2)
     # the IMU still mounted as it was on the platter (the platter starts each axis where this session
     # starts it; the imbalance stays where it is against the IMU): the twin's state, issue 28
-    bench.restore_platter(_read_platter(directory))
+    try:
+        bench.restore_platter(_read_platter(directory))
+    except (KeyError, TypeError, ValueError, AttributeError) as e:
+        raise UserError(f"{directory / PLATTER_FILE}: not the simulated table's state ({type(e).__name__}: {e}); "
+                        "delete it to start every axis anew") from None
     # the chamber as the run left it: its air, the IMU's case lagging it, the setpoint in force
     setpoint = replay_chamber(bench, capture, chamber)
     # the warm-up again, on the IMU's temperature there (a run's segments came after its first)
@@ -453,8 +457,8 @@ def append_scheme(extension: Scheme, text: str, directory: Path,
 
 
 def _write_platter(writer, bench) -> None:
-    """The twin's hidden state that a later session (--append) continues from: the IMU's mounting
-    on the platter (SimulatedBench.platter_state), beside the truth."""
+    """The twin's hidden state that a later session (--append) continues from: where the table left
+    each axis with the IMU mounted on its platter (SimulatedBench.platter_state), beside the truth."""
     writer.write_file(PLATTER_FILE, yaml.safe_dump({"platter": bench.platter_state()}, sort_keys=False))
 
 
@@ -467,7 +471,9 @@ def _read_platter(directory: Path) -> list:
         data = yaml.safe_load(path.read_text())
         return list(data.get("platter") or [])
     except (OSError, yaml.YAMLError, AttributeError, TypeError) as e:
-        raise UserError(f"{path}: unreadable ({e}): the simulated IMU's mounting on the platter") from None
+        first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        raise UserError(f"{path}: unreadable ({first}): the simulated table's state; delete it to start every "
+                        "axis anew") from None
 
 
 def simulate_capture(scheme: Scheme, truth, seed: int, geometry: dict | None = None, chamber=None,
