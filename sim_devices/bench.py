@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from . import world
 from .chamber import ChamberAir
@@ -71,6 +72,13 @@ class SimulatedBench:
         self._g = self.site.g
         self._time_end = float(start_s)   # end of the last segment's window
         self._rotation_starts: dict = {}
+        # the platter's state (issue 28): the IMU is mounted on the platter, the imbalance (and a
+        # bearing's eccentricity, vibration_*; the wobble) is fixed to it, so the angle between the
+        # two is fixed while the IMU stays mounted.  Per rotation key, where the table left that axis
+        # (the IMU's attitude and the platter's angle from the imbalance's zero at the end of the last
+        # rotation about it): platter_state / restore_platter carry it into a later session with the
+        # IMU still mounted, which starts there; remount forgets it
+        self._platter_left: dict = {}
         # the temperature chamber around the table (sim_devices/chamber.py): its air at the room's
         # temperature until a setpoint is given (set_chamber)
         self.chamber = ChamberAir(truth.temperature.start_c)
@@ -158,6 +166,41 @@ class SimulatedBench:
                                          w_eb_b=w_eb_b, wdot_eb_b=wdot_eb_b, t=t, air=self.chamber)
         return accel, gyro, temp
 
+    # ------------------------------------------------------- platter (state)
+    def platter_state(self) -> list:
+        """Where the table left each rotation key (the IMU still mounted), for a later session
+        (restore_platter): the IMU's attitude at the last rotation's end (quaternion x, y, z, w, case
+        from ENU, its placement error included), the table axis (ENU), its heading, the placement
+        error (rad) and the platter's angle (rad) from where the imbalance's phase counts."""
+        out = []
+        for k, (C, a_n, heading, delta, platter) in self._platter_left.items():
+            out.append({"axis_body": [float(x) for x in k[0]],
+                        "start_up_body": None if k[1] is None else [float(x) for x in k[1]],
+                        "axis_elevation_deg": float(k[2]), "attitude_quat": [float(x) for x in C.as_quat()],
+                        "axis_enu": [float(x) for x in a_n], "heading_rad": float(heading),
+                        "placement_error_rad": [float(x) for x in delta], "platter_rad": float(platter)})
+        return out
+
+    def restore_platter(self, state) -> None:
+        """A later session on the same table with the IMU still mounted (platter_state of the
+        earlier one): a rotation about a key turned before starts where the table left it -- the
+        IMU's attitude and the platter's angle (the imbalance where it was against the IMU)."""
+        for d in state or ():
+            hint = d.get("start_up_body")
+            key = (tuple(np.round(np.asarray(d["axis_body"], float), 12)),
+                   None if hint is None else tuple(np.round(np.asarray(hint, float), 12)),
+                   float(d["axis_elevation_deg"]))
+            left = (Rotation.from_quat(d["attitude_quat"]), np.asarray(d["axis_enu"], dtype=float),
+                    float(d["heading_rad"]), np.asarray(d["placement_error_rad"], dtype=float), float(d["platter_rad"]))
+            self._platter_left[key] = left
+            self._rotation_starts[key] = left
+
+    def remount(self) -> None:
+        """The IMU taken off the platter and put back: every rotation key's start is drawn anew (its
+        roll on the platter, its placement), the platter's zero where it then starts."""
+        self._platter_left.clear()
+        self._rotation_starts.clear()
+
     # -------------------------------------------------------------- segments
     def static(self, up_body, duration_s) -> SimSegment:
         """Hold the IMU with case direction ``up_body`` up for ``duration_s``."""
@@ -223,9 +266,11 @@ class SimulatedBench:
             a_n = world.table_axis_enu(heading, math.radians(axis_elevation_deg))
             C_bn0 = world.small_rotation(delta) * world.attitude_axis(
                 a_cmd, a_n, up_body=up_hint, roll_rad=roll)
-            start = (C_bn0, a_n, heading, delta)
+            # the platter's angle at the start, from where the imbalance's phase counts: 0 at the
+            # first start (a restored key starts where the table left it, restore_platter)
+            start = (C_bn0, a_n, heading, delta, 0.0)
             self._rotation_starts[key] = start
-        C_bn0, a_n, heading, delta = start
+        C_bn0, a_n, heading, delta, platter0 = start
         remount = np.zeros(3)
         if self.truth.bench.remount_rotations:
             # taken off the table and put back before every rotation segment, each half of a
@@ -257,7 +302,7 @@ class SimulatedBench:
             profile = world.rate_profile
         theta, theta_dot, theta_ddot = profile(tau, **prof)
         wobble_rad = bench.wobble_arcsec * ARCSEC
-        wobble_phase = math.radians(bench.wobble_phase_deg)
+        wobble_phase = math.radians(bench.wobble_phase_deg) + platter0     # turning with the platter
         if wobble_rad > 0.0:
             C_bn, w_b, wdot_b = world.wobbling_table(C_bn0, a_n, theta, theta_dot, theta_ddot,
                                                      wobble_rad, wobble_phase, harmonic=1)
@@ -268,7 +313,8 @@ class SimulatedBench:
         # IMU about case axis k (the nearest to axis_body) is axis_offsets_m[k] further away
         lever = bench.lever_arm_m + bench.axis_offsets_m[int(np.argmax(np.abs(a_cmd)))]
         f_b, w_ib = world.body_kinematics(C_bn, w_b, wdot_b, lever, self.site)
-        vibration_phase = math.radians(bench.vibration_phase_deg)
+        # the vibration's and the imbalance's phase: fixed to the platter, which starts at platter0
+        vibration_phase = math.radians(bench.vibration_phase_deg) + platter0
         # the base's once-per-revolution vibration, from the table's angle, rate and angular
         # acceleration (zero at rest, ~ rate^2 at a steady rate; world.table_vibration_enu and
         # world.imbalance_acceleration_enu)
@@ -279,7 +325,7 @@ class SimulatedBench:
             f_b = f_b + np.atleast_2d(C_bn.apply(a_vib))
         if bench.imbalance_g_mm:
             a_imb = world.imbalance_acceleration_enu(a_n, theta, theta_dot, theta_ddot, bench.imbalance_g_mm * 1e-6,
-                                                     bench.base_mass_kg, math.radians(bench.imbalance_phase_deg))
+                                                     bench.base_mass_kg, math.radians(bench.imbalance_phase_deg) + platter0)
             f_b = f_b + np.atleast_2d(C_bn.apply(a_imb))
         stamps = self._stamps(t)
 
@@ -287,6 +333,11 @@ class SimulatedBench:
         # the station computes from the IMU stamps, plus error
         edges, edge_rates, _ = profile(np.array([stamps[0] - 0.5 * dt, stamps[-1] + 0.5 * dt]), **prof)
         swept_deg = math.degrees(edges[1] - edges[0])
+        # where the table leaves this axis: the window's end (the IMU's attitude and the platter's
+        # angle there, the next session's start when the IMU stays mounted: restore_platter)
+        theta_end = float(edges[1])
+        self._platter_left[key] = (world.table_attitude(start[0], a_n, np.array([theta_end]))[0], a_n, heading, delta,
+                                   math.remainder(platter0 + theta_end, 2.0 * math.pi))
         enc_err_arcsec = float(self._enc_rng.normal(0.0, bench.table_angle_error_arcsec))
         # an encoder scale error: the table turned (1 + e) times what the encoder reads
         k_axis = int(np.argmax(np.abs(a_cmd)))          # the table axis that turns it (table_axes 3)
@@ -326,5 +377,6 @@ class SimulatedBench:
                 "wobble_rad": wobble_rad,
                 "wobble_direction_enu": world.wobble_direction_enu(a_n, wobble_phase),
                 "vibration_phase_rad": vibration_phase,
+                "platter_start_rad": platter0,
             },
         )

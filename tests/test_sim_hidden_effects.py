@@ -539,3 +539,72 @@ def test_encoder_scale_error_in_the_rate_a_ramp_reports(ramp):
     assert steady == pytest.approx(100.0 / (1 + 1e-6 * e), rel=0, abs=1e-9)
     assert rest == pytest.approx(0.0, abs=1e-12)
     assert seg.meta["angle_deg"] == pytest.approx(seg.truth["swept_angle_deg"] / (1 + 1e-6 * e), rel=0, abs=1e-12)
+
+
+@pytest.mark.parametrize("remounted", [False, True])
+def test_the_imbalance_stays_where_it_is_against_the_imu_until_a_remount(remounted):
+    """The IMU is mounted on the platter and the imbalance is fixed to the platter: the angle
+    between them changes only at a remount (issue 28).  Two sessions (two benches) turn about the
+    same case axis, the second starting where the first left the table (its last turn, 150 deg)
+    or, remounted, from a start of its own; over one whole revolution a perfect IMU's mean reading
+    across the axis is the imbalance's whirl alone (gravity's first harmonic sums to zero over
+    equally spaced angles of a whole turn), (U/M) w^2 along the imbalance's direction in the case.
+    Still mounted: the same vector in both sessions (before, the imbalance restarted at its phase
+    from up with every session's start); remounted: a different one, as large."""
+    U, M = 500e-6, 20.0
+    w = math.radians(120.0)
+    means = []
+    first = None
+    for seed in (3, 4):
+        bench = SimulatedBench(perfect_truth(imbalance_g_mm=500.0, base_mass_kg=M, imbalance_phase_deg=30.0), seed)
+        if first is not None and not remounted:
+            bench.restore_platter(first.platter_state())     # the IMU still mounted as it was
+        seg = bench.rotation([0, 0, 1], 120.0, 3.0)          # one revolution, 300 samples
+        assert len(seg.t) == 300
+        means.append(seg.accel.mean(axis=0))
+        bench.rotation([0, 0, 1], 120.0, 1.25)              # the table left 150 deg on
+        first = first or bench
+    size = U / M * w * w
+    for m in means:
+        assert abs(m[2]) < 1e-9 * size
+        assert np.hypot(m[0], m[1]) == pytest.approx(size, rel=1e-9)
+    (x0, y0), (x1, y1) = means[0][:2], means[1][:2]
+    turned = abs(math.degrees(math.atan2(x0 * y1 - y0 * x1, x0 * x1 + y0 * y1)))
+    if remounted:
+        assert turned > 30.0
+    else:
+        assert turned < 1e-6
+
+
+def test_a_dry_run_appended_with_the_imu_still_mounted_sees_the_imbalance_where_it_was(tmp_path):
+    """run --sim --append: the extension's session starts each axis where the run left the table
+    (dryrun writes the platter's state, sim_platter.yaml, and reads it back), so a turn about the
+    same case axis sees the imbalance in the same case direction (the mean across the axis over a
+    whole revolution, as above); without the file (a capture from before it) the start is new."""
+    import yaml
+
+    from station.io.capture import read_capture
+    from station.io.scheme import load_scheme
+    from station.simulate import dryrun
+
+    truth = perfect_truth(imbalance_g_mm=500.0, base_mass_kg=20.0, imbalance_phase_deg=30.0)
+    truth.bench.time_stamp_jitter_ms = 0.0
+    defaults = {"dwell_s": 0.5, "rate_dps": 120.0, "rotation_s": 3.0}
+    run = {"name": "one", "segments": [{"static": "s0", "up_body": [0, 0, 1]},
+                                       {"rotation": "rz", "axis_body": [0, 0, 1], "pair": False}], "defaults": defaults}
+    ext = {"name": "ext", "segments": [{"rotation": "xz", "axis_body": [0, 0, 1], "pair": False}], "defaults": defaults}
+    (tmp_path / "run.yaml").write_text(yaml.safe_dump(run))
+    text = yaml.safe_dump(ext)
+    (tmp_path / "ext.yaml").write_text(text)
+    turned = {}
+    for kept in (True, False):
+        cap = tmp_path / f"cap{kept}"
+        dryrun.record_scheme(load_scheme(str(tmp_path / "run.yaml")), truth, 5, cap)
+        if not kept:
+            (cap / dryrun.PLATTER_FILE).unlink()
+        dryrun.append_scheme(load_scheme(str(tmp_path / "ext.yaml")), text, cap)
+        segs = {s.name: s for s in read_capture(cap, load_data=True).segments}
+        assert len(segs["rz"].data.t) == len(segs["xz"].data.t) == 300
+        (x0, y0), (x1, y1) = (segs[n].data.accel.mean(axis=0)[:2] for n in ("rz", "xz"))
+        turned[kept] = abs(math.degrees(math.atan2(x0 * y1 - y0 * x1, x0 * x1 + y0 * y1)))
+    assert turned[True] < 1e-3 and turned[False] > 10.0, turned

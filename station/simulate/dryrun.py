@@ -18,6 +18,7 @@ from station.io.scheme import RAMP_REST_S, RotationSpec, Scheme
 
 BLOCK_SECONDS = 10.0     # samples are written and flushed in blocks of this length
 TRUTH_FILE = "sim_truth.yaml"
+PLATTER_FILE = "sim_platter.yaml"      # the twin's state carried to an --append session (issue 28)
 # a recorded ramp's acceleration on the simulated table without a configured table: station.yaml's
 # default rate_accel_dps2 (station.bench.config.AxisConfig); a configured table's own is passed
 # in (``ramp_accel_dps2``: table_ramp_accel of station.yaml's table, issue 28 review item 4)
@@ -310,6 +311,7 @@ def record_scheme(scheme: Scheme, truth, seed: int, out_dir: Path,
         if bench.station_warmup_s > 0:
             writer.write_file("warmup.csv", _warmup_csv(bench))
         _write_segments(writer, scheme, bench, progress)
+        _write_platter(writer, bench)
     finally:
         writer.finish()
     return writer.path
@@ -423,6 +425,13 @@ def append_scheme(extension: Scheme, text: str, directory: Path,
     start_s = max(ends, default=-0.5 / capture.imu.sample_rate_hz) + 0.5 / capture.imu.sample_rate_hz
     seed = int(np.random.SeedSequence([int(sim["seed"]), len(capture.segments)]).generate_state(1)[0])
     bench = _bench(extension, truth, seed, start_s=start_s, chamber=chamber, ramp_accel_dps2=ramp_accel_dps2)
+    # the IMU still mounted as it was on the platter (the platter starts each axis where this session
+    # starts it; the imbalance stays where it is against the IMU): the twin's state, issue 28
+    try:
+        bench.restore_platter(_read_platter(directory))
+    except (KeyError, TypeError, ValueError, AttributeError) as e:
+        raise UserError(f"{directory / PLATTER_FILE}: not the simulated table's state ({type(e).__name__}: {e}); "
+                        "delete it to start every axis anew") from None
     # the chamber as the run left it: its air, the IMU's case lagging it, the setpoint in force
     setpoint = replay_chamber(bench, capture, chamber)
     # the warm-up again, on the IMU's temperature there (a run's segments came after its first)
@@ -443,7 +452,28 @@ def append_scheme(extension: Scheme, text: str, directory: Path,
     if bench.station_warmup_s > 0:
         writer.write_file(warmup_file(directory), _warmup_csv(bench))
     _write_segments(writer, extension, bench, progress, setpoint, appended=number)
+    _write_platter(writer, bench)
     return directory
+
+
+def _write_platter(writer, bench) -> None:
+    """The twin's hidden state that a later session (--append) continues from: where the table left
+    each axis with the IMU mounted on its platter (SimulatedBench.platter_state), beside the truth."""
+    writer.write_file(PLATTER_FILE, yaml.safe_dump({"platter": bench.platter_state()}, sort_keys=False))
+
+
+def _read_platter(directory: Path) -> list:
+    """PLATTER_FILE's state ([] when absent: a capture written before it, the mounting unknown)."""
+    path = Path(directory) / PLATTER_FILE
+    if not path.is_file():
+        return []
+    try:
+        data = yaml.safe_load(path.read_text())
+        return list(data.get("platter") or [])
+    except (OSError, yaml.YAMLError, AttributeError, TypeError) as e:
+        first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        raise UserError(f"{path}: unreadable ({first}): the simulated table's state; delete it to start every "
+                        "axis anew") from None
 
 
 def simulate_capture(scheme: Scheme, truth, seed: int, geometry: dict | None = None, chamber=None,
