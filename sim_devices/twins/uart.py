@@ -54,7 +54,7 @@ def reframe(data: bytes, sent_baud: float, read_baud: float) -> bytes:
     # the next start looked for: after a glitch from half a bit on (the next edge), after a
     # byte from its stop-bit sample on: the first edge at or after it (the edges before the
     # sample's ceiling, counted along the line: a searchsorted without its log factor)
-    before = np.zeros(total + 2, dtype=np.int64)
+    before = np.zeros(total + 2, dtype=np.int32)
     before[edges + 1] = 1
     np.cumsum(before, out=before)
     stop = np.minimum(np.ceil(edges + offsets[-1]), total + 1).astype(np.int64)
