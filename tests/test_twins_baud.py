@@ -3,11 +3,13 @@ pseudo-terminals: what a UART at the wrong rate receives is garbage, fewer or mo
 the ratio of the rates (sim_devices/twins/uart.py, from first principles)."""
 from __future__ import annotations
 
+import math
 import os
 import time
 
 import pytest
 import serial
+from hypothesis import given, settings, strategies as st
 
 from drivers.protocols import vectornav as V
 from sim_devices.truth import default_truth
@@ -71,3 +73,35 @@ def test_the_pty_twin_answers_only_a_driver_at_its_baud_rate():
             while time.monotonic() < end and b"$VNYMR," not in raw:
                 raw += port.read(65536)
             assert b"$VNYMR," in raw
+
+
+def _reframe_byte_by_byte(data: bytes, sent_baud: float, read_baud: float) -> bytes:
+    """A reference sharing no code with uart.reframe: the receiver of its docstring, one start
+    bit at a time over the line's levels (a Python loop)."""
+    line = [1]
+    for b in data:
+        line += [0] + [(b >> k) & 1 for k in range(8)] + [1]
+    line = line[1:]
+    r, out, i = sent_baud / read_baud, bytearray(), 0
+    level = lambda x: line[int(x)] if x < len(line) else 1     # noqa: E731 (idle past the end)
+    while True:
+        while i < len(line) and not (line[i] == 0 and (i == 0 or line[i - 1] == 1)):
+            i += 1                                              # the next falling edge
+        if i >= len(line):
+            return bytes(out)
+        if level(i + 0.5 * r) != 0:                             # a glitch: look on from the next edge
+            i += 1
+            continue
+        out.append(sum(level(i + (k + 0.5) * r) << (k - 1) for k in range(1, 9)))
+        i = math.ceil(i + 9.5 * r)                              # after the stop-bit sample
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.binary(max_size=200), st.sampled_from([9600, 19200, 38400, 57600, 115200, 128000,
+                                                 230400, 460800, 921600]),
+       st.floats(0.05, 20.0))
+def test_reframe_gives_the_bytes_of_a_receiver_walking_one_start_bit_at_a_time(data, sent, ratio):
+    read = sent * ratio
+    if read == sent:
+        return
+    assert reframe(data, sent, read) == _reframe_byte_by_byte(data, sent, read)
