@@ -57,5 +57,34 @@ def test_a_diagonal_turn_reveals_it_and_it_is_not_named(tmp_path_factory):
     assert all(sigma[n] < 0.1 for n in ALONG), sigma
 
 
+def test_a_fit_failing_for_another_reason_does_not_name_it_where_a_diagonal_turn_reveals_it(tmp_path_factory):
+    """Review (revaxisvib): the rule is the estimator's (nominal 1-sigma above the typical size,
+    lsq._blind_effect_parameters), not the 1-sigma widened by a failing fit's reduced chi2: a capture
+    with the diagonal pair, no vibration, whose fit fails for a gyro scale asymmetry (1000 ppm:
+    measured reduced chi2 12.3) had the part along the axis named (0.234, 0.197 mg widened; 0.067,
+    0.056 nominal) with a --reveal command."""
+    from station.diagnose.core import overdispersion
+    from sim_devices.truth import mems_truth
+
+    truth = hide(mems_truth(0), gyro__scale_asymmetry_ppm=[1000.0] * 3)
+    path = tmp_path_factory.mktemp("scheme") / "xyzd.yaml"
+    path.write_text("name: xyzd\ndefaults: {dwell_s: 2.0, rate_dps: 100.0, rotation_s: 7.2}\nsegments:\n"
+                    + NINE_STATICS + THREE_ROTATIONS + "  - {rotation: d, axis_body: [0, 1, 1]}\n")
+    result = lsq.fit(lsq.summarise(dryrun.simulate_capture(load_scheme(str(path)), truth, 4)))
+    phi = overdispersion(result)
+    assert phi > 5, phi                         # the fit fails: the 1-sigma widened by more than 0.1 / 0.067
+    c = score_test(result, "table_vibration_once_per_rev", overdispersion=phi)
+    assert c.aliased == [], (c.aliased, c.sigma)
+
+
+def test_the_words_do_not_ask_for_the_turns_this_capture_made(tmp_path_factory):
+    """Review (revaxisvib): the advice said "rotations about an axis with gravity across it would" on
+    a capture of level turns about x, y, z; what reveals the part along the axis is a level turn about
+    another axis (a diagonal: what the printed command proposes) or a vertical one."""
+    c = candidate(tmp_path_factory)
+    assert "rotations about an axis with gravity across it" not in c.advice, c.advice
+    assert "diagonal" in c.advice and "vertical" in c.advice, c.advice
+
+
 if __name__ == "__main__":
     pytest.main([__file__, "-n", "0"])

@@ -202,9 +202,12 @@ def score_test(result, effect_id, registry: EffectRegistry | None = None, overdi
     revealable = np.abs(V[:, keep]).max(axis=1) if k else np.zeros(len(cols))
     params = effect.params
     aliased = [p.name for p, reach in zip(params, revealable) if reach < 1e-3]
-    # parameters alike with the model's, not exactly but beyond their typical size (TILT_ALIKE)
-    aliased += [p.name for p, s in zip(params, sigma) if p.name not in aliased and s * abs(p.scale) > p.typical
-                and any(fnmatch.fnmatchcase(p.name, pat) for pat in TILT_ALIKE.get(effect_id, ()))]
+    # parameters alike with the model's, not exactly but beyond their typical size (TILT_ALIKE): the
+    # nominal 1-sigma, as the estimator's rule (a fit failing for another reason widens it, not the alias)
+    nominal = np.sqrt(np.clip(np.diag(A_pinv), 0.0, None))
+    tilt_alike = [p.name for p, s in zip(params, nominal) if p.name not in aliased and s * abs(p.scale) > p.typical
+                  and any(fnmatch.fnmatchcase(p.name, pat) for pat in TILT_ALIKE.get(effect_id, ()))]
+    aliased += tilt_alike
     cand = Candidate(effect=effect_id, title=effect.title, predicted_chi2_drop=lm, dof=k,
                      p_value=min(1.0, located * chi2_sf(lm / overdispersion, k)) if k else 1.0,
                      overdispersion=overdispersion, state=effect.state(), bench=bool(getattr(effect, "bench", False)),
@@ -226,6 +229,10 @@ def score_test(result, effect_id, registry: EffectRegistry | None = None, overdi
     elif aliased:
         said = (f"this capture cannot tell {', '.join(aliased)} apart from the model's "
                 f"parameters; {effect.excited_by} would")
+        if tilt_alike and set(aliased) == set(tilt_alike):     # only the tilt-alike parts: what reveals them
+            said = (f"this capture cannot tell {', '.join(aliased)} apart from the model's parameters (a first "
+                    "harmonic along a turn's axis is what a tilt of that axis makes, which the gyros' misalignments "
+                    "take); level turns about another axis (a diagonal) or turns about a vertical axis would")
         cand.advice = f"{cand.advice}; {said}" if cand.advice else said
     return cand
 
