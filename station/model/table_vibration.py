@@ -165,8 +165,10 @@ class TableVibration(Effect):
                   "as a constant and twice per revolution")
     magnitudes = "< 0.01 mg (balanced precision tables), 0.1-1 mg (an unbalanced load), several mg (a worn bearing or belt)"
     signature = ("accelerometer, rotation segments: a first harmonic along the rotation's own axis (which gravity "
-                 "cannot make about a horizontal axis), of one size and phase in every rotation at that rate; "
-                 "across the axis a constant and a second harmonic; the statics fit")
+                 "makes about a level axis only when the axis is tilted: with turns about the IMU's own axes alone "
+                 "the gyros' misalignments take it -- a diagonal or a vertical turn tells them apart), of one size "
+                 "and phase in every rotation at that rate; across the axis a constant and a second harmonic; the "
+                 "statics fit")
     signature_variable = "signed_rate"
     complex_step = True
     bench = True
