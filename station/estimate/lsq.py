@@ -2440,6 +2440,7 @@ def _contradicted_priors(model: Model, x) -> list:
     # its parameters stay held where the capture cannot resolve them; a bias drift over a warm-up
     # fitted freely at 9,000 ug/h for a bias quadratic in temperature (typical 100: held, it is
     # rejected and temperature_bias kept, tests/test_effects_recovered.py)
+    # -- unless the data measure them alone and the fit then passes: _newcomer_released
     for c, p in _effect_columns(model, model.effects[:-1]):
         if p.name in model.unobservable and c in model.priors and model.priors[c] == p.typical / p.scale \
                 and abs(x[c]) > CONTRADICTED * model.priors[c]:
@@ -2472,29 +2473,52 @@ def _newcomer_released(model: Model, x, cov, r, reduced):
             pulls[c] = float(x[c] / np.sqrt(data))
     if not any(abs(w) > held_pull_limit(len(pulls)) for w in pulls.values()):
         return x, cov, r, reduced
-    from station.estimate.verdict import chi2_verdict
+    from station.estimate.distributions import chi2_verdict
 
-    priors, unobservable = dict(model.priors), list(model.unobservable)
+    # (the priors and the data rows as they were, in their order: x, cov, r and reduced are theirs)
+    priors, unobservable, data_rows = dict(model.priors), list(model.unobservable), model.data_rows
+
+    def restored():
+        model.priors.clear()
+        model.priors.update(priors)
+        model.unobservable[:] = unobservable
+        model.refresh()
+        model.data_rows = data_rows
+        return x, cov, r, reduced
+
+    # the released fit's chi2 foreseen from the held one's (linearised: the prior rows removed, their
+    # residuals e = x_H / tau and their hat matrix P_HH / tau^2: chi2 - e^T (I - P_HH / tau^2)^-1 e),
+    # so a release that fails is not solved for (a creeping fit: ~350 evaluations)
+    cols = [c for c, _ in held]
+    tau = np.array([priors[c] for c in cols])
+    k = [where[c] for c in cols]
+    e = x[cols] / tau
+    hat = cov[np.ix_(k, k)] / np.outer(tau, tau)
+    foreseen = float(r @ r) - float(e @ np.linalg.solve(np.eye(len(cols)) - hat, e))
+    dof = int(np.count_nonzero(data_rows)) - model.layout.size + _held_by_weak_priors(model, reduced, cov)
+    if dof <= 0 or chi2_verdict(foreseen, dof)["result"] == "fails":
+        return x, cov, r, reduced
     for c, p in held:
         del model.priors[c]
         model.unobservable.remove(p.name)
     model.refresh()
+
+    def revealed(red):          # none aliased, each 1-sigma within NEWCOMER_REVEALED typical sizes
+        at, null, c_ = {int(c): k for k, c in enumerate(red.columns)}, red.svd.null(), red.svd.covariance()
+        return all(not (null.size and np.max(np.abs(null[:, at[c]])) > 1e-6)
+                   and np.sqrt(c_[at[c], at[c]]) * p.scale <= NEWCOMER_REVEALED * p.typical for c, p in held)
+
+    # judged first where the held fit ended (no solve: the gate barely depends on where the fit ends)
+    if not revealed(_Reduced(model, model.sparse_jacobian(x) if model.is_large else model.jacobian(x))):
+        return restored()
     x1, cov1, r1, reduced1 = _solve(model, x)
-    where = {int(c): k for k, c in enumerate(reduced1.columns)}
-    null = reduced1.svd.null()
     dof = int(np.count_nonzero(model.data_rows)) - model.layout.size + _held_by_weak_priors(model, reduced1, cov1)
     data = r1[model.data_rows]
-    revealed = all(not (null.size and np.max(np.abs(null[:, where[c]])) > 1e-6)
-                   and np.sqrt(cov1[where[c], where[c]]) * p.scale <= NEWCOMER_REVEALED * p.typical for c, p in held)
-    if revealed and dof > 0 and chi2_verdict(float(data @ data), dof)["result"] != "fails":
+    if revealed(reduced1) and dof > 0 and chi2_verdict(float(data @ data), dof)["result"] != "fails":
         model.notes.append("released, the data contradicting their prior and measuring them: "
                            + ", ".join(p.name for _, p in held))
         return x1, cov1, r1, reduced1
-    model.priors.clear()
-    model.priors.update(priors)
-    model.unobservable[:] = unobservable
-    model.refresh()
-    return _solve(model, x)
+    return restored()
 
 
 HELD_PULL_P = 1e-3      # the family-wise false-alarm rate of the held priors' pull test (held_pulls)
