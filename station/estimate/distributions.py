@@ -108,3 +108,19 @@ def binom_sf(k: int, n: int, p: float) -> float:
         if j > n * p and term < total * 1e-17:      # past the mode the terms only fall
             break
     return min(total, 1.0)
+
+
+P_FAIL = 1e-3               # the verdict's (station.estimate.verdict.P_FAIL, REDUCED_CHI2_FAIL)
+REDUCED_CHI2_FAIL = 1.5
+
+
+def chi2_verdict(chi2: float, dof: float, p_fail: float = P_FAIL, reduced_fail: float = REDUCED_CHI2_FAIL) -> dict:
+    """station.estimate.verdict.chi2_verdict's rule with its thresholds given (P_FAIL,
+    REDUCED_CHI2_FAIL): here so that lsq may ask it without an import cycle (lsq._newcomer_released)."""
+    reduced = chi2 / dof
+    p_value = chi2_sf(dof, chi2)        # P(chi2_dof > chi2) (distributions.py: scipy costs 0.17-0.5 s to import)
+    p_below = chi2_cdf(dof, chi2)       # P(chi2_dof < chi2)
+    fails = p_value < p_fail and reduced > reduced_fail
+    overestimated = p_below < p_fail and reduced < 1.0 / reduced_fail
+    result = "fails" if fails else "noise overestimated" if overestimated else "passes"
+    return {"result": result, "reduced_chi2": float(reduced), "p_value": p_value, "p_below": p_below}

@@ -2450,11 +2450,85 @@ def _contradicted_priors(model: Model, x) -> list:
     # its parameters stay held where the capture cannot resolve them; a bias drift over a warm-up
     # fitted freely at 9,000 ug/h for a bias quadratic in temperature (typical 100: held, it is
     # rejected and temperature_bias kept, tests/test_effects_recovered.py)
+    # -- unless the data measure them alone and the fit then passes: _newcomer_released
     for c, p in _effect_columns(model, model.effects[:-1]):
         if p.name in model.unobservable and c in model.priors and model.priors[c] == p.typical / p.scale \
                 and abs(x[c]) > CONTRADICTED * model.priors[c]:
             out.append((c, p))
     return out
+
+
+NEWCOMER_REVEALED = 2.0    # the newcomer's released only where the data alone give each 1-sigma below this many typical sizes
+
+
+def _newcomer_released(model: Model, x, cov, r, reduced):
+    """(x, cov, r, reduced) with the newcomer's held parameters (the last effect's, which
+    _contradicted_priors leaves held) released, all together, where the data measure them: a
+    held parameter's prior is contradicted by its own check (the pull of held_pulls beyond
+    held_pull_limit), and with every prior of the newcomer removed no parameter of it is aliased
+    (null space), each one's 1-sigma is within NEWCOMER_REVEALED typical sizes, and the fit
+    explains the data (verdict.chi2_verdict does not fail).  Else they stay held, as before.
+    (Issue 28, twenty-first session: a table encoder 1000 ppm short, 1-sigma 10.4 ppm against
+    its typical 10, was held and read 481 +- 7 ppm, chi2 4,899/93.)"""
+    if not model.effects or not model.unobservable:
+        return x, cov, r, reduced
+    where = {int(c): k for k, c in enumerate(reduced.columns)}
+    held = [(c, p) for c, p in _effect_columns(model, model.effects[-1:])
+            if p.name in model.unobservable and c in model.priors and model.priors[c] == p.typical / p.scale]
+    pulls = {}
+    for c, p in held:
+        tau2 = float(model.priors[c]) ** 2
+        data = tau2 - float(cov[where[c], where[c]])
+        if data > HELD_PULL_MIN_SHARE * tau2:
+            pulls[c] = float(x[c] / np.sqrt(data))
+    if not any(abs(w) > held_pull_limit(len(pulls)) for w in pulls.values()):
+        return x, cov, r, reduced
+    from station.estimate.distributions import chi2_verdict
+
+    # (the priors and the data rows as they were, in their order: x, cov, r and reduced are theirs)
+    priors, unobservable, data_rows = dict(model.priors), list(model.unobservable), model.data_rows
+
+    def restored():
+        model.priors.clear()
+        model.priors.update(priors)
+        model.unobservable[:] = unobservable
+        model.refresh()
+        model.data_rows = data_rows
+        return x, cov, r, reduced
+
+    # the released fit's chi2 foreseen from the held one's (linearised: the prior rows removed, their
+    # residuals e = x_H / tau and their hat matrix P_HH / tau^2: chi2 - e^T (I - P_HH / tau^2)^-1 e),
+    # so a release that fails is not solved for (a creeping fit: ~350 evaluations)
+    cols = [c for c, _ in held]
+    tau = np.array([priors[c] for c in cols])
+    k = [where[c] for c in cols]
+    e = x[cols] / tau
+    hat = cov[np.ix_(k, k)] / np.outer(tau, tau)
+    foreseen = float(r @ r) - float(e @ np.linalg.solve(np.eye(len(cols)) - hat, e))
+    dof = int(np.count_nonzero(data_rows)) - model.layout.size + _held_by_weak_priors(model, reduced, cov)
+    if dof <= 0 or chi2_verdict(foreseen, dof)["result"] == "fails":
+        return x, cov, r, reduced
+    for c, p in held:
+        del model.priors[c]
+        model.unobservable.remove(p.name)
+    model.refresh()
+
+    def revealed(red):          # none aliased, each 1-sigma within NEWCOMER_REVEALED typical sizes
+        at, null, c_ = {int(c): k for k, c in enumerate(red.columns)}, red.svd.null(), red.svd.covariance()
+        return all(not (null.size and np.max(np.abs(null[:, at[c]])) > 1e-6)
+                   and np.sqrt(c_[at[c], at[c]]) * p.scale <= NEWCOMER_REVEALED * p.typical for c, p in held)
+
+    # judged first where the held fit ended (no solve: the gate barely depends on where the fit ends)
+    if not revealed(_Reduced(model, model.sparse_jacobian(x) if model.is_large else model.jacobian(x))):
+        return restored()
+    x1, cov1, r1, reduced1 = _solve(model, x)
+    dof = int(np.count_nonzero(model.data_rows)) - model.layout.size + _held_by_weak_priors(model, reduced1, cov1)
+    data = r1[model.data_rows]
+    if revealed(reduced1) and dof > 0 and chi2_verdict(float(data @ data), dof)["result"] != "fails":
+        model.notes.append("released, the data contradicting their prior and measuring them: "
+                           + ", ".join(p.name for _, p in held))
+        return x1, cov1, r1, reduced1
+    return restored()
 
 
 HELD_PULL_P = 1e-3      # the family-wise false-alarm rate of the held priors' pull test (held_pulls)
@@ -2576,6 +2650,7 @@ def fit(s: Summaries, effects: list[Effect] | None = None, attitudes: str = "aut
             model.unobservable.remove(p.name)
         model.refresh()
         x, cov, r, reduced = _solve(model, model.x0)
+    x, cov, r, reduced = _newcomer_released(model, x, cov, r, reduced)
     x, cov, r, reduced = _reweight(model, x, cov, r, reduced, turns=turn_sigma_deg is None, statics=statics)
     x, cov, r, reduced = _ramp_reweight(model, x, cov, r, reduced)
     if (model.ramp_estimate or {}).get("estimated") and model.unobservable:

@@ -36,13 +36,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from station.estimate.distributions import chi2_cdf, chi2_sf
+from station.estimate import distributions
 
 from station.core.errors import UserError
 from station.model.calibration import Calibration
 
-P_FAIL = 1e-3               # one honest fit in a thousand fails by chance
-REDUCED_CHI2_FAIL = 1.5     # and only when the residuals exceed the noise by half its variance
+P_FAIL = distributions.P_FAIL                        # one honest fit in a thousand fails by chance
+REDUCED_CHI2_FAIL = distributions.REDUCED_CHI2_FAIL  # and only when the residuals exceed the noise by half its variance
 P_EDGE = 1e-2               # a passing fit whose chi2 comes by chance less often than this is said to be
                             #   at the edge of the noise model, not to agree with it (it still passes)
 #: the verdicts a calibration file may carry, and those it must not be used with (exit status 3)
@@ -113,13 +113,7 @@ def chi2_verdict(chi2: float, dof: float) -> dict:
     "noise overestimated"), reduced chi2, p-value above and below.  The one rule of every
     surface: the calibration file (:func:`judge`) and station diagnose (station/diagnose/core.py),
     both on station.estimate.lsq.verdict_test's chi2 and redundancy (issue 29)."""
-    reduced = chi2 / dof
-    p_value = chi2_sf(dof, chi2)        # P(chi2_dof > chi2) (distributions.py: scipy costs 0.17-0.5 s to import)
-    p_below = chi2_cdf(dof, chi2)       # P(chi2_dof < chi2)
-    fails = p_value < P_FAIL and reduced > REDUCED_CHI2_FAIL
-    overestimated = p_below < P_FAIL and reduced < 1.0 / REDUCED_CHI2_FAIL
-    result = "fails" if fails else "noise overestimated" if overestimated else "passes"
-    return {"result": result, "reduced_chi2": float(reduced), "p_value": p_value, "p_below": p_below}
+    return distributions.chi2_verdict(chi2, dof, P_FAIL, REDUCED_CHI2_FAIL)
 
 
 def _verdict(cal: Calibration) -> None:
