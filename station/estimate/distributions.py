@@ -114,9 +114,11 @@ P_FAIL = 1e-3               # the verdict's (station.estimate.verdict.P_FAIL, RE
 REDUCED_CHI2_FAIL = 1.5
 
 
-def chi2_verdict(chi2: float, dof: float, p_fail: float = P_FAIL, reduced_fail: float = REDUCED_CHI2_FAIL) -> dict:
+def chi2_verdict(chi2: float, dof: float, p_fail: float, reduced_fail: float) -> dict:
     """station.estimate.verdict.chi2_verdict's rule with its thresholds given (P_FAIL,
-    REDUCED_CHI2_FAIL): here so that lsq may ask it without an import cycle (lsq._newcomer_released)."""
+    REDUCED_CHI2_FAIL): here so that lsq may ask it without an import cycle (lsq._newcomer_released).
+    The thresholds are always given (no defaults: a caller that left one out would get a default
+    that equals it, a change the verdict's mutation check could not see)."""
     reduced = chi2 / dof
     p_value = chi2_sf(dof, chi2)        # P(chi2_dof > chi2) (distributions.py: scipy costs 0.17-0.5 s to import)
     p_below = chi2_cdf(dof, chi2)       # P(chi2_dof < chi2)

@@ -2483,7 +2483,11 @@ def _newcomer_released(model: Model, x, cov, r, reduced):
             pulls[c] = float(x[c] / np.sqrt(data))
     if not any(abs(w) > held_pull_limit(len(pulls)) for w in pulls.values()):
         return x, cov, r, reduced
-    from station.estimate.distributions import chi2_verdict
+    from station.estimate.distributions import P_FAIL, REDUCED_CHI2_FAIL
+    from station.estimate.distributions import chi2_verdict as _rule
+
+    def chi2_verdict(chi2, dof):
+        return _rule(chi2, dof, P_FAIL, REDUCED_CHI2_FAIL)
 
     # (the priors and the data rows as they were, in their order: x, cov, r and reduced are theirs)
     priors, unobservable, data_rows = dict(model.priors), list(model.unobservable), model.data_rows
