@@ -608,3 +608,36 @@ def test_a_dry_run_appended_with_the_imu_still_mounted_sees_the_imbalance_where_
         (x0, y0), (x1, y1) = (segs[n].data.accel.mean(axis=0)[:2] for n in ("rz", "xz"))
         turned[kept] = abs(math.degrees(math.atan2(x0 * y1 - y0 * x1, x0 * x1 + y0 * y1)))
     assert turned[True] < 1e-3 and turned[False] > 10.0, turned
+
+
+@pytest.mark.parametrize("entry", [
+    {"axis_enu": [float("nan"), 0.0, 0.0]},            # not finite
+    {"axis_enu": [1.0, 0.0]},                           # not 3 numbers
+    {"axis_enu": [[1.0, 0.0, 0.0]]},                    # nested
+    {"platter_rad": float("inf")},
+    {"axis_enu": [0.0, 0.0, 5.0]},                      # not a direction
+    {"attitude_quat": [0.0, 0.0, 0.0, 1.0]},            # the case's z not along the table axis
+])
+def test_a_platter_state_the_table_cannot_be_in_is_refused_when_restored(entry):
+    """restore_platter of a state read from a user's file (sim_platter.yaml): a value that is not
+    finite, not a 3-vector, or an attitude that does not turn the key's case axis onto the table
+    axis is a ValueError at the restore (dryrun says so in one line, exit 2), not a crash or an
+    impossible twin later in the session (review revplatter)."""
+    bench = SimulatedBench(perfect_truth(imbalance_g_mm=500.0, base_mass_kg=20.0), 3)
+    bench.rotation([0, 0, 1], 120.0, 1.0)
+    state = bench.platter_state()
+    SimulatedBench(perfect_truth(), 4).restore_platter(state)      # the genuine state restores
+    state[0].update(entry)
+    with pytest.raises(ValueError):
+        SimulatedBench(perfect_truth(), 4).restore_platter(state)
+
+
+def test_a_second_rotation_about_an_axis_in_one_session_starts_where_the_first_left_the_table():
+    """The compiler does not move the turning axis before a rotation (compile.py: 'the turning axis
+    starts where it is'), so the next rotation about the same key starts where the last left the
+    table, within a session as across sessions (issue 28's task).  The twin restarts every
+    rotation of a session at the key's first start (platter 0): not fixed (review revplatter)."""
+    bench = SimulatedBench(perfect_truth(imbalance_g_mm=500.0, base_mass_kg=20.0), 3)
+    bench.rotation([0, 0, 1], 120.0, 1.25)                       # 150 deg
+    seg = bench.rotation([0, 0, 1], 120.0, 1.0)
+    assert abs(math.remainder(seg.truth["platter_start_rad"] - math.radians(150.0), 2 * math.pi)) < 0.01
