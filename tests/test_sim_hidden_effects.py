@@ -641,3 +641,37 @@ def test_a_second_rotation_about_an_axis_in_one_session_starts_where_the_first_l
     bench.rotation([0, 0, 1], 120.0, 1.25)                       # 150 deg
     seg = bench.rotation([0, 0, 1], 120.0, 1.0)
     assert abs(math.remainder(seg.truth["platter_start_rad"] - math.radians(150.0), 2 * math.pi)) < 0.01
+
+
+def test_a_dry_run_stopped_by_ctrl_c_keeps_the_platter_state_for_an_append(tmp_path):
+    """A dry run (or an append) stopped by Ctrl-C after a rotation: the capture's complete segments
+    stay and --append extends it, with the IMU still mounted, so the table's state must be written
+    too (sim_platter.yaml), or the appended turn sees the imbalance elsewhere against the IMU --
+    the twin's old artefact (review revplatter, issue 28)."""
+    import yaml
+
+    from station.io.capture import read_capture
+    from station.io.scheme import load_scheme
+    from station.simulate import dryrun
+
+    truth = perfect_truth(imbalance_g_mm=500.0, base_mass_kg=20.0, imbalance_phase_deg=30.0)
+    truth.bench.time_stamp_jitter_ms = 0.0
+    defaults = {"dwell_s": 0.5, "rate_dps": 120.0, "rotation_s": 3.0}
+    run = {"name": "one", "segments": [{"rotation": "rz", "axis_body": [0, 0, 1], "pair": False},
+                                       {"static": "s0", "up_body": [0, 0, 1]}], "defaults": defaults}
+    ext = {"name": "ext", "segments": [{"rotation": "xz", "axis_body": [0, 0, 1], "pair": False}], "defaults": defaults}
+    (tmp_path / "run.yaml").write_text(yaml.safe_dump(run))
+    text = yaml.safe_dump(ext)
+
+    def ctrl_c(name, i, n):
+        if name == "s0":
+            raise KeyboardInterrupt
+
+    cap = tmp_path / "cap"
+    with pytest.raises(KeyboardInterrupt):
+        dryrun.record_scheme(load_scheme(str(tmp_path / "run.yaml")), truth, 5, cap, progress=ctrl_c)
+    (tmp_path / "ext.yaml").write_text(text)
+    dryrun.append_scheme(load_scheme(str(tmp_path / "ext.yaml")), text, cap)
+    segs = {s.name: s for s in read_capture(cap, load_data=True).segments}
+    (x0, y0), (x1, y1) = (segs[n].data.accel.mean(axis=0)[:2] for n in ("rz", "xz"))
+    assert abs(math.degrees(math.atan2(x0 * y1 - y0 * x1, x0 * x1 + y0 * y1))) < 1e-3
