@@ -675,3 +675,36 @@ def test_a_dry_run_stopped_by_ctrl_c_keeps_the_platter_state_for_an_append(tmp_p
     segs = {s.name: s for s in read_capture(cap, load_data=True).segments}
     (x0, y0), (x1, y1) = (segs[n].data.accel.mean(axis=0)[:2] for n in ("rz", "xz"))
     assert abs(math.degrees(math.atan2(x0 * y1 - y0 * x1, x0 * x1 + y0 * y1))) < 1e-3
+
+
+def test_the_bearings_vibration_and_the_wobble_stay_where_they_are_against_the_imu_until_a_remount():
+    """The change fixed the vibration's bearing (vibration_*) and the wobble to the platter as well
+    as the imbalance, but only the imbalance was tested (dropping the platter's angle from either
+    phase passed every test; review revplatter, issue 28).  A bearing's once-per-revolution push
+    along D (Earth-fixed) is cos(theta + phi) D at the reference rate: over one whole revolution a
+    perfect IMU's mean reading across the axis (gravity's first harmonic sums to zero) is half of D
+    turned by the bearing's phase into the case frame -- the same case direction in a second
+    session that starts 150 deg on with the IMU still mounted.  The wobble's tilt direction at the
+    platter's start, in the case frame, must be the same too (it turns with the platter)."""
+    means, wobble = [], []
+    first = None
+    for seed in (3, 4):
+        truth = perfect_truth(vibration_mg=[0.0, 1.0, 0.0], vibration_phase_deg=30.0, vibration_ref_rate_dps=120.0,
+                              wobble_arcsec=20.0, wobble_phase_deg=40.0)
+        bench = SimulatedBench(truth, seed)
+        if first is not None:
+            bench.restore_platter(first.platter_state())     # the IMU still mounted as it was
+        seg = bench.rotation([0, 0, 1], 120.0, 3.0)          # one revolution, 300 samples
+        means.append(seg.accel.mean(axis=0)[:2])
+        C0 = Rotation.from_matrix(seg.truth["C_bn0"])
+        wobble.append(C0.apply(seg.truth["wobble_direction_enu"])[:2])
+        bench.rotation([0, 0, 1], 120.0, 1.25)              # the table left 150 deg on
+        first = first or bench
+
+    def turned(a, b):
+        return abs(math.degrees(math.atan2(a[0] * b[1] - a[1] * b[0], a[0] * b[0] + a[1] * b[1])))
+
+    size = 0.5e-3 * G_STANDARD
+    assert np.hypot(*means[0]) == pytest.approx(size, rel=1e-3)      # the wobble's share: ~1e-4 of it
+    assert turned(*means) < 0.05
+    assert turned(*wobble) < 1e-6
