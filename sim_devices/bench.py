@@ -192,6 +192,18 @@ class SimulatedBench:
                    float(d["axis_elevation_deg"]))
             left = (Rotation.from_quat(d["attitude_quat"]), np.asarray(d["axis_enu"], dtype=float),
                     float(d["heading_rad"]), np.asarray(d["placement_error_rad"], dtype=float), float(d["platter_rad"]))
+            # a state the table cannot be in (a user's file): refused here, not a crash or an impossible
+            # twin later -- finite 3-vectors, a unit table axis that the attitude turns onto the key's
+            # case axis (to within 1 deg: placement and remount errors are arcseconds to arcminutes)
+            for name, v in (("axis_enu", left[1]), ("placement_error_rad", left[3])):
+                if v.shape != (3,) or not np.all(np.isfinite(v)):
+                    raise ValueError(f"{name} must be 3 finite numbers, got {v.tolist()!r}")
+            if not (math.isfinite(left[2]) and math.isfinite(left[4])):
+                raise ValueError("heading_rad and platter_rad must be finite")
+            if abs(float(np.linalg.norm(left[1])) - 1.0) > 1e-6:
+                raise ValueError(f"axis_enu must be a unit vector, got {left[1].tolist()!r}")
+            if float(np.dot(left[0].apply(left[1]), world._unit(key[0], "axis_body"))) < math.cos(math.radians(1.0)):
+                raise ValueError("attitude_quat does not turn axis_enu onto axis_body")
             self._platter_left[key] = left
             self._rotation_starts[key] = left
 

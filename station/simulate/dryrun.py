@@ -310,8 +310,10 @@ def record_scheme(scheme: Scheme, truth, seed: int, out_dir: Path,
         writer.write_file(TRUTH_FILE, yaml.safe_dump(truth.to_yaml_dict(), sort_keys=False))
         if bench.station_warmup_s > 0:
             writer.write_file("warmup.csv", _warmup_csv(bench))
-        _write_segments(writer, scheme, bench, progress)
-        _write_platter(writer, bench)
+        try:
+            _write_segments(writer, scheme, bench, progress)
+        finally:            # also after Ctrl-C: the complete segments stay, --append goes on from them
+            _write_platter(writer, bench)
     finally:
         writer.finish()
     return writer.path
@@ -451,8 +453,10 @@ def append_scheme(extension: Scheme, text: str, directory: Path,
     writer = CaptureWriter.reopen(directory)
     if bench.station_warmup_s > 0:
         writer.write_file(warmup_file(directory), _warmup_csv(bench))
-    _write_segments(writer, extension, bench, progress, setpoint, appended=number)
-    _write_platter(writer, bench)
+    try:
+        _write_segments(writer, extension, bench, progress, setpoint, appended=number)
+    finally:                # also after Ctrl-C: where the table was left, for the next --append
+        _write_platter(writer, bench)
     return directory
 
 
