@@ -39,7 +39,7 @@ imu:
   rate_hz: 25
 table:
   axes: 3
-  poll_interval_s: 0.00001    # a real table's 10 ms between the driver's reads, at the twins' --speed 1000
+  poll_interval_s: 0.001      # the least the configuration takes (a real table's 10 ms is 0.01 ms at --speed 1000)
   limits: [{{max_rate_dps: 300, max_accel_dps2: 300, move_rate_dps: 120, move_accel_dps2: 240, rate_accel_dps2: 200}}]
 run:
   operator: true

@@ -85,3 +85,13 @@ def test_file_then_environment_then_flags(tmp_path, monkeypatch):
     assert (config.imu.port, config.imu.protocol) == ("/dev/env-imu", "vectornav")
     assert config.table.port == "/dev/flag-table" and config.run.operator is False
     assert Config().run.operator is True
+
+
+def test_the_tables_poll_interval_has_a_floor():
+    """table.poll_interval_s below 1 ms is refused in one message naming the field (a driver
+    polling faster starved station run's own IMU reader on the twins: CI of the twenty-first
+    session); 1 ms and the 10 ms default are taken."""
+    with pytest.raises(UserError, match=r"field 'table.poll_interval_s': must be at least 0.001 s"):
+        parse_config({"table": {"poll_interval_s": 0.0001}}, "station.yaml")
+    assert parse_config({"table": {"poll_interval_s": 0.001}}, "station.yaml").table.poll_interval_s == 0.001
+    assert parse_config({}, "station.yaml").table.poll_interval_s == 0.01

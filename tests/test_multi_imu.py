@@ -86,7 +86,7 @@ imus:
 table:
   port: {bench.table_path}
   serial: {{timeout_s: 10}}       # as the IMUs': a resume at a load of 32 on 2 cores waited 1 s once
-  poll_interval_s: {0.01 / SPEED:g}    # a real table's 10 ms between the driver's reads, at the twins' speed
+  poll_interval_s: {max(0.01 / SPEED, 0.001):g}    # a real table's 10 ms at the twins' speed, at least the 1 ms the configuration takes
   axes: 3
   limits: {LIMITS}
 run:

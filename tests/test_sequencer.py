@@ -49,7 +49,7 @@ table:
   serial: {timeout_s: 10}
   # the driver's waits read the table every 10 ms of a real table's time: the twins' 0.1 ms of wall
   # at --speed 100 (its arrival rule, 5 reads in a row, unchanged in device time; docs/sequencer.md)
-  poll_interval_s: 0.0001
+  poll_interval_s: 0.001      # the least the configuration takes (starving the IMU reader below)
   axes: 3
   limits: [{max_rate_dps: 300, max_accel_dps2: 300, move_rate_dps: 60, move_accel_dps2: 60, rate_accel_dps2: 100}]
 run:

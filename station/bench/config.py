@@ -50,6 +50,14 @@ class AxisConfig:
         return None if self.angle_min_deg is None else (self.angle_min_deg, self.angle_max_deg)
 
 
+# the least sleep between the driver's reads of the table while it waits (s): with the twins at
+# speed 100 a sleep of 0.1 ms (10 ms of their time) let station run's table polling starve its own
+# IMU reader (one process, one GIL): the twins' lossless clock waited for the reader and the IMU's
+# watchdog ended the run ("no valid frame for 2 s", CI of the twenty-first session); a real
+# controller's exchange takes milliseconds anyway
+MIN_POLL_INTERVAL_S = 1e-3
+
+
 @dataclass(frozen=True)
 class TableConfig:
     port: str | None = None
@@ -64,7 +72,7 @@ class TableConfig:
     rate_tolerance_dps: float = 0.01
     # the driver's waits (a move's, a rate's settle, a stop) sleep this long after each read of the
     # table (wall s): arrival is settle_polls reads in a row within the tolerances (drivers.table.TableSettings)
-    poll_interval_s: float = 0.01
+    poll_interval_s: float = 0.01         # >= MIN_POLL_INTERVAL_S
     angle_error_arcsec: float = 2.0       # 1-sigma of the table's angles (into the capture)
     imu_offset_m: tuple | None = None     # IMU reference point from the axes' intersection
     # the table's geometry (docs/method-lsq.md, "The table's geometry"): whether the axes meet at
@@ -256,6 +264,9 @@ def parse_config(doc, source: str) -> Config:
         "load_position_deg": v.numbers, "position_tolerance_deg": v.positive,
         "rate_tolerance_dps": v.positive, "poll_interval_s": v.non_negative, "angle_error_arcsec": v.non_negative,
         "imu_offset_m": v.vector, "geometry": None})
+    if table.poll_interval_s < MIN_POLL_INTERVAL_S:
+        raise v.fail("table.poll_interval_s", f"must be at least {MIN_POLL_INTERVAL_S:g} s (the driver polling "
+                     f"faster starves the IMU's reader in the same process), got {table.poll_interval_s!r}")
     site = v.section(doc, "site", SiteConfig, {
         "latitude_deg": v.latitude, "height_m": v.number, "gravity_mps2": v.gravity})
     warmup = v.section(doc, "warmup", WarmupConfig, {
