@@ -459,12 +459,7 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
         np.multiply(c[:, 3], c[:, 3], out=c[:, 4])
         c[:, 5] = _gradient_chunk(w, t, i, j)
         if rate_from_table:
-            theta = angle_rad * fraction[i:j]
-            np.multiply(theta, basis[1], out=c[:, 6])
-            np.multiply(theta, basis[2], out=c[:, 7])
-            np.multiply(theta, c[:, 6], out=c[:, 8])
-            np.multiply(theta, c[:, 7], out=c[:, 9])
-            _ramp_products(c, basis)
+            _ramp_products(c, basis, angle_rad * fraction[i:j])
         if keep is not None:
             basis *= keep[i:j]
         gram += basis @ basis.T
@@ -482,10 +477,7 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
         c = np.empty((n, width))
         c[:, :3], c[:, 3], c[:, 4], c[:, 5] = accel, w, w * w, np.gradient(w, t)
         if rate_from_table:
-            theta = angle_rad * fraction
-            c[:, 6], c[:, 7] = theta * basis[1], theta * basis[2]
-            c[:, 8], c[:, 9] = theta**2 * basis[1], theta**2 * basis[2]
-            _ramp_products(c, basis)
+            _ramp_products(c, basis, angle_rad * fraction)
         coefs = np.linalg.lstsq(basis.T[rows], c[rows], rcond=None)[0]
     # a recorded ramp: not a uniform turn (RotationSummary.turned_moments)
     moments = coefs[:, 6:10].T.copy() if rate_from_table else None
@@ -513,10 +505,15 @@ def rotation_summary(name, axis_body, group, angle_deg, t, accel, gyro, temp,
                            turned_moments=moments, ramp_coef=ramp_coef)
 
 
-def _ramp_products(columns, basis) -> None:
-    """A recorded ramp's columns 10-17 (rotation_summary): w^2 (column 4) and dw/dt (column 5)
-    times cos p, sin p, cos 2p, sin 2p (the basis' rows 1-4 at the samples' phases), to be
-    projected as the samples are (RotationSummary.ramp_coef)."""
+def _ramp_products(columns, basis, theta) -> None:
+    """A recorded ramp's columns 6-17 (rotation_summary), to be projected as the samples are:
+    6-9 theta cos, theta sin, theta^2 cos, theta^2 sin of the phase theta (rad; the turned
+    moments, RotationSummary.turned_moments), 10-17 w^2 (column 4) and dw/dt (column 5) times
+    cos p, sin p, cos 2p, sin 2p (the basis' rows 1-4 at the samples' phases; RotationSummary.ramp_coef)."""
+    np.multiply(theta, basis[1], out=columns[:, 6])
+    np.multiply(theta, basis[2], out=columns[:, 7])
+    np.multiply(theta, columns[:, 6], out=columns[:, 8])
+    np.multiply(theta, columns[:, 7], out=columns[:, 9])
     columns[:, 10:14] = columns[:, 4:5] * basis[1:].T
     columns[:, 14:18] = columns[:, 5:6] * basis[1:].T
 

@@ -197,13 +197,13 @@ def _verdict(cal: Calibration) -> None:
             + (f", except the accelerometers', which are the poses' own fit's (scaled by its own "
                f"sqrt(reduced chi2) = {fit['pose_check'].get('sigma_scale', 1.0):.3g})" if own else ""))
     else:
-        agree = ("are at the edge of what the noise" if p_value < P_EDGE and reduced > 1.0 else "agree with the noise")
-        edge = (f" (a chi2 this large comes by chance in a share {p_value:.2g} of the fits of a right model; a "
-                f"fit fails below {P_FAIL:g}: station diagnose shows where the residuals are largest)"
-                if p_value < P_EDGE and reduced > 1.0 else "")
-        verdict["reason"] = (f"reduced chi2 {reduced:.3g} (p = {p_value:.2g}): the residuals {agree}"
+        at_edge = p_value < P_EDGE and reduced > 1.0
+        verdict["reason"] = (f"reduced chi2 {reduced:.3g} (p = {p_value:.2g}): the residuals "
+                             + ("are at the edge of what the noise" if at_edge else "agree with the noise")
                              + (f" model ({verdict['noise_model']})" if terms and terms != ["white"] else "")
-                             + (" explains" if edge else "") + edge
+                             + (f" explains (a chi2 this large comes by chance in a share {p_value:.2g} of the "
+                                f"fits of a right model; a fit fails below {P_FAIL:g}: station diagnose shows "
+                                "where the residuals are largest)" if at_edge else "")
                              + (f"; {', '.join(left_out)} not tested (their noise estimated from their scatter)"
                                 if left_out else ""))
     fit["verdict"] = verdict
